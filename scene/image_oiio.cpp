@@ -1,0 +1,118 @@
+// OpenImageIO shim: reads textures and writes frames for the C code (see image.h). The only C++ that
+// touches images; every exception is caught here and turned into -1 and a one-line message.
+#include "image.h"
+
+#include <OpenImageIO/imageio.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <memory>
+#include <string>
+#include <vector>
+
+using OIIO::ImageInput;
+using OIIO::ImageOutput;
+using OIIO::ImageSpec;
+using OIIO::TypeDesc;
+
+static void set_msg(char *msg, size_t cap, const std::string &text)
+{
+    if (msg && cap)
+        std::snprintf(msg, cap, "%s", text.c_str());
+}
+
+// The sRGB transfer function, decoded to linear.
+static float srgb_to_linear(float c)
+{
+    return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
+}
+
+extern "C" int scene_image_read_rgb(const char *path, uint32_t *width, uint32_t *height, float **rgb,
+                                    char *msg, size_t msg_cap)
+{
+    *rgb = nullptr;
+    try {
+        auto in = ImageInput::open(path);
+        if (!in) {
+            std::string e = OIIO::geterror();
+            set_msg(msg, msg_cap, std::string(path) + ": cannot read image" + (e.empty() ? "" : ": " + e));
+            return -1;
+        }
+        const ImageSpec &spec = in->spec();
+        if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0 || spec.width > 65536 ||
+            spec.height > 65536) {
+            set_msg(msg, msg_cap, std::string(path) + ": image size out of range (1..65536 per side)");
+            return -1;
+        }
+        size_t w = (size_t)spec.width, h = (size_t)spec.height, nc = (size_t)spec.nchannels;
+        std::vector<float> pixels(w * h * nc);
+        if (!in->read_image(0, 0, 0, (int)nc, TypeDesc::FLOAT, pixels.data())) {
+            set_msg(msg, msg_cap, std::string(path) + ": " + in->geterror());
+            return -1;
+        }
+        bool encoded = spec.format.basetype == TypeDesc::UINT8 || spec.format.basetype == TypeDesc::UINT16;
+        float *out = static_cast<float *>(std::malloc(w * h * 3 * sizeof(float)));
+        if (!out) {
+            set_msg(msg, msg_cap, std::string(path) + ": out of memory");
+            return -1;
+        }
+        for (size_t i = 0; i < w * h; i++)
+            for (size_t k = 0; k < 3; k++) {
+                float c = pixels[i * nc + (nc >= 3 ? k : 0)];
+                if (!std::isfinite(c))
+                    c = 0.0f;
+                out[i * 3 + k] = encoded ? srgb_to_linear(c) : c;
+            }
+        *width = (uint32_t)w;
+        *height = (uint32_t)h;
+        *rgb = out;
+        return 0;
+    } catch (const std::exception &e) {
+        set_msg(msg, msg_cap, std::string(path) + ": " + e.what());
+    } catch (...) {
+        set_msg(msg, msg_cap, std::string(path) + ": unknown error reading image");
+    }
+    return -1;
+}
+
+// Writes one image in the given pixel type; shared by the two public writers.
+static int write_image(const char *path, uint32_t width, uint32_t height, uint32_t channels, TypeDesc type,
+                       const void *pixels, char *msg, size_t msg_cap)
+{
+    try {
+        if (channels < 1 || channels > 4 || width == 0 || height == 0) {
+            set_msg(msg, msg_cap, std::string(path) + ": bad image size or channel count");
+            return -1;
+        }
+        auto out = ImageOutput::create(path);
+        if (!out) {
+            set_msg(msg, msg_cap, std::string(path) + ": no image writer for this file name: " + OIIO::geterror());
+            return -1;
+        }
+        ImageSpec spec((int)width, (int)height, (int)channels, type);
+        if (!out->open(path, spec) || !out->write_image(type, pixels) || !out->close()) {
+            set_msg(msg, msg_cap, std::string(path) + ": " + out->geterror());
+            return -1;
+        }
+        return 0;
+    } catch (const std::exception &e) {
+        set_msg(msg, msg_cap, std::string(path) + ": " + e.what());
+    } catch (...) {
+        set_msg(msg, msg_cap, std::string(path) + ": unknown error writing image");
+    }
+    return -1;
+}
+
+extern "C" int scene_image_write_u8(const char *path, uint32_t width, uint32_t height, uint32_t channels,
+                                    const uint8_t *pixels, char *msg, size_t msg_cap)
+{
+    return write_image(path, width, height, channels, TypeDesc::UINT8, pixels, msg, msg_cap);
+}
+
+extern "C" int scene_image_write_f32(const char *path, uint32_t width, uint32_t height, uint32_t channels,
+                                     const float *pixels, char *msg, size_t msg_cap)
+{
+    return write_image(path, width, height, channels, TypeDesc::FLOAT, pixels, msg, msg_cap);
+}

@@ -1,0 +1,233 @@
+/* scene: everything fxcache knows about the 3D world before any viewer looks at it.
+ *
+ * A scene is built once (from a mesh file, a JSON scene description, or the embedded default scene) and is
+ * read-only afterwards. It holds welded, world-space triangles, per-corner mesh UVs for textures, materials,
+ * lights, the sky, the texel density, the islands every triangle belongs to, and the per-effect overrides.
+ * The Embree scene (scene_rt) and "what this scene needs" (scene_needs) are derived from it.
+ *
+ * Ownership: scene_free() releases every allocation a scene owns. Errors come back through scene_error, a
+ * code plus one line naming the file, line, mesh or value at fault. */
+#ifndef FXC_SCENE_H
+#define FXC_SCENE_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Result codes, one X-macro table: name, string. */
+#define SCENE_RESULTS(X)                                                                                     \
+    X(SCENE_OK, "ok")                                                                                        \
+    X(SCENE_ERR_IO, "cannot read file")                                                                      \
+    X(SCENE_ERR_FORMAT, "unsupported or malformed file")                                                     \
+    X(SCENE_ERR_JSON, "malformed scene description")                                                         \
+    X(SCENE_ERR_INVALID, "invalid scene content")                                                            \
+    X(SCENE_ERR_RANGE, "value out of range")                                                                 \
+    X(SCENE_ERR_EMPTY, "empty scene")                                                                        \
+    X(SCENE_ERR_NOMEM, "out of memory")                                                                      \
+    X(SCENE_ERR_EMBREE, "Embree error")
+
+typedef enum scene_result {
+#define FXC_X(name, str) name,
+    SCENE_RESULTS(FXC_X)
+#undef FXC_X
+} scene_result;
+
+/* The string of a result code. */
+const char *scene_strerror(scene_result code);
+
+/* A failure: the code and one line that names what and where. */
+typedef struct scene_error {
+    scene_result code;
+    char msg[512];
+} scene_error;
+
+/* Effect overrides from the scene description. */
+typedef enum scene_toggle { SCENE_AUTO = 0, SCENE_ON, SCENE_OFF } scene_toggle;
+
+typedef enum scene_light_type { SCENE_LIGHT_DIRECTIONAL = 0, SCENE_LIGHT_POINT } scene_light_type;
+
+typedef struct scene_light {
+    scene_light_type type;
+    float direction[3]; /* directional: unit vector the light travels along (from the light into the scene) */
+    float position[3];  /* point: world position, metres */
+    float color[3];     /* linear RGB, 0..1 typically */
+    float intensity;    /* directional: irradiance scale; point: intensity (falls off with 1/d^2) */
+} scene_light;
+
+typedef struct scene_texture {
+    uint32_t width, height; /* texels */
+    float *rgb;             /* linear RGB, width*height*3, row 0 at the top of the image */
+    char path[256];         /* where it came from, for messages */
+} scene_texture;
+
+typedef struct scene_material {
+    float diffuse[3]; /* linear RGB albedo, 0..1 */
+    int32_t texture;  /* index into scene.textures, or -1 */
+    char name[64];
+} scene_material;
+
+typedef struct scene_mesh {
+    char name[128];
+    uint32_t first_triangle, triangle_count; /* range in the scene's triangle arrays */
+    uint32_t material;                       /* index into scene.materials */
+} scene_mesh;
+
+/* One island: a connected group of at most SCENE_ISLAND_MAX_TRIANGLES triangles with its own texture space. */
+typedef struct scene_island {
+    uint32_t first;          /* first entry in scene.island_triangles */
+    uint32_t triangle_count; /* 1..256 */
+    uint32_t width, height;  /* size in texels at level 0, including the one-texel border */
+    uint32_t mesh;           /* the mesh it belongs to */
+} scene_island;
+
+enum {
+    SCENE_ISLAND_MAX_TRIANGLES = 256,
+    SCENE_BLOCK_TEXELS = 8,             /* a block is 8 x 8 texels */
+    SCENE_MAX_BLOCKS = 4096,            /* 12-bit block coordinates */
+    SCENE_MAX_ISLAND_TEXELS = 4096 * 8, /* level-0 island side, border included */
+};
+
+/* Counts of input the importer repaired or skipped, never silently. */
+typedef struct scene_repairs {
+    uint64_t degenerate_skipped;   /* zero-area or repeated-vertex triangles dropped */
+    uint64_t duplicate_skipped;    /* triangles with the same three welded vertices as an earlier one */
+    uint64_t nonmanifold_split;    /* triangles split off from the half-edge mesh (non-manifold edges) */
+    uint64_t vertices_welded;      /* vertices merged into an earlier one with the same position */
+    uint64_t non_triangles_dropped; /* points and lines in the input */
+    uint64_t textures_missing;      /* texture files named by a material that could not be read */
+} scene_repairs;
+
+/* Wall-clock time of each build stage, milliseconds. */
+typedef struct scene_timings {
+    double load_ms;    /* reading and parsing files, triangulation */
+    double weld_ms;    /* welding and validation */
+    double islands_ms; /* topology, chart growing, projection */
+    double textures_ms;
+} scene_timings;
+
+typedef struct scene {
+    /* Geometry, world space, welded. */
+    uint32_t vertex_count;
+    float *positions; /* vertex_count * 3 */
+    uint32_t triangle_count;
+    uint32_t *indices;     /* triangle_count * 3, into positions */
+    float *corner_uv;      /* triangle_count * 6: the mesh's own UVs per corner (for textures), 0 if none */
+    uint32_t *tri_mesh;    /* triangle_count: mesh index */
+    float *tri_normal;     /* triangle_count * 3: unit geometric normal */
+
+    uint32_t mesh_count;
+    scene_mesh *meshes;
+    uint32_t material_count;
+    scene_material *materials;
+    uint32_t texture_count;
+    scene_texture *textures;
+    uint32_t light_count;
+    scene_light *lights;
+
+    float sky_color[3]; /* linear RGB */
+    float sky_intensity;
+
+    float texel_density;  /* level-0 texels per metre */
+    bool density_auto;    /* chosen by scene_finalize() from the surface area */
+    float ao_radius;      /* metres; 0 = auto (a tenth of the bounding-box diagonal) */
+
+    scene_toggle fx_shadows, fx_ao, fx_indirect;
+
+    bool has_camera; /* a default camera from the scene description */
+    float camera_pos[3], camera_target[3], camera_fov_deg;
+
+    float bounds_min[3], bounds_max[3];
+
+    /* Islands (filled by scene_finalize()). */
+    uint32_t island_count;
+    scene_island *islands;
+    uint32_t *island_triangles; /* triangle_count entries: scene triangle of each island slot */
+    uint32_t *tri_island;       /* triangle_count: island of each triangle */
+    uint8_t *tri_local;         /* triangle_count: index of the triangle inside its island (0..255) */
+    float *tri_island_uv;       /* triangle_count * 6: island-local UV per corner, level-0 texel units */
+
+    scene_repairs repairs;
+    scene_timings timings;
+    char source[256]; /* file it came from, or "(embedded default scene)" */
+} scene;
+
+/* Options for loading. All-zero means defaults. */
+typedef struct scene_load_desc {
+    float texel_density; /* level-0 texels per metre; 0 = from the file, else auto */
+} scene_load_desc;
+
+/* Loads a scene: a JSON scene description (*.json), or any mesh file Assimp reads (optionally .gz), which
+ * then becomes a scene with defaults (one sun, a sky). The path "default" (or NULL) is the embedded scene.
+ * Returns NULL and fills err on failure; nothing partial is returned. */
+scene *scene_load(const char *path, const scene_load_desc *desc, scene_error *err);
+
+/* The embedded default scene: a room with an opening towards a sun, boxes and a curved object. */
+scene *scene_create_default(const scene_load_desc *desc, scene_error *err);
+
+/* Releases a scene and everything it owns. NULL is allowed. */
+void scene_free(scene *s);
+
+/* Total surface area of the scene's triangles, square metres. */
+double scene_surface_area(const scene *s);
+
+/* Samples a material's albedo (linear RGB) at triangle tri with barycentrics (u, v) of corners 1 and 2. */
+void scene_albedo(const scene *s, uint32_t tri, float u, float v, float out_rgb[3]);
+
+/* ---- what the scene needs ---------------------------------------------------------------------------- */
+
+typedef enum scene_effect {
+    SCENE_FX_TRIANGLE_LOOKUP = 0,
+    SCENE_FX_SHADOW,
+    SCENE_FX_AO,
+    SCENE_FX_PROBES,
+    SCENE_FX_COUNT
+} scene_effect;
+
+typedef enum scene_cache_kind { SCENE_CACHE_ON_SURFACE = 0, SCENE_CACHE_WORLD_SPACE, SCENE_CACHE_COUNT } scene_cache_kind;
+
+typedef struct scene_needs_result {
+    bool effect[SCENE_FX_COUNT];
+    char effect_reason[SCENE_FX_COUNT][160]; /* why it runs, or why it is left out */
+    bool cache[SCENE_CACHE_COUNT];
+    char cache_reason[SCENE_CACHE_COUNT][160];
+} scene_needs_result;
+
+/* Decides from the scene content and its overrides which effects and caches run, with a reason for each. */
+void scene_needs(const scene *s, scene_needs_result *out);
+
+/* Short names: "triangle_lookup", "shadow", "ao", "probes"; "on_surface", "world_space". */
+const char *scene_effect_name(scene_effect fx);
+const char *scene_cache_name(scene_cache_kind c);
+
+/* ---- Embree ------------------------------------------------------------------------------------------ */
+
+typedef struct scene_rt scene_rt; /* opaque: an Embree device and scene built from scene triangles */
+
+/* Builds the Embree scene from the same triangles (geometry 0, primID = scene triangle index).
+ * Returns NULL and fills err when Embree reports an error. build_ms (may be NULL) receives the build time. */
+scene_rt *scene_rt_create(const scene *s, double *build_ms, scene_error *err);
+void scene_rt_free(scene_rt *rt);
+
+/* The RTCScene handle, as void * so that this header needs no Embree include. */
+void *scene_rt_handle(scene_rt *rt);
+
+/* Sets flush-to-zero and denormals-are-zero for the calling thread: call once in every tracing thread. */
+void scene_tracing_thread_init(void);
+
+/* A robust origin for a ray leaving a surface at p with geometric normal n (pointing to the side the ray
+ * leaves towards): offsets p along n by a scale-aware amount in integer ULPs (Waechter and Binder, Ray
+ * Tracing Gems ch. 6). Every ray in fxcache that starts on a surface uses this. */
+void scene_offset_ray_origin(const float p[3], const float n[3], float out[3]);
+
+/* One closest-hit query (for tools and tests; passes use packets). Returns true on a hit. */
+bool scene_rt_intersect1(scene_rt *rt, const float org[3], const float dir[3], float tfar, uint32_t *tri,
+                         float *u, float *v, float *t);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

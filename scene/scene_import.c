@@ -1,0 +1,282 @@
+/* Mesh-file import through Assimp's C API: OBJ, 3DS, PLY, glTF 2 and whatever else Assimp reads.
+ * A ".gz" file is decompressed with zlib first and handed to Assimp from memory with the inner extension
+ * as the format hint. Meshes are triangulated by Assimp and pre-transformed to world space; points and
+ * lines are dropped and counted; every mesh then goes through scene__add_mesh(), which checks, welds and
+ * cleans it. Diffuse colours and diffuse textures (read with OpenImageIO, relative to the model file, with
+ * a case-insensitive fallback since many old models name "KAMEN.JPG" for kamen.jpg) become materials. */
+#include "scene_internal.h"
+
+#include <assimp/cimport.h>
+#include <assimp/material.h>
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+
+#include <dirent.h>
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+#include <zlib.h>
+
+/* Largest decompressed .gz model accepted (bytes): Assimp takes the length as unsigned int. */
+#define IMPORT_MAX_GZ_BYTES ((size_t)1 << 31)
+
+/* Reads a gzip file completely into a malloc'd buffer. */
+static scene_result read_gz(const char *path, char **out, size_t *out_len, scene_error *err)
+{
+    gzFile gz = gzopen(path, "rb");
+    if (!gz)
+        return scene__fail(err, SCENE_ERR_IO, "%s: cannot open: %s", path, strerror(errno ? errno : EIO));
+    size_t cap = 1 << 20, len = 0;
+    char *buf = malloc(cap);
+    scene_result rc = SCENE_OK;
+    while (buf) {
+        if (len == cap) {
+            if (cap >= IMPORT_MAX_GZ_BYTES) {
+                rc = scene__fail(err, SCENE_ERR_RANGE, "%s: decompresses to more than %zu bytes", path,
+                                 IMPORT_MAX_GZ_BYTES);
+                break;
+            }
+            char *bigger = realloc(buf, cap * 2);
+            if (!bigger) {
+                rc = scene__fail(err, SCENE_ERR_NOMEM, "%s: out of memory decompressing", path);
+                break;
+            }
+            buf = bigger;
+            cap *= 2;
+        }
+        int n = gzread(gz, buf + len, (unsigned)(cap - len));
+        if (n < 0) {
+            int zerr = 0;
+            const char *zmsg = gzerror(gz, &zerr);
+            rc = scene__fail(err, SCENE_ERR_FORMAT, "%s: corrupt gzip data: %s", path, zmsg);
+            break;
+        }
+        if (n == 0)
+            break;
+        len += (size_t)n;
+    }
+    gzclose(gz);
+    if (!buf)
+        return scene__fail(err, SCENE_ERR_NOMEM, "%s: out of memory decompressing", path);
+    if (rc != SCENE_OK) {
+        free(buf);
+        return rc;
+    }
+    *out = buf;
+    *out_len = len;
+    return SCENE_OK;
+}
+
+/* The folder part of path (with a trailing slash), or "" for a bare file name. */
+static void folder_of(const char *path, char *dir, size_t cap)
+{
+    const char *slash = strrchr(path, '/');
+    size_t n = slash ? (size_t)(slash - path) + 1 : 0;
+    if (n >= cap)
+        n = cap - 1;
+    memcpy(dir, path, n);
+    dir[n] = 0;
+}
+
+/* Resolves a texture name from a model file: backslashes become slashes, the path is taken relative to
+ * the model's folder, and when that file is absent a case-insensitive match of the file name in that
+ * folder is used. Returns false when nothing matches. */
+static bool resolve_texture(const char *model_dir, const char *name, char *out, size_t cap)
+{
+    char clean[512];
+    snprintf(clean, sizeof clean, "%s", name);
+    for (char *p = clean; *p; p++)
+        if (*p == '\\')
+            *p = '/';
+    if (clean[0] == '/')
+        snprintf(out, cap, "%s", clean);
+    else
+        snprintf(out, cap, "%s%s", model_dir, clean);
+    FILE *f = fopen(out, "rb");
+    if (f) {
+        fclose(f);
+        return true;
+    }
+    const char *base = strrchr(clean, '/');
+    base = base ? base + 1 : clean;
+    DIR *dir = opendir(model_dir[0] ? model_dir : ".");
+    if (!dir)
+        return false;
+    bool found = false;
+    for (struct dirent *e; (e = readdir(dir)) != NULL;)
+        if (strcasecmp(e->d_name, base) == 0) {
+            snprintf(out, cap, "%s%s", model_dir, e->d_name);
+            found = true;
+            break;
+        }
+    closedir(dir);
+    return found;
+}
+
+/* Converts one Assimp material into a scene material (its diffuse colour and texture). A texture that
+ * cannot be read is reported on stderr and counted; the material keeps its colour. */
+static scene_result import_material(scene *s, const struct aiMaterial *am, const char *model_dir,
+                                    uint32_t *out_index, scene_error *err)
+{
+    scene_material m = {.diffuse = {0.7f, 0.7f, 0.7f}, .texture = -1};
+    struct aiString name;
+    if (aiGetMaterialString(am, AI_MATKEY_NAME, &name) == aiReturn_SUCCESS)
+        snprintf(m.name, sizeof m.name, "%s", name.data);
+    struct aiColor4D color;
+    if (aiGetMaterialColor(am, AI_MATKEY_COLOR_DIFFUSE, &color) == aiReturn_SUCCESS) {
+        float c[3] = {color.r, color.g, color.b};
+        for (int k = 0; k < 3; k++)
+            m.diffuse[k] = isfinite(c[k]) ? fminf(fmaxf(c[k], 0.0f), 1.0f) : 0.7f;
+    }
+    struct aiString tex;
+    if (aiGetMaterialTextureCount(am, aiTextureType_DIFFUSE) > 0 &&
+        aiGetMaterialTexture(am, aiTextureType_DIFFUSE, 0, &tex, NULL, NULL, NULL, NULL, NULL, NULL) ==
+            aiReturn_SUCCESS &&
+        tex.length > 0 && tex.data[0] != '*') {
+        char path[768];
+        double t0 = scene__now_ms();
+        if (resolve_texture(model_dir, tex.data, path, sizeof path)) {
+            scene_error tex_err = {0};
+            m.texture = scene__add_texture(s, path, &tex_err);
+            if (m.texture < 0) {
+                fprintf(stderr, "fxcache: warning: material '%s': %s (using its colour)\n", m.name, tex_err.msg);
+                s->repairs.textures_missing++;
+            } else {
+                /* The texture carries the colour; Assimp's 3DS and OBJ readers give a tint we keep. */
+                bool black = m.diffuse[0] == 0 && m.diffuse[1] == 0 && m.diffuse[2] == 0;
+                if (black)
+                    m.diffuse[0] = m.diffuse[1] = m.diffuse[2] = 1.0f;
+            }
+        } else {
+            fprintf(stderr, "fxcache: warning: material '%s': texture '%s' not found beside the model "
+                            "(using its colour)\n",
+                    m.name, tex.data);
+            s->repairs.textures_missing++;
+        }
+        s->timings.textures_ms += scene__now_ms() - t0;
+    }
+    *out_index = scene__add_material(s, &m, err);
+    return *out_index == UINT32_MAX ? SCENE_ERR_NOMEM : SCENE_OK;
+}
+
+/* Appends one Assimp mesh (already triangulated and in world space) through scene__add_mesh(). */
+static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t mesh_number, uint32_t material,
+                                const float *xform, const char *path, scene_error *err)
+{
+    char name[160];
+    if (mesh->mName.length > 0)
+        snprintf(name, sizeof name, "%s", mesh->mName.data);
+    else
+        snprintf(name, sizeof name, "%s#%u", path, mesh_number);
+    uint32_t nv = mesh->mNumVertices, nf = mesh->mNumFaces;
+    float *positions = malloc(sizeof(float) * 3 * (size_t)(nv ? nv : 1));
+    float *uv = mesh->mTextureCoords[0] ? malloc(sizeof(float) * 2 * (size_t)(nv ? nv : 1)) : NULL;
+    uint32_t *indices = malloc(sizeof(uint32_t) * 3 * (size_t)(nf ? nf : 1));
+    scene_result rc = SCENE_ERR_NOMEM;
+    if (!positions || !indices || (mesh->mTextureCoords[0] && !uv)) {
+        rc = scene__fail(err, SCENE_ERR_NOMEM, "mesh '%s': out of memory", name);
+        goto done;
+    }
+    for (uint32_t v = 0; v < nv; v++) {
+        positions[3 * (size_t)v] = mesh->mVertices[v].x;
+        positions[3 * (size_t)v + 1] = mesh->mVertices[v].y;
+        positions[3 * (size_t)v + 2] = mesh->mVertices[v].z;
+        if (uv) {
+            uv[2 * (size_t)v] = mesh->mTextureCoords[0][v].x;
+            uv[2 * (size_t)v + 1] = mesh->mTextureCoords[0][v].y;
+        }
+    }
+    uint32_t nt = 0;
+    for (uint32_t f = 0; f < nf; f++) {
+        const struct aiFace *face = &mesh->mFaces[f];
+        if (face->mNumIndices != 3) {
+            s->repairs.non_triangles_dropped++;
+            continue;
+        }
+        for (int c = 0; c < 3; c++)
+            indices[3 * (size_t)nt + c] = face->mIndices[c];
+        nt++;
+    }
+    rc = scene__add_mesh(s, name, positions, nv, indices, nt, uv, material, xform, err);
+done:
+    free(positions);
+    free(uv);
+    free(indices);
+    return rc;
+}
+
+scene_result scene__import_file(scene *s, const char *path, const float *xform,
+                                const scene_material *override, scene_error *err)
+{
+    FILE *probe = fopen(path, "rb");
+    if (!probe)
+        return scene__fail(err, SCENE_ERR_IO, "%s: cannot read: %s", path, strerror(errno));
+    fclose(probe);
+
+    const unsigned flags = aiProcess_Triangulate | aiProcess_PreTransformVertices | aiProcess_SortByPType;
+    const struct aiScene *ai = NULL;
+    size_t n = strlen(path);
+    if (n > 3 && strcasecmp(path + n - 3, ".gz") == 0) {
+        char inner[512], *buf = NULL;
+        size_t len = 0;
+        snprintf(inner, sizeof inner, "%.*s", (int)(n - 3), path);
+        const char *dot = strrchr(inner, '.');
+        const char *hint = dot && !strchr(dot, '/') ? dot + 1 : "";
+        scene_result rc = read_gz(path, &buf, &len, err);
+        if (rc != SCENE_OK)
+            return rc;
+        if (len == 0) {
+            free(buf);
+            return scene__fail(err, SCENE_ERR_FORMAT, "%s: decompresses to nothing", path);
+        }
+        ai = aiImportFileFromMemory(buf, (unsigned)len, flags, hint);
+        free(buf);
+    } else {
+        ai = aiImportFile(path, flags);
+    }
+    if (!ai)
+        return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s", path, aiGetErrorString());
+
+    char model_dir[512];
+    folder_of(path, model_dir, sizeof model_dir);
+    scene_result rc = SCENE_OK;
+    uint32_t *material_map = NULL;
+    uint32_t override_index = UINT32_MAX;
+    if (override) {
+        override_index = scene__add_material(s, override, err);
+        if (override_index == UINT32_MAX)
+            rc = SCENE_ERR_NOMEM;
+    } else {
+        material_map = malloc(sizeof(uint32_t) * (ai->mNumMaterials ? ai->mNumMaterials : 1));
+        if (!material_map)
+            rc = scene__fail(err, SCENE_ERR_NOMEM, "%s: out of memory", path);
+        for (uint32_t m = 0; rc == SCENE_OK && m < ai->mNumMaterials; m++)
+            rc = import_material(s, ai->mMaterials[m], model_dir, &material_map[m], err);
+        if (rc == SCENE_OK && ai->mNumMaterials == 0) {
+            scene_material grey = {.diffuse = {0.7f, 0.7f, 0.7f}, .texture = -1, .name = "default"};
+            override_index = scene__add_material(s, &grey, err);
+            if (override_index == UINT32_MAX)
+                rc = SCENE_ERR_NOMEM;
+        }
+    }
+    uint32_t before = s->triangle_count;
+    for (uint32_t i = 0; rc == SCENE_OK && i < ai->mNumMeshes; i++) {
+        const struct aiMesh *mesh = ai->mMeshes[i];
+        if (!(mesh->mPrimitiveTypes & aiPrimitiveType_TRIANGLE)) {
+            s->repairs.non_triangles_dropped += mesh->mNumFaces;
+            continue;
+        }
+        uint32_t material = override_index;
+        if (material == UINT32_MAX)
+            material = mesh->mMaterialIndex < ai->mNumMaterials ? material_map[mesh->mMaterialIndex] : 0;
+        rc = import_mesh(s, mesh, i, material, xform, path, err);
+    }
+    if (rc == SCENE_OK && s->triangle_count == before)
+        rc = scene__fail(err, SCENE_ERR_EMPTY, "%s: no usable triangles in the file", path);
+    free(material_map);
+    aiReleaseImport(ai);
+    return rc;
+}

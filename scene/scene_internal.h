@@ -1,0 +1,63 @@
+/* Private to the scene module: the builder functions the loaders (mesh files, JSON, embedded scene) share,
+ * and the stages scene finalisation runs. */
+#ifndef FXC_SCENE_INTERNAL_H
+#define FXC_SCENE_INTERNAL_H
+
+#include "scene.h"
+
+#include <stdarg.h>
+
+/* Fills err with code and a printf-style message; returns code so callers can `return scene__fail(...)`. */
+scene_result scene__fail(scene_error *err, scene_result code, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+
+/* A new empty scene with defaults: no meshes, no lights, no sky, density auto, overrides auto. */
+scene *scene__alloc(void);
+
+/* Monotonic clock, milliseconds. */
+double scene__now_ms(void);
+
+/* Appends a material; returns its index. */
+uint32_t scene__add_material(scene *s, const scene_material *m, scene_error *err);
+
+/* Loads a texture (through OpenImageIO) or returns the index of one already loaded from the same path.
+ * Returns -1 and fills err when it cannot be read. */
+int32_t scene__add_texture(scene *s, const char *path, scene_error *err);
+
+/* Appends a light after checking it (finite values, non-negative intensity, non-zero direction). */
+scene_result scene__add_light(scene *s, const scene_light *l, const char *where, scene_error *err);
+
+/* Appends a mesh. positions: vertex_count*3; indices: triangle_count*3; uv: vertex_count*2 or NULL.
+ * xform: a row-major 4x4 affine transform applied to positions, or NULL. Checks every coordinate is
+ * finite (naming the mesh and vertex), every index in range; welds vertices with equal positions; drops
+ * degenerate and duplicate triangles (counted in s->repairs). A mesh left with no triangle is not added
+ * (counted) but is not an error. */
+scene_result scene__add_mesh(scene *s, const char *name, const float *positions, uint32_t vertex_count,
+                             const uint32_t *indices, uint32_t triangle_count, const float *uv,
+                             uint32_t material, const float *xform, scene_error *err);
+
+/* Appends a sun (directional light) and a sky: the defaults of a plain mesh file or a scene without lights
+ * and sky. */
+void scene__add_default_lighting(scene *s);
+
+/* Final stage: checks the scene is not empty, computes normals, bounds, the texel density (auto: from the
+ * surface area), the islands. desc may be NULL. */
+scene_result scene__finalize(scene *s, const scene_load_desc *desc, scene_error *err);
+
+/* Builds the islands of a scene whose triangles, normals and texel density are set (scene_islands.c).
+ * Fills s->islands, island_triangles, tri_island, tri_local, tri_island_uv and s->repairs.nonmanifold_split.
+ * Fails with SCENE_ERR_RANGE when the texel density makes one triangle wider than an island may be. */
+scene_result scene__build_islands(scene *s, scene_error *err);
+
+/* Mesh-file import through Assimp (scene_import.c): appends the file's meshes and materials to s.
+ * xform may be NULL; override (may be NULL) replaces every material of the file. */
+scene_result scene__import_file(scene *s, const char *path, const float *xform,
+                                const scene_material *override, scene_error *err);
+
+/* Reads a JSON scene description into s (scene_json.c). */
+scene_result scene__load_json(scene *s, const char *path, scene_error *err);
+
+/* Fills s with the embedded default scene (scene_default.c). */
+scene_result scene__build_default(scene *s, scene_error *err);
+
+#endif

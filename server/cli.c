@@ -1,0 +1,85 @@
+/* Shared command-line helpers: see cli.h. */
+#include "cli.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+bool srv_cli_double(const char *cmd, const char *option, const char *text, double min, double max,
+                    double *out)
+{
+    char *end = NULL;
+    errno = 0;
+    double v = text ? strtod(text, &end) : NAN;
+    if (!text || end == text || *end != 0 || errno == ERANGE || !isfinite(v) || v < min || v > max) {
+        fprintf(stderr, "fxcache %s: %s: '%s' is not a number in [%g, %g]\n", cmd, option, text ? text : "",
+                min, max);
+        return false;
+    }
+    *out = v;
+    return true;
+}
+
+bool srv_cli_u32(const char *cmd, const char *option, const char *text, uint32_t min, uint32_t max,
+                 uint32_t *out)
+{
+    char *end = NULL;
+    errno = 0;
+    unsigned long long v = 0;
+    bool ok = text && text[0] >= '0' && text[0] <= '9';
+    if (ok) {
+        v = strtoull(text, &end, 10);
+        ok = end != text && *end == 0 && errno != ERANGE && v >= min && v <= max;
+    }
+    if (!ok) {
+        fprintf(stderr, "fxcache %s: %s: '%s' is not a whole number in [%u, %u]\n", cmd, option,
+                text ? text : "", min, max);
+        return false;
+    }
+    *out = (uint32_t)v;
+    return true;
+}
+
+bool srv_cli_resolution(const char *cmd, const char *option, const char *text, uint32_t max_side,
+                        uint32_t *width, uint32_t *height)
+{
+    unsigned long long w = 0, h = 0;
+    char tail = 0;
+    if (!text || sscanf(text, "%llux%llu%c", &w, &h, &tail) != 2 || w < 1 || h < 1 || w > max_side ||
+        h > max_side || text[0] < '0' || text[0] > '9') {
+        fprintf(stderr, "fxcache %s: %s: '%s' is not WIDTHxHEIGHT with each side in [1, %u]\n", cmd, option,
+                text ? text : "", max_side);
+        return false;
+    }
+    *width = (uint32_t)w;
+    *height = (uint32_t)h;
+    return true;
+}
+
+bool srv_cli_vec3(const char *cmd, const char *option, const char *text, float out[3])
+{
+    double v[3];
+    int used = 0;
+    if (!text || sscanf(text, "%lf,%lf,%lf%n", &v[0], &v[1], &v[2], &used) != 3 || text[used] != 0 ||
+        !isfinite(v[0]) || !isfinite(v[1]) || !isfinite(v[2]) || fabs(v[0]) > 1e30 || fabs(v[1]) > 1e30 ||
+        fabs(v[2]) > 1e30) {
+        fprintf(stderr, "fxcache %s: %s: '%s' is not three finite numbers x,y,z (|each| <= 1e30)\n", cmd,
+                option, text ? text : "");
+        return false;
+    }
+    for (int k = 0; k < 3; k++)
+        out[k] = (float)v[k];
+    return true;
+}
+
+scene *srv_cli_load_scene(const char *cmd, const char *path, float texel_density)
+{
+    scene_load_desc desc = {.texel_density = texel_density};
+    scene_error err = {0};
+    scene *s = scene_load(path, &desc, &err);
+    if (!s)
+        fprintf(stderr, "fxcache %s: %s\n", cmd, err.msg[0] ? err.msg : scene_strerror(err.code));
+    return s;
+}

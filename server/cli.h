@@ -1,0 +1,33 @@
+/* Shared pieces of the fxcache command line: value parsing with ranges (every refusal names the option,
+ * the value and the allowed range), and loading the scene a subcommand names. */
+#ifndef FXC_SERVER_CLI_H
+#define FXC_SERVER_CLI_H
+
+#include "scene.h"
+
+#include <stdbool.h>
+#include <stdint.h>
+
+/* Parses a finite double in [min, max]; on failure prints "fxcache CMD: OPTION: ..." and returns false. */
+bool srv_cli_double(const char *cmd, const char *option, const char *text, double min, double max,
+                    double *out);
+
+/* Parses an unsigned integer in [min, max]; on failure prints a one-line error and returns false. */
+bool srv_cli_u32(const char *cmd, const char *option, const char *text, uint32_t min, uint32_t max,
+                 uint32_t *out);
+
+/* Parses "WxH" with each side in [1, max_side]. */
+bool srv_cli_resolution(const char *cmd, const char *option, const char *text, uint32_t max_side,
+                        uint32_t *width, uint32_t *height);
+
+/* Parses "x,y,z" (three finite numbers). */
+bool srv_cli_vec3(const char *cmd, const char *option, const char *text, float out[3]);
+
+/* Loads the scene at path ("default" or NULL: the embedded scene); prints the error on failure. */
+scene *srv_cli_load_scene(const char *cmd, const char *path, float texel_density);
+
+/* The subcommands (each parses its own options and returns the process exit code). */
+int srv_cmd_scene_info(int argc, char **argv);
+int srv_cmd_render(int argc, char **argv);
+
+#endif

@@ -1,0 +1,252 @@
+/* `fxcache scene-info`: what a scene holds and what it needs, in words or as JSON. The same figures feed
+ * the scene benchmark, so every number here is measured on the loaded scene, not estimated. */
+#include "cli.h"
+
+#include <getopt.h>
+#include <jansson.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+enum { HIST_BUCKETS = 9 }; /* islands by triangle count: 1, 2-3, 4-7, ..., 128-255, 256 */
+
+typedef struct island_summary {
+    uint32_t count;
+    uint32_t min_triangles, max_triangles;
+    double mean_triangles;
+    uint64_t histogram[HIST_BUCKETS];
+    uint64_t texels;    /* level-0 texels over all islands, borders included */
+    uint64_t blocks;    /* level-0 8x8 blocks over all islands */
+    uint32_t max_side;  /* largest island side, texels */
+} island_summary;
+
+static const char *const bucket_names[HIST_BUCKETS] = {"1",     "2-3",   "4-7",     "8-15", "16-31",
+                                                       "32-63", "64-127", "128-255", "256"};
+
+static int bucket_of(uint32_t triangles)
+{
+    int b = 0;
+    while (b < HIST_BUCKETS - 1 && (1u << (b + 1)) <= triangles)
+        b++;
+    return b;
+}
+
+static void summarize_islands(const scene *s, island_summary *out)
+{
+    memset(out, 0, sizeof *out);
+    out->count = s->island_count;
+    out->min_triangles = s->island_count ? UINT32_MAX : 0;
+    for (uint32_t i = 0; i < s->island_count; i++) {
+        const scene_island *is = &s->islands[i];
+        out->min_triangles = is->triangle_count < out->min_triangles ? is->triangle_count : out->min_triangles;
+        out->max_triangles = is->triangle_count > out->max_triangles ? is->triangle_count : out->max_triangles;
+        out->histogram[bucket_of(is->triangle_count)]++;
+        out->texels += (uint64_t)is->width * is->height;
+        out->blocks += (uint64_t)((is->width + 7) / 8) * ((is->height + 7) / 8);
+        uint32_t side = is->width > is->height ? is->width : is->height;
+        out->max_side = side > out->max_side ? side : out->max_side;
+    }
+    out->mean_triangles = s->island_count ? (double)s->triangle_count / s->island_count : 0;
+}
+
+static json_t *vec3_json(const float v[3])
+{
+    return json_pack("[fff]", (double)v[0], (double)v[1], (double)v[2]);
+}
+
+/* The whole report as one JSON object. */
+static json_t *scene_info_json(const scene *s, const island_summary *is, const scene_needs_result *needs,
+                               double bvh_ms)
+{
+    json_t *root = json_object();
+    json_object_set_new(root, "source", json_string(s->source));
+    json_object_set_new(root, "triangles", json_integer(s->triangle_count));
+    json_object_set_new(root, "vertices", json_integer(s->vertex_count));
+    json_object_set_new(root, "meshes", json_integer(s->mesh_count));
+    json_object_set_new(root, "materials", json_integer(s->material_count));
+    json_object_set_new(root, "textures", json_integer(s->texture_count));
+    json_object_set_new(root, "lights", json_integer(s->light_count));
+    json_t *lights = json_array();
+    for (uint32_t i = 0; i < s->light_count; i++) {
+        const scene_light *l = &s->lights[i];
+        bool dir = l->type == SCENE_LIGHT_DIRECTIONAL;
+        json_array_append_new(lights, json_pack("{s:s,s:o,s:o,s:f}", "type", dir ? "directional" : "point",
+                                                dir ? "direction" : "position",
+                                                vec3_json(dir ? l->direction : l->position), "color",
+                                                vec3_json(l->color), "intensity", (double)l->intensity));
+    }
+    json_object_set_new(root, "light_list", lights);
+    json_object_set_new(root, "sky", json_pack("{s:o,s:f}", "color", vec3_json(s->sky_color), "intensity",
+                                               (double)s->sky_intensity));
+    json_object_set_new(root, "texel_density", json_real(s->texel_density));
+    json_object_set_new(root, "texel_density_auto", json_boolean(s->density_auto));
+    json_object_set_new(root, "ao_radius", json_real(s->ao_radius));
+    json_object_set_new(root, "surface_area_m2", json_real(scene_surface_area(s)));
+    json_object_set_new(root, "bounds", json_pack("{s:o,s:o}", "min", vec3_json(s->bounds_min), "max",
+                                                  vec3_json(s->bounds_max)));
+
+    json_t *hist = json_object();
+    for (int b = 0; b < HIST_BUCKETS; b++)
+        json_object_set_new(hist, bucket_names[b], json_integer((json_int_t)is->histogram[b]));
+    json_object_set_new(root, "islands",
+                        json_pack("{s:i,s:i,s:i,s:f,s:o,s:I,s:I,s:i}", "count", (int)is->count, "min_triangles",
+                                  (int)is->min_triangles, "max_triangles", (int)is->max_triangles,
+                                  "mean_triangles", is->mean_triangles, "triangles_histogram", hist,
+                                  "texels_level0", (json_int_t)is->texels, "blocks_level0",
+                                  (json_int_t)is->blocks, "max_side_texels", (int)is->max_side));
+
+    const scene_repairs *r = &s->repairs;
+    json_object_set_new(root, "repairs",
+                        json_pack("{s:I,s:I,s:I,s:I,s:I,s:I}", "degenerate_skipped",
+                                  (json_int_t)r->degenerate_skipped, "duplicate_skipped",
+                                  (json_int_t)r->duplicate_skipped, "nonmanifold_split",
+                                  (json_int_t)r->nonmanifold_split, "vertices_welded",
+                                  (json_int_t)r->vertices_welded, "non_triangles_dropped",
+                                  (json_int_t)r->non_triangles_dropped, "textures_missing",
+                                  (json_int_t)r->textures_missing));
+    json_object_set_new(root, "time_ms",
+                        json_pack("{s:f,s:f,s:f,s:f,s:f}", "load", s->timings.load_ms, "weld",
+                                  s->timings.weld_ms, "textures", s->timings.textures_ms, "islands",
+                                  s->timings.islands_ms, "bvh", bvh_ms));
+
+    json_t *effects = json_object(), *left_out = json_object(), *caches = json_object();
+    for (int fx = 0; fx < SCENE_FX_COUNT; fx++) {
+        const char *name = scene_effect_name((scene_effect)fx);
+        if (needs->effect[fx])
+            json_object_set_new(effects, name, json_string(needs->effect_reason[fx]));
+        else
+            json_object_set_new(left_out, name, json_string(needs->effect_reason[fx]));
+    }
+    for (int c = 0; c < SCENE_CACHE_COUNT; c++) {
+        const char *name = scene_cache_name((scene_cache_kind)c);
+        if (needs->cache[c])
+            json_object_set_new(caches, name, json_string(needs->cache_reason[c]));
+        else
+            json_object_set_new(left_out, name, json_string(needs->cache_reason[c]));
+    }
+    json_object_set_new(root, "effects", effects);
+    json_object_set_new(root, "caches", caches);
+    json_object_set_new(root, "left_out", left_out);
+    return root;
+}
+
+static void print_text(const scene *s, const island_summary *is, const scene_needs_result *needs, double bvh_ms)
+{
+    const scene_repairs *r = &s->repairs;
+    printf("scene:          %s\n", s->source);
+    printf("triangles:      %u (vertices %u after welding %llu)\n", s->triangle_count, s->vertex_count,
+           (unsigned long long)r->vertices_welded);
+    printf("repairs:        %llu degenerate and %llu duplicate triangles skipped, %llu split off at "
+           "non-manifold edges, %llu points/lines dropped, %llu textures missing\n",
+           (unsigned long long)r->degenerate_skipped, (unsigned long long)r->duplicate_skipped,
+           (unsigned long long)r->nonmanifold_split, (unsigned long long)r->non_triangles_dropped,
+           (unsigned long long)r->textures_missing);
+    printf("meshes:         %u (materials %u, textures %u)\n", s->mesh_count, s->material_count, s->texture_count);
+    uint32_t dirs = 0;
+    for (uint32_t i = 0; i < s->light_count; i++)
+        dirs += s->lights[i].type == SCENE_LIGHT_DIRECTIONAL;
+    printf("lights:         %u (%u directional, %u point)\n", s->light_count, dirs, s->light_count - dirs);
+    printf("sky:            colour (%.3g, %.3g, %.3g), intensity %.3g\n", (double)s->sky_color[0],
+           (double)s->sky_color[1], (double)s->sky_color[2], (double)s->sky_intensity);
+    printf("texel density:  %.4g texels per metre%s\n", (double)s->texel_density,
+           s->density_auto ? " (auto)" : "");
+    printf("surface area:   %.4g m^2; bounds (%.3g, %.3g, %.3g) to (%.3g, %.3g, %.3g)\n", scene_surface_area(s),
+           (double)s->bounds_min[0], (double)s->bounds_min[1], (double)s->bounds_min[2],
+           (double)s->bounds_max[0], (double)s->bounds_max[1], (double)s->bounds_max[2]);
+    printf("islands:        %u; triangles per island min %u, mean %.1f, max %u\n", is->count, is->min_triangles,
+           is->mean_triangles, is->max_triangles);
+    printf("  level 0:      %llu texels, %llu blocks of 8x8, largest side %u texels\n",
+           (unsigned long long)is->texels, (unsigned long long)is->blocks, is->max_side);
+    printf("  histogram:   ");
+    for (int b = 0; b < HIST_BUCKETS; b++)
+        printf(" [%s] %llu", bucket_names[b], (unsigned long long)is->histogram[b]);
+    printf("\n");
+    printf("build times:    load %.1f ms, weld %.1f ms, textures %.1f ms, islands %.1f ms, BVH %.1f ms\n",
+           s->timings.load_ms, s->timings.weld_ms, s->timings.textures_ms, s->timings.islands_ms, bvh_ms);
+    printf("effects:\n");
+    for (int fx = 0; fx < SCENE_FX_COUNT; fx++)
+        printf("  %-16s %-9s %s\n", scene_effect_name((scene_effect)fx), needs->effect[fx] ? "runs" : "left out",
+               needs->effect_reason[fx]);
+    printf("caches:\n");
+    for (int c = 0; c < SCENE_CACHE_COUNT; c++)
+        printf("  %-16s %-9s %s\n", scene_cache_name((scene_cache_kind)c), needs->cache[c] ? "exists" : "left out",
+               needs->cache_reason[c]);
+}
+
+static const char scene_info_usage[] =
+    "usage: fxcache scene-info [SCENE] [--json] [--density TEXELS_PER_METRE]\n"
+    "\n"
+    "Loads SCENE (a *.json scene description, a mesh file Assimp reads, optionally .gz, or 'default' for\n"
+    "the embedded scene; the default) and prints its triangles, meshes, lights, islands (count,\n"
+    "triangles-per-island histogram, texels and blocks at level 0), texel density, build time per stage\n"
+    "(including the Embree BVH), and which effects and caches the scene needs and why.\n"
+    "\n"
+    "  --json               print the same as one JSON object\n"
+    "  --density D          level-0 texels per metre, in (0, 1e6] (default: the scene's, else auto)\n"
+    "  -h, --help           this text\n";
+
+int srv_cmd_scene_info(int argc, char **argv)
+{
+    static const struct option options[] = {
+        {"json", no_argument, NULL, 'j'},
+        {"density", required_argument, NULL, 'd'},
+        {"help", no_argument, NULL, 'h'},
+        {NULL, 0, NULL, 0},
+    };
+    bool as_json = false;
+    double density = 0;
+    optind = 1;
+    opterr = 0;
+    for (int c; (c = getopt_long(argc, argv, ":h", options, NULL)) != -1;) {
+        switch (c) {
+        case 'j':
+            as_json = true;
+            break;
+        case 'd':
+            if (!srv_cli_double("scene-info", "--density", optarg, 1e-9, 1e6, &density))
+                return 2;
+            break;
+        case 'h':
+            fputs(scene_info_usage, stdout);
+            return 0;
+        case ':':
+            fprintf(stderr, "fxcache scene-info: %s needs a value\n", argv[optind - 1]);
+            return 2;
+        default:
+            fprintf(stderr, "fxcache scene-info: unknown option '%s' (try --help)\n", argv[optind - 1]);
+            return 2;
+        }
+    }
+    if (argc - optind > 1) {
+        fprintf(stderr, "fxcache scene-info: one SCENE at most, got '%s' and '%s'\n", argv[optind],
+                argv[optind + 1]);
+        return 2;
+    }
+    const char *path = optind < argc ? argv[optind] : NULL;
+    scene *s = srv_cli_load_scene("scene-info", path, (float)density);
+    if (!s)
+        return 1;
+    scene_error err = {0};
+    double bvh_ms = 0;
+    scene_rt *rt = scene_rt_create(s, &bvh_ms, &err);
+    if (!rt) {
+        fprintf(stderr, "fxcache scene-info: %s\n", err.msg);
+        scene_free(s);
+        return 1;
+    }
+    scene_rt_free(rt);
+    island_summary is;
+    summarize_islands(s, &is);
+    scene_needs_result needs;
+    scene_needs(s, &needs);
+    if (as_json) {
+        json_t *root = scene_info_json(s, &is, &needs, bvh_ms);
+        json_dumpf(root, stdout, JSON_INDENT(2) | JSON_PRESERVE_ORDER | JSON_REAL_PRECISION(6));
+        fputc('\n', stdout);
+        json_decref(root);
+    } else {
+        print_text(s, &is, &needs, bvh_ms);
+    }
+    scene_free(s);
+    return 0;
+}

@@ -1,0 +1,27 @@
+/* Helpers shared by the test programs: paths to the shared scenes (skip when absent), scratch files,
+ * running the fxcache command line and capturing what it prints. */
+#ifndef FXC_TEST_UTIL_H
+#define FXC_TEST_UTIL_H
+
+#include <stdarg.h>
+#include <stddef.h>
+#include <setjmp.h>
+#include <stdint.h>
+#include <cmocka.h>
+
+/* Path of ../shared/scenes/<rel> relative to the repository root, or NULL (with a message printed) when
+ * that file is absent: the caller then calls skip(). The returned string is static. */
+const char *fxt_shared_scene(const char *rel);
+
+/* Writes text to a scratch file named name in this test's own temporary folder; returns its path (static
+ * buffer, valid until the next call). */
+const char *fxt_write_file(const char *name, const char *text);
+
+/* A scratch path for name in this test's temporary folder (static buffer). */
+const char *fxt_tmp_path(const char *name);
+
+/* Runs `fxcache <args>` through the shell, captures stdout and stderr (each truncated to cap-1 bytes, may
+ * be NULL) and returns the exit status (or -1 when it did not exit normally). */
+int fxt_run_cli(const char *args, char *out, size_t out_cap, char *err, size_t err_cap);
+
+#endif
