@@ -22,7 +22,7 @@ typedef struct osc__table {
     uint32_t max_count; /* inserts beyond this count are refused (max load) */
 } osc__table;
 
-/* The 64-bit mixer (murmur3 fmix64 finalizer): every key bit affects every hash bit, so structured keys
+/* The 64-bit mixer (murmur3's fmix64 finalizer): every key bit affects every hash bit, so structured keys
  * (neighbouring blocks differ in their low bits only) spread over the table. */
 static inline uint64_t osc__hash(uint64_t key)
 {
@@ -34,12 +34,14 @@ static inline uint64_t osc__hash(uint64_t key)
     return key;
 }
 
-/* Initializes a table over caller-owned arrays (capacity a power of two >= 2, max_count < capacity) and
+/* Initializes a table over caller-owned arrays (capacity a power of two >= 16, max_count < capacity) and
  * marks every slot empty. */
 void osc__table_init(osc__table *table, uint64_t *keys, uint32_t *values, uint32_t capacity,
                      uint32_t max_count);
 
-/* The slot holding key, or OSC_NONE. Precondition: key != OSC_KEY_EMPTY. */
+/* The slot holding key, or OSC_NONE. Precondition: key != OSC_KEY_EMPTY.
+ * Plain linear probing, one slot per step: measured faster here than reading 4-slot windows without
+ * branches and than Robin Hood ordering with early miss exit (bench/bench_osc.c; both tried). */
 static inline uint32_t osc__table_find_slot(const osc__table *table, uint64_t key)
 {
     const uint64_t *keys = table->keys;

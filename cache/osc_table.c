@@ -16,7 +16,7 @@
 /* Initializes the table over caller-owned arrays and marks every slot empty. */
 void osc__table_init(osc__table *table, uint64_t *keys, uint32_t *values, uint32_t capacity, uint32_t max_count)
 {
-    OSC_ASSERT(capacity >= 2 && (capacity & (capacity - 1)) == 0);
+    OSC_ASSERT(capacity >= 16 && (capacity & (capacity - 1)) == 0);
     OSC_ASSERT(max_count < capacity);
     table->keys = keys;
     table->values = values;

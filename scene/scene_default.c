@@ -305,14 +305,15 @@ scene_result scene__build_default(scene *s, scene_error *err)
     s->sky_intensity = 0.6f;
     s->ao_radius = 1.0f; /* metres: about a box's size, so corners and contacts darken */
 
-    /* From the south-west corner, at eye height, looking at the patch, the red box and the sphere. */
+    /* From the corner at +x, +z, above eye height, looking across the sunlit patch (red box, sphere) to the
+     * blue box in the far corner; the yellow box is on the left and the ceiling opening at the top. */
     s->has_camera = true;
-    s->camera_pos[0] = -4.2f;
-    s->camera_pos[1] = 2.0f;
-    s->camera_pos[2] = 3.4f;
-    s->camera_target[0] = 2.5f;
-    s->camera_target[1] = 0.4f;
-    s->camera_target[2] = 0.2f;
+    s->camera_pos[0] = 4.3f;
+    s->camera_pos[1] = 2.2f;
+    s->camera_pos[2] = 3.5f;
+    s->camera_target[0] = -1.0f;
+    s->camera_target[1] = 0.5f;
+    s->camera_target[2] = -1.5f;
     s->camera_fov_deg = 60.0f;
     r = SCENE_OK;
 done:

@@ -12,7 +12,9 @@
  * normal) at texel_density, so a triangle's UV area is d^2 * world area * cos(angle to the seed normal),
  * that is between 0.9 and 1.0 times d^2 * world area. A candidate is refused when its projection would
  * fold (non-positive or badly quantised area), overlap the interior of a chart triangle, or make the chart
- * wider or taller than SCENE_MAX_ISLAND_TEXELS with its border.
+ * wider or taller than SCENE_MAX_ISLAND_TEXELS with its border. A finished chart is then turned in its
+ * plane to the direction of the convex-hull edge that gives the smallest bounding box (kept only if the
+ * exact checks below still pass in the turned frame).
  *
  * Exactness: projected corners are snapped to a grid of 1/256 texel (ISLAND_SUBTEXELS) held in integers,
  * and all fold and overlap predicates are exact integer arithmetic on those snapped corners. The stored
@@ -49,10 +51,10 @@ typedef struct island_point {
 
 /* One chart while it grows: its projection frame, its local vertices and triangles. */
 typedef struct island_chart {
-    double origin[3];     /* world position of the seed's first corner (grid origin) */
-    double axis_u[3];     /* unit in-plane axes, scaled by nothing: world metres along each */
+    double origin[3]; /* world position of the seed's first corner (grid origin) */
+    double axis_u[3]; /* unit in-plane axes (u along the seed's longest edge, v = normal x u) */
     double axis_v[3];
-    double normal[3];     /* unit seed normal */
+    double normal[3];       /* unit seed normal */
     double steps_per_metre; /* texel_density * ISLAND_SUBTEXELS */
 
     uint32_t vertex_count;
@@ -62,9 +64,15 @@ typedef struct island_chart {
     uint32_t triangle_count;
     uint32_t triangle_id[SCENE_ISLAND_MAX_TRIANGLES];
     uint16_t corner[SCENE_ISLAND_MAX_TRIANGLES][3]; /* local vertex of each corner */
-    int64_t box[SCENE_ISLAND_MAX_TRIANGLES][4];      /* umin, vmin, umax, vmax of each triangle */
-    int64_t chart_box[4];                            /* of the whole chart */
+    int64_t box[SCENE_ISLAND_MAX_TRIANGLES][4];     /* umin, vmin, umax, vmax of each triangle */
+    int64_t chart_box[4];                           /* of the whole chart */
 } island_chart;
+
+/* A chart vertex in the plane (unsnapped), for the convex hull of rotate_chart(). */
+typedef struct island_hull_point {
+    double u, v;
+    uint32_t local; /* local vertex, breaks ties so the order is total and deterministic */
+} island_hull_point;
 
 /* Scratch of one build, sized from the scene, freed at the end. */
 typedef struct island_work {
@@ -74,6 +82,12 @@ typedef struct island_work {
     uint16_t *vertex_local;  /* vertex_count: local vertex index, valid when vertex_stamp matches */
     uint32_t queue[ISLAND_QUEUE_CAP];
     island_chart chart;
+    /* Scratch of rotate_chart(): the chart in a rotated frame before it is accepted. */
+    double plane_u[ISLAND_MAX_VERTICES], plane_v[ISLAND_MAX_VERTICES]; /* unsnapped, grid steps */
+    island_hull_point sorted[ISLAND_MAX_VERTICES];
+    island_hull_point hull[2 * ISLAND_MAX_VERTICES + 2];
+    island_point rotated_uv[ISLAND_MAX_VERTICES];
+    int64_t rotated_box[SCENE_ISLAND_MAX_TRIANGLES][4];
 } island_work;
 
 /* Twice the signed area of (a, b, c) in grid steps squared; exact (|coordinates| <= 2^24). */
@@ -105,8 +119,10 @@ static void project_vertex(const scene *s, const island_chart *chart, uint32_t v
     const float *p = s->positions + 3 * (size_t)vertex;
     double d[3] = {(double)p[0] - chart->origin[0], (double)p[1] - chart->origin[1],
                    (double)p[2] - chart->origin[2]};
-    *u = (d[0] * chart->axis_u[0] + d[1] * chart->axis_u[1] + d[2] * chart->axis_u[2]) * chart->steps_per_metre;
-    *v = (d[0] * chart->axis_v[0] + d[1] * chart->axis_v[1] + d[2] * chart->axis_v[2]) * chart->steps_per_metre;
+    *u = (d[0] * chart->axis_u[0] + d[1] * chart->axis_u[1] + d[2] * chart->axis_u[2]) *
+         chart->steps_per_metre;
+    *v = (d[0] * chart->axis_v[0] + d[1] * chart->axis_v[1] + d[2] * chart->axis_v[2]) *
+         chart->steps_per_metre;
 }
 
 /* Level-0 island side in texels (border included) for a chart extent in grid steps. */
@@ -139,7 +155,8 @@ static scene_result start_chart(const scene *s, island_work *work, uint32_t char
     double longest = -1;
     for (int k = 0; k < 3; k++) {
         const double *a = pos[k], *b = pos[(k + 1) % 3];
-        double len2 = (b[0] - a[0]) * (b[0] - a[0]) + (b[1] - a[1]) * (b[1] - a[1]) + (b[2] - a[2]) * (b[2] - a[2]);
+        double len2 =
+            (b[0] - a[0]) * (b[0] - a[0]) + (b[1] - a[1]) * (b[1] - a[1]) + (b[2] - a[2]) * (b[2] - a[2]);
         if (len2 > longest) {
             longest = len2;
             first = k;
@@ -148,7 +165,8 @@ static scene_result start_chart(const scene *s, island_work *work, uint32_t char
     const double *a = pos[first], *b = pos[(first + 1) % 3], *c = pos[(first + 2) % 3];
     double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
     double e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
-    double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+    double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                   e1[0] * e2[1] - e1[1] * e2[0]};
     double n_len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
     if (!(n_len > 0)) { /* degenerate slipped through: use the stored normal */
         for (int k = 0; k < 3; k++)
@@ -161,7 +179,8 @@ static scene_result start_chart(const scene *s, island_work *work, uint32_t char
     }
     for (int k = 0; k < 3; k++)
         chart->normal[k] = n[k] / n_len;
-    /* u: the longest edge made orthogonal to the normal; v = normal x u (corners then run counter-clockwise). */
+    /* u: the longest edge made orthogonal to the normal; v = normal x u (corners then run counter-clockwise).
+     */
     double along = e1[0] * chart->normal[0] + e1[1] * chart->normal[1] + e1[2] * chart->normal[2];
     double u_axis[3] = {e1[0] - along * chart->normal[0], e1[1] - along * chart->normal[1],
                         e1[2] - along * chart->normal[2]};
@@ -193,15 +212,17 @@ static scene_result start_chart(const scene *s, island_work *work, uint32_t char
         vmin = fmin(vmin, proj_v[k]);
         vmax = fmax(vmax, proj_v[k]);
     }
-    double width = ceil((umax - umin) / ISLAND_SUBTEXELS) + 2, height = ceil((vmax - vmin) / ISLAND_SUBTEXELS) + 2;
+    double width = ceil((umax - umin) / ISLAND_SUBTEXELS) + 2,
+           height = ceil((vmax - vmin) / ISLAND_SUBTEXELS) + 2;
     if (!(width <= SCENE_MAX_ISLAND_TEXELS && height <= SCENE_MAX_ISLAND_TEXELS)) {
         uint32_t mesh = s->tri_mesh[seed];
         uint32_t local = (s->meshes && mesh < s->mesh_count) ? seed - s->meshes[mesh].first_triangle : seed;
-        return scene__fail(err, SCENE_ERR_RANGE,
-                           "mesh '%s' triangle %u (scene triangle %u) needs %.0f x %.0f texels at %g texels/m; "
-                           "an island may be at most %d texels on a side: lower the texel density",
-                           mesh_name(s, mesh), local, seed, width, height, (double)s->texel_density,
-                           (int)SCENE_MAX_ISLAND_TEXELS);
+        return scene__fail(
+            err, SCENE_ERR_RANGE,
+            "mesh '%s' triangle %u (scene triangle %u) needs %.0f x %.0f texels at %g texels/m; "
+            "an island may be at most %d texels on a side: lower the texel density",
+            mesh_name(s, mesh), local, seed, width, height, (double)s->texel_density,
+            (int)SCENE_MAX_ISLAND_TEXELS);
     }
 
     /* Snap: a = origin exactly, b on the u axis, c above it; open a flattened triangle by one step. */
@@ -347,6 +368,158 @@ static void queue_neighbors(const scene *s, island_work *work, uint32_t chart_in
     }
 }
 
+/* Orders hull points by u, then v, then local index. */
+static int hull_point_compare(const void *a, const void *b)
+{
+    const island_hull_point *p = a, *q = b;
+    if (p->u != q->u)
+        return p->u < q->u ? -1 : 1;
+    if (p->v != q->v)
+        return p->v < q->v ? -1 : 1;
+    return p->local < q->local ? -1 : p->local > q->local;
+}
+
+/* Cross product of (b - a) and (c - a) for hull points. */
+static double hull_cross(const island_hull_point *a, const island_hull_point *b, const island_hull_point *c)
+{
+    return (b->u - a->u) * (c->v - a->v) - (b->v - a->v) * (c->u - a->u);
+}
+
+/* Texel area (border included) of the chart's bounding box when its frame is turned so that u runs along
+ * (cos_a, sin_a) of the current frame; only hull points are needed. */
+static double rotated_box_texels(const island_hull_point *hull, uint32_t hull_count, double cos_a,
+                                 double sin_a)
+{
+    double umin = INFINITY, umax = -INFINITY, vmin = INFINITY, vmax = -INFINITY;
+    for (uint32_t i = 0; i < hull_count; i++) {
+        double u = hull[i].u * cos_a + hull[i].v * sin_a, v = -hull[i].u * sin_a + hull[i].v * cos_a;
+        umin = fmin(umin, u);
+        umax = fmax(umax, u);
+        vmin = fmin(vmin, v);
+        vmax = fmax(vmax, v);
+    }
+    return (ceil((umax - umin) / ISLAND_SUBTEXELS) + 2) * (ceil((vmax - vmin) / ISLAND_SUBTEXELS) + 2);
+}
+
+/* Turns a finished chart in its plane for a tighter bounding box: tries the direction of every convex hull
+ * edge (the minimum-area rectangle has a side on one), and if the best saves at least 3 % of the texels,
+ * re-snaps every corner in the turned frame and re-runs the exact checks (positive area, snapping error,
+ * size, no interior overlap). If any fails the chart keeps its first frame, which passed them already. */
+static void rotate_chart(const scene *s, island_work *work)
+{
+    island_chart *chart = &work->chart;
+    uint32_t count = chart->vertex_count;
+    for (uint32_t i = 0; i < count; i++) {
+        project_vertex(s, chart, chart->vertex_id[i], &work->plane_u[i], &work->plane_v[i]);
+        work->sorted[i].u = work->plane_u[i];
+        work->sorted[i].v = work->plane_v[i];
+        work->sorted[i].local = i;
+    }
+    qsort(work->sorted, count, sizeof work->sorted[0], hull_point_compare);
+    /* Andrew's monotone chain: lower then upper hull, counter-clockwise. */
+    uint32_t hull_count = 0;
+    for (uint32_t i = 0; i < count; i++) {
+        while (hull_count >= 2 &&
+               hull_cross(&work->hull[hull_count - 2], &work->hull[hull_count - 1], &work->sorted[i]) <= 0)
+            hull_count--;
+        work->hull[hull_count++] = work->sorted[i];
+    }
+    for (uint32_t i = count - 1, lower = hull_count + 1; i-- > 0;) {
+        while (hull_count >= lower &&
+               hull_cross(&work->hull[hull_count - 2], &work->hull[hull_count - 1], &work->sorted[i]) <= 0)
+            hull_count--;
+        work->hull[hull_count++] = work->sorted[i];
+    }
+    if (hull_count > 1)
+        hull_count--; /* the last point repeats the first */
+
+    double current = (double)island_side_texels(chart->chart_box[2] - chart->chart_box[0]) *
+                     (double)island_side_texels(chart->chart_box[3] - chart->chart_box[1]);
+    double best = current, best_cos = 1, best_sin = 0;
+    for (uint32_t i = 0; i < hull_count; i++) {
+        const island_hull_point *a = &work->hull[i], *b = &work->hull[(i + 1) % hull_count];
+        double du = b->u - a->u, dv = b->v - a->v, len = sqrt(du * du + dv * dv);
+        if (!(len > 0))
+            continue;
+        double texels = rotated_box_texels(work->hull, hull_count, du / len, dv / len);
+        if (texels < best) {
+            best = texels;
+            best_cos = du / len;
+            best_sin = dv / len;
+        }
+    }
+    if (!(best <= 0.97 * current))
+        return;
+
+    /* Re-snap in the turned frame and re-check everything exactly. */
+    for (uint32_t i = 0; i < count; i++) {
+        double u = work->plane_u[i] * best_cos + work->plane_v[i] * best_sin;
+        double v = -work->plane_u[i] * best_sin + work->plane_v[i] * best_cos;
+        work->plane_u[i] = u;
+        work->plane_v[i] = v;
+        work->rotated_uv[i].u = (int64_t)llround(u);
+        work->rotated_uv[i].v = (int64_t)llround(v);
+    }
+    int64_t chart_box[4] = {INT64_MAX, INT64_MAX, INT64_MIN, INT64_MIN};
+    for (uint32_t t = 0; t < chart->triangle_count; t++) {
+        island_point pts[3];
+        for (int k = 0; k < 3; k++)
+            pts[k] = work->rotated_uv[chart->corner[t][k]];
+        const uint16_t *c = chart->corner[t];
+        double exact_area2 =
+            (work->plane_u[c[1]] - work->plane_u[c[0]]) * (work->plane_v[c[2]] - work->plane_v[c[0]]) -
+            (work->plane_v[c[1]] - work->plane_v[c[0]]) * (work->plane_u[c[2]] - work->plane_u[c[0]]);
+        int64_t area2 = orient2(pts[0], pts[1], pts[2]);
+        if (area2 <= 0 || !(exact_area2 > 0) ||
+            !(fabs((double)area2 - exact_area2) <= ISLAND_MAX_SNAP_AREA_ERROR * exact_area2))
+            return;
+        int64_t *box = work->rotated_box[t];
+        box[0] = box[2] = pts[0].u;
+        box[1] = box[3] = pts[0].v;
+        for (int k = 1; k < 3; k++) {
+            box[0] = pts[k].u < box[0] ? pts[k].u : box[0];
+            box[1] = pts[k].v < box[1] ? pts[k].v : box[1];
+            box[2] = pts[k].u > box[2] ? pts[k].u : box[2];
+            box[3] = pts[k].v > box[3] ? pts[k].v : box[3];
+        }
+        chart_box[0] = box[0] < chart_box[0] ? box[0] : chart_box[0];
+        chart_box[1] = box[1] < chart_box[1] ? box[1] : chart_box[1];
+        chart_box[2] = box[2] > chart_box[2] ? box[2] : chart_box[2];
+        chart_box[3] = box[3] > chart_box[3] ? box[3] : chart_box[3];
+    }
+    if (island_side_texels(chart_box[2] - chart_box[0]) > SCENE_MAX_ISLAND_TEXELS ||
+        island_side_texels(chart_box[3] - chart_box[1]) > SCENE_MAX_ISLAND_TEXELS)
+        return;
+    for (uint32_t t = 1; t < chart->triangle_count; t++) {
+        const int64_t *box = work->rotated_box[t];
+        island_point pts[3];
+        for (int k = 0; k < 3; k++)
+            pts[k] = work->rotated_uv[chart->corner[t][k]];
+        for (uint32_t other = 0; other < t; other++) {
+            const int64_t *ob = work->rotated_box[other];
+            if (ob[0] >= box[2] || ob[2] <= box[0] || ob[1] >= box[3] || ob[3] <= box[1])
+                continue;
+            island_point other_pts[3];
+            for (int k = 0; k < 3; k++)
+                other_pts[k] = work->rotated_uv[chart->corner[other][k]];
+            if (triangles_overlap(pts, other_pts))
+                return;
+        }
+    }
+
+    /* Accept the turned frame. */
+    double axis_u[3], axis_v[3];
+    for (int k = 0; k < 3; k++) {
+        axis_u[k] = chart->axis_u[k] * best_cos + chart->axis_v[k] * best_sin;
+        axis_v[k] = -chart->axis_u[k] * best_sin + chart->axis_v[k] * best_cos;
+    }
+    memcpy(chart->axis_u, axis_u, sizeof axis_u);
+    memcpy(chart->axis_v, axis_v, sizeof axis_v);
+    memcpy(chart->vertex_uv, work->rotated_uv, sizeof(island_point) * count);
+    memcpy(chart->box, work->rotated_box, sizeof(chart->box[0]) * chart->triangle_count);
+    memcpy(chart->chart_box, chart_box, sizeof chart_box);
+}
+
 /* Writes the finished chart as island chart_index: its triangles, their slots and the final UVs (snapped
  * points shifted so the chart starts one texel in, then divided by the grid: exact in float). */
 static void emit_chart(scene *s, island_work *work, uint32_t chart_index, uint32_t first_slot)
@@ -410,7 +583,8 @@ scene_result scene__build_islands(scene *s, scene_error *err)
     if (triangle_count == 0)
         return SCENE_OK;
     if (!s->positions || !s->indices || !s->tri_normal || !s->tri_mesh)
-        return scene__fail(err, SCENE_ERR_INVALID, "islands: the scene has no triangles, normals or meshes set");
+        return scene__fail(err, SCENE_ERR_INVALID,
+                           "islands: the scene has no triangles, normals or meshes set");
     if (!(s->texel_density > 0) || !isfinite(s->texel_density))
         return scene__fail(err, SCENE_ERR_RANGE, "islands: texel density %g must be a finite number > 0",
                            (double)s->texel_density);
@@ -437,8 +611,9 @@ scene_result scene__build_islands(scene *s, scene_error *err)
 
     char topo_msg[256];
     uint32_t split = 0;
-    scene_topo_result topo = scene_topo_edge_neighbors(s->positions, s->vertex_count, s->indices, triangle_count,
-                                                       work->edge_neighbor, &split, topo_msg, sizeof topo_msg);
+    scene_topo_result topo =
+        scene_topo_edge_neighbors(s->positions, s->vertex_count, s->indices, triangle_count,
+                                  work->edge_neighbor, &split, topo_msg, sizeof topo_msg);
     if (topo != SCENE_TOPO_OK) {
         free_work(work);
         clear_islands(s);
@@ -462,7 +637,8 @@ scene_result scene__build_islands(scene *s, scene_error *err)
             return rc;
         }
         work->visit_stamp[seed] = chart_index + 1;
-        /* Breadth-first growth; a refused candidate stays refused for this chart (it could only get worse). */
+        /* Breadth-first growth; a refused candidate stays refused for this chart (it could only get worse).
+         */
         uint32_t queue_begin = 0, queue_end = 0;
         queue_neighbors(s, work, chart_index, seed, &queue_end);
         while (queue_begin < queue_end && work->chart.triangle_count < SCENE_ISLAND_MAX_TRIANGLES) {
@@ -470,6 +646,7 @@ scene_result scene__build_islands(scene *s, scene_error *err)
             if (try_add_triangle(s, work, chart_index, candidate))
                 queue_neighbors(s, work, chart_index, candidate, &queue_end);
         }
+        rotate_chart(s, work);
         emit_chart(s, work, chart_index, slots_used);
         slots_used += work->chart.triangle_count;
         chart_count++;

@@ -26,7 +26,7 @@
  *         "color": [r, g, b], "intensity": x },            color default [1,1,1], intensity default 1, >= 0
  *       { "type": "point", "position": [x, y, z], "color": [r, g, b], "intensity": x } ],
  *     "sky": { "color": [r, g, b], "intensity": x },  optional; absent means no sky (no ambient light)
- *     "texel_density": 100 or "auto",                 level-0 texels per metre, 1e-6 .. 1e8 (default "auto")
+ *     "texel_density": 100 or "auto",                 level-0 texels per metre, 1e-6 .. 1e6 (default "auto")
  *     "ao_radius": 0.5,                               metres, > 0 (default: a tenth of the scene diagonal)
  *     "effects": { "shadows": "auto", "ao": "on", "indirect": "off" },  each "auto" (default), "on" or "off"
  *     "camera": { "position": [x, y, z], "target": [x, y, z], "fov_deg": 60 }  optional default camera
@@ -60,7 +60,7 @@ enum {
 };
 
 #define JSON_DENSITY_MIN 1e-6   /* texels per metre: one texel per 1000 km */
-#define JSON_DENSITY_MAX 1e8    /* texels per metre: a texel of 10 nm */
+#define JSON_DENSITY_MAX 1e6    /* texels per metre: a texel of 1 um (the same bound as --density) */
 #define JSON_AO_RADIUS_MAX 1e9  /* metres */
 #define JSON_DEFAULT_FOV 60.0f  /* degrees */
 
@@ -85,7 +85,8 @@ typedef struct json_mesh_entry {
     char texture[JSON_PATH_CAP];
 } json_mesh_entry;
 
-/* Fills err with "file: where: message" (or "file: message" when where is empty) and returns code. */
+/* Fills err with "file: where: message" (or "file: message" when where is empty) and returns code; control
+ * characters in the message become '?'. */
 __attribute__((format(printf, 4, 5))) static scene_result json_fail(const json_ctx *ctx, scene_result code,
                                                                     const char *where, const char *fmt, ...)
 {
@@ -94,6 +95,9 @@ __attribute__((format(printf, 4, 5))) static scene_result json_fail(const json_c
     va_start(args, fmt);
     vsnprintf(text, sizeof text, fmt, args);
     va_end(args);
+    for (char *c = text; *c; c++) /* keys and strings from the file may hold "\n": keep the message one line */
+        if ((unsigned char)*c < 0x20 || *c == 0x7f)
+            *c = '?';
     if (where && where[0])
         return scene__fail(ctx->err, code, "%s: %s: %s", ctx->path, where, text);
     return scene__fail(ctx->err, code, "%s: %s", ctx->path, text);
@@ -122,8 +126,8 @@ static const char *json_type_word(const json_t *value)
     case JSON_OBJECT: return "an object";
     case JSON_ARRAY: return "an array";
     case JSON_STRING: return "a string";
-    case JSON_INTEGER:
-    case JSON_REAL: return "a number";
+    case JSON_INTEGER: return "an integer";
+    case JSON_REAL: return "a real number";
     case JSON_TRUE:
     case JSON_FALSE: return "a boolean";
     case JSON_NULL: return "null";

@@ -145,8 +145,16 @@ static void needs_probes(const scene *s, const needs_content *content, scene_nee
         needs_reason(reason, cap, "every material is black (zero albedo, no texture), so no light bounces");
     } else {
         out->effect[SCENE_FX_PROBES] = true;
-        needs_reason(reason, cap, "light (%u lights, %s) bounces off %u of %u meshes with non-zero albedo",
-                     content->lights_with_energy, content->sky_with_energy ? "a sky" : "no sky",
+        char sources[64];
+        if (content->lights_with_energy > 0 && content->sky_with_energy)
+            needs_reason(sources, sizeof sources, "%u light%s and the sky", content->lights_with_energy,
+                         content->lights_with_energy == 1 ? "" : "s");
+        else if (content->lights_with_energy > 0)
+            needs_reason(sources, sizeof sources, "%u light%s", content->lights_with_energy,
+                         content->lights_with_energy == 1 ? "" : "s");
+        else
+            needs_reason(sources, sizeof sources, "the sky");
+        needs_reason(reason, cap, "light from %s bounces off %u of %u meshes with non-zero albedo", sources,
                      content->meshes_with_albedo, s->mesh_count);
     }
 }

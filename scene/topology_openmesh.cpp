@@ -17,7 +17,8 @@
 #include <new>
 #include <vector>
 
-namespace {
+namespace
+{
 
 typedef OpenMesh::TriMesh_ArrayKernelT<> TopoMesh;
 
@@ -32,7 +33,10 @@ void topo_message(char *msg, size_t msg_cap, const char *text, unsigned long lon
 // here and counted instead of printed.
 struct OmerrSilencer {
     bool was_enabled;
-    OmerrSilencer() : was_enabled(::omerr().is_enabled()) { ::omerr().disable(); }
+    OmerrSilencer() : was_enabled(::omerr().is_enabled())
+    {
+        ::omerr().disable();
+    }
     ~OmerrSilencer()
     {
         if (was_enabled)

@@ -14,6 +14,8 @@ static const char usage[] =
     "  scene-info [SCENE]   what a scene holds: triangles, meshes, lights, islands, texel density,\n"
     "                       build times, and which effects and caches it needs and why\n"
     "  render [SCENE]       a PNG of the scene's albedo with an island checkerboard overlay\n"
+    "  sim [options]        several simulated viewers sharing one effect cache, no network:\n"
+    "                       statistics per frame, a summary, and the composed frames\n"
     "\n"
     "SCENE is a JSON scene description (*.json), any mesh file Assimp reads (optionally .gz), or\n"
     "'default' (the embedded scene, also used when SCENE is omitted).\n"
@@ -38,6 +40,8 @@ int main(int argc, char **argv)
         return srv_cmd_scene_info(argc - 1, argv + 1);
     if (strcmp(cmd, "render") == 0)
         return srv_cmd_render(argc - 1, argv + 1);
+    if (strcmp(cmd, "sim") == 0)
+        return srv_cmd_sim(argc - 1, argv + 1);
     fprintf(stderr, "fxcache: unknown command '%s' (try 'fxcache --help')\n", cmd);
     return 2;
 }

@@ -1,4 +1,4 @@
-/* Shared test helpers: see test_util.h. */
+/* Shared test helpers (named fxt_util.c so the test_*.c glob does not take it for a test): see test_util.h. */
 #include "test_util.h"
 
 #include <stdio.h>

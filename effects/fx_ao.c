@@ -1,0 +1,150 @@
+/* Ambient occlusion (DESIGN.md "Effects"): cosine-weighted occlusion rays of length ao_radius, accumulated
+ * progressively up to FX_AO_MAX_SAMPLES = 64 per texel (frame stage 6 for AO), and the same rays per pixel
+ * for the no-cache baseline.
+ *
+ * Payload, texel t at bytes 4t: uint16 fraction of unoccluded rays (unorm16, little-endian), uint16 count.
+ * Every ray is either occluded or not, so the stored mean is U / count for an integer U <= 64; unorm16 holds
+ * it to 1/131070, far below 1/64, and U is recovered exactly as round(fraction * count). Adding samples is
+ * therefore exact integer arithmetic: a texel given 16+16+16+16 samples over four frames stores bit for bit
+ * what one given 64 at once stores.
+ *
+ * Sample k of a texel (k counts on from the stored count, so budget splits do not matter) uses two 2D points
+ * of an Owen-scrambled Sobol sequence indexed by k, scrambled per texel by hash(seed, key, texel): one places
+ * the ray origin inside the texel's footprint (mapped to the surface through the triangle lookup), the other
+ * gives the cosine-weighted direction about the lookup triangle's geometric normal (Duff et al. basis). The
+ * first 16, 32 and 64 samples are each stratified in both, which lowers the error against pure random.
+ *
+ * Rays: origins through scene_offset_ray_origin, batched 256 at a time into rtcOccluded1M; a texel's rays
+ * are never split across batches. The caller must have called scene_tracing_thread_init() in this thread. */
+#include "fx_internal.h"
+
+#include <string.h>
+
+/* One texel being updated in the current batch. */
+typedef struct ao_pending {
+    uint8_t *texel_bytes;   /* the texel's 4 payload bytes */
+    uint32_t unoccluded;    /* rays that escaped, stored samples plus this batch */
+    uint32_t count;         /* stored samples */
+    uint32_t added;         /* samples traced in this batch */
+} ao_pending;
+
+/* A batch of rays in flight; rays[r] belongs to pending[owner[r]]. 64-byte aligned for the stream API. */
+typedef struct ao_batch {
+    _Alignas(64) struct RTCRay rays[FX_RAY_BATCH];
+    uint16_t owner[FX_RAY_BATCH];
+    ao_pending pending[FX_RAY_BATCH];
+    uint32_t ray_count, pending_count;
+} ao_batch;
+
+/* Traces the batch, then writes every pending texel's new mean and count (saturating). */
+static void ao_flush(scene_rt *rt, ao_batch *batch)
+{
+    fx__occluded(rt, batch->rays, batch->ray_count);
+    for (uint32_t r = 0; r < batch->ray_count; r++)
+        batch->pending[batch->owner[r]].unoccluded += batch->rays[r].tfar != -INFINITY;
+    for (uint32_t p = 0; p < batch->pending_count; p++) {
+        const ao_pending *texel = &batch->pending[p];
+        uint32_t total = texel->count + texel->added;
+        uint32_t fraction = (uint32_t)lrint((double)texel->unoccluded * 65535.0 / (double)total);
+        fx__put_u16(texel->texel_bytes, (uint16_t)(fraction > 65535u ? 65535u : fraction));
+        fx__put_u16(texel->texel_bytes + 2, (uint16_t)(total > FX_AO_MAX_SAMPLES ? FX_AO_MAX_SAMPLES : total));
+    }
+    batch->ray_count = 0;
+    batch->pending_count = 0;
+}
+
+/* The ray of AO sample `index` leaving a surface point (position, unit normal): origin and direction. */
+static void ao_ray(const float position[3], const float normal[3], uint64_t direction_hash, uint32_t index,
+                   float origin[3], float dir[3])
+{
+    float tangent[3], bitangent[3], xi[2];
+    fx__onb(normal, tangent, bitangent);
+    fx__sobol_2d(index, direction_hash, xi);
+    fx__cosine_direction(normal, tangent, bitangent, xi, dir);
+    scene_offset_ray_origin(position, normal, origin);
+}
+
+uint64_t fx_ao_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count, uint32_t samples)
+{
+    FX_ASSERT(ctx->ao_radius > 0);
+    if (count == 0 || samples == 0)
+        return 0;
+    ao_batch batch;
+    batch.ray_count = batch.pending_count = 0;
+    uint64_t rays_traced = 0;
+
+    for (uint32_t j = 0; j < count; j++) {
+        const fx_block_job *job = &jobs[j];
+        for (uint64_t bits = job->mask; bits != 0; bits &= bits - 1) {
+            uint32_t texel = (uint32_t)__builtin_ctzll(bits);
+            uint8_t *texel_bytes = (uint8_t *)job->payload + 4u * texel;
+            uint32_t stored = fx__get_u16(texel_bytes + 2);
+            if (stored >= FX_AO_MAX_SAMPLES)
+                continue; /* converged (a larger stored count saturates here too) */
+            uint32_t add = FX_AO_MAX_SAMPLES - stored;
+            add = samples < add ? samples : add;
+            /* Recover the exact number of unoccluded rays from the stored mean. */
+            long unoccluded = stored ? lrint((double)fx__get_u16(texel_bytes) * stored / 65535.0) : 0;
+            if (unoccluded > (long)stored)
+                unoccluded = (long)stored;
+
+            if (batch.ray_count + add > FX_RAY_BATCH)
+                ao_flush(ctx->rt, &batch);
+            uint32_t owner = batch.pending_count++;
+            batch.pending[owner] = (ao_pending){
+                .texel_bytes = texel_bytes, .unoccluded = (uint32_t)unoccluded, .count = stored, .added = add};
+
+            uint64_t origin_hash = fx__hash(ctx->seed, job->key, texel, 0, FX_STREAM_AO_ORIGIN);
+            uint64_t direction_hash = fx__hash(ctx->seed, job->key, texel, 0, FX_STREAM_AO_DIRECTION);
+            for (uint32_t k = stored; k < stored + add; k++) {
+                float jitter[2], u, v, position[3], normal[3], origin[3], dir[3];
+                fx__sobol_2d(k, origin_hash, jitter);
+                fx__texel_uv(job->level, job->block_x, job->block_y, texel, jitter[0], jitter[1], &u, &v);
+                fx_surface_point(ctx->s, job->island, job->lookup[texel], u, v, position, normal);
+                ao_ray(position, normal, direction_hash, k, origin, dir);
+                fx__set_ray(&batch.rays[batch.ray_count], origin, dir, ctx->ao_radius, batch.ray_count);
+                batch.owner[batch.ray_count++] = (uint16_t)owner;
+            }
+            rays_traced += add;
+        }
+    }
+    ao_flush(ctx->rt, &batch);
+    return rays_traced;
+}
+
+float fx_ao_sample(const void *payload, uint32_t texel)
+{
+    FX_ASSERT(texel < 64);
+    return (float)fx__get_u16((const uint8_t *)payload + 4u * texel) / 65535.0f; /* 65535 -> 1 exactly */
+}
+
+uint32_t fx_ao_count(const void *payload, uint32_t texel)
+{
+    FX_ASSERT(texel < 64);
+    return fx__get_u16((const uint8_t *)payload + 4u * texel + 2);
+}
+
+float fx_ao_eval_point(const fx_context *ctx, const float pos[3], const float normal[3], uint32_t samples,
+                       uint64_t pixel_id, uint64_t *rays)
+{
+    FX_ASSERT(ctx->ao_radius > 0);
+    if (rays)
+        *rays = samples;
+    if (samples == 0)
+        return 1.0f; /* nothing known to occlude */
+    _Alignas(64) struct RTCRay batch[FX_RAY_BATCH];
+    uint64_t direction_hash = fx__hash(ctx->seed, pixel_id, 0, 0, FX_STREAM_AO_DIRECTION);
+    uint32_t unoccluded = 0;
+    for (uint32_t first = 0; first < samples; first += FX_RAY_BATCH) {
+        uint32_t n = samples - first < FX_RAY_BATCH ? samples - first : FX_RAY_BATCH;
+        for (uint32_t r = 0; r < n; r++) {
+            float origin[3], dir[3];
+            ao_ray(pos, normal, direction_hash, first + r, origin, dir);
+            fx__set_ray(&batch[r], origin, dir, ctx->ao_radius, r);
+        }
+        fx__occluded(ctx->rt, batch, n);
+        for (uint32_t r = 0; r < n; r++)
+            unoccluded += batch[r].tfar != -INFINITY;
+    }
+    return (float)((double)unoccluded / (double)samples);
+}

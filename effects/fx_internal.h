@@ -1,0 +1,203 @@
+/* Private to the effects module: what the effect files (fx_lookup.c, fx_shadow.c, fx_ao.c) share.
+ *
+ * - FX_ASSERT: programming errors, on in every build type (tests run RelWithDebInfo).
+ * - Stateless random numbers: a 64-bit mix of (seed, key, texel, sample index, stream tag), so any split of
+ *   the work over threads, batches or frames gives the same numbers (effects.h, "Determinism").
+ * - Owen-scrambled Sobol points (Burley 2020, "Practical Hash-based Owen Scrambling"): stratified 2D points
+ *   indexed by sample index, so the first 16, 32, 64 samples of a texel are each well stratified.
+ * - Small vector helpers, the branchless orthonormal basis of Duff et al. 2017, little-endian payload access.
+ * - The ray batch: 64-byte aligned RTCRay arrays for rtcOccluded1M (DEPENDENCIES.md: 256-ray streams are
+ *   the fastest for occlusion here). */
+#ifndef FXC_FX_INTERNAL_H
+#define FXC_FX_INTERNAL_H
+
+#include "effects.h"
+
+#include <embree3/rtcore.h>
+
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+/* Programming errors only (bad arguments from our own code); never on a per-ray path. */
+#define FX_ASSERT(cond)                                                                                    \
+    do {                                                                                                   \
+        if (!(cond)) {                                                                                     \
+            fprintf(stderr, "%s:%d: effects assertion failed: %s\n", __FILE__, __LINE__, #cond);           \
+            abort();                                                                                       \
+        }                                                                                                  \
+    } while (0)
+
+enum {
+    FX_RAY_BATCH = 256, /* rays per rtcOccluded1M call */
+};
+
+/* Stream tags: keep the random numbers of different uses independent of each other. */
+enum {
+    FX_STREAM_SHADOW_JITTER = 0x5348, /* "SH" */
+    FX_STREAM_AO_DIRECTION = 0x4144,  /* "AD" */
+    FX_STREAM_AO_ORIGIN = 0x414f,     /* "AO" */
+};
+
+/* ---- random numbers ------------------------------------------------------------------------------- */
+
+/* A 64-bit finaliser (the splitmix64 / Stafford "mix13" constants): every input bit affects every output bit. */
+static inline uint64_t fx__mix64(uint64_t x)
+{
+    x ^= x >> 30;
+    x *= 0xbf58476d1ce4e5b9ull;
+    x ^= x >> 27;
+    x *= 0x94d049bb133111ebull;
+    x ^= x >> 31;
+    return x;
+}
+
+/* The hash of (seed, key, texel, index, stream): chained mixing, so permuting the arguments changes it. */
+static inline uint64_t fx__hash(uint32_t seed, uint64_t key, uint32_t texel, uint32_t index, uint32_t stream)
+{
+    uint64_t h = fx__mix64((uint64_t)seed ^ ((uint64_t)stream << 32) ^ 0x9e3779b97f4a7c15ull);
+    h = fx__mix64(h ^ key);
+    h = fx__mix64(h ^ (((uint64_t)texel << 32) | index));
+    return h;
+}
+
+/* A uniform float in [0, 1) from the top 24 bits of a 32-bit value (exactly representable, never 1). */
+static inline float fx__unit_float(uint32_t bits)
+{
+    return (float)(bits >> 8) * (1.0f / 16777216.0f);
+}
+
+/* Reverses the bit order of a 32-bit value. */
+static inline uint32_t fx__reverse_bits(uint32_t x)
+{
+    x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
+    x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
+    x = ((x >> 4) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4);
+    x = ((x >> 8) & 0x00ff00ffu) | ((x & 0x00ff00ffu) << 8);
+    return (x >> 16) | (x << 16);
+}
+
+/* Nested uniform (Owen) scrambling of a 32-bit fraction: the Laine-Karras permutation on the reversed bits;
+ * each bit is flipped depending only on the bits above it, so aligned intervals map to aligned intervals. */
+static inline uint32_t fx__owen_scramble(uint32_t x, uint32_t seed)
+{
+    x = fx__reverse_bits(x);
+    x += seed;
+    x ^= x * 0x6c50b47cu;
+    x ^= x * 0xb82f1e52u;
+    x ^= x * 0xc7afe638u;
+    x ^= x * 0x8d22f6e6u;
+    return fx__reverse_bits(x);
+}
+
+/* Sample `index` of a 2D Owen-scrambled, index-shuffled Sobol sequence (dimensions 0 and 1, a (0,2)-sequence)
+ * for scramble hash `h`: every aligned run of 2^m indices (the first 16, the next 16, the first 64) is a
+ * (0,m,2)-net, i.e. stratified in every elementary interval. Output in [0, 1)^2. */
+static inline void fx__sobol_2d(uint32_t index, uint64_t h, float out[2])
+{
+    uint32_t shuffled = fx__owen_scramble(index, (uint32_t)(h >> 40) | 1u);
+    uint32_t x = 0, y = 0, direction = 0x80000000u;
+    for (uint32_t bit = 0; shuffled != 0; bit++, shuffled >>= 1) {
+        if (shuffled & 1u) {
+            x ^= 0x80000000u >> bit;
+            y ^= direction;
+        }
+        direction ^= direction >> 1;
+    }
+    out[0] = fx__unit_float(fx__owen_scramble(x, (uint32_t)h));
+    out[1] = fx__unit_float(fx__owen_scramble(y, (uint32_t)(h >> 32)));
+}
+
+/* ---- vectors -------------------------------------------------------------------------------------- */
+
+/* Dot product of two 3-vectors. */
+static inline float fx__dot(const float a[3], const float b[3])
+{
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+/* An orthonormal basis (t, b) around unit n, branchless and continuous except at n.z = 0 sign flips
+ * (Duff et al. 2017, "Building an Orthonormal Basis, Revisited"). */
+static inline void fx__onb(const float n[3], float t[3], float b[3])
+{
+    float sign = copysignf(1.0f, n[2]);
+    float a = -1.0f / (sign + n[2]);
+    float c = n[0] * n[1] * a;
+    t[0] = 1.0f + sign * n[0] * n[0] * a;
+    t[1] = sign * c;
+    t[2] = -sign * n[0];
+    b[0] = c;
+    b[1] = sign + n[1] * n[1] * a;
+    b[2] = -n[1];
+}
+
+/* A cosine-weighted direction about unit n (with basis t, b) from a point of [0,1)^2 (Malley's method). */
+static inline void fx__cosine_direction(const float n[3], const float t[3], const float b[3], const float xi[2],
+                                        float dir[3])
+{
+    float r = sqrtf(xi[0]);
+    float phi = 6.28318530717958647692f * xi[1];
+    float x = r * cosf(phi), y = r * sinf(phi), z = sqrtf(fmaxf(0.0f, 1.0f - xi[0]));
+    for (int k = 0; k < 3; k++)
+        dir[k] = x * t[k] + y * b[k] + z * n[k];
+}
+
+/* ---- payload bytes (little-endian, host independent) --------------------------------------------- */
+
+/* Reads a little-endian uint16 at p. */
+static inline uint16_t fx__get_u16(const void *p)
+{
+    const uint8_t *bytes = p;
+    return (uint16_t)(bytes[0] | (bytes[1] << 8));
+}
+
+/* Writes a little-endian uint16 at p. */
+static inline void fx__put_u16(void *p, uint16_t value)
+{
+    uint8_t *bytes = p;
+    bytes[0] = (uint8_t)(value & 0xffu);
+    bytes[1] = (uint8_t)(value >> 8);
+}
+
+/* ---- rays ------------------------------------------------------------------------------------------ */
+
+/* Fills an occlusion ray: tnear 0, mask all, flags 0, time 0. */
+static inline void fx__set_ray(struct RTCRay *ray, const float org[3], const float dir[3], float tfar,
+                               uint32_t id)
+{
+    ray->org_x = org[0];
+    ray->org_y = org[1];
+    ray->org_z = org[2];
+    ray->tnear = 0.0f;
+    ray->dir_x = dir[0];
+    ray->dir_y = dir[1];
+    ray->dir_z = dir[2];
+    ray->time = 0.0f;
+    ray->tfar = tfar;
+    ray->mask = 0xFFFFFFFFu;
+    ray->id = id;
+    ray->flags = 0;
+}
+
+/* Traces count occlusion rays as one stream; afterwards ray i is occluded iff its tfar is -INFINITY. */
+static inline void fx__occluded(scene_rt *rt, struct RTCRay *rays, uint32_t count)
+{
+    if (count == 0)
+        return;
+    struct RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    rtcOccluded1M((RTCScene)scene_rt_handle(rt), &context, rays, count, sizeof(struct RTCRay));
+}
+
+/* Level-0 island UV of a point inside texel (block_x*8 + x, block_y*8 + y) of level at offsets (jx, jy) in
+ * [0, 1] of the texel. */
+static inline void fx__texel_uv(uint32_t level, uint32_t block_x, uint32_t block_y, uint32_t texel, float jx,
+                                float jy, float *u, float *v)
+{
+    float scale = (float)(1u << level);
+    *u = ((float)(block_x * SCENE_BLOCK_TEXELS + (texel & 7u)) + jx) * scale;
+    *v = ((float)(block_y * SCENE_BLOCK_TEXELS + (texel >> 3)) + jy) * scale;
+}
+
+#endif

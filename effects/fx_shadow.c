@@ -1,0 +1,145 @@
+/* Hard shadows (DESIGN.md "Effects"): per texel and light, FX_SHADOW_RAYS = 16 occlusion rays from 4 x 4
+ * stratified, jittered points of the texel's footprint on the surface, kept as a 16-bit mask (bit i set: ray
+ * i reached the light). Frame stage 6 for the shadow effect, and the same rays per pixel for the no-cache
+ * baseline.
+ *
+ * Sample points: sample i lies in stratum (i % 4, i / 4) of the texel's footprint square in level-0 island UV,
+ * jittered by hash(seed, key, texel, i); it is mapped to the surface through the texel's triangle lookup
+ * (fx_surface_point: clamped into the lookup triangle, so border texels sample the nearest triangle's edge).
+ * The same 16 points serve every light. Facing: a ray whose direction has dot(n, to_light) <= 0 (n the
+ * geometric normal) is not traced and its bit stays 0; a texel facing away from a light stores 0 with no ray.
+ *
+ * Rays: origins through scene_offset_ray_origin, batched 256 at a time into rtcOccluded1M; a (texel, light)
+ * group of 16 rays is never split across batches. The caller must have called scene_tracing_thread_init() in
+ * the calling thread (flush-to-zero / denormals-are-zero). */
+#include "fx_internal.h"
+
+#include <string.h>
+
+/* Where the result of one batched ray goes. */
+typedef struct shadow_ray_target {
+    uint32_t job;
+    uint32_t payload_offset; /* byte offset of the texel's uint16 for this light */
+    uint32_t bit;            /* sample index 0..15 */
+} shadow_ray_target;
+
+/* A batch of rays in flight and their targets; the ray array is 64-byte aligned for Embree's stream API. */
+typedef struct shadow_batch {
+    _Alignas(64) struct RTCRay rays[FX_RAY_BATCH];
+    shadow_ray_target targets[FX_RAY_BATCH];
+    uint32_t count;
+} shadow_batch;
+
+/* The 16 jitter offsets in [0,1)^2 of the stratified pattern for hash inputs (seed, key, texel). */
+static void shadow_jitter(uint32_t seed, uint64_t key, uint32_t texel, float offsets[FX_SHADOW_RAYS][2])
+{
+    for (uint32_t i = 0; i < FX_SHADOW_RAYS; i++) {
+        uint64_t h = fx__hash(seed, key, texel, i, FX_STREAM_SHADOW_JITTER);
+        offsets[i][0] = ((float)(i & 3u) + fx__unit_float((uint32_t)h)) * 0.25f;
+        offsets[i][1] = ((float)(i >> 2) + fx__unit_float((uint32_t)(h >> 32))) * 0.25f;
+    }
+}
+
+/* Direction and ray length from an origin towards a light; false when the light is behind the surface. */
+static bool shadow_ray_towards(const scene_light *light, const float origin[3], const float normal[3],
+                               float dir[3], float *tfar)
+{
+    float distance;
+    fx_light_direction(light, origin, dir, &distance);
+    if (!(fx__dot(normal, dir) > 0))
+        return false;
+    /* Point lights: stop just short of the light so geometry behind it never counts. */
+    *tfar = isinf(distance) ? INFINITY : distance * (1.0f - 1e-4f);
+    return true;
+}
+
+/* Traces the batch and sets the bit of every ray that reached its light. */
+static void shadow_flush(scene_rt *rt, const fx_block_job *jobs, shadow_batch *batch)
+{
+    fx__occluded(rt, batch->rays, batch->count);
+    for (uint32_t r = 0; r < batch->count; r++) {
+        if (batch->rays[r].tfar == -INFINITY)
+            continue;
+        const shadow_ray_target *target = &batch->targets[r];
+        uint8_t *slot = (uint8_t *)jobs[target->job].payload + target->payload_offset;
+        fx__put_u16(slot, (uint16_t)(fx__get_u16(slot) | (1u << target->bit)));
+    }
+    batch->count = 0;
+}
+
+uint64_t fx_shadow_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count)
+{
+    const scene *s = ctx->s;
+    uint32_t light_count = s->light_count;
+    if (light_count == 0 || count == 0)
+        return 0;
+    shadow_batch batch;
+    batch.count = 0;
+    uint64_t rays_traced = 0;
+
+    for (uint32_t j = 0; j < count; j++) {
+        const fx_block_job *job = &jobs[j];
+        for (uint64_t bits = job->mask; bits != 0; bits &= bits - 1) {
+            uint32_t texel = (uint32_t)__builtin_ctzll(bits);
+            float offsets[FX_SHADOW_RAYS][2], origins[FX_SHADOW_RAYS][3], normal[3];
+            shadow_jitter(ctx->seed, job->key, texel, offsets);
+            for (uint32_t i = 0; i < FX_SHADOW_RAYS; i++) {
+                float u, v, position[3];
+                fx__texel_uv(job->level, job->block_x, job->block_y, texel, offsets[i][0], offsets[i][1], &u,
+                             &v);
+                fx_surface_point(s, job->island, job->lookup[texel], u, v, position, normal);
+                scene_offset_ray_origin(position, normal, origins[i]);
+            }
+            for (uint32_t l = 0; l < light_count; l++) {
+                uint32_t offset = (texel * light_count + l) * 2u;
+                fx__put_u16((uint8_t *)job->payload + offset, 0);
+                if (batch.count + FX_SHADOW_RAYS > FX_RAY_BATCH)
+                    shadow_flush(ctx->rt, jobs, &batch);
+                for (uint32_t i = 0; i < FX_SHADOW_RAYS; i++) {
+                    float dir[3], tfar;
+                    if (!shadow_ray_towards(&s->lights[l], origins[i], normal, dir, &tfar))
+                        continue;
+                    fx__set_ray(&batch.rays[batch.count], origins[i], dir, tfar, batch.count);
+                    batch.targets[batch.count] =
+                        (shadow_ray_target){.job = j, .payload_offset = offset, .bit = i};
+                    batch.count++;
+                    rays_traced++;
+                }
+            }
+        }
+    }
+    shadow_flush(ctx->rt, jobs, &batch);
+    return rays_traced;
+}
+
+float fx_shadow_sample(const void *payload, uint32_t texel, uint32_t light_count, uint32_t light)
+{
+    FX_ASSERT(texel < 64 && light < light_count);
+    uint16_t mask = fx__get_u16((const uint8_t *)payload + ((size_t)texel * light_count + light) * 2u);
+    return (float)__builtin_popcount(mask) * (1.0f / FX_SHADOW_RAYS);
+}
+
+float fx_shadow_eval_point(const fx_context *ctx, const float pos[3], const float normal[3], const float dpdx[3],
+                           const float dpdy[3], uint32_t light, uint64_t pixel_id, uint64_t *rays)
+{
+    FX_ASSERT(light < ctx->s->light_count);
+    float offsets[FX_SHADOW_RAYS][2];
+    shadow_jitter(ctx->seed, pixel_id, 0, offsets);
+    _Alignas(64) struct RTCRay batch[FX_SHADOW_RAYS];
+    uint32_t traced = 0;
+    for (uint32_t i = 0; i < FX_SHADOW_RAYS; i++) {
+        float a = offsets[i][0] - 0.5f, b = offsets[i][1] - 0.5f, point[3], origin[3], dir[3], tfar;
+        for (int k = 0; k < 3; k++)
+            point[k] = pos[k] + a * dpdx[k] + b * dpdy[k];
+        scene_offset_ray_origin(point, normal, origin);
+        if (shadow_ray_towards(&ctx->s->lights[light], origin, normal, dir, &tfar))
+            fx__set_ray(&batch[traced++], origin, dir, tfar, i);
+    }
+    fx__occluded(ctx->rt, batch, traced);
+    uint32_t lit = 0;
+    for (uint32_t r = 0; r < traced; r++)
+        lit += batch[r].tfar != -INFINITY;
+    if (rays)
+        *rays = traced;
+    return (float)lit * (1.0f / FX_SHADOW_RAYS);
+}

@@ -1,0 +1,870 @@
+/* Tests of JSON scene descriptions (scene/scene_json.c) and the embedded default scene (scene_default.c).
+ *
+ * Valid descriptions load with the right values; every error case has its own test asserting both the
+ * result code and that the one-line message names what is wrong and where (line:column for malformed JSON,
+ * the JSON path and field for content errors, the mesh and vertex for bad coordinates in a mesh file).
+ * Most tests call scene__load_json() on a fresh scene (white box, no islands needed); one loads through
+ * scene_load(), the entry point users use. */
+#include "test_util.h"
+
+#include "scene_internal.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* A unit quad in the XZ plane facing up (+y), two triangles. */
+static const char quad_obj[] = "o quad\n"
+                               "v 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\n"
+                               "f 1 3 2\nf 1 4 3\n";
+
+/* Writes quad.obj into the scratch folder, where the JSON files of these tests refer to it. */
+static const char *write_quad(void)
+{
+    return fxt_write_file("quad.obj", quad_obj);
+}
+
+/* Writes text as a JSON file name next to quad.obj, loads it into a fresh scene; returns the scene on
+ * success (caller frees) or NULL with err filled. */
+static scene *load_json_text(const char *name, const char *text, scene_error *err)
+{
+    write_quad();
+    const char *path = fxt_write_file(name, text);
+    char path_copy[1024];
+    snprintf(path_copy, sizeof path_copy, "%s", path);
+    scene *s = scene__alloc();
+    assert_non_null(s);
+    memset(err, 0, sizeof *err);
+    scene_result r = scene__load_json(s, path_copy, err);
+    if (r != SCENE_OK) {
+        assert_int_equal(err->code, r);
+        scene_free(s);
+        return NULL;
+    }
+    return s;
+}
+
+/* Loads text (expected to fail) and asserts the code and that the message holds every given fragment. */
+static void expect_error(const char *name, const char *text, scene_result code, const char *fragment1,
+                         const char *fragment2)
+{
+    scene_error err;
+    scene *s = load_json_text(name, text, &err);
+    if (s) {
+        scene_free(s);
+        fail_msg("%s loaded, expected %s", name, scene_strerror(code));
+    }
+    printf("  %s -> [%s] %s\n", name, scene_strerror(err.code), err.msg);
+    assert_int_equal(err.code, code);
+    assert_non_null(strstr(err.msg, name));
+    if (fragment1 && !strstr(err.msg, fragment1))
+        fail_msg("message '%s' does not mention '%s'", err.msg, fragment1);
+    if (fragment2 && !strstr(err.msg, fragment2))
+        fail_msg("message '%s' does not mention '%s'", err.msg, fragment2);
+    assert_null(strchr(err.msg, '\n'));
+}
+
+/* Positions of every vertex of mesh m: the smallest and largest coordinate. */
+static void mesh_bounds(const scene *s, uint32_t m, float lo[3], float hi[3])
+{
+    for (int k = 0; k < 3; k++) {
+        lo[k] = INFINITY;
+        hi[k] = -INFINITY;
+    }
+    const scene_mesh *mesh = &s->meshes[m];
+    for (uint32_t t = mesh->first_triangle; t < mesh->first_triangle + mesh->triangle_count; t++)
+        for (int c = 0; c < 3; c++) {
+            const float *p = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + c];
+            for (int k = 0; k < 3; k++) {
+                lo[k] = fminf(lo[k], p[k]);
+                hi[k] = fmaxf(hi[k], p[k]);
+            }
+        }
+}
+
+/* ---- valid descriptions --------------------------------------------------------------------------------- */
+
+/* Every section at once: values arrive in the scene as written (directions normalised). */
+static void test_valid_full_description(void **state)
+{
+    (void)state;
+    scene_error err;
+    scene *s = load_json_text("full.json",
+                              "{\n"
+                              "  \"version\": 1,\n"
+                              "  \"comment\": \"everything\",\n"
+                              "  \"meshes\": [\n"
+                              "    {\"file\": \"quad.obj\", \"name\": \"ground\",\n"
+                              "     \"transform\": {\"translate\": [10, 1, -2], \"scale\": 2},\n"
+                              "     \"material\": {\"diffuse\": [0.2, 0.4, 0.6], \"name\": \"blueish\"}}\n"
+                              "  ],\n"
+                              "  \"lights\": [\n"
+                              "    {\"type\": \"directional\", \"direction\": [0, -2, 0], \"color\": [1, 0.5, 0.25],"
+                              " \"intensity\": 3},\n"
+                              "    {\"type\": \"point\", \"position\": [1, 2, 3], \"intensity\": 40}\n"
+                              "  ],\n"
+                              "  \"sky\": {\"color\": [0.5, 0.6, 0.7], \"intensity\": 0.25},\n"
+                              "  \"texel_density\": 50,\n"
+                              "  \"ao_radius\": 0.3,\n"
+                              "  \"effects\": {\"shadows\": \"on\", \"ao\": \"off\", \"indirect\": \"auto\"},\n"
+                              "  \"camera\": {\"position\": [0, 1.5, 5], \"target\": [0, 0, 0], \"fov_deg\": 45}\n"
+                              "}\n",
+                              &err);
+    if (!s)
+        fail_msg("%s", err.msg);
+    assert_int_equal(s->mesh_count, 1);
+    assert_int_equal(s->triangle_count, 2);
+    assert_string_equal(s->meshes[0].name, "ground");
+    const scene_material *m = &s->materials[s->meshes[0].material];
+    assert_float_equal(m->diffuse[0], 0.2f, 1e-6);
+    assert_float_equal(m->diffuse[1], 0.4f, 1e-6);
+    assert_float_equal(m->diffuse[2], 0.6f, 1e-6);
+    assert_int_equal(m->texture, -1);
+    assert_string_equal(m->name, "blueish");
+    float lo[3], hi[3];
+    mesh_bounds(s, 0, lo, hi);
+    assert_float_equal(lo[0], 10.0f, 1e-5);
+    assert_float_equal(hi[0], 12.0f, 1e-5);
+    assert_float_equal(lo[1], 1.0f, 1e-5);
+    assert_float_equal(lo[2], -2.0f, 1e-5);
+    assert_float_equal(hi[2], 0.0f, 1e-5);
+
+    assert_int_equal(s->light_count, 2);
+    assert_int_equal(s->lights[0].type, SCENE_LIGHT_DIRECTIONAL);
+    assert_float_equal(s->lights[0].direction[1], -1.0f, 1e-6);
+    assert_float_equal(s->lights[0].color[1], 0.5f, 1e-6);
+    assert_float_equal(s->lights[0].intensity, 3.0f, 1e-6);
+    assert_int_equal(s->lights[1].type, SCENE_LIGHT_POINT);
+    assert_float_equal(s->lights[1].position[2], 3.0f, 1e-6);
+    assert_float_equal(s->lights[1].color[0], 1.0f, 1e-6); /* default colour */
+    assert_float_equal(s->lights[1].intensity, 40.0f, 1e-6);
+
+    assert_float_equal(s->sky_color[2], 0.7f, 1e-6);
+    assert_float_equal(s->sky_intensity, 0.25f, 1e-6);
+    assert_false(s->density_auto);
+    assert_float_equal(s->texel_density, 50.0f, 1e-6);
+    assert_float_equal(s->ao_radius, 0.3f, 1e-6);
+    assert_int_equal(s->fx_shadows, SCENE_ON);
+    assert_int_equal(s->fx_ao, SCENE_OFF);
+    assert_int_equal(s->fx_indirect, SCENE_AUTO);
+    assert_true(s->has_camera);
+    assert_float_equal(s->camera_pos[1], 1.5f, 1e-6);
+    assert_float_equal(s->camera_pos[2], 5.0f, 1e-6);
+    assert_float_equal(s->camera_target[0], 0.0f, 1e-6);
+    assert_float_equal(s->camera_fov_deg, 45.0f, 1e-6);
+    scene_free(s);
+}
+
+/* Without "lights" and "sky" a description has none: no defaults are added. */
+static void test_valid_no_lights_no_sky(void **state)
+{
+    (void)state;
+    scene_error err;
+    scene *s = load_json_text("bare.json", "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}]}", &err);
+    if (!s)
+        fail_msg("%s", err.msg);
+    assert_int_equal(s->light_count, 0);
+    assert_float_equal(s->sky_intensity, 0.0f, 0);
+    assert_float_equal(s->sky_color[0], 0.0f, 0);
+    assert_true(s->density_auto);
+    assert_false(s->has_camera);
+    assert_int_equal(s->fx_shadows, SCENE_AUTO);
+    scene_free(s);
+}
+
+/* Rotation order and the two matrix forms: the same placement three ways. */
+static void test_valid_transforms(void **state)
+{
+    (void)state;
+    scene_error err;
+    /* Rx(90) maps (x, y, z) to (x, -z, y): the quad (z 0..1, y = 0) then spans y -1..0 at z = 0, and the
+     * translation moves it to z = 5. The matrix forms below write the same transform out. */
+    scene *s = load_json_text("xforms.json",
+                              "{\"version\": 1, \"meshes\": [\n"
+                              " {\"file\": \"quad.obj\", \"transform\": {\"rotate_deg\": [90, 0, 0],"
+                              " \"translate\": [0, 0, 5]}},\n"
+                              " {\"file\": \"quad.obj\", \"transform\": {\"matrix\": [1,0,0,0, 0,0,-1,0,"
+                              " 0,1,0,5, 0,0,0,1]}},\n"
+                              " {\"file\": \"quad.obj\", \"transform\": [1,0,0,0, 0,0,-1,0, 0,1,0,5, 0,0,0,1]},\n"
+                              " {\"file\": \"quad.obj\", \"transform\": {\"scale\": [2, 1, 3]}}\n"
+                              "]}",
+                              &err);
+    if (!s)
+        fail_msg("%s", err.msg);
+    assert_int_equal(s->mesh_count, 4);
+    for (uint32_t m = 0; m < 3; m++) {
+        float lo[3], hi[3];
+        mesh_bounds(s, m, lo, hi);
+        assert_float_equal(lo[0], 0.0f, 1e-5);
+        assert_float_equal(hi[0], 1.0f, 1e-5);
+        assert_float_equal(lo[1], -1.0f, 1e-5);
+        assert_float_equal(hi[1], 0.0f, 1e-5);
+        assert_float_equal(lo[2], 5.0f, 1e-5);
+        assert_float_equal(hi[2], 5.0f, 1e-5);
+    }
+    float lo[3], hi[3];
+    mesh_bounds(s, 3, lo, hi);
+    assert_float_equal(hi[0], 2.0f, 1e-6);
+    assert_float_equal(hi[2], 3.0f, 1e-6);
+    scene_free(s);
+}
+
+/* "auto" density, a file in a subfolder (paths relative to the JSON file), an empty lights list. */
+static void test_valid_auto_density_and_subfolder(void **state)
+{
+    (void)state;
+    write_quad();
+    char folder[1100];
+    snprintf(folder, sizeof folder, "%s", fxt_tmp_path("sub"));
+    char command[1200];
+    snprintf(command, sizeof command, "mkdir -p '%s'", folder);
+    assert_int_equal(system(command), 0);
+    fxt_write_file("sub/quad2.obj", quad_obj);
+    scene_error err;
+    scene *s = load_json_text("sub/auto.json",
+                              "{\"version\": 1, \"texel_density\": \"auto\", \"lights\": [],"
+                              " \"meshes\": [{\"file\": \"quad2.obj\"}, {\"file\": \"../quad.obj\"}]}",
+                              &err);
+    if (!s)
+        fail_msg("%s", err.msg);
+    assert_true(s->density_auto);
+    assert_int_equal(s->mesh_count, 2);
+    assert_int_equal(s->light_count, 0);
+    scene_free(s);
+}
+
+/* {"builtin": "default"} brings the default scene's geometry but not its lights, sky or camera. */
+static void test_valid_builtin_default(void **state)
+{
+    (void)state;
+    scene_error err;
+    scene *s = load_json_text("builtin.json",
+                              "{\"version\": 1, \"meshes\": [{\"builtin\": \"default\"}, {\"file\": \"quad.obj\"}],"
+                              " \"lights\": [{\"type\": \"point\", \"position\": [0, 2, 0], \"intensity\": 5}]}",
+                              &err);
+    if (!s)
+        fail_msg("%s", err.msg);
+    assert_true(s->mesh_count >= 5);
+    assert_true(s->triangle_count > 1000);
+    assert_int_equal(s->light_count, 1);
+    assert_int_equal(s->lights[0].type, SCENE_LIGHT_POINT);
+    assert_float_equal(s->sky_intensity, 0.0f, 0);
+    assert_false(s->has_camera);
+    scene_free(s);
+}
+
+/* The whole way users go: scene_load() on a .json path, through finalisation (islands). */
+static void test_valid_through_scene_load(void **state)
+{
+    (void)state;
+    write_quad();
+    const char *path = fxt_write_file("load.json", "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}],"
+                                                   " \"sky\": {\"intensity\": 1}, \"texel_density\": 64}");
+    char path_copy[1024];
+    snprintf(path_copy, sizeof path_copy, "%s", path);
+    scene_error err = {0};
+    scene *s = scene_load(path_copy, NULL, &err);
+    if (!s)
+        fail_msg("scene_load: %s", err.msg);
+    assert_int_equal(s->triangle_count, 2);
+    assert_float_equal(s->texel_density, 64.0f, 1e-6);
+    assert_true(s->island_count >= 1);
+    assert_float_equal(s->tri_normal[1], 1.0f, 1e-6); /* the quad faces up */
+    scene_free(s);
+}
+
+/* ---- the embedded default scene ------------------------------------------------------------------------ */
+
+/* Size, materials, sun, sky, camera, and normals: room surfaces face into the room, objects face out. */
+static void test_default_scene_content(void **state)
+{
+    (void)state;
+    scene *s = scene__alloc();
+    assert_non_null(s);
+    scene_error err = {0};
+    if (scene__build_default(s, &err) != SCENE_OK)
+        fail_msg("%s", err.msg);
+    printf("  default scene: %u triangles, %u meshes, %u materials\n", s->triangle_count, s->mesh_count,
+           s->material_count);
+    assert_true(s->triangle_count >= 1000 && s->triangle_count <= 3000);
+    assert_true(s->material_count >= 3);
+    assert_int_equal(s->light_count, 1);
+    assert_int_equal(s->lights[0].type, SCENE_LIGHT_DIRECTIONAL);
+    assert_true(s->lights[0].direction[1] < 0); /* the sun shines down */
+    assert_true(s->sky_intensity > 0);
+    assert_true(s->has_camera);
+    const float room_lo[3] = {-5, 0, -4}, room_hi[3] = {5, 4, 4};
+    for (int k = 0; k < 3; k++) /* inside the room */
+        assert_true(s->camera_pos[k] > room_lo[k] && s->camera_pos[k] < room_hi[k]);
+    assert_int_equal(s->repairs.degenerate_skipped, 0);
+    assert_int_equal(s->repairs.duplicate_skipped, 0);
+
+    const float room_center[3] = {0, 2, 0};
+    for (uint32_t m = 0; m < s->mesh_count; m++) {
+        const scene_mesh *mesh = &s->meshes[m];
+        bool room = strcmp(mesh->name, "floor") == 0 || strcmp(mesh->name, "walls") == 0 ||
+                    strncmp(mesh->name, "ceiling", 7) == 0;
+        float lo[3], hi[3], center[3];
+        mesh_bounds(s, m, lo, hi);
+        for (int k = 0; k < 3; k++)
+            center[k] = room ? room_center[k] : 0.5f * (lo[k] + hi[k]);
+        for (uint32_t t = mesh->first_triangle; t < mesh->first_triangle + mesh->triangle_count; t++) {
+            const float *a = s->positions + 3 * (size_t)s->indices[3 * (size_t)t];
+            const float *b = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 1];
+            const float *c = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 2];
+            float e1[3], e2[3], n[3], centroid[3];
+            for (int k = 0; k < 3; k++) {
+                e1[k] = b[k] - a[k];
+                e2[k] = c[k] - a[k];
+                centroid[k] = (a[k] + b[k] + c[k]) / 3.0f;
+            }
+            n[0] = e1[1] * e2[2] - e1[2] * e2[1];
+            n[1] = e1[2] * e2[0] - e1[0] * e2[2];
+            n[2] = e1[0] * e2[1] - e1[1] * e2[0];
+            float to_center = 0;
+            for (int k = 0; k < 3; k++)
+                to_center += n[k] * (center[k] - centroid[k]);
+            if (room ? !(to_center > 0) : !(to_center < 0))
+                fail_msg("mesh '%s' triangle %u faces the wrong way", mesh->name, t);
+        }
+    }
+    scene_free(s);
+}
+
+/* Sunlight falls through the ceiling opening onto the floor, and the ceiling shades the rest of the room. */
+static void test_default_scene_sun_patch(void **state)
+{
+    (void)state;
+    scene *s = scene__alloc();
+    assert_non_null(s);
+    scene_error err = {0};
+    if (scene__build_default(s, &err) != SCENE_OK)
+        fail_msg("%s", err.msg);
+    scene_rt *rt = scene_rt_create(s, NULL, &err);
+    if (!rt)
+        fail_msg("%s", err.msg);
+    const float *sun = s->lights[0].direction;
+    const float towards_sun[3] = {-sun[0], -sun[1], -sun[2]};
+    const float lit[3] = {3.5f, 0.001f, -0.5f}, shaded[3] = {-3.0f, 0.001f, 2.0f};
+    uint32_t tri;
+    float u, v, t;
+    assert_false(scene_rt_intersect1(rt, lit, towards_sun, 1e30f, &tri, &u, &v, &t));
+    assert_true(scene_rt_intersect1(rt, shaded, towards_sun, 1e30f, &tri, &u, &v, &t));
+    scene_rt_free(rt);
+    scene_free(s);
+}
+
+/* The default scene through scene_load("default"): finalised, with islands, and its camera kept. */
+static void test_default_scene_through_scene_load(void **state)
+{
+    (void)state;
+    scene_error err = {0};
+    scene *s = scene_load("default", NULL, &err);
+    if (!s)
+        fail_msg("scene_load(default): %s", err.msg);
+    assert_true(s->island_count > 0);
+    assert_true(s->has_camera);
+    assert_int_equal(s->repairs.nonmanifold_split, 0);
+    assert_float_equal(s->ao_radius, 1.0f, 1e-6);
+    scene_free(s);
+}
+
+/* ---- the command line ------------------------------------------------------------------------------ */
+
+/* `fxcache scene-info` on a bad description fails and prints the one-line message with the JSON path. */
+static void test_cli_reports_json_error(void **state)
+{
+    (void)state;
+    write_quad();
+    const char *path = fxt_write_file("cli_bad.json", "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}],"
+                                                      " \"lights\": [{\"type\": \"point\", \"position\": [0,1,0],"
+                                                      " \"intensity\": -1}]}");
+    char args[1200], out[4096], errors[4096];
+    snprintf(args, sizeof args, "scene-info '%s'", path);
+    int status = fxt_run_cli(args, out, sizeof out, errors, sizeof errors);
+    printf("  exit %d, stderr: %s", status, errors);
+    assert_int_not_equal(status, 0);
+    assert_non_null(strstr(errors, "cli_bad.json"));
+    assert_non_null(strstr(errors, "lights[0].intensity"));
+}
+
+/* `fxcache scene-info` on a description without lights says why there are no shadows. */
+static void test_cli_scene_info_without_lights(void **state)
+{
+    (void)state;
+    write_quad();
+    const char *path = fxt_write_file("cli_ok.json", "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}],"
+                                                     " \"sky\": {\"intensity\": 1}}");
+    char args[1200], out[8192], errors[4096];
+    snprintf(args, sizeof args, "scene-info '%s'", path);
+    int status = fxt_run_cli(args, out, sizeof out, errors, sizeof errors);
+    if (status != 0)
+        fail_msg("exit %d: %s", status, errors);
+    assert_non_null(strstr(out, "the scene has no lights"));
+    assert_non_null(strstr(out, "the sky gives ambient light"));
+}
+
+/* ---- malformed JSON --------------------------------------------------------------------------------- */
+
+/* A trailing comma: the message carries the line and column of the fault. */
+static void test_error_syntax_line_column(void **state)
+{
+    (void)state;
+    expect_error("syntax.json",
+                 "{\n"
+                 "  \"version\": 1,\n"
+                 "  \"meshes\": [\n"
+                 "    {\"file\": \"quad.obj\",}\n"
+                 "  ]\n"
+                 "}\n",
+                 SCENE_ERR_JSON, "syntax.json:4:", NULL);
+}
+
+/* A key given twice is refused (JSON_REJECT_DUPLICATES), with line and column. */
+static void test_error_duplicate_key(void **state)
+{
+    (void)state;
+    expect_error("dup.json", "{\"version\": 1,\n \"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}]}",
+                 SCENE_ERR_JSON, "dup.json:2:", "duplicate");
+}
+
+/* A number beyond double range is a parse error, with line and column. */
+static void test_error_number_overflow(void **state)
+{
+    (void)state;
+    expect_error("overflow.json", "{\"version\": 1,\n\n \"ao_radius\": 1e400, \"meshes\": [{\"file\": \"quad.obj\"}]}",
+                 SCENE_ERR_JSON, "overflow.json:3:", NULL);
+}
+
+/* The top level must be an object. */
+static void test_error_top_level_not_object(void **state)
+{
+    (void)state;
+    expect_error("array.json", "[1, 2, 3]", SCENE_ERR_JSON, "top level", "array");
+}
+
+/* The JSON file itself is missing. */
+static void test_error_missing_json_file(void **state)
+{
+    (void)state;
+    scene *s = scene__alloc();
+    assert_non_null(s);
+    scene_error err = {0};
+    assert_int_equal(scene__load_json(s, fxt_tmp_path("no_such_scene.json"), &err), SCENE_ERR_IO);
+    assert_non_null(strstr(err.msg, "no_such_scene.json"));
+    scene_free(s);
+}
+
+/* ---- structure: unknown fields, wrong types, missing fields, versions ---------------------------------- */
+
+/* An unknown top-level field is named. */
+static void test_error_unknown_top_field(void **state)
+{
+    (void)state;
+    expect_error("unknown_top.json", "{\"version\": 1, \"lightz\": [], \"meshes\": [{\"file\": \"quad.obj\"}]}",
+                 SCENE_ERR_JSON, "'lightz'", "top level");
+}
+
+/* An unknown field whose name holds a newline still gives a one-line message. */
+static void test_error_unknown_field_with_newline(void **state)
+{
+    (void)state;
+    expect_error("newline_key.json", "{\"version\": 1, \"bad\\nkey\": 1, \"meshes\": [{\"file\": \"quad.obj\"}]}",
+                 SCENE_ERR_JSON, "'bad?key'", NULL);
+}
+
+/* An unknown field inside a light is named with the light's path. */
+static void test_error_unknown_light_field(void **state)
+{
+    (void)state;
+    expect_error("unknown_light.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}], \"lights\": ["
+                 "{\"type\": \"point\", \"position\": [0,1,0]},"
+                 "{\"type\": \"point\", \"position\": [0,1,0], \"colour\": [1,1,1]}]}",
+                 SCENE_ERR_JSON, "lights[1]", "'colour'");
+}
+
+/* An unknown field inside a mesh transform is named with its path. */
+static void test_error_unknown_transform_field(void **state)
+{
+    (void)state;
+    expect_error("unknown_xform.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"transform\": {\"rotate\": [0,0,0]}}]}",
+                 SCENE_ERR_JSON, "meshes[0].transform", "'rotate'");
+}
+
+/* A string where a number belongs. */
+static void test_error_wrong_type_intensity(void **state)
+{
+    (void)state;
+    expect_error("type_intensity.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}],"
+                 " \"sky\": {\"intensity\": \"bright\"}}",
+                 SCENE_ERR_JSON, "sky.intensity", "must be a number");
+}
+
+/* A colour of the wrong length. */
+static void test_error_wrong_length_color(void **state)
+{
+    (void)state;
+    expect_error("type_color.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}],"
+                 " \"lights\": [{\"type\": \"directional\", \"direction\": [0,-1,0], \"color\": [1, 1]}]}",
+                 SCENE_ERR_JSON, "lights[0].color", "3 numbers");
+}
+
+/* "meshes" must be an array. */
+static void test_error_meshes_not_array(void **state)
+{
+    (void)state;
+    expect_error("meshes_object.json", "{\"version\": 1, \"meshes\": {\"file\": \"quad.obj\"}}", SCENE_ERR_JSON,
+                 "meshes", "must be an array");
+}
+
+/* "version" is required. */
+static void test_error_missing_version(void **state)
+{
+    (void)state;
+    expect_error("no_version.json", "{\"meshes\": [{\"file\": \"quad.obj\"}]}", SCENE_ERR_JSON, "'version'", NULL);
+}
+
+/* "meshes" is required. */
+static void test_error_missing_meshes(void **state)
+{
+    (void)state;
+    expect_error("no_meshes.json", "{\"version\": 1}", SCENE_ERR_JSON, "'meshes'", NULL);
+}
+
+/* A mesh entry needs "file". */
+static void test_error_missing_file(void **state)
+{
+    (void)state;
+    expect_error("no_file.json", "{\"version\": 1, \"meshes\": [{\"name\": \"lost\"}]}", SCENE_ERR_JSON,
+                 "meshes[0]", "'file'");
+}
+
+/* A light needs "type"; a directional light needs "direction". */
+static void test_error_missing_light_fields(void **state)
+{
+    (void)state;
+    expect_error("no_type.json", "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}], \"lights\": [{}]}",
+                 SCENE_ERR_JSON, "lights[0]", "'type'");
+    expect_error("no_direction.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}], \"lights\": [{\"type\": \"directional\"}]}",
+                 SCENE_ERR_JSON, "lights[0]", "'direction'");
+}
+
+/* A point light with a direction is a mistake worth naming. */
+static void test_error_point_light_with_direction(void **state)
+{
+    (void)state;
+    expect_error("point_dir.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}], \"lights\": ["
+                 "{\"type\": \"point\", \"position\": [0,1,0], \"direction\": [0,-1,0]}]}",
+                 SCENE_ERR_JSON, "lights[0]", "'direction'");
+}
+
+/* An unknown light type. */
+static void test_error_unknown_light_type(void **state)
+{
+    (void)state;
+    expect_error("spot.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}], \"lights\": [{\"type\": \"spot\"}]}",
+                 SCENE_ERR_INVALID, "lights[0].type", "'spot'");
+}
+
+/* A newer version is refused with both numbers. */
+static void test_error_newer_version(void **state)
+{
+    (void)state;
+    expect_error("v2.json", "{\"version\": 2, \"meshes\": [{\"file\": \"quad.obj\"}]}", SCENE_ERR_FORMAT,
+                 "version: 2 is newer", "(1)");
+}
+
+/* A version written as a real number is refused with both types named. */
+static void test_error_version_not_integer(void **state)
+{
+    (void)state;
+    expect_error("v1real.json", "{\"version\": 1.5, \"meshes\": [{\"file\": \"quad.obj\"}]}", SCENE_ERR_JSON,
+                 "version", "must be an integer, not a real number");
+}
+
+/* ---- values ------------------------------------------------------------------------------------------- */
+
+/* A negative intensity. */
+static void test_error_negative_intensity(void **state)
+{
+    (void)state;
+    expect_error("negative.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}], \"lights\": ["
+                 "{\"type\": \"point\", \"position\": [0,1,0]},"
+                 "{\"type\": \"directional\", \"direction\": [0,-1,0], \"intensity\": -2}]}",
+                 SCENE_ERR_INVALID, "lights[1].intensity: must be a finite number >= 0", NULL);
+}
+
+/* A number that is finite as a double but infinite as a float. */
+static void test_error_float_overflow(void **state)
+{
+    (void)state;
+    expect_error("float_overflow.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}], \"lights\": ["
+                 "{\"type\": \"directional\", \"direction\": [0,-1,0], \"intensity\": 1e39}]}",
+                 SCENE_ERR_INVALID, "lights[0].intensity", "finite");
+}
+
+/* A zero light direction. */
+static void test_error_zero_direction(void **state)
+{
+    (void)state;
+    expect_error("zero_dir.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}], \"lights\": ["
+                 "{\"type\": \"directional\", \"direction\": [0, 0, 0]}]}",
+                 SCENE_ERR_INVALID, "lights[0].direction", "zero");
+}
+
+/* A negative sky colour component. */
+static void test_error_negative_sky_color(void **state)
+{
+    (void)state;
+    expect_error("sky_color.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}], \"sky\": {\"color\": [0.5, -0.1, 1]}}",
+                 SCENE_ERR_INVALID, "sky.color", ">= 0");
+}
+
+/* Texel density 0, negative and absurdly large: refused with the allowed range. */
+static void test_error_density_range(void **state)
+{
+    (void)state;
+    expect_error("density0.json", "{\"version\": 1, \"texel_density\": 0, \"meshes\": [{\"file\": \"quad.obj\"}]}",
+                 SCENE_ERR_RANGE, "texel_density", "allowed");
+    expect_error("density_neg.json",
+                 "{\"version\": 1, \"texel_density\": -5, \"meshes\": [{\"file\": \"quad.obj\"}]}",
+                 SCENE_ERR_RANGE, "texel_density", "allowed");
+    expect_error("density_huge.json",
+                 "{\"version\": 1, \"texel_density\": 1e12, \"meshes\": [{\"file\": \"quad.obj\"}]}",
+                 SCENE_ERR_RANGE, "texel_density", "allowed");
+}
+
+/* A texel density word other than "auto". */
+static void test_error_density_word(void **state)
+{
+    (void)state;
+    expect_error("density_word.json",
+                 "{\"version\": 1, \"texel_density\": \"high\", \"meshes\": [{\"file\": \"quad.obj\"}]}",
+                 SCENE_ERR_INVALID, "texel_density", "\"auto\"");
+}
+
+/* An override that is not auto, on or off. */
+static void test_error_bad_override(void **state)
+{
+    (void)state;
+    expect_error("override.json",
+                 "{\"version\": 1, \"effects\": {\"ao\": \"maybe\"}, \"meshes\": [{\"file\": \"quad.obj\"}]}",
+                 SCENE_ERR_INVALID, "effects.ao", "\"maybe\"");
+    expect_error("override_bool.json",
+                 "{\"version\": 1, \"effects\": {\"shadows\": true}, \"meshes\": [{\"file\": \"quad.obj\"}]}",
+                 SCENE_ERR_JSON, "effects.shadows", "boolean");
+}
+
+/* A camera field of view outside (0, 180). */
+static void test_error_camera_fov(void **state)
+{
+    (void)state;
+    expect_error("fov.json",
+                 "{\"version\": 1, \"camera\": {\"position\": [0,0,1], \"target\": [0,0,0], \"fov_deg\": 180},"
+                 " \"meshes\": [{\"file\": \"quad.obj\"}]}",
+                 SCENE_ERR_INVALID, "camera.fov_deg", "180");
+}
+
+/* A zero scale, a non-affine matrix and a singular matrix. */
+static void test_error_bad_transforms(void **state)
+{
+    (void)state;
+    expect_error("scale0.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"transform\": {\"scale\": [1, 0, 1]}}]}",
+                 SCENE_ERR_INVALID, "meshes[0].transform.scale", "zero");
+    expect_error("projective.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"transform\": {\"matrix\":"
+                 " [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,1,0]}}]}",
+                 SCENE_ERR_INVALID, "meshes[0].transform.matrix", "affine");
+    expect_error("singular.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"transform\":"
+                 " [1,0,0,0, 2,0,0,0, 0,0,1,0, 0,0,0,1]}]}",
+                 SCENE_ERR_INVALID, "meshes[0].transform", "singular");
+    expect_error("matrix_and_scale.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"transform\":"
+                 " {\"scale\": 2, \"matrix\": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]}}]}",
+                 SCENE_ERR_JSON, "meshes[0].transform", "cannot be combined");
+}
+
+/* An albedo above 1. */
+static void test_error_albedo_above_one(void **state)
+{
+    (void)state;
+    expect_error("albedo.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"material\": {\"diffuse\": [1.5, 0, 0]}}]}",
+                 SCENE_ERR_INVALID, "meshes[0].material.diffuse", "0..1");
+}
+
+/* An unknown builtin scene. */
+static void test_error_unknown_builtin(void **state)
+{
+    (void)state;
+    expect_error("builtin_bad.json", "{\"version\": 1, \"meshes\": [{\"builtin\": \"sponza\"}]}", SCENE_ERR_INVALID,
+                 "meshes[0].builtin", "'sponza'");
+}
+
+/* An empty meshes list. */
+static void test_error_empty_meshes(void **state)
+{
+    (void)state;
+    expect_error("empty.json", "{\"version\": 1, \"meshes\": []}", SCENE_ERR_EMPTY, "meshes", "empty");
+}
+
+/* ---- mesh files ------------------------------------------------------------------------------------------ */
+
+/* A mesh file that does not exist: named, with the entry. */
+static void test_error_missing_mesh_file(void **state)
+{
+    (void)state;
+    expect_error("missing_mesh.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}, {\"file\": \"not_here.obj\"}]}",
+                 SCENE_ERR_IO, "meshes[1]", "not_here.obj");
+}
+
+/* A file Assimp cannot read. */
+static void test_error_unsupported_format(void **state)
+{
+    (void)state;
+    fxt_write_file("notes.xyz", "this is not a mesh\n");
+    expect_error("unsupported.json", "{\"version\": 1, \"meshes\": [{\"file\": \"notes.xyz\"}]}", SCENE_ERR_FORMAT,
+                 "meshes[0]", "notes.xyz");
+}
+
+/* Assimp's OBJ reader turns the token "nan" into a NaN coordinate: refused, naming mesh and vertex. */
+static void test_error_obj_nan(void **state)
+{
+    (void)state;
+    fxt_write_file("nan.obj", "o nanmesh\nv 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n");
+    expect_error("nan.json", "{\"version\": 1, \"meshes\": [{\"file\": \"nan.obj\"}]}", SCENE_ERR_INVALID,
+                 "nanmesh", "vertex 2");
+    scene_error err;
+    scene *s = load_json_text("nan.json", "{\"version\": 1, \"meshes\": [{\"file\": \"nan.obj\"}]}", &err);
+    assert_null(s);
+    assert_non_null(strstr(err.msg, "nan.obj"));
+    assert_non_null(strstr(err.msg, "meshes[0]"));
+}
+
+/* The token "inf" likewise. */
+static void test_error_obj_inf(void **state)
+{
+    (void)state;
+    fxt_write_file("inf.obj", "o infmesh\nv 0 0 0\nv inf 0 0\nv 0 1 0\nf 1 2 3\n");
+    expect_error("inf.json", "{\"version\": 1, \"meshes\": [{\"file\": \"inf.obj\"}]}", SCENE_ERR_INVALID,
+                 "infmesh", "vertex 1");
+}
+
+/* A coordinate too large for a float (1e39) becomes infinite: refused like inf. */
+static void test_error_obj_float_overflow(void **state)
+{
+    (void)state;
+    fxt_write_file("huge.obj", "o hugemesh\nv 0 0 0\nv 1 0 0\nv 0 1e39 0\nf 1 2 3\n");
+    expect_error("huge.json", "{\"version\": 1, \"meshes\": [{\"file\": \"huge.obj\"}]}", SCENE_ERR_INVALID,
+                 "hugemesh", "vertex 2");
+}
+
+/* A transform that pushes finite coordinates past float range. */
+static void test_error_transform_overflow(void **state)
+{
+    (void)state;
+    expect_error("xform_overflow.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"transform\": {\"scale\": 3e38, \"translate\": [3e38, 0, 0]}}]}",
+                 SCENE_ERR_INVALID, "meshes[0]", "vertex");
+}
+
+/* A face index past the vertex list: Assimp's OBJ reader refuses the file. */
+static void test_error_obj_index_out_of_range(void **state)
+{
+    (void)state;
+    fxt_write_file("oor.obj", "o oor\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n");
+    expect_error("oor.json", "{\"version\": 1, \"meshes\": [{\"file\": \"oor.obj\"}]}", SCENE_ERR_FORMAT,
+                 "oor.obj", "out of range");
+}
+
+/* A mesh file whose every triangle is degenerate has no usable triangle. */
+static void test_error_obj_only_degenerate(void **state)
+{
+    (void)state;
+    fxt_write_file("flat.obj", "o flat\nv 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n");
+    expect_error("flat.json", "{\"version\": 1, \"meshes\": [{\"file\": \"flat.obj\"}]}", SCENE_ERR_EMPTY,
+                 "meshes[0]", "flat.obj");
+}
+
+/* A texture that cannot be read. */
+static void test_error_missing_texture(void **state)
+{
+    (void)state;
+    expect_error("texture.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"material\": {\"texture\": \"nope.png\"}}]}",
+                 SCENE_ERR_IO, "meshes[0]", "nope.png");
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_valid_full_description),
+        cmocka_unit_test(test_valid_no_lights_no_sky),
+        cmocka_unit_test(test_valid_transforms),
+        cmocka_unit_test(test_valid_auto_density_and_subfolder),
+        cmocka_unit_test(test_valid_builtin_default),
+        cmocka_unit_test(test_valid_through_scene_load),
+        cmocka_unit_test(test_default_scene_content),
+        cmocka_unit_test(test_default_scene_sun_patch),
+        cmocka_unit_test(test_default_scene_through_scene_load),
+        cmocka_unit_test(test_cli_reports_json_error),
+        cmocka_unit_test(test_cli_scene_info_without_lights),
+        cmocka_unit_test(test_error_syntax_line_column),
+        cmocka_unit_test(test_error_duplicate_key),
+        cmocka_unit_test(test_error_number_overflow),
+        cmocka_unit_test(test_error_top_level_not_object),
+        cmocka_unit_test(test_error_missing_json_file),
+        cmocka_unit_test(test_error_unknown_top_field),
+        cmocka_unit_test(test_error_unknown_field_with_newline),
+        cmocka_unit_test(test_error_unknown_light_field),
+        cmocka_unit_test(test_error_unknown_transform_field),
+        cmocka_unit_test(test_error_wrong_type_intensity),
+        cmocka_unit_test(test_error_wrong_length_color),
+        cmocka_unit_test(test_error_meshes_not_array),
+        cmocka_unit_test(test_error_missing_version),
+        cmocka_unit_test(test_error_missing_meshes),
+        cmocka_unit_test(test_error_missing_file),
+        cmocka_unit_test(test_error_missing_light_fields),
+        cmocka_unit_test(test_error_point_light_with_direction),
+        cmocka_unit_test(test_error_unknown_light_type),
+        cmocka_unit_test(test_error_newer_version),
+        cmocka_unit_test(test_error_version_not_integer),
+        cmocka_unit_test(test_error_negative_intensity),
+        cmocka_unit_test(test_error_float_overflow),
+        cmocka_unit_test(test_error_zero_direction),
+        cmocka_unit_test(test_error_negative_sky_color),
+        cmocka_unit_test(test_error_density_range),
+        cmocka_unit_test(test_error_density_word),
+        cmocka_unit_test(test_error_bad_override),
+        cmocka_unit_test(test_error_camera_fov),
+        cmocka_unit_test(test_error_bad_transforms),
+        cmocka_unit_test(test_error_albedo_above_one),
+        cmocka_unit_test(test_error_unknown_builtin),
+        cmocka_unit_test(test_error_empty_meshes),
+        cmocka_unit_test(test_error_missing_mesh_file),
+        cmocka_unit_test(test_error_unsupported_format),
+        cmocka_unit_test(test_error_obj_nan),
+        cmocka_unit_test(test_error_obj_inf),
+        cmocka_unit_test(test_error_obj_float_overflow),
+        cmocka_unit_test(test_error_transform_overflow),
+        cmocka_unit_test(test_error_obj_index_out_of_range),
+        cmocka_unit_test(test_error_obj_only_degenerate),
+        cmocka_unit_test(test_error_missing_texture),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
