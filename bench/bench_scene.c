@@ -120,6 +120,7 @@ static int run_scene(const char *path, int reps, row *out)
 
 int main(int argc, char **argv)
 {
+    setvbuf(stdout, NULL, _IOLBF, 0);
     int reps = 5, pin = -1;
     const char *paths[64];
     int path_count = 0;

@@ -53,12 +53,12 @@ static void ao_flush(scene_rt *rt, ao_batch *batch)
     batch->pending_count = 0;
 }
 
-/* The ray of AO sample `index` leaving a surface point (position, unit normal): origin and direction. */
-static void ao_ray(const float position[3], const float normal[3], uint64_t direction_hash, uint32_t index,
-                   float origin[3], float dir[3])
+/* The ray of AO sample `index` leaving a surface point (position, unit normal with basis tangent,
+ * bitangent): origin and direction. */
+static void ao_ray(const float position[3], const float normal[3], const float tangent[3],
+                   const float bitangent[3], uint64_t direction_hash, uint32_t index, float origin[3], float dir[3])
 {
-    float tangent[3], bitangent[3], xi[2];
-    fx__onb(normal, tangent, bitangent);
+    float xi[2];
     fx__sobol_2d(index, direction_hash, xi);
     fx__cosine_direction(normal, tangent, bitangent, xi, dir);
     scene_offset_ray_origin(position, normal, origin);
@@ -96,12 +96,16 @@ uint64_t fx_ao_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
 
             uint64_t origin_hash = fx__hash(ctx->seed, job->key, texel, 0, FX_STREAM_AO_ORIGIN);
             uint64_t direction_hash = fx__hash(ctx->seed, job->key, texel, 0, FX_STREAM_AO_DIRECTION);
+            fx__surface_map map;
+            fx__surface_map_init(ctx->s, job->island, job->lookup[texel], &map);
+            float tangent[3], bitangent[3];
+            fx__onb(map.normal, tangent, bitangent);
             for (uint32_t k = stored; k < stored + add; k++) {
-                float jitter[2], u, v, position[3], normal[3], origin[3], dir[3];
+                float jitter[2], u, v, position[3], origin[3], dir[3];
                 fx__sobol_2d(k, origin_hash, jitter);
                 fx__texel_uv(job->level, job->block_x, job->block_y, texel, jitter[0], jitter[1], &u, &v);
-                fx_surface_point(ctx->s, job->island, job->lookup[texel], u, v, position, normal);
-                ao_ray(position, normal, direction_hash, k, origin, dir);
+                fx__surface_map_eval(&map, u, v, position);
+                ao_ray(position, map.normal, tangent, bitangent, direction_hash, k, origin, dir);
                 fx__set_ray(&batch.rays[batch.ray_count], origin, dir, ctx->ao_radius, batch.ray_count);
                 batch.owner[batch.ray_count++] = (uint16_t)owner;
             }
@@ -134,12 +138,14 @@ float fx_ao_eval_point(const fx_context *ctx, const float pos[3], const float no
         return 1.0f; /* nothing known to occlude */
     _Alignas(64) struct RTCRay batch[FX_RAY_BATCH];
     uint64_t direction_hash = fx__hash(ctx->seed, pixel_id, 0, 0, FX_STREAM_AO_DIRECTION);
+    float tangent[3], bitangent[3];
+    fx__onb(normal, tangent, bitangent);
     uint32_t unoccluded = 0;
     for (uint32_t first = 0; first < samples; first += FX_RAY_BATCH) {
         uint32_t n = samples - first < FX_RAY_BATCH ? samples - first : FX_RAY_BATCH;
         for (uint32_t r = 0; r < n; r++) {
             float origin[3], dir[3];
-            ao_ray(pos, normal, direction_hash, first + r, origin, dir);
+            ao_ray(pos, normal, tangent, bitangent, direction_hash, first + r, origin, dir);
             fx__set_ray(&batch[r], origin, dir, ctx->ao_radius, r);
         }
         fx__occluded(ctx->rt, batch, n);

@@ -78,35 +78,49 @@ static inline uint32_t fx__reverse_bits(uint32_t x)
     return (x >> 16) | (x << 16);
 }
 
-/* Nested uniform (Owen) scrambling of a 32-bit fraction: the Laine-Karras permutation on the reversed bits;
- * each bit is flipped depending only on the bits above it, so aligned intervals map to aligned intervals. */
-static inline uint32_t fx__owen_scramble(uint32_t x, uint32_t seed)
+/* The Laine-Karras permutation: each bit is flipped depending only on the bits below it. */
+static inline uint32_t fx__laine_karras(uint32_t x, uint32_t seed)
 {
-    x = fx__reverse_bits(x);
     x += seed;
     x ^= x * 0x6c50b47cu;
     x ^= x * 0xb82f1e52u;
     x ^= x * 0xc7afe638u;
     x ^= x * 0x8d22f6e6u;
-    return fx__reverse_bits(x);
+    return x;
+}
+
+/* Nested uniform (Owen) scrambling of a 32-bit fraction: the Laine-Karras permutation on the reversed bits;
+ * each bit is flipped depending only on the bits above it, so aligned intervals map to aligned intervals. */
+static inline uint32_t fx__owen_scramble(uint32_t x, uint32_t seed)
+{
+    return fx__reverse_bits(fx__laine_karras(fx__reverse_bits(x), seed));
+}
+
+/* Sobol dimension 1 before bit reversal: its generator is Pascal's matrix mod 2, and by Lucas' theorem
+ * output bit m is the XOR of index bits k that are supersets of m (k & m == m): a superset transform over
+ * the five bits of a bit position, in five shift-and-mask steps (checked against the direction-number loop). */
+static inline uint32_t fx__sobol1_reversed(uint32_t index)
+{
+    index ^= (index >> 1) & 0x55555555u;
+    index ^= (index >> 2) & 0x33333333u;
+    index ^= (index >> 4) & 0x0f0f0f0fu;
+    index ^= (index >> 8) & 0x00ff00ffu;
+    index ^= (index >> 16) & 0x0000ffffu;
+    return index;
 }
 
 /* Sample `index` of a 2D Owen-scrambled, index-shuffled Sobol sequence (dimensions 0 and 1, a (0,2)-sequence)
  * for scramble hash `h`: every aligned run of 2^m indices (the first 16, the next 16, the first 64) is a
- * (0,m,2)-net, i.e. stratified in every elementary interval. Output in [0, 1)^2. */
+ * (0,m,2)-net, i.e. stratified in every elementary interval. Output in [0, 1)^2.
+ * Sobol dimension 0 is reverse_bits(index), dimension 1 is reverse_bits(fx__sobol1_reversed(index)), and the
+ * Owen scramble reverses, permutes and reverses again, so the reversals cancel: no loop over bits at all. */
 static inline void fx__sobol_2d(uint32_t index, uint64_t h, float out[2])
 {
     uint32_t shuffled = fx__owen_scramble(index, (uint32_t)(h >> 40) | 1u);
-    uint32_t x = 0, y = 0, direction = 0x80000000u;
-    for (uint32_t bit = 0; shuffled != 0; bit++, shuffled >>= 1) {
-        if (shuffled & 1u) {
-            x ^= 0x80000000u >> bit;
-            y ^= direction;
-        }
-        direction ^= direction >> 1;
-    }
-    out[0] = fx__unit_float(fx__owen_scramble(x, (uint32_t)h));
-    out[1] = fx__unit_float(fx__owen_scramble(y, (uint32_t)(h >> 32)));
+    uint32_t x = fx__reverse_bits(fx__laine_karras(shuffled, (uint32_t)h));
+    uint32_t y = fx__reverse_bits(fx__laine_karras(fx__sobol1_reversed(shuffled), (uint32_t)(h >> 32)));
+    out[0] = fx__unit_float(x);
+    out[1] = fx__unit_float(y);
 }
 
 /* ---- vectors -------------------------------------------------------------------------------------- */
@@ -142,6 +156,25 @@ static inline void fx__cosine_direction(const float n[3], const float t[3], cons
     for (int k = 0; k < 3; k++)
         dir[k] = x * t[k] + y * b[k] + z * n[k];
 }
+
+/* ---- surface points -------------------------------------------------------------------------------- */
+
+/* The map from level-0 island UV to the surface of one lookup triangle, set up once per texel so that each
+ * sample point costs a few multiply-adds (fx_surface_point is init + eval). */
+typedef struct fx__surface_map {
+    double uv_origin[2];      /* corner 0 in island UV */
+    double to_w1[2], to_w2[2]; /* barycentrics of corners 1 and 2 per UV unit */
+    double fallback[2];       /* constant barycentrics for a triangle without UV area */
+    double origin[3], edge1[3], edge2[3]; /* world corner 0 and edges to corners 1 and 2, metres */
+    float normal[3];          /* unit geometric normal */
+} fx__surface_map;
+
+/* Sets up the map of the triangle named by lookup texel `lookup` in island. */
+void fx__surface_map_init(const scene *s, uint32_t island, uint32_t lookup, fx__surface_map *map);
+
+/* The world position of an island UV point, its barycentrics clamped into the triangle (negative weights to
+ * zero, renormalised). */
+void fx__surface_map_eval(const fx__surface_map *map, float island_u, float island_v, float position[3]);
 
 /* ---- payload bytes (little-endian, host independent) --------------------------------------------- */
 

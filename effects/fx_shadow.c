@@ -81,13 +81,16 @@ uint64_t fx_shadow_update(const fx_context *ctx, const fx_block_job *jobs, uint3
         const fx_block_job *job = &jobs[j];
         for (uint64_t bits = job->mask; bits != 0; bits &= bits - 1) {
             uint32_t texel = (uint32_t)__builtin_ctzll(bits);
-            float offsets[FX_SHADOW_RAYS][2], origins[FX_SHADOW_RAYS][3], normal[3];
+            float offsets[FX_SHADOW_RAYS][2], origins[FX_SHADOW_RAYS][3];
             shadow_jitter(ctx->seed, job->key, texel, offsets);
+            fx__surface_map map;
+            fx__surface_map_init(s, job->island, job->lookup[texel], &map);
+            const float *normal = map.normal;
             for (uint32_t i = 0; i < FX_SHADOW_RAYS; i++) {
                 float u, v, position[3];
                 fx__texel_uv(job->level, job->block_x, job->block_y, texel, offsets[i][0], offsets[i][1], &u,
                              &v);
-                fx_surface_point(s, job->island, job->lookup[texel], u, v, position, normal);
+                fx__surface_map_eval(&map, u, v, position);
                 scene_offset_ray_origin(position, normal, origins[i]);
             }
             for (uint32_t l = 0; l < light_count; l++) {

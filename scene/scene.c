@@ -351,12 +351,21 @@ scene_result scene__add_mesh(scene *s, const char *name, const float *positions,
         goto done;
     for (uint32_t v = 0; v < vertex_count; v++)
         memcpy(s->positions + 3 * ((size_t)base_vertex + remap[v]), world + 3 * (size_t)v, 3 * sizeof(float));
+    /* A mirroring transform (negative determinant) would turn every triangle inside out: swap two corners. */
+    bool mirrored = false;
+    if (xform) {
+        double det = (double)xform[0] * ((double)xform[5] * xform[10] - (double)xform[6] * xform[9]) -
+                     (double)xform[1] * ((double)xform[4] * xform[10] - (double)xform[6] * xform[8]) +
+                     (double)xform[2] * ((double)xform[4] * xform[9] - (double)xform[5] * xform[8]);
+        mirrored = det < 0;
+    }
     uint32_t out = base_tri;
     for (uint32_t t = 0; t < triangle_count; t++) {
         if (!keep[t])
             continue;
-        for (int c = 0; c < 3; c++) {
-            uint32_t src = indices[3 * (size_t)t + c];
+        for (int corner = 0; corner < 3; corner++) {
+            int c = mirrored && corner > 0 ? 3 - corner : corner;
+            uint32_t src = indices[3 * (size_t)t + corner];
             s->indices[3 * (size_t)out + c] = base_vertex + remap[src];
             float u = 0, w = 0;
             if (uv && isfinite(uv[2 * (size_t)src]) && isfinite(uv[2 * (size_t)src + 1])) {
@@ -460,8 +469,8 @@ scene_result scene__finalize(scene *s, const scene_load_desc *desc, scene_error 
     if (rc != SCENE_OK)
         return rc;
     if (desc && desc->texel_density != 0) {
-        if (!(desc->texel_density > 0) || !isfinite(desc->texel_density))
-            return scene__fail(err, SCENE_ERR_RANGE, "texel density %g must be a finite number > 0",
+        if (!(desc->texel_density > 0) || !(desc->texel_density <= 1e6f))
+            return scene__fail(err, SCENE_ERR_RANGE, "texel density %g is outside (0, 1e6] texels per metre",
                                (double)desc->texel_density);
         s->texel_density = desc->texel_density;
         s->density_auto = false;

@@ -271,7 +271,8 @@ scene_result scene__import_file(scene *s, const char *path, const float *xform,
         }
         uint32_t material = override_index;
         if (material == UINT32_MAX)
-            material = mesh->mMaterialIndex < ai->mNumMaterials ? material_map[mesh->mMaterialIndex] : 0;
+            material = mesh->mMaterialIndex < ai->mNumMaterials ? material_map[mesh->mMaterialIndex]
+                                                                : material_map[0]; /* this file's first */
         rc = import_mesh(s, mesh, i, material, xform, path, err);
     }
     if (rc == SCENE_OK && s->triangle_count == before)

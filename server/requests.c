@@ -141,6 +141,8 @@ uint64_t srv__requests(srv_loop *loop, uint32_t viewer)
         return 0; /* out of memory: the frame goes on without this viewer's requests */
     for (uint32_t t = 0; t < threads; t++) {
         const srv_request_list *list = &loop->thread_requests[t];
+        if (list->count == 0)
+            continue;
         memcpy(merged->keys + merged->count, list->keys, list->count * sizeof *list->keys);
         memcpy(merged->masks + merged->count, list->masks, list->count * sizeof *list->masks);
         merged->count += list->count;

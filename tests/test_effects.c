@@ -16,6 +16,7 @@
 #include "test_util.h"
 
 #include "effects.h"
+#include "fx_internal.h" /* white-box: the sample sequence */
 #include "scene.h"
 #include "scene_internal.h"
 
@@ -356,6 +357,37 @@ static void test_surface_point(void **state)
     island_run_free(&run);
     scene_rt_free(rt);
     scene_free(s);
+}
+
+/* The AO sample sequence is stratified for any texel hash: the samples 0..15, 16..31 and 0..63 each put
+ * exactly one point in every elementary interval of their size (a (0,m,2)-net: 4x4, 2x8, 8x2, 1x16, 16x1
+ * cells for 16 points; 8x8, 4x16, 16x4, 2x32 cells for 64), and every value lies in [0, 1). */
+static void test_sample_sequence_stratified(void **state)
+{
+    (void)state;
+    for (uint32_t texel = 0; texel < 200; texel++) {
+        uint64_t h = fx__hash(9, 0x1234, texel, 0, FX_STREAM_AO_DIRECTION);
+        float points[64][2];
+        for (uint32_t i = 0; i < 64; i++) {
+            fx__sobol_2d(i, h, points[i]);
+            assert_true(points[i][0] >= 0 && points[i][0] < 1 && points[i][1] >= 0 && points[i][1] < 1);
+        }
+        const uint32_t first[3] = {0, 16, 0}, count[3] = {16, 16, 64};
+        for (int run = 0; run < 3; run++) {
+            uint32_t m = count[run] == 16 ? 4 : 6;
+            for (uint32_t xbits = 0; xbits <= m; xbits++) {
+                uint32_t cells_x = 1u << xbits, cells_y = 1u << (m - xbits);
+                uint8_t hits[64] = {0};
+                for (uint32_t i = first[run]; i < first[run] + count[run]; i++) {
+                    uint32_t cx = (uint32_t)(points[i][0] * (float)cells_x);
+                    uint32_t cy = (uint32_t)(points[i][1] * (float)cells_y);
+                    hits[cy * cells_x + cx]++;
+                }
+                for (uint32_t c = 0; c < count[run]; c++)
+                    assert_int_equal(hits[c], 1);
+            }
+        }
+    }
 }
 
 /* ---- ambient occlusion --------------------------------------------------------------------------- */
@@ -822,6 +854,7 @@ int main(void)
         cmocka_unit_test(test_lookup_inside_and_nearest),
         cmocka_unit_test(test_surface_point),
         cmocka_unit_test(test_describe),
+        cmocka_unit_test(test_sample_sequence_stratified),
         cmocka_unit_test(test_ao_open_plane),
         cmocka_unit_test(test_ao_wall),
         cmocka_unit_test(test_ao_corner),

@@ -1,0 +1,688 @@
+/* The fxcache command line end to end: help texts, scene-info --json, one-line errors for bad input, render,
+ * and sim (summary, per-frame statistics, record and replay, the no-cache baseline, a tiny pool, viewers that
+ * see nothing). Runs the fxcache program of this build through fxt_run_cli(); small resolutions and few
+ * frames keep the whole program quick, also in the sanitizer build. */
+#include "test_util.h"
+
+#include <jansson.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define BUNNY "/usr/share/glmark2/models/bunny.obj"
+
+static char out_buf[1 << 16], err_buf[1 << 14];
+
+/* Runs `fxcache <args...>` (printf-style) and returns the exit code; stdout and stderr land in out_buf and
+ * err_buf. */
+static int run(const char *fmt, ...)
+{
+    char args[3072];
+    va_list ap;
+    va_start(ap, fmt);
+    int n = vsnprintf(args, sizeof args, fmt, ap);
+    va_end(ap);
+    assert_true(n > 0 && (size_t)n < sizeof args);
+    return fxt_run_cli(args, out_buf, sizeof out_buf, err_buf, sizeof err_buf);
+}
+
+/* A scratch path copied out of fxt_tmp_path's static buffer. */
+static void tmp_path(char *dst, size_t cap, const char *name)
+{
+    int n = snprintf(dst, cap, "%s", fxt_tmp_path(name));
+    assert_true(n > 0 && (size_t)n < cap);
+}
+
+static void write_file(char *dst, size_t cap, const char *name, const char *text)
+{
+    int n = snprintf(dst, cap, "%s", fxt_write_file(name, text));
+    assert_true(n > 0 && (size_t)n < cap);
+}
+
+/* err_buf holds exactly one non-empty line (ending in one newline). */
+static void assert_one_line_error(void)
+{
+    size_t len = strlen(err_buf);
+    if (len == 0 || err_buf[len - 1] != '\n' || memchr(err_buf, '\n', len - 1) != NULL) {
+        print_error("stderr is not exactly one line: '%s'\n", err_buf);
+        fail();
+    }
+    assert_true(len > 1);
+}
+
+static void assert_contains(const char *haystack, const char *needle)
+{
+    if (!strstr(haystack, needle)) {
+        print_error("expected '%s' in: '%s'\n", needle, haystack);
+        fail();
+    }
+}
+
+/* Runs a command that must fail with exit code rc and one line on stderr containing every needle (NULL
+ * terminated). */
+static void expect_error(int rc, const char *args, ...)
+{
+    int got = fxt_run_cli(args, out_buf, sizeof out_buf, err_buf, sizeof err_buf);
+    if (got != rc) {
+        print_error("fxcache %s: exit %d, expected %d; stderr: %s\n", args, got, rc, err_buf);
+        fail();
+    }
+    assert_one_line_error();
+    va_list ap;
+    va_start(ap, args);
+    for (const char *needle = va_arg(ap, const char *); needle; needle = va_arg(ap, const char *))
+        assert_contains(err_buf, needle);
+    va_end(ap);
+}
+
+static json_t *parse_json_text(const char *text)
+{
+    json_error_t error;
+    json_t *root = json_loads(text, 0, &error);
+    if (!root) {
+        print_error("invalid JSON (%d:%d: %s): %.400s\n", error.line, error.column, error.text, text);
+        fail();
+    }
+    assert_true(json_is_object(root));
+    return root;
+}
+
+static json_t *load_json_file(const char *path)
+{
+    json_error_t error;
+    json_t *root = json_load_file(path, 0, &error);
+    if (!root) {
+        print_error("%s: invalid JSON (%d:%d: %s)\n", path, error.line, error.column, error.text);
+        fail();
+    }
+    assert_true(json_is_object(root));
+    return root;
+}
+
+/* The integer at a dotted path ("rays.ao"); fails when absent or not an integer. */
+static long long jint(const json_t *root, const char *path)
+{
+    char buf[256];
+    snprintf(buf, sizeof buf, "%s", path);
+    const json_t *node = root;
+    for (char *save = NULL, *key = strtok_r(buf, ".", &save); key; key = strtok_r(NULL, ".", &save)) {
+        node = json_object_get(node, key);
+        if (!node) {
+            print_error("missing field '%s'\n", path);
+            fail();
+        }
+    }
+    if (!json_is_integer(node)) {
+        print_error("field '%s' is not an integer\n", path);
+        fail();
+    }
+    return json_integer_value(node);
+}
+
+static const json_t *jget(const json_t *root, const char *path)
+{
+    char buf[256];
+    snprintf(buf, sizeof buf, "%s", path);
+    const json_t *node = root;
+    for (char *save = NULL, *key = strtok_r(buf, ".", &save); key; key = strtok_r(NULL, ".", &save)) {
+        node = json_object_get(node, key);
+        if (!node) {
+            print_error("missing field '%s'\n", path);
+            fail();
+        }
+    }
+    return node;
+}
+
+/* ---------------------------------------------------------------------------------------------------------
+ * Help and commands */
+
+static void test_help_lists_commands(void **state)
+{
+    (void)state;
+    assert_int_equal(run("--help"), 0);
+    assert_contains(out_buf, "usage: fxcache");
+    assert_contains(out_buf, "scene-info");
+    assert_contains(out_buf, "render");
+    assert_contains(out_buf, "sim");
+}
+
+static void test_unknown_command(void **state)
+{
+    (void)state;
+    expect_error(2, "frobnicate", "frobnicate", NULL);
+}
+
+static void test_subcommand_help(void **state)
+{
+    (void)state;
+    assert_int_equal(run("scene-info --help"), 0);
+    assert_contains(out_buf, "usage: fxcache scene-info");
+    assert_contains(out_buf, "--json");
+    assert_int_equal(run("render --help"), 0);
+    assert_contains(out_buf, "usage: fxcache render");
+    assert_contains(out_buf, "--res");
+    assert_int_equal(run("sim --help"), 0);
+    assert_contains(out_buf, "usage: fxcache sim");
+    assert_contains(out_buf, "--viewers");
+    assert_contains(out_buf, "--no-cache");
+}
+
+/* ---------------------------------------------------------------------------------------------------------
+ * scene-info --json */
+
+static void check_scene_info_common(const json_t *info)
+{
+    assert_true(jint(info, "triangles") > 0);
+    assert_true(jint(info, "meshes") >= 1);
+    assert_int_equal(jint(info, "lights"), 1);
+    assert_true(jint(info, "islands.count") > 0);
+    long long max_tris = jint(info, "islands.max_triangles");
+    assert_true(max_tris >= 1 && max_tris <= 256);
+    assert_true(jint(info, "islands.count") <= jint(info, "triangles"));
+    const json_t *effects = jget(info, "effects");
+    assert_true(json_is_object(effects));
+    assert_non_null(json_object_get(effects, "shadow"));
+    assert_non_null(json_object_get(effects, "ao"));
+    assert_true(json_is_object(jget(info, "left_out")));
+}
+
+static void test_scene_info_default(void **state)
+{
+    (void)state;
+    assert_int_equal(run("scene-info default --json"), 0);
+    json_t *info = parse_json_text(out_buf);
+    check_scene_info_common(info);
+    /* The embedded scene: a room, three boxes and a sphere in 7 meshes, about 1,250 triangles. */
+    assert_int_equal(jint(info, "meshes"), 7);
+    assert_true(jint(info, "triangles") > 1000 && jint(info, "triangles") < 1500);
+    json_decref(info);
+
+    /* Omitting SCENE means the embedded scene too. */
+    assert_int_equal(run("scene-info --json"), 0);
+    info = parse_json_text(out_buf);
+    assert_int_equal(jint(info, "meshes"), 7);
+    json_decref(info);
+}
+
+static void test_scene_info_bunny(void **state)
+{
+    (void)state;
+    FILE *f = fopen(BUNNY, "rb");
+    if (!f) {
+        printf("SKIP: %s is absent (Debian package glmark2-data)\n", BUNNY);
+        skip();
+    }
+    fclose(f);
+    assert_int_equal(run("scene-info '%s' --json", BUNNY), 0);
+    json_t *info = parse_json_text(out_buf);
+    check_scene_info_common(info);
+    /* 69,666 triangles in the file; cleaning drops only degenerate and duplicate ones. */
+    long long tris = jint(info, "triangles");
+    assert_true(tris > 69000 && tris <= 69666);
+    assert_int_equal(tris + jint(info, "repairs.degenerate_skipped") + jint(info, "repairs.duplicate_skipped"),
+                     69666);
+    assert_int_equal(jint(info, "meshes"), 1);
+    json_decref(info);
+}
+
+static void test_scene_info_no_lights_no_sky(void **state)
+{
+    (void)state;
+    char obj[1100], scene[1100];
+    write_file(obj, sizeof obj, "tri.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    (void)obj;
+    write_file(scene, sizeof scene, "dark.json", "{\"version\": 1, \"meshes\": [{\"file\": \"tri.obj\"}]}\n");
+    assert_int_equal(run("scene-info '%s' --json", scene), 0);
+    json_t *info = parse_json_text(out_buf);
+    assert_int_equal(jint(info, "lights"), 0);
+    assert_int_equal(jint(info, "triangles"), 1);
+    const json_t *effects = jget(info, "effects");
+    assert_null(json_object_get(effects, "shadow"));
+    assert_null(json_object_get(effects, "ao"));
+    const json_t *left = jget(info, "left_out");
+    const json_t *shadow = json_object_get(left, "shadow"), *ao = json_object_get(left, "ao");
+    assert_true(json_is_string(shadow));
+    assert_true(json_is_string(ao));
+    assert_contains(json_string_value(shadow), "light");
+    assert_contains(json_string_value(ao), "sky");
+    json_decref(info);
+}
+
+/* ---------------------------------------------------------------------------------------------------------
+ * Bad input: non-zero exit, one line on stderr naming what is at fault */
+
+static void test_err_missing_file(void **state)
+{
+    (void)state;
+    expect_error(1, "scene-info /nonexistent/fxcache-no-such-scene.obj", "fxcache-no-such-scene.obj", NULL);
+}
+
+static void test_err_unsupported_format(void **state)
+{
+    (void)state;
+    char path[1100], args[1300];
+    write_file(path, sizeof path, "junk.xyz", "this is not a mesh\n\x01\x02\x03 junk junk\n");
+    snprintf(args, sizeof args, "scene-info '%s'", path);
+    expect_error(1, args, "junk.xyz", NULL);
+}
+
+static void test_err_malformed_json(void **state)
+{
+    (void)state;
+    char path[1100], args[1300];
+    /* The stray comma is on line 2, column 13. */
+    write_file(path, sizeof path, "malformed.json", "{\"version\": 1,\n \"meshes\": [,]}\n");
+    snprintf(args, sizeof args, "scene-info '%s'", path);
+    expect_error(1, args, "malformed.json:2:13", NULL);
+}
+
+static void test_err_nan_vertex(void **state)
+{
+    (void)state;
+    char path[1100], args[1300];
+    write_file(path, sizeof path, "nan.obj", "v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    snprintf(args, sizeof args, "scene-info '%s'", path);
+    expect_error(1, args, "vertex 0", "non-finite", NULL);
+}
+
+/* Every scene error names the file (docs/SCENE_FORMAT.md "Errors"); a NaN in a mesh file given directly must
+ * say which file, as it does when the same mesh comes through a JSON scene. */
+static void test_err_nan_vertex_names_file(void **state)
+{
+    (void)state;
+    char path[1100], args[1300];
+    write_file(path, sizeof path, "nan2.obj", "v 0 0 0\nv 1 nan 0\nv 0 1 0\nf 1 2 3\n");
+    snprintf(args, sizeof args, "scene-info '%s'", path);
+    expect_error(1, args, "vertex 1", "nan2.obj", NULL);
+}
+
+static void test_err_density(void **state)
+{
+    (void)state;
+    expect_error(2, "scene-info --density 0", "--density", "'0'", NULL);
+    expect_error(2, "scene-info --density abc", "--density", "'abc'", NULL);
+    expect_error(2, "render --density -1", "--density", "'-1'", NULL);
+}
+
+static void test_err_res(void **state)
+{
+    (void)state;
+    expect_error(2, "render --res 0x10", "--res", "'0x10'", NULL);
+    expect_error(2, "render --res 100000x10", "--res", "'100000x10'", NULL);
+    expect_error(2, "sim --res 64x", "--res", "'64x'", NULL);
+    expect_error(2, "sim --res 8193x8", "--res", "'8193x8'", NULL);
+}
+
+static void test_err_fov(void **state)
+{
+    (void)state;
+    expect_error(2, "render --fov 0", "--fov", "'0'", NULL);
+    expect_error(2, "render --fov 180", "--fov", "'180'", NULL);
+}
+
+static void test_err_viewers(void **state)
+{
+    (void)state;
+    expect_error(2, "sim --viewers 0", "--viewers", "'0'", NULL);
+    expect_error(2, "sim --viewers 65", "--viewers", "'65'", NULL);
+    expect_error(2, "sim --viewers", "--viewers", NULL);
+}
+
+static void test_err_frames(void **state)
+{
+    (void)state;
+    expect_error(2, "sim --frames 0", "--frames", "'0'", NULL);
+}
+
+static void test_err_bias(void **state)
+{
+    (void)state;
+    expect_error(2, "sim --bias foo=1", "--bias", "foo", NULL);
+    expect_error(2, "sim --bias ao=99", "--bias", "99", NULL);
+    expect_error(2, "sim --bias shadow=-5", "--bias", "-5", NULL);
+}
+
+static void test_err_effects(void **state)
+{
+    (void)state;
+    expect_error(2, "sim --effects bogus", "--effects", "bogus", NULL);
+    expect_error(2, "sim --effects shadow,bogus", "--effects", "bogus", NULL);
+}
+
+static void test_err_camera(void **state)
+{
+    (void)state;
+    expect_error(2, "sim --camera nowhere", "--camera", "nowhere", NULL);
+}
+
+static void test_err_views_without_out(void **state)
+{
+    (void)state;
+    expect_error(2, "sim --views --res 8x8 --frames 1", "--views", "--out", NULL);
+}
+
+static void test_err_unknown_option(void **state)
+{
+    (void)state;
+    expect_error(2, "sim --bogus-option", "--bogus-option", NULL);
+    expect_error(2, "render --bogus-option", "--bogus-option", NULL);
+    expect_error(2, "scene-info --bogus-option", "--bogus-option", NULL);
+}
+
+static void test_err_trace_bad_line(void **state)
+{
+    (void)state;
+    char path[1100], args[1300];
+    write_file(path, sizeof path, "short.trace", "fxcache-trace 1\n0 1 2 3 4\n");
+    snprintf(args, sizeof args, "sim --trace '%s' --res 8x8 --quiet", path);
+    expect_error(1, args, "short.trace:2:", "8 numbers", NULL);
+}
+
+static void test_err_trace_newer_version(void **state)
+{
+    (void)state;
+    char path[1100], args[1300];
+    write_file(path, sizeof path, "newer.trace", "fxcache-trace 99\n0 0 1 0 0 0 -1 60\n");
+    snprintf(args, sizeof args, "sim --trace '%s' --res 8x8 --quiet", path);
+    expect_error(1, args, "newer.trace:1:", "99", NULL);
+}
+
+static void test_err_traces_and_viewers_disagree(void **state)
+{
+    (void)state;
+    char path[1100], args[1300];
+    write_file(path, sizeof path, "one.trace", "fxcache-trace 1\n0 0 1 3 0 0 -1 60\n");
+    snprintf(args, sizeof args, "sim --trace '%s' --viewers 2 --res 8x8 --quiet", path);
+    expect_error(2, args, "--viewers", NULL);
+}
+
+/* ---------------------------------------------------------------------------------------------------------
+ * render */
+
+static void test_render_png(void **state)
+{
+    (void)state;
+    char path[1100];
+    tmp_path(path, sizeof path, "r.png");
+    remove(path);
+    assert_int_equal(run("render default -o '%s' --res 64x36", path), 0);
+    FILE *f = fopen(path, "rb");
+    assert_non_null(f);
+    unsigned char head[8] = {0};
+    assert_int_equal(fread(head, 1, 8, f), 8);
+    fseek(f, 0, SEEK_END);
+    long size = ftell(f);
+    fclose(f);
+    static const unsigned char png_signature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+    assert_memory_equal(head, png_signature, 8);
+    /* The IHDR chunk follows the signature: width and height big-endian at bytes 16..23. */
+    f = fopen(path, "rb");
+    unsigned char ihdr[24];
+    assert_int_equal(fread(ihdr, 1, 24, f), 24);
+    fclose(f);
+    assert_memory_equal(ihdr + 12, "IHDR", 4);
+    unsigned w = (unsigned)ihdr[16] << 24 | (unsigned)ihdr[17] << 16 | (unsigned)ihdr[18] << 8 | ihdr[19];
+    unsigned h = (unsigned)ihdr[20] << 24 | (unsigned)ihdr[21] << 16 | (unsigned)ihdr[22] << 8 | ihdr[23];
+    assert_int_equal(w, 64);
+    assert_int_equal(h, 36);
+    assert_true(size > 33);
+}
+
+/* ---------------------------------------------------------------------------------------------------------
+ * sim */
+
+static void test_sim_identical_summary_and_stats(void **state)
+{
+    (void)state;
+    char summary[1100], stats[1100];
+    tmp_path(summary, sizeof summary, "S.json");
+    tmp_path(stats, sizeof stats, "F.jsonl");
+    remove(summary);
+    remove(stats);
+    assert_int_equal(run("sim --viewers 2 --frames 3 --res 64x36 --camera identical --summary '%s' --stats '%s' "
+                         "--quiet",
+                         summary, stats),
+                     0);
+    assert_string_equal(out_buf, ""); /* --quiet */
+    json_t *s = load_json_file(summary);
+    assert_int_equal(jint(s, "viewers"), 2);
+    assert_int_equal(jint(s, "frames"), 3);
+    assert_string_equal(json_string_value(jget(s, "resolution")), "64x36");
+    long long requested = jint(s, "requested_texels"), unique = jint(s, "unique_texels");
+    assert_true(unique > 0);
+    assert_int_equal(requested, 2 * unique); /* two identical cameras request the same texels */
+    assert_true(json_is_number(jget(s, "sharing_ratio")));
+    assert_true(fabs(json_number_value(jget(s, "sharing_ratio")) - 2.0) < 1e-9);
+    assert_int_equal(jint(s, "rays.visibility"), 3 * 2 * 64 * 36);
+    assert_true(jint(s, "rays.shadow") > 0);
+    assert_true(jint(s, "rays.ao") > 0);
+    assert_int_equal(jint(s, "rays.effects_total"), jint(s, "rays.shadow") + jint(s, "rays.ao"));
+    assert_true(jint(s, "pixels_visible") > 0 && jint(s, "pixels_visible") <= 3 * 2 * 64 * 36);
+    assert_true(jint(s, "memory_bytes.peak.total") > 0);
+    assert_true(jint(s, "memory_bytes.final.total") > 0);
+    assert_true(jint(s, "memory_bytes.final.total") <= jint(s, "memory_bytes.peak.total"));
+    assert_true(json_is_number(jget(s, "time_ms.visibility")));
+    assert_true(json_is_number(jget(s, "time_ms.requests")));
+    assert_true(json_is_number(jget(s, "time_ms.compose")));
+    assert_non_null(json_object_get(jget(s, "effects"), "shadow"));
+    assert_non_null(json_object_get(jget(s, "effects"), "ao"));
+    assert_true(json_is_string(json_object_get(jget(s, "left_out"), "probes")));
+
+    FILE *f = fopen(stats, "rb");
+    assert_non_null(f);
+    char line[1 << 14];
+    int lines = 0;
+    long long requested_sum = 0, visibility_sum = 0;
+    while (fgets(line, sizeof line, f)) {
+        assert_non_null(strchr(line, '\n')); /* a whole line */
+        json_t *frame = parse_json_text(line);
+        assert_int_equal(jint(frame, "frame"), lines);
+        requested_sum += jint(frame, "requested_texels");
+        visibility_sum += jint(frame, "rays.visibility");
+        assert_int_equal(jint(frame, "requested_texels"), 2 * jint(frame, "unique_texels"));
+        json_decref(frame);
+        lines++;
+    }
+    fclose(f);
+    assert_int_equal(lines, 3);
+    assert_int_equal(requested_sum, requested);
+    assert_int_equal(visibility_sum, 3 * 2 * 64 * 36);
+    json_decref(s);
+}
+
+static void test_sim_record_replay(void **state)
+{
+    (void)state;
+    char dir[1100], a[1100], b[1100];
+    tmp_path(dir, sizeof dir, "rec");
+    tmp_path(a, sizeof a, "A.json");
+    tmp_path(b, sizeof b, "B.json");
+    remove(a);
+    remove(b);
+    assert_int_equal(run("sim --camera orbit --viewers 2 --frames 3 --res 64x36 --record '%s' --summary '%s' --quiet",
+                         dir, a),
+                     0);
+    assert_int_equal(run("sim --trace '%s/viewer_00.trace' --trace '%s/viewer_01.trace' --res 64x36 --summary '%s' "
+                         "--quiet",
+                         dir, dir, b),
+                     0);
+    json_t *ja = load_json_file(a), *jb = load_json_file(b);
+    assert_int_equal(jint(jb, "viewers"), 2);
+    assert_int_equal(jint(jb, "frames"), 3); /* default: the longest trace */
+    assert_true(jint(ja, "unique_texels") > 0);
+    assert_int_equal(jint(ja, "requested_texels"), jint(jb, "requested_texels"));
+    assert_int_equal(jint(ja, "unique_texels"), jint(jb, "unique_texels"));
+    assert_int_equal(jint(ja, "rays.ao"), jint(jb, "rays.ao"));
+    assert_int_equal(jint(ja, "rays.shadow"), jint(jb, "rays.shadow"));
+    assert_int_equal(jint(ja, "pixels_visible"), jint(jb, "pixels_visible"));
+    /* Orbiting viewers are at different places: they do not share everything. */
+    assert_true(jint(ja, "requested_texels") < 2 * jint(ja, "unique_texels"));
+    json_decref(ja);
+    json_decref(jb);
+}
+
+static void test_sim_no_cache(void **state)
+{
+    (void)state;
+    char summary[1100];
+    tmp_path(summary, sizeof summary, "N.json");
+    remove(summary);
+    assert_int_equal(run("sim --no-cache --viewers 1 --res 64x36 --frames 1 --summary '%s' --quiet", summary), 0);
+    json_t *s = load_json_file(summary);
+    assert_true(json_is_true(jget(s, "no_cache")));
+    long long visible = jint(s, "pixels_visible");
+    assert_true(visible > 0 && visible <= 64 * 36);
+    assert_int_equal(jint(s, "rays.ao"), 64 * visible); /* 64 AO rays per visible pixel */
+    assert_int_equal(jint(s, "rays.visibility"), 64 * 36);
+    assert_int_equal(jint(s, "unique_texels"), 0); /* no cache, no texels */
+    json_decref(s);
+}
+
+static void test_sim_tiny_pool(void **state)
+{
+    (void)state;
+    char summary[1100], stats[1100];
+    tmp_path(summary, sizeof summary, "P.json");
+    tmp_path(stats, sizeof stats, "P.jsonl");
+    remove(summary);
+    remove(stats);
+    int rc = run("sim --pool-mb 1 --res 320x180 --viewers 4 --frames 3 --summary '%s' --stats '%s' --quiet",
+                 summary, stats);
+    if (rc != 0)
+        print_error("stderr: %s\n", err_buf);
+    assert_int_equal(rc, 0);
+    json_t *s = load_json_file(summary);
+    assert_int_equal(jint(s, "frames"), 3);
+    assert_int_equal(jint(s, "viewers"), 4);
+    long long missing = jint(s, "pixels_missing");
+    assert_true(missing >= 0 && missing <= jint(s, "pixels_visible"));
+    /* The pools of all effects together stay within the 1 MiB given. */
+    const json_t *effects = jget(s, "memory_bytes.peak.effects");
+    long long reserved = 0;
+    const char *name;
+    const json_t *fx;
+    json_object_foreach((json_t *)effects, name, fx) {
+        long long r = jint(fx, "pool_reserved"), used = jint(fx, "pool_in_use");
+        assert_true(used <= r);
+        reserved += r;
+    }
+    assert_true(reserved > 0 && reserved <= 1024 * 1024);
+    json_decref(s);
+
+    /* The pressure shows: blocks evicted, pool exhausted or pixels missing. */
+    FILE *f = fopen(stats, "rb");
+    assert_non_null(f);
+    char line[1 << 14];
+    long long pressure = missing;
+    int lines = 0;
+    while (fgets(line, sizeof line, f)) {
+        json_t *frame = parse_json_text(line);
+        pressure += jint(frame, "evictions") + jint(frame, "pool_exhausted");
+        json_decref(frame);
+        lines++;
+    }
+    fclose(f);
+    assert_int_equal(lines, 3);
+    assert_true(pressure > 0);
+}
+
+static void test_sim_viewers_see_nothing(void **state)
+{
+    (void)state;
+    char obj[1100], scene[1100], summary[1100];
+    write_file(obj, sizeof obj, "small.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    (void)obj;
+    /* The camera stands 5 m in front of the triangle and looks away from it. */
+    write_file(scene, sizeof scene, "away.json",
+               "{\"version\": 1, \"meshes\": [{\"file\": \"small.obj\"}],\n"
+               " \"lights\": [{\"type\": \"directional\", \"direction\": [0, -1, 0]}],\n"
+               " \"sky\": {\"color\": [1, 1, 1], \"intensity\": 1},\n"
+               " \"camera\": {\"position\": [0.3, 0.3, 5], \"target\": [0.3, 0.3, 10], \"fov_deg\": 60}}\n");
+    tmp_path(summary, sizeof summary, "W.json");
+    remove(summary);
+    int rc = run("sim --scene '%s' --camera static --viewers 2 --frames 2 --res 64x36 --summary '%s' --quiet", scene,
+                 summary);
+    if (rc != 0)
+        print_error("stderr: %s\n", err_buf);
+    assert_int_equal(rc, 0);
+    json_t *s = load_json_file(summary);
+    assert_int_equal(jint(s, "frames"), 2);
+    assert_int_equal(jint(s, "pixels_visible"), 0);
+    assert_int_equal(jint(s, "unique_texels"), 0);
+    assert_int_equal(jint(s, "requested_texels"), 0);
+    assert_int_equal(jint(s, "rays.visibility"), 2 * 2 * 64 * 36);
+    assert_int_equal(jint(s, "rays.effects_total"), 0);
+    json_decref(s);
+}
+
+/* The room generator places viewers near the default camera; in the embedded scene (a closed room, 10 x 4 x 8
+ * m, walls facing inwards) every viewer must stand inside the room, or it sees the back of a wall. */
+static void test_sim_room_cameras_inside_default_room(void **state)
+{
+    (void)state;
+    char dir[1100];
+    tmp_path(dir, sizeof dir, "room_rec");
+    assert_int_equal(run("sim --camera room --viewers 4 --frames 2 --res 8x8 --record '%s' --quiet", dir), 0);
+    for (int v = 0; v < 4; v++) {
+        char path[1200], line[4200];
+        snprintf(path, sizeof path, "%s/viewer_%02d.trace", dir, v);
+        FILE *f = fopen(path, "rb");
+        assert_non_null(f);
+        int cameras = 0;
+        while (fgets(line, sizeof line, f)) {
+            double t, p[3], d[3], fov;
+            if (sscanf(line, "%lf %lf %lf %lf %lf %lf %lf %lf", &t, &p[0], &p[1], &p[2], &d[0], &d[1], &d[2],
+                       &fov) != 8)
+                continue;
+            cameras++;
+            if (!(p[0] > -5 && p[0] < 5 && p[1] > 0 && p[1] < 4 && p[2] > -4 && p[2] < 4)) {
+                print_error("viewer %d camera %d at (%g, %g, %g) is outside the room [-5,5]x[0,4]x[-4,4]\n", v,
+                            cameras - 1, p[0], p[1], p[2]);
+                fclose(f);
+                fail();
+            }
+        }
+        fclose(f);
+        assert_int_equal(cameras, 2);
+    }
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_help_lists_commands),
+        cmocka_unit_test(test_unknown_command),
+        cmocka_unit_test(test_subcommand_help),
+        cmocka_unit_test(test_scene_info_default),
+        cmocka_unit_test(test_scene_info_bunny),
+        cmocka_unit_test(test_scene_info_no_lights_no_sky),
+        cmocka_unit_test(test_err_missing_file),
+        cmocka_unit_test(test_err_unsupported_format),
+        cmocka_unit_test(test_err_malformed_json),
+        cmocka_unit_test(test_err_nan_vertex),
+        cmocka_unit_test(test_err_nan_vertex_names_file),
+        cmocka_unit_test(test_err_density),
+        cmocka_unit_test(test_err_res),
+        cmocka_unit_test(test_err_fov),
+        cmocka_unit_test(test_err_viewers),
+        cmocka_unit_test(test_err_frames),
+        cmocka_unit_test(test_err_bias),
+        cmocka_unit_test(test_err_effects),
+        cmocka_unit_test(test_err_camera),
+        cmocka_unit_test(test_err_views_without_out),
+        cmocka_unit_test(test_err_unknown_option),
+        cmocka_unit_test(test_err_trace_bad_line),
+        cmocka_unit_test(test_err_trace_newer_version),
+        cmocka_unit_test(test_err_traces_and_viewers_disagree),
+        cmocka_unit_test(test_render_png),
+        cmocka_unit_test(test_sim_identical_summary_and_stats),
+        cmocka_unit_test(test_sim_record_replay),
+        cmocka_unit_test(test_sim_no_cache),
+        cmocka_unit_test(test_sim_tiny_pool),
+        cmocka_unit_test(test_sim_viewers_see_nothing),
+        cmocka_unit_test(test_sim_room_cameras_inside_default_room),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
