@@ -22,10 +22,10 @@
 
 /* One texel being updated in the current batch. */
 typedef struct ao_pending {
-    uint8_t *texel_bytes;   /* the texel's 4 payload bytes */
-    uint32_t unoccluded;    /* rays that escaped, stored samples plus this batch */
-    uint32_t count;         /* stored samples */
-    uint32_t added;         /* samples traced in this batch */
+    uint8_t *texel_bytes; /* the texel's 4 payload bytes */
+    uint32_t unoccluded;  /* rays that escaped, stored samples plus this batch */
+    uint32_t count;       /* stored samples */
+    uint32_t added;       /* samples traced in this batch */
 } ao_pending;
 
 /* A batch of rays in flight; rays[r] belongs to pending[owner[r]]. 64-byte aligned for the stream API. */
@@ -47,7 +47,8 @@ static void ao_flush(scene_rt *rt, ao_batch *batch)
         uint32_t total = texel->count + texel->added;
         uint32_t fraction = (uint32_t)lrint((double)texel->unoccluded * 65535.0 / (double)total);
         fx__put_u16(texel->texel_bytes, (uint16_t)(fraction > 65535u ? 65535u : fraction));
-        fx__put_u16(texel->texel_bytes + 2, (uint16_t)(total > FX_AO_MAX_SAMPLES ? FX_AO_MAX_SAMPLES : total));
+        fx__put_u16(texel->texel_bytes + 2,
+                    (uint16_t)(total > FX_AO_MAX_SAMPLES ? FX_AO_MAX_SAMPLES : total));
     }
     batch->ray_count = 0;
     batch->pending_count = 0;
@@ -56,7 +57,8 @@ static void ao_flush(scene_rt *rt, ao_batch *batch)
 /* The ray of AO sample `index` leaving a surface point (position, unit normal with basis tangent,
  * bitangent): origin and direction. */
 static void ao_ray(const float position[3], const float normal[3], const float tangent[3],
-                   const float bitangent[3], uint64_t direction_hash, uint32_t index, float origin[3], float dir[3])
+                   const float bitangent[3], uint64_t direction_hash, uint32_t index, float origin[3],
+                   float dir[3])
 {
     float xi[2];
     fx__sobol_2d(index, direction_hash, xi);
@@ -91,8 +93,10 @@ uint64_t fx_ao_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
             if (batch.ray_count + add > FX_RAY_BATCH)
                 ao_flush(ctx->rt, &batch);
             uint32_t owner = batch.pending_count++;
-            batch.pending[owner] = (ao_pending){
-                .texel_bytes = texel_bytes, .unoccluded = (uint32_t)unoccluded, .count = stored, .added = add};
+            batch.pending[owner] = (ao_pending){.texel_bytes = texel_bytes,
+                                                .unoccluded = (uint32_t)unoccluded,
+                                                .count = stored,
+                                                .added = add};
 
             uint64_t origin_hash = fx__hash(ctx->seed, job->key, texel, 0, FX_STREAM_AO_ORIGIN);
             uint64_t direction_hash = fx__hash(ctx->seed, job->key, texel, 0, FX_STREAM_AO_DIRECTION);

@@ -1,6 +1,6 @@
 /* What every effect shares: the effect descriptions the frame loop reads (bytes per texel, level bias,
- * filter, policy), the mapping from a point of island UV to the surface (through the triangle lookup), and the
- * direction towards a light. */
+ * filter, policy), the mapping from a point of island UV to the surface (through the triangle lookup), and
+ * the direction towards a light. */
 #include "fx_internal.h"
 
 #include <string.h>
@@ -58,7 +58,8 @@ void fx__surface_map_init(const scene *s, uint32_t island, uint32_t lookup, fx__
         map->edge2[k] = (double)p2[k] - p0[k];
         map->normal[k] = s->tri_normal[3 * (size_t)tri + k];
     }
-    /* Barycentrics as an affine function of UV (in double: UVs reach 32768 texels, sub-texel offsets matter). */
+    /* Barycentrics as an affine function of UV (in double: UVs reach 32768 texels, sub-texel offsets matter).
+     */
     double ax = uv[0], ay = uv[1], e1u = (double)uv[2] - ax, e1v = (double)uv[3] - ay;
     double e2u = (double)uv[4] - ax, e2v = (double)uv[5] - ay;
     double area = e1u * e2v - e1v * e2u;
@@ -87,7 +88,8 @@ void fx__surface_map_eval(const fx__surface_map *map, float island_u, float isla
     double w2 = map->fallback[1] + du * map->to_w2[0] + dv * map->to_w2[1];
     double w0 = 1.0 - w1 - w2;
     if (!(w0 >= 0 && w1 >= 0 && w2 >= 0)) {
-        /* Outside (or NaN): clamp negative weights to zero and renormalise; the centroid if nothing is left. */
+        /* Outside (or NaN): clamp negative weights to zero and renormalise; the centroid if nothing is left.
+         */
         w0 = w0 > 0 ? w0 : 0.0;
         w1 = w1 > 0 ? w1 : 0.0;
         w2 = w2 > 0 ? w2 : 0.0;

@@ -21,12 +21,12 @@
 #include <stdlib.h>
 
 /* Programming errors only (bad arguments from our own code); never on a per-ray path. */
-#define FX_ASSERT(cond)                                                                                    \
-    do {                                                                                                   \
-        if (!(cond)) {                                                                                     \
-            fprintf(stderr, "%s:%d: effects assertion failed: %s\n", __FILE__, __LINE__, #cond);           \
-            abort();                                                                                       \
-        }                                                                                                  \
+#define FX_ASSERT(cond)                                                                                      \
+    do {                                                                                                     \
+        if (!(cond)) {                                                                                       \
+            fprintf(stderr, "%s:%d: effects assertion failed: %s\n", __FILE__, __LINE__, #cond);             \
+            abort();                                                                                         \
+        }                                                                                                    \
     } while (0)
 
 enum {
@@ -42,7 +42,8 @@ enum {
 
 /* ---- random numbers ------------------------------------------------------------------------------- */
 
-/* A 64-bit finaliser (the splitmix64 / Stafford "mix13" constants): every input bit affects every output bit. */
+/* A 64-bit finaliser (the splitmix64 / Stafford "mix13" constants): every input bit affects every output bit.
+ */
 static inline uint64_t fx__mix64(uint64_t x)
 {
     x ^= x >> 30;
@@ -98,7 +99,8 @@ static inline uint32_t fx__owen_scramble(uint32_t x, uint32_t seed)
 
 /* Sobol dimension 1 before bit reversal: its generator is Pascal's matrix mod 2, and by Lucas' theorem
  * output bit m is the XOR of index bits k that are supersets of m (k & m == m): a superset transform over
- * the five bits of a bit position, in five shift-and-mask steps (checked against the direction-number loop). */
+ * the five bits of a bit position, in five shift-and-mask steps (checked against the direction-number loop).
+ */
 static inline uint32_t fx__sobol1_reversed(uint32_t index)
 {
     index ^= (index >> 1) & 0x55555555u;
@@ -147,8 +149,8 @@ static inline void fx__onb(const float n[3], float t[3], float b[3])
 }
 
 /* A cosine-weighted direction about unit n (with basis t, b) from a point of [0,1)^2 (Malley's method). */
-static inline void fx__cosine_direction(const float n[3], const float t[3], const float b[3], const float xi[2],
-                                        float dir[3])
+static inline void fx__cosine_direction(const float n[3], const float t[3], const float b[3],
+                                        const float xi[2], float dir[3])
 {
     float r = sqrtf(xi[0]);
     float phi = 6.28318530717958647692f * xi[1];
@@ -162,11 +164,11 @@ static inline void fx__cosine_direction(const float n[3], const float t[3], cons
 /* The map from level-0 island UV to the surface of one lookup triangle, set up once per texel so that each
  * sample point costs a few multiply-adds (fx_surface_point is init + eval). */
 typedef struct fx__surface_map {
-    double uv_origin[2];      /* corner 0 in island UV */
-    double to_w1[2], to_w2[2]; /* barycentrics of corners 1 and 2 per UV unit */
-    double fallback[2];       /* constant barycentrics for a triangle without UV area */
+    double uv_origin[2];                  /* corner 0 in island UV */
+    double to_w1[2], to_w2[2];            /* barycentrics of corners 1 and 2 per UV unit */
+    double fallback[2];                   /* constant barycentrics for a triangle without UV area */
     double origin[3], edge1[3], edge2[3]; /* world corner 0 and edges to corners 1 and 2, metres */
-    float normal[3];          /* unit geometric normal */
+    float normal[3];                      /* unit geometric normal */
 } fx__surface_map;
 
 /* Sets up the map of the triangle named by lookup texel `lookup` in island. */

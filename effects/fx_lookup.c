@@ -1,5 +1,5 @@
-/* Triangle lookup: which island triangle each texel centre lies in, and where (DESIGN.md "Effects"). It is the
- * first effect of every block (frame stage 5): shadows and AO map their sample points through it.
+/* Triangle lookup: which island triangle each texel centre lies in, and where (DESIGN.md "Effects"). It is
+ * the first effect of every block (frame stage 5): shadows and AO map their sample points through it.
  *
  * Inside test: exact. Island UVs are multiples of 1/256 texel below 32768 (scene_islands.c) and texel
  * centres are multiples of 1/2, so every edge function below is computed exactly in double (products of
@@ -17,7 +17,8 @@
 /* Quantization steps of a barycentric coordinate (12 bits). */
 #define FX_LOOKUP_STEPS 4095.0f
 
-/* One island triangle prepared for tests: corners in counter-clockwise order (swapped when stored clockwise). */
+/* One island triangle prepared for tests: corners in counter-clockwise order (swapped when stored clockwise).
+ */
 typedef struct lookup_triangle {
     double corner[3][2];
     double twice_area; /* > 0 for a usable triangle */
@@ -82,7 +83,8 @@ static void prepare_triangle(const scene *s, const scene_island *island, uint32_
     }
 }
 
-/* Exact inside test with the top-left tie rule; on success the barycentrics of corners 1 and 2 (as stored). */
+/* Exact inside test with the top-left tie rule; on success the barycentrics of corners 1 and 2 (as stored).
+ */
 static bool triangle_contains(const lookup_triangle *t, double px, double py, float *u, float *v)
 {
     if (!(t->twice_area > 0))

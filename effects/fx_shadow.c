@@ -3,8 +3,8 @@
  * i reached the light). Frame stage 6 for the shadow effect, and the same rays per pixel for the no-cache
  * baseline.
  *
- * Sample points: sample i lies in stratum (i % 4, i / 4) of the texel's footprint square in level-0 island UV,
- * jittered by hash(seed, key, texel, i); it is mapped to the surface through the texel's triangle lookup
+ * Sample points: sample i lies in stratum (i % 4, i / 4) of the texel's footprint square in level-0 island
+ * UV, jittered by hash(seed, key, texel, i); it is mapped to the surface through the texel's triangle lookup
  * (fx_surface_point: clamped into the lookup triangle, so border texels sample the nearest triangle's edge).
  * The same 16 points serve every light. Facing: a ray whose direction has dot(n, to_light) <= 0 (n the
  * geometric normal) is not traced and its bit stays 0; a texel facing away from a light stores 0 with no ray.
@@ -122,8 +122,9 @@ float fx_shadow_sample(const void *payload, uint32_t texel, uint32_t light_count
     return (float)__builtin_popcount(mask) * (1.0f / FX_SHADOW_RAYS);
 }
 
-float fx_shadow_eval_point(const fx_context *ctx, const float pos[3], const float normal[3], const float dpdx[3],
-                           const float dpdy[3], uint32_t light, uint64_t pixel_id, uint64_t *rays)
+float fx_shadow_eval_point(const fx_context *ctx, const float pos[3], const float normal[3],
+                           const float dpdx[3], const float dpdy[3], uint32_t light, uint64_t pixel_id,
+                           uint64_t *rays)
 {
     FX_ASSERT(light < ctx->s->light_count);
     float offsets[FX_SHADOW_RAYS][2];

@@ -268,6 +268,7 @@ typedef struct sim_totals {
     double time_ms[SRV_STAGE_COUNT], frame_ms;
     srv_memory peak;
     uint32_t frames;
+    uint64_t exhausted; /* cumulative failed requests (pool exhausted), from the cache */
 } sim_totals;
 
 static json_t *memory_json(const srv_memory *m)
@@ -496,6 +497,7 @@ int srv_cmd_sim(int argc, char **argv)
             tot.time_ms[stg] += st.time_ms[stg];
         tot.frame_ms += st.frame_ms;
         tot.frames++;
+        tot.exhausted = st.exhausted;
         if (stats_file) {
             json_t *line = frame_json(&st, o.viewers, &mem);
             json_dumpf(line, stats_file, JSON_COMPACT | JSON_PRESERVE_ORDER);
@@ -515,6 +517,11 @@ int srv_cmd_sim(int argc, char **argv)
     }
     if (progress)
         fputc('\n', stderr);
+    if (tot.exhausted > 0)
+        fprintf(stderr, "fxcache sim: warning: the block pools (--pool-mb %g) were too small for the requests of one "
+                        "frame %llu times; the run went on degraded (%llu visible pixels composed without cached "
+                        "data)\n",
+                o.pool_mb, (unsigned long long)tot.exhausted, (unsigned long long)tot.pixels_missing);
     if (stop_requested && o.out_dir && frame > 0)
         for (uint32_t v = 0; v < o.viewers; v++)
             save_frame(&o, loop, frame - 1, v);
@@ -556,6 +563,7 @@ int srv_cmd_sim(int argc, char **argv)
                                                           "ao", (json_int_t)tot.deferred[SCENE_FX_AO]));
     json_object_set_new(sum, "pixels_visible", json_integer((json_int_t)tot.pixels_visible));
     json_object_set_new(sum, "pixels_missing", json_integer((json_int_t)tot.pixels_missing));
+    json_object_set_new(sum, "pool_exhausted", json_integer((json_int_t)tot.exhausted));
     json_object_set_new(sum, "memory_bytes", json_pack("{s:o,s:o}", "peak", memory_json(&tot.peak), "final", memory_json(&mem)));
     json_object_set_new(sum, "time_ms", stage_json(tot.time_ms, tot.frame_ms));
     json_object_set_new(sum, "bvh_build_ms", json_real(bvh_ms));

@@ -68,9 +68,9 @@ static void add_quad(scene *s, const char *name, const double corner[3], const d
             t += 2;
         }
     scene_error err;
-    assert_int_equal(scene__add_mesh(s, name, positions, vertex_count, indices, triangle_count, NULL, 0, NULL,
-                                     &err),
-                     SCENE_OK);
+    assert_int_equal(
+        scene__add_mesh(s, name, positions, vertex_count, indices, triangle_count, NULL, 0, NULL, &err),
+        SCENE_OK);
     free(positions);
     free(indices);
 }
@@ -78,8 +78,8 @@ static void add_quad(scene *s, const char *name, const double corner[3], const d
 /* Adds a directional light travelling along direction. */
 static void add_sun(scene *s, float dx, float dy, float dz)
 {
-    scene_light light = {.type = SCENE_LIGHT_DIRECTIONAL, .direction = {dx, dy, dz}, .color = {1, 1, 1},
-                         .intensity = 1};
+    scene_light light = {
+        .type = SCENE_LIGHT_DIRECTIONAL, .direction = {dx, dy, dz}, .color = {1, 1, 1}, .intensity = 1};
     scene_error err;
     assert_int_equal(scene__add_light(s, &light, "test sun", &err), SCENE_OK);
 }
@@ -87,7 +87,8 @@ static void add_sun(scene *s, float dx, float dy, float dz)
 /* Adds a point light at (x, y, z). */
 static void add_point_light(scene *s, float x, float y, float z)
 {
-    scene_light light = {.type = SCENE_LIGHT_POINT, .position = {x, y, z}, .color = {1, 1, 1}, .intensity = 1};
+    scene_light light = {
+        .type = SCENE_LIGHT_POINT, .position = {x, y, z}, .color = {1, 1, 1}, .intensity = 1};
     scene_error err;
     assert_int_equal(scene__add_light(s, &light, "test lamp", &err), SCENE_OK);
 }
@@ -135,7 +136,8 @@ typedef struct island_run {
 /* The cache key of a block (DESIGN.md: effect:4 | island:32 | level:4 | block_y:12 | block_x:12). */
 static uint64_t block_key(uint32_t effect, uint32_t island, uint32_t level, uint32_t bx, uint32_t by)
 {
-    return ((uint64_t)effect << 60) | ((uint64_t)island << 28) | ((uint64_t)level << 24) | ((uint64_t)by << 12) | bx;
+    return ((uint64_t)effect << 60) | ((uint64_t)island << 28) | ((uint64_t)level << 24) |
+           ((uint64_t)by << 12) | bx;
 }
 
 /* Prepares every block of island at level for effect: masks cover the island's texels, lookups are filled. */
@@ -413,8 +415,8 @@ static double disk_quadrant_open(double a, double b)
 typedef double (*ao_expectation)(const float pos[3], double radius);
 
 /* Runs AO to convergence on run, then compares the mean of selected texels with the analytic mean. */
-static void check_ao_against(const scene *s, scene_rt *rt, island_run *run, float radius, ao_expectation expect,
-                             const char *what)
+static void check_ao_against(const scene *s, scene_rt *rt, island_run *run, float radius,
+                             ao_expectation expect, const char *what)
 {
     fx_context ctx = {.s = s, .rt = rt, .seed = 7, .ao_radius = radius};
     uint64_t rays = fx_ao_update(&ctx, run->jobs, run->block_count, FX_AO_MAX_SAMPLES);
@@ -470,7 +472,8 @@ static scene *wall_scene(scene_rt **rt)
 {
     scene *s = new_scene();
     add_quad(s, "floor", (double[3]){0, 0, -3}, (double[3]){0, 0, 6}, (double[3]){3, 0, 0}, 2);
-    add_quad(s, "wall", (double[3]){0, 0, -6}, (double[3]){0, 10, 0}, (double[3]){0, 0, 12}, 2); /* normal +x */
+    add_quad(s, "wall", (double[3]){0, 0, -6}, (double[3]){0, 10, 0}, (double[3]){0, 0, 12},
+             2); /* normal +x */
     *rt = finish_scene(s, 20.0f, WALL_RADIUS);
     return s;
 }
@@ -496,7 +499,8 @@ static void test_ao_open_plane(void **state)
     assert_int_equal(fx_ao_update(&ctx, run.jobs, run.block_count, 16), 0);
     /* The no-cache baseline at a point of the plane: 64 rays, all free. */
     uint64_t rays = 0;
-    assert_true(fx_ao_eval_point(&ctx, (float[3]){0.3f, 0, -0.7f}, (float[3]){0, 1, 0}, 64, 99, &rays) == 1.0f);
+    assert_true(fx_ao_eval_point(&ctx, (float[3]){0.3f, 0, -0.7f}, (float[3]){0, 1, 0}, 64, 99, &rays) ==
+                1.0f);
     assert_int_equal(rays, 64);
     island_run_free(&run);
     scene_rt_free(rt);
@@ -539,7 +543,8 @@ static void test_ao_corner(void **state)
     island_run_init(&run, s, island_of_mesh(s, 0), 0, FX_AO);
     check_ao_against(s, rt, &run, 2.0f, expect_corner, "corner (about 0.25)");
 
-    /* The no-cache baseline at one corner point, averaged over many pixels, agrees with the analytic value. */
+    /* The no-cache baseline at one corner point, averaged over many pixels, agrees with the analytic value.
+     */
     fx_context ctx = {.s = s, .rt = rt, .seed = 3, .ao_radius = 2.0f};
     double sum = 0;
     const uint32_t pixels = 400;
@@ -588,7 +593,8 @@ static void test_ao_deterministic_budget_split(void **state)
         backwards[b] = reversed.jobs[reversed.block_count - 1 - b];
     for (int frame = 0; frame < 2; frame++)
         for (uint32_t b = 0; b < reversed.block_count; b += 3)
-            fx_ao_update(&ctx, backwards + b, reversed.block_count - b < 3 ? reversed.block_count - b : 3, 32);
+            fx_ao_update(&ctx, backwards + b, reversed.block_count - b < 3 ? reversed.block_count - b : 3,
+                         32);
     free(backwards);
 
     assert_memory_equal(once.payload, split16.payload, bytes);
@@ -752,7 +758,8 @@ static void test_shadow_occluder(void **state)
     /* Determinism: reversed job order in single-block calls gives the same bytes. */
     island_run again;
     island_run_init(&again, s, island_of_mesh(s, 0), 0, FX_SHADOW);
-    memset(again.payload, 0xa5, (size_t)again.block_count * 64 * again.texel_bytes); /* texels outside masks */
+    memset(again.payload, 0xa5,
+           (size_t)again.block_count * 64 * again.texel_bytes); /* texels outside masks */
     for (uint32_t b = again.block_count; b-- > 0;)
         fx_shadow_update(&ctx, &again.jobs[b], 1);
     assert_memory_equal(again.payload, floor_run.payload, (size_t)again.block_count * 64 * again.texel_bytes);
@@ -768,7 +775,8 @@ static void test_describe(void **state)
 {
     (void)state;
     scene *s = new_scene();
-    fx_info lookup = fx_describe(FX_TRI_LOOKUP, s), shadow = fx_describe(FX_SHADOW, s), ao = fx_describe(FX_AO, s);
+    fx_info lookup = fx_describe(FX_TRI_LOOKUP, s), shadow = fx_describe(FX_SHADOW, s),
+            ao = fx_describe(FX_AO, s);
     assert_string_equal(lookup.name, "triangle_lookup");
     assert_int_equal(lookup.texel_bytes, 4);
     assert_int_equal(lookup.policy, FX_UPDATE_ONCE);
@@ -788,7 +796,8 @@ static void test_describe(void **state)
     fx_light_direction(&s->lights[0], (float[3]){5, 5, 5}, dir, &distance);
     assert_true(dir[1] == 1.0f && isinf(distance));
     fx_light_direction(&s->lights[2], (float[3]){3, 2, 4}, dir, &distance);
-    assert_true(fabsf(distance - 5.0f) < 1e-5f && fabsf(dir[0] + 0.6f) < 1e-6f && fabsf(dir[2] + 0.8f) < 1e-6f);
+    assert_true(fabsf(distance - 5.0f) < 1e-5f && fabsf(dir[0] + 0.6f) < 1e-6f &&
+                fabsf(dir[2] + 0.8f) < 1e-6f);
     scene_free(s);
 }
 
