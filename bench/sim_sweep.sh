@@ -20,13 +20,13 @@ summary() { # NAME ARGS...
 }
 field() { python3 -c "import json,sys; d=json.load(open('$out/$1.json')); print(eval('d' + sys.argv[1]))" "$2"; }
 
-echo "## viewers walking ($scene, $frames frames, 640x360)"
+echo "## viewers walking together through the hall (--camera group, $scene, $frames frames, 640x360)"
 echo
 echo "| viewers | requested texels/frame | unique texels/frame | sharing | effect rays/frame | memory peak MiB (pools in use MiB) | frame ms | visibility | requests | queues | lookup | effects | compose |"
 echo "|---|---|---|---|---|---|---|---|---|---|---|---|---|"
 prev=""
 for v in 1 2 4 8; do
-  summary "walk$v" --viewers "$v" --frames "$frames" --camera walk
+  summary "walk$v" --viewers "$v" --frames "$frames" --camera group
   python3 - "$out/walk$v.json" "$v" <<'PY'
 import json, sys
 d = json.load(open(sys.argv[1])); f = d["frames"]; t = d["time_ms"]; m = d["memory_bytes"]
@@ -64,9 +64,9 @@ print(f"- steady state / no-cache: {last['rays']['effects_total']/nc_rays*100:.2
 print(f"- frame time: cache last frame {last['time_ms']['frame']:.1f} ms, no-cache {nc['time_ms']['frame']/nc['frames']:.1f} ms")
 PY
 echo
-echo "## memory at level bias 0 and 2 ($scene, 4 viewers walking, $frames frames)"
-summary bias0 --viewers 4 --frames "$frames" --camera walk --bias ao=0 --bias shadow=0
-summary bias2 --viewers 4 --frames "$frames" --camera walk --bias ao=2 --bias shadow=2
+echo "## memory at level bias 0 and 2 ($scene, 4 viewers walking together, $frames frames)"
+summary bias0 --viewers 4 --frames "$frames" --camera group --bias ao=0 --bias shadow=0
+summary bias2 --viewers 4 --frames "$frames" --camera group --bias ao=2 --bias shadow=2
 python3 - "$out" <<'PY'
 import json, sys
 for name in ("bias0", "bias2"):

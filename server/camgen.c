@@ -72,7 +72,7 @@ const char *srv_camgen_description(srv_camgen_kind kind)
 
 const char *srv_camgen_list(void)
 {
-    return "orbit, walk, turn, room, static, identical";
+    return "orbit, walk, group, turn, room, static, identical";
 }
 
 /* A well-mixed 32-bit hash of (seed, viewer, salt) (the murmur3 finaliser over a combined word). */
@@ -233,9 +233,10 @@ static void camgen_stadium_point(double straight_half, double radius, double arc
     }
 }
 
-/* walk: staggered viewers on the stadium loop at eye height, looking ahead along it. */
+/* walk: staggered viewers on the stadium loop at eye height, looking ahead along it. group: the same loop,
+ * viewers SRV_CAMGEN_GROUP_SPACING of it apart and alternately shifted across by a tenth of the lane radius. */
 static srv_camera camgen_walk(const scene *s, const scene_box *box, uint32_t viewer, uint32_t viewer_count,
-                              uint32_t frame, uint32_t seed)
+                              uint32_t frame, uint32_t seed, bool group)
 {
     int along_axis = box->half[0] >= box->half[2] ? 0 : 2, across_axis = 2 - along_axis;
     double half_along = box->half[along_axis], half_across = box->half[across_axis];
@@ -245,7 +246,8 @@ static srv_camera camgen_walk(const scene *s, const scene_box *box, uint32_t vie
     double loop = 4 * straight_half + 2 * CAMGEN_PI * radius;
     double eye =
         box->center[1] - box->half[1] + 0.5 * box->half[1]; /* a quarter of the height above the floor */
-    double phase = (double)viewer / viewer_count +
+    double spacing = group ? SRV_CAMGEN_GROUP_SPACING : 1.0 / viewer_count;
+    double phase = -(double)viewer * spacing +
                    (double)(frame % SRV_CAMGEN_WALK_PERIOD) / SRV_CAMGEN_WALK_PERIOD +
                    camgen_unit(seed, 0, 2);
     double arc = loop * phase;
@@ -255,6 +257,8 @@ static srv_camera camgen_walk(const scene *s, const scene_box *box, uint32_t vie
     double position[3], target[3];
     position[along_axis] = box->center[along_axis] + along;
     position[across_axis] = box->center[across_axis] + across;
+    if (group && viewer > 0) /* side by side, not in single file */
+        position[across_axis] += (viewer % 2 ? 0.1 : -0.1) * radius;
     position[1] = eye;
     target[along_axis] = box->center[along_axis] + ahead_along;
     target[across_axis] = box->center[across_axis] + ahead_across;
@@ -337,7 +341,9 @@ srv_camera srv_camgen_camera(srv_camgen_kind kind, const scene *s, uint32_t view
     case SRV_CAMGEN_ORBIT:
         return camgen_orbit(s, &box, viewer, viewer_count, frame, seed);
     case SRV_CAMGEN_WALK:
-        return camgen_walk(s, &box, viewer, viewer_count, frame, seed);
+        return camgen_walk(s, &box, viewer, viewer_count, frame, seed, false);
+    case SRV_CAMGEN_GROUP:
+        return camgen_walk(s, &box, viewer, viewer_count, frame, seed, true);
     case SRV_CAMGEN_TURN:
         return camgen_turn(s, &box, viewer, viewer_count, frame, seed);
     case SRV_CAMGEN_ROOM:

@@ -8,6 +8,8 @@
  *              SRV_CAMGEN_ORBIT_PERIOD frames: steady, moderate motion, partial sharing;
  *   walk       viewers staggered evenly along a closed loop through the scene's interior, along its longest
  *              horizontal axis, at eye height, looking ahead: first-person motion, little sharing;
+ *   group      viewers on the walk's loop, SRV_CAMGEN_GROUP_SPACING of the loop apart, alternately a little to
+ *              the left and right: a tour group walking through the same hall, heavy sharing;
  *   turn       every viewer turning in place at the scene centre, SRV_CAMGEN_TURN_DEGREES_PER_FRAME degrees
  *              per frame, each starting at its own heading: a disocclusion stress test;
  *   room       viewers standing close to the default camera with small offsets, looking at nearby targets
@@ -30,6 +32,9 @@
 #define SRV_CAMGEN_ORBIT_PERIOD 240u
 /* Frames per lap of the walk loop. */
 #define SRV_CAMGEN_WALK_PERIOD 600u
+/* Distance between consecutive viewers of the group generator, as a fraction of the walk loop. */
+#define SRV_CAMGEN_GROUP_SPACING 0.02
+
 /* Rotation of the turn generator per frame, degrees. */
 #define SRV_CAMGEN_TURN_DEGREES_PER_FRAME 30u
 /* Frames per sway cycle of the room generator. */
@@ -41,6 +46,7 @@
 #define SRV_CAMGEN_KINDS(X)                                                                                  \
     X(SRV_CAMGEN_ORBIT, "orbit", "viewers spread around the scene centre, circling slowly")                  \
     X(SRV_CAMGEN_WALK, "walk", "viewers staggered along a loop through the scene at eye height")             \
+    X(SRV_CAMGEN_GROUP, "group", "viewers walking the same loop together, a few steps apart")                \
     X(SRV_CAMGEN_TURN, "turn", "viewers turning in place at the centre, 30 degrees per frame")               \
     X(SRV_CAMGEN_ROOM, "room", "viewers close together near the default camera, overlapping views")          \
     X(SRV_CAMGEN_STATIC, "static", "viewers at the default camera with small fixed offsets")                 \
