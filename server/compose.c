@@ -7,6 +7,7 @@
 #include "frame_internal.h"
 
 #include <math.h>
+#include <pthread.h>
 #include <stdatomic.h>
 #include <string.h>
 
@@ -93,16 +94,29 @@ static void pixel_differentials(const srv_camera_frame *f, const float dir[3], f
     }
 }
 
-static float tone_map(float c)
+enum { TONE_LUT_SIZE = 4096 };
+
+/* The tone map (1 - e^-c) followed by the sRGB encoding, tabulated over the tone-mapped value in [0, 1]:
+ * two transcendental calls per channel and pixel were most of compose's time. */
+static uint8_t tone_lut[TONE_LUT_SIZE];
+static pthread_once_t tone_lut_once = PTHREAD_ONCE_INIT;
+
+static void tone_lut_init(void)
 {
-    return isfinite(c) && c > 0 ? 1.0f - expf(-c) : 0.0f;
+    for (int i = 0; i < TONE_LUT_SIZE; i++) {
+        float c = (float)i / (TONE_LUT_SIZE - 1);
+        float e = c <= 0.0031308f ? 12.92f * c : 1.055f * powf(c, 1.0f / 2.4f) - 0.055f;
+        tone_lut[i] = (uint8_t)(e * 255.0f + 0.5f);
+    }
 }
 
-static uint8_t encode_srgb8(float c)
+/* Linear radiance to an sRGB byte through the tone map. */
+static uint8_t tone_map_srgb8(float c)
 {
-    c = c > 0 ? (c < 1 ? c : 1) : 0;
-    float e = c <= 0.0031308f ? 12.92f * c : 1.055f * powf(c, 1.0f / 2.4f) - 0.055f;
-    return (uint8_t)(e * 255.0f + 0.5f);
+    if (!(c > 0))
+        return 0;
+    float mapped = c < 20.0f ? 1.0f - expf(-c) : 1.0f;
+    return tone_lut[(int)(mapped * (TONE_LUT_SIZE - 1) + 0.5f)];
 }
 
 typedef struct compose_task {
@@ -212,7 +226,7 @@ static void compose_rows(void *user, uint32_t task_index, uint32_t thread_index)
             }
             uint8_t *px = view->image + 3 * p;
             for (int k = 0; k < 3; k++)
-                px[k] = encode_srgb8(tone_map(rad[k]));
+                px[k] = tone_map_srgb8(rad[k]);
             if (view->views[SRV_VIEW_AO]) {
                 view->views[SRV_VIEW_AO][p] = ao;
                 view->views[SRV_VIEW_SHADOW][p] = shadow0;
@@ -226,6 +240,7 @@ static void compose_rows(void *user, uint32_t task_index, uint32_t thread_index)
 
 void srv__compose(srv_loop *loop, uint32_t viewer)
 {
+    pthread_once(&tone_lut_once, tone_lut_init);
     compose_task task = {.loop = loop, .viewer = viewer};
     atomic_init(&task.missing, 0);
     atomic_init(&task.rays_ao, 0);

@@ -558,6 +558,7 @@ static void test_sim_tiny_pool(void **state)
     assert_int_equal(jint(s, "viewers"), 4);
     long long missing = jint(s, "pixels_missing");
     assert_true(missing >= 0 && missing <= jint(s, "pixels_visible"));
+    assert_true(jint(s, "pool_exhausted") >= 0); /* how often the pools were too small for a frame */
     /* The pools of all effects together stay within the 1 MiB given. */
     const json_t *effects = jget(s, "memory_bytes.peak.effects");
     long long reserved = 0;
