@@ -176,11 +176,8 @@ int main(int argc, char **argv)
         fprintf(stderr, "bench_visibility: bad --reps, --width or --height\n");
         return 2;
     }
-    bool default_path = false;
-    if (!path) {
+    if (!path)
         path = "../shared/scenes/sponza/sponza.3ds";
-        default_path = true;
-    }
     if (strcmp(path, "default") && access(path, R_OK) != 0) {
         printf("%s not found: using the embedded default scene with its default camera\n", path);
         path = "default";
@@ -202,7 +199,6 @@ int main(int argc, char **argv)
                       .up = {0, 1, 0}, .fov_deg = fov};
     if (!strcmp(path, "default") && !camera_given)
         cam = srv_camera_default(s);
-    (void)default_path;
     srv_camera_frame f;
     if (!srv_camera_setup(&cam, width, height, &f)) {
         fprintf(stderr, "bench_visibility: invalid camera\n");

@@ -469,8 +469,8 @@ scene_result scene__finalize(scene *s, const scene_load_desc *desc, scene_error 
     if (rc != SCENE_OK)
         return rc;
     if (desc && desc->texel_density != 0) {
-        if (!(desc->texel_density > 0) || !(desc->texel_density <= 1e6f))
-            return scene__fail(err, SCENE_ERR_RANGE, "texel density %g is outside (0, 1e6] texels per metre",
+        if (!(desc->texel_density >= 1e-6f) || !(desc->texel_density <= 1e6f))
+            return scene__fail(err, SCENE_ERR_RANGE, "texel density %g is outside [1e-6, 1e6] texels per metre",
                                (double)desc->texel_density);
         s->texel_density = desc->texel_density;
         s->density_auto = false;
@@ -536,6 +536,11 @@ scene *scene_load(const char *path, const scene_load_desc *desc, scene_error *er
         rc = scene__import_file(s, path, NULL, NULL, err);
         if (rc == SCENE_OK)
             scene__add_default_lighting(s);
+        else if (err && !strstr(err->msg, path)) { /* name the file when the message does not */
+            char inner[sizeof err->msg];
+            snprintf(inner, sizeof inner, "%s", err->msg);
+            scene__fail(err, rc, "%s: %s", path, inner);
+        }
     }
     s->timings.load_ms = scene__now_ms() - t0 - s->timings.weld_ms - s->timings.textures_ms;
     if (rc == SCENE_OK)

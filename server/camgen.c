@@ -293,6 +293,21 @@ static void camgen_random_offset(uint32_t seed, uint32_t viewer, uint32_t salt, 
 }
 
 /* room: near the default camera with small offsets, looking at nearby targets, swaying slowly. */
+/* When the default camera stands inside the scene's box (an interior), keeps a moved position inside too:
+ * each coordinate stays within the box shrunk by a margin no larger than the default camera's own distance
+ * to that face (so the default camera itself is never moved) and no larger than 5 % of the half extent. */
+static void camgen_keep_inside(const scene_box *box, const double home[3], double position[3])
+{
+    for (int k = 0; k < 3; k++)
+        if (!(fabs(home[k] - box->center[k]) < box->half[k]))
+            return; /* outside: an exterior view, nothing to keep it in */
+    for (int k = 0; k < 3; k++) {
+        double lo = box->center[k] - box->half[k], hi = box->center[k] + box->half[k];
+        double margin = fmin(0.05 * box->half[k], fmin(home[k] - lo, hi - home[k]));
+        position[k] = fmin(fmax(position[k], lo + margin), hi - margin);
+    }
+}
+
 static srv_camera camgen_room(const scene *s, const scene_box *box, uint32_t viewer, uint32_t frame,
                               uint32_t seed)
 {
@@ -305,10 +320,12 @@ static srv_camera camgen_room(const scene *s, const scene_box *box, uint32_t vie
                         ((double)(frame % SRV_CAMGEN_ROOM_SWAY_PERIOD) / SRV_CAMGEN_ROOM_SWAY_PERIOD +
                          camgen_unit(seed, viewer, 30));
     double sway[3] = {cos(sway_phase), 0.5 * sin(2 * sway_phase), sin(sway_phase)};
+    double home[3] = {position[0], position[1], position[2]};
     for (int k = 0; k < 3; k++) {
         position[k] += distance * (0.08 * stand[k] + 0.02 * sway[k]);
         target[k] += distance * (0.12 * look[k] + 0.02 * sway[k]);
     }
+    camgen_keep_inside(box, home, position);
     return camgen_make(position, target, camgen_fov(s), box);
 }
 
@@ -318,6 +335,7 @@ static srv_camera camgen_static(const scene *s, const scene_box *box, uint32_t v
 {
     double position[3], target[3];
     double distance = camgen_default(s, box, position, target);
+    double home[3] = {position[0], position[1], position[2]};
     if (!identical && viewer > 0) {
         /* A direction on the unit sphere from the hash; the length is fixed so no viewer coincides with 0. */
         double azimuth = 2 * CAMGEN_PI * camgen_unit(seed, viewer, 40);
@@ -327,6 +345,7 @@ static srv_camera camgen_static(const scene *s, const scene_box *box, uint32_t v
             position[k] += 0.03 * distance * offset[k];
             target[k] += 0.03 * distance * offset[k];
         }
+        camgen_keep_inside(box, home, position);
     }
     return camgen_make(position, target, camgen_fov(s), box);
 }

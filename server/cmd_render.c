@@ -71,7 +71,7 @@ static const char render_usage[] =
     "  --camera X,Y,Z       camera position (default: the scene's camera, else one framing the scene)\n"
     "  --target X,Y,Z       point looked at (default as for --camera)\n"
     "  --fov DEG            vertical field of view in degrees, in [1, 179] (default 60 or the scene's)\n"
-    "  --density D          level-0 texels per metre, in (0, 1e6] (default: the scene's, else auto)\n"
+    "  --density D          level-0 texels per metre, in [1e-6, 1e6] (default: the scene's, else auto)\n"
     "  -h, --help           this text\n";
 
 int srv_cmd_render(int argc, char **argv)
@@ -97,7 +97,7 @@ int srv_cmd_render(int argc, char **argv)
         case 'c': ok = has_position = srv_cli_vec3("render", "--camera", optarg, position); break;
         case 't': ok = has_target = srv_cli_vec3("render", "--target", optarg, target); break;
         case 'f': ok = srv_cli_double("render", "--fov", optarg, 1, 179, &fov); break;
-        case 'd': ok = srv_cli_double("render", "--density", optarg, 1e-9, 1e6, &density); break;
+        case 'd': ok = srv_cli_double("render", "--density", optarg, 1e-6, 1e6, &density); break;
         case 'h': fputs(render_usage, stdout); return 0;
         case ':':
             fprintf(stderr, "fxcache render: %s needs a value\n", argv[optind - 1]);

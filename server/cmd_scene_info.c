@@ -182,7 +182,7 @@ static const char scene_info_usage[] =
     "(including the Embree BVH), and which effects and caches the scene needs and why.\n"
     "\n"
     "  --json               print the same as one JSON object\n"
-    "  --density D          level-0 texels per metre, in (0, 1e6] (default: the scene's, else auto)\n"
+    "  --density D          level-0 texels per metre, in [1e-6, 1e6] (default: the scene's, else auto)\n"
     "  -h, --help           this text\n";
 
 int srv_cmd_scene_info(int argc, char **argv)
@@ -203,7 +203,7 @@ int srv_cmd_scene_info(int argc, char **argv)
             as_json = true;
             break;
         case 'd':
-            if (!srv_cli_double("scene-info", "--density", optarg, 1e-9, 1e6, &density))
+            if (!srv_cli_double("scene-info", "--density", optarg, 1e-6, 1e6, &density))
                 return 2;
             break;
         case 'h':

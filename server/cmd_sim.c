@@ -50,6 +50,7 @@ typedef struct sim_options {
     const char *stats_path;
     const char *summary_path;
     srv_camgen_kind camera;
+    bool camera_set;
     const char *traces[MAX_TRACES];
     uint32_t trace_count;
     const char *record_dir;
@@ -82,7 +83,7 @@ static const char sim_usage[] =
     "  --record DIR         write the cameras used as traces DIR/viewer_NN.trace (replay with --trace)\n"
     "  --seed S             random seed, 0..4294967295 (default 1)\n"
     "  --threads T          worker threads, 0 = all cores (default 0)\n"
-    "  --density D          level-0 texels per metre, (0, 1e6] (default: the scene's, else auto)\n"
+    "  --density D          level-0 texels per metre, [1e-6, 1e6] (default: the scene's, else auto)\n"
     "  --out DIR            write frames as DIR/frame_FFFF_viewer_VV.png\n"
     "  --save-every K       frames to save: every K-th and the last (default 0: only the last)\n"
     "  --views              with --out: also AO and shadow as linear EXR, and a picture of how many\n"
@@ -122,6 +123,28 @@ static bool parse_bias(const char *text, sim_options *o)
     return true;
 }
 
+/* Checks --effects before anything is loaded: 'auto', or a comma list of known effects with no empty entry. */
+static bool effects_list_valid(const char *list)
+{
+    if (strcmp(list, "auto") == 0)
+        return true;
+    const char *p = list;
+    for (;;) {
+        const char *comma = strchr(p, ',');
+        size_t n = comma ? (size_t)(comma - p) : strlen(p);
+        bool known = (n == 6 && strncmp(p, "shadow", 6) == 0) || (n == 7 && strncmp(p, "shadows", 7) == 0) ||
+                     (n == 2 && strncmp(p, "ao", 2) == 0);
+        if (!known) {
+            fprintf(stderr, "fxcache sim: --effects: '%.*s' in '%s' is not an effect (auto, or a comma list of shadow,ao)\n",
+                    (int)n, p, list);
+            return false;
+        }
+        if (!comma)
+            return true;
+        p = comma + 1;
+    }
+}
+
 static int parse_options(int argc, char **argv, sim_options *o)
 {
     enum { O_SCENE = 256, O_VIEWERS, O_FRAMES, O_RES, O_EFFECTS, O_BIAS, O_POOL, O_BUDGET, O_NOCACHE, O_SEED,
@@ -150,7 +173,10 @@ static int parse_options(int argc, char **argv, sim_options *o)
         case O_VIEWERS: ok = srv_cli_u32("sim", "--viewers", optarg, 1, SRV_MAX_VIEWERS, &o->viewers); o->viewers_set = true; break;
         case O_FRAMES: ok = srv_cli_u32("sim", "--frames", optarg, 1, 1000000, &o->frames); o->frames_set = true; break;
         case O_RES: ok = srv_cli_resolution("sim", "--res", optarg, 8192, &o->width, &o->height); break;
-        case O_EFFECTS: o->effects = optarg; break;
+        case O_EFFECTS:
+            o->effects = optarg;
+            ok = effects_list_valid(optarg);
+            break;
         case O_BIAS: ok = parse_bias(optarg, o); break;
         case O_POOL: ok = srv_cli_double("sim", "--pool-mb", optarg, 1, 65536, &o->pool_mb); break;
         case O_BUDGET: ok = srv_cli_double("sim", "--ray-budget", optarg, 0, 1e12, &o->ray_budget); break;
@@ -162,6 +188,7 @@ static int parse_options(int argc, char **argv, sim_options *o)
         case O_STATS: o->stats_path = optarg; break;
         case O_SUMMARY: o->summary_path = optarg; break;
         case O_CAMERA:
+            o->camera_set = true;
             if (!srv_camgen_parse(optarg, &o->camera)) {
                 fprintf(stderr, "fxcache sim: --camera: unknown generator '%s' (one of: %s)\n", optarg, srv_camgen_list());
                 ok = false;
@@ -178,7 +205,7 @@ static int parse_options(int argc, char **argv, sim_options *o)
         case O_RECORD: o->record_dir = optarg; break;
         case O_THREADS: ok = srv_cli_u32("sim", "--threads", optarg, 0, 256, &o->threads); break;
         case O_AOSTEP: ok = srv_cli_u32("sim", "--ao-step", optarg, 1, 64, &o->ao_step); break;
-        case O_DENSITY: ok = srv_cli_double("sim", "--density", optarg, 1e-9, 1e6, &o->density); break;
+        case O_DENSITY: ok = srv_cli_double("sim", "--density", optarg, 1e-6, 1e6, &o->density); break;
         case O_QUIET: o->quiet = true; break;
         case 'h': printf(sim_usage, srv_camgen_list()); return 0;
         case ':': fprintf(stderr, "fxcache sim: %s needs a value\n", argv[optind - 1]); return 2;
@@ -194,6 +221,14 @@ static int parse_options(int argc, char **argv, sim_options *o)
     if (o->trace_count && o->viewers_set && o->viewers != o->trace_count) {
         fprintf(stderr, "fxcache sim: --viewers %u but %u traces: give one --trace per viewer\n", o->viewers,
                 o->trace_count);
+        return 2;
+    }
+    if (o->save_every && !o->out_dir) {
+        fprintf(stderr, "fxcache sim: --save-every needs --out DIR\n");
+        return 2;
+    }
+    if (o->trace_count && o->camera_set) {
+        fprintf(stderr, "fxcache sim: --camera and --trace both choose the cameras: give one of them\n");
         return 2;
     }
     if (o->views && !o->out_dir) {
@@ -568,8 +603,13 @@ int srv_cmd_sim(int argc, char **argv)
     json_object_set_new(sum, "time_ms", stage_json(tot.time_ms, tot.frame_ms));
     json_object_set_new(sum, "bvh_build_ms", json_real(bvh_ms));
     if (o.summary_path) {
-        if (json_dump_file(sum, o.summary_path, JSON_INDENT(2) | JSON_PRESERVE_ORDER) != 0) {
-            fprintf(stderr, "fxcache sim: cannot write %s\n", o.summary_path);
+        FILE *sf = fopen(o.summary_path, "w");
+        bool written = sf && json_dumpf(sum, sf, JSON_INDENT(2) | JSON_PRESERVE_ORDER) == 0;
+        int saved = errno;
+        if (sf && fclose(sf) != 0)
+            written = false;
+        if (!written) {
+            fprintf(stderr, "fxcache sim: cannot write %s: %s\n", o.summary_path, strerror(saved ? saved : EIO));
             json_decref(sum);
             goto done;
         }
