@@ -74,7 +74,7 @@ static const char sim_usage[] =
     "  --effects auto|LIST  'auto': what the scene needs; or a comma list of shadow,ao (default auto)\n"
     "  --bias EFFECT=L      level bias of shadow or ao in levels, -4..8 (coarser is positive; repeatable;\n"
     "                       defaults: shadow 0, ao 1)\n"
-    "  --pool-mb MB         block-pool memory for all effects, 1..65536 (default 256)\n"
+    "  --pool-mb MB         block-pool memory for all effects, 1..65536 (default 64)\n"
     "  --ray-budget R       effect rays per frame, 0 = unlimited (default 0)\n"
     "  --ao-step S          AO samples added per texel and update, 1..64 (default 16)\n"
     "  --no-cache           the baseline: every effect per pixel per frame at the converged sample counts\n"
@@ -417,7 +417,7 @@ static void add_memory_peak(srv_memory *peak, const srv_memory *m)
 
 int srv_cmd_sim(int argc, char **argv)
 {
-    sim_options o = {.viewers = 4, .frames = 30, .width = 640, .height = 360, .seed = 1, .pool_mb = 256,
+    sim_options o = {.viewers = 4, .frames = 30, .width = 640, .height = 360, .seed = 1, .pool_mb = 64,
                      .camera = SRV_CAMGEN_ROOM};
     int rc = parse_options(argc, argv, &o);
     if (rc >= 0)

@@ -40,7 +40,7 @@ srv_loop *srv_loop_create(const srv_loop_desc *desc, char *err, size_t err_cap)
     if (!d->width || !d->height)
         d->width = 640, d->height = 360;
     if (!d->pool_bytes)
-        d->pool_bytes = (uint64_t)256 << 20;
+        d->pool_bytes = (uint64_t)64 << 20;
     if (!d->ao_samples_per_frame)
         d->ao_samples_per_frame = 16;
     if (d->ao_samples_per_frame > FX_AO_MAX_SAMPLES)

@@ -44,7 +44,7 @@ typedef struct srv_loop_desc {
     bool effect_on[SCENE_FX_COUNT];       /* which effects run (probes are not implemented yet) */
     int32_t bias[SCENE_FX_COUNT];         /* level bias per effect, added to the effect's default */
     bool bias_set[SCENE_FX_COUNT];        /* bias given explicitly (replaces the default) */
-    uint64_t pool_bytes;                  /* payload pool budget for all effects (default 256 MiB) */
+    uint64_t pool_bytes;                  /* payload pool budget for all effects (default 64 MiB) */
     uint64_t ray_budget;                  /* effect rays per frame, 0 = unlimited */
     uint32_t ao_samples_per_frame;        /* AO samples added per texel per update (default 16) */
     bool no_cache;                        /* the per-pixel baseline */

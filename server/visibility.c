@@ -49,8 +49,8 @@ static float pixel_footprint(const srv_camera_frame *f, const float dir[3], floa
         }
         longest = fmaxf(longest, len2);
     }
-    float texels = sqrtf(longest) * density;
-    return texels > 1e-30f ? log2f(texels) : -100.0f;
+    float texels2 = longest * density * density; /* squared: log2 of the root is half the log2 */
+    return texels2 > 1e-30f ? 0.5f * log2f(texels2) : -100.0f;
 }
 
 typedef struct visibility_task {
@@ -73,13 +73,23 @@ static void visibility_tile(void *user, uint32_t task_index, uint32_t thread_ind
     _Alignas(64) int valid[16];
     float dirs[16][3];
     struct RTCIntersectContext ctx;
+    /* The image plane per pixel: dir = forward + sx * right + sy * up, normalised (srv_camera_ray, inlined). */
+    const float scale_x = 2.0f * f->tan_half_x / (float)f->width, scale_y = 2.0f * f->tan_half_y / (float)f->height;
     for (uint32_t py = tile_y; py < tile_y + SRV_TILE && py < f->height; py += 4)
         for (uint32_t px = tile_x; px < tile_x + SRV_TILE && px < f->width; px += 4) {
-            memset(&packet, 0, sizeof packet);
             for (int i = 0; i < 16; i++) {
                 uint32_t x = px + (uint32_t)(i & 3), y = py + (uint32_t)(i >> 2);
                 valid[i] = x < f->width && y < f->height ? -1 : 0;
-                srv_camera_ray(f, (float)x + 0.5f, (float)y + 0.5f, dirs[i]);
+                float sx = ((float)x + 0.5f) * scale_x - f->tan_half_x;
+                float sy = f->tan_half_y - ((float)y + 0.5f) * scale_y;
+                float d[3], len2 = 0;
+                for (int k = 0; k < 3; k++) {
+                    d[k] = f->forward[k] + sx * f->right[k] + sy * f->up[k];
+                    len2 += d[k] * d[k];
+                }
+                float inv = 1.0f / sqrtf(len2);
+                for (int k = 0; k < 3; k++)
+                    dirs[i][k] = d[k] * inv;
                 packet.ray.org_x[i] = f->origin[0];
                 packet.ray.org_y[i] = f->origin[1];
                 packet.ray.org_z[i] = f->origin[2];
@@ -89,7 +99,11 @@ static void visibility_tile(void *user, uint32_t task_index, uint32_t thread_ind
                 packet.ray.tnear[i] = 0.0f;
                 packet.ray.tfar[i] = INFINITY;
                 packet.ray.mask[i] = 0xFFFFFFFFu;
+                packet.ray.time[i] = 0.0f;
+                packet.ray.flags[i] = 0;
+                packet.ray.id[i] = 0;
                 packet.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+                packet.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
             }
             rtcInitIntersectContext(&ctx);
             rtcIntersect16(valid, rtc, &ctx, &packet);
