@@ -154,6 +154,10 @@ void srv_loop_free(srv_loop *loop)
         free(loop->viewer_bits[fx]);
     }
     free(loop->fx_jobs);
+    free(loop->queue_empty);
+    free(loop->queue_refine);
+    free(loop->queue_lookups);
+    free(loop->chunk_rays);
     osc_destroy(loop->osc);
     srv_pool_free(loop->pool);
     free(loop);
@@ -281,6 +285,8 @@ void srv_loop_memory(const srv_loop *loop, srv_memory *out)
     for (int fx = 0; fx < SCENE_FX_COUNT; fx++)
         out->queues += loop->jobs[fx].capacity * sizeof(srv_job);
     out->queues += loop->fx_jobs_capacity * sizeof(fx_block_job);
+    out->queues += loop->queue_capacity * (2 * sizeof(uint64_t) + sizeof(uint32_t)) +
+                   loop->chunk_capacity * sizeof(uint64_t);
     out->total = out->table + out->viewers + out->queues;
     for (int fx = 0; fx < SCENE_FX_COUNT; fx++)
         out->total += out->pools_reserved[fx] + out->block_meta[fx];

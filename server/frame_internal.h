@@ -61,7 +61,12 @@ struct srv_loop {
     fx_block_job *fx_jobs;             /* scratch handed to the effects */
     size_t fx_jobs_capacity;
     uint64_t *viewer_bits[SCENE_FX_COUNT]; /* per block: which viewers requested it (keep_views only) */
-    uint64_t scratch_bytes;                /* bytes in the growable lists, for the memory report */
+    /* Per-frame scratch of the update stage, grown when needed and kept (no allocation in steady state). */
+    uint64_t *queue_empty, *queue_refine;  /* per frame block: empty texels, texels to refine */
+    uint32_t *queue_lookups;               /* per frame block: its lookup block */
+    size_t queue_capacity;
+    uint64_t *chunk_rays;                  /* rays traced per chunk of jobs */
+    size_t chunk_capacity;
     srv_frame_stats *stats;                /* the frame being filled */
 };
 

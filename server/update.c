@@ -195,16 +195,20 @@ static uint64_t run_jobs(srv_loop *loop, uint32_t fx, const srv_job_list *list, 
                                           .payload = osc_block_payload(loop->osc, fx, job->block)};
     }
     uint32_t chunks = (uint32_t)((list->count + CHUNK_BLOCKS - 1) / CHUNK_BLOCKS);
-    uint64_t *rays = calloc(chunks, sizeof *rays);
-    if (!rays)
-        return 0;
+    if (chunks > loop->chunk_capacity) {
+        uint64_t *grown = realloc(loop->chunk_rays, chunks * sizeof *grown);
+        if (!grown)
+            return 0;
+        loop->chunk_rays = grown;
+        loop->chunk_capacity = chunks;
+    }
+    uint64_t *rays = loop->chunk_rays;
     effect_task task = {.loop = loop, .fx = fx, .jobs = loop->fx_jobs, .count = (uint32_t)list->count,
                         .samples = samples, .rays = rays};
     srv_pool_run(loop->pool, chunks, effect_chunk, &task);
     uint64_t total = 0;
     for (uint32_t c = 0; c < chunks; c++)
         total += rays[c];
-    free(rays);
     for (size_t i = 0; i < list->count; i++) {
         const srv_job *job = &list->items[i];
         osc_block_set_valid(loop->osc, fx, job->block, osc_block_valid(loop->osc, fx, job->block) | job->mask);
@@ -257,12 +261,23 @@ void srv__update(srv_loop *loop)
     const uint32_t *shadow_blocks = loop->cached_effect[FX_SHADOW] ? osc_frame_blocks(osc, FX_SHADOW, &n_shadow) : NULL;
     const uint32_t *ao_blocks = loop->cached_effect[FX_AO] ? osc_frame_blocks(osc, FX_AO, &n_ao) : NULL;
     uint32_t n_max = n_shadow > n_ao ? n_shadow : n_ao;
-    uint64_t *empty = malloc((n_max ? n_max : 1) * sizeof *empty);
-    uint64_t *refine = malloc((n_max ? n_max : 1) * sizeof *refine);
-    uint32_t *lookups = malloc((n_max ? n_max : 1) * sizeof *lookups);
+    if (n_max > loop->queue_capacity) {
+        uint64_t *e = realloc(loop->queue_empty, n_max * sizeof *e);
+        if (e)
+            loop->queue_empty = e;
+        uint64_t *r = realloc(loop->queue_refine, n_max * sizeof *r);
+        if (r)
+            loop->queue_refine = r;
+        uint32_t *l = realloc(loop->queue_lookups, n_max * sizeof *l);
+        if (l)
+            loop->queue_lookups = l;
+        if (!e || !r || !l)
+            return; /* out of memory: nothing is updated this frame, compose falls back */
+        loop->queue_capacity = n_max;
+    }
+    uint64_t *empty = loop->queue_empty, *refine = loop->queue_refine;
+    uint32_t *lookups = loop->queue_lookups;
     uint64_t budget_left = loop->desc.ray_budget;
-    if (!empty || !refine || !lookups)
-        goto out;
 
     /* Stage 5 first in time: lookups are needed by every queued texel, and cost no rays. */
     double tl = srv__now_ms();
@@ -308,8 +323,4 @@ void srv__update(srv_loop *loop)
             tq = srv__now_ms();
         }
     }
-out:
-    free(empty);
-    free(refine);
-    free(lookups);
 }
