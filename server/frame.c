@@ -23,6 +23,27 @@ double srv__now_ms(void)
     return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
 }
 
+size_t srv__grown_capacity(size_t capacity, size_t n, size_t first)
+{
+    if (n <= capacity)
+        return capacity;
+    size_t cap = capacity ? capacity : first;
+    while (cap < n && cap <= SIZE_MAX / 2)
+        cap *= 2;
+    return cap < n ? n : cap;
+}
+
+bool srv__realloc(void **array, size_t count, size_t size)
+{
+    if (count == 0 || size > SIZE_MAX / count)
+        return false;
+    void *p = realloc(*array, count * size);
+    if (!p)
+        return false;
+    *array = p;
+    return true;
+}
+
 srv_loop *srv_loop_create(const srv_loop_desc *desc, char *err, size_t err_cap)
 {
     if (!desc->s || !desc->rt || desc->viewer_count < 1 || desc->viewer_count > SRV_MAX_VIEWERS) {

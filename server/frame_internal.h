@@ -73,6 +73,14 @@ struct srv_loop {
 /* Monotonic clock, milliseconds. */
 double srv__now_ms(void);
 
+/* The capacity a growable array of `capacity` entries needs for n entries: doubled from `first` until it
+ * holds n (capacity itself when it already does). */
+size_t srv__grown_capacity(size_t capacity, size_t n, size_t first);
+
+/* Reallocates *array to count elements of size bytes, checking the size for overflow; false (array
+ * untouched) on failure. */
+bool srv__realloc(void **array, size_t count, size_t size);
+
 /* Grows a list to hold at least n entries; false on no memory. */
 bool srv__request_reserve(srv_request_list *list, size_t n);
 bool srv__jobs_reserve(srv_job_list *list, size_t n);

@@ -14,23 +14,13 @@ enum { FOLD_SLOTS = 64 };
 
 bool srv__request_reserve(srv_request_list *list, size_t n)
 {
-    if (n <= list->capacity)
+    size_t cap = srv__grown_capacity(list->capacity, n, 4096);
+    if (cap == list->capacity)
         return true;
-    size_t cap = list->capacity ? list->capacity : 4096;
-    while (cap < n)
-        cap *= 2;
-    uint64_t *keys = realloc(list->keys, cap * sizeof *keys);
-    if (!keys)
+    if (!srv__realloc((void **)&list->keys, cap, sizeof *list->keys) ||
+        !srv__realloc((void **)&list->masks, cap, sizeof *list->masks) ||
+        !srv__realloc((void **)&list->blocks, cap, sizeof *list->blocks))
         return false;
-    list->keys = keys;
-    uint64_t *masks = realloc(list->masks, cap * sizeof *masks);
-    if (!masks)
-        return false;
-    list->masks = masks;
-    uint32_t *blocks = realloc(list->blocks, cap * sizeof *blocks);
-    if (!blocks)
-        return false;
-    list->blocks = blocks;
     list->capacity = cap;
     return true;
 }

@@ -21,15 +21,11 @@ enum { CHUNK_BLOCKS = 8 };
 
 bool srv__jobs_reserve(srv_job_list *list, size_t n)
 {
-    if (n <= list->capacity)
+    size_t cap = srv__grown_capacity(list->capacity, n, 1024);
+    if (cap == list->capacity)
         return true;
-    size_t cap = list->capacity ? list->capacity : 1024;
-    while (cap < n)
-        cap *= 2;
-    srv_job *items = realloc(list->items, cap * sizeof *items);
-    if (!items)
+    if (!srv__realloc((void **)&list->items, cap, sizeof *list->items))
         return false;
-    list->items = items;
     list->capacity = cap;
     return true;
 }
@@ -179,10 +175,8 @@ static uint64_t run_jobs(srv_loop *loop, uint32_t fx, const srv_job_list *list, 
     if (list->count == 0)
         return 0;
     if (list->count > loop->fx_jobs_capacity) {
-        fx_block_job *grown = realloc(loop->fx_jobs, list->count * sizeof *grown);
-        if (!grown)
+        if (!srv__realloc((void **)&loop->fx_jobs, list->count, sizeof *loop->fx_jobs))
             return 0;
-        loop->fx_jobs = grown;
         loop->fx_jobs_capacity = list->count;
     }
     for (size_t i = 0; i < list->count; i++) {
@@ -196,10 +190,8 @@ static uint64_t run_jobs(srv_loop *loop, uint32_t fx, const srv_job_list *list, 
     }
     uint32_t chunks = (uint32_t)((list->count + CHUNK_BLOCKS - 1) / CHUNK_BLOCKS);
     if (chunks > loop->chunk_capacity) {
-        uint64_t *grown = realloc(loop->chunk_rays, chunks * sizeof *grown);
-        if (!grown)
+        if (!srv__realloc((void **)&loop->chunk_rays, chunks, sizeof *loop->chunk_rays))
             return 0;
-        loop->chunk_rays = grown;
         loop->chunk_capacity = chunks;
     }
     uint64_t *rays = loop->chunk_rays;
@@ -262,16 +254,9 @@ void srv__update(srv_loop *loop)
     const uint32_t *ao_blocks = loop->cached_effect[FX_AO] ? osc_frame_blocks(osc, FX_AO, &n_ao) : NULL;
     uint32_t n_max = n_shadow > n_ao ? n_shadow : n_ao;
     if (n_max > loop->queue_capacity) {
-        uint64_t *e = realloc(loop->queue_empty, n_max * sizeof *e);
-        if (e)
-            loop->queue_empty = e;
-        uint64_t *r = realloc(loop->queue_refine, n_max * sizeof *r);
-        if (r)
-            loop->queue_refine = r;
-        uint32_t *l = realloc(loop->queue_lookups, n_max * sizeof *l);
-        if (l)
-            loop->queue_lookups = l;
-        if (!e || !r || !l)
+        if (!srv__realloc((void **)&loop->queue_empty, n_max, sizeof *loop->queue_empty) ||
+            !srv__realloc((void **)&loop->queue_refine, n_max, sizeof *loop->queue_refine) ||
+            !srv__realloc((void **)&loop->queue_lookups, n_max, sizeof *loop->queue_lookups))
             return; /* out of memory: nothing is updated this frame, compose falls back */
         loop->queue_capacity = n_max;
     }
