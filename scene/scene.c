@@ -565,13 +565,18 @@ static void texture_sample(const scene_texture *tex, float u, float v, float out
     float y = (1.0f - (v - floorf(v))) * (float)tex->height - 0.5f;
     float fx = floorf(x), fy = floorf(y);
     float ax = x - fx, ay = y - fy;
+    /* x lies in [-0.5, width - 0.5], so x0 + dx lies in [-1, width]: one wrap step, no division. */
     int64_t x0 = (int64_t)fx, y0 = (int64_t)fy;
     int64_t w = tex->width, h = tex->height;
     for (int k = 0; k < 3; k++)
         out[k] = 0;
     for (int dy = 0; dy < 2; dy++)
         for (int dx = 0; dx < 2; dx++) {
-            int64_t xi = ((x0 + dx) % w + w) % w, yi = ((y0 + dy) % h + h) % h;
+            int64_t xi = x0 + dx, yi = y0 + dy;
+            xi = xi < 0 ? xi + w : (xi >= w ? xi - w : xi);
+            yi = yi < 0 ? yi + h : (yi >= h ? yi - h : yi);
+            if (xi < 0 || xi >= w || yi < 0 || yi >= h) /* only for a u or v so large floorf lost precision */
+                xi = 0, yi = 0;
             float weight = (dx ? ax : 1 - ax) * (dy ? ay : 1 - ay);
             const float *p = tex->rgb + 3 * ((size_t)yi * (size_t)w + (size_t)xi);
             for (int k = 0; k < 3; k++)

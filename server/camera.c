@@ -55,15 +55,6 @@ bool srv_camera_setup(const srv_camera *cam, uint32_t width, uint32_t height, sr
     return true;
 }
 
-void srv_camera_ray(const srv_camera_frame *f, float px, float py, float dir[3])
-{
-    float sx = (2.0f * px / (float)f->width - 1.0f) * f->tan_half_x;
-    float sy = (1.0f - 2.0f * py / (float)f->height) * f->tan_half_y;
-    for (int k = 0; k < 3; k++)
-        dir[k] = f->forward[k] + sx * f->right[k] + sy * f->up[k];
-    normalize3(dir);
-}
-
 srv_camera srv_camera_default(const scene *s)
 {
     srv_camera cam = {.up = {0, 1, 0}, .fov_deg = 60};

@@ -4,6 +4,8 @@
 
 #include "scene.h"
 
+#include <math.h>
+
 typedef struct srv_camera {
     float position[3];
     float target[3];
@@ -23,8 +25,21 @@ typedef struct srv_camera_frame {
  * degenerate (position equals target, non-finite values, field of view outside (0, 180)). */
 bool srv_camera_setup(const srv_camera *cam, uint32_t width, uint32_t height, srv_camera_frame *out);
 
-/* The unit direction of the ray through image position (px, py) (pixel centres at +0.5, y down). */
-void srv_camera_ray(const srv_camera_frame *f, float px, float py, float dir[3]);
+/* The unit direction of the ray through image position (px, py) (pixel centres at +0.5, y down). Inline:
+ * it runs once per pixel in visibility and compose. */
+static inline void srv_camera_ray(const srv_camera_frame *f, float px, float py, float dir[3])
+{
+    float sx = (2.0f * px / (float)f->width - 1.0f) * f->tan_half_x;
+    float sy = (1.0f - 2.0f * py / (float)f->height) * f->tan_half_y;
+    float len2 = 0;
+    for (int k = 0; k < 3; k++) {
+        dir[k] = f->forward[k] + sx * f->right[k] + sy * f->up[k];
+        len2 += dir[k] * dir[k];
+    }
+    float inv = 1.0f / sqrtf(len2);
+    for (int k = 0; k < 3; k++)
+        dir[k] *= inv;
+}
 
 /* A camera that frames the whole scene: the scene's own camera when it has one, else one looking at the
  * centre of the bounding box from above and in front. */

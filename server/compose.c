@@ -49,21 +49,33 @@ static void gather_taps(srv_loop *loop, block_memo *memo, uint32_t fx, uint32_t 
     float total = 0;
     out->count = 0;
     out->first_block = OSC_NONE;
+    /* The four taps mostly share one block: look a block up (and read its valid mask) once. */
+    long last_bx = -1, last_by = -1;
+    uint32_t block = OSC_NONE;
+    uint64_t valid = 0;
+    const uint8_t *payload = NULL;
     for (int i = 0; i < 4; i++) {
         long xi = x0 + (i & 1), yi = y0 + (i >> 1);
         xi = xi < 0 ? 0 : (xi >= (long)w ? (long)w - 1 : xi);
         yi = yi < 0 ? 0 : (yi >= (long)h ? (long)h - 1 : yi);
         float weight = ((i & 1) ? ax : 1 - ax) * ((i >> 1) ? ay : 1 - ay);
-        uint64_t key = osc_key_pack(fx, island, level, (uint32_t)xi >> 3, (uint32_t)yi >> 3);
-        uint32_t block = find_block(loop->osc, memo, fx, key);
+        if ((xi >> 3) != last_bx || (yi >> 3) != last_by) {
+            last_bx = xi >> 3;
+            last_by = yi >> 3;
+            uint64_t key = osc_key_pack(fx, island, level, (uint32_t)last_bx, (uint32_t)last_by);
+            block = find_block(loop->osc, memo, fx, key);
+            if (block != OSC_NONE) {
+                valid = osc_block_valid(loop->osc, fx, block);
+                payload = osc_block_payload(loop->osc, fx, block);
+            }
+        }
         if (block == OSC_NONE)
             continue;
         if (out->first_block == OSC_NONE)
             out->first_block = block;
         uint32_t t = ((uint32_t)yi & 7) * 8 + ((uint32_t)xi & 7);
-        if (!(osc_block_valid(loop->osc, fx, block) >> t & 1) || weight <= 0)
+        if (!(valid >> t & 1) || weight <= 0)
             continue;
-        const uint8_t *payload = osc_block_payload(loop->osc, fx, block);
         out->texel[out->count] = payload + (size_t)t * texel_bytes;
         out->weight[out->count] = weight;
         out->count++;
