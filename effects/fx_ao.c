@@ -57,13 +57,13 @@ static void ao_flush(scene_rt *rt, ao_batch *batch)
 /* The ray of AO sample `index` leaving a surface point (position, unit normal with basis tangent,
  * bitangent): origin and direction. */
 static void ao_ray(const float position[3], const float normal[3], const float tangent[3],
-                   const float bitangent[3], uint64_t direction_hash, uint32_t index, float origin[3],
-                   float dir[3])
+                   const float bitangent[3], uint64_t direction_hash, uint32_t index, float offset_scale,
+                   float origin[3], float dir[3])
 {
     float xi[2];
     fx__sobol_2d(index, direction_hash, xi);
     fx__cosine_direction(normal, tangent, bitangent, xi, dir);
-    scene_offset_ray_origin(position, normal, origin);
+    scene_offset_ray_origin(position, normal, offset_scale, origin);
 }
 
 uint64_t fx_ao_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count, uint32_t samples)
@@ -109,7 +109,8 @@ uint64_t fx_ao_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
                 fx__sobol_2d(k, origin_hash, jitter);
                 fx__texel_uv(job->level, job->block_x, job->block_y, texel, jitter[0], jitter[1], &u, &v);
                 fx__surface_map_eval(&map, u, v, position);
-                ao_ray(position, map.normal, tangent, bitangent, direction_hash, k, origin, dir);
+                ao_ray(position, map.normal, tangent, bitangent, direction_hash, k, ctx->s->ray_offset_scale, origin,
+                       dir);
                 fx__set_ray(&batch.rays[batch.ray_count], origin, dir, ctx->ao_radius, batch.ray_count);
                 batch.owner[batch.ray_count++] = (uint16_t)owner;
             }
@@ -149,7 +150,8 @@ float fx_ao_eval_point(const fx_context *ctx, const float pos[3], const float no
         uint32_t n = samples - first < FX_RAY_BATCH ? samples - first : FX_RAY_BATCH;
         for (uint32_t r = 0; r < n; r++) {
             float origin[3], dir[3];
-            ao_ray(pos, normal, tangent, bitangent, direction_hash, first + r, origin, dir);
+            ao_ray(pos, normal, tangent, bitangent, direction_hash, first + r, ctx->s->ray_offset_scale, origin,
+                   dir);
             fx__set_ray(&batch[r], origin, dir, ctx->ao_radius, r);
         }
         fx__occluded(ctx->rt, batch, n);

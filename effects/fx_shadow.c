@@ -91,7 +91,7 @@ uint64_t fx_shadow_update(const fx_context *ctx, const fx_block_job *jobs, uint3
                 fx__texel_uv(job->level, job->block_x, job->block_y, texel, offsets[i][0], offsets[i][1], &u,
                              &v);
                 fx__surface_map_eval(&map, u, v, position);
-                scene_offset_ray_origin(position, normal, origins[i]);
+                scene_offset_ray_origin(position, normal, s->ray_offset_scale, origins[i]);
             }
             for (uint32_t l = 0; l < light_count; l++) {
                 uint32_t offset = (texel * light_count + l) * 2u;
@@ -135,7 +135,7 @@ float fx_shadow_eval_point(const fx_context *ctx, const float pos[3], const floa
         float a = offsets[i][0] - 0.5f, b = offsets[i][1] - 0.5f, point[3], origin[3], dir[3], tfar;
         for (int k = 0; k < 3; k++)
             point[k] = pos[k] + a * dpdx[k] + b * dpdy[k];
-        scene_offset_ray_origin(point, normal, origin);
+        scene_offset_ray_origin(point, normal, ctx->s->ray_offset_scale, origin);
         if (shadow_ray_towards(&ctx->s->lights[light], origin, normal, dir, &tfar))
             fx__set_ray(&batch[traced++], origin, dir, tfar, i);
     }

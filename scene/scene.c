@@ -454,6 +454,10 @@ static scene_result compute_normals_and_bounds(scene *s, scene_error *err)
             s->bounds_min[k] = fminf(s->bounds_min[k], x);
             s->bounds_max[k] = fmaxf(s->bounds_max[k], x);
         }
+    double diag2 = 0;
+    for (int k = 0; k < 3; k++)
+        diag2 += ((double)s->bounds_max[k] - s->bounds_min[k]) * ((double)s->bounds_max[k] - s->bounds_min[k]);
+    s->ray_offset_scale = (float)fmin(1.0, fmax(sqrt(diag2), 1e-30));
     return SCENE_OK;
 }
 

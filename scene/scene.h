@@ -141,6 +141,7 @@ typedef struct scene {
     float camera_pos[3], camera_target[3], camera_fov_deg;
 
     float bounds_min[3], bounds_max[3];
+    float ray_offset_scale; /* min(1, bounding-box diagonal in metres): scales scene_offset_ray_origin() */
 
     /* Islands (filled by scene_finalize()). */
     uint32_t island_count;
@@ -220,8 +221,10 @@ void scene_tracing_thread_init(void);
 
 /* A robust origin for a ray leaving a surface at p with geometric normal n (pointing to the side the ray
  * leaves towards): offsets p along n by a scale-aware amount in integer ULPs (Waechter and Binder, Ray
- * Tracing Gems ch. 6). Every ray in fxcache that starts on a surface uses this. */
-void scene_offset_ray_origin(const float p[3], const float n[3], float out[3]);
+ * Tracing Gems ch. 6). Their fixed offset for coordinates near zero assumes a scene of unit size; `scale`
+ * (the scene's ray_offset_scale) shrinks that threshold and offset for smaller scenes. Every ray in fxcache
+ * that starts on a surface uses this. */
+void scene_offset_ray_origin(const float p[3], const float n[3], float scale, float out[3]);
 
 /* One closest-hit query (for tools and tests; passes use packets). Returns true on a hit. */
 bool scene_rt_intersect1(scene_rt *rt, const float org[3], const float dir[3], float tfar, uint32_t *tri,

@@ -111,11 +111,14 @@ static float bits_float(int32_t i)
     return f;
 }
 
-void scene_offset_ray_origin(const float p[3], const float n[3], float out[3])
+void scene_offset_ray_origin(const float p[3], const float n[3], float scale, float out[3])
 {
     /* Waechter and Binder: near the origin a tiny fixed offset (float spacing is fine there); elsewhere an
-     * offset of int_scale * n units in the last place, which scales with the magnitude of p. */
-    const float origin = 1.0f / 32.0f, float_scale = 1.0f / 65536.0f, int_scale = 256.0f;
+     * offset of int_scale * n units in the last place, which scales with the magnitude of p. Their near-zero
+     * constants are for a scene of unit size: a scene of 1 mm would be lifted by 1.5 % of its size. */
+    if (!(scale > 0) || scale > 1.0f)
+        scale = 1.0f;
+    const float origin = scale / 32.0f, float_scale = scale / 65536.0f, int_scale = 256.0f;
     for (int k = 0; k < 3; k++) {
         int32_t offset = (int32_t)(int_scale * n[k]);
         int32_t bits = float_bits(p[k]);

@@ -6,6 +6,7 @@
  * same terms come from rays traced at the pixel with the sample counts the cache converges to. */
 #include "frame_internal.h"
 
+#include <float.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdatomic.h>
@@ -233,8 +234,12 @@ static void compose_rows(void *user, uint32_t task_index, uint32_t thread_index)
                             ao += ao_taps.weight[i] * fx_ao_sample(ao_taps.texel[i], 0);
                     }
                 }
-                for (int k = 0; k < 3; k++)
-                    rad[k] = albedo[k] * (irradiance[k] + sky[k] * ao);
+                /* Saturate, never overflow to infinity (extreme light intensities): DESIGN.md, robustness. */
+                for (int k = 0; k < 3; k++) {
+                    float irr = fminf(irradiance[k], FLT_MAX) + fminf(sky[k] * ao, FLT_MAX);
+                    float value = albedo[k] * fminf(irr, FLT_MAX);
+                    rad[k] = value <= FLT_MAX ? value : (value > 0 ? FLT_MAX : 0.0f);
+                }
             }
             uint8_t *px = view->image + 3 * p;
             for (int k = 0; k < 3; k++)
