@@ -1,0 +1,197 @@
+/* Mesh-file import through Assimp (scene/scene_import.c) and the builder's cleaning: glTF 2 with an embedded
+ * buffer, ASCII PLY, OBJ with a material and a texture (found case-insensitively), gzip-compressed files,
+ * 3DS (Debian's glmark2 horse), points and lines dropped and counted, a missing texture counted, welding,
+ * degenerate and duplicate triangles skipped, mirrored transforms keeping the winding. */
+#include "test_util.h"
+
+#include "image.h"
+#include "scene_internal.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+#include <zlib.h>
+
+static scene *load_ok(const char *path)
+{
+    scene_error err = {0};
+    scene *s = scene_load(path, NULL, &err);
+    if (!s)
+        fail_msg("%s: %s", path, err.msg);
+    return s;
+}
+
+/* A glTF 2 file with one triangle in a base64 data-URI buffer. */
+static void test_gltf(void **state)
+{
+    (void)state;
+    const char *path = fxt_write_file(
+        "tri.gltf",
+        "{\"asset\":{\"version\":\"2.0\"},\"scene\":0,\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}],"
+        "\"meshes\":[{\"name\":\"tri\",\"primitives\":[{\"attributes\":{\"POSITION\":0},\"indices\":1}]}],"
+        "\"buffers\":[{\"byteLength\":44,\"uri\":\"data:application/octet-stream;base64,"
+        "AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAAAAABAAIAAAA=\"}],"
+        "\"bufferViews\":[{\"buffer\":0,\"byteOffset\":0,\"byteLength\":36},"
+        "{\"buffer\":0,\"byteOffset\":36,\"byteLength\":6}],"
+        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\","
+        "\"min\":[0,0,0],\"max\":[1,1,0]},{\"bufferView\":1,\"componentType\":5123,\"count\":3,\"type\":\"SCALAR\"}]}");
+    scene *s = load_ok(path);
+    assert_int_equal(s->triangle_count, 1);
+    assert_int_equal(s->island_count, 1);
+    assert_true(fabsf(s->tri_normal[2] - 1.0f) < 1e-6f); /* counter-clockwise seen from +z */
+    assert_int_equal(s->light_count, 1);                 /* a plain mesh file gets a sun and a sky */
+    assert_true(s->sky_intensity > 0);
+    scene_free(s);
+}
+
+/* ASCII PLY, and the same file gzip-compressed: identical scenes. */
+static void test_ply_and_gz(void **state)
+{
+    (void)state;
+    const char *ply = "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+                      "property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n"
+                      "0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n";
+    scene *plain = load_ok(fxt_write_file("quad.ply", ply));
+    char gz_path[1024];
+    snprintf(gz_path, sizeof gz_path, "%s", fxt_tmp_path("quad.ply.gz"));
+    gzFile gz = gzopen(gz_path, "wb");
+    assert_non_null(gz);
+    assert_int_equal(gzputs(gz, ply), (int)strlen(ply));
+    gzclose(gz);
+    scene *packed = load_ok(gz_path);
+    assert_int_equal(plain->triangle_count, 2);
+    assert_int_equal(packed->triangle_count, 2);
+    assert_int_equal(plain->vertex_count, 4);
+    assert_memory_equal(plain->positions, packed->positions, sizeof(float) * 3 * 4);
+    assert_int_equal(plain->island_count, 1); /* two coplanar triangles sharing an edge: one island */
+    scene_free(plain);
+    scene_free(packed);
+}
+
+/* A gzip file that is not gzip inside, and one that decompresses to junk: one-line errors, no scene. */
+static void test_bad_gz(void **state)
+{
+    (void)state;
+    scene_error err = {0};
+    assert_null(scene_load(fxt_write_file("junk.obj.gz", "this is not gzip"), NULL, &err));
+    assert_int_not_equal(err.code, SCENE_OK);
+    assert_null(strchr(err.msg, '\n'));
+    assert_non_null(strstr(err.msg, "junk.obj.gz"));
+}
+
+/* OBJ with a material whose texture file is named in another case than on disk; points and lines in the
+ * file are dropped and counted. */
+static void test_obj_texture_and_non_triangles(void **state)
+{
+    (void)state;
+    /* A 2x2 texture written through the same shim the scene reads with. */
+    const uint8_t texels[12] = {255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255};
+    char msg[256];
+    assert_int_equal(scene_image_write_u8(fxt_tmp_path("checker.png"), 2, 2, 3, texels, msg, sizeof msg), 0);
+    fxt_write_file("tex.mtl", "newmtl red\nKd 1 1 1\nmap_Kd CHECKER.PNG\n");
+    const char *obj = fxt_write_file("tex.obj", "mtllib tex.mtl\nusemtl red\n"
+                                                "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+                                                "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+                                                "f 1/1 2/2 3/3\nf 1/1 3/3 4/4\nl 1 2\np 3\n");
+    scene *s = load_ok(obj);
+    assert_int_equal(s->triangle_count, 2);
+    assert_int_equal(s->texture_count, 1);
+    assert_int_equal(s->repairs.textures_missing, 0);
+    assert_true(s->repairs.non_triangles_dropped >= 2);
+    /* Texel (0, 0) at the image's bottom left is blue (row 1 of the file): u = v = 0.25. */
+    float rgb[3];
+    scene_albedo(s, 0, 0.2f, 0.05f, rgb); /* near uv (0.25, 0.05): the bottom row */
+    assert_true(rgb[2] > rgb[0]);
+    scene_free(s);
+}
+
+/* A texture that is not there: the material keeps its colour, the miss is counted, the load succeeds. */
+static void test_missing_texture_counted(void **state)
+{
+    (void)state;
+    fxt_write_file("gone.mtl", "newmtl m\nKd 0.5 0.5 0.5\nmap_Kd nowhere.png\n");
+    const char *obj = fxt_write_file("gone.obj", "mtllib gone.mtl\nusemtl m\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    scene *s = load_ok(obj);
+    assert_int_equal(s->repairs.textures_missing, 1);
+    assert_int_equal(s->texture_count, 0);
+    float rgb[3];
+    scene_albedo(s, 0, 0.3f, 0.3f, rgb);
+    assert_true(fabsf(rgb[0] - 0.5f) < 1e-6f);
+    scene_free(s);
+}
+
+/* Welding, degenerate and duplicate triangles through the builder. */
+static void test_builder_cleaning(void **state)
+{
+    (void)state;
+    scene_error err = {0};
+    scene *s = scene__alloc();
+    scene_material grey = {.diffuse = {0.5f, 0.5f, 0.5f}, .texture = -1};
+    assert_int_equal(scene__add_material(s, &grey, &err), 0);
+    /* Six vertices, two pairs of equal positions (-0 and +0 weld too); a duplicate, a repeated-vertex and a
+     * zero-area triangle. */
+    const float positions[] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 0, 0, -0.0f, 1, 0, 2, 0, 0};
+    const uint32_t indices[] = {0, 1, 2, 3, 4, 0, 0, 1, 2, 0, 0, 1, 0, 1, 5};
+    assert_int_equal(scene__add_mesh(s, "m", positions, 6, indices, 5, NULL, 0, NULL, &err), SCENE_OK);
+    assert_int_equal(s->repairs.vertices_welded, 2);
+    assert_int_equal(s->repairs.duplicate_skipped, 2); /* 0 1 2 again, and 3 4 0 = 1 2 0 after welding */
+    assert_int_equal(s->repairs.degenerate_skipped, 2);
+    assert_int_equal(s->triangle_count, 1);
+    assert_int_equal(scene__finalize(s, NULL, &err), SCENE_OK);
+    scene_free(s);
+}
+
+/* A mirroring transform keeps the triangles facing the same way relative to the surface: the normal of the
+ * mirrored triangle is the mirrored normal, not its opposite. */
+static void test_mirrored_transform_keeps_winding(void **state)
+{
+    (void)state;
+    scene_error err = {0};
+    scene *s = scene__alloc();
+    scene_material grey = {.diffuse = {0.5f, 0.5f, 0.5f}, .texture = -1};
+    scene__add_material(s, &grey, &err);
+    const float positions[] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    const uint32_t indices[] = {0, 1, 2};
+    const float mirror_z[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, -1, 0, 0, 0, 0, 1};
+    const float mirror_x[16] = {-1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+    assert_int_equal(scene__add_mesh(s, "z", positions, 3, indices, 1, NULL, 0, mirror_z, &err), SCENE_OK);
+    assert_int_equal(scene__add_mesh(s, "x", positions, 3, indices, 1, NULL, 0, mirror_x, &err), SCENE_OK);
+    assert_int_equal(scene__finalize(s, NULL, &err), SCENE_OK);
+    assert_true(s->tri_normal[2] < -0.99f); /* +z normal mirrored in z: -z */
+    assert_true(s->tri_normal[5] > 0.99f);  /* mirrored in x: the z normal stays +z */
+    scene_free(s);
+}
+
+/* 3DS through Assimp: the horse Debian's glmark2-data ships. */
+static void test_3ds_horse(void **state)
+{
+    (void)state;
+    const char *path = "/usr/share/glmark2/models/horse.3ds";
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        print_message("SKIP: %s is absent (install glmark2-data)\n", path);
+        skip();
+    }
+    fclose(f);
+    scene *s = load_ok(path);
+    assert_true(s->triangle_count > 1000);
+    assert_true(s->island_count > 0);
+    for (uint32_t i = 0; i < s->island_count; i++)
+        assert_true(s->islands[i].triangle_count <= SCENE_ISLAND_MAX_TRIANGLES);
+    scene_free(s);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_gltf),
+        cmocka_unit_test(test_ply_and_gz),
+        cmocka_unit_test(test_bad_gz),
+        cmocka_unit_test(test_obj_texture_and_non_triangles),
+        cmocka_unit_test(test_missing_texture_counted),
+        cmocka_unit_test(test_builder_cleaning),
+        cmocka_unit_test(test_mirrored_transform_keeps_winding),
+        cmocka_unit_test(test_3ds_horse),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
