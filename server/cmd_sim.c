@@ -89,7 +89,7 @@ static const char sim_usage[] =
     "  --views              with --out: also AO and shadow as linear EXR, and a picture of how many\n"
     "                       viewers requested each pixel's AO block (_sharing.png)\n"
     "  --stats FILE         one JSON line of statistics per frame\n"
-    "  --summary FILE       one JSON object at the end\n"
+    "  --summary FILE       one JSON object at the end (time_ms: sums over the run; time_ms_per_frame)\n"
     "  --quiet              no summary in words on stdout\n"
     "  -h, --help           this text\n";
 
@@ -362,6 +362,8 @@ static json_t *frame_json(const srv_frame_stats *st, uint32_t viewers, const srv
                                   (json_int_t)st->blocks_resident[SCENE_FX_AO]));
     json_object_set_new(o, "pixels_visible", json_integer((json_int_t)st->pixels_visible));
     json_object_set_new(o, "pixels_missing", json_integer((json_int_t)st->pixels_missing));
+    json_object_set_new(o, "table_load",
+                        json_real(st->table_capacity ? (double)st->table_count / st->table_capacity : 0.0));
     json_object_set_new(o, "evictions", json_integer((json_int_t)st->evictions));
     json_object_set_new(o, "pool_exhausted", json_integer((json_int_t)st->exhausted));
     json_object_set_new(o, "memory_bytes", memory_json(mem));
@@ -600,7 +602,11 @@ int srv_cmd_sim(int argc, char **argv)
     json_object_set_new(sum, "pixels_missing", json_integer((json_int_t)tot.pixels_missing));
     json_object_set_new(sum, "pool_exhausted", json_integer((json_int_t)tot.exhausted));
     json_object_set_new(sum, "memory_bytes", json_pack("{s:o,s:o}", "peak", memory_json(&tot.peak), "final", memory_json(&mem)));
-    json_object_set_new(sum, "time_ms", stage_json(tot.time_ms, tot.frame_ms));
+    json_object_set_new(sum, "time_ms", stage_json(tot.time_ms, tot.frame_ms)); /* sums over the run */
+    double per_frame[SRV_STAGE_COUNT];
+    for (int stg = 0; stg < SRV_STAGE_COUNT; stg++)
+        per_frame[stg] = tot.frames ? tot.time_ms[stg] / tot.frames : 0.0;
+    json_object_set_new(sum, "time_ms_per_frame", stage_json(per_frame, tot.frames ? tot.frame_ms / tot.frames : 0.0));
     json_object_set_new(sum, "bvh_build_ms", json_real(bvh_ms));
     if (o.summary_path) {
         FILE *sf = fopen(o.summary_path, "w");

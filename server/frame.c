@@ -246,6 +246,8 @@ bool srv_loop_frame(srv_loop *loop, const srv_camera *cameras, srv_frame_stats *
         for (uint32_t fx = 0; fx <= FX_AO; fx++)
             stats->blocks_resident[fx] = os.effects[fx].blocks_resident;
         stats->evictions = os.evictions;
+        stats->table_count = os.table_count;
+        stats->table_capacity = os.table_capacity;
         stats->exhausted = os.exhausted;
         stats->time_ms[SRV_STAGE_HOUSEKEEPING] = srv__now_ms() - t;
     }

@@ -68,6 +68,7 @@ typedef struct srv_frame_stats {
     uint64_t pixels_visible;
     uint64_t pixels_missing;                      /* visible pixels composed without cached data */
     uint64_t evictions, exhausted;                /* cumulative cache counters */
+    uint32_t table_count, table_capacity;         /* keys in the on-surface table, and its slots */
     double time_ms[SRV_STAGE_COUNT];
     double frame_ms;
 } srv_frame_stats;
