@@ -70,6 +70,71 @@ static scene_result read_gz(const char *path, char **out, size_t *out_len, scene
     return SCENE_OK;
 }
 
+/* Checks a PLY header before Assimp reads it: Assimp 5.2.5's PLY reader loops forever on a header whose
+ * end_header line is damaged (found by mutating files), so every header line must be one PLY knows, the
+ * header must end with an end_header line, and no element may declare more items than the file has bytes. */
+static scene_result check_ply_header(const char *path, const char *buf, size_t len, scene_error *err)
+{
+    static const char *const keywords[] = {"format ", "comment", "obj_info", "element ", "property "};
+    size_t pos = 0;
+    for (unsigned line = 1; pos < len && line <= 100000; line++) {
+        const char *start = buf + pos;
+        const char *newline = memchr(start, '\n', len - pos);
+        size_t n = newline ? (size_t)(newline - start) : len - pos;
+        size_t m = n > 0 && start[n - 1] == '\r' ? n - 1 : n;
+        if (line == 1) {
+            if (!(m == 3 && memcmp(start, "ply", 3) == 0))
+                return scene__fail(err, SCENE_ERR_FORMAT, "%s: not a PLY file (the first line is not 'ply')", path);
+        } else if (m == 10 && memcmp(start, "end_header", 10) == 0) {
+            return SCENE_OK;
+        } else {
+            bool known = false;
+            for (size_t k = 0; k < sizeof keywords / sizeof keywords[0] && !known; k++)
+                known = m >= strlen(keywords[k]) && memcmp(start, keywords[k], strlen(keywords[k])) == 0;
+            if (!known)
+                return scene__fail(err, SCENE_ERR_FORMAT, "%s:%u: not a PLY header line: '%.*s'", path, line,
+                                   (int)(m < 60 ? m : 60), start);
+            if (memcmp(start, "element ", 8) == 0) {
+                char text[128];
+                snprintf(text, sizeof text, "%.*s", (int)(m < 127 ? m : 127), start);
+                char name[64];
+                unsigned long long count = 0;
+                char tail = 0;
+                if (sscanf(text, "element %63s %llu %c", name, &count, &tail) != 2 || count > len)
+                    return scene__fail(err, SCENE_ERR_FORMAT,
+                                       "%s:%u: malformed element line or count larger than the file: '%s'", path,
+                                       line, text);
+            }
+        }
+        if (!newline)
+            break;
+        pos += n + 1;
+    }
+    return scene__fail(err, SCENE_ERR_FORMAT, "%s: the PLY header has no end_header line", path);
+}
+
+/* Checks what Assimp read before any post-processing runs: Assimp's triangulation asserts (aborting the
+ * process) on faces with no index, and indices must lie within their mesh. */
+static scene_result check_faces(const char *path, const struct aiScene *ai, scene_error *err)
+{
+    for (uint32_t i = 0; i < ai->mNumMeshes; i++) {
+        const struct aiMesh *mesh = ai->mMeshes[i];
+        if (!mesh || (mesh->mNumFaces > 0 && !mesh->mFaces) || (mesh->mNumVertices > 0 && !mesh->mVertices))
+            return scene__fail(err, SCENE_ERR_FORMAT, "%s: mesh %u is incomplete", path, i);
+        for (uint32_t f = 0; f < mesh->mNumFaces; f++) {
+            const struct aiFace *face = &mesh->mFaces[f];
+            if (face->mNumIndices == 0 || !face->mIndices)
+                return scene__fail(err, SCENE_ERR_FORMAT, "%s: mesh %u face %u has no vertices", path, i, f);
+            for (uint32_t k = 0; k < face->mNumIndices; k++)
+                if (face->mIndices[k] >= mesh->mNumVertices)
+                    return scene__fail(err, SCENE_ERR_FORMAT,
+                                       "%s: mesh %u face %u uses vertex %u, but the mesh has %u vertices", path, i,
+                                       f, face->mIndices[k], mesh->mNumVertices);
+        }
+    }
+    return SCENE_OK;
+}
+
 /* The folder part of path (with a trailing slash), or "" for a bare file name. */
 static void folder_of(const char *path, char *dir, size_t cap)
 {
@@ -216,27 +281,48 @@ scene_result scene__import_file(scene *s, const char *path, const float *xform,
         return scene__fail(err, SCENE_ERR_IO, "%s: cannot read: %s", path, strerror(errno));
     fclose(probe);
 
-    const unsigned flags = aiProcess_Triangulate | aiProcess_PreTransformVertices | aiProcess_SortByPType;
+    /* Post-processing runs only after the faces were checked (see check_faces). */
+    const unsigned post = aiProcess_Triangulate | aiProcess_PreTransformVertices | aiProcess_SortByPType;
     const struct aiScene *ai = NULL;
     size_t n = strlen(path);
-    if (n > 3 && strcasecmp(path + n - 3, ".gz") == 0) {
-        char inner[512], *buf = NULL;
+    bool gz = n > 3 && strcasecmp(path + n - 3, ".gz") == 0;
+    char inner[512];
+    snprintf(inner, sizeof inner, "%.*s", (int)(gz ? n - 3 : n), path);
+    const char *dot = strrchr(inner, '.');
+    const char *hint = dot && !strchr(dot, '/') ? dot + 1 : "";
+    bool ply = strcasecmp(hint, "ply") == 0;
+    if (gz || ply) {
+        /* read_gz also reads plain files (zlib passes them through). */
+        char *buf = NULL;
         size_t len = 0;
-        snprintf(inner, sizeof inner, "%.*s", (int)(n - 3), path);
-        const char *dot = strrchr(inner, '.');
-        const char *hint = dot && !strchr(dot, '/') ? dot + 1 : "";
         scene_result rc = read_gz(path, &buf, &len, err);
         if (rc != SCENE_OK)
             return rc;
         if (len == 0) {
             free(buf);
-            return scene__fail(err, SCENE_ERR_FORMAT, "%s: decompresses to nothing", path);
+            return scene__fail(err, SCENE_ERR_FORMAT, "%s: %s", path, gz ? "decompresses to nothing" : "empty file");
         }
-        ai = aiImportFileFromMemory(buf, (unsigned)len, flags, hint);
+        if (len > UINT32_MAX) {
+            free(buf);
+            return scene__fail(err, SCENE_ERR_RANGE, "%s: larger than 4 GiB", path);
+        }
+        if (ply && (rc = check_ply_header(path, buf, len, err)) != SCENE_OK) {
+            free(buf);
+            return rc;
+        }
+        ai = aiImportFileFromMemory(buf, (unsigned)len, 0, hint);
         free(buf);
     } else {
-        ai = aiImportFile(path, flags);
+        ai = aiImportFile(path, 0);
     }
+    if (!ai)
+        return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s", path, aiGetErrorString());
+    scene_result checked = check_faces(path, ai, err);
+    if (checked != SCENE_OK) {
+        aiReleaseImport(ai);
+        return checked;
+    }
+    ai = aiApplyPostProcessing(ai, post);
     if (!ai)
         return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s", path, aiGetErrorString());
 

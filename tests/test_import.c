@@ -162,6 +162,38 @@ static void test_mirrored_transform_keeps_winding(void **state)
     scene_free(s);
 }
 
+/* PLY files that made Assimp 5.2.5 loop forever (a damaged end_header or header line, an element with no
+ * count) or abort in its triangulation (a face with no vertex): refused with a one-line error, quickly. */
+static void test_damaged_ply_refused(void **state)
+{
+    (void)state;
+    static const char *const files[] = {
+        /* end_header damaged */
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+        "element face 1\nproperty list uchar int vertex_indices\nen-1d_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+        /* a header line that is no PLY keyword */
+        "ply\nformat ascii 1.0\nelnanement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+        "end_header\n0 0 0\n1 0 0\n0 1 0\n",
+        /* an element without its count */
+        "ply\nformat ascii 1.0\nelement ver\nproperty float x\nend_header\n0\n",
+        /* an element count larger than the file */
+        "ply\nformat ascii 1.0\nelement vertex 99999999\nproperty float x\nproperty float y\nproperty float z\n"
+        "end_header\n0 0 0\n",
+        /* a face with no data: Assimp's triangulation asserts */
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+        "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0/3 0 1 2\n",
+    };
+    for (size_t i = 0; i < sizeof files / sizeof files[0]; i++) {
+        char name[32];
+        snprintf(name, sizeof name, "damaged%zu.ply", i);
+        scene_error err = {0};
+        assert_null(scene_load(fxt_write_file(name, files[i]), NULL, &err));
+        assert_int_equal(err.code, SCENE_ERR_FORMAT);
+        assert_non_null(strstr(err.msg, name));
+        assert_null(strchr(err.msg, '\n'));
+    }
+}
+
 /* 3DS through Assimp: the horse Debian's glmark2-data ships. */
 static void test_3ds_horse(void **state)
 {
@@ -191,6 +223,7 @@ int main(void)
         cmocka_unit_test(test_missing_texture_counted),
         cmocka_unit_test(test_builder_cleaning),
         cmocka_unit_test(test_mirrored_transform_keeps_winding),
+        cmocka_unit_test(test_damaged_ply_refused),
         cmocka_unit_test(test_3ds_horse),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
