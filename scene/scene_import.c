@@ -113,8 +113,8 @@ static scene_result check_ply_header(const char *path, const char *buf, size_t l
     return scene__fail(err, SCENE_ERR_FORMAT, "%s: the PLY header has no end_header line", path);
 }
 
-/* Checks what Assimp read before any post-processing runs: Assimp's triangulation asserts (aborting the
- * process) on faces with no index, and indices must lie within their mesh. */
+/* Checks what Assimp returns, whatever its own validation let through: every face has vertices, every
+ * index lies within its mesh. */
 static scene_result check_faces(const char *path, const struct aiScene *ai, scene_error *err)
 {
     for (uint32_t i = 0; i < ai->mNumMeshes; i++) {
@@ -281,7 +281,12 @@ scene_result scene__import_file(scene *s, const char *path, const float *xform,
         return scene__fail(err, SCENE_ERR_IO, "%s: cannot read: %s", path, strerror(errno));
     fclose(probe);
 
-    /* Post-processing runs only after the faces were checked (see check_faces). */
+    /* Two phases, because Assimp 5.2.5 crashes on some damaged input (found by mutating files): its
+     * triangulation asserts, aborting the process, on a face without vertices, which its own validation
+     * lets through; and aiApplyPostProcessing() crashes releasing a scene its validation rejects. So the
+     * import runs only Assimp's validation, check_faces() checks what that let through, and only then do
+     * the post-processing steps run. */
+    const unsigned flags = aiProcess_ValidateDataStructure;
     const unsigned post = aiProcess_Triangulate | aiProcess_PreTransformVertices | aiProcess_SortByPType;
     const struct aiScene *ai = NULL;
     size_t n = strlen(path);
@@ -310,10 +315,10 @@ scene_result scene__import_file(scene *s, const char *path, const float *xform,
             free(buf);
             return rc;
         }
-        ai = aiImportFileFromMemory(buf, (unsigned)len, 0, hint);
+        ai = aiImportFileFromMemory(buf, (unsigned)len, flags, hint);
         free(buf);
     } else {
-        ai = aiImportFile(path, 0);
+        ai = aiImportFile(path, flags);
     }
     if (!ai)
         return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s", path, aiGetErrorString());
