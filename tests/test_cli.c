@@ -8,7 +8,12 @@
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <fcntl.h>
+#include <signal.h>
 #include <string.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
 
 #define BUNNY "/usr/share/glmark2/models/bunny.obj"
 
@@ -650,9 +655,70 @@ static void test_sim_room_cameras_inside_default_room(void **state)
     }
 }
 
+/* SIGINT during a long run: the current frame finishes, then the summary (marked interrupted), the stats
+ * lines of every finished frame and the last frame's images are written, and the exit status is 0. */
+static void test_sim_interrupted_keeps_results(void **state)
+{
+    (void)state;
+    char stats[1024], summary[1024], out[1024];
+    snprintf(stats, sizeof stats, "%s", fxt_tmp_path("int_stats.jsonl"));
+    snprintf(summary, sizeof summary, "%s", fxt_tmp_path("int_summary.json"));
+    snprintf(out, sizeof out, "%s", fxt_tmp_path("int_out"));
+    remove(stats);
+    remove(summary);
+    pid_t pid = fork();
+    assert_true(pid >= 0);
+    if (pid == 0) {
+        int devnull = open("/dev/null", O_WRONLY);
+        dup2(devnull, STDOUT_FILENO);
+        dup2(devnull, STDERR_FILENO);
+        execl(FXC_BIN, FXC_BIN, "sim", "--frames", "100000", "--res", "64x36", "--viewers", "2", "--stats", stats,
+              "--summary", summary, "--out", out, "--quiet", (char *)NULL);
+        _exit(127);
+    }
+    /* Wait (at most 60 s) until two frames are on record, then interrupt. */
+    for (int tries = 0; tries < 600; tries++) {
+        FILE *f = fopen(stats, "r");
+        int lines = 0;
+        if (f) {
+            for (int c; (c = fgetc(f)) != EOF;)
+                lines += c == '\n';
+            fclose(f);
+        }
+        if (lines >= 2)
+            break;
+        struct timespec pause = {0, 100 * 1000 * 1000};
+        nanosleep(&pause, NULL);
+    }
+    assert_int_equal(kill(pid, SIGINT), 0);
+    int status = 0;
+    assert_int_equal(waitpid(pid, &status, 0), pid);
+    assert_true(WIFEXITED(status));
+    assert_int_equal(WEXITSTATUS(status), 0);
+    json_error_t jerr;
+    json_t *sum = json_load_file(summary, 0, &jerr);
+    assert_non_null(sum);
+    assert_true(json_is_true(json_object_get(sum, "interrupted")));
+    json_int_t frames = json_integer_value(json_object_get(sum, "frames"));
+    assert_true(frames >= 2 && frames < 100000);
+    /* Every finished frame has its stats line. */
+    FILE *f = fopen(stats, "r");
+    assert_non_null(f);
+    json_int_t lines = 0;
+    for (int c; (c = fgetc(f)) != EOF;)
+        lines += c == '\n';
+    fclose(f);
+    assert_int_equal(lines, frames);
+    char image[1200];
+    snprintf(image, sizeof image, "%s/frame_%04d_viewer_01.png", out, (int)(frames - 1));
+    assert_int_equal(access(image, R_OK), 0);
+    json_decref(sum);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_sim_interrupted_keeps_results),
         cmocka_unit_test(test_help_lists_commands),
         cmocka_unit_test(test_unknown_command),
         cmocka_unit_test(test_subcommand_help),
