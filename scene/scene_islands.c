@@ -90,6 +90,19 @@ typedef struct island_work {
     int64_t rotated_box[SCENE_ISLAND_MAX_TRIANGLES][4];
 } island_work;
 
+/* The bounding box (min u, min v, max u, max v) of a triangle's three grid points. */
+static void triangle_box(const island_point pts[3], int64_t box[4])
+{
+    box[0] = box[2] = pts[0].u;
+    box[1] = box[3] = pts[0].v;
+    for (int k = 1; k < 3; k++) {
+        box[0] = pts[k].u < box[0] ? pts[k].u : box[0];
+        box[1] = pts[k].v < box[1] ? pts[k].v : box[1];
+        box[2] = pts[k].u > box[2] ? pts[k].u : box[2];
+        box[3] = pts[k].v > box[3] ? pts[k].v : box[3];
+    }
+}
+
 /* Twice the signed area of (a, b, c) in grid steps squared; exact (|coordinates| <= 2^24). */
 static int64_t orient2(island_point a, island_point b, island_point c)
 {
@@ -252,14 +265,7 @@ static scene_result start_chart(const scene *s, island_work *work, uint32_t char
         work->vertex_local[vertex] = local;
     }
     int64_t *box = chart->box[0];
-    box[0] = box[2] = snapped[0].u;
-    box[1] = box[3] = snapped[0].v;
-    for (int k = 1; k < 3; k++) {
-        box[0] = snapped[k].u < box[0] ? snapped[k].u : box[0];
-        box[1] = snapped[k].v < box[1] ? snapped[k].v : box[1];
-        box[2] = snapped[k].u > box[2] ? snapped[k].u : box[2];
-        box[3] = snapped[k].v > box[3] ? snapped[k].v : box[3];
-    }
+    triangle_box(snapped, box);
     memcpy(chart->chart_box, box, sizeof chart->chart_box);
     return SCENE_OK;
 }
@@ -474,14 +480,7 @@ static void rotate_chart(const scene *s, island_work *work)
             !(fabs((double)area2 - exact_area2) <= ISLAND_MAX_SNAP_AREA_ERROR * exact_area2))
             return;
         int64_t *box = work->rotated_box[t];
-        box[0] = box[2] = pts[0].u;
-        box[1] = box[3] = pts[0].v;
-        for (int k = 1; k < 3; k++) {
-            box[0] = pts[k].u < box[0] ? pts[k].u : box[0];
-            box[1] = pts[k].v < box[1] ? pts[k].v : box[1];
-            box[2] = pts[k].u > box[2] ? pts[k].u : box[2];
-            box[3] = pts[k].v > box[3] ? pts[k].v : box[3];
-        }
+        triangle_box(pts, box);
         chart_box[0] = box[0] < chart_box[0] ? box[0] : chart_box[0];
         chart_box[1] = box[1] < chart_box[1] ? box[1] : chart_box[1];
         chart_box[2] = box[2] > chart_box[2] ? box[2] : chart_box[2];
