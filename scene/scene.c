@@ -71,7 +71,9 @@ void scene_free(scene *s)
     free(s->meshes);
     free(s->materials);
     for (uint32_t i = 0; i < s->texture_count; i++)
-        free(s->textures[i].rgb);
+        for (uint32_t l = 0; l < s->textures[i].levels; l++)
+            free(s->textures[i].mip_rgb[l]); /* mip_rgb[0] is rgb */
+    free(s->tri_texture_lod);
     free(s->textures);
     free(s->lights);
     free(s->islands);
@@ -104,6 +106,41 @@ uint32_t scene__add_material(scene *s, const scene_material *m, scene_error *err
     return s->material_count++;
 }
 
+/* Builds the mip chain of a texture: each level the 2 x 2 box average of the one above (the last row or
+ * column is repeated for odd sizes), down to 1 x 1. False on no memory (levels built so far are kept). */
+static bool build_mips(scene_texture *tex)
+{
+    tex->mip_rgb[0] = tex->rgb;
+    tex->mip_width[0] = tex->width;
+    tex->mip_height[0] = tex->height;
+    tex->levels = 1;
+    while (tex->levels < SCENE_TEXTURE_MAX_LEVELS) {
+        uint32_t l = tex->levels;
+        uint32_t pw = tex->mip_width[l - 1], ph = tex->mip_height[l - 1];
+        if (pw == 1 && ph == 1)
+            break;
+        uint32_t w = (pw + 1) / 2, h = (ph + 1) / 2;
+        float *dst = malloc(sizeof(float) * 3 * (size_t)w * h);
+        if (!dst)
+            return false;
+        const float *src = tex->mip_rgb[l - 1];
+        for (uint32_t y = 0; y < h; y++)
+            for (uint32_t x = 0; x < w; x++) {
+                uint32_t x0 = 2 * x, y0 = 2 * y;
+                uint32_t x1 = x0 + 1 < pw ? x0 + 1 : x0, y1 = y0 + 1 < ph ? y0 + 1 : y0;
+                for (int k = 0; k < 3; k++)
+                    dst[3 * ((size_t)y * w + x) + k] =
+                        0.25f * (src[3 * ((size_t)y0 * pw + x0) + k] + src[3 * ((size_t)y0 * pw + x1) + k] +
+                                 src[3 * ((size_t)y1 * pw + x0) + k] + src[3 * ((size_t)y1 * pw + x1) + k]);
+            }
+        tex->mip_rgb[l] = dst;
+        tex->mip_width[l] = w;
+        tex->mip_height[l] = h;
+        tex->levels++;
+    }
+    return true;
+}
+
 int32_t scene__add_texture(scene *s, const char *path, scene_error *err)
 {
     for (uint32_t i = 0; i < s->texture_count; i++)
@@ -116,8 +153,10 @@ int32_t scene__add_texture(scene *s, const char *path, scene_error *err)
         return -1;
     }
     snprintf(tex.path, sizeof tex.path, "%s", path);
-    if (!grow((void **)&s->textures, (size_t)s->texture_count + 1, sizeof *s->textures)) {
-        free(tex.rgb);
+    bool mips_ok = build_mips(&tex);
+    if (!mips_ok || !grow((void **)&s->textures, (size_t)s->texture_count + 1, sizeof *s->textures)) {
+        for (uint32_t l = 0; l < tex.levels; l++)
+            free(tex.mip_rgb[l]);
         scene__fail(err, SCENE_ERR_NOMEM, "out of memory adding texture %s", path);
         return -1;
     }
@@ -461,6 +500,39 @@ static scene_result compute_normals_and_bounds(scene *s, scene_error *err)
     return SCENE_OK;
 }
 
+/* Per textured triangle, log2 of its texture's texels per metre: sqrt(UV area in texels / world area). */
+static scene_result compute_texture_lods(scene *s, scene_error *err)
+{
+    free(s->tri_texture_lod);
+    s->tri_texture_lod = malloc(sizeof(float) * (size_t)s->triangle_count);
+    if (!s->tri_texture_lod)
+        return scene__fail(err, SCENE_ERR_NOMEM, "out of memory computing texture levels");
+    for (uint32_t t = 0; t < s->triangle_count; t++) {
+        const scene_material *m = &s->materials[s->meshes[s->tri_mesh[t]].material];
+        s->tri_texture_lod[t] = -1000.0f;
+        if (m->texture < 0 || (uint32_t)m->texture >= s->texture_count)
+            continue;
+        const scene_texture *tex = &s->textures[m->texture];
+        const float *uv = s->corner_uv + 6 * (size_t)t;
+        double uv_area = 0.5 * fabs(((double)uv[2] - uv[0]) * ((double)uv[5] - uv[1]) -
+                                    ((double)uv[4] - uv[0]) * ((double)uv[3] - uv[1])) *
+                         (double)tex->width * (double)tex->height;
+        const float *a = s->positions + 3 * (size_t)s->indices[3 * (size_t)t];
+        const float *b = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 1];
+        const float *c = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 2];
+        double e1[3], e2[3];
+        for (int k = 0; k < 3; k++) {
+            e1[k] = (double)b[k] - a[k];
+            e2[k] = (double)c[k] - a[k];
+        }
+        double cx = e1[1] * e2[2] - e1[2] * e2[1], cy = e1[2] * e2[0] - e1[0] * e2[2], cz = e1[0] * e2[1] - e1[1] * e2[0];
+        double world_area = 0.5 * sqrt(cx * cx + cy * cy + cz * cz);
+        if (uv_area > 0 && world_area > 0 && isfinite(uv_area))
+            s->tri_texture_lod[t] = (float)(0.5 * log2(uv_area / world_area));
+    }
+    return SCENE_OK;
+}
+
 scene_result scene__finalize(scene *s, const scene_load_desc *desc, scene_error *err)
 {
     if (s->triangle_count == 0)
@@ -491,6 +563,9 @@ scene_result scene__finalize(scene *s, const scene_load_desc *desc, scene_error 
         if (!(s->ao_radius > 0))
             s->ao_radius = 1.0f;
     }
+    rc = compute_texture_lods(s, err);
+    if (rc != SCENE_OK)
+        return rc;
     s->timings.weld_ms += scene__now_ms() - t0;
     t0 = scene__now_ms();
     rc = scene__build_islands(s, err);
@@ -558,20 +633,23 @@ scene *scene_load(const char *path, const scene_load_desc *desc, scene_error *er
 
 /* ---- materials ---------------------------------------------------------------------------------------- */
 
-/* Bilinear texture lookup with wrap-around addressing; (u, v) with v = 0 at the bottom of the image. */
-static void texture_sample(const scene_texture *tex, float u, float v, float out[3])
+/* Bilinear lookup in mip level `level` of a texture with wrap-around addressing; (u, v) with v = 0 at the
+ * bottom of the image. */
+static void texture_sample(const scene_texture *tex, uint32_t level, float u, float v, float out[3])
 {
+    const float *texels = tex->mip_rgb[level];
+    uint32_t width = tex->mip_width[level], height = tex->mip_height[level];
     if (!isfinite(u) || !isfinite(v)) {
         u = 0;
         v = 0;
     }
-    float x = (u - floorf(u)) * (float)tex->width - 0.5f;
-    float y = (1.0f - (v - floorf(v))) * (float)tex->height - 0.5f;
+    float x = (u - floorf(u)) * (float)width - 0.5f;
+    float y = (1.0f - (v - floorf(v))) * (float)height - 0.5f;
     float fx = floorf(x), fy = floorf(y);
     float ax = x - fx, ay = y - fy;
     /* x lies in [-0.5, width - 0.5], so x0 + dx lies in [-1, width]: one wrap step, no division. */
     int64_t x0 = (int64_t)fx, y0 = (int64_t)fy;
-    int64_t w = tex->width, h = tex->height;
+    int64_t w = width, h = height;
     for (int k = 0; k < 3; k++)
         out[k] = 0;
     for (int dy = 0; dy < 2; dy++)
@@ -582,13 +660,19 @@ static void texture_sample(const scene_texture *tex, float u, float v, float out
             if (xi < 0 || xi >= w || yi < 0 || yi >= h) /* only for a u or v so large floorf lost precision */
                 xi = 0, yi = 0;
             float weight = (dx ? ax : 1 - ax) * (dy ? ay : 1 - ay);
-            const float *p = tex->rgb + 3 * ((size_t)yi * (size_t)w + (size_t)xi);
+            const float *p = texels + 3 * ((size_t)yi * (size_t)w + (size_t)xi);
             for (int k = 0; k < 3; k++)
                 out[k] += weight * p[k];
         }
 }
 
 void scene_albedo(const scene *s, uint32_t tri, float u, float v, float out_rgb[3])
+{
+    scene_albedo_filtered(s, tri, u, v, -1000.0f, out_rgb);
+}
+
+void scene_albedo_filtered(const scene *s, uint32_t tri, float u, float v, float footprint_log2,
+                           float out_rgb[3])
 {
     const scene_material *m = &s->materials[s->meshes[s->tri_mesh[tri]].material];
     if (m->texture < 0 || (uint32_t)m->texture >= s->texture_count) {
@@ -599,8 +683,13 @@ void scene_albedo(const scene *s, uint32_t tri, float u, float v, float out_rgb[
     float w0 = 1 - u - v;
     float tu = w0 * uv[0] + u * uv[2] + v * uv[4];
     float tv = w0 * uv[1] + u * uv[3] + v * uv[5];
+    const scene_texture *tex = &s->textures[m->texture];
+    float level = footprint_log2 + (s->tri_texture_lod ? s->tri_texture_lod[tri] : -1000.0f);
+    uint32_t mip = 0;
+    if (level > 0.5f)
+        mip = level >= (float)(tex->levels - 1) ? tex->levels - 1 : (uint32_t)(level + 0.5f);
     float texel[3];
-    texture_sample(&s->textures[m->texture], tu, tv, texel);
+    texture_sample(tex, mip, tu, tv, texel);
     for (int k = 0; k < 3; k++)
         out_rgb[k] = texel[k] * m->diffuse[k];
 }

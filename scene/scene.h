@@ -58,9 +58,14 @@ typedef struct scene_light {
     float intensity;    /* directional: irradiance scale; point: intensity (falls off with 1/d^2) */
 } scene_light;
 
+enum { SCENE_TEXTURE_MAX_LEVELS = 17 }; /* mip levels of a texture of at most 65536 texels a side */
+
 typedef struct scene_texture {
     uint32_t width, height; /* texels */
     float *rgb;             /* linear RGB, width*height*3, row 0 at the top of the image */
+    uint32_t levels;        /* mip levels, level 0 included (box-filtered halvings down to 1 x 1) */
+    float *mip_rgb[SCENE_TEXTURE_MAX_LEVELS];       /* level l (mip_rgb[0] == rgb) */
+    uint32_t mip_width[SCENE_TEXTURE_MAX_LEVELS], mip_height[SCENE_TEXTURE_MAX_LEVELS];
     char path[256];         /* where it came from, for messages */
 } scene_texture;
 
@@ -118,6 +123,7 @@ typedef struct scene {
     float *corner_uv;      /* triangle_count * 6: the mesh's own UVs per corner (for textures), 0 if none */
     uint32_t *tri_mesh;    /* triangle_count: mesh index */
     float *tri_normal;     /* triangle_count * 3: unit geometric normal */
+    float *tri_texture_lod; /* triangle_count: log2 of its texture's texels per metre on it (-1000: none) */
 
     uint32_t mesh_count;
     scene_mesh *meshes;
@@ -175,8 +181,15 @@ void scene_free(scene *s);
 /* Total surface area of the scene's triangles, square metres. */
 double scene_surface_area(const scene *s);
 
-/* Samples a material's albedo (linear RGB) at triangle tri with barycentrics (u, v) of corners 1 and 2. */
+/* Samples a material's albedo (linear RGB) at triangle tri with barycentrics (u, v) of corners 1 and 2, from
+ * the texture's finest level (bilinear). */
 void scene_albedo(const scene *s, uint32_t tri, float u, float v, float out_rgb[3]);
+
+/* The same, filtered for a pixel whose footprint on the surface is 2^footprint_log2 metres: the texture's
+ * mip level whose texels are that size (bilinear within it), so textures do not alias and far surfaces
+ * read small, cache-friendly levels. */
+void scene_albedo_filtered(const scene *s, uint32_t tri, float u, float v, float footprint_log2,
+                           float out_rgb[3]);
 
 /* ---- what the scene needs ---------------------------------------------------------------------------- */
 

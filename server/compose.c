@@ -154,6 +154,7 @@ static void compose_rows(void *user, uint32_t task_index, uint32_t thread_index)
     float sky[3];
     for (int k = 0; k < 3; k++)
         sky[k] = s->sky_color[k] * s->sky_intensity;
+    const float log2_density = log2f(s->texel_density);
     for (uint32_t y = task_index * SRV_TILE; y < (task_index + 1) * SRV_TILE && y < f->height; y++)
         for (uint32_t x = 0; x < f->width; x++) {
             size_t p = (size_t)y * f->width + x;
@@ -172,7 +173,8 @@ static void compose_rows(void *user, uint32_t task_index, uint32_t thread_index)
                 if (facing > 0) /* seen from behind: light the side the viewer sees */
                     for (int k = 0; k < 3; k++)
                         shade_n[k] = -n[k];
-                scene_albedo(s, tri, u, v, albedo);
+                /* The pixel's footprint in metres: level-0 texels per pixel over texels per metre. */
+                scene_albedo_filtered(s, tri, u, v, view->footprint[p] - log2_density, albedo);
                 uint32_t island = s->tri_island[tri];
                 float tu, tv;
                 srv__island_uv(s, tri, u, v, &tu, &tv);

@@ -114,6 +114,36 @@ static void test_obj_texture_and_non_triangles(void **state)
     scene_free(s);
 }
 
+/* Texture mip levels: a 64 x 64 checker of single texels on a 1 m quad reads as its average (0.5) for a
+ * pixel 1 m wide and as pure black or white for a pixel far smaller than a texel. */
+static void test_texture_mip_levels(void **state)
+{
+    (void)state;
+    uint8_t checker[64 * 64 * 3];
+    for (int y = 0; y < 64; y++)
+        for (int x = 0; x < 64; x++)
+            memset(checker + 3 * (y * 64 + x), (x + y) & 1 ? 255 : 0, 3);
+    char msg[256];
+    assert_int_equal(scene_image_write_u8(fxt_tmp_path("checker64.png"), 64, 64, 3, checker, msg, sizeof msg), 0);
+    fxt_write_file("mip.mtl", "newmtl c\nKd 1 1 1\nmap_Kd checker64.png\n");
+    const char *obj = fxt_write_file("mip.obj", "mtllib mip.mtl\nusemtl c\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+                                                "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n");
+    scene *s = load_ok(obj);
+    assert_int_equal(s->texture_count, 1);
+    assert_int_equal(s->textures[0].levels, 7); /* 64, 32, ..., 1 */
+    assert_true(fabsf(s->tri_texture_lod[0] - 6.0f) < 1e-4f); /* 64 texels per metre */
+    float rgb[3];
+    scene_albedo_filtered(s, 0, 0.3f, 0.2f, 0.0f, rgb); /* a 1 m pixel: the 1 x 1 level */
+    assert_true(fabsf(rgb[0] - 0.5f) < 0.01f);
+    scene_albedo_filtered(s, 0, 0.3f, 0.2f, -4.0f, rgb); /* 1/16 m: the 4 x 4 level, still the average */
+    assert_true(fabsf(rgb[0] - 0.5f) < 0.01f);
+    /* Far below a texel, at a texel centre: level 0, pure black or white. */
+    float u = (10.5f / 64.0f) - (3.5f / 64.0f), v = 3.5f / 64.0f; /* texture uv (10.5, 3.5)/64 on triangle 0 */
+    scene_albedo_filtered(s, 0, u, v, -12.0f, rgb);
+    assert_true(rgb[0] < 0.01f || rgb[0] > 0.99f);
+    scene_free(s);
+}
+
 /* A texture that is not there: the material keeps its colour, the miss is counted, the load succeeds. */
 static void test_missing_texture_counted(void **state)
 {
@@ -295,6 +325,7 @@ int main(void)
         cmocka_unit_test(test_ply_and_gz),
         cmocka_unit_test(test_bad_gz),
         cmocka_unit_test(test_obj_texture_and_non_triangles),
+        cmocka_unit_test(test_texture_mip_levels),
         cmocka_unit_test(test_missing_texture_counted),
         cmocka_unit_test(test_builder_cleaning),
         cmocka_unit_test(test_mirrored_transform_keeps_winding),
