@@ -347,8 +347,9 @@ static json_t *frame_json(const srv_frame_stats *st, uint32_t viewers, const srv
     json_object_set_new(o, "requested_texels", json_integer((json_int_t)st->requested_texels));
     json_object_set_new(o, "viewer_requested_texels", per_viewer);
     json_object_set_new(o, "unique_texels", json_integer((json_int_t)st->unique_texels));
-    json_object_set_new(o, "sharing_ratio",
-                        json_real(st->unique_texels ? (double)st->requested_texels / (double)st->unique_texels : 0));
+    json_object_set_new(o, "sharing_ratio", st->unique_texels
+                                                ? json_real((double)st->requested_texels / (double)st->unique_texels)
+                                                : json_null());
     json_object_set_new(o, "rays", rays_json(st->rays, st->visibility_rays));
     json_object_set_new(o, "texels_updated", json_pack("{s:I,s:I}", "shadow", (json_int_t)st->texels_updated[SCENE_FX_SHADOW],
                                                        "ao", (json_int_t)st->texels_updated[SCENE_FX_AO]));
@@ -590,7 +591,9 @@ int srv_cmd_sim(int argc, char **argv)
     json_object_set_new(sum, "level_bias", bias);
     json_object_set_new(sum, "requested_texels", json_integer((json_int_t)tot.requested));
     json_object_set_new(sum, "unique_texels", json_integer((json_int_t)tot.unique));
-    json_object_set_new(sum, "sharing_ratio", json_real(tot.unique ? (double)tot.requested / (double)tot.unique : 0));
+    /* No cache, or nothing visible: nothing is requested, so there is no ratio (null, not 0). */
+    json_object_set_new(sum, "sharing_ratio",
+                        tot.unique ? json_real((double)tot.requested / (double)tot.unique) : json_null());
     json_object_set_new(sum, "rays", rays_json(tot.rays, tot.visibility_rays));
     json_object_set_new(sum, "texels_updated", json_pack("{s:I,s:I}", "shadow", (json_int_t)tot.texels_updated[SCENE_FX_SHADOW],
                                                          "ao", (json_int_t)tot.texels_updated[SCENE_FX_AO]));
@@ -632,8 +635,13 @@ int srv_cmd_sim(int argc, char **argv)
         for (int fx = SCENE_FX_SHADOW; fx < SCENE_FX_COUNT; fx++)
             if (!desc.effect_on[fx])
                 printf("  left out %s: %s\n", scene_effect_name((scene_effect)fx), reasons[fx]);
-        printf("texels:     %llu requested, %llu unique: sharing ratio %.2f\n", (unsigned long long)tot.requested,
-               (unsigned long long)tot.unique, tot.unique ? (double)tot.requested / (double)tot.unique : 0.0);
+        if (o.no_cache)
+            printf("texels:     none (no cache: every pixel traces its own rays)\n");
+        else if (!tot.unique)
+            printf("texels:     none requested (no viewer saw a surface)\n");
+        else
+            printf("texels:     %llu requested, %llu unique: sharing ratio %.2f\n", (unsigned long long)tot.requested,
+                   (unsigned long long)tot.unique, (double)tot.requested / (double)tot.unique);
         printf("rays:       %llu visibility, %llu shadow, %llu AO (%.0f effect rays per frame)\n",
                (unsigned long long)tot.visibility_rays, (unsigned long long)tot.rays[SCENE_FX_SHADOW],
                (unsigned long long)tot.rays[SCENE_FX_AO], tot.frames ? (double)effect_rays / tot.frames : 0.0);
