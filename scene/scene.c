@@ -70,9 +70,11 @@ void scene_free(scene *s)
     free(s->tri_normal);
     free(s->meshes);
     free(s->materials);
-    for (uint32_t i = 0; i < s->texture_count; i++)
-        for (uint32_t l = 0; l < s->textures[i].levels; l++)
-            free(s->textures[i].mip_rgb[l]); /* mip_rgb[0] is rgb */
+    for (uint32_t i = 0; i < s->texture_count; i++) {
+        free(s->textures[i].rgb); /* level 0 (mip_rgb[0], when the chain was built) */
+        for (uint32_t l = 1; l < s->textures[i].levels; l++)
+            free(s->textures[i].mip_rgb[l]);
+    }
     free(s->tri_texture_lod);
     free(s->textures);
     free(s->lights);
@@ -637,8 +639,9 @@ scene *scene_load(const char *path, const scene_load_desc *desc, scene_error *er
  * bottom of the image. */
 static void texture_sample(const scene_texture *tex, uint32_t level, float u, float v, float out[3])
 {
-    const float *texels = tex->mip_rgb[level];
-    uint32_t width = tex->mip_width[level], height = tex->mip_height[level];
+    /* Level 0 straight from rgb: a texture filled by hand may have no mip chain. */
+    const float *texels = level ? tex->mip_rgb[level] : tex->rgb;
+    uint32_t width = level ? tex->mip_width[level] : tex->width, height = level ? tex->mip_height[level] : tex->height;
     if (!isfinite(u) || !isfinite(v)) {
         u = 0;
         v = 0;
@@ -686,7 +689,7 @@ void scene_albedo_filtered(const scene *s, uint32_t tri, float u, float v, float
     const scene_texture *tex = &s->textures[m->texture];
     float level = footprint_log2 + (s->tri_texture_lod ? s->tri_texture_lod[tri] : -1000.0f);
     uint32_t mip = 0;
-    if (level > 0.5f)
+    if (level > 0.5f && tex->levels > 1)
         mip = level >= (float)(tex->levels - 1) ? tex->levels - 1 : (uint32_t)(level + 0.5f);
     float texel[3];
     texture_sample(tex, mip, tu, tv, texel);
