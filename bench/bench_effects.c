@@ -15,24 +15,7 @@
 #include <string.h>
 #include <time.h>
 
-/* Monotonic clock, seconds. */
-static double now_seconds(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
-}
-
-/* Sorts five doubles in place (insertion sort) for the median. */
-static void sort_small(double *values, int count)
-{
-    for (int i = 1; i < count; i++)
-        for (int j = i; j > 0 && values[j - 1] > values[j]; j--) {
-            double keep = values[j];
-            values[j] = values[j - 1];
-            values[j - 1] = keep;
-        }
-}
+#include "bench_util.h"
 
 enum { RAW_RAYS = 1 << 20, RAW_BATCH = 256 };
 
@@ -92,14 +75,14 @@ static double raw_ao_rate(const scene *s, scene_rt *rt, const fx_block_job *jobs
     struct RTCIntersectContext ctx;
     double best = 0;
     for (int run = 0; run < 5; run++) {
-        double t0 = now_seconds();
+        double t0 = (bench_now_ms() * 1e-3);
         for (uint32_t first = 0; first < n; first += RAW_BATCH) {
             uint32_t count = n - first < RAW_BATCH ? n - first : RAW_BATCH;
             memcpy(batch, rays + first, count * sizeof *batch);
             rtcInitIntersectContext(&ctx);
             rtcOccluded1M(scene_rt_handle(rt), &ctx, batch, count, sizeof *batch);
         }
-        double rate = (double)n / (now_seconds() - t0) * 1e-6;
+        double rate = (double)n / ((bench_now_ms() * 1e-3) - t0) * 1e-6;
         best = rate > best ? rate : best;
     }
     free(rays);
@@ -137,7 +120,7 @@ int main(int argc, char **argv)
         return 1;
     }
     uint64_t texels = 0;
-    double t0 = now_seconds();
+    double t0 = (bench_now_ms() * 1e-3);
     uint32_t b = 0;
     for (uint32_t i = 0; i < s->island_count; i++) {
         uint32_t width = s->islands[i].width, height = s->islands[i].height;
@@ -157,7 +140,7 @@ int main(int argc, char **argv)
                 texels += (uint64_t)__builtin_popcountll(mask);
             }
     }
-    double lookup_seconds = now_seconds() - t0;
+    double lookup_seconds = (bench_now_ms() * 1e-3) - t0;
     printf("scene %s: %u triangles, %u islands, %u blocks, %llu texels; lookup %.1f Mtexels/s\n", s->source,
            s->triangle_count, s->island_count, block_count, (unsigned long long)texels,
            (double)texels / lookup_seconds * 1e-6);
@@ -170,30 +153,29 @@ int main(int argc, char **argv)
             jobs[j].payload = ao_payload + (size_t)64 * 4 * j;
             jobs[j].key = (jobs[j].key & ~(0xfull << 60)) | ((uint64_t)FX_AO << 60);
         }
-        t0 = now_seconds();
+        t0 = (bench_now_ms() * 1e-3);
         uint64_t rays = 0;
         for (int frame = 0; frame < 4; frame++)
             rays += fx_ao_update(&ctx, jobs, block_count, 16);
-        ao_rates[run] = (double)rays / (now_seconds() - t0) * 1e-6;
+        ao_rates[run] = (double)rays / ((bench_now_ms() * 1e-3) - t0) * 1e-6;
 
         for (uint32_t j = 0; j < block_count; j++) {
             jobs[j].payload = shadow_payload + (size_t)64 * shadow_bytes * j;
             jobs[j].key = (jobs[j].key & ~(0xfull << 60)) | ((uint64_t)FX_SHADOW << 60);
         }
-        t0 = now_seconds();
+        t0 = (bench_now_ms() * 1e-3);
         rays = fx_shadow_update(&ctx, jobs, block_count);
-        shadow_rates[run] = (double)rays / (now_seconds() - t0) * 1e-6;
+        shadow_rates[run] = (double)rays / ((bench_now_ms() * 1e-3) - t0) * 1e-6;
     }
-    sort_small(ao_rates, 5);
-    sort_small(shadow_rates, 5);
+
     double raw = raw_ao_rate(s, rt, jobs, block_count);
     printf("raw rtcOccluded1M over the first %d AO rays of the same texels (256-ray streams, best of 5): %.2f "
            "Mrays/s; fx_ao_update (best of 5) / raw = %.2f\n",
-           RAW_RAYS, raw, raw > 0 ? ao_rates[4] / raw : 0.0);
+           RAW_RAYS, raw, raw > 0 ? bench_quantile(ao_rates, 5, 1.0) / raw : 0.0);
     printf("fx_ao_update (4 frames x 16 samples, radius %.3g m): %.2f Mrays/s (median of 5, 1 thread)\n",
-           (double)s->ao_radius, ao_rates[2]);
+           (double)s->ao_radius, bench_quantile(ao_rates, 5, 0.5));
     printf("fx_shadow_update (%u lights x 16 rays): %.2f Mrays/s (median of 5, 1 thread)\n", s->light_count,
-           shadow_rates[2]);
+           bench_quantile(shadow_rates, 5, 0.5));
 
     free(jobs);
     free(lookup);

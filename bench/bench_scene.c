@@ -21,27 +21,9 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "bench_util.h"
+
 enum { MAX_REPS = 101 };
-
-static double now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
-}
-
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-/* Median of count values (sorted in place). */
-static double median(double *values, int count)
-{
-    qsort(values, (size_t)count, sizeof *values, cmp_double);
-    return count % 2 ? values[count / 2] : 0.5 * (values[count / 2 - 1] + values[count / 2]);
-}
 
 enum { ST_LOAD = 0, ST_WELD, ST_TEXTURES, ST_ISLANDS, ST_SCENE_LOAD_TOTAL, ST_BVH, ST_COUNT };
 static const char *const stage_names[ST_COUNT] = {"load",  "weld", "textures", "islands",
@@ -63,9 +45,9 @@ static int run_scene(const char *path, int reps, row *out)
     snprintf(out->name, sizeof out->name, "%s", base ? base + 1 : path);
     for (int r = 0; r < reps; r++) {
         scene_error err;
-        double t0 = now_ms();
+        double t0 = bench_now_ms();
         scene *s = scene_load(path, NULL, &err);
-        double t1 = now_ms();
+        double t1 = bench_now_ms();
         if (!s) {
             fprintf(stderr, "bench_scene: %s: %s\n", path, err.msg);
             return -1;
@@ -112,7 +94,7 @@ static int run_scene(const char *path, int reps, row *out)
             if (samples[st][r] > out->max_ms[st])
                 out->max_ms[st] = samples[st][r];
         }
-        out->median_ms[st] = median(samples[st], reps);
+        out->median_ms[st] = bench_quantile(samples[st], reps, 0.5);
     }
     out->reps = reps;
     return 0;

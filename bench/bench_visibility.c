@@ -31,36 +31,9 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "bench_util.h"
+
 enum { TILE = 16, MAX_REPS = 201 };
-
-static double now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
-}
-
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-static double minimum(const double *values, int count)
-{
-    double m = values[0];
-    for (int i = 1; i < count; i++)
-        m = values[i] < m ? values[i] : m;
-    return m;
-}
-
-static double median(const double *values, int count)
-{
-    double tmp[MAX_REPS];
-    memcpy(tmp, values, sizeof(double) * (size_t)count);
-    qsort(tmp, (size_t)count, sizeof *tmp, cmp_double);
-    return count % 2 ? tmp[count / 2] : 0.5 * (tmp[count / 2 - 1] + tmp[count / 2]);
-}
 
 /* The raw baseline's state: the frame, precomputed directions (x, y, z planes) and the hit buffers. */
 typedef struct raw_job {
@@ -183,7 +156,7 @@ int main(int argc, char **argv)
         path = "default";
     }
     scene_error err;
-    double t0 = now_ms();
+    double t0 = bench_now_ms();
     scene *s = scene_load(path, NULL, &err);
     if (!s) {
         fprintf(stderr, "bench_visibility: %s\n", err.msg);
@@ -207,7 +180,7 @@ int main(int argc, char **argv)
     size_t pixels = (size_t)width * height;
     printf("scene %s: %u triangles, loaded and built in %.0f ms; camera (%g,%g,%g) -> (%g,%g,%g), fov %g; "
            "%ux%u, 1 viewer, %d repetitions\n",
-           path, s->triangle_count, now_ms() - t0, cam.position[0], cam.position[1], cam.position[2],
+           path, s->triangle_count, bench_now_ms() - t0, cam.position[0], cam.position[1], cam.position[2],
            cam.target[0], cam.target[1], cam.target[2], cam.fov_deg, width, height, reps);
 
     /* Precomputed directions and the raw hit buffers. */
@@ -269,15 +242,15 @@ int main(int argc, char **argv)
             }
             if (!only || !strcmp(only, "raw")) {
                 job.generate = false;
-                double a = now_ms();
+                double a = bench_now_ms();
                 srv_pool_run(pool, tiles, raw_tile, &job);
-                raw_ms[r] = now_ms() - a;
+                raw_ms[r] = bench_now_ms() - a;
             }
             if (!only) {
                 job.generate = true;
-                double a = now_ms();
+                double a = bench_now_ms();
                 srv_pool_run(pool, tiles, raw_tile, &job);
-                gen_ms[r] = now_ms() - a;
+                gen_ms[r] = bench_now_ms() - a;
             }
             ratio_raw[r] = raw_ms[r] / vis_ms[r]; /* visibility throughput / raw throughput */
             ratio_gen[r] = gen_ms[r] / vis_ms[r];
@@ -285,11 +258,11 @@ int main(int argc, char **argv)
         raw_hits = 0;
         for (size_t p = 0; p < pixels; p++)
             raw_hits += tri[p] != 0xFFFFFFFFu;
-        double mv = median(vis_ms, reps), mr = median(raw_ms, reps), mg = median(gen_ms, reps);
+        double mv = bench_quantile(vis_ms, reps, 0.5), mr = bench_quantile(raw_ms, reps, 0.5), mg = bench_quantile(gen_ms, reps, 0.5);
         printf("| %u | %.2f | %.1f | %.2f | %.1f | %.2f | %.1f | %.2f | %.2f | %.1f / %.1f / %.1f | %.2f | %llu / %llu |\n",
                threads, mv, (double)pixels / mv / 1e3, mr, (double)pixels / mr / 1e3, mg, (double)pixels / mg / 1e3,
-               median(ratio_raw, reps), median(ratio_gen, reps), minimum(vis_ms, reps), minimum(raw_ms, reps),
-               minimum(gen_ms, reps), median(compose_ms, reps),
+               bench_quantile(ratio_raw, reps, 0.5), bench_quantile(ratio_gen, reps, 0.5), bench_quantile(vis_ms, reps, 0.0), bench_quantile(raw_ms, reps, 0.0),
+               bench_quantile(gen_ms, reps, 0.0), bench_quantile(compose_ms, reps, 0.5),
                (unsigned long long)vis_hits, (unsigned long long)raw_hits);
         fflush(stdout);
         srv_pool_free(pool);

@@ -283,16 +283,21 @@ void srv_loop_memory(const srv_loop *loop, srv_memory *out)
 {
     memset(out, 0, sizeof *out);
     const srv_loop_desc *d = &loop->desc;
+    uint64_t cache_total = 0; /* exact: every byte of the cache went through its allocator */
     if (loop->osc) {
         osc_memory_report m;
         osc_memory(loop->osc, &m);
+        cache_total = m.total_bytes;
         out->table = m.table_key_bytes + m.table_value_bytes + m.cache_struct_bytes;
         for (int fx = 0; fx < SCENE_FX_COUNT && fx < (int)OSC_MAX_EFFECTS; fx++) {
             out->pools_reserved[fx] = m.effects[fx].payload_reserved_bytes;
             out->pools_in_use[fx] = m.effects[fx].payload_in_use_bytes;
             out->block_meta[fx] = m.effects[fx].block_meta_bytes + m.effects[fx].list_bytes;
-            if (loop->viewer_bits[fx])
-                out->block_meta[fx] += sizeof(uint64_t) * osc_pool_capacity(loop->osc, (uint32_t)fx);
+            if (loop->viewer_bits[fx]) {
+                uint64_t bits = sizeof(uint64_t) * osc_pool_capacity(loop->osc, (uint32_t)fx);
+                out->block_meta[fx] += bits;
+                cache_total += bits;
+            }
         }
     }
     size_t pixels = (size_t)d->width * d->height;
@@ -310,16 +315,5 @@ void srv_loop_memory(const srv_loop *loop, srv_memory *out)
     out->queues += loop->fx_jobs_capacity * sizeof(fx_block_job);
     out->queues += loop->queue_capacity * (2 * sizeof(uint64_t) + sizeof(uint32_t)) +
                    loop->chunk_capacity * sizeof(uint64_t);
-    out->total = out->table + out->viewers + out->queues;
-    for (int fx = 0; fx < SCENE_FX_COUNT; fx++)
-        out->total += out->pools_reserved[fx] + out->block_meta[fx];
-    if (loop->osc) {
-        /* The cache's own total is exact (every byte through its allocator); use it for the sum. */
-        osc_memory_report m;
-        osc_memory(loop->osc, &m);
-        uint64_t counted = out->table;
-        for (int fx = 0; fx < SCENE_FX_COUNT; fx++)
-            counted += out->pools_reserved[fx] + m.effects[fx].block_meta_bytes + m.effects[fx].list_bytes;
-        out->total += m.total_bytes - counted;
-    }
+    out->total = cache_total + out->viewers + out->queues;
 }
