@@ -112,7 +112,7 @@ int main(int argc, char **argv)
         block_count += ((s->islands[i].width + 7) / 8) * ((s->islands[i].height + 7) / 8);
     fx_block_job *jobs = calloc(block_count, sizeof *jobs);
     uint32_t *lookup = calloc((size_t)block_count * 64, sizeof *lookup);
-    uint32_t shadow_bytes = fx_describe(FX_SHADOW, s).texel_bytes;
+    uint32_t shadow_bytes = fx_effect_shadow.texel_bytes(s);
     uint8_t *ao_payload = calloc((size_t)block_count * 64, 4);
     uint8_t *shadow_payload = calloc((size_t)block_count * 64, shadow_bytes);
     if (!jobs || !lookup || !ao_payload || !shadow_payload) {

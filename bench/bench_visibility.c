@@ -18,7 +18,7 @@
  * default camera. --only runs just one variant in a loop (for profiling with perf or callgrind). */
 #define _GNU_SOURCE
 #include "camera.h"
-#include "frame.h"
+#include "engine.h"
 #include "pool.h"
 #include "scene.h"
 
@@ -209,10 +209,17 @@ int main(int argc, char **argv)
            "|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (int ti = 0; ti < thread_count_n; ti++) {
         uint32_t threads = thread_list[ti];
-        srv_loop_desc desc = {.s = s, .rt = rt, .viewer_count = 1, .width = width, .height = height,
-                              .threads = threads};
+        srv_loop_desc desc = {.s = s, .rt = rt, .threads = threads};
         char msg[256];
-        srv_loop *loop = srv_loop_create(&desc, msg, sizeof msg);
+        srv_loop *loop = NULL;
+        srv_viewer_id viewer = {0};
+        if (srv_loop_create(&desc, &loop, msg, sizeof msg) == FXC_OK &&
+            (srv_viewer_add(loop, &(srv_viewer_desc){.width = width, .height = height}, &viewer) != FXC_OK ||
+             srv_viewer_set_camera(loop, viewer, &cam) != FXC_OK)) {
+            snprintf(msg, sizeof msg, "cannot add the viewer");
+            srv_loop_free(loop);
+            loop = NULL;
+        }
         srv_pool *pool = srv_pool_create(threads);
         if (!loop || !pool) {
             fprintf(stderr, "bench_visibility: %s\n", loop ? "cannot start the pool" : msg);
@@ -226,14 +233,14 @@ int main(int argc, char **argv)
         srv_frame_stats st;
         /* Warm-up: one of each (page faults, caches). */
         if (!only || !strcmp(only, "vis"))
-            srv_loop_frame(loop, &cam, &st, msg, sizeof msg);
+            srv_loop_frame(loop, &st);
         if (!only || !strcmp(only, "raw"))
             srv_pool_run(pool, tiles, raw_tile, &job);
         for (int r = 0; r < reps; r++) {
             vis_ms[r] = raw_ms[r] = gen_ms[r] = compose_ms[r] = NAN;
             if (!only || !strcmp(only, "vis")) {
-                if (!srv_loop_frame(loop, &cam, &st, msg, sizeof msg)) {
-                    fprintf(stderr, "bench_visibility: %s\n", msg);
+                if (srv_loop_frame(loop, &st) != FXC_OK) {
+                    fprintf(stderr, "bench_visibility: frame failed\n");
                     return 1;
                 }
                 vis_ms[r] = st.time_ms[SRV_STAGE_VISIBILITY];

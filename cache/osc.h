@@ -26,6 +26,8 @@
 #ifndef FXC_OSC_H
 #define FXC_OSC_H
 
+#include "fxc_result.h"
+
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -170,16 +172,17 @@ void osc_footprint_trilinear(const osc_island_extent *island, uint32_t level, fl
 
 /* ---- results -------------------------------------------------------------------------------------- */
 
-/* One X-macro table for every result code: name, value, text. Run-time failures only (pool exhausted is a
+/* The cache's result codes: its own names and texts, the shared values of common/fxc_result.h (name, value,
+ * text). Run-time failures only (pool exhausted is a
  * normal, counted event the caller degrades on); programming errors are asserted instead. */
 #define OSC_RESULT_LIST(X)                                                                                 \
-    X(OSC_OK, 0, "ok")                                                                                     \
-    X(OSC_ERR_INVALID_DESC, -1, "invalid cache description")                                              \
-    X(OSC_ERR_OUT_OF_MEMORY, -2, "out of memory while creating the cache")                                 \
-    X(OSC_ERR_NO_POOL, -3, "the key's effect has no block pool (texel_bytes 0 in the description)")       \
-    X(OSC_ERR_POOL_EXHAUSTED, -4, "every block of the effect's pool is requested this frame")            \
-    X(OSC_ERR_TABLE_FULL, -5, "the hash table is at its maximum load")                                    \
-    X(OSC_ERR_NOT_FOUND, -6, "the key is not resident")
+    X(OSC_OK, FXC_OK, "ok")                                                                                \
+    X(OSC_ERR_INVALID_DESC, FXC_ERR_INVALID, "invalid cache description")                                \
+    X(OSC_ERR_OUT_OF_MEMORY, FXC_ERR_NOMEM, "out of memory while creating the cache")                    \
+    X(OSC_ERR_NO_POOL, FXC_ERR_NO_POOL, "the key's effect has no block pool (texel_bytes 0 in the description)") \
+    X(OSC_ERR_POOL_EXHAUSTED, FXC_ERR_POOL_EXHAUSTED, "every block of the effect's pool is requested this frame") \
+    X(OSC_ERR_TABLE_FULL, FXC_ERR_TABLE_FULL, "the hash table is at its maximum load")                   \
+    X(OSC_ERR_NOT_FOUND, FXC_ERR_NOT_FOUND, "the key is not resident")
 
 typedef enum osc_result {
 #define OSC_RESULT_ENUM(name, value, text) name = value,

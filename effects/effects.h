@@ -31,19 +31,6 @@ enum {
 typedef enum fx_filter { FX_FILTER_POINT = 0, FX_FILTER_BILINEAR, FX_FILTER_TRILINEAR } fx_filter;
 typedef enum fx_policy { FX_UPDATE_ONCE = 0, FX_UPDATE_PROGRESSIVE, FX_UPDATE_CONTINUOUS } fx_policy;
 
-/* What the frame loop needs to know of an effect. */
-typedef struct fx_info {
-    const char *name;        /* "triangle_lookup", "shadow", "ao" */
-    uint32_t id;             /* FX_* */
-    uint32_t texel_bytes;    /* for this scene (shadow: 2 per light) */
-    int32_t level_bias;      /* default bias in levels (coarser is positive) */
-    fx_filter filter;        /* how compositing reads it */
-    fx_policy policy;        /* once (shadow, lookup), progressive until converged (AO) */
-} fx_info;
-
-/* The description of effect id for scene s (texel_bytes depends on the light count). */
-fx_info fx_describe(uint32_t id, const scene *s);
-
 /* ---- triangle lookup -------------------------------------------------------------------------------- */
 
 /* A lookup texel, 32 bits: bits 0..7 the triangle's index inside its island, bits 8..19 and 20..31 the
@@ -115,6 +102,111 @@ float fx_ao_eval_point(const fx_context *ctx, const float pos[3], const float no
 
 /* The direction towards light l from pos and the distance to it (INFINITY for directional lights). */
 void fx_light_direction(const scene_light *light, const float pos[3], float dir[3], float *distance);
+
+/* ---- effects as plug-ins: one table of data and callbacks per effect ---------------------------------- */
+
+enum {
+    FX_MAX_EFFECTS = 16,  /* the on-surface key's 4-bit effect field */
+    FX_RUN_PIXELS = 64,   /* compose hands an effect at most this many pixels per shade call */
+    FX_MAX_TAPS = 8,      /* texels one filtered read touches (trilinear: 8) */
+};
+
+/* The texels one filtered read of a pixel touches, restricted to texels holding data, weights summing to 1
+ * (count 0: no data yet; the effect then leaves its term untouched). at_x, at_y: where the pixel lies
+ * relative to each tap's texel, in that texel's units (0..1 inside it), for sub-texel use of the data. */
+typedef struct fx_taps {
+    const void *texel[FX_MAX_TAPS];
+    float weight[FX_MAX_TAPS];
+    float at_x[FX_MAX_TAPS], at_y[FX_MAX_TAPS];
+    uint32_t count;
+} fx_taps;
+
+/* A visible point as compose sees it (for the no-cache evaluation and for world-space effects). */
+typedef struct fx_point {
+    float position[3];  /* world (scene-local) position */
+    float normal[3];    /* unit geometric normal of the hit triangle (its front side) */
+    float dpdx[3], dpdy[3]; /* the pixel's footprint on the surface: offsets to the next pixel right and down */
+    uint32_t triangle;  /* scene triangle */
+    float u, v;         /* barycentrics of corners 1 and 2 */
+    uint64_t pixel_id;  /* seeds the no-cache random numbers */
+} fx_point;
+
+/* The shading terms of a run of pixels that compose combines as
+ *     radiance = albedo * (sum over lights l of E_l * cos_l * light_visibility[l] + sky * sky_visibility
+ *                          + indirect)
+ * Compose starts every pixel unshadowed (1), unoccluded (1) and with no indirect light (0); each effect's
+ * shade multiplies the visibility it knows and adds the light it brings. The arrays hold `count` pixels. */
+typedef struct fx_shade_run {
+    uint32_t count;               /* pixels in the run, <= FX_RUN_PIXELS */
+    uint32_t light_count;         /* the scene's lights */
+    const fx_taps *taps;          /* per pixel: this effect's filtered texels (cached mode) */
+    const fx_point *points;       /* per pixel: the visible point */
+    float *light_visibility;      /* count * light_count, pixel-major */
+    float *sky_visibility;        /* count */
+    float *indirect;              /* count * 3, linear RGB irradiance */
+} fx_shade_run;
+
+/* The terms of one pixel in no-cache mode (same meaning as fx_shade_run's, one pixel). */
+typedef struct fx_shade_point {
+    float *light_visibility; /* light_count */
+    float *sky_visibility;
+    float *indirect;         /* 3 */
+} fx_shade_point;
+
+/* An effect: what the frame loop, the needs decision, the command line and the statistics know of it.
+ * Adding an effect is one new file defining one of these and one line in the registry (fx_registry.c);
+ * a program may also hand the loop its own list (tests do). Callbacks a kind of effect has no use for are
+ * NULL. Every callback is called from any thread with distinct blocks or pixels and must be deterministic
+ * (random numbers from hashes of seed, key, texel and sample index). */
+typedef struct fx_effect {
+    const char *name;             /* "shadow": command line, statistics, summaries */
+    const char *alias;            /* another accepted spelling on the command line ("shadows"), or NULL */
+    scene_cache_kind cache;       /* where it lives: SCENE_CACHE_ON_SURFACE or SCENE_CACHE_WORLD_SPACE */
+    int32_t level_bias;           /* default level bias (coarser is positive) */
+    fx_filter filter;             /* how compose reads it */
+    fx_policy policy;             /* once, progressive to max_samples, continuous */
+    uint32_t max_samples;         /* progressive: samples at which a texel is converged */
+    const char *depends_on;       /* the effect (by name) whose texels of the same block every update needs
+                                     (every on-surface effect: "triangle_lookup"), or NULL */
+
+    /* Payload bytes per texel for scene s (> 0, <= 1024). */
+    uint32_t (*texel_bytes)(const scene *s);
+    /* Whether scene s needs the effect, with a reason a person can read. NULL: needed exactly when an
+     * effect that depends on it runs (the triangle lookup). */
+    bool (*needs)(const scene *s, char *why, size_t why_cap);
+    /* Upper bound of the rays one update of one texel traces (the ray budget is spent with it before
+     * anything is traced); `samples` is the progressive step. */
+    uint64_t (*cost)(const scene *s, uint32_t samples);
+    /* Updates the texels of every job's mask; returns the rays traced. */
+    uint64_t (*update)(const fx_context *ctx, const fx_block_job *jobs, uint32_t count, uint32_t samples);
+    /* Progressive effects: the samples a texel holds (converged at max_samples). NULL: a texel with data
+     * is final. */
+    uint32_t (*texel_samples)(const void *texel);
+    /* Writes one texel at level l >= 1 from its four final texels of level l - 1 (resampling queue).
+     * NULL: no resampling. */
+    void (*resample)(const fx_context *ctx, const void *const finer[4], void *texel);
+    /* Compose: multiplies or adds this effect's term for a run of pixels from their taps. NULL: the
+     * effect shades nothing itself (the triangle lookup). */
+    void (*shade)(const fx_context *ctx, const fx_shade_run *run);
+    /* The no-cache baseline: the same term evaluated at one visible point with the sample counts the cache
+     * converges to; returns the rays traced. */
+    uint64_t (*eval)(const fx_context *ctx, const fx_point *point, fx_shade_point *out);
+} fx_effect;
+
+/* The built-in effects in registry order (the on-surface key's effect field is the index):
+ * triangle_lookup, shadow, ao. *count receives the number. */
+const fx_effect *const *fx_registry(uint32_t *count);
+
+/* The index of the effect named `name` (or its alias) in effects[0..count), or -1. */
+int32_t fx_find(const fx_effect *const *effects, uint32_t count, const char *name);
+
+/* Which of effects[0..count) scene s needs, with a reason for each (why[i], why_cap bytes each): an
+ * effect with a needs callback decides for itself; one without is needed exactly when a needed effect
+ * depends on it. */
+void fx_needs(const fx_effect *const *effects, uint32_t count, const scene *s, bool *needed, char (*why)[200]);
+
+/* The built-in tables (each defined beside its effect's code). */
+extern const fx_effect fx_effect_triangle_lookup, fx_effect_shadow, fx_effect_ao;
 
 #ifdef __cplusplus
 }

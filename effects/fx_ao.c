@@ -160,3 +160,85 @@ float fx_ao_eval_point(const fx_context *ctx, const float pos[3], const float no
     }
     return (float)((double)unoccluded / (double)samples);
 }
+
+/* ---- the effect table ------------------------------------------------------------------------------- */
+
+static uint32_t ao_texel_bytes(const scene *s)
+{
+    (void)s;
+    return 4;
+}
+
+static bool ao_needs(const scene *s, char *why, size_t why_cap)
+{
+    return fx__scene_needs(s, SCENE_FX_AO, why, why_cap);
+}
+
+static uint64_t ao_cost(const scene *s, uint32_t samples)
+{
+    (void)s;
+    return samples;
+}
+
+static uint64_t ao_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count, uint32_t samples)
+{
+    return fx_ao_update(ctx, jobs, count, samples);
+}
+
+static uint32_t ao_texel_samples(const void *texel)
+{
+    return fx_ao_count(texel, 0);
+}
+
+/* The mean of four converged finer texels, itself converged. */
+static void ao_resample(const fx_context *ctx, const void *const finer[4], void *texel)
+{
+    (void)ctx;
+    float mean = 0;
+    for (int c = 0; c < 4; c++)
+        mean += 0.25f * fx_ao_sample(finer[c], 0);
+    fx__put_u16(texel, (uint16_t)lrintf(fminf(fmaxf(mean, 0.0f), 1.0f) * 65535.0f));
+    fx__put_u16((uint8_t *)texel + 2, FX_AO_MAX_SAMPLES);
+}
+
+/* The sky's visibility: the filtered unoccluded fraction. */
+static void ao_shade(const fx_context *ctx, const fx_shade_run *run)
+{
+    (void)ctx;
+    for (uint32_t i = 0; i < run->count; i++) {
+        const fx_taps *taps = &run->taps[i];
+        if (taps->count == 0)
+            continue;
+        float ao = 0;
+        for (uint32_t t = 0; t < taps->count; t++)
+            ao += taps->weight[t] * fx_ao_sample(taps->texel[t], 0);
+        run->sky_visibility[i] *= ao;
+    }
+}
+
+static uint64_t ao_eval(const fx_context *ctx, const fx_point *point, fx_shade_point *out)
+{
+    uint64_t rays = 0;
+    *out->sky_visibility *= fx_ao_eval_point(ctx, point->position, point->normal, FX_AO_MAX_SAMPLES,
+                                             point->pixel_id, &rays);
+    return rays;
+}
+
+/* Ambient occlusion: progressive to 64 cosine-weighted samples per texel, one level coarser by default. */
+const fx_effect fx_effect_ao = {
+    .name = "ao",
+    .cache = SCENE_CACHE_ON_SURFACE,
+    .level_bias = 1, /* low frequency: one level coarser */
+    .filter = FX_FILTER_BILINEAR,
+    .policy = FX_UPDATE_PROGRESSIVE,
+    .max_samples = FX_AO_MAX_SAMPLES,
+    .depends_on = "triangle_lookup",
+    .texel_bytes = ao_texel_bytes,
+    .needs = ao_needs,
+    .cost = ao_cost,
+    .update = ao_update,
+    .texel_samples = ao_texel_samples,
+    .resample = ao_resample,
+    .shade = ao_shade,
+    .eval = ao_eval,
+};

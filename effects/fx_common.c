@@ -1,45 +1,8 @@
-/* What every effect shares: the effect descriptions the frame loop reads (bytes per texel, level bias,
- * filter, policy), the mapping from a point of island UV to the surface (through the triangle lookup), and
- * the direction towards a light. */
+/* What every effect shares: the mapping from a point of island UV to the surface (through the triangle
+ * lookup), and the direction towards a light. The effects' own descriptions are their tables (effects.h). */
 #include "fx_internal.h"
 
 #include <string.h>
-
-fx_info fx_describe(uint32_t id, const scene *s)
-{
-    fx_info info;
-    memset(&info, 0, sizeof info);
-    info.id = id;
-    switch (id) {
-    case FX_TRI_LOOKUP:
-        info.name = "triangle_lookup";
-        info.texel_bytes = 4;
-        info.level_bias = 0;
-        info.filter = FX_FILTER_POINT;
-        info.policy = FX_UPDATE_ONCE;
-        break;
-    case FX_SHADOW: {
-        uint32_t lights = s ? s->light_count : 0;
-        info.name = "shadow";
-        info.texel_bytes = 2 * (lights > 0 ? lights : 1);
-        info.level_bias = 0; /* hard shadow edges are high frequency */
-        info.filter = FX_FILTER_BILINEAR;
-        info.policy = FX_UPDATE_ONCE;
-        break;
-    }
-    case FX_AO:
-        info.name = "ao";
-        info.texel_bytes = 4;
-        info.level_bias = 1; /* low frequency: one level coarser */
-        info.filter = FX_FILTER_BILINEAR;
-        info.policy = FX_UPDATE_PROGRESSIVE;
-        break;
-    default:
-        info.name = "unknown";
-        break;
-    }
-    return info;
-}
 
 void fx__surface_map_init(const scene *s, uint32_t island, uint32_t lookup, fx__surface_map *map)
 {

@@ -184,3 +184,39 @@ void fx_lookup_update(const scene *s, uint32_t island, uint32_t level, uint32_t 
         texels[texel] = fx_lookup_pack(best_local, best_u, best_v);
     }
 }
+
+/* ---- the effect table ------------------------------------------------------------------------------- */
+
+static uint32_t lookup_texel_bytes(const scene *s)
+{
+    (void)s;
+    return 4;
+}
+
+static uint64_t lookup_cost(const scene *s, uint32_t samples)
+{
+    (void)s, (void)samples;
+    return 0; /* no rays */
+}
+
+static uint64_t lookup_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count, uint32_t samples)
+{
+    (void)samples;
+    for (uint32_t j = 0; j < count; j++)
+        fx_lookup_update(ctx->s, jobs[j].island, jobs[j].level, jobs[j].block_x, jobs[j].block_y, jobs[j].mask,
+                         jobs[j].payload);
+    return 0;
+}
+
+/* The triangle lookup: located once per texel, read by every on-surface effect's update. It shades nothing
+ * and decides nothing itself: it runs when an effect that depends on it runs. */
+const fx_effect fx_effect_triangle_lookup = {
+    .name = "triangle_lookup",
+    .cache = SCENE_CACHE_ON_SURFACE,
+    .level_bias = 0,
+    .filter = FX_FILTER_POINT,
+    .policy = FX_UPDATE_ONCE,
+    .texel_bytes = lookup_texel_bytes,
+    .cost = lookup_cost,
+    .update = lookup_update,
+};

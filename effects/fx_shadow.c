@@ -147,3 +147,88 @@ float fx_shadow_eval_point(const fx_context *ctx, const float pos[3], const floa
         *rays = traced;
     return (float)lit * (1.0f / FX_SHADOW_RAYS);
 }
+
+/* ---- the effect table ------------------------------------------------------------------------------- */
+
+static uint32_t shadow_texel_bytes(const scene *s)
+{
+    return 2u * (s && s->light_count > 0 ? s->light_count : 1u);
+}
+
+static bool shadow_needs(const scene *s, char *why, size_t why_cap)
+{
+    return fx__scene_needs(s, SCENE_FX_SHADOW, why, why_cap);
+}
+
+static uint64_t shadow_cost(const scene *s, uint32_t samples)
+{
+    (void)samples;
+    return (uint64_t)FX_SHADOW_RAYS * (s->light_count ? s->light_count : 1u);
+}
+
+static uint64_t shadow_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count, uint32_t samples)
+{
+    (void)samples;
+    return fx_shadow_update(ctx, jobs, count);
+}
+
+/* Per light, as many lit rays as the four finer texels have on average. */
+static void shadow_resample(const fx_context *ctx, const void *const finer[4], void *texel)
+{
+    uint32_t lights = ctx->s->light_count ? ctx->s->light_count : 1u;
+    for (uint32_t l = 0; l < lights; l++) {
+        float mean = 0;
+        for (int c = 0; c < 4; c++)
+            mean += 0.25f * fx_shadow_sample(finer[c], 0, lights, l);
+        uint32_t bits = (uint32_t)lrintf(mean * FX_SHADOW_RAYS);
+        fx__put_u16((uint8_t *)texel + 2u * l, (uint16_t)(bits >= 16 ? 0xFFFFu : ((1u << bits) - 1u)));
+    }
+}
+
+/* Each light's visibility: the filtered lit fraction of the taps. */
+static void shadow_shade(const fx_context *ctx, const fx_shade_run *run)
+{
+    (void)ctx;
+    uint32_t lights = run->light_count;
+    for (uint32_t i = 0; i < run->count; i++) {
+        const fx_taps *taps = &run->taps[i];
+        if (taps->count == 0)
+            continue;
+        for (uint32_t l = 0; l < lights; l++) {
+            float lit = 0;
+            for (uint32_t t = 0; t < taps->count; t++)
+                lit += taps->weight[t] * fx_shadow_sample(taps->texel[t], 0, lights, l);
+            run->light_visibility[(size_t)i * lights + l] *= lit;
+        }
+    }
+}
+
+static uint64_t shadow_eval(const fx_context *ctx, const fx_point *point, fx_shade_point *out)
+{
+    uint64_t rays = 0;
+    for (uint32_t l = 0; l < ctx->s->light_count; l++) {
+        uint64_t r = 0;
+        out->light_visibility[l] *= fx_shadow_eval_point(ctx, point->position, point->normal, point->dpdx,
+                                                         point->dpdy, l, point->pixel_id, &r);
+        rays += r;
+    }
+    return rays;
+}
+
+/* Hard shadows: 16 rays per texel and light, computed once. */
+const fx_effect fx_effect_shadow = {
+    .name = "shadow",
+    .alias = "shadows",
+    .cache = SCENE_CACHE_ON_SURFACE,
+    .level_bias = 0, /* hard shadow edges are high frequency */
+    .filter = FX_FILTER_BILINEAR,
+    .policy = FX_UPDATE_ONCE,
+    .depends_on = "triangle_lookup",
+    .texel_bytes = shadow_texel_bytes,
+    .needs = shadow_needs,
+    .cost = shadow_cost,
+    .update = shadow_update,
+    .resample = shadow_resample,
+    .shade = shadow_shade,
+    .eval = shadow_eval,
+};

@@ -17,16 +17,16 @@
 /* Auto texel density aims at this many level-0 texels over the whole surface (4096 x 4096). */
 #define SCENE_AUTO_TEXELS (4096.0 * 4096.0)
 
-static const char *const scene_result_strings[] = {
-#define FXC_X(name, str) str,
-    SCENE_RESULTS(FXC_X)
-#undef FXC_X
-};
-
 const char *scene_strerror(scene_result code)
 {
-    size_t n = sizeof scene_result_strings / sizeof scene_result_strings[0];
-    return (size_t)code < n ? scene_result_strings[code] : "unknown error";
+    switch (code) {
+#define FXC_X(name, value, str)                                                                              \
+    case name:                                                                                               \
+        return str;
+        SCENE_RESULTS(FXC_X)
+#undef FXC_X
+    }
+    return "unknown error";
 }
 
 scene_result scene__fail(scene_error *err, scene_result code, const char *fmt, ...)

@@ -10,6 +10,8 @@
 #ifndef FXC_SCENE_H
 #define FXC_SCENE_H
 
+#include "fxc_result.h"
+
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -18,20 +20,20 @@
 extern "C" {
 #endif
 
-/* Result codes, one X-macro table: name, string. */
+/* Result codes: the scene's names and texts, the shared values of common/fxc_result.h (name, value, text). */
 #define SCENE_RESULTS(X)                                                                                     \
-    X(SCENE_OK, "ok")                                                                                        \
-    X(SCENE_ERR_IO, "cannot read file")                                                                      \
-    X(SCENE_ERR_FORMAT, "unsupported or malformed file")                                                     \
-    X(SCENE_ERR_JSON, "malformed scene description")                                                         \
-    X(SCENE_ERR_INVALID, "invalid scene content")                                                            \
-    X(SCENE_ERR_RANGE, "value out of range")                                                                 \
-    X(SCENE_ERR_EMPTY, "empty scene")                                                                        \
-    X(SCENE_ERR_NOMEM, "out of memory")                                                                      \
-    X(SCENE_ERR_EMBREE, "Embree error")
+    X(SCENE_OK, FXC_OK, "ok")                                                                                \
+    X(SCENE_ERR_IO, FXC_ERR_IO, "cannot read file")                                                          \
+    X(SCENE_ERR_FORMAT, FXC_ERR_FORMAT, "unsupported or malformed file")                                     \
+    X(SCENE_ERR_JSON, FXC_ERR_JSON, "malformed scene description")                                           \
+    X(SCENE_ERR_INVALID, FXC_ERR_CONTENT, "invalid scene content")                                           \
+    X(SCENE_ERR_RANGE, FXC_ERR_RANGE, "value out of range")                                                  \
+    X(SCENE_ERR_EMPTY, FXC_ERR_EMPTY, "empty scene")                                                         \
+    X(SCENE_ERR_NOMEM, FXC_ERR_NOMEM, "out of memory")                                                       \
+    X(SCENE_ERR_EMBREE, FXC_ERR_EMBREE, "Embree error")
 
 typedef enum scene_result {
-#define FXC_X(name, str) name,
+#define FXC_X(name, value, str) name = value,
     SCENE_RESULTS(FXC_X)
 #undef FXC_X
 } scene_result;

@@ -63,3 +63,44 @@ int fxt_run_cli(const char *args, char *out, size_t out_cap, char *err, size_t e
         return -1;
     return WEXITSTATUS(status);
 }
+
+srv_loop *fxt_loop(const srv_loop_desc *desc, uint32_t n, uint32_t w, uint32_t h, srv_viewer_id *ids)
+{
+    char err[256];
+    srv_loop *loop = NULL;
+    fxc_result r = srv_loop_create(desc, &loop, err, sizeof err);
+    if (r != FXC_OK)
+        fail_msg("srv_loop_create: %s (%s)", err, fxc_strerror(r));
+    for (uint32_t v = 0; v < n; v++) {
+        srv_viewer_desc vd = {.width = w, .height = h};
+        r = srv_viewer_add(loop, &vd, &ids[v]);
+        if (r != FXC_OK)
+            fail_msg("srv_viewer_add: %s", fxc_strerror(r));
+    }
+    return loop;
+}
+
+void fxt_frame(srv_loop *loop, const srv_viewer_id *ids, uint32_t n, const srv_camera *cameras,
+               srv_frame_stats *stats)
+{
+    for (uint32_t v = 0; v < n; v++) {
+        fxc_result r = srv_viewer_set_camera(loop, ids[v], &cameras[v]);
+        if (r != FXC_OK)
+            fail_msg("srv_viewer_set_camera: %s", fxc_strerror(r));
+    }
+    fxc_result r = srv_loop_frame(loop, stats);
+    if (r != FXC_OK)
+        fail_msg("srv_loop_frame: %s", fxc_strerror(r));
+}
+
+void fxt_effects_on(srv_loop_desc *desc, const char *const *names, uint32_t count)
+{
+    uint32_t n = 0;
+    const fx_effect *const *registry = fx_registry(&n);
+    for (uint32_t i = 0; i < count; i++) {
+        int32_t e = fx_find(registry, n, names[i]);
+        if (e < 0)
+            fail_msg("no effect named %s", names[i]);
+        desc->effect_on[e] = true;
+    }
+}

@@ -235,11 +235,11 @@ static void test_scene_info_bunny(void **state)
 static void test_scene_info_no_lights_no_sky(void **state)
 {
     (void)state;
-    char obj[1100], scene[1100];
+    char obj[1100], scene_file[1100];
     write_file(obj, sizeof obj, "tri.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
     (void)obj;
-    write_file(scene, sizeof scene, "dark.json", "{\"version\": 1, \"meshes\": [{\"file\": \"tri.obj\"}]}\n");
-    assert_int_equal(run("scene-info '%s' --json", scene), 0);
+    write_file(scene_file, sizeof scene_file, "dark.json", "{\"version\": 1, \"meshes\": [{\"file\": \"tri.obj\"}]}\n");
+    assert_int_equal(run("scene-info '%s' --json", scene_file), 0);
     json_t *info = parse_json_text(out_buf);
     assert_int_equal(jint(info, "lights"), 0);
     assert_int_equal(jint(info, "triangles"), 1);
@@ -597,18 +597,18 @@ static void test_sim_tiny_pool(void **state)
 static void test_sim_viewers_see_nothing(void **state)
 {
     (void)state;
-    char obj[1100], scene[1100], summary[1100];
+    char obj[1100], scene_file[1100], summary[1100];
     write_file(obj, sizeof obj, "small.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
     (void)obj;
     /* The camera stands 5 m in front of the triangle and looks away from it. */
-    write_file(scene, sizeof scene, "away.json",
+    write_file(scene_file, sizeof scene_file, "away.json",
                "{\"version\": 1, \"meshes\": [{\"file\": \"small.obj\"}],\n"
                " \"lights\": [{\"type\": \"directional\", \"direction\": [0, -1, 0]}],\n"
                " \"sky\": {\"color\": [1, 1, 1], \"intensity\": 1},\n"
                " \"camera\": {\"position\": [0.3, 0.3, 5], \"target\": [0.3, 0.3, 10], \"fov_deg\": 60}}\n");
     tmp_path(summary, sizeof summary, "W.json");
     remove(summary);
-    int rc = run("sim --scene '%s' --camera static --viewers 2 --frames 2 --res 64x36 --summary '%s' --quiet", scene,
+    int rc = run("sim --scene '%s' --camera static --viewers 2 --frames 2 --res 64x36 --summary '%s' --quiet", scene_file,
                  summary);
     if (rc != 0)
         print_error("stderr: %s\n", err_buf);

@@ -146,7 +146,10 @@ static void island_run_init(island_run *run, const scene *s, uint32_t island, ui
     memset(run, 0, sizeof *run);
     run->island = island;
     run->level = level;
-    run->texel_bytes = fx_describe(effect, s).texel_bytes;
+    uint32_t count = 0;
+    const fx_effect *const *registry = fx_registry(&count);
+    assert_true(effect < count);
+    run->texel_bytes = registry[effect]->texel_bytes(s);
     uint32_t width = (s->islands[island].width + (1u << level) - 1) >> level;
     uint32_t height = (s->islands[island].height + (1u << level) - 1) >> level;
     run->blocks_x = (width + 7) / 8;
@@ -693,7 +696,7 @@ static void test_shadow_occluder(void **state)
     add_sun(s, 0, -1, 0);
     add_point_light(s, 0, 3, 0);
     scene_rt *rt = finish_scene(s, 8.0f, 1.0f);
-    assert_int_equal(fx_describe(FX_SHADOW, s).texel_bytes, 4);
+    assert_int_equal(fx_effect_shadow.texel_bytes(s), 4);
     fx_context ctx = {.s = s, .rt = rt, .seed = 2, .ao_radius = 1.0f};
 
     island_run floor_run;
@@ -770,27 +773,41 @@ static void test_shadow_occluder(void **state)
     scene_free(s);
 }
 
-/* The effect descriptions. */
+/* The effect tables and the registry (the key's effect field is the registry index). */
 static void test_describe(void **state)
 {
     (void)state;
     scene *s = new_scene();
-    fx_info lookup = fx_describe(FX_TRI_LOOKUP, s), shadow = fx_describe(FX_SHADOW, s),
-            ao = fx_describe(FX_AO, s);
-    assert_string_equal(lookup.name, "triangle_lookup");
-    assert_int_equal(lookup.texel_bytes, 4);
-    assert_int_equal(lookup.policy, FX_UPDATE_ONCE);
-    assert_int_equal(lookup.filter, FX_FILTER_POINT);
-    assert_string_equal(shadow.name, "shadow");
-    assert_int_equal(shadow.texel_bytes, 2); /* no light yet: at least 2 */
+    uint32_t count = 0;
+    const fx_effect *const *registry = fx_registry(&count);
+    assert_int_equal(count, 3);
+    assert_ptr_equal(registry[FX_TRI_LOOKUP], &fx_effect_triangle_lookup);
+    assert_ptr_equal(registry[FX_SHADOW], &fx_effect_shadow);
+    assert_ptr_equal(registry[FX_AO], &fx_effect_ao);
+    const fx_effect *lookup = registry[FX_TRI_LOOKUP], *shadow = registry[FX_SHADOW], *ao = registry[FX_AO];
+    assert_string_equal(lookup->name, "triangle_lookup");
+    assert_int_equal(lookup->texel_bytes(s), 4);
+    assert_int_equal(lookup->policy, FX_UPDATE_ONCE);
+    assert_int_equal(lookup->filter, FX_FILTER_POINT);
+    assert_null(lookup->shade); /* it shades nothing: it serves the others */
+    assert_string_equal(shadow->name, "shadow");
+    assert_string_equal(shadow->depends_on, "triangle_lookup");
+    assert_int_equal(shadow->texel_bytes(s), 2); /* no light yet: at least 2 */
     add_sun(s, 0, -1, 0);
     add_sun(s, 1, -1, 0);
     add_point_light(s, 0, 2, 0);
-    assert_int_equal(fx_describe(FX_SHADOW, s).texel_bytes, 6);
-    assert_string_equal(ao.name, "ao");
-    assert_int_equal(ao.texel_bytes, 4);
-    assert_int_equal(ao.level_bias, 1);
-    assert_int_equal(ao.policy, FX_UPDATE_PROGRESSIVE);
+    assert_int_equal(shadow->texel_bytes(s), 6);
+    assert_int_equal(shadow->cost(s, 0), 3 * FX_SHADOW_RAYS);
+    assert_string_equal(ao->name, "ao");
+    assert_int_equal(ao->texel_bytes(s), 4);
+    assert_int_equal(ao->level_bias, 1);
+    assert_int_equal(ao->policy, FX_UPDATE_PROGRESSIVE);
+    assert_int_equal(ao->max_samples, FX_AO_MAX_SAMPLES);
+    assert_int_equal(ao->cost(s, 16), 16);
+    /* Names and aliases resolve to registry indices; unknown names do not. */
+    assert_int_equal(fx_find(registry, count, "shadows"), FX_SHADOW);
+    assert_int_equal(fx_find(registry, count, "ao"), FX_AO);
+    assert_int_equal(fx_find(registry, count, "probes"), -1);
     /* Light directions: the sun's reversed travel direction; a point light's unit direction and distance. */
     float dir[3], distance;
     fx_light_direction(&s->lights[0], (float[3]){5, 5, 5}, dir, &distance);

@@ -5,7 +5,7 @@
 #include "test_util.h"
 
 #include "camgen.h"
-#include "frame.h"
+#include "engine.h"
 #include "scene.h"
 
 #include <math.h>
@@ -38,45 +38,29 @@ static int teardown(void **state)
     return 0;
 }
 
-static srv_loop_desc base_desc(const fixture *f, uint32_t viewers, uint32_t w, uint32_t h)
+static srv_loop_desc base_desc(const fixture *f)
 {
-    srv_loop_desc d = {.s = f->s, .rt = f->rt, .viewer_count = viewers, .width = w, .height = h, .seed = 7,
-                       .pool_bytes = 64u << 20};
-    d.effect_on[SCENE_FX_SHADOW] = true;
-    d.effect_on[SCENE_FX_AO] = true;
+    srv_loop_desc d = {.s = f->s, .rt = f->rt, .seed = 7, .pool_bytes = 64u << 20};
+    fxt_effects_on(&d, (const char *const[]){"shadow", "ao"}, 2);
     return d;
-}
-
-static srv_loop *make_loop(const srv_loop_desc *d)
-{
-    char err[256];
-    srv_loop *loop = srv_loop_create(d, err, sizeof err);
-    if (!loop)
-        fail_msg("srv_loop_create: %s", err);
-    return loop;
-}
-
-static void run_frame(srv_loop *loop, const srv_camera *cams, srv_frame_stats *st)
-{
-    char err[256];
-    if (!srv_loop_frame(loop, cams, st, err, sizeof err))
-        fail_msg("srv_loop_frame: %s", err);
 }
 
 /* Two viewers with the same camera request exactly one viewer's texels twice: the sharing ratio is 2. */
 static void test_identical_viewers_share_everything(void **state)
 {
     fixture *f = *state;
-    srv_loop_desc d = base_desc(f, 2, 96, 54);
-    srv_loop *loop = make_loop(&d);
+    srv_loop_desc d = base_desc(f);
+    srv_viewer_id ids[2];
+    srv_loop *loop = fxt_loop(&d, 2, 96, 54, ids);
     srv_camera cams[2];
     cams[0] = cams[1] = srv_camgen_camera(SRV_CAMGEN_IDENTICAL, f->s, 0, 2, 0, 1);
     srv_frame_stats st;
-    run_frame(loop, cams, &st);
+    fxt_frame(loop, ids, 2, cams, &st);
     assert_true(st.unique_texels > 1000);
-    assert_int_equal(st.viewer_requested[0], st.viewer_requested[1]);
+    assert_int_equal(st.viewer_count, 2);
+    assert_int_equal(st.viewers[0].requested_texels, st.viewers[1].requested_texels);
     assert_int_equal(st.requested_texels, 2 * st.unique_texels);
-    assert_int_equal(st.viewer_requested[0], st.unique_texels);
+    assert_int_equal(st.viewers[0].requested_texels, st.unique_texels);
     srv_loop_free(loop);
 }
 
@@ -84,15 +68,16 @@ static void test_identical_viewers_share_everything(void **state)
 static void test_disjoint_viewers_share_nothing(void **state)
 {
     fixture *f = *state;
-    srv_loop_desc d = base_desc(f, 2, 64, 64);
-    srv_loop *loop = make_loop(&d);
+    srv_loop_desc d = base_desc(f);
+    srv_viewer_id ids[2];
+    srv_loop *loop = fxt_loop(&d, 2, 64, 64, ids);
     srv_camera cams[2] = {
         {.position = {0, 2, 0}, .target = {5, 2, 0}, .up = {0, 1, 0}, .fov_deg = 20},
         {.position = {0, 2, 0}, .target = {-5, 2, 0}, .up = {0, 1, 0}, .fov_deg = 20},
     };
     srv_frame_stats st;
-    run_frame(loop, cams, &st);
-    assert_true(st.viewer_requested[0] > 100 && st.viewer_requested[1] > 100);
+    fxt_frame(loop, ids, 2, cams, &st);
+    assert_true(st.viewers[0].requested_texels > 100 && st.viewers[1].requested_texels > 100);
     assert_int_equal(st.requested_texels, st.unique_texels);
     srv_loop_free(loop);
 }
@@ -100,17 +85,18 @@ static void test_disjoint_viewers_share_nothing(void **state)
 /* Runs frames of a walking pair of viewers with a ray budget and returns the last images and totals. */
 static void run_walk(fixture *f, uint32_t threads, uint8_t **images, uint64_t *unique, uint64_t *rays)
 {
-    srv_loop_desc d = base_desc(f, 2, 80, 48);
+    srv_loop_desc d = base_desc(f);
     d.threads = threads;
     d.ray_budget = 40000;
-    srv_loop *loop = make_loop(&d);
+    srv_viewer_id ids[2];
+    srv_loop *loop = fxt_loop(&d, 2, 80, 48, ids);
     *unique = *rays = 0;
     for (uint32_t frame = 0; frame < 5; frame++) {
         srv_camera cams[2];
         for (uint32_t v = 0; v < 2; v++)
             cams[v] = srv_camgen_camera(SRV_CAMGEN_WALK, f->s, v, 2, frame * 20, 3);
         srv_frame_stats st;
-        run_frame(loop, cams, &st);
+        fxt_frame(loop, ids, 2, cams, &st);
         *unique += st.unique_texels;
         *rays += st.rays[SCENE_FX_SHADOW] + st.rays[SCENE_FX_AO];
         assert_true(st.rays[SCENE_FX_SHADOW] + st.rays[SCENE_FX_AO] <= d.ray_budget);
@@ -118,7 +104,7 @@ static void run_walk(fixture *f, uint32_t threads, uint8_t **images, uint64_t *u
     size_t bytes = (size_t)80 * 48 * 3;
     for (uint32_t v = 0; v < 2; v++) {
         images[v] = malloc(bytes);
-        memcpy(images[v], srv_loop_image(loop, v), bytes);
+        memcpy(images[v], srv_viewer_image(loop, ids[v]), bytes);
     }
     srv_loop_free(loop);
 }
@@ -145,14 +131,15 @@ static void test_thread_count_independent(void **state)
 static void test_ray_budget(void **state)
 {
     fixture *f = *state;
-    srv_loop_desc d = base_desc(f, 1, 96, 54);
+    srv_loop_desc d = base_desc(f);
     d.ray_budget = 5000;
-    srv_loop *loop = make_loop(&d);
+    srv_viewer_id id;
+    srv_loop *loop = fxt_loop(&d, 1, 96, 54, &id);
     srv_camera cam = srv_camgen_camera(SRV_CAMGEN_STATIC, f->s, 0, 1, 0, 1);
     uint64_t deferred = 0;
     for (int frame = 0; frame < 3; frame++) {
         srv_frame_stats st;
-        run_frame(loop, &cam, &st);
+        fxt_frame(loop, &id, 1, &cam, &st);
         assert_true(st.rays[SCENE_FX_SHADOW] + st.rays[SCENE_FX_AO] <= 5000);
         deferred += st.texels_deferred[SCENE_FX_SHADOW] + st.texels_deferred[SCENE_FX_AO];
         assert_true(st.pixels_missing > 0); /* not everything fits in 5000 rays */
@@ -165,13 +152,14 @@ static void test_ray_budget(void **state)
 static void test_static_view_converges(void **state)
 {
     fixture *f = *state;
-    srv_loop_desc d = base_desc(f, 1, 96, 54);
-    srv_loop *loop = make_loop(&d);
+    srv_loop_desc d = base_desc(f);
+    srv_viewer_id id;
+    srv_loop *loop = fxt_loop(&d, 1, 96, 54, &id);
     srv_camera cam = srv_camgen_camera(SRV_CAMGEN_STATIC, f->s, 0, 1, 0, 1);
     srv_frame_stats st;
     uint64_t first = 0;
     for (int frame = 0; frame < 6; frame++) {
-        run_frame(loop, &cam, &st);
+        fxt_frame(loop, &id, 1, &cam, &st);
         if (frame == 0)
             first = st.rays[SCENE_FX_SHADOW] + st.rays[SCENE_FX_AO];
     }
@@ -203,30 +191,31 @@ static void test_cached_matches_no_cache(void **state)
     fixture *f = *state;
     const uint32_t w = 128, h = 72;
     srv_camera cam = srv_camgen_camera(SRV_CAMGEN_STATIC, f->s, 0, 1, 0, 1);
-    srv_loop_desc d = base_desc(f, 1, w, h);
+    srv_loop_desc d = base_desc(f);
     d.bias_set[SCENE_FX_AO] = true; /* full resolution for the comparison */
     d.keep_views = true;
-    srv_loop *cached = make_loop(&d);
+    srv_viewer_id id_c, id_a, id_b;
+    srv_loop *cached = fxt_loop(&d, 1, w, h, &id_c);
     srv_frame_stats st;
     for (int frame = 0; frame < 6; frame++)
-        run_frame(cached, &cam, &st);
+        fxt_frame(cached, &id_c, 1, &cam, &st);
     d.no_cache = true;
-    srv_loop *baseline_a = make_loop(&d);
-    run_frame(baseline_a, &cam, &st);
+    srv_loop *baseline_a = fxt_loop(&d, 1, w, h, &id_a);
+    fxt_frame(baseline_a, &id_a, 1, &cam, &st);
     assert_true(st.rays[SCENE_FX_AO] == 64 * st.pixels_visible);
     d.seed = 12345;
-    srv_loop *baseline_b = make_loop(&d);
-    run_frame(baseline_b, &cam, &st);
+    srv_loop *baseline_b = fxt_loop(&d, 1, w, h, &id_b);
+    fxt_frame(baseline_b, &id_b, 1, &cam, &st);
     size_t n = (size_t)w * h * 3;
-    double cache_err = relative_rmse(srv_loop_radiance(cached, 0), srv_loop_radiance(baseline_a, 0), n);
-    double noise = relative_rmse(srv_loop_radiance(baseline_b, 0), srv_loop_radiance(baseline_a, 0), n);
+    double cache_err = relative_rmse(srv_viewer_radiance(cached, id_c), srv_viewer_radiance(baseline_a, id_a), n);
+    double noise = relative_rmse(srv_viewer_radiance(baseline_b, id_b), srv_viewer_radiance(baseline_a, id_a), n);
     print_message("relative RMSE: cached vs no-cache %.4f, no-cache vs no-cache (other seed) %.4f\n", cache_err,
                   noise);
     assert_true(noise > 0.0);
     assert_true(cache_err < 0.25);
     assert_true(cache_err <= 4.0 * noise);
     for (int view = SRV_VIEW_AO; view <= SRV_VIEW_SHADOW; view++) {
-        const float *c = srv_loop_view(cached, 0, view), *b = srv_loop_view(baseline_a, 0, view);
+        const float *c = srv_viewer_view(cached, id_c, view), *b = srv_viewer_view(baseline_a, id_a, view);
         double mean_c = 0, mean_b = 0;
         for (size_t i = 0; i < (size_t)w * h; i++) {
             mean_c += c[i];
@@ -244,15 +233,16 @@ static void test_cached_matches_no_cache(void **state)
 static void test_tiny_pool_degrades(void **state)
 {
     fixture *f = *state;
-    srv_loop_desc d = base_desc(f, 2, 160, 90);
+    srv_loop_desc d = base_desc(f);
     d.pool_bytes = 1; /* the minimum of 64 blocks per effect */
-    srv_loop *loop = make_loop(&d);
+    srv_viewer_id ids[2];
+    srv_loop *loop = fxt_loop(&d, 2, 160, 90, ids);
     srv_frame_stats st;
     for (uint32_t frame = 0; frame < 3; frame++) {
         srv_camera cams[2];
         for (uint32_t v = 0; v < 2; v++)
             cams[v] = srv_camgen_camera(SRV_CAMGEN_ORBIT, f->s, v, 2, frame * 10, 1);
-        run_frame(loop, cams, &st);
+        fxt_frame(loop, ids, 2, cams, &st);
     }
     assert_true(st.exhausted > 0 || st.evictions > 0);
     assert_true(st.pixels_missing > 0);
@@ -264,11 +254,12 @@ static void test_tiny_pool_degrades(void **state)
 static void test_viewer_sees_nothing(void **state)
 {
     fixture *f = *state;
-    srv_loop_desc d = base_desc(f, 1, 32, 32);
-    srv_loop *loop = make_loop(&d);
+    srv_loop_desc d = base_desc(f);
+    srv_viewer_id id;
+    srv_loop *loop = fxt_loop(&d, 1, 32, 32, &id);
     srv_camera cam = {.position = {0, 100, 0}, .target = {0, 200, 0}, .up = {1, 0, 0}, .fov_deg = 30};
     srv_frame_stats st;
-    run_frame(loop, &cam, &st);
+    fxt_frame(loop, &id, 1, &cam, &st);
     assert_int_equal(st.pixels_visible, 0);
     assert_int_equal(st.unique_texels, 0);
     assert_int_equal(st.rays[SCENE_FX_SHADOW] + st.rays[SCENE_FX_AO], 0);
@@ -279,11 +270,12 @@ static void test_viewer_sees_nothing(void **state)
 static void test_memory_report(void **state)
 {
     fixture *f = *state;
-    srv_loop_desc d = base_desc(f, 1, 64, 36);
-    srv_loop *loop = make_loop(&d);
+    srv_loop_desc d = base_desc(f);
+    srv_viewer_id id;
+    srv_loop *loop = fxt_loop(&d, 1, 64, 36, &id);
     srv_camera cam = srv_camgen_camera(SRV_CAMGEN_STATIC, f->s, 0, 1, 0, 1);
     srv_frame_stats st;
-    run_frame(loop, &cam, &st);
+    fxt_frame(loop, &id, 1, &cam, &st);
     srv_memory m;
     srv_loop_memory(loop, &m);
     assert_true(m.pools_reserved[SCENE_FX_AO] >= 64u * 4u * st.blocks_resident[SCENE_FX_AO]);

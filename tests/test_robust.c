@@ -4,7 +4,7 @@
 #include "test_util.h"
 
 #include "camgen.h"
-#include "frame.h"
+#include "engine.h"
 #include "scene_internal.h"
 
 #include <float.h>
@@ -63,21 +63,19 @@ static frame_result run_view(scene *s, float fov_override)
     scene_rt *rt = scene_rt_create(s, NULL, &err);
     assert_non_null(rt);
     const uint32_t w = 96, h = 54;
-    srv_loop_desc d = {.s = s, .rt = rt, .viewer_count = 1, .width = w, .height = h, .seed = 3,
-                       .pool_bytes = 32u << 20, .keep_views = true};
-    d.effect_on[SCENE_FX_SHADOW] = d.effect_on[SCENE_FX_AO] = true;
-    char msg[256];
-    srv_loop *loop = srv_loop_create(&d, msg, sizeof msg);
-    assert_non_null(loop);
+    srv_loop_desc d = {.s = s, .rt = rt, .seed = 3, .pool_bytes = 32u << 20, .keep_views = true};
+    fxt_effects_on(&d, (const char *const[]){"shadow", "ao"}, 2);
+    srv_viewer_id id;
+    srv_loop *loop = fxt_loop(&d, 1, w, h, &id);
     srv_camera cam = srv_camgen_camera(SRV_CAMGEN_STATIC, s, 0, 1, 0, 1);
     if (fov_override > 0)
         cam.fov_deg = fov_override;
     srv_frame_stats st;
     for (int frame = 0; frame < 5; frame++)
-        assert_true(srv_loop_frame(loop, &cam, &st, msg, sizeof msg));
+        fxt_frame(loop, &id, 1, &cam, &st);
     frame_result r = {.visible = st.pixels_visible, .finite = true};
-    const float *ao = srv_loop_view(loop, 0, SRV_VIEW_AO), *shadow = srv_loop_view(loop, 0, SRV_VIEW_SHADOW);
-    const float *rad = srv_loop_radiance(loop, 0);
+    const float *ao = srv_viewer_view(loop, id, SRV_VIEW_AO), *shadow = srv_viewer_view(loop, id, SRV_VIEW_SHADOW);
+    const float *rad = srv_viewer_radiance(loop, id);
     for (size_t i = 0; i < (size_t)w * h; i++) {
         r.mean_ao += ao[i];
         r.mean_shadow += shadow[i];

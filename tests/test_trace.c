@@ -267,14 +267,29 @@ static void test_refusals(void **state)
     EXPECT_REFUSAL("tiny_dir.trace", "fxcache-trace 1\n0 1e6 0 0 1e-9 0 0 60\n",
                    ":2:", "rounds to the position");
     EXPECT_REFUSAL("no_header.trace", "0 0 0 0 1 0 0 60\n", "no_header.trace:1: missing header",
-                   "fxcache-trace 1");
+                   "fxcache-trace 2");
     EXPECT_REFUSAL("wrong_magic.trace", "fxcache-trase 1\n0 0 0 0 1 0 0 60\n", ":1: missing header");
     EXPECT_REFUSAL("empty.trace", "", "empty.trace:1: empty file");
     EXPECT_REFUSAL("no_cameras.trace", "fxcache-trace 1\n# only\n# comments\n\n",
                    "no_cameras.trace:4: no cameras");
     EXPECT_REFUSAL("header_only.trace", "fxcache-trace 1", "header_only.trace:1: no cameras");
-    EXPECT_REFUSAL("newer.trace", "fxcache-trace 2\n0 0 0 0 1 0 0 60 0\n",
-                   "newer.trace:1: trace format version 2 is newer", "version 1");
+    EXPECT_REFUSAL("newer.trace", "fxcache-trace 3\n0 0 0 0 1 0 0 60 0\n",
+                   "newer.trace:1: trace format version 3 is newer", "version 2");
+    /* Version 2's resolution line: only in version 2, before the cameras, once, two sides in 1..8192. */
+    EXPECT_REFUSAL("res_v1.trace", "fxcache-trace 1\nresolution 64 36\n0 0 0 0 1 0 0 60\n", ":2:",
+                   "needs format version 2");
+    EXPECT_REFUSAL("res_late.trace", "fxcache-trace 2\n0 0 0 0 1 0 0 60\nresolution 64 36\n", ":3:",
+                   "before the first camera");
+    EXPECT_REFUSAL("res_twice.trace", "fxcache-trace 2\nresolution 64 36\nresolution 64 36\n0 0 0 0 1 0 0 60\n",
+                   ":3:", "second 'resolution'");
+    EXPECT_REFUSAL("res_zero.trace", "fxcache-trace 2\nresolution 0 36\n0 0 0 0 1 0 0 60\n", ":2:",
+                   "width 0 is outside 1..8192");
+    EXPECT_REFUSAL("res_big.trace", "fxcache-trace 2\nresolution 64 8193\n0 0 0 0 1 0 0 60\n", ":2:",
+                   "height 8193");
+    EXPECT_REFUSAL("res_words.trace", "fxcache-trace 2\nresolution 64\n0 0 0 0 1 0 0 60\n", ":2:",
+                   "resolution WIDTH HEIGHT");
+    EXPECT_REFUSAL("res_text.trace", "fxcache-trace 2\nresolution 64 3x6\n0 0 0 0 1 0 0 60\n", ":2:",
+                   "not a whole number");
     EXPECT_REFUSAL("much_newer.trace", "fxcache-trace 99999999999999999999\n", ":1: trace format version",
                    "is newer");
     EXPECT_REFUSAL("version0.trace", "fxcache-trace 0\n", ":1: trace format version 0 is not supported");
@@ -337,6 +352,52 @@ static void test_frame_past_end(void **state)
 }
 
 /* The writer refuses cameras the reader would refuse, writes nothing for them, and flushes every line. */
+/* Version 2: the writer records the resolution, the reader returns it; version 1 files have none; cameras
+ * by time take the last line not after the time. */
+static void test_version2_resolution_and_time(void **state)
+{
+    (void)state;
+    const char *path = fxt_tmp_path("sized.trace");
+    char err[512];
+    srv_trace_writer *w = srv_trace_writer_open_sized(path, 320, 180, err, sizeof err);
+    assert_non_null(w);
+    srv_camera a = {.position = {0, 1, 0}, .target = {0, 1, -1}, .fov_deg = 60};
+    srv_camera b = {.position = {2, 1, 0}, .target = {2, 1, -1}, .fov_deg = 50};
+    assert_int_equal(srv_trace_writer_add(w, 0.5, &a), 0);
+    assert_int_equal(srv_trace_writer_add(w, 1.5, &b), 0);
+    assert_int_equal(srv_trace_writer_close(w), 0);
+    FILE *f = fopen(path, "rb");
+    char head[32] = "";
+    assert_non_null(fgets(head, sizeof head, f));
+    fclose(f);
+    assert_string_equal(head, "fxcache-trace 2\n");
+    srv_trace *t = srv_trace_read(path, err, sizeof err);
+    if (!t)
+        fail_msg("%s", err);
+    uint32_t width = 0, height = 0;
+    assert_true(srv_trace_resolution(t, &width, &height));
+    assert_int_equal(width, 320);
+    assert_int_equal(height, 180);
+    assert_true(srv_trace_first_time(t) == 0.5 && srv_trace_last_time(t) == 1.5);
+    assert_true(srv_trace_camera_at(t, 0.0).position[0] == 0.0f);  /* before the start: the first */
+    assert_true(srv_trace_camera_at(t, 1.4999).position[0] == 0.0f);
+    assert_true(srv_trace_camera_at(t, 1.5).position[0] == 2.0f);   /* exactly at a line's time */
+    assert_true(srv_trace_camera_at(t, 99.0).position[0] == 2.0f);  /* past the end: the last */
+    srv_trace_free(t);
+    /* Without a resolution the writer keeps version 1, which older readers read. */
+    w = srv_trace_writer_open(path, err, sizeof err);
+    assert_int_equal(srv_trace_writer_add(w, 0, &a), 0);
+    assert_int_equal(srv_trace_writer_close(w), 0);
+    t = srv_trace_read(path, err, sizeof err);
+    assert_non_null(t);
+    assert_false(srv_trace_resolution(t, &width, &height));
+    srv_trace_free(t);
+    f = fopen(path, "rb");
+    assert_non_null(fgets(head, sizeof head, f));
+    fclose(f);
+    assert_string_equal(head, "fxcache-trace 1\n");
+}
+
 static void test_writer(void **state)
 {
     (void)state;
@@ -729,6 +790,7 @@ int main(void)
         cmocka_unit_test(test_round_trip),
         cmocka_unit_test(test_accepts_documented_forms),
         cmocka_unit_test(test_refusals),
+        cmocka_unit_test(test_version2_resolution_and_time),
         cmocka_unit_test(test_frame_past_end),
         cmocka_unit_test(test_writer),
         cmocka_unit_test(test_every_prefix),

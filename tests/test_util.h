@@ -24,4 +24,18 @@ const char *fxt_tmp_path(const char *name);
  * be NULL) and returns the exit status (or -1 when it did not exit normally). */
 int fxt_run_cli(const char *args, char *out, size_t out_cap, char *err, size_t err_cap);
 
+/* ---- the engine (server/engine) --------------------------------------------------------------------- */
+#include "engine.h"
+
+/* Creates a loop (failing the test with the message if it cannot) and adds n viewers of w x h, their ids in
+ * ids[0..n). */
+srv_loop *fxt_loop(const srv_loop_desc *desc, uint32_t n, uint32_t w, uint32_t h, srv_viewer_id *ids);
+
+/* Sets the cameras of viewers ids[0..n) and runs one frame (failing the test on any error). */
+void fxt_frame(srv_loop *loop, const srv_viewer_id *ids, uint32_t n, const srv_camera *cameras,
+               srv_frame_stats *stats);
+
+/* The desc fields that turn on effects by name (registry order) for the built-in effects. */
+void fxt_effects_on(srv_loop_desc *desc, const char *const *names, uint32_t count);
+
 #endif

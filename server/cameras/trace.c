@@ -29,6 +29,8 @@ struct srv_trace {
     uint32_t capacity;   /* allocated entries of cameras and times */
     srv_camera *cameras; /* count cameras, target already position + direction */
     double *times;       /* count times, seconds, non-decreasing */
+    uint32_t width, height; /* the viewer's resolution (version 2 'resolution' line), 0 when not given */
+    uint32_t version;    /* the file's format version */
 };
 
 struct srv_trace_writer {
@@ -279,6 +281,42 @@ static bool parse_header(trace_reader *r, const char *line, size_t len)
     if (version < 1)
         return fail(r, "trace format version %s is not supported (this fxcache reads version %d)",
                     version_text, SRV_TRACE_VERSION);
+    r->trace->version = (uint32_t)version;
+    return true;
+}
+
+/* Version 2: "resolution W H" before the first camera, at most once; sides 1..SRV_TRACE_MAX_SIDE. */
+static bool parse_resolution_line(trace_reader *r, const char *line, size_t len)
+{
+    const char *starts[4];
+    size_t lengths[4];
+    size_t count = split_tokens(line, len, starts, lengths, 4);
+    if (r->trace->version < 2)
+        return fail(r, "a 'resolution' line needs format version 2 (the header says 1)");
+    if (r->trace->count > 0)
+        return fail(r, "the 'resolution' line must come before the first camera");
+    if (r->trace->width)
+        return fail(r, "a second 'resolution' line");
+    if (count != 3)
+        return fail(r, "expected 'resolution WIDTH HEIGHT', got %zu words", count);
+    uint32_t side[2];
+    for (int i = 0; i < 2; i++) {
+        uint64_t v = 0;
+        for (size_t k = 0; k < lengths[i + 1]; k++) {
+            char c = starts[i + 1][k];
+            if (c < '0' || c > '9')
+                return fail(r, "resolution: '%.*s' is not a whole number", (int)(lengths[i + 1] < 32 ? lengths[i + 1] : 32),
+                            starts[i + 1]);
+            if (v < 1000000000u)
+                v = v * 10 + (uint64_t)(c - '0');
+        }
+        if (v < 1 || v > SRV_TRACE_MAX_SIDE)
+            return fail(r, "resolution: %s %llu is outside 1..%d", i ? "height" : "width", (unsigned long long)v,
+                        SRV_TRACE_MAX_SIDE);
+        side[i] = (uint32_t)v;
+    }
+    r->trace->width = side[0];
+    r->trace->height = side[1];
     return true;
 }
 
@@ -415,6 +453,11 @@ static bool read_all_lines(trace_reader *r)
             first++;
         if (first == len || buf[first] == '#')
             continue; /* blank line or comment */
+        if (len - first >= 10 && memcmp(buf + first, "resolution", 10) == 0) {
+            if (!(ok = parse_resolution_line(r, buf, len)))
+                break;
+            continue;
+        }
         if (!(ok = parse_camera_line(r, buf, len)))
             break;
     }
@@ -469,6 +512,39 @@ double srv_trace_time(const srv_trace *t, uint32_t frame)
     return t->times[index];
 }
 
+bool srv_trace_resolution(const srv_trace *t, uint32_t *width, uint32_t *height)
+{
+    if (!t->width)
+        return false;
+    *width = t->width;
+    *height = t->height;
+    return true;
+}
+
+double srv_trace_first_time(const srv_trace *t)
+{
+    return t->times[0];
+}
+
+double srv_trace_last_time(const srv_trace *t)
+{
+    return t->times[t->count - 1];
+}
+
+srv_camera srv_trace_camera_at(const srv_trace *t, double time)
+{
+    /* The last line whose time is not after `time` (binary search; times do not decrease). */
+    uint32_t lo = 0, hi = t->count;
+    while (hi - lo > 1) {
+        uint32_t mid = lo + (hi - lo) / 2;
+        if (t->times[mid] <= time + SRV_TRACE_TIME_EPSILON)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    return t->cameras[lo];
+}
+
 void srv_trace_free(srv_trace *t)
 {
     if (!t)
@@ -481,6 +557,12 @@ void srv_trace_free(srv_trace *t)
 /* ---- writer ------------------------------------------------------------------------------------------ */
 
 srv_trace_writer *srv_trace_writer_open(const char *path, char *err, size_t cap)
+{
+    return srv_trace_writer_open_sized(path, 0, 0, err, cap);
+}
+
+srv_trace_writer *srv_trace_writer_open_sized(const char *path, uint32_t width, uint32_t height, char *err,
+                                              size_t cap)
 {
     if (err && cap > 0)
         err[0] = 0;
@@ -502,11 +584,15 @@ srv_trace_writer *srv_trace_writer_open(const char *path, char *err, size_t cap)
         free(w);
         return NULL;
     }
-    if (fprintf(w->file,
-                "%s %d\n# columns: time px py pz dx dy dz fov_deg (seconds, position, view direction, "
-                "vertical fov in degrees; up is +Y)\n",
-                SRV_TRACE_MAGIC, SRV_TRACE_VERSION) < 0 ||
-        fflush(w->file) != 0) {
+    bool sized = width >= 1 && height >= 1 && width <= SRV_TRACE_MAX_SIDE && height <= SRV_TRACE_MAX_SIDE;
+    /* Version 1 when there is no resolution to record, so version-1 readers keep reading such files. */
+    int written = fprintf(w->file,
+                          "%s %d\n# columns: time px py pz dx dy dz fov_deg (seconds, position, view direction, "
+                          "vertical fov in degrees; up is +Y)\n",
+                          SRV_TRACE_MAGIC, sized ? 2 : 1);
+    if (written >= 0 && sized)
+        written = fprintf(w->file, "resolution %u %u\n", width, height);
+    if (written < 0 || fflush(w->file) != 0) {
         if (err && cap > 0)
             snprintf(err, cap, "%s: cannot write: %s", path, strerror(errno));
         fclose(w->file);

@@ -3,7 +3,7 @@
  * the footprint: the pixel's size on the surface from ray differentials (the neighbouring pixels' rays
  * intersected with the hit triangle's plane), in level-0 texels, as log2 - the level an unbiased effect
  * reads. */
-#include "frame_internal.h"
+#include "engine_internal.h"
 
 #include <embree3/rtcore.h>
 
@@ -55,7 +55,7 @@ static float pixel_footprint(const srv_camera_frame *f, const float dir[3], floa
 
 typedef struct visibility_task {
     srv_loop *loop;
-    uint32_t viewer;
+    srv_viewer *view;
     uint32_t tiles_x;
 } visibility_task;
 
@@ -65,7 +65,7 @@ static void visibility_tile(void *user, uint32_t task_index, uint32_t thread_ind
     (void)thread_index;
     visibility_task *task = user;
     srv_loop *loop = task->loop;
-    srv_viewer *view = &loop->viewers[task->viewer];
+    srv_viewer *view = task->view;
     const srv_camera_frame *f = &view->frame;
     RTCScene rtc = scene_rt_handle(loop->rt);
     uint32_t tile_x = (task_index % task->tiles_x) * SRV_TILE, tile_y = (task_index / task->tiles_x) * SRV_TILE;
@@ -114,12 +114,14 @@ static void visibility_tile(void *user, uint32_t task_index, uint32_t thread_ind
                 size_t p = (size_t)y * f->width + x;
                 if (packet.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) {
                     view->tri[p] = SRV_MISS;
+                    view->depth[p] = INFINITY;
                     continue;
                 }
                 uint32_t tri = packet.hit.primID[i];
                 view->tri[p] = tri;
                 view->bary_u[p] = packet.hit.u[i];
                 view->bary_v[p] = packet.hit.v[i];
+                view->depth[p] = packet.ray.tfar[i];
                 view->footprint[p] = pixel_footprint(f, dirs[i], packet.ray.tfar[i],
                                                      loop->s->tri_normal + 3 * (size_t)tri,
                                                      loop->s->texel_density);
@@ -127,10 +129,10 @@ static void visibility_tile(void *user, uint32_t task_index, uint32_t thread_ind
         }
 }
 
-void srv__visibility(srv_loop *loop, uint32_t viewer)
+void srv__visibility(srv_loop *loop, srv_viewer *view)
 {
-    const srv_camera_frame *f = &loop->viewers[viewer].frame;
-    visibility_task task = {.loop = loop, .viewer = viewer, .tiles_x = (f->width + SRV_TILE - 1) / SRV_TILE};
+    const srv_camera_frame *f = &view->frame;
+    visibility_task task = {.loop = loop, .view = view, .tiles_x = (f->width + SRV_TILE - 1) / SRV_TILE};
     uint32_t tiles_y = (f->height + SRV_TILE - 1) / SRV_TILE;
     srv_pool_run(loop->pool, task.tiles_x * tiles_y, visibility_tile, &task);
 }

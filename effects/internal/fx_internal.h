@@ -197,6 +197,11 @@ void fx__surface_map_init(const scene *s, uint32_t island, uint32_t lookup, fx__
  * zero, renormalised). */
 void fx__surface_map_eval(const fx__surface_map *map, float island_u, float island_v, float position[3]);
 
+/* ---- the registry ------------------------------------------------------------------------------- */
+
+/* The scene's own decision (scene_needs) for one of its effects, with the reason copied into why. */
+bool fx__scene_needs(const scene *s, scene_effect which, char *why, size_t why_cap);
+
 /* ---- payload bytes (little-endian, host independent) --------------------------------------------- */
 
 /* Reads a little-endian uint16 at p. */

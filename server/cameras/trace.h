@@ -4,8 +4,9 @@
  * (camgen.h) or a trace. The server records live viewers with srv_trace_writer_*; `fxcache sim` replays
  * them with srv_trace_read() and srv_trace_camera(). The format is specified in docs/TRACE_FORMAT.md:
  *
- *     fxcache-trace 1
+ *     fxcache-trace 2
  *     # optional comment lines
+ *     resolution W H            (version 2, optional, before the first camera)
  *     time px py pz dx dy dz fov_deg
  *
  * time in seconds (finite, non-decreasing), position in world units, view direction (non-zero, need not
@@ -25,7 +26,11 @@
 
 /* The header's magic word and the newest format version this build reads and writes. */
 #define SRV_TRACE_MAGIC   "fxcache-trace"
-#define SRV_TRACE_VERSION 1
+#define SRV_TRACE_VERSION 2
+/* Largest resolution side a version 2 trace may name. */
+#define SRV_TRACE_MAX_SIDE 8192
+/* Replays compare frame times with trace times with this slack, seconds (times read back exactly anyway). */
+#define SRV_TRACE_TIME_EPSILON 1e-9
 /* The longest line the reader accepts, bytes, not counting the line end. */
 #define SRV_TRACE_MAX_LINE 4096
 
@@ -47,12 +52,29 @@ srv_camera srv_trace_camera(const srv_trace *t, uint32_t frame);
 /* The time (seconds) of frame `frame`, with the same past-the-end rule as srv_trace_camera(). */
 double srv_trace_time(const srv_trace *t, uint32_t frame);
 
+/* The viewer's resolution recorded in a version 2 trace: true and the sides, or false when the file gives
+ * none (version 1). */
+bool srv_trace_resolution(const srv_trace *t, uint32_t *width, uint32_t *height);
+
+/* The times of the first and the last camera (a replay's join and leave times). */
+double srv_trace_first_time(const srv_trace *t);
+double srv_trace_last_time(const srv_trace *t);
+
+/* The camera at `time` seconds: the last camera line whose time is not after it (the first before the
+ * trace starts). */
+srv_camera srv_trace_camera_at(const srv_trace *t, double time);
+
 /* Releases a trace. NULL is allowed. */
 void srv_trace_free(srv_trace *t);
 
 /* Creates (truncates) a trace file at path and writes the header. Returns NULL with one line in err on
  * failure. The caller owns the writer and must srv_trace_writer_close() it. */
 srv_trace_writer *srv_trace_writer_open(const char *path, char *err, size_t cap);
+
+/* The same, recording the viewer's resolution: writes format version 2 with a 'resolution W H' line when
+ * both sides are in 1..SRV_TRACE_MAX_SIDE (else version 1, as srv_trace_writer_open). */
+srv_trace_writer *srv_trace_writer_open_sized(const char *path, uint32_t width, uint32_t height, char *err,
+                                              size_t cap);
 
 /* Appends one camera at `time` seconds: direction = target - position, every number printed with %.9g
  * (time with as many digits as it needs to read back exactly), and the line is flushed at once so that a

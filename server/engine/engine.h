@@ -1,0 +1,216 @@
+/* The engine: DESIGN.md's frame loop as a library that `fxcache sim`, the networked server and the error
+ * report drive alike.
+ *
+ *   srv_loop_create        the effects (a registry list), the caches their kinds need, the thread pool
+ *   srv_viewer_add/remove  viewers join and leave at any frame, each with its own resolution and field of
+ *                          view; ids carry a generation, so a removed or stale id is refused
+ *   srv_viewer_set_camera  the camera a viewer's next frame is rendered for (stage 1)
+ *   srv_loop_add_sink      where finished frames go (files, a connection, an error accumulator)
+ *   srv_loop_frame         one frame for the viewers present, stages in a fixed order, each timed:
+ *                          visibility, requests, queues, lookup, effects, compose, (sinks), housekeeping;
+ *                          returns the frame's statistics
+ *
+ * With no_cache set the same shading is evaluated per pixel with the sample counts the cache converges to
+ * (the baseline a renderer without the cache pays). Results are fxc_result codes (common/fxc_result.h). */
+#ifndef FXC_ENGINE_H
+#define FXC_ENGINE_H
+
+#include "camera.h"
+#include "effects.h"
+#include "fxc_result.h"
+#include "scene.h"
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+enum {
+    SRV_MAX_VIEWERS = 64,          /* viewer slots */
+    SRV_MAX_EFFECTS = FX_MAX_EFFECTS,
+    SRV_MAX_SIDE = 8192,           /* largest image side */
+};
+
+/* Stages timed per frame, in the order they run. */
+typedef enum srv_stage {
+    SRV_STAGE_VISIBILITY = 0,
+    SRV_STAGE_REQUESTS,
+    SRV_STAGE_QUEUES,
+    SRV_STAGE_LOOKUP,
+    SRV_STAGE_EFFECTS,
+    SRV_STAGE_COMPOSE,
+    SRV_STAGE_SINKS,
+    SRV_STAGE_HOUSEKEEPING,
+    SRV_STAGE_COUNT
+} srv_stage;
+
+const char *srv_stage_name(srv_stage stage);
+
+/* Things a frame had to leave out, each counted (never silent). */
+typedef enum srv_drop {
+    SRV_DROP_NOMEM_REQUESTS = 0, /* a viewer's requests lost: no memory for its request lists */
+    SRV_DROP_NOMEM_UPDATES,      /* an effect's updates lost: no memory for its job lists */
+    SRV_DROP_POOL_EXHAUSTED,     /* blocks not mapped: the effect's pool was full of this frame's blocks */
+    SRV_DROP_TABLE_FULL,         /* blocks not mapped: the cache's table at its maximum load */
+    SRV_DROP_NO_DEPENDENCY,      /* texels not updated: the block they depend on (triangle lookup) is absent */
+    SRV_DROP_COUNT
+} srv_drop;
+
+const char *srv_drop_name(srv_drop drop);
+
+/* An allocator for everything the engine allocates outside the caches (viewer buffers, request and job
+ * lists), so memory is counted exactly and failures can be injected. NULL members: libc. realloc gets the
+ * old size (0 for a new block), free the size. It is called from pool threads too: it must be thread-safe. */
+typedef struct srv_allocator {
+    void *(*realloc)(void *pointer, size_t old_size, size_t new_size, void *user);
+    void (*free)(void *pointer, size_t size, void *user);
+    void *user;
+} srv_allocator;
+
+/* Configuration; zero fields take the defaults beside them. */
+typedef struct srv_loop_desc {
+    const scene *s;                        /* required, outlives the loop */
+    scene_rt *rt;                          /* required, outlives the loop */
+    const fx_effect *const *effects;       /* the effect list (default: fx_registry()); index = effect id */
+    uint32_t effect_count;                 /* entries of effects (<= SRV_MAX_EFFECTS) */
+    bool effect_on[SRV_MAX_EFFECTS];       /* which effects run; their dependencies run with them */
+    int32_t bias[SRV_MAX_EFFECTS];         /* level bias per effect (used where bias_set) */
+    bool bias_set[SRV_MAX_EFFECTS];        /* bias given explicitly (replaces the effect's default) */
+    uint64_t pool_bytes;                   /* payload pool budget for all effects (default 64 MiB) */
+    uint64_t ray_budget;                   /* effect rays per frame, 0 = unlimited */
+    uint32_t samples_per_update;           /* progressive effects: samples added per texel per update
+                                              (default 16, at most the effect's max_samples) */
+    bool no_cache;                         /* the per-pixel baseline */
+    uint32_t seed;
+    uint32_t threads;                      /* 0 = all cores */
+    bool keep_views;                       /* keep per-viewer AO, shadow and sharing images */
+    srv_allocator allocator;               /* default: libc */
+} srv_loop_desc;
+
+/* A viewer: a handle with a generation counter (slot in the low 8 bits, generation above), 0 is never valid.
+ */
+typedef struct srv_viewer_id {
+    uint32_t id;
+} srv_viewer_id;
+
+/* A viewer's shape; zero fields take the defaults beside them. */
+typedef struct srv_viewer_desc {
+    uint32_t width, height; /* pixels, 1..SRV_MAX_SIDE (default 640 x 360) */
+    char name[32];          /* for statistics and file names (default "viewer_SLOT") */
+} srv_viewer_desc;
+
+/* One viewer's figures in a frame. */
+typedef struct srv_viewer_stats {
+    srv_viewer_id id;
+    uint32_t width, height;
+    uint64_t requested_texels; /* deduplicated within the viewer, shading effects */
+    uint64_t pixels_visible;
+    uint64_t pixels_missing;   /* visible pixels composed without cached data */
+} srv_viewer_stats;
+
+/* One frame's figures. */
+typedef struct srv_frame_stats {
+    uint32_t frame;
+    uint32_t viewer_count;                         /* viewers rendered this frame */
+    srv_viewer_stats viewers[SRV_MAX_VIEWERS];     /* [0, viewer_count), in slot order */
+    uint64_t requested_texels;                     /* sum over viewers, shading effects */
+    uint64_t unique_texels;                        /* after deduplication across viewers */
+    uint64_t rays[SRV_MAX_EFFECTS];                /* effect rays traced this frame */
+    uint64_t visibility_rays;
+    uint64_t texels_updated[SRV_MAX_EFFECTS];      /* texels written (traced or resampled) */
+    uint64_t texels_resampled[SRV_MAX_EFFECTS];    /* of which filled from a finer level */
+    uint64_t texels_deferred[SRV_MAX_EFFECTS];     /* requested but left for later by the ray budget */
+    uint64_t blocks_resident[SRV_MAX_EFFECTS];
+    uint64_t pixels_visible;
+    uint64_t pixels_missing;
+    uint64_t drops[SRV_DROP_COUNT];                /* this frame */
+    uint64_t evictions, exhausted;                 /* cumulative cache counters */
+    uint32_t table_count, table_capacity;          /* keys in the on-surface table, and its slots */
+    double time_ms[SRV_STAGE_COUNT];
+    double frame_ms;
+} srv_frame_stats;
+
+/* Bytes actually allocated, by structure and effect. */
+typedef struct srv_memory {
+    uint64_t table;                           /* hash table keys and values, the cache object */
+    uint64_t pools_reserved[SRV_MAX_EFFECTS]; /* payload pools, whole (allocated) */
+    uint64_t pools_in_use[SRV_MAX_EFFECTS];   /* part of them held by resident blocks */
+    uint64_t block_meta[SRV_MAX_EFFECTS];     /* masks, frames, keys, lists, viewer bits */
+    uint64_t viewers;                         /* per-viewer buffers (pixels, images, request lists) */
+    uint64_t queues;                          /* update queues, job lists, per-thread scratch */
+    uint64_t total;                           /* everything above (reserved pools counted whole) */
+} srv_memory;
+
+/* What a sink receives for each viewer after compose. Pointers are valid during the call only. */
+typedef struct srv_viewer_frame {
+    srv_viewer_id id;
+    const char *name;
+    uint32_t frame;
+    uint32_t width, height;
+    const uint8_t *srgb;     /* width*height*3, sRGB 8-bit, top row first */
+    const float *radiance;   /* width*height*3, linear */
+    const float *depth;      /* width*height, distance along the primary ray, INFINITY for the sky */
+    srv_camera camera;       /* the camera it was rendered for */
+    const srv_viewer_stats *stats;
+    const float *views[3];   /* with keep_views: AO, lit fraction of light 0, sharing; else NULL */
+} srv_viewer_frame;
+
+enum { SRV_VIEW_AO = 0, SRV_VIEW_SHADOW, SRV_VIEW_SHARING, SRV_VIEW_COUNT };
+
+/* A sink: called for every viewer's frame, then once with the frame's statistics. Returning non-zero from
+ * either stops nothing but is counted and reported by srv_loop_frame (a sink that cannot write). */
+typedef struct srv_sink {
+    int (*viewer_frame)(void *user, const srv_viewer_frame *frame);
+    int (*frame_done)(void *user, const srv_frame_stats *stats);
+    void *user;
+} srv_sink;
+
+typedef struct srv_loop srv_loop;
+
+/* Creates a loop with no viewers. Returns FXC_OK and *out, or a code with a one-line message in err. */
+fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err, size_t err_cap);
+void srv_loop_free(srv_loop *loop);
+
+/* Adds a viewer: its buffers are allocated (and counted) here. FXC_ERR_NO_SLOT when all slots are taken,
+ * FXC_ERR_INVALID for a bad size, FXC_ERR_NOMEM. It has no camera until srv_viewer_set_camera. */
+fxc_result srv_viewer_add(srv_loop *loop, const srv_viewer_desc *desc, srv_viewer_id *out);
+
+/* Removes a viewer and frees its buffers; its id (and every older id of its slot) is refused afterwards. */
+fxc_result srv_viewer_remove(srv_loop *loop, srv_viewer_id id);
+
+/* Sets the camera the viewer's next frames are rendered for. FXC_ERR_CAMERA for a degenerate camera,
+ * FXC_ERR_STALE_ID for a removed viewer. */
+fxc_result srv_viewer_set_camera(srv_loop *loop, srv_viewer_id id, const srv_camera *camera);
+
+/* FXC_OK when id names a present viewer. */
+fxc_result srv_viewer_check(const srv_loop *loop, srv_viewer_id id);
+
+/* The present viewers in slot order: writes up to cap ids, returns how many there are. */
+uint32_t srv_loop_viewers(const srv_loop *loop, srv_viewer_id *ids, uint32_t cap);
+
+/* A viewer's last frame: sRGB image, linear radiance, depth, or a kept view; NULL for a stale id or before
+ * its first frame. *width / *height (may be NULL) receive its size. */
+const uint8_t *srv_viewer_image(const srv_loop *loop, srv_viewer_id id);
+const float *srv_viewer_radiance(const srv_loop *loop, srv_viewer_id id);
+const float *srv_viewer_depth(const srv_loop *loop, srv_viewer_id id);
+const float *srv_viewer_view(const srv_loop *loop, srv_viewer_id id, int which);
+fxc_result srv_viewer_size(const srv_loop *loop, srv_viewer_id id, uint32_t *width, uint32_t *height);
+
+/* Registers a sink (at most 8). The loop keeps the struct by value; user must outlive the loop. */
+fxc_result srv_loop_add_sink(srv_loop *loop, const srv_sink *sink);
+
+/* Runs one frame for every present viewer that has a camera, fills *stats (returned, never stashed).
+ * Returns FXC_OK; a sink's failure is returned as FXC_ERR_IO after the whole frame ran. */
+fxc_result srv_loop_frame(srv_loop *loop, srv_frame_stats *stats);
+
+/* The effect list, the effects that run, their effective level bias. */
+uint32_t srv_loop_effect_count(const srv_loop *loop);
+const fx_effect *srv_loop_effect(const srv_loop *loop, uint32_t index);
+bool srv_loop_effect_on(const srv_loop *loop, uint32_t index);
+int32_t srv_loop_bias(const srv_loop *loop, uint32_t index);
+/* Whether an effect is a shading effect that goes through a cache this run (counted in requested texels). */
+bool srv_loop_effect_cached(const srv_loop *loop, uint32_t index);
+
+/* Current memory (exact: every byte went through a counting allocator). */
+void srv_loop_memory(const srv_loop *loop, srv_memory *out);
+
+#endif

@@ -1,0 +1,233 @@
+/* Private to the engine: the loop's state, the cache-kind interface and the stage functions.
+ *
+ * loop.c owns the loop, its viewers and sinks and runs the stages in order; visibility.c, requests.c,
+ * update.c (queues, lookup, effects) and compose.c are the stages; kind_osc.c puts the on-surface cache
+ * behind the cache-kind interface (a world-space kind is one more file and one line in kinds.c); report.c
+ * is the run report. Stages call the helpers declared here; nothing here calls back into a stage. */
+#ifndef FXC_ENGINE_INTERNAL_H
+#define FXC_ENGINE_INTERNAL_H
+
+#include "cache.h"
+#include "effects.h"
+#include "engine.h"
+#include "pool.h"
+
+#include <stdatomic.h>
+
+enum {
+    SRV_TILE = 16,                /* visibility and request tiles are 16 x 16 pixels */
+    SRV_MISS = 0xFFFFFFFFu,       /* no hit */
+    SRV_NONE = 0xFFFFFFFFu,       /* no block */
+    SRV_MAX_SINKS = 8,
+    SRV_NO_EFFECT = 0xFFFFFFFFu,
+    SRV_KEYS_PER_PIXEL = 2 * FX_MAX_TAPS, /* an effect's taps and its dependency's */
+    SRV_RUN = FX_RUN_PIXELS,               /* pixels per batched call in requests and compose */
+};
+
+/* Memory categories counted by the engine's allocator (srv_memory's viewers and queues). */
+typedef enum srv_mem_category { SRV_MEM_VIEWERS = 0, SRV_MEM_QUEUES, SRV_MEM_COUNT } srv_mem_category;
+
+/* A growable (key, mask) list, kept across frames so steady state allocates nothing. Aligned to a cache
+ * line so per-thread lists never share one. */
+typedef struct srv_request_list {
+    _Alignas(64) uint64_t *keys;
+    uint64_t *masks;
+    uint32_t *blocks; /* block index per key after the batch request */
+    size_t count, capacity;
+    size_t keys_capacity, masks_capacity, blocks_capacity; /* each array's own (equal unless a grow failed) */
+} srv_request_list;
+
+/* A visible pixel as the cache kinds see it. */
+typedef struct srv_pixel {
+    uint32_t triangle, island;
+    float island_u, island_v; /* level-0 island texels */
+    float footprint;          /* log2 of the pixel's footprint in level-0 texels */
+} srv_pixel;
+
+/* A viewer slot. */
+typedef struct srv_viewer {
+    uint32_t generation;       /* id = generation << 8 | slot; bumped at remove */
+    bool present, has_camera, rendered;
+    srv_viewer_desc desc;
+    srv_camera camera;
+    srv_camera_frame frame;
+    size_t pixels;
+    uint32_t *tri;             /* hit triangle per pixel, SRV_MISS for none */
+    float *bary_u, *bary_v;
+    float *footprint;          /* log2 of the pixel's footprint in level-0 texels (ray differentials) */
+    float *depth;              /* distance along the primary ray, INFINITY for none */
+    float *radiance;           /* linear RGB */
+    uint8_t *image;            /* sRGB 8-bit RGB */
+    float *views[SRV_VIEW_COUNT];
+    srv_request_list requests; /* this frame's, merged across threads, before the cache */
+    srv_viewer_stats stats;
+} srv_viewer;
+
+/* One queued block of an effect for this frame. */
+typedef struct srv_job {
+    uint32_t block;            /* block index in the effect's pool */
+    uint32_t dependency_block; /* the same block of the effect it depends on, or SRV_NONE */
+    uint64_t mask;             /* texels to update */
+} srv_job;
+
+/* Per effect: this frame's queue scratch and job lists (grown when needed and kept). */
+typedef struct srv_effect_queue {
+    uint64_t *empty, *refine, *take; /* per frame block: texels without data, to refine, taken */
+    uint32_t *dependency;            /* per frame block: its dependency block */
+    size_t capacity;
+    srv_job *jobs;
+    size_t job_count, job_capacity;
+    fx_block_job *fx_jobs;           /* what the effect's update receives */
+    size_t fx_job_capacity;
+    uint64_t *chunk_rays;            /* rays traced per chunk of jobs */
+    size_t chunk_capacity;
+} srv_effect_queue;
+
+typedef struct srv_loop srv_loop;
+
+/* A cache kind: what the stages call for every cache, whatever its layout (DESIGN.md: on-surface,
+ * world-space). Keys carry their effect; blocks are indices into that effect's pool. Batched calls take
+ * runs of pixels, never one call per texel. */
+typedef struct srv_cache_kind {
+    const char *name;
+    scene_cache_kind kind;
+    /* Creates the cache for the loop's effects of this kind that run (loop->effect_cached, pool budget
+     * loop->desc.pool_bytes shared by bytes per texel). */
+    fxc_result (*create)(srv_loop *loop, void **cache, char *err, size_t err_cap);
+    void (*destroy)(void *cache);
+    void (*begin_frame)(void *cache, uint32_t frame);
+    /* Stage 3: writes the keys and masks the filtered reads of `count` pixels touch for `effect` at level
+     * footprint + bias, and the same texels of its dependency (SRV_NO_EFFECT: none); at most
+     * SRV_KEYS_PER_PIXEL per pixel. Returns how many were written. */
+    uint32_t (*pixel_requests)(const void *cache, const srv_pixel *pixels, uint32_t count, uint32_t effect,
+                               int32_t bias, uint32_t dependency, uint64_t *keys, uint64_t *masks);
+    uint32_t (*key_effect)(uint64_t key);
+    /* The same block's key for another effect. */
+    uint64_t (*rekey)(uint64_t key, uint32_t effect);
+    fxc_result (*request_batch)(void *cache, uint64_t *keys, uint64_t *masks, size_t count, size_t *unique,
+                                uint32_t *blocks, uint64_t *pool_exhausted, uint64_t *table_full);
+    const uint32_t *(*frame_blocks)(void *cache, uint32_t effect, uint32_t *count);
+    uint64_t (*block_key)(const void *cache, uint32_t effect, uint32_t block);
+    uint64_t (*block_requested)(const void *cache, uint32_t effect, uint32_t block);
+    uint64_t (*block_valid)(const void *cache, uint32_t effect, uint32_t block);
+    void (*block_set_valid)(void *cache, uint32_t effect, uint32_t block, uint64_t valid);
+    void *(*block_payload)(void *cache, uint32_t effect, uint32_t block);
+    uint32_t (*find)(const void *cache, uint64_t key);
+    /* Fills the location fields of an fx_block_job (key, island, level, block_x, block_y) from a key. */
+    void (*job_location)(uint64_t key, fx_block_job *job);
+    /* Resampling: for every texel of `need` in block, the four finer texels holding data (finer[t][0..3]);
+     * returns the texels whose four are all there. */
+    uint64_t (*finer_texels)(void *cache, uint32_t effect, uint32_t block, uint64_t need,
+                             const void *finer[64][4]);
+    /* Stage 7: the filtered taps of `count` pixels for `effect` at level footprint + bias; blocks (may be
+     * NULL) receives the block of each pixel's first tap or SRV_NONE. */
+    void (*pixel_taps)(const void *cache, const srv_pixel *pixels, uint32_t count, uint32_t effect, int32_t bias,
+                       fx_taps *taps, uint32_t *blocks);
+    uint32_t (*pool_capacity)(const void *cache, uint32_t effect);
+    /* Stage 9 and figures. */
+    void (*housekeeping)(void *cache);
+    void (*frame_figures)(const void *cache, srv_frame_stats *stats);
+    void (*memory)(const void *cache, srv_memory *out); /* adds its bytes */
+} srv_cache_kind;
+
+/* The cache kinds by scene_cache_kind (NULL: not built yet). */
+const srv_cache_kind *srv__cache_kind(scene_cache_kind kind);
+
+struct srv_loop {
+    srv_loop_desc desc;
+    const scene *s;
+    scene_rt *rt;
+    srv_pool *pool;
+    fx_context fx;
+    /* Effects. */
+    uint32_t effect_count;
+    const fx_effect *effects[SRV_MAX_EFFECTS];
+    uint32_t dependency[SRV_MAX_EFFECTS];   /* index of the effect it depends on, or SRV_NO_EFFECT */
+    bool effect_on[SRV_MAX_EFFECTS];        /* runs (in either mode) */
+    bool effect_cached[SRV_MAX_EFFECTS];    /* goes through a cache this run (on, cache mode) */
+    bool effect_shading[SRV_MAX_EFFECTS];   /* cached and shades (counted in requested texels) */
+    bool depended_on[SRV_MAX_EFFECTS];      /* an effect that runs depends on it: updated in the lookup stage */
+    int32_t bias[SRV_MAX_EFFECTS];
+    uint32_t samples[SRV_MAX_EFFECTS];      /* samples per update handed to the effect */
+    /* Caches, one per kind that an effect needs. */
+    const srv_cache_kind *kinds[SCENE_CACHE_COUNT];
+    void *caches[SCENE_CACHE_COUNT];
+    uint32_t effect_kind[SRV_MAX_EFFECTS];  /* scene_cache_kind of each effect */
+    /* Viewers and sinks. */
+    uint32_t frame_number;
+    srv_viewer viewers[SRV_MAX_VIEWERS];
+    srv_sink sinks[SRV_MAX_SINKS];
+    uint32_t sink_count;
+    /* Scratch kept across frames. */
+    srv_request_list *thread_requests;      /* one per pool thread */
+    srv_effect_queue queues[SRV_MAX_EFFECTS];
+    uint64_t *viewer_bits[SRV_MAX_EFFECTS]; /* per block: which viewer slots requested it (keep_views) */
+    void *compose_scratch;                  /* per thread: runs of pixels (compose.c) */
+    size_t compose_scratch_bytes;           /* per thread */
+    /* Memory counted by category through desc.allocator (request lists grow on pool threads). */
+    _Atomic uint64_t mem[SRV_MEM_COUNT];
+};
+
+/* Monotonic clock, milliseconds. */
+double srv__now_ms(void);
+
+/* Allocation through the loop's allocator, counted in category: (re)allocates *array from old_count to
+ * new_count elements of size bytes (overflow-checked); false and *array untouched on failure. new_count 0
+ * frees. */
+bool srv__resize(srv_loop *loop, srv_mem_category category, void **array, size_t old_count, size_t new_count,
+                 size_t size);
+
+/* Grows *array (capacity *capacity elements) to hold n, doubling from `first`; false on no memory. */
+bool srv__grow(srv_loop *loop, srv_mem_category category, void **array, size_t *capacity, size_t n,
+               size_t first, size_t size);
+
+/* Grows a request list to hold at least n entries; false on no memory. */
+bool srv__request_reserve(srv_loop *loop, srv_mem_category category, srv_request_list *list, size_t n);
+void srv__request_list_free(srv_loop *loop, srv_mem_category category, srv_request_list *list);
+
+/* Stage 2: visibility of one viewer into its buffers. */
+void srv__visibility(srv_loop *loop, srv_viewer *view);
+
+/* Stage 3: requests of one viewer into the caches; returns the viewer's requested texels (deduplicated
+ * within the viewer, shading effects only) and counts drops in st. */
+uint64_t srv__requests(srv_loop *loop, uint32_t slot, srv_frame_stats *st);
+
+/* Stage 4: queues of every cached effect within the ray budget, resampling first. */
+void srv__queues(srv_loop *loop, srv_frame_stats *st);
+
+/* Stages 5 and 6: runs the queued jobs of the effects others depend on (lookup = true) or of the rest. */
+void srv__updates(srv_loop *loop, bool lookup, srv_frame_stats *st);
+
+/* Stage 7: compose one viewer (cached, or per-pixel in no-cache mode). */
+void srv__compose(srv_loop *loop, uint32_t slot, srv_frame_stats *st);
+
+/* Per-thread compose scratch size for this loop (bytes), known at creation. */
+size_t srv__compose_scratch_bytes(const srv_loop *loop);
+
+/* The effect level of a pixel: round(footprint + bias), clamped to [0, 15]. */
+static inline uint32_t srv__level(float footprint_log2, int32_t bias)
+{
+    float l = footprint_log2 + (float)bias;
+    if (!(l > 0.0f))
+        return 0;
+    if (l >= 15.0f)
+        return 15;
+    return (uint32_t)(l + 0.5f) > 15 ? 15 : (uint32_t)(l + 0.5f);
+}
+
+/* The island-local UV (level-0 texels) of a hit. */
+static inline void srv__island_uv(const scene *s, uint32_t tri, float u, float v, float *tu, float *tv)
+{
+    const float *uv = s->tri_island_uv + 6 * (size_t)tri;
+    float w = 1.0f - u - v;
+    *tu = w * uv[0] + u * uv[2] + v * uv[4];
+    *tv = w * uv[1] + u * uv[3] + v * uv[5];
+}
+
+/* The world position and unit normal of a hit. */
+void srv__hit_point(const scene *s, uint32_t tri, float u, float v, float pos[3], float normal[3]);
+
+/* The on-surface kind (kind_osc.c). */
+extern const srv_cache_kind srv__kind_osc;
+
+#endif

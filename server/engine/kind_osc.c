@@ -1,0 +1,347 @@
+/* The on-surface cache (cache/osc.h) behind the cache-kind interface: keys from a pixel's island UV and
+ * level (bilinear footprints), filtered taps for compose, the four finer texels for resampling, and the
+ * cache's phases, figures and memory. Everything that knows the osc key layout or island sizes in the
+ * engine is here. */
+#include "engine_internal.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+typedef struct kind_osc {
+    osc_cache *osc;
+    const scene *s;
+} kind_osc;
+
+static fxc_result osc_kind_create(srv_loop *loop, void **out, char *err, size_t err_cap)
+{
+    uint32_t total_texel_bytes = 0;
+    uint32_t texel_bytes[SRV_MAX_EFFECTS] = {0};
+    for (uint32_t e = 0; e < loop->effect_count; e++)
+        if (loop->effect_cached[e] && loop->effect_kind[e] == SCENE_CACHE_ON_SURFACE) {
+            texel_bytes[e] = loop->effects[e]->texel_bytes(loop->s);
+            total_texel_bytes += texel_bytes[e];
+        }
+    *out = NULL;
+    if (total_texel_bytes == 0)
+        return FXC_OK;
+    kind_osc *k = calloc(1, sizeof *k);
+    if (!k) {
+        snprintf(err, err_cap, "frame loop: out of memory for the on-surface cache");
+        return FXC_ERR_NOMEM;
+    }
+    k->s = loop->s;
+    /* Every effect gets the same number of blocks: a block of each effect covers the same texels. */
+    uint64_t blocks = loop->desc.pool_bytes / (64ull * total_texel_bytes);
+    if (blocks < 64)
+        blocks = 64;
+    if (blocks > (1u << 26))
+        blocks = 1u << 26;
+    osc_desc od = {0};
+    for (uint32_t e = 0; e < loop->effect_count; e++)
+        if (texel_bytes[e])
+            od.effects[e] = (osc_effect_desc){.texel_bytes = texel_bytes[e], .max_blocks = (uint32_t)blocks};
+    char msg[256];
+    osc_result r = osc_create(&od, &k->osc, msg, sizeof msg);
+    if (r != OSC_OK) {
+        snprintf(err, err_cap, "frame loop: cannot create the on-surface cache: %s", msg);
+        free(k);
+        return (fxc_result)r;
+    }
+    *out = k;
+    return FXC_OK;
+}
+
+static void osc_kind_destroy(void *cache)
+{
+    kind_osc *k = cache;
+    if (!k)
+        return;
+    osc_destroy(k->osc);
+    free(k);
+}
+
+static void osc_kind_begin_frame(void *cache, uint32_t frame)
+{
+    osc_begin_frame(((kind_osc *)cache)->osc, frame);
+}
+
+static osc_island_extent extent_of(const scene *s, uint32_t effect, uint32_t island)
+{
+    return (osc_island_extent){.effect = effect, .island_id = island, .width0 = s->islands[island].width,
+                               .height0 = s->islands[island].height};
+}
+
+static uint32_t osc_kind_pixel_requests(const void *cache, const srv_pixel *pixels, uint32_t count, uint32_t effect,
+                                        int32_t bias, uint32_t dependency, uint64_t *keys, uint64_t *masks)
+{
+    const kind_osc *k = cache;
+    uint32_t n = 0;
+    uint64_t dep_field = dependency == SRV_NO_EFFECT ? 0 : (uint64_t)dependency << OSC_KEY_EFFECT_SHIFT;
+    const uint64_t effect_clear = ~((uint64_t)0xF << OSC_KEY_EFFECT_SHIFT);
+    for (uint32_t i = 0; i < count; i++) {
+        const srv_pixel *px = &pixels[i];
+        uint32_t level = srv__level(px->footprint, bias);
+        float scale = 1.0f / (float)(1u << level);
+        osc_island_extent extent = extent_of(k->s, effect, px->island);
+        osc_footprint fp;
+        osc_footprint_bilinear(&extent, level, px->island_u * scale, px->island_v * scale, &fp);
+        for (uint32_t f = 0; f < fp.count; f++) {
+            keys[n] = fp.keys[f];
+            masks[n++] = fp.texel_masks[f];
+            if (dependency != SRV_NO_EFFECT) {
+                keys[n] = (fp.keys[f] & effect_clear) | dep_field;
+                masks[n++] = fp.texel_masks[f];
+            }
+        }
+    }
+    return n;
+}
+
+static uint32_t osc_kind_key_effect(uint64_t key)
+{
+    return osc_key_effect(key);
+}
+
+static uint64_t osc_kind_rekey(uint64_t key, uint32_t effect)
+{
+    return (key & ~((uint64_t)0xF << OSC_KEY_EFFECT_SHIFT)) | ((uint64_t)effect << OSC_KEY_EFFECT_SHIFT);
+}
+
+static fxc_result osc_kind_request_batch(void *cache, uint64_t *keys, uint64_t *masks, size_t count, size_t *unique,
+                                         uint32_t *blocks, uint64_t *pool_exhausted, uint64_t *table_full)
+{
+    kind_osc *k = cache;
+    osc_stats before;
+    osc_stats_get(k->osc, &before);
+    osc_result r = osc_request_batch(k->osc, keys, masks, count, unique, blocks);
+    osc_stats after;
+    osc_stats_get(k->osc, &after);
+    *pool_exhausted += after.exhausted - before.exhausted;
+    *table_full += after.table_full - before.table_full;
+    return (fxc_result)r;
+}
+
+static const uint32_t *osc_kind_frame_blocks(void *cache, uint32_t effect, uint32_t *count)
+{
+    return osc_frame_blocks(((kind_osc *)cache)->osc, effect, count);
+}
+
+static uint64_t osc_kind_block_key(const void *cache, uint32_t effect, uint32_t block)
+{
+    return osc_block_key(((const kind_osc *)cache)->osc, effect, block);
+}
+
+static uint64_t osc_kind_block_requested(const void *cache, uint32_t effect, uint32_t block)
+{
+    return osc_block_requested(((const kind_osc *)cache)->osc, effect, block);
+}
+
+static uint64_t osc_kind_block_valid(const void *cache, uint32_t effect, uint32_t block)
+{
+    return osc_block_valid(((const kind_osc *)cache)->osc, effect, block);
+}
+
+static void osc_kind_block_set_valid(void *cache, uint32_t effect, uint32_t block, uint64_t valid)
+{
+    osc_block_set_valid(((kind_osc *)cache)->osc, effect, block, valid);
+}
+
+static void *osc_kind_block_payload(void *cache, uint32_t effect, uint32_t block)
+{
+    return osc_block_payload(((kind_osc *)cache)->osc, effect, block);
+}
+
+static uint32_t osc_kind_find(const void *cache, uint64_t key)
+{
+    return osc_find(((const kind_osc *)cache)->osc, key);
+}
+
+static void osc_kind_job_location(uint64_t key, fx_block_job *job)
+{
+    osc_key_fields f = osc_key_unpack(key);
+    job->key = key;
+    job->island = f.island_id;
+    job->level = f.level;
+    job->block_x = f.block_x;
+    job->block_y = f.block_y;
+}
+
+static uint64_t osc_kind_finer_texels(void *cache, uint32_t effect, uint32_t block, uint64_t need,
+                                      const void *finer[64][4])
+{
+    kind_osc *k = cache;
+    osc_key_fields key = osc_key_unpack(osc_block_key(k->osc, effect, block));
+    if (key.level == 0 || need == 0)
+        return 0;
+    const scene_island *island = &k->s->islands[key.island_id];
+    uint32_t fine_w = osc_level_size(island->width, key.level - 1);
+    uint32_t fine_h = osc_level_size(island->height, key.level - 1);
+    uint32_t texel_bytes = osc_pool_texel_bytes(k->osc, effect);
+    /* The up to four finer blocks under this one, looked up once. */
+    uint32_t fine_block[2][2];
+    uint64_t fine_valid[2][2] = {{0, 0}, {0, 0}};
+    const uint8_t *fine_payload[2][2] = {{NULL, NULL}, {NULL, NULL}};
+    for (uint32_t dy = 0; dy < 2; dy++)
+        for (uint32_t dx = 0; dx < 2; dx++) {
+            uint32_t bx = 2 * key.block_x + dx, by = 2 * key.block_y + dy;
+            fine_block[dy][dx] = OSC_NONE;
+            if (bx * 8 < fine_w && by * 8 < fine_h && bx <= OSC_MAX_BLOCK_COORD && by <= OSC_MAX_BLOCK_COORD)
+                fine_block[dy][dx] = osc_find(k->osc, osc_key_pack(effect, key.island_id, key.level - 1, bx, by));
+            if (fine_block[dy][dx] != OSC_NONE) {
+                fine_valid[dy][dx] = osc_block_valid(k->osc, effect, fine_block[dy][dx]);
+                fine_payload[dy][dx] = osc_block_payload(k->osc, effect, fine_block[dy][dx]);
+            }
+        }
+    uint64_t found = 0;
+    for (uint64_t m = need; m; m &= m - 1) {
+        uint32_t t = (uint32_t)__builtin_ctzll(m);
+        uint32_t tx = key.block_x * 8 + (t & 7), ty = key.block_y * 8 + (t >> 3);
+        bool ok = true;
+        for (uint32_t c = 0; c < 4 && ok; c++) {
+            uint32_t cx = 2 * tx + (c & 1), cy = 2 * ty + (c >> 1);
+            if (cx >= fine_w || cy >= fine_h) {
+                ok = false;
+                break;
+            }
+            uint32_t by = (cy / 8) - 2 * key.block_y, bx = (cx / 8) - 2 * key.block_x;
+            uint32_t ct = (cy & 7) * 8 + (cx & 7);
+            if (fine_block[by][bx] == OSC_NONE || !(fine_valid[by][bx] >> ct & 1)) {
+                ok = false;
+                break;
+            }
+            finer[t][c] = fine_payload[by][bx] + (size_t)ct * texel_bytes;
+        }
+        if (ok)
+            found |= (uint64_t)1 << t;
+    }
+    return found;
+}
+
+static void osc_kind_pixel_taps(const void *cache, const srv_pixel *pixels, uint32_t count, uint32_t effect,
+                                int32_t bias, fx_taps *taps, uint32_t *blocks)
+{
+    const kind_osc *k = cache;
+    uint32_t texel_bytes = osc_pool_texel_bytes(k->osc, effect);
+    /* Neighbouring pixels mostly read the same block: remember the last one. */
+    uint64_t memo_key = OSC_KEY_EMPTY;
+    uint32_t memo_block = OSC_NONE;
+    for (uint32_t i = 0; i < count; i++) {
+        const srv_pixel *px = &pixels[i];
+        fx_taps *out = &taps[i];
+        uint32_t level = srv__level(px->footprint, bias);
+        const scene_island *is = &k->s->islands[px->island];
+        uint32_t w = osc_level_size(is->width, level), h = osc_level_size(is->height, level);
+        float scale = 1.0f / (float)(1u << level);
+        float x = px->island_u * scale - 0.5f, y = px->island_v * scale - 0.5f;
+        float fx0 = floorf(x), fy0 = floorf(y);
+        float ax = x - fx0, ay = y - fy0;
+        long x0 = (long)fx0, y0 = (long)fy0;
+        float total = 0;
+        out->count = 0;
+        if (blocks)
+            blocks[i] = SRV_NONE;
+        long last_bx = -1, last_by = -1;
+        uint32_t block = OSC_NONE;
+        uint64_t valid = 0;
+        const uint8_t *payload = NULL;
+        for (int t = 0; t < 4; t++) {
+            long xi = x0 + (t & 1), yi = y0 + (t >> 1);
+            xi = xi < 0 ? 0 : (xi >= (long)w ? (long)w - 1 : xi);
+            yi = yi < 0 ? 0 : (yi >= (long)h ? (long)h - 1 : yi);
+            float weight = ((t & 1) ? ax : 1 - ax) * ((t >> 1) ? ay : 1 - ay);
+            if ((xi >> 3) != last_bx || (yi >> 3) != last_by) {
+                last_bx = xi >> 3;
+                last_by = yi >> 3;
+                uint64_t key = osc_key_pack(effect, px->island, level, (uint32_t)last_bx, (uint32_t)last_by);
+                if (key != memo_key) {
+                    memo_key = key;
+                    memo_block = osc_find(k->osc, key);
+                }
+                block = memo_block;
+                if (block != OSC_NONE) {
+                    valid = osc_block_valid(k->osc, effect, block);
+                    payload = osc_block_payload(k->osc, effect, block);
+                }
+            }
+            if (block == OSC_NONE)
+                continue;
+            if (blocks && blocks[i] == SRV_NONE)
+                blocks[i] = block;
+            uint32_t texel = ((uint32_t)yi & 7) * 8 + ((uint32_t)xi & 7);
+            if (!(valid >> texel & 1) || weight <= 0)
+                continue;
+            out->texel[out->count] = payload + (size_t)texel * texel_bytes;
+            out->weight[out->count] = weight;
+            out->at_x[out->count] = x + 0.5f - (float)xi;
+            out->at_y[out->count] = y + 0.5f - (float)yi;
+            out->count++;
+            total += weight;
+        }
+        float inv = out->count ? 1.0f / total : 0.0f;
+        for (uint32_t t = 0; t < out->count; t++)
+            out->weight[t] *= inv;
+    }
+}
+
+static uint32_t osc_kind_pool_capacity(const void *cache, uint32_t effect)
+{
+    return osc_pool_capacity(((const kind_osc *)cache)->osc, effect);
+}
+
+static void osc_kind_housekeeping(void *cache)
+{
+    osc_housekeeping(((kind_osc *)cache)->osc);
+}
+
+static void osc_kind_frame_figures(const void *cache, srv_frame_stats *st)
+{
+    osc_stats os;
+    osc_stats_get(((const kind_osc *)cache)->osc, &os);
+    for (uint32_t e = 0; e < SRV_MAX_EFFECTS && e < OSC_MAX_EFFECTS; e++)
+        st->blocks_resident[e] += os.effects[e].blocks_resident;
+    st->evictions += os.evictions;
+    st->exhausted += os.exhausted;
+    st->table_count += os.table_count;
+    st->table_capacity += os.table_capacity;
+}
+
+static void osc_kind_memory(const void *cache, srv_memory *out)
+{
+    const kind_osc *k = cache;
+    osc_memory_report m;
+    osc_memory(k->osc, &m);
+    out->table += m.table_key_bytes + m.table_value_bytes + m.cache_struct_bytes + sizeof *k;
+    for (uint32_t e = 0; e < SRV_MAX_EFFECTS && e < OSC_MAX_EFFECTS; e++) {
+        out->pools_reserved[e] += m.effects[e].payload_reserved_bytes;
+        out->pools_in_use[e] += m.effects[e].payload_in_use_bytes;
+        out->block_meta[e] += m.effects[e].block_meta_bytes + m.effects[e].list_bytes;
+    }
+    out->total += m.total_bytes + sizeof *k;
+}
+
+const srv_cache_kind srv__kind_osc = {
+    .name = "on_surface",
+    .kind = SCENE_CACHE_ON_SURFACE,
+    .create = osc_kind_create,
+    .destroy = osc_kind_destroy,
+    .begin_frame = osc_kind_begin_frame,
+    .pixel_requests = osc_kind_pixel_requests,
+    .key_effect = osc_kind_key_effect,
+    .rekey = osc_kind_rekey,
+    .request_batch = osc_kind_request_batch,
+    .frame_blocks = osc_kind_frame_blocks,
+    .block_key = osc_kind_block_key,
+    .block_requested = osc_kind_block_requested,
+    .block_valid = osc_kind_block_valid,
+    .block_set_valid = osc_kind_block_set_valid,
+    .block_payload = osc_kind_block_payload,
+    .find = osc_kind_find,
+    .job_location = osc_kind_job_location,
+    .finer_texels = osc_kind_finer_texels,
+    .pixel_taps = osc_kind_pixel_taps,
+    .pool_capacity = osc_kind_pool_capacity,
+    .housekeeping = osc_kind_housekeeping,
+    .frame_figures = osc_kind_frame_figures,
+    .memory = osc_kind_memory,
+};

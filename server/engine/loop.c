@@ -1,0 +1,599 @@
+/* The loop: creation (effects resolved, caches per kind, scratch), viewers as handles, sinks, one frame in
+ * DESIGN.md's stage order, memory. See engine.h. */
+#include "engine_internal.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+static const char *const stage_names[SRV_STAGE_COUNT] = {"visibility", "requests", "queues", "lookup",
+                                                         "effects", "compose", "sinks", "housekeeping"};
+
+const char *srv_stage_name(srv_stage stage)
+{
+    return (unsigned)stage < SRV_STAGE_COUNT ? stage_names[stage] : "?";
+}
+
+static const char *const drop_names[SRV_DROP_COUNT] = {"nomem_requests", "nomem_updates", "pool_exhausted",
+                                                       "table_full", "no_dependency"};
+
+const char *srv_drop_name(srv_drop drop)
+{
+    return (unsigned)drop < SRV_DROP_COUNT ? drop_names[drop] : "?";
+}
+
+double srv__now_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
+}
+
+/* ---- counted allocation ------------------------------------------------------------------------------ */
+
+bool srv__resize(srv_loop *loop, srv_mem_category category, void **array, size_t old_count, size_t new_count,
+                 size_t size)
+{
+    const srv_allocator *a = &loop->desc.allocator;
+    if (new_count == 0) {
+        if (*array) {
+            if (a->free)
+                a->free(*array, old_count * size, a->user);
+            else
+                free(*array);
+        }
+        *array = NULL;
+        atomic_fetch_sub(&loop->mem[category], (uint64_t)old_count * size);
+        return true;
+    }
+    if (size == 0 || new_count > SIZE_MAX / size)
+        return false;
+    void *p = a->realloc ? a->realloc(*array, old_count * size, new_count * size, a->user)
+                         : realloc(*array, new_count * size);
+    if (!p)
+        return false;
+    *array = p;
+    atomic_fetch_add(&loop->mem[category], (uint64_t)new_count * size);
+    atomic_fetch_sub(&loop->mem[category], (uint64_t)old_count * size);
+    return true;
+}
+
+bool srv__grow(srv_loop *loop, srv_mem_category category, void **array, size_t *capacity, size_t n, size_t first,
+               size_t size)
+{
+    if (n <= *capacity)
+        return true;
+    size_t cap = *capacity ? *capacity : first;
+    while (cap < n && cap <= SIZE_MAX / 2)
+        cap *= 2;
+    if (cap < n)
+        cap = n;
+    if (!srv__resize(loop, category, array, *capacity, cap, size))
+        return false;
+    *capacity = cap;
+    return true;
+}
+
+bool srv__request_reserve(srv_loop *loop, srv_mem_category category, srv_request_list *list, size_t n)
+{
+    if (n <= list->capacity)
+        return true;
+    size_t cap = list->capacity ? list->capacity : 4096;
+    while (cap < n && cap <= SIZE_MAX / 2)
+        cap *= 2;
+    if (cap < n)
+        cap = n;
+    /* Grow the three arrays; on a failure the grown ones keep their larger size (counted) and the list keeps
+     * its old capacity, so nothing is lost or miscounted. */
+    if (!srv__resize(loop, category, (void **)&list->keys, list->keys_capacity, cap, sizeof *list->keys))
+        return false;
+    list->keys_capacity = cap;
+    if (!srv__resize(loop, category, (void **)&list->masks, list->masks_capacity, cap, sizeof *list->masks))
+        return false;
+    list->masks_capacity = cap;
+    if (!srv__resize(loop, category, (void **)&list->blocks, list->blocks_capacity, cap, sizeof *list->blocks))
+        return false;
+    list->blocks_capacity = cap;
+    list->capacity = cap;
+    return true;
+}
+
+void srv__request_list_free(srv_loop *loop, srv_mem_category category, srv_request_list *list)
+{
+    srv__resize(loop, category, (void **)&list->keys, list->keys_capacity, 0, sizeof *list->keys);
+    srv__resize(loop, category, (void **)&list->masks, list->masks_capacity, 0, sizeof *list->masks);
+    srv__resize(loop, category, (void **)&list->blocks, list->blocks_capacity, 0, sizeof *list->blocks);
+    memset(list, 0, sizeof *list);
+}
+
+/* ---- creation ------------------------------------------------------------------------------------------ */
+
+/* Resolves the effect list: dependencies by name, which effects run and how. */
+static fxc_result resolve_effects(srv_loop *loop, char *err, size_t err_cap)
+{
+    const srv_loop_desc *d = &loop->desc;
+    const fx_effect *const *list = d->effects;
+    uint32_t count = d->effect_count;
+    if (!list)
+        list = fx_registry(&count);
+    if (count == 0 || count > SRV_MAX_EFFECTS) {
+        snprintf(err, err_cap, "frame loop: %u effects (1..%d)", count, SRV_MAX_EFFECTS);
+        return FXC_ERR_EFFECTS;
+    }
+    loop->effect_count = count;
+    for (uint32_t e = 0; e < count; e++) {
+        const fx_effect *fx = list[e];
+        if (!fx || !fx->name || !fx->texel_bytes || !fx->update || !fx->cost ||
+            (fx->policy == FX_UPDATE_PROGRESSIVE && (!fx->texel_samples || fx->max_samples == 0)) ||
+            fx->cache >= SCENE_CACHE_COUNT) {
+            snprintf(err, err_cap, "frame loop: effect %u (%s) lacks a name, texel_bytes, cost or update, or is "
+                                   "progressive without texel_samples and max_samples",
+                     e, fx && fx->name ? fx->name : "?");
+            return FXC_ERR_EFFECTS;
+        }
+        loop->effects[e] = fx;
+        loop->effect_kind[e] = fx->cache;
+        loop->dependency[e] = SRV_NO_EFFECT;
+        if (fx->depends_on) {
+            int32_t dep = fx_find(list, count, fx->depends_on);
+            if (dep < 0 || (uint32_t)dep == e || list[dep]->depends_on || list[dep]->cache != fx->cache) {
+                snprintf(err, err_cap, "frame loop: effect %s depends on '%s', which is not in the list, is itself "
+                                       "dependent, or lives in another cache",
+                         fx->name, fx->depends_on);
+                return FXC_ERR_EFFECTS;
+            }
+            loop->dependency[e] = (uint32_t)dep;
+        }
+    }
+    for (uint32_t e = 0; e < count; e++) {
+        loop->effect_on[e] = d->effect_on[e];
+        /* An effect that shades nothing runs only for the effects that depend on it. */
+        if (!loop->effects[e]->shade && !loop->effects[e]->eval)
+            loop->effect_on[e] = false;
+    }
+    for (uint32_t e = 0; e < count; e++)
+        if (loop->effect_on[e] && loop->dependency[e] != SRV_NO_EFFECT && !d->no_cache) {
+            loop->effect_on[loop->dependency[e]] = true;
+            loop->depended_on[loop->dependency[e]] = true;
+        }
+    for (uint32_t e = 0; e < count; e++) {
+        const fx_effect *fx = loop->effects[e];
+        loop->effect_cached[e] = loop->effect_on[e] && !d->no_cache && srv__cache_kind(fx->cache) != NULL;
+        loop->effect_shading[e] = loop->effect_cached[e] && fx->shade != NULL;
+        loop->bias[e] = d->bias_set[e] ? d->bias[e] : fx->level_bias;
+        uint32_t step = d->samples_per_update ? d->samples_per_update : 16;
+        loop->samples[e] = fx->policy == FX_UPDATE_PROGRESSIVE ? (step < fx->max_samples ? step : fx->max_samples) : 0;
+        if (loop->effect_on[e] && !loop->effect_cached[e] && !d->no_cache) {
+            snprintf(err, err_cap, "frame loop: effect %s needs the %s cache, which is not built yet", fx->name,
+                     scene_cache_name(fx->cache));
+            return FXC_ERR_EFFECTS;
+        }
+    }
+    return FXC_OK;
+}
+
+fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err, size_t err_cap)
+{
+    *out = NULL;
+    if (!desc || !desc->s || !desc->rt) {
+        snprintf(err, err_cap, "frame loop: a scene and its Embree scene are required");
+        return FXC_ERR_INVALID;
+    }
+    const srv_allocator *a = &desc->allocator;
+    srv_loop *loop = a->realloc ? a->realloc(NULL, 0, sizeof *loop, a->user) : malloc(sizeof *loop);
+    if (!loop) {
+        snprintf(err, err_cap, "frame loop: out of memory");
+        return FXC_ERR_NOMEM;
+    }
+    memset(loop, 0, sizeof *loop);
+    loop->desc = *desc;
+    atomic_store(&loop->mem[SRV_MEM_QUEUES], sizeof *loop);
+    loop->s = desc->s;
+    loop->rt = desc->rt;
+    if (!loop->desc.pool_bytes)
+        loop->desc.pool_bytes = (uint64_t)64 << 20;
+    loop->fx = (fx_context){.s = desc->s, .rt = desc->rt, .seed = desc->seed, .ao_radius = desc->s->ao_radius};
+    fxc_result r = resolve_effects(loop, err, err_cap);
+    if (r != FXC_OK) {
+        srv_loop_free(loop);
+        return r;
+    }
+    loop->pool = srv_pool_create(desc->threads);
+    if (!loop->pool) {
+        snprintf(err, err_cap, "frame loop: cannot start threads");
+        srv_loop_free(loop);
+        return FXC_ERR_THREADS;
+    }
+    for (uint32_t k = 0; k < SCENE_CACHE_COUNT; k++) {
+        const srv_cache_kind *kind = srv__cache_kind((scene_cache_kind)k);
+        if (!kind)
+            continue;
+        void *cache = NULL;
+        r = kind->create(loop, &cache, err, err_cap);
+        if (r != FXC_OK) {
+            srv_loop_free(loop);
+            return r;
+        }
+        if (cache) {
+            loop->kinds[k] = kind;
+            loop->caches[k] = cache;
+        }
+    }
+    uint32_t threads = srv_pool_threads(loop->pool);
+    bool ok = srv__resize(loop, SRV_MEM_QUEUES, (void **)&loop->thread_requests, 0, threads,
+                          sizeof *loop->thread_requests);
+    if (ok)
+        memset(loop->thread_requests, 0, threads * sizeof *loop->thread_requests);
+    for (uint32_t e = 0; ok && e < loop->effect_count; e++) {
+        if (!desc->keep_views || !loop->effect_shading[e])
+            continue;
+        uint32_t k = loop->effect_kind[e];
+        size_t blocks = loop->kinds[k]->pool_capacity(loop->caches[k], e);
+        ok = srv__resize(loop, SRV_MEM_QUEUES, (void **)&loop->viewer_bits[e], 0, blocks, sizeof(uint64_t));
+    }
+    loop->compose_scratch_bytes = srv__compose_scratch_bytes(loop);
+    ok = ok && srv__resize(loop, SRV_MEM_QUEUES, &loop->compose_scratch, 0, threads, loop->compose_scratch_bytes);
+    if (!ok) {
+        snprintf(err, err_cap, "frame loop: out of memory");
+        srv_loop_free(loop);
+        return FXC_ERR_NOMEM;
+    }
+    *out = loop;
+    return FXC_OK;
+}
+
+static void viewer_free_buffers(srv_loop *loop, srv_viewer *view)
+{
+    size_t n = view->pixels;
+    srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->tri, n, 0, sizeof *view->tri);
+    srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->bary_u, n, 0, sizeof(float));
+    srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->bary_v, n, 0, sizeof(float));
+    srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->footprint, n, 0, sizeof(float));
+    srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->depth, n, 0, sizeof(float));
+    srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->radiance, 3 * n, 0, sizeof(float));
+    srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->image, 3 * n, 0, 1);
+    for (int w = 0; w < SRV_VIEW_COUNT; w++)
+        srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->views[w], view->views[w] ? n : 0, 0, sizeof(float));
+    srv__request_list_free(loop, SRV_MEM_VIEWERS, &view->requests);
+}
+
+void srv_loop_free(srv_loop *loop)
+{
+    if (!loop)
+        return;
+    for (uint32_t v = 0; v < SRV_MAX_VIEWERS; v++)
+        if (loop->viewers[v].present)
+            viewer_free_buffers(loop, &loop->viewers[v]);
+    uint32_t threads = loop->pool ? srv_pool_threads(loop->pool) : 0;
+    if (loop->thread_requests) {
+        for (uint32_t t = 0; t < threads; t++)
+            srv__request_list_free(loop, SRV_MEM_QUEUES, &loop->thread_requests[t]);
+        srv__resize(loop, SRV_MEM_QUEUES, (void **)&loop->thread_requests, threads, 0, sizeof *loop->thread_requests);
+    }
+    for (uint32_t e = 0; e < SRV_MAX_EFFECTS; e++) {
+        srv_effect_queue *q = &loop->queues[e];
+        srv__resize(loop, SRV_MEM_QUEUES, (void **)&q->empty, q->capacity, 0, sizeof *q->empty);
+        srv__resize(loop, SRV_MEM_QUEUES, (void **)&q->refine, q->capacity, 0, sizeof *q->refine);
+        srv__resize(loop, SRV_MEM_QUEUES, (void **)&q->take, q->capacity, 0, sizeof *q->take);
+        srv__resize(loop, SRV_MEM_QUEUES, (void **)&q->dependency, q->capacity, 0, sizeof *q->dependency);
+        srv__resize(loop, SRV_MEM_QUEUES, (void **)&q->jobs, q->job_capacity, 0, sizeof *q->jobs);
+        srv__resize(loop, SRV_MEM_QUEUES, (void **)&q->fx_jobs, q->fx_job_capacity, 0, sizeof *q->fx_jobs);
+        srv__resize(loop, SRV_MEM_QUEUES, (void **)&q->chunk_rays, q->chunk_capacity, 0, sizeof *q->chunk_rays);
+        if (loop->viewer_bits[e]) {
+            uint32_t k = loop->effect_kind[e];
+            size_t blocks = loop->kinds[k]->pool_capacity(loop->caches[k], e);
+            srv__resize(loop, SRV_MEM_QUEUES, (void **)&loop->viewer_bits[e], blocks, 0, sizeof(uint64_t));
+        }
+    }
+    if (loop->compose_scratch)
+        srv__resize(loop, SRV_MEM_QUEUES, &loop->compose_scratch, threads, 0, loop->compose_scratch_bytes);
+    for (uint32_t k = 0; k < SCENE_CACHE_COUNT; k++)
+        if (loop->kinds[k])
+            loop->kinds[k]->destroy(loop->caches[k]);
+    srv_pool_free(loop->pool);
+    srv_allocator a = loop->desc.allocator;
+    if (a.free)
+        a.free(loop, sizeof *loop, a.user);
+    else
+        free(loop);
+}
+
+/* ---- viewers ------------------------------------------------------------------------------------------- */
+
+static srv_viewer *viewer_of(const srv_loop *loop, srv_viewer_id id)
+{
+    uint32_t slot = id.id & 0xFFu, generation = id.id >> 8;
+    if (slot >= SRV_MAX_VIEWERS)
+        return NULL;
+    srv_viewer *view = (srv_viewer *)&loop->viewers[slot];
+    return view->present && view->generation == generation ? view : NULL;
+}
+
+fxc_result srv_viewer_check(const srv_loop *loop, srv_viewer_id id)
+{
+    return viewer_of(loop, id) ? FXC_OK : FXC_ERR_STALE_ID;
+}
+
+fxc_result srv_viewer_add(srv_loop *loop, const srv_viewer_desc *desc, srv_viewer_id *out)
+{
+    out->id = 0;
+    srv_viewer_desc d = desc ? *desc : (srv_viewer_desc){0};
+    if (!d.width && !d.height)
+        d.width = 640, d.height = 360;
+    if (d.width < 1 || d.height < 1 || d.width > SRV_MAX_SIDE || d.height > SRV_MAX_SIDE)
+        return FXC_ERR_INVALID;
+    uint32_t slot = 0;
+    while (slot < SRV_MAX_VIEWERS && loop->viewers[slot].present)
+        slot++;
+    if (slot == SRV_MAX_VIEWERS)
+        return FXC_ERR_NO_SLOT;
+    srv_viewer *view = &loop->viewers[slot];
+    uint32_t generation = view->generation + 1;
+    if (generation >= (1u << 24))
+        generation = 1; /* wraps after 16 million re-uses of one slot */
+    memset(view, 0, sizeof *view);
+    view->generation = generation;
+    view->desc = d;
+    if (!view->desc.name[0])
+        snprintf(view->desc.name, sizeof view->desc.name, "viewer_%02u", slot);
+    size_t n = (size_t)d.width * d.height;
+    bool ok = srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->tri, 0, n, sizeof *view->tri);
+    view->pixels = n; /* from here on viewer_free_buffers frees what was allocated */
+    ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->bary_u, 0, n, sizeof(float));
+    ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->bary_v, 0, n, sizeof(float));
+    ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->footprint, 0, n, sizeof(float));
+    ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->depth, 0, n, sizeof(float));
+    ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->radiance, 0, 3 * n, sizeof(float));
+    ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->image, 0, 3 * n, 1);
+    for (int w = 0; ok && loop->desc.keep_views && w < SRV_VIEW_COUNT; w++) {
+        ok = srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->views[w], 0, n, sizeof(float));
+        if (ok)
+            memset(view->views[w], 0, n * sizeof(float));
+    }
+    if (!ok) {
+        viewer_free_buffers(loop, view);
+        view->present = false;
+        return FXC_ERR_NOMEM;
+    }
+    view->present = true;
+    out->id = generation << 8 | slot;
+    return FXC_OK;
+}
+
+fxc_result srv_viewer_remove(srv_loop *loop, srv_viewer_id id)
+{
+    srv_viewer *view = viewer_of(loop, id);
+    if (!view)
+        return FXC_ERR_STALE_ID;
+    viewer_free_buffers(loop, view);
+    uint32_t generation = view->generation;
+    memset(view, 0, sizeof *view);
+    view->generation = generation; /* the next add bumps it: this id stays refused */
+    return FXC_OK;
+}
+
+fxc_result srv_viewer_set_camera(srv_loop *loop, srv_viewer_id id, const srv_camera *camera)
+{
+    srv_viewer *view = viewer_of(loop, id);
+    if (!view)
+        return FXC_ERR_STALE_ID;
+    srv_camera_frame frame;
+    if (!camera || !srv_camera_setup(camera, view->desc.width, view->desc.height, &frame))
+        return FXC_ERR_CAMERA;
+    view->camera = *camera;
+    view->frame = frame;
+    view->has_camera = true;
+    return FXC_OK;
+}
+
+uint32_t srv_loop_viewers(const srv_loop *loop, srv_viewer_id *ids, uint32_t cap)
+{
+    uint32_t n = 0;
+    for (uint32_t v = 0; v < SRV_MAX_VIEWERS; v++)
+        if (loop->viewers[v].present) {
+            if (ids && n < cap)
+                ids[n] = (srv_viewer_id){loop->viewers[v].generation << 8 | v};
+            n++;
+        }
+    return n;
+}
+
+const uint8_t *srv_viewer_image(const srv_loop *loop, srv_viewer_id id)
+{
+    const srv_viewer *view = viewer_of(loop, id);
+    return view && view->rendered ? view->image : NULL;
+}
+
+const float *srv_viewer_radiance(const srv_loop *loop, srv_viewer_id id)
+{
+    const srv_viewer *view = viewer_of(loop, id);
+    return view && view->rendered ? view->radiance : NULL;
+}
+
+const float *srv_viewer_depth(const srv_loop *loop, srv_viewer_id id)
+{
+    const srv_viewer *view = viewer_of(loop, id);
+    return view && view->rendered ? view->depth : NULL;
+}
+
+const float *srv_viewer_view(const srv_loop *loop, srv_viewer_id id, int which)
+{
+    const srv_viewer *view = viewer_of(loop, id);
+    if (!view || !view->rendered || which < 0 || which >= SRV_VIEW_COUNT)
+        return NULL;
+    return view->views[which];
+}
+
+fxc_result srv_viewer_size(const srv_loop *loop, srv_viewer_id id, uint32_t *width, uint32_t *height)
+{
+    const srv_viewer *view = viewer_of(loop, id);
+    if (!view)
+        return FXC_ERR_STALE_ID;
+    if (width)
+        *width = view->desc.width;
+    if (height)
+        *height = view->desc.height;
+    return FXC_OK;
+}
+
+fxc_result srv_loop_add_sink(srv_loop *loop, const srv_sink *sink)
+{
+    if (!sink || loop->sink_count == SRV_MAX_SINKS)
+        return FXC_ERR_INVALID;
+    loop->sinks[loop->sink_count++] = *sink;
+    return FXC_OK;
+}
+
+/* ---- the frame ----------------------------------------------------------------------------------------- */
+
+fxc_result srv_loop_frame(srv_loop *loop, srv_frame_stats *st)
+{
+    memset(st, 0, sizeof *st);
+    st->frame = loop->frame_number;
+    double frame_start = srv__now_ms();
+    uint32_t slots[SRV_MAX_VIEWERS], active = 0;
+    for (uint32_t v = 0; v < SRV_MAX_VIEWERS; v++)
+        if (loop->viewers[v].present && loop->viewers[v].has_camera)
+            slots[active++] = v;
+    st->viewer_count = active;
+
+    /* Stage 2: visibility. */
+    double t = srv__now_ms();
+    for (uint32_t i = 0; i < active; i++)
+        srv__visibility(loop, &loop->viewers[slots[i]]);
+    st->time_ms[SRV_STAGE_VISIBILITY] = srv__now_ms() - t;
+    for (uint32_t i = 0; i < active; i++) {
+        srv_viewer *view = &loop->viewers[slots[i]];
+        memset(&view->stats, 0, sizeof view->stats);
+        view->stats.id = (srv_viewer_id){view->generation << 8 | slots[i]};
+        view->stats.width = view->desc.width;
+        view->stats.height = view->desc.height;
+        for (size_t p = 0; p < view->pixels; p++)
+            view->stats.pixels_visible += view->tri[p] != SRV_MISS;
+        st->visibility_rays += view->pixels;
+        st->pixels_visible += view->stats.pixels_visible;
+    }
+
+    /* Stage 3: requests from every viewer into the shared caches. */
+    t = srv__now_ms();
+    for (uint32_t k = 0; k < SCENE_CACHE_COUNT; k++)
+        if (loop->kinds[k])
+            loop->kinds[k]->begin_frame(loop->caches[k], loop->frame_number);
+    for (uint32_t e = 0; e < loop->effect_count; e++)
+        if (loop->viewer_bits[e]) {
+            uint32_t k = loop->effect_kind[e];
+            memset(loop->viewer_bits[e], 0, sizeof(uint64_t) * loop->kinds[k]->pool_capacity(loop->caches[k], e));
+        }
+    for (uint32_t i = 0; i < active; i++) {
+        srv_viewer *view = &loop->viewers[slots[i]];
+        view->stats.requested_texels = srv__requests(loop, slots[i], st);
+        st->requested_texels += view->stats.requested_texels;
+    }
+    for (uint32_t e = 0; e < loop->effect_count; e++) {
+        if (!loop->effect_shading[e])
+            continue;
+        uint32_t k = loop->effect_kind[e], n = 0;
+        const uint32_t *blocks = loop->kinds[k]->frame_blocks(loop->caches[k], e, &n);
+        for (uint32_t b = 0; b < n; b++)
+            st->unique_texels +=
+                (uint64_t)__builtin_popcountll(loop->kinds[k]->block_requested(loop->caches[k], e, blocks[b]));
+    }
+    st->time_ms[SRV_STAGE_REQUESTS] = srv__now_ms() - t;
+
+    /* Stages 4-6: queues for every effect, then the lookup, then every effect's updates. */
+    t = srv__now_ms();
+    srv__queues(loop, st);
+    st->time_ms[SRV_STAGE_QUEUES] = srv__now_ms() - t;
+    t = srv__now_ms();
+    srv__updates(loop, true, st);
+    st->time_ms[SRV_STAGE_LOOKUP] = srv__now_ms() - t;
+    t = srv__now_ms();
+    srv__updates(loop, false, st);
+    st->time_ms[SRV_STAGE_EFFECTS] = srv__now_ms() - t;
+
+    /* Stage 7: compose. */
+    t = srv__now_ms();
+    for (uint32_t i = 0; i < active; i++)
+        srv__compose(loop, slots[i], st);
+    st->time_ms[SRV_STAGE_COMPOSE] = srv__now_ms() - t;
+    for (uint32_t i = 0; i < active; i++) {
+        srv_viewer *view = &loop->viewers[slots[i]];
+        view->rendered = true;
+        st->viewers[i] = view->stats;
+        st->pixels_missing += view->stats.pixels_missing;
+    }
+
+    /* Stage 8: the sinks get every viewer's frame. */
+    t = srv__now_ms();
+    uint32_t sink_failures = 0;
+    for (uint32_t s = 0; s < loop->sink_count; s++) {
+        if (!loop->sinks[s].viewer_frame)
+            continue;
+        for (uint32_t i = 0; i < active; i++) {
+            srv_viewer *view = &loop->viewers[slots[i]];
+            srv_viewer_frame vf = {.id = st->viewers[i].id, .name = view->desc.name, .frame = st->frame,
+                                   .width = view->desc.width, .height = view->desc.height, .srgb = view->image,
+                                   .radiance = view->radiance, .depth = view->depth, .camera = view->camera,
+                                   .stats = &st->viewers[i]};
+            for (int w = 0; w < SRV_VIEW_COUNT; w++)
+                vf.views[w] = view->views[w];
+            sink_failures += loop->sinks[s].viewer_frame(loop->sinks[s].user, &vf) != 0;
+        }
+    }
+    st->time_ms[SRV_STAGE_SINKS] = srv__now_ms() - t;
+
+    /* Stage 9: housekeeping and the caches' figures. */
+    t = srv__now_ms();
+    for (uint32_t k = 0; k < SCENE_CACHE_COUNT; k++)
+        if (loop->kinds[k]) {
+            loop->kinds[k]->housekeeping(loop->caches[k]);
+            loop->kinds[k]->frame_figures(loop->caches[k], st);
+        }
+    st->time_ms[SRV_STAGE_HOUSEKEEPING] = srv__now_ms() - t;
+    st->frame_ms = srv__now_ms() - frame_start;
+    loop->frame_number++;
+    for (uint32_t s = 0; s < loop->sink_count; s++)
+        if (loop->sinks[s].frame_done)
+            sink_failures += loop->sinks[s].frame_done(loop->sinks[s].user, st) != 0;
+    return sink_failures ? FXC_ERR_IO : FXC_OK;
+}
+
+/* ---- effects and memory ------------------------------------------------------------------------------ */
+
+uint32_t srv_loop_effect_count(const srv_loop *loop)
+{
+    return loop->effect_count;
+}
+
+const fx_effect *srv_loop_effect(const srv_loop *loop, uint32_t index)
+{
+    return index < loop->effect_count ? loop->effects[index] : NULL;
+}
+
+bool srv_loop_effect_on(const srv_loop *loop, uint32_t index)
+{
+    return index < loop->effect_count && loop->effect_on[index];
+}
+
+bool srv_loop_effect_cached(const srv_loop *loop, uint32_t index)
+{
+    return index < loop->effect_count && loop->effect_shading[index];
+}
+
+int32_t srv_loop_bias(const srv_loop *loop, uint32_t index)
+{
+    return index < loop->effect_count ? loop->bias[index] : 0;
+}
+
+void srv_loop_memory(const srv_loop *loop, srv_memory *out)
+{
+    memset(out, 0, sizeof *out);
+    for (uint32_t k = 0; k < SCENE_CACHE_COUNT; k++)
+        if (loop->kinds[k])
+            loop->kinds[k]->memory(loop->caches[k], out);
+    out->viewers = atomic_load(&loop->mem[SRV_MEM_VIEWERS]);
+    out->queues = atomic_load(&loop->mem[SRV_MEM_QUEUES]);
+    out->total += out->viewers + out->queues;
+}

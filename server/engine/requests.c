@@ -1,0 +1,151 @@
+/* Stage 3, requests: every visible pixel asks, for every cached effect, for the texels its filter reads at
+ * that effect's level (the pixel footprint plus the effect's bias), and for the same texels of the effect it
+ * depends on (the triangle lookup). The keys come from the effect's cache kind, a run of pixels at a time.
+ * Tiles run on the thread pool; each folds neighbouring pixels' requests for the same block in a small
+ * direct-mapped buffer before appending them to its thread's list. The lists of all threads then go to the
+ * kind's batch request, which sorts and merges them, so the cache comes out identical whatever the thread
+ * interleaving. Requests of all viewers meet in the same tables: this is where sharing happens. */
+#include "engine_internal.h"
+
+#include <stdatomic.h>
+#include <string.h>
+
+enum { FOLD_SLOTS = 64 };
+
+/* Folds requests for the same key that arrive close together. */
+typedef struct fold_buffer {
+    uint64_t keys[FOLD_SLOTS];
+    uint64_t masks[FOLD_SLOTS];
+} fold_buffer;
+
+typedef struct request_task {
+    srv_loop *loop;
+    srv_viewer *view;
+    uint32_t kind;
+    uint32_t tiles_x;
+    atomic_bool failed; /* a thread ran out of memory: this viewer's requests are dropped this frame */
+} request_task;
+
+static bool fold_flush_slot(srv_loop *loop, fold_buffer *fold, uint32_t slot, srv_request_list *out)
+{
+    if (fold->keys[slot] == OSC_KEY_EMPTY)
+        return true;
+    if (out->count == out->capacity && !srv__request_reserve(loop, SRV_MEM_QUEUES, out, out->count + 1))
+        return false;
+    out->keys[out->count] = fold->keys[slot];
+    out->masks[out->count] = fold->masks[slot];
+    out->count++;
+    fold->keys[slot] = OSC_KEY_EMPTY;
+    return true;
+}
+
+static bool fold_add(srv_loop *loop, fold_buffer *fold, uint64_t key, uint64_t mask, srv_request_list *out)
+{
+    uint32_t slot = (uint32_t)((key * 0x9E3779B97F4A7C15ull) >> 58); /* 6 bits: FOLD_SLOTS */
+    if (fold->keys[slot] == key) {
+        fold->masks[slot] |= mask;
+        return true;
+    }
+    bool ok = fold_flush_slot(loop, fold, slot, out);
+    fold->keys[slot] = key;
+    fold->masks[slot] = mask;
+    return ok;
+}
+
+static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
+{
+    request_task *task = user;
+    srv_loop *loop = task->loop;
+    const scene *s = loop->s;
+    const srv_viewer *view = task->view;
+    const srv_cache_kind *kind = loop->kinds[task->kind];
+    const void *cache = loop->caches[task->kind];
+    srv_request_list *out = &loop->thread_requests[thread_index];
+    uint32_t width = view->frame.width, height = view->frame.height;
+    uint32_t x0 = (task_index % task->tiles_x) * SRV_TILE, y0 = (task_index / task->tiles_x) * SRV_TILE;
+    fold_buffer fold;
+    memset(fold.keys, 0xFF, sizeof fold.keys);
+    srv_pixel pixels[SRV_TILE * SRV_TILE];
+    uint32_t count = 0;
+    for (uint32_t y = y0; y < y0 + SRV_TILE && y < height; y++)
+        for (uint32_t x = x0; x < x0 + SRV_TILE && x < width; x++) {
+            size_t p = (size_t)y * width + x;
+            uint32_t tri = view->tri[p];
+            if (tri == SRV_MISS)
+                continue;
+            srv_pixel *px = &pixels[count++];
+            px->triangle = tri;
+            px->island = s->tri_island[tri];
+            px->footprint = view->footprint[p];
+            srv__island_uv(s, tri, view->bary_u[p], view->bary_v[p], &px->island_u, &px->island_v);
+        }
+    bool ok = true;
+    uint64_t keys[SRV_RUN * SRV_KEYS_PER_PIXEL], masks[SRV_RUN * SRV_KEYS_PER_PIXEL];
+    for (uint32_t e = 0; e < loop->effect_count; e++) {
+        if (!loop->effect_shading[e] || loop->effect_kind[e] != task->kind)
+            continue;
+        for (uint32_t first = 0; first < count; first += SRV_RUN) {
+            uint32_t run = count - first < SRV_RUN ? count - first : SRV_RUN;
+            uint32_t n = kind->pixel_requests(cache, pixels + first, run, e, loop->bias[e], loop->dependency[e], keys,
+                                              masks);
+            for (uint32_t i = 0; i < n; i++)
+                ok &= fold_add(loop, &fold, keys[i], masks[i], out);
+        }
+    }
+    for (uint32_t slot = 0; slot < FOLD_SLOTS; slot++)
+        ok &= fold_flush_slot(loop, &fold, slot, out);
+    if (!ok)
+        atomic_store(&task->failed, true);
+}
+
+uint64_t srv__requests(srv_loop *loop, uint32_t slot, srv_frame_stats *st)
+{
+    srv_viewer *view = &loop->viewers[slot];
+    uint32_t threads = srv_pool_threads(loop->pool);
+    uint64_t requested = 0;
+    for (uint32_t k = 0; k < SCENE_CACHE_COUNT; k++) {
+        const srv_cache_kind *kind = loop->kinds[k];
+        if (!kind)
+            continue;
+        for (uint32_t t = 0; t < threads; t++)
+            loop->thread_requests[t].count = 0;
+        request_task task = {.loop = loop, .view = view, .kind = k,
+                             .tiles_x = (view->frame.width + SRV_TILE - 1) / SRV_TILE};
+        atomic_init(&task.failed, false);
+        uint32_t tiles_y = (view->frame.height + SRV_TILE - 1) / SRV_TILE;
+        srv_pool_run(loop->pool, task.tiles_x * tiles_y, request_tile, &task);
+
+        /* Gather the threads' lists (order does not matter: the batch sorts). */
+        size_t total = 0;
+        for (uint32_t t = 0; t < threads; t++)
+            total += loop->thread_requests[t].count;
+        srv_request_list *merged = &view->requests;
+        merged->count = 0;
+        if (atomic_load(&task.failed) || !srv__request_reserve(loop, SRV_MEM_VIEWERS, merged, total ? total : 1)) {
+            st->drops[SRV_DROP_NOMEM_REQUESTS]++; /* the frame goes on without this viewer's requests */
+            continue;
+        }
+        for (uint32_t t = 0; t < threads; t++) {
+            const srv_request_list *list = &loop->thread_requests[t];
+            if (list->count == 0)
+                continue;
+            memcpy(merged->keys + merged->count, list->keys, list->count * sizeof *list->keys);
+            memcpy(merged->masks + merged->count, list->masks, list->count * sizeof *list->masks);
+            merged->count += list->count;
+        }
+        size_t unique = 0;
+        uint32_t *blocks = merged->blocks;
+        kind->request_batch(loop->caches[k], merged->keys, merged->masks, merged->count, &unique, blocks,
+                            &st->drops[SRV_DROP_POOL_EXHAUSTED], &st->drops[SRV_DROP_TABLE_FULL]);
+        merged->count = unique;
+        for (size_t i = 0; i < unique; i++) {
+            uint32_t e = kind->key_effect(merged->keys[i]);
+            if (e >= loop->effect_count || !loop->effect_shading[e])
+                continue;
+            requested += (uint64_t)__builtin_popcountll(merged->masks[i]);
+            if (blocks[i] != SRV_NONE && loop->viewer_bits[e])
+                loop->viewer_bits[e][blocks[i]] |= (uint64_t)1 << slot;
+        }
+    }
+    return requested;
+}

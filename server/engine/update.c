@@ -1,0 +1,245 @@
+/* Stages 4-6: update queues (with resampling), the lookup stage, the effect updates. Nothing here names an
+ * effect: every decision comes from the effect's table (effects.h) and the cache's kind.
+ *
+ * Queues (stage 4): per cached effect, the blocks requested this frame whose requested texels hold no data,
+ * and for progressive effects those not yet converged. Before anything is traced, a texel of level l >= 1
+ * whose four level l-1 texels hold final data is filled from them (the resampling queue: no rays). The ray
+ * budget (effect rays per frame, shared by all effects) is then spent in a fixed order: every effect's empty
+ * texels in registry order, then every progressive effect's refinement; what does not fit waits for a later
+ * frame and is counted as deferred. Costs are upper bounds known before tracing (the effect's cost
+ * callback), so which texels run depends only on the queues, never on timing. A texel whose dependency block
+ * (the triangle lookup) could not be mapped is counted as dropped.
+ *
+ * Lookup (stage 5) runs the jobs of the effects others depend on, so that the effect updates (stage 6) find
+ * their lookup texels. Both run the queued blocks on the pool in chunks; each chunk's ray count is stored per
+ * chunk and summed in order, and valid masks are set after the chunks, on one thread. */
+#include "engine_internal.h"
+
+#include <string.h>
+
+enum { CHUNK_BLOCKS = 8 };
+
+/* Grows an effect's per-block queue arrays to n blocks. */
+static bool queue_reserve(srv_loop *loop, srv_effect_queue *q, size_t n)
+{
+    if (n <= q->capacity)
+        return true;
+    size_t cap = q->capacity ? q->capacity : 1024;
+    while (cap < n)
+        cap *= 2;
+    /* Each array keeps its own size until all four have grown; only then does the capacity change. */
+    size_t old = q->capacity;
+    void *arrays[4] = {q->empty, q->refine, q->take, q->dependency};
+    size_t sizes[4] = {sizeof *q->empty, sizeof *q->refine, sizeof *q->take, sizeof *q->dependency};
+    for (int i = 0; i < 4; i++)
+        if (!srv__resize(loop, SRV_MEM_QUEUES, &arrays[i], old, cap, sizes[i])) {
+            /* Undo the ones already grown so every array has `old` entries again. */
+            for (int j = 0; j < i; j++)
+                srv__resize(loop, SRV_MEM_QUEUES, &arrays[j], cap, old ? old : 0, sizes[j]);
+            q->empty = arrays[0], q->refine = arrays[1], q->take = arrays[2], q->dependency = arrays[3];
+            return false;
+        }
+    q->empty = arrays[0], q->refine = arrays[1], q->take = arrays[2], q->dependency = arrays[3];
+    q->capacity = cap;
+    return true;
+}
+
+/* Texels of mask whose sample count is below the effect's maximum. */
+static uint64_t unconverged(const fx_effect *e, const uint8_t *payload, uint32_t texel_bytes, uint64_t mask)
+{
+    uint64_t out = 0;
+    for (uint64_t m = mask; m; m &= m - 1) {
+        uint32_t t = (uint32_t)__builtin_ctzll(m);
+        if (e->texel_samples(payload + (size_t)t * texel_bytes) < e->max_samples)
+            out |= (uint64_t)1 << t;
+    }
+    return out;
+}
+
+/* Fills texels of `need` from four final finer texels each; returns the texels filled. */
+static uint64_t resample_block(srv_loop *loop, uint32_t e, uint32_t block, uint64_t need, uint32_t texel_bytes)
+{
+    const fx_effect *fx = loop->effects[e];
+    const srv_cache_kind *kind = loop->kinds[loop->effect_kind[e]];
+    void *cache = loop->caches[loop->effect_kind[e]];
+    const void *finer[64][4];
+    uint64_t found = kind->finer_texels(cache, e, block, need, finer);
+    uint8_t *payload = kind->block_payload(cache, e, block);
+    uint64_t filled = 0;
+    for (uint64_t m = found; m; m &= m - 1) {
+        uint32_t t = (uint32_t)__builtin_ctzll(m);
+        bool final = true;
+        if (fx->texel_samples)
+            for (int c = 0; c < 4; c++)
+                final &= fx->texel_samples(finer[t][c]) >= fx->max_samples;
+        if (!final)
+            continue;
+        fx->resample(&loop->fx, finer[t], payload + (size_t)t * texel_bytes);
+        filled |= (uint64_t)1 << t;
+    }
+    return filled;
+}
+
+/* Takes texels of masks[i] into take[i] within the remaining budget (cost per texel); what does not fit is
+ * counted as deferred, texels without their dependency block as dropped. */
+static void take_within_budget(srv_loop *loop, uint32_t e, srv_effect_queue *q, uint32_t count, const uint64_t *masks,
+                               uint64_t cost, uint64_t *budget_left, srv_frame_stats *st)
+{
+    bool unlimited = loop->desc.ray_budget == 0;
+    bool needs_dependency = loop->dependency[e] != SRV_NO_EFFECT;
+    for (uint32_t i = 0; i < count; i++) {
+        uint64_t mask = masks[i];
+        if (!mask)
+            continue;
+        uint64_t texels = (uint64_t)__builtin_popcountll(mask);
+        if (needs_dependency && q->dependency[i] == SRV_NONE) {
+            st->drops[SRV_DROP_NO_DEPENDENCY] += texels;
+            continue;
+        }
+        if (!unlimited && cost > 0) {
+            uint64_t affordable = *budget_left / cost;
+            if (affordable < texels) {
+                uint64_t trimmed = 0;
+                for (uint64_t m = mask, n = 0; m && n < affordable; m &= m - 1, n++)
+                    trimmed |= m & (~m + 1);
+                st->texels_deferred[e] += texels - affordable;
+                mask = trimmed;
+                texels = affordable;
+            }
+            *budget_left -= texels * cost;
+        }
+        q->take[i] |= mask;
+    }
+}
+
+void srv__queues(srv_loop *loop, srv_frame_stats *st)
+{
+    uint32_t counts[SRV_MAX_EFFECTS] = {0};
+    const uint32_t *blocks[SRV_MAX_EFFECTS] = {NULL};
+    uint32_t texel_bytes[SRV_MAX_EFFECTS] = {0};
+    for (uint32_t e = 0; e < loop->effect_count; e++) {
+        srv_effect_queue *q = &loop->queues[e];
+        q->job_count = 0;
+        if (!loop->effect_cached[e])
+            continue;
+        const fx_effect *fx = loop->effects[e];
+        const srv_cache_kind *kind = loop->kinds[loop->effect_kind[e]];
+        void *cache = loop->caches[loop->effect_kind[e]];
+        uint32_t n = 0;
+        blocks[e] = kind->frame_blocks(cache, e, &n);
+        texel_bytes[e] = fx->texel_bytes(loop->s);
+        if (!queue_reserve(loop, q, n)) {
+            st->drops[SRV_DROP_NOMEM_UPDATES]++; /* nothing of this effect is updated this frame */
+            continue;
+        }
+        counts[e] = n;
+        uint32_t dep = loop->dependency[e];
+        for (uint32_t i = 0; i < n; i++) {
+            uint32_t b = blocks[e][i];
+            uint64_t requested = kind->block_requested(cache, e, b), valid = kind->block_valid(cache, e, b);
+            uint64_t need = requested & ~valid;
+            if (need && fx->resample) {
+                uint64_t filled = resample_block(loop, e, b, need, texel_bytes[e]);
+                if (filled) {
+                    kind->block_set_valid(cache, e, b, valid | filled);
+                    st->texels_resampled[e] += (uint64_t)__builtin_popcountll(filled);
+                    st->texels_updated[e] += (uint64_t)__builtin_popcountll(filled);
+                    need &= ~filled;
+                    valid |= filled;
+                }
+            }
+            q->empty[i] = need;
+            q->refine[i] = fx->policy == FX_UPDATE_PROGRESSIVE
+                               ? unconverged(fx, kind->block_payload(cache, e, b), texel_bytes[e], requested & valid)
+                               : 0;
+            q->dependency[i] =
+                dep == SRV_NO_EFFECT ? SRV_NONE : kind->find(cache, kind->rekey(kind->block_key(cache, e, b), dep));
+            q->take[i] = 0;
+        }
+    }
+    /* The budget: empty texels of every effect in registry order, then refinement. */
+    uint64_t budget_left = loop->desc.ray_budget;
+    for (uint32_t round = 0; round < 2; round++)
+        for (uint32_t e = 0; e < loop->effect_count; e++) {
+            if (!counts[e] || (round == 1 && loop->effects[e]->policy != FX_UPDATE_PROGRESSIVE))
+                continue;
+            srv_effect_queue *q = &loop->queues[e];
+            uint64_t cost = loop->effects[e]->cost(loop->s, loop->samples[e]);
+            take_within_budget(loop, e, q, counts[e], round == 0 ? q->empty : q->refine, cost, &budget_left, st);
+        }
+    /* One job per block with texels taken. */
+    for (uint32_t e = 0; e < loop->effect_count; e++) {
+        srv_effect_queue *q = &loop->queues[e];
+        if (!counts[e])
+            continue;
+        uint32_t jobs = 0;
+        for (uint32_t i = 0; i < counts[e]; i++)
+            jobs += q->take[i] != 0;
+        if (!srv__grow(loop, SRV_MEM_QUEUES, (void **)&q->jobs, &q->job_capacity, jobs ? jobs : 1, 1024,
+                       sizeof *q->jobs)) {
+            st->drops[SRV_DROP_NOMEM_UPDATES]++;
+            continue;
+        }
+        for (uint32_t i = 0; i < counts[e]; i++)
+            if (q->take[i])
+                q->jobs[q->job_count++] =
+                    (srv_job){.block = blocks[e][i], .dependency_block = q->dependency[i], .mask = q->take[i]};
+    }
+}
+
+typedef struct effect_task {
+    srv_loop *loop;
+    const fx_effect *effect;
+    const fx_block_job *jobs;
+    uint32_t count;
+    uint32_t samples;
+    uint64_t *rays; /* per chunk */
+} effect_task;
+
+static void effect_chunk(void *user, uint32_t task_index, uint32_t thread_index)
+{
+    (void)thread_index;
+    effect_task *task = user;
+    uint32_t first = task_index * CHUNK_BLOCKS;
+    uint32_t n = task->count - first < CHUNK_BLOCKS ? task->count - first : CHUNK_BLOCKS;
+    task->rays[task_index] = task->effect->update(&task->loop->fx, task->jobs + first, n, task->samples);
+}
+
+void srv__updates(srv_loop *loop, bool lookup, srv_frame_stats *st)
+{
+    for (uint32_t e = 0; e < loop->effect_count; e++) {
+        srv_effect_queue *q = &loop->queues[e];
+        if (!loop->effect_cached[e] || loop->depended_on[e] != lookup || q->job_count == 0)
+            continue;
+        const srv_cache_kind *kind = loop->kinds[loop->effect_kind[e]];
+        void *cache = loop->caches[loop->effect_kind[e]];
+        uint32_t dep = loop->dependency[e];
+        size_t count = q->job_count;
+        uint32_t chunks = (uint32_t)((count + CHUNK_BLOCKS - 1) / CHUNK_BLOCKS);
+        if (!srv__grow(loop, SRV_MEM_QUEUES, (void **)&q->fx_jobs, &q->fx_job_capacity, count, 1024,
+                       sizeof *q->fx_jobs) ||
+            !srv__grow(loop, SRV_MEM_QUEUES, (void **)&q->chunk_rays, &q->chunk_capacity, chunks, 128,
+                       sizeof *q->chunk_rays)) {
+            st->drops[SRV_DROP_NOMEM_UPDATES]++;
+            continue;
+        }
+        for (size_t i = 0; i < count; i++) {
+            const srv_job *job = &q->jobs[i];
+            fx_block_job *fj = &q->fx_jobs[i];
+            kind->job_location(kind->block_key(cache, e, job->block), fj);
+            fj->mask = job->mask;
+            fj->lookup = dep == SRV_NO_EFFECT ? NULL : kind->block_payload(cache, dep, job->dependency_block);
+            fj->payload = kind->block_payload(cache, e, job->block);
+        }
+        effect_task task = {.loop = loop, .effect = loop->effects[e], .jobs = q->fx_jobs, .count = (uint32_t)count,
+                            .samples = loop->samples[e], .rays = q->chunk_rays};
+        srv_pool_run(loop->pool, chunks, effect_chunk, &task);
+        for (uint32_t c = 0; c < chunks; c++)
+            st->rays[e] += q->chunk_rays[c];
+        for (size_t i = 0; i < count; i++) {
+            const srv_job *job = &q->jobs[i];
+            kind->block_set_valid(cache, e, job->block, kind->block_valid(cache, e, job->block) | job->mask);
+            st->texels_updated[e] += (uint64_t)__builtin_popcountll(job->mask);
+        }
+    }
+}
