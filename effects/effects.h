@@ -118,6 +118,7 @@ typedef struct fx_taps {
     const void *texel[FX_MAX_TAPS];
     float weight[FX_MAX_TAPS];
     float at_x[FX_MAX_TAPS], at_y[FX_MAX_TAPS];
+    float footprint; /* the pixel's size in texels of the level read (about 1 unless the level is clamped) */
     uint32_t count;
 } fx_taps;
 

@@ -172,20 +172,46 @@ static uint64_t shadow_update(const fx_context *ctx, const fx_block_job *jobs, u
     return fx_shadow_update(ctx, jobs, count);
 }
 
-/* Per light, as many lit rays as the four finer texels have on average. */
+/* The coarse texel's 4 x 4 cells from its four finer texels: each finer texel covers 2 x 2 coarse cells, and
+ * a coarse cell is lit when at least two of the four finer cells under it are (per light). The mask stays a
+ * map of where inside the texel the light reaches, so compose can still place edges inside it. */
 static void shadow_resample(const fx_context *ctx, const void *const finer[4], void *texel)
 {
     uint32_t lights = ctx->s->light_count ? ctx->s->light_count : 1u;
     for (uint32_t l = 0; l < lights; l++) {
-        float mean = 0;
-        for (int c = 0; c < 4; c++)
-            mean += 0.25f * fx_shadow_sample(finer[c], 0, lights, l);
-        uint32_t bits = (uint32_t)lrintf(mean * FX_SHADOW_RAYS);
-        fx__put_u16((uint8_t *)texel + 2u * l, (uint16_t)(bits >= 16 ? 0xFFFFu : ((1u << bits) - 1u)));
+        uint32_t mask = 0;
+        for (uint32_t c = 0; c < 4; c++) { /* finer texel c sits at (c & 1, c >> 1) of the coarse one */
+            uint32_t child = fx__get_u16((const uint8_t *)finer[c] + 2u * l);
+            for (uint32_t qy = 0; qy < 2; qy++)
+                for (uint32_t qx = 0; qx < 2; qx++) {
+                    /* The 2 x 2 finer cells under coarse cell (qx, qy) of this quarter. */
+                    uint32_t bits = (child >> ((2 * qy) * 4 + 2 * qx)) & 3u;
+                    bits |= ((child >> ((2 * qy + 1) * 4 + 2 * qx)) & 3u) << 2;
+                    if (__builtin_popcount(bits) >= 2)
+                        mask |= 1u << ((2 * (c >> 1) + qy) * 4 + 2 * (c & 1) + qx);
+                }
+        }
+        fx__put_u16((uint8_t *)texel + 2u * l, (uint16_t)mask);
     }
 }
 
-/* Each light's visibility: the filtered lit fraction of the taps. */
+/* The tap whose texel lies (ox, oy) texels from tap `from`'s texel, or -1. */
+static int shadow_tap_at(const fx_taps *taps, int from, int ox, int oy)
+{
+    for (uint32_t t = 0; t < taps->count; t++)
+        if (fabsf(taps->at_x[from] - (float)ox - taps->at_x[t]) < 0.5f &&
+            fabsf(taps->at_y[from] - (float)oy - taps->at_y[t]) < 0.5f)
+            return (int)t;
+    return -1;
+}
+
+/* Each light's visibility at the pixel. Bit i of a texel's mask is the ray from cell (i & 3, i >> 2) of its
+ * 4 x 4 stratified cells, so the masks of the taps form a sample grid four times finer than the texels.
+ * A pixel much smaller than a texel (the finest level, seen from close) reads that grid bilinearly at its
+ * own position, which places shadow edges inside texels (DESIGN.md, "Hard shadows") without more rays; a
+ * cell whose texel holds no data takes the nearest cell of the pixel's own texel. A pixel as large as a
+ * texel reads the texels' lit fractions bilinearly instead (a point sample of the fine grid would alias);
+ * in between, the two are blended by the pixel's size in texels. */
 static void shadow_shade(const fx_context *ctx, const fx_shade_run *run)
 {
     (void)ctx;
@@ -194,11 +220,57 @@ static void shadow_shade(const fx_context *ctx, const fx_shade_run *run)
         const fx_taps *taps = &run->taps[i];
         if (taps->count == 0)
             continue;
+        /* The tap whose texel holds the pixel (the one with the largest weight if none does exactly). */
+        int home = 0;
+        for (uint32_t t = 0; t < taps->count; t++) {
+            if (taps->at_x[t] >= 0 && taps->at_x[t] < 1 && taps->at_y[t] >= 0 && taps->at_y[t] < 1) {
+                home = (int)t;
+                break;
+            }
+            if (taps->weight[t] > taps->weight[home])
+                home = (int)t;
+        }
+        /* The four fine cells around the pixel and their bilinear weights. */
+        float fx = taps->at_x[home] * 4.0f - 0.5f, fy = taps->at_y[home] * 4.0f - 0.5f;
+        float cx0 = floorf(fx), cy0 = floorf(fy);
+        float wx = fx - cx0, wy = fy - cy0;
+        if (taps->footprint >= 1.0f) { /* as large as a texel: the texels' lit fractions */
+            for (uint32_t l = 0; l < lights; l++) {
+                float lit = 0;
+                for (uint32_t t = 0; t < taps->count; t++)
+                    lit += taps->weight[t] * fx_shadow_sample(taps->texel[t], 0, lights, l);
+                run->light_visibility[(size_t)i * lights + l] *= lit;
+            }
+            continue;
+        }
+        const uint8_t *cell_texel[4];
+        uint32_t cell_bit[4];
+        float cell_weight[4];
+        for (int c = 0; c < 4; c++) {
+            int cx = (int)cx0 + (c & 1), cy = (int)cy0 + (c >> 1);
+            int ox = cx < 0 ? -1 : (cx > 3 ? 1 : 0), oy = cy < 0 ? -1 : (cy > 3 ? 1 : 0);
+            int t = (ox || oy) ? shadow_tap_at(taps, home, ox, oy) : home;
+            if (t < 0) { /* no data there: the nearest cell of the pixel's own texel */
+                t = home;
+                ox = oy = 0;
+                cx = cx < 0 ? 0 : (cx > 3 ? 3 : cx);
+                cy = cy < 0 ? 0 : (cy > 3 ? 3 : cy);
+            }
+            cell_texel[c] = taps->texel[t];
+            cell_bit[c] = (uint32_t)((cy - 4 * oy) * 4 + (cx - 4 * ox));
+            cell_weight[c] = ((c & 1) ? wx : 1 - wx) * ((c >> 1) ? wy : 1 - wy);
+        }
+        float coarse = fminf(fmaxf(taps->footprint, 0.0f), 1.0f); /* weight of the texel average */
         for (uint32_t l = 0; l < lights; l++) {
-            float lit = 0;
-            for (uint32_t t = 0; t < taps->count; t++)
-                lit += taps->weight[t] * fx_shadow_sample(taps->texel[t], 0, lights, l);
-            run->light_visibility[(size_t)i * lights + l] *= lit;
+            float fine = 0, average = 0;
+            for (int c = 0; c < 4; c++) {
+                uint32_t mask = fx__get_u16(cell_texel[c] + 2u * l);
+                fine += cell_weight[c] * (float)((mask >> cell_bit[c]) & 1u);
+            }
+            if (coarse > 0)
+                for (uint32_t t = 0; t < taps->count; t++)
+                    average += taps->weight[t] * fx_shadow_sample(taps->texel[t], 0, lights, l);
+            run->light_visibility[(size_t)i * lights + l] *= fine + coarse * (average - fine);
         }
     }
 }

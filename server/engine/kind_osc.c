@@ -239,6 +239,7 @@ static void osc_kind_pixel_taps(const void *cache, const srv_pixel *pixels, uint
         long x0 = (long)fx0, y0 = (long)fy0;
         float total = 0;
         out->count = 0;
+        out->footprint = exp2f(px->footprint - (float)level);
         if (blocks)
             blocks[i] = SRV_NONE;
         long last_bx = -1, last_by = -1;
