@@ -77,7 +77,9 @@ typedef struct fx_block_job {
 } fx_block_job;
 
 /* Hard shadows: for each texel of mask and each light, FX_SHADOW_RAYS rays from stratified jittered points
- * of the texel's footprint on the surface towards the light; bit i set = ray i reached the light. Stored
+ * of the texel's footprint on the surface (kept a sixteenth of a texel inside the lookup triangle's edges,
+ * so a texel at a crease never samples the wall's plane) towards the light; bit i set = ray i reached the
+ * light. Stored
  * as uint16 per light: texel t, light l at payload bytes ((t * light_count) + l) * 2. Texels facing away
  * from a light store 0 for it without tracing. Call from any thread; uses Embree's stream API.
  * Returns the number of rays traced. */

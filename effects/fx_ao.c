@@ -10,12 +10,15 @@
  *
  * Sample k of a texel (k counts on from the stored count, so budget splits do not matter) uses two 2D points
  * of an Owen-scrambled Sobol sequence indexed by k, scrambled per texel by hash(seed, key, texel): one places
- * the ray origin inside the texel's footprint (mapped to the surface through the triangle lookup), the other
- * gives the cosine-weighted direction about the lookup triangle's geometric normal (Duff et al. basis). The
- * first 16, 32 and 64 samples are each stratified in both, which lowers the error against pure random.
+ * the ray origin inside the texel's footprint (mapped to the surface through the triangle lookup, and kept
+ * FX_TEXEL_MARGIN of a texel inside the lookup triangle's edges, so a texel at a crease never samples the
+ * wall's plane), the other gives the cosine-weighted direction about the lookup triangle's geometric normal
+ * (Duff et al. basis). The first 16, 32 and 64 samples are each stratified in both, which lowers the error
+ * against pure random.
  *
- * Rays: origins through scene_offset_ray_origin, batched 256 at a time into rtcOccluded1M; a texel's rays
- * are never split across batches. The caller must have called scene_tracing_thread_init() in this thread. */
+ * Rays: origins through scene_offset_ray_origin (along the normal: every AO ray leaves on that side),
+ * batched 256 at a time into rtcOccluded1M; a texel's rays are never split across batches. The caller must
+ * have called scene_tracing_thread_init() in this thread. */
 #include "fx_internal.h"
 
 #include <string.h>
@@ -77,6 +80,7 @@ uint64_t fx_ao_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
 
     for (uint32_t j = 0; j < count; j++) {
         const fx_block_job *job = &jobs[j];
+        float margin = fx__texel_margin(ctx->s, job->level);
         for (uint64_t bits = job->mask; bits != 0; bits &= bits - 1) {
             uint32_t texel = (uint32_t)__builtin_ctzll(bits);
             uint8_t *texel_bytes = (uint8_t *)job->payload + 4u * texel;
@@ -101,7 +105,7 @@ uint64_t fx_ao_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
             uint64_t origin_hash = fx__hash(ctx->seed, job->key, texel, 0, FX_STREAM_AO_ORIGIN);
             uint64_t direction_hash = fx__hash(ctx->seed, job->key, texel, 0, FX_STREAM_AO_DIRECTION);
             fx__surface_map map;
-            fx__surface_map_init(ctx->s, job->island, job->lookup[texel], &map);
+            fx__surface_map_init(ctx->s, job->island, job->lookup[texel], margin, &map);
             float tangent[3], bitangent[3];
             fx__onb(map.normal, tangent, bitangent);
             for (uint32_t k = stored; k < stored + add; k++) {
@@ -109,8 +113,8 @@ uint64_t fx_ao_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
                 fx__sobol_2d(k, origin_hash, jitter);
                 fx__texel_uv(job->level, job->block_x, job->block_y, texel, jitter[0], jitter[1], &u, &v);
                 fx__surface_map_eval(&map, u, v, position);
-                ao_ray(position, map.normal, tangent, bitangent, direction_hash, k, ctx->s->ray_offset_scale, origin,
-                       dir);
+                ao_ray(position, map.normal, tangent, bitangent, direction_hash, k, ctx->s->ray_offset_scale,
+                       origin, dir);
                 fx__set_ray(&batch.rays[batch.ray_count], origin, dir, ctx->ao_radius, batch.ray_count);
                 batch.owner[batch.ray_count++] = (uint16_t)owner;
             }

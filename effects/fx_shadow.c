@@ -5,7 +5,8 @@
  *
  * Sample points: sample i lies in stratum (i % 4, i / 4) of the texel's footprint square in level-0 island
  * UV, jittered by hash(seed, key, texel, i); it is mapped to the surface through the texel's triangle lookup
- * (fx_surface_point: clamped into the lookup triangle, so border texels sample the nearest triangle's edge).
+ * and clamped into the lookup triangle shrunk by FX_TEXEL_MARGIN of a texel (border texels sample just inside
+ * the nearest triangle's edge, never on the plane of a wall that edge meets: fx_internal.h).
  * The same 16 points serve every light. Facing: a ray whose direction has dot(n, to_light) <= 0 (n the
  * geometric normal) is not traced and its bit stays 0; a texel facing away from a light stores 0 with no ray.
  *
@@ -84,7 +85,7 @@ uint64_t fx_shadow_update(const fx_context *ctx, const fx_block_job *jobs, uint3
             float offsets[FX_SHADOW_RAYS][2], origins[FX_SHADOW_RAYS][3];
             shadow_jitter(ctx->seed, job->key, texel, offsets);
             fx__surface_map map;
-            fx__surface_map_init(s, job->island, job->lookup[texel], &map);
+            fx__surface_map_init(s, job->island, job->lookup[texel], fx__texel_margin(s, job->level), &map);
             const float *normal = map.normal;
             for (uint32_t i = 0; i < FX_SHADOW_RAYS; i++) {
                 float u, v, position[3];
