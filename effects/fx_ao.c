@@ -16,6 +16,9 @@
  * (Duff et al. basis). The first 16, 32 and 64 samples are each stratified in both, which lowers the error
  * against pure random.
  *
+ * The no-cache baseline traces from the visible point itself, after moving it inside the triangle it lies on
+ * (fx__locate_point): a pixel exactly on a crease would otherwise start every ray on the wall's plane.
+ *
  * Rays: origins through scene_offset_ray_origin (along the normal: every AO ray leaves on that side),
  * batched 256 at a time into rtcOccluded1M; a texel's rays are never split across batches. The caller must
  * have called scene_tracing_thread_init() in this thread. */
@@ -147,6 +150,10 @@ float fx_ao_eval_point(const fx_context *ctx, const float pos[3], const float no
         return 1.0f; /* nothing known to occlude */
     _Alignas(64) struct RTCRay batch[FX_RAY_BATCH];
     uint64_t direction_hash = fx__hash(ctx->seed, pixel_id, 0, 0, FX_STREAM_AO_DIRECTION);
+    /* A point exactly on a crease lies on the wall's plane too: move it inside its own triangle first. */
+    fx__surface_map map;
+    float point[3];
+    fx__locate_point(ctx, pos, normal, 0.0f, &map, point);
     float tangent[3], bitangent[3];
     fx__onb(normal, tangent, bitangent);
     uint32_t unoccluded = 0;
@@ -154,8 +161,8 @@ float fx_ao_eval_point(const fx_context *ctx, const float pos[3], const float no
         uint32_t n = samples - first < FX_RAY_BATCH ? samples - first : FX_RAY_BATCH;
         for (uint32_t r = 0; r < n; r++) {
             float origin[3], dir[3];
-            ao_ray(pos, normal, tangent, bitangent, direction_hash, first + r, ctx->s->ray_offset_scale, origin,
-                   dir);
+            ao_ray(point, normal, tangent, bitangent, direction_hash, first + r, ctx->s->ray_offset_scale,
+                   origin, dir);
             fx__set_ray(&batch[r], origin, dir, ctx->ao_radius, r);
         }
         fx__occluded(ctx->rt, batch, n);

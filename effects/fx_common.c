@@ -1,6 +1,7 @@
 /* What every effect shares: the effect descriptions the frame loop reads (bytes per texel, level bias,
  * filter, policy), the mapping from a point of island UV to the surface (through the triangle lookup, kept
- * inside the triangle by a margin: fx_internal.h "surface points"), and the direction towards a light. */
+ * inside the triangle by a margin: fx_internal.h "surface points"), locating the triangle of a visible point
+ * for the no-cache baseline, and the direction towards a light. */
 #include "fx_internal.h"
 
 #include <string.h>
@@ -175,6 +176,110 @@ void fx_surface_point(const scene *s, uint32_t island, uint32_t lookup, float is
     fx__surface_map_eval(&map, island_u, island_v, position);
     for (int k = 0; k < 3; k++)
         normal[k] = map.normal[k];
+}
+
+/* ---- locating a visible point's triangle (the no-cache baseline) ---------------------------------- */
+
+/* What the point query looks for and what it found. */
+typedef struct locate_query {
+    const scene *s;
+    double point[3];
+    float normal[3];
+    uint32_t best_tri; /* UINT32_MAX: none yet */
+    double best_d2;    /* squared distance to it */
+} locate_query;
+
+/* Squared distance from p to triangle (a, b, c), in double (Ericson, Real-Time Collision Detection 5.1.5). */
+static double triangle_distance2(const double p[3], const float *a, const float *b, const float *c)
+{
+    double ab[3], ac[3], ap[3];
+    for (int k = 0; k < 3; k++) {
+        ab[k] = (double)b[k] - a[k];
+        ac[k] = (double)c[k] - a[k];
+        ap[k] = p[k] - a[k];
+    }
+#define FX_DOT3(x, y) ((x)[0] * (y)[0] + (x)[1] * (y)[1] + (x)[2] * (y)[2])
+    double d1 = FX_DOT3(ab, ap), d2 = FX_DOT3(ac, ap), v, w;
+    if (d1 <= 0 && d2 <= 0) {
+        v = w = 0; /* corner a */
+    } else {
+        double bp[3], cp[3];
+        for (int k = 0; k < 3; k++) {
+            bp[k] = p[k] - b[k];
+            cp[k] = p[k] - c[k];
+        }
+        double d3 = FX_DOT3(ab, bp), d4 = FX_DOT3(ac, bp), d5 = FX_DOT3(ab, cp), d6 = FX_DOT3(ac, cp);
+        double vc = d1 * d4 - d3 * d2, vb = d5 * d2 - d1 * d6, va = d3 * d6 - d5 * d4;
+        if (d3 >= 0 && d4 <= d3) {
+            v = 1, w = 0; /* corner b */
+        } else if (d6 >= 0 && d5 <= d6) {
+            v = 0, w = 1; /* corner c */
+        } else if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+            v = d1 / (d1 - d3), w = 0; /* edge ab */
+        } else if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+            v = 0, w = d2 / (d2 - d6); /* edge ac */
+        } else if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+            w = (d4 - d3) / ((d4 - d3) + (d5 - d6)); /* edge bc */
+            v = 1 - w;
+        } else {
+            double denom = 1.0 / (va + vb + vc); /* inside */
+            v = vb * denom;
+            w = vc * denom;
+        }
+    }
+#undef FX_DOT3
+    double d2sum = 0;
+    for (int k = 0; k < 3; k++) {
+        double q = a[k] + v * ab[k] + w * ac[k] - p[k];
+        d2sum += q * q;
+    }
+    return d2sum;
+}
+
+/* Embree's point-query callback: keeps the nearest triangle facing along the query's normal (ties: the
+ * lower index, so the answer does not depend on the traversal order). The radius is never shrunk. */
+static bool locate_callback(struct RTCPointQueryFunctionArguments *args)
+{
+    locate_query *q = args->userPtr;
+    uint32_t tri = args->primID;
+    const scene *s = q->s;
+    if (tri >= s->triangle_count || !(fx__dot(s->tri_normal + 3 * (size_t)tri, q->normal) > 0.906f))
+        return false; /* more than 25 degrees off: another surface (the wall at a crease) */
+    const uint32_t *corner = s->indices + 3 * (size_t)tri;
+    double d2 =
+        triangle_distance2(q->point, s->positions + 3 * (size_t)corner[0],
+                           s->positions + 3 * (size_t)corner[1], s->positions + 3 * (size_t)corner[2]);
+    double radius = args->query->radius;
+    if (d2 <= radius * radius && (d2 < q->best_d2 || (d2 == q->best_d2 && tri < q->best_tri))) {
+        q->best_d2 = d2;
+        q->best_tri = tri;
+    }
+    return false;
+}
+
+bool fx__locate_point(const fx_context *ctx, const float pos[3], const float normal[3], float margin,
+                      fx__surface_map *map, float settled[3])
+{
+    const scene *s = ctx->s;
+    float reach = fx__robust_distance(pos, s->ray_offset_scale);
+    locate_query q = {.s = s, .best_tri = UINT32_MAX, .best_d2 = INFINITY};
+    for (int k = 0; k < 3; k++) {
+        q.point[k] = pos[k];
+        q.normal[k] = normal[k];
+        settled[k] = pos[k];
+    }
+    _Alignas(16) struct RTCPointQuery query = {
+        .x = pos[0], .y = pos[1], .z = pos[2], .time = 0, .radius = reach};
+    _Alignas(16) struct RTCPointQueryContext context;
+    rtcInitPointQueryContext(&context);
+    rtcPointQuery((RTCScene)scene_rt_handle(ctx->rt), &query, &context, locate_callback, &q);
+    if (q.best_tri == UINT32_MAX)
+        return false;
+    fx__triangle_map_init(s, q.best_tri, fmaxf(margin, reach), map);
+    double w1, w2;
+    fx__surface_map_bary(map, pos, &w1, &w2);
+    fx__surface_map_eval_bary(map, w1, w2, settled);
+    return true;
 }
 
 void fx_light_direction(const scene_light *light, const float pos[3], float dir[3], float *distance)

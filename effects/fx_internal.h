@@ -257,6 +257,14 @@ static inline void fx__surface_map_bary(const fx__surface_map *map, const float 
     *w2 = d[0] * map->dual2[0] + d[1] * map->dual2[1] + d[2] * map->dual2[2];
 }
 
+/* For the no-cache baseline, which knows a visible point and its normal but not its triangle: finds the
+ * triangle facing along normal (within 25 degrees) nearest to pos, within fx__robust_distance of it
+ * (Embree's point query), and sets map up for it with points kept margin metres inside (raised as in
+ * fx__triangle_map_init), then `settled` = pos clamped into that shrunk triangle. Returns false, with
+ * settled = pos, when no such triangle is that near (a point off every surface). */
+bool fx__locate_point(const fx_context *ctx, const float pos[3], const float normal[3], float margin,
+                      fx__surface_map *map, float settled[3]);
+
 /* ---- payload bytes (little-endian, host independent) --------------------------------------------- */
 
 /* Reads a little-endian uint16 at p. */
