@@ -64,7 +64,9 @@ typedef struct fx_block_job {
 } fx_block_job;
 
 /* Hard shadows: for each texel of mask and each light, FX_SHADOW_RAYS rays from stratified jittered points
- * of the texel's footprint on the surface towards the light; bit i set = ray i reached the light. Stored
+ * of the texel's footprint on the surface (kept a sixteenth of a texel inside the lookup triangle's edges,
+ * so a texel at a crease never samples the wall's plane) towards the light; bit i set = ray i reached the
+ * light. Stored
  * as uint16 per light: texel t, light l at payload bytes ((t * light_count) + l) * 2. Texels facing away
  * from a light store 0 for it without tracing. Call from any thread; uses Embree's stream API.
  * Returns the number of rays traced. */
@@ -91,12 +93,18 @@ void fx_surface_point(const scene *s, uint32_t island, uint32_t lookup, float is
 /* ---- the no-cache baseline: the same rays per pixel ------------------------------------------------- */
 
 /* Lit fraction of light l at a visible point: FX_SHADOW_RAYS rays from pos + a*dpdx + b*dpdy for
- * stratified jittered (a, b) in [-0.5, 0.5]^2 (the pixel's footprint), seeded by (seed, pixel_id).
- * Returns the fraction; *rays receives the rays traced (0 when facing away). */
+ * stratified jittered (a, b) in [-0.5, 0.5]^2 (the pixel's footprint), seeded by (seed, pixel_id). pos is
+ * first moved a rounding-safe distance inside the triangle it lies on (found by its position and normal), so
+ * a pixel on a crease does not start on the wall; a jittered point outside that triangle is kept only if a
+ * ray from pos reaches it past every surface, and is otherwise clamped into the triangle, so no ray starts on
+ * or behind another surface. Returns the fraction; *rays receives the rays traced, those checks included
+ * (0 when facing away). */
 float fx_shadow_eval_point(const fx_context *ctx, const float pos[3], const float normal[3], const float dpdx[3],
                            const float dpdy[3], uint32_t light, uint64_t pixel_id, uint64_t *rays);
 
-/* AO at a visible point with `samples` cosine-weighted rays, seeded by (seed, pixel_id). */
+/* AO at a visible point with `samples` cosine-weighted rays, seeded by (seed, pixel_id), from pos moved a
+ * rounding-safe distance inside the triangle it lies on (a pixel exactly on a crease reads the AO beside it,
+ * not 0). */
 float fx_ao_eval_point(const fx_context *ctx, const float pos[3], const float normal[3], uint32_t samples,
                        uint64_t pixel_id, uint64_t *rays);
 

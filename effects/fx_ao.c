@@ -10,12 +10,18 @@
  *
  * Sample k of a texel (k counts on from the stored count, so budget splits do not matter) uses two 2D points
  * of an Owen-scrambled Sobol sequence indexed by k, scrambled per texel by hash(seed, key, texel): one places
- * the ray origin inside the texel's footprint (mapped to the surface through the triangle lookup), the other
- * gives the cosine-weighted direction about the lookup triangle's geometric normal (Duff et al. basis). The
- * first 16, 32 and 64 samples are each stratified in both, which lowers the error against pure random.
+ * the ray origin inside the texel's footprint (mapped to the surface through the triangle lookup, and kept
+ * FX_TEXEL_MARGIN of a texel inside the lookup triangle's edges, so a texel at a crease never samples the
+ * wall's plane), the other gives the cosine-weighted direction about the lookup triangle's geometric normal
+ * (Duff et al. basis). The first 16, 32 and 64 samples are each stratified in both, which lowers the error
+ * against pure random.
  *
- * Rays: origins through scene_offset_ray_origin, batched 256 at a time into rtcOccluded1M; a texel's rays
- * are never split across batches. The caller must have called scene_tracing_thread_init() in this thread. */
+ * The no-cache baseline traces from the visible point itself, after moving it inside the triangle it lies on
+ * (fx__locate_point): a pixel exactly on a crease would otherwise start every ray on the wall's plane.
+ *
+ * Rays: origins through scene_offset_ray_origin (along the normal: every AO ray leaves on that side),
+ * batched 256 at a time into rtcOccluded1M; a texel's rays are never split across batches. The caller must
+ * have called scene_tracing_thread_init() in this thread. */
 #include "fx_internal.h"
 
 #include <string.h>
@@ -77,6 +83,7 @@ uint64_t fx_ao_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
 
     for (uint32_t j = 0; j < count; j++) {
         const fx_block_job *job = &jobs[j];
+        float margin = fx__texel_margin(ctx->s, job->level);
         for (uint64_t bits = job->mask; bits != 0; bits &= bits - 1) {
             uint32_t texel = (uint32_t)__builtin_ctzll(bits);
             uint8_t *texel_bytes = (uint8_t *)job->payload + 4u * texel;
@@ -101,7 +108,7 @@ uint64_t fx_ao_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
             uint64_t origin_hash = fx__hash(ctx->seed, job->key, texel, 0, FX_STREAM_AO_ORIGIN);
             uint64_t direction_hash = fx__hash(ctx->seed, job->key, texel, 0, FX_STREAM_AO_DIRECTION);
             fx__surface_map map;
-            fx__surface_map_init(ctx->s, job->island, job->lookup[texel], &map);
+            fx__surface_map_init(ctx->s, job->island, job->lookup[texel], margin, &map);
             float tangent[3], bitangent[3];
             fx__onb(map.normal, tangent, bitangent);
             for (uint32_t k = stored; k < stored + add; k++) {
@@ -109,8 +116,8 @@ uint64_t fx_ao_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
                 fx__sobol_2d(k, origin_hash, jitter);
                 fx__texel_uv(job->level, job->block_x, job->block_y, texel, jitter[0], jitter[1], &u, &v);
                 fx__surface_map_eval(&map, u, v, position);
-                ao_ray(position, map.normal, tangent, bitangent, direction_hash, k, ctx->s->ray_offset_scale, origin,
-                       dir);
+                ao_ray(position, map.normal, tangent, bitangent, direction_hash, k, ctx->s->ray_offset_scale,
+                       origin, dir);
                 fx__set_ray(&batch.rays[batch.ray_count], origin, dir, ctx->ao_radius, batch.ray_count);
                 batch.owner[batch.ray_count++] = (uint16_t)owner;
             }
@@ -143,6 +150,10 @@ float fx_ao_eval_point(const fx_context *ctx, const float pos[3], const float no
         return 1.0f; /* nothing known to occlude */
     _Alignas(64) struct RTCRay batch[FX_RAY_BATCH];
     uint64_t direction_hash = fx__hash(ctx->seed, pixel_id, 0, 0, FX_STREAM_AO_DIRECTION);
+    /* A point exactly on a crease lies on the wall's plane too: move it inside its own triangle first. */
+    fx__surface_map map;
+    float point[3];
+    fx__locate_point(ctx, pos, normal, 0.0f, &map, point);
     float tangent[3], bitangent[3];
     fx__onb(normal, tangent, bitangent);
     uint32_t unoccluded = 0;
@@ -150,8 +161,8 @@ float fx_ao_eval_point(const fx_context *ctx, const float pos[3], const float no
         uint32_t n = samples - first < FX_RAY_BATCH ? samples - first : FX_RAY_BATCH;
         for (uint32_t r = 0; r < n; r++) {
             float origin[3], dir[3];
-            ao_ray(pos, normal, tangent, bitangent, direction_hash, first + r, ctx->s->ray_offset_scale, origin,
-                   dir);
+            ao_ray(point, normal, tangent, bitangent, direction_hash, first + r, ctx->s->ray_offset_scale,
+                   origin, dir);
             fx__set_ray(&batch[r], origin, dir, ctx->ao_radius, r);
         }
         fx__occluded(ctx->rt, batch, n);

@@ -5,9 +5,16 @@
  *
  * Sample points: sample i lies in stratum (i % 4, i / 4) of the texel's footprint square in level-0 island
  * UV, jittered by hash(seed, key, texel, i); it is mapped to the surface through the texel's triangle lookup
- * (fx_surface_point: clamped into the lookup triangle, so border texels sample the nearest triangle's edge).
+ * and clamped into the lookup triangle shrunk by FX_TEXEL_MARGIN of a texel (border texels sample just inside
+ * the nearest triangle's edge, never on the plane of a wall that edge meets: fx_internal.h).
  * The same 16 points serve every light. Facing: a ray whose direction has dot(n, to_light) <= 0 (n the
  * geometric normal) is not traced and its bit stays 0; a texel facing away from a light stores 0 with no ray.
+ *
+ * The no-cache baseline (fx_shadow_eval_point) jitters over the pixel's footprint instead, which can reach
+ * past a crease onto or behind a wall: its points are checked as effects.h describes. Checking only the
+ * points that leave the visible triangle keeps the baseline at 16 rays for pixels inside a triangle, which
+ * is what it stands for (DESIGN.md "No-cache baseline"); clamping every point into the triangle instead would
+ * shrink the footprint to the triangle on fine meshes.
  *
  * Rays: origins through scene_offset_ray_origin, batched 256 at a time into rtcOccluded1M; a (texel, light)
  * group of 16 rays is never split across batches. The caller must have called scene_tracing_thread_init() in
@@ -84,7 +91,7 @@ uint64_t fx_shadow_update(const fx_context *ctx, const fx_block_job *jobs, uint3
             float offsets[FX_SHADOW_RAYS][2], origins[FX_SHADOW_RAYS][3];
             shadow_jitter(ctx->seed, job->key, texel, offsets);
             fx__surface_map map;
-            fx__surface_map_init(s, job->island, job->lookup[texel], &map);
+            fx__surface_map_init(s, job->island, job->lookup[texel], fx__texel_margin(s, job->level), &map);
             const float *normal = map.normal;
             for (uint32_t i = 0; i < FX_SHADOW_RAYS; i++) {
                 float u, v, position[3];
@@ -127,16 +134,71 @@ float fx_shadow_eval_point(const fx_context *ctx, const float pos[3], const floa
                            uint64_t *rays)
 {
     FX_ASSERT(light < ctx->s->light_count);
+    const scene *s = ctx->s;
+    const scene_light *lamp = &s->lights[light];
     float offsets[FX_SHADOW_RAYS][2];
     shadow_jitter(ctx->seed, pixel_id, 0, offsets);
+
+    /* The centre: the visible point moved inside its triangle (a pixel on a crease lies on the wall too). */
+    fx__surface_map map;
+    float centre[3], centre_origin[3];
+    bool located = fx__locate_point(ctx, pos, normal, 0.0f, &map, centre);
+    scene_offset_ray_origin(centre, normal, s->ray_offset_scale, centre_origin);
+    float reach = fx__robust_distance(centre, s->ray_offset_scale);
+
+    /* Jittered points over the footprint. Those inside the triangle (with its margin) are on the visible
+     * surface; any other may lie on or behind another surface (past a crease): it is kept only when a ray
+     * from the centre reaches it, and a little beyond, without meeting anything; otherwise it is clamped into
+     * the triangle (the centre itself when the triangle is unknown). */
+    float points[FX_SHADOW_RAYS][3];
     _Alignas(64) struct RTCRay batch[FX_SHADOW_RAYS];
+    uint32_t checks = 0;
+    for (uint32_t i = 0; i < FX_SHADOW_RAYS; i++) {
+        float a = offsets[i][0] - 0.5f, b = offsets[i][1] - 0.5f, origin[3], dir[3], tfar;
+        for (int k = 0; k < 3; k++)
+            points[i][k] = centre[k] + a * dpdx[k] + b * dpdy[k];
+        double w1 = 0, w2 = 0;
+        if (located) {
+            fx__surface_map_bary(&map, points[i], &w1, &w2);
+            if (fx__inside_margin(&map, w1, w2))
+                continue;
+        }
+        scene_offset_ray_origin(points[i], normal, s->ray_offset_scale, origin);
+        if (!shadow_ray_towards(lamp, origin, normal, dir, &tfar))
+            continue; /* untraced below anyway */
+        float step[3];
+        double length2 = 0;
+        for (int k = 0; k < 3; k++) {
+            step[k] = origin[k] - centre_origin[k];
+            length2 += (double)step[k] * step[k];
+        }
+        float length = (float)sqrt(length2);
+        if (!(length > 0))
+            continue;
+        for (int k = 0; k < 3; k++)
+            step[k] /= length;
+        fx__set_ray(&batch[checks++], centre_origin, step, length + reach, i);
+    }
+    fx__occluded(ctx->rt, batch, checks);
+    for (uint32_t r = 0; r < checks; r++) {
+        if (batch[r].tfar != -INFINITY)
+            continue;
+        float *point = points[batch[r].id];
+        if (located) {
+            double w1, w2;
+            fx__surface_map_bary(&map, point, &w1, &w2);
+            fx__surface_map_eval_bary(&map, w1, w2, point);
+        } else {
+            for (int k = 0; k < 3; k++)
+                point[k] = centre[k];
+        }
+    }
+
     uint32_t traced = 0;
     for (uint32_t i = 0; i < FX_SHADOW_RAYS; i++) {
-        float a = offsets[i][0] - 0.5f, b = offsets[i][1] - 0.5f, point[3], origin[3], dir[3], tfar;
-        for (int k = 0; k < 3; k++)
-            point[k] = pos[k] + a * dpdx[k] + b * dpdy[k];
-        scene_offset_ray_origin(point, normal, ctx->s->ray_offset_scale, origin);
-        if (shadow_ray_towards(&ctx->s->lights[light], origin, normal, dir, &tfar))
+        float origin[3], dir[3], tfar;
+        scene_offset_ray_origin(points[i], normal, s->ray_offset_scale, origin);
+        if (shadow_ray_towards(lamp, origin, normal, dir, &tfar))
             fx__set_ray(&batch[traced++], origin, dir, tfar, i);
     }
     fx__occluded(ctx->rt, batch, traced);
@@ -144,7 +206,7 @@ float fx_shadow_eval_point(const fx_context *ctx, const float pos[3], const floa
     for (uint32_t r = 0; r < traced; r++)
         lit += batch[r].tfar != -INFINITY;
     if (rays)
-        *rays = traced;
+        *rays = checks + traced;
     return (float)lit * (1.0f / FX_SHADOW_RAYS);
 }
 

@@ -16,6 +16,7 @@
 #include <embree3/rtcore.h>
 
 #include <math.h>
+#include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -180,22 +181,89 @@ static inline void fx__cosine_direction(const float n[3], const float t[3], cons
 
 /* ---- surface points -------------------------------------------------------------------------------- */
 
-/* The map from level-0 island UV to the surface of one lookup triangle, set up once per texel so that each
- * sample point costs a few multiply-adds (fx_surface_point is init + eval). */
+/* Why sample points are pulled inside their triangle (DESIGN.md "Effects": a texel's points stay on its own
+ * surface). Where a floor meets a wall, the floor triangle's edge lies on the wall's plane. A point on that
+ * edge, offset along the floor's normal, is still on the wall's plane (or, after rounding, behind it): every
+ * ray from it with tnear = 0 meets the wall at t = 0, whatever its direction (AO 0, a dark line), or passes
+ * behind it (light leaking into a closed room). So every sample point is kept `margin` metres inside each
+ * edge of its triangle: more than the Waechter-Binder offset can move it sideways and the rounding of a
+ * position (fx__robust_distance), and for texels a small fraction of the texel (FX_TEXEL_MARGIN), so the
+ * wall is met at t > 0 by the rays that reach it and by no other. */
+
+/* The fraction of a texel's side by which its sample points stay inside their triangle's edges. Small
+ * against the texel (AO near a wall of radius R changes by about 2 margin / (pi R); a shadow mask's stratum
+ * is 1/4 of the side), large against rounding. */
+#define FX_TEXEL_MARGIN (1.0f / 16.0f)
+
+/* A distance (metres) beyond every sideways move of scene_offset_ray_origin at p and the rounding of p:
+ * twice its largest offset, 2 * 256 ulps of p's largest coordinate (at most |x| 2^-14), or near zero twice
+ * its fixed offset (scale 2^-15). */
+static inline float fx__robust_distance(const float p[3], float scale)
+{
+    if (!(scale > 0) || scale > 1.0f)
+        scale = 1.0f;
+    float largest = fmaxf(fabsf(p[0]), fmaxf(fabsf(p[1]), fabsf(p[2])));
+    return largest * 0x1p-14f + scale * 0x1p-15f;
+}
+
+/* The map from level-0 island UV (or barycentrics) to the surface of one triangle, set up once per texel so
+ * that each sample point costs a few multiply-adds (fx_surface_point is init + eval). Points are clamped into
+ * the triangle shrunk by `margin` metres on every side: barycentric weight k at least min_weight[k]. */
 typedef struct fx__surface_map {
     double uv_origin[2];                  /* corner 0 in island UV */
     double to_w1[2], to_w2[2];            /* barycentrics of corners 1 and 2 per UV unit */
     double fallback[2];                   /* constant barycentrics for a triangle without UV area */
     double origin[3], edge1[3], edge2[3]; /* world corner 0 and edges to corners 1 and 2, metres */
+    double dual1[3], dual2[3];            /* world offset from corner 0 -> barycentrics 1 and 2 (in plane) */
+    double min_weight[3];                 /* barycentric margins of corners 0, 1, 2 (0: plain clamp) */
     float normal[3];                      /* unit geometric normal */
 } fx__surface_map;
 
-/* Sets up the map of the triangle named by lookup texel `lookup` in island. */
-void fx__surface_map_init(const scene *s, uint32_t island, uint32_t lookup, fx__surface_map *map);
+/* Sets up the map of scene triangle tri (world part only: no UV), with its points kept margin metres (raised
+ * to fx__robust_distance of its corners when positive; 0: clamped onto the triangle, edges included)
+ * inside its edges. A triangle too small for the margin maps every point to its incentre. */
+void fx__triangle_map_init(const scene *s, uint32_t tri, float margin, fx__surface_map *map);
 
-/* The world position of an island UV point, its barycentrics clamped into the triangle (negative weights to
- * zero, renormalised). */
+/* Sets up the map of the triangle named by lookup texel `lookup` in island, with margin as above. */
+void fx__surface_map_init(const scene *s, uint32_t island, uint32_t lookup, float margin,
+                          fx__surface_map *map);
+
+/* The margin (metres) for the sample points of a texel at level: FX_TEXEL_MARGIN of its side. */
+static inline float fx__texel_margin(const scene *s, uint32_t level)
+{
+    return FX_TEXEL_MARGIN * (float)(1u << level) / s->texel_density;
+}
+
+/* Whether barycentrics (w1, w2) (w0 = 1 - w1 - w2) lie in the map's shrunk triangle. */
+static inline bool fx__inside_margin(const fx__surface_map *map, double w1, double w2)
+{
+    return 1.0 - w1 - w2 >= map->min_weight[0] && w1 >= map->min_weight[1] && w2 >= map->min_weight[2];
+}
+
+/* The world position of barycentrics (w1, w2), clamped into the shrunk triangle first (weights below their
+ * margins raised onto it, the rest renormalised). */
+void fx__surface_map_eval_bary(const fx__surface_map *map, double w1, double w2, float position[3]);
+
+/* The world position of an island UV point: its barycentrics, clamped as fx__surface_map_eval_bary does. */
 void fx__surface_map_eval(const fx__surface_map *map, float island_u, float island_v, float position[3]);
+
+/* The barycentrics (w1, w2) of world point p projected onto the map's plane. */
+static inline void fx__surface_map_bary(const fx__surface_map *map, const float p[3], double *w1, double *w2)
+{
+    double d[3];
+    for (int k = 0; k < 3; k++)
+        d[k] = (double)p[k] - map->origin[k];
+    *w1 = d[0] * map->dual1[0] + d[1] * map->dual1[1] + d[2] * map->dual1[2];
+    *w2 = d[0] * map->dual2[0] + d[1] * map->dual2[1] + d[2] * map->dual2[2];
+}
+
+/* For the no-cache baseline, which knows a visible point and its normal but not its triangle: finds the
+ * triangle facing along normal (within 25 degrees) nearest to pos, within fx__robust_distance of it
+ * (Embree's point query), and sets map up for it with points kept margin metres inside (raised as in
+ * fx__triangle_map_init), then `settled` = pos clamped into that shrunk triangle. Returns false, with
+ * settled = pos, when no such triangle is that near (a point off every surface). */
+bool fx__locate_point(const fx_context *ctx, const float pos[3], const float normal[3], float margin,
+                      fx__surface_map *map, float settled[3]);
 
 /* ---- the registry ------------------------------------------------------------------------------- */
 

@@ -1,0 +1,177 @@
+/* bench_stages: the per-pixel stages (requests, compose) against visibility on the same frames, and the
+ * whole frame on 2 threads against 1, for a walking viewer (issue: "per-pixel stages at a fraction of the
+ * ray cost").
+ *
+ *   part 1: one loop on 1 thread; per frame after the warm-up, requests / visibility and compose /
+ *           visibility (the same frame's stage timers); medians and the 10-90 % spread
+ *   part 2: two loops, 1 and 2 threads, same cameras, frames alternating between them (frame f on the
+ *           1-thread loop, then frame f on the 2-thread loop); per frame t1 / t2; median and spread.
+ *           Both loops do identical work (same cameras, deterministic caches).
+ *
+ * Usage: bench_stages [--scene PATH (default ../shared/scenes/sponza/sponza.3ds)] [--res WxH (640x360)]
+ *                     [--warmup N (10)] [--frames N (30)] [--camera walk|group|orbit (walk)] [--viewers N (1)]
+ */
+#include "bench_util.h"
+#include "camgen.h"
+#include "engine.h"
+#include "scene.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+static srv_loop *make_loop(scene *s, scene_rt *rt, uint32_t threads, uint32_t viewers, uint32_t w, uint32_t h,
+                           srv_viewer_id *ids)
+{
+    srv_loop_desc d = {.s = s, .rt = rt, .threads = threads, .seed = 1};
+    uint32_t count = 0;
+    const fx_effect *const *registry = fx_registry(&count);
+    bool needed[SRV_MAX_EFFECTS];
+    char why[SRV_MAX_EFFECTS][200];
+    fx_needs(registry, count, s, needed, why);
+    for (uint32_t e = 0; e < count; e++)
+        d.effect_on[e] = needed[e] && registry[e]->shade;
+    srv_loop *loop = NULL;
+    char err[256];
+    if (srv_loop_create(&d, &loop, err, sizeof err) != FXC_OK) {
+        fprintf(stderr, "bench_stages: %s\n", err);
+        exit(1);
+    }
+    for (uint32_t v = 0; v < viewers; v++)
+        if (srv_viewer_add(loop, &(srv_viewer_desc){.width = w, .height = h}, &ids[v]) != FXC_OK) {
+            fprintf(stderr, "bench_stages: cannot add a viewer\n");
+            exit(1);
+        }
+    return loop;
+}
+
+static double run_frame(srv_loop *loop, const scene *s, srv_camgen_kind gen, const srv_viewer_id *ids,
+                        uint32_t viewers, uint32_t frame, srv_frame_stats *st)
+{
+    for (uint32_t v = 0; v < viewers; v++) {
+        srv_camera cam = srv_camgen_camera(gen, s, v, viewers, frame, 1);
+        srv_viewer_set_camera(loop, ids[v], &cam);
+    }
+    double t = bench_now_ms();
+    if (srv_loop_frame(loop, st) != FXC_OK) {
+        fprintf(stderr, "bench_stages: frame failed\n");
+        exit(1);
+    }
+    return bench_now_ms() - t;
+}
+
+static void print_row(const char *what, const double *values, int n)
+{
+    printf("| %s | %.3f | %.3f | %.3f |\n", what, bench_quantile(values, n, 0.5), bench_quantile(values, n, 0.1),
+           bench_quantile(values, n, 0.9));
+}
+
+int main(int argc, char **argv)
+{
+    const char *path = "../shared/scenes/sponza/sponza.3ds";
+    uint32_t w = 640, h = 360, warmup = 10, frames = 30, viewers = 1;
+    srv_camgen_kind gen = SRV_CAMGEN_WALK;
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
+        if (!strcmp(a, "--scene") && v)
+            path = v, i++;
+        else if (!strcmp(a, "--res") && v && sscanf(v, "%ux%u", &w, &h) == 2)
+            i++;
+        else if (!strcmp(a, "--warmup") && v)
+            warmup = (uint32_t)atoi(v), i++;
+        else if (!strcmp(a, "--frames") && v)
+            frames = (uint32_t)atoi(v), i++;
+        else if (!strcmp(a, "--viewers") && v)
+            viewers = (uint32_t)atoi(v), i++;
+        else if (!strcmp(a, "--camera") && v && srv_camgen_parse(v, &gen))
+            i++;
+        else {
+            fprintf(stderr, "usage: bench_stages [--scene PATH] [--res WxH] [--warmup N] [--frames N] [--camera GEN] "
+                            "[--viewers N]\n");
+            return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
+        }
+    }
+    if (!w || !h || frames < 1 || frames > BENCH_MAX_SAMPLES || viewers < 1 || viewers > SRV_MAX_VIEWERS) {
+        fprintf(stderr, "bench_stages: bad --res, --frames (1..%d) or --viewers\n", BENCH_MAX_SAMPLES);
+        return 2;
+    }
+    if (strcmp(path, "default") && access(path, R_OK) != 0) {
+        printf("%s not found: using the embedded default scene\n", path);
+        path = "default";
+    }
+    scene_error err;
+    scene *s = scene_load(path, NULL, &err);
+    if (!s) {
+        fprintf(stderr, "bench_stages: %s\n", err.msg);
+        return 1;
+    }
+    scene_rt *rt = scene_rt_create(s, NULL, &err);
+    if (!rt) {
+        fprintf(stderr, "bench_stages: %s\n", err.msg);
+        return 1;
+    }
+    printf("scene %s (%u triangles), %u viewer(s) of %ux%u, camera %s, %u warm-up frames then %u measured\n", path,
+           s->triangle_count, viewers, w, h, srv_camgen_name(gen), warmup, frames);
+
+    /* Part 1: stage ratios on one thread. */
+    srv_viewer_id ids[SRV_MAX_VIEWERS];
+    srv_loop *one = make_loop(s, rt, 1, viewers, w, h, ids);
+    double vis[BENCH_MAX_SAMPLES], req_ratio[BENCH_MAX_SAMPLES], comp_ratio[BENCH_MAX_SAMPLES],
+        req[BENCH_MAX_SAMPLES], comp[BENCH_MAX_SAMPLES], frame_ms[BENCH_MAX_SAMPLES];
+    srv_frame_stats st;
+    for (uint32_t f = 0; f < warmup + frames; f++) {
+        run_frame(one, s, gen, ids, viewers, f, &st);
+        if (f < warmup)
+            continue;
+        int i = (int)(f - warmup);
+        vis[i] = st.time_ms[SRV_STAGE_VISIBILITY];
+        req[i] = st.time_ms[SRV_STAGE_REQUESTS];
+        comp[i] = st.time_ms[SRV_STAGE_COMPOSE];
+        frame_ms[i] = st.frame_ms;
+        req_ratio[i] = req[i] / vis[i];
+        comp_ratio[i] = comp[i] / vis[i];
+    }
+    srv_loop_free(one);
+    printf("\n1 thread, per frame (ms and ratios to the same frame's visibility):\n\n"
+           "| figure | median | p10 | p90 |\n|---|---|---|---|\n");
+    print_row("visibility ms", vis, (int)frames);
+    print_row("requests ms", req, (int)frames);
+    print_row("compose ms", comp, (int)frames);
+    print_row("frame ms", frame_ms, (int)frames);
+    print_row("requests / visibility", req_ratio, (int)frames);
+    print_row("compose / visibility", comp_ratio, (int)frames);
+
+    /* Part 2: 1 thread against 2, alternating frame by frame. */
+    srv_viewer_id ids1[SRV_MAX_VIEWERS], ids2[SRV_MAX_VIEWERS];
+    srv_loop *l1 = make_loop(s, rt, 1, viewers, w, h, ids1), *l2 = make_loop(s, rt, 2, viewers, w, h, ids2);
+    double speedup[BENCH_MAX_SAMPLES], t1s[BENCH_MAX_SAMPLES], t2s[BENCH_MAX_SAMPLES];
+    for (uint32_t f = 0; f < warmup + frames; f++) {
+        srv_frame_stats s1, s2;
+        double t1 = run_frame(l1, s, gen, ids1, viewers, f, &s1);
+        double t2 = run_frame(l2, s, gen, ids2, viewers, f, &s2);
+        uint64_t rays1 = 0, rays2 = 0;
+        for (uint32_t e = 0; e < SRV_MAX_EFFECTS; e++)
+            rays1 += s1.rays[e], rays2 += s2.rays[e];
+        if (s1.requested_texels != s2.requested_texels || rays1 != rays2) {
+            fprintf(stderr, "bench_stages: the two loops did different work in frame %u\n", f);
+            return 1;
+        }
+        if (f < warmup)
+            continue;
+        int i = (int)(f - warmup);
+        t1s[i] = t1;
+        t2s[i] = t2;
+        speedup[i] = t1 / t2;
+    }
+    printf("\nwhole frame, 1 thread against 2 threads (frames alternating between the two loops):\n\n"
+           "| figure | median | p10 | p90 |\n|---|---|---|---|\n");
+    print_row("1 thread ms", t1s, (int)frames);
+    print_row("2 threads ms", t2s, (int)frames);
+    print_row("speed-up (1 thread / 2 threads)", speedup, (int)frames);
+    srv_loop_free(l1);
+    srv_loop_free(l2);
+    scene_rt_free(rt);
+    scene_free(s);
+    return 0;
+}
