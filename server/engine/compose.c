@@ -20,14 +20,14 @@ typedef struct compose_scratch {
     fx_point points[SRV_RUN];
     fx_taps taps[SRV_RUN];
     uint32_t blocks[SRV_RUN];
-    size_t index[SRV_RUN];        /* pixel index of each visible pixel of the run */
+    size_t index[SRV_RUN]; /* pixel index of each visible pixel of the run */
     float albedo[SRV_RUN][3];
     float shade_normal[SRV_RUN][3];
     uint8_t missing[SRV_RUN];
     float sharing[SRV_RUN];
     float sky_visibility[SRV_RUN];
     float indirect[SRV_RUN * 3];
-    float light_visibility[];     /* SRV_RUN * max(light_count, 1) */
+    float light_visibility[]; /* SRV_RUN * max(light_count, 1) */
 } compose_scratch;
 
 size_t srv__compose_scratch_bytes(const srv_loop *loop)
@@ -44,7 +44,8 @@ static void pixel_differentials(const srv_camera_frame *f, const float dir[3], f
     float dn = dir[0] * n[0] + dir[1] * n[1] + dir[2] * n[2];
     for (int axis = 0; axis < 2; axis++) {
         const float *offset = axis == 0 ? f->right : f->up;
-        float step = axis == 0 ? 2.0f * f->tan_half_x / (float)f->width : -2.0f * f->tan_half_y / (float)f->height;
+        float step =
+            axis == 0 ? 2.0f * f->tan_half_x / (float)f->width : -2.0f * f->tan_half_y / (float)f->height;
         float d2[3];
         for (int k = 0; k < 3; k++)
             d2[k] = dir[k] + step * offset[k];
@@ -90,54 +91,63 @@ typedef struct compose_task {
     atomic_uint_fast64_t rays[SRV_MAX_EFFECTS];
 } compose_task;
 
-/* Gathers the visible pixels of one run (row y, columns x0..x0+n): their points, albedo and cache pixels;
- * misses get the sky. Returns how many are visible. */
-static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t y, uint32_t x0, uint32_t n,
-                           compose_scratch *cs, const float sky[3], float log2_density)
+/* Gathers the visible pixels of one run (rows y0..y1, columns x0..x1, at most SRV_RUN pixels): their points,
+ * albedo and cache pixels; misses get the sky. Returns how many are visible. */
+static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32_t x1, uint32_t y0,
+                           uint32_t y1, compose_scratch *cs, const float sky[3], float log2_density)
 {
     const scene *s = loop->s;
     const srv_camera_frame *f = &view->frame;
     bool no_cache = loop->desc.no_cache;
+    const float scale_x = 2.0f * f->tan_half_x / (float)f->width,
+                scale_y = 2.0f * f->tan_half_y / (float)f->height;
     uint32_t count = 0;
-    for (uint32_t x = x0; x < x0 + n; x++) {
-        size_t p = (size_t)y * f->width + x;
-        uint32_t tri = view->tri[p];
-        if (tri == SRV_MISS) {
-            memcpy(view->radiance + 3 * p, sky, 3 * sizeof(float));
-            if (view->views[SRV_VIEW_AO]) {
-                view->views[SRV_VIEW_AO][p] = 1.0f;
-                view->views[SRV_VIEW_SHADOW][p] = 1.0f;
-                view->views[SRV_VIEW_SHARING][p] = 0.0f;
+    for (uint32_t y = y0; y < y1; y++)
+        for (uint32_t x = x0; x < x1; x++) {
+            size_t p = (size_t)y * f->width + x;
+            uint32_t tri = view->tri[p];
+            if (tri == SRV_MISS) {
+                memcpy(view->radiance + 3 * p, sky, 3 * sizeof(float));
+                if (view->views[SRV_VIEW_AO]) {
+                    view->views[SRV_VIEW_AO][p] = 1.0f;
+                    view->views[SRV_VIEW_SHADOW][p] = 1.0f;
+                    view->views[SRV_VIEW_SHARING][p] = 0.0f;
+                }
+                continue;
             }
-            continue;
+            uint32_t i = count++;
+            cs->index[i] = p;
+            fx_point *pt = &cs->points[i];
+            float u = view->bary_u[p], v = view->bary_v[p], dir[3];
+            srv__hit_point(s, tri, u, v, pt->position, pt->normal);
+            /* The ray's direction, not normalised: only its side of the surface matters here. */
+            float sx = ((float)x + 0.5f) * scale_x - f->tan_half_x,
+                  sy = f->tan_half_y - ((float)y + 0.5f) * scale_y;
+            for (int k = 0; k < 3; k++)
+                dir[k] = f->forward[k] + sx * f->right[k] + sy * f->up[k];
+            float facing = pt->normal[0] * dir[0] + pt->normal[1] * dir[1] + pt->normal[2] * dir[2];
+            for (int k = 0; k < 3; k++) /* seen from behind: light the side the viewer sees */
+                cs->shade_normal[i][k] = facing > 0 ? -pt->normal[k] : pt->normal[k];
+            /* The pixel's footprint in metres: level-0 texels per pixel over texels per metre. */
+            scene_albedo_filtered(s, tri, u, v, view->footprint[p] - log2_density, cs->albedo[i]);
+            pt->triangle = tri;
+            pt->u = u;
+            pt->v = v;
+            pt->pixel_id = p;
+            if (no_cache) {
+                srv_camera_ray(f, (float)x + 0.5f, (float)y + 0.5f, dir);
+                pixel_differentials(f, dir, view->depth[p], pt->normal, pt->dpdx, pt->dpdy);
+            }
+            srv_pixel *px = &cs->pixels[i];
+            px->triangle = tri;
+            px->island = s->tri_island[tri];
+            px->footprint = view->footprint[p];
+            srv__island_uv(s, tri, u, v, &px->island_u, &px->island_v);
         }
-        uint32_t i = count++;
-        cs->index[i] = p;
-        fx_point *pt = &cs->points[i];
-        float u = view->bary_u[p], v = view->bary_v[p], dir[3];
-        srv__hit_point(s, tri, u, v, pt->position, pt->normal);
-        srv_camera_ray(f, (float)x + 0.5f, (float)y + 0.5f, dir);
-        float facing = pt->normal[0] * dir[0] + pt->normal[1] * dir[1] + pt->normal[2] * dir[2];
-        for (int k = 0; k < 3; k++) /* seen from behind: light the side the viewer sees */
-            cs->shade_normal[i][k] = facing > 0 ? -pt->normal[k] : pt->normal[k];
-        /* The pixel's footprint in metres: level-0 texels per pixel over texels per metre. */
-        scene_albedo_filtered(s, tri, u, v, view->footprint[p] - log2_density, cs->albedo[i]);
-        pt->triangle = tri;
-        pt->u = u;
-        pt->v = v;
-        pt->pixel_id = p;
-        if (no_cache)
-            pixel_differentials(f, dir, view->depth[p], pt->normal, pt->dpdx, pt->dpdy);
-        srv_pixel *px = &cs->pixels[i];
-        px->triangle = tri;
-        px->island = s->tri_island[tri];
-        px->footprint = view->footprint[p];
-        srv__island_uv(s, tri, u, v, &px->island_u, &px->island_v);
-    }
     return count;
 }
 
-static void compose_rows(void *user, uint32_t task_index, uint32_t thread_index)
+static void compose_tile(void *user, uint32_t task_index, uint32_t thread_index)
 {
     compose_task *task = user;
     srv_loop *loop = task->loop;
@@ -153,87 +163,114 @@ static void compose_rows(void *user, uint32_t task_index, uint32_t thread_index)
     for (int k = 0; k < 3; k++)
         sky[k] = s->sky_color[k] * s->sky_intensity;
     const float log2_density = log2f(s->texel_density);
-    for (uint32_t y = task_index * SRV_TILE; y < (task_index + 1) * SRV_TILE && y < f->height; y++)
-        for (uint32_t x0 = 0; x0 < f->width; x0 += SRV_RUN) {
-            uint32_t n = f->width - x0 < SRV_RUN ? f->width - x0 : SRV_RUN;
-            uint32_t count = gather_run(loop, view, y, x0, n, cs, sky, log2_density);
-            for (uint32_t i = 0; i < count * stride; i++)
-                cs->light_visibility[i] = 1.0f;
+    /* Directional lights: the same direction and irradiance for every pixel, computed once. */
+    enum { CONSTANT_LIGHTS = 8 };
+    float light_dir[CONSTANT_LIGHTS][3], light_rgb[CONSTANT_LIGHTS][3];
+    for (uint32_t l = 0; l < lights && l < CONSTANT_LIGHTS; l++) {
+        float dist;
+        fx_light_direction(&s->lights[l], (const float[3]){0, 0, 0}, light_dir[l], &dist);
+        for (int k = 0; k < 3; k++)
+            light_rgb[l][k] = s->lights[l].intensity * s->lights[l].color[k];
+    }
+    /* A 16 x 16 tile in runs of 4 rows x 16 columns: neighbouring pixels read the same blocks and texels. */
+    uint32_t tiles_x = (f->width + SRV_TILE - 1) / SRV_TILE;
+    uint32_t tx0 = (task_index % tiles_x) * SRV_TILE, ty0 = (task_index / tiles_x) * SRV_TILE;
+    uint32_t tx1 = tx0 + SRV_TILE < f->width ? tx0 + SRV_TILE : f->width;
+    uint32_t ty1 = ty0 + SRV_TILE < f->height ? ty0 + SRV_TILE : f->height;
+    for (uint32_t ry = ty0; ry < ty1; ry += SRV_RUN / SRV_TILE) {
+        uint32_t ry1 = ry + SRV_RUN / SRV_TILE < ty1 ? ry + SRV_RUN / SRV_TILE : ty1;
+        uint32_t count = gather_run(loop, view, tx0, tx1, ry, ry1, cs, sky, log2_density);
+        for (uint32_t i = 0; i < count * stride; i++)
+            cs->light_visibility[i] = 1.0f;
+        for (uint32_t i = 0; i < count; i++) {
+            cs->sky_visibility[i] = 1.0f;
+            cs->indirect[3 * i] = cs->indirect[3 * i + 1] = cs->indirect[3 * i + 2] = 0.0f;
+            cs->missing[i] = 0;
+            cs->sharing[i] = 0.0f;
+        }
+        if (no_cache) {
             for (uint32_t i = 0; i < count; i++) {
-                cs->sky_visibility[i] = 1.0f;
-                cs->indirect[3 * i] = cs->indirect[3 * i + 1] = cs->indirect[3 * i + 2] = 0.0f;
-                cs->missing[i] = 0;
-                cs->sharing[i] = 0.0f;
+                fx_shade_point sp = {.light_visibility = cs->light_visibility + (size_t)i * stride,
+                                     .sky_visibility = &cs->sky_visibility[i],
+                                     .indirect = &cs->indirect[3 * i]};
+                for (uint32_t e = 0; e < loop->effect_count; e++)
+                    if (loop->effect_on[e] && loop->effects[e]->eval)
+                        rays[e] += loop->effects[e]->eval(&loop->fx, &cs->points[i], &sp);
             }
-            if (no_cache) {
+        } else if (count) {
+            fx_shade_run run = {.count = count,
+                                .light_count = lights,
+                                .taps = cs->taps,
+                                .points = cs->points,
+                                .light_visibility = cs->light_visibility,
+                                .sky_visibility = cs->sky_visibility,
+                                .indirect = cs->indirect};
+            for (uint32_t e = 0; e < loop->effect_count; e++) {
+                if (!loop->effect_shading[e])
+                    continue;
+                uint32_t k = loop->effect_kind[e];
+                const uint64_t *bits = loop->viewer_bits[e];
+                loop->kinds[k]->pixel_taps(loop->caches[k], cs->pixels, count, e, loop->bias[e], cs->taps,
+                                           bits ? cs->blocks : NULL);
+                loop->effects[e]->shade(&loop->fx, &run);
                 for (uint32_t i = 0; i < count; i++) {
-                    fx_shade_point sp = {.light_visibility = cs->light_visibility + (size_t)i * stride,
-                                         .sky_visibility = &cs->sky_visibility[i],
-                                         .indirect = &cs->indirect[3 * i]};
-                    for (uint32_t e = 0; e < loop->effect_count; e++)
-                        if (loop->effect_on[e] && loop->effects[e]->eval)
-                            rays[e] += loop->effects[e]->eval(&loop->fx, &cs->points[i], &sp);
-                }
-            } else if (count) {
-                fx_shade_run run = {.count = count, .light_count = lights, .taps = cs->taps, .points = cs->points,
-                                    .light_visibility = cs->light_visibility, .sky_visibility = cs->sky_visibility,
-                                    .indirect = cs->indirect};
-                for (uint32_t e = 0; e < loop->effect_count; e++) {
-                    if (!loop->effect_shading[e])
-                        continue;
-                    uint32_t k = loop->effect_kind[e];
-                    const uint64_t *bits = loop->viewer_bits[e];
-                    loop->kinds[k]->pixel_taps(loop->caches[k], cs->pixels, count, e, loop->bias[e], cs->taps,
-                                               bits ? cs->blocks : NULL);
-                    loop->effects[e]->shade(&loop->fx, &run);
-                    for (uint32_t i = 0; i < count; i++) {
-                        cs->missing[i] |= cs->taps[i].count == 0;
-                        if (bits && cs->blocks[i] != SRV_NONE)
-                            cs->sharing[i] = fmaxf(cs->sharing[i], (float)__builtin_popcountll(bits[cs->blocks[i]]));
-                    }
+                    cs->missing[i] |= cs->taps[i].count == 0;
+                    if (bits && cs->blocks[i] != SRV_NONE)
+                        cs->sharing[i] =
+                            fmaxf(cs->sharing[i], (float)__builtin_popcountll(bits[cs->blocks[i]]));
                 }
             }
-            for (uint32_t i = 0; i < count; i++) {
-                size_t p = cs->index[i];
-                const float *sn = cs->shade_normal[i];
-                const float *pos = cs->points[i].position;
-                const float *visibility = cs->light_visibility + (size_t)i * stride;
-                float irradiance[3] = {0, 0, 0};
-                for (uint32_t l = 0; l < lights; l++) {
-                    const scene_light *light = &s->lights[l];
-                    float ldir[3], dist;
-                    fx_light_direction(light, pos, ldir, &dist);
+        }
+        for (uint32_t i = 0; i < count; i++) {
+            size_t p = cs->index[i];
+            const float *sn = cs->shade_normal[i];
+            const float *pos = cs->points[i].position;
+            const float *visibility = cs->light_visibility + (size_t)i * stride;
+            float irradiance[3] = {0, 0, 0};
+            for (uint32_t l = 0; l < lights; l++) {
+                const scene_light *light = &s->lights[l];
+                if (light->type == SCENE_LIGHT_DIRECTIONAL && l < CONSTANT_LIGHTS) {
+                    const float *ldir = light_dir[l];
                     float cosine = sn[0] * ldir[0] + sn[1] * ldir[1] + sn[2] * ldir[2];
-                    if (!(cosine > 0))
-                        continue;
-                    float falloff = light->type == SCENE_LIGHT_POINT ? 1.0f / fmaxf(dist * dist, 1e-8f) : 1.0f;
-                    float scale = light->intensity * cosine * visibility[l] * falloff;
-                    for (int k = 0; k < 3; k++)
-                        irradiance[k] += scale * light->color[k];
+                    if (cosine > 0)
+                        for (int k = 0; k < 3; k++)
+                            irradiance[k] += cosine * visibility[l] * light_rgb[l][k];
+                    continue;
                 }
-                /* Saturate, never overflow to infinity (extreme light intensities): DESIGN.md, robustness. */
-                float *rad = view->radiance + 3 * p;
-                for (int k = 0; k < 3; k++) {
-                    float irr = fminf(irradiance[k], FLT_MAX) + fminf(sky[k] * cs->sky_visibility[i], FLT_MAX) +
-                                fminf(cs->indirect[3 * i + k], FLT_MAX);
-                    float value = cs->albedo[i][k] * fminf(irr, FLT_MAX);
-                    rad[k] = value <= FLT_MAX ? value : (value > 0 ? FLT_MAX : 0.0f);
-                }
-                missing += cs->missing[i];
-                if (view->views[SRV_VIEW_AO]) {
-                    view->views[SRV_VIEW_AO][p] = cs->sky_visibility[i];
-                    view->views[SRV_VIEW_SHADOW][p] = lights ? visibility[0] : 1.0f;
-                    view->views[SRV_VIEW_SHARING][p] = cs->sharing[i];
-                }
+                float ldir[3], dist;
+                fx_light_direction(light, pos, ldir, &dist);
+                float cosine = sn[0] * ldir[0] + sn[1] * ldir[1] + sn[2] * ldir[2];
+                if (!(cosine > 0))
+                    continue;
+                float falloff = light->type == SCENE_LIGHT_POINT ? 1.0f / fmaxf(dist * dist, 1e-8f) : 1.0f;
+                float scale = light->intensity * cosine * visibility[l] * falloff;
+                for (int k = 0; k < 3; k++)
+                    irradiance[k] += scale * light->color[k];
             }
-            for (uint32_t x = x0; x < x0 + n; x++) {
+            /* Saturate, never overflow to infinity (extreme light intensities): DESIGN.md, robustness. */
+            float *rad = view->radiance + 3 * p;
+            for (int k = 0; k < 3; k++) {
+                float irr = fminf(irradiance[k], FLT_MAX) + fminf(sky[k] * cs->sky_visibility[i], FLT_MAX) +
+                            fminf(cs->indirect[3 * i + k], FLT_MAX);
+                float value = cs->albedo[i][k] * fminf(irr, FLT_MAX);
+                rad[k] = value <= FLT_MAX ? value : (value > 0 ? FLT_MAX : 0.0f);
+            }
+            missing += cs->missing[i];
+            if (view->views[SRV_VIEW_AO]) {
+                view->views[SRV_VIEW_AO][p] = cs->sky_visibility[i];
+                view->views[SRV_VIEW_SHADOW][p] = lights ? visibility[0] : 1.0f;
+                view->views[SRV_VIEW_SHARING][p] = cs->sharing[i];
+            }
+        }
+        for (uint32_t y = ry; y < ry1; y++)
+            for (uint32_t x = tx0; x < tx1; x++) {
                 size_t p = (size_t)y * f->width + x;
                 const float *rad = view->radiance + 3 * p;
                 uint8_t *px = view->image + 3 * p;
                 for (int k = 0; k < 3; k++)
                     px[k] = tone_map_srgb8(rad[k]);
             }
-        }
+    }
     atomic_fetch_add(&task->missing, missing);
     for (uint32_t e = 0; e < loop->effect_count; e++)
         if (rays[e])
@@ -248,8 +285,9 @@ void srv__compose(srv_loop *loop, uint32_t slot, srv_frame_stats *st)
     atomic_init(&task.missing, 0);
     for (uint32_t e = 0; e < SRV_MAX_EFFECTS; e++)
         atomic_init(&task.rays[e], 0);
-    uint32_t rows = (view->frame.height + SRV_TILE - 1) / SRV_TILE;
-    srv_pool_run(loop->pool, rows, compose_rows, &task);
+    uint32_t tiles =
+        ((view->frame.width + SRV_TILE - 1) / SRV_TILE) * ((view->frame.height + SRV_TILE - 1) / SRV_TILE);
+    srv_pool_run(loop->pool, tiles, compose_tile, &task);
     view->stats.pixels_missing = atomic_load(&task.missing);
     for (uint32_t e = 0; e < loop->effect_count; e++)
         st->rays[e] += atomic_load(&task.rays[e]);
