@@ -483,7 +483,7 @@ int srv_cmd_sim(int argc, char **argv)
         for (uint32_t v = 0; v < o.viewers; v++) {
             char path[1024];
             snprintf(path, sizeof path, "%s/viewer_%02u.trace", o.record_dir, v);
-            records[v] = srv_trace_writer_open(path, err, sizeof err);
+            records[v] = srv_trace_writer_open(path, s, err, sizeof err);
             if (!records[v]) {
                 fprintf(stderr, "fxcache sim: %s\n", err);
                 goto done;
@@ -505,7 +505,7 @@ int srv_cmd_sim(int argc, char **argv)
     uint32_t frame = 0;
     for (; frame < o.frames && !stop_requested; frame++) {
         for (uint32_t v = 0; v < o.viewers; v++) {
-            cameras[v] = traces[v] ? srv_trace_camera(traces[v], frame)
+            cameras[v] = traces[v] ? srv_trace_camera(traces[v], s, frame)
                                    : srv_camgen_camera(o.camera, s, v, o.viewers, frame, o.seed);
             if (records[v] && srv_trace_writer_add(records[v], traces[v] ? srv_trace_time(traces[v], frame) : frame / 30.0,
                                                    &cameras[v]) != 0) {
