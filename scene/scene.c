@@ -8,6 +8,7 @@
 #include "image.h"
 
 #include <errno.h>
+#include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -59,6 +60,148 @@ scene *scene__alloc(void)
     return s;
 }
 
+/* ---- the local frame and the loading state ------------------------------------------------------------ */
+
+typedef struct scene__builder scene__builder;
+
+/* One mesh as a loader handed it over, in double precision after its transform: kept until the scene's
+ * origin is settled, so that the mesh can be welded and cleaned again in the final frame. */
+typedef struct staged_mesh {
+    char name[128];
+    double *world;     /* vertex_count * 3: positions after the mesh transform, world frame */
+    uint32_t *indices; /* triangle_count * 3 */
+    float *uv;         /* vertex_count * 2, or NULL */
+    uint32_t vertex_count, triangle_count, material;
+    bool mirrored;     /* the transform mirrors: corners are swapped to keep the winding */
+    uint32_t mesh;     /* its entry in scene.meshes, UINT32_MAX when nothing of it was left */
+} staged_mesh;
+
+/* What a scene holds while it is being loaded (scene.builder); scene__finalize() releases it. */
+struct scene__builder {
+    bool frame_chosen;
+    double frame_origin[3]; /* the provisional frame the meshes are welded in: the first mesh's */
+    staged_mesh *meshes;
+    uint32_t mesh_count;
+    double *light_world;    /* 3 per light slot: the world position of the light in that slot, in double */
+    uint32_t light_slots;
+    bool camera_set;        /* camera_pos/target hold the scene's camera in double */
+    double camera_pos[3], camera_target[3];
+    char source[256];       /* the file the next meshes come from (scene__set_source) */
+    double input_step;      /* the coarsest input spacing seen, metres (float spacing x transform stretch) */
+    double input_magnitude; /* the largest input coordinate of that mesh */
+    double input_stretch;   /* its transform's largest stretch */
+    char input_source[256]; /* its file, or its mesh name */
+};
+
+/* The builder of s, allocated on first use; NULL when out of memory. */
+static scene__builder *builder_of(scene *s)
+{
+    if (!s->builder)
+        s->builder = calloc(1, sizeof *s->builder);
+    return s->builder;
+}
+
+static void staged_mesh_release(staged_mesh *m)
+{
+    free(m->world);
+    free(m->indices);
+    free(m->uv);
+    memset(m, 0, sizeof *m);
+}
+
+/* Releases a scene's loading state. */
+static void builder_free(scene *s)
+{
+    scene__builder *b = s->builder;
+    if (!b)
+        return;
+    for (uint32_t i = 0; i < b->mesh_count; i++)
+        staged_mesh_release(&b->meshes[i]);
+    free(b->meshes);
+    free(b->light_world);
+    free(b);
+    s->builder = NULL;
+}
+
+void scene__set_source(scene *s, const char *label)
+{
+    scene__builder *b = builder_of(s);
+    if (b)
+        snprintf(b->source, sizeof b->source, "%s", label ? label : "");
+}
+
+/* The spacing of floats at magnitude x (the unit in the last place), in double. */
+static double float_spacing(double x)
+{
+    if (!(x >= FLT_MIN))
+        return ldexp(1.0, -149); /* subnormal floats are this far apart */
+    return ldexp(1.0, ilogb(x) - 23);
+}
+
+static void bounds_reset(double lo[3], double hi[3])
+{
+    for (int k = 0; k < 3; k++) {
+        lo[k] = INFINITY;
+        hi[k] = -INFINITY;
+    }
+}
+
+/* Extends lo..hi by the vertices the mesh's triangles use (stray unused vertices do not move the frame). */
+static void staged_bounds(const staged_mesh *m, double lo[3], double hi[3])
+{
+    for (size_t i = 0; i < 3 * (size_t)m->triangle_count; i++) {
+        const double *p = m->world + 3 * (size_t)m->indices[i];
+        for (int k = 0; k < 3; k++) {
+            lo[k] = fmin(lo[k], p[k]);
+            hi[k] = fmax(hi[k], p[k]);
+        }
+    }
+}
+
+/* The origin of the local frame for geometry spanning lo..hi (world, double): (0, 0, 0) when the centre of
+ * the box lies within one extent (its longest side) of the world origin, where rebasing would gain at most
+ * 1.6 bits and world coordinates stay as they are; else the centre rounded to a multiple of the smallest
+ * power of two >= the extent, and of at least 1 m. The rounding keeps the origin a whole number of metres
+ * and makes a scene moved by such multiples (1e6 is one for extents up to 64 m) bit-identical in its local
+ * frame; either way every local coordinate lies within max(1.5 extents, 1 m) of the origin. The 1 m floor
+ * costs nothing the texel grid sees: below 1 m floats are at most 6e-8 m apart, under 1/16 of the finest
+ * texel allowed (1e6 texels per metre). */
+static void frame_origin_for(const double lo[3], const double hi[3], double origin[3])
+{
+    double centre[3], extent = 0, distance = 0;
+    for (int k = 0; k < 3; k++) {
+        centre[k] = 0.5 * lo[k] + 0.5 * hi[k];
+        extent = fmax(extent, hi[k] - lo[k]);
+        distance = fmax(distance, fabs(centre[k]));
+    }
+    if (!(distance > extent)) { /* also for empty bounds (NaN) */
+        origin[0] = origin[1] = origin[2] = 0;
+        return;
+    }
+    if (!(extent > 0)) { /* a single point far out: its own position */
+        memcpy(origin, centre, sizeof centre);
+        return;
+    }
+    double quantum = ldexp(1.0, ilogb(extent));
+    if (quantum < extent)
+        quantum *= 2;
+    quantum = fmax(quantum, 1.0);
+    for (int k = 0; k < 3; k++)
+        origin[k] = nearbyint(centre[k] / quantum) * quantum + 0.0; /* + 0.0: no -0 in messages */
+}
+
+void scene_world_to_local(const scene *s, const double world[3], float local[3])
+{
+    for (int k = 0; k < 3; k++)
+        local[k] = (float)(world[k] - s->origin[k]);
+}
+
+void scene_local_to_world(const scene *s, const float local[3], double world[3])
+{
+    for (int k = 0; k < 3; k++)
+        world[k] = (double)local[k] + s->origin[k];
+}
+
 void scene_free(scene *s)
 {
     if (!s)
@@ -83,6 +226,7 @@ void scene_free(scene *s)
     free(s->tri_island);
     free(s->tri_local);
     free(s->tri_island_uv);
+    builder_free(s);
     free(s);
 }
 
@@ -171,13 +315,15 @@ static bool finite3(const float v[3])
     return isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]);
 }
 
-scene_result scene__add_light(scene *s, const scene_light *l, const char *where, scene_error *err)
+scene_result scene__add_light_world(scene *s, const scene_light *l, const double world_position[3],
+                                    const char *where, scene_error *err)
 {
     scene_light light = *l;
     if (!finite3(light.color) || !isfinite(light.intensity))
         return scene__fail(err, SCENE_ERR_INVALID, "%s: light colour and intensity must be finite", where);
     if (light.intensity < 0 || light.color[0] < 0 || light.color[1] < 0 || light.color[2] < 0)
         return scene__fail(err, SCENE_ERR_RANGE, "%s: light colour and intensity must be >= 0", where);
+    double world[3] = {light.position[0], light.position[1], light.position[2]};
     if (light.type == SCENE_LIGHT_DIRECTIONAL) {
         if (!finite3(light.direction))
             return scene__fail(err, SCENE_ERR_INVALID, "%s: light direction must be finite", where);
@@ -188,13 +334,48 @@ scene_result scene__add_light(scene *s, const scene_light *l, const char *where,
             return scene__fail(err, SCENE_ERR_INVALID, "%s: light direction must not be zero", where);
         for (int k = 0; k < 3; k++)
             light.direction[k] = (float)(light.direction[k] / len);
-    } else if (!finite3(light.position)) {
-        return scene__fail(err, SCENE_ERR_INVALID, "%s: light position must be finite", where);
+    } else {
+        if (world_position)
+            memcpy(world, world_position, sizeof world);
+        for (int k = 0; k < 3; k++)
+            light.position[k] = (float)world[k];
+        if (!isfinite(world[0]) || !isfinite(world[1]) || !isfinite(world[2]) || !finite3(light.position))
+            return scene__fail(err, SCENE_ERR_INVALID, "%s: light position must be finite", where);
     }
+    /* The slot's world position in double; scene__finalize() moves the light into the local frame. */
+    scene__builder *b = builder_of(s);
+    uint32_t slot = s->light_count;
+    if (!b || (slot >= b->light_slots && !grow((void **)&b->light_world, 3 * ((size_t)slot + 1), sizeof(double))))
+        return scene__fail(err, SCENE_ERR_NOMEM, "out of memory adding a light");
+    if (slot >= b->light_slots)
+        b->light_slots = slot + 1;
+    memcpy(b->light_world + 3 * (size_t)slot, world, sizeof world);
     if (!grow((void **)&s->lights, (size_t)s->light_count + 1, sizeof *s->lights))
         return scene__fail(err, SCENE_ERR_NOMEM, "out of memory adding a light");
     s->lights[s->light_count++] = light;
     return SCENE_OK;
+}
+
+scene_result scene__add_light(scene *s, const scene_light *l, const char *where, scene_error *err)
+{
+    return scene__add_light_world(s, l, NULL, where, err);
+}
+
+bool scene__set_camera_world(scene *s, const double position[3], const double target[3], float fov_deg)
+{
+    scene__builder *b = builder_of(s);
+    if (!b)
+        return false;
+    b->camera_set = true;
+    memcpy(b->camera_pos, position, sizeof b->camera_pos);
+    memcpy(b->camera_target, target, sizeof b->camera_target);
+    s->has_camera = true;
+    for (int k = 0; k < 3; k++) {
+        s->camera_pos[k] = (float)position[k];
+        s->camera_target[k] = (float)target[k];
+    }
+    s->camera_fov_deg = fov_deg;
+    return true;
 }
 
 void scene__add_default_lighting(scene *s)
@@ -273,28 +454,15 @@ static bool triangle_degenerate(const float *a, const float *b, const float *c)
     return !(area2 > 1e-9 * longest2) || !(longest2 > 0);
 }
 
-scene_result scene__add_mesh(scene *s, const char *name, const float *positions, uint32_t vertex_count,
-                             const uint32_t *indices, uint32_t triangle_count, const float *uv,
-                             uint32_t material, const float *xform, scene_error *err)
+/* Welds, cleans and appends one staged mesh, its positions moved into the frame with the given origin:
+ * (float)(world - origin), subtracted in double. *mesh_index receives its index in s->meshes, or UINT32_MAX
+ * when no triangle was left. */
+static scene_result commit_mesh(scene *s, const staged_mesh *m, const double origin[3], const char *name,
+                                uint32_t *mesh_index, scene_error *err)
 {
-    if (material >= s->material_count)
-        return scene__fail(err, SCENE_ERR_INVALID, "mesh '%s': material %u out of range (%u materials)",
-                           name, material, s->material_count);
-    for (uint32_t v = 0; v < vertex_count; v++) {
-        const float *p = positions + 3 * (size_t)v;
-        if (!finite3(p))
-            return scene__fail(err, SCENE_ERR_INVALID,
-                               "mesh '%s': vertex %u has a non-finite coordinate (%g, %g, %g)", name, v,
-                               (double)p[0], (double)p[1], (double)p[2]);
-    }
-    for (size_t i = 0; i < 3 * (size_t)triangle_count; i++)
-        if (indices[i] >= vertex_count)
-            return scene__fail(err, SCENE_ERR_INVALID,
-                               "mesh '%s': triangle %zu uses vertex %u, but the mesh has %u vertices", name,
-                               i / 3, indices[i], vertex_count);
-    if (triangle_count == 0)
-        return SCENE_OK;
-
+    uint32_t vertex_count = m->vertex_count, triangle_count = m->triangle_count;
+    const uint32_t *indices = m->indices;
+    *mesh_index = UINT32_MAX;
     double t0 = scene__now_ms();
     scene_result rc = SCENE_ERR_NOMEM;
     float *world = malloc(sizeof(float) * 3 * (size_t)vertex_count);
@@ -305,22 +473,16 @@ scene_result scene__add_mesh(scene *s, const char *name, const float *positions,
     if (!world || !order || !remap || !keys || !keep)
         goto done;
 
-    /* Transform; adding 0.0f turns -0 into +0 so the two weld together. */
+    /* Into the frame, in double, rounded once; adding 0.0f turns -0 into +0 so the two weld together. */
     for (uint32_t v = 0; v < vertex_count; v++) {
-        const float *p = positions + 3 * (size_t)v;
+        const double *p = m->world + 3 * (size_t)v;
         float *w = world + 3 * (size_t)v;
-        if (xform) {
-            for (int r = 0; r < 3; r++)
-                w[r] = (float)((double)xform[4 * r] * p[0] + (double)xform[4 * r + 1] * p[1] +
-                               (double)xform[4 * r + 2] * p[2] + xform[4 * r + 3]);
-        } else {
-            w[0] = p[0], w[1] = p[1], w[2] = p[2];
-        }
         for (int k = 0; k < 3; k++)
-            w[k] += 0.0f;
+            w[k] = (float)(p[k] - origin[k]) + 0.0f;
         if (!finite3(w)) {
             rc = scene__fail(err, SCENE_ERR_INVALID,
-                             "mesh '%s': vertex %u is not finite after the mesh transform", name, v);
+                             "mesh '%s': vertex %u is not finite after the mesh transform (%g, %g, %g)", name, v,
+                             p[0], p[1], p[2]);
             goto done;
         }
         order[v] = v;
@@ -343,7 +505,7 @@ scene_result scene__add_mesh(scene *s, const char *name, const float *positions,
     }
     s->repairs.vertices_welded += vertex_count - unique;
 
-    /* Degenerate and duplicate triangles. */
+    /* Degenerate and duplicate triangles, judged on the float positions in this frame. */
     uint32_t kept = 0;
     for (uint32_t t = 0; t < triangle_count; t++) {
         const uint32_t *tri = indices + 3 * (size_t)t;
@@ -392,26 +554,19 @@ scene_result scene__add_mesh(scene *s, const char *name, const float *positions,
         goto done;
     for (uint32_t v = 0; v < vertex_count; v++)
         memcpy(s->positions + 3 * ((size_t)base_vertex + remap[v]), world + 3 * (size_t)v, 3 * sizeof(float));
-    /* A mirroring transform (negative determinant) would turn every triangle inside out: swap two corners. */
-    bool mirrored = false;
-    if (xform) {
-        double det = (double)xform[0] * ((double)xform[5] * xform[10] - (double)xform[6] * xform[9]) -
-                     (double)xform[1] * ((double)xform[4] * xform[10] - (double)xform[6] * xform[8]) +
-                     (double)xform[2] * ((double)xform[4] * xform[9] - (double)xform[5] * xform[8]);
-        mirrored = det < 0;
-    }
     uint32_t out = base_tri;
     for (uint32_t t = 0; t < triangle_count; t++) {
         if (!keep[t])
             continue;
         for (int corner = 0; corner < 3; corner++) {
-            int c = mirrored && corner > 0 ? 3 - corner : corner;
+            /* A mirroring transform would turn every triangle inside out: swap two corners. */
+            int c = m->mirrored && corner > 0 ? 3 - corner : corner;
             uint32_t src = indices[3 * (size_t)t + corner];
             s->indices[3 * (size_t)out + c] = base_vertex + remap[src];
             float u = 0, w = 0;
-            if (uv && isfinite(uv[2 * (size_t)src]) && isfinite(uv[2 * (size_t)src + 1])) {
-                u = uv[2 * (size_t)src];
-                w = uv[2 * (size_t)src + 1];
+            if (m->uv && isfinite(m->uv[2 * (size_t)src]) && isfinite(m->uv[2 * (size_t)src + 1])) {
+                u = m->uv[2 * (size_t)src];
+                w = m->uv[2 * (size_t)src + 1];
             }
             s->corner_uv[6 * (size_t)out + 2 * c] = u;
             s->corner_uv[6 * (size_t)out + 2 * c + 1] = w;
@@ -419,12 +574,13 @@ scene_result scene__add_mesh(scene *s, const char *name, const float *positions,
         s->tri_mesh[out] = s->mesh_count;
         out++;
     }
-    scene_mesh *m = &s->meshes[s->mesh_count++];
-    memset(m, 0, sizeof *m);
-    snprintf(m->name, sizeof m->name, "%s", name);
-    m->first_triangle = base_tri;
-    m->triangle_count = kept;
-    m->material = material;
+    scene_mesh *mesh = &s->meshes[s->mesh_count];
+    memset(mesh, 0, sizeof *mesh);
+    snprintf(mesh->name, sizeof mesh->name, "%s", name);
+    mesh->first_triangle = base_tri;
+    mesh->triangle_count = kept;
+    mesh->material = m->material;
+    *mesh_index = s->mesh_count++;
     s->vertex_count = (uint32_t)nv;
     s->triangle_count = (uint32_t)nt;
     rc = SCENE_OK;
@@ -438,6 +594,95 @@ done:
     free(keys);
     free(keep);
     return rc;
+}
+
+scene_result scene__add_mesh(scene *s, const char *name, const float *positions, uint32_t vertex_count,
+                             const uint32_t *indices, uint32_t triangle_count, const float *uv,
+                             uint32_t material, const double *xform, scene_error *err)
+{
+    if (material >= s->material_count)
+        return scene__fail(err, SCENE_ERR_INVALID, "mesh '%s': material %u out of range (%u materials)",
+                           name, material, s->material_count);
+    for (uint32_t v = 0; v < vertex_count; v++) {
+        const float *p = positions + 3 * (size_t)v;
+        if (!finite3(p))
+            return scene__fail(err, SCENE_ERR_INVALID,
+                               "mesh '%s': vertex %u has a non-finite coordinate (%g, %g, %g)", name, v,
+                               (double)p[0], (double)p[1], (double)p[2]);
+    }
+    for (size_t i = 0; i < 3 * (size_t)triangle_count; i++)
+        if (indices[i] >= vertex_count)
+            return scene__fail(err, SCENE_ERR_INVALID,
+                               "mesh '%s': triangle %zu uses vertex %u, but the mesh has %u vertices", name,
+                               i / 3, indices[i], vertex_count);
+    if (triangle_count == 0)
+        return SCENE_OK;
+
+    scene__builder *b = builder_of(s);
+    if (!b || !grow((void **)&b->meshes, (size_t)b->mesh_count + 1, sizeof *b->meshes))
+        return scene__fail(err, SCENE_ERR_NOMEM, "mesh '%s': out of memory", name);
+    staged_mesh *m = &b->meshes[b->mesh_count];
+    memset(m, 0, sizeof *m);
+    snprintf(m->name, sizeof m->name, "%s", name);
+    m->vertex_count = vertex_count;
+    m->triangle_count = triangle_count;
+    m->material = material;
+    m->mesh = UINT32_MAX;
+    m->world = malloc(sizeof(double) * 3 * (size_t)vertex_count);
+    m->indices = malloc(sizeof(uint32_t) * 3 * (size_t)triangle_count);
+    m->uv = uv ? malloc(sizeof(float) * 2 * (size_t)vertex_count) : NULL;
+    if (!m->world || !m->indices || (uv && !m->uv)) {
+        staged_mesh_release(m);
+        return scene__fail(err, SCENE_ERR_NOMEM, "mesh '%s': out of memory", name);
+    }
+    memcpy(m->indices, indices, sizeof(uint32_t) * 3 * (size_t)triangle_count);
+    if (uv)
+        memcpy(m->uv, uv, sizeof(float) * 2 * (size_t)vertex_count);
+
+    /* The transform, in double. The input's own float spacing, times the transform's largest stretch, is the
+     * finest the mesh can be, wherever it ends up. */
+    double input_magnitude = 0, stretch = 1;
+    for (uint32_t v = 0; v < vertex_count; v++) {
+        const float *p = positions + 3 * (size_t)v;
+        double *w = m->world + 3 * (size_t)v;
+        for (int r = 0; r < 3; r++) {
+            w[r] = xform ? xform[4 * r] * p[0] + xform[4 * r + 1] * p[1] + xform[4 * r + 2] * p[2] + xform[4 * r + 3]
+                         : (double)p[r];
+            input_magnitude = fmax(input_magnitude, fabs((double)p[r]));
+        }
+        if (!(fabs(w[0]) <= FLT_MAX && fabs(w[1]) <= FLT_MAX && fabs(w[2]) <= FLT_MAX)) { /* and NaN */
+            staged_mesh_release(m);
+            return scene__fail(err, SCENE_ERR_INVALID,
+                               "mesh '%s': vertex %u is not finite (as a float) after the mesh transform", name, v);
+        }
+    }
+    b->mesh_count++; /* owned by the builder from here on */
+    if (xform) {
+        stretch = 0;
+        for (int col = 0; col < 3; col++)
+            stretch = fmax(stretch, sqrt(xform[col] * xform[col] + xform[4 + col] * xform[4 + col] +
+                                         xform[8 + col] * xform[8 + col]));
+        double det = xform[0] * (xform[5] * xform[10] - xform[6] * xform[9]) -
+                     xform[1] * (xform[4] * xform[10] - xform[6] * xform[8]) +
+                     xform[2] * (xform[4] * xform[9] - xform[5] * xform[8]);
+        m->mirrored = det < 0;
+    }
+    double input_step = float_spacing(input_magnitude) * stretch;
+    if (input_step > b->input_step) {
+        b->input_step = input_step;
+        b->input_magnitude = input_magnitude;
+        b->input_stretch = stretch;
+        snprintf(b->input_source, sizeof b->input_source, "%s", b->source[0] ? b->source : name);
+    }
+
+    if (!b->frame_chosen) {
+        double lo[3], hi[3];
+        bounds_reset(lo, hi);
+        staged_bounds(m, lo, hi);
+        frame_origin_for(lo, hi, b->frame_origin);
+        b->frame_chosen = true;
+    }
+    return commit_mesh(s, m, b->frame_origin, name, &m->mesh, err);
 }
 
 /* ---- finalisation ------------------------------------------------------------------------------------- */
@@ -535,8 +780,122 @@ static scene_result compute_texture_lods(scene *s, scene_error *err)
     return SCENE_OK;
 }
 
+/* Settles the local frame: the origin from the bounds of every staged mesh; the meshes welded and cleaned
+ * again from their double positions when the provisional frame (the first mesh's) differs, so the result is
+ * that of one pass in the final frame; point lights and the camera moved into the frame. */
+static scene_result settle_frame(scene *s, scene_error *err)
+{
+    scene__builder *b = s->builder;
+    if (!b)
+        return SCENE_OK; /* built by hand: positions are already where they stay */
+    double lo[3], hi[3], origin[3] = {0, 0, 0};
+    bounds_reset(lo, hi);
+    for (uint32_t i = 0; i < b->mesh_count; i++)
+        staged_bounds(&b->meshes[i], lo, hi);
+    if (b->mesh_count)
+        frame_origin_for(lo, hi, origin);
+
+    if (b->frame_chosen && memcmp(origin, b->frame_origin, sizeof origin) != 0) {
+        scene_mesh *old_meshes = s->meshes;
+        uint32_t old_mesh_count = s->mesh_count;
+        free(s->positions);
+        free(s->indices);
+        free(s->corner_uv);
+        free(s->tri_mesh);
+        s->positions = NULL;
+        s->indices = NULL;
+        s->corner_uv = NULL;
+        s->tri_mesh = NULL;
+        s->meshes = NULL;
+        s->vertex_count = s->triangle_count = s->mesh_count = 0;
+        s->repairs.vertices_welded = s->repairs.degenerate_skipped = s->repairs.duplicate_skipped = 0;
+        scene_result rc = SCENE_OK;
+        for (uint32_t i = 0; i < b->mesh_count && rc == SCENE_OK; i++) {
+            staged_mesh *m = &b->meshes[i];
+            /* The name as the loader left it (a JSON scene renames meshes after import). */
+            const char *name = m->mesh < old_mesh_count ? old_meshes[m->mesh].name : m->name;
+            char kept_name[sizeof m->name];
+            snprintf(kept_name, sizeof kept_name, "%s", name);
+            rc = commit_mesh(s, m, origin, kept_name, &m->mesh, err);
+        }
+        free(old_meshes);
+        if (rc != SCENE_OK)
+            return rc;
+    }
+    memcpy(s->origin, origin, sizeof origin);
+
+    /* A slot's double position applies while the float there is still its rounding (nobody replaced it). */
+    for (uint32_t i = 0; i < s->light_count; i++) {
+        scene_light *l = &s->lights[i];
+        if (l->type != SCENE_LIGHT_POINT)
+            continue;
+        double world[3] = {l->position[0], l->position[1], l->position[2]};
+        const double *slot = i < b->light_slots ? b->light_world + 3 * (size_t)i : NULL;
+        if (slot && (float)slot[0] == l->position[0] && (float)slot[1] == l->position[1] &&
+            (float)slot[2] == l->position[2])
+            memcpy(world, slot, sizeof world);
+        scene_world_to_local(s, world, l->position);
+    }
+    if (s->has_camera) {
+        double pos[3], target[3];
+        bool precise = b->camera_set;
+        for (int k = 0; k < 3; k++) {
+            precise = precise && (float)b->camera_pos[k] == s->camera_pos[k] &&
+                      (float)b->camera_target[k] == s->camera_target[k];
+            pos[k] = s->camera_pos[k];
+            target[k] = s->camera_target[k];
+        }
+        if (precise) {
+            memcpy(pos, b->camera_pos, sizeof pos);
+            memcpy(target, b->camera_target, sizeof target);
+        }
+        scene_world_to_local(s, pos, s->camera_pos);
+        scene_world_to_local(s, target, s->camera_target);
+    }
+    return SCENE_OK;
+}
+
+/* The spacing of the stored positions against the texel size: fills position_step and, when positions are
+ * more than SCENE_PRECISION_TEXEL_FRACTION of a texel apart, precision_warning (naming the file whose float
+ * input limits them, or the extent of the local frame). */
+static void assess_precision(scene *s)
+{
+    double reach = 0;
+    for (int k = 0; k < 3; k++)
+        reach = fmax(reach, fmax(fabs((double)s->bounds_min[k]), fabs((double)s->bounds_max[k])));
+    double local_step = float_spacing(reach);
+    const scene__builder *b = s->builder;
+    double input_step = b ? b->input_step : 0;
+    s->position_step = fmax(local_step, input_step);
+    s->precision_warning[0] = 0;
+    double texel = 1.0 / (double)s->texel_density;
+    if (!(s->position_step > SCENE_PRECISION_TEXEL_FRACTION * texel))
+        return;
+    if (input_step > local_step) {
+        char stretch[64] = "";
+        if (b->input_stretch != 1.0)
+            snprintf(stretch, sizeof stretch, ", stretched %.4g times by the mesh transform", b->input_stretch);
+        snprintf(s->precision_warning, sizeof s->precision_warning,
+                 "%s: its coordinates (up to %.7g%s) arrive as 32-bit floats, so positions are %.3g m apart: "
+                 "%.3g texels at %.4g texels per metre (more than 1/%.0f texel); keep a model near the origin "
+                 "in its own file and place it with a scene transform",
+                 b->input_source, b->input_magnitude, stretch, input_step, input_step / texel,
+                 (double)s->texel_density, 1.0 / SCENE_PRECISION_TEXEL_FRACTION);
+    } else {
+        snprintf(s->precision_warning, sizeof s->precision_warning,
+                 "%s: the scene reaches %.4g m from its local origin, where floats are %.3g m apart: %.3g "
+                 "texels at %.4g texels per metre (more than 1/%.0f texel); lower the texel density or split "
+                 "the scene",
+                 s->source, reach, local_step, local_step / texel, (double)s->texel_density,
+                 1.0 / SCENE_PRECISION_TEXEL_FRACTION);
+    }
+}
+
 scene_result scene__finalize(scene *s, const scene_load_desc *desc, scene_error *err)
 {
+    scene_result settled = settle_frame(s, err);
+    if (settled != SCENE_OK)
+        return settled;
     if (s->triangle_count == 0)
         return scene__fail(err, SCENE_ERR_EMPTY, "%s: the scene has no triangles (%llu degenerate, %llu "
                                                   "duplicate skipped)",
@@ -568,6 +927,8 @@ scene_result scene__finalize(scene *s, const scene_load_desc *desc, scene_error 
     rc = compute_texture_lods(s, err);
     if (rc != SCENE_OK)
         return rc;
+    assess_precision(s);
+    builder_free(s); /* the scene is read-only from here on */
     s->timings.weld_ms += scene__now_ms() - t0;
     t0 = scene__now_ms();
     rc = scene__build_islands(s, err);
@@ -614,6 +975,7 @@ scene *scene_load(const char *path, const scene_load_desc *desc, scene_error *er
         rc = scene__load_json(s, path, err);
     } else {
         snprintf(s->source, sizeof s->source, "%s", path);
+        scene__set_source(s, path);
         rc = scene__import_file(s, path, NULL, NULL, err);
         if (rc == SCENE_OK)
             scene__add_default_lighting(s);

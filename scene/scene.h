@@ -1,9 +1,15 @@
 /* scene: everything fxcache knows about the 3D world before any viewer looks at it.
  *
  * A scene is built once (from a mesh file, a JSON scene description, or the embedded default scene) and is
- * read-only afterwards. It holds welded, world-space triangles, per-corner mesh UVs for textures, materials,
- * lights, the sky, the texel density, the islands every triangle belongs to, and the per-effect overrides.
- * The Embree scene (scene_rt) and "what this scene needs" (scene_needs) are derived from it.
+ * read-only afterwards. It holds welded triangles, per-corner mesh UVs for textures, materials, lights, the
+ * sky, the texel density, the islands every triangle belongs to, and the per-effect overrides. The Embree
+ * scene (scene_rt) and "what this scene needs" (scene_needs) are derived from it.
+ *
+ * Local frame: every position a scene holds (vertices, bounds, point lights, its camera) is a float in the
+ * scene's local frame, world = local + origin, with the origin (double) near the scene's centre (DESIGN.md
+ * "Numerical robustness"). The loaders apply mesh transforms and subtract the origin in double before
+ * positions become floats, so a scene 1e6 from the world origin keeps the float precision it has at the
+ * origin. Positions from outside (viewer traces, the command line) go through scene_world_to_local().
  *
  * Ownership: scene_free() releases every allocation a scene owns. Errors come back through scene_error, a
  * code plus one line naming the file, line, mesh or value at fault. */
@@ -55,7 +61,7 @@ typedef enum scene_light_type { SCENE_LIGHT_DIRECTIONAL = 0, SCENE_LIGHT_POINT }
 typedef struct scene_light {
     scene_light_type type;
     float direction[3]; /* directional: unit vector the light travels along (from the light into the scene) */
-    float position[3];  /* point: world position, metres */
+    float position[3];  /* point: position in the local frame, metres (world until scene finalisation) */
     float color[3];     /* linear RGB, 0..1 typically */
     float intensity;    /* directional: irradiance scale; point: intensity (falls off with 1/d^2) */
 } scene_light;
@@ -116,8 +122,10 @@ typedef struct scene_timings {
     double textures_ms;
 } scene_timings;
 
+struct scene__builder; /* private to the scene module: loading state, gone once the scene is finalised */
+
 typedef struct scene {
-    /* Geometry, world space, welded. */
+    /* Geometry, local frame (world = local + origin), welded. */
     uint32_t vertex_count;
     float *positions; /* vertex_count * 3 */
     uint32_t triangle_count;
@@ -146,7 +154,20 @@ typedef struct scene {
     scene_toggle fx_shadows, fx_ao, fx_indirect;
 
     bool has_camera; /* a default camera from the scene description */
-    float camera_pos[3], camera_target[3], camera_fov_deg;
+    float camera_pos[3], camera_target[3], camera_fov_deg; /* local frame, like every position here */
+
+    /* The local frame: world = local + origin, metres. The centre of the geometry's bounding box rounded to a
+     * multiple of the smallest power of two >= the scene's extent and >= 1 m (so a whole number of metres),
+     * or (0, 0, 0) when that centre lies within one extent of the world origin (rebasing would gain at most
+     * 1.6 bits there). Either way every local coordinate is within max(1.5 extents, 1 m) of the origin. */
+    double origin[3];
+    /* The spacing of stored positions, metres: the coarser of the float spacing at the largest local
+     * coordinate and the spacing the input had (a mesh file whose own coordinates are far from its origin
+     * arrives as floats, already quantized, times the mesh transform's scale). */
+    double position_step;
+    /* "" or one line: positions are quantized to more than SCENE_PRECISION_TEXEL_FRACTION of a texel at the
+     * texel density, naming the file or the extent at fault and the figure. The scene still loads. */
+    char precision_warning[512];
 
     float bounds_min[3], bounds_max[3];
     float ray_offset_scale; /* min(1, bounding-box diagonal in metres): scales scene_offset_ray_origin() */
@@ -162,7 +183,12 @@ typedef struct scene {
     scene_repairs repairs;
     scene_timings timings;
     char source[256]; /* file it came from, or "(embedded default scene)" */
+
+    struct scene__builder *builder; /* loading state (private); NULL once finalised */
 } scene;
+
+/* Positions quantized more coarsely than this fraction of a level-0 texel get a precision_warning. */
+#define SCENE_PRECISION_TEXEL_FRACTION (1.0 / 16.0)
 
 /* Options for loading. All-zero means defaults. */
 typedef struct scene_load_desc {
@@ -179,6 +205,14 @@ scene *scene_create_default(const scene_load_desc *desc, scene_error *err);
 
 /* Releases a scene and everything it owns. NULL is allowed. */
 void scene_free(scene *s);
+
+/* Converts a world-space position (a camera position or target, a light position) into the scene's local
+ * frame: (float)(world - origin), subtracted in double. Use it for every position that comes from outside
+ * the scene (traces, the command line). */
+void scene_world_to_local(const scene *s, const double world[3], float local[3]);
+
+/* The inverse: local + origin, added in double (for writing positions back out, e.g. recorded traces). */
+void scene_local_to_world(const scene *s, const float local[3], double world[3]);
 
 /* Total surface area of the scene's triangles, square metres. */
 double scene_surface_area(const scene *s);

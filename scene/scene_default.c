@@ -187,12 +187,12 @@ static void builder_sphere(default_builder *b, const float center[3], float radi
 
 /* Hands the builder's object to the scene as one mesh with the given material, then empties the builder. */
 static scene_result builder_commit(default_builder *b, scene *s, const char *name, uint32_t material,
-                                   scene_error *err)
+                                   const double *xform, scene_error *err)
 {
     if (b->failed)
         return scene__fail(err, SCENE_ERR_NOMEM, "(embedded default scene): out of memory building '%s'", name);
     scene_result r = scene__add_mesh(s, name, b->positions, b->vertex_count, b->indices, b->triangle_count, NULL,
-                                     material, NULL, err);
+                                     material, xform, err);
     builder_reset(b);
     return r;
 }
@@ -211,8 +211,9 @@ static uint32_t default_material(scene *s, const char *name, float r, float g, f
 }
 
 /* Fills s with the embedded default scene: its meshes and materials, the sun, the sky, the ambient-occlusion
- * radius and the default camera. s comes from scene__alloc(); on failure err says why and the caller frees s. */
-scene_result scene__build_default(scene *s, scene_error *err)
+ * radius and the default camera. xform (may be NULL) moves the meshes only. s comes from scene__alloc(); on
+ * failure err says why and the caller frees s. */
+scene_result scene__build_default_xform(scene *s, const double *xform, scene_error *err)
 {
     enum { MAT_FLOOR, MAT_WALLS, MAT_RED, MAT_BLUE, MAT_YELLOW, MAT_GREEN, MAT_COUNT };
     static const struct {
@@ -231,6 +232,7 @@ scene_result scene__build_default(scene *s, scene_error *err)
             return err ? err->code : SCENE_ERR_NOMEM;
     }
 
+    scene__set_source(s, "(embedded default scene)");
     const float hx = DEFAULT_ROOM_HALF_X, h = DEFAULT_ROOM_HEIGHT, hz = DEFAULT_ROOM_HALF_Z;
     const float along_x[3] = {2 * hx, 0, 0}, along_y[3] = {0, h, 0}, along_z[3] = {0, 0, 2 * hz};
     const uint32_t cells_x = 10, cells_y = 4, cells_z = 8; /* 1 m cells */
@@ -241,14 +243,14 @@ scene_result scene__build_default(scene *s, scene_error *err)
     /* Floor, facing up: z x x = +y. */
     const float floor_origin[3] = {-hx, 0, -hz};
     builder_grid(&b, floor_origin, along_z, along_x, cells_z, cells_x, NULL);
-    if ((r = builder_commit(&b, s, "floor", material_index[MAT_FLOOR], err)) != SCENE_OK)
+    if ((r = builder_commit(&b, s, "floor", material_index[MAT_FLOOR], xform, err)) != SCENE_OK)
         goto done;
 
     /* Ceiling, facing down (x x z = -y), with the opening: cells x -1..2, z -2..0. */
     const float ceiling_origin[3] = {-hx, h, -hz};
     const default_hole opening = {.i0 = 4, .i1 = 7, .j0 = 2, .j1 = 4};
     builder_grid(&b, ceiling_origin, along_x, along_z, cells_x, cells_z, &opening);
-    if ((r = builder_commit(&b, s, "ceiling with opening", material_index[MAT_WALLS], err)) != SCENE_OK)
+    if ((r = builder_commit(&b, s, "ceiling with opening", material_index[MAT_WALLS], xform, err)) != SCENE_OK)
         goto done;
 
     /* Four walls facing into the room. */
@@ -258,31 +260,31 @@ scene_result scene__build_default(scene *s, scene_error *err)
     builder_grid(&b, east_origin, along_z, along_y, cells_z, cells_y, NULL);  /* z x y = -x */
     builder_grid(&b, north_origin, along_x, along_y, cells_x, cells_y, NULL); /* x x y = +z */
     builder_grid(&b, south_origin, along_y, along_x, cells_y, cells_x, NULL); /* y x x = -z */
-    if ((r = builder_commit(&b, s, "walls", material_index[MAT_WALLS], err)) != SCENE_OK)
+    if ((r = builder_commit(&b, s, "walls", material_index[MAT_WALLS], xform, err)) != SCENE_OK)
         goto done;
 
     /* A red cube in the sunlit patch. */
     const float red_lo[3] = {1.5f, 0, -0.5f}, red_hi[3] = {2.5f, 1.0f, 0.5f};
     builder_box(&b, red_lo, red_hi, BOX_ALL_BUT_BOTTOM);
-    if ((r = builder_commit(&b, s, "red box", material_index[MAT_RED], err)) != SCENE_OK)
+    if ((r = builder_commit(&b, s, "red box", material_index[MAT_RED], xform, err)) != SCENE_OK)
         goto done;
 
     /* A tall blue box in the corner of the west and north walls: only its three free faces. */
     const float blue_lo[3] = {-hx, 0, -hz}, blue_hi[3] = {-hx + 1.2f, 2.2f, -hz + 1.0f};
     builder_box(&b, blue_lo, blue_hi, BOX_POS_X | BOX_POS_Y | BOX_POS_Z);
-    if ((r = builder_commit(&b, s, "blue box in the corner", material_index[MAT_BLUE], err)) != SCENE_OK)
+    if ((r = builder_commit(&b, s, "blue box in the corner", material_index[MAT_BLUE], xform, err)) != SCENE_OK)
         goto done;
 
     /* A low, wide yellow box in the shade. */
     const float yellow_lo[3] = {-2.5f, 0, 1.5f}, yellow_hi[3] = {-0.5f, 0.6f, 3.0f};
     builder_box(&b, yellow_lo, yellow_hi, BOX_ALL_BUT_BOTTOM);
-    if ((r = builder_commit(&b, s, "yellow box", material_index[MAT_YELLOW], err)) != SCENE_OK)
+    if ((r = builder_commit(&b, s, "yellow box", material_index[MAT_YELLOW], xform, err)) != SCENE_OK)
         goto done;
 
     /* A green sphere resting on the floor in the sunlit patch. */
     const float sphere_center[3] = {3.3f, 0.6f, 0.6f};
     builder_sphere(&b, sphere_center, 0.6f, 24, 14);
-    if ((r = builder_commit(&b, s, "green sphere", material_index[MAT_GREEN], err)) != SCENE_OK)
+    if ((r = builder_commit(&b, s, "green sphere", material_index[MAT_GREEN], xform, err)) != SCENE_OK)
         goto done;
 
     /* The sun travels down and towards +x, +z: through the opening onto the floor around x 1..4, z -0.8..1.2. */
@@ -319,4 +321,9 @@ scene_result scene__build_default(scene *s, scene_error *err)
 done:
     builder_release(&b);
     return r;
+}
+
+scene_result scene__build_default(scene *s, scene_error *err)
+{
+    return scene__build_default_xform(s, NULL, err);
 }

@@ -229,7 +229,7 @@ static scene_result import_material(scene *s, const struct aiMaterial *am, const
 
 /* Appends one Assimp mesh (already triangulated and in world space) through scene__add_mesh(). */
 static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t mesh_number, uint32_t material,
-                                const float *xform, const char *path, scene_error *err)
+                                const double *xform, const char *path, scene_error *err)
 {
     char name[160];
     if (mesh->mName.length > 0)
@@ -273,7 +273,7 @@ done:
     return rc;
 }
 
-scene_result scene__import_file(scene *s, const char *path, const float *xform,
+scene_result scene__import_file(scene *s, const char *path, const double *xform,
                                 const scene_material *override, scene_error *err)
 {
     FILE *probe = fopen(path, "rb");

@@ -19,8 +19,9 @@
  *         "material": { "diffuse": [r, g, b],         optional; replaces every material of the file;
  *                       "texture": "wood.png",        linear albedo in 0..1 (default 0.8 grey, or white
  *                       "name": "wood" } },           when a texture is given); texture relative to the JSON
- *       { "builtin": "default" }                      the embedded default scene's geometry and materials
- *     ],                                              (not its lights, sky or camera)
+ *       { "builtin": "default",                       the embedded default scene's geometry and materials
+ *         "transform": { ... } }                      (not its lights, sky or camera); optional transform
+ *     ],
  *     "lights": [                                     optional; absent or [] means no lights
  *       { "type": "directional", "direction": [x, y, z],   direction the light travels (into the scene)
  *         "color": [r, g, b], "intensity": x },            color default [1,1,1], intensity default 1, >= 0
@@ -46,6 +47,7 @@
  * files imported, so a typo in the last light does not cost the import of a large mesh. */
 #include "scene_internal.h"
 
+#include <float.h>
 #include <jansson.h>
 #include <math.h>
 #include <stdarg.h>
@@ -78,7 +80,7 @@ typedef struct json_mesh_entry {
     bool has_name;
     char name[128];
     bool has_xform;
-    float xform[16];            /* row-major affine */
+    double xform[16];           /* row-major affine, applied in double */
     bool has_material;
     scene_material material;    /* texture index filled at import time */
     bool has_texture;
@@ -230,6 +232,51 @@ static scene_result json_get_numbers(const json_ctx *ctx, const json_t *obj, con
     return json_read_numbers(ctx, value, field, out, count);
 }
 
+/* Reads a finite number from value at where into out, in double: positions and transforms keep the
+ * precision the file gives them (a scene far from the origin needs more than a float has). */
+static scene_result json_read_number_d(const json_ctx *ctx, const json_t *value, const char *where, double *out)
+{
+    if (!json_is_number(value))
+        return json_fail(ctx, SCENE_ERR_JSON, where, "must be a number, not %s", json_type_word(value));
+    double number = json_number_value(value);
+    if (!(fabs(number) <= FLT_MAX))
+        return json_fail(ctx, SCENE_ERR_INVALID, where, "must be a finite number (%g does not fit a float)",
+                         number);
+    *out = number;
+    return SCENE_OK;
+}
+
+/* Reads an array of count finite numbers from value (at where) into out, in double. */
+static scene_result json_read_numbers_d(const json_ctx *ctx, const json_t *value, const char *where, double *out,
+                                        size_t count)
+{
+    if (!json_is_array(value) || json_array_size(value) != count)
+        return json_fail(ctx, SCENE_ERR_JSON, where, "must be an array of %zu numbers, not %s%s", count,
+                         json_type_word(value), json_is_array(value) ? " of another length" : "");
+    for (size_t i = 0; i < count; i++) {
+        char element[JSON_WHERE_CAP];
+        json_element_path(element, sizeof element, where, i);
+        scene_result r = json_read_number_d(ctx, json_array_get(value, i), element, &out[i]);
+        if (r != SCENE_OK)
+            return r;
+    }
+    return SCENE_OK;
+}
+
+/* Reads an optional array of count finite numbers, field key of obj, in double; out alone when absent. */
+static scene_result json_get_numbers_d(const json_ctx *ctx, const json_t *obj, const char *where, const char *key,
+                                       double *out, size_t count, bool *present)
+{
+    const json_t *value = json_object_get(obj, key);
+    if (present)
+        *present = value != NULL;
+    if (!value)
+        return SCENE_OK;
+    char field[JSON_WHERE_CAP];
+    json_field_path(field, sizeof field, where, key);
+    return json_read_numbers_d(ctx, value, field, out, count);
+}
+
 /* Reads an optional non-empty string field key of obj into out (cap bytes); NULL-safe on absence. */
 static scene_result json_get_string(const json_ctx *ctx, const json_t *obj, const char *where, const char *key,
                                     char *out, size_t cap, bool *present)
@@ -291,16 +338,16 @@ static void json_mat3_mul(const double a[9], const double b[9], double out[9])
 
 /* Reads "transform" of a mesh entry (where names it) into a row-major affine 4x4 matrix. */
 static scene_result json_read_transform(const json_ctx *ctx, const json_t *value, const char *where,
-                                        float xform[16])
+                                        double xform[16])
 {
     char field[JSON_WHERE_CAP];
     scene_result r;
-    float matrix[16];
+    double matrix[16];
     bool has_matrix = false;
 
     if (json_is_array(value)) {
         /* The bare 16-number form. */
-        if ((r = json_read_numbers(ctx, value, where, matrix, 16)) != SCENE_OK)
+        if ((r = json_read_numbers_d(ctx, value, where, matrix, 16)) != SCENE_OK)
             return r;
         has_matrix = true;
         snprintf(field, sizeof field, "%s", where);
@@ -309,7 +356,7 @@ static scene_result json_read_transform(const json_ctx *ctx, const json_t *value
         r = json_check_object(ctx, value, where, allowed, 4);
         if (r != SCENE_OK)
             return r;
-        r = json_get_numbers(ctx, value, where, "matrix", matrix, 16, &has_matrix);
+        r = json_get_numbers_d(ctx, value, where, "matrix", matrix, 16, &has_matrix);
         if (r != SCENE_OK)
             return r;
         json_field_path(field, sizeof field, where, "matrix");
@@ -320,43 +367,43 @@ static scene_result json_read_transform(const json_ctx *ctx, const json_t *value
                                       json_object_get(value, "scale")))
             return json_fail(ctx, SCENE_ERR_JSON, where,
                              "'matrix' cannot be combined with translate, rotate_deg or scale");
-        if (matrix[12] != 0.0f || matrix[13] != 0.0f || matrix[14] != 0.0f || matrix[15] != 1.0f)
+        if (matrix[12] != 0.0 || matrix[13] != 0.0 || matrix[14] != 0.0 || matrix[15] != 1.0)
             return json_fail(ctx, SCENE_ERR_INVALID, field,
-                             "must be affine: the last row must be 0 0 0 1 (it is %g %g %g %g)",
-                             (double)matrix[12], (double)matrix[13], (double)matrix[14], (double)matrix[15]);
-        double det = (double)matrix[0] * ((double)matrix[5] * matrix[10] - (double)matrix[6] * matrix[9]) -
-                     (double)matrix[1] * ((double)matrix[4] * matrix[10] - (double)matrix[6] * matrix[8]) +
-                     (double)matrix[2] * ((double)matrix[4] * matrix[9] - (double)matrix[5] * matrix[8]);
+                             "must be affine: the last row must be 0 0 0 1 (it is %g %g %g %g)", matrix[12],
+                             matrix[13], matrix[14], matrix[15]);
+        double det = matrix[0] * (matrix[5] * matrix[10] - matrix[6] * matrix[9]) -
+                     matrix[1] * (matrix[4] * matrix[10] - matrix[6] * matrix[8]) +
+                     matrix[2] * (matrix[4] * matrix[9] - matrix[5] * matrix[8]);
         if (!(fabs(det) > 0.0) || !isfinite(det))
             return json_fail(ctx, SCENE_ERR_INVALID, field, "is singular (it flattens the mesh)");
         memcpy(xform, matrix, sizeof matrix);
         return SCENE_OK;
     }
 
-    float translate[3] = {0, 0, 0}, rotate_deg[3] = {0, 0, 0}, scale[3] = {1, 1, 1};
-    if ((r = json_get_numbers(ctx, value, where, "translate", translate, 3, NULL)) != SCENE_OK ||
-        (r = json_get_numbers(ctx, value, where, "rotate_deg", rotate_deg, 3, NULL)) != SCENE_OK)
+    double translate[3] = {0, 0, 0}, rotate_deg[3] = {0, 0, 0}, scale[3] = {1, 1, 1};
+    if ((r = json_get_numbers_d(ctx, value, where, "translate", translate, 3, NULL)) != SCENE_OK ||
+        (r = json_get_numbers_d(ctx, value, where, "rotate_deg", rotate_deg, 3, NULL)) != SCENE_OK)
         return r;
     const json_t *scale_value = json_object_get(value, "scale");
     json_field_path(field, sizeof field, where, "scale");
     if (scale_value && json_is_number(scale_value)) {
-        if ((r = json_read_number(ctx, scale_value, field, &scale[0])) != SCENE_OK)
+        if ((r = json_read_number_d(ctx, scale_value, field, &scale[0])) != SCENE_OK)
             return r;
         scale[1] = scale[2] = scale[0];
     } else if (scale_value && !json_is_array(scale_value)) {
         return json_fail(ctx, SCENE_ERR_JSON, field, "must be a number or an array of 3 numbers, not %s",
                          json_type_word(scale_value));
-    } else if ((r = json_get_numbers(ctx, value, where, "scale", scale, 3, NULL)) != SCENE_OK) {
+    } else if ((r = json_get_numbers_d(ctx, value, where, "scale", scale, 3, NULL)) != SCENE_OK) {
         return r;
     }
     for (int i = 0; i < 3; i++)
-        if (scale[i] == 0.0f)
+        if (scale[i] == 0.0)
             return json_fail(ctx, SCENE_ERR_INVALID, field, "must not be zero (it flattens the mesh)");
 
     /* M = T * Rz * Ry * Rx * S: scale, then rotate about X, Y, Z (world axes), then translate. */
     double radians[3], c[3], s[3];
     for (int i = 0; i < 3; i++) {
-        radians[i] = (double)rotate_deg[i] * (3.14159265358979323846 / 180.0);
+        radians[i] = rotate_deg[i] * (3.14159265358979323846 / 180.0);
         c[i] = cos(radians[i]);
         s[i] = sin(radians[i]);
     }
@@ -368,11 +415,11 @@ static scene_result json_read_transform(const json_ctx *ctx, const json_t *value
     json_mat3_mul(rz, ryx, rzyx);
     for (int row = 0; row < 3; row++) {
         for (int col = 0; col < 3; col++)
-            xform[row * 4 + col] = (float)(rzyx[row * 3 + col] * (double)scale[col]);
+            xform[row * 4 + col] = rzyx[row * 3 + col] * scale[col];
         xform[row * 4 + 3] = translate[row];
     }
-    xform[12] = xform[13] = xform[14] = 0.0f;
-    xform[15] = 1.0f;
+    xform[12] = xform[13] = xform[14] = 0.0;
+    xform[15] = 1.0;
     return SCENE_OK;
 }
 
@@ -384,8 +431,8 @@ static scene_result json_read_mesh_entry(const json_ctx *ctx, const json_t *valu
     char field[JSON_WHERE_CAP];
     memset(entry, 0, sizeof *entry);
     if (json_is_object(value) && json_object_get(value, "builtin")) {
-        static const char *const allowed_builtin[] = {"builtin"};
-        if ((r = json_check_object(ctx, value, where, allowed_builtin, 1)) != SCENE_OK)
+        static const char *const allowed_builtin[] = {"builtin", "transform"};
+        if ((r = json_check_object(ctx, value, where, allowed_builtin, 2)) != SCENE_OK)
             return r;
         char which[32];
         if ((r = json_get_string(ctx, value, where, "builtin", which, sizeof which, NULL)) != SCENE_OK)
@@ -396,6 +443,13 @@ static scene_result json_read_mesh_entry(const json_ctx *ctx, const json_t *valu
                              which);
         }
         entry->builtin = true;
+        const json_t *transform = json_object_get(value, "transform");
+        if (transform) {
+            json_field_path(field, sizeof field, where, "transform");
+            if ((r = json_read_transform(ctx, transform, field, entry->xform)) != SCENE_OK)
+                return r;
+            entry->has_xform = true;
+        }
         return SCENE_OK;
     }
 
@@ -491,9 +545,10 @@ static scene_result json_read_lights(const json_ctx *ctx, scene *s, const json_t
         light.color[0] = light.color[1] = light.color[2] = 1.0f;
         light.intensity = 1.0f;
         bool has_direction = false, has_position = false;
+        double position[3] = {0, 0, 0}; /* world, in double: the scene's origin is subtracted before float */
         if ((r = json_get_numbers(ctx, value, where, "direction", light.direction, 3, &has_direction)) !=
                 SCENE_OK ||
-            (r = json_get_numbers(ctx, value, where, "position", light.position, 3, &has_position)) != SCENE_OK ||
+            (r = json_get_numbers_d(ctx, value, where, "position", position, 3, &has_position)) != SCENE_OK ||
             (r = json_get_numbers(ctx, value, where, "color", light.color, 3, NULL)) != SCENE_OK ||
             (r = json_get_number(ctx, value, where, "intensity", &light.intensity, NULL)) != SCENE_OK)
             return r;
@@ -535,7 +590,7 @@ static scene_result json_read_lights(const json_ctx *ctx, scene *s, const json_t
         }
         char light_where[JSON_WHERE_CAP + 300];
         snprintf(light_where, sizeof light_where, "%s: %s", ctx->path, where);
-        if ((r = scene__add_light(s, &light, light_where, ctx->err)) != SCENE_OK)
+        if ((r = scene__add_light_world(s, &light, position, light_where, ctx->err)) != SCENE_OK)
             return r;
     }
     return SCENE_OK;
@@ -595,10 +650,11 @@ static scene_result json_read_camera(const json_ctx *ctx, scene *s, const json_t
     scene_result r = json_check_object(ctx, camera, "camera", allowed, 3);
     if (r != SCENE_OK)
         return r;
-    float position[3], target[3], fov_deg = JSON_DEFAULT_FOV;
+    double position[3], target[3]; /* world, in double: the scene's origin is subtracted before float */
+    float fov_deg = JSON_DEFAULT_FOV;
     bool has_position = false, has_target = false;
-    if ((r = json_get_numbers(ctx, camera, "camera", "position", position, 3, &has_position)) != SCENE_OK ||
-        (r = json_get_numbers(ctx, camera, "camera", "target", target, 3, &has_target)) != SCENE_OK ||
+    if ((r = json_get_numbers_d(ctx, camera, "camera", "position", position, 3, &has_position)) != SCENE_OK ||
+        (r = json_get_numbers_d(ctx, camera, "camera", "target", target, 3, &has_target)) != SCENE_OK ||
         (r = json_get_number(ctx, camera, "camera", "fov_deg", &fov_deg, NULL)) != SCENE_OK)
         return r;
     if (!has_position)
@@ -610,10 +666,8 @@ static scene_result json_read_camera(const json_ctx *ctx, scene *s, const json_t
     if (!(fov_deg > 0.0f && fov_deg < 180.0f))
         return json_fail(ctx, SCENE_ERR_INVALID, "camera.fov_deg", "must be in (0, 180) degrees (it is %g)",
                          (double)fov_deg);
-    s->has_camera = true;
-    memcpy(s->camera_pos, position, sizeof position);
-    memcpy(s->camera_target, target, sizeof target);
-    s->camera_fov_deg = fov_deg;
+    if (!scene__set_camera_world(s, position, target, fov_deg))
+        return json_fail(ctx, SCENE_ERR_NOMEM, "camera", "out of memory");
     return SCENE_OK;
 }
 
@@ -658,9 +712,9 @@ static scene_result json_read_density_and_radius(const json_ctx *ctx, scene *s, 
     return SCENE_OK;
 }
 
-/* Adds the embedded default scene's geometry and materials, without its lights, sky and camera: a JSON
- * scene says exactly which lights it has. */
-static scene_result json_add_builtin_default(const json_ctx *ctx, scene *s, const char *where)
+/* Adds the embedded default scene's geometry and materials (moved by xform, may be NULL), without its lights,
+ * sky and camera: a JSON scene says exactly which lights it has. */
+static scene_result json_add_builtin_default(const json_ctx *ctx, scene *s, const double *xform, const char *where)
 {
     uint32_t light_count = s->light_count;
     float sky_color[3];
@@ -672,7 +726,7 @@ static scene_result json_add_builtin_default(const json_ctx *ctx, scene *s, cons
     memcpy(camera_target, s->camera_target, sizeof camera_target);
     float ao_radius = s->ao_radius;
 
-    scene_result r = scene__build_default(s, ctx->err);
+    scene_result r = scene__build_default_xform(s, xform, ctx->err);
     if (r != SCENE_OK) {
         char inner[sizeof ctx->err->msg];
         snprintf(inner, sizeof inner, "%s", ctx->err->msg);
@@ -705,7 +759,7 @@ static void json_join_name(char *out, size_t cap, const char *prefix, const char
 static scene_result json_import_entry(const json_ctx *ctx, scene *s, json_mesh_entry *entry, const char *where)
 {
     if (entry->builtin)
-        return json_add_builtin_default(ctx, s, where);
+        return json_add_builtin_default(ctx, s, entry->has_xform ? entry->xform : NULL, where);
 
     scene_result r;
     if (entry->has_texture) {
@@ -719,6 +773,7 @@ static scene_result json_import_entry(const json_ctx *ctx, scene *s, json_mesh_e
         entry->material.texture = texture;
     }
     uint32_t first_mesh = s->mesh_count;
+    scene__set_source(s, entry->file);
     r = scene__import_file(s, entry->file, entry->has_xform ? entry->xform : NULL,
                            entry->has_material ? &entry->material : NULL, ctx->err);
     if (r != SCENE_OK) {

@@ -741,8 +741,10 @@ static double no_cache_face(const fx_context *ctx, const placement *pl, int axis
             p[axis] = at;
             p[a] = i < n ? lo[0] + da : hi[0] - da;
             p[b] = j < n ? lo[1] + db : hi[1] - db;
+            double world[3];
             float pos[3];
-            place_float(pl, p, true, pos);
+            place(pl, p, true, world);
+            scene_world_to_local(ctx->s, world, pos); /* the scene may be rebased onto its centre */
             uint64_t r = 0;
             double lit =
                 fx_shadow_eval_point(ctx, pos, world_normal, world_dpdx, world_dpdy, 0, i * 64 + j, &r);
@@ -888,7 +890,9 @@ static void test_shadow_thin_wall(void **state)
         assert_true(worst == 0.0);
         /* The open room's floor beside the wall is lit (the test is not vacuous). */
         float pos[3], up[3], dx[3], dz[3];
-        place_float(pl, (double[3]){-0.01, 0, 1.0}, true, pos);
+        double world[3];
+        place(pl, (double[3]){-0.01, 0, 1.0}, true, world);
+        scene_world_to_local(s, world, pos);
         place_float(pl, (double[3]){0, 1, 0}, false, up);
         place_float(pl, (double[3]){0.005, 0, 0}, false, dx);
         place_float(pl, (double[3]){0, 0, 0.005}, false, dz);

@@ -449,7 +449,7 @@ static void test_replay_matches_api(void **state)
         char name[32];
         snprintf(name, sizeof name, "replay_%d.trace", i);
         snprintf(paths[i], sizeof paths[i], "%s", fxt_tmp_path(name));
-        srv_trace_writer *w = srv_trace_writer_open_sized(paths[i], plans[i].width, plans[i].height, err, sizeof err);
+        srv_trace_writer *w = srv_trace_writer_open_sized(paths[i], f->s, plans[i].width, plans[i].height, err, sizeof err);
         assert_non_null(w);
         for (uint32_t k = 0; k < plans[i].cameras; k++) {
             srv_camera cam = srv_camgen_camera(SRV_CAMGEN_WALK, f->s, (uint32_t)i, 3, k, 2);
@@ -499,7 +499,7 @@ static void test_replay_matches_api(void **state)
                 assert_int_equal(srv_viewer_add(loop, &vd, &ids[i]), FXC_OK);
                 joined[i] = true;
             }
-            srv_camera cam = srv_trace_camera_at(traces[i], now);
+            srv_camera cam = srv_trace_camera_at(traces[i], f->s, now);
             assert_int_equal(srv_viewer_set_camera(loop, ids[i], &cam), FXC_OK);
         }
         srv_frame_stats st;

@@ -191,8 +191,8 @@ static void test_mirrored_transform_keeps_winding(void **state)
     scene__add_material(s, &grey, &err);
     const float positions[] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
     const uint32_t indices[] = {0, 1, 2};
-    const float mirror_z[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, -1, 0, 0, 0, 0, 1};
-    const float mirror_x[16] = {-1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+    const double mirror_z[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, -1, 0, 0, 0, 0, 1};
+    const double mirror_x[16] = {-1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
     assert_int_equal(scene__add_mesh(s, "z", positions, 3, indices, 1, NULL, 0, mirror_z, &err), SCENE_OK);
     assert_int_equal(scene__add_mesh(s, "x", positions, 3, indices, 1, NULL, 0, mirror_x, &err), SCENE_OK);
     assert_int_equal(scene__finalize(s, NULL, &err), SCENE_OK);

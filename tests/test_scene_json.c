@@ -25,8 +25,8 @@ static const char *write_quad(void)
     return fxt_write_file("quad.obj", quad_obj);
 }
 
-/* Writes text as a JSON file name next to quad.obj, loads it into a fresh scene; returns the scene on
- * success (caller frees) or NULL with err filled. */
+/* Writes text as a JSON file name next to quad.obj, loads it into a fresh scene and finalises it; returns
+ * the scene on success (caller frees) or NULL with err filled. */
 static scene *load_json_text(const char *name, const char *text, scene_error *err)
 {
     write_quad();
@@ -37,6 +37,8 @@ static scene *load_json_text(const char *name, const char *text, scene_error *er
     assert_non_null(s);
     memset(err, 0, sizeof *err);
     scene_result r = scene__load_json(s, path_copy, err);
+    if (r == SCENE_OK) /* settles the local frame: positions, lights and camera relative to s->origin */
+        r = scene__finalize(s, NULL, err);
     if (r != SCENE_OK) {
         assert_int_equal(err->code, r);
         scene_free(s);
@@ -65,7 +67,8 @@ static void expect_error(const char *name, const char *text, scene_result code, 
     assert_null(strchr(err.msg, '\n'));
 }
 
-/* Positions of every vertex of mesh m: the smallest and largest coordinate. */
+/* Positions of every vertex of mesh m: the smallest and largest coordinate, in world coordinates (the scene
+ * keeps them relative to its origin). */
 static void mesh_bounds(const scene *s, uint32_t m, float lo[3], float hi[3])
 {
     for (int k = 0; k < 3; k++) {
@@ -77,10 +80,19 @@ static void mesh_bounds(const scene *s, uint32_t m, float lo[3], float hi[3])
         for (int c = 0; c < 3; c++) {
             const float *p = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + c];
             for (int k = 0; k < 3; k++) {
-                lo[k] = fminf(lo[k], p[k]);
-                hi[k] = fmaxf(hi[k], p[k]);
+                lo[k] = fminf(lo[k], (float)(p[k] + s->origin[k]));
+                hi[k] = fmaxf(hi[k], (float)(p[k] + s->origin[k]));
             }
         }
+}
+
+/* A local position of s in world coordinates, rounded to float for comparisons. */
+static void world_of(const scene *s, const float local[3], float out[3])
+{
+    double world[3];
+    scene_local_to_world(s, local, world);
+    for (int k = 0; k < 3; k++)
+        out[k] = (float)world[k];
 }
 
 /* ---- valid descriptions --------------------------------------------------------------------------------- */
@@ -136,7 +148,15 @@ static void test_valid_full_description(void **state)
     assert_float_equal(s->lights[0].color[1], 0.5f, 1e-6);
     assert_float_equal(s->lights[0].intensity, 3.0f, 1e-6);
     assert_int_equal(s->lights[1].type, SCENE_LIGHT_POINT);
-    assert_float_equal(s->lights[1].position[2], 3.0f, 1e-6);
+    /* The quad spans x 10..12 about 11 m from the world origin, 2 m wide: the scene is rebased onto its
+     * centre rounded to a multiple of 2 m, and the point light and camera follow into that frame. */
+    assert_float_equal(s->origin[0], 12.0, 0);
+    assert_float_equal(s->origin[1], 0.0, 0);
+    assert_float_equal(s->origin[2], 0.0, 0); /* -1 / 2 rounds to even: 0 */
+    float world[3];
+    world_of(s, s->lights[1].position, world);
+    assert_float_equal(world[0], 1.0f, 1e-6);
+    assert_float_equal(world[2], 3.0f, 1e-6);
     assert_float_equal(s->lights[1].color[0], 1.0f, 1e-6); /* default colour */
     assert_float_equal(s->lights[1].intensity, 40.0f, 1e-6);
 
@@ -149,9 +169,11 @@ static void test_valid_full_description(void **state)
     assert_int_equal(s->fx_ao, SCENE_OFF);
     assert_int_equal(s->fx_indirect, SCENE_AUTO);
     assert_true(s->has_camera);
-    assert_float_equal(s->camera_pos[1], 1.5f, 1e-6);
-    assert_float_equal(s->camera_pos[2], 5.0f, 1e-6);
-    assert_float_equal(s->camera_target[0], 0.0f, 1e-6);
+    world_of(s, s->camera_pos, world);
+    assert_float_equal(world[1], 1.5f, 1e-6);
+    assert_float_equal(world[2], 5.0f, 1e-6);
+    world_of(s, s->camera_target, world);
+    assert_float_equal(world[0], 0.0f, 1e-6);
     assert_float_equal(s->camera_fov_deg, 45.0f, 1e-6);
     scene_free(s);
 }

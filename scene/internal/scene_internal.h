@@ -24,24 +24,46 @@ uint32_t scene__add_material(scene *s, const scene_material *m, scene_error *err
  * Returns -1 and fills err when it cannot be read. */
 int32_t scene__add_texture(scene *s, const char *path, scene_error *err);
 
-/* Appends a light after checking it (finite values, non-negative intensity, non-zero direction). */
+/* Appends a light after checking it (finite values, non-negative intensity, non-zero direction). A point
+ * light's position is in world coordinates until scene__finalize() moves it into the local frame. */
 scene_result scene__add_light(scene *s, const scene_light *l, const char *where, scene_error *err);
 
+/* The same with the point light's world position in double (l->position is then ignored): for positions
+ * from a scene description, which may lie far from the world origin. */
+scene_result scene__add_light_world(scene *s, const scene_light *l, const double world_position[3],
+                                    const char *where, scene_error *err);
+
+/* Sets the scene's default camera from world positions in double (has_camera, camera_* fields; the float
+ * fields receive the world position rounded, the local frame's value at finalisation). False when the
+ * builder state cannot be allocated. */
+bool scene__set_camera_world(scene *s, const double position[3], const double target[3], float fov_deg);
+
+/* Names the file (or other source) the meshes appended next come from, for the precision warning: "" or
+ * NULL clears it. */
+void scene__set_source(scene *s, const char *label);
+
 /* Appends a mesh. positions: vertex_count*3; indices: triangle_count*3; uv: vertex_count*2 or NULL.
- * xform: a row-major 4x4 affine transform applied to positions, or NULL. Checks every coordinate is
- * finite (naming the mesh and vertex), every index in range; welds vertices with equal positions; drops
- * degenerate and duplicate triangles (counted in s->repairs). A mesh left with no triangle is not added
- * (counted) but is not an error. */
+ * xform: a row-major 4x4 affine transform (double) applied to positions in double, or NULL. Checks every
+ * coordinate is finite (naming the mesh and vertex), every index in range; moves the positions into the
+ * scene's local frame in double before they become floats; welds vertices with equal (float) positions;
+ * drops degenerate and duplicate triangles (counted in s->repairs). A mesh left with no triangle is not
+ * added (counted) but is not an error.
+ *
+ * The local frame's origin is the whole scene's, known only once every mesh is in: until then meshes are
+ * welded and cleaned in a provisional frame centred on the first mesh, and scene__finalize() repeats the
+ * welding and cleaning from the double positions (kept until then) if the scene's origin differs, so the
+ * result is that of one pass in the final frame. */
 scene_result scene__add_mesh(scene *s, const char *name, const float *positions, uint32_t vertex_count,
                              const uint32_t *indices, uint32_t triangle_count, const float *uv,
-                             uint32_t material, const float *xform, scene_error *err);
+                             uint32_t material, const double *xform, scene_error *err);
 
 /* Appends a sun (directional light) and a sky: the defaults of a plain mesh file or a scene without lights
  * and sky. */
 void scene__add_default_lighting(scene *s);
 
-/* Final stage: checks the scene is not empty, computes normals, bounds, the texel density (auto: from the
- * surface area), the islands. desc may be NULL. */
+/* Final stage: settles the local frame (the origin; meshes rebuilt in it if the provisional frame differed;
+ * point lights and the camera moved into it), checks the scene is not empty, computes normals, bounds, the
+ * texel density (auto: from the surface area), the precision warning, the islands. desc may be NULL. */
 scene_result scene__finalize(scene *s, const scene_load_desc *desc, scene_error *err);
 
 /* Builds the islands of a scene whose triangles, normals and texel density are set (scene_islands.c).
@@ -50,8 +72,8 @@ scene_result scene__finalize(scene *s, const scene_load_desc *desc, scene_error 
 scene_result scene__build_islands(scene *s, scene_error *err);
 
 /* Mesh-file import through Assimp (scene_import.c): appends the file's meshes and materials to s.
- * xform may be NULL; override (may be NULL) replaces every material of the file. */
-scene_result scene__import_file(scene *s, const char *path, const float *xform,
+ * xform (row-major affine, double) may be NULL; override (may be NULL) replaces every material of the file. */
+scene_result scene__import_file(scene *s, const char *path, const double *xform,
                                 const scene_material *override, scene_error *err);
 
 /* Reads a JSON scene description into s (scene_json.c). */
@@ -59,5 +81,9 @@ scene_result scene__load_json(scene *s, const char *path, scene_error *err);
 
 /* Fills s with the embedded default scene (scene_default.c). */
 scene_result scene__build_default(scene *s, scene_error *err);
+
+/* The same with its meshes moved by xform (row-major affine, double; NULL for none); its lights and camera
+ * are not moved (a JSON scene that places it brings its own). */
+scene_result scene__build_default_xform(scene *s, const double *xform, scene_error *err);
 
 #endif

@@ -4,11 +4,13 @@
  * The reader is line oriented and treats the file as untrusted: it reads at most SRV_TRACE_MAX_LINE bytes
  * per line, checks each line for NUL bytes, control characters and invalid UTF-8 before looking at its
  * content, accepts only plain decimal numbers (no NaN, no infinity, no hex), and stops at the first problem
- * with one line "FILE:LINE: what is wrong". Cameras are kept as srv_camera values (target = position +
- * direction, computed in double and rounded once to float) so that replay costs nothing per frame.
+ * with one line "FILE:LINE: what is wrong". Cameras are kept as read, in double and world coordinates;
+ * srv_trace_camera() moves one into the scene's local frame (scene_world_to_local) when it is replayed, so a
+ * trace of a scene far from the world origin loses nothing to float rounding.
  *
- * The writer prints each line with %.9g (float-exact for positions and fov; the direction to float
- * precision; the time with as many digits as it needs) and flushes after every line. */
+ * The writer turns local cameras back into world coordinates (local + the scene's origin, in double) and
+ * prints each number with as many digits as it needs to read back exactly (at least 9: float-exact for
+ * cameras of a scene at the origin), and flushes after every line. */
 #include "trace.h"
 
 #include <errno.h>
@@ -24,17 +26,25 @@ enum { TRACE_COLUMNS = 8 };
 static const char *const trace_column_names[TRACE_COLUMNS] = {"time", "px", "py", "pz",
                                                               "dx",   "dy", "dz", "fov_deg"};
 
+/* One camera line as read: world coordinates, in double. */
+typedef struct trace_camera {
+    double position[3];  /* world */
+    double direction[3]; /* non-zero; position + direction differs from position in double */
+    float fov_deg;       /* (0, 180) */
+} trace_camera;
+
 struct srv_trace {
-    uint32_t count;      /* cameras, >= 1 once read */
-    uint32_t capacity;   /* allocated entries of cameras and times */
-    srv_camera *cameras; /* count cameras, target already position + direction */
-    double *times;       /* count times, seconds, non-decreasing */
+    uint32_t count;         /* cameras, >= 1 once read */
+    uint32_t capacity;      /* allocated entries of cameras and times */
+    trace_camera *cameras;  /* count cameras */
+    double *times;          /* count times, seconds, non-decreasing */
     uint32_t width, height; /* the viewer's resolution (version 2 'resolution' line), 0 when not given */
-    uint32_t version;    /* the file's format version */
+    uint32_t version;       /* the file's format version */
 };
 
 struct srv_trace_writer {
     FILE *file;
+    double origin[3]; /* the scene's origin: cameras are local to it, lines are world */
     uint32_t count;   /* cameras written */
     double last_time; /* time of the last camera written (valid when count > 0) */
     bool failed;      /* an I/O error happened: close reports it */
@@ -321,7 +331,7 @@ static bool parse_resolution_line(trace_reader *r, const char *line, size_t len)
 }
 
 /* Appends a camera and its time to the trace, growing it with overflow-checked doubling. */
-static bool append_camera(trace_reader *r, double time, const srv_camera *cam)
+static bool append_camera(trace_reader *r, double time, const trace_camera *cam)
 {
     srv_trace *t = r->trace;
     if (t->count == t->capacity) {
@@ -329,10 +339,10 @@ static bool append_camera(trace_reader *r, double time, const srv_camera *cam)
             return fail(r, "too many cameras (at most %u)", UINT32_MAX / 2);
         uint32_t capacity = t->capacity ? t->capacity * 2 : 256;
 #if SIZE_MAX < UINT64_MAX /* only a 32-bit size_t can overflow here */
-        if (SIZE_MAX / sizeof(srv_camera) < capacity)
+        if (SIZE_MAX / sizeof(trace_camera) < capacity)
             return fail(r, "too many cameras for this machine's memory");
 #endif
-        srv_camera *cameras = realloc(t->cameras, (size_t)capacity * sizeof *cameras);
+        trace_camera *cameras = realloc(t->cameras, (size_t)capacity * sizeof *cameras);
         if (!cameras)
             return fail(r, "out of memory after %u cameras", t->count);
         t->cameras = cameras;
@@ -387,14 +397,16 @@ static bool parse_camera_line(trace_reader *r, const char *line, size_t len)
     }
     if (direction[0] == 0 && direction[1] == 0 && direction[2] == 0)
         return fail(r, "direction (0, 0, 0) is zero: a camera must look somewhere");
-    srv_camera cam = {.up = {0, 1, 0}, .fov_deg = (float)fov_deg};
+    /* Checked in double, as kept: the scene's local frame may hold the camera more precisely than a float
+     * at these world coordinates could (srv_trace_camera). */
+    trace_camera cam = {.fov_deg = (float)fov_deg};
     bool target_differs = false;
     for (int k = 0; k < 3; k++) {
-        cam.position[k] = (float)position[k];
-        cam.target[k] = (float)((double)cam.position[k] + direction[k]);
-        if (!isfinite(cam.target[k]))
+        cam.position[k] = position[k];
+        cam.direction[k] = direction[k];
+        if (!(fabs(position[k] + direction[k]) <= FLT_MAX))
             return fail(r, "position + direction is outside the range of a float");
-        if (cam.target[k] != cam.position[k])
+        if (position[k] + direction[k] != position[k])
             target_differs = true;
     }
     if (!target_differs)
@@ -500,10 +512,40 @@ uint32_t srv_trace_count(const srv_trace *t)
     return t ? t->count : 0;
 }
 
-srv_camera srv_trace_camera(const srv_trace *t, uint32_t frame)
+/* Camera line `index` in the local frame of scene s (NULL: as given). */
+static srv_camera trace_camera_local(const srv_trace *t, const scene *s, uint32_t index)
 {
-    uint32_t index = frame < t->count ? frame : t->count - 1;
-    return t->cameras[index];
+    const trace_camera *c = &t->cameras[index];
+    srv_camera cam = {.up = {0, 1, 0}, .fov_deg = c->fov_deg};
+    if (s) {
+        scene_world_to_local(s, c->position, cam.position);
+    } else {
+        for (int k = 0; k < 3; k++)
+            cam.position[k] = (float)c->position[k];
+    }
+    /* The target from the rounded position, so a recorded camera reads back exactly. */
+    bool target_differs = false;
+    for (int k = 0; k < 3; k++) {
+        cam.target[k] = (float)((double)cam.position[k] + c->direction[k]);
+        target_differs |= cam.target[k] != cam.position[k];
+    }
+    if (!target_differs) {
+        /* A direction below the float spacing at this position: the same direction, one position-length
+         * long (the view does not depend on the target's distance). */
+        double length = sqrt(c->direction[0] * c->direction[0] + c->direction[1] * c->direction[1] +
+                             c->direction[2] * c->direction[2]);
+        double reach = 1.0;
+        for (int k = 0; k < 3; k++)
+            reach = fmax(reach, fabs((double)cam.position[k]));
+        for (int k = 0; k < 3; k++)
+            cam.target[k] = (float)((double)cam.position[k] + c->direction[k] / length * reach);
+    }
+    return cam;
+}
+
+srv_camera srv_trace_camera(const srv_trace *t, const scene *s, uint32_t frame)
+{
+    return trace_camera_local(t, s, frame < t->count ? frame : t->count - 1);
 }
 
 double srv_trace_time(const srv_trace *t, uint32_t frame)
@@ -531,7 +573,7 @@ double srv_trace_last_time(const srv_trace *t)
     return t->times[t->count - 1];
 }
 
-srv_camera srv_trace_camera_at(const srv_trace *t, double time)
+srv_camera srv_trace_camera_at(const srv_trace *t, const scene *s, double time)
 {
     /* The last line whose time is not after `time` (binary search; times do not decrease). */
     uint32_t lo = 0, hi = t->count;
@@ -542,7 +584,7 @@ srv_camera srv_trace_camera_at(const srv_trace *t, double time)
         else
             hi = mid;
     }
-    return t->cameras[lo];
+    return trace_camera_local(t, s, lo);
 }
 
 void srv_trace_free(srv_trace *t)
@@ -556,13 +598,13 @@ void srv_trace_free(srv_trace *t)
 
 /* ---- writer ------------------------------------------------------------------------------------------ */
 
-srv_trace_writer *srv_trace_writer_open(const char *path, char *err, size_t cap)
+srv_trace_writer *srv_trace_writer_open(const char *path, const scene *s, char *err, size_t cap)
 {
-    return srv_trace_writer_open_sized(path, 0, 0, err, cap);
+    return srv_trace_writer_open_sized(path, s, 0, 0, err, cap);
 }
 
-srv_trace_writer *srv_trace_writer_open_sized(const char *path, uint32_t width, uint32_t height, char *err,
-                                              size_t cap)
+srv_trace_writer *srv_trace_writer_open_sized(const char *path, const scene *s, uint32_t width, uint32_t height,
+                                              char *err, size_t cap)
 {
     if (err && cap > 0)
         err[0] = 0;
@@ -577,6 +619,8 @@ srv_trace_writer *srv_trace_writer_open_sized(const char *path, uint32_t width, 
             snprintf(err, cap, "%s: out of memory", path);
         return NULL;
     }
+    if (s)
+        memcpy(w->origin, s->origin, sizeof w->origin);
     w->file = fopen(path, "wb");
     if (!w->file) {
         if (err && cap > 0)
@@ -642,11 +686,13 @@ int srv_trace_writer_add(srv_trace_writer *w, double time, const srv_camera *cam
                  (double)cam->fov_deg);
         return -1;
     }
-    char time_text[32];
+    /* World = local + origin (as scene_local_to_world), printed so that it reads back exactly. */
+    char time_text[32], position_text[3][32];
     format_double_exact(time, time_text, sizeof time_text);
-    if (fprintf(w->file, "%s %.9g %.9g %.9g %.9g %.9g %.9g %.9g\n", time_text, (double)cam->position[0],
-                (double)cam->position[1], (double)cam->position[2], direction[0], direction[1], direction[2],
-                (double)cam->fov_deg) < 0 ||
+    for (int k = 0; k < 3; k++)
+        format_double_exact((double)cam->position[k] + w->origin[k], position_text[k], sizeof position_text[k]);
+    if (fprintf(w->file, "%s %s %s %s %.9g %.9g %.9g %.9g\n", time_text, position_text[0], position_text[1],
+                position_text[2], direction[0], direction[1], direction[2], (double)cam->fov_deg) < 0 ||
         fflush(w->file) != 0) {
         w->failed = true;
         snprintf(w->error, sizeof w->error, "cannot write: %s", strerror(errno));

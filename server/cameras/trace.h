@@ -9,9 +9,10 @@
  *     resolution W H            (version 2, optional, before the first camera)
  *     time px py pz dx dy dz fov_deg
  *
- * time in seconds (finite, non-decreasing), position in world units, view direction (non-zero, need not
- * be unit), vertical field of view in degrees, in (0, 180). Up is always +Y. A camera's target is
- * position + direction.
+ * time in seconds (finite, non-decreasing), position in world coordinates (metres), view direction
+ * (non-zero, need not be unit), vertical field of view in degrees, in (0, 180). Up is always +Y. A camera's
+ * target is position + direction. Traces hold world coordinates; the frame loop works in the scene's local
+ * frame (scene.h), so srv_trace_camera() converts on replay and the writer converts back.
  *
  * A trace file is untrusted input: the reader never asserts and never crashes on junk; every refusal is
  * one line "FILE:LINE: what is wrong". */
@@ -45,9 +46,12 @@ srv_trace *srv_trace_read(const char *path, char *err, size_t cap);
 /* The number of cameras (camera lines) in a trace: at least 1. */
 uint32_t srv_trace_count(const srv_trace *t);
 
-/* The camera of frame `frame`: frame i is the trace's i-th camera line (from 0); past the end, the last
- * camera holds. up is (0, 1, 0) and target = position + direction. t must not be NULL. */
-srv_camera srv_trace_camera(const srv_trace *t, uint32_t frame);
+/* The camera of frame `frame` in the local frame of scene s: frame i is the trace's i-th camera line (from
+ * 0); past the end, the last camera holds. The position goes through scene_world_to_local() (in double);
+ * the target is the rounded position + direction (a direction too short to move a float at that position is
+ * stretched to the position's magnitude, same direction). up is (0, 1, 0). t must not be NULL; s NULL means
+ * world coordinates as they are (a scene whose origin is 0). */
+srv_camera srv_trace_camera(const srv_trace *t, const scene *s, uint32_t frame);
 
 /* The time (seconds) of frame `frame`, with the same past-the-end rule as srv_trace_camera(). */
 double srv_trace_time(const srv_trace *t, uint32_t frame);
@@ -60,28 +64,30 @@ bool srv_trace_resolution(const srv_trace *t, uint32_t *width, uint32_t *height)
 double srv_trace_first_time(const srv_trace *t);
 double srv_trace_last_time(const srv_trace *t);
 
-/* The camera at `time` seconds: the last camera line whose time is not after it (the first before the
- * trace starts). */
-srv_camera srv_trace_camera_at(const srv_trace *t, double time);
+/* The camera at `time` seconds in the local frame of scene s (as srv_trace_camera): the last camera line
+ * whose time is not after it (the first before the trace starts). */
+srv_camera srv_trace_camera_at(const srv_trace *t, const scene *s, double time);
 
 /* Releases a trace. NULL is allowed. */
 void srv_trace_free(srv_trace *t);
 
-/* Creates (truncates) a trace file at path and writes the header. Returns NULL with one line in err on
- * failure. The caller owns the writer and must srv_trace_writer_close() it. */
-srv_trace_writer *srv_trace_writer_open(const char *path, char *err, size_t cap);
+/* Creates (truncates) a trace file at path and writes the header. Cameras added are in the local frame of
+ * scene s and are written in world coordinates (the writer copies s->origin; s NULL: written as given).
+ * Returns NULL with one line in err on failure. The caller owns the writer and must srv_trace_writer_close()
+ * it. */
+srv_trace_writer *srv_trace_writer_open(const char *path, const scene *s, char *err, size_t cap);
 
 /* The same, recording the viewer's resolution: writes format version 2 with a 'resolution W H' line when
  * both sides are in 1..SRV_TRACE_MAX_SIDE (else version 1, as srv_trace_writer_open). */
-srv_trace_writer *srv_trace_writer_open_sized(const char *path, uint32_t width, uint32_t height, char *err,
-                                              size_t cap);
+srv_trace_writer *srv_trace_writer_open_sized(const char *path, const scene *s, uint32_t width, uint32_t height,
+                                              char *err, size_t cap);
 
-/* Appends one camera at `time` seconds: direction = target - position, every number printed with %.9g
- * (time with as many digits as it needs to read back exactly), and the line is flushed at once so that a
- * crash loses nothing already added. Returns 0 on success; -1 when the camera or time is invalid (not
- * finite, position equal to target, fov_deg outside (0, 180), time before the previous one), and nothing
- * is written; -2 on an I/O error. srv_trace_writer_error() then says what went wrong. cam->up is not
- * recorded (the format's up is +Y). */
+/* Appends one camera at `time` seconds: position = local position + origin in double, direction = target -
+ * position, the time and position printed with as many digits as they need to read back exactly (at least
+ * 9), the rest with %.9g, and the line is flushed at once so that a crash loses nothing already added.
+ * Returns 0 on success; -1 when the camera or time is invalid (not finite, position equal to target,
+ * fov_deg outside (0, 180), time before the previous one), and nothing is written; -2 on an I/O error.
+ * srv_trace_writer_error() then says what went wrong. cam->up is not recorded (the format's up is +Y). */
 int srv_trace_writer_add(srv_trace_writer *w, double time, const srv_camera *cam);
 
 /* The last error of a writer as one line ("" when none). */

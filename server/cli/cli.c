@@ -58,7 +58,7 @@ bool srv_cli_resolution(const char *cmd, const char *option, const char *text, u
     return true;
 }
 
-bool srv_cli_vec3(const char *cmd, const char *option, const char *text, float out[3])
+bool srv_cli_vec3(const char *cmd, const char *option, const char *text, double out[3])
 {
     double v[3];
     int used = 0;
@@ -70,7 +70,7 @@ bool srv_cli_vec3(const char *cmd, const char *option, const char *text, float o
         return false;
     }
     for (int k = 0; k < 3; k++)
-        out[k] = (float)v[k];
+        out[k] = v[k];
     return true;
 }
 
@@ -81,5 +81,7 @@ scene *srv_cli_load_scene(const char *cmd, const char *path, float texel_density
     scene *s = scene_load(path, &desc, &err);
     if (!s)
         fprintf(stderr, "fxcache %s: %s\n", cmd, err.msg[0] ? err.msg : scene_strerror(err.code));
+    else if (s->precision_warning[0]) /* the scene loads, but it must not render silently wrong */
+        fprintf(stderr, "fxcache %s: warning: %s\n", cmd, s->precision_warning);
     return s;
 }

@@ -20,10 +20,12 @@ bool srv_cli_u32(const char *cmd, const char *option, const char *text, uint32_t
 bool srv_cli_resolution(const char *cmd, const char *option, const char *text, uint32_t max_side,
                         uint32_t *width, uint32_t *height);
 
-/* Parses "x,y,z" (three finite numbers). */
-bool srv_cli_vec3(const char *cmd, const char *option, const char *text, float out[3]);
+/* Parses "x,y,z" (three finite numbers, |each| <= 1e30), in double: world positions far from the origin
+ * keep their precision until scene_world_to_local(). */
+bool srv_cli_vec3(const char *cmd, const char *option, const char *text, double out[3]);
 
-/* Loads the scene at path ("default" or NULL: the embedded scene); prints the error on failure. */
+/* Loads the scene at path ("default" or NULL: the embedded scene); prints the error on failure, and the
+ * scene's precision warning (if any) as "fxcache CMD: warning: ..." on stderr. */
 scene *srv_cli_load_scene(const char *cmd, const char *path, float texel_density);
 
 /* The subcommands (each parses its own options and returns the process exit code). */

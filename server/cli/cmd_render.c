@@ -68,7 +68,8 @@ static const char render_usage[] =
     "\n"
     "  -o, --out FILE       image to write; the format follows the extension (default fxcache-render.png)\n"
     "  --res WxH            image size, each side in [1, 16384] (default 960x540)\n"
-    "  --camera X,Y,Z       camera position (default: the scene's camera, else one framing the scene)\n"
+    "  --camera X,Y,Z       camera position, world coordinates (default: the scene's camera, else one\n"
+    "                       framing the scene)\n"
     "  --target X,Y,Z       point looked at (default as for --camera)\n"
     "  --fov DEG            vertical field of view in degrees, in [1, 179] (default 60 or the scene's)\n"
     "  --density D          level-0 texels per metre, in [1e-6, 1e6] (default: the scene's, else auto)\n"
@@ -84,7 +85,7 @@ int srv_cmd_render(int argc, char **argv)
     };
     const char *out_path = "fxcache-render.png";
     uint32_t width = 960, height = 540;
-    float position[3], target[3];
+    double position[3], target[3]; /* world coordinates, converted into the scene's local frame */
     bool has_position = false, has_target = false;
     double fov = 0, density = 0;
     optind = 1;
@@ -118,9 +119,9 @@ int srv_cmd_render(int argc, char **argv)
         return 1;
     srv_camera cam = srv_camera_default(s);
     if (has_position)
-        memcpy(cam.position, position, sizeof position);
+        scene_world_to_local(s, position, cam.position);
     if (has_target)
-        memcpy(cam.target, target, sizeof target);
+        scene_world_to_local(s, target, cam.target);
     if (fov > 0)
         cam.fov_deg = (float)fov;
     srv_camera_frame frame;

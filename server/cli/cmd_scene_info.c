@@ -4,6 +4,7 @@
 
 #include <getopt.h>
 #include <jansson.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -54,6 +55,15 @@ static json_t *vec3_json(const float v[3])
     return json_pack("[fff]", (double)v[0], (double)v[1], (double)v[2]);
 }
 
+/* A world-space number that must survive the dump's 6 significant digits: an integer when it is one (scene
+ * origins are whole metres), else a real. */
+static json_t *exact_number_json(double v)
+{
+    if (v == nearbyint(v) && fabs(v) < 9007199254740992.0)
+        return json_integer((json_int_t)v);
+    return json_real(v);
+}
+
 /* The whole report as one JSON object. */
 static json_t *scene_info_json(const scene *s, const island_summary *is, const scene_needs_result *needs,
                                double bvh_ms)
@@ -84,6 +94,12 @@ static json_t *scene_info_json(const scene *s, const island_summary *is, const s
     json_object_set_new(root, "surface_area_m2", json_real(scene_surface_area(s)));
     json_object_set_new(root, "bounds", json_pack("{s:o,s:o}", "min", vec3_json(s->bounds_min), "max",
                                                   vec3_json(s->bounds_max)));
+    json_object_set_new(root, "origin", json_pack("[ooo]", exact_number_json(s->origin[0]),
+                                                  exact_number_json(s->origin[1]), exact_number_json(s->origin[2])));
+    json_object_set_new(root, "position_step_m", json_real(s->position_step));
+    json_object_set_new(root, "position_step_texels", json_real(s->position_step * (double)s->texel_density));
+    json_object_set_new(root, "precision_warning",
+                        s->precision_warning[0] ? json_string(s->precision_warning) : json_null());
 
     json_t *hist = json_object();
     for (int b = 0; b < HIST_BUCKETS; b++)
@@ -150,9 +166,15 @@ static void print_text(const scene *s, const island_summary *is, const scene_nee
            (double)s->sky_color[1], (double)s->sky_color[2], (double)s->sky_intensity);
     printf("texel density:  %.4g texels per metre%s\n", (double)s->texel_density,
            s->density_auto ? " (auto)" : "");
-    printf("surface area:   %.4g m^2; bounds (%.3g, %.3g, %.3g) to (%.3g, %.3g, %.3g)\n", scene_surface_area(s),
+    printf("surface area:   %.4g m^2; bounds (%.3g, %.3g, %.3g) to (%.3g, %.3g, %.3g)%s\n", scene_surface_area(s),
            (double)s->bounds_min[0], (double)s->bounds_min[1], (double)s->bounds_min[2],
-           (double)s->bounds_max[0], (double)s->bounds_max[1], (double)s->bounds_max[2]);
+           (double)s->bounds_max[0], (double)s->bounds_max[1], (double)s->bounds_max[2],
+           s->origin[0] != 0 || s->origin[1] != 0 || s->origin[2] != 0 ? " in the local frame" : "");
+    printf("origin:         (%.17g, %.17g, %.17g): positions are kept relative to it (world = local + origin)\n",
+           s->origin[0], s->origin[1], s->origin[2]);
+    printf("precision:      positions %.3g m apart = %.3g texels%s%s\n", s->position_step,
+           s->position_step * (double)s->texel_density, s->precision_warning[0] ? "; WARNING: " : "",
+           s->precision_warning);
     printf("islands:        %u; triangles per island min %u, mean %.1f, max %u\n", is->count, is->min_triangles,
            is->mean_triangles, is->max_triangles);
     printf("  level 0:      %llu texels, %llu blocks of 8x8, largest side %u texels\n",
@@ -178,8 +200,10 @@ static const char scene_info_usage[] =
     "\n"
     "Loads SCENE (a *.json scene description, a mesh file Assimp reads, optionally .gz, or 'default' for\n"
     "the embedded scene; the default) and prints its triangles, meshes, lights, islands (count,\n"
-    "triangles-per-island histogram, texels and blocks at level 0), texel density, build time per stage\n"
-    "(including the Embree BVH), and which effects and caches the scene needs and why.\n"
+    "triangles-per-island histogram, texels and blocks at level 0), texel density, the origin of its local\n"
+    "frame (world = local + origin) and the spacing of its float positions (with a warning when that exceeds\n"
+    "1/16 of a texel), build time per stage (including the Embree BVH), and which effects and caches the\n"
+    "scene needs and why.\n"
     "\n"
     "  --json               print the same as one JSON object\n"
     "  --density D          level-0 texels per metre, in [1e-6, 1e6] (default: the scene's, else auto)\n"

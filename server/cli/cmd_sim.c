@@ -630,14 +630,14 @@ int srv_cmd_sim(int argc, char **argv)
                 if (o.record_dir) {
                     char path[1024];
                     snprintf(path, sizeof path, "%s/viewer_%02u.trace", o.record_dir, v);
-                    recorder.writers[v] = srv_trace_writer_open_sized(path, vd.width, vd.height, err, sizeof err);
+                    recorder.writers[v] = srv_trace_writer_open_sized(path, s, vd.width, vd.height, err, sizeof err);
                     if (!recorder.writers[v]) {
                         fprintf(stderr, "fxcache sim: %s\n", err);
                         goto done;
                     }
                 }
             }
-            srv_camera cam = traces[v] ? srv_trace_camera_at(traces[v], now)
+            srv_camera cam = traces[v] ? srv_trace_camera_at(traces[v], s, now)
                                        : srv_camgen_camera(o.camera, s, v, o.viewers, frame, o.seed);
             r = srv_viewer_set_camera(loop, ids[v], &cam);
             if (r != FXC_OK) {
@@ -682,6 +682,8 @@ int srv_cmd_sim(int argc, char **argv)
     /* The summary: the run's options, then the report's totals. */
     json_t *sum = json_object();
     json_object_set_new(sum, "scene", json_string(s->source));
+    json_object_set_new(sum, "precision_warning",
+                        s->precision_warning[0] ? json_string(s->precision_warning) : json_null());
     json_object_set_new(sum, "viewers", json_integer(o.viewers));
     json_object_set_new(sum, "frames_requested", json_integer(o.frames));
     json_object_set_new(sum, "interrupted", json_boolean(stop_requested));
