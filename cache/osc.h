@@ -28,6 +28,7 @@
 
 #include "fxc_result.h"
 
+#include <math.h>
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -169,6 +170,43 @@ void osc_footprint_bilinear(const osc_island_extent *island, uint32_t level, flo
  * Precondition: level < 15. */
 void osc_footprint_trilinear(const osc_island_extent *island, uint32_t level, float x, float y,
                              osc_footprint *out);
+
+/* The bilinear footprint for the hot per-pixel paths (requests): the same blocks, masks and order as
+ * osc_footprint_bilinear() for the same arguments, without its argument checks and inlined. Precondition
+ * (the caller's, unchecked): effect < 16, level <= 15, 1 <= width0, height0 <= OSC_MAX_ISLAND_SIZE.
+ * Writes 1..4 (key, mask) pairs and returns how many. */
+static inline uint32_t osc_bilinear_keys(uint32_t effect, uint32_t island_id, uint32_t width0, uint32_t height0,
+                                         uint32_t level, float x, float y, uint64_t keys[4], uint64_t masks[4])
+{
+    uint32_t width = (width0 + (1u << level) - 1u) >> level, height = (height0 + (1u << level) - 1u) >> level;
+    float fx = x - 0.5f, fy = y - 0.5f;
+    int32_t x0 = !(fx >= -1.0f) ? -1 : (fx > (float)width ? (int32_t)width : (int32_t)floorf(fx));
+    int32_t y0 = !(fy >= -1.0f) ? -1 : (fy > (float)height ? (int32_t)height : (int32_t)floorf(fy));
+    uint32_t tx[2], ty[2];
+    for (int i = 0; i < 2; i++) {
+        int32_t cx = x0 + i, cy = y0 + i;
+        tx[i] = cx < 0 ? 0 : ((uint32_t)cx >= width ? width - 1 : (uint32_t)cx);
+        ty[i] = cy < 0 ? 0 : ((uint32_t)cy >= height ? height - 1 : (uint32_t)cy);
+    }
+    uint64_t base = ((uint64_t)effect << OSC_KEY_EFFECT_SHIFT) | ((uint64_t)island_id << OSC_KEY_ISLAND_SHIFT) |
+                    ((uint64_t)level << OSC_KEY_LEVEL_SHIFT);
+    uint32_t count = 0;
+    for (int i = 0; i < 4; i++) { /* (x0,y0) (x1,y0) (x0,y1) (x1,y1), as osc_footprint_bilinear */
+        uint32_t px = tx[i & 1], py = ty[i >> 1];
+        uint64_t key = base | ((uint64_t)(py >> 3) << OSC_KEY_BLOCK_Y_SHIFT) | ((uint64_t)(px >> 3) << OSC_KEY_BLOCK_X_SHIFT);
+        uint64_t bit = (uint64_t)1 << ((py & 7u) * 8u + (px & 7u));
+        uint32_t j = 0;
+        while (j < count && keys[j] != key)
+            j++;
+        if (j == count) {
+            keys[count] = key;
+            masks[count++] = bit;
+        } else {
+            masks[j] |= bit;
+        }
+    }
+    return count;
+}
 
 /* ---- results -------------------------------------------------------------------------------------- */
 

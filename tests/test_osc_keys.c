@@ -174,6 +174,38 @@ static void test_footprint_bilinear(void **state)
     expect_block(&footprint, 0, &hundred, 3, 1, 1, bit(4, 4));
 }
 
+/* The inlined bilinear keys of the request stage against osc_footprint_bilinear(): the same blocks, masks and
+ * order for random islands, levels and points, also outside the island and at texel centres. */
+static void test_bilinear_keys_match(void **state)
+{
+    (void)state;
+    uint64_t rng = 0x9e3779b97f4a7c15ull;
+    for (int i = 0; i < 200000; i++) {
+        rng = rng * 6364136223846793005ull + 1442695040888963407ull;
+        uint32_t r = (uint32_t)(rng >> 32);
+        osc_island_extent island = {.effect = r & 15u, .island_id = (uint32_t)(rng >> 7) & 0xFFFFFFu,
+                                    .width0 = 1 + (r >> 4) % (i % 3 == 0 ? 40 : OSC_MAX_ISLAND_SIZE),
+                                    .height0 = 1 + (r >> 12) % (i % 5 == 0 ? 17 : OSC_MAX_ISLAND_SIZE)};
+        uint32_t level = (r >> 24) % 16;
+        rng = rng * 6364136223846793005ull + 1442695040888963407ull;
+        float w = (float)osc_level_size(island.width0, level), h = (float)osc_level_size(island.height0, level);
+        float x = ((float)(rng >> 40) / 16777216.0f) * (w + 4.0f) - 2.0f;
+        float y = ((float)((rng >> 16) & 0xFFFFFFu) / 16777216.0f) * (h + 4.0f) - 2.0f;
+        if (i % 7 == 0)
+            x = floorf(x) + 0.5f; /* exactly on a texel centre */
+        osc_footprint fp;
+        osc_footprint_bilinear(&island, level, x, y, &fp);
+        uint64_t keys[4], masks[4];
+        uint32_t n = osc_bilinear_keys(island.effect, island.island_id, island.width0, island.height0, level, x, y,
+                                       keys, masks);
+        assert_int_equal(n, fp.count);
+        for (uint32_t k = 0; k < n; k++) {
+            assert_int_equal(keys[k], fp.keys[k]);
+            assert_int_equal(masks[k], fp.texel_masks[k]);
+        }
+    }
+}
+
 static void test_footprint_trilinear(void **state)
 {
     (void)state;
@@ -221,6 +253,7 @@ int main(void)
         cmocka_unit_test(test_footprint_point),
         cmocka_unit_test(test_footprint_bilinear),
         cmocka_unit_test(test_footprint_trilinear),
+        cmocka_unit_test(test_bilinear_keys_match),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -7,6 +7,7 @@
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 typedef struct kind_osc {
     osc_cache *osc;
@@ -66,16 +67,12 @@ static void osc_kind_begin_frame(void *cache, uint32_t frame)
     osc_begin_frame(((kind_osc *)cache)->osc, frame);
 }
 
-static osc_island_extent extent_of(const scene *s, uint32_t effect, uint32_t island)
-{
-    return (osc_island_extent){.effect = effect, .island_id = island, .width0 = s->islands[island].width,
-                               .height0 = s->islands[island].height};
-}
-
-static uint32_t osc_kind_pixel_requests(const void *cache, const srv_pixel *pixels, uint32_t count, uint32_t effect,
-                                        int32_t bias, uint32_t dependency, uint64_t *keys, uint64_t *masks)
+static uint32_t osc_kind_pixel_requests(const void *cache, const srv_pixel *pixels, uint32_t count,
+                                        uint32_t effect, int32_t bias, uint32_t dependency, uint64_t *keys,
+                                        uint64_t *masks)
 {
     const kind_osc *k = cache;
+    const scene_island *islands = k->s->islands;
     uint32_t n = 0;
     uint64_t dep_field = dependency == SRV_NO_EFFECT ? 0 : (uint64_t)dependency << OSC_KEY_EFFECT_SHIFT;
     const uint64_t effect_clear = ~((uint64_t)0xF << OSC_KEY_EFFECT_SHIFT);
@@ -83,17 +80,15 @@ static uint32_t osc_kind_pixel_requests(const void *cache, const srv_pixel *pixe
         const srv_pixel *px = &pixels[i];
         uint32_t level = srv__level(px->footprint, bias);
         float scale = 1.0f / (float)(1u << level);
-        osc_island_extent extent = extent_of(k->s, effect, px->island);
-        osc_footprint fp;
-        osc_footprint_bilinear(&extent, level, px->island_u * scale, px->island_v * scale, &fp);
-        for (uint32_t f = 0; f < fp.count; f++) {
-            keys[n] = fp.keys[f];
-            masks[n++] = fp.texel_masks[f];
-            if (dependency != SRV_NO_EFFECT) {
-                keys[n] = (fp.keys[f] & effect_clear) | dep_field;
-                masks[n++] = fp.texel_masks[f];
+        const scene_island *is = &islands[px->island];
+        uint32_t got = osc_bilinear_keys(effect, px->island, is->width, is->height, level,
+                                         px->island_u * scale, px->island_v * scale, keys + n, masks + n);
+        if (dependency != SRV_NO_EFFECT)
+            for (uint32_t f = 0; f < got; f++) {
+                keys[n + got + f] = (keys[n + f] & effect_clear) | dep_field;
+                masks[n + got + f] = masks[n + f];
             }
-        }
+        n += dependency != SRV_NO_EFFECT ? 2 * got : got;
     }
     return n;
 }
@@ -108,8 +103,9 @@ static uint64_t osc_kind_rekey(uint64_t key, uint32_t effect)
     return (key & ~((uint64_t)0xF << OSC_KEY_EFFECT_SHIFT)) | ((uint64_t)effect << OSC_KEY_EFFECT_SHIFT);
 }
 
-static fxc_result osc_kind_request_batch(void *cache, uint64_t *keys, uint64_t *masks, size_t count, size_t *unique,
-                                         uint32_t *blocks, uint64_t *pool_exhausted, uint64_t *table_full)
+static fxc_result osc_kind_request_batch(void *cache, uint64_t *keys, uint64_t *masks, size_t count,
+                                         size_t *unique, uint32_t *blocks, uint64_t *pool_exhausted,
+                                         uint64_t *table_full)
 {
     kind_osc *k = cache;
     osc_stats before;
@@ -187,7 +183,8 @@ static uint64_t osc_kind_finer_texels(void *cache, uint32_t effect, uint32_t blo
             uint32_t bx = 2 * key.block_x + dx, by = 2 * key.block_y + dy;
             fine_block[dy][dx] = OSC_NONE;
             if (bx * 8 < fine_w && by * 8 < fine_h && bx <= OSC_MAX_BLOCK_COORD && by <= OSC_MAX_BLOCK_COORD)
-                fine_block[dy][dx] = osc_find(k->osc, osc_key_pack(effect, key.island_id, key.level - 1, bx, by));
+                fine_block[dy][dx] =
+                    osc_find(k->osc, osc_key_pack(effect, key.island_id, key.level - 1, bx, by));
             if (fine_block[dy][dx] != OSC_NONE) {
                 fine_valid[dy][dx] = osc_block_valid(k->osc, effect, fine_block[dy][dx]);
                 fine_payload[dy][dx] = osc_block_payload(k->osc, effect, fine_block[dy][dx]);
@@ -218,61 +215,78 @@ static uint64_t osc_kind_finer_texels(void *cache, uint32_t effect, uint32_t blo
     return found;
 }
 
+/* A few recently read blocks of one run of pixels: neighbouring pixels read the same two to four blocks. */
+enum { TAP_MEMO = 4 };
+typedef struct tap_memo {
+    uint64_t key[TAP_MEMO];
+    uint32_t block[TAP_MEMO];
+    uint64_t valid[TAP_MEMO];
+    const uint8_t *payload[TAP_MEMO];
+    uint32_t next; /* round-robin replacement */
+} tap_memo;
+
+static uint32_t memo_lookup(const osc_cache *osc, tap_memo *memo, uint32_t effect, uint64_t key)
+{
+    for (uint32_t m = 0; m < TAP_MEMO; m++)
+        if (memo->key[m] == key)
+            return m;
+    uint32_t m = memo->next;
+    memo->next = (m + 1) % TAP_MEMO;
+    memo->key[m] = key;
+    memo->block[m] = osc_find(osc, key);
+    if (memo->block[m] != OSC_NONE) {
+        memo->valid[m] = osc_block_valid(osc, effect, memo->block[m]);
+        memo->payload[m] = osc_block_payload((osc_cache *)osc, effect, memo->block[m]);
+    }
+    return m;
+}
+
 static void osc_kind_pixel_taps(const void *cache, const srv_pixel *pixels, uint32_t count, uint32_t effect,
                                 int32_t bias, fx_taps *taps, uint32_t *blocks)
 {
     const kind_osc *k = cache;
-    uint32_t texel_bytes = osc_pool_texel_bytes(k->osc, effect);
-    /* Neighbouring pixels mostly read the same block: remember the last one. */
-    uint64_t memo_key = OSC_KEY_EMPTY;
-    uint32_t memo_block = OSC_NONE;
+    const osc_cache *osc = k->osc;
+    const scene_island *islands = k->s->islands;
+    uint32_t texel_bytes = osc_pool_texel_bytes(osc, effect);
+    tap_memo memo;
+    memset(memo.key, 0xFF, sizeof memo.key);
+    memo.next = 0;
+    const uint64_t effect_field = (uint64_t)effect << OSC_KEY_EFFECT_SHIFT;
     for (uint32_t i = 0; i < count; i++) {
         const srv_pixel *px = &pixels[i];
         fx_taps *out = &taps[i];
         uint32_t level = srv__level(px->footprint, bias);
-        const scene_island *is = &k->s->islands[px->island];
-        uint32_t w = osc_level_size(is->width, level), h = osc_level_size(is->height, level);
+        const scene_island *is = &islands[px->island];
+        long w = (long)((is->width + (1u << level) - 1u) >> level),
+             h = (long)((is->height + (1u << level) - 1u) >> level);
         float scale = 1.0f / (float)(1u << level);
         float x = px->island_u * scale - 0.5f, y = px->island_v * scale - 0.5f;
         float fx0 = floorf(x), fy0 = floorf(y);
         float ax = x - fx0, ay = y - fy0;
         long x0 = (long)fx0, y0 = (long)fy0;
+        const uint64_t base = effect_field | ((uint64_t)px->island << OSC_KEY_ISLAND_SHIFT) |
+                              ((uint64_t)level << OSC_KEY_LEVEL_SHIFT);
         float total = 0;
         out->count = 0;
         out->footprint = exp2f(px->footprint - (float)level);
         if (blocks)
             blocks[i] = SRV_NONE;
-        long last_bx = -1, last_by = -1;
-        uint32_t block = OSC_NONE;
-        uint64_t valid = 0;
-        const uint8_t *payload = NULL;
         for (int t = 0; t < 4; t++) {
             long xi = x0 + (t & 1), yi = y0 + (t >> 1);
-            xi = xi < 0 ? 0 : (xi >= (long)w ? (long)w - 1 : xi);
-            yi = yi < 0 ? 0 : (yi >= (long)h ? (long)h - 1 : yi);
+            xi = xi < 0 ? 0 : (xi >= w ? w - 1 : xi);
+            yi = yi < 0 ? 0 : (yi >= h ? h - 1 : yi);
             float weight = ((t & 1) ? ax : 1 - ax) * ((t >> 1) ? ay : 1 - ay);
-            if ((xi >> 3) != last_bx || (yi >> 3) != last_by) {
-                last_bx = xi >> 3;
-                last_by = yi >> 3;
-                uint64_t key = osc_key_pack(effect, px->island, level, (uint32_t)last_bx, (uint32_t)last_by);
-                if (key != memo_key) {
-                    memo_key = key;
-                    memo_block = osc_find(k->osc, key);
-                }
-                block = memo_block;
-                if (block != OSC_NONE) {
-                    valid = osc_block_valid(k->osc, effect, block);
-                    payload = osc_block_payload(k->osc, effect, block);
-                }
-            }
-            if (block == OSC_NONE)
+            uint64_t key = base | ((uint64_t)(yi >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
+                           ((uint64_t)(xi >> 3) << OSC_KEY_BLOCK_X_SHIFT);
+            uint32_t m = memo_lookup(osc, &memo, effect, key);
+            if (memo.block[m] == OSC_NONE)
                 continue;
             if (blocks && blocks[i] == SRV_NONE)
-                blocks[i] = block;
+                blocks[i] = memo.block[m];
             uint32_t texel = ((uint32_t)yi & 7) * 8 + ((uint32_t)xi & 7);
-            if (!(valid >> texel & 1) || weight <= 0)
+            if (!(memo.valid[m] >> texel & 1) || weight <= 0)
                 continue;
-            out->texel[out->count] = payload + (size_t)texel * texel_bytes;
+            out->texel[out->count] = memo.payload[m] + (size_t)texel * texel_bytes;
             out->weight[out->count] = weight;
             out->at_x[out->count] = x + 0.5f - (float)xi;
             out->at_y[out->count] = y + 0.5f - (float)yi;

@@ -86,8 +86,9 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
             continue;
         for (uint32_t first = 0; first < count; first += SRV_RUN) {
             uint32_t run = count - first < SRV_RUN ? count - first : SRV_RUN;
-            uint32_t n = kind->pixel_requests(cache, pixels + first, run, e, loop->bias[e], loop->dependency[e], keys,
-                                              masks);
+            /* Only the effect's own keys: its dependency's are derived after merging (half the keys). */
+            uint32_t n = kind->pixel_requests(cache, pixels + first, run, e, loop->bias[e], SRV_NO_EFFECT,
+                                              keys, masks);
             for (uint32_t i = 0; i < n; i++)
                 ok &= fold_add(loop, &fold, keys[i], masks[i], out);
         }
@@ -109,8 +110,8 @@ uint64_t srv__requests(srv_loop *loop, uint32_t slot, srv_frame_stats *st)
             continue;
         for (uint32_t t = 0; t < threads; t++)
             loop->thread_requests[t].count = 0;
-        request_task task = {.loop = loop, .view = view, .kind = k,
-                             .tiles_x = (view->frame.width + SRV_TILE - 1) / SRV_TILE};
+        request_task task = {
+            .loop = loop, .view = view, .kind = k, .tiles_x = (view->frame.width + SRV_TILE - 1) / SRV_TILE};
         atomic_init(&task.failed, false);
         uint32_t tiles_y = (view->frame.height + SRV_TILE - 1) / SRV_TILE;
         srv_pool_run(loop->pool, task.tiles_x * tiles_y, request_tile, &task);
@@ -121,7 +122,8 @@ uint64_t srv__requests(srv_loop *loop, uint32_t slot, srv_frame_stats *st)
             total += loop->thread_requests[t].count;
         srv_request_list *merged = &view->requests;
         merged->count = 0;
-        if (atomic_load(&task.failed) || !srv__request_reserve(loop, SRV_MEM_VIEWERS, merged, total ? total : 1)) {
+        if (atomic_load(&task.failed) ||
+            !srv__request_reserve(loop, SRV_MEM_VIEWERS, merged, total ? total : 1)) {
             st->drops[SRV_DROP_NOMEM_REQUESTS]++; /* the frame goes on without this viewer's requests */
             continue;
         }
@@ -138,6 +140,7 @@ uint64_t srv__requests(srv_loop *loop, uint32_t slot, srv_frame_stats *st)
         kind->request_batch(loop->caches[k], merged->keys, merged->masks, merged->count, &unique, blocks,
                             &st->drops[SRV_DROP_POOL_EXHAUSTED], &st->drops[SRV_DROP_TABLE_FULL]);
         merged->count = unique;
+        size_t dependent = 0;
         for (size_t i = 0; i < unique; i++) {
             uint32_t e = kind->key_effect(merged->keys[i]);
             if (e >= loop->effect_count || !loop->effect_shading[e])
@@ -145,7 +148,29 @@ uint64_t srv__requests(srv_loop *loop, uint32_t slot, srv_frame_stats *st)
             requested += (uint64_t)__builtin_popcountll(merged->masks[i]);
             if (blocks[i] != SRV_NONE && loop->viewer_bits[e])
                 loop->viewer_bits[e][blocks[i]] |= (uint64_t)1 << slot;
+            dependent += loop->dependency[e] != SRV_NO_EFFECT;
         }
+        /* The same texels of the effects they depend on (the triangle lookup), from the merged keys: appended
+         * after them and requested as a second batch. */
+        if (!dependent)
+            continue;
+        if (!srv__request_reserve(loop, SRV_MEM_VIEWERS, merged, unique + dependent)) {
+            st->drops[SRV_DROP_NOMEM_REQUESTS]++;
+            continue;
+        }
+        size_t n = unique;
+        for (size_t i = 0; i < unique; i++) {
+            uint32_t e = kind->key_effect(merged->keys[i]);
+            if (e < loop->effect_count && loop->effect_shading[e] && loop->dependency[e] != SRV_NO_EFFECT) {
+                merged->keys[n] = kind->rekey(merged->keys[i], loop->dependency[e]);
+                merged->masks[n++] = merged->masks[i];
+            }
+        }
+        size_t dep_unique = 0;
+        kind->request_batch(loop->caches[k], merged->keys + unique, merged->masks + unique, n - unique,
+                            &dep_unique, merged->blocks + unique, &st->drops[SRV_DROP_POOL_EXHAUSTED],
+                            &st->drops[SRV_DROP_TABLE_FULL]);
+        merged->count = unique + dep_unique;
     }
     return requested;
 }
