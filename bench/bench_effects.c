@@ -2,8 +2,12 @@
  * on one thread, over every level-0 block of every island of a scene, against the Embree ceilings in
  * DEPENDENCIES.md (rtcOccluded1M, 256-ray streams: 19.8 Mrays/s on one thread for AO).
  *
+ * The raw baseline traces exactly the rays the update traced: a first, untimed run of each update records its
+ * ray streams (fx_context.observe_rays); then five runs alternate the update and the raw rtcOccluded1M replay
+ * of those streams, and the figure is the median of the per-run ratios.
+ *
  * Usage: bench_effects [scene (default: the embedded scene)] [texel density, texels per metre (default 24)]
- * Prints the scene, the texel count, then Mrays/s per effect (median of 5 runs). */
+ * Prints the scene, the texel count, then Mrays/s per effect and the ratios to the raw replay. */
 #include "effects.h"
 #include "scene.h"
 
@@ -17,76 +21,67 @@
 
 #include "bench_util.h"
 
-enum { RAW_RAYS = 1 << 20, RAW_BATCH = 256 };
+enum { MAX_CAPTURED = 1 << 25 }; /* rays kept for the raw replay (48 bytes each) */
 
-/* A uniform float in [0, 1) from a 64-bit hash of (a, b). */
-static float hash_unit(uint64_t a, uint64_t b)
+/* The rays an update traced, in the streams it traced them in (fx_context.observe_rays). */
+typedef struct captured_rays {
+    struct RTCRay *rays;    /* pristine copies */
+    uint32_t *stream_sizes; /* rays per rtcOccluded1M call, in order */
+    size_t count, streams, capacity, stream_capacity;
+    bool truncated;
+} captured_rays;
+
+static void capture(void *user, const void *rays, uint32_t count)
 {
-    uint64_t z = a * 0x9e3779b97f4a7c15ull + b * 0xbf58476d1ce4e5b9ull + 0x94d049bb133111ebull;
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    z ^= z >> 31;
-    return (float)(z >> 40) * (1.0f / 16777216.0f);
+    captured_rays *c = user;
+    if (c->truncated || c->count + count > MAX_CAPTURED) {
+        c->truncated = true;
+        return;
+    }
+    if (c->count + count > c->capacity) {
+        size_t cap = c->capacity ? 2 * c->capacity : 1u << 16;
+        while (cap < c->count + count)
+            cap *= 2;
+        struct RTCRay *grown = aligned_alloc(64, cap * sizeof *grown);
+        if (!grown) {
+            c->truncated = true;
+            return;
+        }
+        if (c->rays)
+            memcpy(grown, c->rays, c->count * sizeof *grown);
+        free(c->rays);
+        c->rays = grown;
+        c->capacity = cap;
+    }
+    if (c->streams == c->stream_capacity) {
+        size_t cap = c->stream_capacity ? 2 * c->stream_capacity : 1024;
+        uint32_t *grown = realloc(c->stream_sizes, cap * sizeof *grown);
+        if (!grown) {
+            c->truncated = true;
+            return;
+        }
+        c->stream_sizes = grown;
+        c->stream_capacity = cap;
+    }
+    memcpy(c->rays + c->count, rays, count * sizeof(struct RTCRay));
+    c->count += count;
+    c->stream_sizes[c->streams++] = count;
 }
 
-/* The raw baseline: the first RAW_RAYS AO rays of the same texels (64 cosine-weighted rays per texel centre,
- * length ao_radius, robust origins) built once, then traced through rtcOccluded1M in 256-ray streams with
- * nothing else per ray. Returns Mrays/s of the best of 5 runs. */
-static double raw_ao_rate(const scene *s, scene_rt *rt, const fx_block_job *jobs, uint32_t block_count)
+/* Traces the captured rays again, stream by stream as the update did, with nothing else per ray; `work` is a
+ * scratch copy (Embree overwrites tfar). Returns milliseconds (the copy is not timed). */
+static double raw_replay_ms(scene_rt *rt, const captured_rays *c, struct RTCRay *work)
 {
-    struct RTCRay *rays = aligned_alloc(64, sizeof(struct RTCRay) * RAW_RAYS);
-    if (!rays)
-        return 0;
-    uint32_t n = 0;
-    for (uint32_t j = 0; j < block_count && n < RAW_RAYS; j++)
-        for (uint64_t m = jobs[j].mask; m && n < RAW_RAYS; m &= m - 1) {
-            uint32_t t = (uint32_t)__builtin_ctzll(m);
-            float p[3], normal[3], origin[3];
-            fx_surface_point(s, jobs[j].island, jobs[j].lookup[t], (float)(jobs[j].block_x * 8 + (t & 7)) + 0.5f,
-                             (float)(jobs[j].block_y * 8 + (t >> 3)) + 0.5f, p, normal);
-            scene_offset_ray_origin(p, normal, s->ray_offset_scale, origin);
-            float tangent[3] = {1, 0, 0};
-            if (fabsf(normal[0]) > 0.9f)
-                tangent[0] = 0, tangent[1] = 1;
-            float bitangent[3] = {normal[1] * tangent[2] - normal[2] * tangent[1],
-                                  normal[2] * tangent[0] - normal[0] * tangent[2],
-                                  normal[0] * tangent[1] - normal[1] * tangent[0]};
-            float len = sqrtf(bitangent[0] * bitangent[0] + bitangent[1] * bitangent[1] + bitangent[2] * bitangent[2]);
-            for (int k = 0; k < 3; k++)
-                bitangent[k] /= len;
-            for (int k = 0; k < 3; k++)
-                tangent[k] = bitangent[(k + 1) % 3] * normal[(k + 2) % 3] - bitangent[(k + 2) % 3] * normal[(k + 1) % 3];
-            for (uint32_t r = 0; r < 64 && n < RAW_RAYS; r++, n++) {
-                float u1 = hash_unit((uint64_t)j * 64 + t, 2 * r), u2 = hash_unit((uint64_t)j * 64 + t, 2 * r + 1);
-                float radius = sqrtf(u1), phi = 6.2831853f * u2;
-                float x = radius * cosf(phi), y = radius * sinf(phi), z = sqrtf(fmaxf(0.0f, 1.0f - u1));
-                struct RTCRay *ray = &rays[n];
-                memset(ray, 0, sizeof *ray);
-                ray->org_x = origin[0], ray->org_y = origin[1], ray->org_z = origin[2];
-                ray->dir_x = x * tangent[0] + y * bitangent[0] + z * normal[0];
-                ray->dir_y = x * tangent[1] + y * bitangent[1] + z * normal[1];
-                ray->dir_z = x * tangent[2] + y * bitangent[2] + z * normal[2];
-                ray->tnear = 0.0f;
-                ray->tfar = s->ao_radius;
-                ray->mask = 0xFFFFFFFFu;
-            }
-        }
-    _Alignas(64) struct RTCRay batch[RAW_BATCH];
-    struct RTCIntersectContext ctx;
-    double best = 0;
-    for (int run = 0; run < 5; run++) {
-        double t0 = (bench_now_ms() * 1e-3);
-        for (uint32_t first = 0; first < n; first += RAW_BATCH) {
-            uint32_t count = n - first < RAW_BATCH ? n - first : RAW_BATCH;
-            memcpy(batch, rays + first, count * sizeof *batch);
-            rtcInitIntersectContext(&ctx);
-            rtcOccluded1M(scene_rt_handle(rt), &ctx, batch, count, sizeof *batch);
-        }
-        double rate = (double)n / ((bench_now_ms() * 1e-3) - t0) * 1e-6;
-        best = rate > best ? rate : best;
+    memcpy(work, c->rays, c->count * sizeof *work);
+    struct RTCIntersectContext context;
+    double t0 = bench_now_ms();
+    size_t first = 0;
+    for (size_t k = 0; k < c->streams; k++) {
+        rtcInitIntersectContext(&context);
+        rtcOccluded1M(scene_rt_handle(rt), &context, work + first, c->stream_sizes[k], sizeof *work);
+        first += c->stream_sizes[k];
     }
-    free(rays);
-    return best;
+    return bench_now_ms() - t0;
 }
 
 int main(int argc, char **argv)
@@ -146,36 +141,57 @@ int main(int argc, char **argv)
            (double)texels / lookup_seconds * 1e-6);
 
     fx_context ctx = {.s = s, .rt = rt, .seed = 1, .ao_radius = s->ao_radius};
-    double ao_rates[5], shadow_rates[5];
-    for (int run = 0; run < 5; run++) {
-        memset(ao_payload, 0, (size_t)block_count * 64 * 4);
-        for (uint32_t j = 0; j < block_count; j++) {
-            jobs[j].payload = ao_payload + (size_t)64 * 4 * j;
-            jobs[j].key = (jobs[j].key & ~(0xfull << 60)) | ((uint64_t)FX_AO << 60);
+    /* One update of each effect (AO: 4 frames x 16 samples; shadows: once) on fresh payloads. */
+    for (int effect = 0; effect < 2; effect++) {
+        bool ao = effect == 0;
+        captured_rays rays = {0};
+        double update_ms[5], raw_ms[5], ratio[5];
+        struct RTCRay *work = NULL;
+        for (int run = -1; run < 5; run++) {
+            /* Run -1 captures the rays (not timed); runs 0..4 alternate the update and its raw replay. */
+            ctx.observe_rays = run < 0 ? capture : NULL;
+            ctx.observe_user = &rays;
+            uint8_t *payload = ao ? ao_payload : shadow_payload;
+            uint32_t bytes = ao ? 4 : shadow_bytes;
+            memset(payload, 0, (size_t)block_count * 64 * bytes);
+            for (uint32_t j = 0; j < block_count; j++) {
+                jobs[j].payload = payload + (size_t)64 * bytes * j;
+                jobs[j].key = (jobs[j].key & ~(0xfull << 60)) | ((uint64_t)(ao ? FX_AO : FX_SHADOW) << 60);
+            }
+            double start = bench_now_ms();
+            uint64_t traced = 0;
+            if (ao)
+                for (int frame = 0; frame < 4; frame++)
+                    traced += fx_ao_update(&ctx, jobs, block_count, 16);
+            else
+                traced = fx_shadow_update(&ctx, jobs, block_count);
+            double ms = bench_now_ms() - start;
+            if (run < 0) {
+                if (rays.truncated || rays.count != traced) {
+                    fprintf(stderr, "bench_effects: captured %zu of %llu rays (at most %d are kept)\n", rays.count,
+                            (unsigned long long)traced, MAX_CAPTURED);
+                    return 1;
+                }
+                work = aligned_alloc(64, (rays.count ? rays.count : 1) * sizeof *work);
+                if (!work)
+                    return 1;
+                continue;
+            }
+            update_ms[run] = ms;
+            raw_ms[run] = raw_replay_ms(rt, &rays, work);
+            ratio[run] = raw_ms[run] / update_ms[run]; /* update throughput over raw throughput */
         }
-        t0 = (bench_now_ms() * 1e-3);
-        uint64_t rays = 0;
-        for (int frame = 0; frame < 4; frame++)
-            rays += fx_ao_update(&ctx, jobs, block_count, 16);
-        ao_rates[run] = (double)rays / ((bench_now_ms() * 1e-3) - t0) * 1e-6;
-
-        for (uint32_t j = 0; j < block_count; j++) {
-            jobs[j].payload = shadow_payload + (size_t)64 * shadow_bytes * j;
-            jobs[j].key = (jobs[j].key & ~(0xfull << 60)) | ((uint64_t)FX_SHADOW << 60);
-        }
-        t0 = (bench_now_ms() * 1e-3);
-        rays = fx_shadow_update(&ctx, jobs, block_count);
-        shadow_rates[run] = (double)rays / ((bench_now_ms() * 1e-3) - t0) * 1e-6;
+        double n = (double)rays.count;
+        printf("%s: %zu rays in %zu streams; update %.2f Mrays/s, raw rtcOccluded1M over the same rays %.2f Mrays/s "
+               "(medians of 5 alternating runs, 1 thread); update / raw throughput %.2f (p10 %.2f, p90 %.2f)\n",
+               ao ? "fx_ao_update (4 frames x 16 samples)" : "fx_shadow_update (16 rays per texel and light)",
+               rays.count, rays.streams, n / bench_quantile(update_ms, 5, 0.5) * 1e-3,
+               n / bench_quantile(raw_ms, 5, 0.5) * 1e-3, bench_quantile(ratio, 5, 0.5), bench_quantile(ratio, 5, 0.1),
+               bench_quantile(ratio, 5, 0.9));
+        free(work);
+        free(rays.rays);
+        free(rays.stream_sizes);
     }
-
-    double raw = raw_ao_rate(s, rt, jobs, block_count);
-    printf("raw rtcOccluded1M over the first %d AO rays of the same texels (256-ray streams, best of 5): %.2f "
-           "Mrays/s; fx_ao_update (best of 5) / raw = %.2f\n",
-           RAW_RAYS, raw, raw > 0 ? bench_quantile(ao_rates, 5, 1.0) / raw : 0.0);
-    printf("fx_ao_update (4 frames x 16 samples, radius %.3g m): %.2f Mrays/s (median of 5, 1 thread)\n",
-           (double)s->ao_radius, bench_quantile(ao_rates, 5, 0.5));
-    printf("fx_shadow_update (%u lights x 16 rays): %.2f Mrays/s (median of 5, 1 thread)\n", s->light_count,
-           bench_quantile(shadow_rates, 5, 0.5));
 
     free(jobs);
     free(lookup);

@@ -52,6 +52,11 @@ typedef struct fx_context {
     scene_rt *rt;
     uint32_t seed;   /* run seed */
     float ao_radius; /* metres (> 0) */
+    /* Optional: called with every stream of occlusion rays (an array of `count` Embree RTCRay, 64-byte
+     * aligned) just before it is traced, from the tracing thread; benchmarks use it to replay exactly the
+     * rays an update traced. NULL: nothing is called. */
+    void (*observe_rays)(void *user, const void *rays, uint32_t count);
+    void *observe_user;
 } fx_context;
 
 /* One queued block. payload and lookup point into the cache; the effect writes payload texels of mask. */

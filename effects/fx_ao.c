@@ -43,9 +43,9 @@ typedef struct ao_batch {
 } ao_batch;
 
 /* Traces the batch, then writes every pending texel's new mean and count (saturating). */
-static void ao_flush(scene_rt *rt, ao_batch *batch)
+static void ao_flush(const fx_context *ctx, ao_batch *batch)
 {
-    fx__occluded(rt, batch->rays, batch->ray_count);
+    fx__occluded(ctx, batch->rays, batch->ray_count);
     for (uint32_t r = 0; r < batch->ray_count; r++)
         batch->pending[batch->owner[r]].unoccluded += batch->rays[r].tfar != -INFINITY;
     for (uint32_t p = 0; p < batch->pending_count; p++) {
@@ -98,7 +98,7 @@ uint64_t fx_ao_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
                 unoccluded = (long)stored;
 
             if (batch.ray_count + add > FX_RAY_BATCH)
-                ao_flush(ctx->rt, &batch);
+                ao_flush(ctx, &batch);
             uint32_t owner = batch.pending_count++;
             batch.pending[owner] = (ao_pending){.texel_bytes = texel_bytes,
                                                 .unoccluded = (uint32_t)unoccluded,
@@ -124,7 +124,7 @@ uint64_t fx_ao_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
             rays_traced += add;
         }
     }
-    ao_flush(ctx->rt, &batch);
+    ao_flush(ctx, &batch);
     return rays_traced;
 }
 
@@ -165,7 +165,7 @@ float fx_ao_eval_point(const fx_context *ctx, const float pos[3], const float no
                    origin, dir);
             fx__set_ray(&batch[r], origin, dir, ctx->ao_radius, r);
         }
-        fx__occluded(ctx->rt, batch, n);
+        fx__occluded(ctx, batch, n);
         for (uint32_t r = 0; r < n; r++)
             unoccluded += batch[r].tfar != -INFINITY;
     }

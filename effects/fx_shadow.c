@@ -61,9 +61,9 @@ static bool shadow_ray_towards(const scene_light *light, const float origin[3], 
 }
 
 /* Traces the batch and sets the bit of every ray that reached its light. */
-static void shadow_flush(scene_rt *rt, const fx_block_job *jobs, shadow_batch *batch)
+static void shadow_flush(const fx_context *ctx, const fx_block_job *jobs, shadow_batch *batch)
 {
-    fx__occluded(rt, batch->rays, batch->count);
+    fx__occluded(ctx, batch->rays, batch->count);
     for (uint32_t r = 0; r < batch->count; r++) {
         if (batch->rays[r].tfar == -INFINITY)
             continue;
@@ -104,7 +104,7 @@ uint64_t fx_shadow_update(const fx_context *ctx, const fx_block_job *jobs, uint3
                 uint32_t offset = (texel * light_count + l) * 2u;
                 fx__put_u16((uint8_t *)job->payload + offset, 0);
                 if (batch.count + FX_SHADOW_RAYS > FX_RAY_BATCH)
-                    shadow_flush(ctx->rt, jobs, &batch);
+                    shadow_flush(ctx, jobs, &batch);
                 for (uint32_t i = 0; i < FX_SHADOW_RAYS; i++) {
                     float dir[3], tfar;
                     if (!shadow_ray_towards(&s->lights[l], origins[i], normal, dir, &tfar))
@@ -118,7 +118,7 @@ uint64_t fx_shadow_update(const fx_context *ctx, const fx_block_job *jobs, uint3
             }
         }
     }
-    shadow_flush(ctx->rt, jobs, &batch);
+    shadow_flush(ctx, jobs, &batch);
     return rays_traced;
 }
 
@@ -179,7 +179,7 @@ float fx_shadow_eval_point(const fx_context *ctx, const float pos[3], const floa
             step[k] /= length;
         fx__set_ray(&batch[checks++], centre_origin, step, length + reach, i);
     }
-    fx__occluded(ctx->rt, batch, checks);
+    fx__occluded(ctx, batch, checks);
     for (uint32_t r = 0; r < checks; r++) {
         if (batch[r].tfar != -INFINITY)
             continue;
@@ -201,7 +201,7 @@ float fx_shadow_eval_point(const fx_context *ctx, const float pos[3], const floa
         if (shadow_ray_towards(lamp, origin, normal, dir, &tfar))
             fx__set_ray(&batch[traced++], origin, dir, tfar, i);
     }
-    fx__occluded(ctx->rt, batch, traced);
+    fx__occluded(ctx, batch, traced);
     uint32_t lit = 0;
     for (uint32_t r = 0; r < traced; r++)
         lit += batch[r].tfar != -INFINITY;

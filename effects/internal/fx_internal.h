@@ -308,13 +308,15 @@ static inline void fx__set_ray(struct RTCRay *ray, const float org[3], const flo
 }
 
 /* Traces count occlusion rays as one stream; afterwards ray i is occluded iff its tfar is -INFINITY. */
-static inline void fx__occluded(scene_rt *rt, struct RTCRay *rays, uint32_t count)
+static inline void fx__occluded(const fx_context *ctx, struct RTCRay *rays, uint32_t count)
 {
     if (count == 0)
         return;
+    if (ctx->observe_rays) /* benchmarks replay exactly these rays against raw Embree */
+        ctx->observe_rays(ctx->observe_user, rays, count);
     struct RTCIntersectContext context;
     rtcInitIntersectContext(&context);
-    rtcOccluded1M((RTCScene)scene_rt_handle(rt), &context, rays, count, sizeof(struct RTCRay));
+    rtcOccluded1M((RTCScene)scene_rt_handle(ctx->rt), &context, rays, count, sizeof(struct RTCRay));
 }
 
 /* Level-0 island UV of a point inside texel (block_x*8 + x, block_y*8 + y) of level at offsets (jx, jy) in

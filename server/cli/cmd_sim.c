@@ -444,7 +444,7 @@ static int record_sink_frame(void *user, const srv_viewer_frame *vf)
 /* ---- the summary ----------------------------------------------------------------------------------------- */
 
 static void print_summary(const sim_options *o, const scene *s, const srv_loop *loop, const srv_report *report,
-                          const char reasons[SRV_MAX_EFFECTS][200])
+                          const char reasons[SRV_MAX_EFFECTS][200], const json_t *left_out_extra)
 {
     const srv_report_totals *t = srv_report_get_totals(report);
     uint64_t effect_rays = 0, pools_in_use = 0;
@@ -452,7 +452,7 @@ static void print_summary(const sim_options *o, const scene *s, const srv_loop *
         effect_rays += t->rays[e];
         pools_in_use += t->final.pools_in_use[e];
     }
-    printf("%u viewers (%llu viewer-frames), %u frames on %s%s%s\n", t->viewers_seen,
+    printf("%u viewer%s (%llu viewer-frames), %u frames on %s%s%s\n", t->viewers_seen, t->viewers_seen == 1 ? "" : "s",
            (unsigned long long)t->viewer_frames, t->frames, s->source, o->no_cache ? " (no cache)" : "",
            stop_requested ? " (interrupted)" : "");
     printf("effects:   ");
@@ -463,6 +463,10 @@ static void print_summary(const sim_options *o, const scene *s, const srv_loop *
     for (uint32_t e = 0; e < srv_loop_effect_count(loop); e++)
         if (srv_loop_effect(loop, e)->shade && !srv_loop_effect_on(loop, e))
             printf("  left out %s: %s\n", srv_loop_effect(loop, e)->name, reasons[e]);
+    const char *extra_name;
+    const json_t *extra_reason;
+    json_object_foreach((json_t *)left_out_extra, extra_name, extra_reason)
+        printf("  left out %s: %s\n", extra_name, json_string_value(extra_reason));
     if (o->no_cache)
         printf("texels:     none (no cache: every pixel traces its own rays)\n");
     else if (!t->unique)
@@ -727,7 +731,7 @@ int srv_cmd_sim(int argc, char **argv)
     }
     json_decref(sum);
     if (!o.quiet)
-        print_summary(&o, s, loop, report, (const char(*)[200])reasons);
+        print_summary(&o, s, loop, report, (const char(*)[200])reasons, left_out_extra);
     exit_code = 0;
 done:
     for (uint32_t v = 0; v < SRV_MAX_VIEWERS; v++)

@@ -27,14 +27,16 @@ enum {
 /* Memory categories counted by the engine's allocator (srv_memory's viewers and queues). */
 typedef enum srv_mem_category { SRV_MEM_VIEWERS = 0, SRV_MEM_QUEUES, SRV_MEM_COUNT } srv_mem_category;
 
-/* A growable (key, mask) list, kept across frames so steady state allocates nothing. Aligned to a cache
- * line so per-thread lists never share one. */
+/* A growable (key, mask) list, kept across frames so steady state allocates nothing. Padded to two cache
+ * lines, whatever the alignment the allocator gives the array of per-thread lists: the fields of two
+ * neighbouring lists (64 bytes each) are then at least 64 bytes apart and never share a cache line. */
 typedef struct srv_request_list {
-    _Alignas(64) uint64_t *keys;
+    uint64_t *keys;
     uint64_t *masks;
     uint32_t *blocks; /* block index per key after the batch request */
     size_t count, capacity;
     size_t keys_capacity, masks_capacity, blocks_capacity; /* each array's own (equal unless a grow failed) */
+    uint8_t padding[64];
 } srv_request_list;
 
 /* A visible pixel as the cache kinds see it. */
