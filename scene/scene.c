@@ -1036,25 +1036,43 @@ void scene_albedo(const scene *s, uint32_t tri, float u, float v, float out_rgb[
     scene_albedo_filtered(s, tri, u, v, -1000.0f, out_rgb);
 }
 
-void scene_albedo_filtered(const scene *s, uint32_t tri, float u, float v, float footprint_log2,
-                           float out_rgb[3])
+void scene_albedo_prepare(const scene *s, uint32_t tri, scene_albedo_triangle *out)
 {
     const scene_material *m = &s->materials[s->meshes[s->tri_mesh[tri]].material];
-    if (m->texture < 0 || (uint32_t)m->texture >= s->texture_count) {
-        memcpy(out_rgb, m->diffuse, 3 * sizeof(float));
+    memcpy(out->diffuse, m->diffuse, sizeof out->diffuse);
+    out->texture = NULL;
+    if (m->texture < 0 || (uint32_t)m->texture >= s->texture_count)
+        return;
+    out->texture = &s->textures[m->texture];
+    memcpy(out->uv, s->corner_uv + 6 * (size_t)tri, sizeof out->uv);
+    out->lod = s->tri_texture_lod ? s->tri_texture_lod[tri] : -1000.0f;
+}
+
+void scene_albedo_sample(const scene_albedo_triangle *t, float u, float v, float footprint_log2, float out_rgb[3])
+{
+    if (!t->texture) {
+        memcpy(out_rgb, t->diffuse, 3 * sizeof(float));
         return;
     }
-    const float *uv = s->corner_uv + 6 * (size_t)tri;
+    const float *uv = t->uv;
     float w0 = 1 - u - v;
     float tu = w0 * uv[0] + u * uv[2] + v * uv[4];
     float tv = w0 * uv[1] + u * uv[3] + v * uv[5];
-    const scene_texture *tex = &s->textures[m->texture];
-    float level = footprint_log2 + (s->tri_texture_lod ? s->tri_texture_lod[tri] : -1000.0f);
+    const scene_texture *tex = t->texture;
+    float level = footprint_log2 + t->lod;
     uint32_t mip = 0;
     if (level > 0.5f && tex->levels > 1)
         mip = level >= (float)(tex->levels - 1) ? tex->levels - 1 : (uint32_t)(level + 0.5f);
     float texel[3];
     texture_sample(tex, mip, tu, tv, texel);
     for (int k = 0; k < 3; k++)
-        out_rgb[k] = texel[k] * m->diffuse[k];
+        out_rgb[k] = texel[k] * t->diffuse[k];
+}
+
+void scene_albedo_filtered(const scene *s, uint32_t tri, float u, float v, float footprint_log2,
+                           float out_rgb[3])
+{
+    scene_albedo_triangle t;
+    scene_albedo_prepare(s, tri, &t);
+    scene_albedo_sample(&t, u, v, footprint_log2, out_rgb);
 }

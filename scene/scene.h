@@ -227,6 +227,19 @@ void scene_albedo(const scene *s, uint32_t tri, float u, float v, float out_rgb[
 void scene_albedo_filtered(const scene *s, uint32_t tri, float u, float v, float footprint_log2,
                            float out_rgb[3]);
 
+/* What albedo sampling needs of one triangle, looked up once for the many pixels that see it. */
+typedef struct scene_albedo_triangle {
+    const scene_texture *texture; /* NULL: untextured, the diffuse colour alone */
+    float diffuse[3];
+    float uv[6];                  /* mesh UVs of the three corners */
+    float lod;                    /* log2 of texture texels per metre on the triangle */
+} scene_albedo_triangle;
+
+/* Prepares albedo sampling of triangle tri; scene_albedo_sample() then gives what scene_albedo_filtered()
+ * gives for the same arguments. */
+void scene_albedo_prepare(const scene *s, uint32_t tri, scene_albedo_triangle *out);
+void scene_albedo_sample(const scene_albedo_triangle *t, float u, float v, float footprint_log2, float out_rgb[3]);
+
 /* ---- what the scene needs ---------------------------------------------------------------------------- */
 
 typedef enum scene_effect {

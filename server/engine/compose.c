@@ -84,6 +84,12 @@ static uint8_t tone_map_srgb8(float c)
     return tone_lut[(int)(mapped * (TONE_LUT_SIZE - 1) + 0.5f)];
 }
 
+/* min(x, FLT_MAX) without a libm call: infinity saturates, NaN passes on (and is caught after). */
+static inline float saturate_max(float x)
+{
+    return x > FLT_MAX ? FLT_MAX : x;
+}
+
 typedef struct compose_task {
     srv_loop *loop;
     srv_viewer *view;
@@ -101,6 +107,10 @@ static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32
     bool no_cache = loop->desc.no_cache;
     const float scale_x = 2.0f * f->tan_half_x / (float)f->width,
                 scale_y = 2.0f * f->tan_half_y / (float)f->height;
+    /* What neighbouring pixels share when they see the same triangle, looked up once. */
+    uint32_t memo_tri = SRV_MISS, memo_island = 0;
+    float corner[3][3], normal[3], island_uv[6];
+    scene_albedo_triangle albedo;
     uint32_t count = 0;
     for (uint32_t y = y0; y < y1; y++)
         for (uint32_t x = x0; x < x1; x++) {
@@ -119,7 +129,21 @@ static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32
             cs->index[i] = p;
             fx_point *pt = &cs->points[i];
             float u = view->bary_u[p], v = view->bary_v[p], dir[3];
-            srv__hit_point(s, tri, u, v, pt->position, pt->normal);
+            if (tri != memo_tri) {
+                memo_tri = tri;
+                const uint32_t *idx = s->indices + 3 * (size_t)tri;
+                for (int c = 0; c < 3; c++)
+                    memcpy(corner[c], s->positions + 3 * (size_t)idx[c], sizeof corner[c]);
+                memcpy(normal, s->tri_normal + 3 * (size_t)tri, sizeof normal);
+                memcpy(island_uv, s->tri_island_uv + 6 * (size_t)tri, sizeof island_uv);
+                memo_island = s->tri_island[tri];
+                scene_albedo_prepare(s, tri, &albedo);
+            }
+            float w = 1.0f - u - v;
+            for (int k = 0; k < 3; k++) {
+                pt->position[k] = w * corner[0][k] + u * corner[1][k] + v * corner[2][k];
+                pt->normal[k] = normal[k];
+            }
             /* The ray's direction, not normalised: only its side of the surface matters here. */
             float sx = ((float)x + 0.5f) * scale_x - f->tan_half_x,
                   sy = f->tan_half_y - ((float)y + 0.5f) * scale_y;
@@ -129,7 +153,7 @@ static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32
             for (int k = 0; k < 3; k++) /* seen from behind: light the side the viewer sees */
                 cs->shade_normal[i][k] = facing > 0 ? -pt->normal[k] : pt->normal[k];
             /* The pixel's footprint in metres: level-0 texels per pixel over texels per metre. */
-            scene_albedo_filtered(s, tri, u, v, view->footprint[p] - log2_density, cs->albedo[i]);
+            scene_albedo_sample(&albedo, u, v, view->footprint[p] - log2_density, cs->albedo[i]);
             pt->triangle = tri;
             pt->u = u;
             pt->v = v;
@@ -140,9 +164,10 @@ static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32
             }
             srv_pixel *px = &cs->pixels[i];
             px->triangle = tri;
-            px->island = s->tri_island[tri];
+            px->island = memo_island;
             px->footprint = view->footprint[p];
-            srv__island_uv(s, tri, u, v, &px->island_u, &px->island_v);
+            px->island_u = w * island_uv[0] + u * island_uv[2] + v * island_uv[4];
+            px->island_v = w * island_uv[1] + u * island_uv[3] + v * island_uv[5];
         }
     return count;
 }
@@ -250,9 +275,9 @@ static void compose_tile(void *user, uint32_t task_index, uint32_t thread_index)
             /* Saturate, never overflow to infinity (extreme light intensities): DESIGN.md, robustness. */
             float *rad = view->radiance + 3 * p;
             for (int k = 0; k < 3; k++) {
-                float irr = fminf(irradiance[k], FLT_MAX) + fminf(sky[k] * cs->sky_visibility[i], FLT_MAX) +
-                            fminf(cs->indirect[3 * i + k], FLT_MAX);
-                float value = cs->albedo[i][k] * fminf(irr, FLT_MAX);
+                float irr = saturate_max(irradiance[k]) + saturate_max(sky[k] * cs->sky_visibility[i]) +
+                            saturate_max(cs->indirect[3 * i + k]);
+                float value = cs->albedo[i][k] * saturate_max(irr);
                 rad[k] = value <= FLT_MAX ? value : (value > 0 ? FLT_MAX : 0.0f);
             }
             missing += cs->missing[i];
