@@ -10,6 +10,7 @@
  *
  * Usage: bench_stages [--scene PATH (default ../shared/scenes/sponza/sponza.3ds)] [--res WxH (640x360)]
  *                     [--warmup N (10)] [--frames N (30)] [--camera walk|group|orbit (walk)] [--viewers N (1)]
+ *                     [--no-scaling (part 1 only, for profiling)]
  */
 #include "bench_util.h"
 #include "camgen.h"
@@ -72,6 +73,7 @@ int main(int argc, char **argv)
     const char *path = "../shared/scenes/sponza/sponza.3ds";
     uint32_t w = 640, h = 360, warmup = 10, frames = 30, viewers = 1;
     srv_camgen_kind gen = SRV_CAMGEN_WALK;
+    bool scaling = true;
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
         if (!strcmp(a, "--scene") && v)
@@ -86,9 +88,11 @@ int main(int argc, char **argv)
             viewers = (uint32_t)atoi(v), i++;
         else if (!strcmp(a, "--camera") && v && srv_camgen_parse(v, &gen))
             i++;
+        else if (!strcmp(a, "--no-scaling"))
+            scaling = false;
         else {
             fprintf(stderr, "usage: bench_stages [--scene PATH] [--res WxH] [--warmup N] [--frames N] [--camera GEN] "
-                            "[--viewers N]\n");
+                            "[--viewers N] [--no-scaling]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }
     }
@@ -143,6 +147,11 @@ int main(int argc, char **argv)
     print_row("compose / visibility", comp_ratio, (int)frames);
 
     /* Part 2: 1 thread against 2, alternating frame by frame. */
+    if (!scaling) {
+        scene_rt_free(rt);
+        scene_free(s);
+        return 0;
+    }
     srv_viewer_id ids1[SRV_MAX_VIEWERS], ids2[SRV_MAX_VIEWERS];
     srv_loop *l1 = make_loop(s, rt, 1, viewers, w, h, ids1), *l2 = make_loop(s, rt, 2, viewers, w, h, ids2);
     double speedup[BENCH_MAX_SAMPLES], t1s[BENCH_MAX_SAMPLES], t2s[BENCH_MAX_SAMPLES];

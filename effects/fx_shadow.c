@@ -296,7 +296,7 @@ static void shadow_shade(const fx_context *ctx, const fx_shade_run *run)
         float fx = taps->at_x[home] * 4.0f - 0.5f, fy = taps->at_y[home] * 4.0f - 0.5f;
         float cx0 = floorf(fx), cy0 = floorf(fy);
         float wx = fx - cx0, wy = fy - cy0;
-        if (taps->footprint >= 1.0f) { /* as large as a texel: the texels' lit fractions */
+        if (taps->footprint_log2 >= 0.0f) { /* as large as a texel: the texels' lit fractions */
             for (uint32_t l = 0; l < lights; l++) {
                 float lit = 0;
                 for (uint32_t t = 0; t < taps->count; t++)
@@ -322,7 +322,7 @@ static void shadow_shade(const fx_context *ctx, const fx_shade_run *run)
             cell_bit[c] = (uint32_t)((cy - 4 * oy) * 4 + (cx - 4 * ox));
             cell_weight[c] = ((c & 1) ? wx : 1 - wx) * ((c >> 1) ? wy : 1 - wy);
         }
-        float coarse = fminf(fmaxf(taps->footprint, 0.0f), 1.0f); /* weight of the texel average */
+        float coarse = exp2f(taps->footprint_log2); /* weight of the texel average: the pixel's size, < 1 */
         for (uint32_t l = 0; l < lights; l++) {
             float fine = 0, average = 0;
             for (int c = 0; c < 4; c++) {

@@ -12,6 +12,7 @@
 #include "cache.h"
 #include "camgen.h"
 #include "engine.h"
+#include "engine_internal.h" /* white-box: the tone map */
 #include "report.h"
 #include "scene.h"
 #include "trace.h"
@@ -632,6 +633,42 @@ static void test_allocation_failures_counted(void **state)
     assert_true(hit_updates);
 }
 
+/* Compose's tone map by thresholds equals its definition with expf: over every 997th bit pattern from 0 to
+ * +infinity (both signs), over every bit pattern of each interval where the byte changes (the thresholds), and
+ * at NaN and the infinities. */
+static void test_tone_map_thresholds(void **state)
+{
+    (void)state;
+    uint64_t checked = 0, changes = 0;
+    uint8_t previous = 0;
+    for (uint64_t bits = 0; bits <= 0x7f800000u; bits += 997) {
+        for (int sign = 0; sign < 2; sign++) {
+            uint32_t b = (uint32_t)bits | (sign ? 0x80000000u : 0);
+            float c;
+            memcpy(&c, &b, sizeof c);
+            uint8_t got = srv__tone_map(c), want = srv__tone_map_reference(c);
+            if (got != want)
+                fail_msg("tone map of %.9g (0x%08x): %u, definition %u", (double)c, b, got, want);
+            checked++;
+            if (sign || got == previous)
+                continue;
+            changes++;
+            for (uint32_t d = (uint32_t)bits - 997; d <= bits; d++) { /* the interval where it changed */
+                memcpy(&c, &d, sizeof c);
+                if (srv__tone_map(c) != srv__tone_map_reference(c))
+                    fail_msg("tone map of %.9g (0x%08x): %u, definition %u", (double)c, d, srv__tone_map(c),
+                             srv__tone_map_reference(c));
+            }
+            previous = got;
+        }
+    }
+    assert_true(checked > 4000000);
+    assert_true(changes > 200); /* nearly every byte value is reached */
+    assert_int_equal(srv__tone_map(NAN), 0);
+    assert_int_equal(srv__tone_map(INFINITY), 255);
+    assert_int_equal(srv__tone_map(-INFINITY), 0);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -643,6 +680,7 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_sinks_and_report, setup, teardown),
         cmocka_unit_test_setup_teardown(test_replay_matches_api, setup, teardown),
         cmocka_unit_test(test_result_codes),
+        cmocka_unit_test(test_tone_map_thresholds),
         cmocka_unit_test_setup_teardown(test_allocation_failures_counted, setup, teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

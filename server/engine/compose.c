@@ -12,6 +12,8 @@
 #include <math.h>
 #include <pthread.h>
 #include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 /* Per-thread scratch for one run of pixels along a row. */
@@ -64,7 +66,42 @@ enum { TONE_LUT_SIZE = 4096 };
 /* The tone map (1 - e^-c) followed by the sRGB encoding, tabulated over the tone-mapped value in [0, 1]:
  * two transcendental calls per channel and pixel were most of compose's time. */
 static uint8_t tone_lut[TONE_LUT_SIZE];
+
+/* A check of a table's premise at start-up: a programming error if it fails, in every build type. */
+#define FX_CHECK(cond)                                                                                      \
+    do {                                                                                                     \
+        if (!(cond)) {                                                                                       \
+            fprintf(stderr, "%s:%d: compose: check failed: %s\n", __FILE__, __LINE__, #cond);              \
+            abort();                                                                                         \
+        }                                                                                                    \
+    } while (0)
+/* The tone map without expf: a table indexed by the top bits of the float (its exponent and 8 bits of
+ * mantissa), so each cell spans 1/256 of an octave of radiance. Within a cell the byte changes at most once
+ * (checked when the table is built): the cell holds its first byte and the radiance where the next begins. */
+enum {
+    TONE_EXP_LO = 107,                           /* 2^-20: below it every byte is 0 (checked) */
+    TONE_EXP_HI = 132,                           /* 2^5 = 32: from 20 on every byte is 255 */
+    TONE_CELLS = (TONE_EXP_HI - TONE_EXP_LO) << 8,
+};
+static uint8_t tone_cell_byte[TONE_CELLS];
+static float tone_cell_next[TONE_CELLS];
 static pthread_once_t tone_lut_once = PTHREAD_ONCE_INIT;
+
+/* Linear radiance to an sRGB byte through the tone map, with expf: the definition. */
+static uint8_t tone_map_reference(float c)
+{
+    if (!(c > 0))
+        return 0;
+    float mapped = c < 20.0f ? 1.0f - expf(-c) : 1.0f;
+    return tone_lut[(int)(mapped * (TONE_LUT_SIZE - 1) + 0.5f)];
+}
+
+static float float_of_bits(uint32_t bits)
+{
+    float f;
+    memcpy(&f, &bits, sizeof f);
+    return f;
+}
 
 static void tone_lut_init(void)
 {
@@ -73,15 +110,51 @@ static void tone_lut_init(void)
         float e = c <= 0.0031308f ? 12.92f * c : 1.055f * powf(c, 1.0f / 2.4f) - 0.055f;
         tone_lut[i] = (uint8_t)(e * 255.0f + 0.5f);
     }
+    FX_CHECK(tone_map_reference(float_of_bits((uint32_t)TONE_EXP_LO << 23)) == 0);
+    FX_CHECK(tone_map_reference(20.0f) == 255);
+    for (uint32_t cell = 0; cell < TONE_CELLS; cell++) {
+        uint32_t first = ((uint32_t)TONE_EXP_LO << 23) + (cell << 15), last = first + (1u << 15) - 1;
+        uint8_t lo_byte = tone_map_reference(float_of_bits(first)), hi_byte = tone_map_reference(float_of_bits(last));
+        FX_CHECK(hi_byte - lo_byte <= 1); /* one change at most: the table's premise */
+        tone_cell_byte[cell] = lo_byte;
+        tone_cell_next[cell] = INFINITY;
+        if (hi_byte == lo_byte)
+            continue;
+        uint32_t lo = first, hi = last; /* byte(lo) = lo_byte, byte(hi) = lo_byte + 1 */
+        while (hi - lo > 1) {
+            uint32_t mid = lo + (hi - lo) / 2;
+            if (tone_map_reference(float_of_bits(mid)) > lo_byte)
+                hi = mid;
+            else
+                lo = mid;
+        }
+        tone_cell_next[cell] = float_of_bits(hi);
+    }
 }
 
-/* Linear radiance to an sRGB byte through the tone map. */
-static uint8_t tone_map_srgb8(float c)
+/* Linear radiance to an sRGB byte, equal to tone_map_reference() for every float (tests/test_engine.c). */
+static inline uint8_t tone_map_srgb8(float c)
 {
-    if (!(c > 0))
+    if (!(c >= 0x1p-20f)) /* also NaN and every c <= 0 */
         return 0;
-    float mapped = c < 20.0f ? 1.0f - expf(-c) : 1.0f;
-    return tone_lut[(int)(mapped * (TONE_LUT_SIZE - 1) + 0.5f)];
+    if (c >= 20.0f)
+        return 255;
+    uint32_t bits;
+    memcpy(&bits, &c, sizeof bits);
+    uint32_t cell = (bits >> 15) - ((uint32_t)TONE_EXP_LO << 8);
+    return (uint8_t)(tone_cell_byte[cell] + (c >= tone_cell_next[cell]));
+}
+
+uint8_t srv__tone_map(float c)
+{
+    pthread_once(&tone_lut_once, tone_lut_init);
+    return tone_map_srgb8(c);
+}
+
+uint8_t srv__tone_map_reference(float c)
+{
+    pthread_once(&tone_lut_once, tone_lut_init);
+    return tone_map_reference(c);
 }
 
 /* min(x, FLT_MAX) without a libm call: infinity saturates, NaN passes on (and is caught after). */

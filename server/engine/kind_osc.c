@@ -9,6 +9,11 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* 2^-level for the 16 levels: a multiply per pixel instead of a division. */
+static const float inverse_power_of_two[16] = {
+    1.0f,        0.5f,         0.25f,         0.125f,         0.0625f,  0.03125f, 0.015625f, 0.0078125f,
+    0.00390625f, 0.001953125f, 0.0009765625f, 0.00048828125f, 0x1p-12f, 0x1p-13f, 0x1p-14f,  0x1p-15f};
+
 typedef struct kind_osc {
     osc_cache *osc;
     const scene *s;
@@ -79,7 +84,7 @@ static uint32_t osc_kind_pixel_requests(const void *cache, const srv_pixel *pixe
     for (uint32_t i = 0; i < count; i++) {
         const srv_pixel *px = &pixels[i];
         uint32_t level = srv__level(px->footprint, bias);
-        float scale = 1.0f / (float)(1u << level);
+        float scale = inverse_power_of_two[level];
         const scene_island *is = &islands[px->island];
         uint32_t got = osc_bilinear_keys(effect, px->island, is->width, is->height, level,
                                          px->island_u * scale, px->island_v * scale, keys + n, masks + n);
@@ -259,7 +264,7 @@ static void osc_kind_pixel_taps(const void *cache, const srv_pixel *pixels, uint
         const scene_island *is = &islands[px->island];
         long w = (long)((is->width + (1u << level) - 1u) >> level),
              h = (long)((is->height + (1u << level) - 1u) >> level);
-        float scale = 1.0f / (float)(1u << level);
+        float scale = inverse_power_of_two[level];
         float x = px->island_u * scale - 0.5f, y = px->island_v * scale - 0.5f;
         float fx0 = floorf(x), fy0 = floorf(y);
         float ax = x - fx0, ay = y - fy0;
@@ -268,7 +273,7 @@ static void osc_kind_pixel_taps(const void *cache, const srv_pixel *pixels, uint
                               ((uint64_t)level << OSC_KEY_LEVEL_SHIFT);
         float total = 0;
         out->count = 0;
-        out->footprint = exp2f(px->footprint - (float)level);
+        out->footprint_log2 = px->footprint - (float)level;
         if (blocks)
             blocks[i] = SRV_NONE;
         for (int t = 0; t < 4; t++) {

@@ -203,6 +203,11 @@ void srv__updates(srv_loop *loop, bool lookup, srv_frame_stats *st);
 /* Stage 7: compose one viewer (cached, or per-pixel in no-cache mode). */
 void srv__compose(srv_loop *loop, uint32_t slot, srv_frame_stats *st);
 
+/* The tone map of compose (linear radiance to an sRGB byte) and its definition with expf; equal for every
+ * float (white-box tests compare them). */
+uint8_t srv__tone_map(float c);
+uint8_t srv__tone_map_reference(float c);
+
 /* Per-thread compose scratch size for this loop (bytes), known at creation. */
 size_t srv__compose_scratch_bytes(const srv_loop *loop);
 
