@@ -12,55 +12,13 @@
  *                     [--warmup N (10)] [--frames N (30)] [--camera walk|group|orbit (walk)] [--viewers N (1)]
  *                     [--no-scaling (part 1 only, for profiling)]
  */
-#include "bench_util.h"
-#include "camgen.h"
-#include "engine.h"
+#include "bench_engine.h"
 #include "scene.h"
 
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
-
-static srv_loop *make_loop(scene *s, scene_rt *rt, uint32_t threads, uint32_t viewers, uint32_t w, uint32_t h,
-                           srv_viewer_id *ids)
-{
-    srv_loop_desc d = {.s = s, .rt = rt, .threads = threads, .seed = 1};
-    uint32_t count = 0;
-    const fx_effect *const *registry = fx_registry(&count);
-    bool needed[SRV_MAX_EFFECTS];
-    char why[SRV_MAX_EFFECTS][200];
-    fx_needs(registry, count, s, needed, why);
-    for (uint32_t e = 0; e < count; e++)
-        d.effect_on[e] = needed[e] && registry[e]->shade;
-    srv_loop *loop = NULL;
-    char err[256];
-    if (srv_loop_create(&d, &loop, err, sizeof err) != FXC_OK) {
-        fprintf(stderr, "bench_stages: %s\n", err);
-        exit(1);
-    }
-    for (uint32_t v = 0; v < viewers; v++)
-        if (srv_viewer_add(loop, &(srv_viewer_desc){.width = w, .height = h}, &ids[v]) != FXC_OK) {
-            fprintf(stderr, "bench_stages: cannot add a viewer\n");
-            exit(1);
-        }
-    return loop;
-}
-
-static double run_frame(srv_loop *loop, const scene *s, srv_camgen_kind gen, const srv_viewer_id *ids,
-                        uint32_t viewers, uint32_t frame, srv_frame_stats *st)
-{
-    for (uint32_t v = 0; v < viewers; v++) {
-        srv_camera cam = srv_camgen_camera(gen, s, v, viewers, frame, 1);
-        srv_viewer_set_camera(loop, ids[v], &cam);
-    }
-    double t = bench_now_ms();
-    if (srv_loop_frame(loop, st) != FXC_OK) {
-        fprintf(stderr, "bench_stages: frame failed\n");
-        exit(1);
-    }
-    return bench_now_ms() - t;
-}
 
 static void print_row(const char *what, const double *values, int n)
 {
@@ -120,12 +78,12 @@ int main(int argc, char **argv)
 
     /* Part 1: stage ratios on one thread. */
     srv_viewer_id ids[SRV_MAX_VIEWERS];
-    srv_loop *one = make_loop(s, rt, 1, viewers, w, h, ids);
+    srv_loop *one = bench_make_loop("bench_stages", s, rt, false, 1, viewers, w, h, ids);
     double vis[BENCH_MAX_SAMPLES], req_ratio[BENCH_MAX_SAMPLES], comp_ratio[BENCH_MAX_SAMPLES],
         req[BENCH_MAX_SAMPLES], comp[BENCH_MAX_SAMPLES], frame_ms[BENCH_MAX_SAMPLES];
     srv_frame_stats st;
     for (uint32_t f = 0; f < warmup + frames; f++) {
-        run_frame(one, s, gen, ids, viewers, f, &st);
+        bench_run_frame("bench_stages", one, s, gen, ids, viewers, f, &st);
         if (f < warmup)
             continue;
         int i = (int)(f - warmup);
@@ -153,16 +111,14 @@ int main(int argc, char **argv)
         return 0;
     }
     srv_viewer_id ids1[SRV_MAX_VIEWERS], ids2[SRV_MAX_VIEWERS];
-    srv_loop *l1 = make_loop(s, rt, 1, viewers, w, h, ids1), *l2 = make_loop(s, rt, 2, viewers, w, h, ids2);
+    srv_loop *l1 = bench_make_loop("bench_stages", s, rt, false, 1, viewers, w, h, ids1),
+             *l2 = bench_make_loop("bench_stages", s, rt, false, 2, viewers, w, h, ids2);
     double speedup[BENCH_MAX_SAMPLES], t1s[BENCH_MAX_SAMPLES], t2s[BENCH_MAX_SAMPLES];
     for (uint32_t f = 0; f < warmup + frames; f++) {
         srv_frame_stats s1, s2;
-        double t1 = run_frame(l1, s, gen, ids1, viewers, f, &s1);
-        double t2 = run_frame(l2, s, gen, ids2, viewers, f, &s2);
-        uint64_t rays1 = 0, rays2 = 0;
-        for (uint32_t e = 0; e < SRV_MAX_EFFECTS; e++)
-            rays1 += s1.rays[e], rays2 += s2.rays[e];
-        if (s1.requested_texels != s2.requested_texels || rays1 != rays2) {
+        double t1 = bench_run_frame("bench_stages", l1, s, gen, ids1, viewers, f, &s1);
+        double t2 = bench_run_frame("bench_stages", l2, s, gen, ids2, viewers, f, &s2);
+        if (s1.requested_texels != s2.requested_texels || bench_effect_rays(&s1) != bench_effect_rays(&s2)) {
             fprintf(stderr, "bench_stages: the two loops did different work in frame %u\n", f);
             return 1;
         }

@@ -8,61 +8,13 @@
  *                     [--camera walk|group|... (walk)] [--viewers N (1)] [--warmup N (10)] [--frames N (20)]
  *                     [--threads T (0 = all)]
  */
-#include "bench_util.h"
-#include "camgen.h"
-#include "engine.h"
+#include "bench_engine.h"
 #include "scene.h"
 
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
-
-static srv_loop *make_loop(scene *s, scene_rt *rt, bool no_cache, uint32_t threads, uint32_t viewers, uint32_t w,
-                           uint32_t h, srv_viewer_id *ids)
-{
-    srv_loop_desc d = {.s = s, .rt = rt, .threads = threads, .seed = 1, .no_cache = no_cache};
-    uint32_t count = 0;
-    const fx_effect *const *registry = fx_registry(&count);
-    bool needed[SRV_MAX_EFFECTS];
-    char why[SRV_MAX_EFFECTS][200];
-    fx_needs(registry, count, s, needed, why);
-    for (uint32_t e = 0; e < count; e++)
-        d.effect_on[e] = needed[e] && registry[e]->shade;
-    srv_loop *loop = NULL;
-    char err[256];
-    if (srv_loop_create(&d, &loop, err, sizeof err) != FXC_OK) {
-        fprintf(stderr, "bench_steady: %s\n", err);
-        exit(1);
-    }
-    for (uint32_t v = 0; v < viewers; v++)
-        if (srv_viewer_add(loop, &(srv_viewer_desc){.width = w, .height = h}, &ids[v]) != FXC_OK) {
-            fprintf(stderr, "bench_steady: cannot add a viewer\n");
-            exit(1);
-        }
-    return loop;
-}
-
-/* Runs one frame; returns its wall time (ms) and the effect rays. */
-static double run_frame(srv_loop *loop, const scene *s, srv_camgen_kind gen, const srv_viewer_id *ids,
-                        uint32_t viewers, uint32_t frame, uint64_t *rays)
-{
-    for (uint32_t v = 0; v < viewers; v++) {
-        srv_camera cam = srv_camgen_camera(gen, s, v, viewers, frame, 1);
-        srv_viewer_set_camera(loop, ids[v], &cam);
-    }
-    srv_frame_stats st;
-    double t = bench_now_ms();
-    if (srv_loop_frame(loop, &st) != FXC_OK) {
-        fprintf(stderr, "bench_steady: frame failed\n");
-        exit(1);
-    }
-    t = bench_now_ms() - t;
-    *rays = 0;
-    for (uint32_t e = 0; e < SRV_MAX_EFFECTS; e++)
-        *rays += st.rays[e];
-    return t;
-}
 
 int main(int argc, char **argv)
 {
@@ -112,16 +64,17 @@ int main(int argc, char **argv)
            "each frame on the cached loop, then on the no-cache loop\n\n",
            path, viewers, w, h, srv_camgen_name(gen), threads, warmup, frames);
     srv_viewer_id ids_c[SRV_MAX_VIEWERS], ids_n[SRV_MAX_VIEWERS];
-    srv_loop *cached = make_loop(s, rt, false, threads, viewers, w, h, ids_c);
-    srv_loop *baseline = make_loop(s, rt, true, threads, viewers, w, h, ids_n);
+    srv_loop *cached = bench_make_loop("bench_steady", s, rt, false, threads, viewers, w, h, ids_c);
+    srv_loop *baseline = bench_make_loop("bench_steady", s, rt, true, threads, viewers, w, h, ids_n);
     double ray_ratio[BENCH_MAX_SAMPLES], time_ratio[BENCH_MAX_SAMPLES], ms_c[BENCH_MAX_SAMPLES],
         ms_n[BENCH_MAX_SAMPLES], rays_c[BENCH_MAX_SAMPLES], rays_n[BENCH_MAX_SAMPLES];
     printf("| frame | cached effect rays | no-cache effect rays | rays cached / no-cache | cached ms | no-cache ms | "
            "time cached / no-cache |\n|---|---|---|---|---|---|---|\n");
     for (uint32_t f = 0; f < warmup + frames; f++) {
-        uint64_t rc, rn;
-        double tc = run_frame(cached, s, gen, ids_c, viewers, f, &rc);
-        double tn = run_frame(baseline, s, gen, ids_n, viewers, f, &rn);
+        srv_frame_stats sc, sn;
+        double tc = bench_run_frame("bench_steady", cached, s, gen, ids_c, viewers, f, &sc);
+        double tn = bench_run_frame("bench_steady", baseline, s, gen, ids_n, viewers, f, &sn);
+        uint64_t rc = bench_effect_rays(&sc), rn = bench_effect_rays(&sn);
         if (f < warmup)
             continue;
         int i = (int)(f - warmup);

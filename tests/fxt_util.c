@@ -104,3 +104,25 @@ void fxt_effects_on(srv_loop_desc *desc, const char *const *names, uint32_t coun
         desc->effect_on[e] = true;
     }
 }
+
+int fxt_default_scene_setup(void **state)
+{
+    fxt_scene_fixture *f = calloc(1, sizeof *f);
+    assert_non_null(f);
+    scene_error err = {0};
+    f->s = scene_create_default(NULL, &err);
+    assert_non_null(f->s);
+    f->rt = scene_rt_create(f->s, NULL, &err);
+    assert_non_null(f->rt);
+    *state = f;
+    return 0;
+}
+
+int fxt_default_scene_teardown(void **state)
+{
+    fxt_scene_fixture *f = *state;
+    scene_rt_free(f->rt);
+    scene_free(f->s);
+    free(f);
+    return 0;
+}

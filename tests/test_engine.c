@@ -24,31 +24,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-typedef struct fixture {
-    scene *s;
-    scene_rt *rt;
-} fixture;
-
-static int setup(void **state)
-{
-    fixture *f = calloc(1, sizeof *f);
-    scene_error err = {0};
-    f->s = scene_create_default(NULL, &err);
-    assert_non_null(f->s);
-    f->rt = scene_rt_create(f->s, NULL, &err);
-    assert_non_null(f->rt);
-    *state = f;
-    return 0;
-}
-
-static int teardown(void **state)
-{
-    fixture *f = *state;
-    scene_rt_free(f->rt);
-    scene_free(f->s);
-    free(f);
-    return 0;
-}
+typedef fxt_scene_fixture fixture;
 
 /* ---- a test-only effect: the world position of every texel ------------------------------------------- */
 
@@ -669,19 +645,22 @@ static void test_tone_map_thresholds(void **state)
     assert_int_equal(srv__tone_map(-INFINITY), 0);
 }
 
+/* A test run with the embedded default scene as its state. */
+#define SCENE_TEST(test) cmocka_unit_test_setup_teardown(test, fxt_default_scene_setup, fxt_default_scene_teardown)
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test_setup_teardown(test_effect_plugin, setup, teardown),
-        cmocka_unit_test_setup_teardown(test_effect_list_refused, setup, teardown),
-        cmocka_unit_test_setup_teardown(test_viewer_handles, setup, teardown),
-        cmocka_unit_test_setup_teardown(test_sixty_four_viewers, setup, teardown),
-        cmocka_unit_test_setup_teardown(test_late_viewer_same_pixels, setup, teardown),
-        cmocka_unit_test_setup_teardown(test_sinks_and_report, setup, teardown),
-        cmocka_unit_test_setup_teardown(test_replay_matches_api, setup, teardown),
+        SCENE_TEST(test_effect_plugin),
+        SCENE_TEST(test_effect_list_refused),
+        SCENE_TEST(test_viewer_handles),
+        SCENE_TEST(test_sixty_four_viewers),
+        SCENE_TEST(test_late_viewer_same_pixels),
+        SCENE_TEST(test_sinks_and_report),
+        SCENE_TEST(test_replay_matches_api),
         cmocka_unit_test(test_result_codes),
         cmocka_unit_test(test_tone_map_thresholds),
-        cmocka_unit_test_setup_teardown(test_allocation_failures_counted, setup, teardown),
+        SCENE_TEST(test_allocation_failures_counted),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

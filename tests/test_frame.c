@@ -12,31 +12,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-typedef struct fixture {
-    scene *s;
-    scene_rt *rt;
-} fixture;
-
-static int setup(void **state)
-{
-    fixture *f = calloc(1, sizeof *f);
-    scene_error err = {0};
-    f->s = scene_create_default(NULL, &err);
-    assert_non_null(f->s);
-    f->rt = scene_rt_create(f->s, NULL, &err);
-    assert_non_null(f->rt);
-    *state = f;
-    return 0;
-}
-
-static int teardown(void **state)
-{
-    fixture *f = *state;
-    scene_rt_free(f->rt);
-    scene_free(f->s);
-    free(f);
-    return 0;
-}
+typedef fxt_scene_fixture fixture;
 
 static srv_loop_desc base_desc(const fixture *f)
 {
@@ -287,18 +263,21 @@ static void test_memory_report(void **state)
     srv_loop_free(loop);
 }
 
+/* A test run with the embedded default scene as its state. */
+#define SCENE_TEST(test) cmocka_unit_test_setup_teardown(test, fxt_default_scene_setup, fxt_default_scene_teardown)
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test_setup_teardown(test_identical_viewers_share_everything, setup, teardown),
-        cmocka_unit_test_setup_teardown(test_disjoint_viewers_share_nothing, setup, teardown),
-        cmocka_unit_test_setup_teardown(test_thread_count_independent, setup, teardown),
-        cmocka_unit_test_setup_teardown(test_ray_budget, setup, teardown),
-        cmocka_unit_test_setup_teardown(test_static_view_converges, setup, teardown),
-        cmocka_unit_test_setup_teardown(test_cached_matches_no_cache, setup, teardown),
-        cmocka_unit_test_setup_teardown(test_tiny_pool_degrades, setup, teardown),
-        cmocka_unit_test_setup_teardown(test_viewer_sees_nothing, setup, teardown),
-        cmocka_unit_test_setup_teardown(test_memory_report, setup, teardown),
+        SCENE_TEST(test_identical_viewers_share_everything),
+        SCENE_TEST(test_disjoint_viewers_share_nothing),
+        SCENE_TEST(test_thread_count_independent),
+        SCENE_TEST(test_ray_budget),
+        SCENE_TEST(test_static_view_converges),
+        SCENE_TEST(test_cached_matches_no_cache),
+        SCENE_TEST(test_tiny_pool_degrades),
+        SCENE_TEST(test_viewer_sees_nothing),
+        SCENE_TEST(test_memory_report),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

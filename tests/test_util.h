@@ -27,6 +27,14 @@ int fxt_run_cli(const char *args, char *out, size_t out_cap, char *err, size_t e
 /* ---- the engine (server/engine) --------------------------------------------------------------------- */
 #include "engine.h"
 
+/* A cmocka fixture holding the embedded default scene and its Embree scene (state: fxt_scene_fixture *). */
+typedef struct fxt_scene_fixture {
+    scene *s;
+    scene_rt *rt;
+} fxt_scene_fixture;
+int fxt_default_scene_setup(void **state);
+int fxt_default_scene_teardown(void **state);
+
 /* Creates a loop (failing the test with the message if it cannot) and adds n viewers of w x h, their ids in
  * ids[0..n). */
 srv_loop *fxt_loop(const srv_loop_desc *desc, uint32_t n, uint32_t w, uint32_t h, srv_viewer_id *ids);
