@@ -25,6 +25,8 @@
  * along their creases, and no-cache footprints reaching past a wall were lit up to 14/16. */
 #include "test_util.h"
 
+#include "fxt_scene.h"
+
 #include "effects.h"
 #include "fx_internal.h"
 #include "scene.h"
@@ -39,46 +41,7 @@ static const double PI = 3.14159265358979323846;
 
 /* ---- scene building (as in test_effects.c) -------------------------------------------------------- */
 
-/* A new scene with one grey material. */
-static scene *new_scene(void)
-{
-    scene *s = scene__alloc();
-    assert_non_null(s);
-    scene_error err;
-    scene_material material = {.diffuse = {0.5f, 0.5f, 0.5f}, .texture = -1, .name = "grey"};
-    scene__add_material(s, &material, &err);
-    return s;
-}
 
-/* Adds the parallelogram corner, corner + edge_a, corner + edge_a + edge_b, corner + edge_b as one mesh of
- * cells x cells quads (two triangles each); its normal is edge_a x edge_b. */
-static void add_quad(scene *s, const char *name, const double corner[3], const double edge_a[3],
-                     const double edge_b[3], uint32_t cells)
-{
-    uint32_t side = cells + 1, vertex_count = side * side, triangle_count = 2 * cells * cells;
-    float *positions = malloc(sizeof(float) * 3 * vertex_count);
-    uint32_t *indices = malloc(sizeof(uint32_t) * 3 * triangle_count);
-    assert_true(positions && indices);
-    for (uint32_t j = 0; j < side; j++)
-        for (uint32_t i = 0; i < side; i++)
-            for (int k = 0; k < 3; k++)
-                positions[3 * (j * side + i) + k] =
-                    (float)(corner[k] + edge_a[k] * i / cells + edge_b[k] * j / cells);
-    uint32_t t = 0;
-    for (uint32_t j = 0; j < cells; j++)
-        for (uint32_t i = 0; i < cells; i++) {
-            uint32_t v00 = j * side + i, v10 = v00 + 1, v01 = v00 + side, v11 = v01 + 1;
-            uint32_t quad[6] = {v00, v10, v11, v00, v11, v01};
-            memcpy(indices + 3 * t, quad, sizeof quad);
-            t += 2;
-        }
-    scene_error err;
-    assert_int_equal(
-        scene__add_mesh(s, name, positions, vertex_count, indices, triangle_count, NULL, 0, NULL, &err),
-        SCENE_OK);
-    free(positions);
-    free(indices);
-}
 
 /* Where a test room goes: world = rot * room + shift. */
 typedef struct placement {
@@ -124,112 +87,19 @@ static void add_rect(scene *s, const char *name, const placement *pl, int axis, 
     place(pl, edge_a, false, world_a);
     place(pl, edge_b, false, world_b);
     if (facing > 0)
-        add_quad(s, name, world_corner, world_a, world_b, cells);
+        fxt_add_quad(s, name, world_corner, world_a, world_b, cells);
     else
-        add_quad(s, name, world_corner, world_b, world_a, cells);
+        fxt_add_quad(s, name, world_corner, world_b, world_a, cells);
 }
 
-/* Adds a directional light travelling along (dx, dy, dz). */
-static void add_sun(scene *s, float dx, float dy, float dz)
-{
-    scene_light light = {
-        .type = SCENE_LIGHT_DIRECTIONAL, .direction = {dx, dy, dz}, .color = {1, 1, 1}, .intensity = 1};
-    scene_error err;
-    assert_int_equal(scene__add_light(s, &light, "test sun", &err), SCENE_OK);
-}
 
-/* Finalizes s at texel density (texels per metre) with the AO radius and builds its Embree scene. */
-static scene_rt *finish_scene(scene *s, float density, float ao_radius)
-{
-    scene_error err;
-    s->ao_radius = ao_radius;
-    scene_load_desc desc = {.texel_density = density};
-    scene_result rc = scene__finalize(s, &desc, &err);
-    if (rc != SCENE_OK)
-        fprintf(stderr, "finalize: %s\n", err.msg);
-    assert_int_equal(rc, SCENE_OK);
-    scene_rt *rt = scene_rt_create(s, NULL, &err);
-    assert_non_null(rt);
-    scene_tracing_thread_init();
-    return rt;
-}
 
-/* The single island of mesh. */
-static uint32_t island_of_mesh(const scene *s, uint32_t mesh)
-{
-    uint32_t found = UINT32_MAX, islands = 0;
-    for (uint32_t i = 0; i < s->island_count; i++)
-        if (s->islands[i].mesh == mesh) {
-            found = i;
-            islands++;
-        }
-    assert_int_equal(islands, 1);
-    return found;
-}
 
 /* ---- running an effect over a whole island -------------------------------------------------------- */
 
-/* Every block of one island at one level, with its lookup and payload storage and one job per block. */
-typedef struct island_run {
-    uint32_t island, level, blocks_x, blocks_y, block_count, texel_bytes;
-    uint32_t *lookup;   /* block_count * 64 */
-    uint8_t *payload;   /* block_count * 64 * texel_bytes */
-    fx_block_job *jobs; /* block_count */
-    uint64_t texels;    /* texels in all masks */
-} island_run;
 
-/* The cache key of a block (DESIGN.md: effect:4 | island:32 | level:4 | block_y:12 | block_x:12). */
-static uint64_t block_key(uint32_t effect, uint32_t island, uint32_t level, uint32_t bx, uint32_t by)
-{
-    return ((uint64_t)effect << 60) | ((uint64_t)island << 28) | ((uint64_t)level << 24) |
-           ((uint64_t)by << 12) | bx;
-}
 
-/* Prepares every block of island at level for effect: masks cover the island's texels, lookups are filled
- * by fx_lookup_update (as frame stage 5 does). */
-static void island_run_init(island_run *run, const scene *s, uint32_t island, uint32_t level, uint32_t effect)
-{
-    memset(run, 0, sizeof *run);
-    run->island = island;
-    run->level = level;
-    uint32_t registry_count = 0;
-    run->texel_bytes = fx_registry(&registry_count)[effect]->texel_bytes(s);
-    uint32_t width = (s->islands[island].width + (1u << level) - 1) >> level;
-    uint32_t height = (s->islands[island].height + (1u << level) - 1) >> level;
-    run->blocks_x = (width + 7) / 8;
-    run->blocks_y = (height + 7) / 8;
-    run->block_count = run->blocks_x * run->blocks_y;
-    run->lookup = calloc((size_t)run->block_count * 64, sizeof(uint32_t));
-    run->payload = calloc((size_t)run->block_count * 64, run->texel_bytes);
-    run->jobs = calloc(run->block_count, sizeof(fx_block_job));
-    assert_true(run->lookup && run->payload && run->jobs);
-    for (uint32_t by = 0; by < run->blocks_y; by++)
-        for (uint32_t bx = 0; bx < run->blocks_x; bx++) {
-            uint32_t b = by * run->blocks_x + bx;
-            uint64_t mask = 0;
-            for (uint32_t t = 0; t < 64; t++)
-                if (bx * 8 + (t & 7) < width && by * 8 + (t >> 3) < height)
-                    mask |= 1ull << t;
-            fx_lookup_update(s, island, level, bx, by, mask, run->lookup + 64 * b);
-            run->jobs[b] = (fx_block_job){.key = block_key(effect, island, level, bx, by),
-                                          .island = island,
-                                          .level = level,
-                                          .block_x = bx,
-                                          .block_y = by,
-                                          .mask = mask,
-                                          .lookup = run->lookup + 64 * b,
-                                          .payload = run->payload + (size_t)64 * run->texel_bytes * b};
-            run->texels += (uint64_t)__builtin_popcountll(mask);
-        }
-}
 
-/* Releases a run's storage. */
-static void island_run_free(island_run *run)
-{
-    free(run->lookup);
-    free(run->payload);
-    free(run->jobs);
-}
 
 /* The affine map from level-0 island UV to world of a planar island, from its first triangle (computed here
  * in double, independently of the effect code): world = origin + u * along_u + v * along_v. */
@@ -358,7 +228,7 @@ typedef struct corner_setup {
 
 static scene *corner_room(const corner_setup *c, float density, float radius, scene_rt **rt)
 {
-    scene *s = new_scene();
+    scene *s = fxt_new_scene();
     double reach = radius + 1.0, top = isinf(c->ceiling) ? reach : c->ceiling;
     add_rect(s, "floor", &ROOM, 1, 0, (double[2]){0, c->z0}, (double[2]){c->floor_x, c->z1}, +1, 2);
     add_rect(s, "wall_x", &ROOM, 0, 0, (double[2]){0, c->z0 - reach}, (double[2]){top, c->z1 + reach}, +1, 2);
@@ -367,7 +237,7 @@ static scene *corner_room(const corner_setup *c, float density, float radius, sc
     if (!isinf(c->ceiling))
         add_rect(s, "ceiling", &ROOM, 1, c->ceiling, (double[2]){0, c->z0 - reach},
                  (double[2]){c->floor_x + reach, c->z1 + reach}, -1, 2);
-    *rt = finish_scene(s, density, radius);
+    *rt = fxt_finish_scene(s, density, radius);
     return s;
 }
 
@@ -436,7 +306,7 @@ static uint32_t island_texels(uint32_t size, uint32_t level)
 
 /* The four texel slots (block * 64 + texel) and weights of a bilinear read of island run at level-0 island UV
  * (u, v), as compose reads: texel centres at (i + 0.5) 2^level, indices clamped into the island. */
-static void bilinear_taps(const scene *s, const island_run *run, double u, double v, size_t slots[4],
+static void bilinear_taps(const scene *s, const fxt_island_run *run, double u, double v, size_t slots[4],
                           double weights[4])
 {
     double scale = (double)(1u << run->level), fu = u / scale - 0.5, fv = v / scale - 0.5;
@@ -470,11 +340,11 @@ static cached_result check_cached_ao(const corner_setup *c, float density, float
 {
     scene_rt *rt;
     scene *s = corner_room(c, density, radius, &rt);
-    uint32_t island = island_of_mesh(s, 0);
+    uint32_t island = fxt_island_of_mesh(s, 0);
     uv_to_world map = island_plane_map(s, island);
-    island_run run, extra;
-    island_run_init(&run, s, island, level, FX_AO);
-    island_run_init(&extra, s, island, level, FX_AO);
+    fxt_island_run run, extra;
+    fxt_island_run_init(&run, s, island, level, FX_AO);
+    fxt_island_run_init(&extra, s, island, level, FX_AO);
     double texel_m = (double)(1u << level) / density, scale = (double)(1u << level);
 
     /* Each texel's group and expectation. */
@@ -502,7 +372,7 @@ static cached_result check_cached_ao(const corner_setup *c, float density, float
     for (uint32_t seed = 0; seed < 32; seed++) {
         /* Seed 0 runs every texel (kept in `run` for the bilinear reads); later seeds only the texels of
          * groups still short of 32 texels' worth. */
-        island_run *target = seed == 0 ? &run : &extra;
+        fxt_island_run *target = seed == 0 ? &run : &extra;
         uint64_t texels = 0;
         for (uint32_t b = 0; b < run.block_count; b++) {
             uint64_t mask = 0;
@@ -586,8 +456,8 @@ static cached_result check_cached_ao(const corner_setup *c, float density, float
     }
     free(group);
     free(expected);
-    island_run_free(&extra);
-    island_run_free(&run);
+    fxt_island_run_free(&extra);
+    fxt_island_run_free(&run);
     scene_rt_free(rt);
     scene_free(s);
     return result;
@@ -699,8 +569,8 @@ typedef struct shadow_count {
 
 static shadow_count cached_shadow(const scene *s, scene_rt *rt, uint32_t mesh, uint32_t level)
 {
-    island_run run;
-    island_run_init(&run, s, island_of_mesh(s, mesh), level, FX_SHADOW);
+    fxt_island_run run;
+    fxt_island_run_init(&run, s, fxt_island_of_mesh(s, mesh), level, FX_SHADOW);
     memset(run.payload, 0xa5, (size_t)run.block_count * 64 * run.texel_bytes); /* must be overwritten */
     fx_context ctx = {.s = s, .rt = rt, .seed = 9, .ao_radius = 1.0f};
     shadow_count count = {.texels = run.texels};
@@ -712,7 +582,7 @@ static shadow_count cached_shadow(const scene *s, scene_rt *rt, uint32_t mesh, u
             count.lit_bits += (uint64_t)__builtin_popcount(mask);
             count.lit_texels += mask != 0;
         }
-    island_run_free(&run);
+    fxt_island_run_free(&run);
     return count;
 }
 
@@ -760,7 +630,7 @@ static void add_placed_sun(scene *s, const placement *pl, double dx, double dy, 
 {
     float dir[3];
     place_float(pl, (double[3]){dx, dy, dz}, false, dir);
-    add_sun(s, dir[0], dir[1], dir[2]);
+    fxt_add_sun(s, dir[0], dir[1], dir[2]);
 }
 
 /* A closed box (2 x 1.5 x 1.7 m, faces inward) under a sun outside it, axis-aligned and turned: the floor and
@@ -775,7 +645,7 @@ static void test_shadow_closed_box(void **state)
     for (size_t k = 0; k < sizeof densities / sizeof densities[0]; k++)
         for (int turned = 0; turned < 2; turned++) {
             const placement *pl = placements[turned];
-            scene *s = new_scene();
+            scene *s = fxt_new_scene();
             add_rect(s, "floor", pl, 1, 0, (double[2]){0, 0}, (double[2]){w, d}, +1, 2);
             add_rect(s, "ceiling", pl, 1, h, (double[2]){0, 0}, (double[2]){w, d}, -1, 2);
             add_rect(s, "wall x0", pl, 0, 0, (double[2]){0, 0}, (double[2]){h, d}, +1, 2);
@@ -784,7 +654,7 @@ static void test_shadow_closed_box(void **state)
             add_rect(s, "wall z1", pl, 2, d, (double[2]){0, 0}, (double[2]){w, h}, -1, 2);
             add_placed_sun(s, pl, -0.4, -1.0,
                            -0.3); /* from above, +x, +z: faces the floor and walls x0, z0 */
-            scene_rt *rt = finish_scene(s, densities[k], 1.0f);
+            scene_rt *rt = fxt_finish_scene(s, densities[k], 1.0f);
             uint64_t facing_rays = 0, lit_bits = 0;
             for (uint32_t level = 0; level <= 3; level += 3)
                 for (uint32_t mesh = 0; mesh < 6; mesh++) {
@@ -841,7 +711,7 @@ static void test_shadow_thin_wall(void **state)
     const placement *placements[] = {&ROOM, &TURNED};
     for (int turned = 0; turned < 2; turned++) {
         const placement *pl = placements[turned];
-        scene *s = new_scene();
+        scene *s = fxt_new_scene();
         add_rect(s, "open floor", pl, 1, 0, (double[2]){-room, 0}, (double[2]){0, d}, +1, 2);         /* 0 */
         add_rect(s, "closed floor", pl, 1, 0, (double[2]){t, 0}, (double[2]){t + room, d}, +1, 2);    /* 1 */
         add_rect(s, "closed far wall", pl, 0, t + room, (double[2]){0, 0}, (double[2]){h, d}, -1, 2); /* 2 */
@@ -853,7 +723,7 @@ static void test_shadow_thin_wall(void **state)
         add_rect(s, "partition top", pl, 1, h, (double[2]){0, 0}, (double[2]){t, d}, +1, 1);          /* 8 */
         add_placed_sun(s, pl, 1.0, -0.8,
                        -0.25); /* travelling +x and down: from the open room to the closed */
-        scene_rt *rt = finish_scene(s, 37.0f, 1.0f);
+        scene_rt *rt = fxt_finish_scene(s, 37.0f, 1.0f);
 
         for (uint32_t level = 0; level <= 3; level += 3) {
             for (uint32_t mesh = 1; mesh <= 7; mesh++) {

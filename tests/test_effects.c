@@ -15,6 +15,8 @@
  * no self-intersection (open-plane AO exactly 1, every shadow bit set) and finite points. */
 #include "test_util.h"
 
+#include "fxt_scene.h"
+
 #include "effects.h"
 #include "fx_internal.h" /* white-box: the sample sequence */
 #include "scene.h"
@@ -34,55 +36,8 @@ static const double PI = 3.14159265358979323846;
 
 /* ---- scene building ------------------------------------------------------------------------------ */
 
-/* A new scene with one grey material. */
-static scene *new_scene(void)
-{
-    scene *s = scene__alloc();
-    assert_non_null(s);
-    scene_error err;
-    scene_material material = {.diffuse = {0.5f, 0.5f, 0.5f}, .texture = -1, .name = "grey"};
-    scene__add_material(s, &material, &err);
-    return s;
-}
 
-/* Adds a parallelogram corner, corner + edge_a, corner + edge_a + edge_b, corner + edge_b as one mesh of
- * cells x cells quads (two triangles each); its normal is edge_a x edge_b. */
-static void add_quad(scene *s, const char *name, const double corner[3], const double edge_a[3],
-                     const double edge_b[3], uint32_t cells)
-{
-    uint32_t side = cells + 1, vertex_count = side * side, triangle_count = 2 * cells * cells;
-    float *positions = malloc(sizeof(float) * 3 * vertex_count);
-    uint32_t *indices = malloc(sizeof(uint32_t) * 3 * triangle_count);
-    assert_true(positions && indices);
-    for (uint32_t j = 0; j < side; j++)
-        for (uint32_t i = 0; i < side; i++)
-            for (int k = 0; k < 3; k++)
-                positions[3 * (j * side + i) + k] =
-                    (float)(corner[k] + edge_a[k] * i / cells + edge_b[k] * j / cells);
-    uint32_t t = 0;
-    for (uint32_t j = 0; j < cells; j++)
-        for (uint32_t i = 0; i < cells; i++) {
-            uint32_t v00 = j * side + i, v10 = v00 + 1, v01 = v00 + side, v11 = v01 + 1;
-            uint32_t quad[6] = {v00, v10, v11, v00, v11, v01};
-            memcpy(indices + 3 * t, quad, sizeof quad);
-            t += 2;
-        }
-    scene_error err;
-    assert_int_equal(
-        scene__add_mesh(s, name, positions, vertex_count, indices, triangle_count, NULL, 0, NULL, &err),
-        SCENE_OK);
-    free(positions);
-    free(indices);
-}
 
-/* Adds a directional light travelling along direction. */
-static void add_sun(scene *s, float dx, float dy, float dz)
-{
-    scene_light light = {
-        .type = SCENE_LIGHT_DIRECTIONAL, .direction = {dx, dy, dz}, .color = {1, 1, 1}, .intensity = 1};
-    scene_error err;
-    assert_int_equal(scene__add_light(s, &light, "test sun", &err), SCENE_OK);
-}
 
 /* Adds a point light at (x, y, z). */
 static void add_point_light(scene *s, float x, float y, float z)
@@ -93,102 +48,16 @@ static void add_point_light(scene *s, float x, float y, float z)
     assert_int_equal(scene__add_light(s, &light, "test lamp", &err), SCENE_OK);
 }
 
-/* Finalizes s at texel density (texels per metre) with the AO radius and builds its Embree scene. */
-static scene_rt *finish_scene(scene *s, float density, float ao_radius)
-{
-    scene_error err;
-    s->ao_radius = ao_radius;
-    scene_load_desc desc = {.texel_density = density};
-    scene_result rc = scene__finalize(s, &desc, &err);
-    if (rc != SCENE_OK)
-        fprintf(stderr, "finalize: %s\n", err.msg);
-    assert_int_equal(rc, SCENE_OK);
-    scene_rt *rt = scene_rt_create(s, NULL, &err);
-    assert_non_null(rt);
-    scene_tracing_thread_init();
-    return rt;
-}
 
-/* The single island of mesh (the test meshes are planar and small, so each is one island). */
-static uint32_t island_of_mesh(const scene *s, uint32_t mesh)
-{
-    uint32_t found = UINT32_MAX, islands = 0;
-    for (uint32_t i = 0; i < s->island_count; i++)
-        if (s->islands[i].mesh == mesh) {
-            found = i;
-            islands++;
-        }
-    assert_int_equal(islands, 1);
-    return found;
-}
 
 /* ---- running an effect over a whole island -------------------------------------------------------- */
 
-/* Every block of one island at one level, with its lookup and payload storage and one job per block. */
-typedef struct island_run {
-    uint32_t island, level, blocks_x, blocks_y, block_count, texel_bytes;
-    uint32_t *lookup;   /* block_count * 64 */
-    uint8_t *payload;   /* block_count * 64 * texel_bytes */
-    fx_block_job *jobs; /* block_count */
-    uint64_t texels;    /* texels in all masks */
-} island_run;
 
-/* The cache key of a block (DESIGN.md: effect:4 | island:32 | level:4 | block_y:12 | block_x:12). */
-static uint64_t block_key(uint32_t effect, uint32_t island, uint32_t level, uint32_t bx, uint32_t by)
-{
-    return ((uint64_t)effect << 60) | ((uint64_t)island << 28) | ((uint64_t)level << 24) |
-           ((uint64_t)by << 12) | bx;
-}
 
-/* Prepares every block of island at level for effect: masks cover the island's texels, lookups are filled. */
-static void island_run_init(island_run *run, const scene *s, uint32_t island, uint32_t level, uint32_t effect)
-{
-    memset(run, 0, sizeof *run);
-    run->island = island;
-    run->level = level;
-    uint32_t count = 0;
-    const fx_effect *const *registry = fx_registry(&count);
-    assert_true(effect < count);
-    run->texel_bytes = registry[effect]->texel_bytes(s);
-    uint32_t width = (s->islands[island].width + (1u << level) - 1) >> level;
-    uint32_t height = (s->islands[island].height + (1u << level) - 1) >> level;
-    run->blocks_x = (width + 7) / 8;
-    run->blocks_y = (height + 7) / 8;
-    run->block_count = run->blocks_x * run->blocks_y;
-    run->lookup = calloc((size_t)run->block_count * 64, sizeof(uint32_t));
-    run->payload = calloc((size_t)run->block_count * 64, run->texel_bytes);
-    run->jobs = calloc(run->block_count, sizeof(fx_block_job));
-    assert_true(run->lookup && run->payload && run->jobs);
-    for (uint32_t by = 0; by < run->blocks_y; by++)
-        for (uint32_t bx = 0; bx < run->blocks_x; bx++) {
-            uint32_t b = by * run->blocks_x + bx;
-            uint64_t mask = 0;
-            for (uint32_t t = 0; t < 64; t++)
-                if (bx * 8 + (t & 7) < width && by * 8 + (t >> 3) < height)
-                    mask |= 1ull << t;
-            fx_lookup_update(s, island, level, bx, by, mask, run->lookup + 64 * b);
-            run->jobs[b] = (fx_block_job){.key = block_key(effect, island, level, bx, by),
-                                          .island = island,
-                                          .level = level,
-                                          .block_x = bx,
-                                          .block_y = by,
-                                          .mask = mask,
-                                          .lookup = run->lookup + 64 * b,
-                                          .payload = run->payload + (size_t)64 * run->texel_bytes * b};
-            run->texels += (uint64_t)__builtin_popcountll(mask);
-        }
-}
 
-/* Releases a run's storage. */
-static void island_run_free(island_run *run)
-{
-    free(run->lookup);
-    free(run->payload);
-    free(run->jobs);
-}
 
 /* World position and normal of the centre of texel t of block b. */
-static void texel_centre(const scene *s, const island_run *run, uint32_t b, uint32_t t, float pos[3],
+static void texel_centre(const scene *s, const fxt_island_run *run, uint32_t b, uint32_t t, float pos[3],
                          float normal[3])
 {
     const fx_block_job *job = &run->jobs[b];
@@ -271,19 +140,19 @@ static double triangle_distance(const float *uv, double px, double py)
 static void test_lookup_inside_and_nearest(void **state)
 {
     (void)state;
-    scene *s = new_scene();
+    scene *s = fxt_new_scene();
     const float positions[] = {0, 0, 0, 3, 0, 0, 3, 0, 1, 1.2f, 0, 1.1f, 1, 0, 3, 0, 0, 3};
     const uint32_t indices[] = {0, 2, 1, 0, 3, 2, 0, 4, 3, 0, 5, 4}; /* normal +y */
     scene_error err;
     assert_int_equal(scene__add_mesh(s, "L", positions, 6, indices, 4, NULL, 0, NULL, &err), SCENE_OK);
-    scene_rt *rt = finish_scene(s, 7.3f, 1.0f);
-    uint32_t island = island_of_mesh(s, 0);
+    scene_rt *rt = fxt_finish_scene(s, 7.3f, 1.0f);
+    uint32_t island = fxt_island_of_mesh(s, 0);
     const scene_island *isl = &s->islands[island];
     assert_int_equal(isl->triangle_count, 4);
 
     for (uint32_t level = 0; level < 2; level++) {
-        island_run run;
-        island_run_init(&run, s, island, level, FX_TRI_LOOKUP);
+        fxt_island_run run;
+        fxt_island_run_init(&run, s, island, level, FX_TRI_LOOKUP);
         uint32_t inside = 0, outside = 0;
         for (uint32_t b = 0; b < run.block_count; b++)
             for (uint32_t t = 0; t < 64; t++) {
@@ -332,7 +201,7 @@ static void test_lookup_inside_and_nearest(void **state)
         /* Not vacuous: both kinds occur (the notch and the border are outside). */
         assert_true(inside > 50u >> (2 * level));
         assert_true(outside > 20u >> (2 * level));
-        island_run_free(&run);
+        fxt_island_run_free(&run);
     }
     scene_rt_free(rt);
     scene_free(s);
@@ -342,11 +211,11 @@ static void test_lookup_inside_and_nearest(void **state)
 static void test_surface_point(void **state)
 {
     (void)state;
-    scene *s = new_scene();
-    add_quad(s, "floor", (double[3]){-2, 0.5, -2}, (double[3]){0, 0, 4}, (double[3]){4, 0, 0}, 3);
-    scene_rt *rt = finish_scene(s, 8.0f, 1.0f);
-    island_run run;
-    island_run_init(&run, s, island_of_mesh(s, 0), 0, FX_TRI_LOOKUP);
+    scene *s = fxt_new_scene();
+    fxt_add_quad(s, "floor", (double[3]){-2, 0.5, -2}, (double[3]){0, 0, 4}, (double[3]){4, 0, 0}, 3);
+    scene_rt *rt = fxt_finish_scene(s, 8.0f, 1.0f);
+    fxt_island_run run;
+    fxt_island_run_init(&run, s, fxt_island_of_mesh(s, 0), 0, FX_TRI_LOOKUP);
     for (uint32_t b = 0; b < run.block_count; b++)
         for (uint32_t t = 0; t < 64; t++) {
             if (!(run.jobs[b].mask >> t & 1))
@@ -359,7 +228,7 @@ static void test_surface_point(void **state)
             assert_true(pos[2] >= -2.0f - 1e-5f && pos[2] <= 2.0f + 1e-5f);
             assert_true(fabsf(normal[1] - 1.0f) < 1e-6f);
         }
-    island_run_free(&run);
+    fxt_island_run_free(&run);
     scene_rt_free(rt);
     scene_free(s);
 }
@@ -418,7 +287,7 @@ static double disk_quadrant_open(double a, double b)
 typedef double (*ao_expectation)(const float pos[3], double radius);
 
 /* Runs AO to convergence on run, then compares the mean of selected texels with the analytic mean. */
-static void check_ao_against(const scene *s, scene_rt *rt, island_run *run, float radius,
+static void check_ao_against(const scene *s, scene_rt *rt, fxt_island_run *run, float radius,
                              ao_expectation expect, const char *what)
 {
     fx_context ctx = {.s = s, .rt = rt, .seed = 7, .ao_radius = radius};
@@ -473,11 +342,11 @@ static double expect_corner(const float pos[3], double radius)
  * texels of expect_wall, every ray of length WALL_RADIUS towards the wall hits it (as an infinite wall). */
 static scene *wall_scene(scene_rt **rt)
 {
-    scene *s = new_scene();
-    add_quad(s, "floor", (double[3]){0, 0, -3}, (double[3]){0, 0, 6}, (double[3]){3, 0, 0}, 2);
-    add_quad(s, "wall", (double[3]){0, 0, -6}, (double[3]){0, 10, 0}, (double[3]){0, 0, 12},
+    scene *s = fxt_new_scene();
+    fxt_add_quad(s, "floor", (double[3]){0, 0, -3}, (double[3]){0, 0, 6}, (double[3]){3, 0, 0}, 2);
+    fxt_add_quad(s, "wall", (double[3]){0, 0, -6}, (double[3]){0, 10, 0}, (double[3]){0, 0, 12},
              2); /* normal +x */
-    *rt = finish_scene(s, 20.0f, WALL_RADIUS);
+    *rt = fxt_finish_scene(s, 20.0f, WALL_RADIUS);
     return s;
 }
 
@@ -485,11 +354,11 @@ static scene *wall_scene(scene_rt **rt)
 static void test_ao_open_plane(void **state)
 {
     (void)state;
-    scene *s = new_scene();
-    add_quad(s, "floor", (double[3]){-3, 0, -3}, (double[3]){0, 0, 6}, (double[3]){6, 0, 0}, 4);
-    scene_rt *rt = finish_scene(s, 6.0f, 1.0f);
-    island_run run;
-    island_run_init(&run, s, island_of_mesh(s, 0), 0, FX_AO);
+    scene *s = fxt_new_scene();
+    fxt_add_quad(s, "floor", (double[3]){-3, 0, -3}, (double[3]){0, 0, 6}, (double[3]){6, 0, 0}, 4);
+    scene_rt *rt = fxt_finish_scene(s, 6.0f, 1.0f);
+    fxt_island_run run;
+    fxt_island_run_init(&run, s, fxt_island_of_mesh(s, 0), 0, FX_AO);
     fx_context ctx = {.s = s, .rt = rt, .seed = 1, .ao_radius = 1.0f};
     assert_int_equal(fx_ao_update(&ctx, run.jobs, run.block_count, 64), run.texels * 64);
     for (uint32_t b = 0; b < run.block_count; b++)
@@ -505,7 +374,7 @@ static void test_ao_open_plane(void **state)
     assert_true(fx_ao_eval_point(&ctx, (float[3]){0.3f, 0, -0.7f}, (float[3]){0, 1, 0}, 64, 99, &rays) ==
                 1.0f);
     assert_int_equal(rays, 64);
-    island_run_free(&run);
+    fxt_island_run_free(&run);
     scene_rt_free(rt);
     scene_free(s);
 }
@@ -516,10 +385,10 @@ static void test_ao_wall(void **state)
     (void)state;
     scene_rt *rt;
     scene *s = wall_scene(&rt);
-    island_run run;
-    island_run_init(&run, s, island_of_mesh(s, 0), 0, FX_AO);
+    fxt_island_run run;
+    fxt_island_run_init(&run, s, fxt_island_of_mesh(s, 0), 0, FX_AO);
     check_ao_against(s, rt, &run, WALL_RADIUS, expect_wall, "wall (about 0.5)");
-    island_run_free(&run);
+    fxt_island_run_free(&run);
     scene_rt_free(rt);
     scene_free(s);
 }
@@ -528,11 +397,11 @@ static void test_ao_wall(void **state)
  * x = 0 and z = 0 (4 x 4 m, beyond the reach of rays of length radius <= 3) facing into the corner. */
 static scene *corner_scene(scene_rt **rt, float density, float radius)
 {
-    scene *s = new_scene();
-    add_quad(s, "floor", (double[3]){0, 0, 0}, (double[3]){0, 0, 1}, (double[3]){1, 0, 0}, 2);
-    add_quad(s, "wall_x", (double[3]){0, 0, 0}, (double[3]){0, 4, 0}, (double[3]){0, 0, 4}, 2); /* +x */
-    add_quad(s, "wall_z", (double[3]){0, 0, 0}, (double[3]){4, 0, 0}, (double[3]){0, 4, 0}, 2); /* +z */
-    *rt = finish_scene(s, density, radius);
+    scene *s = fxt_new_scene();
+    fxt_add_quad(s, "floor", (double[3]){0, 0, 0}, (double[3]){0, 0, 1}, (double[3]){1, 0, 0}, 2);
+    fxt_add_quad(s, "wall_x", (double[3]){0, 0, 0}, (double[3]){0, 4, 0}, (double[3]){0, 0, 4}, 2); /* +x */
+    fxt_add_quad(s, "wall_z", (double[3]){0, 0, 0}, (double[3]){4, 0, 0}, (double[3]){0, 4, 0}, 2); /* +z */
+    *rt = fxt_finish_scene(s, density, radius);
     return s;
 }
 
@@ -542,8 +411,8 @@ static void test_ao_corner(void **state)
     (void)state;
     scene_rt *rt;
     scene *s = corner_scene(&rt, 80.0f, 2.0f);
-    island_run run;
-    island_run_init(&run, s, island_of_mesh(s, 0), 0, FX_AO);
+    fxt_island_run run;
+    fxt_island_run_init(&run, s, fxt_island_of_mesh(s, 0), 0, FX_AO);
     check_ao_against(s, rt, &run, 2.0f, expect_corner, "corner (about 0.25)");
 
     /* The no-cache baseline at one corner point, averaged over many pixels, agrees with the analytic value.
@@ -559,7 +428,7 @@ static void test_ao_corner(void **state)
     double expected = disk_quadrant_open(0.1, 0.05), mean = sum / pixels;
     double tolerance = AO_SIGMAS * sqrt(expected * (1 - expected) / (pixels * 64.0));
     assert_true(fabs(mean - expected) <= tolerance);
-    island_run_free(&run);
+    fxt_island_run_free(&run);
     scene_rt_free(rt);
     scene_free(s);
 }
@@ -571,12 +440,12 @@ static void test_ao_deterministic_budget_split(void **state)
     (void)state;
     scene_rt *rt;
     scene *s = corner_scene(&rt, 30.0f, 1.0f);
-    uint32_t island = island_of_mesh(s, 0);
+    uint32_t island = fxt_island_of_mesh(s, 0);
     fx_context ctx = {.s = s, .rt = rt, .seed = 11, .ao_radius = 1.0f};
-    island_run once, split16, split7, single, reversed, other_seed;
-    island_run *runs[] = {&once, &split16, &split7, &single, &reversed, &other_seed};
+    fxt_island_run once, split16, split7, single, reversed, other_seed;
+    fxt_island_run *runs[] = {&once, &split16, &split7, &single, &reversed, &other_seed};
     for (int r = 0; r < 6; r++)
-        island_run_init(runs[r], s, island, 0, FX_AO);
+        fxt_island_run_init(runs[r], s, island, 0, FX_AO);
     size_t bytes = (size_t)once.block_count * 64 * once.texel_bytes;
 
     fx_ao_update(&ctx, once.jobs, once.block_count, 64);
@@ -611,7 +480,7 @@ static void test_ao_deterministic_budget_split(void **state)
     fx_ao_update(&other, other_seed.jobs, other_seed.block_count, 64);
     assert_memory_not_equal(once.payload, other_seed.payload, bytes);
     for (int r = 0; r < 6; r++)
-        island_run_free(runs[r]);
+        fxt_island_run_free(runs[r]);
     scene_rt_free(rt);
     scene_free(s);
 }
@@ -622,8 +491,8 @@ static void test_ao_stratified_error(void **state)
     (void)state;
     scene_rt *rt;
     scene *s = wall_scene(&rt);
-    island_run run;
-    island_run_init(&run, s, island_of_mesh(s, 0), 0, FX_AO);
+    fxt_island_run run;
+    fxt_island_run_init(&run, s, fxt_island_of_mesh(s, 0), 0, FX_AO);
     fx_context ctx = {.s = s, .rt = rt, .seed = 5, .ao_radius = WALL_RADIUS};
     fx_ao_update(&ctx, run.jobs, run.block_count, 16);
     double squared_error = 0, binomial_variance = 0;
@@ -646,7 +515,7 @@ static void test_ao_stratified_error(void **state)
            sqrt(binomial_variance / texels));
     /* Plain Monte Carlo would give mean squared error = binomial variance; demand half of it or less. */
     assert_true(squared_error < 0.5 * binomial_variance);
-    island_run_free(&run);
+    fxt_island_run_free(&run);
     scene_rt_free(rt);
     scene_free(s);
 }
@@ -655,11 +524,11 @@ static void test_ao_stratified_error(void **state)
 static void test_ao_saturation(void **state)
 {
     (void)state;
-    scene *s = new_scene();
-    add_quad(s, "floor", (double[3]){-1, 0, -1}, (double[3]){0, 0, 2}, (double[3]){2, 0, 0}, 1);
-    scene_rt *rt = finish_scene(s, 4.0f, 1.0f);
-    island_run run;
-    island_run_init(&run, s, island_of_mesh(s, 0), 0, FX_AO);
+    scene *s = fxt_new_scene();
+    fxt_add_quad(s, "floor", (double[3]){-1, 0, -1}, (double[3]){0, 0, 2}, (double[3]){2, 0, 0}, 1);
+    scene_rt *rt = fxt_finish_scene(s, 4.0f, 1.0f);
+    fxt_island_run run;
+    fxt_island_run_init(&run, s, fxt_island_of_mesh(s, 0), 0, FX_AO);
     memset(run.payload, 0xff, (size_t)run.block_count * 64 * 4); /* count 65535 everywhere */
     fx_context ctx = {.s = s, .rt = rt, .seed = 1, .ao_radius = 1.0f};
     assert_int_equal(fx_ao_update(&ctx, run.jobs, run.block_count, 64), 0);
@@ -677,7 +546,7 @@ static void test_ao_saturation(void **state)
             assert_int_equal(fx_ao_count(run.payload, t), 64);
             assert_true(fx_ao_sample(run.payload, t) == 1.0f);
         }
-    island_run_free(&run);
+    fxt_island_run_free(&run);
     scene_rt_free(rt);
     scene_free(s);
 }
@@ -690,17 +559,17 @@ static void test_ao_saturation(void **state)
 static void test_shadow_occluder(void **state)
 {
     (void)state;
-    scene *s = new_scene();
-    add_quad(s, "floor", (double[3]){-4, 0, -4}, (double[3]){0, 0, 8}, (double[3]){8, 0, 0}, 2);
-    add_quad(s, "occluder", (double[3]){-1, 1, -1}, (double[3]){2, 0, 0}, (double[3]){0, 0, 2}, 1); /* -y */
-    add_sun(s, 0, -1, 0);
+    scene *s = fxt_new_scene();
+    fxt_add_quad(s, "floor", (double[3]){-4, 0, -4}, (double[3]){0, 0, 8}, (double[3]){8, 0, 0}, 2);
+    fxt_add_quad(s, "occluder", (double[3]){-1, 1, -1}, (double[3]){2, 0, 0}, (double[3]){0, 0, 2}, 1); /* -y */
+    fxt_add_sun(s, 0, -1, 0);
     add_point_light(s, 0, 3, 0);
-    scene_rt *rt = finish_scene(s, 8.0f, 1.0f);
+    scene_rt *rt = fxt_finish_scene(s, 8.0f, 1.0f);
     assert_int_equal(fx_effect_shadow.texel_bytes(s), 4);
     fx_context ctx = {.s = s, .rt = rt, .seed = 2, .ao_radius = 1.0f};
 
-    island_run floor_run;
-    island_run_init(&floor_run, s, island_of_mesh(s, 0), 0, FX_SHADOW);
+    fxt_island_run floor_run;
+    fxt_island_run_init(&floor_run, s, fxt_island_of_mesh(s, 0), 0, FX_SHADOW);
     memset(floor_run.payload, 0xa5, (size_t)floor_run.block_count * 64 * floor_run.texel_bytes);
     assert_int_equal(fx_shadow_update(&ctx, floor_run.jobs, floor_run.block_count),
                      floor_run.texels * FX_SHADOW_RAYS * 2);
@@ -737,8 +606,8 @@ static void test_shadow_occluder(void **state)
     for (int l = 0; l < 2; l++)
         assert_true(dark[l] > 100 && lit[l] > 1000);
 
-    island_run occluder_run;
-    island_run_init(&occluder_run, s, island_of_mesh(s, 1), 0, FX_SHADOW);
+    fxt_island_run occluder_run;
+    fxt_island_run_init(&occluder_run, s, fxt_island_of_mesh(s, 1), 0, FX_SHADOW);
     memset(occluder_run.payload, 0xff, (size_t)occluder_run.block_count * 64 * occluder_run.texel_bytes);
     assert_int_equal(fx_shadow_update(&ctx, occluder_run.jobs, occluder_run.block_count), 0);
     for (uint32_t b = 0; b < occluder_run.block_count; b++)
@@ -759,16 +628,16 @@ static void test_shadow_occluder(void **state)
     assert_int_equal(rays, 0);
 
     /* Determinism: reversed job order in single-block calls gives the same bytes. */
-    island_run again;
-    island_run_init(&again, s, island_of_mesh(s, 0), 0, FX_SHADOW);
+    fxt_island_run again;
+    fxt_island_run_init(&again, s, fxt_island_of_mesh(s, 0), 0, FX_SHADOW);
     memset(again.payload, 0xa5,
            (size_t)again.block_count * 64 * again.texel_bytes); /* texels outside masks */
     for (uint32_t b = again.block_count; b-- > 0;)
         fx_shadow_update(&ctx, &again.jobs[b], 1);
     assert_memory_equal(again.payload, floor_run.payload, (size_t)again.block_count * 64 * again.texel_bytes);
-    island_run_free(&again);
-    island_run_free(&floor_run);
-    island_run_free(&occluder_run);
+    fxt_island_run_free(&again);
+    fxt_island_run_free(&floor_run);
+    fxt_island_run_free(&occluder_run);
     scene_rt_free(rt);
     scene_free(s);
 }
@@ -777,7 +646,7 @@ static void test_shadow_occluder(void **state)
 static void test_describe(void **state)
 {
     (void)state;
-    scene *s = new_scene();
+    scene *s = fxt_new_scene();
     uint32_t count = 0;
     const fx_effect *const *registry = fx_registry(&count);
     assert_int_equal(count, 3);
@@ -793,8 +662,8 @@ static void test_describe(void **state)
     assert_string_equal(shadow->name, "shadow");
     assert_string_equal(shadow->depends_on, "triangle_lookup");
     assert_int_equal(shadow->texel_bytes(s), 2); /* no light yet: at least 2 */
-    add_sun(s, 0, -1, 0);
-    add_sun(s, 1, -1, 0);
+    fxt_add_sun(s, 0, -1, 0);
+    fxt_add_sun(s, 1, -1, 0);
     add_point_light(s, 0, 2, 0);
     assert_int_equal(shadow->texel_bytes(s), 6);
     assert_int_equal(shadow->cost(s, 0), 3 * FX_SHADOW_RAYS);
@@ -824,21 +693,21 @@ static void test_describe(void **state)
  * for a sun the planes face, and finite surface points. */
 static void check_open_planes_at_scale(double scale, double offset)
 {
-    scene *s = new_scene();
+    scene *s = fxt_new_scene();
     double o = offset;
-    add_quad(s, "flat", (double[3]){o - 5 * scale, o, o - 5 * scale}, (double[3]){0, 0, 10 * scale},
+    fxt_add_quad(s, "flat", (double[3]){o - 5 * scale, o, o - 5 * scale}, (double[3]){0, 0, 10 * scale},
              (double[3]){10 * scale, 0, 0}, 3);
     /* Tilted about two axes, above and beside the flat one (out of its sun rays and AO radius). */
-    add_quad(s, "tilted", (double[3]){o + 30 * scale, o + 20 * scale, o - 2 * scale},
+    fxt_add_quad(s, "tilted", (double[3]){o + 30 * scale, o + 20 * scale, o - 2 * scale},
              (double[3]){1 * scale, 3 * scale, 7 * scale}, (double[3]){6 * scale, 1 * scale, -1 * scale}, 3);
-    add_sun(s, 0.2f, -1.0f, 0.1f);
-    scene_rt *rt = finish_scene(s, (float)(6.0 / scale), (float)(2.0 * scale));
+    fxt_add_sun(s, 0.2f, -1.0f, 0.1f);
+    scene_rt *rt = fxt_finish_scene(s, (float)(6.0 / scale), (float)(2.0 * scale));
     fx_context ctx = {.s = s, .rt = rt, .seed = 4, .ao_radius = (float)(2.0 * scale)};
     for (uint32_t mesh = 0; mesh < 2; mesh++) {
-        island_run ao, shadow;
-        uint32_t island = island_of_mesh(s, mesh);
-        island_run_init(&ao, s, island, 0, FX_AO);
-        island_run_init(&shadow, s, island, 0, FX_SHADOW);
+        fxt_island_run ao, shadow;
+        uint32_t island = fxt_island_of_mesh(s, mesh);
+        fxt_island_run_init(&ao, s, island, 0, FX_AO);
+        fxt_island_run_init(&shadow, s, island, 0, FX_SHADOW);
         fx_ao_update(&ctx, ao.jobs, ao.block_count, 64);
         uint64_t shadow_rays = fx_shadow_update(&ctx, shadow.jobs, shadow.block_count);
         assert_int_equal(shadow_rays, shadow.texels * 16);
@@ -852,8 +721,8 @@ static void check_open_planes_at_scale(double scale, double offset)
                 assert_true(fx_ao_sample(ao.jobs[b].payload, t) == 1.0f);
                 assert_true(fx_shadow_sample(shadow.jobs[b].payload, t, 1, 0) == 1.0f);
             }
-        island_run_free(&ao);
-        island_run_free(&shadow);
+        fxt_island_run_free(&ao);
+        fxt_island_run_free(&shadow);
     }
     scene_rt_free(rt);
     scene_free(s);

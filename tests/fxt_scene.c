@@ -1,0 +1,143 @@
+/* Scenes built by hand for the effect tests: see fxt_scene.h. */
+#include "test_util.h"
+
+#include "fxt_scene.h"
+#include "scene_internal.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* A new scene with one grey material. */
+scene *fxt_new_scene(void)
+{
+    scene *s = scene__alloc();
+    assert_non_null(s);
+    scene_error err;
+    scene_material material = {.diffuse = {0.5f, 0.5f, 0.5f}, .texture = -1, .name = "grey"};
+    scene__add_material(s, &material, &err);
+    return s;
+}
+
+/* Adds a parallelogram corner, corner + edge_a, corner + edge_a + edge_b, corner + edge_b as one mesh of
+ * cells x cells quads (two triangles each); its normal is edge_a x edge_b. */
+void fxt_add_quad(scene *s, const char *name, const double corner[3], const double edge_a[3],
+                  const double edge_b[3], uint32_t cells)
+{
+    uint32_t side = cells + 1, vertex_count = side * side, triangle_count = 2 * cells * cells;
+    float *positions = malloc(sizeof(float) * 3 * vertex_count);
+    uint32_t *indices = malloc(sizeof(uint32_t) * 3 * triangle_count);
+    assert_true(positions && indices);
+    for (uint32_t j = 0; j < side; j++)
+        for (uint32_t i = 0; i < side; i++)
+            for (int k = 0; k < 3; k++)
+                positions[3 * (j * side + i) + k] =
+                    (float)(corner[k] + edge_a[k] * i / cells + edge_b[k] * j / cells);
+    uint32_t t = 0;
+    for (uint32_t j = 0; j < cells; j++)
+        for (uint32_t i = 0; i < cells; i++) {
+            uint32_t v00 = j * side + i, v10 = v00 + 1, v01 = v00 + side, v11 = v01 + 1;
+            uint32_t quad[6] = {v00, v10, v11, v00, v11, v01};
+            memcpy(indices + 3 * t, quad, sizeof quad);
+            t += 2;
+        }
+    scene_error err;
+    assert_int_equal(
+        scene__add_mesh(s, name, positions, vertex_count, indices, triangle_count, NULL, 0, NULL, &err),
+        SCENE_OK);
+    free(positions);
+    free(indices);
+}
+
+/* Adds a directional light travelling along direction. */
+void fxt_add_sun(scene *s, float dx, float dy, float dz)
+{
+    scene_light light = {
+        .type = SCENE_LIGHT_DIRECTIONAL, .direction = {dx, dy, dz}, .color = {1, 1, 1}, .intensity = 1};
+    scene_error err;
+    assert_int_equal(scene__add_light(s, &light, "test sun", &err), SCENE_OK);
+}
+
+/* Finalizes s at texel density (texels per metre) with the AO radius and builds its Embree scene. */
+scene_rt *fxt_finish_scene(scene *s, float density, float ao_radius)
+{
+    scene_error err;
+    s->ao_radius = ao_radius;
+    scene_load_desc desc = {.texel_density = density};
+    scene_result rc = scene__finalize(s, &desc, &err);
+    if (rc != SCENE_OK)
+        fprintf(stderr, "finalize: %s\n", err.msg);
+    assert_int_equal(rc, SCENE_OK);
+    scene_rt *rt = scene_rt_create(s, NULL, &err);
+    assert_non_null(rt);
+    scene_tracing_thread_init();
+    return rt;
+}
+
+/* The single island of mesh (the test meshes are planar and small, so each is one island). */
+uint32_t fxt_island_of_mesh(const scene *s, uint32_t mesh)
+{
+    uint32_t found = UINT32_MAX, islands = 0;
+    for (uint32_t i = 0; i < s->island_count; i++)
+        if (s->islands[i].mesh == mesh) {
+            found = i;
+            islands++;
+        }
+    assert_int_equal(islands, 1);
+    return found;
+}
+
+/* The cache key of a block (DESIGN.md: effect:4 | island:32 | level:4 | block_y:12 | block_x:12). */
+uint64_t fxt_block_key(uint32_t effect, uint32_t island, uint32_t level, uint32_t bx, uint32_t by)
+{
+    return ((uint64_t)effect << 60) | ((uint64_t)island << 28) | ((uint64_t)level << 24) |
+           ((uint64_t)by << 12) | bx;
+}
+
+/* Prepares every block of island at level for effect: masks cover the island's texels, lookups are filled. */
+void fxt_island_run_init(fxt_island_run *run, const scene *s, uint32_t island, uint32_t level,
+                         uint32_t effect)
+{
+    memset(run, 0, sizeof *run);
+    run->island = island;
+    run->level = level;
+    uint32_t count = 0;
+    const fx_effect *const *registry = fx_registry(&count);
+    assert_true(effect < count);
+    run->texel_bytes = registry[effect]->texel_bytes(s);
+    uint32_t width = (s->islands[island].width + (1u << level) - 1) >> level;
+    uint32_t height = (s->islands[island].height + (1u << level) - 1) >> level;
+    run->blocks_x = (width + 7) / 8;
+    run->blocks_y = (height + 7) / 8;
+    run->block_count = run->blocks_x * run->blocks_y;
+    run->lookup = calloc((size_t)run->block_count * 64, sizeof(uint32_t));
+    run->payload = calloc((size_t)run->block_count * 64, run->texel_bytes);
+    run->jobs = calloc(run->block_count, sizeof(fx_block_job));
+    assert_true(run->lookup && run->payload && run->jobs);
+    for (uint32_t by = 0; by < run->blocks_y; by++)
+        for (uint32_t bx = 0; bx < run->blocks_x; bx++) {
+            uint32_t b = by * run->blocks_x + bx;
+            uint64_t mask = 0;
+            for (uint32_t t = 0; t < 64; t++)
+                if (bx * 8 + (t & 7) < width && by * 8 + (t >> 3) < height)
+                    mask |= 1ull << t;
+            fx_lookup_update(s, island, level, bx, by, mask, run->lookup + 64 * b);
+            run->jobs[b] = (fx_block_job){.key = fxt_block_key(effect, island, level, bx, by),
+                                          .island = island,
+                                          .level = level,
+                                          .block_x = bx,
+                                          .block_y = by,
+                                          .mask = mask,
+                                          .lookup = run->lookup + 64 * b,
+                                          .payload = run->payload + (size_t)64 * run->texel_bytes * b};
+            run->texels += (uint64_t)__builtin_popcountll(mask);
+        }
+}
+
+/* Releases a run's storage. */
+void fxt_island_run_free(fxt_island_run *run)
+{
+    free(run->lookup);
+    free(run->payload);
+    free(run->jobs);
+}

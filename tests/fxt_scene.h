@@ -1,0 +1,47 @@
+/* Scenes built by hand for the effect tests (test_effects.c, test_crease.c): quads, suns, islands, and every
+ * block of an island run through an effect. White-box: uses the scene builder's internals. */
+#ifndef FXC_FXT_SCENE_H
+#define FXC_FXT_SCENE_H
+
+#include "effects.h"
+#include "scene.h"
+
+#include <stdint.h>
+
+/* Every block of one island at one level, with its lookup and payload storage and one job per block. */
+typedef struct fxt_island_run {
+    uint32_t island, level, blocks_x, blocks_y, block_count, texel_bytes;
+    uint32_t *lookup;   /* block_count * 64 */
+    uint8_t *payload;   /* block_count * 64 * texel_bytes */
+    fx_block_job *jobs; /* block_count */
+    uint64_t texels;    /* texels in all masks */
+} fxt_island_run;
+
+/* A new scene with one grey material. */
+scene *fxt_new_scene(void);
+
+/* Adds a parallelogram corner, corner + edge_a, corner + edge_a + edge_b, corner + edge_b as one mesh of
+ * cells x cells quads (two triangles each); its normal is edge_a x edge_b. */
+void fxt_add_quad(scene *s, const char *name, const double corner[3], const double edge_a[3],
+                  const double edge_b[3], uint32_t cells);
+
+/* Adds a directional light travelling along direction. */
+void fxt_add_sun(scene *s, float dx, float dy, float dz);
+
+/* Finalizes s at texel density (texels per metre) with the AO radius and builds its Embree scene. */
+scene_rt *fxt_finish_scene(scene *s, float density, float ao_radius);
+
+/* The single island of mesh (the test meshes are planar and small, so each is one island). */
+uint32_t fxt_island_of_mesh(const scene *s, uint32_t mesh);
+
+/* The cache key of a block (DESIGN.md: effect:4 | island:32 | level:4 | block_y:12 | block_x:12). */
+uint64_t fxt_block_key(uint32_t effect, uint32_t island, uint32_t level, uint32_t bx, uint32_t by);
+
+/* Prepares every block of island at level for effect: masks cover the island's texels, lookups are filled. */
+void fxt_island_run_init(fxt_island_run *run, const scene *s, uint32_t island, uint32_t level,
+                         uint32_t effect);
+
+/* Releases a run's storage. */
+void fxt_island_run_free(fxt_island_run *run);
+
+#endif
