@@ -276,10 +276,9 @@ done:
 scene_result scene__import_file(scene *s, const char *path, const float *xform,
                                 const scene_material *override, scene_error *err)
 {
-    FILE *probe = fopen(path, "rb");
-    if (!probe)
-        return scene__fail(err, SCENE_ERR_IO, "%s: cannot read: %s", path, strerror(errno));
-    fclose(probe);
+    scene_result rc = scene__check_file(path, err);
+    if (rc != SCENE_OK)
+        return rc;
 
     /* Two phases, because Assimp 5.2.5 crashes on some damaged input (found by mutating files): its
      * triangulation asserts, aborting the process, on a face without vertices, which its own validation
@@ -300,7 +299,7 @@ scene_result scene__import_file(scene *s, const char *path, const float *xform,
         /* read_gz also reads plain files (zlib passes them through). */
         char *buf = NULL;
         size_t len = 0;
-        scene_result rc = read_gz(path, &buf, &len, err);
+        rc = read_gz(path, &buf, &len, err);
         if (rc != SCENE_OK)
             return rc;
         if (len == 0) {
@@ -333,7 +332,6 @@ scene_result scene__import_file(scene *s, const char *path, const float *xform,
 
     char model_dir[512];
     folder_of(path, model_dir, sizeof model_dir);
-    scene_result rc = SCENE_OK;
     uint32_t *material_map = NULL;
     uint32_t override_index = UINT32_MAX;
     if (override) {

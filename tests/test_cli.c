@@ -11,6 +11,7 @@
 #include <fcntl.h>
 #include <signal.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
@@ -271,6 +272,18 @@ static void test_err_unsupported_format(void **state)
     write_file(path, sizeof path, "junk.xyz", "this is not a mesh\n\x01\x02\x03 junk junk\n");
     snprintf(args, sizeof args, "scene-info '%s'", path);
     expect_error(1, args, "junk.xyz", NULL);
+}
+
+/* A directory named like a model: refused with exit code 1 and one line saying what it is (Assimp said the
+ * file had no meshes). */
+static void test_err_model_inputs(void **state)
+{
+    (void)state;
+    char folder[1100], args[1300];
+    tmp_path(folder, sizeof folder, "folder.obj");
+    assert_true(mkdir(folder, 0755) == 0 || access(folder, F_OK) == 0);
+    snprintf(args, sizeof args, "scene-info '%s'", folder);
+    expect_error(1, args, folder, "is a directory", NULL);
 }
 
 static void test_err_malformed_json(void **state)
@@ -727,6 +740,7 @@ int main(void)
         cmocka_unit_test(test_scene_info_no_lights_no_sky),
         cmocka_unit_test(test_err_missing_file),
         cmocka_unit_test(test_err_unsupported_format),
+        cmocka_unit_test(test_err_model_inputs),
         cmocka_unit_test(test_err_malformed_json),
         cmocka_unit_test(test_err_nan_vertex),
         cmocka_unit_test(test_err_nan_vertex_names_file),

@@ -10,6 +10,8 @@
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
 #include <zlib.h>
 
 /* splitmix64: the mutation test's deterministic random numbers. */
@@ -299,6 +301,66 @@ static void test_mutated_files(void **state)
     assert_true(loaded > 0 && refused > 0);
 }
 
+/* One input of the table-driven test below: a file written by the test, and what loading it must give. */
+typedef struct input_case {
+    const char *name;   /* file name in the test's folder */
+    const char *bytes;  /* the file's content (NULL when dir is set) */
+    size_t len;         /* bytes in content; 0: strlen */
+    bool dir;           /* make a directory of that name instead of a file */
+    scene_result code;  /* SCENE_OK: must load */
+    const char *needle; /* must be in the error message (when code is not SCENE_OK) */
+    uint32_t triangles; /* when it loads: exactly this many triangles (0: any number above 0) */
+} input_case;
+
+/* Loads one case and checks the outcome: the load's code, and for a refusal one line naming the file and
+ * containing the needle. */
+static void check_input_case(const input_case *c, const char *path)
+{
+    scene_error err = {0};
+    scene *s = scene_load(path, NULL, &err);
+    if (c->code == SCENE_OK) {
+        if (!s)
+            fail_msg("%s: expected to load, got: %s", c->name, err.msg);
+        if (c->triangles)
+            assert_int_equal(s->triangle_count, c->triangles);
+        assert_true(s->triangle_count > 0);
+        scene_free(s);
+        return;
+    }
+    if (s) {
+        scene_free(s);
+        fail_msg("%s: expected a refusal containing '%s', but it loaded", c->name, c->needle);
+    }
+    if (err.code != c->code || !strstr(err.msg, c->needle) || !strstr(err.msg, c->name) ||
+        strchr(err.msg, '\n'))
+        fail_msg("%s: expected code %d and one line naming the file with '%s'; got code %d: '%s'", c->name,
+                 (int)c->code, c->needle, (int)err.code, err.msg);
+}
+
+/* A directory named like a model is refused as what it is, not handed to Assimp. */
+static void test_inputs_refused_or_read(void **state)
+{
+    (void)state;
+    const input_case cases[] = {
+        {"folder.obj", NULL, 0, true, SCENE_ERR_IO, "is a directory", 0},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        const input_case *c = &cases[i];
+        char path[1024];
+        snprintf(path, sizeof path, "%s", fxt_tmp_path(c->name));
+        if (c->dir) {
+            assert_true(mkdir(path, 0755) == 0 || access(path, F_OK) == 0);
+        } else {
+            FILE *f = fopen(path, "wb");
+            assert_non_null(f);
+            size_t len = c->len ? c->len : strlen(c->bytes);
+            assert_int_equal(fwrite(c->bytes, 1, len, f), len);
+            fclose(f);
+        }
+        check_input_case(c, path);
+    }
+}
+
 /* 3DS through Assimp: the horse Debian's glmark2-data ships. */
 static void test_3ds_horse(void **state)
 {
@@ -332,6 +394,7 @@ int main(void)
         cmocka_unit_test(test_damaged_ply_refused),
         cmocka_unit_test(test_mutated_files),
         cmocka_unit_test(test_3ds_horse),
+        cmocka_unit_test(test_inputs_refused_or_read),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
