@@ -135,6 +135,48 @@ static scene_result check_faces(const char *path, const struct aiScene *ai, scen
     return SCENE_OK;
 }
 
+/* How many meshes the node graph below node places (references), counting a mesh once per reference.
+ * Assimp's validation has checked every index is below mNumMeshes and that the graph is a tree. */
+static uint64_t placed_meshes(const struct aiNode *node, unsigned depth)
+{
+    if (!node || depth > 10000)
+        return 0;
+    uint64_t placed = node->mNumMeshes;
+    for (uint32_t i = 0; i < node->mNumChildren; i++)
+        placed += placed_meshes(node->mChildren[i], depth + 1);
+    return placed;
+}
+
+/* Checks what Assimp's pre-transform step would fail on: it throws when no node places any mesh ("all
+ * meshes are orphaned"), and aiApplyPostProcessing() then crashes releasing the scene (an AC3D object with
+ * vertices but no surfaces gives one unplaced mesh of points). Says which case it is: no surfaces at all,
+ * or surfaces no node places. */
+static scene_result check_scene_graph(const char *path, const struct aiScene *ai, scene_error *err)
+{
+    if (placed_meshes(ai->mRootNode, 0) > 0)
+        return SCENE_OK;
+    uint64_t polygons = 0, points_lines = 0;
+    for (uint32_t i = 0; i < ai->mNumMeshes; i++)
+        for (uint32_t f = 0; f < ai->mMeshes[i]->mNumFaces; f++) {
+            if (ai->mMeshes[i]->mFaces[f].mNumIndices >= 3)
+                polygons++;
+            else
+                points_lines++;
+        }
+    if (ai->mNumMeshes == 0)
+        return scene__fail(err, SCENE_ERR_EMPTY, "%s: no usable triangles in the file (it has no meshes)",
+                           path);
+    if (polygons == 0)
+        return scene__fail(err, SCENE_ERR_EMPTY,
+                           "%s: no usable triangles in the file (only %llu points and lines)", path,
+                           (unsigned long long)points_lines);
+    return scene__fail(
+        err, SCENE_ERR_EMPTY,
+        "%s: no usable triangles in the file (its %u meshes are not placed by any node of its scene "
+        "graph)",
+        path, ai->mNumMeshes);
+}
+
 /* The folder part of path (with a trailing slash), or "" for a bare file name. */
 static void folder_of(const char *path, char *dir, size_t cap)
 {
@@ -282,9 +324,9 @@ scene_result scene__import_file(scene *s, const char *path, const float *xform,
 
     /* Two phases, because Assimp 5.2.5 crashes on some damaged input (found by mutating files): its
      * triangulation asserts, aborting the process, on a face without vertices, which its own validation
-     * lets through; and aiApplyPostProcessing() crashes releasing a scene its validation rejects. So the
-     * import runs only Assimp's validation, check_faces() checks what that let through, and only then do
-     * the post-processing steps run. */
+     * lets through; and aiApplyPostProcessing() crashes releasing a scene when a step fails. So the
+     * import runs only Assimp's validation, check_faces() and check_scene_graph() check what that let
+     * through and what the steps would fail on, and only then do the post-processing steps run. */
     const unsigned flags = aiProcess_ValidateDataStructure;
     const unsigned post = aiProcess_Triangulate | aiProcess_PreTransformVertices | aiProcess_SortByPType;
     const struct aiScene *ai = NULL;
@@ -322,6 +364,8 @@ scene_result scene__import_file(scene *s, const char *path, const float *xform,
     if (!ai)
         return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s", path, aiGetErrorString());
     scene_result checked = check_faces(path, ai, err);
+    if (checked == SCENE_OK)
+        checked = check_scene_graph(path, ai, err);
     if (checked != SCENE_OK) {
         aiReleaseImport(ai);
         return checked;
@@ -352,6 +396,7 @@ scene_result scene__import_file(scene *s, const char *path, const float *xform,
         }
     }
     uint32_t before = s->triangle_count;
+    scene_repairs repairs_before = s->repairs;
     for (uint32_t i = 0; rc == SCENE_OK && i < ai->mNumMeshes; i++) {
         const struct aiMesh *mesh = ai->mMeshes[i];
         if (!(mesh->mPrimitiveTypes & aiPrimitiveType_TRIANGLE)) {
@@ -365,7 +410,14 @@ scene_result scene__import_file(scene *s, const char *path, const float *xform,
         rc = import_mesh(s, mesh, i, material, xform, path, err);
     }
     if (rc == SCENE_OK && s->triangle_count == before)
-        rc = scene__fail(err, SCENE_ERR_EMPTY, "%s: no usable triangles in the file", path);
+        rc = scene__fail(
+            err, SCENE_ERR_EMPTY,
+            "%s: no usable triangles in the file (%llu points and lines dropped, %llu degenerate and "
+            "%llu duplicate triangles skipped)",
+            path,
+            (unsigned long long)(s->repairs.non_triangles_dropped - repairs_before.non_triangles_dropped),
+            (unsigned long long)(s->repairs.degenerate_skipped - repairs_before.degenerate_skipped),
+            (unsigned long long)(s->repairs.duplicate_skipped - repairs_before.duplicate_skipped));
     free(material_map);
     aiReleaseImport(ai);
     return rc;

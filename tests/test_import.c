@@ -14,6 +14,9 @@
 #include <unistd.h>
 #include <zlib.h>
 
+/* Where Debian's assimp-testmodels puts Assimp's own test models. */
+#define ASSIMP_MODELS "/usr/share/assimp/models"
+
 /* splitmix64: the mutation test's deterministic random numbers. */
 static uint64_t splitmix(uint64_t *state)
 {
@@ -301,10 +304,11 @@ static void test_mutated_files(void **state)
     assert_true(loaded > 0 && refused > 0);
 }
 
-/* One input of the table-driven test below: a file written by the test, and what loading it must give. */
+/* One input of the table-driven tests below: a file written by the test (or named in Assimp's models), and
+ * what loading it must give. */
 typedef struct input_case {
-    const char *name;   /* file name in the test's folder */
-    const char *bytes;  /* the file's content (NULL when dir is set) */
+    const char *name;   /* file name in the test's folder, or a path under ASSIMP_MODELS */
+    const char *bytes;  /* the file's content (NULL: an Assimp model, or a directory when dir is set) */
     size_t len;         /* bytes in content; 0: strlen */
     bool dir;           /* make a directory of that name instead of a file */
     scene_result code;  /* SCENE_OK: must load */
@@ -361,6 +365,25 @@ static void test_inputs_refused_or_read(void **state)
     }
 }
 
+/* Assimp's own test models that crashed: an AC3D file of lines only (a segfault in Assimp's pre-transform
+ * step). */
+static void test_assimp_models(void **state)
+{
+    (void)state;
+    if (access(ASSIMP_MODELS, R_OK) != 0) {
+        print_message("SKIP: %s is absent (install assimp-testmodels)\n", ASSIMP_MODELS);
+        skip();
+    }
+    static const input_case cases[] = {
+        {"AC/nosurfaces.ac", NULL, 0, false, SCENE_ERR_EMPTY, "only 7 points and lines", 0},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        char path[1024];
+        snprintf(path, sizeof path, "%s/%s", ASSIMP_MODELS, cases[i].name);
+        check_input_case(&cases[i], path);
+    }
+}
+
 /* 3DS through Assimp: the horse Debian's glmark2-data ships. */
 static void test_3ds_horse(void **state)
 {
@@ -395,6 +418,7 @@ int main(void)
         cmocka_unit_test(test_mutated_files),
         cmocka_unit_test(test_3ds_horse),
         cmocka_unit_test(test_inputs_refused_or_read),
+        cmocka_unit_test(test_assimp_models),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
