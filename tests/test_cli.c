@@ -275,18 +275,19 @@ static void test_err_unsupported_format(void **state)
     expect_error(1, args, "junk.xyz", NULL);
 }
 
-/* Model inputs that crashed (a segfault in Assimp's pre-transform step), ran out of memory or got a
- * misleading message: each is refused with exit code 1 and one line naming the file and the problem. The
- * Assimp test models are used where Debian's assimp-testmodels is installed. */
+/* Model inputs that crashed (a segfault in Assimp's pre-transform step), ran out of memory, got a misleading
+ * message or printed a second line from inside Assimp: each is refused with exit code 1 and one line naming
+ * the file and the problem. The Assimp test models are used where Debian's assimp-testmodels is installed. */
 static void test_err_model_inputs(void **state)
 {
     (void)state;
-    char folder[1100], bsp[1100], models[2][1100];
+    char folder[1100], bsp[1100], models[3][1100];
     tmp_path(folder, sizeof folder, "folder.obj");
     assert_true(mkdir(folder, 0755) == 0 || access(folder, F_OK) == 0);
     write_file(bsp, sizeof bsp, "bare.bsp", "IBSP.");
-    static const char *const model_names[2] = {"AC/nosurfaces.ac", "invalid/OutOfMemory.off"};
-    for (int k = 0; k < 2; k++)
+    static const char *const model_names[3] = {"AC/nosurfaces.ac", "invalid/OutOfMemory.off",
+                                               "OpenGEX/empty_camera.ogex"};
+    for (int k = 0; k < 3; k++)
         snprintf(models[k], sizeof models[k], "/usr/share/assimp/models/%s", model_names[k]);
     bool have_models = access("/usr/share/assimp/models", R_OK) == 0;
     if (!have_models)
@@ -300,6 +301,7 @@ static void test_err_model_inputs(void **state)
         {bsp, "only from inside a .pk3", false},
         {models[0], "no usable triangles in the file (only 7 points and lines)", true},
         {models[1], "declares 353535235358 vertices", true},
+        {models[2], "(Assimp also printed: 'nullptr returned by creating DDLNode.')", true},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         if (cases[i].assimp_model && !have_models)

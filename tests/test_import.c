@@ -439,6 +439,7 @@ static void test_assimp_models(void **state)
         {"AC/nosurfaces.ac", NULL, 0, false, SCENE_ERR_EMPTY, "only 7 points and lines", 0},
         {"invalid/OutOfMemory.off", NULL, 0, false, SCENE_ERR_FORMAT, "declares 353535235358 vertices", 0},
         {"PLY/Wuson.ply", NULL, 0, false, SCENE_OK, NULL, 0},
+        {"OpenGEX/empty_camera.ogex", NULL, 0, false, SCENE_ERR_FORMAT, "Assimp also printed: 'nullptr", 0},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         char path[1024];
