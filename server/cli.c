@@ -6,6 +6,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 bool srv_cli_double(const char *cmd, const char *option, const char *text, double min, double max,
                     double *out)
@@ -72,6 +73,36 @@ bool srv_cli_vec3(const char *cmd, const char *option, const char *text, float o
     for (int k = 0; k < 3; k++)
         out[k] = (float)v[k];
     return true;
+}
+
+uint64_t srv_cli_physical_memory(void)
+{
+    long pages = sysconf(_SC_PHYS_PAGES), page_size = sysconf(_SC_PAGESIZE);
+    if (pages <= 0 || page_size <= 0)
+        return 0;
+    return (uint64_t)pages * (uint64_t)page_size;
+}
+
+bool srv_cli_check_memory(const char *cmd, double pool_mb, uint32_t viewers, uint32_t width, uint32_t height,
+                          bool views)
+{
+    uint64_t physical = srv_cli_physical_memory();
+    if (physical == 0)
+        return true;
+    /* At most 64 viewers of 8192 x 8192 at 43 bytes and a 64 GiB pool: no overflow in 64 bits. */
+    uint64_t per_pixel = SRV_CLI_VIEWER_BYTES_PER_PIXEL + (views ? SRV_CLI_VIEWS_BYTES_PER_PIXEL : 0);
+    uint64_t buffers = (uint64_t)viewers * width * height * per_pixel;
+    uint64_t pools = pool_mb > 0 ? (uint64_t)(pool_mb * 1048576.0) : 0;
+    if (pools + buffers <= physical)
+        return true;
+    fprintf(
+        stderr,
+        "fxcache %s: the block pools (%.0f MiB) and the per-pixel buffers of %u viewers at %ux%u (%.0f MiB) "
+        "need %.0f MiB, more than this machine's %llu MiB of physical memory: lower --pool-mb, --viewers "
+        "or --res\n",
+        cmd, pools / 1048576.0, viewers, width, height, buffers / 1048576.0, (pools + buffers) / 1048576.0,
+        (unsigned long long)(physical >> 20));
+    return false;
 }
 
 scene *srv_cli_load_scene(const char *cmd, const char *path, float texel_density)

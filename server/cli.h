@@ -23,6 +23,22 @@ bool srv_cli_resolution(const char *cmd, const char *option, const char *text, u
 /* Parses "x,y,z" (three finite numbers). */
 bool srv_cli_vec3(const char *cmd, const char *option, const char *text, float out[3]);
 
+/* Bytes per pixel the frame loop allocates for each viewer (server/frame.c, srv_loop_create): triangle,
+ * barycentric u and v, footprint (4 each), radiance (12) and the 8-bit RGB image (3); and what --views adds
+ * (AO, shadow and sharing pictures, 4 each). Keep in step with frame.c. */
+#define SRV_CLI_VIEWER_BYTES_PER_PIXEL 31u
+#define SRV_CLI_VIEWS_BYTES_PER_PIXEL  12u
+
+/* The machine's physical memory in bytes (sysconf(_SC_PHYS_PAGES) times the page size), 0 if unknown. */
+uint64_t srv_cli_physical_memory(void);
+
+/* Checks, before anything is loaded, that the block pools (pool_mb MiB; 0 when no cache runs) and the
+ * viewers' per-pixel buffers fit in physical memory; otherwise prints one line with both figures and the
+ * machine's ("fxcache CMD: ... need N MiB ..., more than this machine's M MiB of physical memory") and
+ * returns false. Always true when the physical memory is unknown. */
+bool srv_cli_check_memory(const char *cmd, double pool_mb, uint32_t viewers, uint32_t width, uint32_t height,
+                          bool views);
+
 /* Loads the scene at path ("default" or NULL: the embedded scene); prints the error on failure. */
 scene *srv_cli_load_scene(const char *cmd, const char *path, float texel_density);
 

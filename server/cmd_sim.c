@@ -425,6 +425,9 @@ int srv_cmd_sim(int argc, char **argv)
     int rc = parse_options(argc, argv, &o);
     if (rc >= 0)
         return rc;
+    uint32_t viewer_count = o.trace_count ? o.trace_count : o.viewers;
+    if (!srv_cli_check_memory("sim", o.no_cache ? 0 : o.pool_mb, viewer_count, o.width, o.height, o.views))
+        return 2;
     srv_trace *traces[MAX_TRACES] = {0};
     srv_trace_writer *records[SRV_MAX_VIEWERS] = {0};
     scene *s = NULL;

@@ -442,6 +442,64 @@ static void test_err_traces_and_viewers_disagree(void **state)
     expect_error(2, args, "--viewers", NULL);
 }
 
+/* The machine's physical memory in MiB as /proc/meminfo tells it (MemTotal), a second source beside the
+ * sysconf() figure fxcache prints; 0 when unreadable. */
+static unsigned long long meminfo_total_mib(void)
+{
+    FILE *f = fopen("/proc/meminfo", "r");
+    if (!f)
+        return 0;
+    char line[256];
+    unsigned long long kib = 0;
+    while (fgets(line, sizeof line, f))
+        if (sscanf(line, "MemTotal: %llu kB", &kib) == 1)
+            break;
+    fclose(f);
+    return kib / 1024;
+}
+
+/* Memory options beyond the machine's physical memory are refused before anything is loaded or allocated,
+ * with the figures: --pool-mb 65536 and 64 viewers of 8192x8192 (124 GiB of per-pixel buffers) were accepted
+ * and tried to allocate them. A case is skipped on a machine that has the memory. */
+static void test_err_memory_beyond_physical(void **state)
+{
+    (void)state;
+    unsigned long long total_mib = meminfo_total_mib();
+    if (total_mib == 0) {
+        print_message("SKIP: /proc/meminfo is unreadable\n");
+        skip();
+    }
+    char out_dir[1024], views_args[1400], total[64];
+    tmp_path(out_dir, sizeof out_dir, "memory_views_out");
+    snprintf(views_args, sizeof views_args, "sim --viewers 64 --res 8192x8192 --views --out '%s' --quiet",
+             out_dir);
+    snprintf(total, sizeof total, "this machine's %llu MiB of physical memory", total_mib);
+    const struct {
+        const char *args;
+        unsigned long long at_least_mib; /* a lower bound of what the options need (skip above it) */
+        const char *needle;
+    } cases[] = {
+        {"sim --pool-mb 65536 --quiet", 65536, "block pools (65536 MiB)"},
+        {"sim --viewers 64 --res 8192x8192 --quiet", 64ull * 8192 * 8192 * 31 / 1048576,
+         "64 viewers at 8192x8192"},
+        {views_args, 64ull * 8192 * 8192 * 43 / 1048576, "64 viewers at 8192x8192"},
+        {"sim --no-cache --pool-mb 65536 --viewers 64 --res 8192x8192 --quiet",
+         64ull * 8192 * 8192 * 31 / 1048576, "block pools (0 MiB)"},
+    };
+    unsigned checked = 0;
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        if (total_mib >= cases[i].at_least_mib) {
+            print_message("SKIP: '%s' fits in this machine's %llu MiB\n", cases[i].args, total_mib);
+            continue;
+        }
+        expect_error(2, cases[i].args, cases[i].needle, total, "lower --pool-mb", NULL);
+        checked++;
+    }
+    if (checked == 0)
+        skip();
+    assert_int_equal(access(out_dir, F_OK), -1); /* refused before --out was created */
+}
+
 /* ---------------------------------------------------------------------------------------------------------
  * render */
 
@@ -783,6 +841,7 @@ int main(void)
         cmocka_unit_test(test_err_trace_bad_line),
         cmocka_unit_test(test_err_trace_newer_version),
         cmocka_unit_test(test_err_traces_and_viewers_disagree),
+        cmocka_unit_test(test_err_memory_beyond_physical),
         cmocka_unit_test(test_render_png),
         cmocka_unit_test(test_sim_identical_summary_and_stats),
         cmocka_unit_test(test_sim_record_replay),
