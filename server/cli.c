@@ -3,6 +3,7 @@
 
 #include <errno.h>
 #include <math.h>
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -103,6 +104,13 @@ bool srv_cli_check_memory(const char *cmd, double pool_mb, uint32_t viewers, uin
         cmd, pools / 1048576.0, viewers, width, height, buffers / 1048576.0, (pools + buffers) / 1048576.0,
         (unsigned long long)(physical >> 20));
     return false;
+}
+
+int srv_cli_interrupted(const char *cmd, int sig, const char *when)
+{
+    const char *name = sig == SIGINT ? "SIGINT" : sig == SIGTERM ? "SIGTERM" : "a signal";
+    fprintf(stderr, "fxcache %s: interrupted by %s %s\n", cmd, name, when);
+    return 128 + sig;
 }
 
 scene *srv_cli_load_scene(const char *cmd, const char *path, float texel_density)

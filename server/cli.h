@@ -39,6 +39,11 @@ uint64_t srv_cli_physical_memory(void);
 bool srv_cli_check_memory(const char *cmd, double pool_mb, uint32_t viewers, uint32_t width, uint32_t height,
                           bool views);
 
+/* Reports a run ended by signal sig (SIGINT, SIGTERM) before it did its work, with one line
+ * "fxcache CMD: interrupted by SIGTERM WHEN", and returns the exit code a shell gives such a run: 128 + sig
+ * (130 for SIGINT, 143 for SIGTERM). */
+int srv_cli_interrupted(const char *cmd, int sig, const char *when);
+
 /* Loads the scene at path ("default" or NULL: the embedded scene); prints the error on failure. */
 scene *srv_cli_load_scene(const char *cmd, const char *path, float texel_density);
 

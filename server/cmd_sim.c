@@ -26,8 +26,7 @@ static volatile sig_atomic_t stop_requested = 0;
 
 static void on_signal(int sig)
 {
-    (void)sig;
-    stop_requested = 1;
+    stop_requested = sig;
 }
 
 typedef struct sim_options {
@@ -428,6 +427,8 @@ int srv_cmd_sim(int argc, char **argv)
     uint32_t viewer_count = o.trace_count ? o.trace_count : o.viewers;
     if (!srv_cli_check_memory("sim", o.no_cache ? 0 : o.pool_mb, viewer_count, o.width, o.height, o.views))
         return 2;
+    signal(SIGINT, on_signal); /* from here on: a signal during the load ends the run after it */
+    signal(SIGTERM, on_signal);
     srv_trace *traces[MAX_TRACES] = {0};
     srv_trace_writer *records[SRV_MAX_VIEWERS] = {0};
     scene *s = NULL;
@@ -453,7 +454,9 @@ int srv_cmd_sim(int argc, char **argv)
             o.frames = longest;
     }
     s = srv_cli_load_scene("sim", o.scene_path, (float)o.density);
-    if (!s)
+    if (stop_requested)
+        exit_code = srv_cli_interrupted("sim", stop_requested, "while loading the scene");
+    if (!s || stop_requested)
         goto done;
     scene_error serr = {0};
     double bvh_ms = 0;
@@ -500,8 +503,6 @@ int srv_cmd_sim(int argc, char **argv)
     cameras = calloc(o.viewers, sizeof *cameras);
     if (!cameras)
         goto done;
-    signal(SIGINT, on_signal);
-    signal(SIGTERM, on_signal);
     bool progress = isatty(STDERR_FILENO);
     sim_totals tot = {0};
     srv_memory mem = {0};

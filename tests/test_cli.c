@@ -812,10 +812,88 @@ static void test_sim_interrupted_keeps_results(void **state)
     json_decref(sum);
 }
 
+/* Whether process pid catches signal sig (its SigCgt mask in /proc). */
+static bool catches_signal(pid_t pid, int sig)
+{
+    char path[64], line[256];
+    snprintf(path, sizeof path, "/proc/%d/status", (int)pid);
+    FILE *f = fopen(path, "r");
+    if (!f)
+        return false;
+    unsigned long long mask = 0;
+    bool found = false;
+    while (!found && fgets(line, sizeof line, f))
+        found = sscanf(line, "SigCgt: %llx", &mask) == 1;
+    fclose(f);
+    return found && (mask >> (sig - 1)) & 1;
+}
+
+/* SIGTERM or SIGINT while sim loads a large scene (Sponza, about 1-2 s of loading): the load runs to its end,
+ * then the run stops with one line saying so and the exit code a shell gives such a run (143, 130), and
+ * nothing else is written. The signal is sent as soon as fxcache's handler is in place, which is just before
+ * the load starts (before that the signal would kill it, or for SIGINT be ignored, with nothing printed). */
+static void test_sim_signal_during_load(void **state)
+{
+    (void)state;
+    const char *shared = fxt_shared_scene("sponza/sponza.3ds");
+    if (!shared)
+        skip();
+    char scene_path[1024], err_path[1024], summary[1024];
+    snprintf(scene_path, sizeof scene_path, "%s", shared);
+    tmp_path(err_path, sizeof err_path, "signal_stderr.txt");
+    tmp_path(summary, sizeof summary, "signal_summary.json");
+    static const struct {
+        int sig;
+        int exit_code;
+        const char *message;
+    } cases[] = {
+        {SIGTERM, 143, "fxcache sim: interrupted by SIGTERM while loading the scene\n"},
+        {SIGINT, 130, "fxcache sim: interrupted by SIGINT while loading the scene\n"},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        remove(summary);
+        pid_t pid = fork();
+        assert_true(pid >= 0);
+        if (pid == 0) {
+            signal(cases[i].sig, SIG_DFL); /* so SigCgt shows fxcache's own handler, not one inherited */
+            int devnull = open("/dev/null", O_WRONLY);
+            int errfd = open(err_path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+            dup2(devnull, STDOUT_FILENO);
+            dup2(errfd, STDERR_FILENO);
+            execl(FXC_BIN, FXC_BIN, "sim", "--scene", scene_path, "--frames", "1", "--viewers", "1", "--res",
+                  "16x16", "--quiet", "--summary", summary, (char *)NULL);
+            _exit(127);
+        }
+        bool ready = false;
+        for (int tries = 0; tries < 60000 && !ready; tries++) { /* at most 60 s */
+            ready = catches_signal(pid, cases[i].sig);
+            if (!ready) {
+                struct timespec pause = {0, 1000 * 1000};
+                nanosleep(&pause, NULL);
+            }
+        }
+        assert_true(ready);
+        assert_int_equal(kill(pid, cases[i].sig), 0);
+        int status = 0;
+        assert_int_equal(waitpid(pid, &status, 0), pid);
+        if (!WIFEXITED(status))
+            fail_msg("%s: fxcache did not exit normally (status 0x%x)", cases[i].message, status);
+        assert_int_equal(WEXITSTATUS(status), cases[i].exit_code);
+        FILE *f = fopen(err_path, "r");
+        assert_non_null(f);
+        size_t n = fread(err_buf, 1, sizeof err_buf - 1, f);
+        err_buf[n] = 0;
+        fclose(f);
+        assert_string_equal(err_buf, cases[i].message);
+        assert_int_equal(access(summary, F_OK), -1);
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_sim_interrupted_keeps_results),
+        cmocka_unit_test(test_sim_signal_during_load),
         cmocka_unit_test(test_help_lists_commands),
         cmocka_unit_test(test_unknown_command),
         cmocka_unit_test(test_subcommand_help),
