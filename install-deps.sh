@@ -15,6 +15,7 @@ packages=(
   libcmocka-dev
   uthash-dev libglib2.0-dev
   glmark2-data
+  assimp-testmodels
 )
 
 missing=()

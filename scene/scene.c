@@ -13,6 +13,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <time.h>
 
 /* Auto texel density aims at this many level-0 texels over the whole surface (4096 x 4096). */
@@ -953,6 +954,25 @@ static bool ends_with(const char *s, const char *suffix)
     return true;
 }
 
+scene_result scene__check_file(const char *path, scene_error *err)
+{
+    struct stat st;
+    if (stat(path, &st) != 0)
+        return scene__fail(err, SCENE_ERR_IO, "%s: cannot read: %s", path, strerror(errno));
+    if (S_ISDIR(st.st_mode))
+        return scene__fail(err, SCENE_ERR_IO, "%s: is a directory, not a file", path);
+    if (!S_ISREG(st.st_mode))
+        return scene__fail(err, SCENE_ERR_IO, "%s: not a regular file (a %s)", path,
+                           S_ISFIFO(st.st_mode)   ? "FIFO"
+                           : S_ISSOCK(st.st_mode) ? "socket"
+                                                  : "device");
+    FILE *probe = fopen(path, "rb");
+    if (!probe)
+        return scene__fail(err, SCENE_ERR_IO, "%s: cannot read: %s", path, strerror(errno));
+    fclose(probe);
+    return SCENE_OK;
+}
+
 scene *scene_create_default(const scene_load_desc *desc, scene_error *err)
 {
     return scene_load(NULL, desc, err);
@@ -972,7 +992,9 @@ scene *scene_load(const char *path, const scene_load_desc *desc, scene_error *er
         rc = scene__build_default(s, err);
     } else if (ends_with(path, ".json")) {
         snprintf(s->source, sizeof s->source, "%s", path);
-        rc = scene__load_json(s, path, err);
+        rc = scene__check_file(path, err);
+        if (rc == SCENE_OK)
+            rc = scene__load_json(s, path, err);
     } else {
         snprintf(s->source, sizeof s->source, "%s", path);
         scene__set_source(s, path);

@@ -18,6 +18,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include <unistd.h>
 #include <zlib.h>
 
 /* Largest decompressed .gz model accepted (bytes): Assimp takes the length as unsigned int. */
@@ -70,47 +71,226 @@ static scene_result read_gz(const char *path, char **out, size_t *out_len, scene
     return SCENE_OK;
 }
 
-/* Checks a PLY header before Assimp reads it: Assimp 5.2.5's PLY reader loops forever on a header whose
- * end_header line is damaged (found by mutating files), so every header line must be one PLY knows, the
- * header must end with an end_header line, and no element may declare more items than the file has bytes. */
-static scene_result check_ply_header(const char *path, const char *buf, size_t len, scene_error *err)
+/* A whole number as Assimp's strtoul10() reads it: the leading decimal digits, wrapping modulo 2^32 as its
+ * unsigned int does. *digits_out (may be NULL) is the same number without wrapping, saturated at UINT64_MAX,
+ * so a count that wrapped to something small is still seen for what the file declares. */
+static uint32_t assimp_strtoul10(const char *p, const char *end, uint64_t *digits_out)
 {
-    static const char *const keywords[] = {"format ", "comment", "obj_info", "element ", "property "};
+    uint32_t wrapped = 0;
+    uint64_t digits = 0;
+    for (; p < end && *p >= '0' && *p <= '9'; p++) {
+        wrapped = wrapped * 10u + (uint32_t)(*p - '0');
+        digits = digits > (UINT64_MAX - 9) / 10 ? UINT64_MAX : digits * 10 + (uint64_t)(*p - '0');
+    }
+    if (digits_out)
+        *digits_out = digits;
+    return wrapped;
+}
+
+/* Refuses a declared count larger than the file could hold: every item of a declared element, vertex or
+ * face takes at least one byte of the file, so a count above the file's size is a lie that would only make
+ * Assimp allocate for it (its OFF reader allocates from the header alone: Assimp's own test file
+ * invalid/OutOfMemory.off, 309 bytes, declares 353535235358 vertices and grew past 8 GB). */
+static scene_result check_count(const char *path, unsigned line, const char *what, uint64_t count, size_t len,
+                                scene_error *err)
+{
+    if (count <= len)
+        return SCENE_OK;
+    return scene__fail(err, SCENE_ERR_FORMAT,
+                       "%s:%u: declares %llu %s, more than the file's %zu bytes can hold", path, line,
+                       (unsigned long long)count, what, len);
+}
+
+/* Counts in a PLY "comment" line that Assimp takes as an element count are refused only above this many:
+ * below it Assimp's allocation for them is small whatever the file's size (about 24 bytes each). */
+#define PLY_COMMENT_COUNT_HARMLESS (1u << 20)
+
+/* Checks a PLY header before Assimp reads it. Assimp 5.2.5's PLY reader loops forever on a header whose
+ * end_header line is damaged (found by mutating files), so the header must end with an end_header line;
+ * and no element may declare more items than the file has bytes. Header lines PLY does not define
+ * (Blender 2.47 writes a bare "Created by Blender3D ..." line) are accepted: Assimp skips them. Assimp also
+ * parses every "comment" line as an element (its comment skipping works on a copy of the line), so a
+ * comment starting with a number, or with "vertex"/"face" and a number, declares a count as well. */
+static scene_result check_ply(const char *path, const char *buf, size_t len, scene_error *err)
+{
+    /* the element semantics after which Assimp reads a count ("TextureFile" takes a name, no count) */
+    static const char *const semantics[] = {"vertex", "face", "tristrips", "edge", "material"};
     size_t pos = 0;
     for (unsigned line = 1; pos < len && line <= 100000; line++) {
         const char *start = buf + pos;
         const char *newline = memchr(start, '\n', len - pos);
         size_t n = newline ? (size_t)(newline - start) : len - pos;
         size_t m = n > 0 && start[n - 1] == '\r' ? n - 1 : n;
+        const char *end = start + m;
         if (line == 1) {
             if (!(m == 3 && memcmp(start, "ply", 3) == 0))
                 return scene__fail(err, SCENE_ERR_FORMAT, "%s: not a PLY file (the first line is not 'ply')", path);
-        } else if (m == 10 && memcmp(start, "end_header", 10) == 0) {
+        } else if (m >= 10 && memcmp(start, "end_header", 10) == 0 &&
+                   (m == 10 || start[10] == ' ' || start[10] == '\t')) {
             return SCENE_OK;
-        } else {
-            bool known = false;
-            for (size_t k = 0; k < sizeof keywords / sizeof keywords[0] && !known; k++)
-                known = m >= strlen(keywords[k]) && memcmp(start, keywords[k], strlen(keywords[k])) == 0;
-            if (!known)
-                return scene__fail(err, SCENE_ERR_FORMAT, "%s:%u: not a PLY header line: '%.*s'", path, line,
+        } else if (m >= 8 && memcmp(start, "element ", 8) == 0) {
+            /* "element NAME COUNT", nothing after the count */
+            const char *p = start + 8, *name = NULL, *digits = NULL;
+            while (p < end && (*p == ' ' || *p == '\t'))
+                p++;
+            for (name = p; p < end && *p != ' ' && *p != '\t';)
+                p++;
+            size_t name_len = (size_t)(p - name);
+            while (p < end && (*p == ' ' || *p == '\t'))
+                p++;
+            for (digits = p; p < end && *p >= '0' && *p <= '9';)
+                p++;
+            bool has_digits = p > digits;
+            while (p < end && (*p == ' ' || *p == '\t'))
+                p++;
+            if (name_len == 0 || !has_digits || p != end)
+                return scene__fail(err, SCENE_ERR_FORMAT, "%s:%u: malformed element line: '%.*s'", path, line,
                                    (int)(m < 60 ? m : 60), start);
-            if (memcmp(start, "element ", 8) == 0) {
-                char text[128];
-                snprintf(text, sizeof text, "%.*s", (int)(m < 127 ? m : 127), start);
-                char name[64];
-                unsigned long long count = 0;
-                char tail = 0;
-                if (sscanf(text, "element %63s %llu %c", name, &count, &tail) != 2 || count > len)
-                    return scene__fail(err, SCENE_ERR_FORMAT,
-                                       "%s:%u: malformed element line or count larger than the file: '%s'", path,
-                                       line, text);
+            uint64_t declared = 0;
+            assimp_strtoul10(digits, end, &declared);
+            char what[96];
+            snprintf(what, sizeof what, "items of element '%.*s'", (int)(name_len < 40 ? name_len : 40),
+                     name);
+            scene_result rc = check_count(path, line, what, declared, len, err);
+            if (rc != SCENE_OK)
+                return rc;
+        } else if (m >= 8 && memcmp(start, "comment", 7) == 0 && (start[7] == ' ' || start[7] == '\t')) {
+            const char *p = start + 8;
+            while (p < end && (*p == ' ' || *p == '\t'))
+                p++;
+            for (size_t k = 0; k < sizeof semantics / sizeof semantics[0]; k++) {
+                size_t sl = strlen(semantics[k]);
+                if ((size_t)(end - p) > sl && memcmp(p, semantics[k], sl) == 0 &&
+                    (p[sl] == ' ' || p[sl] == '\t')) {
+                    for (p += sl; p < end && (*p == ' ' || *p == '\t');)
+                        p++;
+                    break;
+                }
             }
+            uint64_t declared = 0;
+            assimp_strtoul10(p, end, &declared);
+            if (declared > len && declared > PLY_COMMENT_COUNT_HARMLESS)
+                return scene__fail(
+                    err, SCENE_ERR_FORMAT,
+                    "%s:%u: Assimp reads this comment as declaring %llu items, more than the file's "
+                    "%zu bytes can hold: '%.*s'",
+                    path, line, (unsigned long long)declared, len, (int)(m < 60 ? m : 60), start);
         }
         if (!newline)
             break;
         pos += n + 1;
     }
     return scene__fail(err, SCENE_ERR_FORMAT, "%s: the PLY header has no end_header line", path);
+}
+
+/* Skips blanks, line ends and '#' comment lines the way Assimp's OFF reader does. */
+static const char *off_next_token(const char *p, const char *end)
+{
+    for (;;) {
+        while (p < end && (*p == ' ' || *p == '\t' || *p == '\r' || *p == '\n'))
+            p++;
+        if (p >= end || *p != '#')
+            return p;
+        while (p < end && *p != '\n')
+            p++;
+    }
+}
+
+/* Checks an OFF header's vertex and face counts against the file size before Assimp reads it: Assimp
+ * allocates both arrays from the header alone. The header is parsed as Assimp parses it: optional "ST",
+ * "C", "N", "4" and "n" prefixes, "OFF" (which may be absent), a dimension after "n", then the counts. */
+static scene_result check_off(const char *path, const char *buf, size_t len, scene_error *err)
+{
+    const char *p = off_next_token(buf, buf + len), *end = buf + len;
+    bool dimension = false;
+    if (end - p > 2 && p[0] == 'S' && p[1] == 'T')
+        p += 2;
+    if (end - p > 1 && p[0] == 'C')
+        p++;
+    if (end - p > 1 && p[0] == 'N')
+        p++;
+    if (end - p > 1 && p[0] == '4')
+        p++;
+    if (end - p > 1 && p[0] == 'n') {
+        dimension = true;
+        p++;
+    }
+    if (end - p > 3 && memcmp(p, "OFF", 3) == 0)
+        p += 3;
+    else
+        dimension = false; /* Assimp reads the counts from here on */
+    p = off_next_token(p, end);
+    if (dimension) {
+        assimp_strtoul10(p, end, NULL);
+        while (p < end && *p >= '0' && *p <= '9')
+            p++;
+        p = off_next_token(p, end);
+    }
+    static const char *const what[2] = {"vertices", "faces"};
+    for (int k = 0; k < 2; k++) {
+        uint64_t declared = 0;
+        assimp_strtoul10(p, end, &declared);
+        unsigned line = 1;
+        for (const char *q = buf; q < p; q++)
+            line += *q == '\n';
+        scene_result rc = check_count(path, line, what[k], declared, len, err);
+        if (rc != SCENE_OK)
+            return rc;
+        while (p < end && *p >= '0' && *p <= '9')
+            p++;
+        p = off_next_token(p, end);
+    }
+    return SCENE_OK;
+}
+
+/* Checks a binary STL's facet count against the file size. Assimp takes a file for binary STL when
+ * 84 + 50 * count equals its size in 32-bit arithmetic, which a huge count can wrap to; ASCII STL declares
+ * no counts. */
+static scene_result check_stl(const char *path, const char *buf, size_t len, scene_error *err)
+{
+    if (len < 84)
+        return SCENE_OK;
+    const unsigned char *c = (const unsigned char *)buf + 80;
+    uint32_t count = (uint32_t)c[0] | (uint32_t)c[1] << 8 | (uint32_t)c[2] << 16 | (uint32_t)c[3] << 24;
+    bool binary = (uint32_t)(count * 50u + 84u) == (uint32_t)len;
+    if (binary && 84 + 50 * (uint64_t)count != (uint64_t)len)
+        return scene__fail(err, SCENE_ERR_FORMAT,
+                           "%s: declares %u facets (%llu bytes), but the file has %zu bytes", path, count,
+                           84 + 50 * (unsigned long long)count, len);
+    return SCENE_OK;
+}
+
+/* What fxcache knows about a format before Assimp reads it, by the file's (inner, for .gz) extension: a
+ * check of the whole file (declared counts against its size) that runs before Assimp, or the reason the
+ * format is refused outright. */
+typedef scene_result (*import_check_fn)(const char *path, const char *buf, size_t len, scene_error *err);
+typedef struct import_format {
+    const char *ext;       /* lower case, without the dot */
+    import_check_fn check; /* NULL: none */
+    const char *refused;   /* non-NULL: the file is refused with this reason */
+} import_format;
+
+static const import_format import_formats[] = {
+    {"ply", check_ply, NULL},
+    {"off", check_off, NULL},
+    {"stl", check_stl, NULL},
+    /* Assimp's Q3BSP importer opens its file as a zip archive (ZipArchiveIOSystem) and looks for
+     * maps/NAME.bsp inside, so a bare .bsp always fails with "Failed to open file"; inside a .pk3 it
+     * leaves the triangles' vertex indices unset (5.2.5: every face reads "0 0 0" or "N 0 0"). */
+    {"bsp", NULL,
+     "a bare Quake 3 .bsp map: Assimp reads these only from inside a .pk3 (zip) archive, and its Quake 3 "
+     "importer (5.2.5) leaves the triangles' vertex indices unset; convert the map (e.g. to OBJ) first"},
+    {"pk3", NULL,
+     "a Quake 3 .pk3 archive: Assimp's Quake 3 importer (5.2.5) leaves the triangles' vertex indices unset; "
+     "convert the map (e.g. to OBJ) first"},
+};
+
+static const import_format *import_format_of(const char *ext)
+{
+    for (size_t i = 0; i < sizeof import_formats / sizeof import_formats[0]; i++)
+        if (strcasecmp(ext, import_formats[i].ext) == 0)
+            return &import_formats[i];
+    return NULL;
 }
 
 /* Checks what Assimp returns, whatever its own validation let through: every face has vertices, every
@@ -133,6 +313,103 @@ static scene_result check_faces(const char *path, const struct aiScene *ai, scen
         }
     }
     return SCENE_OK;
+}
+
+/* What Assimp's own code writes to the process's stderr (file descriptor 2) during an import, held in a
+ * temporary file: its bundled OpenDDL parser (OpenGEX) writes "nullptr returned by creating DDLNode."
+ * straight to std::cerr, which put a second line beside fxcache's one-line error. fxcache's loaders run
+ * before any of its threads start, so nothing else writes to stderr meanwhile. */
+typedef struct stderr_capture {
+    int saved_fd; /* the real stderr while capturing, else -1 */
+    FILE *file;   /* where file descriptor 2 points meanwhile */
+} stderr_capture;
+
+static void capture_begin(stderr_capture *c)
+{
+    c->saved_fd = -1;
+    c->file = tmpfile();
+    if (!c->file)
+        return; /* no temporary file: Assimp writes to stderr as it would */
+    fflush(stderr);
+    c->saved_fd = dup(STDERR_FILENO);
+    if (c->saved_fd < 0 || dup2(fileno(c->file), STDERR_FILENO) < 0) {
+        if (c->saved_fd >= 0)
+            close(c->saved_fd);
+        c->saved_fd = -1;
+        fclose(c->file);
+        c->file = NULL;
+    }
+}
+
+/* Restores stderr and copies what was written into text as one line (line ends become "; ", at most
+ * cap - 1 bytes); text is "" when nothing was. */
+static void capture_end(stderr_capture *c, char *text, size_t cap)
+{
+    text[0] = 0;
+    if (c->saved_fd < 0)
+        return;
+    fflush(stderr);
+    dup2(c->saved_fd, STDERR_FILENO);
+    close(c->saved_fd);
+    rewind(c->file);
+    size_t n = 0;
+    bool line_end = false;
+    for (int ch; n + 3 < cap && (ch = fgetc(c->file)) != EOF;) {
+        if (ch == '\n' || ch == '\r') {
+            line_end = n > 0;
+            continue;
+        }
+        if (line_end) {
+            text[n++] = ';';
+            text[n++] = ' ';
+            line_end = false;
+        }
+        text[n++] = (char)(ch >= 32 && ch < 127 ? ch : '?');
+    }
+    text[n] = 0;
+    fclose(c->file);
+}
+
+/* How many meshes the node graph below node places (references), counting a mesh once per reference.
+ * Assimp's validation has checked every index is below mNumMeshes and that the graph is a tree. */
+static uint64_t placed_meshes(const struct aiNode *node, unsigned depth)
+{
+    if (!node || depth > 10000)
+        return 0;
+    uint64_t placed = node->mNumMeshes;
+    for (uint32_t i = 0; i < node->mNumChildren; i++)
+        placed += placed_meshes(node->mChildren[i], depth + 1);
+    return placed;
+}
+
+/* Checks what Assimp's pre-transform step would fail on: it throws when no node places any mesh ("all
+ * meshes are orphaned"), and aiApplyPostProcessing() then crashes releasing the scene (an AC3D object with
+ * vertices but no surfaces gives one unplaced mesh of points). Says which case it is: no surfaces at all,
+ * or surfaces no node places. */
+static scene_result check_scene_graph(const char *path, const struct aiScene *ai, scene_error *err)
+{
+    if (placed_meshes(ai->mRootNode, 0) > 0)
+        return SCENE_OK;
+    uint64_t polygons = 0, points_lines = 0;
+    for (uint32_t i = 0; i < ai->mNumMeshes; i++)
+        for (uint32_t f = 0; f < ai->mMeshes[i]->mNumFaces; f++) {
+            if (ai->mMeshes[i]->mFaces[f].mNumIndices >= 3)
+                polygons++;
+            else
+                points_lines++;
+        }
+    if (ai->mNumMeshes == 0)
+        return scene__fail(err, SCENE_ERR_EMPTY, "%s: no usable triangles in the file (it has no meshes)",
+                           path);
+    if (polygons == 0)
+        return scene__fail(err, SCENE_ERR_EMPTY,
+                           "%s: no usable triangles in the file (only %llu points and lines)", path,
+                           (unsigned long long)points_lines);
+    return scene__fail(
+        err, SCENE_ERR_EMPTY,
+        "%s: no usable triangles in the file (its %u meshes are not placed by any node of its scene "
+        "graph)",
+        path, ai->mNumMeshes);
 }
 
 /* The folder part of path (with a trailing slash), or "" for a bare file name. */
@@ -276,16 +553,15 @@ done:
 scene_result scene__import_file(scene *s, const char *path, const double *xform,
                                 const scene_material *override, scene_error *err)
 {
-    FILE *probe = fopen(path, "rb");
-    if (!probe)
-        return scene__fail(err, SCENE_ERR_IO, "%s: cannot read: %s", path, strerror(errno));
-    fclose(probe);
+    scene_result rc = scene__check_file(path, err);
+    if (rc != SCENE_OK)
+        return rc;
 
     /* Two phases, because Assimp 5.2.5 crashes on some damaged input (found by mutating files): its
      * triangulation asserts, aborting the process, on a face without vertices, which its own validation
-     * lets through; and aiApplyPostProcessing() crashes releasing a scene its validation rejects. So the
-     * import runs only Assimp's validation, check_faces() checks what that let through, and only then do
-     * the post-processing steps run. */
+     * lets through; and aiApplyPostProcessing() crashes releasing a scene when a step fails. So the
+     * import runs only Assimp's validation, check_faces() and check_scene_graph() check what that let
+     * through and what the steps would fail on, and only then do the post-processing steps run. */
     const unsigned flags = aiProcess_ValidateDataStructure;
     const unsigned post = aiProcess_Triangulate | aiProcess_PreTransformVertices | aiProcess_SortByPType;
     const struct aiScene *ai = NULL;
@@ -295,12 +571,17 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
     snprintf(inner, sizeof inner, "%.*s", (int)(gz ? n - 3 : n), path);
     const char *dot = strrchr(inner, '.');
     const char *hint = dot && !strchr(dot, '/') ? dot + 1 : "";
-    bool ply = strcasecmp(hint, "ply") == 0;
-    if (gz || ply) {
-        /* read_gz also reads plain files (zlib passes them through). */
+    const import_format *format = import_format_of(hint);
+    stderr_capture capture;
+    char printed[200];
+    if (format && format->refused)
+        return scene__fail(err, SCENE_ERR_FORMAT, "%s: %s", path, format->refused);
+    if (gz || (format && format->check)) {
+        /* The whole file in memory, so the check sees the bytes Assimp reads (read_gz also reads plain
+         * files: zlib passes them through). */
         char *buf = NULL;
         size_t len = 0;
-        scene_result rc = read_gz(path, &buf, &len, err);
+        rc = read_gz(path, &buf, &len, err);
         if (rc != SCENE_OK)
             return rc;
         if (len == 0) {
@@ -311,18 +592,27 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
             free(buf);
             return scene__fail(err, SCENE_ERR_RANGE, "%s: larger than 4 GiB", path);
         }
-        if (ply && (rc = check_ply_header(path, buf, len, err)) != SCENE_OK) {
+        if (format && format->check && (rc = format->check(path, buf, len, err)) != SCENE_OK) {
             free(buf);
             return rc;
         }
+        capture_begin(&capture);
         ai = aiImportFileFromMemory(buf, (unsigned)len, flags, hint);
+        capture_end(&capture, printed, sizeof printed);
         free(buf);
     } else {
+        capture_begin(&capture);
         ai = aiImportFile(path, flags);
+        capture_end(&capture, printed, sizeof printed);
     }
     if (!ai)
-        return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s", path, aiGetErrorString());
+        return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s%s%s%s", path, aiGetErrorString(),
+                           printed[0] ? " (Assimp also printed: '" : "", printed, printed[0] ? "')" : "");
+    if (printed[0])
+        fprintf(stderr, "fxcache: warning: %s: Assimp printed: '%s'\n", path, printed);
     scene_result checked = check_faces(path, ai, err);
+    if (checked == SCENE_OK)
+        checked = check_scene_graph(path, ai, err);
     if (checked != SCENE_OK) {
         aiReleaseImport(ai);
         return checked;
@@ -333,7 +623,6 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
 
     char model_dir[512];
     folder_of(path, model_dir, sizeof model_dir);
-    scene_result rc = SCENE_OK;
     uint32_t *material_map = NULL;
     uint32_t override_index = UINT32_MAX;
     if (override) {
@@ -354,6 +643,7 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
         }
     }
     uint32_t before = s->triangle_count;
+    scene_repairs repairs_before = s->repairs;
     for (uint32_t i = 0; rc == SCENE_OK && i < ai->mNumMeshes; i++) {
         const struct aiMesh *mesh = ai->mMeshes[i];
         if (!(mesh->mPrimitiveTypes & aiPrimitiveType_TRIANGLE)) {
@@ -367,7 +657,14 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
         rc = import_mesh(s, mesh, i, material, xform, path, err);
     }
     if (rc == SCENE_OK && s->triangle_count == before)
-        rc = scene__fail(err, SCENE_ERR_EMPTY, "%s: no usable triangles in the file", path);
+        rc = scene__fail(
+            err, SCENE_ERR_EMPTY,
+            "%s: no usable triangles in the file (%llu points and lines dropped, %llu degenerate and "
+            "%llu duplicate triangles skipped)",
+            path,
+            (unsigned long long)(s->repairs.non_triangles_dropped - repairs_before.non_triangles_dropped),
+            (unsigned long long)(s->repairs.degenerate_skipped - repairs_before.degenerate_skipped),
+            (unsigned long long)(s->repairs.duplicate_skipped - repairs_before.duplicate_skipped));
     free(material_map);
     aiReleaseImport(ai);
     return rc;

@@ -10,7 +10,9 @@
 #include <stdlib.h>
 #include <fcntl.h>
 #include <signal.h>
+#include <stdbool.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
@@ -273,6 +275,43 @@ static void test_err_unsupported_format(void **state)
     expect_error(1, args, "junk.xyz", NULL);
 }
 
+/* Model inputs that crashed (a segfault in Assimp's pre-transform step), ran out of memory, got a misleading
+ * message or printed a second line from inside Assimp: each is refused with exit code 1 and one line naming
+ * the file and the problem. The Assimp test models are used where Debian's assimp-testmodels is installed. */
+static void test_err_model_inputs(void **state)
+{
+    (void)state;
+    char folder[1100], bsp[1100], models[3][1100];
+    tmp_path(folder, sizeof folder, "folder.obj");
+    assert_true(mkdir(folder, 0755) == 0 || access(folder, F_OK) == 0);
+    write_file(bsp, sizeof bsp, "bare.bsp", "IBSP.");
+    static const char *const model_names[3] = {"AC/nosurfaces.ac", "invalid/OutOfMemory.off",
+                                               "OpenGEX/empty_camera.ogex"};
+    for (int k = 0; k < 3; k++)
+        snprintf(models[k], sizeof models[k], "/usr/share/assimp/models/%s", model_names[k]);
+    bool have_models = access("/usr/share/assimp/models", R_OK) == 0;
+    if (!have_models)
+        print_message("SKIP (part): /usr/share/assimp/models is absent (install assimp-testmodels)\n");
+    const struct {
+        const char *path;
+        const char *needle;
+        bool assimp_model;
+    } cases[] = {
+        {folder, "is a directory", false},
+        {bsp, "only from inside a .pk3", false},
+        {models[0], "no usable triangles in the file (only 7 points and lines)", true},
+        {models[1], "declares 353535235358 vertices", true},
+        {models[2], "(Assimp also printed: 'nullptr returned by creating DDLNode.')", true},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        if (cases[i].assimp_model && !have_models)
+            continue;
+        char args[1300];
+        snprintf(args, sizeof args, "scene-info '%s'", cases[i].path);
+        expect_error(1, args, cases[i].path, cases[i].needle, NULL);
+    }
+}
+
 static void test_err_malformed_json(void **state)
 {
     (void)state;
@@ -401,6 +440,64 @@ static void test_err_traces_and_viewers_disagree(void **state)
     write_file(path, sizeof path, "one.trace", "fxcache-trace 1\n0 0 1 3 0 0 -1 60\n");
     snprintf(args, sizeof args, "sim --trace '%s' --viewers 2 --res 8x8 --quiet", path);
     expect_error(2, args, "--viewers", NULL);
+}
+
+/* The machine's physical memory in MiB as /proc/meminfo tells it (MemTotal), a second source beside the
+ * sysconf() figure fxcache prints; 0 when unreadable. */
+static unsigned long long meminfo_total_mib(void)
+{
+    FILE *f = fopen("/proc/meminfo", "r");
+    if (!f)
+        return 0;
+    char line[256];
+    unsigned long long kib = 0;
+    while (fgets(line, sizeof line, f))
+        if (sscanf(line, "MemTotal: %llu kB", &kib) == 1)
+            break;
+    fclose(f);
+    return kib / 1024;
+}
+
+/* Memory options beyond the machine's physical memory are refused before anything is loaded or allocated,
+ * with the figures: --pool-mb 65536 and 64 viewers of 8192x8192 (140 GiB of per-pixel buffers) were accepted
+ * and tried to allocate them. A case is skipped on a machine that has the memory. */
+static void test_err_memory_beyond_physical(void **state)
+{
+    (void)state;
+    unsigned long long total_mib = meminfo_total_mib();
+    if (total_mib == 0) {
+        print_message("SKIP: /proc/meminfo is unreadable\n");
+        skip();
+    }
+    char out_dir[1024], views_args[1400], total[64];
+    tmp_path(out_dir, sizeof out_dir, "memory_views_out");
+    snprintf(views_args, sizeof views_args, "sim --viewers 64 --res 8192x8192 --views --out '%s' --quiet",
+             out_dir);
+    snprintf(total, sizeof total, "this machine's %llu MiB of physical memory", total_mib);
+    const struct {
+        const char *args;
+        unsigned long long at_least_mib; /* a lower bound of what the options need (skip above it) */
+        const char *needle;
+    } cases[] = {
+        {"sim --pool-mb 65536 --quiet", 65536, "block pools (65536 MiB)"},
+        {"sim --viewers 64 --res 8192x8192 --quiet", 64ull * 8192 * 8192 * 35 / 1048576,
+         "64 viewers, 4294967296 pixels (143360 MiB)"},
+        {views_args, 64ull * 8192 * 8192 * 47 / 1048576, "64 viewers, 4294967296 pixels (192512 MiB)"},
+        {"sim --no-cache --pool-mb 65536 --viewers 64 --res 8192x8192 --quiet",
+         64ull * 8192 * 8192 * 35 / 1048576, "block pools (0 MiB)"},
+    };
+    unsigned checked = 0;
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        if (total_mib >= cases[i].at_least_mib) {
+            print_message("SKIP: '%s' fits in this machine's %llu MiB\n", cases[i].args, total_mib);
+            continue;
+        }
+        expect_error(2, cases[i].args, cases[i].needle, total, "lower --pool-mb", NULL);
+        checked++;
+    }
+    if (checked == 0)
+        skip();
+    assert_int_equal(access(out_dir, F_OK), -1); /* refused before --out was created */
 }
 
 /* ---------------------------------------------------------------------------------------------------------
@@ -715,10 +812,88 @@ static void test_sim_interrupted_keeps_results(void **state)
     json_decref(sum);
 }
 
+/* Whether process pid catches signal sig (its SigCgt mask in /proc). */
+static bool catches_signal(pid_t pid, int sig)
+{
+    char path[64], line[256];
+    snprintf(path, sizeof path, "/proc/%d/status", (int)pid);
+    FILE *f = fopen(path, "r");
+    if (!f)
+        return false;
+    unsigned long long mask = 0;
+    bool found = false;
+    while (!found && fgets(line, sizeof line, f))
+        found = sscanf(line, "SigCgt: %llx", &mask) == 1;
+    fclose(f);
+    return found && (mask >> (sig - 1)) & 1;
+}
+
+/* SIGTERM or SIGINT while sim loads a large scene (Sponza, about 1-2 s of loading): the load runs to its end,
+ * then the run stops with one line saying so and the exit code a shell gives such a run (143, 130), and
+ * nothing else is written. The signal is sent as soon as fxcache's handler is in place, which is just before
+ * the load starts (before that the signal would kill it, or for SIGINT be ignored, with nothing printed). */
+static void test_sim_signal_during_load(void **state)
+{
+    (void)state;
+    const char *shared = fxt_shared_scene("sponza/sponza.3ds");
+    if (!shared)
+        skip();
+    char scene_path[1024], err_path[1024], summary[1024];
+    snprintf(scene_path, sizeof scene_path, "%s", shared);
+    tmp_path(err_path, sizeof err_path, "signal_stderr.txt");
+    tmp_path(summary, sizeof summary, "signal_summary.json");
+    static const struct {
+        int sig;
+        int exit_code;
+        const char *message;
+    } cases[] = {
+        {SIGTERM, 143, "fxcache sim: interrupted by SIGTERM while loading the scene\n"},
+        {SIGINT, 130, "fxcache sim: interrupted by SIGINT while loading the scene\n"},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        remove(summary);
+        pid_t pid = fork();
+        assert_true(pid >= 0);
+        if (pid == 0) {
+            signal(cases[i].sig, SIG_DFL); /* so SigCgt shows fxcache's own handler, not one inherited */
+            int devnull = open("/dev/null", O_WRONLY);
+            int errfd = open(err_path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+            dup2(devnull, STDOUT_FILENO);
+            dup2(errfd, STDERR_FILENO);
+            execl(FXC_BIN, FXC_BIN, "sim", "--scene", scene_path, "--frames", "1", "--viewers", "1", "--res",
+                  "16x16", "--quiet", "--summary", summary, (char *)NULL);
+            _exit(127);
+        }
+        bool ready = false;
+        for (int tries = 0; tries < 60000 && !ready; tries++) { /* at most 60 s */
+            ready = catches_signal(pid, cases[i].sig);
+            if (!ready) {
+                struct timespec pause = {0, 1000 * 1000};
+                nanosleep(&pause, NULL);
+            }
+        }
+        assert_true(ready);
+        assert_int_equal(kill(pid, cases[i].sig), 0);
+        int status = 0;
+        assert_int_equal(waitpid(pid, &status, 0), pid);
+        if (!WIFEXITED(status))
+            fail_msg("%s: fxcache did not exit normally (status 0x%x)", cases[i].message, status);
+        assert_int_equal(WEXITSTATUS(status), cases[i].exit_code);
+        FILE *f = fopen(err_path, "r");
+        assert_non_null(f);
+        size_t n = fread(err_buf, 1, sizeof err_buf - 1, f);
+        err_buf[n] = 0;
+        fclose(f);
+        assert_string_equal(err_buf, cases[i].message);
+        assert_int_equal(access(summary, F_OK), -1);
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_sim_interrupted_keeps_results),
+        cmocka_unit_test(test_sim_signal_during_load),
         cmocka_unit_test(test_help_lists_commands),
         cmocka_unit_test(test_unknown_command),
         cmocka_unit_test(test_subcommand_help),
@@ -727,6 +902,7 @@ int main(void)
         cmocka_unit_test(test_scene_info_no_lights_no_sky),
         cmocka_unit_test(test_err_missing_file),
         cmocka_unit_test(test_err_unsupported_format),
+        cmocka_unit_test(test_err_model_inputs),
         cmocka_unit_test(test_err_malformed_json),
         cmocka_unit_test(test_err_nan_vertex),
         cmocka_unit_test(test_err_nan_vertex_names_file),
@@ -743,6 +919,7 @@ int main(void)
         cmocka_unit_test(test_err_trace_bad_line),
         cmocka_unit_test(test_err_trace_newer_version),
         cmocka_unit_test(test_err_traces_and_viewers_disagree),
+        cmocka_unit_test(test_err_memory_beyond_physical),
         cmocka_unit_test(test_render_png),
         cmocka_unit_test(test_sim_identical_summary_and_stats),
         cmocka_unit_test(test_sim_record_replay),

@@ -245,6 +245,7 @@ static void test_viewer_handles(void **state)
     assert_true(a.id != 0 && b.id != 0 && a.id != b.id);
     srv_loop_memory(loop, &after);
     assert_int_equal(after.viewers - before.viewers, (uint64_t)(32 * 16 + 40 * 20) * (5 * 4 + 12 + 3));
+    assert_int_equal(SRV_VIEWER_BYTES_PER_PIXEL, 5 * 4 + 12 + 3); /* what the command line checks against */
     srv_camera cam = srv_camgen_camera(SRV_CAMGEN_STATIC, f->s, 0, 1, 0, 1);
     srv_frame_stats st;
     fxt_frame(loop, (srv_viewer_id[]){a, b}, 2, (srv_camera[]){cam, cam}, &st);

@@ -10,7 +10,12 @@
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
 #include <zlib.h>
+
+/* Where Debian's assimp-testmodels puts Assimp's own test models. */
+#define ASSIMP_MODELS "/usr/share/assimp/models"
 
 /* splitmix64: the mutation test's deterministic random numbers. */
 static uint64_t splitmix(uint64_t *state)
@@ -201,8 +206,9 @@ static void test_mirrored_transform_keeps_winding(void **state)
     scene_free(s);
 }
 
-/* PLY files that made Assimp 5.2.5 loop forever (a damaged end_header or header line, an element with no
- * count) or abort in its triangulation (a face with no vertex): refused with a one-line error, quickly. */
+/* PLY files that made Assimp 5.2.5 loop forever (a damaged end_header line), or that it cannot read (a
+ * header line that is no PLY keyword, where the vertex element should be; an element with no count), or that
+ * abort its triangulation (a face with no vertex): refused with a one-line error, quickly. */
 static void test_damaged_ply_refused(void **state)
 {
     (void)state;
@@ -210,7 +216,7 @@ static void test_damaged_ply_refused(void **state)
         /* end_header damaged */
         "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
         "element face 1\nproperty list uchar int vertex_indices\nen-1d_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
-        /* a header line that is no PLY keyword */
+        /* a header line that is no PLY keyword: Assimp skips it, and then finds no vertex element */
         "ply\nformat ascii 1.0\nelnanement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
         "end_header\n0 0 0\n1 0 0\n0 1 0\n",
         /* an element without its count */
@@ -299,6 +305,149 @@ static void test_mutated_files(void **state)
     assert_true(loaded > 0 && refused > 0);
 }
 
+/* One input of the table-driven tests below: a file written by the test (or named in Assimp's models), and
+ * what loading it must give. */
+typedef struct input_case {
+    const char *name;   /* file name in the test's folder, or a path under ASSIMP_MODELS */
+    const char *bytes;  /* the file's content (NULL: an Assimp model, or a directory when dir is set) */
+    size_t len;         /* bytes in content; 0: strlen */
+    bool dir;           /* make a directory of that name instead of a file */
+    scene_result code;  /* SCENE_OK: must load */
+    const char *needle; /* must be in the error message (when code is not SCENE_OK) */
+    uint32_t triangles; /* when it loads: exactly this many triangles (0: any number above 0) */
+} input_case;
+
+/* Loads one case and checks the outcome: the load's code, and for a refusal one line naming the file and
+ * containing the needle. */
+static void check_input_case(const input_case *c, const char *path)
+{
+    scene_error err = {0};
+    scene *s = scene_load(path, NULL, &err);
+    if (c->code == SCENE_OK) {
+        if (!s)
+            fail_msg("%s: expected to load, got: %s", c->name, err.msg);
+        if (c->triangles)
+            assert_int_equal(s->triangle_count, c->triangles);
+        assert_true(s->triangle_count > 0);
+        scene_free(s);
+        return;
+    }
+    if (s) {
+        scene_free(s);
+        fail_msg("%s: expected a refusal containing '%s', but it loaded", c->name, c->needle);
+    }
+    if (err.code != c->code || !strstr(err.msg, c->needle) || !strstr(err.msg, c->name) ||
+        strchr(err.msg, '\n'))
+        fail_msg("%s: expected code %d and one line naming the file with '%s'; got code %d: '%s'", c->name,
+                 (int)c->code, c->needle, (int)err.code, err.msg);
+}
+
+/* A binary STL of count facets declared, with facets_written facets of data after the header. */
+static size_t binary_stl(char *buf, size_t cap, uint32_t declared, uint32_t facets_written)
+{
+    size_t len = 84 + 50 * (size_t)facets_written;
+    assert_true(len <= cap);
+    memset(buf, 0, len);
+    memcpy(buf, "binary STL written by test_import", 33);
+    for (int k = 0; k < 4; k++)
+        buf[80 + k] = (char)(declared >> (8 * k));
+    const float tri[12] = {0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0}; /* normal, then three corners */
+    for (uint32_t f = 0; f < facets_written; f++)
+        memcpy(buf + 84 + 50 * (size_t)f, tri, sizeof tri); /* little-endian floats on this machine */
+    return len;
+}
+
+/* Declared counts are checked against the file size before Assimp reads them (Assimp allocates from the
+ * header alone: 3.5 billion OFF vertices for a 40-byte file); formats that declare no such count, and honest
+ * counts, still load; Quake 3 maps, which Assimp 5.2.5 cannot give usable triangles for, and a directory
+ * named like a model are refused with what is wrong. */
+static void test_inputs_refused_or_read(void **state)
+{
+    (void)state;
+    static char stl_wrapped[200], stl_one[200];
+    /* 2^31 + 1 facets: 50 * count + 84 wraps in 32 bits to the 134 bytes of the file, which makes Assimp take
+     * the file for binary STL. */
+    size_t stl_wrapped_len = binary_stl(stl_wrapped, sizeof stl_wrapped, 2147483649u, 1);
+    size_t stl_one_len = binary_stl(stl_one, sizeof stl_one, 1, 1);
+    const char *tri_off_tail = "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+    char off_huge_vertices[128], off_huge_faces[128], off_no_keyword[128], coff[128], off_ok[128];
+    snprintf(off_huge_vertices, sizeof off_huge_vertices, "OFF\n3500000000 1 0\n%s", tri_off_tail);
+    snprintf(off_huge_faces, sizeof off_huge_faces, "OFF\n# a comment\n3 4000000000 0\n%s", tri_off_tail);
+    snprintf(off_no_keyword, sizeof off_no_keyword, "3 99999999 0\n%s", tri_off_tail);
+    snprintf(coff, sizeof coff, "COFF 99999999 1 0\n%s", tri_off_tail);
+    snprintf(off_ok, sizeof off_ok, "OFF\n3 1 0\n%s", tri_off_tail);
+    const char *ply_head = "ply\nformat ascii 1.0\n";
+    const char *ply_body = "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                           "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                           "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+    char ply_blender[512], ply_comment_small[512], ply_comment_huge[512], ply_comment_vertex[512];
+    snprintf(ply_blender, sizeof ply_blender,
+             "%sCreated by Blender3D 247 - www.blender.org, source file: \n%s", ply_head, ply_body);
+    snprintf(ply_comment_small, sizeof ply_comment_small,
+             "%scomment 2023 scan, obj_info below\nobj_info x\n%s", ply_head, ply_body);
+    snprintf(ply_comment_huge, sizeof ply_comment_huge, "%scomment 4000000000 points\n%s", ply_head,
+             ply_body);
+    snprintf(ply_comment_vertex, sizeof ply_comment_vertex, "%scomment vertex 99999999\n%s", ply_head,
+             ply_body);
+    const input_case cases[] = {
+        {"huge_vertices.off", off_huge_vertices, 0, false, SCENE_ERR_FORMAT, "declares 3500000000 vertices",
+         0},
+        {"huge_faces.off", off_huge_faces, 0, false, SCENE_ERR_FORMAT, ":3: declares 4000000000 faces", 0},
+        {"no_keyword.off", off_no_keyword, 0, false, SCENE_ERR_FORMAT, "declares 99999999 faces", 0},
+        {"coff.off", coff, 0, false, SCENE_ERR_FORMAT, "declares 99999999 vertices", 0},
+        {"honest.off", off_ok, 0, false, SCENE_OK, NULL, 1},
+        {"wrapped.stl", stl_wrapped, stl_wrapped_len, false, SCENE_ERR_FORMAT, "declares 2147483649 facets",
+         0},
+        {"one.stl", stl_one, stl_one_len, false, SCENE_OK, NULL, 1},
+        {"blender247.ply", ply_blender, 0, false, SCENE_OK, NULL, 1},
+        {"comment_small.ply", ply_comment_small, 0, false, SCENE_OK, NULL, 1},
+        {"comment_huge.ply", ply_comment_huge, 0, false, SCENE_ERR_FORMAT, ":3: Assimp reads this comment",
+         0},
+        {"comment_vertex.ply", ply_comment_vertex, 0, false, SCENE_ERR_FORMAT, "declaring 99999999 items", 0},
+        {"map.bsp", "IBSP\x2e", 5, false, SCENE_ERR_FORMAT, "only from inside a .pk3", 0},
+        {"maps.pk3", "PK\x03\x04", 4, false, SCENE_ERR_FORMAT, "vertex indices unset", 0},
+        {"folder.obj", NULL, 0, true, SCENE_ERR_IO, "is a directory", 0},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        const input_case *c = &cases[i];
+        char path[1024];
+        snprintf(path, sizeof path, "%s", fxt_tmp_path(c->name));
+        if (c->dir) {
+            assert_true(mkdir(path, 0755) == 0 || access(path, F_OK) == 0);
+        } else {
+            FILE *f = fopen(path, "wb");
+            assert_non_null(f);
+            size_t len = c->len ? c->len : strlen(c->bytes);
+            assert_int_equal(fwrite(c->bytes, 1, len, f), len);
+            fclose(f);
+        }
+        check_input_case(c, path);
+    }
+}
+
+/* Assimp's own test models that crashed, ran out of memory or were refused wrongly: an AC3D file of lines
+ * only (a segfault in Assimp's pre-transform step), an OFF header claiming 353535235358 vertices (8 GB and
+ * growing), a Blender 2.47 PLY with a bare text line in its header (refused by fxcache's header check). */
+static void test_assimp_models(void **state)
+{
+    (void)state;
+    if (access(ASSIMP_MODELS, R_OK) != 0) {
+        print_message("SKIP: %s is absent (install assimp-testmodels)\n", ASSIMP_MODELS);
+        skip();
+    }
+    static const input_case cases[] = {
+        {"AC/nosurfaces.ac", NULL, 0, false, SCENE_ERR_EMPTY, "only 7 points and lines", 0},
+        {"invalid/OutOfMemory.off", NULL, 0, false, SCENE_ERR_FORMAT, "declares 353535235358 vertices", 0},
+        {"PLY/Wuson.ply", NULL, 0, false, SCENE_OK, NULL, 0},
+        {"OpenGEX/empty_camera.ogex", NULL, 0, false, SCENE_ERR_FORMAT, "Assimp also printed: 'nullptr", 0},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        char path[1024];
+        snprintf(path, sizeof path, "%s/%s", ASSIMP_MODELS, cases[i].name);
+        check_input_case(&cases[i], path);
+    }
+}
+
 /* 3DS through Assimp: the horse Debian's glmark2-data ships. */
 static void test_3ds_horse(void **state)
 {
@@ -332,6 +481,8 @@ int main(void)
         cmocka_unit_test(test_damaged_ply_refused),
         cmocka_unit_test(test_mutated_files),
         cmocka_unit_test(test_3ds_horse),
+        cmocka_unit_test(test_inputs_refused_or_read),
+        cmocka_unit_test(test_assimp_models),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

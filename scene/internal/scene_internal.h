@@ -71,6 +71,10 @@ scene_result scene__finalize(scene *s, const scene_load_desc *desc, scene_error 
  * Fails with SCENE_ERR_RANGE when the texel density makes one triangle wider than an island may be. */
 scene_result scene__build_islands(scene *s, scene_error *err);
 
+/* Checks that path names a regular file that can be opened for reading, before any reader opens it: a
+ * directory named like a model ("x.obj"), a FIFO or a device is refused with a message saying what it is. */
+scene_result scene__check_file(const char *path, scene_error *err);
+
 /* Mesh-file import through Assimp (scene_import.c): appends the file's meshes and materials to s.
  * xform (row-major affine, double) may be NULL; override (may be NULL) replaces every material of the file. */
 scene_result scene__import_file(scene *s, const char *path, const double *xform,

@@ -1,11 +1,15 @@
 /* Shared command-line helpers: see cli.h. */
 #include "cli.h"
 
+#include "engine.h"
+
 #include <errno.h>
 #include <math.h>
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 bool srv_cli_double(const char *cmd, const char *option, const char *text, double min, double max,
                     double *out)
@@ -72,6 +76,43 @@ bool srv_cli_vec3(const char *cmd, const char *option, const char *text, double 
     for (int k = 0; k < 3; k++)
         out[k] = v[k];
     return true;
+}
+
+uint64_t srv_cli_physical_memory(void)
+{
+    long pages = sysconf(_SC_PHYS_PAGES), page_size = sysconf(_SC_PAGESIZE);
+    if (pages <= 0 || page_size <= 0)
+        return 0;
+    return (uint64_t)pages * (uint64_t)page_size;
+}
+
+bool srv_cli_check_memory(const char *cmd, double pool_mb, uint32_t viewers, uint64_t pixels, bool views)
+{
+    uint64_t physical = srv_cli_physical_memory();
+    if (physical == 0)
+        return true;
+    /* At most 64 viewers of 8192 x 8192 at 47 bytes and a 64 GiB pool: no overflow in 64 bits. */
+    uint64_t per_pixel = SRV_VIEWER_BYTES_PER_PIXEL + (views ? SRV_VIEWS_BYTES_PER_PIXEL : 0);
+    uint64_t buffers = pixels * per_pixel;
+    uint64_t pools = pool_mb > 0 ? (uint64_t)(pool_mb * 1048576.0) : 0;
+    if (pools + buffers <= physical)
+        return true;
+    fprintf(
+        stderr,
+        "fxcache %s: the block pools (%.0f MiB) and the per-pixel buffers of %u viewers, %llu pixels (%.0f MiB) "
+        "need %.0f MiB, more than this machine's %llu MiB of physical memory: lower --pool-mb, --viewers "
+        "or --res\n",
+        cmd, pools / 1048576.0, viewers, (unsigned long long)pixels, buffers / 1048576.0,
+        (pools + buffers) / 1048576.0,
+        (unsigned long long)(physical >> 20));
+    return false;
+}
+
+int srv_cli_interrupted(const char *cmd, int sig, const char *when)
+{
+    const char *name = sig == SIGINT ? "SIGINT" : sig == SIGTERM ? "SIGTERM" : "a signal";
+    fprintf(stderr, "fxcache %s: interrupted by %s %s\n", cmd, name, when);
+    return 128 + sig;
 }
 
 scene *srv_cli_load_scene(const char *cmd, const char *path, float texel_density)

@@ -24,6 +24,21 @@ bool srv_cli_resolution(const char *cmd, const char *option, const char *text, u
  * keep their precision until scene_world_to_local(). */
 bool srv_cli_vec3(const char *cmd, const char *option, const char *text, double out[3]);
 
+/* The machine's physical memory in bytes (sysconf(_SC_PHYS_PAGES) times the page size), 0 if unknown. */
+uint64_t srv_cli_physical_memory(void);
+
+/* Checks, before anything is loaded, that the block pools (pool_mb MiB; 0 when no cache runs) and the
+ * per-pixel buffers of `viewers` viewers with `pixels` pixels in all (SRV_VIEWER_BYTES_PER_PIXEL each, and
+ * SRV_VIEWS_BYTES_PER_PIXEL more with views) fit in physical memory; otherwise prints one line with both figures and the
+ * machine's ("fxcache CMD: ... need N MiB ..., more than this machine's M MiB of physical memory") and
+ * returns false. Always true when the physical memory is unknown. */
+bool srv_cli_check_memory(const char *cmd, double pool_mb, uint32_t viewers, uint64_t pixels, bool views);
+
+/* Reports a run ended by signal sig (SIGINT, SIGTERM) before it did its work, with one line
+ * "fxcache CMD: interrupted by SIGTERM WHEN", and returns the exit code a shell gives such a run: 128 + sig
+ * (130 for SIGINT, 143 for SIGTERM). */
+int srv_cli_interrupted(const char *cmd, int sig, const char *when);
+
 /* Loads the scene at path ("default" or NULL: the embedded scene); prints the error on failure, and the
  * scene's precision warning (if any) as "fxcache CMD: warning: ..." on stderr. */
 scene *srv_cli_load_scene(const char *cmd, const char *path, float texel_density);

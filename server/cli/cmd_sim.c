@@ -29,8 +29,7 @@ static volatile sig_atomic_t stop_requested = 0;
 
 static void on_signal(int sig)
 {
-    (void)sig;
-    stop_requested = 1;
+    stop_requested = sig;
 }
 
 typedef struct sim_options {
@@ -546,9 +545,26 @@ int srv_cmd_sim(int argc, char **argv)
         }
     }
     recorder.start_time = start_time;
-    signal(SIGINT, on_signal);
+    /* Memory: the pools and every viewer's buffers (at its trace's resolution, if it records one) within the
+     * machine's physical memory, before anything is loaded. */
+    uint64_t pixels = 0;
+    for (uint32_t v = 0; v < o.viewers; v++) {
+        uint32_t w = o.width, h = o.height;
+        if (traces[v] && !o.res_set)
+            srv_trace_resolution(traces[v], &w, &h);
+        pixels += (uint64_t)w * h;
+    }
+    if (!srv_cli_check_memory("sim", o.no_cache ? 0 : o.pool_mb, o.viewers, pixels, o.views)) {
+        exit_code = 2;
+        goto done;
+    }
+    signal(SIGINT, on_signal); /* from here on: a signal during the load ends the run after it */
     signal(SIGTERM, on_signal);
     s = srv_cli_load_scene("sim", o.scene_path, (float)o.density);
+    if (stop_requested) {
+        exit_code = srv_cli_interrupted("sim", stop_requested, "while loading the scene");
+        goto done;
+    }
     if (!s)
         goto done;
     scene_error serr = {0};

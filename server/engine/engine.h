@@ -98,6 +98,12 @@ typedef struct srv_viewer_desc {
     char name[32];          /* for statistics and file names (default "viewer_SLOT") */
 } srv_viewer_desc;
 
+/* Bytes srv_viewer_add allocates per pixel: triangle, barycentric u and v, footprint, depth (4 each), linear
+ * radiance (12), sRGB image (3); and the three kept views with keep_views (4 each). For memory checks before
+ * anything is created; tests/test_engine.c checks them against the counted allocations. */
+#define SRV_VIEWER_BYTES_PER_PIXEL 35u
+#define SRV_VIEWS_BYTES_PER_PIXEL 12u
+
 /* One viewer's figures in a frame. */
 typedef struct srv_viewer_stats {
     srv_viewer_id id;
