@@ -190,6 +190,12 @@ static inline uint32_t osc_bilinear_keys(uint32_t effect, uint32_t island_id, ui
     }
     uint64_t base = ((uint64_t)effect << OSC_KEY_EFFECT_SHIFT) | ((uint64_t)island_id << OSC_KEY_ISLAND_SHIFT) |
                     ((uint64_t)level << OSC_KEY_LEVEL_SHIFT);
+    if ((tx[0] >> 3) == (tx[1] >> 3) && (ty[0] >> 3) == (ty[1] >> 3)) { /* the usual case: one block */
+        keys[0] = base | ((uint64_t)(ty[0] >> 3) << OSC_KEY_BLOCK_Y_SHIFT) | ((uint64_t)(tx[0] >> 3) << OSC_KEY_BLOCK_X_SHIFT);
+        masks[0] = ((uint64_t)1 << ((ty[0] & 7u) * 8u + (tx[0] & 7u))) | ((uint64_t)1 << ((ty[0] & 7u) * 8u + (tx[1] & 7u))) |
+                   ((uint64_t)1 << ((ty[1] & 7u) * 8u + (tx[0] & 7u))) | ((uint64_t)1 << ((ty[1] & 7u) * 8u + (tx[1] & 7u)));
+        return 1;
+    }
     uint32_t count = 0;
     for (int i = 0; i < 4; i++) { /* (x0,y0) (x1,y0) (x0,y1) (x1,y1), as osc_footprint_bilinear */
         uint32_t px = tx[i & 1], py = ty[i >> 1];

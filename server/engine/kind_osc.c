@@ -81,26 +81,37 @@ static uint32_t osc_kind_pixel_requests(const void *cache, const srv_pixel *pixe
     uint32_t n = 0;
     uint64_t dep_field = dependency == SRV_NO_EFFECT ? 0 : (uint64_t)dependency << OSC_KEY_EFFECT_SHIFT;
     const uint64_t effect_clear = ~((uint64_t)0xF << OSC_KEY_EFFECT_SHIFT);
-    /* The previous pixel's island, level and stencil corner: a pixel with the same ones asks for exactly the
-     * same texels (neighbouring pixels often do: a texel of a coarser level spans several pixels). */
-    uint32_t last_island = UINT32_MAX, last_level = 0;
-    int32_t last_x = 0, last_y = 0;
+    /* Recent pixels' island, level and stencil corner, direct-mapped: a pixel with the same ones as one of
+     * them asks for exactly the same texels (neighbouring pixels, beside and above, often do: a texel of a
+     * coarser level spans several pixels), so it is skipped. */
+    enum { SEEN = 64 };
+    uint64_t seen[SEEN];
+    memset(seen, 0xFF, sizeof seen);
+    uint32_t memo_island = UINT32_MAX, width0 = 0, height0 = 0; /* the last island's size */
     for (uint32_t i = 0; i < count; i++) {
         const srv_pixel *px = &pixels[i];
         uint32_t level = srv__level(px->footprint, bias);
         float scale = inverse_power_of_two[level];
         float x = px->island_u * scale, y = px->island_v * scale;
-        if (x >= 0.0f && y >= 0.0f && x < 65536.0f && y < 65536.0f) { /* also false for NaN */
-            int32_t cx = (int32_t)(x + 0.5f), cy = (int32_t)(y + 0.5f); /* floor(x - 0.5) + 1 */
-            if (px->island == last_island && level == last_level && cx == last_x && cy == last_y)
-                continue;
-            last_island = px->island, last_level = level, last_x = cx, last_y = cy;
-        } else {
-            last_island = UINT32_MAX;
+        if (x >= 0.0f && y >= 0.0f && x < 32768.0f && y < 32768.0f) { /* also false for NaN */
+            /* floor(x - 0.5) + 1, 16 bits each: island 28 bits, level 4 (islands beyond 2^28 are not deduped)
+             */
+            uint64_t cx = (uint64_t)(x + 0.5f), cy = (uint64_t)(y + 0.5f);
+            uint64_t signature = (uint64_t)px->island << 36 | (uint64_t)level << 32 | cy << 16 | cx;
+            uint32_t slot = (uint32_t)((signature * 0x9E3779B97F4A7C15ull) >> 58); /* 6 bits: SEEN */
+            if (px->island < (1u << 28)) {
+                if (seen[slot] == signature)
+                    continue;
+                seen[slot] = signature;
+            }
         }
-        const scene_island *is = &islands[px->island];
-        uint32_t got = osc_bilinear_keys(effect, px->island, is->width, is->height, level, x, y, keys + n,
-                                         masks + n);
+        if (px->island != memo_island) {
+            memo_island = px->island;
+            width0 = islands[memo_island].width;
+            height0 = islands[memo_island].height;
+        }
+        uint32_t got =
+            osc_bilinear_keys(effect, px->island, width0, height0, level, x, y, keys + n, masks + n);
         if (dependency != SRV_NO_EFFECT)
             for (uint32_t f = 0; f < got; f++) {
                 keys[n + got + f] = (keys[n + f] & effect_clear) | dep_field;

@@ -67,31 +67,39 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
     memset(fold.keys, 0xFF, sizeof fold.keys);
     srv_pixel pixels[SRV_TILE * SRV_TILE];
     uint32_t count = 0;
+    uint32_t memo_tri = SRV_MISS, memo_island = 0; /* the last triangle's island and island UVs */
+    float uv[6] = {0, 0, 0, 0, 0, 0};
     for (uint32_t y = y0; y < y0 + SRV_TILE && y < height; y++)
         for (uint32_t x = x0; x < x0 + SRV_TILE && x < width; x++) {
             size_t p = (size_t)y * width + x;
             uint32_t tri = view->tri[p];
             if (tri == SRV_MISS)
                 continue;
+            if (tri != memo_tri) {
+                memo_tri = tri;
+                memo_island = s->tri_island[tri];
+                memcpy(uv, s->tri_island_uv + 6 * (size_t)tri, sizeof uv);
+            }
             srv_pixel *px = &pixels[count++];
             px->triangle = tri;
-            px->island = s->tri_island[tri];
+            px->island = memo_island;
             px->footprint = view->footprint[p];
-            srv__island_uv(s, tri, view->bary_u[p], view->bary_v[p], &px->island_u, &px->island_v);
+            float u = view->bary_u[p], v = view->bary_v[p], w = 1.0f - u - v;
+            px->island_u = w * uv[0] + u * uv[2] + v * uv[4];
+            px->island_v = w * uv[1] + u * uv[3] + v * uv[5];
         }
     bool ok = true;
-    uint64_t keys[SRV_RUN * SRV_KEYS_PER_PIXEL], masks[SRV_RUN * SRV_KEYS_PER_PIXEL];
+    /* The whole tile in one call, so the kind can skip pixels that repeat one above or beside them. */
+    uint64_t keys[SRV_TILE * SRV_TILE * SRV_KEYS_PER_PIXEL / 2],
+        masks[SRV_TILE * SRV_TILE * SRV_KEYS_PER_PIXEL / 2];
     for (uint32_t e = 0; e < loop->effect_count; e++) {
         if (!loop->effect_shading[e] || loop->effect_kind[e] != task->kind)
             continue;
-        for (uint32_t first = 0; first < count; first += SRV_RUN) {
-            uint32_t run = count - first < SRV_RUN ? count - first : SRV_RUN;
-            /* Only the effect's own keys: its dependency's are derived after merging (half the keys). */
-            uint32_t n = kind->pixel_requests(cache, pixels + first, run, e, loop->bias[e], SRV_NO_EFFECT,
-                                              keys, masks);
-            for (uint32_t i = 0; i < n; i++)
-                ok &= fold_add(loop, &fold, keys[i], masks[i], out);
-        }
+        /* Only the effect's own keys (at most half of SRV_KEYS_PER_PIXEL a pixel): its dependency's are
+         * derived after merging (half the keys). */
+        uint32_t n = kind->pixel_requests(cache, pixels, count, e, loop->bias[e], SRV_NO_EFFECT, keys, masks);
+        for (uint32_t i = 0; i < n; i++)
+            ok &= fold_add(loop, &fold, keys[i], masks[i], out);
     }
     for (uint32_t slot = 0; slot < FOLD_SLOTS; slot++)
         ok &= fold_flush_slot(loop, &fold, slot, out);
