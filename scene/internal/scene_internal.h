@@ -71,6 +71,12 @@ scene_result scene__finalize(scene *s, const scene_load_desc *desc, scene_error 
  * Fails with SCENE_ERR_RANGE when the texel density makes one triangle wider than an island may be. */
 scene_result scene__build_islands(scene *s, scene_error *err);
 
+/* Grows *array to hold count elements of size bytes; false (array untouched) on overflow or no memory. */
+bool scene__grow(void **array, size_t count, size_t size);
+
+/* The log2 of texture texels per metre of every textured triangle (scene_material.c), for mip selection. */
+scene_result scene__compute_texture_lods(scene *s, scene_error *err);
+
 /* Checks that path names a regular file that can be opened for reading, before any reader opens it: a
  * directory named like a model ("x.obj"), a FIFO or a device is refused with a message saying what it is. */
 scene_result scene__check_file(const char *path, scene_error *err);

@@ -1,0 +1,194 @@
+/* Materials, textures and albedo: adding materials and textures (with their mip chains) while a scene is
+ * built, the per-triangle texture density once it is finalized, and sampling a triangle's albedo at a pixel's
+ * footprint (compose). Split from scene.c, which builds the geometry. */
+#include "image.h"
+#include "scene_internal.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+uint32_t scene__add_material(scene *s, const scene_material *m, scene_error *err)
+{
+    if (!scene__grow((void **)&s->materials, (size_t)s->material_count + 1, sizeof *s->materials)) {
+        scene__fail(err, SCENE_ERR_NOMEM, "out of memory adding material %s", m->name);
+        return UINT32_MAX;
+    }
+    s->materials[s->material_count] = *m;
+    return s->material_count++;
+}
+
+/* Builds the mip chain of a texture: each level the 2 x 2 box average of the one above (the last row or
+ * column is repeated for odd sizes), down to 1 x 1. False on no memory (levels built so far are kept). */
+static bool build_mips(scene_texture *tex)
+{
+    tex->mip_rgb[0] = tex->rgb;
+    tex->mip_width[0] = tex->width;
+    tex->mip_height[0] = tex->height;
+    tex->levels = 1;
+    while (tex->levels < SCENE_TEXTURE_MAX_LEVELS) {
+        uint32_t l = tex->levels;
+        uint32_t pw = tex->mip_width[l - 1], ph = tex->mip_height[l - 1];
+        if (pw == 1 && ph == 1)
+            break;
+        uint32_t w = (pw + 1) / 2, h = (ph + 1) / 2;
+        float *dst = malloc(sizeof(float) * 3 * (size_t)w * h);
+        if (!dst)
+            return false;
+        const float *src = tex->mip_rgb[l - 1];
+        for (uint32_t y = 0; y < h; y++)
+            for (uint32_t x = 0; x < w; x++) {
+                uint32_t x0 = 2 * x, y0 = 2 * y;
+                uint32_t x1 = x0 + 1 < pw ? x0 + 1 : x0, y1 = y0 + 1 < ph ? y0 + 1 : y0;
+                for (int k = 0; k < 3; k++)
+                    dst[3 * ((size_t)y * w + x) + k] =
+                        0.25f * (src[3 * ((size_t)y0 * pw + x0) + k] + src[3 * ((size_t)y0 * pw + x1) + k] +
+                                 src[3 * ((size_t)y1 * pw + x0) + k] + src[3 * ((size_t)y1 * pw + x1) + k]);
+            }
+        tex->mip_rgb[l] = dst;
+        tex->mip_width[l] = w;
+        tex->mip_height[l] = h;
+        tex->levels++;
+    }
+    return true;
+}
+
+int32_t scene__add_texture(scene *s, const char *path, scene_error *err)
+{
+    for (uint32_t i = 0; i < s->texture_count; i++)
+        if (strcmp(s->textures[i].path, path) == 0)
+            return (int32_t)i;
+    scene_texture tex = {0};
+    char msg[384];
+    if (scene_image_read_rgb(path, &tex.width, &tex.height, &tex.rgb, msg, sizeof msg) != 0) {
+        scene__fail(err, SCENE_ERR_IO, "%s", msg);
+        return -1;
+    }
+    snprintf(tex.path, sizeof tex.path, "%s", path);
+    bool mips_ok = build_mips(&tex);
+    if (!mips_ok || !scene__grow((void **)&s->textures, (size_t)s->texture_count + 1, sizeof *s->textures)) {
+        for (uint32_t l = 0; l < tex.levels; l++)
+            free(tex.mip_rgb[l]);
+        scene__fail(err, SCENE_ERR_NOMEM, "out of memory adding texture %s", path);
+        return -1;
+    }
+    s->textures[s->texture_count] = tex;
+    return (int32_t)s->texture_count++;
+}
+
+/* Per textured triangle, log2 of its texture's texels per metre: sqrt(UV area in texels / world area). */
+scene_result scene__compute_texture_lods(scene *s, scene_error *err)
+{
+    free(s->tri_texture_lod);
+    s->tri_texture_lod = malloc(sizeof(float) * (size_t)s->triangle_count);
+    if (!s->tri_texture_lod)
+        return scene__fail(err, SCENE_ERR_NOMEM, "out of memory computing texture levels");
+    for (uint32_t t = 0; t < s->triangle_count; t++) {
+        const scene_material *m = &s->materials[s->meshes[s->tri_mesh[t]].material];
+        s->tri_texture_lod[t] = -1000.0f;
+        if (m->texture < 0 || (uint32_t)m->texture >= s->texture_count)
+            continue;
+        const scene_texture *tex = &s->textures[m->texture];
+        const float *uv = s->corner_uv + 6 * (size_t)t;
+        double uv_area = 0.5 * fabs(((double)uv[2] - uv[0]) * ((double)uv[5] - uv[1]) -
+                                    ((double)uv[4] - uv[0]) * ((double)uv[3] - uv[1])) *
+                         (double)tex->width * (double)tex->height;
+        const float *a = s->positions + 3 * (size_t)s->indices[3 * (size_t)t];
+        const float *b = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 1];
+        const float *c = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 2];
+        double e1[3], e2[3];
+        for (int k = 0; k < 3; k++) {
+            e1[k] = (double)b[k] - a[k];
+            e2[k] = (double)c[k] - a[k];
+        }
+        double cx = e1[1] * e2[2] - e1[2] * e2[1], cy = e1[2] * e2[0] - e1[0] * e2[2], cz = e1[0] * e2[1] - e1[1] * e2[0];
+        double world_area = 0.5 * sqrt(cx * cx + cy * cy + cz * cz);
+        if (uv_area > 0 && world_area > 0 && isfinite(uv_area))
+            s->tri_texture_lod[t] = (float)(0.5 * log2(uv_area / world_area));
+    }
+    return SCENE_OK;
+}
+
+/* Settles the local frame: the origin from the bounds of every staged mesh; the meshes welded and cleaned
+ * again from their double positions when the provisional frame (the first mesh's) differs, so the result is
+ * that of one pass in the final frame; point lights and the camera moved into the frame. */
+/* Bilinear lookup in mip level `level` of a texture with wrap-around addressing; (u, v) with v = 0 at the
+ * bottom of the image. */
+static void texture_sample(const scene_texture *tex, uint32_t level, float u, float v, float out[3])
+{
+    /* Level 0 straight from rgb: a texture filled by hand may have no mip chain. */
+    const float *texels = level ? tex->mip_rgb[level] : tex->rgb;
+    uint32_t width = level ? tex->mip_width[level] : tex->width, height = level ? tex->mip_height[level] : tex->height;
+    if (!isfinite(u) || !isfinite(v)) {
+        u = 0;
+        v = 0;
+    }
+    float x = (u - floorf(u)) * (float)width - 0.5f;
+    float y = (1.0f - (v - floorf(v))) * (float)height - 0.5f;
+    float fx = floorf(x), fy = floorf(y);
+    float ax = x - fx, ay = y - fy;
+    /* x lies in [-0.5, width - 0.5], so x0 + dx lies in [-1, width]: one wrap step, no division. */
+    int64_t x0 = (int64_t)fx, y0 = (int64_t)fy;
+    int64_t w = width, h = height;
+    for (int k = 0; k < 3; k++)
+        out[k] = 0;
+    for (int dy = 0; dy < 2; dy++)
+        for (int dx = 0; dx < 2; dx++) {
+            int64_t xi = x0 + dx, yi = y0 + dy;
+            xi = xi < 0 ? xi + w : (xi >= w ? xi - w : xi);
+            yi = yi < 0 ? yi + h : (yi >= h ? yi - h : yi);
+            if (xi < 0 || xi >= w || yi < 0 || yi >= h) /* only for a u or v so large floorf lost precision */
+                xi = 0, yi = 0;
+            float weight = (dx ? ax : 1 - ax) * (dy ? ay : 1 - ay);
+            const float *p = texels + 3 * ((size_t)yi * (size_t)w + (size_t)xi);
+            for (int k = 0; k < 3; k++)
+                out[k] += weight * p[k];
+        }
+}
+
+void scene_albedo(const scene *s, uint32_t tri, float u, float v, float out_rgb[3])
+{
+    scene_albedo_filtered(s, tri, u, v, -1000.0f, out_rgb);
+}
+
+void scene_albedo_prepare(const scene *s, uint32_t tri, scene_albedo_triangle *out)
+{
+    const scene_material *m = &s->materials[s->meshes[s->tri_mesh[tri]].material];
+    memcpy(out->diffuse, m->diffuse, sizeof out->diffuse);
+    out->texture = NULL;
+    if (m->texture < 0 || (uint32_t)m->texture >= s->texture_count)
+        return;
+    out->texture = &s->textures[m->texture];
+    memcpy(out->uv, s->corner_uv + 6 * (size_t)tri, sizeof out->uv);
+    out->lod = s->tri_texture_lod ? s->tri_texture_lod[tri] : -1000.0f;
+}
+
+void scene_albedo_sample(const scene_albedo_triangle *t, float u, float v, float footprint_log2, float out_rgb[3])
+{
+    if (!t->texture) {
+        memcpy(out_rgb, t->diffuse, 3 * sizeof(float));
+        return;
+    }
+    const float *uv = t->uv;
+    float w0 = 1 - u - v;
+    float tu = w0 * uv[0] + u * uv[2] + v * uv[4];
+    float tv = w0 * uv[1] + u * uv[3] + v * uv[5];
+    const scene_texture *tex = t->texture;
+    float level = footprint_log2 + t->lod;
+    uint32_t mip = 0;
+    if (level > 0.5f && tex->levels > 1)
+        mip = level >= (float)(tex->levels - 1) ? tex->levels - 1 : (uint32_t)(level + 0.5f);
+    float texel[3];
+    texture_sample(tex, mip, tu, tv, texel);
+    for (int k = 0; k < 3; k++)
+        out_rgb[k] = texel[k] * t->diffuse[k];
+}
+
+void scene_albedo_filtered(const scene *s, uint32_t tri, float u, float v, float footprint_log2,
+                           float out_rgb[3])
+{
+    scene_albedo_triangle t;
+    scene_albedo_prepare(s, tri, &t);
+    scene_albedo_sample(&t, u, v, footprint_log2, out_rgb);
+}
