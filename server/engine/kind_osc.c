@@ -73,14 +73,11 @@ static void osc_kind_begin_frame(void *cache, uint32_t frame)
 }
 
 static uint32_t osc_kind_pixel_requests(const void *cache, const srv_pixel *pixels, uint32_t count,
-                                        uint32_t effect, int32_t bias, uint32_t dependency, uint64_t *keys,
-                                        uint64_t *masks)
+                                        uint32_t effect, int32_t bias, uint64_t *keys, uint64_t *masks)
 {
     const kind_osc *k = cache;
     const scene_island *islands = k->s->islands;
     uint32_t n = 0;
-    uint64_t dep_field = dependency == SRV_NO_EFFECT ? 0 : (uint64_t)dependency << OSC_KEY_EFFECT_SHIFT;
-    const uint64_t effect_clear = ~((uint64_t)0xF << OSC_KEY_EFFECT_SHIFT);
     /* Recent pixels' island, level and stencil corner, direct-mapped: a pixel with the same ones as one of
      * them asks for exactly the same texels (neighbouring pixels, beside and above, often do: a texel of a
      * coarser level spans several pixels), so it is skipped. */
@@ -110,14 +107,7 @@ static uint32_t osc_kind_pixel_requests(const void *cache, const srv_pixel *pixe
             width0 = islands[memo_island].width;
             height0 = islands[memo_island].height;
         }
-        uint32_t got =
-            osc_bilinear_keys(effect, px->island, width0, height0, level, x, y, keys + n, masks + n);
-        if (dependency != SRV_NO_EFFECT)
-            for (uint32_t f = 0; f < got; f++) {
-                keys[n + got + f] = (keys[n + f] & effect_clear) | dep_field;
-                masks[n + got + f] = masks[n + f];
-            }
-        n += dependency != SRV_NO_EFFECT ? 2 * got : got;
+        n += osc_bilinear_keys(effect, px->island, width0, height0, level, x, y, keys + n, masks + n);
     }
     return n;
 }

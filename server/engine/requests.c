@@ -95,9 +95,8 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
     for (uint32_t e = 0; e < loop->effect_count; e++) {
         if (!loop->effect_shading[e] || loop->effect_kind[e] != task->kind)
             continue;
-        /* Only the effect's own keys (at most half of SRV_KEYS_PER_PIXEL a pixel): its dependency's are
-         * derived after merging (half the keys). */
-        uint32_t n = kind->pixel_requests(cache, pixels, count, e, loop->bias[e], SRV_NO_EFFECT, keys, masks);
+        /* Only the effect's own keys: its dependency's are derived after merging (half the keys). */
+        uint32_t n = kind->pixel_requests(cache, pixels, count, e, loop->bias[e], keys, masks);
         for (uint32_t i = 0; i < n; i++)
             ok &= fold_add(loop, &fold, keys[i], masks[i], out);
     }

@@ -20,7 +20,7 @@ enum {
     SRV_NONE = 0xFFFFFFFFu,       /* no block */
     SRV_MAX_SINKS = 8,
     SRV_NO_EFFECT = 0xFFFFFFFFu,
-    SRV_KEYS_PER_PIXEL = 2 * FX_MAX_TAPS, /* an effect's taps and its dependency's */
+    SRV_KEYS_PER_PIXEL = FX_MAX_TAPS,     /* blocks one filtered read of a pixel touches */
     SRV_RUN = FX_RUN_PIXELS,               /* pixels per batched call in requests and compose */
 };
 
@@ -99,10 +99,10 @@ typedef struct srv_cache_kind {
     void (*destroy)(void *cache);
     void (*begin_frame)(void *cache, uint32_t frame);
     /* Stage 3: writes the keys and masks the filtered reads of `count` pixels touch for `effect` at level
-     * footprint + bias, and the same texels of its dependency (SRV_NO_EFFECT: none); at most
-     * SRV_KEYS_PER_PIXEL per pixel. Returns how many were written. */
+     * footprint + bias, at most SRV_KEYS_PER_PIXEL per pixel (a pixel that repeats a recent one may write
+     * none). Returns how many were written. The dependency's keys are derived later, from the merged ones. */
     uint32_t (*pixel_requests)(const void *cache, const srv_pixel *pixels, uint32_t count, uint32_t effect,
-                               int32_t bias, uint32_t dependency, uint64_t *keys, uint64_t *masks);
+                               int32_t bias, uint64_t *keys, uint64_t *masks);
     uint32_t (*key_effect)(uint64_t key);
     /* The same block's key for another effect. */
     uint64_t (*rekey)(uint64_t key, uint32_t effect);
