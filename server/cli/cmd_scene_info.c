@@ -1,6 +1,7 @@
 /* `fxcache scene-info`: what a scene holds and what it needs, in words or as JSON. The same figures feed
  * the scene benchmark, so every number here is measured on the loaded scene, not estimated. */
 #include "cli.h"
+#include "effects.h"
 
 #include <getopt.h>
 #include <jansson.h>
@@ -209,6 +210,35 @@ static const char scene_info_usage[] =
     "  --density D          level-0 texels per metre, in [1e-6, 1e6] (default: the scene's, else auto)\n"
     "  -h, --help           this text\n";
 
+/* What the scene's content asks for, narrowed to what fxcache runs: an effect with no registered table
+ * (probes until the world-space cache is built) is left out with that said, and a cache exists only when a
+ * registered effect that runs lives in it. */
+static void what_runs(const scene *s, scene_needs_result *needs)
+{
+    uint32_t count = 0;
+    const fx_effect *const *registry = fx_registry(&count);
+    bool needed[FX_MAX_EFFECTS];
+    char why[FX_MAX_EFFECTS][200];
+    fx_needs(registry, count, s, needed, why);
+    bool cache_used[SCENE_CACHE_COUNT] = {false};
+    for (uint32_t e = 0; e < count; e++)
+        cache_used[registry[e]->cache] |= needed[e];
+    for (int fx = 0; fx < SCENE_FX_COUNT; fx++) {
+        if (fx_find(registry, count, scene_effect_name((scene_effect)fx)) >= 0 || !needs->effect[fx])
+            continue;
+        needs->effect[fx] = false;
+        size_t used = strlen(needs->effect_reason[fx]);
+        snprintf(needs->effect_reason[fx] + used, sizeof needs->effect_reason[fx] - used,
+                 "; but it is not implemented yet");
+    }
+    for (int c = 0; c < SCENE_CACHE_COUNT; c++)
+        if (needs->cache[c] && !cache_used[c]) {
+            needs->cache[c] = false;
+            snprintf(needs->cache_reason[c], sizeof needs->cache_reason[c],
+                     "no effect that runs lives in it (its effects are not implemented yet)");
+        }
+}
+
 int srv_cmd_scene_info(int argc, char **argv)
 {
     static const struct option options[] = {
@@ -263,6 +293,7 @@ int srv_cmd_scene_info(int argc, char **argv)
     summarize_islands(s, &is);
     scene_needs_result needs;
     scene_needs(s, &needs);
+    what_runs(s, &needs);
     if (as_json) {
         json_t *root = scene_info_json(s, &is, &needs, bvh_ms);
         json_dumpf(root, stdout, JSON_INDENT(2) | JSON_PRESERVE_ORDER | JSON_REAL_PRECISION(6));
