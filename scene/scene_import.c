@@ -5,6 +5,7 @@
  * cleans it. Diffuse colours and diffuse textures (read with OpenImageIO, relative to the model file, with
  * a case-insensitive fallback since many old models name "KAMEN.JPG" for kamen.jpg) become materials. */
 #include "scene_internal.h"
+#include "cerr_capture.h"
 
 #include <assimp/cimport.h>
 #include <assimp/material.h>
@@ -18,7 +19,6 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
-#include <unistd.h>
 #include <zlib.h>
 
 /* Largest decompressed .gz model accepted (bytes): Assimp takes the length as unsigned int. */
@@ -315,61 +315,6 @@ static scene_result check_faces(const char *path, const struct aiScene *ai, scen
     return SCENE_OK;
 }
 
-/* What Assimp's own code writes to the process's stderr (file descriptor 2) during an import, held in a
- * temporary file: its bundled OpenDDL parser (OpenGEX) writes "nullptr returned by creating DDLNode."
- * straight to std::cerr, which put a second line beside fxcache's one-line error. fxcache's loaders run
- * before any of its threads start, so nothing else writes to stderr meanwhile. */
-typedef struct stderr_capture {
-    int saved_fd; /* the real stderr while capturing, else -1 */
-    FILE *file;   /* where file descriptor 2 points meanwhile */
-} stderr_capture;
-
-static void capture_begin(stderr_capture *c)
-{
-    c->saved_fd = -1;
-    c->file = tmpfile();
-    if (!c->file)
-        return; /* no temporary file: Assimp writes to stderr as it would */
-    fflush(stderr);
-    c->saved_fd = dup(STDERR_FILENO);
-    if (c->saved_fd < 0 || dup2(fileno(c->file), STDERR_FILENO) < 0) {
-        if (c->saved_fd >= 0)
-            close(c->saved_fd);
-        c->saved_fd = -1;
-        fclose(c->file);
-        c->file = NULL;
-    }
-}
-
-/* Restores stderr and copies what was written into text as one line (line ends become "; ", at most
- * cap - 1 bytes); text is "" when nothing was. */
-static void capture_end(stderr_capture *c, char *text, size_t cap)
-{
-    text[0] = 0;
-    if (c->saved_fd < 0)
-        return;
-    fflush(stderr);
-    dup2(c->saved_fd, STDERR_FILENO);
-    close(c->saved_fd);
-    rewind(c->file);
-    size_t n = 0;
-    bool line_end = false;
-    for (int ch; n + 3 < cap && (ch = fgetc(c->file)) != EOF;) {
-        if (ch == '\n' || ch == '\r') {
-            line_end = n > 0;
-            continue;
-        }
-        if (line_end) {
-            text[n++] = ';';
-            text[n++] = ' ';
-            line_end = false;
-        }
-        text[n++] = (char)(ch >= 32 && ch < 127 ? ch : '?');
-    }
-    text[n] = 0;
-    fclose(c->file);
-}
-
 /* How many meshes the node graph below node places (references), counting a mesh once per reference.
  * Assimp's validation has checked every index is below mNumMeshes and that the graph is a tree. */
 static uint64_t placed_meshes(const struct aiNode *node, unsigned depth)
@@ -572,7 +517,6 @@ scene_result scene__import_file(scene *s, const char *path, const float *xform,
     const char *dot = strrchr(inner, '.');
     const char *hint = dot && !strchr(dot, '/') ? dot + 1 : "";
     const import_format *format = import_format_of(hint);
-    stderr_capture capture;
     char printed[200];
     if (format && format->refused)
         return scene__fail(err, SCENE_ERR_FORMAT, "%s: %s", path, format->refused);
@@ -596,14 +540,14 @@ scene_result scene__import_file(scene *s, const char *path, const float *xform,
             free(buf);
             return rc;
         }
-        capture_begin(&capture);
+        scene_cerr_capture *capture = scene_cerr_capture_begin();
         ai = aiImportFileFromMemory(buf, (unsigned)len, flags, hint);
-        capture_end(&capture, printed, sizeof printed);
+        scene_cerr_capture_end(capture, printed, sizeof printed);
         free(buf);
     } else {
-        capture_begin(&capture);
+        scene_cerr_capture *capture = scene_cerr_capture_begin();
         ai = aiImportFile(path, flags);
-        capture_end(&capture, printed, sizeof printed);
+        scene_cerr_capture_end(capture, printed, sizeof printed);
     }
     if (!ai)
         return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s%s%s%s", path, aiGetErrorString(),
