@@ -315,6 +315,17 @@ static scene_result check_faces(const char *path, const struct aiScene *ai, scen
     return SCENE_OK;
 }
 
+/* Assimp's last error as one line: it can quote the file, line ends and all ("Unsupported x-file format
+ * '4\nMe'"), so control characters become spaces. */
+static const char *assimp_error(char *text, size_t cap)
+{
+    snprintf(text, cap, "%s", aiGetErrorString());
+    for (char *p = text; *p; p++)
+        if ((unsigned char)*p < 32 || *p == 127)
+            *p = ' ';
+    return text;
+}
+
 /* How many meshes the node graph below node places (references), counting a mesh once per reference.
  * Assimp's validation has checked every index is below mNumMeshes and that the graph is a tree. */
 static uint64_t placed_meshes(const struct aiNode *node, unsigned depth)
@@ -517,7 +528,7 @@ scene_result scene__import_file(scene *s, const char *path, const float *xform,
     const char *dot = strrchr(inner, '.');
     const char *hint = dot && !strchr(dot, '/') ? dot + 1 : "";
     const import_format *format = import_format_of(hint);
-    char printed[200];
+    char printed[200], why[400];
     if (format && format->refused)
         return scene__fail(err, SCENE_ERR_FORMAT, "%s: %s", path, format->refused);
     if (gz || (format && format->check)) {
@@ -550,8 +561,9 @@ scene_result scene__import_file(scene *s, const char *path, const float *xform,
         scene_cerr_capture_end(capture, printed, sizeof printed);
     }
     if (!ai)
-        return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s%s%s%s", path, aiGetErrorString(),
-                           printed[0] ? " (Assimp also printed: '" : "", printed, printed[0] ? "')" : "");
+        return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s%s%s%s", path,
+                           assimp_error(why, sizeof why), printed[0] ? " (Assimp also printed: '" : "",
+                           printed, printed[0] ? "')" : "");
     if (printed[0])
         fprintf(stderr, "fxcache: warning: %s: Assimp printed: '%s'\n", path, printed);
     scene_result checked = check_faces(path, ai, err);
@@ -563,7 +575,8 @@ scene_result scene__import_file(scene *s, const char *path, const float *xform,
     }
     ai = aiApplyPostProcessing(ai, post);
     if (!ai)
-        return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s", path, aiGetErrorString());
+        return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s", path,
+                           assimp_error(why, sizeof why));
 
     char model_dir[512];
     folder_of(path, model_dir, sizeof model_dir);
