@@ -896,15 +896,16 @@ scene *scene_load(const char *path, const scene_load_desc *desc, scene_error *er
         rc = scene__import_file(s, path, NULL, NULL, err);
         if (rc == SCENE_OK)
             scene__add_default_lighting(s);
-        else if (err && !strstr(err->msg, path)) { /* name the file when the message does not */
-            char inner[sizeof err->msg];
-            snprintf(inner, sizeof inner, "%s", err->msg);
-            scene__fail(err, rc, "%s: %s", path, inner);
-        }
     }
     s->timings.load_ms = scene__now_ms() - t0 - s->timings.weld_ms - s->timings.textures_ms;
     if (rc == SCENE_OK)
         rc = scene__finalize(s, desc, err);
+    if (rc != SCENE_OK && path && strcmp(path, "default") != 0 && err && !strstr(err->msg, path)) {
+        /* name the file when the message does not (a mesh's vertex, a triangle too wide for an island) */
+        char inner[sizeof err->msg];
+        snprintf(inner, sizeof inner, "%s", err->msg);
+        scene__fail(err, rc, "%s: %s", path, inner);
+    }
     if (rc != SCENE_OK) {
         scene_free(s);
         return NULL;

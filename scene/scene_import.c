@@ -5,6 +5,7 @@
  * cleans it. Diffuse colours and diffuse textures (read with OpenImageIO, relative to the model file, with
  * a case-insensitive fallback since many old models name "KAMEN.JPG" for kamen.jpg) become materials. */
 #include "scene_internal.h"
+#include "cerr_capture.h"
 
 #include <assimp/cimport.h>
 #include <assimp/material.h>
@@ -18,7 +19,6 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
-#include <unistd.h>
 #include <zlib.h>
 
 /* Largest decompressed .gz model accepted (bytes): Assimp takes the length as unsigned int. */
@@ -315,59 +315,15 @@ static scene_result check_faces(const char *path, const struct aiScene *ai, scen
     return SCENE_OK;
 }
 
-/* What Assimp's own code writes to the process's stderr (file descriptor 2) during an import, held in a
- * temporary file: its bundled OpenDDL parser (OpenGEX) writes "nullptr returned by creating DDLNode."
- * straight to std::cerr, which put a second line beside fxcache's one-line error. fxcache's loaders run
- * before any of its threads start, so nothing else writes to stderr meanwhile. */
-typedef struct stderr_capture {
-    int saved_fd; /* the real stderr while capturing, else -1 */
-    FILE *file;   /* where file descriptor 2 points meanwhile */
-} stderr_capture;
-
-static void capture_begin(stderr_capture *c)
+/* Assimp's last error as one line: it can quote the file, line ends and all ("Unsupported x-file format
+ * '4\nMe'"), so control characters become spaces. */
+static const char *assimp_error(char *text, size_t cap)
 {
-    c->saved_fd = -1;
-    c->file = tmpfile();
-    if (!c->file)
-        return; /* no temporary file: Assimp writes to stderr as it would */
-    fflush(stderr);
-    c->saved_fd = dup(STDERR_FILENO);
-    if (c->saved_fd < 0 || dup2(fileno(c->file), STDERR_FILENO) < 0) {
-        if (c->saved_fd >= 0)
-            close(c->saved_fd);
-        c->saved_fd = -1;
-        fclose(c->file);
-        c->file = NULL;
-    }
-}
-
-/* Restores stderr and copies what was written into text as one line (line ends become "; ", at most
- * cap - 1 bytes); text is "" when nothing was. */
-static void capture_end(stderr_capture *c, char *text, size_t cap)
-{
-    text[0] = 0;
-    if (c->saved_fd < 0)
-        return;
-    fflush(stderr);
-    dup2(c->saved_fd, STDERR_FILENO);
-    close(c->saved_fd);
-    rewind(c->file);
-    size_t n = 0;
-    bool line_end = false;
-    for (int ch; n + 3 < cap && (ch = fgetc(c->file)) != EOF;) {
-        if (ch == '\n' || ch == '\r') {
-            line_end = n > 0;
-            continue;
-        }
-        if (line_end) {
-            text[n++] = ';';
-            text[n++] = ' ';
-            line_end = false;
-        }
-        text[n++] = (char)(ch >= 32 && ch < 127 ? ch : '?');
-    }
-    text[n] = 0;
-    fclose(c->file);
+    snprintf(text, cap, "%s", aiGetErrorString());
+    for (char *p = text; *p; p++)
+        if ((unsigned char)*p < 32 || *p == 127)
+            *p = ' ';
+    return text;
 }
 
 /* How many meshes the node graph below node places (references), counting a mesh once per reference.
@@ -572,8 +528,7 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
     const char *dot = strrchr(inner, '.');
     const char *hint = dot && !strchr(dot, '/') ? dot + 1 : "";
     const import_format *format = import_format_of(hint);
-    stderr_capture capture;
-    char printed[200];
+    char printed[200], why[400];
     if (format && format->refused)
         return scene__fail(err, SCENE_ERR_FORMAT, "%s: %s", path, format->refused);
     if (gz || (format && format->check)) {
@@ -596,18 +551,19 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
             free(buf);
             return rc;
         }
-        capture_begin(&capture);
+        scene_cerr_capture *capture = scene_cerr_capture_begin();
         ai = aiImportFileFromMemory(buf, (unsigned)len, flags, hint);
-        capture_end(&capture, printed, sizeof printed);
+        scene_cerr_capture_end(capture, printed, sizeof printed);
         free(buf);
     } else {
-        capture_begin(&capture);
+        scene_cerr_capture *capture = scene_cerr_capture_begin();
         ai = aiImportFile(path, flags);
-        capture_end(&capture, printed, sizeof printed);
+        scene_cerr_capture_end(capture, printed, sizeof printed);
     }
     if (!ai)
-        return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s%s%s%s", path, aiGetErrorString(),
-                           printed[0] ? " (Assimp also printed: '" : "", printed, printed[0] ? "')" : "");
+        return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s%s%s%s", path,
+                           assimp_error(why, sizeof why), printed[0] ? " (Assimp also printed: '" : "",
+                           printed, printed[0] ? "')" : "");
     if (printed[0])
         fprintf(stderr, "fxcache: warning: %s: Assimp printed: '%s'\n", path, printed);
     scene_result checked = check_faces(path, ai, err);
@@ -619,7 +575,8 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
     }
     ai = aiApplyPostProcessing(ai, post);
     if (!ai)
-        return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s", path, aiGetErrorString());
+        return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s", path,
+                           assimp_error(why, sizeof why));
 
     char model_dir[512];
     folder_of(path, model_dir, sizeof model_dir);

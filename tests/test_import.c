@@ -360,7 +360,8 @@ static size_t binary_stl(char *buf, size_t cap, uint32_t declared, uint32_t face
 /* Declared counts are checked against the file size before Assimp reads them (Assimp allocates from the
  * header alone: 3.5 billion OFF vertices for a 40-byte file); formats that declare no such count, and honest
  * counts, still load; Quake 3 maps, which Assimp 5.2.5 cannot give usable triangles for, and a directory
- * named like a model are refused with what is wrong. */
+ * named like a model are refused with what is wrong; Assimp's own message is kept to one line, and an error
+ * found after the import (a triangle too long for an island) names the file too. */
 static void test_inputs_refused_or_read(void **state)
 {
     (void)state;
@@ -390,6 +391,10 @@ static void test_inputs_refused_or_read(void **state)
     snprintf(ply_comment_vertex, sizeof ply_comment_vertex, "%scomment vertex 99999999\n%s", ply_head,
              ply_body);
     const input_case cases[] = {
+        {"format.x", "xof 03024\nMe 0064\n", 0, false, SCENE_ERR_FORMAT, "Unsupported x-file format '4 Me'",
+         0},
+        {"sliver.obj", "v 0 0 0\nv 1000 0 0\nv 0 0.001 0\nf 1 2 3\n", 0, false, SCENE_ERR_RANGE,
+         "an island may be at most", 0},
         {"huge_vertices.off", off_huge_vertices, 0, false, SCENE_ERR_FORMAT, "declares 3500000000 vertices",
          0},
         {"huge_faces.off", off_huge_faces, 0, false, SCENE_ERR_FORMAT, ":3: declares 4000000000 faces", 0},
