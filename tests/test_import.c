@@ -239,32 +239,17 @@ static void test_damaged_ply_refused(void **state)
     }
 }
 
-/* A bounded mutation run (fixed seed, so every run sees the same 240 inputs): damaged OBJ, PLY and glTF files
- * either load or fail with a one-line error naming the file; never a crash, a hang or a sanitizer report.
- * The mutations are the kind that found Assimp's PLY loop and triangulation abort. */
-static void test_mutated_files(void **state)
+/* Loads `rounds` mutations of the seed files (round r mutates seed r % kinds, written under names[r % kinds])
+ * from a fixed random sequence, so every run sees the same inputs: each either loads or fails with a
+ * one-line error naming the file; never a crash, a hang or a sanitizer report. Counts both outcomes. */
+static void mutation_run(const char *const *seeds, const char *const *names, int kinds, int rounds,
+                         uint64_t rng, unsigned *loaded, unsigned *refused)
 {
-    (void)state;
-    static const char *const seeds[3] = {
-        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 1\nf 1/1 2/2 3/1\nf 1 3 4\n",
-        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
-        "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
-        "{\"asset\":{\"version\":\"2.0\"},\"scene\":0,\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}],"
-        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0},\"indices\":1}]}],"
-        "\"buffers\":[{\"byteLength\":44,\"uri\":\"data:application/octet-stream;base64,"
-        "AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAAAAABAAIAAAA=\"}],"
-        "\"bufferViews\":[{\"buffer\":0,\"byteLength\":36},{\"buffer\":0,\"byteOffset\":36,\"byteLength\":6}],"
-        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\","
-        "\"min\":[0,0,0],\"max\":[1,1,0]},{\"bufferView\":1,\"componentType\":5123,\"count\":3,\"type\":\"SCALAR\"}]}",
-    };
-    static const char *const names[3] = {"mutated.obj", "mutated.ply", "mutated.gltf"};
     static const char *const inserts[] = {"99999999", "-1", "1e39", "nan", "f 1 2 9\n", "4294967295", "\"", "]"};
     static const char alphabet[] = "0123456789-. \nfvn/e+x\"{}[],:";
-    uint64_t rng = 20261123;
     char buf[2048];
-    unsigned loaded = 0, refused = 0;
-    for (int round = 0; round < 240; round++) {
-        int kind = round % 3;
+    for (int round = 0; round < rounds; round++) {
+        int kind = round % kinds;
         size_t len = strlen(seeds[kind]);
         memcpy(buf, seeds[kind], len + 1);
         int edits = 1 + (int)(splitmix(&rng) % 5);
@@ -291,16 +276,69 @@ static void test_mutated_files(void **state)
         scene_error err = {0};
         scene *s = scene_load(fxt_write_file(names[kind], buf), NULL, &err);
         if (s) {
-            loaded++;
+            (*loaded)++;
             assert_true(s->triangle_count > 0);
             scene_free(s);
         } else {
-            refused++;
+            (*refused)++;
             assert_int_not_equal(err.code, SCENE_OK);
-            assert_non_null(strstr(err.msg, names[kind]));
-            assert_null(strchr(err.msg, '\n'));
+            if (!strstr(err.msg, names[kind]) || strchr(err.msg, '\n'))
+                fail_msg("round %d: not one line naming %s: '%s'", round, names[kind], err.msg);
         }
     }
+}
+
+/* A bounded mutation run (fixed seed, so every run sees the same 240 inputs): damaged OBJ, PLY and glTF files
+ * either load or fail with a one-line error naming the file; never a crash, a hang or a sanitizer report.
+ * The mutations are the kind that found Assimp's PLY loop and triangulation abort. */
+static void test_mutated_files(void **state)
+{
+    (void)state;
+    static const char *const seeds[3] = {
+        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 1\nf 1/1 2/2 3/1\nf 1 3 4\n",
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+        "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+        "{\"asset\":{\"version\":\"2.0\"},\"scene\":0,\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}],"
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0},\"indices\":1}]}],"
+        "\"buffers\":[{\"byteLength\":44,\"uri\":\"data:application/octet-stream;base64,"
+        "AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAAAAABAAIAAAA=\"}],"
+        "\"bufferViews\":[{\"buffer\":0,\"byteLength\":36},{\"buffer\":0,\"byteOffset\":36,\"byteLength\":6}]"
+        ","
+        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\","
+        "\"min\":[0,0,0],\"max\":[1,1,0]},{\"bufferView\":1,\"componentType\":5123,\"count\":3,\"type\":"
+        "\"SCALAR\"}]}",
+    };
+    static const char *const names[3] = {"mutated.obj", "mutated.ply", "mutated.gltf"};
+    unsigned loaded = 0, refused = 0;
+    mutation_run(seeds, names, 3, 240, 20261123, &loaded, &refused);
+    print_message("mutated files: %u loaded, %u refused\n", loaded, refused);
+    assert_true(loaded > 0 && refused > 0);
+}
+
+/* The same for the formats whose declared counts and indices are checked before Assimp reads them (OFF,
+ * text .x, ASE, MD5 mesh): the checks read untrusted bytes, and what they let through must not crash
+ * Assimp either. */
+static void test_mutated_counted_formats(void **state)
+{
+    (void)state;
+    static const char *const seeds[4] = {
+        "OFF\n# a comment\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n",
+        "xof 0302txt 0064\nMesh m {\n4;\n0;0;0;,\n1;0;0;,\n1;1;0;,\n0;1;0;;\n2;\n3;0,1,2;,\n3;0,2,3;;\n"
+        "MeshNormals {\n1;\n0;0;1;;\n2;\n3;0,0,0;,\n3;0,0,0;;\n}\n}\n",
+        "*3DSMAX_ASCIIEXPORT 200\n*GEOMOBJECT {\n*NODE_NAME \"a\"\n*MESH {\n*MESH_NUMVERTEX "
+        "3\n*MESH_NUMFACES 1\n"
+        "*MESH_VERTEX_LIST {\n*MESH_VERTEX 0 0 0 0\n*MESH_VERTEX 1 1 0 0\n*MESH_VERTEX 2 0 1 0\n}\n"
+        "*MESH_FACE_LIST {\n*MESH_FACE 0: A: 0 B: 1 C: 2\n}\n}\n}\n",
+        "MD5Version 10\ncommandline \"\"\n\nnumJoints 1\nnumMeshes 1\n\njoints {\n\"root\" -1 ( 0 0 0 ) ( 0 "
+        "0 0 )\n}\n"
+        "\nmesh {\nshader \"m\"\nnumverts 3\nvert 0 ( 0 0 ) 0 1\nvert 1 ( 1 0 ) 1 1\nvert 2 ( 0 1 ) 2 "
+        "1\nnumtris 1\n"
+        "tri 0 0 2 1\nnumweights 3\nweight 0 0 1 ( 0 0 0 )\nweight 1 0 1 ( 1 0 0 )\nweight 2 0 1 ( 0 1 0 "
+        ")\n}\n",
+    };
+    static const char *const names[4] = {"mutated.off", "mutated.x", "mutated.ase", "mutated.md5mesh"};
+    unsigned loaded = 0, refused = 0;
+    mutation_run(seeds, names, 4, 320, 20261128, &loaded, &refused);
     print_message("mutated files: %u loaded, %u refused\n", loaded, refused);
     assert_true(loaded > 0 && refused > 0);
 }
@@ -358,10 +396,11 @@ static size_t binary_stl(char *buf, size_t cap, uint32_t declared, uint32_t face
 }
 
 /* Declared counts are checked against the file size before Assimp reads them (Assimp allocates from the
- * header alone: 3.5 billion OFF vertices for a 40-byte file); formats that declare no such count, and honest
- * counts, still load; Quake 3 maps, which Assimp 5.2.5 cannot give usable triangles for, and a directory
- * named like a model are refused with what is wrong; Assimp's own message is kept to one line, and an error
- * found after the import (a triangle too long for an island) names the file too. */
+ * header alone: 3.5 billion OFF vertices for a 40-byte file); the indices of ASE, MD5 and .x files Assimp
+ * uses unchecked are checked (each case below crashed it); honest files still load; Quake 3 maps, which
+ * Assimp 5.2.5 cannot give usable triangles for, and a directory named like a model are refused with what is
+ * wrong; Assimp's own message is kept to one line, and an error found after the import (a triangle too
+ * long for an island) names the file too. */
 static void test_inputs_refused_or_read(void **state)
 {
     (void)state;
@@ -390,11 +429,107 @@ static void test_inputs_refused_or_read(void **state)
              ply_body);
     snprintf(ply_comment_vertex, sizeof ply_comment_vertex, "%scomment vertex 99999999\n%s", ply_head,
              ply_body);
+    /* text .x: a mesh of two triangles with normals */
+    const char *x_head = "xof 0302txt 0064\nMesh m {\n4;\n0;0;0;,\n1;0;0;,\n1;1;0;,\n0;1;0;;\n";
+    const char *x_faces = "2;\n3;0,1,2;,\n3;0,2,3;;\n";
+    char x_ok[512], x_huge[512], x_negative[512], x_normal[512];
+    snprintf(x_ok, sizeof x_ok, "%s%sMeshNormals {\n1;\n0;0;1;;\n2;\n3;0,0,0;,\n3;0,0,0;;\n}\n}\n", x_head,
+             x_faces);
+    snprintf(x_huge, sizeof x_huge,
+             "xof 0302txt 0064\nMesh m {\n300000000;\n0;0;0;,\n1;0;0;,\n0;1;0;;\n1;\n3;0,1,2;;\n}\n");
+    snprintf(x_negative, sizeof x_negative, "%s-12;\n3;0,1,2;,\n3;0,2,3;;\n}\n", x_head);
+    snprintf(x_normal, sizeof x_normal, "%s%sMeshNormals {\n1;\n0;0;1;;\n2;\n3;0,-10,0;,\n3;0,0,0;;\n}\n}\n",
+             x_head, x_faces);
+    /* ASE: one triangle */
+    const char *ase_head = "*3DSMAX_ASCIIEXPORT 200\n*GEOMOBJECT {\n*NODE_NAME \"a\"\n*MESH {\n";
+    const char *ase_vertices =
+        "*MESH_NUMVERTEX 3\n*MESH_VERTEX_LIST {\n*MESH_VERTEX 0 0 0 0\n*MESH_VERTEX 1 1 0 0\n"
+        "*MESH_VERTEX 2 0 1 0\n}\n";
+    char ase_ok[512], ase_huge[512], ase_no_face_line[512], ase_no_vertices[512], ase_corner[512],
+        ase_half_face[512];
+    snprintf(ase_ok, sizeof ase_ok,
+             "%s%s*MESH_NUMFACES 1\n*MESH_FACE_LIST {\n*MESH_FACE 0: A: 0 B: 1 C: 2\n}\n}\n}\n", ase_head,
+             ase_vertices);
+    snprintf(ase_huge, sizeof ase_huge, "%s*MESH_NUMVERTEX 300000000\n}\n}\n", ase_head);
+    snprintf(ase_no_face_line, sizeof ase_no_face_line,
+             "%s%s*MESH_NUMFACES 2\n*MESH_FACE_LIST {\n"
+             "*MESH_FACE 0: A: 0 B: 1 C: 2\n}\n}\n}\n",
+             ase_head, ase_vertices);
+    snprintf(ase_no_vertices, sizeof ase_no_vertices,
+             "%s*MESH_NUMFACES 1\n*MESH_FACE_LIST {\n"
+             "*MESH_FACE 0: A: 0 B: 1 C: 2\n}\n}\n}\n",
+             ase_head);
+    snprintf(ase_corner, sizeof ase_corner,
+             "%s%s*MESH_NUMFACES 1\n*MESH_FACE_LIST {\n"
+             "*MESH_FACE 0: A: 0 B: 1 C: 159999999\n}\n}\n}\n",
+             ase_head, ase_vertices);
+    snprintf(ase_half_face, sizeof ase_half_face,
+             "%s%s*MESH_NUMFACES 1\n*MESH_FACE_LIST {\n"
+             "*MESH_FACE 0: A: 0 B: 1 C:\n}\n}\n}\n",
+             ase_head, ase_vertices);
+    /* MD5 mesh: one joint, one triangle, one weight per vertex */
+    const char *md5_head = "MD5Version 10\ncommandline \"\"\n\nnumJoints 1\nnumMeshes 1\n\n"
+                           "joints {\n\"root\" -1 ( 0 0 0 ) ( 0 0 0 )\n}\n\nmesh {\nshader \"m\"\n";
+    const char *md5_tri = "numtris 1\ntri 0 0 2 1\n";
+    const char *md5_weights =
+        "numweights 3\nweight 0 0 1 ( 0 0 0 )\nweight 1 0 1 ( 1 0 0 )\nweight 2 0 1 ( 0 1 0 )\n";
+    const char *md5_verts = "numverts 3\nvert 0 ( 0 0 ) 0 1\nvert 1 ( 1 0 ) 1 1\nvert 2 ( 0 1 ) 2 1\n";
+    char md5_ok[1024], md5_missing[1024], md5_joint[1024], md5_weight_range[1024], md5_unused[1024],
+        md5_quote[1024], md5_no_joints[1024];
+    snprintf(md5_ok, sizeof md5_ok, "%s%s%s%s}\n", md5_head, md5_verts, md5_tri, md5_weights);
+    snprintf(md5_missing, sizeof md5_missing,
+             "%snumverts 40\nvert 0 ( 0 0 ) 0 1\nvert 1 ( 1 0 ) 1 1\n"
+             "vert 2 ( 0 1 ) 2 1\n%s%s}\n",
+             md5_head, md5_tri, md5_weights);
+    snprintf(md5_joint, sizeof md5_joint,
+             "%s%s%snumweights 3\nweight 0 0 1 ( 0 0 0 )\nweight 1 0 1 ( 1 0 0 )\n"
+             "weight 2 7 1 ( 0 1 0 )\n}\n",
+             md5_head, md5_verts, md5_tri);
+    snprintf(md5_weight_range, sizeof md5_weight_range,
+             "%snumverts 3\nvert 0 ( 0 0 ) 0 1\nvert 1 ( 1 0 ) 1 1\n"
+             "vert 2 ( 0 1 ) 2 9\n%s%s}\n",
+             md5_head, md5_tri, md5_weights);
+    snprintf(md5_unused, sizeof md5_unused,
+             "%snumverts 4\nvert 0 ( 0 0 ) 0 1\nvert 1 ( 1 0 ) 1 1\n"
+             "vert 2 ( 0 1 ) 2 1\nvert 3 ( 0 1 ) 2 1\nnumtris 2\ntri 0 0 2 1\ntri 1 0 0 0\n%s}\n",
+             md5_head, md5_weights);
+    snprintf(md5_quote, sizeof md5_quote, "%s%s%s}\n",
+             "MD5Version 10\ncommandline \"\"\n\nnumJoints 1\nnumMeshes 1\n"
+             "\njoints {\n\"root\" -1 ( 0 0 0 ) ( 0 0 0 )\n}\n\nmesh {\nshader \"m\n",
+             md5_verts, md5_tri);
+    /* "joints {" right under "numMeshes 1": Assimp reads the block as part of the numMeshes section */
+    snprintf(md5_no_joints, sizeof md5_no_joints,
+             "MD5Version 10\n\nnumMeshes 1\njoints {\n\"root\" -1 ( 0 0 0 ) "
+             "( 0 0 0 )\n}\n\nmesh {\nshader \"m\"\n%s%s%s}\n",
+             md5_verts, md5_tri, md5_weights);
     const input_case cases[] = {
+        {"honest.x", x_ok, 0, false, SCENE_OK, NULL, 2},
+        {"huge.x", x_huge, 0, false, SCENE_ERR_FORMAT, ":3: declares 300000000 vertices (Mesh)", 0},
+        {"negative.x", x_negative, 0, false, SCENE_ERR_FORMAT, "declares -12 faces (Mesh)", 0},
+        {"normal.x", x_normal, 0, false, SCENE_ERR_FORMAT, "uses normal -10, but it has 1 normals", 0},
         {"format.x", "xof 03024\nMe 0064\n", 0, false, SCENE_ERR_FORMAT, "Unsupported x-file format '4 Me'",
          0},
         {"sliver.obj", "v 0 0 0\nv 1000 0 0\nv 0 0.001 0\nf 1 2 3\n", 0, false, SCENE_ERR_RANGE,
          "an island may be at most", 0},
+        {"honest.ase", ase_ok, 0, false, SCENE_OK, NULL, 1},
+        {"huge.ase", ase_huge, 0, false, SCENE_ERR_FORMAT, "declares 300000000 items (*MESH_NUMVERTEX)", 0},
+        {"no_face_line.ase", ase_no_face_line, 0, false, SCENE_ERR_FORMAT,
+         "no *MESH_FACE line for face 1 of its 2", 0},
+        {"no_vertices.ase", ase_no_vertices, 0, false, SCENE_ERR_FORMAT, "has 1 faces but no vertices", 0},
+        {"corner.ase", ase_corner, 0, false, SCENE_ERR_FORMAT,
+         "a *MESH_FACE line uses a vertex beyond its list", 0},
+        {"half_face.ase", ase_half_face, 0, false, SCENE_ERR_FORMAT, ":13: a *MESH_FACE line that is not", 0},
+        {"honest.md5mesh", md5_ok, 0, false, SCENE_OK, NULL, 1},
+        {"missing.md5mesh", md5_missing, 0, false, SCENE_ERR_FORMAT, "no vert line for index 3 of its 40", 0},
+        {"joint.md5mesh", md5_joint, 0, false, SCENE_ERR_FORMAT,
+         "weight 2 uses joint 7, but Assimp finds 1 joints", 0},
+        {"no_joints.md5mesh", md5_no_joints, 0, false, SCENE_ERR_FORMAT,
+         "uses joint 0, but Assimp finds 0 joints", 0},
+        {"weights.md5mesh", md5_weight_range, 0, false, SCENE_ERR_FORMAT,
+         "vert 2 uses 9 weights from weight 2", 0},
+        {"unused.md5mesh", md5_unused, 0, false, SCENE_ERR_FORMAT, "vert 3 is used by no triangle", 0},
+        {"quote.md5mesh", md5_quote, 0, false, SCENE_ERR_FORMAT,
+         ":12: a quotation mark not closed on its line", 0},
         {"huge_vertices.off", off_huge_vertices, 0, false, SCENE_ERR_FORMAT, "declares 3500000000 vertices",
          0},
         {"huge_faces.off", off_huge_faces, 0, false, SCENE_ERR_FORMAT, ":3: declares 4000000000 faces", 0},
@@ -485,6 +620,7 @@ int main(void)
         cmocka_unit_test(test_mirrored_transform_keeps_winding),
         cmocka_unit_test(test_damaged_ply_refused),
         cmocka_unit_test(test_mutated_files),
+        cmocka_unit_test(test_mutated_counted_formats),
         cmocka_unit_test(test_3ds_horse),
         cmocka_unit_test(test_inputs_refused_or_read),
         cmocka_unit_test(test_assimp_models),
