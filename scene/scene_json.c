@@ -201,37 +201,6 @@ static scene_result json_get_number(const json_ctx *ctx, const json_t *obj, cons
     return json_read_number(ctx, value, field, out);
 }
 
-/* Reads an array of count finite numbers from value (at where) into out. */
-static scene_result json_read_numbers(const json_ctx *ctx, const json_t *value, const char *where, float *out,
-                                      size_t count)
-{
-    if (!json_is_array(value) || json_array_size(value) != count)
-        return json_fail(ctx, SCENE_ERR_JSON, where, "must be an array of %zu numbers, not %s%s", count,
-                         json_type_word(value), json_is_array(value) ? " of another length" : "");
-    for (size_t i = 0; i < count; i++) {
-        char element[JSON_WHERE_CAP];
-        json_element_path(element, sizeof element, where, i);
-        scene_result r = json_read_number(ctx, json_array_get(value, i), element, &out[i]);
-        if (r != SCENE_OK)
-            return r;
-    }
-    return SCENE_OK;
-}
-
-/* Reads an optional array of count finite numbers, field key of obj; leaves out alone when absent. */
-static scene_result json_get_numbers(const json_ctx *ctx, const json_t *obj, const char *where, const char *key,
-                                     float *out, size_t count, bool *present)
-{
-    const json_t *value = json_object_get(obj, key);
-    if (present)
-        *present = value != NULL;
-    if (!value)
-        return SCENE_OK;
-    char field[JSON_WHERE_CAP];
-    json_field_path(field, sizeof field, where, key);
-    return json_read_numbers(ctx, value, field, out, count);
-}
-
 /* Reads a finite number from value at where into out, in double: positions and transforms keep the
  * precision the file gives them (a scene far from the origin needs more than a float has). */
 static scene_result json_read_number_d(const json_ctx *ctx, const json_t *value, const char *where, double *out)
@@ -275,6 +244,34 @@ static scene_result json_get_numbers_d(const json_ctx *ctx, const json_t *obj, c
     char field[JSON_WHERE_CAP];
     json_field_path(field, sizeof field, where, key);
     return json_read_numbers_d(ctx, value, field, out, count);
+}
+
+/* Reads an array of count (at most 16) finite numbers from value (at where) into out, as floats: the double
+ * reader below, then one rounding. */
+static scene_result json_read_numbers(const json_ctx *ctx, const json_t *value, const char *where, float *out,
+                                      size_t count)
+{
+    double values[16];
+    if (count > 16)
+        return json_fail(ctx, SCENE_ERR_JSON, where, "too many numbers (%zu)", count);
+    scene_result r = json_read_numbers_d(ctx, value, where, values, count);
+    for (size_t i = 0; r == SCENE_OK && i < count; i++)
+        out[i] = (float)values[i];
+    return r;
+}
+
+/* Reads an optional array of count finite numbers, field key of obj; leaves out alone when absent. */
+static scene_result json_get_numbers(const json_ctx *ctx, const json_t *obj, const char *where, const char *key,
+                                     float *out, size_t count, bool *present)
+{
+    const json_t *value = json_object_get(obj, key);
+    if (present)
+        *present = value != NULL;
+    if (!value)
+        return SCENE_OK;
+    char field[JSON_WHERE_CAP];
+    json_field_path(field, sizeof field, where, key);
+    return json_read_numbers(ctx, value, field, out, count);
 }
 
 /* Reads an optional non-empty string field key of obj into out (cap bytes); NULL-safe on absence. */
