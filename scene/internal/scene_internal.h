@@ -81,6 +81,19 @@ scene_result scene__compute_texture_lods(scene *s, scene_error *err);
  * directory named like a model ("x.obj"), a FIFO or a device is refused with a message saying what it is. */
 scene_result scene__check_file(const char *path, scene_error *err);
 
+/* What fxcache knows about a mesh format before Assimp reads it (scene_import_check.c), by the file's (inner,
+ * for .gz) extension: a check of the whole file that runs before Assimp, or the reason the format is refused
+ * outright. */
+typedef scene_result (*scene_import_check_fn)(const char *path, const char *buf, size_t len, scene_error *err);
+typedef struct scene_import_format {
+    const char *ext;             /* lower case, without the dot */
+    scene_import_check_fn check; /* NULL: none */
+    const char *refused;         /* non-NULL: the file is refused with this reason */
+} scene_import_format;
+
+/* The entry for extension ext (compared without case), or NULL when fxcache knows nothing of the format. */
+const scene_import_format *scene__import_format_of(const char *ext);
+
 /* Mesh-file import through Assimp (scene_import.c): appends the file's meshes and materials to s.
  * xform (row-major affine, double) may be NULL; override (may be NULL) replaces every material of the file. */
 scene_result scene__import_file(scene *s, const char *path, const double *xform,

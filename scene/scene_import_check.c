@@ -1,0 +1,1007 @@
+/* The checks fxcache runs on a mesh file before Assimp reads it, by format (scene_import.c calls them
+ * through scene__import_format_of()): declared counts against the file's size (PLY, OFF, STL, ASE, .x) and
+ * the indices Assimp uses without checking (ASE, .x, MD5), each found crashing or exhausting memory on
+ * damaged files; and the formats refused outright, with the reason. The input is untrusted: every check
+ * reads within [buf, buf + len) and refuses with one line naming the file and, where known, the line. */
+#include "scene_internal.h"
+
+#include <limits.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+
+/* A whole number as Assimp's strtoul10() reads it: the leading decimal digits, wrapping modulo 2^32 as its
+ * unsigned int does. *digits_out (may be NULL) is the same number without wrapping, saturated at UINT64_MAX,
+ * so a count that wrapped to something small is still seen for what the file declares. */
+static uint32_t assimp_strtoul10(const char *p, const char *end, uint64_t *digits_out)
+{
+    uint32_t wrapped = 0;
+    uint64_t digits = 0;
+    for (; p < end && *p >= '0' && *p <= '9'; p++) {
+        wrapped = wrapped * 10u + (uint32_t)(*p - '0');
+        digits = digits > (UINT64_MAX - 9) / 10 ? UINT64_MAX : digits * 10 + (uint64_t)(*p - '0');
+    }
+    if (digits_out)
+        *digits_out = digits;
+    return wrapped;
+}
+
+/* The number of the line pos is on (1-based). */
+static unsigned line_of(const char *buf, const char *pos)
+{
+    unsigned line = 1;
+    for (const char *q = buf; q < pos; q++)
+        line += *q == '\n';
+    return line;
+}
+
+static bool is_blank(char c)
+{
+    return c == ' ' || c == '\t' || c == '\r' || c == '\n';
+}
+
+/* Refuses a declared count larger than the file could hold: every item of a declared element, vertex or
+ * face takes at least one byte of the file, so a count above the file's size is a lie that would only make
+ * Assimp allocate for it (its OFF reader allocates from the header alone: Assimp's own test file
+ * invalid/OutOfMemory.off, 309 bytes, declares 353535235358 vertices and grew past 8 GB). */
+static scene_result check_count(const char *path, unsigned line, const char *what, uint64_t count, size_t len,
+                                scene_error *err)
+{
+    if (count <= len)
+        return SCENE_OK;
+    return scene__fail(err, SCENE_ERR_FORMAT,
+                       "%s:%u: declares %llu %s, more than the file's %zu bytes can hold", path, line,
+                       (unsigned long long)count, what, len);
+}
+
+/* check_count() for a count at `at` in buf: the line number is counted only when the check fails. */
+static scene_result check_count_at(const char *path, const char *buf, const char *at, const char *what,
+                                   uint64_t count, size_t len, scene_error *err)
+{
+    return count <= len ? SCENE_OK : check_count(path, line_of(buf, at), what, count, len, err);
+}
+
+/* Counts in a PLY "comment" line that Assimp takes as an element count are refused only above this many:
+ * below it Assimp's allocation for them is small whatever the file's size (about 24 bytes each). */
+#define PLY_COMMENT_COUNT_HARMLESS (1u << 20)
+
+/* Checks a PLY header before Assimp reads it. Assimp 5.2.5's PLY reader loops forever on a header whose
+ * end_header line is damaged (found by mutating files), so the header must end with an end_header line;
+ * and no element may declare more items than the file has bytes. Header lines PLY does not define
+ * (Blender 2.47 writes a bare "Created by Blender3D ..." line) are accepted: Assimp skips them. Assimp also
+ * parses every "comment" line as an element (its comment skipping works on a copy of the line), so a
+ * comment starting with a number, or with "vertex"/"face" and a number, declares a count as well. */
+static scene_result check_ply(const char *path, const char *buf, size_t len, scene_error *err)
+{
+    /* the element semantics after which Assimp reads a count ("TextureFile" takes a name, no count) */
+    static const char *const semantics[] = {"vertex", "face", "tristrips", "edge", "material"};
+    size_t pos = 0;
+    for (unsigned line = 1; pos < len && line <= 100000; line++) {
+        const char *start = buf + pos;
+        const char *newline = memchr(start, '\n', len - pos);
+        size_t n = newline ? (size_t)(newline - start) : len - pos;
+        size_t m = n > 0 && start[n - 1] == '\r' ? n - 1 : n;
+        const char *end = start + m;
+        if (line == 1) {
+            if (!(m == 3 && memcmp(start, "ply", 3) == 0))
+                return scene__fail(err, SCENE_ERR_FORMAT, "%s: not a PLY file (the first line is not 'ply')", path);
+        } else if (m >= 10 && memcmp(start, "end_header", 10) == 0 &&
+                   (m == 10 || start[10] == ' ' || start[10] == '\t')) {
+            return SCENE_OK;
+        } else if (m >= 8 && memcmp(start, "element ", 8) == 0) {
+            /* "element NAME COUNT", nothing after the count */
+            const char *p = start + 8, *name = NULL, *digits = NULL;
+            while (p < end && (*p == ' ' || *p == '\t'))
+                p++;
+            for (name = p; p < end && *p != ' ' && *p != '\t';)
+                p++;
+            size_t name_len = (size_t)(p - name);
+            while (p < end && (*p == ' ' || *p == '\t'))
+                p++;
+            for (digits = p; p < end && *p >= '0' && *p <= '9';)
+                p++;
+            bool has_digits = p > digits;
+            while (p < end && (*p == ' ' || *p == '\t'))
+                p++;
+            if (name_len == 0 || !has_digits || p != end)
+                return scene__fail(err, SCENE_ERR_FORMAT, "%s:%u: malformed element line: '%.*s'", path, line,
+                                   (int)(m < 60 ? m : 60), start);
+            uint64_t declared = 0;
+            assimp_strtoul10(digits, end, &declared);
+            char what[96];
+            snprintf(what, sizeof what, "items of element '%.*s'", (int)(name_len < 40 ? name_len : 40),
+                     name);
+            scene_result rc = check_count(path, line, what, declared, len, err);
+            if (rc != SCENE_OK)
+                return rc;
+        } else if (m >= 8 && memcmp(start, "comment", 7) == 0 && (start[7] == ' ' || start[7] == '\t')) {
+            const char *p = start + 8;
+            while (p < end && (*p == ' ' || *p == '\t'))
+                p++;
+            for (size_t k = 0; k < sizeof semantics / sizeof semantics[0]; k++) {
+                size_t sl = strlen(semantics[k]);
+                if ((size_t)(end - p) > sl && memcmp(p, semantics[k], sl) == 0 &&
+                    (p[sl] == ' ' || p[sl] == '\t')) {
+                    for (p += sl; p < end && (*p == ' ' || *p == '\t');)
+                        p++;
+                    break;
+                }
+            }
+            uint64_t declared = 0;
+            assimp_strtoul10(p, end, &declared);
+            if (declared > len && declared > PLY_COMMENT_COUNT_HARMLESS)
+                return scene__fail(
+                    err, SCENE_ERR_FORMAT,
+                    "%s:%u: Assimp reads this comment as declaring %llu items, more than the file's "
+                    "%zu bytes can hold: '%.*s'",
+                    path, line, (unsigned long long)declared, len, (int)(m < 60 ? m : 60), start);
+        }
+        if (!newline)
+            break;
+        pos += n + 1;
+    }
+    return scene__fail(err, SCENE_ERR_FORMAT, "%s: the PLY header has no end_header line", path);
+}
+
+/* Skips blanks, line ends and '#' comment lines the way Assimp's OFF reader does. */
+static const char *off_next_token(const char *p, const char *end)
+{
+    for (;;) {
+        while (p < end && (*p == ' ' || *p == '\t' || *p == '\r' || *p == '\n'))
+            p++;
+        if (p >= end || *p != '#')
+            return p;
+        while (p < end && *p != '\n')
+            p++;
+    }
+}
+
+/* Checks an OFF header's vertex and face counts against the file size before Assimp reads it: Assimp
+ * allocates both arrays from the header alone. The header is parsed as Assimp parses it: optional "ST",
+ * "C", "N", "4" and "n" prefixes, "OFF" (which may be absent), a dimension after "n", then the counts. */
+static scene_result check_off(const char *path, const char *buf, size_t len, scene_error *err)
+{
+    const char *p = off_next_token(buf, buf + len), *end = buf + len;
+    bool dimension = false;
+    if (end - p > 2 && p[0] == 'S' && p[1] == 'T')
+        p += 2;
+    if (end - p > 1 && p[0] == 'C')
+        p++;
+    if (end - p > 1 && p[0] == 'N')
+        p++;
+    if (end - p > 1 && p[0] == '4')
+        p++;
+    if (end - p > 1 && p[0] == 'n') {
+        dimension = true;
+        p++;
+    }
+    if (end - p > 3 && memcmp(p, "OFF", 3) == 0)
+        p += 3;
+    else
+        dimension = false; /* Assimp reads the counts from here on */
+    p = off_next_token(p, end);
+    if (dimension) {
+        assimp_strtoul10(p, end, NULL);
+        while (p < end && *p >= '0' && *p <= '9')
+            p++;
+        p = off_next_token(p, end);
+    }
+    static const char *const what[2] = {"vertices", "faces"};
+    for (int k = 0; k < 2; k++) {
+        uint64_t declared = 0;
+        assimp_strtoul10(p, end, &declared);
+        unsigned line = 1;
+        for (const char *q = buf; q < p; q++)
+            line += *q == '\n';
+        scene_result rc = check_count(path, line, what[k], declared, len, err);
+        if (rc != SCENE_OK)
+            return rc;
+        while (p < end && *p >= '0' && *p <= '9')
+            p++;
+        p = off_next_token(p, end);
+    }
+    return SCENE_OK;
+}
+
+/* Checks a binary STL's facet count against the file size. Assimp takes a file for binary STL when
+ * 84 + 50 * count equals its size in 32-bit arithmetic, which a huge count can wrap to; ASCII STL declares
+ * no counts. */
+static scene_result check_stl(const char *path, const char *buf, size_t len, scene_error *err)
+{
+    if (len < 84)
+        return SCENE_OK;
+    const unsigned char *c = (const unsigned char *)buf + 80;
+    uint32_t count = (uint32_t)c[0] | (uint32_t)c[1] << 8 | (uint32_t)c[2] << 16 | (uint32_t)c[3] << 24;
+    bool binary = (uint32_t)(count * 50u + 84u) == (uint32_t)len;
+    if (binary && 84 + 50 * (uint64_t)count != (uint64_t)len)
+        return scene__fail(err, SCENE_ERR_FORMAT,
+                           "%s: declares %u facets (%llu bytes), but the file has %zu bytes", path, count,
+                           84 + 50 * (unsigned long long)count, len);
+    return SCENE_OK;
+}
+
+/* One *MESH block of an ASE file as Assimp's reader will use it. Assimp sizes a list when it meets the
+ * list's block (*MESH_VERTEX_LIST, *MESH_FACE_LIST, *MESH_TVERTLIST, *MESH_CVERTLIST) to the count declared
+ * before it (*MESH_NUMVERTEX, ...), and the list stays empty without its block. Per face: which of the
+ * *MESH_FACE, *MESH_CFACE and *MESH_TFACE lines (per texture channel) filled it. */
+enum { ASE_CHANNELS = 8, ASE_FACE = 1, ASE_CFACE = 2, ASE_TFACE0 = 4 };
+typedef struct ase_mesh {
+    uint64_t declared_faces, declared_vertices, declared_cvertices, declared_tvertices[ASE_CHANNELS];
+    uint64_t faces, vertices, cvertices, tvertices[ASE_CHANNELS]; /* the lists' sizes */
+    uint16_t *filled; /* per face: ASE_FACE | ASE_CFACE | ASE_TFACE0 << channel */
+    uint64_t largest_corner, largest_ccorner, largest_tcorner[ASE_CHANNELS]; /* +1, 0: none */
+    const char *start; /* where the block starts, for the message (line numbers only on failure: counting
+                          them per block would make the check quadratic) */
+} ase_mesh;
+
+/* At the end of a *MESH block: a mesh with faces must have vertices, and every face Assimp allocated must be
+ * filled by a *MESH_FACE line, and by a *MESH_CFACE / *MESH_TFACE line when the mesh has vertex colours /
+ * texture vertices in that channel (Assimp reads those indices for every face; each of these segfaulted). */
+static scene_result ase_check_mesh(const char *path, const char *buf, const ase_mesh *m, unsigned mesh_number,
+                                   scene_error *err)
+{
+    if (m->faces > 0 && m->vertices == 0) /* Assimp clamps a vertex index to vertices - 1 */
+        return scene__fail(err, SCENE_ERR_FORMAT, "%s:%u: mesh %u has %llu faces but no vertices", path,
+                           line_of(buf, m->start), mesh_number, (unsigned long long)m->faces);
+    /* Assimp does not check the corners against the lists (a corner of 159999999 segfaulted) */
+    const char *beyond = m->largest_corner > m->vertices                         ? "*MESH_FACE"
+                         : m->cvertices > 0 && m->largest_ccorner > m->cvertices ? "*MESH_CFACE"
+                                                                                 : NULL;
+    for (int c = 0; !beyond && c < ASE_CHANNELS; c++)
+        if (m->tvertices[c] > 0 && m->largest_tcorner[c] > m->tvertices[c])
+            beyond = "*MESH_TFACE";
+    if (beyond)
+        return scene__fail(err, SCENE_ERR_FORMAT, "%s:%u: mesh %u: a %s line uses a vertex beyond its list",
+                           path, line_of(buf, m->start), mesh_number, beyond);
+    for (uint64_t f = 0; f < m->faces; f++) {
+        const char *missing = NULL;
+        int channel = -1;
+        if (!(m->filled[f] & ASE_FACE))
+            missing = "*MESH_FACE";
+        else if (m->cvertices > 0 && !(m->filled[f] & ASE_CFACE))
+            missing = "*MESH_CFACE";
+        for (int c = 0; !missing && c < ASE_CHANNELS; c++)
+            if (m->tvertices[c] > 0 && !(m->filled[f] & (ASE_TFACE0 << c))) {
+                missing = "*MESH_TFACE";
+                channel = c;
+            }
+        if (missing)
+            return scene__fail(
+                err, SCENE_ERR_FORMAT,
+                "%s:%u: mesh %u has no %s line for face %llu of its %llu%s (Assimp would read an "
+                "uninitialised face)",
+                path, line_of(buf, m->start), mesh_number, missing, (unsigned long long)f,
+                (unsigned long long)m->faces, channel > 0 ? " in a mapping channel" : "");
+    }
+    return SCENE_OK;
+}
+
+/* Whether the text after a *MESH_FACE keyword is what Assimp's reader needs to set all three corners of the
+ * face, on the keyword's line: an index, ':', then A:, B: and C: (in any order, each once) with a number. On
+ * anything else it stops reading the line but keeps the face, with the corners it had not read
+ * uninitialised (a "C:" with its number missing segfaulted). *largest gets the largest corner. */
+static bool ase_face_line_complete(const char *p, const char *end, uint64_t *largest)
+{
+    *largest = 0;
+    const char *newline = memchr(p, '\n', (size_t)(end - p));
+    end = newline ? newline : end;
+    while (p < end && (*p == ' ' || *p == '\t'))
+        p++;
+    if (p >= end || *p < '0' || *p > '9')
+        return false;
+    while (p < end && *p >= '0' && *p <= '9')
+        p++;
+    while (p < end && (*p == ' ' || *p == '\t'))
+        p++;
+    if (p >= end || *p != ':')
+        return false;
+    p++;
+    unsigned corners = 0;
+    for (int i = 0; i < 3; i++) {
+        while (p < end && (*p == ' ' || *p == '\t'))
+            p++;
+        if (end - p < 2 || p[1] != ':')
+            return false;
+        int corner = *p == 'A' || *p == 'a'   ? 0
+                     : *p == 'B' || *p == 'b' ? 1
+                     : *p == 'C' || *p == 'c' ? 2
+                                              : -1;
+        if (corner < 0)
+            return false;
+        corners |= 1u << corner;
+        for (p += 2; p < end && (*p == ' ' || *p == '\t');)
+            p++;
+        if (p >= end || *p < '0' || *p > '9')
+            return false;
+        uint64_t index = 0;
+        assimp_strtoul10(p, end, &index);
+        *largest = index > *largest ? index : *largest;
+        while (p < end && *p >= '0' && *p <= '9')
+            p++;
+    }
+    return corners == 7;
+}
+
+/* Reading an ASE file the way Assimp's reader walks it: each block (the file, a *MESH, a list in it) is its
+ * own loop over every character, counting braces and ending when its depth returns to zero, and reacting
+ * only to its own keywords (a keyword followed by a blank); a keyword of another block is ignored. */
+enum ase_block_kind {
+    ASE_FILE,
+    ASE_MESH,
+    ASE_CHANNEL,
+    ASE_VERTEX_LIST,
+    ASE_FACE_LIST,
+    ASE_TVERT_LIST,
+    ASE_TFACE_LIST,
+    ASE_CVERT_LIST,
+    ASE_CFACE_LIST,
+    ASE_SKIP
+};
+
+typedef struct ase_reader {
+    const char *path, *buf, *p, *end;
+    scene_error *err;
+    scene_result rc;
+    unsigned mesh_number;
+} ase_reader;
+
+/* Whether the keyword at r->p is `keyword` followed by a blank or the end (Assimp's TokenMatch()); if so,
+ * moves past it and reads the number after it (Assimp's ParseLV4MeshLong(): 0 without digits). */
+static bool ase_keyword(ase_reader *r, const char *keyword, uint64_t *value)
+{
+    size_t n = strlen(keyword);
+    if ((size_t)(r->end - r->p) < n || memcmp(r->p, keyword, n) != 0 ||
+        (r->p + n < r->end && !is_blank(r->p[n])))
+        return false;
+    r->p += n;
+    const char *q = r->p;
+    while (q < r->end && (*q == ' ' || *q == '\t'))
+        q++;
+    assimp_strtoul10(q, r->end, value);
+    return true;
+}
+
+/* Reads one block of kind `kind` from r->p (just after its keyword) to where Assimp's loop for it ends;
+ * m is the mesh it belongs to (NULL at file level), channel its texture channel. */
+static void ase_block(ase_reader *r, enum ase_block_kind kind, ase_mesh *m, int channel)
+{
+    int depth = 0;
+    while (r->p < r->end && r->rc == SCENE_OK) {
+        char c = *r->p;
+        if (c == '{' || c == '}') {
+            r->p++;
+            if (c == '{')
+                depth++;
+            else if (--depth == 0 && kind != ASE_FILE)
+                return;
+            continue;
+        }
+        if (c != '*') {
+            r->p++;
+            continue;
+        }
+        const char *word = r->p;
+        uint64_t value = 0, largest = 0;
+        if (kind == ASE_FILE && ase_keyword(r, "*MESH", &value)) {
+            ase_mesh mesh = {.start = word};
+            ase_block(r, ASE_MESH, &mesh, 0);
+            if (r->rc == SCENE_OK)
+                r->rc = ase_check_mesh(r->path, r->buf, &mesh, r->mesh_number++, r->err);
+            free(mesh.filled);
+        } else if (kind == ASE_MESH && ase_keyword(r, "*MESH_NUMVERTEX", &value)) {
+            m->declared_vertices = value;
+        } else if (kind == ASE_MESH && ase_keyword(r, "*MESH_NUMFACES", &value)) {
+            m->declared_faces = value;
+        } else if (kind == ASE_MESH && ase_keyword(r, "*MESH_NUMCVERTEX", &value)) {
+            m->declared_cvertices = value;
+        } else if ((kind == ASE_MESH || kind == ASE_CHANNEL) && ase_keyword(r, "*MESH_NUMTVERTEX", &value)) {
+            m->declared_tvertices[channel] = value;
+        } else if (kind == ASE_MESH && ase_keyword(r, "*MESH_VERTEX_LIST", &value)) {
+            m->vertices = m->declared_vertices; /* Assimp sizes each list as its block starts */
+            ase_block(r, ASE_VERTEX_LIST, m, channel);
+        } else if (kind == ASE_MESH && ase_keyword(r, "*MESH_FACE_LIST", &value)) {
+            free(m->filled);
+            m->faces = m->declared_faces;
+            if (!(m->filled = calloc((size_t)m->faces + 1, sizeof *m->filled)))
+                r->rc =
+                    scene__fail(r->err, SCENE_ERR_NOMEM, "%s: out of memory checking the ASE file", r->path);
+            else
+                ase_block(r, ASE_FACE_LIST, m, channel);
+        } else if (kind == ASE_MESH && ase_keyword(r, "*MESH_CVERTLIST", &value)) {
+            m->cvertices = m->declared_cvertices;
+            ase_block(r, ASE_CVERT_LIST, m, channel);
+        } else if (kind == ASE_MESH && ase_keyword(r, "*MESH_CFACELIST", &value)) {
+            ase_block(r, ASE_CFACE_LIST, m, channel);
+        } else if ((kind == ASE_MESH || kind == ASE_CHANNEL) && ase_keyword(r, "*MESH_TVERTLIST", &value)) {
+            m->tvertices[channel] = m->declared_tvertices[channel];
+            ase_block(r, ASE_TVERT_LIST, m, channel);
+        } else if ((kind == ASE_MESH || kind == ASE_CHANNEL) && ase_keyword(r, "*MESH_TFACELIST", &value)) {
+            ase_block(r, ASE_TFACE_LIST, m, channel);
+        } else if (kind == ASE_MESH && ase_keyword(r, "*MESH_MAPPINGCHANNEL", &value)) {
+            /* Assimp reads channel N (2..8) into texture channel N - 1 and skips the others */
+            bool valid = value >= 2 && value <= ASE_CHANNELS;
+            ase_block(r, valid ? ASE_CHANNEL : ASE_SKIP, m, valid ? (int)value - 1 : 0);
+        } else if (kind == ASE_FACE_LIST && ase_keyword(r, "*MESH_FACE", &value)) {
+            if (!ase_face_line_complete(r->p, r->end, &largest))
+                r->rc =
+                    scene__fail(r->err, SCENE_ERR_FORMAT,
+                                "%s:%u: a *MESH_FACE line that is not 'N: A: a B: b C: c' (Assimp would keep "
+                                "the face with uninitialised corners)",
+                                r->path, line_of(r->buf, word));
+            else if (value < m->faces) {
+                m->filled[value] |= ASE_FACE;
+                m->largest_corner = largest + 1 > m->largest_corner ? largest + 1 : m->largest_corner;
+            }
+        } else if ((kind == ASE_TFACE_LIST && ase_keyword(r, "*MESH_TFACE", &value)) ||
+                   (kind == ASE_CFACE_LIST && ase_keyword(r, "*MESH_CFACE", &value))) {
+            /* "face a b c": the largest of a, b, c as Assimp reads them (no digits: 0) */
+            const char *q = r->p;
+            for (int i = 0; i < 4; i++) {
+                while (q < r->end && (*q == ' ' || *q == '\t'))
+                    q++;
+                uint64_t index = 0;
+                assimp_strtoul10(q, r->end, &index);
+                if (i > 0)
+                    largest = index > largest ? index : largest;
+                while (q < r->end && *q >= '0' && *q <= '9')
+                    q++;
+            }
+            if (value < m->faces) {
+                bool colour = kind == ASE_CFACE_LIST;
+                uint64_t *corner = colour ? &m->largest_ccorner : &m->largest_tcorner[channel];
+                m->filled[value] |= colour ? ASE_CFACE : (uint16_t)(ASE_TFACE0 << channel);
+                *corner = largest + 1 > *corner ? largest + 1 : *corner;
+            }
+        } else {
+            r->p++; /* not a keyword of this block: Assimp moves on by one character */
+        }
+    }
+}
+
+/* Checks an ASE file before Assimp reads it. Every count it declares (*MESH_NUMVERTEX, *MESH_NUMFACES,
+ * *MESH_NUMTVERTEX, ...: every "*...NUM..." or "*...COUNT..." keyword followed by a number) must be at most
+ * the file size, as Assimp resizes its arrays to them (a 300000000 there made it touch 3.6 GB before reading
+ * a vertex); and every *MESH must pass ase_check_mesh() as Assimp's reader will have filled it. */
+static scene_result check_ase(const char *path, const char *buf, size_t len, scene_error *err)
+{
+    const char *end = buf + len;
+    for (const char *p = buf; p < end; p++) {
+        if (*p != '*')
+            continue;
+        const char *word = p;
+        while (p + 1 < end && !is_blank(p[1]))
+            p++;
+        size_t n = (size_t)(p + 1 - word);
+        bool counts = false;
+        for (size_t k = 1; k + 3 <= n && !counts; k++)
+            counts = memcmp(word + k, "NUM", 3) == 0 || (k + 5 <= n && memcmp(word + k, "COUNT", 5) == 0);
+        if (!counts)
+            continue;
+        const char *q = p + 1;
+        while (q < end && (*q == ' ' || *q == '\t'))
+            q++;
+        uint64_t value = 0;
+        assimp_strtoul10(q, end, &value);
+        char what[64];
+        snprintf(what, sizeof what, "items (%.*s)", (int)(n < 40 ? n : 40), word);
+        scene_result rc = check_count_at(path, buf, word, what, value, len, err);
+        if (rc != SCENE_OK)
+            return rc;
+    }
+    ase_reader r = {.path = path, .buf = buf, .p = buf, .end = end, .err = err, .rc = SCENE_OK};
+    ase_block(&r, ASE_FILE, NULL, 0);
+    return r.rc;
+}
+
+/* Skips one number of a text .x file and the separators after it; returns NULL when there is no number.
+ * Besides digits it takes what Assimp's float reader takes: "nan" and "inf", and the "1.#IND" / "1.#QNAN"
+ * forms some exporters write (missing one would put the next count where Assimp reads a coordinate). */
+static const char *x_skip_number(const char *p, const char *end)
+{
+    const char *start = p;
+    if (p < end && (*p == '-' || *p == '+'))
+        p++;
+    if (end - p >= 3 && (strncasecmp(p, "nan", 3) == 0 || strncasecmp(p, "inf", 3) == 0)) {
+        p += 3;
+        while (p < end && ((*p >= 'a' && *p <= 'z') || (*p >= 'A' && *p <= 'Z')))
+            p++;
+    } else {
+        while (p < end &&
+               ((*p >= '0' && *p <= '9') || *p == '.' || *p == 'e' || *p == 'E' || *p == '-' || *p == '+'))
+            p++;
+        if (p < end && *p == '#')
+            while (p < end && (*p == '#' || (*p >= 'A' && *p <= 'Z')))
+                p++;
+    }
+    if (p == start || (p == start + 1 && (*start == '-' || *start == '+')))
+        return NULL;
+    while (p < end && (is_blank(*p) || *p == ';' || *p == ','))
+        p++;
+    return p;
+}
+
+/* Reads one integer of a text .x file as Assimp's reader does (an optional '-', digits) and skips the
+ * separators after it; returns NULL when there is none. */
+static const char *x_read_int(const char *p, const char *end, long long *out)
+{
+    if (!p || p >= end)
+        return NULL;
+    const char *q = p;
+    bool negative = *q == '-';
+    if (negative)
+        q++;
+    if (q >= end || *q < '0' || *q > '9')
+        return NULL;
+    long long v = 0;
+    for (; q < end && *q >= '0' && *q <= '9'; q++)
+        v = v > (LLONG_MAX - 9) / 10 ? LLONG_MAX : v * 10 + (*q - '0');
+    *out = negative ? -v : v;
+    return x_skip_number(p, end);
+}
+
+/* Checks a text DirectX .x file before Assimp reads it: the counts its Mesh, MeshNormals,
+ * MeshTextureCoords, MeshVertexColors and MeshMaterialList objects declare must be at most the file size
+ * (Assimp's X reader resizes its arrays to them: a vertex count of 300000000 made it touch 3.6 GB; the face
+ * count of a Mesh comes after its vertices), and the faces of MeshNormals must use normals that exist (Assimp
+ * does not check them: a normal index of -10 segfaulted). Binary and compressed .x files are not checked. */
+static scene_result check_x(const char *path, const char *buf, size_t len, scene_error *err)
+{
+    if (len < 16 || memcmp(buf, "xof ", 4) != 0 || memcmp(buf + 8, "txt ", 4) != 0)
+        return SCENE_OK;
+    static const struct {
+        const char *name;
+        const char *what[2];      /* the first count, and the second (NULL: none) */
+        unsigned numbers_between; /* numbers per item of the first list, before the second count */
+    } objects[] = {
+        {"Mesh", {"vertices (Mesh)", "faces (Mesh)"}, 3},
+        {"MeshNormals", {"normals (MeshNormals)", "face normals (MeshNormals)"}, 3},
+        {"MeshTextureCoords", {"texture coordinates (MeshTextureCoords)", NULL}, 0},
+        {"MeshVertexColors", {"vertex colours (MeshVertexColors)", NULL}, 0},
+        {"MeshMaterialList", {"materials (MeshMaterialList)", "face indexes (MeshMaterialList)"}, 0},
+    };
+    const char *end = buf + len;
+    for (const char *p = buf + 16; p < end; p++) {
+        if (p[-1] == '_' || (p[-1] >= 'A' && p[-1] <= 'Z') || (p[-1] >= 'a' && p[-1] <= 'z') ||
+            (p[-1] >= '0' && p[-1] <= '9'))
+            continue;
+        for (size_t k = 0; k < sizeof objects / sizeof objects[0]; k++) {
+            size_t n = strlen(objects[k].name);
+            if ((size_t)(end - p) <= n || memcmp(p, objects[k].name, n) != 0 ||
+                !(is_blank(p[n]) || p[n] == '{'))
+                continue;
+            /* NAME [identifier] { count; ... */
+            const char *q = p + n;
+            while (q < end && is_blank(*q))
+                q++;
+            while (q < end && !is_blank(*q) && *q != '{')
+                q++;
+            while (q < end && is_blank(*q))
+                q++;
+            if (q >= end || *q != '{')
+                break;
+            for (q++; q < end && is_blank(*q);)
+                q++;
+            uint64_t first_count = 0;
+            for (int c = 0; c < 2 && objects[k].what[c] && q < end && ((*q >= '0' && *q <= '9') || *q == '-');
+                 c++) {
+                long long signed_count = 0;
+                const char *count_at = q;
+                if (!(q = x_read_int(q, end, &signed_count)))
+                    break;
+                /* Assimp reads a negative count as unsigned: -12 faces are 4294967284 */
+                uint64_t declared = signed_count < 0 ? UINT64_MAX : (uint64_t)signed_count;
+                scene_result rc = check_count_at(path, buf, count_at, objects[k].what[c], declared, len, err);
+                if (rc != SCENE_OK)
+                    return signed_count < 0
+                               ? scene__fail(err, SCENE_ERR_FORMAT, "%s:%u: declares %lld %s", path,
+                                             line_of(buf, count_at), signed_count, objects[k].what[c])
+                               : rc;
+                for (uint64_t skip = c == 0 ? declared * objects[k].numbers_between : 0; q && skip > 0;
+                     skip--)
+                    q = x_skip_number(q, end);
+                if (!q)
+                    break;
+                if (c == 0)
+                    first_count = declared;
+                else if (k == 1) /* the faces of MeshNormals: count, then that many normal indices */
+                    for (uint64_t f = 0; q && f < declared; f++) {
+                        long long corners = 0, normal = 0;
+                        q = x_read_int(q, end, &corners);
+                        for (long long i = 0; q && i < corners; i++) {
+                            const char *at = q;
+                            q = x_read_int(q, end, &normal);
+                            if (q && (normal < 0 || (uint64_t)normal >= first_count))
+                                return scene__fail(
+                                    err, SCENE_ERR_FORMAT,
+                                    "%s:%u: a face of MeshNormals uses normal %lld, but it has %llu "
+                                    "normals",
+                                    path, line_of(buf, at), normal, (unsigned long long)first_count);
+                        }
+                    }
+            }
+            break;
+        }
+    }
+    return SCENE_OK;
+}
+
+/* One kind of indexed line in an MD5 mesh ("vert", "tri", "weight"): the list Assimp builds from it. */
+typedef struct md5_list {
+    uint64_t count; /* max(declared, largest index + 1): the length of Assimp's list */
+    uint8_t *seen;  /* seen[i]: a line fills entry i (capacity entries, zero beyond what was set) */
+    uint64_t capacity;
+} md5_list;
+
+/* Makes list->seen hold at least n entries (n is at most the file size plus one). */
+static bool md5_reserve(md5_list *list, uint64_t n)
+{
+    if (n <= list->capacity)
+        return true;
+    uint64_t cap = list->capacity ? list->capacity : 64;
+    while (cap < n)
+        cap *= 2;
+    uint8_t *bigger = realloc(list->seen, (size_t)cap);
+    if (!bigger)
+        return false;
+    memset(bigger + list->capacity, 0, (size_t)(cap - list->capacity));
+    list->seen = bigger;
+    list->capacity = cap;
+    return true;
+}
+
+/* Copies the line at p (up to its end or line_end) into a NUL-terminated buffer, for sscanf. */
+static void md5_line_copy(const char *p, const char *line_end, char *out, size_t cap)
+{
+    size_t n = (size_t)(line_end - p);
+    n = n < cap - 1 ? n : cap - 1;
+    memcpy(out, p, n);
+    out[n] = 0;
+}
+
+/* Strict readers for one field of an MD5 line: they advance *p past the field and return false when the text
+ * is not that field. */
+static void md5_blanks(const char **p)
+{
+    while (**p == ' ' || **p == '\t')
+        (*p)++;
+}
+
+static bool md5_uint(const char **p, unsigned long long *out)
+{
+    md5_blanks(p);
+    if (**p < '0' || **p > '9')
+        return false;
+    unsigned long long v = 0;
+    for (; **p >= '0' && **p <= '9'; (*p)++)
+        v = v > (ULLONG_MAX - 9) / 10 ? ULLONG_MAX : v * 10 + (unsigned long long)(**p - '0');
+    *out = v;
+    return true;
+}
+
+static bool md5_int(const char **p, long long *out)
+{
+    md5_blanks(p);
+    bool negative = **p == '-';
+    if (negative)
+        (*p)++;
+    unsigned long long v = 0;
+    if (!md5_uint(p, &v) || v > LLONG_MAX)
+        return false;
+    *out = negative ? -(long long)v : (long long)v;
+    return true;
+}
+
+/* Whether the line (n bytes, blanks before it skipped) starts with keyword as Assimp's TokenMatch() sees
+ * it: followed by a blank or by the end of the line. */
+static bool md5_keyword(const char *line, size_t n, const char *keyword)
+{
+    size_t kl = strlen(keyword);
+    return n >= kl && memcmp(line, keyword, kl) == 0 && (n == kl || line[kl] == ' ' || line[kl] == '\t');
+}
+
+static bool md5_float(const char **p)
+{
+    md5_blanks(p);
+    if (**p == '-')
+        (*p)++;
+    const char *digits = *p;
+    while ((**p >= '0' && **p <= '9') || **p == '.')
+        (*p)++;
+    if (*p == digits)
+        return false;
+    if (**p == 'e' || **p == 'E') {
+        (*p)++;
+        if (**p == '-' || **p == '+')
+            (*p)++;
+        if (**p < '0' || **p > '9')
+            return false;
+        while (**p >= '0' && **p <= '9')
+            (*p)++;
+    }
+    return true;
+}
+
+static bool md5_char(const char **p, char c)
+{
+    md5_blanks(p);
+    if (**p != c)
+        return false;
+    (*p)++;
+    return true;
+}
+
+/* The end of an MD5 line: blanks, then nothing or a // comment. */
+static bool md5_line_end(const char *p)
+{
+    md5_blanks(&p);
+    return *p == 0 || (p[0] == '/' && p[1] == '/');
+}
+
+/* Checks the lists of one MD5 mesh once its block has ended (lines from mesh_start to mesh_end). Every vert,
+ * tri and weight line must have the exact form Assimp reads field by field (on anything else it reads other
+ * fields than the ones meant); every list entry must be filled by a line; a vertex's weights must lie within
+ * the weights, a weight's joint within the joints, a triangle's corners within the vertices; and a mesh with
+ * triangles must use every vertex: Assimp's reader makes a copy of each vertex for every further triangle
+ * corner that uses it into a list of 3 x triangles entries, and writes past that list when a vertex is
+ * unused (heap corruption, found by mutating files). */
+static scene_result md5_check_mesh(const char *path, const char *buf, const char *mesh_start,
+                                   const char *mesh_end, unsigned mesh_number, const md5_list lists[3],
+                                   uint64_t joints, scene_error *err)
+{
+    static const char *const kinds[3] = {"vert", "tri", "weight"};
+    for (int k = 0; k < 3; k++)
+        for (uint64_t i = 0; i < lists[k].count; i++)
+            if (!lists[k].seen[i])
+                return scene__fail(
+                    err, SCENE_ERR_FORMAT,
+                    "%s:%u: mesh %u has no %s line for index %llu of its %llu (Assimp would read "
+                    "an uninitialised entry)",
+                    path, line_of(buf, mesh_start), mesh_number, kinds[k], (unsigned long long)i,
+                    (unsigned long long)lists[k].count);
+    uint64_t verts = lists[0].count, tris = lists[1].count, weights = lists[2].count;
+    uint8_t *used = calloc((size_t)verts + 1, 1);
+    if (!used)
+        return scene__fail(err, SCENE_ERR_NOMEM, "%s: out of memory checking the MD5 mesh", path);
+    scene_result rc = SCENE_OK;
+    for (const char *q = mesh_start; q < mesh_end && rc == SCENE_OK;) {
+        const char *qe = memchr(q, '\n', (size_t)(mesh_end - q));
+        qe = qe ? qe : mesh_end;
+        char text[256];
+        md5_line_copy(q, qe, text, sizeof text);
+        const char *line_at = q;
+        q = qe + 1;
+        const char *t = text;
+        md5_blanks(&t);
+        /* the other keywords Assimp reads in a mesh: "shader" with a quoted name, the three counts */
+        static const char *const others[4] = {"shader", "numverts", "numtris", "numweights"};
+        int other = -1;
+        for (int k = 0; k < 4 && other < 0; k++)
+            if (md5_keyword(t, strlen(t), others[k]))
+                other = k;
+        if (other >= 0) {
+            const char *f = t + strlen(others[other]);
+            unsigned long long value = 0;
+            const char *close = NULL;
+            bool ok = other > 0 ? md5_uint(&f, &value)
+                                : (md5_char(&f, '"') && (close = strchr(f, '"')) != NULL && (f = close + 1));
+            if (!ok || !md5_line_end(f))
+                rc = scene__fail(err, SCENE_ERR_FORMAT, "%s:%u: malformed %s line: '%.60s'", path,
+                                 line_of(buf, line_at), others[other], t);
+            continue;
+        }
+        int kind = -1;
+        for (int k = 0; k < 3 && kind < 0; k++)
+            if (md5_keyword(t, strlen(t), kinds[k]))
+                kind = k;
+        if (kind < 0)
+            continue;
+        const char *f = t + strlen(kinds[kind]);
+        unsigned long long index = 0, first = 0, count = 0, corner[3] = {0}, joint = 0;
+        bool ok = md5_uint(&f, &index);
+        if (kind == 0)
+            ok = ok && md5_char(&f, '(') && md5_float(&f) && md5_float(&f) && md5_char(&f, ')') &&
+                 md5_uint(&f, &first) && md5_uint(&f, &count);
+        else if (kind == 1)
+            ok = ok && md5_uint(&f, &corner[0]) && md5_uint(&f, &corner[1]) && md5_uint(&f, &corner[2]);
+        else
+            ok = ok && md5_uint(&f, &joint) && md5_float(&f) && md5_char(&f, '(') && md5_float(&f) &&
+                 md5_float(&f) && md5_float(&f) && md5_char(&f, ')');
+        if (!ok || !md5_line_end(f))
+            rc = scene__fail(err, SCENE_ERR_FORMAT, "%s:%u: malformed %s line: '%.60s'", path,
+                             line_of(buf, line_at), kinds[kind], t);
+        else if (kind == 0 && (first > weights || count > weights - first))
+            rc = scene__fail(
+                err, SCENE_ERR_FORMAT,
+                "%s:%u: vert %llu uses %llu weights from weight %llu, but mesh %u has %llu weights", path,
+                line_of(buf, line_at), index, count, first, mesh_number, (unsigned long long)weights);
+        else if (kind == 1 && (corner[0] >= verts || corner[1] >= verts || corner[2] >= verts))
+            rc = scene__fail(err, SCENE_ERR_FORMAT,
+                             "%s:%u: tri %llu uses a vertex beyond mesh %u's %llu vertices", path,
+                             line_of(buf, line_at), index, mesh_number, (unsigned long long)verts);
+        else if (kind == 2 && joint >= joints)
+            rc = scene__fail(err, SCENE_ERR_FORMAT,
+                             "%s:%u: weight %llu uses joint %llu, but Assimp finds %llu joints in the file",
+                             path, line_of(buf, line_at), index, joint, (unsigned long long)joints);
+        else if (kind == 1)
+            used[corner[0]] = used[corner[1]] = used[corner[2]] = 1;
+    }
+    for (uint64_t v = 0; rc == SCENE_OK && tris > 0 && v < verts; v++)
+        if (!used[v])
+            rc = scene__fail(
+                err, SCENE_ERR_FORMAT,
+                "%s:%u: mesh %u: vert %llu is used by no triangle (Assimp's MD5 reader then writes past "
+                "its vertex list)",
+                path, line_of(buf, mesh_start), mesh_number, (unsigned long long)v);
+    free(used);
+    return rc;
+}
+
+/* Reads the first-pass facts of one element (line) of an MD5 mesh block into the lists: a declared count or
+ * the index of a vert, tri or weight line (at most the file size, so the lists stay small). */
+static scene_result md5_mesh_element(const char *path, const char *buf, size_t len, const char *line,
+                                     const char *line_end, md5_list lists[3], scene_error *err)
+{
+    static const char *const kinds[3] = {"vert", "tri", "weight"};
+    static const char *const numbers[3] = {"numverts", "numtris", "numweights"};
+    size_t n = (size_t)(line_end - line);
+    for (int k = 0; k < 3; k++) {
+        bool number_line = md5_keyword(line, n, numbers[k]), item_line = md5_keyword(line, n, kinds[k]);
+        if (!number_line && !item_line)
+            continue;
+        const char *q = line + strlen(number_line ? numbers[k] : kinds[k]);
+        while (q < line_end && (*q == ' ' || *q == '\t'))
+            q++;
+        uint64_t value = 0;
+        assimp_strtoul10(q, line_end, &value);
+        md5_list *list = &lists[k];
+        if (value > len)
+            return scene__fail(
+                err, SCENE_ERR_FORMAT, "%s:%u: %s %llu, more than the file's %zu bytes can hold", path,
+                line_of(buf, line), number_line ? numbers[k] : kinds[k], (unsigned long long)value, len);
+        if (!md5_reserve(list, value + 1))
+            return scene__fail(err, SCENE_ERR_NOMEM, "%s: out of memory checking the MD5 mesh", path);
+        if (!number_line)
+            list->seen[value] = 1;
+        uint64_t count = number_line ? value : value + 1;
+        list->count = count > list->count ? count : list->count;
+        return SCENE_OK;
+    }
+    return SCENE_OK;
+}
+
+/* Checks one element of a joints block: "name" parent ( x y z ) ( qx qy qz ). Assimp takes every element of
+ * the block for a joint and looks for the name's quotation marks past the end of the line. */
+static scene_result md5_joint_element(const char *path, const char *buf, const char *line,
+                                      const char *line_end, scene_error *err)
+{
+    char text[256];
+    md5_line_copy(line, line_end, text, sizeof text);
+    const char *f = text;
+    long long parent = 0;
+    const char *close = text[0] == '"' ? strchr(text + 1, '"') : NULL;
+    bool ok = close && (f = close + 1, md5_int(&f, &parent)) && md5_char(&f, '(') && md5_float(&f) &&
+              md5_float(&f) && md5_float(&f) && md5_char(&f, ')') && md5_char(&f, '(') && md5_float(&f) &&
+              md5_float(&f) && md5_float(&f) && md5_char(&f, ')') && md5_line_end(f);
+    if (!ok)
+        return scene__fail(err, SCENE_ERR_FORMAT, "%s:%u: malformed joint line: '%.60s'", path,
+                           line_of(buf, line), text);
+    return SCENE_OK;
+}
+
+/* Walks the sections of an MD5 file as Assimp's parser splits them, and checks them (pass 0: the joints
+ * blocks, counting the joints into *joints; pass 1: the mesh blocks, against that count). A section is a
+ * name, then values and at most one { } block of lines; after a value Assimp consumes one more character, so
+ * a value at the end of a line continues the section on the next line unless that line is blank or indented:
+ * "numMeshes 1" directly above "joints {" makes that block part of the numMeshes section, no joints at all.
+ */
+static scene_result md5_sections(const char *path, const char *buf, size_t len, int pass, uint64_t *joints,
+                                 scene_error *err)
+{
+    const char *end = buf + len;
+    unsigned mesh_number = 0;
+    scene_result rc = SCENE_OK;
+    for (const char *p = buf; p < end && rc == SCENE_OK;) {
+        while (p < end && is_blank(*p))
+            p++;
+        if (p >= end)
+            break;
+        const char *name = p;
+        while (p < end && !is_blank(*p))
+            p++;
+        size_t name_len = (size_t)(p - name);
+        while (p < end && (*p == ' ' || *p == '\t'))
+            p++;
+        const char *value = NULL;                       /* Assimp keeps the last value of a section */
+        while (p < end && *p != '{' && !is_blank(*p)) { /* values, each with the character after it */
+            value = p;
+            while (p < end && !is_blank(*p))
+                p++;
+            if (p < end)
+                p++;
+        }
+        bool reserves = (name_len == 9 && memcmp(name, "numJoints", 9) == 0) ||
+                        (name_len == 9 && memcmp(name, "numMeshes", 9) == 0);
+        if (value && reserves && pass == 0) { /* Assimp reserves that many joints or meshes */
+            uint64_t count = 0;
+            assimp_strtoul10(value, end, &count);
+            char what[32];
+            snprintf(what, sizeof what, "items (%.*s)", (int)name_len, name);
+            if ((rc = check_count_at(path, buf, value, what, count, len, err)) != SCENE_OK)
+                break;
+        }
+        if (p >= end || *p != '{')
+            continue;
+        bool joints_block = name_len == 6 && memcmp(name, "joints", 6) == 0;
+        bool mesh_block = name_len == 4 && memcmp(name, "mesh", 4) == 0;
+        const char *block_start = ++p;
+        md5_list lists[3] = {{0}};
+        while (rc == SCENE_OK) { /* one element per line, to a line starting with '}' */
+            while (p < end && is_blank(*p))
+                p++;
+            if (p >= end || *p == '}')
+                break;
+            const char *line = p, *eol = memchr(p, '\n', (size_t)(end - p));
+            const char *line_end = eol ? eol : end;
+            p = eol ? eol + 1 : end;
+            unsigned quotes = 0;
+            for (const char *q = line; q < line_end; q++)
+                quotes += *q == '"';
+            if (quotes % 2) /* Assimp looks for the closing quotation mark past the end of the line */
+                rc = scene__fail(err, SCENE_ERR_FORMAT, "%s:%u: a quotation mark not closed on its line",
+                                 path, line_of(buf, line));
+            else if (joints_block && pass == 0 &&
+                     (rc = md5_joint_element(path, buf, line, line_end, err)) == SCENE_OK)
+                (*joints)++;
+            else if (mesh_block && pass == 1)
+                rc = md5_mesh_element(path, buf, len, line, line_end, lists, err);
+        }
+        if (rc == SCENE_OK && mesh_block && pass == 1)
+            rc = md5_check_mesh(path, buf, block_start, p, mesh_number++, lists, *joints, err);
+        for (int k = 0; k < 3; k++)
+            free(lists[k].seen);
+        if (p < end)
+            p++; /* the '}' */
+    }
+    return rc;
+}
+
+/* Checks an MD5 mesh the way Assimp's reader will use it (md5_sections(), md5_check_mesh()): every quoted
+ * string must close on its line (a shader name without its closing quotation mark made Assimp read past its
+ * buffer); every count and index must be at most the file size; and the lists of each mesh must be complete
+ * and refer to each other within range. */
+static scene_result check_md5(const char *path, const char *buf, size_t len, scene_error *err)
+{
+    uint64_t joints = 0;
+    scene_result rc = md5_sections(path, buf, len, 0, &joints, err);
+    return rc == SCENE_OK ? md5_sections(path, buf, len, 1, &joints, err) : rc;
+}
+
+static const scene_import_format import_formats[] = {
+    {"ply", check_ply, NULL},
+    {"off", check_off, NULL},
+    {"stl", check_stl, NULL},
+    {"ase", check_ase, NULL},
+    {"ask", check_ase, NULL},
+    {"x", check_x, NULL},
+    {"md5mesh", check_md5, NULL},
+    /* Assimp's Q3BSP importer opens its file as a zip archive (ZipArchiveIOSystem) and looks for
+     * maps/NAME.bsp inside, so a bare .bsp always fails with "Failed to open file"; inside a .pk3 it
+     * leaves the triangles' vertex indices unset (5.2.5: every face reads "0 0 0" or "N 0 0"). */
+    {"bsp", NULL,
+     "a bare Quake 3 .bsp map: Assimp reads these only from inside a .pk3 (zip) archive, and its Quake 3 "
+     "importer (5.2.5) leaves the triangles' vertex indices unset; convert the map (e.g. to OBJ) first"},
+    {"pk3", NULL,
+     "a Quake 3 .pk3 archive: Assimp's Quake 3 importer (5.2.5) leaves the triangles' vertex indices unset; "
+     "convert the map (e.g. to OBJ) first"},
+};
+
+const scene_import_format *scene__import_format_of(const char *ext)
+{
+    for (size_t i = 0; i < sizeof import_formats / sizeof import_formats[0]; i++)
+        if (strcasecmp(ext, import_formats[i].ext) == 0)
+            return &import_formats[i];
+    return NULL;
+}
+
