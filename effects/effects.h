@@ -46,6 +46,8 @@ void fx_lookup_update(const scene *s, uint32_t island, uint32_t level, uint32_t 
 
 /* ---- updates over queued blocks ------------------------------------------------------------------------ */
 
+struct fx_taps;
+
 /* Shared, read-only state of an update. */
 typedef struct fx_context {
     const scene *s;
@@ -57,6 +59,16 @@ typedef struct fx_context {
      * rays an update traced. NULL: nothing is called. */
     void (*observe_rays)(void *user, const void *rays, uint32_t count);
     void *observe_user;
+    /* World-space effects (probes). The filtered read of `effect` at a scene-local position on grid `level`:
+     * the resident cells (probes) at the corners of the level's cell around it that hold committed data,
+     * trilinear weights (not renormalised over missing corners; fx_taps.count 0: none). Reads only what the
+     * last commit wrote, so it is safe from any thread during updates and the result does not depend on
+     * the order updates run in. NULL: the loop has no world-space cache. */
+    uint32_t (*world_taps)(const void *user, uint32_t effect, const float position[3], uint32_t level,
+                           struct fx_taps *taps);
+    const void *world_user;
+    uint32_t probe_rays;    /* rays per probe update (default 144, DDGI's) */
+    float probe_hysteresis; /* weight of the old irradiance in a probe update's blend (default 0.97, RTXGI's) */
 } fx_context;
 
 /* One queued block. payload and lookup point into the cache; the effect writes payload texels of mask. */
@@ -65,7 +77,15 @@ typedef struct fx_block_job {
     uint32_t island, level, block_x, block_y;
     uint64_t mask;          /* texels to update */
     const uint32_t *lookup; /* the block's 64 triangle-lookup texels (valid for every texel of mask) */
-    void *payload;          /* 64 * texel_bytes */
+    void *payload;          /* 64 * texel_bytes (on-surface); brick_size^3 * texel_bytes (world-space) */
+    /* World-space effects: the brick's first cell's grid point (its lowest corner) in scene-local metres,
+     * the cell size of its level (level in `level`), and the job's scratch (the effect's scratch_bytes,
+     * kept from update to commit within the frame; NULL when the effect asks for none). Cell c of the
+     * brick (bit c of mask, c = (z * n + y) * n + x for brick size n) is the grid point origin + cell *
+     * (x, y, z). */
+    float origin[3];
+    float cell;
+    void *scratch;
 } fx_block_job;
 
 /* Hard shadows: for each texel of mask and each light, FX_SHADOW_RAYS rays from stratified jittered points
@@ -200,6 +220,15 @@ typedef struct fx_effect {
     /* Writes one texel at level l >= 1 from its four final texels of level l - 1 (resampling queue).
      * NULL: no resampling. */
     void (*resample)(const fx_context *ctx, const void *const finer[4], void *texel);
+    /* World-space effects: cells per brick side (1: probes; 4: volumetric data, 64 cells, one bit each in
+     * a brick mask). On-surface effects: 0 (their blocks are 8 x 8 texels). */
+    uint32_t brick_size;
+    /* Scratch bytes one queued job needs between update and commit (NULL: none). */
+    uint32_t (*scratch_bytes)(const scene *s);
+    /* Called after every update of the frame has run, with the same jobs: makes what update gathered
+     * visible (a world-space update reads its neighbours' committed values through ctx->world_taps, so it
+     * must not change them itself). NULL: update writes the payload directly. */
+    void (*commit)(const fx_context *ctx, const fx_block_job *jobs, uint32_t count);
     /* Compose: multiplies or adds this effect's term for a run of pixels from their taps. NULL: the
      * effect shades nothing itself (the triangle lookup). */
     void (*shade)(const fx_context *ctx, const fx_shade_run *run);
