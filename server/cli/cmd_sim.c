@@ -62,6 +62,9 @@ typedef struct sim_options {
     double density;
     double fps;
     bool quiet;
+    double probe_cell, probe_hysteresis;
+    uint32_t probe_rays, probe_budget;
+    bool no_local_table;
 } sim_options;
 
 static const char sim_usage[] =
@@ -84,6 +87,14 @@ static const char sim_usage[] =
     "  --ray-budget R       effect rays per frame, 0 = unlimited (default 0)\n"
     "  --ao-step S          samples added per texel and update of progressive effects (AO), 1..64\n"
     "                       (default 16)\n"
+    "  --probe-cell M       finest world-grid cell in metres, [0.001, 1000]; a cell at distance d from a\n"
+    "                       viewer is about d/16..d/8 wide, never finer (default: the power of two nearest\n"
+    "                       a 64th of the scene's bounding-box diagonal)\n"
+    "  --probe-rays N       rays per probe update, 1..4096 (default 144, DDGI's)\n"
+    "  --probe-hysteresis H weight of a probe's old irradiance per update, [0, 0.999] (default 0.97)\n"
+    "  --probe-budget N     probes updated per frame at most, 1..1000000 (default 1024)\n"
+    "  --no-local-table     compose finds probes through the hash table only (for measuring the\n"
+    "                       viewers' local lookup tables)\n"
     "  --no-cache           the baseline: every effect per pixel per frame at the converged sample counts\n"
     "  --camera GEN         camera generator when no --trace is given (default room): %s\n"
     "  --trace FILE         a viewer trace (repeat once per viewer; see docs/TRACE_FORMAT.md): the viewer\n"
@@ -182,7 +193,7 @@ static int parse_options(int argc, char **argv, sim_options *o)
 {
     enum { O_SCENE = 256, O_VIEWERS, O_FRAMES, O_RES, O_EFFECTS, O_BIAS, O_POOL, O_BUDGET, O_NOCACHE, O_SEED,
            O_OUT, O_SAVE, O_VIEWS, O_STATS, O_SUMMARY, O_CAMERA, O_TRACE, O_RECORD, O_THREADS, O_AOSTEP,
-           O_DENSITY, O_QUIET, O_FPS };
+           O_DENSITY, O_QUIET, O_FPS, O_PCELL, O_PRAYS, O_PHYST, O_PBUDGET, O_NOLOCAL };
     static const struct option options[] = {
         {"scene", required_argument, NULL, O_SCENE},     {"viewers", required_argument, NULL, O_VIEWERS},
         {"frames", required_argument, NULL, O_FRAMES},   {"res", required_argument, NULL, O_RES},
@@ -196,6 +207,9 @@ static int parse_options(int argc, char **argv, sim_options *o)
         {"threads", required_argument, NULL, O_THREADS}, {"ao-step", required_argument, NULL, O_AOSTEP},
         {"density", required_argument, NULL, O_DENSITY}, {"quiet", no_argument, NULL, O_QUIET},
         {"fps", required_argument, NULL, O_FPS},         {"help", no_argument, NULL, 'h'},
+        {"probe-cell", required_argument, NULL, O_PCELL}, {"probe-rays", required_argument, NULL, O_PRAYS},
+        {"probe-hysteresis", required_argument, NULL, O_PHYST},
+        {"probe-budget", required_argument, NULL, O_PBUDGET}, {"no-local-table", no_argument, NULL, O_NOLOCAL},
         {NULL, 0, NULL, 0},
     };
     optind = 1;
@@ -242,6 +256,15 @@ static int parse_options(int argc, char **argv, sim_options *o)
         case O_DENSITY: ok = srv_cli_double("sim", "--density", optarg, 1e-6, 1e6, &o->density); break;
         case O_QUIET: o->quiet = true; break;
         case O_FPS: ok = srv_cli_double("sim", "--fps", optarg, 0.001, 1000, &o->fps); break;
+        case O_PCELL: ok = srv_cli_double("sim", "--probe-cell", optarg, 0.001, 1000, &o->probe_cell); break;
+        case O_PRAYS: ok = srv_cli_u32("sim", "--probe-rays", optarg, 1, 4096, &o->probe_rays); break;
+        case O_PHYST:
+            ok = srv_cli_double("sim", "--probe-hysteresis", optarg, 0, 0.999, &o->probe_hysteresis);
+            if (ok && o->probe_hysteresis == 0)
+                o->probe_hysteresis = 1e-9; /* 0 means "default" in the loop's description */
+            break;
+        case O_PBUDGET: ok = srv_cli_u32("sim", "--probe-budget", optarg, 1, 1000000, &o->probe_budget); break;
+        case O_NOLOCAL: o->no_local_table = true; break;
         case 'h': {
             char names[256];
             effect_names(names, sizeof names);
@@ -473,6 +496,20 @@ static void print_summary(const sim_options *o, const scene *s, const srv_loop *
     else
         printf("texels:     %llu requested, %llu unique: sharing ratio %.2f\n", (unsigned long long)t->requested,
                (unsigned long long)t->unique, (double)t->requested / (double)t->unique);
+    if (srv_loop_probe_cell(loop) > 0) {
+        printf("probes:     %llu requested, %llu unique: sharing ratio %.2f; finest cell %g m\n",
+               (unsigned long long)t->world_requested, (unsigned long long)t->world_unique,
+               t->world_unique ? (double)t->world_requested / (double)t->world_unique : 0.0,
+               (double)srv_loop_probe_cell(loop));
+        printf("world:      %llu bricks, %.1f MiB, table load %.2f, %llu points refused, local tables answered "
+               "%.1f %% of reads\n",
+               (unsigned long long)t->world_last.bricks_resident, t->world_last.bytes / 1048576.0,
+               t->world_last.table_capacity ? (double)t->world_last.entries / (double)t->world_last.table_capacity : 0.0,
+               (unsigned long long)t->world_refusals,
+               t->world_local_lookups ? 100.0 * (double)t->world_local_hits / (double)t->world_local_lookups : 0.0);
+    } else if (!o->no_cache) {
+        printf("world:      no world-space cache (no effect that runs lives in it: nothing allocated)\n");
+    }
     printf("rays:       %llu visibility", (unsigned long long)t->visibility_rays);
     for (uint32_t e = 0; e < srv_loop_effect_count(loop); e++)
         if (srv_loop_effect_on(loop, e) && srv_loop_effect(loop, e)->shade)
@@ -577,7 +614,10 @@ int srv_cmd_sim(int argc, char **argv)
     char reasons[SRV_MAX_EFFECTS][200];
     srv_loop_desc desc = {.s = s, .rt = rt, .pool_bytes = (uint64_t)(o.pool_mb * 1048576.0),
                           .ray_budget = (uint64_t)o.ray_budget, .samples_per_update = o.ao_step,
-                          .no_cache = o.no_cache, .seed = o.seed, .threads = o.threads, .keep_views = o.views};
+                          .no_cache = o.no_cache, .seed = o.seed, .threads = o.threads, .keep_views = o.views,
+                          .probe_cell = (float)o.probe_cell, .probe_rays = o.probe_rays,
+                          .probe_hysteresis = (float)o.probe_hysteresis, .probe_budget = o.probe_budget,
+                          .no_local_table = o.no_local_table};
     if (!choose_effects(s, o.effects, desc.effect_on, reasons, left_out_extra)) {
         exit_code = 2;
         goto done;
@@ -717,6 +757,17 @@ int srv_cmd_sim(int argc, char **argv)
     json_object_set_new(sum, "seed", json_integer(o.seed));
     json_object_set_new(sum, "pool_mb", json_real(o.pool_mb));
     json_object_set_new(sum, "ray_budget", json_integer((json_int_t)o.ray_budget));
+    if (srv_loop_probe_cell(loop) > 0)
+        json_object_set_new(sum, "probes",
+                            json_pack("{s:f,s:I,s:f,s:I,s:b}", "cell_m", (double)srv_loop_probe_cell(loop), "rays",
+                                      (json_int_t)srv_loop_desc_of(loop)->probe_rays, "hysteresis",
+                                      (double)srv_loop_desc_of(loop)->probe_hysteresis, "budget",
+                                      (json_int_t)srv_loop_desc_of(loop)->probe_budget, "local_tables",
+                                      !o.no_local_table));
+    else
+        json_object_set_new(sum, "world_space_cache",
+                            json_string(o.no_cache ? "none: no cache at all (--no-cache)"
+                                                   : "not created: no effect that runs lives in it (nothing allocated)"));
     json_t *effects = json_object(), *left_out = json_object(), *bias = json_object();
     for (uint32_t e = 0; e < srv_loop_effect_count(loop); e++) {
         const char *name = srv_loop_effect(loop, e)->name;

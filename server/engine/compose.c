@@ -241,6 +241,8 @@ static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32
             px->footprint = view->footprint[p];
             px->island_u = w * island_uv[0] + u * island_uv[2] + v * island_uv[4];
             px->island_v = w * island_uv[1] + u * island_uv[3] + v * island_uv[5];
+            memcpy(px->position, pt->position, sizeof px->position);
+            px->distance = view->depth[p];
         }
     return count;
 }
@@ -308,8 +310,8 @@ static void compose_tile(void *user, uint32_t task_index, uint32_t thread_index)
                     continue;
                 uint32_t k = loop->effect_kind[e];
                 const uint64_t *bits = loop->viewer_bits[e];
-                loop->kinds[k]->pixel_taps(loop->caches[k], cs->pixels, count, e, loop->bias[e], cs->taps,
-                                           bits ? cs->blocks : NULL);
+                loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers), thread_index,
+                                           cs->pixels, count, e, loop->bias[e], cs->taps, bits ? cs->blocks : NULL);
                 loop->effects[e]->shade(&loop->fx, &run);
                 for (uint32_t i = 0; i < count; i++) {
                     cs->missing[i] |= cs->taps[i].count == 0;

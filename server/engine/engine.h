@@ -83,6 +83,16 @@ typedef struct srv_loop_desc {
     uint32_t seed;
     uint32_t threads;                      /* 0 = all cores */
     bool keep_views;                       /* keep per-viewer AO, shadow and sharing images */
+    /* World-space effects (probes). */
+    float probe_cell;                      /* finest cell, metres: the grid's one scene-scale parameter
+                                              (default: the power of two nearest a 64th of the
+                                              scene's bounding-box diagonal) */
+    uint32_t probe_rays;                   /* rays per probe update (default 144, DDGI's) */
+    float probe_hysteresis;                /* old irradiance's weight in an update (default 0.97, RTXGI's) */
+    uint32_t probe_budget;                 /* cells (probes) updated per frame at most, new ones first, then
+                                              the longest unrefreshed (default 1024; shares the ray budget) */
+    bool no_local_table;                   /* benchmarks: compose finds probes through the hash table only,
+                                              not the viewers' local lookup tables */
     srv_allocator allocator;               /* default: libc */
 } srv_loop_desc;
 
@@ -109,9 +119,25 @@ typedef struct srv_viewer_stats {
     srv_viewer_id id;
     uint32_t width, height;
     uint64_t requested_texels; /* deduplicated within the viewer, shading effects */
+    uint64_t requested_cells;  /* world-space cells (probes), deduplicated within the viewer */
     uint64_t pixels_visible;
     uint64_t pixels_missing;   /* visible pixels composed without cached data */
 } srv_viewer_stats;
+
+/* The world-space cache's figures in a frame (all zero when no world-space effect runs). Requested and
+ * unique cells follow DESIGN.md's definitions for texels: per viewer the set of (effect, cell) it asks for,
+ * summed over viewers, against the size of their union. */
+typedef struct srv_world_stats {
+    uint64_t requested_cells;
+    uint64_t unique_cells;
+    uint64_t entries;          /* keys in its tables (one per resident brick) */
+    uint64_t table_capacity;   /* slots of its tables */
+    uint64_t bricks_resident;
+    uint64_t bytes;            /* every byte it allocated, local lookup tables included */
+    uint64_t refusals;         /* this frame: points outside the grid's range, refused (never wrapped) */
+    uint64_t local_lookups;    /* this frame: compose's reads through the viewers' local lookup tables */
+    uint64_t local_hits;       /* of which answered without the hash table */
+} srv_world_stats;
 
 /* One frame's figures. */
 typedef struct srv_frame_stats {
@@ -131,6 +157,7 @@ typedef struct srv_frame_stats {
     uint64_t drops[SRV_DROP_COUNT];                /* this frame */
     uint64_t evictions, exhausted;                 /* cumulative cache counters */
     uint32_t table_count, table_capacity;          /* keys in the on-surface table, and its slots */
+    srv_world_stats world;
     double time_ms[SRV_STAGE_COUNT];
     double frame_ms;
 } srv_frame_stats;
@@ -143,6 +170,7 @@ typedef struct srv_memory {
     uint64_t block_meta[SRV_MAX_EFFECTS];     /* masks, frames, keys, lists, viewer bits */
     uint64_t viewers;                         /* per-viewer buffers (pixels, images, request lists) */
     uint64_t queues;                          /* update queues, job lists, per-thread scratch */
+    uint64_t world_local;                     /* the world-space cache's local lookup tables (per viewer) */
     uint64_t total;                           /* everything above (reserved pools counted whole) */
 } srv_memory;
 
@@ -215,6 +243,12 @@ bool srv_loop_effect_on(const srv_loop *loop, uint32_t index);
 int32_t srv_loop_bias(const srv_loop *loop, uint32_t index);
 /* Whether an effect is a shading effect that goes through a cache this run (counted in requested texels). */
 bool srv_loop_effect_cached(const srv_loop *loop, uint32_t index);
+
+/* The finest world-grid cell the run uses, metres; 0 when no world-space cache exists. */
+float srv_loop_probe_cell(const srv_loop *loop);
+
+/* The loop's description with its defaults resolved. */
+const srv_loop_desc *srv_loop_desc_of(const srv_loop *loop);
 
 /* Current memory (exact: every byte went through a counting allocator). */
 void srv_loop_memory(const srv_loop *loop, srv_memory *out);

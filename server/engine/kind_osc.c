@@ -72,9 +72,10 @@ static void osc_kind_begin_frame(void *cache, uint32_t frame)
     osc_begin_frame(((kind_osc *)cache)->osc, frame);
 }
 
-static uint32_t osc_kind_pixel_requests(const void *cache, const srv_pixel *pixels, uint32_t count,
+static uint32_t osc_kind_pixel_requests(const void *cache, uint32_t slot, const srv_pixel *pixels, uint32_t count,
                                         uint32_t effect, int32_t bias, uint64_t *keys, uint64_t *masks)
 {
+    (void)slot;
     const kind_osc *k = cache;
     const scene_island *islands = k->s->islands;
     uint32_t n = 0;
@@ -95,11 +96,11 @@ static uint32_t osc_kind_pixel_requests(const void *cache, const srv_pixel *pixe
              */
             uint64_t cx = (uint64_t)(x + 0.5f), cy = (uint64_t)(y + 0.5f);
             uint64_t signature = (uint64_t)px->island << 36 | (uint64_t)level << 32 | cy << 16 | cx;
-            uint32_t slot = (uint32_t)((signature * 0x9E3779B97F4A7C15ull) >> 58); /* 6 bits: SEEN */
+            uint32_t seen_slot = (uint32_t)((signature * 0x9E3779B97F4A7C15ull) >> 58); /* 6 bits: SEEN */
             if (px->island < (1u << 28)) {
-                if (seen[slot] == signature)
+                if (seen[seen_slot] == signature)
                     continue;
-                seen[slot] = signature;
+                seen[seen_slot] = signature;
             }
         }
         if (px->island != memo_island) {
@@ -122,10 +123,11 @@ static uint64_t osc_kind_rekey(uint64_t key, uint32_t effect)
     return (key & ~((uint64_t)0xF << OSC_KEY_EFFECT_SHIFT)) | ((uint64_t)effect << OSC_KEY_EFFECT_SHIFT);
 }
 
-static fxc_result osc_kind_request_batch(void *cache, uint64_t *keys, uint64_t *masks, size_t count,
-                                         size_t *unique, uint32_t *blocks, uint64_t *pool_exhausted,
-                                         uint64_t *table_full)
+static fxc_result osc_kind_request_batch(void *cache, uint32_t slot, uint32_t effect, uint64_t *keys,
+                                         uint64_t *masks, size_t count, size_t *unique, uint32_t *blocks,
+                                         uint64_t *pool_exhausted, uint64_t *table_full)
 {
+    (void)slot, (void)effect; /* every viewer and effect meet in one table; keys carry their effect */
     kind_osc *k = cache;
     osc_stats before;
     osc_stats_get(k->osc, &before);
@@ -167,13 +169,15 @@ static void *osc_kind_block_payload(void *cache, uint32_t effect, uint32_t block
     return osc_block_payload(((kind_osc *)cache)->osc, effect, block);
 }
 
-static uint32_t osc_kind_find(const void *cache, uint64_t key)
+static uint32_t osc_kind_find(const void *cache, uint32_t effect, uint64_t key)
 {
+    (void)effect;
     return osc_find(((const kind_osc *)cache)->osc, key);
 }
 
-static void osc_kind_job_location(uint64_t key, fx_block_job *job)
+static void osc_kind_job_location(const void *cache, uint32_t effect, uint64_t key, fx_block_job *job)
 {
+    (void)cache, (void)effect;
     osc_key_fields f = osc_key_unpack(key);
     job->key = key;
     job->island = f.island_id;
@@ -260,9 +264,10 @@ static uint32_t memo_lookup(const osc_cache *osc, tap_memo *memo, uint32_t effec
     return m;
 }
 
-static void osc_kind_pixel_taps(const void *cache, const srv_pixel *pixels, uint32_t count, uint32_t effect,
-                                int32_t bias, fx_taps *taps, uint32_t *blocks)
+static void osc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
+                                uint32_t count, uint32_t effect, int32_t bias, fx_taps *taps, uint32_t *blocks)
 {
+    (void)slot, (void)thread;
     const kind_osc *k = cache;
     const osc_cache *osc = k->osc;
     const scene_island *islands = k->s->islands;
@@ -357,6 +362,8 @@ static void osc_kind_memory(const void *cache, srv_memory *out)
 const srv_cache_kind srv__kind_osc = {
     .name = "on_surface",
     .kind = SCENE_CACHE_ON_SURFACE,
+    .keys_carry_effect = true,
+    .needs_position = false,
     .create = osc_kind_create,
     .destroy = osc_kind_destroy,
     .begin_frame = osc_kind_begin_frame,

@@ -4,7 +4,7 @@
 
 static const srv_cache_kind *const kinds[SCENE_CACHE_COUNT] = {
     [SCENE_CACHE_ON_SURFACE] = &srv__kind_osc,
-    [SCENE_CACHE_WORLD_SPACE] = NULL, /* the world-space cache: a later issue */
+    [SCENE_CACHE_WORLD_SPACE] = &srv__kind_wsc,
 };
 
 const srv_cache_kind *srv__cache_kind(scene_cache_kind kind)

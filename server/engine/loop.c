@@ -194,7 +194,24 @@ fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err,
     loop->rt = desc->rt;
     if (!loop->desc.pool_bytes)
         loop->desc.pool_bytes = (uint64_t)64 << 20;
-    loop->fx = (fx_context){.s = desc->s, .rt = desc->rt, .seed = desc->seed, .ao_radius = desc->s->ao_radius};
+    if (!loop->desc.probe_rays)
+        loop->desc.probe_rays = 144;
+    if (!(loop->desc.probe_hysteresis > 0))
+        loop->desc.probe_hysteresis = 0.97f;
+    if (!loop->desc.probe_budget)
+        loop->desc.probe_budget = 1024;
+    if (loop->desc.probe_rays > 1u << 16 || !(loop->desc.probe_hysteresis < 1.0f) ||
+        !(loop->desc.probe_cell >= 0.0f && loop->desc.probe_cell <= 1e6f)) {
+        snprintf(err, err_cap, "frame loop: probe rays must be 1..65536, hysteresis in (0, 1), the cell 0..1e6 m");
+        srv_loop_free(loop);
+        return FXC_ERR_INVALID;
+    }
+    loop->fx = (fx_context){.s = desc->s,
+                            .rt = desc->rt,
+                            .seed = desc->seed,
+                            .ao_radius = desc->s->ao_radius,
+                            .probe_rays = loop->desc.probe_rays,
+                            .probe_hysteresis = loop->desc.probe_hysteresis};
     fxc_result r = resolve_effects(loop, err, err_cap);
     if (r != FXC_OK) {
         srv_loop_free(loop);
@@ -219,6 +236,10 @@ fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err,
         if (cache) {
             loop->kinds[k] = kind;
             loop->caches[k] = cache;
+        }
+        if (cache && k == SCENE_CACHE_WORLD_SPACE) {
+            loop->fx.world_taps = srv__wsc_world_taps;
+            loop->fx.world_user = cache;
         }
     }
     uint32_t threads = srv_pool_threads(loop->pool);
@@ -281,6 +302,8 @@ void srv_loop_free(srv_loop *loop)
         srv__resize(loop, SRV_MEM_QUEUES, (void **)&q->jobs, q->job_capacity, 0, sizeof *q->jobs);
         srv__resize(loop, SRV_MEM_QUEUES, (void **)&q->fx_jobs, q->fx_job_capacity, 0, sizeof *q->fx_jobs);
         srv__resize(loop, SRV_MEM_QUEUES, (void **)&q->chunk_rays, q->chunk_capacity, 0, sizeof *q->chunk_rays);
+        srv__resize(loop, SRV_MEM_QUEUES, (void **)&q->scratch, q->scratch_capacity, 0, 1);
+        srv__resize(loop, SRV_MEM_QUEUES, (void **)&q->order, q->order_capacity, 0, sizeof *q->order);
         if (loop->viewer_bits[e]) {
             uint32_t k = loop->effect_kind[e];
             size_t blocks = loop->kinds[k]->pool_capacity(loop->caches[k], e);
@@ -368,6 +391,9 @@ fxc_result srv_viewer_remove(srv_loop *loop, srv_viewer_id id)
     if (!view)
         return FXC_ERR_STALE_ID;
     viewer_free_buffers(loop, view);
+    for (uint32_t k = 0; k < SCENE_CACHE_COUNT; k++)
+        if (loop->kinds[k] && loop->kinds[k]->viewer_removed)
+            loop->kinds[k]->viewer_removed(loop->caches[k], (uint32_t)(view - loop->viewers));
     uint32_t generation = view->generation;
     memset(view, 0, sizeof *view);
     view->generation = generation; /* the next add bumps it: this id stays refused */
@@ -488,17 +514,25 @@ fxc_result srv_loop_frame(srv_loop *loop, srv_frame_stats *st)
         }
     for (uint32_t i = 0; i < active; i++) {
         srv_viewer *view = &loop->viewers[slots[i]];
-        view->stats.requested_texels = srv__requests(loop, slots[i], st);
+        uint64_t requested[SCENE_CACHE_COUNT];
+        srv__requests(loop, slots[i], st, requested);
+        view->stats.requested_texels = requested[SCENE_CACHE_ON_SURFACE];
+        view->stats.requested_cells = requested[SCENE_CACHE_WORLD_SPACE];
         st->requested_texels += view->stats.requested_texels;
+        st->world.requested_cells += view->stats.requested_cells;
     }
     for (uint32_t e = 0; e < loop->effect_count; e++) {
         if (!loop->effect_shading[e])
             continue;
         uint32_t k = loop->effect_kind[e], n = 0;
         const uint32_t *blocks = loop->kinds[k]->frame_blocks(loop->caches[k], e, &n);
+        uint64_t unique = 0;
         for (uint32_t b = 0; b < n; b++)
-            st->unique_texels +=
-                (uint64_t)__builtin_popcountll(loop->kinds[k]->block_requested(loop->caches[k], e, blocks[b]));
+            unique += (uint64_t)__builtin_popcountll(loop->kinds[k]->block_requested(loop->caches[k], e, blocks[b]));
+        if (k == SCENE_CACHE_WORLD_SPACE)
+            st->world.unique_cells += unique;
+        else
+            st->unique_texels += unique;
     }
     st->time_ms[SRV_STAGE_REQUESTS] = srv__now_ms() - t;
 
@@ -585,6 +619,16 @@ bool srv_loop_effect_cached(const srv_loop *loop, uint32_t index)
 int32_t srv_loop_bias(const srv_loop *loop, uint32_t index)
 {
     return index < loop->effect_count ? loop->bias[index] : 0;
+}
+
+float srv_loop_probe_cell(const srv_loop *loop)
+{
+    return loop->kinds[SCENE_CACHE_WORLD_SPACE] ? loop->desc.probe_cell : 0.0f;
+}
+
+const srv_loop_desc *srv_loop_desc_of(const srv_loop *loop)
+{
+    return &loop->desc;
 }
 
 void srv_loop_memory(const srv_loop *loop, srv_memory *out)

@@ -52,6 +52,12 @@ void srv_report_add(srv_report *r, const srv_frame_stats *st, const srv_memory *
     for (uint32_t d = 0; d < SRV_DROP_COUNT; d++)
         t->drops[d] += st->drops[d];
     t->exhausted = st->exhausted;
+    t->world_requested += st->world.requested_cells;
+    t->world_unique += st->world.unique_cells;
+    t->world_refusals += st->world.refusals;
+    t->world_local_lookups += st->world.local_lookups;
+    t->world_local_hits += st->world.local_hits;
+    t->world_last = st->world;
     for (uint32_t s = 0; s < SRV_STAGE_COUNT; s++)
         t->time_ms[s] += st->time_ms[s];
     t->frame_ms += st->frame_ms;
@@ -142,8 +148,29 @@ json_t *srv_report_memory_json(const srv_report *report, const srv_memory *m)
                                       "pool_in_use", (json_int_t)m->pools_in_use[e], "block_meta",
                                       (json_int_t)m->block_meta[e]));
     }
-    return json_pack("{s:I,s:I,s:I,s:o,s:I}", "table", (json_int_t)m->table, "viewers", (json_int_t)m->viewers,
-                     "queues", (json_int_t)m->queues, "effects", effects, "total", (json_int_t)m->total);
+    return json_pack("{s:I,s:I,s:I,s:I,s:o,s:I}", "table", (json_int_t)m->table, "viewers", (json_int_t)m->viewers,
+                     "queues", (json_int_t)m->queues, "world_local_tables", (json_int_t)m->world_local, "effects",
+                     effects, "total", (json_int_t)m->total);
+}
+
+/* The world-space cache's figures: cells (probes) requested and unique, their sharing ratio (the texels'
+ * definition), the table, the bricks, the bytes, refusals and the local lookup tables' hit rate. */
+static json_t *world_json(uint64_t requested, uint64_t unique, const srv_world_stats *w, uint64_t refusals,
+                          uint64_t lookups, uint64_t hits)
+{
+    json_t *o = json_object();
+    json_object_set_new(o, "requested_cells", json_integer((json_int_t)requested));
+    json_object_set_new(o, "unique_cells", json_integer((json_int_t)unique));
+    json_object_set_new(o, "sharing_ratio", unique ? json_real((double)requested / (double)unique) : json_null());
+    json_object_set_new(o, "entries", json_integer((json_int_t)w->entries));
+    json_object_set_new(o, "bricks", json_integer((json_int_t)w->bricks_resident));
+    json_object_set_new(o, "bytes", json_integer((json_int_t)w->bytes));
+    json_object_set_new(o, "table_load",
+                        json_real(w->table_capacity ? (double)w->entries / (double)w->table_capacity : 0.0));
+    json_object_set_new(o, "refusals", json_integer((json_int_t)refusals));
+    json_object_set_new(o, "local_table_lookups", json_integer((json_int_t)lookups));
+    json_object_set_new(o, "local_table_hit_rate", lookups ? json_real((double)hits / (double)lookups) : json_null());
+    return o;
 }
 
 json_t *srv_report_frame_json(const srv_report *report, const srv_frame_stats *st, const srv_memory *mem)
@@ -152,10 +179,11 @@ json_t *srv_report_frame_json(const srv_report *report, const srv_frame_stats *s
     json_t *viewers = json_array();
     for (uint32_t i = 0; i < st->viewer_count; i++) {
         const srv_viewer_stats *v = &st->viewers[i];
-        json_array_append_new(viewers, json_pack("{s:I,s:I,s:I,s:I,s:I,s:I}", "id", (json_int_t)v->id.id, "slot",
+        json_array_append_new(viewers, json_pack("{s:I,s:I,s:I,s:I,s:I,s:I,s:I}", "id", (json_int_t)v->id.id, "slot",
                                                  (json_int_t)(v->id.id & 0xFFu), "width", (json_int_t)v->width,
                                                  "height", (json_int_t)v->height, "requested_texels",
-                                                 (json_int_t)v->requested_texels, "pixels_missing",
+                                                 (json_int_t)v->requested_texels, "requested_cells",
+                                                 (json_int_t)v->requested_cells, "pixels_missing",
                                                  (json_int_t)v->pixels_missing));
     }
     json_t *o = json_object();
@@ -178,6 +206,10 @@ json_t *srv_report_frame_json(const srv_report *report, const srv_frame_stats *s
                         json_real(st->table_capacity ? (double)st->table_count / st->table_capacity : 0.0));
     json_object_set_new(o, "evictions", json_integer((json_int_t)st->evictions));
     json_object_set_new(o, "pool_exhausted", json_integer((json_int_t)st->exhausted));
+    if (st->world.table_capacity)
+        json_object_set_new(o, "world_space", world_json(st->world.requested_cells, st->world.unique_cells, &st->world,
+                                                         st->world.refusals, st->world.local_lookups,
+                                                         st->world.local_hits));
     if (mem)
         json_object_set_new(o, "memory_bytes", srv_report_memory_json(report, mem));
     json_object_set_new(o, "time_ms", stage_json(st->time_ms, st->frame_ms, 1.0));
@@ -206,6 +238,10 @@ json_t *srv_report_json(const srv_report *report)
     json_object_set_new(o, "pixels_missing", json_integer((json_int_t)t->pixels_missing));
     json_object_set_new(o, "pool_exhausted", json_integer((json_int_t)t->exhausted));
     json_object_set_new(o, "drops", drops_json(t->drops));
+    if (t->world_last.table_capacity)
+        json_object_set_new(o, "world_space", world_json(t->world_requested, t->world_unique, &t->world_last,
+                                                         t->world_refusals, t->world_local_lookups,
+                                                         t->world_local_hits));
     json_object_set_new(o, "memory_bytes",
                         json_pack("{s:o,s:o}", "peak", srv_report_memory_json(report, &t->peak), "final",
                                   srv_report_memory_json(report, &t->final)));

@@ -28,6 +28,10 @@ typedef struct srv_report_totals {
         deferred[SRV_MAX_EFFECTS];
     uint64_t drops[SRV_DROP_COUNT];
     uint64_t exhausted;            /* cumulative failed block requests (pool exhausted), from the caches */
+    /* The world-space cache (zero when it is left out): cells requested and unique, summed over frames;
+     * refusals and local-table reads summed; the last frame's table and bricks. */
+    uint64_t world_requested, world_unique, world_refusals, world_local_lookups, world_local_hits;
+    srv_world_stats world_last;
     double time_ms[SRV_STAGE_COUNT], frame_ms;
     srv_memory peak, final;
 } srv_report_totals;

@@ -22,6 +22,7 @@ typedef struct request_task {
     srv_loop *loop;
     srv_viewer *view;
     uint32_t kind;
+    uint32_t effect; /* the one effect whose keys this pass gathers, or SRV_NO_EFFECT for all of the kind */
     uint32_t tiles_x;
     atomic_bool failed; /* a thread ran out of memory: this viewer's requests are dropped this frame */
 } request_task;
@@ -60,6 +61,8 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
     const srv_viewer *view = task->view;
     const srv_cache_kind *kind = loop->kinds[task->kind];
     const void *cache = loop->caches[task->kind];
+    const bool positions = kind->needs_position;
+    const uint32_t viewer_slot = (uint32_t)(view - loop->viewers);
     srv_request_list *out = &loop->thread_requests[thread_index];
     uint32_t width = view->frame.width, height = view->frame.height;
     uint32_t x0 = (task_index % task->tiles_x) * SRV_TILE, y0 = (task_index / task->tiles_x) * SRV_TILE;
@@ -68,7 +71,7 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
     srv_pixel pixels[SRV_TILE * SRV_TILE];
     uint32_t count = 0;
     uint32_t memo_tri = SRV_MISS, memo_island = 0; /* the last triangle's island and island UVs */
-    float uv[6] = {0, 0, 0, 0, 0, 0};
+    float uv[6] = {0, 0, 0, 0, 0, 0}, corner[3][3] = {{0}};
     for (uint32_t y = y0; y < y0 + SRV_TILE && y < height; y++)
         for (uint32_t x = x0; x < x0 + SRV_TILE && x < width; x++) {
             size_t p = (size_t)y * width + x;
@@ -79,6 +82,11 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
                 memo_tri = tri;
                 memo_island = s->tri_island[tri];
                 memcpy(uv, s->tri_island_uv + 6 * (size_t)tri, sizeof uv);
+                if (positions) {
+                    const uint32_t *idx = s->indices + 3 * (size_t)tri;
+                    for (int c = 0; c < 3; c++)
+                        memcpy(corner[c], s->positions + 3 * (size_t)idx[c], sizeof corner[c]);
+                }
             }
             srv_pixel *px = &pixels[count++];
             px->triangle = tri;
@@ -87,97 +95,119 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
             float u = view->bary_u[p], v = view->bary_v[p], w = 1.0f - u - v;
             px->island_u = w * uv[0] + u * uv[2] + v * uv[4];
             px->island_v = w * uv[1] + u * uv[3] + v * uv[5];
+            if (positions) {
+                for (int k = 0; k < 3; k++)
+                    px->position[k] = w * corner[0][k] + u * corner[1][k] + v * corner[2][k];
+                px->distance = view->depth[p];
+            }
         }
     bool ok = true;
     /* The whole tile in one call, so the kind can skip pixels that repeat one above or beside them. */
-    uint64_t keys[SRV_TILE * SRV_TILE * SRV_KEYS_PER_PIXEL / 2],
-        masks[SRV_TILE * SRV_TILE * SRV_KEYS_PER_PIXEL / 2];
+    uint64_t keys[SRV_TILE * SRV_TILE * SRV_KEYS_PER_PIXEL], masks[SRV_TILE * SRV_TILE * SRV_KEYS_PER_PIXEL];
     for (uint32_t e = 0; e < loop->effect_count; e++) {
-        if (!loop->effect_shading[e] || loop->effect_kind[e] != task->kind)
+        if (!loop->effect_shading[e] || loop->effect_kind[e] != task->kind ||
+            (task->effect != SRV_NO_EFFECT && task->effect != e))
             continue;
         /* Only the effect's own keys: its dependency's are derived after merging (half the keys). */
-        uint32_t n = kind->pixel_requests(cache, pixels, count, e, loop->bias[e], keys, masks);
+        uint32_t n = kind->pixel_requests(cache, viewer_slot, pixels, count, e, loop->bias[e], keys, masks);
         for (uint32_t i = 0; i < n; i++)
             ok &= fold_add(loop, &fold, keys[i], masks[i], out);
     }
-    for (uint32_t slot = 0; slot < FOLD_SLOTS; slot++)
-        ok &= fold_flush_slot(loop, &fold, slot, out);
+    for (uint32_t f = 0; f < FOLD_SLOTS; f++)
+        ok &= fold_flush_slot(loop, &fold, f, out);
     if (!ok)
         atomic_store(&task->failed, true);
 }
 
-uint64_t srv__requests(srv_loop *loop, uint32_t slot, srv_frame_stats *st)
+/* One pass of one viewer over one kind (and one effect when the kind's keys do not name it): gather on the
+ * pool, merge, batch-request, then the dependency's keys. Returns the requested texels (or cells). */
+static uint64_t request_pass(srv_loop *loop, uint32_t slot, uint32_t k, uint32_t effect, srv_frame_stats *st)
 {
     srv_viewer *view = &loop->viewers[slot];
+    const srv_cache_kind *kind = loop->kinds[k];
     uint32_t threads = srv_pool_threads(loop->pool);
     uint64_t requested = 0;
+    for (uint32_t t = 0; t < threads; t++)
+        loop->thread_requests[t].count = 0;
+    request_task task = {.loop = loop,
+                         .view = view,
+                         .kind = k,
+                         .effect = effect,
+                         .tiles_x = (view->frame.width + SRV_TILE - 1) / SRV_TILE};
+    atomic_init(&task.failed, false);
+    uint32_t tiles_y = (view->frame.height + SRV_TILE - 1) / SRV_TILE;
+    srv_pool_run(loop->pool, task.tiles_x * tiles_y, request_tile, &task);
+
+    /* Gather the threads' lists (order does not matter: the batch sorts). */
+    size_t total = 0;
+    for (uint32_t t = 0; t < threads; t++)
+        total += loop->thread_requests[t].count;
+    srv_request_list *merged = &view->requests;
+    merged->count = 0;
+    if (atomic_load(&task.failed) || !srv__request_reserve(loop, SRV_MEM_VIEWERS, merged, total ? total : 1)) {
+        st->drops[SRV_DROP_NOMEM_REQUESTS]++; /* the frame goes on without this viewer's requests */
+        return 0;
+    }
+    for (uint32_t t = 0; t < threads; t++) {
+        const srv_request_list *list = &loop->thread_requests[t];
+        if (list->count == 0)
+            continue;
+        memcpy(merged->keys + merged->count, list->keys, list->count * sizeof *list->keys);
+        memcpy(merged->masks + merged->count, list->masks, list->count * sizeof *list->masks);
+        merged->count += list->count;
+    }
+    size_t unique = 0;
+    uint32_t *blocks = merged->blocks;
+    kind->request_batch(loop->caches[k], slot, effect, merged->keys, merged->masks, merged->count, &unique, blocks,
+                        &st->drops[SRV_DROP_POOL_EXHAUSTED], &st->drops[SRV_DROP_TABLE_FULL]);
+    merged->count = unique;
+    size_t dependent = 0;
+    for (size_t i = 0; i < unique; i++) {
+        uint32_t e = effect != SRV_NO_EFFECT ? effect : kind->key_effect(merged->keys[i]);
+        if (e >= loop->effect_count || !loop->effect_shading[e])
+            continue;
+        requested += (uint64_t)__builtin_popcountll(merged->masks[i]);
+        if (blocks[i] != SRV_NONE && loop->viewer_bits[e])
+            loop->viewer_bits[e][blocks[i]] |= (uint64_t)1 << slot;
+        dependent += loop->dependency[e] != SRV_NO_EFFECT;
+    }
+    /* The same texels of the effects they depend on (the triangle lookup), from the merged keys: appended
+     * after them and requested as a second batch. Only kinds whose keys name their effect have dependencies. */
+    if (!dependent || !kind->rekey)
+        return requested;
+    if (!srv__request_reserve(loop, SRV_MEM_VIEWERS, merged, unique + dependent)) {
+        st->drops[SRV_DROP_NOMEM_REQUESTS]++;
+        return requested;
+    }
+    size_t n = unique;
+    for (size_t i = 0; i < unique; i++) {
+        uint32_t e = kind->key_effect(merged->keys[i]);
+        if (e < loop->effect_count && loop->effect_shading[e] && loop->dependency[e] != SRV_NO_EFFECT) {
+            merged->keys[n] = kind->rekey(merged->keys[i], loop->dependency[e]);
+            merged->masks[n++] = merged->masks[i];
+        }
+    }
+    size_t dep_unique = 0;
+    kind->request_batch(loop->caches[k], slot, SRV_NO_EFFECT, merged->keys + unique, merged->masks + unique,
+                        n - unique, &dep_unique, merged->blocks + unique, &st->drops[SRV_DROP_POOL_EXHAUSTED],
+                        &st->drops[SRV_DROP_TABLE_FULL]);
+    merged->count = unique + dep_unique;
+    return requested;
+}
+
+void srv__requests(srv_loop *loop, uint32_t slot, srv_frame_stats *st, uint64_t requested[SCENE_CACHE_COUNT])
+{
     for (uint32_t k = 0; k < SCENE_CACHE_COUNT; k++) {
+        requested[k] = 0;
         const srv_cache_kind *kind = loop->kinds[k];
         if (!kind)
             continue;
-        for (uint32_t t = 0; t < threads; t++)
-            loop->thread_requests[t].count = 0;
-        request_task task = {
-            .loop = loop, .view = view, .kind = k, .tiles_x = (view->frame.width + SRV_TILE - 1) / SRV_TILE};
-        atomic_init(&task.failed, false);
-        uint32_t tiles_y = (view->frame.height + SRV_TILE - 1) / SRV_TILE;
-        srv_pool_run(loop->pool, task.tiles_x * tiles_y, request_tile, &task);
-
-        /* Gather the threads' lists (order does not matter: the batch sorts). */
-        size_t total = 0;
-        for (uint32_t t = 0; t < threads; t++)
-            total += loop->thread_requests[t].count;
-        srv_request_list *merged = &view->requests;
-        merged->count = 0;
-        if (atomic_load(&task.failed) ||
-            !srv__request_reserve(loop, SRV_MEM_VIEWERS, merged, total ? total : 1)) {
-            st->drops[SRV_DROP_NOMEM_REQUESTS]++; /* the frame goes on without this viewer's requests */
+        if (kind->keys_carry_effect) {
+            requested[k] += request_pass(loop, slot, k, SRV_NO_EFFECT, st);
             continue;
         }
-        for (uint32_t t = 0; t < threads; t++) {
-            const srv_request_list *list = &loop->thread_requests[t];
-            if (list->count == 0)
-                continue;
-            memcpy(merged->keys + merged->count, list->keys, list->count * sizeof *list->keys);
-            memcpy(merged->masks + merged->count, list->masks, list->count * sizeof *list->masks);
-            merged->count += list->count;
-        }
-        size_t unique = 0;
-        uint32_t *blocks = merged->blocks;
-        kind->request_batch(loop->caches[k], merged->keys, merged->masks, merged->count, &unique, blocks,
-                            &st->drops[SRV_DROP_POOL_EXHAUSTED], &st->drops[SRV_DROP_TABLE_FULL]);
-        merged->count = unique;
-        size_t dependent = 0;
-        for (size_t i = 0; i < unique; i++) {
-            uint32_t e = kind->key_effect(merged->keys[i]);
-            if (e >= loop->effect_count || !loop->effect_shading[e])
-                continue;
-            requested += (uint64_t)__builtin_popcountll(merged->masks[i]);
-            if (blocks[i] != SRV_NONE && loop->viewer_bits[e])
-                loop->viewer_bits[e][blocks[i]] |= (uint64_t)1 << slot;
-            dependent += loop->dependency[e] != SRV_NO_EFFECT;
-        }
-        /* The same texels of the effects they depend on (the triangle lookup), from the merged keys: appended
-         * after them and requested as a second batch. */
-        if (!dependent)
-            continue;
-        if (!srv__request_reserve(loop, SRV_MEM_VIEWERS, merged, unique + dependent)) {
-            st->drops[SRV_DROP_NOMEM_REQUESTS]++;
-            continue;
-        }
-        size_t n = unique;
-        for (size_t i = 0; i < unique; i++) {
-            uint32_t e = kind->key_effect(merged->keys[i]);
-            if (e < loop->effect_count && loop->effect_shading[e] && loop->dependency[e] != SRV_NO_EFFECT) {
-                merged->keys[n] = kind->rekey(merged->keys[i], loop->dependency[e]);
-                merged->masks[n++] = merged->masks[i];
-            }
-        }
-        size_t dep_unique = 0;
-        kind->request_batch(loop->caches[k], merged->keys + unique, merged->masks + unique, n - unique,
-                            &dep_unique, merged->blocks + unique, &st->drops[SRV_DROP_POOL_EXHAUSTED],
-                            &st->drops[SRV_DROP_TABLE_FULL]);
-        merged->count = unique + dep_unique;
+        for (uint32_t e = 0; e < loop->effect_count; e++)
+            if (loop->effect_shading[e] && loop->effect_kind[e] == k)
+                requested[k] += request_pass(loop, slot, k, e, st);
     }
-    return requested;
 }

@@ -15,6 +15,7 @@
  * chunk and summed in order, and valid masks are set after the chunks, on one thread. */
 #include "engine_internal.h"
 
+#include <stdlib.h>
 #include <string.h>
 
 enum { CHUNK_BLOCKS = 8 };
@@ -112,6 +113,77 @@ static void take_within_budget(srv_loop *loop, uint32_t e, srv_effect_queue *q, 
     }
 }
 
+/* Continuous effects (probes) keep being updated while they are requested: their light changes as their
+ * neighbours' does (the bounces) and when lights change. Each frame at most desc.probe_budget cells of
+ * such an effect update (sharing the ray budget): first the requested cells that hold no data yet, then
+ * the ones whose last update is oldest; a cell the effect calls converged (texel_samples >= max_samples)
+ * waits at least CONVERGED_REFRESH frames between updates. The order is a sort on (age, frame-list
+ * position), so it depends only on the cache's state, never on timing or threads. */
+enum { CONVERGED_REFRESH = 8 };
+
+static int compare_u64(const void *a, const void *b)
+{
+    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+    return (x > y) - (x < y);
+}
+
+static void continuous_order(srv_loop *loop, uint32_t e, srv_effect_queue *q, const uint32_t *blocks, uint32_t count)
+{
+    const fx_effect *fx = loop->effects[e];
+    const srv_cache_kind *kind = loop->kinds[loop->effect_kind[e]];
+    void *cache = loop->caches[loop->effect_kind[e]];
+    uint32_t texel_bytes = fx->texel_bytes(loop->s);
+    q->order_count = 0;
+    if (!srv__grow(loop, SRV_MEM_QUEUES, (void **)&q->order, &q->order_capacity, count ? count : 1, 1024,
+                   sizeof *q->order))
+        return; /* no refresh this frame: only cells without data are taken */
+    uint32_t stamp = loop->frame_number + 1;
+    for (uint32_t i = 0; i < count; i++) {
+        uint64_t have = q->refine[i] = kind->block_requested(cache, e, blocks[i]) & kind->block_valid(cache, e, blocks[i]);
+        if (!have)
+            continue;
+        uint32_t *word = kind->block_word ? kind->block_word(cache, e, blocks[i]) : NULL;
+        uint32_t age = word && *word ? stamp - *word : UINT32_MAX / 2;
+        if (fx->texel_samples && age < CONVERGED_REFRESH) {
+            const uint8_t *payload = kind->block_payload(cache, e, blocks[i]);
+            bool converged = true;
+            for (uint64_t m = have; m && converged; m &= m - 1)
+                converged = fx->texel_samples(payload + (size_t)__builtin_ctzll(m) * texel_bytes) >= fx->max_samples;
+            if (converged)
+                continue;
+        }
+        /* Oldest first; ties in frame-list order. */
+        q->order[q->order_count++] = (uint64_t)(UINT32_MAX - age) << 32 | i;
+    }
+    qsort(q->order, q->order_count, sizeof *q->order, compare_u64);
+}
+
+/* Round 0 (refresh = false): cells without data, in frame-list order; round 2: the refresh order. Both
+ * within the cell budget and the ray budget. */
+static void take_continuous(srv_loop *loop, uint32_t e, srv_effect_queue *q, uint32_t count, bool refresh,
+                            uint64_t cost, uint64_t *budget_left, srv_frame_stats *st)
+{
+    bool unlimited = loop->desc.ray_budget == 0;
+    uint32_t n = refresh ? (uint32_t)q->order_count : count;
+    for (uint32_t j = 0; j < n; j++) {
+        uint32_t i = refresh ? (uint32_t)q->order[j] : j;
+        uint64_t mask = refresh ? q->refine[i] : q->empty[i];
+        if (!mask)
+            continue;
+        uint64_t cells = (uint64_t)__builtin_popcountll(mask);
+        bool fits = q->cells_taken + cells <= loop->desc.probe_budget && (unlimited || *budget_left >= cells * cost);
+        if (!fits) {
+            if (!refresh)
+                st->texels_deferred[e] += cells; /* a refresh that waits is not a deferral: the cell has data */
+            continue;
+        }
+        q->cells_taken += cells;
+        if (!unlimited)
+            *budget_left -= cells * cost;
+        q->take[i] |= mask;
+    }
+}
+
 void srv__queues(srv_loop *loop, srv_frame_stats *st)
 {
     uint32_t counts[SRV_MAX_EFFECTS] = {0};
@@ -120,6 +192,7 @@ void srv__queues(srv_loop *loop, srv_frame_stats *st)
     for (uint32_t e = 0; e < loop->effect_count; e++) {
         srv_effect_queue *q = &loop->queues[e];
         q->job_count = 0;
+        q->cells_taken = 0;
         if (!loop->effect_cached[e])
             continue;
         const fx_effect *fx = loop->effects[e];
@@ -138,7 +211,7 @@ void srv__queues(srv_loop *loop, srv_frame_stats *st)
             uint32_t b = blocks[e][i];
             uint64_t requested = kind->block_requested(cache, e, b), valid = kind->block_valid(cache, e, b);
             uint64_t need = requested & ~valid;
-            if (need && fx->resample) {
+            if (need && fx->resample && kind->finer_texels) {
                 uint64_t filled = resample_block(loop, e, b, need, texel_bytes[e]);
                 if (filled) {
                     kind->block_set_valid(cache, e, b, valid | filled);
@@ -152,19 +225,29 @@ void srv__queues(srv_loop *loop, srv_frame_stats *st)
             q->refine[i] = fx->policy == FX_UPDATE_PROGRESSIVE
                                ? unconverged(fx, kind->block_payload(cache, e, b), texel_bytes[e], requested & valid)
                                : 0;
-            q->dependency[i] =
-                dep == SRV_NO_EFFECT ? SRV_NONE : kind->find(cache, kind->rekey(kind->block_key(cache, e, b), dep));
+            q->dependency[i] = dep == SRV_NO_EFFECT
+                                   ? SRV_NONE
+                                   : kind->find(cache, dep, kind->rekey(kind->block_key(cache, e, b), dep));
             q->take[i] = 0;
         }
     }
-    /* The budget: empty texels of every effect in registry order, then refinement. */
+    /* The budget: empty texels of every effect in registry order, then refinement, then the refresh of
+     * continuous effects. */
     uint64_t budget_left = loop->desc.ray_budget;
-    for (uint32_t round = 0; round < 2; round++)
+    for (uint32_t round = 0; round < 3; round++)
         for (uint32_t e = 0; e < loop->effect_count; e++) {
-            if (!counts[e] || (round == 1 && loop->effects[e]->policy != FX_UPDATE_PROGRESSIVE))
+            const fx_effect *fx = loop->effects[e];
+            if (!counts[e] || (round == 1 && fx->policy != FX_UPDATE_PROGRESSIVE) ||
+                (round == 2 && fx->policy != FX_UPDATE_CONTINUOUS))
                 continue;
             srv_effect_queue *q = &loop->queues[e];
-            uint64_t cost = loop->effects[e]->cost(loop->s, loop->samples[e]);
+            uint64_t cost = fx->cost(loop->s, loop->samples[e]);
+            if (fx->policy == FX_UPDATE_CONTINUOUS) {
+                if (round == 0)
+                    continuous_order(loop, e, q, blocks[e], counts[e]);
+                take_continuous(loop, e, q, counts[e], round == 2, cost, &budget_left, st);
+                continue;
+            }
             take_within_budget(loop, e, q, counts[e], round == 0 ? q->empty : q->refine, cost, &budget_left, st);
         }
     /* One job per block with texels taken. */
@@ -205,6 +288,15 @@ static void effect_chunk(void *user, uint32_t task_index, uint32_t thread_index)
     task->rays[task_index] = task->effect->update(&task->loop->fx, task->jobs + first, n, task->samples);
 }
 
+static void commit_chunk(void *user, uint32_t task_index, uint32_t thread_index)
+{
+    (void)thread_index;
+    effect_task *task = user;
+    uint32_t first = task_index * CHUNK_BLOCKS;
+    uint32_t n = task->count - first < CHUNK_BLOCKS ? task->count - first : CHUNK_BLOCKS;
+    task->effect->commit(&task->loop->fx, task->jobs + first, n);
+}
+
 void srv__updates(srv_loop *loop, bool lookup, srv_frame_stats *st)
 {
     for (uint32_t e = 0; e < loop->effect_count; e++) {
@@ -214,20 +306,26 @@ void srv__updates(srv_loop *loop, bool lookup, srv_frame_stats *st)
         const srv_cache_kind *kind = loop->kinds[loop->effect_kind[e]];
         void *cache = loop->caches[loop->effect_kind[e]];
         uint32_t dep = loop->dependency[e];
+        const fx_effect *fx = loop->effects[e];
         size_t count = q->job_count;
         uint32_t chunks = (uint32_t)((count + CHUNK_BLOCKS - 1) / CHUNK_BLOCKS);
+        size_t scratch_bytes = fx->scratch_bytes ? fx->scratch_bytes(loop->s) : 0;
         if (!srv__grow(loop, SRV_MEM_QUEUES, (void **)&q->fx_jobs, &q->fx_job_capacity, count, 1024,
                        sizeof *q->fx_jobs) ||
             !srv__grow(loop, SRV_MEM_QUEUES, (void **)&q->chunk_rays, &q->chunk_capacity, chunks, 128,
-                       sizeof *q->chunk_rays)) {
+                       sizeof *q->chunk_rays) ||
+            (scratch_bytes && !srv__grow(loop, SRV_MEM_QUEUES, (void **)&q->scratch, &q->scratch_capacity,
+                                         count * scratch_bytes, 65536, 1))) {
             st->drops[SRV_DROP_NOMEM_UPDATES]++;
             continue;
         }
         for (size_t i = 0; i < count; i++) {
             const srv_job *job = &q->jobs[i];
             fx_block_job *fj = &q->fx_jobs[i];
-            kind->job_location(kind->block_key(cache, e, job->block), fj);
+            memset(fj, 0, sizeof *fj);
+            kind->job_location(cache, e, kind->block_key(cache, e, job->block), fj);
             fj->mask = job->mask;
+            fj->scratch = scratch_bytes ? q->scratch + i * scratch_bytes : NULL;
             fj->lookup = dep == SRV_NO_EFFECT ? NULL : kind->block_payload(cache, dep, job->dependency_block);
             fj->payload = kind->block_payload(cache, e, job->block);
         }
@@ -236,9 +334,15 @@ void srv__updates(srv_loop *loop, bool lookup, srv_frame_stats *st)
         srv_pool_run(loop->pool, chunks, effect_chunk, &task);
         for (uint32_t c = 0; c < chunks; c++)
             st->rays[e] += q->chunk_rays[c];
+        /* Every update has read what the last commit left; only now may the results become visible. */
+        if (fx->commit)
+            srv_pool_run(loop->pool, chunks, commit_chunk, &task);
         for (size_t i = 0; i < count; i++) {
             const srv_job *job = &q->jobs[i];
             kind->block_set_valid(cache, e, job->block, kind->block_valid(cache, e, job->block) | job->mask);
+            uint32_t *word = kind->block_word ? kind->block_word(cache, e, job->block) : NULL;
+            if (word)
+                *word = loop->frame_number + 1; /* the frame of its last update, + 1 (0: never) */
             st->texels_updated[e] += (uint64_t)__builtin_popcountll(job->mask);
         }
     }

@@ -44,6 +44,10 @@ typedef struct srv_pixel {
     uint32_t triangle, island;
     float island_u, island_v; /* level-0 island texels */
     float footprint;          /* log2 of the pixel's footprint in level-0 texels */
+    /* Filled only when a cache kind asks for them (needs_position): the visible point, scene-local, and its
+     * distance from the viewer's camera (what world-space levels are chosen by). */
+    float position[3];
+    float distance;
 } srv_pixel;
 
 /* A viewer slot. */
@@ -83,53 +87,70 @@ typedef struct srv_effect_queue {
     size_t fx_job_capacity;
     uint64_t *chunk_rays;            /* rays traced per chunk of jobs */
     size_t chunk_capacity;
+    uint8_t *scratch;                /* job_count * the effect's scratch_bytes (world-space updates) */
+    size_t scratch_capacity;         /* bytes */
+    uint64_t *order;                 /* continuous refresh: (~age << 32 | frame block), oldest first */
+    size_t order_capacity, order_count;
+    uint64_t cells_taken;            /* continuous effects: cells taken this frame (the probe budget) */
 } srv_effect_queue;
 
 typedef struct srv_loop srv_loop;
 
 /* A cache kind: what the stages call for every cache, whatever its layout (DESIGN.md: on-surface,
- * world-space). Keys carry their effect; blocks are indices into that effect's pool. Batched calls take
- * runs of pixels, never one call per texel. */
+ * world-space). Blocks are indices into an effect's pool (a world-space brick is a block here). Batched calls
+ * take runs of pixels, never one call per texel. `slot` is the viewer a call works for (a kind may keep
+ * per-viewer state, such as the world-space cache's local lookup tables). */
 typedef struct srv_cache_kind {
     const char *name;
     scene_cache_kind kind;
+    bool keys_carry_effect; /* the key names its effect (key_effect, rekey); otherwise requests are batched
+                               per effect and the effect is passed alongside */
+    bool needs_position;    /* pixels must carry position and distance (srv_pixel) */
     /* Creates the cache for the loop's effects of this kind that run (loop->effect_cached, pool budget
-     * loop->desc.pool_bytes shared by bytes per texel). */
+     * loop->desc.pool_bytes shared by bytes per texel). *cache NULL: nothing of this kind runs. */
     fxc_result (*create)(srv_loop *loop, void **cache, char *err, size_t err_cap);
     void (*destroy)(void *cache);
     void (*begin_frame)(void *cache, uint32_t frame);
     /* Stage 3: writes the keys and masks the filtered reads of `count` pixels touch for `effect` at level
      * footprint + bias, at most SRV_KEYS_PER_PIXEL per pixel (a pixel that repeats a recent one may write
-     * none). Returns how many were written. The dependency's keys are derived later, from the merged ones. */
-    uint32_t (*pixel_requests)(const void *cache, const srv_pixel *pixels, uint32_t count, uint32_t effect,
-                               int32_t bias, uint64_t *keys, uint64_t *masks);
-    uint32_t (*key_effect)(uint64_t key);
-    /* The same block's key for another effect. */
-    uint64_t (*rekey)(uint64_t key, uint32_t effect);
-    fxc_result (*request_batch)(void *cache, uint64_t *keys, uint64_t *masks, size_t count, size_t *unique,
-                                uint32_t *blocks, uint64_t *pool_exhausted, uint64_t *table_full);
+     * none). Returns how many were written. The dependency's keys are derived later, from the merged ones.
+     * Called from several threads at once. */
+    uint32_t (*pixel_requests)(const void *cache, uint32_t slot, const srv_pixel *pixels, uint32_t count,
+                               uint32_t effect, int32_t bias, uint64_t *keys, uint64_t *masks);
+    uint32_t (*key_effect)(uint64_t key);       /* keys_carry_effect only */
+    uint64_t (*rekey)(uint64_t key, uint32_t effect); /* the same block's key for another effect */
+    /* Sorts, merges and requests one viewer's keys (of `effect` when keys do not carry it). */
+    fxc_result (*request_batch)(void *cache, uint32_t slot, uint32_t effect, uint64_t *keys, uint64_t *masks,
+                                size_t count, size_t *unique, uint32_t *blocks, uint64_t *pool_exhausted,
+                                uint64_t *table_full);
     const uint32_t *(*frame_blocks)(void *cache, uint32_t effect, uint32_t *count);
     uint64_t (*block_key)(const void *cache, uint32_t effect, uint32_t block);
     uint64_t (*block_requested)(const void *cache, uint32_t effect, uint32_t block);
     uint64_t (*block_valid)(const void *cache, uint32_t effect, uint32_t block);
     void (*block_set_valid)(void *cache, uint32_t effect, uint32_t block, uint64_t valid);
     void *(*block_payload)(void *cache, uint32_t effect, uint32_t block);
-    uint32_t (*find)(const void *cache, uint64_t key);
-    /* Fills the location fields of an fx_block_job (key, island, level, block_x, block_y) from a key. */
-    void (*job_location)(uint64_t key, fx_block_job *job);
+    /* Per-block word (world-space: the frame of the block's last update, for continuous refresh), or NULL. */
+    uint32_t *(*block_word)(void *cache, uint32_t effect, uint32_t block);
+    uint32_t (*find)(const void *cache, uint32_t effect, uint64_t key);
+    /* Fills the location fields of an fx_block_job (key, island, level, block_x, block_y; world-space:
+     * origin and cell) from a key. */
+    void (*job_location)(const void *cache, uint32_t effect, uint64_t key, fx_block_job *job);
     /* Resampling: for every texel of `need` in block, the four finer texels holding data (finer[t][0..3]);
-     * returns the texels whose four are all there. */
+     * returns the texels whose four are all there. NULL: the kind does not resample. */
     uint64_t (*finer_texels)(void *cache, uint32_t effect, uint32_t block, uint64_t need,
                              const void *finer[64][4]);
     /* Stage 7: the filtered taps of `count` pixels for `effect` at level footprint + bias; blocks (may be
-     * NULL) receives the block of each pixel's first tap or SRV_NONE. */
-    void (*pixel_taps)(const void *cache, const srv_pixel *pixels, uint32_t count, uint32_t effect, int32_t bias,
-                       fx_taps *taps, uint32_t *blocks);
+     * NULL) receives the block of each pixel's first tap or SRV_NONE. Called from several threads at once;
+     * `thread` is the calling pool thread (per-thread state of a kind, such as local lookup tables). */
+    void (*pixel_taps)(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
+                       uint32_t count, uint32_t effect, int32_t bias, fx_taps *taps, uint32_t *blocks);
     uint32_t (*pool_capacity)(const void *cache, uint32_t effect);
     /* Stage 9 and figures. */
     void (*housekeeping)(void *cache);
     void (*frame_figures)(const void *cache, srv_frame_stats *stats);
     void (*memory)(const void *cache, srv_memory *out); /* adds its bytes */
+    /* A viewer left: drop whatever the kind keeps for its slot (may be NULL). */
+    void (*viewer_removed)(void *cache, uint32_t slot);
 } srv_cache_kind;
 
 /* The cache kinds by scene_cache_kind (NULL: not built yet). */
@@ -190,9 +211,10 @@ void srv__request_list_free(srv_loop *loop, srv_mem_category category, srv_reque
 /* Stage 2: visibility of one viewer into its buffers. */
 void srv__visibility(srv_loop *loop, srv_viewer *view);
 
-/* Stage 3: requests of one viewer into the caches; returns the viewer's requested texels (deduplicated
- * within the viewer, shading effects only) and counts drops in st. */
-uint64_t srv__requests(srv_loop *loop, uint32_t slot, srv_frame_stats *st);
+/* Stage 3: requests of one viewer into the caches; fills the viewer's requested texels and cells
+ * (deduplicated within the viewer, shading effects only, per cache kind) and counts drops in st. */
+void srv__requests(srv_loop *loop, uint32_t slot, srv_frame_stats *st, uint64_t requested[SCENE_CACHE_COUNT]);
+
 
 /* Stage 4: queues of every cached effect within the ray budget, resampling first. */
 void srv__queues(srv_loop *loop, srv_frame_stats *st);
@@ -234,7 +256,11 @@ static inline void srv__island_uv(const scene *s, uint32_t tri, float u, float v
 /* The world position and unit normal of a hit. */
 void srv__hit_point(const scene *s, uint32_t tri, float u, float v, float pos[3], float normal[3]);
 
-/* The on-surface kind (kind_osc.c). */
-extern const srv_cache_kind srv__kind_osc;
+/* The on-surface kind (kind_osc.c) and the world-space kind (kind_wsc.c). */
+extern const srv_cache_kind srv__kind_osc, srv__kind_wsc;
+
+/* The world-space kind's read for effects (fx_context.world_taps; user: the kind's cache). */
+uint32_t srv__wsc_world_taps(const void *user, uint32_t effect, const float position[3], uint32_t level,
+                             fx_taps *taps);
 
 #endif

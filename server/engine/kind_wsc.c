@@ -1,0 +1,462 @@
+/* The world-space cache (cache/wsc.h) behind the cache-kind interface: the 8 grid points around each visible
+ * point at the level its distance from the camera chooses, bricks per effect, the taps compose and the
+ * effects' own reads (fx_context.world_taps) use, and the cache's figures and memory. Everything in the
+ * engine that knows the world grid is here.
+ *
+ * The grid is fixed in world space: positions go to the grid as scene-local + the scene's origin, in double,
+ * so a scene rebased into its local frame keeps the same cells (DESIGN.md, numerical robustness). Points
+ * outside the grid's range are refused and counted, never wrapped.
+ *
+ * Local lookup tables (paper section 3.2.2): compose reads the 8 probes of every pixel, and neighbouring
+ * pixels read the same ones, so each viewer has local tables around its camera that answer most reads
+ * without hashing; one per viewer and pool thread (a local table belongs to one thread at a time), created
+ * at the viewer's first frame and dropped when it leaves. They always agree with the table (wsc.h). */
+#include "engine_internal.h"
+
+#include "wsc.h"
+
+#include <math.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+enum { LOCAL_SIDE = 16, LOCAL_LEVELS = 8 };
+
+typedef struct kind_wsc {
+    wsc_cache *wsc;
+    const scene *s;
+    double c0;        /* finest cell, metres */
+    double origin[3]; /* the scene's local frame in the world */
+    uint32_t brick_size[SRV_MAX_EFFECTS];
+    uint32_t cell_bytes[SRV_MAX_EFFECTS];
+    uint32_t threads;
+    bool use_local;
+    wsc_local **local; /* [SRV_MAX_VIEWERS * threads], NULL until first used */
+    _Atomic uint64_t refused;       /* this frame, from the request threads */
+    _Atomic uint64_t local_lookups; /* this frame, compose */
+    _Atomic uint64_t local_hits;
+} kind_wsc;
+
+/* The default finest cell: the power of two nearest a 64th of the bounding-box diagonal (a grid that does
+ * not move when the scene does), at least 1/64 m. */
+static double default_cell(const scene *s)
+{
+    double d2 = 0;
+    for (int k = 0; k < 3; k++) {
+        double e = (double)s->bounds_max[k] - (double)s->bounds_min[k];
+        d2 += e > 0 ? e * e : 0;
+    }
+    double target = sqrt(d2) / 64.0;
+    if (!(target > 1.0 / 64.0))
+        return 1.0 / 64.0;
+    return ldexp(1.0, (int)lround(log2(target)));
+}
+
+static fxc_result wsc_kind_create(srv_loop *loop, void **out, char *err, size_t err_cap)
+{
+    *out = NULL;
+    wsc_desc wd = {0};
+    bool any = false;
+    uint32_t brick_size[SRV_MAX_EFFECTS] = {0}, cell_bytes[SRV_MAX_EFFECTS] = {0};
+    for (uint32_t e = 0; e < loop->effect_count; e++) {
+        if (!loop->effect_cached[e] || loop->effect_kind[e] != SCENE_CACHE_WORLD_SPACE)
+            continue;
+        const fx_effect *fx = loop->effects[e];
+        brick_size[e] = fx->brick_size ? fx->brick_size : 1;
+        cell_bytes[e] = fx->texel_bytes(loop->s);
+        uint64_t brick_bytes = (uint64_t)cell_bytes[e] * brick_size[e] * brick_size[e] * brick_size[e];
+        /* A quarter of the pool budget per world-space effect, within 1024..65536 bricks. */
+        uint64_t bricks = loop->desc.pool_bytes / 4 / (brick_bytes ? brick_bytes : 1);
+        bricks = bricks < 1024 ? 1024 : (bricks > 65536 ? 65536 : bricks);
+        wd.effects[e] = (wsc_effect_desc){.cell_bytes = cell_bytes[e],
+                                          .brick_size = brick_size[e],
+                                          .max_bricks = (uint32_t)bricks,
+                                          .convergence = true};
+        any = true;
+    }
+    if (!any)
+        return FXC_OK; /* no world-space effect runs: nothing is allocated */
+    kind_wsc *k = calloc(1, sizeof *k);
+    uint32_t threads = srv_pool_threads(loop->pool);
+    wsc_local **local = calloc((size_t)SRV_MAX_VIEWERS * threads, sizeof *local);
+    if (!k || !local) {
+        free(k);
+        free(local);
+        snprintf(err, err_cap, "frame loop: out of memory for the world-space cache");
+        return FXC_ERR_NOMEM;
+    }
+    k->s = loop->s;
+    k->c0 = loop->desc.probe_cell > 0 ? (double)loop->desc.probe_cell : default_cell(loop->s);
+    for (int a = 0; a < 3; a++)
+        k->origin[a] = loop->s->origin[a];
+    memcpy(k->brick_size, brick_size, sizeof brick_size);
+    memcpy(k->cell_bytes, cell_bytes, sizeof cell_bytes);
+    k->threads = threads;
+    k->local = local;
+    k->use_local = !loop->desc.no_local_table;
+    char msg[256];
+    osc_result r = wsc_create(&wd, &k->wsc, msg, sizeof msg);
+    if (r != OSC_OK) {
+        snprintf(err, err_cap, "frame loop: cannot create the world-space cache: %s", msg);
+        free(local);
+        free(k);
+        return (fxc_result)r;
+    }
+    loop->desc.probe_cell = (float)k->c0; /* what the run used, for its summary */
+    *out = k;
+    return FXC_OK;
+}
+
+static void drop_locals(kind_wsc *k, uint32_t slot)
+{
+    for (uint32_t t = 0; t < k->threads; t++) {
+        wsc_local **l = &k->local[(size_t)slot * k->threads + t];
+        if (*l) {
+            wsc_local_destroy(*l);
+            *l = NULL;
+        }
+    }
+}
+
+static void wsc_kind_destroy(void *cache)
+{
+    kind_wsc *k = cache;
+    if (!k)
+        return;
+    for (uint32_t v = 0; v < SRV_MAX_VIEWERS; v++)
+        drop_locals(k, v);
+    wsc_destroy(k->wsc);
+    free(k->local);
+    free(k);
+}
+
+static void wsc_kind_viewer_removed(void *cache, uint32_t slot)
+{
+    drop_locals(cache, slot);
+}
+
+static void wsc_kind_begin_frame(void *cache, uint32_t frame)
+{
+    kind_wsc *k = cache;
+    wsc_begin_frame(k->wsc, frame);
+    atomic_store_explicit(&k->refused, 0, memory_order_relaxed);
+    atomic_store_explicit(&k->local_lookups, 0, memory_order_relaxed);
+    atomic_store_explicit(&k->local_hits, 0, memory_order_relaxed);
+}
+
+/* A pixel's level and cell: the world position in double, the level from its distance to the camera. */
+static bool pixel_corners(const kind_wsc *k, const srv_pixel *px, int32_t bias, uint32_t *level,
+                          int32_t corners[8][3], float weights[8])
+{
+    double world[3] = {(double)px->position[0] + k->origin[0], (double)px->position[1] + k->origin[1],
+                       (double)px->position[2] + k->origin[2]};
+    int32_t l = (int32_t)wsc_level((double)px->distance, k->c0) + bias;
+    *level = l < 0 ? 0 : (l > (int32_t)WSC_MAX_LEVEL ? WSC_MAX_LEVEL : (uint32_t)l);
+    return wsc_corners(world, *level, k->c0, corners, weights);
+}
+
+static uint32_t wsc_kind_pixel_requests(const void *cache, uint32_t slot, const srv_pixel *pixels, uint32_t count,
+                                        uint32_t effect, int32_t bias, uint64_t *keys, uint64_t *masks)
+{
+    (void)slot;
+    kind_wsc *k = (kind_wsc *)cache; /* only the atomic refusal counter is written */
+    uint32_t n = 0, refused = 0, brick_size = k->brick_size[effect];
+    /* Recent cells, direct-mapped: neighbouring pixels lie in the same cell far more often than not, and a
+     * pixel in a cell already asked for asks for exactly the same 8 grid points. */
+    enum { SEEN = 32 };
+    uint64_t seen[SEEN];
+    memset(seen, 0xFF, sizeof seen);
+    for (uint32_t i = 0; i < count; i++) {
+        uint32_t level;
+        int32_t corners[8][3];
+        float weights[8];
+        if (!pixel_corners(k, &pixels[i], bias, &level, corners, weights)) {
+            refused++;
+            continue;
+        }
+        uint64_t cell;
+        if (!wsc_wgi_pack(level, corners[0][0], corners[0][1], corners[0][2], &cell)) {
+            refused++;
+            continue;
+        }
+        uint32_t s = (uint32_t)((cell * 0x9E3779B97F4A7C15ull) >> 59); /* 5 bits: SEEN */
+        if (seen[s] == cell)
+            continue;
+        seen[s] = cell;
+        uint32_t first = n;
+        for (int c = 0; c < 8; c++) {
+            uint64_t wgi, bit;
+            if (!wsc_brick_of(corners[c], level, brick_size, &wgi, &bit))
+                continue; /* wsc_corners checked the range: not reached */
+            uint32_t j = first;
+            while (j < n && keys[j] != wgi)
+                j++;
+            if (j == n) {
+                keys[n] = wgi;
+                masks[n++] = bit;
+            } else {
+                masks[j] |= bit;
+            }
+        }
+    }
+    if (refused)
+        atomic_fetch_add_explicit(&k->refused, refused, memory_order_relaxed);
+    return n;
+}
+
+static fxc_result wsc_kind_request_batch(void *cache, uint32_t slot, uint32_t effect, uint64_t *keys,
+                                         uint64_t *masks, size_t count, size_t *unique, uint32_t *blocks,
+                                         uint64_t *pool_exhausted, uint64_t *table_full)
+{
+    (void)slot;
+    kind_wsc *k = cache;
+    wsc_stats before, after;
+    wsc_stats_get(k->wsc, &before);
+    osc_result r = wsc_request_batch(k->wsc, effect, keys, masks, count, unique, blocks);
+    wsc_stats_get(k->wsc, &after);
+    *pool_exhausted += after.effects[effect].exhausted - before.effects[effect].exhausted;
+    *table_full += after.effects[effect].table_full - before.effects[effect].table_full;
+    return (fxc_result)r;
+}
+
+static const uint32_t *wsc_kind_frame_blocks(void *cache, uint32_t effect, uint32_t *count)
+{
+    return wsc_frame_bricks(((kind_wsc *)cache)->wsc, effect, count);
+}
+
+static uint64_t wsc_kind_block_key(const void *cache, uint32_t effect, uint32_t block)
+{
+    return wsc_brick_key(((const kind_wsc *)cache)->wsc, effect, block);
+}
+
+static uint64_t wsc_kind_block_requested(const void *cache, uint32_t effect, uint32_t block)
+{
+    return wsc_brick_requested(((const kind_wsc *)cache)->wsc, effect, block);
+}
+
+static uint64_t wsc_kind_block_valid(const void *cache, uint32_t effect, uint32_t block)
+{
+    return wsc_brick_valid(((const kind_wsc *)cache)->wsc, effect, block);
+}
+
+static void wsc_kind_block_set_valid(void *cache, uint32_t effect, uint32_t block, uint64_t valid)
+{
+    wsc_brick_set_valid(((kind_wsc *)cache)->wsc, effect, block, valid);
+}
+
+static void *wsc_kind_block_payload(void *cache, uint32_t effect, uint32_t block)
+{
+    return wsc_brick_payload(((kind_wsc *)cache)->wsc, effect, block);
+}
+
+static uint32_t *wsc_kind_block_word(void *cache, uint32_t effect, uint32_t block)
+{
+    return wsc_brick_convergence(((kind_wsc *)cache)->wsc, effect, block);
+}
+
+static uint32_t wsc_kind_find(const void *cache, uint32_t effect, uint64_t key)
+{
+    return wsc_find(((const kind_wsc *)cache)->wsc, effect, key);
+}
+
+static void wsc_kind_job_location(const void *cache, uint32_t effect, uint64_t key, fx_block_job *job)
+{
+    const kind_wsc *k = cache;
+    uint32_t level = 0;
+    int32_t first[3] = {0, 0, 0};
+    bool ok = wsc_brick_first_cell(key, k->brick_size[effect], &level, first);
+    WSC_ASSERT(ok);
+    double cell = wsc_cell_size(level, k->c0);
+    job->key = key;
+    job->level = level;
+    job->cell = (float)cell;
+    for (int a = 0; a < 3; a++)
+        job->origin[a] = (float)((double)first[a] * cell - k->origin[a]);
+}
+
+/* The taps of one point at one level: the corners' cells holding data, trilinear weights (not
+ * renormalised). `local` may be NULL (the hash table then answers). */
+static uint32_t point_taps(kind_wsc *k, wsc_local *local, uint32_t effect, uint32_t level,
+                           int32_t corners[8][3], const float weights[8], fx_taps *out, uint32_t *first_block)
+{
+    uint32_t brick_size = k->brick_size[effect], cell_bytes = k->cell_bytes[effect];
+    out->count = 0;
+    out->footprint_log2 = 0;
+    if (first_block)
+        *first_block = SRV_NONE;
+    for (int c = 0; c < 8; c++) {
+        uint64_t wgi, bit;
+        if (weights[c] <= 0 || !wsc_brick_of(corners[c], level, brick_size, &wgi, &bit))
+            continue;
+        uint32_t brick = local ? wsc_local_lookup(local, k->wsc, effect, wgi) : wsc_find(k->wsc, effect, wgi);
+        if (brick == WSC_NONE)
+            continue;
+        if (first_block && *first_block == SRV_NONE)
+            *first_block = brick;
+        if (!(wsc_brick_valid(k->wsc, effect, brick) & bit))
+            continue;
+        uint32_t index = (uint32_t)__builtin_ctzll(bit);
+        out->texel[out->count] = (const uint8_t *)wsc_brick_payload(k->wsc, effect, brick) + (size_t)index * cell_bytes;
+        out->weight[out->count] = weights[c];
+        out->at_x[out->count] = out->at_y[out->count] = 0;
+        out->count++;
+    }
+    return out->count;
+}
+
+uint32_t srv__wsc_world_taps(const void *user, uint32_t effect, const float position[3], uint32_t level,
+                             fx_taps *taps)
+{
+    kind_wsc *k = (kind_wsc *)user; /* read-only: the table and payloads are only read here */
+    taps->count = 0;
+    if (effect >= SRV_MAX_EFFECTS || !k->brick_size[effect] || level > WSC_MAX_LEVEL)
+        return 0;
+    double world[3] = {(double)position[0] + k->origin[0], (double)position[1] + k->origin[1],
+                       (double)position[2] + k->origin[2]};
+    int32_t corners[8][3];
+    float weights[8];
+    if (!wsc_corners(world, level, k->c0, corners, weights))
+        return 0;
+    return point_taps(k, NULL, effect, level, corners, weights, taps, NULL);
+}
+
+static void wsc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
+                                uint32_t count, uint32_t effect, int32_t bias, fx_taps *taps, uint32_t *blocks)
+{
+    kind_wsc *k = (kind_wsc *)cache; /* writes only this (viewer, thread)'s local table and counters */
+    wsc_local *local = NULL;
+    if (k->use_local && thread < k->threads) {
+        wsc_local **slot_local = &k->local[(size_t)slot * k->threads + thread];
+        if (!*slot_local) {
+            wsc_local_desc ld = {.side = LOCAL_SIDE, .levels = LOCAL_LEVELS};
+            char msg[128];
+            if (wsc_local_create(&ld, k->wsc, slot_local, msg, sizeof msg) != OSC_OK)
+                *slot_local = NULL; /* no memory: the table answers alone */
+        }
+        local = *slot_local;
+    }
+    wsc_local_stats before = {0}, after = {0};
+    if (local)
+        wsc_local_stats_get(local, &before);
+    for (uint32_t i = 0; i < count; i++) {
+        uint32_t level;
+        int32_t corners[8][3];
+        float weights[8];
+        if (!pixel_corners(k, &pixels[i], bias, &level, corners, weights)) {
+            taps[i].count = 0;
+            if (blocks)
+                blocks[i] = SRV_NONE;
+            continue;
+        }
+        point_taps(k, local, effect, level, corners, weights, &taps[i], blocks ? &blocks[i] : NULL);
+    }
+    if (local) {
+        wsc_local_stats_get(local, &after);
+        uint64_t hits = after.hits - before.hits;
+        uint64_t lookups = hits + (after.misses - before.misses) + (after.bypasses - before.bypasses);
+        atomic_fetch_add_explicit(&k->local_lookups, lookups, memory_order_relaxed);
+        atomic_fetch_add_explicit(&k->local_hits, hits, memory_order_relaxed);
+    }
+}
+
+static uint32_t wsc_kind_pool_capacity(const void *cache, uint32_t effect)
+{
+    return wsc_capacity(((const kind_wsc *)cache)->wsc, effect);
+}
+
+static void wsc_kind_housekeeping(void *cache)
+{
+    kind_wsc *k = cache;
+    uint64_t refused = atomic_load_explicit(&k->refused, memory_order_relaxed);
+    if (refused) { /* counted against the first world-space effect: a point is refused for all alike */
+        for (uint32_t e = 0; e < SRV_MAX_EFFECTS; e++)
+            if (k->brick_size[e]) {
+                wsc_count_refusals(k->wsc, e, refused);
+                break;
+            }
+    }
+    wsc_housekeeping(k->wsc);
+}
+
+static size_t locals_bytes(const kind_wsc *k)
+{
+    size_t bytes = (size_t)SRV_MAX_VIEWERS * k->threads * sizeof *k->local;
+    for (size_t i = 0; i < (size_t)SRV_MAX_VIEWERS * k->threads; i++)
+        if (k->local[i]) {
+            wsc_local_stats ls;
+            wsc_local_stats_get(k->local[i], &ls);
+            bytes += ls.bytes;
+        }
+    return bytes;
+}
+
+static void wsc_kind_frame_figures(const void *cache, srv_frame_stats *st)
+{
+    const kind_wsc *k = cache;
+    wsc_stats ws;
+    wsc_stats_get(k->wsc, &ws);
+    for (uint32_t e = 0; e < SRV_MAX_EFFECTS; e++) {
+        const wsc_effect_stats *es = &ws.effects[e];
+        if (!es->brick_size)
+            continue;
+        st->blocks_resident[e] += es->bricks_resident;
+        st->world.entries += es->entries;
+        st->world.table_capacity += es->table_capacity;
+        st->world.bricks_resident += es->bricks_resident;
+        st->evictions += es->evictions;
+        st->exhausted += es->exhausted;
+    }
+    wsc_memory_report m;
+    wsc_memory(k->wsc, &m);
+    st->world.bytes = m.total_bytes + sizeof *k + locals_bytes(k);
+    st->world.refusals = atomic_load_explicit(&((kind_wsc *)k)->refused, memory_order_relaxed);
+    st->world.local_lookups = atomic_load_explicit(&((kind_wsc *)k)->local_lookups, memory_order_relaxed);
+    st->world.local_hits = atomic_load_explicit(&((kind_wsc *)k)->local_hits, memory_order_relaxed);
+}
+
+static void wsc_kind_memory(const void *cache, srv_memory *out)
+{
+    const kind_wsc *k = cache;
+    wsc_memory_report m;
+    wsc_memory(k->wsc, &m);
+    size_t local = locals_bytes(k);
+    out->table += m.table_key_bytes + m.table_value_bytes + m.cache_struct_bytes + m.core_struct_bytes + sizeof *k;
+    for (uint32_t e = 0; e < SRV_MAX_EFFECTS; e++) {
+        out->pools_reserved[e] += m.effects[e].payload_reserved_bytes;
+        out->pools_in_use[e] += m.effects[e].payload_in_use_bytes;
+        out->block_meta[e] += m.effects[e].block_meta_bytes + m.effects[e].list_bytes;
+    }
+    out->world_local += local;
+    out->total += m.total_bytes + sizeof *k + local;
+}
+
+const srv_cache_kind srv__kind_wsc = {
+    .name = "world_space",
+    .kind = SCENE_CACHE_WORLD_SPACE,
+    .keys_carry_effect = false,
+    .needs_position = true,
+    .create = wsc_kind_create,
+    .destroy = wsc_kind_destroy,
+    .begin_frame = wsc_kind_begin_frame,
+    .pixel_requests = wsc_kind_pixel_requests,
+    .key_effect = NULL,
+    .rekey = NULL,
+    .request_batch = wsc_kind_request_batch,
+    .frame_blocks = wsc_kind_frame_blocks,
+    .block_key = wsc_kind_block_key,
+    .block_requested = wsc_kind_block_requested,
+    .block_valid = wsc_kind_block_valid,
+    .block_set_valid = wsc_kind_block_set_valid,
+    .block_payload = wsc_kind_block_payload,
+    .block_word = wsc_kind_block_word,
+    .find = wsc_kind_find,
+    .job_location = wsc_kind_job_location,
+    .finer_texels = NULL,
+    .pixel_taps = wsc_kind_pixel_taps,
+    .pool_capacity = wsc_kind_pool_capacity,
+    .housekeeping = wsc_kind_housekeeping,
+    .frame_figures = wsc_kind_frame_figures,
+    .memory = wsc_kind_memory,
+    .viewer_removed = wsc_kind_viewer_removed,
+};
