@@ -9,20 +9,20 @@
 
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
-/* A loop on threads threads (0 = all) running what scene s needs, cached or not, with `viewers` viewers of
- * w x h whose ids go to ids. */
-static inline srv_loop *bench_make_loop(const char *who, scene *s, scene_rt *rt, bool no_cache, uint32_t threads,
-                                        uint32_t viewers, uint32_t w, uint32_t h, srv_viewer_id *ids)
+/* A loop with description d running what the scene needs except the effect named skip (NULL: none), with
+ * `viewers` viewers of w x h whose ids go to ids. */
+static inline srv_loop *bench_make_loop_desc(const char *who, srv_loop_desc d, const char *skip, uint32_t viewers,
+                                             uint32_t w, uint32_t h, srv_viewer_id *ids)
 {
-    srv_loop_desc d = {.s = s, .rt = rt, .threads = threads, .seed = 1, .no_cache = no_cache};
     uint32_t count = 0;
     const fx_effect *const *registry = fx_registry(&count);
     bool needed[SRV_MAX_EFFECTS];
     char why[SRV_MAX_EFFECTS][200];
-    fx_needs(registry, count, s, needed, why);
+    fx_needs(registry, count, d.s, needed, why);
     for (uint32_t e = 0; e < count; e++)
-        d.effect_on[e] = needed[e] && registry[e]->shade;
+        d.effect_on[e] = needed[e] && registry[e]->shade && !(skip && !strcmp(skip, registry[e]->name));
     srv_loop *loop = NULL;
     char err[256];
     if (srv_loop_create(&d, &loop, err, sizeof err) != FXC_OK) {
@@ -35,6 +35,15 @@ static inline srv_loop *bench_make_loop(const char *who, scene *s, scene_rt *rt,
             exit(1);
         }
     return loop;
+}
+
+/* The same with the default description, without probes: the figures of bench_stages and bench_steady are
+ * the on-surface effects' (docs/BENCHMARKS.md); bench_probes measures what probes add. */
+static inline srv_loop *bench_make_loop(const char *who, scene *s, scene_rt *rt, bool no_cache, uint32_t threads,
+                                        uint32_t viewers, uint32_t w, uint32_t h, srv_viewer_id *ids)
+{
+    srv_loop_desc d = {.s = s, .rt = rt, .threads = threads, .seed = 1, .no_cache = no_cache};
+    return bench_make_loop_desc(who, d, "probes", viewers, w, h, ids);
 }
 
 /* Frame `frame` of generator gen for every viewer; returns its wall time in ms and fills *st. */

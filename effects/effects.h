@@ -58,6 +58,8 @@ typedef struct fx_context {
      * aligned) just before it is traced, from the tracing thread; benchmarks use it to replay exactly the
      * rays an update traced. NULL: nothing is called. */
     void (*observe_rays)(void *user, const void *rays, uint32_t count);
+    /* The same for streams of intersection rays (RTCRayHit, before tracing); NULL: nothing is called. */
+    void (*observe_hits)(void *user, const void *rayhits, uint32_t count);
     void *observe_user;
     /* World-space effects (probes). The filtered read of `effect` at a scene-local position on grid `level`:
      * the resident cells (probes) at the corners of the level's cell around it that hold committed data,

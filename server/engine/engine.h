@@ -244,6 +244,11 @@ int32_t srv_loop_bias(const srv_loop *loop, uint32_t index);
 /* Whether an effect is a shading effect that goes through a cache this run (counted in requested texels). */
 bool srv_loop_effect_cached(const srv_loop *loop, uint32_t index);
 
+/* Benchmarks: every ray stream the effect updates trace is shown to these first (fx_context's observe_rays
+ * and observe_hits; NULL: none), from the tracing thread. */
+void srv_loop_set_observer(srv_loop *loop, void (*occlusion)(void *user, const void *rays, uint32_t count),
+                           void (*hits)(void *user, const void *rayhits, uint32_t count), void *user);
+
 /* The finest world-grid cell the run uses, metres; 0 when no world-space cache exists. */
 float srv_loop_probe_cell(const srv_loop *loop);
 

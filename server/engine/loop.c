@@ -621,6 +621,14 @@ int32_t srv_loop_bias(const srv_loop *loop, uint32_t index)
     return index < loop->effect_count ? loop->bias[index] : 0;
 }
 
+void srv_loop_set_observer(srv_loop *loop, void (*occlusion)(void *user, const void *rays, uint32_t count),
+                           void (*hits)(void *user, const void *rayhits, uint32_t count), void *user)
+{
+    loop->fx.observe_rays = occlusion;
+    loop->fx.observe_hits = hits;
+    loop->fx.observe_user = user;
+}
+
 float srv_loop_probe_cell(const srv_loop *loop)
 {
     return loop->kinds[SCENE_CACHE_WORLD_SPACE] ? loop->desc.probe_cell : 0.0f;

@@ -1,0 +1,404 @@
+/* bench_probes: what the world-space cache and the probe effect cost and share (issue "the world-space cache
+ * and probe-based indirect light").
+ *
+ *   rays:     probe update rays per second against raw Embree over the same rays in the same run: one loop
+ *             with probes alone on one thread; per frame after the warm-up, the effects stage (probe updates
+ *             and commits) is timed, every ray stream it traced is recorded (fx_context observe hooks), and
+ *             the recorded streams are then traced again with rtcIntersect1M / rtcOccluded1M, alternating
+ *             update and replay frame by frame. Figure: raw time / update time per frame (1 = as fast as
+ *             bare Embree over the same rays); median and spread.
+ *   viewers:  1, 4 and 8 viewers (--camera, default group) with everything the scene needs: probes requested
+ *             and unique per frame, the world-space cache's bytes and bricks, time per stage (medians); then
+ *             two loops, with and without the viewers' local lookup tables, frames alternating: requests and
+ *             compose medians of each.
+ *   overhead: what indirect light adds to the per-pixel stages, against visibility: two loops on one thread,
+ *             with and without probes (everything else the same), frames alternating; per frame
+ *             ((requests + compose) with - (requests + compose) without) / visibility (mean of the two
+ *             loops' visibility times for that frame); median and spread.
+ *   memory:   bytes per probe (payload, and all of the cache per resident probe) beside RTXGI's layout.
+ *
+ * Usage: bench_probes [--scene PATH (default ../shared/scenes/sponza/sponza.3ds)] [--res WxH (640x360)]
+ *                     [--warmup N (10)] [--frames N (20)] [--camera GEN (group)] [--part rays|viewers|overhead|all]
+ */
+#include "bench_engine.h"
+#include "scene.h"
+
+#include <embree3/rtcore.h>
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+static void print_row(const char *what, const double *values, int n)
+{
+    printf("| %s | %.3f | %.3f | %.3f |\n", what, bench_quantile(values, n, 0.5), bench_quantile(values, n, 0.1),
+           bench_quantile(values, n, 0.9));
+}
+
+typedef struct options {
+    const char *path;
+    uint32_t w, h, warmup, frames;
+    srv_camgen_kind gen;
+    const char *part;
+} options;
+
+static int32_t effect_index(const char *name)
+{
+    uint32_t count = 0;
+    const fx_effect *const *registry = fx_registry(&count);
+    return fx_find(registry, count, name);
+}
+
+/* ---- rays: the update against raw Embree over the same rays ------------------------------------------- */
+
+enum { MAX_CAPTURED = 1 << 24 };
+
+/* Ray streams as an update traced them, in order: intersection streams (RTCRayHit) and occlusion streams
+ * (RTCRay), each with its size and kind. */
+typedef struct captured {
+    struct RTCRayHit *hits;
+    struct RTCRay *rays;
+    uint32_t *sizes;
+    uint8_t *is_hit;
+    size_t hit_count, ray_count, streams, hit_cap, ray_cap, stream_cap, kind_cap;
+    bool truncated;
+} captured;
+
+static bool grow(void **array, size_t *cap, size_t need, size_t size, size_t align)
+{
+    if (need <= *cap)
+        return true;
+    size_t n = *cap ? *cap : 4096;
+    while (n < need)
+        n *= 2;
+    void *p = align ? aligned_alloc(align, n * size) : malloc(n * size);
+    if (!p)
+        return false;
+    if (*array)
+        memcpy(p, *array, *cap * size);
+    free(*array);
+    *array = p;
+    *cap = n;
+    return true;
+}
+
+static void capture_stream(captured *c, const void *rays, uint32_t count, bool hit)
+{
+    if (c->truncated || c->hit_count + c->ray_count + count > MAX_CAPTURED ||
+        !grow((void **)&c->sizes, &c->stream_cap, c->streams + 1, sizeof *c->sizes, 0) ||
+        !grow((void **)&c->is_hit, &c->kind_cap, c->streams + 1, 1, 0)) {
+        c->truncated = true;
+        return;
+    }
+    if (hit) {
+        if (!grow((void **)&c->hits, &c->hit_cap, c->hit_count + count, sizeof *c->hits, 64)) {
+            c->truncated = true;
+            return;
+        }
+        memcpy(c->hits + c->hit_count, rays, count * sizeof *c->hits);
+        c->hit_count += count;
+    } else {
+        if (!grow((void **)&c->rays, &c->ray_cap, c->ray_count + count, sizeof *c->rays, 64)) {
+            c->truncated = true;
+            return;
+        }
+        memcpy(c->rays + c->ray_count, rays, count * sizeof *c->rays);
+        c->ray_count += count;
+    }
+    c->sizes[c->streams] = count;
+    c->is_hit[c->streams] = hit;
+    c->streams++;
+}
+
+static void observe_occlusion(void *user, const void *rays, uint32_t count)
+{
+    capture_stream(user, rays, count, false);
+}
+
+static void observe_hits(void *user, const void *rays, uint32_t count)
+{
+    capture_stream(user, rays, count, true);
+}
+
+/* Traces the captured streams again (on copies, so tfar and hits start as they did); returns ms. */
+static double replay(scene_rt *rt, const captured *c, struct RTCRayHit *hit_work, struct RTCRay *ray_work)
+{
+    memcpy(hit_work, c->hits, c->hit_count * sizeof *hit_work);
+    memcpy(ray_work, c->rays, c->ray_count * sizeof *ray_work);
+    struct RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    double t = bench_now_ms();
+    size_t h = 0, r = 0;
+    for (size_t k = 0; k < c->streams; k++) {
+        if (c->is_hit[k]) {
+            rtcIntersect1M(scene_rt_handle(rt), &context, hit_work + h, c->sizes[k], sizeof *hit_work);
+            h += c->sizes[k];
+        } else {
+            rtcOccluded1M(scene_rt_handle(rt), &context, ray_work + r, c->sizes[k], sizeof *ray_work);
+            r += c->sizes[k];
+        }
+    }
+    return bench_now_ms() - t;
+}
+
+static void part_rays(const options *o, scene *s, scene_rt *rt)
+{
+    int32_t probes = effect_index("probes");
+    srv_loop_desc d = {.s = s, .rt = rt, .threads = 1, .seed = 1};
+    d.effect_on[probes] = true;
+    srv_viewer_id id;
+    srv_loop *loop = NULL;
+    char err[256];
+    if (srv_loop_create(&d, &loop, err, sizeof err) != FXC_OK || srv_viewer_add(loop, &(srv_viewer_desc){.width = o->w, .height = o->h}, &id) != FXC_OK) {
+        fprintf(stderr, "bench_probes: %s\n", err);
+        exit(1);
+    }
+    captured c = {0};
+    srv_loop_set_observer(loop, observe_occlusion, observe_hits, &c);
+    double ratio[BENCH_MAX_SAMPLES], update_mrays[BENCH_MAX_SAMPLES], raw_mrays[BENCH_MAX_SAMPLES];
+    struct RTCRayHit *hit_work = NULL;
+    struct RTCRay *ray_work = NULL;
+    size_t hit_work_cap = 0, ray_work_cap = 0;
+    uint64_t total_rays = 0;
+    int n = 0;
+    for (uint32_t f = 0; f < o->warmup + o->frames; f++) {
+        c.hit_count = c.ray_count = c.streams = 0;
+        c.truncated = false;
+        srv_frame_stats st;
+        bench_run_frame("bench_probes", loop, s, o->gen, &id, 1, f, &st);
+        if (f < o->warmup || st.rays[probes] == 0)
+            continue;
+        if (c.truncated || c.hit_count + c.ray_count != st.rays[probes]) {
+            fprintf(stderr, "bench_probes: frame %u: %zu rays recorded, %llu counted%s\n", f, c.hit_count + c.ray_count,
+                    (unsigned long long)st.rays[probes], c.truncated ? " (truncated)" : "");
+            exit(1);
+        }
+        if (!grow((void **)&hit_work, &hit_work_cap, c.hit_count + 1, sizeof *hit_work, 64) ||
+            !grow((void **)&ray_work, &ray_work_cap, c.ray_count + 1, sizeof *ray_work, 64)) {
+            fprintf(stderr, "bench_probes: out of memory\n");
+            exit(1);
+        }
+        double update_ms = st.time_ms[SRV_STAGE_EFFECTS];
+        double raw_ms = replay(rt, &c, hit_work, ray_work);
+        double rays = (double)st.rays[probes];
+        total_rays += st.rays[probes];
+        update_mrays[n] = rays / update_ms / 1000.0;
+        raw_mrays[n] = rays / raw_ms / 1000.0;
+        ratio[n] = raw_ms / update_ms;
+        n++;
+    }
+    printf("\nrays: probe updates on 1 thread against raw Embree over the same streams (%d frames, %llu rays, "
+           "%.0f per frame)\n\n| figure | median | p10 | p90 |\n|---|---|---|---|\n",
+           n, (unsigned long long)total_rays, n ? (double)total_rays / n : 0.0);
+    if (n) {
+        print_row("update Mrays/s (effects stage: gather, shading, commit)", update_mrays, n);
+        print_row("raw rtcIntersect1M + rtcOccluded1M Mrays/s", raw_mrays, n);
+        print_row("update / raw (raw time / update time)", ratio, n);
+    }
+    free(hit_work);
+    free(ray_work);
+    free(c.hits);
+    free(c.rays);
+    free(c.sizes);
+    free(c.is_hit);
+    srv_loop_free(loop);
+}
+
+/* ---- viewers: sharing, memory, stages; local tables on and off ----------------------------------------- */
+
+static void part_viewers(const options *o, scene *s, scene_rt *rt)
+{
+    static const uint32_t counts[] = {1, 4, 8};
+    printf("\nviewers (%s camera, everything the scene needs, all cores), per frame after the warm-up:\n\n"
+           "| viewers | probes requested | unique | sharing | bricks | world-space MiB | visibility ms | requests ms "
+           "| queues ms | effects ms | compose ms | frame ms |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+           srv_camgen_name(o->gen));
+    for (size_t c = 0; c < sizeof counts / sizeof counts[0]; c++) {
+        uint32_t n = counts[c];
+        srv_viewer_id ids[SRV_MAX_VIEWERS];
+        srv_loop *loop = bench_make_loop_desc("bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1}, NULL, n,
+                                              o->w, o->h, ids);
+        double stage[SRV_STAGE_COUNT][BENCH_MAX_SAMPLES], frame[BENCH_MAX_SAMPLES];
+        uint64_t requested = 0, unique = 0;
+        srv_frame_stats st;
+        for (uint32_t f = 0; f < o->warmup + o->frames; f++) {
+            bench_run_frame("bench_probes", loop, s, o->gen, ids, n, f, &st);
+            if (f < o->warmup)
+                continue;
+            for (int k = 0; k < SRV_STAGE_COUNT; k++)
+                stage[k][f - o->warmup] = st.time_ms[k];
+            frame[f - o->warmup] = st.frame_ms;
+            requested += st.world.requested_cells;
+            unique += st.world.unique_cells;
+        }
+        int m = (int)o->frames;
+        printf("| %u | %.0f | %.0f | %.2f | %llu | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f |\n", n,
+               (double)requested / m, (double)unique / m, unique ? (double)requested / (double)unique : 0.0,
+               (unsigned long long)st.world.bricks_resident, st.world.bytes / 1048576.0,
+               bench_quantile(stage[SRV_STAGE_VISIBILITY], m, 0.5), bench_quantile(stage[SRV_STAGE_REQUESTS], m, 0.5),
+               bench_quantile(stage[SRV_STAGE_QUEUES], m, 0.5), bench_quantile(stage[SRV_STAGE_EFFECTS], m, 0.5),
+               bench_quantile(stage[SRV_STAGE_COMPOSE], m, 0.5), bench_quantile(frame, m, 0.5));
+        srv_loop_free(loop);
+    }
+
+    /* Local lookup tables on and off: same cameras, frames alternating between two loops. */
+    uint32_t n = 4;
+    srv_viewer_id on_ids[SRV_MAX_VIEWERS], off_ids[SRV_MAX_VIEWERS];
+    srv_loop *on = bench_make_loop_desc("bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1}, NULL, n, o->w,
+                                        o->h, on_ids);
+    srv_loop *off = bench_make_loop_desc("bench_probes",
+                                         (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .no_local_table = true}, NULL,
+                                         n, o->w, o->h, off_ids);
+    double req_on[BENCH_MAX_SAMPLES], req_off[BENCH_MAX_SAMPLES], comp_on[BENCH_MAX_SAMPLES],
+        comp_off[BENCH_MAX_SAMPLES], ratio[BENCH_MAX_SAMPLES], hit[BENCH_MAX_SAMPLES];
+    for (uint32_t f = 0; f < o->warmup + o->frames; f++) {
+        srv_frame_stats a, b;
+        bench_run_frame("bench_probes", on, s, o->gen, on_ids, n, f, &a);
+        bench_run_frame("bench_probes", off, s, o->gen, off_ids, n, f, &b);
+        if (f < o->warmup)
+            continue;
+        int i = (int)(f - o->warmup);
+        req_on[i] = a.time_ms[SRV_STAGE_REQUESTS];
+        req_off[i] = b.time_ms[SRV_STAGE_REQUESTS];
+        comp_on[i] = a.time_ms[SRV_STAGE_COMPOSE];
+        comp_off[i] = b.time_ms[SRV_STAGE_COMPOSE];
+        ratio[i] = comp_off[i] / comp_on[i];
+        hit[i] = a.world.local_lookups ? (double)a.world.local_hits / (double)a.world.local_lookups : 0.0;
+    }
+    printf("\nlocal lookup tables, %u viewers, frames alternating between a loop with them and one without:\n\n"
+           "| figure | median | p10 | p90 |\n|---|---|---|---|\n", n);
+    int m = (int)o->frames;
+    print_row("requests ms, with", req_on, m);
+    print_row("requests ms, without", req_off, m);
+    print_row("compose ms, with", comp_on, m);
+    print_row("compose ms, without", comp_off, m);
+    print_row("compose without / with", ratio, m);
+    print_row("local table hit rate", hit, m);
+    srv_loop_free(on);
+    srv_loop_free(off);
+}
+
+/* ---- overhead: the per-pixel stages with and without probes ------------------------------------------ */
+
+static void part_overhead(const options *o, scene *s, scene_rt *rt)
+{
+    srv_viewer_id with_ids[1], without_ids[1];
+    srv_loop *with = bench_make_loop_desc("bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .threads = 1},
+                                          NULL, 1, o->w, o->h, with_ids);
+    srv_loop *without = bench_make_loop_desc(
+        "bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .threads = 1}, "probes", 1, o->w, o->h, without_ids);
+    double added[BENCH_MAX_SAMPLES], req_added[BENCH_MAX_SAMPLES], comp_added[BENCH_MAX_SAMPLES];
+    for (uint32_t f = 0; f < o->warmup + o->frames; f++) {
+        srv_frame_stats a, b;
+        bench_run_frame("bench_probes", with, s, o->gen, with_ids, 1, f, &a);
+        bench_run_frame("bench_probes", without, s, o->gen, without_ids, 1, f, &b);
+        if (f < o->warmup)
+            continue;
+        int i = (int)(f - o->warmup);
+        double vis = 0.5 * (a.time_ms[SRV_STAGE_VISIBILITY] + b.time_ms[SRV_STAGE_VISIBILITY]);
+        req_added[i] = (a.time_ms[SRV_STAGE_REQUESTS] - b.time_ms[SRV_STAGE_REQUESTS]) / vis;
+        comp_added[i] = (a.time_ms[SRV_STAGE_COMPOSE] - b.time_ms[SRV_STAGE_COMPOSE]) / vis;
+        added[i] = req_added[i] + comp_added[i];
+    }
+    printf("\noverhead: 1 viewer (%s camera), 1 thread, frames alternating between a loop with probes and one "
+           "without; what probes add, as a fraction of the frame's visibility time:\n\n"
+           "| figure | median | p10 | p90 |\n|---|---|---|---|\n", srv_camgen_name(o->gen));
+    int m = (int)o->frames;
+    print_row("requests added / visibility", req_added, m);
+    print_row("compose added / visibility", comp_added, m);
+    print_row("(requests + compose) added / visibility", added, m);
+    srv_loop_free(with);
+    srv_loop_free(without);
+}
+
+/* ---- memory ------------------------------------------------------------------------------------------- */
+
+static void part_memory(const options *o, scene *s, scene_rt *rt)
+{
+    int32_t probes = effect_index("probes");
+    uint32_t count = 0;
+    const fx_effect *const *registry = fx_registry(&count);
+    uint32_t payload = registry[probes]->texel_bytes(s);
+    srv_viewer_id ids[8];
+    srv_loop *loop = bench_make_loop_desc("bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1}, NULL, 8, o->w,
+                                          o->h, ids);
+    srv_frame_stats st;
+    for (uint32_t f = 0; f < o->warmup + o->frames; f++)
+        bench_run_frame("bench_probes", loop, s, o->gen, ids, 8, f, &st);
+    srv_memory m;
+    srv_loop_memory(loop, &m);
+    /* RTXGI's layout: 8x8 irradiance texels plus a 1-texel border (10x10) in R10G10B10A2 (4 bytes), and 16x16
+     * distance texels plus border (18x18) in RG16F (4 bytes); probe data (offsets, states) RGBA16F (8 bytes). */
+    double rtxgi_per_probe = 10 * 10 * 4 + 18 * 18 * 4 + 8;
+    printf("\nmemory after %u frames of 8 viewers:\n\n| figure | value |\n|---|---|\n", o->warmup + o->frames);
+    printf("| payload bytes per probe (ours) | %u |\n", payload);
+    printf("| world-space cache bytes per resident probe (table, metadata, lists, local tables) | %.0f |\n",
+           st.world.bricks_resident ? (double)st.world.bytes / (double)st.world.bricks_resident : 0.0);
+    printf("| resident probes | %llu |\n", (unsigned long long)st.world.bricks_resident);
+    printf("| world-space cache MiB (pool reserved whole) | %.2f |\n", st.world.bytes / 1048576.0);
+    printf("| probe pool reserved MiB / in use MiB | %.2f / %.2f |\n", m.pools_reserved[probes] / 1048576.0,
+           m.pools_in_use[probes] / 1048576.0);
+    printf("| RTXGI bytes per probe (10x10 x 4 + 18x18 x 4 + 8) | %.0f |\n", rtxgi_per_probe);
+    printf("| RTXGI Sponza, 22x22x22 probes, MiB | %.2f |\n", 22.0 * 22 * 22 * rtxgi_per_probe / 1048576.0);
+    srv_loop_free(loop);
+}
+
+int main(int argc, char **argv)
+{
+    options o = {.path = "../shared/scenes/sponza/sponza.3ds", .w = 640, .h = 360, .warmup = 10, .frames = 20,
+                 .gen = SRV_CAMGEN_GROUP, .part = "all"};
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
+        if (!strcmp(a, "--scene") && v)
+            o.path = v, i++;
+        else if (!strcmp(a, "--res") && v && sscanf(v, "%ux%u", &o.w, &o.h) == 2)
+            i++;
+        else if (!strcmp(a, "--warmup") && v)
+            o.warmup = (uint32_t)atoi(v), i++;
+        else if (!strcmp(a, "--frames") && v)
+            o.frames = (uint32_t)atoi(v), i++;
+        else if (!strcmp(a, "--camera") && v && srv_camgen_parse(v, &o.gen))
+            i++;
+        else if (!strcmp(a, "--part") && v)
+            o.part = v, i++;
+        else {
+            fprintf(stderr, "usage: bench_probes [--scene PATH] [--res WxH] [--warmup N] [--frames N] [--camera GEN] "
+                            "[--part rays|viewers|overhead|memory|all]\n");
+            return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
+        }
+    }
+    if (!o.w || !o.h || o.frames < 1 || o.frames > BENCH_MAX_SAMPLES) {
+        fprintf(stderr, "bench_probes: bad --res or --frames (1..%d)\n", BENCH_MAX_SAMPLES);
+        return 2;
+    }
+    if (strcmp(o.path, "default") && access(o.path, R_OK) != 0) {
+        printf("%s not found: using the embedded default scene\n", o.path);
+        o.path = "default";
+    }
+    scene_error err;
+    scene *s = scene_load(o.path, NULL, &err);
+    scene_rt *rt = s ? scene_rt_create(s, NULL, &err) : NULL;
+    if (!rt) {
+        fprintf(stderr, "bench_probes: %s\n", err.msg);
+        return 1;
+    }
+    if (effect_index("probes") < 0) {
+        fprintf(stderr, "bench_probes: no effect named probes is registered\n");
+        return 1;
+    }
+    printf("scene %s (%u triangles), %ux%u per viewer, %u warm-up frames then %u measured\n", o.path,
+           s->triangle_count, o.w, o.h, o.warmup, o.frames);
+    bool all = !strcmp(o.part, "all");
+    if (all || !strcmp(o.part, "rays"))
+        part_rays(&o, s, rt);
+    if (all || !strcmp(o.part, "overhead"))
+        part_overhead(&o, s, rt);
+    if (all || !strcmp(o.part, "viewers"))
+        part_viewers(&o, s, rt);
+    if (all || !strcmp(o.part, "memory"))
+        part_memory(&o, s, rt);
+    scene_rt_free(rt);
+    scene_free(s);
+    return 0;
+}

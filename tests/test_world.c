@@ -1,0 +1,223 @@
+/* The world-space cache inside the engine (server/engine/kind_wsc.c) with the probe effect: a scene that
+ * needs no indirect light allocates nothing for it; probes light what the sun does not reach; one and two
+ * threads give identical images; the local lookup tables change no pixel; probes requested by identical
+ * viewers are shared; points outside the grid's range are refused and counted, never wrapped. */
+#include "test_util.h"
+
+#include "camgen.h"
+#include "engine.h"
+#include "fxt_scene.h"
+#include "scene.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef fxt_scene_fixture fixture;
+
+static srv_loop_desc probe_desc(const fixture *f, bool direct)
+{
+    srv_loop_desc d = {.s = f->s, .rt = f->rt, .seed = 11, .pool_bytes = 64u << 20, .probe_budget = 100000};
+    fxt_effects_on(&d, (const char *const[]){"probes"}, 1);
+    if (direct)
+        fxt_effects_on(&d, (const char *const[]){"shadow"}, 1);
+    return d;
+}
+
+/* Runs `frames` frames of the default camera of the embedded scene and returns a copy of the last radiance. */
+static float *run_frames(const fixture *f, const srv_loop_desc *d, uint32_t w, uint32_t h, uint32_t frames,
+                         srv_frame_stats *last, srv_memory *memory)
+{
+    srv_viewer_id id;
+    srv_loop *loop = fxt_loop(d, 1, w, h, &id);
+    for (uint32_t frame = 0; frame < frames; frame++) {
+        srv_camera cam = srv_camgen_camera(SRV_CAMGEN_WALK, f->s, 0, 1, frame, 1);
+        fxt_frame(loop, &id, 1, &cam, last);
+    }
+    if (memory)
+        srv_loop_memory(loop, memory);
+    float *copy = malloc((size_t)w * h * 3 * sizeof(float));
+    assert_non_null(copy);
+    memcpy(copy, srv_viewer_radiance(loop, id), (size_t)w * h * 3 * sizeof(float));
+    srv_loop_free(loop);
+    return copy;
+}
+
+/* A scene without light and sky needs no indirect light: the loop creates no world-space cache, allocates
+ * nothing for it and traces no probe ray, even when probes are asked for. */
+static void test_dark_scene_leaves_probes_out(void **state)
+{
+    (void)state;
+    scene *s = fxt_new_scene();
+    fxt_add_quad(s, "floor", (const double[3]){-2, 0, -2}, (const double[3]){0, 0, 4}, (const double[3]){4, 0, 0}, 2);
+    s->sky_intensity = 0;
+    scene_rt *rt = fxt_finish_scene(s, 8, 0.5f);
+    uint32_t count = 0;
+    const fx_effect *const *registry = fx_registry(&count);
+    bool needed[FX_MAX_EFFECTS];
+    char why[FX_MAX_EFFECTS][200];
+    fx_needs(registry, count, s, needed, why);
+    int32_t probes = fx_find(registry, count, "probes");
+    assert_true(probes >= 0);
+    assert_false(needed[probes]);
+    assert_true(why[probes][0] != '\0'); /* the reason the summary gives */
+
+    /* The loop turns what it is given on; what matters is that a needed-off effect is never given, and that a
+     * loop without world-space effects has no world-space cache. */
+    srv_loop_desc d = {.s = s, .rt = rt, .seed = 1};
+    fxt_effects_on(&d, (const char *const[]){"shadow"}, 1);
+    srv_viewer_id id;
+    srv_loop *loop = fxt_loop(&d, 1, 32, 32, &id);
+    srv_camera cam = {.position = {0, 1, 3}, .target = {0, 0, 0}, .up = {0, 1, 0}, .fov_deg = 60};
+    srv_frame_stats st;
+    fxt_frame(loop, &id, 1, &cam, &st);
+    assert_true(srv_loop_probe_cell(loop) == 0.0f);
+    assert_int_equal(st.world.table_capacity, 0);
+    assert_int_equal(st.world.bytes, 0);
+    assert_int_equal(st.rays[probes], 0);
+    srv_memory m;
+    srv_loop_memory(loop, &m);
+    assert_int_equal(m.world_local, 0);
+    assert_int_equal(m.pools_reserved[probes], 0);
+    srv_loop_free(loop);
+    scene_rt_free(rt);
+    scene_free(s);
+}
+
+/* The embedded scene is a room lit through a roof opening: without indirect light every pixel the sun does
+ * not reach and the sky does not see is black. With probes those pixels receive light, and no pixel gets
+ * darker. */
+static void test_probes_light_the_room(void **state)
+{
+    fixture *f = *state;
+    enum { W = 96, H = 54, FRAMES = 12 };
+    srv_frame_stats st;
+    srv_loop_desc without = {.s = f->s, .rt = f->rt, .seed = 11};
+    fxt_effects_on(&without, (const char *const[]){"shadow", "ao"}, 2);
+    float *dark = run_frames(f, &without, W, H, FRAMES, &st, NULL);
+    srv_loop_desc with = without;
+    fxt_effects_on(&with, (const char *const[]){"probes"}, 1);
+    with.probe_budget = 100000;
+    srv_memory m;
+    float *lit = run_frames(f, &with, W, H, FRAMES, &st, &m);
+    assert_true(st.world.unique_cells > 0);
+    assert_true(st.world.bricks_resident > 0);
+    assert_true(st.world.bytes > 0);
+    assert_true(m.world_local > 0);
+    uint64_t brighter = 0, darker = 0, black_before = 0, lit_now = 0;
+    for (size_t i = 0; i < (size_t)W * H * 3; i += 3) {
+        float a = dark[i] + dark[i + 1] + dark[i + 2], b = lit[i] + lit[i + 1] + lit[i + 2];
+        brighter += b > a;
+        darker += b < a - 1e-6f * (a + 1);
+        if (a <= 1e-6f) {
+            black_before++;
+            lit_now += b > 1e-4f;
+        }
+    }
+    print_message("pixels brighter %llu, darker %llu, black without probes %llu, of them lit with %llu\n",
+                  (unsigned long long)brighter, (unsigned long long)darker, (unsigned long long)black_before,
+                  (unsigned long long)lit_now);
+    assert_int_equal(darker, 0);
+    assert_true(brighter > (uint64_t)W * H / 2);
+    if (black_before)
+        assert_true(lit_now * 10 >= black_before * 9);
+    free(dark);
+    free(lit);
+}
+
+/* One and two threads: identical radiance for the same seed (updates read only committed probes). */
+static void test_threads_identical(void **state)
+{
+    fixture *f = *state;
+    srv_frame_stats st;
+    srv_loop_desc d = probe_desc(f, true);
+    d.threads = 1;
+    float *one = run_frames(f, &d, 64, 40, 6, &st, NULL);
+    d.threads = 2;
+    float *two = run_frames(f, &d, 64, 40, 6, &st, NULL);
+    assert_memory_equal(one, two, (size_t)64 * 40 * 3 * sizeof(float));
+    free(one);
+    free(two);
+}
+
+/* The local lookup tables are only a faster way to the same bricks: images are identical without them,
+ * and they answer most of compose's reads. */
+static void test_local_tables_change_nothing(void **state)
+{
+    fixture *f = *state;
+    srv_frame_stats st;
+    srv_loop_desc d = probe_desc(f, false);
+    float *with = run_frames(f, &d, 64, 40, 4, &st, NULL);
+    assert_true(st.world.local_lookups > 0);
+    print_message("local table hit rate %.3f\n", (double)st.world.local_hits / (double)st.world.local_lookups);
+    assert_true(st.world.local_hits * 2 > st.world.local_lookups);
+    d.no_local_table = true;
+    float *without = run_frames(f, &d, 64, 40, 4, &st, NULL);
+    assert_int_equal(st.world.local_lookups, 0);
+    assert_memory_equal(with, without, (size_t)64 * 40 * 3 * sizeof(float));
+    free(with);
+    free(without);
+}
+
+/* Identical viewers ask for the same probes: requested cells are twice the unique ones; each viewer's count
+ * is the unique count. */
+static void test_identical_viewers_share_probes(void **state)
+{
+    fixture *f = *state;
+    srv_loop_desc d = probe_desc(f, false);
+    srv_viewer_id ids[2];
+    srv_loop *loop = fxt_loop(&d, 2, 64, 40, ids);
+    srv_camera cams[2];
+    cams[0] = cams[1] = srv_camgen_camera(SRV_CAMGEN_IDENTICAL, f->s, 0, 2, 0, 1);
+    srv_frame_stats st;
+    fxt_frame(loop, ids, 2, cams, &st);
+    assert_true(st.world.unique_cells > 8);
+    assert_int_equal(st.viewers[0].requested_cells, st.world.unique_cells);
+    assert_int_equal(st.world.requested_cells, 2 * st.world.unique_cells);
+    /* The on-surface figures stay the on-surface ones: probes are not texels. */
+    assert_int_equal(st.requested_texels, 0);
+    srv_loop_free(loop);
+}
+
+/* A finest cell so small that the room lies outside the grid's range at the levels its distances choose:
+ * every point is refused and counted, nothing is requested, nothing wraps onto other cells. */
+static void test_out_of_range_refused(void **state)
+{
+    fixture *f = *state;
+    scene *s = fxt_new_scene();
+    double far = 5.0e6; /* metres from the world origin */
+    fxt_add_quad(s, "floor", (const double[3]){far - 2, 0, -2}, (const double[3]){0, 0, 4},
+                 (const double[3]){4, 0, 0}, 2);
+    fxt_add_sun(s, 0.3f, -1.0f, 0.2f);
+    scene_rt *rt = fxt_finish_scene(s, 8, 0.5f);
+    (void)f;
+    srv_loop_desc d = {.s = s, .rt = rt, .seed = 1, .probe_cell = 0.001f};
+    fxt_effects_on(&d, (const char *const[]){"probes"}, 1);
+    srv_viewer_id id;
+    srv_loop *loop = fxt_loop(&d, 1, 32, 32, &id);
+    float target[3] = {(float)(far - s->origin[0]), 0, (float)(0 - s->origin[2])};
+    srv_camera cam = {.position = {target[0], 2, target[2] + 3}, .target = {target[0], 0, target[2]},
+                      .up = {0, 1, 0}, .fov_deg = 60};
+    srv_frame_stats st;
+    fxt_frame(loop, &id, 1, &cam, &st);
+    assert_true(st.pixels_visible > 100);
+    assert_true(st.world.refusals > 0);
+    assert_int_equal(st.world.unique_cells, 0);
+    assert_int_equal(st.world.bricks_resident, 0);
+    srv_loop_free(loop);
+    scene_rt_free(rt);
+    scene_free(s);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_dark_scene_leaves_probes_out),
+        cmocka_unit_test(test_probes_light_the_room),
+        cmocka_unit_test(test_threads_identical),
+        cmocka_unit_test(test_local_tables_change_nothing),
+        cmocka_unit_test(test_identical_viewers_share_probes),
+        cmocka_unit_test(test_out_of_range_refused),
+    };
+    return cmocka_run_group_tests(tests, fxt_default_scene_setup, fxt_default_scene_teardown);
+}
