@@ -112,11 +112,20 @@ static osc_result osc__resolve_desc(const osc_desc *desc, osc_desc *resolved, ch
     for (unsigned effect = 0; effect < OSC_MAX_EFFECTS; effect++) {
         osc_effect_desc *effect_desc = &resolved->effects[effect];
         if (effect_desc->texel_bytes == 0) {
-            if (effect_desc->max_blocks != 0 || effect_desc->convergence)
+            if (effect_desc->max_blocks != 0 || effect_desc->convergence || effect_desc->block_texels != 0)
                 return osc__invalid(error_text, error_text_cap,
-                                    "effects[%u]: max_blocks or convergence set but texel_bytes is 0", effect);
+                                    "effects[%u]: max_blocks, convergence or block_texels set but texel_bytes is 0",
+                                    effect);
             continue;
         }
+        if (resolved->single_pool && effect != 0)
+            return osc__invalid(error_text, error_text_cap,
+                                "effects[%u]: a single-pool cache has effects[0] only", effect);
+        if (effect_desc->block_texels == 0)
+            effect_desc->block_texels = OSC_BLOCK_TEXELS;
+        if (effect_desc->block_texels != OSC_BLOCK_TEXELS && effect_desc->block_texels != 1)
+            return osc__invalid(error_text, error_text_cap, "effects[%u].block_texels %u is neither 64 nor 1",
+                                effect, effect_desc->block_texels);
         if (effect_desc->texel_bytes > OSC__MAX_TEXEL_BYTES)
             return osc__invalid(error_text, error_text_cap, "effects[%u].texel_bytes %u exceeds 1024", effect,
                                 effect_desc->texel_bytes);
@@ -167,7 +176,8 @@ static bool osc__pool_create(osc_cache *cache, osc__pool *pool, const osc_effect
     uint32_t capacity = effect_desc->max_blocks;
     pool->texel_bytes = effect_desc->texel_bytes;
     pool->capacity = capacity;
-    pool->block_bytes = OSC_BLOCK_TEXELS * effect_desc->texel_bytes;
+    pool->block_texels = effect_desc->block_texels;
+    pool->block_bytes = effect_desc->block_texels * effect_desc->texel_bytes;
     pool->age_threshold = initial_age;
     pool->requested = osc__alloc_array(cache, pool, OSC__MEM_BLOCK_META, capacity, sizeof(uint64_t));
     pool->valid = osc__alloc_array(cache, pool, OSC__MEM_BLOCK_META, capacity, sizeof(uint64_t));
@@ -218,6 +228,7 @@ osc_result osc_create(const osc_desc *desc, osc_cache **out_cache, char *error_t
     cache->allocator = resolved.allocator;
     cache->bytes[OSC__MEM_STRUCT] = sizeof *cache;
     cache->max_age_frames = resolved.max_age_frames;
+    cache->pool_select = resolved.single_pool ? 0u : 0xFu;
 
     uint32_t table_capacity = resolved.table_capacity;
     uint64_t *table_keys = osc__alloc_array(cache, NULL, OSC__MEM_TABLE_KEYS, table_capacity, sizeof(uint64_t));
@@ -419,7 +430,7 @@ osc_result osc_request(osc_cache *cache, uint64_t key, uint64_t texel_mask, uint
     OSC_ASSERT(cache->stamp != 0); /* osc_begin_frame first */
     OSC_ASSERT(key != OSC_KEY_EMPTY);
     *block_index = OSC_NONE;
-    osc__pool *pool = &cache->pools[osc_key_effect(key)];
+    osc__pool *pool = osc__pool_of_key(cache, key);
     if (pool->texel_bytes == 0)
         return OSC_ERR_NO_POOL;
     pool->stats.requests++;
@@ -497,7 +508,7 @@ osc_result osc_remove(osc_cache *cache, uint64_t key)
     if (slot == OSC_NONE)
         return OSC_ERR_NOT_FOUND;
     cache->stats.hits++;
-    osc__pool *pool = &cache->pools[osc_key_effect(key)];
+    osc__pool *pool = osc__pool_of_key(cache, key);
     uint32_t block = cache->table.values[slot];
     osc__table_remove_slot(&cache->table, slot);
     osc__pool_free_block(cache, pool, block);
@@ -611,6 +622,12 @@ uint32_t osc_pool_capacity(const osc_cache *cache, uint32_t effect)
 uint32_t osc_pool_texel_bytes(const osc_cache *cache, uint32_t effect)
 {
     return osc__pool_of(cache, effect)->texel_bytes;
+}
+
+/* Elements per block (0 when absent). */
+uint32_t osc_pool_block_texels(const osc_cache *cache, uint32_t effect)
+{
+    return osc__pool_of(cache, effect)->block_texels;
 }
 
 /* ---- statistics and memory ------------------------------------------------------------------------------- */

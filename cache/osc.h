@@ -247,11 +247,15 @@ typedef struct osc_allocator {
     void *user;
 } osc_allocator;
 
-/* One effect's block pool. All-zero: the effect is absent (no pool, nothing allocated). */
+/* One effect's block pool. All-zero: the effect is absent (no pool, nothing allocated).
+ * block_texels exists so the world-space cache (wsc.h) can reuse this core for 1 x 1 x 1 bricks: a block
+ * of 1 element has a payload of texel_bytes and uses bit 0 of its masks only (the caller keeps the other
+ * bits zero). A block of 64 elements is an 8 x 8 texel block here and a 4 x 4 x 4 brick in the wsc. */
 typedef struct osc_effect_desc {
     uint32_t texel_bytes; /* payload bytes per texel, 1..1024 (0 = effect absent; e.g. 2 shadow, 4 AO) */
     uint32_t max_blocks;  /* pool capacity in 8x8 blocks (default 65536 when texel_bytes > 0) */
     bool convergence;     /* keep one uint32 convergence word per block (default false) */
+    uint32_t block_texels; /* elements per block: 64 or 1 (default 64, the 8 x 8 texel block) */
 } osc_effect_desc;
 
 /* The cache's configuration; all-zero fields take the defaults written beside them. */
@@ -266,6 +270,10 @@ typedef struct osc_desc {
                                      memory is free, and the adaptive threshold never exceeds it, frames
                                      (default 1024) */
     osc_allocator allocator;      /* default: malloc / free */
+    bool single_pool;             /* keys carry no effect field: every key, all 64 bits of it, goes to
+                                     pool 0 and only effects[0] may be present (the world-space cache's
+                                     WGIs); OSC_KEY_EMPTY stays reserved (default false: the top 4 bits
+                                     select the pool) */
 } osc_desc;
 
 typedef struct osc_cache osc_cache;
@@ -338,16 +346,18 @@ uint32_t osc_block_last_frame(const osc_cache *cache, uint32_t effect, uint32_t 
 /* Replaces a block's valid mask (the effect calls it after writing texels of the payload). */
 void osc_block_set_valid(osc_cache *cache, uint32_t effect, uint32_t block_index, uint64_t valid_mask);
 
-/* The block's payload: 64 texels of texel_bytes bytes, texel (x, y) at byte (y*8+x)*texel_bytes. Owned by
- * the cache; zeroed when the block is mapped. */
+/* The block's payload: 64 texels of texel_bytes bytes, texel (x, y) at byte (y*8+x)*texel_bytes (a pool
+ * of block_texels 1: one element of texel_bytes bytes). Owned by the cache; zeroed when the block is
+ * mapped. */
 void *osc_block_payload(osc_cache *cache, uint32_t effect, uint32_t block_index);
 
 /* The block's convergence word (zeroed when mapped), or NULL when the pool has none. */
 uint32_t *osc_block_convergence(osc_cache *cache, uint32_t effect, uint32_t block_index);
 
-/* Pool shape: capacity in blocks and bytes per texel (both 0 for an absent effect). */
+/* Pool shape: capacity in blocks, bytes per texel and elements per block (all 0 for an absent effect). */
 uint32_t osc_pool_capacity(const osc_cache *cache, uint32_t effect);
 uint32_t osc_pool_texel_bytes(const osc_cache *cache, uint32_t effect);
+uint32_t osc_pool_block_texels(const osc_cache *cache, uint32_t effect);
 
 /* ---- statistics and memory -------------------------------------------------------------------------- */
 

@@ -107,7 +107,8 @@ enum {
 typedef struct osc__pool {
     uint32_t texel_bytes;    /* 0: no pool */
     uint32_t capacity;       /* blocks */
-    uint32_t block_bytes;    /* 64 * texel_bytes */
+    uint32_t block_texels;   /* elements per block: 64 (8 x 8 texels, 4 x 4 x 4 cells) or 1 */
+    uint32_t block_bytes;    /* block_texels * texel_bytes */
     uint32_t in_use;         /* resident blocks */
     /* Block metadata, structure of arrays, [capacity] each. */
     uint64_t *requested;     /* texels requested this frame */
@@ -138,11 +139,20 @@ struct osc_cache {
     osc_allocator allocator;
     osc__table table;
     osc__pool pools[OSC_MAX_EFFECTS];
+    uint32_t pool_select;    /* ANDed with the key's top 4 bits to pick the pool: 0xF, or 0 for a
+                                single-pool cache (osc__pool_of_key) */
     uint32_t stamp;          /* current frame + 1; 0 before the first osc_begin_frame */
     uint32_t max_age_frames;
     osc_stats stats;         /* whole-cache counters (effects[] filled on osc_stats_get) */
     size_t bytes[OSC__MEM_COUNT]; /* bytes allocated, by bucket, whole cache */
 };
+
+/* The pool a key belongs to: its top 4 bits, masked to 0 in a single-pool cache. A mask rather than a
+ * branch keeps the default request path as it was (one more AND with a field of the same cache line). */
+static inline osc__pool *osc__pool_of_key(osc_cache *cache, uint64_t key)
+{
+    return &cache->pools[(uint32_t)(key >> OSC_KEY_EFFECT_SHIFT) & cache->pool_select];
+}
 
 /* Builds the pool's eviction candidate list for the current stamp: resident blocks not requested this
  * frame, least recently requested first (ties by block index). */
