@@ -128,10 +128,7 @@ static void test_wgi_layout_and_round_trip(void **state)
             uint32_t out_level = 99;
             int32_t ox = 0, oy = 0, oz = 0;
             assert_true(wsc_wgi_unpack(wgi, &out_level, &ox, &oy, &oz));
-            assert_int_equal(out_level, level);
-            assert_int_equal(ox, gx);
-            assert_int_equal(oy, gy);
-            assert_int_equal(oz, gz);
+            assert_true(out_level == level && ox == gx && oy == gy && oz == gz);
         }
     }
     /* Level 15 is reserved: never packed, never unpacked (so UINT64_MAX is no WGI). */
@@ -171,18 +168,13 @@ static void test_level_formula(void **state)
     (void)state;
     const double c0 = 0.25;
     /* Closed form at the boundaries: level l covers (16 c0 2^(l-1), 16 c0 2^l]. */
-    assert_int_equal(wsc_level(0.0, c0), 0);
-    assert_int_equal(wsc_level(4.0, c0), 0);
-    assert_int_equal(wsc_level(nextafter(4.0, 10.0), c0), 1);
-    assert_int_equal(wsc_level(8.0, c0), 1);
-    assert_int_equal(wsc_level(nextafter(8.0, 10.0), c0), 2);
-    assert_int_equal(wsc_level(4.0 * 1024.0, c0), 10);
-    assert_int_equal(wsc_level(1e300, c0), WSC_MAX_LEVEL);
-    assert_int_equal(wsc_level(INFINITY, c0), WSC_MAX_LEVEL);
-    assert_int_equal(wsc_level(NAN, c0), 0);
-    assert_int_equal(wsc_level(-5.0, c0), 0);
-    assert_int_equal(wsc_level(-INFINITY, c0), 0);
-    assert_int_equal(wsc_level(5e-324, c0), 0);
+    static const struct {
+        double distance;
+        uint32_t level;
+    } expected[] = {{0.0, 0}, {4.0, 0}, {4.000000000000001, 1}, {8.0, 1}, {8.000000000000002, 2}, {4096.0, 10},
+                    {1e300, WSC_MAX_LEVEL}, {INFINITY, WSC_MAX_LEVEL}, {NAN, 0}, {-5.0, 0}, {-INFINITY, 0}, {5e-324, 0}};
+    for (size_t i = 0; i < sizeof expected / sizeof expected[0]; i++)
+        assert_int_equal(wsc_level(expected[i].distance, c0), expected[i].level);
     /* Random distances: 8 < distance / cell <= 16 for levels 1..13 (cells distance/16..distance/8 wide). */
     uint64_t rng = 3;
     for (int i = 0; i < 20000; i++) {
@@ -246,9 +238,7 @@ static void test_grid_static_and_refusals(void **state)
     double far[3] = {200000.0 + 0.3, -32000.0 + 0.1, -250000.0 + 0.2};
     int32_t g[3];
     assert_true(wsc_grid_point(far, 0, c0, g));
-    assert_int_equal(g[0], 800001);
-    assert_int_equal(g[1], -128000 + 0);
-    assert_int_equal(g[2], -1000000 + 0);
+    assert_true(g[0] == 800001 && g[1] == -128000 && g[2] == -1000000);
 
     /* Range ends: the last cell inside is accepted, the next refused, per axis and level; non-finite
      * coordinates refused. Count the refusals into a cache and read them back. */
