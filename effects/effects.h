@@ -24,6 +24,7 @@ enum {
     FX_TRI_LOOKUP = SCENE_FX_TRIANGLE_LOOKUP, /* 0 */
     FX_SHADOW = SCENE_FX_SHADOW,              /* 1 */
     FX_AO = SCENE_FX_AO,                      /* 2 */
+    FX_PROBES = SCENE_FX_PROBES,              /* 3: the effect id world_taps is called with for probes */
     FX_SHADOW_RAYS = 16,                      /* rays per texel and light */
     FX_AO_MAX_SAMPLES = 64,                   /* AO converges here */
 };
@@ -138,6 +139,69 @@ float fx_ao_eval_point(const fx_context *ctx, const float pos[3], const float no
 /* The direction towards light l from pos and the distance to it (INFINITY for directional lights). */
 void fx_light_direction(const scene_light *light, const float pos[3], float dir[3], float *distance);
 
+/* ---- probes (indirect diffuse, DDGI-style; fx_probes.c) -------------------------------------------- */
+
+/* One probe's payload, FX_PROBE_BYTES, little-endian, written byte by byte:
+ *   0  float32 x3  position, scene-local metres (the grid point plus its relocation offset)
+ *  12  float32     cell size of its level, metres (shade has no other way to know it)
+ *  16  uint32      flags: FX_PROBE_HAS_DATA (committed at least once), FX_PROBE_OFF (inside geometry)
+ *  20  uint32      blended updates since it was created or last switched on (0: the next takes its value
+ *                  fully); texel_samples returns it
+ *  24  float32     irradiance scale: the largest irradiance component of the map (0: all zero)
+ *  28  float32     fraction of back-face hits of the last update
+ *  32  64 x 3 half irradiance / scale, RGB, texel t = y * 8 + x of the 8 x 8 octahedral map
+ * 416  64 x 2 half visibility moments: mean distance / cell, mean (distance / cell)^2
+ * Irradiance is E = integral of radiance x cos over the hemisphere about the texel's direction (a uniform
+ * sky of radiance L gives pi L); shade hands compose E / pi, which is what compose's bracket holds. */
+enum {
+    FX_PROBE_BYTES = 672,
+    FX_PROBE_MAP = 8,               /* octahedral map side, texels */
+    FX_PROBE_TEXELS = 64,
+    FX_PROBE_RAYS = 144,            /* default rays per update (DDGI's) */
+    FX_PROBE_MAX_RAYS = 4096,       /* probe_rays is clamped to this */
+    FX_PROBE_HAS_DATA = 1u,
+    FX_PROBE_OFF = 2u,
+};
+#define FX_PROBE_HYSTERESIS 0.97f /* default weight of the old value in a blend (RTXGI's) */
+
+/* The octahedral map (DDGI's convention): unit dir -> uv in [-1, 1]^2, z >= 0 inside the diamond |u|+|v| <= 1,
+ * z < 0 folded outside it; and back (any uv in [-1, 1]^2 to a unit direction). Texel (x, y) covers
+ * uv in [x/4 - 1, (x+1)/4 - 1] x [y/4 - 1, (y+1)/4 - 1]. */
+void fx_probe_oct_encode(const float dir[3], float uv[2]);
+void fx_probe_oct_decode(const float uv[2], float dir[3]);
+
+/* Point i of the n-point spherical Fibonacci set (unrotated), a unit vector. */
+void fx_probe_fibonacci(uint32_t i, uint32_t n, float dir[3]);
+
+/* A probe payload's header, decoded. */
+typedef struct fx_probe_info {
+    float position[3], cell;
+    uint32_t flags, updates;
+    float backface_fraction;
+} fx_probe_info;
+void fx_probe_info_read(const void *payload, fx_probe_info *out);
+
+/* A probe's irradiance E (true units: pi L under a uniform sky L) in direction dir, bilinear in its map. */
+void fx_probe_irradiance(const void *payload, const float dir[3], float out_rgb[3]);
+
+/* The filtered irradiance E at a surface point (position, unit normal) from taps over probe payloads: each
+ * probe with data and not off weighted by its trilinear tap weight x DDGI's wrap weight x Chebyshev
+ * visibility from its moments (normal bias 0.2 cell), renormalised. Returns false (out zero) when no probe
+ * contributes. The same filter serves shade and the hits of an update. */
+bool fx_probe_filter(const struct fx_taps *taps, const float position[3], const float normal[3], float out_rgb[3]);
+
+/* Traces every job's probe and leaves the new estimates in the job's scratch; reads payloads only (its own
+ * and, through ctx->world_taps, its neighbours' committed ones). Returns the rays traced. */
+uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count);
+
+/* Blends every job's scratch into its payload with hysteresis ctx->probe_hysteresis. */
+void fx_probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint32_t count);
+
+/* The no-cache estimate at a visible point: probe_rays cosine-weighted rays, hits lit directly (shadow rays),
+ * the sky on misses, one bounce. Writes E (true units) to out_rgb; *rays receives the rays traced. */
+void fx_probe_eval_point(const fx_context *ctx, const float pos[3], const float normal[3], uint64_t pixel_id,
+                         float out_rgb[3], uint64_t *rays);
+
 /* ---- effects as plug-ins: one table of data and callbacks per effect ---------------------------------- */
 
 enum {
@@ -240,7 +304,7 @@ typedef struct fx_effect {
 } fx_effect;
 
 /* The built-in effects in registry order (the on-surface key's effect field is the index):
- * triangle_lookup, shadow, ao. *count receives the number. */
+ * triangle_lookup, shadow, ao, probes. *count receives the number. */
 const fx_effect *const *fx_registry(uint32_t *count);
 
 /* The index of the effect named `name` (or its alias) in effects[0..count), or -1. */
@@ -252,7 +316,7 @@ int32_t fx_find(const fx_effect *const *effects, uint32_t count, const char *nam
 void fx_needs(const fx_effect *const *effects, uint32_t count, const scene *s, bool *needed, char (*why)[200]);
 
 /* The built-in tables (each defined beside its effect's code). */
-extern const fx_effect fx_effect_triangle_lookup, fx_effect_shadow, fx_effect_ao;
+extern const fx_effect fx_effect_triangle_lookup, fx_effect_shadow, fx_effect_ao, fx_effect_probes;
 
 #ifdef __cplusplus
 }

@@ -11,6 +11,7 @@ static const fx_effect *const builtin[] = {
     &fx_effect_triangle_lookup, /* 0: every on-surface effect depends on it */
     &fx_effect_shadow,          /* 1 */
     &fx_effect_ao,              /* 2 */
+    &fx_effect_probes,          /* 3: world-space (SCENE_FX_PROBES) */
 };
 
 const fx_effect *const *fx_registry(uint32_t *count)

@@ -649,7 +649,7 @@ static void test_describe(void **state)
     scene *s = fxt_new_scene();
     uint32_t count = 0;
     const fx_effect *const *registry = fx_registry(&count);
-    assert_int_equal(count, 3);
+    assert_int_equal(count, 4);
     assert_ptr_equal(registry[FX_TRI_LOOKUP], &fx_effect_triangle_lookup);
     assert_ptr_equal(registry[FX_SHADOW], &fx_effect_shadow);
     assert_ptr_equal(registry[FX_AO], &fx_effect_ao);
@@ -676,7 +676,19 @@ static void test_describe(void **state)
     /* Names and aliases resolve to registry indices; unknown names do not. */
     assert_int_equal(fx_find(registry, count, "shadows"), FX_SHADOW);
     assert_int_equal(fx_find(registry, count, "ao"), FX_AO);
-    assert_int_equal(fx_find(registry, count, "probes"), -1);
+    assert_int_equal(fx_find(registry, count, "probes"), FX_PROBES);
+    assert_int_equal(fx_find(registry, count, "indirect"), FX_PROBES);
+    assert_int_equal(fx_find(registry, count, "volumes"), -1);
+    const fx_effect *probes = registry[FX_PROBES];
+    assert_ptr_equal(probes, &fx_effect_probes);
+    assert_int_equal(probes->cache, SCENE_CACHE_WORLD_SPACE);
+    assert_int_equal(probes->brick_size, 1);
+    assert_int_equal(probes->policy, FX_UPDATE_CONTINUOUS);
+    assert_int_equal(probes->texel_bytes(s), FX_PROBE_BYTES);
+    assert_true(probes->texel_bytes(s) <= 1024);
+    assert_int_equal(probes->cost(s, 0), FX_PROBE_RAYS * 4); /* three lights: a shadow ray each per hit */
+    assert_non_null(probes->commit);
+    assert_non_null(probes->scratch_bytes);
     /* Light directions: the sun's reversed travel direction; a point light's unit direction and distance. */
     float dir[3], distance;
     fx_light_direction(&s->lights[0], (float[3]){5, 5, 5}, dir, &distance);

@@ -1,0 +1,837 @@
+/* Probes: DDGI-style indirect diffuse light in the world-space cache (DESIGN.md "Effects"; Majercik et al.
+ * 2019, "Dynamic Diffuse Global Illumination with Ray-Traced Irradiance Fields", and RTXGI's defaults).
+ * Frame stage 6 for world-space jobs (update, then commit after every update of the frame), stage 7 (shade),
+ * and the per-pixel estimate of the no-cache baseline (eval).
+ *
+ * Units. Compose forms radiance = albedo x (E_l cos + sky x sky_visibility + indirect): its bracket is
+ * irradiance over pi (a light's `intensity` is its irradiance over pi; the sky term is the sky's radiance L,
+ * which is pi L over pi). Payloads store true irradiance E (pi L under a uniform sky) as DDGI does; shade and
+ * eval add E / pi to `indirect`, so a white wall under a uniform sky gets from the probes exactly what the
+ * sky term gives it. The probe irradiance includes the sky (misses return it), so shade and eval set
+ * sky_visibility to 0 for the pixels they light: compose would otherwise count the sky twice.
+ *
+ * Update of one probe (a job, brick size 1): probe_rays rays in a spherical Fibonacci set, rotated by a
+ * uniform random rotation from hash(seed, key, update count), from the probe's (relocated) position:
+ *   - front-face hit: radiance = albedo x (direct light at the hit, shadow rays to every light, as compose
+ *     lights it + E_probes / pi), E_probes the committed probes around the hit at the job's level through
+ *     ctx->world_taps with the shade filter (fx_probe_filter): light bounces once more every frame;
+ *   - back-face hit: radiance 0, counted, distance shortened to 0.2 t (RTXGI), so the visibility moments see
+ *     the wall as near;
+ *   - miss: the sky's radiance, distance the maximum.
+ * Distances are clamped to 1.5 sqrt(3) cell (RTXGI's maximum). Per texel direction d_t, the new irradiance is
+ * pi sum(max(0, d_t.d_i) L_i) / sum(max(0, d_t.d_i)) (the cosine-weighted integral, normalised by the
+ * quadrature's own weight sum), and the moments sum(w d) / sum(w), sum(w d^2) / sum(w) with w = max(0,
+ * d_t.d_i)^FX_PROBE_DEPTH_POWER. These, the back-face fraction, the off decision and the relocated position
+ * go to the job's scratch; commit blends them into the payload: old x h + new x (1 - h), h =
+ * ctx->probe_hysteresis, except that the first update after the probe was created or switched on is taken
+ * as is. Plain hysteresis (no RTXGI change-threshold or brightness clamp), so a step settles as h^k exactly.
+ *
+ * Probes inside geometry are switched off (shade and the update filter skip them; the update count is reset):
+ * more than FX_PROBE_BACKFACE_OFF (RTXGI's 25 %) of the rays hit back faces, or some back face lies within
+ * the cell diagonal sqrt(3) cell and no front face does (a probe just outside a closed room sees only the
+ * room's back faces near it, under 25 % of its rays, and would otherwise pass its darkness to the wall
+ * points of its cells; RTXGI's classification also switches off probes with no front face in their cell).
+ * Relocation, every update, from the same rays (offset = position - grid point, m = FX_PROBE_MIN_FRONT cell):
+ *   1. off (the tests above): move through the closest back face, offset += dir_b (t_b + m / 2)
+ *      (RTXGI: towards the closest back face, which is the way out of the geometry);
+ *   2. else a front face closer than m: move straight away from it by what is missing, offset -= dir_f (m -
+ *      t_f) (a probe in a corner walks out of it over a few updates);
+ *   3. else: back towards the grid point by min(t_f - m, |offset|) (RTXGI), t_f the closest front face.
+ * Each component of the offset is clamped to +-0.45 cell (RTXGI checks per axis too), so a probe never
+ * passes half way to its neighbour and the trilinear cell stays right.
+ *
+ * Storage: half floats (the 1024-byte texel limit; floats would take 1,280 bytes for the maps alone). The
+ * irradiance is stored relative to a per-probe float scale, so any light intensity keeps 11 bits of
+ * precision (DESIGN.md "Numerical robustness": nothing saturates or overflows); moments are in cell units
+ * (scale-free: a scene of 1e-4 m keeps them normal halves). Rounding to half is stochastic (probability
+ * from a hash): with nearest rounding a 3 % step is below half a unit in the last place within 0.8 % of the
+ * target, and the blend would stall there; stochastic rounding keeps the blend's mean exact.
+ *
+ * Determinism: update reads only committed payloads (its own and world_taps'); all randomness is hashed
+ * from (seed, key, update count): any thread split or job order gives the same bytes. The caller must have
+ * called scene_tracing_thread_init() in the tracing thread. */
+#include "fx_internal.h"
+
+#include <float.h>
+#include <string.h>
+
+#define FX_PROBE_PI 3.14159265358979f
+/* The cosine power of the moments' lobe: 64 (DDGI's 50, rounded to six squarings). A lobe as wide as an
+ * 8 x 8 texel (power 16) mixed a thin wall's distance with the floor's behind it, and the Chebyshev test let
+ * 15 % of the lit room through to a floor point beside the wall (tests/test_probes.c); at 64 it is under 1 %.
+ * Each texel then rests on about 1.1 rays' weight per update; the hysteresis averages over the rotations. */
+#define FX_PROBE_DEPTH_POWER 64
+#define FX_PROBE_BACKFACE_OFF 0.25f  /* back-face fraction above which a probe is off (RTXGI) */
+#define FX_PROBE_BACKFACE_SHORTEN 0.2f /* back-face distances are stored shortened (RTXGI) */
+#define FX_PROBE_MAX_DISTANCE 2.598076f /* 1.5 sqrt(3): distances are clamped to this many cells */
+#define FX_PROBE_MIN_FRONT 0.25f     /* cells: relocation keeps front faces at least this far */
+#define FX_PROBE_MAX_OFFSET 0.45f    /* cells, per axis: relocation range */
+#define FX_PROBE_NORMAL_BIAS 0.2f    /* cells: the shading point moves this far along its normal for Chebyshev */
+
+enum {
+    FX_STREAM_PROBE_ROTATION = 0x5052, /* "PR" */
+    FX_STREAM_PROBE_ROUNDING = 0x5051,
+    FX_STREAM_PROBE_EVAL = 0x5045,
+    PROBE_CHUNK = 128, /* primary rays per intersection stream */
+    PROBE_HEADER = 32,
+    PROBE_IRRADIANCE = PROBE_HEADER,
+    PROBE_MOMENTS = PROBE_IRRADIANCE + FX_PROBE_TEXELS * 6,
+};
+
+_Static_assert(PROBE_MOMENTS + FX_PROBE_TEXELS * 4 == FX_PROBE_BYTES, "payload layout");
+
+/* ---- bytes ---------------------------------------------------------------------------------------------- */
+
+static uint32_t get_u32(const uint8_t *p)
+{
+    return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);
+}
+
+static void put_u32(uint8_t *p, uint32_t v)
+{
+    p[0] = (uint8_t)v;
+    p[1] = (uint8_t)(v >> 8);
+    p[2] = (uint8_t)(v >> 16);
+    p[3] = (uint8_t)(v >> 24);
+}
+
+static float get_f32(const uint8_t *p)
+{
+    uint32_t bits = get_u32(p);
+    float f;
+    memcpy(&f, &bits, sizeof f);
+    return f;
+}
+
+static void put_f32(uint8_t *p, float f)
+{
+    uint32_t bits;
+    memcpy(&bits, &f, sizeof bits);
+    put_u32(p, bits);
+}
+
+/* A half float (IEEE binary16) to float: every half, subnormals included (no infinities are ever written). */
+static float half_to_float(uint16_t h)
+{
+    uint32_t exponent = (h >> 10) & 0x1fu, mantissa = h & 0x3ffu;
+    float value;
+    if (exponent == 0)
+        value = (float)mantissa * 0x1p-24f;
+    else if (exponent == 31)
+        value = mantissa ? NAN : INFINITY;
+    else
+        value = ldexpf((float)(mantissa | 0x400u), (int)exponent - 25);
+    return (h & 0x8000u) ? -value : value;
+}
+
+/* A value >= 0 to half, rounded up with probability equal to its position between the two neighbouring
+ * halves (u in [0, 1)), so the rounding is unbiased; saturates at the largest half (65504), never infinity.
+ * Negative values and NaN become 0 (irradiance and distances are never negative). */
+static uint16_t half_stochastic(float x, float u)
+{
+    if (!(x > 0))
+        return 0;
+    if (x >= 65504.0f)
+        return 0x7bffu;
+    uint16_t lo;
+    if (x < 0x1p-14f) {
+        lo = (uint16_t)(x * 0x1p24f); /* subnormal: truncated multiple of 2^-24 */
+    } else {
+        uint32_t bits;
+        memcpy(&bits, &x, sizeof bits);
+        int exponent = (int)((bits >> 23) & 0xffu) - 127;
+        lo = (uint16_t)(((uint32_t)(exponent + 15) << 10) | ((bits & 0x7fffffu) >> 13));
+    }
+    float below = half_to_float(lo);
+    if (below == x || lo == 0x7bffu)
+        return lo;
+    float above = half_to_float((uint16_t)(lo + 1));
+    return u * (above - below) < x - below ? (uint16_t)(lo + 1) : lo;
+}
+
+/* ---- directions ------------------------------------------------------------------------------------ */
+
+static float sign_nonzero(float x)
+{
+    return x >= 0 ? 1.0f : -1.0f;
+}
+
+void fx_probe_oct_encode(const float dir[3], float uv[2])
+{
+    float l1 = fabsf(dir[0]) + fabsf(dir[1]) + fabsf(dir[2]);
+    float x = l1 > 0 ? dir[0] / l1 : 0.0f, y = l1 > 0 ? dir[1] / l1 : 0.0f;
+    if (dir[2] < 0) {
+        float fx = (1.0f - fabsf(y)) * sign_nonzero(x), fy = (1.0f - fabsf(x)) * sign_nonzero(y);
+        x = fx, y = fy;
+    }
+    uv[0] = x;
+    uv[1] = y;
+}
+
+void fx_probe_oct_decode(const float uv[2], float dir[3])
+{
+    float x = uv[0], y = uv[1], z = 1.0f - fabsf(x) - fabsf(y);
+    if (z < 0) {
+        float fx = (1.0f - fabsf(y)) * sign_nonzero(x), fy = (1.0f - fabsf(x)) * sign_nonzero(y);
+        x = fx, y = fy;
+    }
+    float len = sqrtf(x * x + y * y + z * z);
+    dir[0] = x / len;
+    dir[1] = y / len;
+    dir[2] = z / len;
+}
+
+void fx_probe_fibonacci(uint32_t i, uint32_t n, float dir[3])
+{
+    /* DDGI's sphericalFibonacci: phi = 2 pi frac(i (golden ratio - 1)), cos theta = 1 - (2 i + 1) / n. */
+    double turns = (double)i * 0.6180339887498949;
+    turns -= floor(turns);
+    float cos_theta = 1.0f - (2.0f * (float)i + 1.0f) / (float)n;
+    float sin_theta = sqrtf(fmaxf(0.0f, 1.0f - cos_theta * cos_theta));
+    float s, c;
+    fx__sincos_turns((float)turns, &s, &c);
+    dir[0] = c * sin_theta;
+    dir[1] = s * sin_theta;
+    dir[2] = cos_theta;
+}
+
+/* The 64 texel-centre directions of the map. */
+static void texel_dirs(float dirs[FX_PROBE_TEXELS][3])
+{
+    for (uint32_t t = 0; t < FX_PROBE_TEXELS; t++) {
+        float uv[2] = {((float)(t % FX_PROBE_MAP) + 0.5f) * 0.25f - 1.0f,
+                       ((float)(t / FX_PROBE_MAP) + 0.5f) * 0.25f - 1.0f};
+        fx_probe_oct_decode(uv, dirs[t]);
+    }
+}
+
+/* The four texels and bilinear weights of direction dir in the 8 x 8 map; neighbours past an edge of the
+ * square wrap as the octahedron does (the edge is mirrored about its midpoint; a corner's neighbour is the
+ * opposite corner), i.e. DDGI's border texels without storing them. */
+static void oct_bilinear(const float dir[3], uint32_t texel[4], float weight[4])
+{
+    float uv[2];
+    fx_probe_oct_encode(dir, uv);
+    float fx = (uv[0] + 1.0f) * 4.0f - 0.5f, fy = (uv[1] + 1.0f) * 4.0f - 0.5f;
+    float x0 = floorf(fx), y0 = floorf(fy);
+    float wx = fx - x0, wy = fy - y0;
+    for (int c = 0; c < 4; c++) {
+        int x = (int)x0 + (c & 1), y = (int)y0 + (c >> 1);
+        if (y < 0 || y > 7) {
+            y = y < 0 ? 0 : 7;
+            x = 7 - x;
+        }
+        if (x < 0 || x > 7) {
+            x = x < 0 ? 0 : 7;
+            y = 7 - y;
+        }
+        x = x < 0 ? 0 : (x > 7 ? 7 : x); /* only reached for NaN input */
+        y = y < 0 ? 0 : (y > 7 ? 7 : y);
+        texel[c] = (uint32_t)(y * FX_PROBE_MAP + x);
+        weight[c] = ((c & 1) ? wx : 1.0f - wx) * ((c >> 1) ? wy : 1.0f - wy);
+    }
+}
+
+/* ---- reading payloads -------------------------------------------------------------------------------- */
+
+void fx_probe_info_read(const void *payload, fx_probe_info *out)
+{
+    const uint8_t *p = payload;
+    for (int k = 0; k < 3; k++)
+        out->position[k] = get_f32(p + 4 * k);
+    out->cell = get_f32(p + 12);
+    out->flags = get_u32(p + 16);
+    out->updates = get_u32(p + 20);
+    out->backface_fraction = get_f32(p + 28);
+}
+
+void fx_probe_irradiance(const void *payload, const float dir[3], float out_rgb[3])
+{
+    const uint8_t *p = payload;
+    uint32_t texel[4];
+    float weight[4];
+    oct_bilinear(dir, texel, weight);
+    float scale = get_f32(p + 24);
+    out_rgb[0] = out_rgb[1] = out_rgb[2] = 0;
+    for (int c = 0; c < 4; c++)
+        for (int k = 0; k < 3; k++)
+            out_rgb[k] += weight[c] * half_to_float(fx__get_u16(p + PROBE_IRRADIANCE + 6 * texel[c] + 2 * k));
+    for (int k = 0; k < 3; k++)
+        out_rgb[k] *= scale;
+}
+
+/* The moments (mean distance, mean squared distance, metres) of a probe in direction dir, bilinear. */
+static void probe_moments(const uint8_t *p, const float dir[3], float cell, float *mean, float *mean2)
+{
+    uint32_t texel[4];
+    float weight[4];
+    oct_bilinear(dir, texel, weight);
+    float m1 = 0, m2 = 0;
+    for (int c = 0; c < 4; c++) {
+        m1 += weight[c] * half_to_float(fx__get_u16(p + PROBE_MOMENTS + 4 * texel[c]));
+        m2 += weight[c] * half_to_float(fx__get_u16(p + PROBE_MOMENTS + 4 * texel[c] + 2));
+    }
+    *mean = m1 * cell;
+    *mean2 = m2 * cell * cell;
+}
+
+bool fx_probe_filter(const fx_taps *taps, const float position[3], const float normal[3], float out_rgb[3])
+{
+    float sum[3] = {0, 0, 0}, total = 0;
+    for (uint32_t t = 0; t < taps->count; t++) {
+        const uint8_t *p = taps->texel[t];
+        uint32_t flags = get_u32(p + 16);
+        if (!(flags & FX_PROBE_HAS_DATA) || (flags & FX_PROBE_OFF) || !(taps->weight[t] > 0))
+            continue;
+        float probe[3], cell = get_f32(p + 12);
+        for (int k = 0; k < 3; k++)
+            probe[k] = get_f32(p + 4 * k);
+        /* DDGI's wrap shading: probes behind the surface count less, never nothing. */
+        float to_probe[3], biased_to_probe[3], len2 = 0, biased_len2 = 0;
+        for (int k = 0; k < 3; k++) {
+            to_probe[k] = probe[k] - position[k];
+            biased_to_probe[k] = probe[k] - (position[k] + normal[k] * FX_PROBE_NORMAL_BIAS * cell);
+            len2 += to_probe[k] * to_probe[k];
+            biased_len2 += biased_to_probe[k] * biased_to_probe[k];
+        }
+        float len = sqrtf(len2), wrap = len > 0 ? (fx__dot(to_probe, normal) / len + 1.0f) * 0.5f : 1.0f;
+        float weight = wrap * wrap + 0.2f;
+        /* Chebyshev's bound on the probe seeing the (biased) point, from the moments towards it. */
+        float distance = sqrtf(biased_len2);
+        if (distance > 0) {
+            float from_probe[3];
+            for (int k = 0; k < 3; k++)
+                from_probe[k] = -biased_to_probe[k] / distance;
+            float mean, mean2;
+            probe_moments(p, from_probe, cell, &mean, &mean2);
+            float chebyshev = 1.0f;
+            if (distance > mean) {
+                float variance = fabsf(mean2 - mean * mean), excess = distance - mean;
+                chebyshev = variance / (variance + excess * excess);
+                chebyshev = chebyshev * chebyshev * chebyshev;
+            }
+            weight *= fmaxf(0.05f, chebyshev);
+        }
+        weight = fmaxf(weight, 1e-6f);
+        if (weight < 0.2f) /* DDGI: crush small weights, so light leaking through a wall fades quickly */
+            weight *= weight * weight / (0.2f * 0.2f);
+        weight *= taps->weight[t];
+        float e[3];
+        fx_probe_irradiance(p, normal, e);
+        for (int k = 0; k < 3; k++)
+            sum[k] += weight * e[k];
+        total += weight;
+    }
+    if (!(total > 0)) {
+        out_rgb[0] = out_rgb[1] = out_rgb[2] = 0;
+        return false;
+    }
+    for (int k = 0; k < 3; k++)
+        out_rgb[k] = fminf(sum[k] / total, FLT_MAX);
+    return true;
+}
+
+/* ---- update ---------------------------------------------------------------------------------------- */
+
+/* What update leaves for commit (host floats: scratch never leaves the process). */
+typedef struct probe_scratch {
+    float irradiance[FX_PROBE_TEXELS][3]; /* new estimate of E per texel */
+    float irradiance_weight[FX_PROBE_TEXELS];
+    float moments[FX_PROBE_TEXELS][2];    /* new mean distance and squared distance, cells */
+    float moment_weight[FX_PROBE_TEXELS];
+    float position[3];                    /* relocated position for the next update */
+    float backface_fraction;
+    uint32_t off;
+    uint32_t valid; /* 1 once update wrote it */
+} probe_scratch;
+
+/* A uniform random rotation (Shoemake's quaternion from three uniform numbers) as a row-major matrix. */
+static void random_rotation(uint64_t h1, uint64_t h2, float m[9])
+{
+    float u1 = fx__unit_float((uint32_t)h1), u2 = fx__unit_float((uint32_t)(h1 >> 32)),
+          u3 = fx__unit_float((uint32_t)h2);
+    float s2, c2, s3, c3;
+    fx__sincos_turns(u2, &s2, &c2);
+    fx__sincos_turns(u3, &s3, &c3);
+    float a = sqrtf(1.0f - u1), b = sqrtf(u1);
+    float x = a * s2, y = a * c2, z = b * s3, w = b * c3;
+    float n = sqrtf(x * x + y * y + z * z + w * w);
+    x /= n, y /= n, z /= n, w /= n;
+    m[0] = 1 - 2 * (y * y + z * z), m[1] = 2 * (x * y - z * w), m[2] = 2 * (x * z + y * w);
+    m[3] = 2 * (x * y + z * w), m[4] = 1 - 2 * (x * x + z * z), m[5] = 2 * (y * z - x * w);
+    m[6] = 2 * (x * z - y * w), m[7] = 2 * (y * z + x * w), m[8] = 1 - 2 * (x * x + y * y);
+}
+
+static uint32_t ray_count(const fx_context *ctx)
+{
+    uint32_t n = ctx->probe_rays ? ctx->probe_rays : FX_PROBE_RAYS;
+    return n > FX_PROBE_MAX_RAYS ? FX_PROBE_MAX_RAYS : n;
+}
+
+/* The shading of a chunk of hits: per primary ray, its radiance once the shadow rays are back. */
+typedef struct hit_shading {
+    _Alignas(64) struct RTCRay shadow[FX_RAY_BATCH];
+    uint16_t owner[FX_RAY_BATCH];
+    float light[FX_RAY_BATCH][3];
+    uint32_t count;
+    float direct[PROBE_CHUNK][3]; /* compose units (irradiance / pi) */
+} hit_shading;
+
+static void shadow_flush(const fx_context *ctx, hit_shading *hs)
+{
+    fx__occluded(ctx, hs->shadow, hs->count);
+    for (uint32_t r = 0; r < hs->count; r++)
+        if (hs->shadow[r].tfar != -INFINITY)
+            for (int k = 0; k < 3; k++)
+                hs->direct[hs->owner[r]][k] += hs->light[r][k];
+    hs->count = 0;
+}
+
+/* Queues the shadow rays of a front-face hit (origin already offset, unit front normal) for chunk slot i;
+ * returns the rays queued. Contributions are compose's: intensity x colour x cos (/ d^2 for point lights). */
+static uint32_t queue_shadow_rays(const fx_context *ctx, hit_shading *hs, uint32_t i, const float origin[3],
+                                  const float normal[3])
+{
+    const scene *s = ctx->s;
+    uint32_t queued = 0;
+    for (uint32_t l = 0; l < s->light_count; l++) {
+        const scene_light *light = &s->lights[l];
+        float dir[3], distance;
+        fx_light_direction(light, origin, dir, &distance);
+        float cosine = fx__dot(normal, dir);
+        if (!(cosine > 0))
+            continue;
+        float falloff = light->type == SCENE_LIGHT_POINT ? 1.0f / fmaxf(distance * distance, 1e-8f) : 1.0f;
+        float scale = light->intensity * cosine * falloff;
+        if (!(scale > 0))
+            continue;
+        if (hs->count == FX_RAY_BATCH)
+            shadow_flush(ctx, hs);
+        fx__set_ray(&hs->shadow[hs->count], origin, dir, isinf(distance) ? INFINITY : distance * (1.0f - 1e-4f),
+                    hs->count);
+        hs->owner[hs->count] = (uint16_t)i;
+        for (int k = 0; k < 3; k++)
+            hs->light[hs->count][k] = fminf(scale * light->color[k], FLT_MAX);
+        hs->count++;
+        queued++;
+    }
+    return queued;
+}
+
+/* Radiance leaving a front-face hit, given its direct light (compose units) and the probes around it. */
+static void hit_radiance(const fx_context *ctx, uint32_t level, uint32_t tri, float u, float v, float t,
+                         const float position[3], const float normal[3], const float direct[3], float out[3])
+{
+    float albedo[3], bounce[3] = {0, 0, 0};
+    /* The albedo over the ray's footprint there (144 rays: about 0.3 rad apart). */
+    scene_albedo_filtered(ctx->s, tri, u, v, log2f(fmaxf(t * 0.3f, 1e-30f)), albedo);
+    if (ctx->world_taps) {
+        fx_taps taps;
+        memset(&taps, 0, sizeof taps);
+        ctx->world_taps(ctx->world_user, FX_PROBES, position, level, &taps);
+        if (taps.count > 0)
+            fx_probe_filter(&taps, position, normal, bounce);
+    }
+    for (int k = 0; k < 3; k++)
+        out[k] = albedo[k] * (direct[k] + bounce[k] * (1.0f / FX_PROBE_PI));
+}
+
+uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count)
+{
+    const scene *s = ctx->s;
+    const uint32_t rays = ray_count(ctx);
+    float dirs[FX_PROBE_TEXELS][3];
+    texel_dirs(dirs);
+    float sky[3];
+    for (int k = 0; k < 3; k++)
+        sky[k] = s->sky_color[k] * s->sky_intensity;
+    struct RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    RTCScene rtc = (RTCScene)scene_rt_handle(ctx->rt);
+    _Alignas(64) struct RTCRayHit hits[PROBE_CHUNK];
+    hit_shading *hs = malloc(sizeof *hs); /* 20 KB: off the (pool thread) stack */
+    probe_scratch *out = malloc(sizeof *out);
+    FX_ASSERT(hs && out);
+    uint64_t traced = 0;
+
+    for (uint32_t j = 0; j < count; j++) {
+        const fx_block_job *job = &jobs[j];
+        FX_ASSERT(job->scratch != NULL && job->cell > 0);
+        const uint8_t *payload = job->payload;
+        uint32_t flags = get_u32(payload + 16), updates = get_u32(payload + 20);
+        float cell = job->cell, origin[3], offset[3];
+        for (int k = 0; k < 3; k++) {
+            origin[k] = (flags & FX_PROBE_HAS_DATA) ? get_f32(payload + 4 * k) : job->origin[k];
+            offset[k] = origin[k] - job->origin[k];
+            if (!isfinite(offset[k]) || fabsf(offset[k]) > FX_PROBE_MAX_OFFSET * cell * 1.001f) {
+                origin[k] = job->origin[k]; /* a stale or foreign payload: start from the grid point */
+                offset[k] = 0;
+            }
+        }
+        float rotation[9];
+        random_rotation(fx__hash(ctx->seed, job->key, 0, updates, FX_STREAM_PROBE_ROTATION),
+                        fx__hash(ctx->seed, job->key, 1, updates, FX_STREAM_PROBE_ROTATION), rotation);
+        memset(out, 0, sizeof *out);
+        uint32_t backfaces = 0;
+        float closest_front = INFINITY, closest_back = INFINITY, front_dir[3] = {0, 0, 0}, back_dir[3] = {0, 0, 0};
+        const float max_distance = FX_PROBE_MAX_DISTANCE * cell;
+
+        for (uint32_t first = 0; first < rays; first += PROBE_CHUNK) {
+            uint32_t n = rays - first < PROBE_CHUNK ? rays - first : PROBE_CHUNK;
+            for (uint32_t r = 0; r < n; r++) {
+                float fib[3], dir[3];
+                fx_probe_fibonacci(first + r, rays, fib);
+                for (int k = 0; k < 3; k++)
+                    dir[k] = rotation[3 * k] * fib[0] + rotation[3 * k + 1] * fib[1] + rotation[3 * k + 2] * fib[2];
+                struct RTCRayHit *rh = &hits[r];
+                fx__set_ray(&rh->ray, origin, dir, INFINITY, r);
+                rh->hit.geomID = RTC_INVALID_GEOMETRY_ID;
+                rh->hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+            }
+            rtcIntersect1M(rtc, &context, hits, n, sizeof(struct RTCRayHit));
+            traced += n;
+
+            /* Shadow rays of the front-face hits. */
+            hs->count = 0;
+            float hit_pos[PROBE_CHUNK][3];
+            for (uint32_t r = 0; r < n; r++) {
+                hs->direct[r][0] = hs->direct[r][1] = hs->direct[r][2] = 0;
+                const struct RTCRayHit *rh = &hits[r];
+                if (rh->hit.geomID == RTC_INVALID_GEOMETRY_ID || rh->hit.primID >= s->triangle_count)
+                    continue;
+                const float *normal = s->tri_normal + 3 * (size_t)rh->hit.primID;
+                float dir[3] = {rh->ray.dir_x, rh->ray.dir_y, rh->ray.dir_z};
+                if (!(fx__dot(dir, normal) < 0))
+                    continue; /* back face */
+                float p[3];
+                for (int k = 0; k < 3; k++)
+                    p[k] = origin[k] + rh->ray.tfar * dir[k];
+                scene_offset_ray_origin(p, normal, s->ray_offset_scale, hit_pos[r]);
+                traced += queue_shadow_rays(ctx, hs, r, hit_pos[r], normal);
+            }
+            shadow_flush(ctx, hs);
+
+            /* Radiance and distance of every ray, accumulated into the texels. */
+            for (uint32_t r = 0; r < n; r++) {
+                const struct RTCRayHit *rh = &hits[r];
+                float dir[3] = {rh->ray.dir_x, rh->ray.dir_y, rh->ray.dir_z}, radiance[3], distance;
+                if (rh->hit.geomID == RTC_INVALID_GEOMETRY_ID || rh->hit.primID >= s->triangle_count) {
+                    memcpy(radiance, sky, sizeof radiance);
+                    distance = max_distance;
+                } else {
+                    const float *normal = s->tri_normal + 3 * (size_t)rh->hit.primID;
+                    float t = rh->ray.tfar;
+                    if (!(fx__dot(dir, normal) < 0)) {
+                        backfaces++;
+                        radiance[0] = radiance[1] = radiance[2] = 0;
+                        distance = FX_PROBE_BACKFACE_SHORTEN * t;
+                        if (t < closest_back) {
+                            closest_back = t;
+                            memcpy(back_dir, dir, sizeof back_dir);
+                        }
+                    } else {
+                        hit_radiance(ctx, job->level, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r], normal,
+                                     hs->direct[r], radiance);
+                        distance = t;
+                        if (t < closest_front) {
+                            closest_front = t;
+                            memcpy(front_dir, dir, sizeof front_dir);
+                        }
+                    }
+                    distance = fminf(distance, max_distance);
+                }
+                float d = distance / cell;
+                for (uint32_t tx = 0; tx < FX_PROBE_TEXELS; tx++) {
+                    float c = fx__dot(dirs[tx], dir);
+                    if (!(c > 0))
+                        continue;
+                    for (int k = 0; k < 3; k++)
+                        out->irradiance[tx][k] += c * radiance[k];
+                    out->irradiance_weight[tx] += c;
+                    float c2 = c * c, c4 = c2 * c2, c8 = c4 * c4, c16 = c8 * c8, c32 = c16 * c16, w = c32 * c32; /* c^64 */
+                    out->moments[tx][0] += w * d;
+                    out->moments[tx][1] += w * d * d;
+                    out->moment_weight[tx] += w;
+                }
+            }
+        }
+        for (uint32_t tx = 0; tx < FX_PROBE_TEXELS; tx++) {
+            if (out->irradiance_weight[tx] > 0)
+                for (int k = 0; k < 3; k++)
+                    out->irradiance[tx][k] =
+                        fminf(FX_PROBE_PI * out->irradiance[tx][k] / out->irradiance_weight[tx], FLT_MAX);
+            if (out->moment_weight[tx] > 0) {
+                out->moments[tx][0] /= out->moment_weight[tx];
+                out->moments[tx][1] /= out->moment_weight[tx];
+            }
+        }
+
+        /* Off and relocation (file comment). */
+        out->backface_fraction = (float)backfaces / (float)rays;
+        /* Inside: too many back faces, or back faces within reach of its cells (the cell diagonal) and no
+         * front face there: every surface it could light is seen from behind (outside a closed room). */
+        float reach = 1.7320508f * cell;
+        out->off = out->backface_fraction > FX_PROBE_BACKFACE_OFF ||
+                   (closest_back <= reach && !(closest_front <= reach));
+        float min_front = FX_PROBE_MIN_FRONT * cell, next[3];
+        memcpy(next, offset, sizeof next);
+        if (out->off && isfinite(closest_back)) {
+            for (int k = 0; k < 3; k++)
+                next[k] += back_dir[k] * (closest_back + 0.5f * min_front);
+        } else if (closest_front < min_front) {
+            for (int k = 0; k < 3; k++)
+                next[k] -= front_dir[k] * (min_front - closest_front);
+        } else {
+            float length = sqrtf(fx__dot(offset, offset));
+            float back = fminf(closest_front - min_front, length);
+            if (length > 0 && back > 0)
+                for (int k = 0; k < 3; k++)
+                    next[k] -= offset[k] / length * back;
+        }
+        for (int k = 0; k < 3; k++) {
+            float limit = FX_PROBE_MAX_OFFSET * cell;
+            next[k] = fminf(fmaxf(next[k], -limit), limit);
+            out->position[k] = job->origin[k] + next[k];
+        }
+        out->valid = 1;
+        memcpy(job->scratch, out, sizeof *out);
+    }
+    free(out);
+    free(hs);
+    return traced;
+}
+
+void fx_probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint32_t count)
+{
+    float h = ctx->probe_hysteresis;
+    if (h == 0.0f)
+        h = FX_PROBE_HYSTERESIS;
+    h = isnan(h) ? FX_PROBE_HYSTERESIS : fminf(fmaxf(h, 0.0f), 0.999f);
+    probe_scratch *in = malloc(sizeof *in);
+    FX_ASSERT(in);
+    for (uint32_t j = 0; j < count; j++) {
+        const fx_block_job *job = &jobs[j];
+        FX_ASSERT(job->scratch != NULL);
+        memcpy(in, job->scratch, sizeof *in);
+        if (!in->valid)
+            continue;
+        uint8_t *p = job->payload;
+        uint32_t flags = get_u32(p + 16), updates = get_u32(p + 20);
+        bool fresh = !(flags & FX_PROBE_HAS_DATA) || updates == 0;
+        for (int k = 0; k < 3; k++)
+            put_f32(p + 4 * k, in->position[k]);
+        put_f32(p + 12, job->cell);
+        put_f32(p + 28, in->backface_fraction);
+        if (in->off) { /* the maps stay as they were; the next update after it is on again starts afresh */
+            if (!(flags & FX_PROBE_HAS_DATA))
+                put_f32(p + 24, 0.0f);
+            put_u32(p + 16, FX_PROBE_HAS_DATA | FX_PROBE_OFF);
+            put_u32(p + 20, 0);
+            continue;
+        }
+        float old_scale = fresh ? 0.0f : get_f32(p + 24), irradiance[FX_PROBE_TEXELS][3],
+              moments[FX_PROBE_TEXELS][2], scale = 0;
+        for (uint32_t t = 0; t < FX_PROBE_TEXELS; t++) {
+            for (int k = 0; k < 3; k++) {
+                float old = old_scale * half_to_float(fx__get_u16(p + PROBE_IRRADIANCE + 6 * t + 2 * k));
+                float value = old;
+                if (in->irradiance_weight[t] > 0)
+                    value = fresh ? in->irradiance[t][k] : h * old + (1.0f - h) * in->irradiance[t][k];
+                irradiance[t][k] = isfinite(value) && value > 0 ? value : (value > 0 ? FLT_MAX : 0.0f);
+                scale = fmaxf(scale, irradiance[t][k]);
+            }
+            for (int k = 0; k < 2; k++) {
+                float old = fresh ? 0.0f : half_to_float(fx__get_u16(p + PROBE_MOMENTS + 4 * t + 2 * k));
+                float value = old;
+                if (in->moment_weight[t] > 0)
+                    value = fresh ? in->moments[t][k] : h * old + (1.0f - h) * in->moments[t][k];
+                else if (fresh)
+                    value = k == 0 ? FX_PROBE_MAX_DISTANCE : FX_PROBE_MAX_DISTANCE * FX_PROBE_MAX_DISTANCE;
+                moments[t][k] = value;
+            }
+        }
+        put_f32(p + 24, scale);
+        float inv = scale > 0 ? 1.0f / scale : 0.0f;
+        for (uint32_t t = 0; t < FX_PROBE_TEXELS; t++) {
+            uint64_t bits = fx__hash(ctx->seed, job->key, t, updates, FX_STREAM_PROBE_ROUNDING);
+            for (int k = 0; k < 5; k++) {
+                float u = (float)((bits >> (12 * k)) & 0xfffu) * (1.0f / 4096.0f);
+                if (k < 3)
+                    fx__put_u16(p + PROBE_IRRADIANCE + 6 * t + 2 * k,
+                                half_stochastic(fminf(irradiance[t][k] * inv, 1.0f), u));
+                else
+                    fx__put_u16(p + PROBE_MOMENTS + 4 * t + 2 * (k - 3), half_stochastic(moments[t][k - 3], u));
+            }
+        }
+        put_u32(p + 16, FX_PROBE_HAS_DATA);
+        put_u32(p + 20, updates < UINT32_MAX ? updates + 1 : UINT32_MAX);
+    }
+    free(in);
+}
+
+/* ---- the no-cache baseline --------------------------------------------------------------------------- */
+
+void fx_probe_eval_point(const fx_context *ctx, const float pos[3], const float normal[3], uint64_t pixel_id,
+                         float out_rgb[3], uint64_t *rays)
+{
+    const scene *s = ctx->s;
+    const uint32_t n_rays = ray_count(ctx);
+    float sky[3];
+    for (int k = 0; k < 3; k++)
+        sky[k] = s->sky_color[k] * s->sky_intensity;
+    fx__surface_map map;
+    float point[3], origin[3], tangent[3], bitangent[3];
+    fx__locate_point(ctx, pos, normal, 0.0f, &map, point); /* off a crease's wall */
+    scene_offset_ray_origin(point, normal, s->ray_offset_scale, origin);
+    fx__onb(normal, tangent, bitangent);
+    uint64_t direction_hash = fx__hash(ctx->seed, pixel_id, 0, 0, FX_STREAM_PROBE_EVAL);
+    struct RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    RTCScene rtc = (RTCScene)scene_rt_handle(ctx->rt);
+    _Alignas(64) struct RTCRayHit hits[PROBE_CHUNK];
+    hit_shading *hs = malloc(sizeof *hs);
+    FX_ASSERT(hs);
+    double sum[3] = {0, 0, 0};
+    uint64_t traced = 0;
+    for (uint32_t first = 0; first < n_rays; first += PROBE_CHUNK) {
+        uint32_t n = n_rays - first < PROBE_CHUNK ? n_rays - first : PROBE_CHUNK;
+        for (uint32_t r = 0; r < n; r++) {
+            float xi[2], dir[3];
+            fx__sobol_2d(first + r, direction_hash, xi);
+            fx__cosine_direction(normal, tangent, bitangent, xi, dir);
+            fx__set_ray(&hits[r].ray, origin, dir, INFINITY, r);
+            hits[r].hit.geomID = RTC_INVALID_GEOMETRY_ID;
+            hits[r].hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+        }
+        rtcIntersect1M(rtc, &context, hits, n, sizeof(struct RTCRayHit));
+        traced += n;
+        hs->count = 0;
+        float hit_pos[PROBE_CHUNK][3];
+        bool front[PROBE_CHUNK];
+        for (uint32_t r = 0; r < n; r++) {
+            hs->direct[r][0] = hs->direct[r][1] = hs->direct[r][2] = 0;
+            front[r] = false;
+            if (hits[r].hit.geomID == RTC_INVALID_GEOMETRY_ID || hits[r].hit.primID >= s->triangle_count) {
+                for (int k = 0; k < 3; k++)
+                    sum[k] += sky[k];
+                continue;
+            }
+            const float *n_hit = s->tri_normal + 3 * (size_t)hits[r].hit.primID;
+            float dir[3] = {hits[r].ray.dir_x, hits[r].ray.dir_y, hits[r].ray.dir_z};
+            if (!(fx__dot(dir, n_hit) < 0))
+                continue; /* back face: no light, as for the probes */
+            front[r] = true;
+            float p[3];
+            for (int k = 0; k < 3; k++)
+                p[k] = origin[k] + hits[r].ray.tfar * dir[k];
+            scene_offset_ray_origin(p, n_hit, s->ray_offset_scale, hit_pos[r]);
+            traced += queue_shadow_rays(ctx, hs, r, hit_pos[r], n_hit);
+        }
+        shadow_flush(ctx, hs);
+        for (uint32_t r = 0; r < n; r++) {
+            if (!front[r])
+                continue;
+            float albedo[3];
+            scene_albedo_filtered(s, hits[r].hit.primID, hits[r].hit.u, hits[r].hit.v,
+                                  log2f(fmaxf(hits[r].ray.tfar * 0.3f, 1e-30f)), albedo);
+            for (int k = 0; k < 3; k++)
+                sum[k] += (double)albedo[k] * hs->direct[r][k];
+        }
+    }
+    free(hs);
+    /* Cosine-weighted sampling: E = pi x the mean radiance. */
+    for (int k = 0; k < 3; k++)
+        out_rgb[k] = (float)fmin(FX_PROBE_PI * sum[k] / (double)n_rays, FLT_MAX);
+    if (rays)
+        *rays = traced;
+}
+
+/* ---- the effect table ------------------------------------------------------------------------------- */
+
+static uint32_t probes_texel_bytes(const scene *s)
+{
+    (void)s;
+    return FX_PROBE_BYTES;
+}
+
+static bool probes_needs(const scene *s, char *why, size_t why_cap)
+{
+    return fx__scene_needs(s, SCENE_FX_PROBES, why, why_cap);
+}
+
+/* Rays of one probe update: `samples` rays when the caller passes probe_rays there, else the default; each
+ * may hit a front face and send one shadow ray per light. */
+static uint64_t probes_cost(const scene *s, uint32_t samples)
+{
+    uint64_t rays = samples ? (samples > FX_PROBE_MAX_RAYS ? FX_PROBE_MAX_RAYS : samples) : FX_PROBE_RAYS;
+    return rays * (1u + (uint64_t)s->light_count);
+}
+
+static uint64_t probes_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count, uint32_t samples)
+{
+    (void)samples;
+    return fx_probes_update(ctx, jobs, count);
+}
+
+static uint32_t probes_texel_samples(const void *texel)
+{
+    return get_u32((const uint8_t *)texel + 20);
+}
+
+static uint32_t probes_scratch_bytes(const scene *s)
+{
+    (void)s;
+    return (uint32_t)sizeof(probe_scratch);
+}
+
+static void probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint32_t count)
+{
+    fx_probes_commit(ctx, jobs, count);
+}
+
+/* Adds E / pi of the probes around each pixel; the sky is in it, so the separate sky term goes to 0. */
+static void probes_shade(const fx_context *ctx, const fx_shade_run *run)
+{
+    (void)ctx;
+    for (uint32_t i = 0; i < run->count; i++) {
+        float e[3];
+        if (run->taps[i].count == 0 || !fx_probe_filter(&run->taps[i], run->points[i].position,
+                                                        run->points[i].normal, e))
+            continue;
+        for (int k = 0; k < 3; k++)
+            run->indirect[3 * i + k] += e[k] * (1.0f / FX_PROBE_PI);
+        run->sky_visibility[i] = 0.0f;
+    }
+}
+
+static uint64_t probes_eval(const fx_context *ctx, const fx_point *point, fx_shade_point *out)
+{
+    uint64_t rays = 0;
+    float e[3];
+    fx_probe_eval_point(ctx, point->position, point->normal, point->pixel_id, e, &rays);
+    for (int k = 0; k < 3; k++)
+        out->indirect[k] += e[k] * (1.0f / FX_PROBE_PI);
+    *out->sky_visibility = 0.0f;
+    return rays;
+}
+
+/* Probes: DDGI-style irradiance and visibility per grid point, updated continuously with hysteresis. */
+const fx_effect fx_effect_probes = {
+    .name = "probes",
+    .alias = "indirect",
+    .cache = SCENE_CACHE_WORLD_SPACE,
+    .level_bias = 0,
+    .filter = FX_FILTER_TRILINEAR,
+    .policy = FX_UPDATE_CONTINUOUS,
+    .max_samples = 0, /* continuous: never converged; texel_samples reports the blended updates */
+    .texel_bytes = probes_texel_bytes,
+    .needs = probes_needs,
+    .cost = probes_cost,
+    .update = probes_update,
+    .texel_samples = probes_texel_samples,
+    .brick_size = 1,
+    .scratch_bytes = probes_scratch_bytes,
+    .commit = probes_commit,
+    .shade = probes_shade,
+    .eval = probes_eval,
+};
