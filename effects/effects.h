@@ -226,6 +226,7 @@ typedef struct fx_taps {
 typedef struct fx_point {
     float position[3];  /* world (scene-local) position */
     float normal[3];    /* unit geometric normal of the hit triangle (its front side) */
+    float view_normal[3]; /* the same normal turned to the side the viewer sees (what light reaches) */
     float dpdx[3], dpdy[3]; /* the pixel's footprint on the surface: offsets to the next pixel right and down */
     uint32_t triangle;  /* scene triangle */
     float u, v;         /* barycentrics of corners 1 and 2 */

@@ -488,6 +488,8 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
                 rh->hit.geomID = RTC_INVALID_GEOMETRY_ID;
                 rh->hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
             }
+            if (ctx->observe_hits) /* benchmarks replay exactly these rays against raw Embree */
+                ctx->observe_hits(ctx->observe_user, hits, n);
             rtcIntersect1M(rtc, &context, hits, n, sizeof(struct RTCRayHit));
             traced += n;
 
@@ -703,6 +705,8 @@ void fx_probe_eval_point(const fx_context *ctx, const float pos[3], const float 
             hits[r].hit.geomID = RTC_INVALID_GEOMETRY_ID;
             hits[r].hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
         }
+        if (ctx->observe_hits)
+            ctx->observe_hits(ctx->observe_user, hits, n);
         rtcIntersect1M(rtc, &context, hits, n, sizeof(struct RTCRayHit));
         traced += n;
         hs->count = 0;
@@ -789,17 +793,21 @@ static void probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint3
     fx_probes_commit(ctx, jobs, count);
 }
 
-/* Adds E / pi of the probes around each pixel; the sky is in it, so the separate sky term goes to 0. */
+/* Adds E / pi of the probes around each pixel. The sky is in E (missed probe rays return it), so the
+ * separate sky term goes to 0; what an effect shading before this one left in sky_visibility (ambient
+ * occlusion: the fraction of the hemisphere open within its radius) scales E instead, the way engines
+ * apply AO to indirect diffuse light. Without AO it is 1 and E goes in whole. Both modes do the same. */
 static void probes_shade(const fx_context *ctx, const fx_shade_run *run)
 {
     (void)ctx;
     for (uint32_t i = 0; i < run->count; i++) {
         float e[3];
         if (run->taps[i].count == 0 || !fx_probe_filter(&run->taps[i], run->points[i].position,
-                                                        run->points[i].normal, e))
+                                                        run->points[i].view_normal, e))
             continue;
+        float open = run->sky_visibility[i] * (1.0f / FX_PROBE_PI);
         for (int k = 0; k < 3; k++)
-            run->indirect[3 * i + k] += e[k] * (1.0f / FX_PROBE_PI);
+            run->indirect[3 * i + k] += e[k] * open;
         run->sky_visibility[i] = 0.0f;
     }
 }
@@ -808,9 +816,10 @@ static uint64_t probes_eval(const fx_context *ctx, const fx_point *point, fx_sha
 {
     uint64_t rays = 0;
     float e[3];
-    fx_probe_eval_point(ctx, point->position, point->normal, point->pixel_id, e, &rays);
+    fx_probe_eval_point(ctx, point->position, point->view_normal, point->pixel_id, e, &rays);
+    float open = *out->sky_visibility * (1.0f / FX_PROBE_PI);
     for (int k = 0; k < 3; k++)
-        out->indirect[k] += e[k] * (1.0f / FX_PROBE_PI);
+        out->indirect[k] += e[k] * open;
     *out->sky_visibility = 0.0f;
     return rays;
 }

@@ -560,7 +560,9 @@ static void test_sim_identical_summary_and_stats(void **state)
     assert_int_equal(jint(s, "rays.visibility"), 3 * 2 * 64 * 36);
     assert_true(jint(s, "rays.shadow") > 0);
     assert_true(jint(s, "rays.ao") > 0);
-    assert_int_equal(jint(s, "rays.effects_total"), jint(s, "rays.shadow") + jint(s, "rays.ao"));
+    assert_true(jint(s, "rays.probes") > 0); /* the embedded scene has a sun and a sky: indirect light */
+    assert_int_equal(jint(s, "rays.effects_total"), jint(s, "rays.shadow") + jint(s, "rays.ao") + jint(s, "rays.probes"));
+    assert_int_equal(jint(s, "world_space.requested_cells"), 2 * jint(s, "world_space.unique_cells"));
     assert_true(jint(s, "pixels_visible") > 0 && jint(s, "pixels_visible") <= 3 * 2 * 64 * 36);
     assert_true(jint(s, "memory_bytes.peak.total") > 0);
     assert_true(jint(s, "memory_bytes.final.total") > 0);
@@ -570,7 +572,8 @@ static void test_sim_identical_summary_and_stats(void **state)
     assert_true(json_is_number(jget(s, "time_ms.compose")));
     assert_non_null(json_object_get(jget(s, "effects"), "shadow"));
     assert_non_null(json_object_get(jget(s, "effects"), "ao"));
-    assert_true(json_is_string(json_object_get(jget(s, "left_out"), "probes")));
+    assert_true(json_is_string(json_object_get(jget(s, "effects"), "probes")));
+    assert_true(jget(s, "probes.cell_m") != NULL && json_number_value(jget(s, "probes.cell_m")) > 0);
 
     FILE *f = fopen(stats, "rb");
     assert_non_null(f);
@@ -591,6 +594,30 @@ static void test_sim_identical_summary_and_stats(void **state)
     assert_int_equal(lines, 3);
     assert_int_equal(requested_sum, requested);
     assert_int_equal(visibility_sum, 3 * 2 * 64 * 36);
+    json_decref(s);
+}
+
+/* "indirect": "off": no world-space cache, no probe ray, and the summary says why. */
+static void test_sim_indirect_off(void **state)
+{
+    (void)state;
+    char scene_file[1100], summary[1100];
+    write_file(scene_file, sizeof scene_file, "noindirect.json",
+               "{\"version\": 1, \"meshes\": [{\"builtin\": \"default\"}],\n"
+               " \"lights\": [{\"type\": \"directional\", \"direction\": [0.3, -1, 0.2]}],\n"
+               " \"sky\": {\"color\": [0.5, 0.6, 1], \"intensity\": 0.5},\n"
+               " \"effects\": {\"indirect\": \"off\"}}\n");
+    tmp_path(summary, sizeof summary, "noindirect_summary.json");
+    remove(summary);
+    assert_int_equal(run("sim --scene '%s' --viewers 1 --frames 2 --res 48x27 --summary '%s'", scene_file, summary), 0);
+    assert_non_null(strstr(out_buf, "left out probes"));
+    assert_non_null(strstr(out_buf, "no world-space cache"));
+    json_t *s = load_json_file(summary);
+    assert_true(json_is_string(json_object_get(jget(s, "left_out"), "probes")));
+    assert_true(json_is_string(jget(s, "world_space_cache")));
+    assert_null(json_object_get(s, "world_space"));
+    assert_int_equal(jint(s, "memory_bytes.final.world_local_tables"), 0);
+    assert_null(json_object_get(jget(s, "rays"), "probes"));
     json_decref(s);
 }
 
@@ -922,6 +949,7 @@ int main(void)
         cmocka_unit_test(test_err_memory_beyond_physical),
         cmocka_unit_test(test_render_png),
         cmocka_unit_test(test_sim_identical_summary_and_stats),
+        cmocka_unit_test(test_sim_indirect_off),
         cmocka_unit_test(test_sim_record_replay),
         cmocka_unit_test(test_sim_no_cache),
         cmocka_unit_test(test_sim_tiny_pool),

@@ -132,7 +132,7 @@ static void shade_at(const grid *g, const float pos[3], const float normal[3], f
     memcpy(point.position, pos, sizeof point.position);
     float len = sqrtf(fx__dot(normal, normal));
     for (int k = 0; k < 3; k++)
-        point.normal[k] = normal[k] / len;
+        point.normal[k] = point.view_normal[k] = normal[k] / len;
     float visibility = 1, sky_visibility = 1;
     indirect[0] = indirect[1] = indirect[2] = 0;
     fx_shade_run run = {.count = 1,

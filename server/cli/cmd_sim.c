@@ -83,7 +83,7 @@ static const char sim_usage[] =
     "  --bias EFFECT=L      level bias of an effect in levels, -4..8 (coarser is positive; repeatable;\n"
     "                       default: each effect's own)\n"
     "  --pool-mb MB         block-pool memory for all effects, 1..65536, within the machine's memory\n"
-    "                       (default 64)\n"
+    "                       (default 64; a quarter of it for probes when they run)\n"
     "  --ray-budget R       effect rays per frame, 0 = unlimited (default 0)\n"
     "  --ao-step S          samples added per texel and update of progressive effects (AO), 1..64\n"
     "                       (default 16)\n"

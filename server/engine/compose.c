@@ -224,7 +224,7 @@ static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32
                 dir[k] = f->forward[k] + sx * f->right[k] + sy * f->up[k];
             float facing = pt->normal[0] * dir[0] + pt->normal[1] * dir[1] + pt->normal[2] * dir[2];
             for (int k = 0; k < 3; k++) /* seen from behind: light the side the viewer sees */
-                cs->shade_normal[i][k] = facing > 0 ? -pt->normal[k] : pt->normal[k];
+                pt->view_normal[k] = cs->shade_normal[i][k] = facing > 0 ? -pt->normal[k] : pt->normal[k];
             /* The pixel's footprint in metres: level-0 texels per pixel over texels per metre. */
             scene_albedo_sample(&albedo, u, v, view->footprint[p] - log2_density, cs->albedo[i]);
             pt->triangle = tri;

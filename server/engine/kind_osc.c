@@ -37,8 +37,13 @@ static fxc_result osc_kind_create(srv_loop *loop, void **out, char *err, size_t 
         return FXC_ERR_NOMEM;
     }
     k->s = loop->s;
-    /* Every effect gets the same number of blocks: a block of each effect covers the same texels. */
-    uint64_t blocks = loop->desc.pool_bytes / (64ull * total_texel_bytes);
+    /* Every effect gets the same number of blocks: a block of each effect covers the same texels. When a
+     * world-space effect runs, it has a quarter of the pool budget (kind_wsc.c) and these pools the rest. */
+    bool world = false;
+    for (uint32_t e = 0; e < loop->effect_count; e++)
+        world |= loop->effect_cached[e] && loop->effect_kind[e] == SCENE_CACHE_WORLD_SPACE;
+    uint64_t budget = world ? loop->desc.pool_bytes - loop->desc.pool_bytes / 4 : loop->desc.pool_bytes;
+    uint64_t blocks = budget / (64ull * total_texel_bytes);
     if (blocks < 64)
         blocks = 64;
     if (blocks > (1u << 26))

@@ -58,7 +58,9 @@ static fxc_result wsc_kind_create(srv_loop *loop, void **out, char *err, size_t 
     *out = NULL;
     wsc_desc wd = {0};
     bool any = false;
-    uint32_t brick_size[SRV_MAX_EFFECTS] = {0}, cell_bytes[SRV_MAX_EFFECTS] = {0};
+    uint32_t brick_size[SRV_MAX_EFFECTS] = {0}, cell_bytes[SRV_MAX_EFFECTS] = {0}, world_effects = 0;
+    for (uint32_t e = 0; e < loop->effect_count; e++)
+        world_effects += loop->effect_cached[e] && loop->effect_kind[e] == SCENE_CACHE_WORLD_SPACE;
     for (uint32_t e = 0; e < loop->effect_count; e++) {
         if (!loop->effect_cached[e] || loop->effect_kind[e] != SCENE_CACHE_WORLD_SPACE)
             continue;
@@ -66,9 +68,10 @@ static fxc_result wsc_kind_create(srv_loop *loop, void **out, char *err, size_t 
         brick_size[e] = fx->brick_size ? fx->brick_size : 1;
         cell_bytes[e] = fx->texel_bytes(loop->s);
         uint64_t brick_bytes = (uint64_t)cell_bytes[e] * brick_size[e] * brick_size[e] * brick_size[e];
-        /* A quarter of the pool budget per world-space effect, within 1024..65536 bricks. */
-        uint64_t bricks = loop->desc.pool_bytes / 4 / (brick_bytes ? brick_bytes : 1);
-        bricks = bricks < 1024 ? 1024 : (bricks > 65536 ? 65536 : bricks);
+        /* A quarter of the pool budget for the world-space effects, shared equally (the on-surface pools have
+         * the rest), within 64..65536 bricks each. */
+        uint64_t bricks = loop->desc.pool_bytes / 4 / world_effects / (brick_bytes ? brick_bytes : 1);
+        bricks = bricks < 64 ? 64 : (bricks > 65536 ? 65536 : bricks);
         wd.effects[e] = (wsc_effect_desc){.cell_bytes = cell_bytes[e],
                                           .brick_size = brick_size[e],
                                           .max_bricks = (uint32_t)bricks,

@@ -165,6 +165,8 @@ static fxc_result resolve_effects(srv_loop *loop, char *err, size_t err_cap)
         loop->bias[e] = d->bias_set[e] ? d->bias[e] : fx->level_bias;
         uint32_t step = d->samples_per_update ? d->samples_per_update : 16;
         loop->samples[e] = fx->policy == FX_UPDATE_PROGRESSIVE ? (step < fx->max_samples ? step : fx->max_samples) : 0;
+        if (fx->policy == FX_UPDATE_CONTINUOUS && fx->cache == SCENE_CACHE_WORLD_SPACE)
+            loop->samples[e] = loop->desc.probe_rays; /* the rays of one update: what its cost counts */
         if (loop->effect_on[e] && !loop->effect_cached[e] && !d->no_cache) {
             snprintf(err, err_cap, "frame loop: effect %s needs the %s cache, which is not built yet", fx->name,
                      scene_cache_name(fx->cache));
