@@ -113,15 +113,20 @@ static void put_f32(uint8_t *p, float f)
 /* A half float (IEEE binary16) to float: every half, subnormals included (no infinities are ever written). */
 static float half_to_float(uint16_t h)
 {
-    uint32_t exponent = (h >> 10) & 0x1fu, mantissa = h & 0x3ffu;
+    uint32_t exponent = (h >> 10) & 0x1fu, mantissa = h & 0x3ffu, sign = (uint32_t)(h & 0x8000u) << 16;
+    uint32_t bits;
+    if (exponent - 1u < 30u) { /* normal: rebias the exponent (15 -> 127) and widen the mantissa, exact */
+        bits = sign | ((exponent + 112u) << 23) | (mantissa << 13);
+    } else if (exponent == 0) {
+        float value = (float)mantissa * 0x1p-24f; /* subnormal, exact */
+        memcpy(&bits, &value, sizeof bits);
+        bits |= sign;
+    } else {
+        bits = sign | 0x7f800000u | (mantissa << 13); /* infinity or NaN */
+    }
     float value;
-    if (exponent == 0)
-        value = (float)mantissa * 0x1p-24f;
-    else if (exponent == 31)
-        value = mantissa ? NAN : INFINITY;
-    else
-        value = ldexpf((float)(mantissa | 0x400u), (int)exponent - 25);
-    return (h & 0x8000u) ? -value : value;
+    memcpy(&value, &bits, sizeof value);
+    return value;
 }
 
 /* A value >= 0 to half, rounded up with probability equal to its position between the two neighbouring
@@ -275,46 +280,58 @@ static void probe_moments(const uint8_t *p, const float dir[3], float cell, floa
     *mean2 = m2 * cell * cell;
 }
 
+/* A probe's weight for a point before the trilinear one: DDGI's wrap term times the Chebyshev visibility
+ * bound, small weights crushed; 0 for a probe without data or switched off. */
+static float probe_weight(const uint8_t *p, const float position[3], const float normal[3])
+{
+    uint32_t flags = get_u32(p + 16);
+    if (!(flags & FX_PROBE_HAS_DATA) || (flags & FX_PROBE_OFF))
+        return 0.0f;
+    float probe[3], cell = get_f32(p + 12);
+    for (int k = 0; k < 3; k++)
+        probe[k] = get_f32(p + 4 * k);
+    /* DDGI's wrap shading: probes behind the surface count less, never nothing. */
+    float to_probe[3], biased_to_probe[3], len2 = 0, biased_len2 = 0;
+    for (int k = 0; k < 3; k++) {
+        to_probe[k] = probe[k] - position[k];
+        biased_to_probe[k] = probe[k] - (position[k] + normal[k] * FX_PROBE_NORMAL_BIAS * cell);
+        len2 += to_probe[k] * to_probe[k];
+        biased_len2 += biased_to_probe[k] * biased_to_probe[k];
+    }
+    float len = sqrtf(len2), wrap = len > 0 ? (fx__dot(to_probe, normal) / len + 1.0f) * 0.5f : 1.0f;
+    float weight = wrap * wrap + 0.2f;
+    /* Chebyshev's bound on the probe seeing the (biased) point, from the moments towards it. */
+    float distance = sqrtf(biased_len2);
+    if (distance > 0) {
+        float from_probe[3];
+        for (int k = 0; k < 3; k++)
+            from_probe[k] = -biased_to_probe[k] / distance;
+        float mean, mean2;
+        probe_moments(p, from_probe, cell, &mean, &mean2);
+        float chebyshev = 1.0f;
+        if (distance > mean) {
+            float variance = fabsf(mean2 - mean * mean), excess = distance - mean;
+            chebyshev = variance / (variance + excess * excess);
+            chebyshev = chebyshev * chebyshev * chebyshev;
+        }
+        weight *= fmaxf(0.05f, chebyshev);
+    }
+    weight = fmaxf(weight, 1e-6f);
+    if (weight < 0.2f) /* DDGI: crush small weights, so light leaking through a wall fades quickly */
+        weight *= weight * weight / (0.2f * 0.2f);
+    return weight;
+}
+
 bool fx_probe_filter(const fx_taps *taps, const float position[3], const float normal[3], float out_rgb[3])
 {
     float sum[3] = {0, 0, 0}, total = 0;
     for (uint32_t t = 0; t < taps->count; t++) {
         const uint8_t *p = taps->texel[t];
-        uint32_t flags = get_u32(p + 16);
-        if (!(flags & FX_PROBE_HAS_DATA) || (flags & FX_PROBE_OFF) || !(taps->weight[t] > 0))
+        if (!(taps->weight[t] > 0))
             continue;
-        float probe[3], cell = get_f32(p + 12);
-        for (int k = 0; k < 3; k++)
-            probe[k] = get_f32(p + 4 * k);
-        /* DDGI's wrap shading: probes behind the surface count less, never nothing. */
-        float to_probe[3], biased_to_probe[3], len2 = 0, biased_len2 = 0;
-        for (int k = 0; k < 3; k++) {
-            to_probe[k] = probe[k] - position[k];
-            biased_to_probe[k] = probe[k] - (position[k] + normal[k] * FX_PROBE_NORMAL_BIAS * cell);
-            len2 += to_probe[k] * to_probe[k];
-            biased_len2 += biased_to_probe[k] * biased_to_probe[k];
-        }
-        float len = sqrtf(len2), wrap = len > 0 ? (fx__dot(to_probe, normal) / len + 1.0f) * 0.5f : 1.0f;
-        float weight = wrap * wrap + 0.2f;
-        /* Chebyshev's bound on the probe seeing the (biased) point, from the moments towards it. */
-        float distance = sqrtf(biased_len2);
-        if (distance > 0) {
-            float from_probe[3];
-            for (int k = 0; k < 3; k++)
-                from_probe[k] = -biased_to_probe[k] / distance;
-            float mean, mean2;
-            probe_moments(p, from_probe, cell, &mean, &mean2);
-            float chebyshev = 1.0f;
-            if (distance > mean) {
-                float variance = fabsf(mean2 - mean * mean), excess = distance - mean;
-                chebyshev = variance / (variance + excess * excess);
-                chebyshev = chebyshev * chebyshev * chebyshev;
-            }
-            weight *= fmaxf(0.05f, chebyshev);
-        }
-        weight = fmaxf(weight, 1e-6f);
-        if (weight < 0.2f) /* DDGI: crush small weights, so light leaking through a wall fades quickly */
-            weight *= weight * weight / (0.2f * 0.2f);
+        float weight = probe_weight(p, position, normal);
+        if (weight == 0.0f)
+            continue;
         weight *= taps->weight[t];
         float e[3];
         fx_probe_irradiance(p, normal, e);
@@ -796,19 +813,117 @@ static void probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint3
 /* Adds E / pi of the probes around each pixel. The sky is in E (missed probe rays return it), so the
  * separate sky term goes to 0; what an effect shading before this one left in sky_visibility (ambient
  * occlusion: the fraction of the hemisphere open within its radius) scales E instead, the way engines
- * apply AO to indirect diffuse light. Without AO it is 1 and E goes in whole. Both modes do the same. */
+ * apply AO to indirect diffuse light. Without AO it is 1 and E goes in whole. Both modes do the same.
+ *
+ * Cost. The filter of one pixel reads 8 probes, each twice (irradiance towards the normal, moments towards
+ * the point) and weighs each with a Chebyshev bound: too much to do per pixel (bench_probes). Pixels of a
+ * run that read the same 8 probes (the same cell) and face the same way (the same normal: one triangle or
+ * coplanar ones) form a group. Per group the probes' irradiance towards the normal is read once (exact: it
+ * depends on nothing else) and each probe's wrap and Chebyshev weight is taken once, at the group's mean
+ * position; per pixel only the trilinear weights change. A group spans at most 4 x 16 pixels, much less than
+ * a cell (cells are about distance/16 wide, 16 pixels about distance/40 at 640 pixels and 60 degrees), so
+ * the visibility weights barely move within it. A group of one pixel is exactly fx_probe_filter. */
+enum { SHADE_GROUPS = 16 };
+
+typedef struct shade_group {
+    const void *texel[FX_MAX_TAPS]; /* its taps' probes, in order: with the normal, what a group shares */
+    uint32_t count;
+    float normal[3];
+    float position_sum[3];
+    uint32_t pixels;
+    float weight[FX_MAX_TAPS];   /* wrap x Chebyshev per tap, at the mean position */
+    float e[FX_MAX_TAPS][3];     /* irradiance of each tap towards the normal */
+} shade_group;
+
+static bool same_group(const shade_group *g, const fx_taps *taps, const float normal[3])
+{
+    if (g->count != taps->count || g->normal[0] != normal[0] || g->normal[1] != normal[1] ||
+        g->normal[2] != normal[2])
+        return false;
+    for (uint32_t t = 0; t < taps->count; t++)
+        if (g->texel[t] != taps->texel[t])
+            return false;
+    return true;
+}
+
 static void probes_shade(const fx_context *ctx, const fx_shade_run *run)
 {
     (void)ctx;
-    for (uint32_t i = 0; i < run->count; i++) {
-        float e[3];
-        if (run->taps[i].count == 0 || !fx_probe_filter(&run->taps[i], run->points[i].position,
-                                                        run->points[i].view_normal, e))
-            continue;
-        float open = run->sky_visibility[i] * (1.0f / FX_PROBE_PI);
-        for (int k = 0; k < 3; k++)
-            run->indirect[3 * i + k] += e[k] * open;
-        run->sky_visibility[i] = 0.0f;
+    shade_group groups[SHADE_GROUPS];
+    uint8_t group_of[FX_RUN_PIXELS];
+    uint32_t group_count = 0;
+    uint32_t done = 0; /* pixels before this one are shaded; the rest wait for the next pass */
+    while (done < run->count) {
+        /* Pass 1: assign pixels to groups until the group table is full. */
+        group_count = 0;
+        uint32_t end = done, last = 0; /* the group of the pixel before: usually this one's too */
+        for (; end < run->count; end++) {
+            const fx_taps *taps = &run->taps[end];
+            group_of[end] = 0xFF;
+            if (taps->count == 0)
+                continue;
+            const float *n = run->points[end].view_normal;
+            uint32_t g = last;
+            if (!(g < group_count && same_group(&groups[g], taps, n)))
+                for (g = 0; g < group_count && !same_group(&groups[g], taps, n);)
+                    g++;
+            last = g;
+            if (g == group_count) {
+                if (group_count == SHADE_GROUPS)
+                    break;
+                shade_group *ng = &groups[group_count++];
+                memcpy(ng->texel, taps->texel, taps->count * sizeof taps->texel[0]);
+                ng->count = taps->count;
+                memcpy(ng->normal, n, sizeof ng->normal);
+                ng->position_sum[0] = ng->position_sum[1] = ng->position_sum[2] = 0;
+                ng->pixels = 0;
+            }
+            group_of[end] = (uint8_t)g;
+            for (int k = 0; k < 3; k++)
+                groups[g].position_sum[k] += run->points[end].position[k];
+            groups[g].pixels++;
+        }
+        /* Pass 2: per group, each tap's weight at the mean position and irradiance towards the normal. The
+         * taps of a group are the same probes in the same order (same cell), whichever pixel is asked. */
+        for (uint32_t g = 0; g < group_count; g++) {
+            shade_group *sg = &groups[g];
+            uint32_t sample = done;
+            while (group_of[sample] != g)
+                sample++;
+            const fx_taps *taps = &run->taps[sample];
+            float mean[3];
+            for (int k = 0; k < 3; k++)
+                mean[k] = sg->pixels == 1 ? run->points[sample].position[k] : sg->position_sum[k] / (float)sg->pixels;
+            for (uint32_t t = 0; t < taps->count; t++) {
+                const uint8_t *p = taps->texel[t];
+                sg->weight[t] = probe_weight(p, mean, sg->normal);
+                if (sg->weight[t] > 0)
+                    fx_probe_irradiance(p, sg->normal, sg->e[t]);
+            }
+        }
+        /* Pass 3: per pixel, the trilinear weights. */
+        for (uint32_t i = done; i < end; i++) {
+            if (group_of[i] == 0xFF)
+                continue;
+            const shade_group *sg = &groups[group_of[i]];
+            const fx_taps *taps = &run->taps[i];
+            float sum[3] = {0, 0, 0}, total = 0;
+            for (uint32_t t = 0; t < taps->count; t++) {
+                float w = sg->weight[t] * taps->weight[t];
+                if (!(w > 0))
+                    continue;
+                for (int k = 0; k < 3; k++)
+                    sum[k] += w * sg->e[t][k];
+                total += w;
+            }
+            if (!(total > 0))
+                continue;
+            float open = run->sky_visibility[i] * (1.0f / FX_PROBE_PI) / total;
+            for (int k = 0; k < 3; k++)
+                run->indirect[3 * i + k] += fminf(sum[k] * open, FLT_MAX);
+            run->sky_visibility[i] = 0.0f;
+        }
+        done = end;
     }
 }
 

@@ -148,15 +148,87 @@ static void wsc_kind_begin_frame(void *cache, uint32_t frame)
     atomic_store_explicit(&k->local_hits, 0, memory_order_relaxed);
 }
 
-/* A pixel's level and cell: the world position in double, the level from its distance to the camera. */
-static bool pixel_corners(const kind_wsc *k, const srv_pixel *px, int32_t bias, uint32_t *level,
-                          int32_t corners[8][3], float weights[8])
+/* The cell of the last pixel: neighbouring pixels lie in the same cell far more often than not, and a point
+ * well inside the last cell's box (by a millionth of a cell, so rounding can never put it in another) is in
+ * it without the divisions and floors of wsc_corners. Decisions near a face go through wsc_corners, so the
+ * cell of a point never depends on which pixel came before it. */
+typedef struct cell_memo {
+    uint32_t level; /* UINT32_MAX: none */
+    int32_t g[3];   /* the cell's grid point */
+    double lo[3], hi[3], inside_lo[3], inside_hi[3];
+    double inv_cell;
+    /* The last distance's level (before the bias), and the distances well inside its range. */
+    uint32_t distance_level;
+    double distance_lo, distance_hi;
+} cell_memo;
+
+/* wsc_level of a distance, remembering the range of distances of the last level (a millionth inside its
+ * bounds, so the answer is always wsc_level's). */
+static uint32_t memo_level(const kind_wsc *k, cell_memo *m, double distance)
+{
+    if (distance > m->distance_lo && distance < m->distance_hi)
+        return m->distance_level;
+    uint32_t level = wsc_level(distance, k->c0);
+    double step = 16.0 * k->c0;
+    double lo = level == 0 ? -INFINITY : ldexp(step, (int)level - 1), hi = level == WSC_MAX_LEVEL ? INFINITY : ldexp(step, (int)level);
+    m->distance_level = level;
+    m->distance_lo = level == 0 ? -INFINITY : lo * (1.0 + 1e-6);
+    m->distance_hi = hi * (1.0 - 1e-6);
+    if (!(distance == distance)) /* NaN: no range */
+        m->distance_lo = m->distance_hi = 0;
+    return level;
+}
+
+/* A pixel's level, its cell (memo) and its position in the cell (t, each in [0, 1]); false when the point is
+ * outside the grid's range. *same: the memo's cell already was this pixel's. */
+static bool pixel_cell(const kind_wsc *k, const srv_pixel *px, int32_t bias, cell_memo *m, float t[3], bool *same)
 {
     double world[3] = {(double)px->position[0] + k->origin[0], (double)px->position[1] + k->origin[1],
                        (double)px->position[2] + k->origin[2]};
-    int32_t l = (int32_t)wsc_level((double)px->distance, k->c0) + bias;
-    *level = l < 0 ? 0 : (l > (int32_t)WSC_MAX_LEVEL ? WSC_MAX_LEVEL : (uint32_t)l);
-    return wsc_corners(world, *level, k->c0, corners, weights);
+    int32_t l = (int32_t)memo_level(k, m, (double)px->distance) + bias;
+    uint32_t level = l < 0 ? 0 : (l > (int32_t)WSC_MAX_LEVEL ? WSC_MAX_LEVEL : (uint32_t)l);
+    *same = m->level == level && world[0] >= m->inside_lo[0] && world[0] < m->inside_hi[0] &&
+            world[1] >= m->inside_lo[1] && world[1] < m->inside_hi[1] && world[2] >= m->inside_lo[2] &&
+            world[2] < m->inside_hi[2];
+    if (!*same) {
+        int32_t corners[8][3];
+        float weights[8];
+        if (!wsc_corners(world, level, k->c0, corners, weights)) {
+            m->level = UINT32_MAX;
+            return false;
+        }
+        double cell = wsc_cell_size(level, k->c0);
+        bool moved = m->level != level || memcmp(m->g, corners[0], sizeof m->g) != 0;
+        m->level = level;
+        m->inv_cell = 1.0 / cell;
+        for (int a = 0; a < 3; a++) {
+            m->g[a] = corners[0][a];
+            m->lo[a] = (double)corners[0][a] * cell;
+            m->hi[a] = m->lo[a] + cell;
+            m->inside_lo[a] = m->lo[a] + 1e-6 * cell;
+            m->inside_hi[a] = m->hi[a] - 1e-6 * cell;
+        }
+        *same = !moved; /* a point near a face of the same cell */
+    }
+    for (int a = 0; a < 3; a++) {
+        double u = (world[a] - m->lo[a]) * m->inv_cell;
+        t[a] = u < 0.0 ? 0.0f : (u > 1.0 ? 1.0f : (float)u);
+    }
+    return true;
+}
+
+/* Corner c (0..7) of the memo's cell: g + (c & 1, c >> 1 & 1, c >> 2 & 1); its trilinear weight from t. */
+static void corner_of(const cell_memo *m, int c, int32_t out[3])
+{
+    out[0] = m->g[0] + (c & 1);
+    out[1] = m->g[1] + ((c >> 1) & 1);
+    out[2] = m->g[2] + ((c >> 2) & 1);
+}
+
+static inline float corner_weight(const float t[3], int c)
+{
+    return ((c & 1) ? t[0] : 1.0f - t[0]) * (((c >> 1) & 1) ? t[1] : 1.0f - t[1]) *
+           (((c >> 2) & 1) ? t[2] : 1.0f - t[2]);
 }
 
 static uint32_t wsc_kind_pixel_requests(const void *cache, uint32_t slot, const srv_pixel *pixels, uint32_t count,
@@ -165,21 +237,22 @@ static uint32_t wsc_kind_pixel_requests(const void *cache, uint32_t slot, const 
     (void)slot;
     kind_wsc *k = (kind_wsc *)cache; /* only the atomic refusal counter is written */
     uint32_t n = 0, refused = 0, brick_size = k->brick_size[effect];
-    /* Recent cells, direct-mapped: neighbouring pixels lie in the same cell far more often than not, and a
-     * pixel in a cell already asked for asks for exactly the same 8 grid points. */
+    /* Recent cells, direct-mapped: a pixel in a cell already asked for asks for the same 8 grid points. */
     enum { SEEN = 32 };
     uint64_t seen[SEEN];
     memset(seen, 0xFF, sizeof seen);
+    cell_memo memo = {.level = UINT32_MAX, .distance_lo = 0, .distance_hi = 0};
     for (uint32_t i = 0; i < count; i++) {
-        uint32_t level;
-        int32_t corners[8][3];
-        float weights[8];
-        if (!pixel_corners(k, &pixels[i], bias, &level, corners, weights)) {
+        float t[3];
+        bool same;
+        if (!pixel_cell(k, &pixels[i], bias, &memo, t, &same)) {
             refused++;
             continue;
         }
+        if (same)
+            continue;
         uint64_t cell;
-        if (!wsc_wgi_pack(level, corners[0][0], corners[0][1], corners[0][2], &cell)) {
+        if (!wsc_wgi_pack(memo.level, memo.g[0], memo.g[1], memo.g[2], &cell)) {
             refused++;
             continue;
         }
@@ -189,8 +262,10 @@ static uint32_t wsc_kind_pixel_requests(const void *cache, uint32_t slot, const 
         seen[s] = cell;
         uint32_t first = n;
         for (int c = 0; c < 8; c++) {
+            int32_t corner[3];
+            corner_of(&memo, c, corner);
             uint64_t wgi, bit;
-            if (!wsc_brick_of(corners[c], level, brick_size, &wgi, &bit))
+            if (!wsc_brick_of(corner, memo.level, brick_size, &wgi, &bit))
                 continue; /* wsc_corners checked the range: not reached */
             uint32_t j = first;
             while (j < n && keys[j] != wgi)
@@ -278,34 +353,53 @@ static void wsc_kind_job_location(const void *cache, uint32_t effect, uint64_t k
         job->origin[a] = (float)((double)first[a] * cell - k->origin[a]);
 }
 
-/* The taps of one point at one level: the corners' cells holding data, trilinear weights (not
- * renormalised). `local` may be NULL (the hash table then answers). */
-static uint32_t point_taps(kind_wsc *k, wsc_local *local, uint32_t effect, uint32_t level,
-                           int32_t corners[8][3], const float weights[8], fx_taps *out, uint32_t *first_block)
+/* The cells of one cell's 8 corners that hold data, found once per cell: payload and corner index. */
+typedef struct cell_taps {
+    uint32_t count;
+    const void *texel[8];
+    uint8_t corner[8];
+    uint32_t first_block; /* the brick of the first corner found, or SRV_NONE */
+} cell_taps;
+
+/* Looks the memo's cell's corners up (through `local` when not NULL, else the hash table). */
+static void find_cell_taps(kind_wsc *k, wsc_local *local, uint32_t effect, const cell_memo *m, cell_taps *out)
 {
     uint32_t brick_size = k->brick_size[effect], cell_bytes = k->cell_bytes[effect];
     out->count = 0;
-    out->footprint_log2 = 0;
-    if (first_block)
-        *first_block = SRV_NONE;
+    out->first_block = SRV_NONE;
     for (int c = 0; c < 8; c++) {
+        int32_t corner[3];
+        corner_of(m, c, corner);
         uint64_t wgi, bit;
-        if (weights[c] <= 0 || !wsc_brick_of(corners[c], level, brick_size, &wgi, &bit))
+        if (!wsc_brick_of(corner, m->level, brick_size, &wgi, &bit))
             continue;
         uint32_t brick = local ? wsc_local_lookup(local, k->wsc, effect, wgi) : wsc_find(k->wsc, effect, wgi);
         if (brick == WSC_NONE)
             continue;
-        if (first_block && *first_block == SRV_NONE)
-            *first_block = brick;
+        if (out->first_block == SRV_NONE)
+            out->first_block = brick;
         if (!(wsc_brick_valid(k->wsc, effect, brick) & bit))
             continue;
         uint32_t index = (uint32_t)__builtin_ctzll(bit);
         out->texel[out->count] = (const uint8_t *)wsc_brick_payload(k->wsc, effect, brick) + (size_t)index * cell_bytes;
-        out->weight[out->count] = weights[c];
+        out->corner[out->count++] = (uint8_t)c;
+    }
+}
+
+/* A point's taps from its cell's: trilinear weights (not renormalised), corners of zero weight left out. */
+static void fill_taps(const cell_taps *ct, const float t[3], fx_taps *out)
+{
+    out->count = 0;
+    out->footprint_log2 = 0;
+    for (uint32_t i = 0; i < ct->count; i++) {
+        float w = corner_weight(t, ct->corner[i]);
+        if (!(w > 0))
+            continue;
+        out->texel[out->count] = ct->texel[i];
+        out->weight[out->count] = w;
         out->at_x[out->count] = out->at_y[out->count] = 0;
         out->count++;
     }
-    return out->count;
 }
 
 uint32_t srv__wsc_world_taps(const void *user, uint32_t effect, const float position[3], uint32_t level,
@@ -321,7 +415,21 @@ uint32_t srv__wsc_world_taps(const void *user, uint32_t effect, const float posi
     float weights[8];
     if (!wsc_corners(world, level, k->c0, corners, weights))
         return 0;
-    return point_taps(k, NULL, effect, level, corners, weights, taps, NULL);
+    cell_memo m = {.level = level};
+    memcpy(m.g, corners[0], sizeof m.g);
+    cell_taps ct;
+    find_cell_taps(k, NULL, effect, &m, &ct);
+    taps->footprint_log2 = 0;
+    for (uint32_t i = 0; i < ct.count; i++) {
+        float w = weights[ct.corner[i]];
+        if (!(w > 0))
+            continue;
+        taps->texel[taps->count] = ct.texel[i];
+        taps->weight[taps->count] = w;
+        taps->at_x[taps->count] = taps->at_y[taps->count] = 0;
+        taps->count++;
+    }
+    return taps->count;
 }
 
 static void wsc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
@@ -342,17 +450,22 @@ static void wsc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t threa
     wsc_local_stats before = {0}, after = {0};
     if (local)
         wsc_local_stats_get(local, &before);
+    cell_memo memo = {.level = UINT32_MAX, .distance_lo = 0, .distance_hi = 0};
+    cell_taps ct = {.count = 0, .first_block = SRV_NONE};
     for (uint32_t i = 0; i < count; i++) {
-        uint32_t level;
-        int32_t corners[8][3];
-        float weights[8];
-        if (!pixel_corners(k, &pixels[i], bias, &level, corners, weights)) {
+        float t[3];
+        bool same;
+        if (!pixel_cell(k, &pixels[i], bias, &memo, t, &same)) {
             taps[i].count = 0;
             if (blocks)
                 blocks[i] = SRV_NONE;
             continue;
         }
-        point_taps(k, local, effect, level, corners, weights, &taps[i], blocks ? &blocks[i] : NULL);
+        if (!same)
+            find_cell_taps(k, local, effect, &memo, &ct);
+        fill_taps(&ct, t, &taps[i]);
+        if (blocks)
+            blocks[i] = ct.first_block;
     }
     if (local) {
         wsc_local_stats_get(local, &after);
