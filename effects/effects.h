@@ -216,7 +216,7 @@ enum {
 typedef struct fx_taps {
     const void *texel[FX_MAX_TAPS];
     float weight[FX_MAX_TAPS];
-    float at_x[FX_MAX_TAPS], at_y[FX_MAX_TAPS];
+    float at_x[FX_MAX_TAPS], at_y[FX_MAX_TAPS]; /* on-surface taps only; unset for world-space ones */
     float footprint_log2; /* log2 of the pixel's size in texels of the level read (about 0 unless the level
                              is clamped at 0: then negative, the pixel smaller than a texel) */
     uint32_t count;

@@ -396,8 +396,7 @@ static void fill_taps(const cell_taps *ct, const float t[3], fx_taps *out)
         if (!(w > 0))
             continue;
         out->texel[out->count] = ct->texel[i];
-        out->weight[out->count] = w;
-        out->at_x[out->count] = out->at_y[out->count] = 0;
+        out->weight[out->count] = w; /* at_x, at_y: on-surface taps only (effects.h) */
         out->count++;
     }
 }
