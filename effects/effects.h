@@ -71,6 +71,8 @@ typedef struct fx_context {
                            struct fx_taps *taps);
     const void *world_user;
     uint32_t probe_rays;    /* rays per probe update (default 144, DDGI's) */
+    uint32_t frame;         /* the frame being run, + 1 (0: unknown). Cache payloads change only between
+                               frames, so what is derived from them can be kept within one frame. */
     float probe_hysteresis; /* weight of the old irradiance in a probe update's blend (default 0.97, RTXGI's) */
 } fx_context;
 

@@ -846,9 +846,43 @@ static bool same_group(const shade_group *g, const fx_taps *taps, const float no
     return true;
 }
 
+/* Irradiance of a probe towards a normal, kept per thread for the frame (ctx->frame): runs of one frame
+ * meet the same probes with the same normals again and again, and within a frame a payload does not change
+ * (commits run before compose). Exact: a hit returns what fx_probe_irradiance would. */
+enum { IRRADIANCE_MEMO = 256 };
+typedef struct irradiance_memo {
+    const void *probe;
+    uint32_t frame;
+    float normal[3];
+    float e[3];
+} irradiance_memo;
+static _Thread_local irradiance_memo irradiance_memo_table[IRRADIANCE_MEMO];
+
+static void probe_irradiance_memo(const fx_context *ctx, const void *probe, const float normal[3], float e[3])
+{
+    if (!ctx || ctx->frame == 0) {
+        fx_probe_irradiance(probe, normal, e);
+        return;
+    }
+    uint32_t bits[3];
+    memcpy(bits, normal, sizeof bits);
+    uint64_t h = (uint64_t)(uintptr_t)probe * 0x9E3779B97F4A7C15ull ^ (bits[0] * 0x85EBCA6Bu) ^ (bits[1] * 0xC2B2AE35u) ^
+                 ((uint64_t)bits[2] << 17);
+    irradiance_memo *m = &irradiance_memo_table[(h ^ (h >> 29)) & (IRRADIANCE_MEMO - 1)];
+    if (m->probe == probe && m->frame == ctx->frame && m->normal[0] == normal[0] && m->normal[1] == normal[1] &&
+        m->normal[2] == normal[2]) {
+        memcpy(e, m->e, sizeof m->e);
+        return;
+    }
+    fx_probe_irradiance(probe, normal, e);
+    m->probe = probe;
+    m->frame = ctx->frame;
+    memcpy(m->normal, normal, sizeof m->normal);
+    memcpy(m->e, e, sizeof m->e);
+}
+
 static void probes_shade(const fx_context *ctx, const fx_shade_run *run)
 {
-    (void)ctx;
     shade_group groups[SHADE_GROUPS];
     uint8_t group_of[FX_RUN_PIXELS];
     uint32_t group_count = 0;
@@ -898,7 +932,7 @@ static void probes_shade(const fx_context *ctx, const fx_shade_run *run)
                 const uint8_t *p = taps->texel[t];
                 sg->weight[t] = probe_weight(p, mean, sg->normal);
                 if (sg->weight[t] > 0)
-                    fx_probe_irradiance(p, sg->normal, sg->e[t]);
+                    probe_irradiance_memo(ctx, p, sg->normal, sg->e[t]);
             }
         }
         /* Pass 3: per pixel, the trilinear weights. */

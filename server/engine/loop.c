@@ -487,6 +487,8 @@ fxc_result srv_loop_frame(srv_loop *loop, srv_frame_stats *st)
             slots[active++] = v;
     st->viewer_count = active;
 
+    loop->fx.frame = loop->frame_number + 1;
+
     /* Stage 2: visibility. */
     double t = srv__now_ms();
     for (uint32_t i = 0; i < active; i++)
