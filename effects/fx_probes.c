@@ -435,6 +435,72 @@ static uint32_t queue_shadow_rays(const fx_context *ctx, hit_shading *hs, uint32
     return queued;
 }
 
+/* Irradiance of a probe towards a normal, kept per thread for the frame (ctx->frame): runs of one frame
+ * meet the same probes with the same normals again and again, and within a frame a payload does not change
+ * (commits run after every update and before compose). Exact: a hit returns what fx_probe_irradiance would. */
+enum { IRRADIANCE_MEMO = 256 };
+typedef struct irradiance_memo {
+    const void *probe;
+    uint32_t frame;
+    float normal[3];
+    float e[3];
+} irradiance_memo;
+static _Thread_local irradiance_memo irradiance_memo_table[IRRADIANCE_MEMO];
+
+static void probe_irradiance_memo(const fx_context *ctx, bool committed, const void *probe, const float normal[3],
+                                  float e[3])
+{
+    if (!ctx || ctx->frame == 0) {
+        fx_probe_irradiance(probe, normal, e);
+        return;
+    }
+    /* Updates read the payloads before this frame's commits, compose after them: two generations a frame. */
+    uint32_t generation = ctx->frame * 2u + (committed ? 1u : 0u);
+    uint32_t bits[3];
+    memcpy(bits, normal, sizeof bits);
+    uint64_t h = (uint64_t)(uintptr_t)probe * 0x9E3779B97F4A7C15ull ^ (bits[0] * 0x85EBCA6Bu) ^ (bits[1] * 0xC2B2AE35u) ^
+                 ((uint64_t)bits[2] << 17);
+    irradiance_memo *m = &irradiance_memo_table[(h ^ (h >> 29)) & (IRRADIANCE_MEMO - 1)];
+    if (m->probe == probe && m->frame == generation && m->normal[0] == normal[0] && m->normal[1] == normal[1] &&
+        m->normal[2] == normal[2]) {
+        memcpy(e, m->e, sizeof m->e);
+        return;
+    }
+    fx_probe_irradiance(probe, normal, e);
+    m->probe = probe;
+    m->frame = generation;
+    memcpy(m->normal, normal, sizeof m->normal);
+    memcpy(m->e, e, sizeof m->e);
+}
+
+/* fx_probe_filter with each probe's irradiance towards the normal from the per-thread memo. */
+static bool probe_filter_memo(const fx_context *ctx, bool committed, const fx_taps *taps, const float position[3],
+                              const float normal[3], float out_rgb[3])
+{
+    float sum[3] = {0, 0, 0}, total = 0;
+    for (uint32_t t = 0; t < taps->count; t++) {
+        const uint8_t *p = taps->texel[t];
+        if (!(taps->weight[t] > 0))
+            continue;
+        float weight = probe_weight(p, position, normal);
+        if (weight == 0.0f)
+            continue;
+        weight *= taps->weight[t];
+        float e[3];
+        probe_irradiance_memo(ctx, committed, p, normal, e);
+        for (int k = 0; k < 3; k++)
+            sum[k] += weight * e[k];
+        total += weight;
+    }
+    if (!(total > 0)) {
+        out_rgb[0] = out_rgb[1] = out_rgb[2] = 0;
+        return false;
+    }
+    for (int k = 0; k < 3; k++)
+        out_rgb[k] = fminf(sum[k] / total, FLT_MAX);
+    return true;
+}
+
 /* Radiance leaving a front-face hit, given its direct light (compose units) and the probes around it. */
 static void hit_radiance(const fx_context *ctx, uint32_t level, uint32_t tri, float u, float v, float t,
                          const float position[3], const float normal[3], const float direct[3], float out[3])
@@ -447,11 +513,15 @@ static void hit_radiance(const fx_context *ctx, uint32_t level, uint32_t tri, fl
         memset(&taps, 0, sizeof taps);
         ctx->world_taps(ctx->world_user, FX_PROBES, position, level, &taps);
         if (taps.count > 0)
-            fx_probe_filter(&taps, position, normal, bounce);
+            probe_filter_memo(ctx, false, &taps, position, normal, bounce);
     }
     for (int k = 0; k < 3; k++)
         out[k] = albedo[k] * (direct[k] + bounce[k] * (1.0f / FX_PROBE_PI));
 }
+
+/* Per-thread working memory of update, commit and eval (each uses it within one call only). */
+static _Thread_local hit_shading thread_hit_shading;
+static _Thread_local probe_scratch thread_scratch;
 
 uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count)
 {
@@ -466,9 +536,8 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
     rtcInitIntersectContext(&context);
     RTCScene rtc = (RTCScene)scene_rt_handle(ctx->rt);
     _Alignas(64) struct RTCRayHit hits[PROBE_CHUNK];
-    hit_shading *hs = malloc(sizeof *hs); /* 20 KB: off the (pool thread) stack */
-    probe_scratch *out = malloc(sizeof *out);
-    FX_ASSERT(hs && out);
+    hit_shading *hs = &thread_hit_shading; /* 20 KB: off the (pool thread) stack, never allocated */
+    probe_scratch *out = &thread_scratch;
     uint64_t traced = 0;
 
     for (uint32_t j = 0; j < count; j++) {
@@ -615,8 +684,7 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
         out->valid = 1;
         memcpy(job->scratch, out, sizeof *out);
     }
-    free(out);
-    free(hs);
+
     return traced;
 }
 
@@ -626,8 +694,7 @@ void fx_probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
     if (h == 0.0f)
         h = FX_PROBE_HYSTERESIS;
     h = isnan(h) ? FX_PROBE_HYSTERESIS : fminf(fmaxf(h, 0.0f), 0.999f);
-    probe_scratch *in = malloc(sizeof *in);
-    FX_ASSERT(in);
+    probe_scratch *in = &thread_scratch;
     for (uint32_t j = 0; j < count; j++) {
         const fx_block_job *job = &jobs[j];
         FX_ASSERT(job->scratch != NULL);
@@ -685,7 +752,6 @@ void fx_probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
         put_u32(p + 16, FX_PROBE_HAS_DATA);
         put_u32(p + 20, updates < UINT32_MAX ? updates + 1 : UINT32_MAX);
     }
-    free(in);
 }
 
 /* ---- the no-cache baseline --------------------------------------------------------------------------- */
@@ -708,8 +774,7 @@ void fx_probe_eval_point(const fx_context *ctx, const float pos[3], const float 
     rtcInitIntersectContext(&context);
     RTCScene rtc = (RTCScene)scene_rt_handle(ctx->rt);
     _Alignas(64) struct RTCRayHit hits[PROBE_CHUNK];
-    hit_shading *hs = malloc(sizeof *hs);
-    FX_ASSERT(hs);
+    hit_shading *hs = &thread_hit_shading;
     double sum[3] = {0, 0, 0};
     uint64_t traced = 0;
     for (uint32_t first = 0; first < n_rays; first += PROBE_CHUNK) {
@@ -759,7 +824,6 @@ void fx_probe_eval_point(const fx_context *ctx, const float pos[3], const float 
                 sum[k] += (double)albedo[k] * hs->direct[r][k];
         }
     }
-    free(hs);
     /* Cosine-weighted sampling: E = pi x the mean radiance. */
     for (int k = 0; k < 3; k++)
         out_rgb[k] = (float)fmin(FX_PROBE_PI * sum[k] / (double)n_rays, FLT_MAX);
@@ -846,41 +910,6 @@ static bool same_group(const shade_group *g, const fx_taps *taps, const float no
     return true;
 }
 
-/* Irradiance of a probe towards a normal, kept per thread for the frame (ctx->frame): runs of one frame
- * meet the same probes with the same normals again and again, and within a frame a payload does not change
- * (commits run before compose). Exact: a hit returns what fx_probe_irradiance would. */
-enum { IRRADIANCE_MEMO = 256 };
-typedef struct irradiance_memo {
-    const void *probe;
-    uint32_t frame;
-    float normal[3];
-    float e[3];
-} irradiance_memo;
-static _Thread_local irradiance_memo irradiance_memo_table[IRRADIANCE_MEMO];
-
-static void probe_irradiance_memo(const fx_context *ctx, const void *probe, const float normal[3], float e[3])
-{
-    if (!ctx || ctx->frame == 0) {
-        fx_probe_irradiance(probe, normal, e);
-        return;
-    }
-    uint32_t bits[3];
-    memcpy(bits, normal, sizeof bits);
-    uint64_t h = (uint64_t)(uintptr_t)probe * 0x9E3779B97F4A7C15ull ^ (bits[0] * 0x85EBCA6Bu) ^ (bits[1] * 0xC2B2AE35u) ^
-                 ((uint64_t)bits[2] << 17);
-    irradiance_memo *m = &irradiance_memo_table[(h ^ (h >> 29)) & (IRRADIANCE_MEMO - 1)];
-    if (m->probe == probe && m->frame == ctx->frame && m->normal[0] == normal[0] && m->normal[1] == normal[1] &&
-        m->normal[2] == normal[2]) {
-        memcpy(e, m->e, sizeof m->e);
-        return;
-    }
-    fx_probe_irradiance(probe, normal, e);
-    m->probe = probe;
-    m->frame = ctx->frame;
-    memcpy(m->normal, normal, sizeof m->normal);
-    memcpy(m->e, e, sizeof m->e);
-}
-
 static void probes_shade(const fx_context *ctx, const fx_shade_run *run)
 {
     shade_group groups[SHADE_GROUPS];
@@ -932,7 +961,7 @@ static void probes_shade(const fx_context *ctx, const fx_shade_run *run)
                 const uint8_t *p = taps->texel[t];
                 sg->weight[t] = probe_weight(p, mean, sg->normal);
                 if (sg->weight[t] > 0)
-                    probe_irradiance_memo(ctx, p, sg->normal, sg->e[t]);
+                    probe_irradiance_memo(ctx, true, p, sg->normal, sg->e[t]);
             }
         }
         /* Pass 3: per pixel, the trilinear weights. */
