@@ -901,8 +901,10 @@ typedef struct shade_group {
 
 static bool same_group(const shade_group *g, const fx_taps *taps, const float normal[3])
 {
-    if (g->count != taps->count || g->normal[0] != normal[0] || g->normal[1] != normal[1] ||
-        g->normal[2] != normal[2])
+    /* Normals within 1e-3 per component (0.06 degrees) count as one: coplanar triangles of a wall have
+     * normals that differ in their last bits, and the irradiance cannot tell them apart. */
+    if (g->count != taps->count || fabsf(g->normal[0] - normal[0]) > 1e-3f || fabsf(g->normal[1] - normal[1]) > 1e-3f ||
+        fabsf(g->normal[2] - normal[2]) > 1e-3f)
         return false;
     for (uint32_t t = 0; t < taps->count; t++)
         if (g->texel[t] != taps->texel[t])
