@@ -122,11 +122,27 @@ uint64_t fx_shadow_update(const fx_context *ctx, const fx_block_job *jobs, uint3
     return rays_traced;
 }
 
+/* The bits set in a 16-bit mask, without a call: the build targets baseline x86-64, where
+ * __builtin_popcount is a library call. */
+static inline uint32_t popcount16(uint32_t v)
+{
+    v = v - ((v >> 1) & 0x5555u);
+    v = (v & 0x3333u) + ((v >> 2) & 0x3333u);
+    v = (v + (v >> 4)) & 0x0F0Fu;
+    return (v + (v >> 8)) & 0x1Fu;
+}
+
+/* The lit fraction of a texel's mask: rays that reached the light over rays traced. */
+static inline float lit_fraction(uint32_t mask)
+{
+    return (float)popcount16(mask) * (1.0f / FX_SHADOW_RAYS);
+}
+
 float fx_shadow_sample(const void *payload, uint32_t texel, uint32_t light_count, uint32_t light)
 {
     FX_ASSERT(texel < 64 && light < light_count);
     uint16_t mask = fx__get_u16((const uint8_t *)payload + ((size_t)texel * light_count + light) * 2u);
-    return (float)__builtin_popcount(mask) * (1.0f / FX_SHADOW_RAYS);
+    return lit_fraction(mask);
 }
 
 float fx_shadow_eval_point(const fx_context *ctx, const float pos[3], const float normal[3],
@@ -249,7 +265,7 @@ static void shadow_resample(const fx_context *ctx, const void *const finer[4], v
                     /* The 2 x 2 finer cells under coarse cell (qx, qy) of this quarter. */
                     uint32_t bits = (child >> ((2 * qy) * 4 + 2 * qx)) & 3u;
                     bits |= ((child >> ((2 * qy + 1) * 4 + 2 * qx)) & 3u) << 2;
-                    if (__builtin_popcount(bits) >= 2)
+                    if (popcount16(bits) >= 2)
                         mask |= 1u << ((2 * (c >> 1) + qy) * 4 + 2 * (c & 1) + qx);
                 }
         }
@@ -300,7 +316,7 @@ static void shadow_shade(const fx_context *ctx, const fx_shade_run *run)
             for (uint32_t l = 0; l < lights; l++) {
                 float lit = 0;
                 for (uint32_t t = 0; t < taps->count; t++)
-                    lit += taps->weight[t] * fx_shadow_sample(taps->texel[t], 0, lights, l);
+                    lit += taps->weight[t] * lit_fraction(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
                 run->light_visibility[(size_t)i * lights + l] *= lit;
             }
             continue;
@@ -331,7 +347,8 @@ static void shadow_shade(const fx_context *ctx, const fx_shade_run *run)
             }
             if (coarse > 0)
                 for (uint32_t t = 0; t < taps->count; t++)
-                    average += taps->weight[t] * fx_shadow_sample(taps->texel[t], 0, lights, l);
+                    average +=
+                        taps->weight[t] * lit_fraction(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
             run->light_visibility[(size_t)i * lights + l] *= fine + coarse * (average - fine);
         }
     }
