@@ -24,6 +24,8 @@ typedef struct compose_scratch {
     uint32_t blocks[SRV_RUN];
     size_t index[SRV_RUN]; /* pixel index of each visible pixel of the run */
     float albedo[SRV_RUN][3];
+    uint32_t triangle[SRV_RUN];                      /* the albedo's arguments, one array each */
+    float bary_u[SRV_RUN], bary_v[SRV_RUN], albedo_footprint[SRV_RUN];
     float shade_normal[SRV_RUN][3];
     uint8_t missing[SRV_RUN];
     float sharing[SRV_RUN];
@@ -183,7 +185,6 @@ static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32
     /* What neighbouring pixels share when they see the same triangle, looked up once. */
     uint32_t memo_tri = SRV_MISS, memo_island = 0;
     float corner[3][3], normal[3], island_uv[6];
-    scene_albedo_triangle albedo;
     uint32_t count = 0;
     for (uint32_t y = y0; y < y1; y++)
         for (uint32_t x = x0; x < x1; x++) {
@@ -210,7 +211,6 @@ static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32
                 memcpy(normal, s->tri_normal + 3 * (size_t)tri, sizeof normal);
                 memcpy(island_uv, s->tri_island_uv + 6 * (size_t)tri, sizeof island_uv);
                 memo_island = s->tri_island[tri];
-                scene_albedo_prepare(s, tri, &albedo);
             }
             float w = 1.0f - u - v;
             for (int k = 0; k < 3; k++) {
@@ -225,8 +225,12 @@ static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32
             float facing = pt->normal[0] * dir[0] + pt->normal[1] * dir[1] + pt->normal[2] * dir[2];
             for (int k = 0; k < 3; k++) /* seen from behind: light the side the viewer sees */
                 cs->shade_normal[i][k] = facing > 0 ? -pt->normal[k] : pt->normal[k];
-            /* The pixel's footprint in metres: level-0 texels per pixel over texels per metre. */
-            scene_albedo_sample(&albedo, u, v, view->footprint[p] - log2_density, cs->albedo[i]);
+            /* The pixel's footprint in metres: level-0 texels per pixel over texels per metre. The albedo is
+             * sampled after the loop, for the whole run. */
+            cs->triangle[i] = tri;
+            cs->bary_u[i] = u;
+            cs->bary_v[i] = v;
+            cs->albedo_footprint[i] = view->footprint[p] - log2_density;
             pt->triangle = tri;
             pt->u = u;
             pt->v = v;
@@ -244,6 +248,7 @@ static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32
             memcpy(px->position, pt->position, sizeof px->position);
             px->distance = view->depth[p];
         }
+    scene_albedo_run(s, cs->triangle, cs->bary_u, cs->bary_v, cs->albedo_footprint, count, cs->albedo);
     return count;
 }
 
