@@ -173,9 +173,11 @@ typedef struct compose_task {
 } compose_task;
 
 /* Gathers the visible pixels of one run (rows y0..y1, columns x0..x1, at most SRV_RUN pixels): their points,
- * albedo and cache pixels; misses get the sky. Returns how many are visible. */
+ * albedo and cache pixels (with position and distance only when `positions`: a cache kind asks for them);
+ * misses get the sky. Returns how many are visible. */
 static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32_t x1, uint32_t y0,
-                           uint32_t y1, compose_scratch *cs, const float sky[3], float log2_density)
+                           uint32_t y1, compose_scratch *cs, const float sky[3], float log2_density,
+                           bool positions)
 {
     const scene *s = loop->s;
     const srv_camera_frame *f = &view->frame;
@@ -245,8 +247,10 @@ static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32
             px->footprint = view->footprint[p];
             px->island_u = w * island_uv[0] + u * island_uv[2] + v * island_uv[4];
             px->island_v = w * island_uv[1] + u * island_uv[3] + v * island_uv[5];
-            memcpy(px->position, pt->position, sizeof px->position);
-            px->distance = view->depth[p];
+            if (positions) {
+                memcpy(px->position, pt->position, sizeof px->position);
+                px->distance = view->depth[p];
+            }
         }
     scene_albedo_run(s, cs->triangle, cs->bary_u, cs->bary_v, cs->albedo_footprint, count, cs->albedo);
     return count;
@@ -268,6 +272,9 @@ static void compose_tile(void *user, uint32_t task_index, uint32_t thread_index)
     for (int k = 0; k < 3; k++)
         sky[k] = s->sky_color[k] * s->sky_intensity;
     const float log2_density = log2f(s->texel_density);
+    bool positions = false; /* some shading cache kind reads the pixels' positions */
+    for (uint32_t e = 0; e < loop->effect_count; e++)
+        positions |= loop->effect_shading[e] && loop->kinds[loop->effect_kind[e]]->needs_position;
     /* Directional lights: the same direction and irradiance for every pixel, computed once. */
     enum { CONSTANT_LIGHTS = 8 };
     float light_dir[CONSTANT_LIGHTS][3], light_rgb[CONSTANT_LIGHTS][3];
@@ -284,7 +291,7 @@ static void compose_tile(void *user, uint32_t task_index, uint32_t thread_index)
     uint32_t ty1 = ty0 + SRV_TILE < f->height ? ty0 + SRV_TILE : f->height;
     for (uint32_t ry = ty0; ry < ty1; ry += SRV_RUN / SRV_TILE) {
         uint32_t ry1 = ry + SRV_RUN / SRV_TILE < ty1 ? ry + SRV_RUN / SRV_TILE : ty1;
-        uint32_t count = gather_run(loop, view, tx0, tx1, ry, ry1, cs, sky, log2_density);
+        uint32_t count = gather_run(loop, view, tx0, tx1, ry, ry1, cs, sky, log2_density, positions);
         for (uint32_t i = 0; i < count * stride; i++)
             cs->light_visibility[i] = 1.0f;
         for (uint32_t i = 0; i < count; i++) {
