@@ -20,6 +20,7 @@
  * group of 16 rays is never split across batches. The caller must have called scene_tracing_thread_init() in
  * the calling thread (flush-to-zero / denormals-are-zero). */
 #include "fx_internal.h"
+#include "fxc_hot.h"
 
 #include <string.h>
 
@@ -290,7 +291,7 @@ static int shadow_tap_at(const fx_taps *taps, int from, int ox, int oy)
  * cell whose texel holds no data takes the nearest cell of the pixel's own texel. A pixel as large as a
  * texel reads the texels' lit fractions bilinearly instead (a point sample of the fine grid would alias);
  * in between, the two are blended by the pixel's size in texels. */
-static void shadow_shade(const fx_context *ctx, const fx_shade_run *run)
+FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_run *run)
 {
     (void)ctx;
     uint32_t lights = run->light_count;

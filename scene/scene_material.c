@@ -3,6 +3,7 @@
  * footprint (compose). Split from scene.c, which builds the geometry. */
 #include "image.h"
 #include "scene_internal.h"
+#include "fxc_hot.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -201,7 +202,7 @@ void scene_albedo_sample(const scene_albedo_triangle *t, float u, float v, float
     albedo_sample(t, u, v, footprint_log2, out_rgb);
 }
 
-void scene_albedo_run(const scene *s, const uint32_t *tri, const float *u, const float *v,
+FXC_HOT_CLONES void scene_albedo_run(const scene *s, const uint32_t *tri, const float *u, const float *v,
                       const float *footprint_log2, uint32_t count, float (*out_rgb)[3])
 {
     scene_albedo_triangle t;

@@ -7,6 +7,7 @@
  * data at all keeps that effect's neutral term and is counted as missing. In no-cache mode each effect's
  * eval callback traces its rays at the pixel with the sample counts the cache converges to. */
 #include "engine_internal.h"
+#include "fxc_hot.h"
 
 #include <float.h>
 #include <math.h>
@@ -256,7 +257,7 @@ static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32
     return count;
 }
 
-static void compose_tile(void *user, uint32_t task_index, uint32_t thread_index)
+FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_t thread_index)
 {
     compose_task *task = user;
     srv_loop *loop = task->loop;

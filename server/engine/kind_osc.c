@@ -3,6 +3,7 @@
  * cache's phases, figures and memory. Everything that knows the osc key layout or island sizes in the
  * engine is here. */
 #include "engine_internal.h"
+#include "fxc_hot.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -271,7 +272,7 @@ static inline uint32_t memo_lookup(const osc_cache *osc, tap_memo *memo, uint32_
  * holds no data or whose weight is 0; the weights renormalised. The four texels lie in one block unless the
  * footprint straddles a block edge, so the block of a tap is looked up only where its block coordinates
  * differ from the first tap's. */
-static void osc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
+FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
                                 uint32_t count, uint32_t effect, int32_t bias, fx_taps *taps, uint32_t *blocks)
 {
     (void)slot, (void)thread;
