@@ -12,4 +12,12 @@
 #define FXC_HOT_CLONES
 #endif
 
+/* FXC_HOT_INLINE: a static helper of such a function, always inlined into it, so that it is compiled for
+ * each copy (a helper left as a call would run the baseline code from both). */
+#if defined(__GNUC__)
+#define FXC_HOT_INLINE static inline __attribute__((always_inline))
+#else
+#define FXC_HOT_INLINE static inline
+#endif
+
 #endif

@@ -116,7 +116,7 @@ scene_result scene__compute_texture_lods(scene *s, scene_error *err)
  * that of one pass in the final frame; point lights and the camera moved into the frame. */
 /* Bilinear lookup in mip level `level` of a texture with wrap-around addressing; (u, v) with v = 0 at the
  * bottom of the image. */
-static inline void texture_sample(const scene_texture *tex, uint32_t level, float u, float v, float out[3])
+FXC_HOT_INLINE void texture_sample(const scene_texture *tex, uint32_t level, float u, float v, float out[3])
 {
     /* Level 0 straight from rgb: a texture filled by hand may have no mip chain. */
     const float *texels = level ? tex->mip_rgb[level] : tex->rgb;
@@ -158,7 +158,7 @@ static inline void texture_sample(const scene_texture *tex, uint32_t level, floa
 }
 
 /* scene_albedo_sample's body, inlined into the run. */
-static inline void albedo_sample(const scene_albedo_triangle *t, float u, float v, float footprint_log2,
+FXC_HOT_INLINE void albedo_sample(const scene_albedo_triangle *t, float u, float v, float footprint_log2,
                                  float out_rgb[3])
 {
     if (!t->texture) {

@@ -176,7 +176,7 @@ typedef struct compose_task {
 /* Gathers the visible pixels of one run (rows y0..y1, columns x0..x1, at most SRV_RUN pixels): their points,
  * albedo and cache pixels (with position and distance only when `positions`: a cache kind asks for them);
  * misses get the sky. Returns how many are visible. */
-static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32_t x1, uint32_t y0,
+FXC_HOT_INLINE uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32_t x1, uint32_t y0,
                            uint32_t y1, compose_scratch *cs, const float sky[3], float log2_density,
                            bool positions)
 {

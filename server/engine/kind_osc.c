@@ -251,7 +251,7 @@ typedef struct tap_memo {
 } tap_memo;
 
 /* The memo slot holding key (looked up in the cache when it is not there yet). */
-static inline uint32_t memo_lookup(const osc_cache *osc, tap_memo *memo, uint32_t effect, uint64_t key)
+FXC_HOT_INLINE uint32_t memo_lookup(const osc_cache *osc, tap_memo *memo, uint32_t effect, uint64_t key)
 {
     uint32_t m = (uint32_t)((key * 0x9E3779B97F4A7C15ull) >> 60); /* 4 bits: TAP_MEMO */
     if (memo->key[m] == key)
@@ -286,6 +286,7 @@ FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot,
     uint32_t memo_island = UINT32_MAX, memo_level = UINT32_MAX;
     long w = 0, h = 0;
     uint64_t base = 0;
+    uint32_t last_slot = 0; /* the memo slot of the previous pixel's first block */
     for (uint32_t i = 0; i < count; i++) {
         const srv_pixel *px = &pixels[i];
         fx_taps *out = &taps[i];
@@ -312,8 +313,11 @@ FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot,
         }
         float wx[2] = {1 - ax, ax}, wy[2] = {1 - ay, ay};
         uint32_t tap_memo_slot[4];
-        tap_memo_slot[0] = memo_lookup(osc, &memo, effect, base | ((uint64_t)(ty[0] >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
-                                                                ((uint64_t)(tx[0] >> 3) << OSC_KEY_BLOCK_X_SHIFT));
+        uint64_t key0 = base | ((uint64_t)(ty[0] >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
+                        ((uint64_t)(tx[0] >> 3) << OSC_KEY_BLOCK_X_SHIFT);
+        if (memo.key[last_slot] != key0) /* the slot may since hold another block */
+            last_slot = memo_lookup(osc, &memo, effect, key0);
+        tap_memo_slot[0] = last_slot;
         bool same_x = (tx[0] >> 3) == (tx[1] >> 3), same_y = (ty[0] >> 3) == (ty[1] >> 3);
         out->footprint_log2 = px->footprint - (float)level;
         uint32_t m0 = tap_memo_slot[0];
