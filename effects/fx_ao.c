@@ -23,6 +23,7 @@
  * batched 256 at a time into rtcOccluded1M; a texel's rays are never split across batches. The caller must
  * have called scene_tracing_thread_init() in this thread. */
 #include "fx_internal.h"
+#include "fxc_hot.h"
 
 #include <string.h>
 
@@ -213,7 +214,7 @@ static void ao_resample(const fx_context *ctx, const void *const finer[4], void 
 }
 
 /* The sky's visibility: the filtered unoccluded fraction. */
-static void ao_shade(const fx_context *ctx, const fx_shade_run *run)
+FXC_HOT_CLONES static void ao_shade(const fx_context *ctx, const fx_shade_run *run)
 {
     (void)ctx;
     for (uint32_t i = 0; i < run->count; i++) {

@@ -20,6 +20,7 @@
  * group of 16 rays is never split across batches. The caller must have called scene_tracing_thread_init() in
  * the calling thread (flush-to-zero / denormals-are-zero). */
 #include "fx_internal.h"
+#include "fxc_hot.h"
 
 #include <string.h>
 
@@ -122,11 +123,32 @@ uint64_t fx_shadow_update(const fx_context *ctx, const fx_block_job *jobs, uint3
     return rays_traced;
 }
 
+/* Bits set per byte value: a 16-bit mask's popcount in two table reads, the same on every x86-64 (the
+ * baseline build has no POPCNT instruction, and __builtin_popcount is a library call there). */
+#define FX_B2(n) n, n + 1, n + 1, n + 2
+#define FX_B4(n) FX_B2(n), FX_B2(n + 1), FX_B2(n + 1), FX_B2(n + 2)
+#define FX_B6(n) FX_B4(n), FX_B4(n + 1), FX_B4(n + 1), FX_B4(n + 2)
+static const uint8_t bits_in_byte[256] = {FX_B6(0), FX_B6(1), FX_B6(1), FX_B6(2)};
+#undef FX_B2
+#undef FX_B4
+#undef FX_B6
+
+static inline uint32_t popcount16(uint32_t v)
+{
+    return (uint32_t)bits_in_byte[v & 0xFF] + bits_in_byte[(v >> 8) & 0xFF];
+}
+
+/* The lit fraction of a texel's mask: rays that reached the light over rays traced. */
+static inline float lit_fraction(uint32_t mask)
+{
+    return (float)popcount16(mask) * (1.0f / FX_SHADOW_RAYS);
+}
+
 float fx_shadow_sample(const void *payload, uint32_t texel, uint32_t light_count, uint32_t light)
 {
     FX_ASSERT(texel < 64 && light < light_count);
     uint16_t mask = fx__get_u16((const uint8_t *)payload + ((size_t)texel * light_count + light) * 2u);
-    return (float)__builtin_popcount(mask) * (1.0f / FX_SHADOW_RAYS);
+    return lit_fraction(mask);
 }
 
 float fx_shadow_eval_point(const fx_context *ctx, const float pos[3], const float normal[3],
@@ -249,7 +271,7 @@ static void shadow_resample(const fx_context *ctx, const void *const finer[4], v
                     /* The 2 x 2 finer cells under coarse cell (qx, qy) of this quarter. */
                     uint32_t bits = (child >> ((2 * qy) * 4 + 2 * qx)) & 3u;
                     bits |= ((child >> ((2 * qy + 1) * 4 + 2 * qx)) & 3u) << 2;
-                    if (__builtin_popcount(bits) >= 2)
+                    if (popcount16(bits) >= 2)
                         mask |= 1u << ((2 * (c >> 1) + qy) * 4 + 2 * (c & 1) + qx);
                 }
         }
@@ -258,7 +280,7 @@ static void shadow_resample(const fx_context *ctx, const void *const finer[4], v
 }
 
 /* The tap whose texel lies (ox, oy) texels from tap `from`'s texel, or -1. */
-static int shadow_tap_at(const fx_taps *taps, int from, int ox, int oy)
+static inline int shadow_tap_at(const fx_taps *taps, int from, int ox, int oy)
 {
     for (uint32_t t = 0; t < taps->count; t++)
         if (fabsf(taps->at_x[from] - (float)ox - taps->at_x[t]) < 0.5f &&
@@ -274,7 +296,7 @@ static int shadow_tap_at(const fx_taps *taps, int from, int ox, int oy)
  * cell whose texel holds no data takes the nearest cell of the pixel's own texel. A pixel as large as a
  * texel reads the texels' lit fractions bilinearly instead (a point sample of the fine grid would alias);
  * in between, the two are blended by the pixel's size in texels. */
-static void shadow_shade(const fx_context *ctx, const fx_shade_run *run)
+FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_run *run)
 {
     (void)ctx;
     uint32_t lights = run->light_count;
@@ -300,7 +322,7 @@ static void shadow_shade(const fx_context *ctx, const fx_shade_run *run)
             for (uint32_t l = 0; l < lights; l++) {
                 float lit = 0;
                 for (uint32_t t = 0; t < taps->count; t++)
-                    lit += taps->weight[t] * fx_shadow_sample(taps->texel[t], 0, lights, l);
+                    lit += taps->weight[t] * lit_fraction(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
                 run->light_visibility[(size_t)i * lights + l] *= lit;
             }
             continue;
@@ -331,7 +353,8 @@ static void shadow_shade(const fx_context *ctx, const fx_shade_run *run)
             }
             if (coarse > 0)
                 for (uint32_t t = 0; t < taps->count; t++)
-                    average += taps->weight[t] * fx_shadow_sample(taps->texel[t], 0, lights, l);
+                    average +=
+                        taps->weight[t] * lit_fraction(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
             run->light_visibility[(size_t)i * lights + l] *= fine + coarse * (average - fine);
         }
     }

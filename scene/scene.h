@@ -240,6 +240,12 @@ typedef struct scene_albedo_triangle {
 void scene_albedo_prepare(const scene *s, uint32_t tri, scene_albedo_triangle *out);
 void scene_albedo_sample(const scene_albedo_triangle *t, float u, float v, float footprint_log2, float out_rgb[3]);
 
+/* The albedo of a run of `count` hits: out_rgb[i] is what scene_albedo_filtered(s, tri[i], u[i], v[i],
+ * footprint_log2[i]) gives. Neighbouring hits on the same triangle share one lookup of its material, and
+ * the caller keeps its registers across the run (one call, not one per pixel). */
+void scene_albedo_run(const scene *s, const uint32_t *tri, const float *u, const float *v,
+                      const float *footprint_log2, uint32_t count, float (*out_rgb)[3]);
+
 /* ---- what the scene needs ---------------------------------------------------------------------------- */
 
 typedef enum scene_effect {

@@ -3,6 +3,7 @@
  * footprint (compose). Split from scene.c, which builds the geometry. */
 #include "image.h"
 #include "scene_internal.h"
+#include "fxc_hot.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -115,7 +116,7 @@ scene_result scene__compute_texture_lods(scene *s, scene_error *err)
  * that of one pass in the final frame; point lights and the camera moved into the frame. */
 /* Bilinear lookup in mip level `level` of a texture with wrap-around addressing; (u, v) with v = 0 at the
  * bottom of the image. */
-static void texture_sample(const scene_texture *tex, uint32_t level, float u, float v, float out[3])
+FXC_HOT_INLINE void texture_sample(const scene_texture *tex, uint32_t level, float u, float v, float out[3])
 {
     /* Level 0 straight from rgb: a texture filled by hand may have no mip chain. */
     const float *texels = level ? tex->mip_rgb[level] : tex->rgb;
@@ -131,20 +132,52 @@ static void texture_sample(const scene_texture *tex, uint32_t level, float u, fl
     /* x lies in [-0.5, width - 0.5], so x0 + dx lies in [-1, width]: one wrap step, no division. */
     int64_t x0 = (int64_t)fx, y0 = (int64_t)fy;
     int64_t w = width, h = height;
-    for (int k = 0; k < 3; k++)
-        out[k] = 0;
+    int64_t column[2], row[2];
+    bool column_bad[2], row_bad[2];
+    for (int d = 0; d < 2; d++) {
+        int64_t xi = x0 + d, yi = y0 + d;
+        column[d] = xi < 0 ? xi + w : (xi >= w ? xi - w : xi);
+        row[d] = yi < 0 ? yi + h : (yi >= h ? yi - h : yi);
+        column_bad[d] = column[d] < 0 || column[d] >= w;
+        row_bad[d] = row[d] < 0 || row[d] >= h;
+    }
+    float wx[2] = {1 - ax, ax}, wy[2] = {1 - ay, ay};
+    float sum[3] = {0, 0, 0};
     for (int dy = 0; dy < 2; dy++)
         for (int dx = 0; dx < 2; dx++) {
-            int64_t xi = x0 + dx, yi = y0 + dy;
-            xi = xi < 0 ? xi + w : (xi >= w ? xi - w : xi);
-            yi = yi < 0 ? yi + h : (yi >= h ? yi - h : yi);
-            if (xi < 0 || xi >= w || yi < 0 || yi >= h) /* only for a u or v so large floorf lost precision */
+            size_t xi = (size_t)column[dx], yi = (size_t)row[dy];
+            if (column_bad[dx] || row_bad[dy]) /* only for a u or v so large floorf lost precision */
                 xi = 0, yi = 0;
-            float weight = (dx ? ax : 1 - ax) * (dy ? ay : 1 - ay);
-            const float *p = texels + 3 * ((size_t)yi * (size_t)w + (size_t)xi);
+            float weight = wx[dx] * wy[dy];
+            const float *p = texels + 3 * (yi * (size_t)w + xi);
             for (int k = 0; k < 3; k++)
-                out[k] += weight * p[k];
+                sum[k] += weight * p[k];
         }
+    for (int k = 0; k < 3; k++)
+        out[k] = sum[k];
+}
+
+/* scene_albedo_sample's body, inlined into the run. */
+FXC_HOT_INLINE void albedo_sample(const scene_albedo_triangle *t, float u, float v, float footprint_log2,
+                                 float out_rgb[3])
+{
+    if (!t->texture) {
+        memcpy(out_rgb, t->diffuse, 3 * sizeof(float));
+        return;
+    }
+    const float *uv = t->uv;
+    float w0 = 1 - u - v;
+    float tu = w0 * uv[0] + u * uv[2] + v * uv[4];
+    float tv = w0 * uv[1] + u * uv[3] + v * uv[5];
+    const scene_texture *tex = t->texture;
+    float level = footprint_log2 + t->lod;
+    uint32_t mip = 0;
+    if (level > 0.5f && tex->levels > 1)
+        mip = level >= (float)(tex->levels - 1) ? tex->levels - 1 : (uint32_t)(level + 0.5f);
+    float texel[3];
+    texture_sample(tex, mip, tu, tv, texel);
+    for (int k = 0; k < 3; k++)
+        out_rgb[k] = texel[k] * t->diffuse[k];
 }
 
 void scene_albedo(const scene *s, uint32_t tri, float u, float v, float out_rgb[3])
@@ -166,23 +199,21 @@ void scene_albedo_prepare(const scene *s, uint32_t tri, scene_albedo_triangle *o
 
 void scene_albedo_sample(const scene_albedo_triangle *t, float u, float v, float footprint_log2, float out_rgb[3])
 {
-    if (!t->texture) {
-        memcpy(out_rgb, t->diffuse, 3 * sizeof(float));
-        return;
+    albedo_sample(t, u, v, footprint_log2, out_rgb);
+}
+
+FXC_HOT_CLONES void scene_albedo_run(const scene *s, const uint32_t *tri, const float *u, const float *v,
+                      const float *footprint_log2, uint32_t count, float (*out_rgb)[3])
+{
+    scene_albedo_triangle t;
+    uint32_t memo_tri = UINT32_MAX;
+    for (uint32_t i = 0; i < count; i++) {
+        if (tri[i] != memo_tri) {
+            memo_tri = tri[i];
+            scene_albedo_prepare(s, memo_tri, &t);
+        }
+        albedo_sample(&t, u[i], v[i], footprint_log2[i], out_rgb[i]);
     }
-    const float *uv = t->uv;
-    float w0 = 1 - u - v;
-    float tu = w0 * uv[0] + u * uv[2] + v * uv[4];
-    float tv = w0 * uv[1] + u * uv[3] + v * uv[5];
-    const scene_texture *tex = t->texture;
-    float level = footprint_log2 + t->lod;
-    uint32_t mip = 0;
-    if (level > 0.5f && tex->levels > 1)
-        mip = level >= (float)(tex->levels - 1) ? tex->levels - 1 : (uint32_t)(level + 0.5f);
-    float texel[3];
-    texture_sample(tex, mip, tu, tv, texel);
-    for (int k = 0; k < 3; k++)
-        out_rgb[k] = texel[k] * t->diffuse[k];
 }
 
 void scene_albedo_filtered(const scene *s, uint32_t tri, float u, float v, float footprint_log2,

@@ -7,6 +7,7 @@
  * data at all keeps that effect's neutral term and is counted as missing. In no-cache mode each effect's
  * eval callback traces its rays at the pixel with the sample counts the cache converges to. */
 #include "engine_internal.h"
+#include "fxc_hot.h"
 
 #include <float.h>
 #include <math.h>
@@ -24,6 +25,8 @@ typedef struct compose_scratch {
     uint32_t blocks[SRV_RUN];
     size_t index[SRV_RUN]; /* pixel index of each visible pixel of the run */
     float albedo[SRV_RUN][3];
+    uint32_t triangle[SRV_RUN];                      /* the albedo's arguments, one array each */
+    float bary_u[SRV_RUN], bary_v[SRV_RUN], albedo_footprint[SRV_RUN];
     float shade_normal[SRV_RUN][3];
     uint8_t missing[SRV_RUN];
     float sharing[SRV_RUN];
@@ -171,9 +174,11 @@ typedef struct compose_task {
 } compose_task;
 
 /* Gathers the visible pixels of one run (rows y0..y1, columns x0..x1, at most SRV_RUN pixels): their points,
- * albedo and cache pixels; misses get the sky. Returns how many are visible. */
-static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32_t x1, uint32_t y0,
-                           uint32_t y1, compose_scratch *cs, const float sky[3], float log2_density)
+ * albedo and cache pixels (with position and distance only when `positions`: a cache kind asks for them);
+ * misses get the sky. Returns how many are visible. */
+FXC_HOT_INLINE uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32_t x1, uint32_t y0,
+                           uint32_t y1, compose_scratch *cs, const float sky[3], float log2_density,
+                           bool positions)
 {
     const scene *s = loop->s;
     const srv_camera_frame *f = &view->frame;
@@ -183,7 +188,6 @@ static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32
     /* What neighbouring pixels share when they see the same triangle, looked up once. */
     uint32_t memo_tri = SRV_MISS, memo_island = 0;
     float corner[3][3], normal[3], island_uv[6];
-    scene_albedo_triangle albedo;
     uint32_t count = 0;
     for (uint32_t y = y0; y < y1; y++)
         for (uint32_t x = x0; x < x1; x++) {
@@ -210,7 +214,6 @@ static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32
                 memcpy(normal, s->tri_normal + 3 * (size_t)tri, sizeof normal);
                 memcpy(island_uv, s->tri_island_uv + 6 * (size_t)tri, sizeof island_uv);
                 memo_island = s->tri_island[tri];
-                scene_albedo_prepare(s, tri, &albedo);
             }
             float w = 1.0f - u - v;
             for (int k = 0; k < 3; k++) {
@@ -225,8 +228,12 @@ static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32
             float facing = pt->normal[0] * dir[0] + pt->normal[1] * dir[1] + pt->normal[2] * dir[2];
             for (int k = 0; k < 3; k++) /* seen from behind: light the side the viewer sees */
                 pt->view_normal[k] = cs->shade_normal[i][k] = facing > 0 ? -pt->normal[k] : pt->normal[k];
-            /* The pixel's footprint in metres: level-0 texels per pixel over texels per metre. */
-            scene_albedo_sample(&albedo, u, v, view->footprint[p] - log2_density, cs->albedo[i]);
+            /* The pixel's footprint in metres: level-0 texels per pixel over texels per metre. The albedo is
+             * sampled after the loop, for the whole run. */
+            cs->triangle[i] = tri;
+            cs->bary_u[i] = u;
+            cs->bary_v[i] = v;
+            cs->albedo_footprint[i] = view->footprint[p] - log2_density;
             pt->triangle = tri;
             pt->u = u;
             pt->v = v;
@@ -241,13 +248,16 @@ static uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32
             px->footprint = view->footprint[p];
             px->island_u = w * island_uv[0] + u * island_uv[2] + v * island_uv[4];
             px->island_v = w * island_uv[1] + u * island_uv[3] + v * island_uv[5];
-            memcpy(px->position, pt->position, sizeof px->position);
-            px->distance = view->depth[p];
+            if (positions) {
+                memcpy(px->position, pt->position, sizeof px->position);
+                px->distance = view->depth[p];
+            }
         }
+    scene_albedo_run(s, cs->triangle, cs->bary_u, cs->bary_v, cs->albedo_footprint, count, cs->albedo);
     return count;
 }
 
-static void compose_tile(void *user, uint32_t task_index, uint32_t thread_index)
+FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_t thread_index)
 {
     compose_task *task = user;
     srv_loop *loop = task->loop;
@@ -263,6 +273,9 @@ static void compose_tile(void *user, uint32_t task_index, uint32_t thread_index)
     for (int k = 0; k < 3; k++)
         sky[k] = s->sky_color[k] * s->sky_intensity;
     const float log2_density = log2f(s->texel_density);
+    bool positions = false; /* some shading cache kind reads the pixels' positions */
+    for (uint32_t e = 0; e < loop->effect_count; e++)
+        positions |= loop->effect_shading[e] && loop->kinds[loop->effect_kind[e]]->needs_position;
     /* Directional lights: the same direction and irradiance for every pixel, computed once. */
     enum { CONSTANT_LIGHTS = 8 };
     float light_dir[CONSTANT_LIGHTS][3], light_rgb[CONSTANT_LIGHTS][3];
@@ -279,7 +292,7 @@ static void compose_tile(void *user, uint32_t task_index, uint32_t thread_index)
     uint32_t ty1 = ty0 + SRV_TILE < f->height ? ty0 + SRV_TILE : f->height;
     for (uint32_t ry = ty0; ry < ty1; ry += SRV_RUN / SRV_TILE) {
         uint32_t ry1 = ry + SRV_RUN / SRV_TILE < ty1 ? ry + SRV_RUN / SRV_TILE : ty1;
-        uint32_t count = gather_run(loop, view, tx0, tx1, ry, ry1, cs, sky, log2_density);
+        uint32_t count = gather_run(loop, view, tx0, tx1, ry, ry1, cs, sky, log2_density, positions);
         for (uint32_t i = 0; i < count * stride; i++)
             cs->light_visibility[i] = 1.0f;
         for (uint32_t i = 0; i < count; i++) {

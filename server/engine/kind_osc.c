@@ -3,6 +3,7 @@
  * cache's phases, figures and memory. Everything that knows the osc key layout or island sizes in the
  * engine is here. */
 #include "engine_internal.h"
+#include "fxc_hot.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -243,25 +244,27 @@ static uint64_t osc_kind_finer_texels(void *cache, uint32_t effect, uint32_t blo
     return found;
 }
 
-/* A few recently read blocks of one run of pixels: neighbouring pixels read the same two to four blocks. */
-enum { TAP_MEMO = 4 };
+/* The blocks one call of osc_kind_pixel_taps has read, direct-mapped by key: neighbouring pixels of a run
+ * read the same two to four blocks, so most taps find theirs here with one compare instead of a probe of the
+ * table. A block found is constant within compose, so how often an entry is replaced changes nothing. */
+enum { TAP_MEMO = 16 };
 typedef struct tap_memo {
     uint64_t key[TAP_MEMO];
     uint32_t block[TAP_MEMO];
     uint64_t valid[TAP_MEMO];
     const uint8_t *payload[TAP_MEMO];
-    uint32_t next; /* round-robin replacement */
 } tap_memo;
 
-static uint32_t memo_lookup(const osc_cache *osc, tap_memo *memo, uint32_t effect, uint64_t key)
+/* The memo slot holding key (looked up in the cache when it is not there yet). */
+FXC_HOT_INLINE uint32_t memo_lookup(const osc_cache *osc, tap_memo *memo, uint32_t effect, uint64_t key)
 {
-    for (uint32_t m = 0; m < TAP_MEMO; m++)
-        if (memo->key[m] == key)
-            return m;
-    uint32_t m = memo->next;
-    memo->next = (m + 1) % TAP_MEMO;
+    uint32_t m = (uint32_t)((key * 0x9E3779B97F4A7C15ull) >> 60); /* 4 bits: TAP_MEMO */
+    if (memo->key[m] == key)
+        return m;
     memo->key[m] = key;
     memo->block[m] = osc_find(osc, key);
+    memo->valid[m] = 0;
+    memo->payload[m] = NULL;
     if (memo->block[m] != OSC_NONE) {
         memo->valid[m] = osc_block_valid(osc, effect, memo->block[m]);
         memo->payload[m] = osc_block_payload((osc_cache *)osc, effect, memo->block[m]);
@@ -269,61 +272,124 @@ static uint32_t memo_lookup(const osc_cache *osc, tap_memo *memo, uint32_t effec
     return m;
 }
 
-static void osc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
+/* Per pixel the bilinear taps at its level, in the order (x0, y0), (x0 + 1, y0), (x0, y0 + 1),
+ * (x0 + 1, y0 + 1) with texels clamped to the island, leaving out taps whose block is absent, whose texel
+ * holds no data or whose weight is 0; the weights renormalised. The four texels lie in one block unless the
+ * footprint straddles a block edge, so the block of a tap is looked up only where its block coordinates
+ * differ from the first tap's. */
+FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
                                 uint32_t count, uint32_t effect, int32_t bias, fx_taps *taps, uint32_t *blocks)
 {
     (void)slot, (void)thread;
     const kind_osc *k = cache;
     const osc_cache *osc = k->osc;
     const scene_island *islands = k->s->islands;
-    uint32_t texel_bytes = osc_pool_texel_bytes(osc, effect);
+    const size_t texel_bytes = osc_pool_texel_bytes(osc, effect);
     tap_memo memo;
-    memset(memo.key, 0xFF, sizeof memo.key);
-    memo.next = 0;
+    memset(memo.key, 0xFF, sizeof memo.key); /* no key has every bit set: its effect field would be 15 */
     const uint64_t effect_field = (uint64_t)effect << OSC_KEY_EFFECT_SHIFT;
+    uint32_t memo_island = UINT32_MAX, memo_level = UINT32_MAX;
+    long w = 0, h = 0;
+    uint64_t base = 0;
+    uint32_t last_slot = 0; /* the memo slot of the previous pixel's first block */
     for (uint32_t i = 0; i < count; i++) {
         const srv_pixel *px = &pixels[i];
         fx_taps *out = &taps[i];
         uint32_t level = srv__level(px->footprint, bias);
-        const scene_island *is = &islands[px->island];
-        long w = (long)((is->width + (1u << level) - 1u) >> level),
-             h = (long)((is->height + (1u << level) - 1u) >> level);
+        if (px->island != memo_island || level != memo_level) { /* the island's size at this level */
+            memo_island = px->island;
+            memo_level = level;
+            const scene_island *is = &islands[px->island];
+            w = (long)((is->width + (1u << level) - 1u) >> level);
+            h = (long)((is->height + (1u << level) - 1u) >> level);
+            base = effect_field | ((uint64_t)px->island << OSC_KEY_ISLAND_SHIFT) |
+                   ((uint64_t)level << OSC_KEY_LEVEL_SHIFT);
+        }
         float scale = inverse_power_of_two[level];
         float x = px->island_u * scale - 0.5f, y = px->island_v * scale - 0.5f;
         float fx0 = floorf(x), fy0 = floorf(y);
         float ax = x - fx0, ay = y - fy0;
         long x0 = (long)fx0, y0 = (long)fy0;
-        const uint64_t base = effect_field | ((uint64_t)px->island << OSC_KEY_ISLAND_SHIFT) |
-                              ((uint64_t)level << OSC_KEY_LEVEL_SHIFT);
-        float total = 0;
-        out->count = 0;
+        long tx[2], ty[2]; /* the two columns and rows, clamped */
+        for (int c = 0; c < 2; c++) {
+            long xi = x0 + c, yi = y0 + c;
+            tx[c] = xi < 0 ? 0 : (xi >= w ? w - 1 : xi);
+            ty[c] = yi < 0 ? 0 : (yi >= h ? h - 1 : yi);
+        }
+        float wx[2] = {1 - ax, ax}, wy[2] = {1 - ay, ay};
+        uint32_t tap_memo_slot[4];
+        uint64_t key0 = base | ((uint64_t)(ty[0] >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
+                        ((uint64_t)(tx[0] >> 3) << OSC_KEY_BLOCK_X_SHIFT);
+        if (memo.key[last_slot] != key0) /* the slot may since hold another block */
+            last_slot = memo_lookup(osc, &memo, effect, key0);
+        tap_memo_slot[0] = last_slot;
+        bool same_x = (tx[0] >> 3) == (tx[1] >> 3), same_y = (ty[0] >> 3) == (ty[1] >> 3);
         out->footprint_log2 = px->footprint - (float)level;
-        if (blocks)
-            blocks[i] = SRV_NONE;
+        uint32_t m0 = tap_memo_slot[0];
+        if (same_x && same_y && memo.block[m0] != OSC_NONE) {
+            /* The common case, straight-line: four texels of one block, all holding data, no weight 0. What
+             * the general path below gives for it, operation for operation. */
+            uint32_t row0 = ((uint32_t)ty[0] & 7) * 8, row1 = ((uint32_t)ty[1] & 7) * 8;
+            uint32_t col0 = (uint32_t)tx[0] & 7, col1 = (uint32_t)tx[1] & 7;
+            uint64_t need = (uint64_t)1 << (row0 + col0) | (uint64_t)1 << (row0 + col1) |
+                            (uint64_t)1 << (row1 + col0) | (uint64_t)1 << (row1 + col1);
+            float w00 = wx[0] * wy[0], w10 = wx[1] * wy[0], w01 = wx[0] * wy[1], w11 = wx[1] * wy[1];
+            if ((memo.valid[m0] & need) == need && w00 > 0 && w10 > 0 && w01 > 0 && w11 > 0) {
+                const uint8_t *payload = memo.payload[m0];
+                out->texel[0] = payload + (row0 + col0) * texel_bytes;
+                out->texel[1] = payload + (row0 + col1) * texel_bytes;
+                out->texel[2] = payload + (row1 + col0) * texel_bytes;
+                out->texel[3] = payload + (row1 + col1) * texel_bytes;
+                float total = w00 + w10 + w01 + w11;
+                float inv = 1.0f / total;
+                out->weight[0] = w00 * inv;
+                out->weight[1] = w10 * inv;
+                out->weight[2] = w01 * inv;
+                out->weight[3] = w11 * inv;
+                float at_x0 = x + 0.5f - (float)tx[0], at_x1 = x + 0.5f - (float)tx[1];
+                float at_y0 = y + 0.5f - (float)ty[0], at_y1 = y + 0.5f - (float)ty[1];
+                out->at_x[0] = at_x0, out->at_x[1] = at_x1, out->at_x[2] = at_x0, out->at_x[3] = at_x1;
+                out->at_y[0] = at_y0, out->at_y[1] = at_y0, out->at_y[2] = at_y1, out->at_y[3] = at_y1;
+                out->count = 4;
+                if (blocks)
+                    blocks[i] = memo.block[m0];
+                continue;
+            }
+        }
+        for (int t = 1; t < 4; t++) {
+            long xi = tx[t & 1], yi = ty[t >> 1];
+            bool same = ((t & 1) == 0 || same_x) && ((t >> 1) == 0 || same_y);
+            tap_memo_slot[t] = same ? tap_memo_slot[0]
+                                    : memo_lookup(osc, &memo, effect,
+                                                  base | ((uint64_t)(yi >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
+                                                      ((uint64_t)(xi >> 3) << OSC_KEY_BLOCK_X_SHIFT));
+        }
+        float total = 0;
+        uint32_t n = 0;
+        uint32_t first_block = SRV_NONE;
         for (int t = 0; t < 4; t++) {
-            long xi = x0 + (t & 1), yi = y0 + (t >> 1);
-            xi = xi < 0 ? 0 : (xi >= w ? w - 1 : xi);
-            yi = yi < 0 ? 0 : (yi >= h ? h - 1 : yi);
-            float weight = ((t & 1) ? ax : 1 - ax) * ((t >> 1) ? ay : 1 - ay);
-            uint64_t key = base | ((uint64_t)(yi >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
-                           ((uint64_t)(xi >> 3) << OSC_KEY_BLOCK_X_SHIFT);
-            uint32_t m = memo_lookup(osc, &memo, effect, key);
+            uint32_t m = tap_memo_slot[t];
             if (memo.block[m] == OSC_NONE)
                 continue;
-            if (blocks && blocks[i] == SRV_NONE)
-                blocks[i] = memo.block[m];
+            if (first_block == SRV_NONE)
+                first_block = memo.block[m];
+            long xi = tx[t & 1], yi = ty[t >> 1];
             uint32_t texel = ((uint32_t)yi & 7) * 8 + ((uint32_t)xi & 7);
-            if (!(memo.valid[m] >> texel & 1) || weight <= 0)
-                continue;
-            out->texel[out->count] = memo.payload[m] + (size_t)texel * texel_bytes;
-            out->weight[out->count] = weight;
-            out->at_x[out->count] = x + 0.5f - (float)xi;
-            out->at_y[out->count] = y + 0.5f - (float)yi;
-            out->count++;
-            total += weight;
+            float weight = wx[t & 1] * wy[t >> 1];
+            /* Written always, kept only when the texel holds data and the weight is not 0 (no branch). */
+            bool keep = (memo.valid[m] >> texel & 1) && !(weight <= 0);
+            out->texel[n] = memo.payload[m] + texel * texel_bytes;
+            out->weight[n] = weight;
+            out->at_x[n] = x + 0.5f - (float)xi;
+            out->at_y[n] = y + 0.5f - (float)yi;
+            total += keep ? weight : 0.0f;
+            n += keep;
         }
-        float inv = out->count ? 1.0f / total : 0.0f;
-        for (uint32_t t = 0; t < out->count; t++)
+        out->count = n;
+        if (blocks)
+            blocks[i] = first_block;
+        float inv = n ? 1.0f / total : 0.0f;
+        for (uint32_t t = 0; t < n; t++)
             out->weight[t] *= inv;
     }
 }
