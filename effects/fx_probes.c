@@ -324,32 +324,6 @@ static float probe_weight(const uint8_t *p, const float position[3], const float
     return weight;
 }
 
-bool fx_probe_filter(const fx_taps *taps, const float position[3], const float normal[3], float out_rgb[3])
-{
-    float sum[3] = {0, 0, 0}, total = 0;
-    for (uint32_t t = 0; t < taps->count; t++) {
-        const uint8_t *p = taps->texel[t];
-        if (!(taps->weight[t] > 0))
-            continue;
-        float weight = probe_weight(p, position, normal, true);
-        if (weight == 0.0f)
-            continue;
-        weight *= taps->weight[t];
-        float e[3];
-        fx_probe_irradiance(p, normal, e);
-        for (int k = 0; k < 3; k++)
-            sum[k] += weight * e[k];
-        total += weight;
-    }
-    if (!(total > 0)) {
-        out_rgb[0] = out_rgb[1] = out_rgb[2] = 0;
-        return false;
-    }
-    for (int k = 0; k < 3; k++)
-        out_rgb[k] = fminf(sum[k] / total, FLT_MAX);
-    return true;
-}
-
 /* ---- update ---------------------------------------------------------------------------------------- */
 
 /* What update leaves for commit (host floats: scratch never leaves the process). */
@@ -519,6 +493,11 @@ static void hit_radiance(const fx_context *ctx, uint32_t level, uint32_t tri, fl
     }
     for (int k = 0; k < 3; k++)
         out[k] = albedo[k] * (direct[k] + bounce[k] * (1.0f / FX_PROBE_PI));
+}
+
+bool fx_probe_filter(const fx_taps *taps, const float position[3], const float normal[3], float out_rgb[3])
+{
+    return probe_filter_memo(NULL, true, taps, position, normal, out_rgb);
 }
 
 /* The gather's sums per texel, structure of arrays (update). */

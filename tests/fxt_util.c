@@ -126,3 +126,26 @@ int fxt_default_scene_teardown(void **state)
     free(f);
     return 0;
 }
+
+void *fxt_counting_alloc(size_t size, void *user)
+{
+    fxt_counting_allocator *counter = user;
+    counter->total_allocations++;
+    if (counter->fail_at != 0 && counter->total_allocations == counter->fail_at)
+        return NULL;
+    void *pointer = malloc(size);
+    if (pointer) {
+        counter->live_bytes += size;
+        counter->live_allocations++;
+    }
+    return pointer;
+}
+
+void fxt_counting_free(void *pointer, size_t size, void *user)
+{
+    fxt_counting_allocator *counter = user;
+    assert_true(counter->live_bytes >= size);
+    counter->live_bytes -= size;
+    counter->live_allocations--;
+    free(pointer);
+}

@@ -50,36 +50,6 @@ static void shuffle_pairs(uint64_t *keys, uint64_t *masks, size_t count, uint64_
     }
 }
 
-/* A counting allocator: live bytes and allocations, optional failure of the n-th allocation. */
-typedef struct counting_allocator {
-    size_t live_bytes;
-    size_t live_allocations;
-    size_t total_allocations;
-    size_t fail_at; /* 1-based allocation number that fails, 0 = never */
-} counting_allocator;
-
-static void *counting_alloc(size_t size, void *user)
-{
-    counting_allocator *counter = user;
-    counter->total_allocations++;
-    if (counter->fail_at != 0 && counter->total_allocations == counter->fail_at)
-        return NULL;
-    void *pointer = malloc(size);
-    if (pointer) {
-        counter->live_bytes += size;
-        counter->live_allocations++;
-    }
-    return pointer;
-}
-
-static void counting_free(void *pointer, size_t size, void *user)
-{
-    counting_allocator *counter = user;
-    assert_true(counter->live_bytes >= size);
-    counter->live_bytes -= size;
-    counter->live_allocations--;
-    free(pointer);
-}
 
 static osc_cache *create_or_fail(const osc_desc *desc)
 {
@@ -547,14 +517,14 @@ static void test_remove_and_frame_list(void **state)
 static void test_memory_accounting(void **state)
 {
     (void)state;
-    counting_allocator counter = {0};
+    fxt_counting_allocator counter = {0};
     osc_desc desc = {0};
     desc.effects[0].texel_bytes = 2;
     desc.effects[0].max_blocks = 100;
     desc.effects[3].texel_bytes = 4;
     desc.effects[3].max_blocks = 50;
     desc.effects[3].convergence = true;
-    desc.allocator = (osc_allocator){counting_alloc, counting_free, &counter};
+    desc.allocator = (osc_allocator){fxt_counting_alloc, fxt_counting_free, &counter};
     osc_cache *cache = create_or_fail(&desc);
     osc_memory_report report;
     osc_memory(cache, &report);
@@ -597,7 +567,7 @@ static void test_memory_accounting(void **state)
 
     /* Allocation failure at every step: a clean error, nothing leaked. */
     for (size_t fail_at = 1; fail_at <= allocations; fail_at++) {
-        counting_allocator failing = {.fail_at = fail_at};
+        fxt_counting_allocator failing = {.fail_at = fail_at};
         desc.allocator.user = &failing;
         osc_cache *broken = (osc_cache *)&failing;
         char message[200];

@@ -24,6 +24,15 @@ const char *fxt_tmp_path(const char *name);
  * be NULL) and returns the exit status (or -1 when it did not exit normally). */
 int fxt_run_cli(const char *args, char *out, size_t out_cap, char *err, size_t err_cap);
 
+/* A counting allocator for the caches' allocator hooks (osc_allocator): live bytes and allocations, and an
+ * optional failure of the n-th allocation. free checks it never frees more than is live. */
+typedef struct fxt_counting_allocator {
+    size_t live_bytes, live_allocations, total_allocations;
+    size_t fail_at; /* 1-based allocation number that fails, 0 = never */
+} fxt_counting_allocator;
+void *fxt_counting_alloc(size_t size, void *user);
+void fxt_counting_free(void *pointer, size_t size, void *user);
+
 /* ---- the engine (server/engine) --------------------------------------------------------------------- */
 #include "engine.h"
 

@@ -36,32 +36,6 @@ static int32_t rng_range(uint64_t *state, int32_t lo, int32_t hi) /* [lo, hi] */
     return lo + (int32_t)(rng_next(state) % (uint64_t)(hi - lo + 1));
 }
 
-typedef struct counting_allocator {
-    size_t live_bytes, live_allocations, total_allocations, fail_at; /* fail_at: 1-based, 0 = never */
-} counting_allocator;
-
-static void *counting_alloc(size_t size, void *user)
-{
-    counting_allocator *counter = user;
-    counter->total_allocations++;
-    if (counter->fail_at != 0 && counter->total_allocations == counter->fail_at)
-        return NULL;
-    void *pointer = malloc(size);
-    if (pointer) {
-        counter->live_bytes += size;
-        counter->live_allocations++;
-    }
-    return pointer;
-}
-
-static void counting_free(void *pointer, size_t size, void *user)
-{
-    counting_allocator *counter = user;
-    assert_true(counter->live_bytes >= size);
-    counter->live_bytes -= size;
-    counter->live_allocations--;
-    free(pointer);
-}
 
 static wsc_cache *create_or_fail(const wsc_desc *desc)
 {
@@ -531,10 +505,10 @@ static void test_local_agrees_with_table(void **state)
 static void test_memory_accounting(void **state)
 {
     (void)state;
-    counting_allocator counter = {0};
+    fxt_counting_allocator counter = {0};
     wsc_desc desc = two_effect_desc(100, 40);
     desc.effects[3].convergence = true;
-    desc.allocator = (osc_allocator){counting_alloc, counting_free, &counter};
+    desc.allocator = (osc_allocator){fxt_counting_alloc, fxt_counting_free, &counter};
     wsc_cache *cache = create_or_fail(&desc);
     wsc_memory_report report;
     wsc_memory(cache, &report);
@@ -582,7 +556,7 @@ static void test_memory_accounting(void **state)
 
     /* Allocation failure at every step of both creations: a clean error, nothing leaked. */
     for (size_t fail_at = 1;; fail_at++) {
-        counting_allocator failing = {.fail_at = fail_at};
+        fxt_counting_allocator failing = {.fail_at = fail_at};
         desc.allocator.user = &failing;
         local_desc.allocator.user = &failing;
         char message[200];
