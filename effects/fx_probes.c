@@ -1020,7 +1020,9 @@ const fx_effect fx_effect_probes = {
     .level_bias = 0,
     .filter = FX_FILTER_TRILINEAR,
     .policy = FX_UPDATE_CONTINUOUS,
-    .max_samples = 0, /* continuous: never converged; texel_samples reports the blended updates */
+    /* Converged after 64 blended updates (the first value's weight 0.97^63 = 0.15 by then): the engine then
+     * refreshes the probe only every few frames, spending the budget on younger ones. */
+    .max_samples = 64,
     .texel_bytes = probes_texel_bytes,
     .needs = probes_needs,
     .cost = probes_cost,

@@ -116,9 +116,9 @@ static void take_within_budget(srv_loop *loop, uint32_t e, srv_effect_queue *q, 
 /* Continuous effects (probes) keep being updated while they are requested: their light changes as their
  * neighbours' does (the bounces) and when lights change. Each frame at most desc.probe_budget cells of
  * such an effect update (sharing the ray budget): first the requested cells that hold no data yet, then
- * the ones whose last update is oldest; a cell the effect calls converged (texel_samples >= max_samples)
- * waits at least CONVERGED_REFRESH frames between updates. The order is a sort on (age, frame-list
- * position), so it depends only on the cache's state, never on timing or threads. */
+ * the ones whose last update is oldest; a cell the effect calls converged (texel_samples >= max_samples,
+ * max_samples > 0) waits at least CONVERGED_REFRESH frames between updates. The order is a sort on (age,
+ * frame-list position), so it depends only on the cache's state, never on timing or threads. */
 enum { CONVERGED_REFRESH = 8 };
 
 static int compare_u64(const void *a, const void *b)
@@ -144,7 +144,7 @@ static void continuous_order(srv_loop *loop, uint32_t e, srv_effect_queue *q, co
             continue;
         uint32_t *word = kind->block_word ? kind->block_word(cache, e, blocks[i]) : NULL;
         uint32_t age = word && *word ? stamp - *word : UINT32_MAX / 2;
-        if (fx->texel_samples && age < CONVERGED_REFRESH) {
+        if (fx->texel_samples && fx->max_samples > 0 && age < CONVERGED_REFRESH) { /* 0: never converged */
             const uint8_t *payload = kind->block_payload(cache, e, blocks[i]);
             bool converged = true;
             for (uint64_t m = have; m && converged; m &= m - 1)
