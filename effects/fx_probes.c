@@ -8,7 +8,11 @@
  * which is pi L over pi). Payloads store true irradiance E (pi L under a uniform sky) as DDGI does; shade and
  * eval add E / pi to `indirect`, so a white wall under a uniform sky gets from the probes exactly what the
  * sky term gives it. The probe irradiance includes the sky (misses return it), so shade and eval set
- * sky_visibility to 0 for the pixels they light: compose would otherwise count the sky twice.
+ * sky_visibility to 0 for the pixels they light (compose would otherwise count the sky twice) after scaling
+ * E by what it held (ambient occlusion's open fraction when AO ran before them, else 1).
+ *
+ * This file: update, commit, the no-cache estimate and the effect's table; fx_probes_map.c: the maps, their
+ * readers and compose's shade.
  *
  * Update of one probe (a job, brick size 1): probe_rays rays in a spherical Fibonacci set, rotated by a
  * uniform random rotation from hash(seed, key, update count), from the probe's (relocated) position:
@@ -50,84 +54,7 @@
  * Determinism: update reads only committed payloads (its own and world_taps'); all randomness is hashed
  * from (seed, key, update count): any thread split or job order gives the same bytes. The caller must have
  * called scene_tracing_thread_init() in the tracing thread. */
-#include "fx_internal.h"
-
-#include <float.h>
-#include <string.h>
-
-#define FX_PROBE_PI 3.14159265358979f
-/* The cosine power of the moments' lobe: 64 (DDGI's 50, rounded to six squarings). A lobe as wide as an
- * 8 x 8 texel (power 16) mixed a thin wall's distance with the floor's behind it, and the Chebyshev test let
- * 15 % of the lit room through to a floor point beside the wall (tests/test_probes.c); at 64 it is under 1 %.
- * Each texel then rests on about 1.1 rays' weight per update; the hysteresis averages over the rotations. */
-#define FX_PROBE_DEPTH_POWER 64
-#define FX_PROBE_BACKFACE_OFF 0.25f  /* back-face fraction above which a probe is off (RTXGI) */
-#define FX_PROBE_BACKFACE_SHORTEN 0.2f /* back-face distances are stored shortened (RTXGI) */
-#define FX_PROBE_MAX_DISTANCE 2.598076f /* 1.5 sqrt(3): distances are clamped to this many cells */
-#define FX_PROBE_MIN_FRONT 0.25f     /* cells: relocation keeps front faces at least this far */
-#define FX_PROBE_MAX_OFFSET 0.45f    /* cells, per axis: relocation range */
-#define FX_PROBE_NORMAL_BIAS 0.2f    /* cells: the shading point moves this far along its normal for Chebyshev */
-
-enum {
-    FX_STREAM_PROBE_ROTATION = 0x5052, /* "PR" */
-    FX_STREAM_PROBE_ROUNDING = 0x5051,
-    FX_STREAM_PROBE_EVAL = 0x5045,
-    PROBE_CHUNK = 128, /* primary rays per intersection stream */
-    PROBE_HEADER = 32,
-    PROBE_IRRADIANCE = PROBE_HEADER,
-    PROBE_MOMENTS = PROBE_IRRADIANCE + FX_PROBE_TEXELS * 6,
-};
-
-_Static_assert(PROBE_MOMENTS + FX_PROBE_TEXELS * 4 == FX_PROBE_BYTES, "payload layout");
-
-/* ---- bytes ---------------------------------------------------------------------------------------------- */
-
-static uint32_t get_u32(const uint8_t *p)
-{
-    return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);
-}
-
-static void put_u32(uint8_t *p, uint32_t v)
-{
-    p[0] = (uint8_t)v;
-    p[1] = (uint8_t)(v >> 8);
-    p[2] = (uint8_t)(v >> 16);
-    p[3] = (uint8_t)(v >> 24);
-}
-
-static float get_f32(const uint8_t *p)
-{
-    uint32_t bits = get_u32(p);
-    float f;
-    memcpy(&f, &bits, sizeof f);
-    return f;
-}
-
-static void put_f32(uint8_t *p, float f)
-{
-    uint32_t bits;
-    memcpy(&bits, &f, sizeof bits);
-    put_u32(p, bits);
-}
-
-/* A half float (IEEE binary16) to float: every half, subnormals included (no infinities are ever written). */
-static float half_to_float(uint16_t h)
-{
-    uint32_t exponent = (h >> 10) & 0x1fu, mantissa = h & 0x3ffu, sign = (uint32_t)(h & 0x8000u) << 16;
-    uint32_t bits;
-    if (exponent - 1u < 30u) { /* normal: rebias the exponent (15 -> 127) and widen the mantissa, exact */
-        bits = sign | ((exponent + 112u) << 23) | (mantissa << 13);
-    } else if (exponent == 0) {
-        float value = (float)mantissa * 0x1p-24f; /* subnormal, exact */
-        memcpy(&bits, &value, sizeof bits);
-        bits |= sign;
-    } else {
-        bits = sign | 0x7f800000u | (mantissa << 13); /* infinity or NaN */
-    }
-    float value;
-    memcpy(&value, &bits, sizeof value);
-    return value;
-}
+#include "fx_probes_internal.h"
 
 /* A value >= 0 to half, rounded up with probability equal to its position between the two neighbouring
  * halves (u in [0, 1)), so the rounding is unbiased; saturates at the largest half (65504), never infinity.
@@ -152,176 +79,6 @@ static uint16_t half_stochastic(float x, float u)
         return lo;
     float above = half_to_float((uint16_t)(lo + 1));
     return u * (above - below) < x - below ? (uint16_t)(lo + 1) : lo;
-}
-
-/* ---- directions ------------------------------------------------------------------------------------ */
-
-static float sign_nonzero(float x)
-{
-    return x >= 0 ? 1.0f : -1.0f;
-}
-
-void fx_probe_oct_encode(const float dir[3], float uv[2])
-{
-    float l1 = fabsf(dir[0]) + fabsf(dir[1]) + fabsf(dir[2]);
-    float x = l1 > 0 ? dir[0] / l1 : 0.0f, y = l1 > 0 ? dir[1] / l1 : 0.0f;
-    if (dir[2] < 0) {
-        float fx = (1.0f - fabsf(y)) * sign_nonzero(x), fy = (1.0f - fabsf(x)) * sign_nonzero(y);
-        x = fx, y = fy;
-    }
-    uv[0] = x;
-    uv[1] = y;
-}
-
-void fx_probe_oct_decode(const float uv[2], float dir[3])
-{
-    float x = uv[0], y = uv[1], z = 1.0f - fabsf(x) - fabsf(y);
-    if (z < 0) {
-        float fx = (1.0f - fabsf(y)) * sign_nonzero(x), fy = (1.0f - fabsf(x)) * sign_nonzero(y);
-        x = fx, y = fy;
-    }
-    float len = sqrtf(x * x + y * y + z * z);
-    dir[0] = x / len;
-    dir[1] = y / len;
-    dir[2] = z / len;
-}
-
-void fx_probe_fibonacci(uint32_t i, uint32_t n, float dir[3])
-{
-    /* DDGI's sphericalFibonacci: phi = 2 pi frac(i (golden ratio - 1)), cos theta = 1 - (2 i + 1) / n. */
-    double turns = (double)i * 0.6180339887498949;
-    turns -= floor(turns);
-    float cos_theta = 1.0f - (2.0f * (float)i + 1.0f) / (float)n;
-    float sin_theta = sqrtf(fmaxf(0.0f, 1.0f - cos_theta * cos_theta));
-    float s, c;
-    fx__sincos_turns((float)turns, &s, &c);
-    dir[0] = c * sin_theta;
-    dir[1] = s * sin_theta;
-    dir[2] = cos_theta;
-}
-
-/* The 64 texel-centre directions of the map. */
-static void texel_dirs(float dirs[FX_PROBE_TEXELS][3])
-{
-    for (uint32_t t = 0; t < FX_PROBE_TEXELS; t++) {
-        float uv[2] = {((float)(t % FX_PROBE_MAP) + 0.5f) * 0.25f - 1.0f,
-                       ((float)(t / FX_PROBE_MAP) + 0.5f) * 0.25f - 1.0f};
-        fx_probe_oct_decode(uv, dirs[t]);
-    }
-}
-
-/* The four texels and bilinear weights of direction dir in the 8 x 8 map; neighbours past an edge of the
- * square wrap as the octahedron does (the edge is mirrored about its midpoint; a corner's neighbour is the
- * opposite corner), i.e. DDGI's border texels without storing them. */
-static void oct_bilinear(const float dir[3], uint32_t texel[4], float weight[4])
-{
-    float uv[2];
-    fx_probe_oct_encode(dir, uv);
-    float fx = (uv[0] + 1.0f) * 4.0f - 0.5f, fy = (uv[1] + 1.0f) * 4.0f - 0.5f;
-    float x0 = floorf(fx), y0 = floorf(fy);
-    float wx = fx - x0, wy = fy - y0;
-    for (int c = 0; c < 4; c++) {
-        int x = (int)x0 + (c & 1), y = (int)y0 + (c >> 1);
-        if (y < 0 || y > 7) {
-            y = y < 0 ? 0 : 7;
-            x = 7 - x;
-        }
-        if (x < 0 || x > 7) {
-            x = x < 0 ? 0 : 7;
-            y = 7 - y;
-        }
-        x = x < 0 ? 0 : (x > 7 ? 7 : x); /* only reached for NaN input */
-        y = y < 0 ? 0 : (y > 7 ? 7 : y);
-        texel[c] = (uint32_t)(y * FX_PROBE_MAP + x);
-        weight[c] = ((c & 1) ? wx : 1.0f - wx) * ((c >> 1) ? wy : 1.0f - wy);
-    }
-}
-
-/* ---- reading payloads -------------------------------------------------------------------------------- */
-
-void fx_probe_info_read(const void *payload, fx_probe_info *out)
-{
-    const uint8_t *p = payload;
-    for (int k = 0; k < 3; k++)
-        out->position[k] = get_f32(p + 4 * k);
-    out->cell = get_f32(p + 12);
-    out->flags = get_u32(p + 16);
-    out->updates = get_u32(p + 20);
-    out->backface_fraction = get_f32(p + 28);
-}
-
-void fx_probe_irradiance(const void *payload, const float dir[3], float out_rgb[3])
-{
-    const uint8_t *p = payload;
-    uint32_t texel[4];
-    float weight[4];
-    oct_bilinear(dir, texel, weight);
-    float scale = get_f32(p + 24);
-    out_rgb[0] = out_rgb[1] = out_rgb[2] = 0;
-    for (int c = 0; c < 4; c++)
-        for (int k = 0; k < 3; k++)
-            out_rgb[k] += weight[c] * half_to_float(fx__get_u16(p + PROBE_IRRADIANCE + 6 * texel[c] + 2 * k));
-    for (int k = 0; k < 3; k++)
-        out_rgb[k] *= scale;
-}
-
-/* The moments (mean distance, mean squared distance, metres) of a probe in direction dir, bilinear. */
-static void probe_moments(const uint8_t *p, const float dir[3], float cell, float *mean, float *mean2)
-{
-    uint32_t texel[4];
-    float weight[4];
-    oct_bilinear(dir, texel, weight);
-    float m1 = 0, m2 = 0;
-    for (int c = 0; c < 4; c++) {
-        m1 += weight[c] * half_to_float(fx__get_u16(p + PROBE_MOMENTS + 4 * texel[c]));
-        m2 += weight[c] * half_to_float(fx__get_u16(p + PROBE_MOMENTS + 4 * texel[c] + 2));
-    }
-    *mean = m1 * cell;
-    *mean2 = m2 * cell * cell;
-}
-
-/* A probe's weight for a point before the trilinear one: DDGI's wrap term times the Chebyshev visibility
- * bound (when `visibility`), small weights crushed; 0 for a probe without data or switched off. Update hits
- * need the visibility term too: without it the thin-wall test's dark room gets 2.3 % of the lit room's light
- * through the bounce (measured), over its 2 % bound. */
-static float probe_weight(const uint8_t *p, const float position[3], const float normal[3], bool visibility)
-{
-    uint32_t flags = get_u32(p + 16);
-    if (!(flags & FX_PROBE_HAS_DATA) || (flags & FX_PROBE_OFF))
-        return 0.0f;
-    float probe[3], cell = get_f32(p + 12);
-    for (int k = 0; k < 3; k++)
-        probe[k] = get_f32(p + 4 * k);
-    /* DDGI's wrap shading: probes behind the surface count less, never nothing. */
-    float to_probe[3], biased_to_probe[3], len2 = 0, biased_len2 = 0;
-    for (int k = 0; k < 3; k++) {
-        to_probe[k] = probe[k] - position[k];
-        biased_to_probe[k] = probe[k] - (position[k] + normal[k] * FX_PROBE_NORMAL_BIAS * cell);
-        len2 += to_probe[k] * to_probe[k];
-        biased_len2 += biased_to_probe[k] * biased_to_probe[k];
-    }
-    float len = sqrtf(len2), wrap = len > 0 ? (fx__dot(to_probe, normal) / len + 1.0f) * 0.5f : 1.0f;
-    float weight = wrap * wrap + 0.2f;
-    /* Chebyshev's bound on the probe seeing the (biased) point, from the moments towards it. */
-    float distance = sqrtf(biased_len2);
-    if (visibility && distance > 0) {
-        float from_probe[3];
-        for (int k = 0; k < 3; k++)
-            from_probe[k] = -biased_to_probe[k] / distance;
-        float mean, mean2;
-        probe_moments(p, from_probe, cell, &mean, &mean2);
-        float chebyshev = 1.0f;
-        if (distance > mean) {
-            float variance = fabsf(mean2 - mean * mean), excess = distance - mean;
-            chebyshev = variance / (variance + excess * excess);
-            chebyshev = chebyshev * chebyshev * chebyshev;
-        }
-        weight *= fmaxf(0.05f, chebyshev);
-    }
-    weight = fmaxf(weight, 1e-6f);
-    if (weight < 0.2f) /* DDGI: crush small weights, so light leaking through a wall fades quickly */
-        weight *= weight * weight / (0.2f * 0.2f);
-    return weight;
 }
 
 /* ---- update ---------------------------------------------------------------------------------------- */
@@ -411,72 +168,6 @@ static uint32_t queue_shadow_rays(const fx_context *ctx, hit_shading *hs, uint32
     return queued;
 }
 
-/* Irradiance of a probe towards a normal, kept per thread for the frame (ctx->frame): runs of one frame
- * meet the same probes with the same normals again and again, and within a frame a payload does not change
- * (commits run after every update and before compose). Exact: a hit returns what fx_probe_irradiance would. */
-enum { IRRADIANCE_MEMO = 256 };
-typedef struct irradiance_memo {
-    const void *probe;
-    uint32_t frame;
-    float normal[3];
-    float e[3];
-} irradiance_memo;
-static _Thread_local irradiance_memo irradiance_memo_table[IRRADIANCE_MEMO];
-
-static void probe_irradiance_memo(const fx_context *ctx, bool committed, const void *probe, const float normal[3],
-                                  float e[3])
-{
-    if (!ctx || ctx->frame == 0) {
-        fx_probe_irradiance(probe, normal, e);
-        return;
-    }
-    /* Updates read the payloads before this frame's commits, compose after them: two generations a frame. */
-    uint32_t generation = ctx->frame * 2u + (committed ? 1u : 0u);
-    uint32_t bits[3];
-    memcpy(bits, normal, sizeof bits);
-    uint64_t h = (uint64_t)(uintptr_t)probe * 0x9E3779B97F4A7C15ull ^ (bits[0] * 0x85EBCA6Bu) ^ (bits[1] * 0xC2B2AE35u) ^
-                 ((uint64_t)bits[2] << 17);
-    irradiance_memo *m = &irradiance_memo_table[(h ^ (h >> 29)) & (IRRADIANCE_MEMO - 1)];
-    if (m->probe == probe && m->frame == generation && m->normal[0] == normal[0] && m->normal[1] == normal[1] &&
-        m->normal[2] == normal[2]) {
-        memcpy(e, m->e, sizeof m->e);
-        return;
-    }
-    fx_probe_irradiance(probe, normal, e);
-    m->probe = probe;
-    m->frame = generation;
-    memcpy(m->normal, normal, sizeof m->normal);
-    memcpy(m->e, e, sizeof m->e);
-}
-
-/* fx_probe_filter with each probe's irradiance towards the normal from the per-thread memo. */
-static bool probe_filter_memo(const fx_context *ctx, bool committed, const fx_taps *taps, const float position[3],
-                              const float normal[3], float out_rgb[3])
-{
-    float sum[3] = {0, 0, 0}, total = 0;
-    for (uint32_t t = 0; t < taps->count; t++) {
-        const uint8_t *p = taps->texel[t];
-        if (!(taps->weight[t] > 0))
-            continue;
-        float weight = probe_weight(p, position, normal, true);
-        if (weight == 0.0f)
-            continue;
-        weight *= taps->weight[t];
-        float e[3];
-        probe_irradiance_memo(ctx, committed, p, normal, e);
-        for (int k = 0; k < 3; k++)
-            sum[k] += weight * e[k];
-        total += weight;
-    }
-    if (!(total > 0)) {
-        out_rgb[0] = out_rgb[1] = out_rgb[2] = 0;
-        return false;
-    }
-    for (int k = 0; k < 3; k++)
-        out_rgb[k] = fminf(sum[k] / total, FLT_MAX);
-    return true;
-}
-
 /* Radiance leaving a front-face hit, given its direct light (compose units) and the probes around it. */
 static void hit_radiance(const fx_context *ctx, uint32_t level, uint32_t tri, float u, float v, float t,
                          const float position[3], const float normal[3], const float direct[3], float out[3])
@@ -489,15 +180,10 @@ static void hit_radiance(const fx_context *ctx, uint32_t level, uint32_t tri, fl
         memset(&taps, 0, sizeof taps);
         ctx->world_taps(ctx->world_user, FX_PROBES, position, level, &taps);
         if (taps.count > 0)
-            probe_filter_memo(ctx, false, &taps, position, normal, bounce);
+            fx__probe_filter_memo(ctx, false, &taps, position, normal, bounce);
     }
     for (int k = 0; k < 3; k++)
         out[k] = albedo[k] * (direct[k] + bounce[k] * (1.0f / FX_PROBE_PI));
-}
-
-bool fx_probe_filter(const fx_taps *taps, const float position[3], const float normal[3], float out_rgb[3])
-{
-    return probe_filter_memo(NULL, true, taps, position, normal, out_rgb);
 }
 
 /* The gather's sums per texel, structure of arrays (update). */
@@ -515,7 +201,7 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
     const scene *s = ctx->s;
     const uint32_t rays = ray_count(ctx);
     float dirs[FX_PROBE_TEXELS][3];
-    texel_dirs(dirs);
+    fx__probe_texel_dirs(dirs);
     /* The gather below runs over the 64 texels for every ray: structure of arrays, no branch, so the
      * compiler vectorises it; each texel adds its rays in ray order, whatever the thread split. */
     float dir_x[FX_PROBE_TEXELS], dir_y[FX_PROBE_TEXELS], dir_z[FX_PROBE_TEXELS];
@@ -882,124 +568,6 @@ static void probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint3
     fx_probes_commit(ctx, jobs, count);
 }
 
-/* Adds E / pi of the probes around each pixel. The sky is in E (missed probe rays return it), so the
- * separate sky term goes to 0; what an effect shading before this one left in sky_visibility (ambient
- * occlusion: the fraction of the hemisphere open within its radius) scales E instead, the way engines
- * apply AO to indirect diffuse light. Without AO it is 1 and E goes in whole. Both modes do the same.
- *
- * Cost. The filter of one pixel reads 8 probes, each twice (irradiance towards the normal, moments towards
- * the point) and weighs each with a Chebyshev bound: too much to do per pixel (bench_probes). Pixels of a
- * run that read the same 8 probes (the same cell) and face the same way (the same normal: one triangle or
- * coplanar ones) form a group. Per group the probes' irradiance towards the normal is read once (exact: it
- * depends on nothing else) and each probe's wrap and Chebyshev weight is taken once, at the group's mean
- * position; per pixel only the trilinear weights change. A group spans at most 4 x 16 pixels, much less than
- * a cell (cells are about distance/16 wide, 16 pixels about distance/40 at 640 pixels and 60 degrees), so
- * the visibility weights barely move within it. A group of one pixel is exactly fx_probe_filter. */
-enum { SHADE_GROUPS = 16 };
-
-typedef struct shade_group {
-    const void *texel[FX_MAX_TAPS]; /* its taps' probes, in order: with the normal, what a group shares */
-    uint32_t count;
-    float normal[3];
-    float position_sum[3];
-    uint32_t pixels;
-    float weight[FX_MAX_TAPS];   /* wrap x Chebyshev per tap, at the mean position */
-    float e[FX_MAX_TAPS][3];     /* irradiance of each tap towards the normal */
-} shade_group;
-
-static bool same_group(const shade_group *g, const fx_taps *taps, const float normal[3])
-{
-    /* Normals within 1e-3 per component (0.06 degrees) count as one: coplanar triangles of a wall have
-     * normals that differ in their last bits, and the irradiance cannot tell them apart. */
-    if (g->count != taps->count || fabsf(g->normal[0] - normal[0]) > 1e-3f || fabsf(g->normal[1] - normal[1]) > 1e-3f ||
-        fabsf(g->normal[2] - normal[2]) > 1e-3f)
-        return false;
-    for (uint32_t t = 0; t < taps->count; t++)
-        if (g->texel[t] != taps->texel[t])
-            return false;
-    return true;
-}
-
-static void probes_shade(const fx_context *ctx, const fx_shade_run *run)
-{
-    shade_group groups[SHADE_GROUPS];
-    uint8_t group_of[FX_RUN_PIXELS];
-    uint32_t group_count = 0;
-    uint32_t done = 0; /* pixels before this one are shaded; the rest wait for the next pass */
-    while (done < run->count) {
-        /* Pass 1: assign pixels to groups until the group table is full. */
-        group_count = 0;
-        uint32_t end = done, last = 0; /* the group of the pixel before: usually this one's too */
-        for (; end < run->count; end++) {
-            const fx_taps *taps = &run->taps[end];
-            group_of[end] = 0xFF;
-            if (taps->count == 0)
-                continue;
-            const float *n = run->points[end].view_normal;
-            uint32_t g = last;
-            if (!(g < group_count && same_group(&groups[g], taps, n)))
-                for (g = 0; g < group_count && !same_group(&groups[g], taps, n);)
-                    g++;
-            last = g;
-            if (g == group_count) {
-                if (group_count == SHADE_GROUPS)
-                    break;
-                shade_group *ng = &groups[group_count++];
-                memcpy(ng->texel, taps->texel, taps->count * sizeof taps->texel[0]);
-                ng->count = taps->count;
-                memcpy(ng->normal, n, sizeof ng->normal);
-                ng->position_sum[0] = ng->position_sum[1] = ng->position_sum[2] = 0;
-                ng->pixels = 0;
-            }
-            group_of[end] = (uint8_t)g;
-            for (int k = 0; k < 3; k++)
-                groups[g].position_sum[k] += run->points[end].position[k];
-            groups[g].pixels++;
-        }
-        /* Pass 2: per group, each tap's weight at the mean position and irradiance towards the normal. The
-         * taps of a group are the same probes in the same order (same cell), whichever pixel is asked. */
-        for (uint32_t g = 0; g < group_count; g++) {
-            shade_group *sg = &groups[g];
-            uint32_t sample = done;
-            while (group_of[sample] != g)
-                sample++;
-            const fx_taps *taps = &run->taps[sample];
-            float mean[3];
-            for (int k = 0; k < 3; k++)
-                mean[k] = sg->pixels == 1 ? run->points[sample].position[k] : sg->position_sum[k] / (float)sg->pixels;
-            for (uint32_t t = 0; t < taps->count; t++) {
-                const uint8_t *p = taps->texel[t];
-                sg->weight[t] = probe_weight(p, mean, sg->normal, true);
-                if (sg->weight[t] > 0)
-                    probe_irradiance_memo(ctx, true, p, sg->normal, sg->e[t]);
-            }
-        }
-        /* Pass 3: per pixel, the trilinear weights. */
-        for (uint32_t i = done; i < end; i++) {
-            if (group_of[i] == 0xFF)
-                continue;
-            const shade_group *sg = &groups[group_of[i]];
-            const fx_taps *taps = &run->taps[i];
-            float sum[3] = {0, 0, 0}, total = 0;
-            for (uint32_t t = 0; t < taps->count; t++) {
-                float w = sg->weight[t] * taps->weight[t];
-                if (!(w > 0))
-                    continue;
-                for (int k = 0; k < 3; k++)
-                    sum[k] += w * sg->e[t][k];
-                total += w;
-            }
-            if (!(total > 0))
-                continue;
-            float open = run->sky_visibility[i] * (1.0f / FX_PROBE_PI) / total;
-            for (int k = 0; k < 3; k++)
-                run->indirect[3 * i + k] += fminf(sum[k] * open, FLT_MAX);
-            run->sky_visibility[i] = 0.0f;
-        }
-        done = end;
-    }
-}
-
 static uint64_t probes_eval(const fx_context *ctx, const fx_point *point, fx_shade_point *out)
 {
     uint64_t rays = 0;
@@ -1031,6 +599,6 @@ const fx_effect fx_effect_probes = {
     .brick_size = 1,
     .scratch_bytes = probes_scratch_bytes,
     .commit = probes_commit,
-    .shade = probes_shade,
+    .shade = fx__probes_shade,
     .eval = probes_eval,
 };

@@ -1,0 +1,97 @@
+/* fx_probes_internal.h: what the probe effect's two files share (effects/fx_probes.c: update, commit, the
+ * no-cache estimate and the table; effects/fx_probes_map.c: the octahedral maps, reading payloads, the shading
+ * filter and compose's shade). The payload layout and units are described at the top of fx_probes.c. */
+#ifndef FXC_FX_PROBES_INTERNAL_H
+#define FXC_FX_PROBES_INTERNAL_H
+
+#include "fx_internal.h"
+
+#include <float.h>
+#include <string.h>
+
+#define FX_PROBE_PI 3.14159265358979f
+/* The cosine power of the moments' lobe: 64 (DDGI's 50, rounded to six squarings). A lobe as wide as an
+ * 8 x 8 texel (power 16) mixed a thin wall's distance with the floor's behind it, and the Chebyshev test let
+ * 15 % of the lit room through to a floor point beside the wall (tests/test_probes.c); at 64 it is under 1 %.
+ * Each texel then rests on about 1.1 rays' weight per update; the hysteresis averages over the rotations. */
+#define FX_PROBE_DEPTH_POWER 64
+#define FX_PROBE_BACKFACE_OFF 0.25f  /* back-face fraction above which a probe is off (RTXGI) */
+#define FX_PROBE_BACKFACE_SHORTEN 0.2f /* back-face distances are stored shortened (RTXGI) */
+#define FX_PROBE_MAX_DISTANCE 2.598076f /* 1.5 sqrt(3): distances are clamped to this many cells */
+#define FX_PROBE_MIN_FRONT 0.25f     /* cells: relocation keeps front faces at least this far */
+#define FX_PROBE_MAX_OFFSET 0.45f    /* cells, per axis: relocation range */
+#define FX_PROBE_NORMAL_BIAS 0.2f    /* cells: the shading point moves this far along its normal for Chebyshev */
+
+enum {
+    FX_STREAM_PROBE_ROTATION = 0x5052, /* "PR" */
+    FX_STREAM_PROBE_ROUNDING = 0x5051,
+    FX_STREAM_PROBE_EVAL = 0x5045,
+    PROBE_CHUNK = 128, /* primary rays per intersection stream */
+    PROBE_HEADER = 32,
+    PROBE_IRRADIANCE = PROBE_HEADER,
+    PROBE_MOMENTS = PROBE_IRRADIANCE + FX_PROBE_TEXELS * 6,
+};
+
+_Static_assert(PROBE_MOMENTS + FX_PROBE_TEXELS * 4 == FX_PROBE_BYTES, "payload layout");
+
+/* ---- bytes ---------------------------------------------------------------------------------------------- */
+
+static inline uint32_t get_u32(const uint8_t *p)
+{
+    return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);
+}
+
+static inline void put_u32(uint8_t *p, uint32_t v)
+{
+    p[0] = (uint8_t)v;
+    p[1] = (uint8_t)(v >> 8);
+    p[2] = (uint8_t)(v >> 16);
+    p[3] = (uint8_t)(v >> 24);
+}
+
+static inline float get_f32(const uint8_t *p)
+{
+    uint32_t bits = get_u32(p);
+    float f;
+    memcpy(&f, &bits, sizeof f);
+    return f;
+}
+
+static inline void put_f32(uint8_t *p, float f)
+{
+    uint32_t bits;
+    memcpy(&bits, &f, sizeof bits);
+    put_u32(p, bits);
+}
+
+/* A half float (IEEE binary16) to float: every half, subnormals included (no infinities are ever written). */
+static inline float half_to_float(uint16_t h)
+{
+    uint32_t exponent = (h >> 10) & 0x1fu, mantissa = h & 0x3ffu, sign = (uint32_t)(h & 0x8000u) << 16;
+    uint32_t bits;
+    if (exponent - 1u < 30u) { /* normal: rebias the exponent (15 -> 127) and widen the mantissa, exact */
+        bits = sign | ((exponent + 112u) << 23) | (mantissa << 13);
+    } else if (exponent == 0) {
+        float value = (float)mantissa * 0x1p-24f; /* subnormal, exact */
+        memcpy(&bits, &value, sizeof bits);
+        bits |= sign;
+    } else {
+        bits = sign | 0x7f800000u | (mantissa << 13); /* infinity or NaN */
+    }
+    float value;
+    memcpy(&value, &bits, sizeof value);
+    return value;
+}
+
+/* The 64 texels' directions (their octahedral centres). */
+void fx__probe_texel_dirs(float dirs[FX_PROBE_TEXELS][3]);
+
+/* fx_probe_filter, each probe's irradiance towards the normal from a per-thread memo of the frame (ctx may be
+ * NULL: no memo). committed: read after this frame's commits (compose) or before them (update hits). */
+bool fx__probe_filter_memo(const fx_context *ctx, bool committed, const fx_taps *taps, const float position[3],
+                           const float normal[3], float out_rgb[3]);
+
+/* The probes' term of a run of pixels (fx_effect.shade). */
+void fx__probes_shade(const fx_context *ctx, const fx_shade_run *run);
+
+#endif
