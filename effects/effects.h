@@ -91,6 +91,7 @@ typedef struct fx_block_job {
     float origin[3];
     float cell;
     void *scratch;
+    uint32_t effect; /* the effect's index in the loop's list (what ctx->world_taps takes) */
 } fx_block_job;
 
 /* Hard shadows: for each texel of mask and each light, FX_SHADOW_RAYS rays from stratified jittered points

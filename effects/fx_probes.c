@@ -169,7 +169,7 @@ static uint32_t queue_shadow_rays(const fx_context *ctx, hit_shading *hs, uint32
 }
 
 /* Radiance leaving a front-face hit, given its direct light (compose units) and the probes around it. */
-static void hit_radiance(const fx_context *ctx, uint32_t level, uint32_t tri, float u, float v, float t,
+static void hit_radiance(const fx_context *ctx, uint32_t effect, uint32_t level, uint32_t tri, float u, float v, float t,
                          const float position[3], const float normal[3], const float direct[3], float out[3])
 {
     float albedo[3], bounce[3] = {0, 0, 0};
@@ -178,7 +178,7 @@ static void hit_radiance(const fx_context *ctx, uint32_t level, uint32_t tri, fl
     if (ctx->world_taps) {
         fx_taps taps;
         memset(&taps, 0, sizeof taps);
-        ctx->world_taps(ctx->world_user, FX_PROBES, position, level, &taps);
+        ctx->world_taps(ctx->world_user, effect, position, level, &taps);
         if (taps.count > 0)
             fx__probe_filter_memo(ctx, false, &taps, position, normal, bounce);
     }
@@ -298,7 +298,7 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
                             memcpy(back_dir, dir, sizeof back_dir);
                         }
                     } else {
-                        hit_radiance(ctx, job->level, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r], normal,
+                        hit_radiance(ctx, job->effect, job->level, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r], normal,
                                      hs->direct[r], radiance);
                         distance = t;
                         if (t < closest_front) {

@@ -46,6 +46,7 @@ static void grid_init(grid *g, const scene *s, const float origin[3], float cell
                 fx_block_job *job = &g->jobs[i];
                 job->key = 0x7000000000000000ull | ((uint64_t)z << 40) | ((uint64_t)y << 20) | x;
                 job->mask = 1;
+                job->effect = FX_PROBES; /* the registry's index, as the engine's loop gives it */
                 job->payload = g->payload + (size_t)i * FX_PROBE_BYTES;
                 job->scratch = g->scratch + (size_t)i * g->scratch_bytes;
                 job->cell = cell;

@@ -326,6 +326,7 @@ void srv__updates(srv_loop *loop, bool lookup, srv_frame_stats *st)
             kind->job_location(cache, e, kind->block_key(cache, e, job->block), fj);
             fj->mask = job->mask;
             fj->scratch = scratch_bytes ? q->scratch + i * scratch_bytes : NULL;
+            fj->effect = e;
             fj->lookup = dep == SRV_NO_EFFECT ? NULL : kind->block_payload(cache, dep, job->dependency_block);
             fj->payload = kind->block_payload(cache, e, job->block);
         }
