@@ -210,7 +210,8 @@ void fx_probe_eval_point(const fx_context *ctx, const float pos[3], const float 
 enum {
     FX_MAX_EFFECTS = 16,  /* the on-surface key's 4-bit effect field */
     FX_RUN_PIXELS = 64,   /* compose hands an effect at most this many pixels per shade call */
-    FX_MAX_TAPS = 8,      /* texels one filtered read touches (trilinear: 8) */
+    FX_MAX_TAPS = 16,     /* texels one filtered read touches (trilinear: 8; world-space cells blended
+                             across two levels: 16) */
 };
 
 /* The texels one filtered read of a pixel touches, restricted to texels holding data, weights summing to 1

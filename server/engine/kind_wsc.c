@@ -157,9 +157,10 @@ typedef struct cell_memo {
     int32_t g[3];   /* the cell's grid point */
     double lo[3], hi[3], inside_lo[3], inside_hi[3];
     double inv_cell;
-    /* The last distance's level (before the bias), and the distances well inside its range. */
+    /* The last distance's level (before the bias), the distances well inside its range, and the inverse of
+     * the range's upper end (for the blend). */
     uint32_t distance_level;
-    double distance_lo, distance_hi;
+    double distance_lo, distance_hi, inv_top;
 } cell_memo;
 
 /* wsc_level of a distance, remembering the range of distances of the last level (a millionth inside its
@@ -174,19 +175,30 @@ static uint32_t memo_level(const kind_wsc *k, cell_memo *m, double distance)
     m->distance_level = level;
     m->distance_lo = level == 0 ? -INFINITY : lo * (1.0 + 1e-6);
     m->distance_hi = hi * (1.0 - 1e-6);
+    m->inv_top = level == WSC_MAX_LEVEL ? 0.0 : 1.0 / hi;
     if (!(distance == distance)) /* NaN: no range */
         m->distance_lo = m->distance_hi = 0;
     return level;
 }
 
-/* A pixel's level, its cell (memo) and its position in the cell (t, each in [0, 1]); false when the point is
- * outside the grid's range. *same: the memo's cell already was this pixel's. */
-static bool pixel_cell(const kind_wsc *k, const srv_pixel *px, int32_t bias, cell_memo *m, float t[3], bool *same)
+/* Levels blend into each other: over the last quarter of a level's distances (3/4 to 1 of its upper end)
+ * the next level's cells fade in, so no seam shows where the level changes; at the boundary a pixel reads
+ * the next level alone, as the pixel just beyond it does. A pixel's level (bias included) and the weight
+ * of level + 1 in [0, 1]. */
+static uint32_t pixel_level(const kind_wsc *k, cell_memo *m, const srv_pixel *px, int32_t bias, float *blend)
 {
-    double world[3] = {(double)px->position[0] + k->origin[0], (double)px->position[1] + k->origin[1],
-                       (double)px->position[2] + k->origin[2]};
-    int32_t l = (int32_t)memo_level(k, m, (double)px->distance) + bias;
+    double distance = (double)px->distance;
+    int32_t l = (int32_t)memo_level(k, m, distance) + bias;
     uint32_t level = l < 0 ? 0 : (l > (int32_t)WSC_MAX_LEVEL ? WSC_MAX_LEVEL : (uint32_t)l);
+    double b = (distance * m->inv_top - 0.75) * 4.0;
+    *blend = level >= WSC_MAX_LEVEL || !(b > 0.0) ? 0.0f : (b >= 1.0 ? 1.0f : (float)b);
+    return level;
+}
+
+/* The cell of a world position at a level (memo m) and the position in it (t, each in [0, 1]); false when
+ * the point is outside the grid's range. *same: the memo's cell already was this one. */
+static bool cell_at(const kind_wsc *k, const double world[3], uint32_t level, cell_memo *m, float t[3], bool *same)
+{
     *same = m->level == level && world[0] >= m->inside_lo[0] && world[0] < m->inside_hi[0] &&
             world[1] >= m->inside_lo[1] && world[1] < m->inside_hi[1] && world[2] >= m->inside_lo[2] &&
             world[2] < m->inside_hi[2];
@@ -217,6 +229,12 @@ static bool pixel_cell(const kind_wsc *k, const srv_pixel *px, int32_t bias, cel
     return true;
 }
 
+static inline void pixel_world(const kind_wsc *k, const srv_pixel *px, double world[3])
+{
+    for (int a = 0; a < 3; a++)
+        world[a] = (double)px->position[a] + k->origin[a];
+}
+
 /* Corner c (0..7) of the memo's cell: g + (c & 1, c >> 1 & 1, c >> 2 & 1); its trilinear weight from t. */
 static void corner_of(const cell_memo *m, int c, int32_t out[3])
 {
@@ -231,6 +249,39 @@ static inline float corner_weight(const float t[3], int c)
            (((c >> 2) & 1) ? t[2] : 1.0f - t[2]);
 }
 
+/* Writes the keys of the memo's cell's 8 corners unless a recent pixel wrote them (seen). */
+static uint32_t cell_keys(const cell_memo *m, uint32_t brick_size, uint64_t seen[32], uint64_t *keys, uint64_t *masks,
+                          uint32_t n, uint32_t *refused)
+{
+    uint64_t cell;
+    if (!wsc_wgi_pack(m->level, m->g[0], m->g[1], m->g[2], &cell)) {
+        (*refused)++;
+        return n;
+    }
+    uint32_t s = (uint32_t)((cell * 0x9E3779B97F4A7C15ull) >> 59); /* 5 bits: 32 slots */
+    if (seen[s] == cell)
+        return n;
+    seen[s] = cell;
+    uint32_t first = n;
+    for (int c = 0; c < 8; c++) {
+        int32_t corner[3];
+        corner_of(m, c, corner);
+        uint64_t wgi, bit;
+        if (!wsc_brick_of(corner, m->level, brick_size, &wgi, &bit))
+            continue; /* wsc_corners checked the range: not reached */
+        uint32_t j = first;
+        while (j < n && keys[j] != wgi)
+            j++;
+        if (j == n) {
+            keys[n] = wgi;
+            masks[n++] = bit;
+        } else {
+            masks[j] |= bit;
+        }
+    }
+    return n;
+}
+
 static uint32_t wsc_kind_pixel_requests(const void *cache, uint32_t slot, const srv_pixel *pixels, uint32_t count,
                                         uint32_t effect, int32_t bias, uint64_t *keys, uint64_t *masks)
 {
@@ -238,45 +289,23 @@ static uint32_t wsc_kind_pixel_requests(const void *cache, uint32_t slot, const 
     kind_wsc *k = (kind_wsc *)cache; /* only the atomic refusal counter is written */
     uint32_t n = 0, refused = 0, brick_size = k->brick_size[effect];
     /* Recent cells, direct-mapped: a pixel in a cell already asked for asks for the same 8 grid points. */
-    enum { SEEN = 32 };
-    uint64_t seen[SEEN];
+    uint64_t seen[32];
     memset(seen, 0xFF, sizeof seen);
-    cell_memo memo = {.level = UINT32_MAX, .distance_lo = 0, .distance_hi = 0};
+    cell_memo memo = {.level = UINT32_MAX}, next = {.level = UINT32_MAX}; /* the pixel's level, and level + 1 */
     for (uint32_t i = 0; i < count; i++) {
-        float t[3];
+        float t[3], blend;
         bool same;
-        if (!pixel_cell(k, &pixels[i], bias, &memo, t, &same)) {
+        double world[3];
+        pixel_world(k, &pixels[i], world);
+        uint32_t level = pixel_level(k, &memo, &pixels[i], bias, &blend);
+        if (!cell_at(k, world, level, &memo, t, &same)) {
             refused++;
             continue;
         }
-        if (same)
-            continue;
-        uint64_t cell;
-        if (!wsc_wgi_pack(memo.level, memo.g[0], memo.g[1], memo.g[2], &cell)) {
-            refused++;
-            continue;
-        }
-        uint32_t s = (uint32_t)((cell * 0x9E3779B97F4A7C15ull) >> 59); /* 5 bits: SEEN */
-        if (seen[s] == cell)
-            continue;
-        seen[s] = cell;
-        uint32_t first = n;
-        for (int c = 0; c < 8; c++) {
-            int32_t corner[3];
-            corner_of(&memo, c, corner);
-            uint64_t wgi, bit;
-            if (!wsc_brick_of(corner, memo.level, brick_size, &wgi, &bit))
-                continue; /* wsc_corners checked the range: not reached */
-            uint32_t j = first;
-            while (j < n && keys[j] != wgi)
-                j++;
-            if (j == n) {
-                keys[n] = wgi;
-                masks[n++] = bit;
-            } else {
-                masks[j] |= bit;
-            }
-        }
+        if (!same)
+            n = cell_keys(&memo, brick_size, seen, keys, masks, n, &refused);
+        if (blend > 0 && cell_at(k, world, level + 1, &next, t, &same) && !same)
+            n = cell_keys(&next, brick_size, seen, keys, masks, n, &refused);
     }
     if (refused)
         atomic_fetch_add_explicit(&k->refused, refused, memory_order_relaxed);
@@ -386,13 +415,12 @@ static void find_cell_taps(kind_wsc *k, wsc_local *local, uint32_t effect, const
     }
 }
 
-/* A point's taps from its cell's: trilinear weights (not renormalised), corners of zero weight left out. */
-static void fill_taps(const cell_taps *ct, const float t[3], fx_taps *out)
+/* Appends a point's taps from its cell's: trilinear weights times `scale` (not renormalised), corners of
+ * zero weight left out. */
+static void add_taps(const cell_taps *ct, const float t[3], float scale, fx_taps *out)
 {
-    out->count = 0;
-    out->footprint_log2 = 0;
     for (uint32_t i = 0; i < ct->count; i++) {
-        float w = corner_weight(t, ct->corner[i]);
+        float w = corner_weight(t, ct->corner[i]) * scale;
         if (!(w > 0))
             continue;
         out->texel[out->count] = ct->texel[i];
@@ -449,22 +477,31 @@ static void wsc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t threa
     wsc_local_stats before = {0}, after = {0};
     if (local)
         wsc_local_stats_get(local, &before);
-    cell_memo memo = {.level = UINT32_MAX, .distance_lo = 0, .distance_hi = 0};
-    cell_taps ct = {.count = 0, .first_block = SRV_NONE};
+    cell_memo memo = {.level = UINT32_MAX}, next = {.level = UINT32_MAX};
+    cell_taps ct = {.count = 0, .first_block = SRV_NONE}, next_ct = {.count = 0, .first_block = SRV_NONE};
     for (uint32_t i = 0; i < count; i++) {
-        float t[3];
+        float t[3], blend;
         bool same;
-        if (!pixel_cell(k, &pixels[i], bias, &memo, t, &same)) {
-            taps[i].count = 0;
+        double world[3];
+        pixel_world(k, &pixels[i], world);
+        uint32_t level = pixel_level(k, &memo, &pixels[i], bias, &blend);
+        taps[i].count = 0;
+        taps[i].footprint_log2 = 0;
+        if (!cell_at(k, world, level, &memo, t, &same)) {
             if (blocks)
                 blocks[i] = SRV_NONE;
             continue;
         }
         if (!same)
             find_cell_taps(k, local, effect, &memo, &ct);
-        fill_taps(&ct, t, &taps[i]);
+        add_taps(&ct, t, 1.0f - blend, &taps[i]);
         if (blocks)
             blocks[i] = ct.first_block;
+        if (blend > 0 && cell_at(k, world, level + 1, &next, t, &same)) {
+            if (!same)
+                find_cell_taps(k, local, effect, &next, &next_ct);
+            add_taps(&next_ct, t, blend, &taps[i]);
+        }
     }
     if (local) {
         wsc_local_stats_get(local, &after);
