@@ -306,6 +306,86 @@ static void test_volumetric_4x4x4_effect(void **state)
     srv_loop_free(loop);
 }
 
+/* Levels blend: a test-only 1x1x1 effect whose cells store their own level. Read back through compose's
+ * taps, a pixel gets its level, or between two levels in the blend band; neighbouring pixels at nearly the
+ * same distance never differ by a jump (without the blend they would differ by a whole level at the
+ * boundary), and the band is there (fractional values). */
+static float level_read[VOLUME_W * VOLUME_H], level_total[VOLUME_W * VOLUME_H];
+
+static uint64_t level_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count, uint32_t samples)
+{
+    (void)ctx, (void)samples;
+    for (uint32_t j = 0; j < count; j++) {
+        float level = (float)jobs[j].level;
+        memcpy(jobs[j].payload, &level, 4);
+    }
+    return 0;
+}
+
+static void level_shade(const fx_context *ctx, const fx_shade_run *run)
+{
+    (void)ctx;
+    for (uint32_t i = 0; i < run->count; i++) {
+        const fx_taps *t = &run->taps[i];
+        float sum = 0, total = 0;
+        for (uint32_t k = 0; k < t->count; k++) {
+            float v;
+            memcpy(&v, t->texel[k], 4);
+            sum += t->weight[k] * v;
+            total += t->weight[k];
+        }
+        size_t p = (size_t)run->points[i].pixel_id;
+        level_total[p] = total;
+        level_read[p] = total > 0 ? sum / total : NAN;
+    }
+}
+
+static const fx_effect level_effect = {
+    .name = "cell_level", .cache = SCENE_CACHE_WORLD_SPACE, .filter = FX_FILTER_TRILINEAR,
+    .policy = FX_UPDATE_ONCE, .brick_size = 1, .texel_bytes = volume_texel_bytes, .needs = volume_needs,
+    .cost = volume_cost, .update = level_update, .shade = level_shade,
+};
+
+static void test_levels_blend_without_seams(void **state)
+{
+    fixture *f = *state;
+    const fx_effect *effects[] = {&level_effect};
+    srv_loop_desc d = {.s = f->s, .rt = f->rt, .seed = 1, .effects = effects, .effect_count = 1, .probe_budget = 1u << 20};
+    d.effect_on[0] = true;
+    srv_viewer_id id;
+    srv_loop *loop = fxt_loop(&d, 1, VOLUME_W, VOLUME_H, &id);
+    srv_frame_stats st;
+    srv_camera cam = {.position = {-3.5f, 0.6f, -3.5f}, .target = {3, 0.2f, 3}, .up = {0, 1, 0}, .fov_deg = 70};
+    for (uint32_t frame = 0; frame < 2; frame++) {
+        memset(level_total, 0, sizeof level_total);
+        fxt_frame(loop, &id, 1, &cam, &st);
+    }
+    const float *depth = srv_viewer_depth(loop, id);
+    float lo = INFINITY, hi = -INFINITY, worst = 0;
+    uint32_t fractional = 0, pairs = 0;
+    for (uint32_t y = 0; y < VOLUME_H; y++)
+        for (uint32_t x = 0; x < VOLUME_W; x++) {
+            size_t p = (size_t)y * VOLUME_W + x;
+            if (fabsf(level_total[p] - 1.0f) > 1e-4f)
+                continue;
+            lo = fminf(lo, level_read[p]);
+            hi = fmaxf(hi, level_read[p]);
+            fractional += fabsf(level_read[p] - roundf(level_read[p])) > 0.01f;
+            if (x + 1 < VOLUME_W && fabsf(level_total[p + 1] - 1.0f) <= 1e-4f &&
+                fabsf(depth[p + 1] - depth[p]) < 0.01f * depth[p]) {
+                pairs++;
+                worst = fmaxf(worst, fabsf(level_read[p + 1] - level_read[p]));
+            }
+        }
+    print_message("levels read %.2f..%.2f, %u fractional pixels, worst step between neighbours %.3f over %u pairs\n",
+                  lo, hi, fractional, worst, pairs);
+    assert_true(hi - lo >= 1.0f); /* a level boundary is in view */
+    assert_true(fractional > 0);  /* the blend band */
+    assert_true(pairs > 100);
+    assert_true(worst < 0.5f);    /* no whole-level jump */
+    srv_loop_free(loop);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -316,6 +396,7 @@ int main(void)
         cmocka_unit_test(test_identical_viewers_share_probes),
         cmocka_unit_test(test_out_of_range_refused),
         cmocka_unit_test(test_volumetric_4x4x4_effect),
+        cmocka_unit_test(test_levels_blend_without_seams),
     };
     return cmocka_run_group_tests(tests, fxt_default_scene_setup, fxt_default_scene_teardown);
 }
