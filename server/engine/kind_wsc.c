@@ -21,7 +21,10 @@
 #include <stdlib.h>
 #include <string.h>
 
-enum { LOCAL_SIDE = 16, LOCAL_LEVELS = 8 };
+/* Slots per axis and levels of a viewer's local tables: compose reads them only when a pixel enters another
+ * cell, so 8^3 slots a level (6 KB) are enough: 97 % of reads hit on Sponza with 4 viewers (16^3: 99.9 %) at
+ * an eighth of the memory (docs/BENCHMARKS.md). */
+enum { LOCAL_SIDE = 8, LOCAL_LEVELS = 8 };
 
 typedef struct kind_wsc {
     wsc_cache *wsc;
