@@ -187,12 +187,6 @@ void fx_probe_info_read(const void *payload, fx_probe_info *out);
 /* A probe's irradiance E (true units: pi L under a uniform sky L) in direction dir, bilinear in its map. */
 void fx_probe_irradiance(const void *payload, const float dir[3], float out_rgb[3]);
 
-/* The filtered irradiance E at a surface point (position, unit normal) from taps over probe payloads: each
- * probe with data and not off weighted by its trilinear tap weight x DDGI's wrap weight x Chebyshev
- * visibility from its moments (normal bias 0.2 cell), renormalised. Returns false (out zero) when no probe
- * contributes. The same filter serves shade and the hits of an update. */
-bool fx_probe_filter(const struct fx_taps *taps, const float position[3], const float normal[3], float out_rgb[3]);
-
 /* Traces every job's probe and leaves the new estimates in the job's scratch; reads payloads only (its own
  * and, through ctx->world_taps, its neighbours' committed ones). Returns the rays traced. */
 uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count);

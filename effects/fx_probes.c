@@ -18,7 +18,7 @@
  * uniform random rotation from hash(seed, key, update count), from the probe's (relocated) position:
  *   - front-face hit: radiance = albedo x (direct light at the hit, shadow rays to every light, as compose
  *     lights it + E_probes / pi), E_probes the committed probes around the hit at the job's level through
- *     ctx->world_taps with the shade filter (fx_probe_filter): light bounces once more every frame;
+ *     ctx->world_taps with the shade filter (fx__probe_filter_memo): light bounces once more every frame;
  *   - back-face hit: radiance 0, counted, distance shortened to 0.2 t (RTXGI), so the visibility moments see
  *     the wall as near;
  *   - miss: the sky's radiance, distance the maximum.

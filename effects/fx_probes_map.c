@@ -212,7 +212,8 @@ static void probe_irradiance_memo(const fx_context *ctx, bool committed, const v
     memcpy(m->e, e, sizeof m->e);
 }
 
-/* fx_probe_filter with each probe's irradiance towards the normal from the per-thread memo. */
+/* The DDGI filter at a point: each probe with data and not off weighted by its trilinear tap weight x wrap x
+ * Chebyshev visibility, renormalised; each probe's irradiance towards the normal from the per-thread memo. */
 bool fx__probe_filter_memo(const fx_context *ctx, bool committed, const fx_taps *taps, const float position[3],
                               const float normal[3], float out_rgb[3])
 {
@@ -240,11 +241,6 @@ bool fx__probe_filter_memo(const fx_context *ctx, bool committed, const fx_taps 
     return true;
 }
 
-bool fx_probe_filter(const fx_taps *taps, const float position[3], const float normal[3], float out_rgb[3])
-{
-    return fx__probe_filter_memo(NULL, true, taps, position, normal, out_rgb);
-}
-
 /* Adds E / pi of the probes around each pixel. The sky is in E (missed probe rays return it), so the
  * separate sky term goes to 0; what an effect shading before this one left in sky_visibility (ambient
  * occlusion: the fraction of the hemisphere open within its radius) scales E instead, the way engines
@@ -257,7 +253,7 @@ bool fx_probe_filter(const fx_taps *taps, const float position[3], const float n
  * depends on nothing else) and each probe's wrap and Chebyshev weight is taken once, at the group's mean
  * position; per pixel only the trilinear weights change. A group spans at most 4 x 16 pixels, much less than
  * a cell (cells are about distance/16 wide, 16 pixels about distance/40 at 640 pixels and 60 degrees), so
- * the visibility weights barely move within it. A group of one pixel is exactly fx_probe_filter. */
+ * the visibility weights barely move within it. A group of one pixel is exactly the filter of fx__probe_filter_memo. */
 enum { SHADE_GROUPS = 16 };
 
 typedef struct shade_group {

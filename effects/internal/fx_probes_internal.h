@@ -86,7 +86,7 @@ static inline float half_to_float(uint16_t h)
 /* The 64 texels' directions (their octahedral centres). */
 void fx__probe_texel_dirs(float dirs[FX_PROBE_TEXELS][3]);
 
-/* fx_probe_filter, each probe's irradiance towards the normal from a per-thread memo of the frame (ctx may be
+/* The shading filter (DDGI's weights, renormalised; false when no probe contributes), each probe's irradiance towards the normal from a per-thread memo of the frame (ctx may be
  * NULL: no memo). committed: read after this frame's commits (compose) or before them (update hits). */
 bool fx__probe_filter_memo(const fx_context *ctx, bool committed, const fx_taps *taps, const float position[3],
                            const float normal[3], float out_rgb[3]);

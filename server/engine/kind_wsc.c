@@ -158,7 +158,7 @@ static void wsc_kind_begin_frame(void *cache, uint32_t frame)
 typedef struct cell_memo {
     uint32_t level; /* UINT32_MAX: none */
     int32_t g[3];   /* the cell's grid point */
-    double lo[3], hi[3], inside_lo[3], inside_hi[3];
+    double lo[3], inside_lo[3], inside_hi[3]; /* the cell's lower corner; its box a millionth inside */
     double inv_cell;
     /* The last distance's level (before the bias), the distances well inside its range, and the inverse of
      * the range's upper end (for the blend). */
@@ -219,9 +219,8 @@ static bool cell_at(const kind_wsc *k, const double world[3], uint32_t level, ce
         for (int a = 0; a < 3; a++) {
             m->g[a] = corners[0][a];
             m->lo[a] = (double)corners[0][a] * cell;
-            m->hi[a] = m->lo[a] + cell;
             m->inside_lo[a] = m->lo[a] + 1e-6 * cell;
-            m->inside_hi[a] = m->hi[a] - 1e-6 * cell;
+            m->inside_hi[a] = m->lo[a] + cell - 1e-6 * cell;
         }
         *same = !moved; /* a point near a face of the same cell */
     }

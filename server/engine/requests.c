@@ -93,9 +93,10 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
             px->island = memo_island;
             px->footprint = view->footprint[p];
             float u = view->bary_u[p], v = view->bary_v[p], w = 1.0f - u - v;
-            px->island_u = w * uv[0] + u * uv[2] + v * uv[4];
-            px->island_v = w * uv[1] + u * uv[3] + v * uv[5];
-            if (positions) {
+            if (!positions) { /* a kind reads island UVs or positions, never both (needs_position) */
+                px->island_u = w * uv[0] + u * uv[2] + v * uv[4];
+                px->island_v = w * uv[1] + u * uv[3] + v * uv[5];
+            } else {
                 for (int k = 0; k < 3; k++)
                     px->position[k] = w * corner[0][k] + u * corner[1][k] + v * corner[2][k];
                 px->distance = view->depth[p];

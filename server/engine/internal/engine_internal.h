@@ -44,8 +44,9 @@ typedef struct srv_pixel {
     uint32_t triangle, island;
     float island_u, island_v; /* level-0 island texels */
     float footprint;          /* log2 of the pixel's footprint in level-0 texels */
-    /* Filled only when a cache kind asks for them (needs_position): the visible point, scene-local, and its
-     * distance from the viewer's camera (what world-space levels are chosen by). */
+    /* Filled only when a cache kind asks for them (needs_position; its request pass then leaves island_u/v
+     * unset): the visible point, scene-local, and its distance from the viewer's camera (what world-space
+     * levels are chosen by). */
     float position[3];
     float distance;
 } srv_pixel;
