@@ -26,7 +26,18 @@
     X(FXC_ERR_NO_SLOT, -15, "every viewer slot is taken")                                                    \
     X(FXC_ERR_CAMERA, -16, "invalid camera (non-finite, position equals target, or field of view outside (0, 180))") \
     X(FXC_ERR_EFFECTS, -17, "invalid effect list (unknown dependency, too many effects, or a bad table)")   \
-    X(FXC_ERR_THREADS, -18, "cannot start threads")
+    X(FXC_ERR_THREADS, -18, "cannot start threads")                                                          \
+    X(FXC_ERR_BAD_MAGIC, -19, "not an fxcache message (bad magic)")                                          \
+    X(FXC_ERR_VERSION, -20, "unsupported protocol version")                                                  \
+    X(FXC_ERR_TRUNCATED, -21, "message truncated")                                                           \
+    X(FXC_ERR_TRAILING, -22, "trailing bytes after the message")                                             \
+    X(FXC_ERR_TOO_LARGE, -23, "message or payload too large")                                                \
+    X(FXC_ERR_UNKNOWN_TYPE, -24, "unknown message type")                                                     \
+    X(FXC_ERR_CODEC, -25, "payload does not decode")                                                         \
+    X(FXC_ERR_PROTOCOL, -26, "message not allowed now (protocol order)")                                     \
+    X(FXC_ERR_UNAUTHORIZED, -27, "missing or wrong access token")                                            \
+    X(FXC_ERR_LIMIT, -28, "over a server limit (viewers, resolution, message size or camera rate)")          \
+    X(FXC_ERR_SHUTDOWN, -29, "the server is shutting down")
 
 typedef enum fxc_result {
 #define FXC_RESULT_ENUM(name, value, text) name = value,
