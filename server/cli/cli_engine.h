@@ -1,0 +1,84 @@
+/* What `fxcache sim` and `fxcache serve` share (cli_engine.c): the engine's options, opening a run, the
+ * per-frame statistics file, and the summary. */
+#ifndef FXC_SERVER_CLI_ENGINE_H
+#define FXC_SERVER_CLI_ENGINE_H
+
+#include "engine.h"
+#include "report.h"
+
+#include <getopt.h>
+#include <jansson.h>
+#include <signal.h>
+#include <stdbool.h>
+#include <stdio.h>
+
+/* The options that shape the engine; zero fields take the loop's defaults. */
+typedef struct srv_cli_engine {
+    const char *scene_path; /* NULL: the embedded default scene */
+    const char *effects;    /* NULL or "auto": what the scene needs */
+    int32_t bias[SRV_MAX_EFFECTS];
+    bool bias_set[SRV_MAX_EFFECTS];
+    double pool_mb, ray_budget, density, probe_cell, probe_hysteresis;
+    uint32_t seed, threads, ao_step, probe_rays, probe_budget;
+    bool no_cache, no_local_table;
+} srv_cli_engine;
+
+/* getopt_long codes of the engine options (a command's own codes start at SRV_CLI_O_COMMAND). */
+enum {
+    SRV_CLI_O_SCENE = 256, SRV_CLI_O_EFFECTS, SRV_CLI_O_BIAS, SRV_CLI_O_POOL, SRV_CLI_O_BUDGET, SRV_CLI_O_AOSTEP,
+    SRV_CLI_O_PCELL, SRV_CLI_O_PRAYS, SRV_CLI_O_PHYST, SRV_CLI_O_PBUDGET, SRV_CLI_O_NOLOCAL, SRV_CLI_O_NOCACHE,
+    SRV_CLI_O_SEED, SRV_CLI_O_THREADS, SRV_CLI_O_DENSITY,
+    SRV_CLI_O_COMMAND = 320
+};
+
+/* The engine options' getopt_long entries (no terminator) and their --help lines (one %s: the effect names). */
+extern const struct option srv_cli_engine_options[];
+extern const size_t srv_cli_engine_option_count;
+extern const char srv_cli_engine_usage[];
+
+void srv_cli_engine_defaults(srv_cli_engine *e);
+
+/* The effects a user can choose (those that shade), comma-separated. */
+void srv_cli_effect_names(char *out, size_t cap);
+
+/* Handles one getopt_long result: 1 when it was an engine option and valid, 0 when it was one and invalid
+ * (a one-line error "fxcache CMD: OPTION: ..." was printed), -1 when it is not an engine option. */
+int srv_cli_engine_option(const char *cmd, int code, const char *arg, srv_cli_engine *e);
+
+/* A run: the scene, its Embree scene, the loop with the chosen effects, the report (its sink registered). */
+typedef struct srv_cli_run {
+    const char *cmd;
+    scene *s;
+    scene_rt *rt;
+    srv_loop *loop;
+    srv_report *report;
+    srv_sink report_sink;
+    char reasons[SRV_MAX_EFFECTS][200]; /* why each effect runs or is left out */
+    json_t *left_out_extra;             /* what the scene needs that no registered effect serves */
+    double bvh_ms;
+} srv_cli_run;
+
+/* Opens a run. Returns -1 on success, else the exit code (an error line was printed; srv_cli_run_close
+ * still frees what was made). A signal flagged in *stop during the scene load ends it (128 + signal). */
+int srv_cli_run_open(const char *cmd, const srv_cli_engine *e, bool keep_views, srv_cli_run *run,
+                     volatile sig_atomic_t *stop);
+void srv_cli_run_close(srv_cli_run *run);
+
+/* --stats FILE: one JSON line per frame, flushed at once (a crash loses no finished frame). */
+typedef struct srv_cli_stats {
+    FILE *file;
+    srv_cli_run *run;
+    const char *path;
+} srv_cli_stats;
+
+bool srv_cli_stats_open(srv_cli_stats *stats, srv_cli_run *run, const char *path);
+bool srv_cli_stats_close(srv_cli_stats *stats); /* false (and an error line) when the close failed */
+
+/* The summary's common part: scene, options, effects and why, the report's totals. Caller owns it. */
+json_t *srv_cli_summary_json(const srv_cli_run *run, const srv_cli_engine *e);
+/* Writes JSON to path (indented); false with an error line on failure. */
+bool srv_cli_write_json(const char *cmd, const char *path, const json_t *value);
+/* The summary in words on stdout. */
+void srv_cli_print_summary(const srv_cli_run *run, bool no_cache, bool interrupted);
+
+#endif
