@@ -512,35 +512,41 @@ uint32_t srv_trace_count(const srv_trace *t)
     return t ? t->count : 0;
 }
 
-/* Camera line `index` in the local frame of scene s (NULL: as given). */
-static srv_camera trace_camera_local(const srv_trace *t, const scene *s, uint32_t index)
+srv_camera srv_trace_camera_world(const scene *s, const double position[3], const double direction[3], float fov_deg)
 {
-    const trace_camera *c = &t->cameras[index];
-    srv_camera cam = {.up = {0, 1, 0}, .fov_deg = c->fov_deg};
+    srv_camera cam = {.up = {0, 1, 0}, .fov_deg = fov_deg};
     if (s) {
-        scene_world_to_local(s, c->position, cam.position);
+        scene_world_to_local(s, position, cam.position);
     } else {
         for (int k = 0; k < 3; k++)
-            cam.position[k] = (float)c->position[k];
+            cam.position[k] = (float)position[k];
     }
     /* The target from the rounded position, so a recorded camera reads back exactly. */
     bool target_differs = false;
     for (int k = 0; k < 3; k++) {
-        cam.target[k] = (float)((double)cam.position[k] + c->direction[k]);
+        cam.target[k] = (float)((double)cam.position[k] + direction[k]);
         target_differs |= cam.target[k] != cam.position[k];
     }
     if (!target_differs) {
         /* A direction below the float spacing at this position: the same direction, one position-length
          * long (the view does not depend on the target's distance). */
-        double length = sqrt(c->direction[0] * c->direction[0] + c->direction[1] * c->direction[1] +
-                             c->direction[2] * c->direction[2]);
+        double length = sqrt(direction[0] * direction[0] + direction[1] * direction[1] +
+                             direction[2] * direction[2]);
         double reach = 1.0;
         for (int k = 0; k < 3; k++)
             reach = fmax(reach, fabs((double)cam.position[k]));
         for (int k = 0; k < 3; k++)
-            cam.target[k] = (float)((double)cam.position[k] + c->direction[k] / length * reach);
+            cam.target[k] = (float)((double)cam.position[k] + direction[k] / length * reach);
     }
     return cam;
+}
+
+/* Camera line `index` in the local frame of scene s (NULL: as given). */
+static srv_camera trace_camera_local(const srv_trace *t, const scene *s, uint32_t index)
+{
+    const trace_camera *c = &t->cameras[index];
+    double direction[3] = {c->direction[0], c->direction[1], c->direction[2]};
+    return srv_trace_camera_world(s, c->position, direction, c->fov_deg);
 }
 
 srv_camera srv_trace_camera(const srv_trace *t, const scene *s, uint32_t frame)

@@ -53,6 +53,11 @@ uint32_t srv_trace_count(const srv_trace *t);
  * world coordinates as they are (a scene whose origin is 0). */
 srv_camera srv_trace_camera(const srv_trace *t, const scene *s, uint32_t frame);
 
+/* A camera given in world coordinates (a position, a direction, a field of view; up +Y), in the local frame
+ * of scene s exactly as a trace line with these values replays: a live viewer's camera built this way and
+ * recorded reads back as the same camera. s NULL: world coordinates as they are. */
+srv_camera srv_trace_camera_world(const scene *s, const double position[3], const double direction[3], float fov_deg);
+
 /* The time (seconds) of frame `frame`, with the same past-the-end rule as srv_trace_camera(). */
 double srv_trace_time(const srv_trace *t, uint32_t frame);
 
