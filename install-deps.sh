@@ -13,6 +13,7 @@ packages=(
   zlib1g-dev libzstd-dev libturbojpeg0-dev
   libwebsockets-dev
   libcmocka-dev
+  nodejs node-ws zstd
   uthash-dev libglib2.0-dev
   glmark2-data
   assimp-testmodels

@@ -47,5 +47,6 @@ scene *srv_cli_load_scene(const char *cmd, const char *path, float texel_density
 int srv_cmd_scene_info(int argc, char **argv);
 int srv_cmd_render(int argc, char **argv);
 int srv_cmd_sim(int argc, char **argv);
+int srv_cmd_serve(int argc, char **argv);
 
 #endif

@@ -16,6 +16,8 @@ static const char usage[] =
     "  render [SCENE]       a PNG of the scene's albedo with an island checkerboard overlay\n"
     "  sim [options]        several simulated viewers sharing one effect cache, no network:\n"
     "                       statistics per frame, a summary, and the composed frames\n"
+    "  serve [options]      the networked server: viewers (fxcache-viewer) connect over WebSockets\n"
+    "                       and get composed frames for their cameras\n"
     "\n"
     "SCENE is a JSON scene description (*.json), any mesh file Assimp reads (optionally .gz), or\n"
     "'default' (the embedded scene, also used when SCENE is omitted).\n"
@@ -42,6 +44,8 @@ int main(int argc, char **argv)
         return srv_cmd_render(argc - 1, argv + 1);
     if (strcmp(cmd, "sim") == 0)
         return srv_cmd_sim(argc - 1, argv + 1);
+    if (strcmp(cmd, "serve") == 0)
+        return srv_cmd_serve(argc - 1, argv + 1);
     fprintf(stderr, "fxcache: unknown command '%s' (try 'fxcache --help')\n", cmd);
     return 2;
 }

@@ -1,0 +1,232 @@
+/* `fxcache serve`: the networked server. Viewers connect over WebSockets (the wire format is proto/, the
+ * client viewer_client/), each with its own resolution and codec, and get frames for their latest camera at
+ * --fps, composed by the same engine `fxcache sim` drives (the network is one more sink: server/net/).
+ * SIGINT and SIGTERM stop it cleanly: bye on every connection, the statistics and the summary written, the
+ * recorded traces flushed. */
+#include "cli.h"
+#include "cli_engine.h"
+#include "net.h"
+#include "proto.h"
+
+#include <errno.h>
+#include <getopt.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+static volatile sig_atomic_t stop_requested = 0;
+
+static void on_signal(int sig)
+{
+    stop_requested = sig;
+}
+
+typedef struct serve_options {
+    srv_cli_engine engine;
+    srv_net_desc net;
+    const char *stats_path, *summary_path;
+    uint32_t max_width, max_height;
+    bool quiet;
+} serve_options;
+
+static const char serve_usage[] =
+    "usage: fxcache serve [options]\n"
+    "\n"
+    "Serves composed frames to viewers over WebSockets (see docs/PROTOCOL.md; the client is\n"
+    "fxcache-viewer). Viewers join and leave at any time, each with its own resolution and codec, and\n"
+    "get frames for their latest camera at --fps; a slow viewer gets the newest frame (older ones are\n"
+    "dropped and counted). Runs until SIGINT or SIGTERM (or --frames), then says bye to every viewer,\n"
+    "writes the statistics and prints a summary.\n"
+    "\n"
+    "  --bind ADDR          address to listen on (default 127.0.0.1; beyond loopback needs --token)\n"
+    "  --port P             TCP port, 0..65535; 0 = any free port (default 7681). The address is\n"
+    "                       printed on stdout as 'listening on ws://ADDR:PORT'\n"
+    "  --token T            access token every hello must carry (default: $FXCACHE_TOKEN, else none)\n"
+    "  --fps F              frames per second, (0, 1000] (default 30)\n"
+    "  --frames N           stop after N frames, 1..100000000 (default: until stopped); the clock\n"
+    "                       starts with the first viewer's first camera\n"
+    "  --max-viewers N      viewers at once, 1..64 (default 16)\n"
+    "  --max-res WxH        largest resolution a viewer may ask for, sides 1..8192 (default 3840x2160)\n"
+    "  --max-message B      largest message a viewer may send, bytes, 1024..16777216 (default 65536)\n"
+    "  --camera-rate N      camera messages per second a viewer may send, 1..100000 (default 240)\n"
+    "  --record DIR         write every viewer's rendered cameras as DIR/viewer_NN.trace with frame\n"
+    "                       times; 'fxcache sim --trace ... --fps F' replays the session\n"
+    "  --stats FILE         one JSON line of statistics per frame\n"
+    "  --summary FILE       one JSON object at the end\n"
+    "  --quiet              no summary in words on stdout\n";
+
+static bool is_loopback(const char *address)
+{
+    return strncmp(address, "127.", 4) == 0 || strcmp(address, "localhost") == 0 || strcmp(address, "::1") == 0;
+}
+
+static int parse_options(int argc, char **argv, serve_options *o)
+{
+    enum { O_BIND = SRV_CLI_O_COMMAND, O_PORT, O_TOKEN, O_FPS, O_FRAMES, O_MAXV, O_MAXRES, O_MAXMSG, O_RATE,
+           O_RECORD, O_STATS, O_SUMMARY, O_QUIET };
+    static const struct option own[] = {
+        {"bind", required_argument, NULL, O_BIND},          {"port", required_argument, NULL, O_PORT},
+        {"token", required_argument, NULL, O_TOKEN},        {"fps", required_argument, NULL, O_FPS},
+        {"frames", required_argument, NULL, O_FRAMES},      {"max-viewers", required_argument, NULL, O_MAXV},
+        {"max-res", required_argument, NULL, O_MAXRES},     {"max-message", required_argument, NULL, O_MAXMSG},
+        {"camera-rate", required_argument, NULL, O_RATE},   {"record", required_argument, NULL, O_RECORD},
+        {"stats", required_argument, NULL, O_STATS},        {"summary", required_argument, NULL, O_SUMMARY},
+        {"quiet", no_argument, NULL, O_QUIET},              {"help", no_argument, NULL, 'h'},
+    };
+    struct option options[sizeof own / sizeof own[0] + 32];
+    size_t n_own = sizeof own / sizeof own[0];
+    memcpy(options, own, sizeof own);
+    memcpy(options + n_own, srv_cli_engine_options, srv_cli_engine_option_count * sizeof options[0]);
+    options[n_own + srv_cli_engine_option_count] = (struct option){NULL, 0, NULL, 0};
+    optind = 1;
+    opterr = 0;
+    for (int c; (c = getopt_long(argc, argv, ":h", options, NULL)) != -1;) {
+        int engine = srv_cli_engine_option("serve", c, optarg, &o->engine);
+        if (engine == 0)
+            return 2;
+        if (engine == 1)
+            continue;
+        bool ok = true;
+        uint32_t value = 0;
+        switch (c) {
+        case O_BIND: o->net.bind = optarg; break;
+        case O_PORT:
+            ok = srv_cli_u32("serve", "--port", optarg, 0, 65535, &value);
+            o->net.port = (int)value;
+            break;
+        case O_TOKEN: o->net.token = optarg; break;
+        case O_FPS: ok = srv_cli_double("serve", "--fps", optarg, 0.001, 1000, &o->net.fps); break;
+        case O_FRAMES: ok = srv_cli_u32("serve", "--frames", optarg, 1, 100000000, &o->net.frames); break;
+        case O_MAXV: ok = srv_cli_u32("serve", "--max-viewers", optarg, 1, SRV_MAX_VIEWERS, &o->net.max_viewers); break;
+        case O_MAXRES:
+            ok = srv_cli_resolution("serve", "--max-res", optarg, PROTO_MAX_SIDE, &o->net.max_width, &o->net.max_height);
+            break;
+        case O_MAXMSG: ok = srv_cli_u32("serve", "--max-message", optarg, 1024, 16777216, &o->net.max_message); break;
+        case O_RATE: ok = srv_cli_u32("serve", "--camera-rate", optarg, 1, 100000, &o->net.camera_rate); break;
+        case O_RECORD: o->net.record_dir = optarg; break;
+        case O_STATS: o->stats_path = optarg; break;
+        case O_SUMMARY: o->summary_path = optarg; break;
+        case O_QUIET: o->quiet = true; break;
+        case 'h': {
+            char names[256];
+            srv_cli_effect_names(names, sizeof names);
+            fputs(serve_usage, stdout);
+            printf(srv_cli_engine_usage, names);
+            printf("  -h, --help           this text\n");
+            return 0;
+        }
+        case ':': fprintf(stderr, "fxcache serve: %s needs a value\n", argv[optind - 1]); return 2;
+        default: fprintf(stderr, "fxcache serve: unknown option '%s' (try --help)\n", argv[optind - 1]); return 2;
+        }
+        if (!ok)
+            return 2;
+    }
+    if (optind < argc) {
+        fprintf(stderr, "fxcache serve: unexpected argument '%s' (the scene is given with --scene)\n", argv[optind]);
+        return 2;
+    }
+    if (!o->net.token) {
+        const char *env = getenv("FXCACHE_TOKEN");
+        o->net.token = env && env[0] ? env : NULL;
+    }
+    if (o->net.token && (strlen(o->net.token) > PROTO_TOKEN_MAX || !o->net.token[0])) {
+        fprintf(stderr, "fxcache serve: --token: 1..%d printable characters\n", PROTO_TOKEN_MAX);
+        return 2;
+    }
+    for (const char *t = o->net.token; t && *t; t++)
+        if (*t < 0x21 || *t > 0x7e) {
+            fprintf(stderr, "fxcache serve: --token: only printable characters without spaces\n");
+            return 2;
+        }
+    if (!is_loopback(o->net.bind) && !o->net.token) {
+        fprintf(stderr, "fxcache serve: --bind %s is beyond loopback: give --token (or FXCACHE_TOKEN) so that only "
+                        "viewers with it can connect\n", o->net.bind);
+        return 2;
+    }
+    return -1;
+}
+
+/* The network's totals, for the summary. */
+static json_t *net_json(const serve_options *o, const srv_net *net, const srv_net_totals *t)
+{
+    json_t *refused = json_object();
+    for (int code = 1; code < 32; code++)
+        if (t->refused_by_code[code])
+            json_object_set_new(refused, fxc_strerror(-code), json_integer((json_int_t)t->refused_by_code[code]));
+    json_t *j = json_pack("{s:s,s:i,s:f,s:i,s:I,s:I,s:I,s:o,s:I,s:I,s:I,s:I,s:f,s:I}", "bind", o->net.bind, "port",
+                         srv_net_port(net), "fps", o->net.fps, "max_viewers", (int)o->net.max_viewers, "connections",
+                         (json_int_t)t->connections, "viewers_joined", (json_int_t)t->viewers_joined, "refused",
+                         (json_int_t)t->refused, "refused_by", refused, "frames_sent", (json_int_t)t->frames_sent,
+                         "frames_dropped", (json_int_t)t->frames_dropped, "bytes_sent", (json_int_t)t->bytes_sent,
+                         "cameras_received", (json_int_t)t->cameras_received, "encode_ms", t->encode_ms,
+                         "buffer_bytes_peak", (json_int_t)t->buffer_bytes_peak);
+    return j;
+}
+
+int srv_cmd_serve(int argc, char **argv)
+{
+    serve_options o = {.net = {.bind = "127.0.0.1", .port = 7681, .fps = 30}};
+    srv_cli_engine_defaults(&o.engine);
+    int rc = parse_options(argc, argv, &o);
+    if (rc >= 0)
+        return rc;
+    if (!srv_cli_check_memory("serve", o.engine.no_cache ? 0 : o.engine.pool_mb, 0, 0, false))
+        return 2;
+    if (o.net.record_dir && mkdir(o.net.record_dir, 0755) != 0 && errno != EEXIST) {
+        fprintf(stderr, "fxcache serve: cannot create folder %s: %s\n", o.net.record_dir, strerror(errno));
+        return 1;
+    }
+    signal(SIGINT, on_signal);
+    signal(SIGTERM, on_signal);
+    signal(SIGPIPE, SIG_IGN);
+    srv_cli_run run = {0};
+    srv_cli_stats stats = {0};
+    srv_net *net = NULL;
+    int exit_code = srv_cli_run_open("serve", &o.engine, false, &run, &stop_requested);
+    if (exit_code >= 0)
+        goto done;
+    exit_code = 1;
+    if (o.stats_path && !srv_cli_stats_open(&stats, &run, o.stats_path))
+        goto done;
+    o.net.loop = run.loop;
+    o.net.report = run.report;
+    o.net.s = run.s;
+    o.net.stop = &stop_requested;
+    o.net.progress = isatty(STDERR_FILENO);
+    char err[512];
+    if (srv_net_create(&o.net, &net, err, sizeof err) != FXC_OK) {
+        fprintf(stderr, "fxcache serve: %s\n", err);
+        goto done;
+    }
+    printf("fxcache serve: listening on ws://%s:%d\n", o.net.bind, srv_net_port(net));
+    fflush(stdout);
+    fxc_result r = srv_net_run(net, err, sizeof err);
+    if (r != FXC_OK)
+        fprintf(stderr, "fxcache serve: %s\n", err);
+    srv_net_totals totals;
+    srv_net_get_totals(net, &totals);
+    json_t *sum = srv_cli_summary_json(&run, &o.engine);
+    json_object_set_new(sum, "interrupted", json_boolean(stop_requested));
+    json_object_set_new(sum, "serve", net_json(&o, net, &totals));
+    bool written = !o.summary_path || srv_cli_write_json("serve", o.summary_path, sum);
+    json_decref(sum);
+    if (!o.quiet) {
+        srv_cli_print_summary(&run, o.engine.no_cache, false);
+        printf("network:    %llu connections, %llu viewers joined, %llu refused; %llu frames sent (%.1f MB), %llu "
+               "dropped for newer ones; %.2f ms encoding per frame sent\n",
+               (unsigned long long)totals.connections, (unsigned long long)totals.viewers_joined,
+               (unsigned long long)totals.refused, (unsigned long long)totals.frames_sent, totals.bytes_sent / 1e6,
+               (unsigned long long)totals.frames_dropped,
+               totals.frames_sent ? totals.encode_ms / (double)totals.frames_sent : 0.0);
+    }
+    exit_code = r == FXC_OK && written ? 0 : 1;
+done:
+    srv_net_free(net);
+    if (!srv_cli_stats_close(&stats) && exit_code == 0)
+        exit_code = 1;
+    srv_cli_run_close(&run);
+    return exit_code;
+}
