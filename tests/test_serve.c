@@ -608,6 +608,26 @@ static void test_limits_and_token(void **state)
         assert_int_equal(m.u.frame.width, 64);
         free(msg);
     }
+    /* Stats on request: the run report as JSON text. */
+    proto_msg request = {.type = PROTO_STATS_REQUEST};
+    assert_true(ws_send_msg(keep[0], &request));
+    bool stats = false;
+    for (int i = 0; i < 200 && !stats; i++) {
+        uint8_t *msg = NULL;
+        long n = ws_recv(keep[0], &msg, 60);
+        proto_msg m;
+        assert_true(n > 0);
+        assert_int_equal(proto_decode(msg, (size_t)n, &m), FXC_OK);
+        if (m.type == PROTO_STATS) {
+            char *text = strndup(m.u.stats.json, m.u.stats.json_bytes);
+            assert_non_null(strstr(text, "\"frames\""));
+            assert_non_null(strstr(text, "\"sharing_ratio\""));
+            free(text);
+            stats = true;
+        }
+        free(msg);
+    }
+    assert_true(stats);
     /* SIGTERM: each gets bye. */
     kill(sv.pid, SIGTERM);
     for (int i = 0; i < 2; i++) {
