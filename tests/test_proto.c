@@ -1112,6 +1112,7 @@ static void test_color_corrupt(void **state)
     uint8_t *jpeg = color_encode_alloc(PROTO_CODEC_JPEG, 80, rgb, w, h, &jpeg_bytes);
 
     expect_color_codec_error("raw one byte short", PROTO_CODEC_RAW, rgb, w * h * 3 - 1, w, h);
+    expect_color_codec_error("raw one byte long", PROTO_CODEC_RAW, rgb, w * h * 3, w, h - 1);
     expect_color_codec_error("raw for a taller image", PROTO_CODEC_RAW, rgb, w * h * 3, w, h + 1);
     expect_color_codec_error("empty zstd", PROTO_CODEC_ZSTD, zstd, 0, w, h);
     expect_color_codec_error("empty jpeg", PROTO_CODEC_JPEG, jpeg, 0, w, h);
@@ -1133,7 +1134,7 @@ static void test_color_corrupt(void **state)
     longer[zstd_bytes] = 0;
     expect_color_codec_error("zstd with a trailing byte", PROTO_CODEC_ZSTD, longer, zstd_bytes + 1, w, h);
     free(longer);
-    size_t half = (size_t)w * h * 3 / 2, cap = 2 * ZSTD_compressBound(half);
+    size_t half = (size_t)w * h * 3 / 2, cap = 2 * ZSTD_compressBound((size_t)w * h * 3);
     uint8_t *two = malloc(cap);
     assert_non_null(two);
     size_t first = ZSTD_compress(two, cap, rgb, half, 1);
@@ -1141,6 +1142,12 @@ static void test_color_corrupt(void **state)
     size_t second = ZSTD_compress(two + first, cap - first, rgb + half, half, 1);
     assert_false(ZSTD_isError(second));
     expect_color_codec_error("two zstd frames", PROTO_CODEC_ZSTD, two, first + second, w, h);
+    /* The whole image in the first frame, then an empty second frame: the content adds up, still refused. */
+    first = ZSTD_compress(two, cap, rgb, (size_t)w * h * 3, 1);
+    assert_false(ZSTD_isError(first));
+    second = ZSTD_compress(two + first, cap - first, rgb, 0, 1);
+    assert_false(ZSTD_isError(second));
+    expect_color_codec_error("zstd and an empty frame", PROTO_CODEC_ZSTD, two, first + second, w, h);
     /* One frame of the right content but without its size in the header. */
     ZSTD_CCtx *cctx = ZSTD_createCCtx();
     assert_non_null(cctx);
@@ -1375,19 +1382,21 @@ static void test_depth_half_closed_forms(void **state)
         {float_from_bits(1), 0.0f},           /* a float subnormal */
     };
     enum { COUNT = sizeof cases / sizeof cases[0] };
-    float in[COUNT + 3];
+    float in[COUNT + 4];
     for (int i = 0; i < COUNT; i++)
         in[i] = cases[i].in;
     in[COUNT] = -0.0f;
     in[COUNT + 1] = NAN;
-    in[COUNT + 2] = -1e-9f; /* rounds to -0 */
-    float *back = depth_round_trip(PROTO_DEPTH_HALF, in, COUNT + 3, 1);
+    in[COUNT + 2] = -1e-9f;                       /* rounds to -0 */
+    in[COUNT + 3] = float_from_bits(0xff800001u); /* a NaN whose payload lies only in the dropped bits */
+    float *back = depth_round_trip(PROTO_DEPTH_HALF, in, COUNT + 4, 1);
     for (int i = 0; i < COUNT; i++)
         if (bits_from_float(back[i]) != bits_from_float(cases[i].out))
             fail_msg("half(%.10g) = %.10g, expected %.10g", cases[i].in, back[i], cases[i].out);
     assert_int_equal(bits_from_float(back[COUNT]), 0x80000000u);
     assert_true(isnan(back[COUNT + 1]));
     assert_int_equal(bits_from_float(back[COUNT + 2]), 0x80000000u);
+    assert_true(isnan(back[COUNT + 3]) && signbit(back[COUNT + 3]));
     free(back);
 }
 
