@@ -11,7 +11,7 @@
  *     offset 8   length   u32      payload bytes that follow the header (exactly: no more, no fewer)
  *
  * Floats are IEEE-754 binary32/binary64 bit patterns (u32/u64). Strings are a u8 or u16 length, then that
- * many bytes, no terminator; names and tokens must be printable ASCII. docs/PROTOCOL.md gives every
+ * many bytes, no terminator; names, tokens and reasons must be printable ASCII. docs/PROTOCOL.md gives every
  * message's payload field by field.
  *
  * Decoders are safe on untrusted bytes: they never read outside [buf, buf + len), never assert on content,
@@ -103,7 +103,8 @@ typedef struct proto_hello {
 
 typedef struct proto_welcome {
     uint32_t viewer_id;        /* the server's id for this viewer (nonzero) */
-    char name[PROTO_NAME_MAX + 1]; /* the server's name for it ("viewer_NN"): its frames, statistics and trace */
+    char name[PROTO_NAME_MAX + 1]; /* the server's name for it ("viewer_NN", 1..31 printable bytes): its frames,
+                                      statistics and trace */
     float fps;                 /* the server's target frames per second, > 0 */
     double bounds_min[3];      /* the scene's bounding box, world coordinates (min <= max, finite) */
     double bounds_max[3];
@@ -127,8 +128,8 @@ typedef struct proto_frame_stats {
     uint64_t pixels_visible;
     uint64_t pixels_missing;    /* visible pixels composed without cached data */
     uint64_t frames_dropped;    /* this viewer's frames replaced by a newer one before they were sent, so far */
-    float frame_ms;             /* the server's whole frame, all viewers */
-    float encode_ms;            /* encoding this message */
+    float frame_ms;             /* the server's whole frame, all viewers (finite, >= 0) */
+    float encode_ms;            /* encoding this message (finite, >= 0) */
 } proto_frame_stats;
 
 typedef struct proto_frame {
@@ -152,7 +153,7 @@ typedef struct proto_stats {
 
 typedef struct proto_error {
     int32_t code;                          /* an fxc_result code (negative) */
-    char reason[PROTO_REASON_MAX + 1];     /* NUL-terminated here */
+    char reason[PROTO_REASON_MAX + 1];     /* 0..200 printable bytes, NUL-terminated here */
 } proto_error;
 
 typedef struct proto_bye {
@@ -190,7 +191,8 @@ size_t proto_bound(const proto_msg *m);
 
 /* Encodes m into buf (cap bytes). Returns the bytes written (exactly proto_bound(m)), or 0 when m is invalid
  * or cap is too small; then *result (may be NULL) says why: FXC_ERR_RANGE (a field out of range, or a string
- * not printable), FXC_ERR_INVALID (unknown type), FXC_ERR_TOO_LARGE (cap too small or a payload too large). */
+ * not printable), FXC_ERR_INVALID (unknown type, or a NULL payload pointer with a nonzero count),
+ * FXC_ERR_TOO_LARGE (cap too small or a payload too large). */
 size_t proto_encode(const proto_msg *m, uint8_t *buf, size_t cap, fxc_result *result);
 
 /* Decodes exactly one whole message of len bytes. Returns FXC_OK and *out, or: the header's codes above;
@@ -207,7 +209,8 @@ size_t proto_color_bound(uint32_t codec, uint32_t width, uint32_t height);
 
 /* Encodes width*height*3 bytes of sRGB (top row first) into out (cap bytes). quality: 1..100 for JPEG,
  * ignored otherwise. Returns FXC_OK and *out_bytes, FXC_ERR_INVALID (unknown codec, bad quality or sides),
- * FXC_ERR_TOO_LARGE (cap too small), FXC_ERR_CODEC (the codec library failed). */
+ * FXC_ERR_TOO_LARGE (cap too small; for JPEG cap must be at least proto_color_bound), FXC_ERR_CODEC (the codec
+ * library failed). Thread-safe (no state is shared between calls). */
 fxc_result proto_color_encode(uint32_t codec, uint32_t quality, const uint8_t *rgb, uint32_t width,
                               uint32_t height, uint8_t *out, size_t cap, size_t *out_bytes);
 

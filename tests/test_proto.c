@@ -1,0 +1,1635 @@
+/* Tests of the wire format (proto/proto.c) and the payload codecs (proto/proto_codec.c).
+ *
+ * Messages: byte order against literal bytes; every sample message (every type, optional parts present and
+ * absent, strings empty and at their maximum) round-trips with proto_bound == bytes written and its header
+ * and field offsets where docs/PROTOCOL.md puts them; every prefix of every sample, each in its own
+ * allocation, is TRUNCATED; an extra byte, undeclared or declared, is TRAILING; header faults have their own
+ * codes; one table changes one field's bytes per row and expects RANGE (or TRUNCATED/TRAILING for length
+ * fields), another changes one struct field and expects proto_encode to refuse; a bounded mutation loop
+ * checks that whatever decodes re-encodes to the same bytes; the committed fuzz corpus decodes.
+ * Codecs: raw and zstd bit exact; JPEG against a PSNR floor and quality ordering; corrupt payloads refused;
+ * depth binary32 bit exact; binary16 against closed forms, every half value and a half-ulp sweep (and
+ * _Float16 where the compiler has it); encoding from several threads at once gives the same bytes. */
+#include "test_util.h"
+
+#include "proto.h"
+
+#include <dirent.h>
+#include <math.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <zstd.h>
+
+/* A small deterministic generator for test data (xorshift32). */
+static uint32_t next_random(uint32_t *state)
+{
+    uint32_t x = *state;
+    x ^= x << 13;
+    x ^= x >> 17;
+    x ^= x << 5;
+    return *state = x;
+}
+
+static float float_from_bits(uint32_t bits)
+{
+    float v;
+    memcpy(&v, &bits, sizeof v);
+    return v;
+}
+
+static uint32_t bits_from_float(float v)
+{
+    uint32_t bits;
+    memcpy(&bits, &v, sizeof bits);
+    return bits;
+}
+
+/* ---- sample messages ------------------------------------------------------------------------------- */
+
+enum {
+    S_HELLO_RAW,       /* empty strings */
+    S_HELLO_JPEG,      /* name "alice", token "secret-token", strategy "nearest" */
+    S_HELLO_ZSTD,      /* every string at its maximum */
+    S_WELCOME,         /* name "viewer_07" */
+    S_CAMERA,          /* without a predicted pose */
+    S_CAMERA_PREDICTED,
+    S_FRAME,           /* 4x3 raw colour (36 bytes), no depth */
+    S_FRAME_DEPTH,     /* 5 colour bytes, 7 depth bytes (the message does not look inside them) */
+    S_STATS_REQUEST,
+    S_STATS,
+    S_STATS_EMPTY,
+    S_ERROR,           /* reason "missing or wrong access token" (29 bytes) */
+    S_BYE,             /* reason "client closing" (14 bytes) */
+    S_BYE_EMPTY,
+    SAMPLE_COUNT
+};
+
+static const uint8_t frame_color[36] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18,
+                                        19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31, 32, 33, 34, 35, 36};
+static const uint8_t frame_depth[7] = {0xde, 0xad, 0xbe, 0xef, 0x00, 0x01, 0xff};
+static const char stats_json[] = "{\"frames\": 10, \"viewers\": [1, 2]}";
+
+static proto_pose sample_pose(double offset)
+{
+    proto_pose pose = {{1.5e6 + offset, -2.25, 3.0 / 7.0}, {0.25f, -1.0f, 1e-3f}, 60.0f};
+    return pose;
+}
+
+/* Sample message i (valid, every field distinct from zero where it may be). */
+static proto_msg sample(int i)
+{
+    proto_msg m;
+    memset(&m, 0, sizeof m);
+    switch (i) {
+    case S_HELLO_RAW:
+        m.type = PROTO_HELLO;
+        m.u.hello = (proto_hello){.width = 640, .height = 360, .fov_deg = 60.0f, .codec = PROTO_CODEC_RAW};
+        break;
+    case S_HELLO_JPEG:
+        m.type = PROTO_HELLO;
+        m.u.hello = (proto_hello){.name = "alice", .width = 1920, .height = 1080, .fov_deg = 75.5f,
+                                  .codec = PROTO_CODEC_JPEG, .jpeg_quality = 85, .depth = PROTO_DEPTH_HALF,
+                                  .token = "secret-token", .strategy = "nearest"};
+        break;
+    case S_HELLO_ZSTD:
+        m.type = PROTO_HELLO;
+        m.u.hello = (proto_hello){.width = PROTO_MAX_SIDE, .height = 1, .fov_deg = 179.9f,
+                                  .codec = PROTO_CODEC_ZSTD, .depth = PROTO_DEPTH_FLOAT};
+        memset(m.u.hello.name, '~', PROTO_NAME_MAX);
+        m.u.hello.name[0] = ' ';
+        memset(m.u.hello.token, 'T', PROTO_TOKEN_MAX);
+        memset(m.u.hello.strategy, 's', PROTO_STRATEGY_MAX);
+        break;
+    case S_WELCOME:
+        m.type = PROTO_WELCOME;
+        m.u.welcome = (proto_welcome){.viewer_id = 7, .name = "viewer_07", .fps = 30.0f,
+                                      .bounds_min = {-10.5, 0.0, -1e-9}, .bounds_max = {10.5, 0.0, 4.0},
+                                      .camera = sample_pose(0.0), .max_camera_rate = 120};
+        break;
+    case S_CAMERA:
+        m.type = PROTO_CAMERA;
+        m.u.camera = (proto_camera){.sequence = 42, .time = 1.25, .pose = sample_pose(1.0)};
+        break;
+    case S_CAMERA_PREDICTED:
+        m.type = PROTO_CAMERA;
+        m.u.camera = (proto_camera){.sequence = 0xfffffffeu, .time = -3.5, .pose = sample_pose(2.0),
+                                    .has_predicted = true, .predicted_time = 1.3, .predicted = sample_pose(3.0)};
+        m.u.camera.predicted.fov_deg = 0.001f;
+        break;
+    case S_FRAME:
+        m.type = PROTO_FRAME;
+        m.u.frame = (proto_frame){.frame = 100, .camera_sequence = 42, .camera = sample_pose(4.0), .width = 4,
+                                  .height = 3, .codec = PROTO_CODEC_RAW, .depth = PROTO_DEPTH_NONE,
+                                  .stats = {1, 2, 3, 4, 5, 16.5f, 0.0f}, .color = frame_color,
+                                  .color_bytes = sizeof frame_color};
+        break;
+    case S_FRAME_DEPTH:
+        m.type = PROTO_FRAME;
+        m.u.frame = (proto_frame){.frame = 0xffffffffu, .camera_sequence = 0, .camera = sample_pose(5.0),
+                                  .width = PROTO_MAX_SIDE, .height = PROTO_MAX_SIDE, .codec = PROTO_CODEC_ZSTD,
+                                  .depth = PROTO_DEPTH_HALF,
+                                  .stats = {UINT64_MAX, 1ull << 40, 7, 0, 1, 1e3f, 2.5f}, .color = frame_color,
+                                  .color_bytes = 5, .depth_data = frame_depth, .depth_bytes = sizeof frame_depth};
+        break;
+    case S_STATS_REQUEST:
+        m.type = PROTO_STATS_REQUEST;
+        break;
+    case S_STATS:
+        m.type = PROTO_STATS;
+        m.u.stats = (proto_stats){stats_json, (uint32_t)strlen(stats_json)};
+        break;
+    case S_STATS_EMPTY:
+        m.type = PROTO_STATS;
+        break;
+    case S_ERROR:
+        m.type = PROTO_ERROR;
+        m.u.error.code = FXC_ERR_UNAUTHORIZED;
+        strcpy(m.u.error.reason, "missing or wrong access token");
+        break;
+    case S_BYE:
+        m.type = PROTO_BYE;
+        strcpy(m.u.bye.reason, "client closing");
+        break;
+    case S_BYE_EMPTY:
+        m.type = PROTO_BYE;
+        break;
+    }
+    return m;
+}
+
+/* Payload bytes of each sample, counted by hand from docs/PROTOCOL.md's tables. */
+static const size_t sample_payload_bytes[SAMPLE_COUNT] = {
+    [S_HELLO_RAW] = 18,
+    [S_HELLO_JPEG] = 18 + 5 + 12 + 7,
+    [S_HELLO_ZSTD] = 18 + 31 + 64 + 31,
+    [S_WELCOME] = 101 + 9,
+    [S_CAMERA] = 53,
+    [S_CAMERA_PREDICTED] = 101,
+    [S_FRAME] = 114 + 36,
+    [S_FRAME_DEPTH] = 114 + 5 + 7,
+    [S_STATS_REQUEST] = 0,
+    [S_STATS] = 4 + sizeof stats_json - 1,
+    [S_STATS_EMPTY] = 4,
+    [S_ERROR] = 6 + 29,
+    [S_BYE] = 2 + 14,
+    [S_BYE_EMPTY] = 2,
+};
+
+/* Encodes m into a new allocation of exactly proto_bound(m) bytes (the test fails if it cannot). */
+static uint8_t *encode_alloc(const proto_msg *m, size_t *len)
+{
+    size_t bound = proto_bound(m);
+    assert_true(bound >= PROTO_HEADER_BYTES);
+    uint8_t *buf = malloc(bound);
+    assert_non_null(buf);
+    fxc_result result = FXC_ERR_INVALID;
+    *len = proto_encode(m, buf, bound, &result);
+    assert_int_equal(result, FXC_OK);
+    assert_int_equal(*len, bound);
+    return buf;
+}
+
+/* Decodes a copy of bytes in an allocation of exactly len bytes, so the sanitizer sees any over-read. */
+static fxc_result decode_copy(const uint8_t *bytes, size_t len, proto_msg *out)
+{
+    uint8_t *copy = malloc(len ? len : 1);
+    assert_non_null(copy);
+    if (len)
+        memcpy(copy, bytes, len);
+    fxc_result result = proto_decode(len ? copy : NULL, len, out);
+    free(copy);
+    return result;
+}
+
+static bool same_pose(const proto_pose *a, const proto_pose *b)
+{
+    return memcmp(a->position, b->position, sizeof a->position) == 0 &&
+           memcmp(a->direction, b->direction, sizeof a->direction) == 0 &&
+           bits_from_float(a->fov_deg) == bits_from_float(b->fov_deg);
+}
+
+/* Field by field equality of two messages (floats bit for bit, payloads by content). */
+static void assert_same_message(const proto_msg *a, const proto_msg *b)
+{
+    assert_int_equal(a->type, b->type);
+    switch (a->type) {
+    case PROTO_HELLO: {
+        const proto_hello *x = &a->u.hello, *y = &b->u.hello;
+        assert_string_equal(x->name, y->name);
+        assert_int_equal(x->width, y->width);
+        assert_int_equal(x->height, y->height);
+        assert_int_equal(bits_from_float(x->fov_deg), bits_from_float(y->fov_deg));
+        assert_int_equal(x->codec, y->codec);
+        assert_int_equal(x->jpeg_quality, y->jpeg_quality);
+        assert_int_equal(x->depth, y->depth);
+        assert_string_equal(x->token, y->token);
+        assert_string_equal(x->strategy, y->strategy);
+        break;
+    }
+    case PROTO_WELCOME: {
+        const proto_welcome *x = &a->u.welcome, *y = &b->u.welcome;
+        assert_int_equal(x->viewer_id, y->viewer_id);
+        assert_string_equal(x->name, y->name);
+        assert_int_equal(bits_from_float(x->fps), bits_from_float(y->fps));
+        assert_memory_equal(x->bounds_min, y->bounds_min, sizeof x->bounds_min);
+        assert_memory_equal(x->bounds_max, y->bounds_max, sizeof x->bounds_max);
+        assert_true(same_pose(&x->camera, &y->camera));
+        assert_int_equal(x->max_camera_rate, y->max_camera_rate);
+        break;
+    }
+    case PROTO_CAMERA: {
+        const proto_camera *x = &a->u.camera, *y = &b->u.camera;
+        assert_int_equal(x->sequence, y->sequence);
+        assert_memory_equal(&x->time, &y->time, sizeof x->time);
+        assert_true(same_pose(&x->pose, &y->pose));
+        assert_int_equal(x->has_predicted, y->has_predicted);
+        if (x->has_predicted) {
+            assert_memory_equal(&x->predicted_time, &y->predicted_time, sizeof x->predicted_time);
+            assert_true(same_pose(&x->predicted, &y->predicted));
+        }
+        break;
+    }
+    case PROTO_FRAME: {
+        const proto_frame *x = &a->u.frame, *y = &b->u.frame;
+        assert_int_equal(x->frame, y->frame);
+        assert_int_equal(x->camera_sequence, y->camera_sequence);
+        assert_true(same_pose(&x->camera, &y->camera));
+        assert_int_equal(x->width, y->width);
+        assert_int_equal(x->height, y->height);
+        assert_int_equal(x->codec, y->codec);
+        assert_int_equal(x->depth, y->depth);
+        assert_true(x->stats.requested_texels == y->stats.requested_texels);
+        assert_true(x->stats.requested_cells == y->stats.requested_cells);
+        assert_true(x->stats.pixels_visible == y->stats.pixels_visible);
+        assert_true(x->stats.pixels_missing == y->stats.pixels_missing);
+        assert_true(x->stats.frames_dropped == y->stats.frames_dropped);
+        assert_int_equal(bits_from_float(x->stats.frame_ms), bits_from_float(y->stats.frame_ms));
+        assert_int_equal(bits_from_float(x->stats.encode_ms), bits_from_float(y->stats.encode_ms));
+        assert_int_equal(x->color_bytes, y->color_bytes);
+        assert_memory_equal(x->color, y->color, x->color_bytes);
+        assert_int_equal(x->depth_bytes, y->depth_bytes);
+        if (x->depth_bytes)
+            assert_memory_equal(x->depth_data, y->depth_data, x->depth_bytes);
+        break;
+    }
+    case PROTO_STATS:
+        assert_int_equal(a->u.stats.json_bytes, b->u.stats.json_bytes);
+        if (a->u.stats.json_bytes)
+            assert_memory_equal(a->u.stats.json, b->u.stats.json, a->u.stats.json_bytes);
+        break;
+    case PROTO_ERROR:
+        assert_int_equal(a->u.error.code, b->u.error.code);
+        assert_string_equal(a->u.error.reason, b->u.error.reason);
+        break;
+    case PROTO_BYE:
+        assert_string_equal(a->u.bye.reason, b->u.bye.reason);
+        break;
+    }
+}
+
+/* ---- bytes and names -------------------------------------------------------------------------------- */
+
+static void test_byte_order(void **state)
+{
+    (void)state;
+    uint8_t bytes[8];
+    proto_put_u32le(bytes, 0x01020304u);
+    static const uint8_t want32[4] = {0x04, 0x03, 0x02, 0x01};
+    assert_memory_equal(bytes, want32, 4);
+    proto_put_u16le(bytes, 0xa1b2u);
+    assert_int_equal(bytes[0], 0xb2);
+    assert_int_equal(bytes[1], 0xa1);
+    proto_put_u64le(bytes, 0x0102030405060708ull);
+    static const uint8_t want64[8] = {8, 7, 6, 5, 4, 3, 2, 1};
+    assert_memory_equal(bytes, want64, 8);
+    static const uint8_t high[8] = {0xff, 0xfe, 0xfd, 0xfc, 0xfb, 0xfa, 0xf9, 0xf8};
+    assert_int_equal(proto_get_u16le(high), 0xfeff);
+    assert_int_equal(proto_get_u32le(high), 0xfcfdfeffu);
+    assert_true(proto_get_u64le(high) == 0xf8f9fafbfcfdfeffull);
+}
+
+static void test_names(void **state)
+{
+    (void)state;
+    static const char *const types[] = {NULL,    "hello",         "welcome", "camera", "frame",
+                                        "stats-request", "stats", "error",   "bye"};
+    for (uint32_t t = 1; t <= 8; t++)
+        assert_string_equal(proto_type_name(t), types[t]);
+    assert_string_equal(proto_type_name(0), "unknown");
+    assert_string_equal(proto_type_name(9), "unknown");
+    assert_string_equal(proto_type_name(0xffffffffu), "unknown");
+    assert_string_equal(proto_codec_name(PROTO_CODEC_RAW), "raw");
+    assert_string_equal(proto_codec_name(PROTO_CODEC_ZSTD), "zstd");
+    assert_string_equal(proto_codec_name(PROTO_CODEC_JPEG), "jpeg");
+    assert_string_equal(proto_codec_name(PROTO_CODEC_COUNT), "unknown");
+    proto_codec codec = PROTO_CODEC_COUNT;
+    assert_true(proto_codec_parse("jpeg", &codec));
+    assert_int_equal(codec, PROTO_CODEC_JPEG);
+    assert_true(proto_codec_parse("raw", &codec));
+    assert_int_equal(codec, PROTO_CODEC_RAW);
+    assert_true(proto_codec_parse("zstd", &codec));
+    assert_int_equal(codec, PROTO_CODEC_ZSTD);
+    static const char *const refused[] = {"JPEG", "", "zstd ", "jpg", "unknown"};
+    for (size_t i = 0; i < sizeof refused / sizeof refused[0]; i++) {
+        codec = PROTO_CODEC_COUNT;
+        assert_false(proto_codec_parse(refused[i], &codec));
+        assert_int_equal(codec, PROTO_CODEC_COUNT);
+    }
+    assert_false(proto_codec_parse(NULL, &codec));
+}
+
+/* ---- messages --------------------------------------------------------------------------------------- */
+
+/* Every sample: bound == written == 12 + the hand-counted payload, the header as documented, decode gives
+ * back every field, and the frame's payloads point into the buffer. */
+static void test_round_trip(void **state)
+{
+    (void)state;
+    for (int i = 0; i < SAMPLE_COUNT; i++) {
+        proto_msg m = sample(i);
+        size_t len;
+        uint8_t *buf = encode_alloc(&m, &len);
+        assert_int_equal(len, PROTO_HEADER_BYTES + sample_payload_bytes[i]);
+        assert_memory_equal(buf, "FXCP", 4);
+        assert_int_equal(buf[4], PROTO_VERSION);
+        assert_int_equal(buf[5], 0);
+        assert_int_equal(buf[6], m.type);
+        assert_int_equal(buf[7], 0);
+        assert_int_equal(proto_get_u32le(buf + 8), sample_payload_bytes[i]);
+        proto_header h;
+        assert_int_equal(proto_decode_header(buf, len, &h), FXC_OK);
+        assert_int_equal(h.version, PROTO_VERSION);
+        assert_int_equal(h.type, m.type);
+        assert_int_equal(h.length, sample_payload_bytes[i]);
+        proto_msg back;
+        fxc_result result = proto_decode(buf, len, &back);
+        if (result != FXC_OK)
+            fail_msg("sample %d (%s): %s", i, proto_type_name(m.type), fxc_strerror(result));
+        assert_same_message(&m, &back);
+        if (m.type == PROTO_FRAME) {
+            /* The colour count sits at payload offset 106, the colour bytes right after it. */
+            assert_ptr_equal(back.u.frame.color, buf + PROTO_HEADER_BYTES + 110);
+            assert_int_equal(proto_get_u32le(buf + PROTO_HEADER_BYTES + 106), m.u.frame.color_bytes);
+            if (m.u.frame.depth_bytes)
+                assert_ptr_equal(back.u.frame.depth_data, buf + PROTO_HEADER_BYTES + 114 + m.u.frame.color_bytes);
+            else
+                assert_null(back.u.frame.depth_data);
+        }
+        if (m.type == PROTO_STATS && m.u.stats.json_bytes)
+            assert_ptr_equal(back.u.stats.json, (const char *)buf + PROTO_HEADER_BYTES + 4);
+        /* A camera without a predicted pose decodes with the predicted fields zeroed. */
+        if (i == S_CAMERA) {
+            assert_false(back.u.camera.has_predicted);
+            assert_true(back.u.camera.predicted.fov_deg == 0.0f && back.u.camera.predicted_time == 0.0);
+        }
+        free(buf);
+    }
+}
+
+/* A few fields at the offsets docs/PROTOCOL.md gives (a second reading of the layout, by hand). */
+static void test_documented_offsets(void **state)
+{
+    (void)state;
+    size_t len;
+    proto_msg m = sample(S_HELLO_JPEG);
+    uint8_t *buf = encode_alloc(&m, &len);
+    const uint8_t *p = buf + PROTO_HEADER_BYTES;
+    assert_int_equal(p[0], 5);
+    assert_memory_equal(p + 1, "alice", 5);
+    assert_int_equal(proto_get_u32le(p + 6), 1920);
+    assert_int_equal(proto_get_u32le(p + 10), 1080);
+    assert_int_equal(proto_get_u32le(p + 14), bits_from_float(75.5f));
+    assert_int_equal(p[18], PROTO_CODEC_JPEG);
+    assert_int_equal(p[19], 85);
+    assert_int_equal(p[20], 16);
+    assert_int_equal(p[21], 12);
+    assert_memory_equal(p + 22, "secret-token", 12);
+    assert_int_equal(p[34], 7);
+    assert_memory_equal(p + 35, "nearest", 7);
+    free(buf);
+
+    m = sample(S_WELCOME);
+    buf = encode_alloc(&m, &len);
+    p = buf + PROTO_HEADER_BYTES;
+    assert_int_equal(proto_get_u32le(p), 7);
+    assert_int_equal(p[4], 9);
+    assert_int_equal(proto_get_u32le(p + 14), bits_from_float(30.0f));
+    double bmax0 = 10.5;
+    uint64_t bits;
+    memcpy(&bits, &bmax0, sizeof bits);
+    assert_true(proto_get_u64le(p + 42) == bits);
+    assert_int_equal(proto_get_u32le(p + 102), bits_from_float(60.0f)); /* camera fov */
+    assert_int_equal(proto_get_u32le(p + 106), 120);
+    free(buf);
+
+    m = sample(S_CAMERA_PREDICTED);
+    buf = encode_alloc(&m, &len);
+    p = buf + PROTO_HEADER_BYTES;
+    assert_int_equal(proto_get_u32le(p), 0xfffffffeu);
+    assert_int_equal(p[52], 1);
+    assert_int_equal(proto_get_u32le(p + 97), bits_from_float(0.001f));
+    free(buf);
+
+    m = sample(S_FRAME_DEPTH);
+    buf = encode_alloc(&m, &len);
+    p = buf + PROTO_HEADER_BYTES;
+    assert_int_equal(proto_get_u32le(p + 48), PROTO_MAX_SIDE);
+    assert_int_equal(p[56], PROTO_CODEC_ZSTD);
+    assert_int_equal(p[57], 16);
+    assert_true(proto_get_u64le(p + 58) == UINT64_MAX);
+    assert_int_equal(proto_get_u32le(p + 102), bits_from_float(2.5f));
+    assert_int_equal(proto_get_u32le(p + 115), 7);
+    free(buf);
+
+    m = sample(S_ERROR);
+    buf = encode_alloc(&m, &len);
+    p = buf + PROTO_HEADER_BYTES;
+    assert_int_equal(proto_get_u32le(p), (uint32_t)FXC_ERR_UNAUTHORIZED);
+    assert_int_equal(proto_get_u16le(p + 4), 29);
+    free(buf);
+}
+
+/* Every prefix of every sample, each in its own allocation of exactly that many bytes, is TRUNCATED. */
+static void test_every_prefix(void **state)
+{
+    (void)state;
+    for (int i = 0; i < SAMPLE_COUNT; i++) {
+        proto_msg m = sample(i);
+        size_t len;
+        uint8_t *buf = encode_alloc(&m, &len);
+        for (size_t prefix = 0; prefix < len; prefix++) {
+            proto_msg out;
+            fxc_result result = decode_copy(buf, prefix, &out);
+            if (result != FXC_ERR_TRUNCATED)
+                fail_msg("sample %d, %zu of %zu bytes: %s", i, prefix, len, fxc_strerror(result));
+        }
+        free(buf);
+    }
+}
+
+/* One byte more than declared, and a declared length one more than the fields use: both TRAILING. */
+static void test_trailing(void **state)
+{
+    (void)state;
+    for (int i = 0; i < SAMPLE_COUNT; i++) {
+        proto_msg m = sample(i);
+        size_t len;
+        uint8_t *buf = encode_alloc(&m, &len);
+        uint8_t *longer = malloc(len + 1);
+        assert_non_null(longer);
+        memcpy(longer, buf, len);
+        longer[len] = 0;
+        proto_msg out;
+        assert_int_equal(decode_copy(longer, len + 1, &out), FXC_ERR_TRAILING);
+        proto_put_u32le(longer + 8, proto_get_u32le(longer + 8) + 1);
+        assert_int_equal(decode_copy(longer, len + 1, &out), FXC_ERR_TRAILING);
+        free(longer);
+        free(buf);
+    }
+}
+
+static void test_header_faults(void **state)
+{
+    (void)state;
+    proto_msg m = sample(S_BYE);
+    size_t len;
+    uint8_t *buf = encode_alloc(&m, &len);
+    proto_msg out;
+    for (int k = 0; k < 4; k++) { /* each magic byte */
+        buf[k] ^= 0x20;
+        assert_int_equal(decode_copy(buf, len, &out), FXC_ERR_BAD_MAGIC);
+        assert_int_equal(proto_decode_header(buf, len, NULL), FXC_ERR_BAD_MAGIC);
+        buf[k] ^= 0x20;
+    }
+    static const uint16_t bad_versions[] = {0, PROTO_VERSION + 1, 0xffff};
+    for (size_t k = 0; k < sizeof bad_versions / sizeof bad_versions[0]; k++) {
+        proto_put_u16le(buf + 4, bad_versions[k]);
+        assert_int_equal(decode_copy(buf, len, &out), FXC_ERR_VERSION);
+        /* The magic is checked before the version. */
+        buf[0] = 'G';
+        assert_int_equal(decode_copy(buf, len, &out), FXC_ERR_BAD_MAGIC);
+        buf[0] = 'F';
+    }
+    proto_put_u16le(buf + 4, PROTO_VERSION);
+    static const uint16_t bad_types[] = {0, 9, 0x100 | PROTO_BYE, 0xffff};
+    for (size_t k = 0; k < sizeof bad_types / sizeof bad_types[0]; k++) {
+        proto_put_u16le(buf + 6, bad_types[k]);
+        assert_int_equal(decode_copy(buf, len, &out), FXC_ERR_UNKNOWN_TYPE);
+    }
+    proto_put_u16le(buf + 6, PROTO_BYE);
+    assert_int_equal(decode_copy(buf, len, &out), FXC_OK);
+
+    /* The length: above the maximum is TOO_LARGE from the 12 header bytes alone; at it, the header is fine
+     * and the message is merely truncated. */
+    uint8_t header[PROTO_HEADER_BYTES];
+    memcpy(header, buf, sizeof header);
+    proto_put_u32le(header + 8, PROTO_MAX_PAYLOAD + 1u);
+    assert_int_equal(proto_decode_header(header, sizeof header, NULL), FXC_ERR_TOO_LARGE);
+    assert_int_equal(decode_copy(header, sizeof header, &out), FXC_ERR_TOO_LARGE);
+    proto_put_u32le(header + 8, 0xffffffffu);
+    assert_int_equal(decode_copy(header, sizeof header, &out), FXC_ERR_TOO_LARGE);
+    proto_put_u32le(header + 8, PROTO_MAX_PAYLOAD);
+    proto_header h;
+    assert_int_equal(proto_decode_header(header, sizeof header, &h), FXC_OK);
+    assert_int_equal(h.length, PROTO_MAX_PAYLOAD);
+    assert_int_equal(decode_copy(header, sizeof header, &out), FXC_ERR_TRUNCATED);
+    assert_int_equal(proto_decode_header(header, 11, &h), FXC_ERR_TRUNCATED);
+    assert_int_equal(proto_decode(NULL, 0, &out), FXC_ERR_TRUNCATED);
+    free(buf);
+}
+
+/* One edit of an encoded sample: replace old_size payload bytes at offset by new_size bytes holding value
+ * (little-endian, zeros beyond 8 bytes), fix the header's length, and expect a code. */
+typedef struct byte_edit {
+    const char *what;
+    int sample;
+    size_t offset, old_size, new_size;
+    uint64_t value;
+    fxc_result expect;
+} byte_edit;
+
+#define F32_NAN 0x7fc00000u
+#define F32_INF 0x7f800000u
+#define F32_NEG_INF 0xff800000u
+#define F32_ZERO 0x00000000u
+#define F32_NEG_ONE 0xbf800000u
+#define F32_180 0x43340000u
+#define F64_NAN 0x7ff8000000000000ull
+#define F64_INF 0x7ff0000000000000ull
+#define F64_NEG_INF 0xfff0000000000000ull
+#define F64_ONE 0x3ff0000000000000ull
+
+/* Payload offsets of the samples' fields (docs/PROTOCOL.md), with their string lengths in. */
+enum {
+    /* hello "alice"/"secret-token"/"nearest"; S_HELLO_RAW has empty strings: width at 1 */
+    HJ_NAME = 0, HJ_WIDTH = 6, HJ_HEIGHT = 10, HJ_FOV = 14, HJ_CODEC = 18, HJ_QUALITY = 19, HJ_DEPTH = 20,
+    HJ_TOKEN = 21, HJ_STRATEGY = 34, HR_QUALITY = 14, HR_TOKEN = 16, HR_STRATEGY = 17,
+    /* welcome "viewer_07" */
+    W_ID = 0, W_NAME = 4, W_FPS = 14, W_MIN = 18, W_MAX = 42, W_POS = 66, W_DIR = 90, W_FOV = 102,
+    /* camera (S_CAMERA_PREDICTED for the predicted part) */
+    C_TIME = 4, C_POS = 12, C_DIR = 36, C_FOV = 48, C_FLAG = 52, C_PTIME = 53, C_PPOS = 61, C_PDIR = 85,
+    C_PFOV = 97,
+    /* frame */
+    F_POS = 8, F_DIR = 32, F_FOV = 44, F_WIDTH = 48, F_HEIGHT = 52, F_CODEC = 56, F_DEPTH = 57, F_FRAME_MS = 98,
+    F_ENCODE_MS = 102, F_COLOR_BYTES = 106, F_COLOR = 110,
+    /* error and bye */
+    E_CODE = 0, E_REASON = 4, B_REASON = 0,
+};
+
+static const byte_edit byte_edits[] = {
+    /* hello */
+    {"hello name longer than 31", S_HELLO_JPEG, HJ_NAME, 1, 1, 32, FXC_ERR_RANGE},
+    {"hello name control byte", S_HELLO_JPEG, HJ_NAME + 3, 1, 1, 0x01, FXC_ERR_RANGE},
+    {"hello name DEL byte", S_HELLO_JPEG, HJ_NAME + 1, 1, 1, 0x7f, FXC_ERR_RANGE},
+    {"hello name non-ASCII byte", S_HELLO_JPEG, HJ_NAME + 5, 1, 1, 0xc3, FXC_ERR_RANGE},
+    {"hello name NUL byte", S_HELLO_JPEG, HJ_NAME + 2, 1, 1, 0x00, FXC_ERR_RANGE},
+    {"hello width 0", S_HELLO_JPEG, HJ_WIDTH, 4, 4, 0, FXC_ERR_RANGE},
+    {"hello width 8193", S_HELLO_JPEG, HJ_WIDTH, 4, 4, 8193, FXC_ERR_RANGE},
+    {"hello height 0", S_HELLO_JPEG, HJ_HEIGHT, 4, 4, 0, FXC_ERR_RANGE},
+    {"hello height 2^32-1", S_HELLO_JPEG, HJ_HEIGHT, 4, 4, 0xffffffffu, FXC_ERR_RANGE},
+    {"hello fov 0", S_HELLO_JPEG, HJ_FOV, 4, 4, F32_ZERO, FXC_ERR_RANGE},
+    {"hello fov 180", S_HELLO_JPEG, HJ_FOV, 4, 4, F32_180, FXC_ERR_RANGE},
+    {"hello fov NaN", S_HELLO_JPEG, HJ_FOV, 4, 4, F32_NAN, FXC_ERR_RANGE},
+    {"hello fov -inf", S_HELLO_JPEG, HJ_FOV, 4, 4, F32_NEG_INF, FXC_ERR_RANGE},
+    {"hello codec 3", S_HELLO_JPEG, HJ_CODEC, 1, 1, PROTO_CODEC_COUNT, FXC_ERR_RANGE},
+    {"hello codec 255", S_HELLO_JPEG, HJ_CODEC, 1, 1, 255, FXC_ERR_RANGE},
+    {"hello jpeg quality 0", S_HELLO_JPEG, HJ_QUALITY, 1, 1, 0, FXC_ERR_RANGE},
+    {"hello jpeg quality 101", S_HELLO_JPEG, HJ_QUALITY, 1, 1, 101, FXC_ERR_RANGE},
+    {"hello raw with a quality", S_HELLO_RAW, HR_QUALITY, 1, 1, 50, FXC_ERR_RANGE},
+    {"hello quality kept, codec raw", S_HELLO_JPEG, HJ_CODEC, 1, 1, PROTO_CODEC_RAW, FXC_ERR_RANGE},
+    {"hello depth 1", S_HELLO_JPEG, HJ_DEPTH, 1, 1, 1, FXC_ERR_RANGE},
+    {"hello depth 8", S_HELLO_JPEG, HJ_DEPTH, 1, 1, 8, FXC_ERR_RANGE},
+    {"hello depth 33", S_HELLO_JPEG, HJ_DEPTH, 1, 1, 33, FXC_ERR_RANGE},
+    {"hello token longer than 64", S_HELLO_JPEG, HJ_TOKEN, 1, 1, 65, FXC_ERR_RANGE},
+    {"hello token tab", S_HELLO_JPEG, HJ_TOKEN + 1, 1, 1, '\t', FXC_ERR_RANGE},
+    {"hello strategy longer than 31", S_HELLO_JPEG, HJ_STRATEGY, 1, 1, 32, FXC_ERR_RANGE},
+    {"hello strategy newline", S_HELLO_JPEG, HJ_STRATEGY + 7, 1, 1, '\n', FXC_ERR_RANGE},
+    {"hello token longer than the payload", S_HELLO_RAW, HR_TOKEN, 1, 1, 2, FXC_ERR_TRUNCATED},
+    {"hello strategy shorter than its bytes", S_HELLO_JPEG, HJ_STRATEGY, 1, 1, 6, FXC_ERR_TRAILING},
+    /* welcome */
+    {"welcome viewer id 0", S_WELCOME, W_ID, 4, 4, 0, FXC_ERR_RANGE},
+    {"welcome empty name", S_WELCOME, W_NAME, 10, 1, 0, FXC_ERR_RANGE},
+    {"welcome name longer than 31", S_WELCOME, W_NAME, 1, 1, 32, FXC_ERR_RANGE},
+    {"welcome name escape byte", S_WELCOME, W_NAME + 1, 1, 1, 0x1b, FXC_ERR_RANGE},
+    {"welcome fps 0", S_WELCOME, W_FPS, 4, 4, F32_ZERO, FXC_ERR_RANGE},
+    {"welcome fps -1", S_WELCOME, W_FPS, 4, 4, F32_NEG_ONE, FXC_ERR_RANGE},
+    {"welcome fps NaN", S_WELCOME, W_FPS, 4, 4, F32_NAN, FXC_ERR_RANGE},
+    {"welcome fps inf", S_WELCOME, W_FPS, 4, 4, F32_INF, FXC_ERR_RANGE},
+    {"welcome bounds min x NaN", S_WELCOME, W_MIN, 8, 8, F64_NAN, FXC_ERR_RANGE},
+    {"welcome bounds min z -inf", S_WELCOME, W_MIN + 16, 8, 8, F64_NEG_INF, FXC_ERR_RANGE},
+    {"welcome bounds max z inf", S_WELCOME, W_MAX + 16, 8, 8, F64_INF, FXC_ERR_RANGE},
+    {"welcome bounds min y > max y", S_WELCOME, W_MIN + 8, 8, 8, F64_ONE, FXC_ERR_RANGE},
+    {"welcome camera position NaN", S_WELCOME, W_POS + 8, 8, 8, F64_NAN, FXC_ERR_RANGE},
+    {"welcome camera direction zero", S_WELCOME, W_DIR, 12, 12, 0, FXC_ERR_RANGE},
+    {"welcome camera direction inf", S_WELCOME, W_DIR + 4, 4, 4, F32_INF, FXC_ERR_RANGE},
+    {"welcome camera fov 180", S_WELCOME, W_FOV, 4, 4, F32_180, FXC_ERR_RANGE},
+    /* camera */
+    {"camera time NaN", S_CAMERA, C_TIME, 8, 8, F64_NAN, FXC_ERR_RANGE},
+    {"camera time inf", S_CAMERA, C_TIME, 8, 8, F64_INF, FXC_ERR_RANGE},
+    {"camera position -inf", S_CAMERA, C_POS + 16, 8, 8, F64_NEG_INF, FXC_ERR_RANGE},
+    {"camera direction zero", S_CAMERA, C_DIR, 12, 12, 0, FXC_ERR_RANGE},
+    {"camera direction -0, 0, 0", S_CAMERA, C_DIR, 12, 12, 0x80000000u, FXC_ERR_RANGE},
+    {"camera direction NaN", S_CAMERA, C_DIR + 8, 4, 4, F32_NAN, FXC_ERR_RANGE},
+    {"camera fov NaN", S_CAMERA, C_FOV, 4, 4, F32_NAN, FXC_ERR_RANGE},
+    {"camera fov -1", S_CAMERA, C_FOV, 4, 4, F32_NEG_ONE, FXC_ERR_RANGE},
+    {"camera flag 2", S_CAMERA, C_FLAG, 1, 1, 2, FXC_ERR_RANGE},
+    {"camera flag 255", S_CAMERA_PREDICTED, C_FLAG, 1, 1, 255, FXC_ERR_RANGE},
+    {"camera flag 1 without the predicted part", S_CAMERA, C_FLAG, 1, 1, 1, FXC_ERR_TRUNCATED},
+    {"camera flag 0 with the predicted part", S_CAMERA_PREDICTED, C_FLAG, 1, 1, 0, FXC_ERR_TRAILING},
+    {"camera predicted time NaN", S_CAMERA_PREDICTED, C_PTIME, 8, 8, F64_NAN, FXC_ERR_RANGE},
+    {"camera predicted position inf", S_CAMERA_PREDICTED, C_PPOS, 8, 8, F64_INF, FXC_ERR_RANGE},
+    {"camera predicted direction zero", S_CAMERA_PREDICTED, C_PDIR, 12, 12, 0, FXC_ERR_RANGE},
+    {"camera predicted fov 180", S_CAMERA_PREDICTED, C_PFOV, 4, 4, F32_180, FXC_ERR_RANGE},
+    /* frame */
+    {"frame position NaN", S_FRAME, F_POS, 8, 8, F64_NAN, FXC_ERR_RANGE},
+    {"frame direction zero", S_FRAME, F_DIR, 12, 12, 0, FXC_ERR_RANGE},
+    {"frame fov 0", S_FRAME, F_FOV, 4, 4, F32_ZERO, FXC_ERR_RANGE},
+    {"frame width 0", S_FRAME, F_WIDTH, 4, 4, 0, FXC_ERR_RANGE},
+    {"frame width 8193", S_FRAME, F_WIDTH, 4, 4, 8193, FXC_ERR_RANGE},
+    {"frame height 0", S_FRAME, F_HEIGHT, 4, 4, 0, FXC_ERR_RANGE},
+    {"frame height 8193", S_FRAME_DEPTH, F_HEIGHT, 4, 4, 8193, FXC_ERR_RANGE},
+    {"frame codec 3", S_FRAME, F_CODEC, 1, 1, 3, FXC_ERR_RANGE},
+    {"frame depth 1", S_FRAME_DEPTH, F_DEPTH, 1, 1, 1, FXC_ERR_RANGE},
+    {"frame depth 64", S_FRAME_DEPTH, F_DEPTH, 1, 1, 64, FXC_ERR_RANGE},
+    {"frame depth none with depth bytes", S_FRAME_DEPTH, F_DEPTH, 1, 1, PROTO_DEPTH_NONE, FXC_ERR_RANGE},
+    {"frame depth half without depth bytes", S_FRAME, F_DEPTH, 1, 1, PROTO_DEPTH_HALF, FXC_ERR_RANGE},
+    {"frame depth float without depth bytes", S_FRAME, F_DEPTH, 1, 1, PROTO_DEPTH_FLOAT, FXC_ERR_RANGE},
+    {"frame frame_ms NaN", S_FRAME, F_FRAME_MS, 4, 4, F32_NAN, FXC_ERR_RANGE},
+    {"frame frame_ms -1", S_FRAME, F_FRAME_MS, 4, 4, F32_NEG_ONE, FXC_ERR_RANGE},
+    {"frame encode_ms inf", S_FRAME, F_ENCODE_MS, 4, 4, F32_INF, FXC_ERR_RANGE},
+    {"frame no colour bytes", S_FRAME, F_COLOR_BYTES, 4 + 36, 4, 0, FXC_ERR_RANGE},
+    {"frame colour runs past the end", S_FRAME, F_COLOR_BYTES, 4, 4, 41, FXC_ERR_TRUNCATED},
+    {"frame colour count 2^32-1", S_FRAME, F_COLOR_BYTES, 4, 4, 0xffffffffu, FXC_ERR_TRUNCATED},
+    {"frame depth runs past the end", S_FRAME_DEPTH, F_COLOR + 5, 4, 4, 8, FXC_ERR_TRUNCATED},
+    {"frame depth count short", S_FRAME_DEPTH, F_COLOR + 5, 4, 4, 6, FXC_ERR_TRAILING},
+    /* stats */
+    {"stats text runs past the end", S_STATS, 0, 4, 4, sizeof stats_json, FXC_ERR_TRUNCATED},
+    {"stats text shorter than its bytes", S_STATS, 0, 4, 4, 3, FXC_ERR_TRAILING},
+    /* error and bye */
+    {"error code 0", S_ERROR, E_CODE, 4, 4, 0, FXC_ERR_RANGE},
+    {"error code 1", S_ERROR, E_CODE, 4, 4, 1, FXC_ERR_RANGE},
+    {"error code INT32_MAX", S_ERROR, E_CODE, 4, 4, 0x7fffffffu, FXC_ERR_RANGE},
+    {"error reason longer than 200", S_ERROR, E_REASON, 2, 2, 201, FXC_ERR_RANGE},
+    {"error reason 65535 bytes", S_ERROR, E_REASON, 2, 2, 0xffff, FXC_ERR_RANGE},
+    {"error reason newline", S_ERROR, E_REASON + 2 + 28, 1, 1, '\n', FXC_ERR_RANGE},
+    {"error reason runs past the end", S_ERROR, E_REASON, 2, 2, 30, FXC_ERR_TRUNCATED},
+    {"bye reason longer than 200", S_BYE, B_REASON, 2, 2, 201, FXC_ERR_RANGE},
+    {"bye reason NUL", S_BYE, B_REASON + 2 + 6, 1, 1, 0, FXC_ERR_RANGE},
+    {"bye reason 0xff", S_BYE, B_REASON + 2, 1, 1, 0xff, FXC_ERR_RANGE},
+    {"bye reason shorter than its bytes", S_BYE, B_REASON, 2, 2, 13, FXC_ERR_TRAILING},
+    /* controls: edits that stay valid, so the table's offsets are known to hit the right fields */
+    {"control: hello width 8192", S_HELLO_JPEG, HJ_WIDTH, 4, 4, 8192, FXC_OK},
+    {"control: hello jpeg quality 100", S_HELLO_JPEG, HJ_QUALITY, 1, 1, 100, FXC_OK},
+    {"control: hello depth 32", S_HELLO_JPEG, HJ_DEPTH, 1, 1, 32, FXC_OK},
+    {"control: welcome fps 1", S_WELCOME, W_FPS, 4, 4, 0x3f800000u, FXC_OK},
+    {"control: welcome bounds min y = -1", S_WELCOME, W_MIN + 8, 8, 8, 0xbff0000000000000ull, FXC_OK},
+    {"control: camera direction y only", S_CAMERA, C_DIR, 12, 12, 0x3f80000000000000ull, FXC_OK},
+    {"control: frame depth float", S_FRAME_DEPTH, F_DEPTH, 1, 1, PROTO_DEPTH_FLOAT, FXC_OK},
+    {"control: frame frame_ms -0", S_FRAME, F_FRAME_MS, 4, 4, 0x80000000u, FXC_OK},
+    {"control: error code INT32_MIN", S_ERROR, E_CODE, 4, 4, 0x80000000u, FXC_OK},
+    {"control: bye reason shortened", S_BYE, B_REASON, 2 + 14, 2, 0, FXC_OK},
+};
+
+/* Each row of byte_edits applied to its sample, decoded from an exact allocation. */
+static void test_field_faults(void **state)
+{
+    (void)state;
+    for (size_t row = 0; row < sizeof byte_edits / sizeof byte_edits[0]; row++) {
+        const byte_edit *e = &byte_edits[row];
+        proto_msg m = sample(e->sample);
+        size_t len;
+        uint8_t *buf = encode_alloc(&m, &len);
+        size_t at = PROTO_HEADER_BYTES + e->offset;
+        assert_true(at + e->old_size <= len);
+        size_t edited_len = len - e->old_size + e->new_size;
+        uint8_t *edited = malloc(edited_len);
+        assert_non_null(edited);
+        memcpy(edited, buf, at);
+        for (size_t k = 0; k < e->new_size; k++)
+            edited[at + k] = k < 8 ? (uint8_t)(e->value >> (8 * k)) : 0;
+        memcpy(edited + at + e->new_size, buf + at + e->old_size, len - at - e->old_size);
+        proto_put_u32le(edited + 8, (uint32_t)(edited_len - PROTO_HEADER_BYTES));
+        proto_msg out;
+        fxc_result result = decode_copy(edited, edited_len, &out);
+        if (result != e->expect)
+            fail_msg("%s: %s, expected %s", e->what, fxc_strerror(result), fxc_strerror(e->expect));
+        if (result != FXC_OK) { /* a refused message leaves nothing half-decoded behind */
+            proto_msg zero;
+            memset(&zero, 0, sizeof zero);
+            assert_memory_equal(&out, &zero, sizeof out);
+        }
+        free(edited);
+        free(buf);
+    }
+}
+
+/* One change to a valid message's struct, and what proto_encode must say. */
+typedef enum edit_kind { EDIT_U8, EDIT_U32, EDIT_I32, EDIT_F32, EDIT_F64, EDIT_TEXT, EDIT_FILL, EDIT_ZERO } edit_kind;
+typedef struct struct_edit {
+    const char *what;
+    int sample;
+    size_t offset; /* offsetof(proto_msg, ...) */
+    edit_kind kind;
+    size_t size;   /* bytes for EDIT_FILL and EDIT_ZERO */
+    double number;
+    const char *text;
+    fxc_result expect;
+} struct_edit;
+
+#define AT(field) offsetof(proto_msg, field)
+
+static const struct_edit struct_edits[] = {
+    {"type 0", S_BYE, AT(type), EDIT_U32, 0, 0, NULL, FXC_ERR_INVALID},
+    {"type 9", S_BYE, AT(type), EDIT_U32, 0, 9, NULL, FXC_ERR_INVALID},
+    {"hello name control byte", S_HELLO_JPEG, AT(u.hello.name), EDIT_TEXT, 0, 0, "a\x02", FXC_ERR_RANGE},
+    {"hello name unterminated", S_HELLO_JPEG, AT(u.hello.name), EDIT_FILL, PROTO_NAME_MAX + 1, 0, NULL, FXC_ERR_RANGE},
+    {"hello name non-ASCII", S_HELLO_JPEG, AT(u.hello.name), EDIT_TEXT, 0, 0, "caf\xc3\xa9", FXC_ERR_RANGE},
+    {"hello width 0", S_HELLO_JPEG, AT(u.hello.width), EDIT_U32, 0, 0, NULL, FXC_ERR_RANGE},
+    {"hello width 8193", S_HELLO_JPEG, AT(u.hello.width), EDIT_U32, 0, 8193, NULL, FXC_ERR_RANGE},
+    {"hello height 0", S_HELLO_JPEG, AT(u.hello.height), EDIT_U32, 0, 0, NULL, FXC_ERR_RANGE},
+    {"hello fov 0", S_HELLO_JPEG, AT(u.hello.fov_deg), EDIT_F32, 0, 0, NULL, FXC_ERR_RANGE},
+    {"hello fov 180", S_HELLO_JPEG, AT(u.hello.fov_deg), EDIT_F32, 0, 180, NULL, FXC_ERR_RANGE},
+    {"hello fov NaN", S_HELLO_JPEG, AT(u.hello.fov_deg), EDIT_F32, 0, NAN, NULL, FXC_ERR_RANGE},
+    {"hello codec 3", S_HELLO_RAW, AT(u.hello.codec), EDIT_U8, 0, 3, NULL, FXC_ERR_RANGE},
+    {"hello jpeg quality 0", S_HELLO_JPEG, AT(u.hello.jpeg_quality), EDIT_U8, 0, 0, NULL, FXC_ERR_RANGE},
+    {"hello jpeg quality 101", S_HELLO_JPEG, AT(u.hello.jpeg_quality), EDIT_U8, 0, 101, NULL, FXC_ERR_RANGE},
+    {"hello zstd with a quality", S_HELLO_ZSTD, AT(u.hello.jpeg_quality), EDIT_U8, 0, 90, NULL, FXC_ERR_RANGE},
+    {"hello depth 8", S_HELLO_JPEG, AT(u.hello.depth), EDIT_U8, 0, 8, NULL, FXC_ERR_RANGE},
+    {"hello token unterminated", S_HELLO_JPEG, AT(u.hello.token), EDIT_FILL, PROTO_TOKEN_MAX + 1, 0, NULL, FXC_ERR_RANGE},
+    {"hello strategy tab", S_HELLO_JPEG, AT(u.hello.strategy), EDIT_TEXT, 0, 0, "a\tb", FXC_ERR_RANGE},
+    {"welcome viewer id 0", S_WELCOME, AT(u.welcome.viewer_id), EDIT_U32, 0, 0, NULL, FXC_ERR_RANGE},
+    {"welcome empty name", S_WELCOME, AT(u.welcome.name), EDIT_TEXT, 0, 0, "", FXC_ERR_RANGE},
+    {"welcome fps 0", S_WELCOME, AT(u.welcome.fps), EDIT_F32, 0, 0, NULL, FXC_ERR_RANGE},
+    {"welcome fps inf", S_WELCOME, AT(u.welcome.fps), EDIT_F32, 0, INFINITY, NULL, FXC_ERR_RANGE},
+    {"welcome fps NaN", S_WELCOME, AT(u.welcome.fps), EDIT_F32, 0, NAN, NULL, FXC_ERR_RANGE},
+    {"welcome bounds min x NaN", S_WELCOME, AT(u.welcome.bounds_min[0]), EDIT_F64, 0, NAN, NULL, FXC_ERR_RANGE},
+    {"welcome bounds max y > min y fails", S_WELCOME, AT(u.welcome.bounds_max[1]), EDIT_F64, 0, -1, NULL, FXC_ERR_RANGE},
+    {"welcome camera fov 180", S_WELCOME, AT(u.welcome.camera.fov_deg), EDIT_F32, 0, 180, NULL, FXC_ERR_RANGE},
+    {"welcome camera direction zero", S_WELCOME, AT(u.welcome.camera.direction), EDIT_ZERO, 12, 0, NULL, FXC_ERR_RANGE},
+    {"camera time inf", S_CAMERA, AT(u.camera.time), EDIT_F64, 0, -INFINITY, NULL, FXC_ERR_RANGE},
+    {"camera position NaN", S_CAMERA, AT(u.camera.pose.position[2]), EDIT_F64, 0, NAN, NULL, FXC_ERR_RANGE},
+    {"camera direction inf", S_CAMERA, AT(u.camera.pose.direction[0]), EDIT_F32, 0, INFINITY, NULL, FXC_ERR_RANGE},
+    {"camera predicted time NaN", S_CAMERA_PREDICTED, AT(u.camera.predicted_time), EDIT_F64, 0, NAN, NULL, FXC_ERR_RANGE},
+    {"camera predicted direction zero", S_CAMERA_PREDICTED, AT(u.camera.predicted.direction), EDIT_ZERO, 12, 0, NULL, FXC_ERR_RANGE},
+    {"camera predicted ignored without flag", S_CAMERA, AT(u.camera.predicted_time), EDIT_F64, 0, NAN, NULL, FXC_OK},
+    {"frame width 8193", S_FRAME, AT(u.frame.width), EDIT_U32, 0, 8193, NULL, FXC_ERR_RANGE},
+    {"frame height 0", S_FRAME, AT(u.frame.height), EDIT_U32, 0, 0, NULL, FXC_ERR_RANGE},
+    {"frame codec 3", S_FRAME, AT(u.frame.codec), EDIT_U8, 0, 3, NULL, FXC_ERR_RANGE},
+    {"frame depth 8", S_FRAME_DEPTH, AT(u.frame.depth), EDIT_U8, 0, 8, NULL, FXC_ERR_RANGE},
+    {"frame depth none with depth bytes", S_FRAME_DEPTH, AT(u.frame.depth), EDIT_U8, 0, 0, NULL, FXC_ERR_RANGE},
+    {"frame depth half without bytes", S_FRAME, AT(u.frame.depth), EDIT_U8, 0, 16, NULL, FXC_ERR_RANGE},
+    {"frame no colour", S_FRAME, AT(u.frame.color_bytes), EDIT_U32, 0, 0, NULL, FXC_ERR_RANGE},
+    {"frame frame_ms NaN", S_FRAME, AT(u.frame.stats.frame_ms), EDIT_F32, 0, NAN, NULL, FXC_ERR_RANGE},
+    {"frame encode_ms -1", S_FRAME, AT(u.frame.stats.encode_ms), EDIT_F32, 0, -1, NULL, FXC_ERR_RANGE},
+    {"frame camera fov NaN", S_FRAME, AT(u.frame.camera.fov_deg), EDIT_F32, 0, NAN, NULL, FXC_ERR_RANGE},
+    {"frame colour NULL", S_FRAME, AT(u.frame.color), EDIT_ZERO, sizeof(void *), 0, NULL, FXC_ERR_INVALID},
+    {"frame depth NULL", S_FRAME_DEPTH, AT(u.frame.depth_data), EDIT_ZERO, sizeof(void *), 0, NULL, FXC_ERR_INVALID},
+    {"frame colour over 1 GiB", S_FRAME, AT(u.frame.color_bytes), EDIT_U32, 0, PROTO_MAX_PAYLOAD, NULL, FXC_ERR_TOO_LARGE},
+    {"stats text NULL", S_STATS, AT(u.stats.json), EDIT_ZERO, sizeof(void *), 0, NULL, FXC_ERR_INVALID},
+    {"stats text 4 GiB", S_STATS, AT(u.stats.json_bytes), EDIT_U32, 0, 4294967295.0, NULL, FXC_ERR_TOO_LARGE},
+    {"error code 0", S_ERROR, AT(u.error.code), EDIT_I32, 0, 0, NULL, FXC_ERR_RANGE},
+    {"error code 5", S_ERROR, AT(u.error.code), EDIT_I32, 0, 5, NULL, FXC_ERR_RANGE},
+    {"error reason newline", S_ERROR, AT(u.error.reason), EDIT_TEXT, 0, 0, "line\n", FXC_ERR_RANGE},
+    {"error reason unterminated", S_ERROR, AT(u.error.reason), EDIT_FILL, PROTO_REASON_MAX + 1, 0, NULL, FXC_ERR_RANGE},
+    {"bye reason DEL", S_BYE, AT(u.bye.reason), EDIT_TEXT, 0, 0, "\x7f", FXC_ERR_RANGE},
+    {"control: bye reason of 200", S_BYE, AT(u.bye.reason), EDIT_FILL, PROTO_REASON_MAX, 0, NULL, FXC_OK},
+};
+
+static void apply_struct_edit(const struct_edit *e, proto_msg *m)
+{
+    uint8_t *at = (uint8_t *)m + e->offset;
+    switch (e->kind) {
+    case EDIT_U8: {
+        uint8_t v = (uint8_t)e->number;
+        memcpy(at, &v, sizeof v);
+        break;
+    }
+    case EDIT_U32: {
+        uint32_t v = (uint32_t)e->number;
+        memcpy(at, &v, sizeof v);
+        break;
+    }
+    case EDIT_I32: {
+        int32_t v = (int32_t)e->number;
+        memcpy(at, &v, sizeof v);
+        break;
+    }
+    case EDIT_F32: {
+        float v = (float)e->number;
+        memcpy(at, &v, sizeof v);
+        break;
+    }
+    case EDIT_F64:
+        memcpy(at, &e->number, sizeof e->number);
+        break;
+    case EDIT_TEXT:
+        memcpy(at, e->text, strlen(e->text) + 1);
+        break;
+    case EDIT_FILL:
+        memset(at, 'a', e->size);
+        break;
+    case EDIT_ZERO:
+        memset(at, 0, e->size);
+        break;
+    }
+}
+
+/* Each row of struct_edits: proto_bound is 0 and proto_encode writes nothing and says why; the controls
+ * encode and decode. */
+static void test_encode_refusals(void **state)
+{
+    (void)state;
+    uint8_t buf[2048];
+    for (size_t row = 0; row < sizeof struct_edits / sizeof struct_edits[0]; row++) {
+        const struct_edit *e = &struct_edits[row];
+        proto_msg m = sample(e->sample);
+        apply_struct_edit(e, &m);
+        fxc_result result = FXC_OK;
+        memset(buf, 0xaa, sizeof buf);
+        size_t written = proto_encode(&m, buf, sizeof buf, &result);
+        if (result != e->expect)
+            fail_msg("%s: %s, expected %s", e->what, fxc_strerror(result), fxc_strerror(e->expect));
+        if (e->expect != FXC_OK) {
+            assert_int_equal(written, 0);
+            assert_int_equal(proto_bound(&m), 0);
+            assert_int_equal(buf[0], 0xaa);
+        } else {
+            proto_msg out;
+            assert_int_equal(written, proto_bound(&m));
+            assert_int_equal(proto_decode(buf, written, &out), FXC_OK);
+        }
+    }
+    /* A NULL message, a NULL result pointer. */
+    fxc_result result = FXC_OK;
+    assert_int_equal(proto_encode(NULL, buf, sizeof buf, &result), 0);
+    assert_int_equal(result, FXC_ERR_INVALID);
+    assert_int_equal(proto_bound(NULL), 0);
+    proto_msg bad = sample(S_ERROR);
+    bad.u.error.code = 0;
+    assert_int_equal(proto_encode(&bad, buf, sizeof buf, NULL), 0);
+}
+
+/* A buffer one byte short (an exact allocation, so a write past it is seen), or none, is TOO_LARGE. */
+static void test_encode_capacity(void **state)
+{
+    (void)state;
+    for (int i = 0; i < SAMPLE_COUNT; i++) {
+        proto_msg m = sample(i);
+        size_t bound = proto_bound(&m);
+        for (size_t cap = 0; cap < bound; cap += (cap < PROTO_HEADER_BYTES + 2 || cap + 2 >= bound) ? 1 : 7) {
+            uint8_t *buf = malloc(cap ? cap : 1);
+            assert_non_null(buf);
+            fxc_result result = FXC_OK;
+            assert_int_equal(proto_encode(&m, buf, cap, &result), 0);
+            assert_int_equal(result, FXC_ERR_TOO_LARGE);
+            free(buf);
+        }
+        fxc_result result = FXC_OK;
+        assert_int_equal(proto_encode(&m, NULL, 0, &result), 0);
+        assert_int_equal(result, FXC_ERR_TOO_LARGE);
+    }
+}
+
+/* Random edits of valid messages: every result is one of the decoder's codes, and whatever decodes encodes
+ * back to exactly the same bytes (the encoding is canonical). */
+static void test_mutations(void **state)
+{
+    (void)state;
+    uint32_t rng = 0x5eed1234u;
+    unsigned decoded = 0;
+    uint8_t again[4096];
+    for (int iteration = 0; iteration < 40000; iteration++) {
+        proto_msg m = sample(iteration % SAMPLE_COUNT);
+        size_t len;
+        uint8_t *buf = encode_alloc(&m, &len);
+        int edits = 1 + (int)(next_random(&rng) % 3);
+        for (int e = 0; e < edits; e++) {
+            size_t at = next_random(&rng) % len;
+            switch (next_random(&rng) % 4) {
+            case 0:
+                buf[at] = (uint8_t)next_random(&rng);
+                break;
+            case 1:
+                buf[at] ^= (uint8_t)(1u << (next_random(&rng) % 8));
+                break;
+            case 2:
+                buf[at] = (uint8_t)(buf[at] + 1);
+                break;
+            default:
+                len = at > PROTO_HEADER_BYTES ? at : len; /* cut */
+                break;
+            }
+        }
+        if (next_random(&rng) % 2) /* keep the header's length consistent, so payload faults are reached */
+            proto_put_u32le(buf + 8, (uint32_t)(len - PROTO_HEADER_BYTES));
+        proto_msg out;
+        fxc_result result = decode_copy(buf, len, &out);
+        switch (result) {
+        case FXC_OK: {
+            decoded++;
+            /* The copy is gone, so decode again from buf (payload pointers must point into a live buffer). */
+            assert_int_equal(proto_decode(buf, len, &out), FXC_OK);
+            fxc_result encoded = FXC_ERR_INVALID;
+            size_t n = proto_encode(&out, again, sizeof again, &encoded);
+            assert_int_equal(encoded, FXC_OK);
+            assert_int_equal(n, len);
+            assert_memory_equal(again, buf, len);
+            break;
+        }
+        case FXC_ERR_TRUNCATED:
+        case FXC_ERR_TRAILING:
+        case FXC_ERR_BAD_MAGIC:
+        case FXC_ERR_VERSION:
+        case FXC_ERR_TOO_LARGE:
+        case FXC_ERR_UNKNOWN_TYPE:
+        case FXC_ERR_RANGE:
+            break;
+        default:
+            fail_msg("unexpected %s", fxc_strerror(result));
+        }
+        free(buf);
+    }
+    assert_true(decoded > 1000); /* the loop reaches valid messages too, not only refusals */
+}
+
+/* ---- codecs: colour ---------------------------------------------------------------------------------- */
+
+/* A w x h image: a smooth gradient, with noise when noisy. */
+static uint8_t *make_image(uint32_t w, uint32_t h, bool noisy, uint32_t seed)
+{
+    uint8_t *rgb = malloc((size_t)w * h * 3);
+    assert_non_null(rgb);
+    for (uint32_t y = 0; y < h; y++)
+        for (uint32_t x = 0; x < w; x++) {
+            uint8_t *p = rgb + ((size_t)y * w + x) * 3;
+            p[0] = (uint8_t)(255 * x / (w > 1 ? w - 1 : 1));
+            p[1] = (uint8_t)(255 * y / (h > 1 ? h - 1 : 1));
+            p[2] = (uint8_t)(128 + 100 * sin(0.05 * x + 0.03 * y));
+            if (noisy)
+                for (int c = 0; c < 3; c++)
+                    p[c] ^= (uint8_t)(next_random(&seed) & 0x1f);
+        }
+    return rgb;
+}
+
+/* Encodes rgb with codec into an allocation of exactly proto_color_bound bytes. */
+static uint8_t *color_encode_alloc(uint32_t codec, uint32_t quality, const uint8_t *rgb, uint32_t w, uint32_t h,
+                                   size_t *bytes)
+{
+    size_t bound = proto_color_bound(codec, w, h);
+    assert_true(bound > 0);
+    uint8_t *out = malloc(bound);
+    assert_non_null(out);
+    fxc_result result = proto_color_encode(codec, quality, rgb, w, h, out, bound, bytes);
+    if (result != FXC_OK)
+        fail_msg("%s %ux%u: %s", proto_codec_name(codec), w, h, fxc_strerror(result));
+    assert_true(*bytes > 0 && *bytes <= bound);
+    return out;
+}
+
+/* Decodes into an allocation of exactly w*h*3 bytes; returns it (or NULL, freed, when the decode failed). */
+static uint8_t *color_decode_alloc(uint32_t codec, const uint8_t *payload, size_t bytes, uint32_t w, uint32_t h,
+                                   fxc_result *result)
+{
+    uint8_t *rgb = malloc((size_t)w * h * 3);
+    assert_non_null(rgb);
+    *result = proto_color_decode(codec, payload, bytes, w, h, rgb);
+    if (*result != FXC_OK) {
+        free(rgb);
+        return NULL;
+    }
+    return rgb;
+}
+
+static void test_color_lossless(void **state)
+{
+    (void)state;
+    static const uint32_t sizes[][2] = {{1, 1}, {37, 23}, {640, 360}, {8192, 1}, {1, 300}};
+    for (size_t s = 0; s < sizeof sizes / sizeof sizes[0]; s++) {
+        uint32_t w = sizes[s][0], h = sizes[s][1];
+        uint8_t *rgb = make_image(w, h, s % 2 == 1, (uint32_t)s + 1);
+        assert_int_equal(proto_color_bound(PROTO_CODEC_RAW, w, h), (size_t)w * h * 3);
+        for (uint32_t codec = PROTO_CODEC_RAW; codec <= PROTO_CODEC_ZSTD; codec++) {
+            size_t bytes;
+            uint8_t *payload = color_encode_alloc(codec, 0, rgb, w, h, &bytes);
+            if (codec == PROTO_CODEC_ZSTD) /* the frame names its content size, which the decoder requires */
+                assert_true(ZSTD_getFrameContentSize(payload, bytes) == (unsigned long long)w * h * 3);
+            fxc_result result;
+            uint8_t *back = color_decode_alloc(codec, payload, bytes, w, h, &result);
+            assert_int_equal(result, FXC_OK);
+            assert_memory_equal(back, rgb, (size_t)w * h * 3);
+            free(back);
+            free(payload);
+        }
+        free(rgb);
+    }
+    /* A flat image compresses: zstd is doing something. */
+    uint8_t *flat = calloc((size_t)256 * 256 * 3, 1);
+    assert_non_null(flat);
+    size_t bytes;
+    uint8_t *payload = color_encode_alloc(PROTO_CODEC_ZSTD, 0, flat, 256, 256, &bytes);
+    assert_true(bytes < 256 * 256 * 3 / 100);
+    free(payload);
+    free(flat);
+}
+
+/* Peak signal to noise ratio of b against a, in dB, over n bytes. */
+static double psnr(const uint8_t *a, const uint8_t *b, size_t n)
+{
+    double sum = 0;
+    for (size_t i = 0; i < n; i++) {
+        double d = (double)a[i] - (double)b[i];
+        sum += d * d;
+    }
+    double mse = sum / (double)n;
+    return mse == 0 ? INFINITY : 10.0 * log10(255.0 * 255.0 / mse);
+}
+
+static void test_color_jpeg(void **state)
+{
+    (void)state;
+    const uint32_t w = 160, h = 96;
+    uint8_t *rgb = make_image(w, h, false, 1);
+    double quality_psnr[2];
+    size_t quality_bytes[2];
+    static const uint32_t qualities[2] = {90, 20};
+    for (int q = 0; q < 2; q++) {
+        size_t bytes;
+        uint8_t *payload = color_encode_alloc(PROTO_CODEC_JPEG, qualities[q], rgb, w, h, &bytes);
+        assert_true(payload[0] == 0xff && payload[1] == 0xd8); /* SOI */
+        fxc_result result;
+        uint8_t *back = color_decode_alloc(PROTO_CODEC_JPEG, payload, bytes, w, h, &result);
+        assert_int_equal(result, FXC_OK);
+        quality_psnr[q] = psnr(rgb, back, (size_t)w * h * 3);
+        quality_bytes[q] = bytes;
+        free(back);
+        free(payload);
+    }
+    print_message("jpeg 160x96 gradient: quality 90 %.1f dB (%zu bytes), quality 20 %.1f dB (%zu bytes)\n",
+                  quality_psnr[0], quality_bytes[0], quality_psnr[1], quality_bytes[1]);
+    assert_true(quality_psnr[0] > 42.0); /* 46.6 dB with libjpeg-turbo 2.1.5 */
+    assert_true(quality_psnr[1] < quality_psnr[0] - 3.0);
+    assert_true(quality_bytes[1] < quality_bytes[0]);
+    /* Sizes that are not multiples of the 16x16 block still decode to the whole image. */
+    uint8_t *odd = make_image(17, 9, false, 2);
+    size_t bytes;
+    uint8_t *payload = color_encode_alloc(PROTO_CODEC_JPEG, 95, odd, 17, 9, &bytes);
+    fxc_result result;
+    uint8_t *back = color_decode_alloc(PROTO_CODEC_JPEG, payload, bytes, 17, 9, &result);
+    assert_int_equal(result, FXC_OK);
+    assert_true(psnr(odd, back, 17 * 9 * 3) > 30.0);
+    free(back);
+    free(payload);
+    free(odd);
+    free(rgb);
+}
+
+/* Payloads that must not decode, each from an exact allocation. */
+static void expect_color_codec_error(const char *what, uint32_t codec, const uint8_t *payload, size_t bytes,
+                                     uint32_t w, uint32_t h)
+{
+    uint8_t *copy = malloc(bytes ? bytes : 1);
+    assert_non_null(copy);
+    if (bytes)
+        memcpy(copy, payload, bytes);
+    fxc_result result;
+    uint8_t *back = color_decode_alloc(codec, bytes ? copy : NULL, bytes, w, h, &result);
+    if (result != FXC_ERR_CODEC)
+        fail_msg("%s: %s", what, fxc_strerror(result));
+    free(back);
+    free(copy);
+}
+
+static void test_color_corrupt(void **state)
+{
+    (void)state;
+    const uint32_t w = 24, h = 16;
+    uint8_t *rgb = make_image(w, h, true, 3);
+    size_t zstd_bytes, jpeg_bytes;
+    uint8_t *zstd = color_encode_alloc(PROTO_CODEC_ZSTD, 0, rgb, w, h, &zstd_bytes);
+    uint8_t *jpeg = color_encode_alloc(PROTO_CODEC_JPEG, 80, rgb, w, h, &jpeg_bytes);
+
+    expect_color_codec_error("raw one byte short", PROTO_CODEC_RAW, rgb, w * h * 3 - 1, w, h);
+    expect_color_codec_error("raw one byte long", PROTO_CODEC_RAW, rgb, w * h * 3, w, h - 1);
+    expect_color_codec_error("raw for a taller image", PROTO_CODEC_RAW, rgb, w * h * 3, w, h + 1);
+    expect_color_codec_error("empty zstd", PROTO_CODEC_ZSTD, zstd, 0, w, h);
+    expect_color_codec_error("empty jpeg", PROTO_CODEC_JPEG, jpeg, 0, w, h);
+    for (size_t cut = 1; cut < zstd_bytes; cut++)
+        expect_color_codec_error("truncated zstd", PROTO_CODEC_ZSTD, zstd, cut, w, h);
+    for (size_t cut = 1; cut < jpeg_bytes; cut += 7)
+        expect_color_codec_error("truncated jpeg", PROTO_CODEC_JPEG, jpeg, cut, w, h);
+    expect_color_codec_error("zstd of a smaller image", PROTO_CODEC_ZSTD, zstd, zstd_bytes, w, h + 1);
+    expect_color_codec_error("zstd of a larger image", PROTO_CODEC_ZSTD, zstd, zstd_bytes, w - 1, h);
+    expect_color_codec_error("jpeg of another width", PROTO_CODEC_JPEG, jpeg, jpeg_bytes, w + 8, h);
+    expect_color_codec_error("jpeg of another height", PROTO_CODEC_JPEG, jpeg, jpeg_bytes, w, h / 2);
+    expect_color_codec_error("jpeg as zstd", PROTO_CODEC_ZSTD, jpeg, jpeg_bytes, w, h);
+    expect_color_codec_error("zstd as jpeg", PROTO_CODEC_JPEG, zstd, zstd_bytes, w, h);
+
+    /* A zstd payload with a byte after the frame, and two frames whose contents add up to the image. */
+    uint8_t *longer = malloc(zstd_bytes + 1);
+    assert_non_null(longer);
+    memcpy(longer, zstd, zstd_bytes);
+    longer[zstd_bytes] = 0;
+    expect_color_codec_error("zstd with a trailing byte", PROTO_CODEC_ZSTD, longer, zstd_bytes + 1, w, h);
+    free(longer);
+    size_t half = (size_t)w * h * 3 / 2, cap = 2 * ZSTD_compressBound((size_t)w * h * 3);
+    uint8_t *two = malloc(cap);
+    assert_non_null(two);
+    size_t first = ZSTD_compress(two, cap, rgb, half, 1);
+    assert_false(ZSTD_isError(first));
+    size_t second = ZSTD_compress(two + first, cap - first, rgb + half, half, 1);
+    assert_false(ZSTD_isError(second));
+    expect_color_codec_error("two zstd frames", PROTO_CODEC_ZSTD, two, first + second, w, h);
+    /* The whole image in the first frame, then an empty second frame: the content adds up, still refused. */
+    first = ZSTD_compress(two, cap, rgb, (size_t)w * h * 3, 1);
+    assert_false(ZSTD_isError(first));
+    second = ZSTD_compress(two + first, cap - first, rgb, 0, 1);
+    assert_false(ZSTD_isError(second));
+    expect_color_codec_error("zstd and an empty frame", PROTO_CODEC_ZSTD, two, first + second, w, h);
+    /* One frame of the right content but without its size in the header. */
+    ZSTD_CCtx *cctx = ZSTD_createCCtx();
+    assert_non_null(cctx);
+    assert_false(ZSTD_isError(ZSTD_CCtx_setParameter(cctx, ZSTD_c_contentSizeFlag, 0)));
+    size_t unsized = ZSTD_compress2(cctx, two, cap, rgb, (size_t)w * h * 3);
+    assert_false(ZSTD_isError(unsized));
+    ZSTD_freeCCtx(cctx);
+    assert_true(ZSTD_getFrameContentSize(two, unsized) == ZSTD_CONTENTSIZE_UNKNOWN);
+    expect_color_codec_error("zstd without a content size", PROTO_CODEC_ZSTD, two, unsized, w, h);
+    free(two);
+
+    /* Flipped bytes inside the zstd blocks or the JPEG's entropy-coded data. */
+    uint32_t rng = 99;
+    for (int trial = 0; trial < 300; trial++) {
+        uint8_t *copy = malloc(jpeg_bytes);
+        assert_non_null(copy);
+        memcpy(copy, jpeg, jpeg_bytes);
+        copy[next_random(&rng) % jpeg_bytes] ^= (uint8_t)(1 + next_random(&rng) % 255);
+        fxc_result result;
+        uint8_t *back = color_decode_alloc(PROTO_CODEC_JPEG, copy, jpeg_bytes, w, h, &result);
+        /* Some flips land in the image data and decode to another image; either outcome is allowed. */
+        assert_true(result == FXC_OK || result == FXC_ERR_CODEC);
+        free(back);
+        free(copy);
+    }
+    /* Random bytes. */
+    for (int trial = 0; trial < 200; trial++) {
+        size_t bytes = 1 + next_random(&rng) % 600;
+        uint8_t *noise = malloc(bytes);
+        assert_non_null(noise);
+        for (size_t i = 0; i < bytes; i++)
+            noise[i] = (uint8_t)next_random(&rng);
+        if (trial % 2) { /* sometimes behind a plausible magic */
+            static const uint8_t zstd_magic[4] = {0x28, 0xb5, 0x2f, 0xfd}, jpeg_magic[4] = {0xff, 0xd8, 0xff, 0xdb};
+            memcpy(noise, trial % 4 == 1 ? zstd_magic : jpeg_magic, bytes < 4 ? bytes : 4);
+        }
+        expect_color_codec_error("random zstd", PROTO_CODEC_ZSTD, noise, bytes, w, h);
+        expect_color_codec_error("random jpeg", PROTO_CODEC_JPEG, noise, bytes, w, h);
+        free(noise);
+    }
+    /* Arguments. */
+    uint8_t pixel[3];
+    assert_int_equal(proto_color_decode(PROTO_CODEC_COUNT, zstd, zstd_bytes, w, h, rgb), FXC_ERR_INVALID);
+    assert_int_equal(proto_color_decode(PROTO_CODEC_ZSTD, zstd, zstd_bytes, 0, h, rgb), FXC_ERR_INVALID);
+    assert_int_equal(proto_color_decode(PROTO_CODEC_ZSTD, zstd, zstd_bytes, w, 8193, rgb), FXC_ERR_INVALID);
+    assert_int_equal(proto_color_decode(PROTO_CODEC_RAW, pixel, 3, 1, 1, NULL), FXC_ERR_INVALID);
+    free(jpeg);
+    free(zstd);
+    free(rgb);
+}
+
+static void test_color_encode_errors(void **state)
+{
+    (void)state;
+    const uint32_t w = 32, h = 16;
+    uint8_t *rgb = make_image(w, h, true, 4);
+    uint8_t out[8192];
+    size_t bytes = 12345;
+    assert_int_equal(proto_color_encode(PROTO_CODEC_COUNT, 0, rgb, w, h, out, sizeof out, &bytes), FXC_ERR_INVALID);
+    assert_int_equal(proto_color_encode(PROTO_CODEC_JPEG, 0, rgb, w, h, out, sizeof out, &bytes), FXC_ERR_INVALID);
+    assert_int_equal(proto_color_encode(PROTO_CODEC_JPEG, 101, rgb, w, h, out, sizeof out, &bytes), FXC_ERR_INVALID);
+    assert_int_equal(proto_color_encode(PROTO_CODEC_RAW, 0, rgb, 0, h, out, sizeof out, &bytes), FXC_ERR_INVALID);
+    assert_int_equal(proto_color_encode(PROTO_CODEC_RAW, 0, rgb, w, 8193, out, sizeof out, &bytes), FXC_ERR_INVALID);
+    assert_int_equal(proto_color_encode(PROTO_CODEC_RAW, 0, NULL, w, h, out, sizeof out, &bytes), FXC_ERR_INVALID);
+    /* Quality is ignored by the lossless codecs. */
+    assert_int_equal(proto_color_encode(PROTO_CODEC_ZSTD, 0, rgb, w, h, out, sizeof out, &bytes), FXC_OK);
+    assert_int_equal(proto_color_encode(PROTO_CODEC_RAW, 500, rgb, w, h, out, sizeof out, &bytes), FXC_OK);
+    /* Too small a buffer, each one exact so a write past it is seen. */
+    size_t raw = (size_t)w * h * 3, jpeg_bound = proto_color_bound(PROTO_CODEC_JPEG, w, h);
+    const struct {
+        uint32_t codec;
+        size_t cap;
+    } small[] = {{PROTO_CODEC_RAW, raw - 1}, {PROTO_CODEC_ZSTD, 16}, {PROTO_CODEC_ZSTD, 1}, {PROTO_CODEC_JPEG, jpeg_bound - 1}};
+    for (size_t i = 0; i < sizeof small / sizeof small[0]; i++) {
+        uint8_t *buf = malloc(small[i].cap);
+        assert_non_null(buf);
+        assert_int_equal(proto_color_encode(small[i].codec, 50, rgb, w, h, buf, small[i].cap, &bytes),
+                         FXC_ERR_TOO_LARGE);
+        free(buf);
+    }
+    /* Bounds. */
+    assert_int_equal(proto_color_bound(PROTO_CODEC_COUNT, w, h), 0);
+    assert_int_equal(proto_color_bound(PROTO_CODEC_RAW, 8193, 1), 0);
+    assert_int_equal(proto_color_bound(PROTO_CODEC_ZSTD, 1, 0), 0);
+    assert_true(proto_color_bound(PROTO_CODEC_ZSTD, w, h) >= raw);
+    assert_true(proto_color_bound(PROTO_CODEC_JPEG, PROTO_MAX_SIDE, PROTO_MAX_SIDE) >=
+                (size_t)PROTO_MAX_SIDE * PROTO_MAX_SIDE);
+    free(rgb);
+}
+
+/* Several threads encoding and decoding at once get the bytes one thread gets alone. */
+typedef struct codec_job {
+    const uint8_t *rgb;
+    const uint8_t *want_jpeg, *want_zstd;
+    size_t want_jpeg_bytes, want_zstd_bytes;
+    int failures;
+} codec_job;
+
+enum { THREAD_W = 96, THREAD_H = 64 };
+
+static void *codec_thread(void *arg)
+{
+    codec_job *job = arg;
+    size_t cap = proto_color_bound(PROTO_CODEC_JPEG, THREAD_W, THREAD_H);
+    size_t zcap = proto_color_bound(PROTO_CODEC_ZSTD, THREAD_W, THREAD_H);
+    if (zcap > cap)
+        cap = zcap;
+    uint8_t *out = malloc(cap), *back = malloc((size_t)THREAD_W * THREAD_H * 3);
+    for (int round = 0; out && back && round < 40; round++) {
+        size_t bytes;
+        if (proto_color_encode(PROTO_CODEC_JPEG, 75, job->rgb, THREAD_W, THREAD_H, out, cap, &bytes) != FXC_OK ||
+            bytes != job->want_jpeg_bytes || memcmp(out, job->want_jpeg, bytes) != 0 ||
+            proto_color_decode(PROTO_CODEC_JPEG, out, bytes, THREAD_W, THREAD_H, back) != FXC_OK)
+            job->failures++;
+        if (proto_color_encode(PROTO_CODEC_ZSTD, 0, job->rgb, THREAD_W, THREAD_H, out, cap, &bytes) != FXC_OK ||
+            bytes != job->want_zstd_bytes || memcmp(out, job->want_zstd, bytes) != 0 ||
+            proto_color_decode(PROTO_CODEC_ZSTD, out, bytes, THREAD_W, THREAD_H, back) != FXC_OK ||
+            memcmp(back, job->rgb, (size_t)THREAD_W * THREAD_H * 3) != 0)
+            job->failures++;
+    }
+    if (!out || !back)
+        job->failures++;
+    free(out);
+    free(back);
+    return NULL;
+}
+
+static void test_codec_threads(void **state)
+{
+    (void)state;
+    uint8_t *rgb = make_image(THREAD_W, THREAD_H, true, 5);
+    size_t jpeg_bytes, zstd_bytes;
+    uint8_t *jpeg = color_encode_alloc(PROTO_CODEC_JPEG, 75, rgb, THREAD_W, THREAD_H, &jpeg_bytes);
+    uint8_t *zstd = color_encode_alloc(PROTO_CODEC_ZSTD, 0, rgb, THREAD_W, THREAD_H, &zstd_bytes);
+    enum { THREADS = 4 };
+    pthread_t threads[THREADS];
+    codec_job jobs[THREADS];
+    for (int t = 0; t < THREADS; t++) {
+        jobs[t] = (codec_job){rgb, jpeg, zstd, jpeg_bytes, zstd_bytes, 0};
+        assert_int_equal(pthread_create(&threads[t], NULL, codec_thread, &jobs[t]), 0);
+    }
+    for (int t = 0; t < THREADS; t++) {
+        pthread_join(threads[t], NULL);
+        assert_int_equal(jobs[t].failures, 0);
+    }
+    free(zstd);
+    free(jpeg);
+    free(rgb);
+}
+
+/* ---- codecs: depth ----------------------------------------------------------------------------------- */
+
+/* Encodes count = w*h depths and decodes them again (exact allocations); returns the decoded values. */
+static float *depth_round_trip(uint32_t depth, const float *values, uint32_t w, uint32_t h)
+{
+    size_t bound = proto_depth_bound(depth, w, h);
+    assert_true(bound > 0);
+    uint8_t *payload = malloc(bound);
+    float *back = malloc((size_t)w * h * sizeof(float));
+    assert_non_null(payload);
+    assert_non_null(back);
+    size_t bytes = 0;
+    fxc_result result = proto_depth_encode(depth, values, w, h, payload, bound, &bytes);
+    if (result != FXC_OK)
+        fail_msg("depth %u %ux%u: %s", depth, w, h, fxc_strerror(result));
+    assert_true(bytes > 0 && bytes <= bound);
+    assert_true(ZSTD_getFrameContentSize(payload, bytes) == (unsigned long long)w * h * (depth / 8));
+    uint8_t *exact = malloc(bytes);
+    assert_non_null(exact);
+    memcpy(exact, payload, bytes);
+    assert_int_equal(proto_depth_decode(depth, exact, bytes, w, h, back), FXC_OK);
+    free(exact);
+    free(payload);
+    return back;
+}
+
+static void test_depth_float_exact(void **state)
+{
+    (void)state;
+    const uint32_t w = 300, h = 70; /* more values than one encoder chunk */
+    float *values = malloc((size_t)w * h * sizeof(float));
+    assert_non_null(values);
+    uint32_t rng = 7;
+    for (size_t i = 0; i < (size_t)w * h; i++)
+        values[i] = float_from_bits(next_random(&rng));
+    values[0] = INFINITY;
+    values[1] = 0.0f;
+    values[2] = -0.0f;
+    values[3] = float_from_bits(1); /* smallest subnormal */
+    values[4] = 1e30f;
+    values[5] = float_from_bits(0x7fc01234u); /* a NaN with a payload: the bits travel as they are */
+    float *back = depth_round_trip(PROTO_DEPTH_FLOAT, values, w, h);
+    assert_memory_equal(back, values, (size_t)w * h * sizeof(float));
+    free(back);
+    free(values);
+}
+
+/* binary16 through the codec against values worked out by hand. */
+static void test_depth_half_closed_forms(void **state)
+{
+    (void)state;
+    const float ulp_sub = 5.9604644775390625e-8f; /* 2^-24, the smallest subnormal half */
+    const struct {
+        float in, out;
+    } cases[] = {
+        {1.0f, 1.0f},
+        {-2.0f, -2.0f},
+        {65504.0f, 65504.0f},                 /* the largest half */
+        {65519.0f, 65504.0f},                 /* below the midpoint to 2^16 */
+        {65520.0f, INFINITY},                 /* the midpoint: ties to even, which is 2^16: overflow */
+        {1e6f, INFINITY},
+        {-65520.0f, -INFINITY},
+        {INFINITY, INFINITY},
+        {-INFINITY, -INFINITY},
+        {1e-8f, 0.0f},                        /* 0.168 of the smallest subnormal */
+        {ulp_sub, ulp_sub},                   /* 2^-24 exact */
+        {ulp_sub / 2, 0.0f},                  /* 2^-25: a tie, to the even 0 */
+        {ulp_sub * 0.75f, ulp_sub},           /* above the tie */
+        {ulp_sub * 1.5f, 2 * ulp_sub},        /* tie between 1 and 2 ulps: to the even 2 */
+        {ulp_sub * 2.5f, 2 * ulp_sub},        /* tie between 2 and 3: to the even 2 */
+        {ulp_sub * 1023.0f, ulp_sub * 1023.0f}, /* the largest subnormal */
+        {ulp_sub * 1023.5f, 6.103515625e-5f}, /* tie to the even 1024 = 2^-14, the smallest normal */
+        {6.103515625e-5f, 6.103515625e-5f},
+        {1.0f + 0x1p-11f, 1.0f},              /* tie between 1 and 1 + 2^-10: to the even 1 */
+        {1.0f + 3 * 0x1p-11f, 1.0f + 0x1p-9f}, /* tie between 1 + 2^-10 and 1 + 2^-9: to the even one */
+        {1.0f + 0x1p-11f + 0x1p-20f, 1.0f + 0x1p-10f}, /* just above the tie */
+        {1.0f / 3.0f, 0.333251953125f},       /* 0x3555 */
+        {0.1f, 0.0999755859375f},             /* 0x2e66 */
+        {2049.0f, 2048.0f},                   /* the spacing is 2 from 2048: a tie, to the even 2048 */
+        {2051.0f, 2052.0f},                   /* a tie, to the even 2052 */
+        {0.0f, 0.0f},
+        {float_from_bits(1), 0.0f},           /* a float subnormal */
+    };
+    enum { COUNT = sizeof cases / sizeof cases[0] };
+    float in[COUNT + 4];
+    for (int i = 0; i < COUNT; i++)
+        in[i] = cases[i].in;
+    in[COUNT] = -0.0f;
+    in[COUNT + 1] = NAN;
+    in[COUNT + 2] = -1e-9f;                       /* rounds to -0 */
+    in[COUNT + 3] = float_from_bits(0xff800001u); /* a NaN whose payload lies only in the dropped bits */
+    float *back = depth_round_trip(PROTO_DEPTH_HALF, in, COUNT + 4, 1);
+    for (int i = 0; i < COUNT; i++)
+        if (bits_from_float(back[i]) != bits_from_float(cases[i].out))
+            fail_msg("half(%.10g) = %.10g, expected %.10g", cases[i].in, back[i], cases[i].out);
+    assert_int_equal(bits_from_float(back[COUNT]), 0x80000000u);
+    assert_true(isnan(back[COUNT + 1]));
+    assert_int_equal(bits_from_float(back[COUNT + 2]), 0x80000000u);
+    assert_true(isnan(back[COUNT + 3]) && signbit(back[COUNT + 3]));
+    free(back);
+}
+
+/* The value of half bits by the formula of IEEE 754 (not the codec's bit manipulation). */
+static double half_value(uint16_t bits)
+{
+    int exponent = (bits >> 10) & 31, mantissa = bits & 1023;
+    double sign = (bits & 0x8000) ? -1.0 : 1.0;
+    if (exponent == 31)
+        return mantissa ? NAN : sign * INFINITY;
+    if (exponent == 0)
+        return sign * ldexp(mantissa, -24);
+    return sign * ldexp(1024 + mantissa, exponent - 25);
+}
+
+/* Every one of the 65536 halves survives float -> half -> float exactly (NaNs stay NaN). */
+static void test_depth_half_every_value(void **state)
+{
+    (void)state;
+    float *values = malloc(65536 * sizeof(float));
+    assert_non_null(values);
+    for (uint32_t bits = 0; bits < 65536; bits++)
+        values[bits] = (float)half_value((uint16_t)bits);
+    float *back = depth_round_trip(PROTO_DEPTH_HALF, values, 8192, 8);
+    for (uint32_t bits = 0; bits < 65536; bits++) {
+        if (isnan(values[bits]))
+            assert_true(isnan(back[bits]));
+        else if (bits_from_float(back[bits]) != bits_from_float(values[bits]))
+            fail_msg("half 0x%04x: %.10g came back as %.10g", bits, values[bits], back[bits]);
+    }
+    free(back);
+    free(values);
+}
+
+/* A sweep over [2^-26, 65504]: the error is at most half an ulp of binary16 at that value, and a tie goes to
+ * an even mantissa; with _Float16 available, the result equals the compiler's conversion too. */
+static void test_depth_half_sweep(void **state)
+{
+    (void)state;
+    const uint32_t w = 8192, h = 40;
+    size_t count = (size_t)w * h;
+    float *values = malloc(count * sizeof(float));
+    assert_non_null(values);
+    uint32_t rng = 11;
+    double lo = log(0x1p-26), hi = log(65504.0);
+    for (size_t i = 0; i < count; i++) {
+        double t = (double)i / (double)(count - 1);
+        float v = (float)exp(lo + (hi - lo) * t);
+        if (i % 3 == 1) /* and a random float of the same binade */
+            v = float_from_bits((bits_from_float(v) & 0xff800000u) | (next_random(&rng) & 0x7fffffu));
+        if (v > 65504.0f)
+            v = 65504.0f;
+        values[i] = (i % 2) ? -v : v;
+    }
+    float *back = depth_round_trip(PROTO_DEPTH_HALF, values, w, h);
+    double worst = 0;
+    for (size_t i = 0; i < count; i++) {
+        double x = fabs((double)values[i]), y = fabs((double)back[i]);
+        assert_true(!signbit(values[i]) == !signbit(back[i]));
+        int exponent;
+        frexp(x, &exponent); /* x = f * 2^exponent, f in [0.5, 1) */
+        int e = exponent - 1 < -14 ? -14 : exponent - 1;
+        double ulp = ldexp(1.0, e - 10);
+        double error = fabs(y - x) / ulp;
+        if (error > worst)
+            worst = error;
+        if (error > 0.5)
+            fail_msg("half(%.10g) = %.10g: %.4f ulp", values[i], back[i], error);
+        if (error == 0.5) { /* a tie: the mantissa of the result is even */
+            double units = y / ulp;
+            assert_true(fmod(units, 2.0) == 0.0);
+        }
+#ifdef __FLT16_MAX__
+        _Float16 reference = (_Float16)values[i];
+        if (bits_from_float((float)reference) != bits_from_float(back[i]))
+            fail_msg("half(%.10g) = %.10g, _Float16 says %.10g", values[i], back[i], (double)(float)reference);
+#endif
+    }
+    print_message("binary16 sweep: %zu values, worst error %.4f ulp\n", count, worst);
+    assert_true(worst > 0.49); /* the sweep does reach near-ties */
+    free(back);
+    free(values);
+}
+
+static void test_depth_errors(void **state)
+{
+    (void)state;
+    const uint32_t w = 40, h = 30;
+    float values[40 * 30];
+    uint32_t rng = 5;
+    for (size_t i = 0; i < w * h; i++)
+        values[i] = (float)(next_random(&rng) % 100000) / 100.0f;
+    for (uint32_t depth = PROTO_DEPTH_HALF; depth <= PROTO_DEPTH_FLOAT; depth += 16) {
+        size_t bound = proto_depth_bound(depth, w, h);
+        assert_true(bound >= w * h * (depth / 8));
+        uint8_t *payload = malloc(bound);
+        assert_non_null(payload);
+        size_t bytes;
+        assert_int_equal(proto_depth_encode(depth, values, w, h, payload, bound, &bytes), FXC_OK);
+        float *back = malloc((size_t)w * (h + 1) * sizeof(float)); /* room for the wrong sizes tried below */
+        assert_non_null(back);
+        for (size_t cut = 1; cut < bytes; cut += 3) {
+            uint8_t *copy = malloc(cut);
+            assert_non_null(copy);
+            memcpy(copy, payload, cut);
+            assert_int_equal(proto_depth_decode(depth, copy, cut, w, h, back), FXC_ERR_CODEC);
+            free(copy);
+        }
+        assert_int_equal(proto_depth_decode(depth, payload, bytes, w, h + 1, back), FXC_ERR_CODEC);
+        assert_int_equal(proto_depth_decode(depth, payload, bytes, w / 2, h, back), FXC_ERR_CODEC);
+        /* Read as the other depth codec: the content size is twice or half what it claims. */
+        assert_int_equal(proto_depth_decode(depth ^ 48, payload, bytes, w, h, back), FXC_ERR_CODEC);
+        assert_int_equal(proto_depth_decode(depth, NULL, 0, w, h, back), FXC_ERR_CODEC);
+        for (int trial = 0; trial < 100; trial++) {
+            for (size_t i = 4; i < bytes; i++)
+                payload[i] = (uint8_t)next_random(&rng);
+            assert_int_equal(proto_depth_decode(depth, payload, bytes, w, h, back), FXC_ERR_CODEC);
+        }
+        /* Too small a buffer. */
+        uint8_t small[16];
+        assert_int_equal(proto_depth_encode(depth, values, w, h, small, sizeof small, &bytes), FXC_ERR_TOO_LARGE);
+        free(back);
+        free(payload);
+    }
+    /* Incompressible values still fit in the bound (exact allocation). */
+    const uint32_t big_w = 512, big_h = 300;
+    float *noise = malloc((size_t)big_w * big_h * sizeof(float));
+    assert_non_null(noise);
+    for (size_t i = 0; i < (size_t)big_w * big_h; i++)
+        noise[i] = float_from_bits(next_random(&rng) & 0x7f7fffffu);
+    for (uint32_t depth = PROTO_DEPTH_HALF; depth <= PROTO_DEPTH_FLOAT; depth += 16) {
+        float *back = depth_round_trip(depth, noise, big_w, big_h);
+        if (depth == PROTO_DEPTH_FLOAT)
+            assert_memory_equal(back, noise, (size_t)big_w * big_h * sizeof(float));
+        free(back);
+    }
+    free(noise);
+    /* Arguments. */
+    uint8_t out[64];
+    size_t bytes;
+    float one = 1.0f;
+    assert_int_equal(proto_depth_bound(PROTO_DEPTH_NONE, w, h), 0);
+    assert_int_equal(proto_depth_bound(8, w, h), 0);
+    assert_int_equal(proto_depth_bound(PROTO_DEPTH_HALF, 0, h), 0);
+    assert_int_equal(proto_depth_encode(PROTO_DEPTH_NONE, &one, 1, 1, out, sizeof out, &bytes), FXC_ERR_INVALID);
+    assert_int_equal(proto_depth_encode(PROTO_DEPTH_HALF, &one, 8193, 1, out, sizeof out, &bytes), FXC_ERR_INVALID);
+    assert_int_equal(proto_depth_decode(PROTO_DEPTH_NONE, out, 10, 1, 1, &one), FXC_ERR_INVALID);
+    assert_int_equal(proto_depth_decode(17, out, 10, 1, 1, &one), FXC_ERR_INVALID);
+}
+
+/* ---- the fuzz corpus --------------------------------------------------------------------------------- */
+
+/* Every seed of tests/fuzz/corpus_proto (crash-* and leak-* files aside: those are inputs the fuzzer once
+ * found, kept to be refused) decodes, with its payloads; together they cover every type, codec and depth. */
+static void test_corpus(void **state)
+{
+    (void)state;
+    const char *dir_path = FXC_SOURCE_DIR "/tests/fuzz/corpus_proto";
+    DIR *dir = opendir(dir_path);
+    if (!dir)
+        fail_msg("cannot open %s", dir_path);
+    unsigned types_seen = 0, codecs_seen = 0, depths_seen = 0, seeds = 0;
+    struct dirent *entry;
+    while ((entry = readdir(dir)) != NULL) {
+        const char *name = entry->d_name;
+        if (name[0] == '.' || strcmp(name, "README.md") == 0)
+            continue;
+        char path[1024];
+        snprintf(path, sizeof path, "%s/%s", dir_path, name);
+        FILE *f = fopen(path, "rb");
+        assert_non_null(f);
+        static uint8_t buf[1 << 16];
+        size_t len = fread(buf, 1, sizeof buf, f);
+        fclose(f);
+        assert_true(len < sizeof buf);
+        proto_msg m;
+        fxc_result result = decode_copy(buf, len, &m);
+        if (strncmp(name, "crash-", 6) == 0 || strncmp(name, "leak-", 5) == 0)
+            continue; /* found by the fuzzer: it must merely not crash, which decoding it just showed */
+        if (result != FXC_OK)
+            fail_msg("%s: %s", name, fxc_strerror(result));
+        seeds++;
+        assert_int_equal(proto_decode(buf, len, &m), FXC_OK);
+        types_seen |= 1u << m.type;
+        if (m.type == PROTO_FRAME) {
+            const proto_frame *fr = &m.u.frame;
+            codecs_seen |= 1u << fr->codec;
+            depths_seen |= 1u << (fr->depth / 16);
+            uint8_t *rgb = malloc((size_t)fr->width * fr->height * 3);
+            float *depth = malloc((size_t)fr->width * fr->height * sizeof(float));
+            assert_non_null(rgb);
+            assert_non_null(depth);
+            if (proto_color_decode(fr->codec, fr->color, fr->color_bytes, fr->width, fr->height, rgb) != FXC_OK)
+                fail_msg("%s: the colour does not decode", name);
+            if (fr->depth != PROTO_DEPTH_NONE &&
+                proto_depth_decode(fr->depth, fr->depth_data, fr->depth_bytes, fr->width, fr->height, depth) != FXC_OK)
+                fail_msg("%s: the depth does not decode", name);
+            free(depth);
+            free(rgb);
+        }
+    }
+    closedir(dir);
+    assert_true(seeds >= 8);
+    assert_int_equal(types_seen, 0x1feu);  /* types 1..8 */
+    assert_int_equal(codecs_seen, 0x7u);   /* raw, zstd, jpeg */
+    assert_int_equal(depths_seen, 0x7u);   /* none, half, float */
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_byte_order),
+        cmocka_unit_test(test_names),
+        cmocka_unit_test(test_round_trip),
+        cmocka_unit_test(test_documented_offsets),
+        cmocka_unit_test(test_every_prefix),
+        cmocka_unit_test(test_trailing),
+        cmocka_unit_test(test_header_faults),
+        cmocka_unit_test(test_field_faults),
+        cmocka_unit_test(test_encode_refusals),
+        cmocka_unit_test(test_encode_capacity),
+        cmocka_unit_test(test_mutations),
+        cmocka_unit_test(test_color_lossless),
+        cmocka_unit_test(test_color_jpeg),
+        cmocka_unit_test(test_color_corrupt),
+        cmocka_unit_test(test_color_encode_errors),
+        cmocka_unit_test(test_codec_threads),
+        cmocka_unit_test(test_depth_float_exact),
+        cmocka_unit_test(test_depth_half_closed_forms),
+        cmocka_unit_test(test_depth_half_every_value),
+        cmocka_unit_test(test_depth_half_sweep),
+        cmocka_unit_test(test_depth_errors),
+        cmocka_unit_test(test_corpus),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
