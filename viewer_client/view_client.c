@@ -412,6 +412,8 @@ static void viewer_take_frame(view_viewer *v, const proto_frame *frame, size_t m
     v->held_count++;
     if (!latency_us(v))
         viewer_show_frames(v, now);
+    else
+        viewer_schedule(v, now); /* the timer may be set for later than this frame's moment */
 }
 
 /* ---- the welcome -------------------------------------------------------------------------------------- */
