@@ -14,6 +14,7 @@
 #include "test_util.h"
 
 #include <arpa/inet.h>
+#include <jansson.h>
 #include <errno.h>
 #include <fcntl.h>
 #include <netinet/in.h>
@@ -699,6 +700,106 @@ static void test_node_peer(void **state)
     assert_int_equal(server_stop(&sv), 0);
 }
 
+/* Counts the PNG files in a folder. */
+static int count_png(const char *dir)
+{
+    char cmd[1024];
+    snprintf(cmd, sizeof cmd, "ls '%s' 2>/dev/null | grep -c '\\.png$'", dir);
+    FILE *p = popen(cmd, "r");
+    int n = 0;
+    if (p && fscanf(p, "%d", &n) != 1)
+        n = 0;
+    if (p)
+        pclose(p);
+    return n;
+}
+
+/* End to end: 4 fxcache-viewers (zstd, lossless) until SIGTERM stops the server; then `fxcache sim` replays
+ * the traces the server recorded, and every frame a viewer received is the same PNG, byte for byte, as the
+ * one sim writes for that frame and viewer. The statistics have one line per frame of the clock. */
+static void test_replay_bit_identical(void **state)
+{
+    (void)state;
+#ifndef FXC_VIEWER_BIN
+    print_message("fxcache-viewer is not built: skipped\n");
+    skip();
+#else
+    char rec[512], client[512], simdir[512], stats[512], summary[512];
+    snprintf(rec, sizeof rec, "%s", fxt_tmp_path("replay_rec"));
+    snprintf(client, sizeof client, "%s", fxt_tmp_path("replay_client"));
+    snprintf(simdir, sizeof simdir, "%s", fxt_tmp_path("replay_sim"));
+    snprintf(stats, sizeof stats, "%s", fxt_tmp_path("replay_stats.jsonl"));
+    snprintf(summary, sizeof summary, "%s", fxt_tmp_path("replay_summary.json"));
+    char clean[2048];
+    snprintf(clean, sizeof clean, "rm -rf '%s' '%s' '%s'", rec, client, simdir);
+    assert_int_equal(system(clean), 0);
+    server sv;
+    const char *args[] = {"--fps", "30", "--record", rec, "--stats", stats, "--summary", summary, NULL};
+    server_start(&sv, "replay", args);
+    char url[64];
+    snprintf(url, sizeof url, "ws://127.0.0.1:%d", sv.port);
+    const char *argv[] = {FXC_VIEWER_BIN, "--connect", url, "--viewers", "4", "--res", "96x54", "--out", client,
+                          "--quiet", "--timeout", "120", NULL};
+    pid_t viewer;
+    assert_int_equal(posix_spawn(&viewer, FXC_VIEWER_BIN, NULL, NULL, (char *const *)argv, environ), 0);
+    /* Until every viewer has about 20 frames, then SIGTERM in the middle of the session. */
+    for (double t0 = now_s(); count_png(client) < 80 && now_s() - t0 < 300;)
+        usleep(50000);
+    assert_true(count_png(client) >= 80);
+    assert_int_equal(server_stop(&sv), 0);
+    int status = 0;
+    assert_int_equal(waitpid(viewer, &status, 0), viewer);
+    assert_true(WIFEXITED(status));
+    assert_int_equal(WEXITSTATUS(status), 0); /* the viewers got bye and ended well */
+    char cmd[4096];
+    snprintf(cmd, sizeof cmd,
+             "sim --trace '%s/viewer_00.trace' --trace '%s/viewer_01.trace' --trace '%s/viewer_02.trace' "
+             "--trace '%s/viewer_03.trace' --fps 30 --out '%s' --save-every 1 --quiet",
+             rec, rec, rec, rec, simdir);
+    char err[2048] = "";
+    int rc = fxt_run_cli(cmd, NULL, 0, err, sizeof err);
+    if (rc != 0)
+        fail_msg("sim replay: %d: %s", rc, err);
+    /* Every received frame against sim's. */
+    snprintf(cmd, sizeof cmd, "cd '%s' && ls *.png", client);
+    FILE *list = popen(cmd, "r");
+    char name[256];
+    int compared = 0, differ = 0;
+    while (list && fgets(name, sizeof name, list)) {
+        name[strcspn(name, "\n")] = 0;
+        snprintf(cmd, sizeof cmd, "cmp -s '%s/%s' '%s/%s'", client, name, simdir, name);
+        compared++;
+        if (system(cmd) != 0) {
+            if (differ++ < 5)
+                print_message("differs from sim's: %s\n", name);
+        }
+    }
+    if (list)
+        pclose(list);
+    print_message("%d frames received, each compared with sim's replay: %d differ\n", compared, differ);
+    assert_true(compared >= 80);
+    assert_int_equal(differ, 0);
+    /* The statistics: one complete line per frame of the clock, as many as the summary counts. */
+    FILE *f = fopen(stats, "r");
+    assert_non_null(f);
+    int lines = 0, c, last = '\n';
+    while ((c = fgetc(f)) != EOF) {
+        lines += c == '\n';
+        last = c;
+    }
+    fclose(f);
+    assert_int_equal(last, '\n');
+    json_error_t jerr;
+    json_t *sum = json_load_file(summary, 0, &jerr);
+    assert_non_null(sum);
+    assert_int_equal(json_integer_value(json_object_get(sum, "frames")), lines);
+    assert_true(json_is_true(json_object_get(sum, "interrupted")));
+    json_t *serve = json_object_get(sum, "serve");
+    assert_int_equal(json_integer_value(json_object_get(serve, "viewers_joined")), 4);
+    json_decref(sum);
+#endif
+}
+
 int main(void)
 {
     signal(SIGPIPE, SIG_IGN);
@@ -707,6 +808,7 @@ int main(void)
         cmocka_unit_test(test_options),
         cmocka_unit_test(test_node_peer),
         cmocka_unit_test(test_limits_and_token),
+        cmocka_unit_test(test_replay_bit_identical),
         cmocka_unit_test(test_misbehaving_clients),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
