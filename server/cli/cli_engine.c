@@ -58,6 +58,18 @@ void srv_cli_engine_defaults(srv_cli_engine *e)
     *e = (srv_cli_engine){.pool_mb = 64, .seed = 1};
 }
 
+void srv_cli_merge_options(const struct option *own, size_t n_own, struct option *out, size_t cap)
+{
+    size_t n = 0;
+    for (size_t i = 0; i < n_own && n + 1 < cap; i++)
+        out[n++] = own[i];
+    for (size_t i = 0; i < srv_cli_engine_option_count && n + 1 < cap; i++)
+        out[n++] = srv_cli_engine_options[i];
+    out[n] = (struct option){NULL, 0, NULL, 0};
+    optind = 1;
+    opterr = 0;
+}
+
 void srv_cli_effect_names(char *out, size_t cap)
 {
     uint32_t count = 0;

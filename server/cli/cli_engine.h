@@ -38,6 +38,10 @@ extern const char srv_cli_engine_usage[];
 
 void srv_cli_engine_defaults(srv_cli_engine *e);
 
+/* A command's own getopt_long entries (n_own, no terminator) followed by the engine's and a terminator, in
+ * out (cap entries, enough for all); the loop's state (optind, opterr) reset for a new parse. */
+void srv_cli_merge_options(const struct option *own, size_t n_own, struct option *out, size_t cap);
+
 /* The effects a user can choose (those that shade), comma-separated. */
 void srv_cli_effect_names(char *out, size_t cap);
 

@@ -77,12 +77,7 @@ static int parse_options(int argc, char **argv, serve_options *o)
         {"quiet", no_argument, NULL, O_QUIET},              {"help", no_argument, NULL, 'h'},
     };
     struct option options[sizeof own / sizeof own[0] + 32];
-    size_t n_own = sizeof own / sizeof own[0];
-    memcpy(options, own, sizeof own);
-    memcpy(options + n_own, srv_cli_engine_options, srv_cli_engine_option_count * sizeof options[0]);
-    options[n_own + srv_cli_engine_option_count] = (struct option){NULL, 0, NULL, 0};
-    optind = 1;
-    opterr = 0;
+    srv_cli_merge_options(own, sizeof own / sizeof own[0], options, sizeof options / sizeof options[0]);
     for (int c; (c = getopt_long(argc, argv, ":h", options, NULL)) != -1;) {
         int engine = srv_cli_engine_option("serve", c, optarg, &o->engine);
         if (engine == 0)
