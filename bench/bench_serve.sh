@@ -28,10 +28,12 @@ mkdir -p "$out"
 [ -x "$bin" ] && [ -x "$viewer" ] || { echo "bench_serve: build first (./run demo): $bin, $viewer" >&2; exit 1; }
 echo "bench_serve: $scene, $res, $frames frames per viewer, --fps $fps, counts: $counts, $repeats repeats; files in $out"
 
-# The cameras: 16 walkers through the scene (the images are not needed: a tiny resolution).
+# The cameras: walkers through the scene (the images are not needed: a tiny resolution). A client sends a
+# trace's cameras in real time and stops at its end, so the traces are long (100 s) for the server's frames,
+# slower than --fps with many viewers, to reach FRAMES.
 max=0
 for n in $counts; do [ "$n" -gt "$max" ] && max=$n; done
-"$bin" sim --scene "$scene" --camera walk --viewers "$max" --frames $((frames * 2)) --res 16x9 --fps $fps \
+"$bin" sim --scene "$scene" --camera walk --viewers "$max" --frames 3000 --res 16x9 --fps $fps \
   --record "$out/cameras" --quiet --effects shadow >/dev/null
 
 # One serve run: N viewers with codec C; writes $out/$tag.{serve.jsonl,summary.json,client.json} and rec.
