@@ -74,6 +74,8 @@ typedef struct fx_context {
     uint32_t frame;         /* the frame being run, + 1 (0: unknown). Cache payloads change only between
                                frames, so what is derived from them can be kept within one frame. */
     float probe_hysteresis; /* weight of the old irradiance in a probe update's blend (default 0.97, RTXGI's) */
+    uint32_t reference_bounces; /* the reference's path tracing (fx_indirect_reference_point): bounces at most
+                                   (0: until Russian roulette ends the path) */
 } fx_context;
 
 /* One queued block. payload and lookup point into the cache; the effect writes payload texels of mask. */
@@ -199,6 +201,22 @@ void fx_probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
 void fx_probe_eval_point(const fx_context *ctx, const float pos[3], const float normal[3], uint64_t pixel_id,
                          float out_rgb[3], uint64_t *rays);
 
+/* ---- the reference renderer: the same terms per pixel, converged (server/engine/reference.h) ---------- */
+
+/* Indirect diffuse light at a visible point by path tracing, what the probes approximate (fx_paths.c):
+ * `paths` paths leave the point (moved inside its triangle off a crease, as the baseline's) in
+ * cosine-weighted directions about `normal` (an Owen-scrambled Sobol set, scrambled by hash(seed, stream));
+ * a path that misses returns the sky, one that meets a back face ends dark (the probes' rule), and at every
+ * front-face vertex it gathers direct light by next-event estimation (a shadow ray per light, lit as compose
+ * lights a point: intensity x colour x cos, / d^2 for point lights), times the albedo of every vertex so far;
+ * then it continues in a cosine-weighted direction, with Russian roulette from the second vertex on
+ * (survival probability the largest component of the path's throughput, at most 0.95) and at most
+ * ctx->reference_bounces vertices (0: no limit but FX_PATH_MAX_VERTICES). Writes E (true units, pi L under a
+ * uniform sky L, as fx_probe_eval_point) to out_rgb; *rays receives the rays traced (paths and shadow rays). */
+enum { FX_PATH_MAX_VERTICES = 256 };
+void fx_indirect_reference_point(const fx_context *ctx, const float pos[3], const float normal[3], uint32_t paths,
+                                 uint64_t stream, float out_rgb[3], uint64_t *rays);
+
 /* ---- effects as plug-ins: one table of data and callbacks per effect ---------------------------------- */
 
 enum {
@@ -251,6 +269,10 @@ typedef struct fx_shade_point {
     float *light_visibility; /* light_count */
     float *sky_visibility;
     float *indirect;         /* 3 */
+    /* Optional (NULL: not asked). An effect that replaces the sky term by light that carries the sky (the
+     * probes: sky_visibility becomes 0) writes here the sky visibility it found and scaled its light by (what
+     * ambient occlusion left): the ambient-occlusion term a picture of it shows. */
+    float *sky_open;
 } fx_shade_point;
 
 /* An effect: what the frame loop, the needs decision, the command line and the statistics know of it.
@@ -300,6 +322,15 @@ typedef struct fx_effect {
     /* The no-cache baseline: the same term evaluated at one visible point with the sample counts the cache
      * converges to; returns the rays traced. */
     uint64_t (*eval)(const fx_context *ctx, const fx_point *point, fx_shade_point *out);
+    /* The reference renderer: the same term as eval, converged. `samples` of the effect's own kind (AO rays,
+     * shadow rays per light, indirect paths: a multiple of reference_granule) at one visible point, every
+     * random number hashed from (ctx->seed, point->pixel_id), so calls with different pixel_ids are
+     * independent estimates. Terms are taken on the side the viewer sees (point->view_normal). Returns the
+     * rays traced. NULL: the effect has no reference estimator (the reference renderer refuses to run it). */
+    uint64_t (*reference)(const fx_context *ctx, const fx_point *point, uint32_t samples, fx_shade_point *out);
+    uint32_t reference_samples; /* the reference's default samples per pixel */
+    uint32_t reference_granule; /* samples come in sets of this many (0: 1) */
+    const char *reference_unit; /* what a sample is, for messages and --help: "rays", "rays per light", ... */
 } fx_effect;
 
 /* The built-in effects in registry order (the on-surface key's effect field is the index):

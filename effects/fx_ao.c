@@ -236,6 +236,15 @@ static uint64_t ao_eval(const fx_context *ctx, const fx_point *point, fx_shade_p
     return rays;
 }
 
+/* The reference: `samples` rays from the side the viewer sees, one Sobol set scrambled by the pixel id. */
+static uint64_t ao_reference(const fx_context *ctx, const fx_point *point, uint32_t samples, fx_shade_point *out)
+{
+    uint64_t rays = 0;
+    *out->sky_visibility *= fx_ao_eval_point(ctx, point->position, point->view_normal, samples, point->pixel_id,
+                                             &rays);
+    return rays;
+}
+
 /* Ambient occlusion: progressive to 64 cosine-weighted samples per texel, one level coarser by default. */
 const fx_effect fx_effect_ao = {
     .name = "ao",
@@ -253,4 +262,7 @@ const fx_effect fx_effect_ao = {
     .resample = ao_resample,
     .shade = ao_shade,
     .eval = ao_eval,
+    .reference = ao_reference,
+    .reference_samples = 1024, /* 16 times the cache's 64: the noise is a quarter of the cached texel's */
+    .reference_unit = "rays",
 };

@@ -576,6 +576,25 @@ static uint64_t probes_eval(const fx_context *ctx, const fx_point *point, fx_sha
     float open = *out->sky_visibility * (1.0f / FX_PROBE_PI);
     for (int k = 0; k < 3; k++)
         out->indirect[k] += e[k] * open;
+    if (out->sky_open)
+        *out->sky_open = *out->sky_visibility;
+    *out->sky_visibility = 0.0f;
+    return rays;
+}
+
+/* The reference: the same term with E from path tracing (every bounce, not one) instead of one bounce of
+ * probe_rays rays; the probes' rule for the sky (E carries it, scaled by what AO left) is the same. */
+static uint64_t probes_reference(const fx_context *ctx, const fx_point *point, uint32_t samples,
+                                 fx_shade_point *out)
+{
+    uint64_t rays = 0;
+    float e[3];
+    fx_indirect_reference_point(ctx, point->position, point->view_normal, samples, point->pixel_id, e, &rays);
+    float open = *out->sky_visibility;
+    for (int k = 0; k < 3; k++)
+        out->indirect[k] += fminf(e[k] * open * (1.0f / FX_PROBE_PI), FLT_MAX);
+    if (out->sky_open)
+        *out->sky_open = open;
     *out->sky_visibility = 0.0f;
     return rays;
 }
@@ -601,4 +620,7 @@ const fx_effect fx_effect_probes = {
     .commit = probes_commit,
     .shade = fx__probes_shade,
     .eval = probes_eval,
+    .reference = probes_reference,
+    .reference_samples = 256, /* paths per pixel: see docs/ARCHITECTURE.md, "The reference renderer" */
+    .reference_unit = "paths",
 };

@@ -372,6 +372,28 @@ static uint64_t shadow_eval(const fx_context *ctx, const fx_point *point, fx_sha
     return rays;
 }
 
+/* The reference: `samples` rays per light over the pixel's footprint, in sets of FX_SHADOW_RAYS jittered in
+ * 4 x 4 strata as the baseline's (each set checked at creases the same way), each set with its own jitter. */
+static uint64_t shadow_reference(const fx_context *ctx, const fx_point *point, uint32_t samples,
+                                 fx_shade_point *out)
+{
+    FX_ASSERT(samples >= FX_SHADOW_RAYS && samples % FX_SHADOW_RAYS == 0);
+    uint32_t sets = samples / FX_SHADOW_RAYS;
+    uint64_t rays = 0;
+    for (uint32_t l = 0; l < ctx->s->light_count; l++) {
+        double lit = 0;
+        for (uint32_t set = 0; set < sets; set++) {
+            uint64_t r = 0;
+            uint64_t set_id = fx__mix64(point->pixel_id ^ ((uint64_t)(set + 1) * 0x9e3779b97f4a7c15ull));
+            lit += fx_shadow_eval_point(ctx, point->position, point->view_normal, point->dpdx, point->dpdy, l,
+                                        set_id, &r);
+            rays += r;
+        }
+        out->light_visibility[l] *= (float)(lit / sets);
+    }
+    return rays;
+}
+
 /* Hard shadows: 16 rays per texel and light, computed once. */
 const fx_effect fx_effect_shadow = {
     .name = "shadow",
@@ -388,4 +410,8 @@ const fx_effect fx_effect_shadow = {
     .resample = shadow_resample,
     .shade = shadow_shade,
     .eval = shadow_eval,
+    .reference = shadow_reference,
+    .reference_samples = 256, /* 16 times the cache's 16 per texel */
+    .reference_granule = FX_SHADOW_RAYS,
+    .reference_unit = "rays per light",
 };

@@ -173,9 +173,8 @@ int srv_cli_engine_option(const char *cmd, int code, const char *arg, srv_cli_en
     }
 }
 
-/* Decides which effects run: the registry's needs, narrowed by --effects; reasons for the summary. Needs
- * of the scene that no registered effect serves (the scene_needs list) are reported as left out. */
-static bool choose_effects(const char *cmd, const scene *s, const char *list, bool effect_on[SRV_MAX_EFFECTS],
+/* Decides which effects run (cli_engine.h). */
+bool srv_cli_choose_effects(const char *cmd, const scene *s, const char *list, bool effect_on[SRV_MAX_EFFECTS],
                            char reasons[SRV_MAX_EFFECTS][200], json_t *left_out_extra)
 {
     uint32_t count = 0;
@@ -249,7 +248,7 @@ int srv_cli_run_open(const char *cmd, const srv_cli_engine *e, bool keep_views, 
                           .probe_cell = (float)e->probe_cell, .probe_rays = e->probe_rays,
                           .probe_hysteresis = (float)e->probe_hysteresis, .probe_budget = e->probe_budget,
                           .no_local_table = e->no_local_table};
-    if (!choose_effects(cmd, run->s, e->effects, desc.effect_on, run->reasons, run->left_out_extra))
+    if (!srv_cli_choose_effects(cmd, run->s, e->effects, desc.effect_on, run->reasons, run->left_out_extra))
         return 2;
     memcpy(desc.bias, e->bias, sizeof desc.bias);
     memcpy(desc.bias_set, e->bias_set, sizeof desc.bias_set);

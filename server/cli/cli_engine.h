@@ -49,6 +49,14 @@ void srv_cli_effect_names(char *out, size_t cap);
  * (a one-line error "fxcache CMD: OPTION: ..." was printed), -1 when it is not an engine option. */
 int srv_cli_engine_option(const char *cmd, int code, const char *arg, srv_cli_engine *e);
 
+/* Decides which effects run on scene s: the registry's needs, narrowed by --effects `list` (NULL or "auto":
+ * all that are needed); effect_on by registry index, a reason for each (why it runs or is left out), and in
+ * left_out_extra (a JSON object) the needs of the scene no registered effect serves. False (and an error line)
+ * for an unknown effect. `sim`, `serve` and `ref` decide the same way, so a reference has the terms the
+ * cached frames it is compared with have. */
+bool srv_cli_choose_effects(const char *cmd, const scene *s, const char *list, bool effect_on[SRV_MAX_EFFECTS],
+                            char reasons[SRV_MAX_EFFECTS][200], json_t *left_out_extra);
+
 /* A run: the scene, its Embree scene, the loop with the chosen effects, the report (its sink registered). */
 typedef struct srv_cli_run {
     const char *cmd;

@@ -18,6 +18,8 @@ static const char usage[] =
     "                       statistics per frame, a summary, and the composed frames\n"
     "  serve [options]      the networked server: viewers (fxcache-viewer) connect over WebSockets\n"
     "                       and get composed frames for their cameras\n"
+    "  ref [options]        reference images: the same shading per pixel with no cache and converged\n"
+    "                       samples, for the frames sim renders, with their noise estimate\n"
     "\n"
     "SCENE is a JSON scene description (*.json), any mesh file Assimp reads (optionally .gz), or\n"
     "'default' (the embedded scene, also used when SCENE is omitted).\n"
@@ -46,6 +48,8 @@ int main(int argc, char **argv)
         return srv_cmd_sim(argc - 1, argv + 1);
     if (strcmp(cmd, "serve") == 0)
         return srv_cmd_serve(argc - 1, argv + 1);
+    if (strcmp(cmd, "ref") == 0)
+        return srv_cmd_ref(argc - 1, argv + 1);
     fprintf(stderr, "fxcache: unknown command '%s' (try 'fxcache --help')\n", cmd);
     return 2;
 }

@@ -42,9 +42,9 @@ size_t srv__compose_scratch_bytes(const srv_loop *loop)
     return (bytes + 63) & ~(size_t)63;
 }
 
-/* Differentials of the hit position towards the next pixel right (dpdx) and down (dpdy). */
-static void pixel_differentials(const srv_camera_frame *f, const float dir[3], float t, const float n[3],
-                                float dpdx[3], float dpdy[3])
+/* Differentials of the hit position towards the next pixel right (dpdx) and down (dpdy) (engine_internal.h). */
+void srv__pixel_differentials(const srv_camera_frame *f, const float dir[3], float t, const float n[3],
+                              float dpdx[3], float dpdy[3])
 {
     float dn = dir[0] * n[0] + dir[1] * n[1] + dir[2] * n[2];
     for (int axis = 0; axis < 2; axis++) {
@@ -240,7 +240,7 @@ FXC_HOT_INLINE uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0
             pt->pixel_id = p;
             if (no_cache) {
                 srv_camera_ray(f, (float)x + 0.5f, (float)y + 0.5f, dir);
-                pixel_differentials(f, dir, view->depth[p], pt->normal, pt->dpdx, pt->dpdy);
+                srv__pixel_differentials(f, dir, view->depth[p], pt->normal, pt->dpdx, pt->dpdy);
             }
             srv_pixel *px = &cs->pixels[i];
             px->triangle = tri;

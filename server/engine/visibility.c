@@ -53,22 +53,11 @@ static float pixel_footprint(const srv_camera_frame *f, const float dir[3], floa
     return texels2 > 1e-30f ? 0.5f * log2f(texels2) : -100.0f;
 }
 
-typedef struct visibility_task {
-    srv_loop *loop;
-    srv_viewer *view;
-    uint32_t tiles_x;
-} visibility_task;
-
-/* One 16 x 16 tile: sixteen packets of 4 x 4 pixels. */
-static void visibility_tile(void *user, uint32_t task_index, uint32_t thread_index)
+void srv__visibility_tile(const scene *s, scene_rt *rt, const srv_camera_frame *f, uint32_t tile_x,
+                          uint32_t tile_y, uint32_t *tri, float *bary_u, float *bary_v, float *depth,
+                          float *footprint)
 {
-    (void)thread_index;
-    visibility_task *task = user;
-    srv_loop *loop = task->loop;
-    srv_viewer *view = task->view;
-    const srv_camera_frame *f = &view->frame;
-    RTCScene rtc = scene_rt_handle(loop->rt);
-    uint32_t tile_x = (task_index % task->tiles_x) * SRV_TILE, tile_y = (task_index / task->tiles_x) * SRV_TILE;
+    RTCScene rtc = scene_rt_handle(rt);
     _Alignas(64) struct RTCRayHit16 packet;
     _Alignas(64) int valid[16];
     float dirs[16][3];
@@ -113,20 +102,36 @@ static void visibility_tile(void *user, uint32_t task_index, uint32_t thread_ind
                 uint32_t x = px + (uint32_t)(i & 3), y = py + (uint32_t)(i >> 2);
                 size_t p = (size_t)y * f->width + x;
                 if (packet.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) {
-                    view->tri[p] = SRV_MISS;
-                    view->depth[p] = INFINITY;
+                    tri[p] = SRV_MISS;
+                    depth[p] = INFINITY;
                     continue;
                 }
-                uint32_t tri = packet.hit.primID[i];
-                view->tri[p] = tri;
-                view->bary_u[p] = packet.hit.u[i];
-                view->bary_v[p] = packet.hit.v[i];
-                view->depth[p] = packet.ray.tfar[i];
-                view->footprint[p] = pixel_footprint(f, dirs[i], packet.ray.tfar[i],
-                                                     loop->s->tri_normal + 3 * (size_t)tri,
-                                                     loop->s->texel_density);
+                uint32_t hit = packet.hit.primID[i];
+                tri[p] = hit;
+                bary_u[p] = packet.hit.u[i];
+                bary_v[p] = packet.hit.v[i];
+                depth[p] = packet.ray.tfar[i];
+                footprint[p] = pixel_footprint(f, dirs[i], packet.ray.tfar[i], s->tri_normal + 3 * (size_t)hit,
+                                               s->texel_density);
             }
         }
+}
+
+typedef struct visibility_task {
+    srv_loop *loop;
+    srv_viewer *view;
+    uint32_t tiles_x;
+} visibility_task;
+
+/* One 16 x 16 tile of a viewer. */
+static void visibility_tile(void *user, uint32_t task_index, uint32_t thread_index)
+{
+    (void)thread_index;
+    visibility_task *task = user;
+    srv_viewer *view = task->view;
+    srv__visibility_tile(task->loop->s, task->loop->rt, &view->frame, (task_index % task->tiles_x) * SRV_TILE,
+                         (task_index / task->tiles_x) * SRV_TILE, view->tri, view->bary_u, view->bary_v, view->depth,
+                         view->footprint);
 }
 
 void srv__visibility(srv_loop *loop, srv_viewer *view)

@@ -212,6 +212,20 @@ void srv__request_list_free(srv_loop *loop, srv_mem_category category, srv_reque
 /* Stage 2: visibility of one viewer into its buffers. */
 void srv__visibility(srv_loop *loop, srv_viewer *view);
 
+/* The primary rays of one SRV_TILE x SRV_TILE tile of frame f whose top-left pixel is (tile_x, tile_y), in
+ * 4 x 4 packets: per pixel of the tile (index y * width + x) the triangle (SRV_MISS for none), barycentrics,
+ * depth (INFINITY for none) and footprint (log2 of level-0 texels). What srv__visibility writes into a
+ * viewer's buffers; the reference renderer uses it so it sees the same surface at every pixel. */
+void srv__visibility_tile(const scene *s, scene_rt *rt, const srv_camera_frame *f, uint32_t tile_x,
+                          uint32_t tile_y, uint32_t *tri, float *bary_u, float *bary_v, float *depth,
+                          float *footprint);
+
+/* Differentials of the hit position at distance t along unit ray dir on the plane of normal n: the offsets
+ * to where the rays through the next pixel right (dpdx) and down (dpdy) meet that plane (grazing: at most 64
+ * t). The pixel's footprint the no-cache baseline jitters shadow rays over. */
+void srv__pixel_differentials(const srv_camera_frame *f, const float dir[3], float t, const float n[3],
+                              float dpdx[3], float dpdy[3]);
+
 /* Stage 3: requests of one viewer into the caches; fills the viewer's requested texels and cells
  * (deduplicated within the viewer, shading effects only, per cache kind) and counts drops in st. */
 void srv__requests(srv_loop *loop, uint32_t slot, srv_frame_stats *st, uint64_t requested[SCENE_CACHE_COUNT]);
