@@ -14,6 +14,7 @@
 #include <fcntl.h>
 #include <jansson.h>
 #include <netinet/in.h>
+#include <poll.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -36,6 +37,8 @@ typedef struct run_how {
     const char *token_env; /* $FXCACHE_TOKEN for the program (NULL: unset) */
     double signal_after_s; /* send `signal_number` after this long (0: never) */
     int signal_number;
+    int ready_fd;          /* > 0: and not before this listening socket has a connection waiting (the program
+                              is past its start, its signal handlers in place, even on a loaded machine) */
 } run_how;
 
 #ifdef FXC_VIEWER_BIN
@@ -68,7 +71,7 @@ static void run_viewer(const char *const *args, const run_how *how, viewer_run *
         "SKIP: fxcache-viewer is not built (proto/proto.c and proto/proto_codec.c are not in the tree)\n");
     skip();
 #else
-    static const run_how plain = {NULL, 0, 0};
+    static const run_how plain = {.token_env = NULL};
     if (!how)
         how = &plain;
     char out_path[1024], err_path[1024];
@@ -108,7 +111,12 @@ static void run_viewer(const char *const *args, const run_how *how, viewer_run *
         if (done == pid)
             break;
         double elapsed = now_seconds() - start;
-        if (how->signal_after_s > 0 && !signalled && elapsed >= how->signal_after_s) {
+        bool ready = true;
+        if (how->ready_fd > 0) {
+            struct pollfd pfd = {.fd = how->ready_fd, .events = POLLIN};
+            ready = poll(&pfd, 1, 0) > 0;
+        }
+        if (how->signal_after_s > 0 && !signalled && elapsed >= how->signal_after_s && ready) {
             kill(pid, how->signal_number);
             signalled = true;
         }
@@ -328,6 +336,20 @@ static int silent_listener(uint16_t *port)
     return fd;
 }
 
+/* Accepts and closes every connection waiting on a listener (those of an earlier run). */
+static void drain(int listener)
+{
+    for (;;) {
+        struct pollfd pfd = {.fd = listener, .events = POLLIN};
+        if (poll(&pfd, 1, 0) <= 0)
+            return;
+        int fd = accept(listener, NULL, NULL);
+        if (fd < 0)
+            return;
+        close(fd);
+    }
+}
+
 /* Reads the --stats file and checks the number of viewers and failures. */
 static json_t *load_stats(const char *path, size_t viewers, int failed)
 {
@@ -394,7 +416,8 @@ static void test_timeout_and_signal(void **state)
 
     /* SIGTERM long before the (default 10 s) timeout: exit 0, the summary, the statistics, no failure. */
     const char *signal_args[] = {"--connect", url, "--viewers", "2", "--stats", stats, NULL};
-    run_how term = {.signal_after_s = 1.0, .signal_number = SIGTERM};
+    drain(listener);
+    run_how term = {.signal_after_s = 1.0, .signal_number = SIGTERM, .ready_fd = listener};
     run_viewer(signal_args, &term, &r);
     if (r.status != 0)
         fail_msg("exit %d after SIGTERM; stderr: %s", r.status, r.err);
@@ -404,7 +427,8 @@ static void test_timeout_and_signal(void **state)
     json_decref(load_stats(stats, 2, 0));
 
     /* SIGINT the same. */
-    run_how interrupt = {.signal_after_s = 1.0, .signal_number = SIGINT};
+    drain(listener);
+    run_how interrupt = {.signal_after_s = 1.0, .signal_number = SIGINT, .ready_fd = listener};
     run_viewer(signal_args, &interrupt, &r);
     assert_int_equal(r.status, 0);
     close(listener);
