@@ -53,7 +53,8 @@ serve_run() { # tag n codec
   local traces=()
   for ((v = 0; v < n; v++)); do traces+=(--trace "$out/cameras/$(printf 'viewer_%02u' $v).trace"); done
   "$viewer" --connect "ws://127.0.0.1:$port" --viewers "$n" "${traces[@]}" --res $res --frames "$frames" \
-    --codec "$codec" --stats "$out/$tag.client.json" --quiet >"$out/$tag.client.out" 2>&1
+    --codec "$codec" --stats "$out/$tag.client.json" --quiet --timeout 600 >"$out/$tag.client.out" 2>&1 ||
+    { echo "bench_serve: a viewer failed (see $out/$tag.client.out)" >&2; kill -TERM $pid; wait $pid; exit 1; }
   kill -TERM $pid
   wait $pid
 }
