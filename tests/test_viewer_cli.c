@@ -414,7 +414,7 @@ static void test_timeout_and_signal(void **state)
     assert_non_null(strstr(r.err, "fxcache-viewer: viewer 2: no connection within 0.5 s"));
     assert_true(r.seconds < 20);
 
-    /* SIGTERM long before the (default 10 s) timeout: exit 0, the summary, the statistics, no failure. */
+    /* SIGTERM long before the (default 60 s) timeout: exit 0, the summary, the statistics, no failure. */
     const char *signal_args[] = {"--connect", url, "--viewers", "2", "--stats", stats, NULL};
     drain(listener);
     run_how term = {.signal_after_s = 1.0, .signal_number = SIGTERM, .ready_fd = listener};

@@ -370,7 +370,7 @@ view_parse_result view_options_parse(int argc, char *const argv[], const char *e
     o->codec = PROTO_CODEC_ZSTD;
     o->quality = 85;
     o->depth = PROTO_DEPTH_NONE;
-    o->timeout_s = 10;
+    o->timeout_s = 60; /* the first frame of 16 viewers on Sponza took 13 s here: everything is new */
     if (env_token && !option_token(o, "FXCACHE_TOKEN", env_token, err, cap))
         return VIEW_PARSE_ERROR;
     bool viewers_given = false;
@@ -467,7 +467,8 @@ const char *view_options_help(void)
            "median\n"
            "                           and 95th percentile, bytes received, bytes per frame, decode errors\n"
            "  --timeout S              give up on a viewer that has no connection, no welcome, or no frame\n"
-           "                           for S seconds (default 10)\n"
+           "                           for S seconds (default 60: a first frame of many viewers on a large\n"
+           "                           scene can take over 10 s)\n"
            "  --quiet                  no summary and no warnings (errors are still printed)\n"
            "  --help                   this text\n"
            "\n"
