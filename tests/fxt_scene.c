@@ -141,3 +141,45 @@ void fxt_island_run_free(fxt_island_run *run)
     free(run->payload);
     free(run->jobs);
 }
+
+/* The embedded scene scaled by `scale` and moved by `offset` (every axis), with its sun, sky, AO radius and
+ * camera transformed alike (the camera in double, as a scene description gives it); light intensities and
+ * the sky multiplied by `intensity_scale`. Finalised at the automatic texel density, which follows the
+ * scale, so the islands are the same in texels at every scale. */
+scene *fxt_transformed_default(double scale, double offset, float intensity_scale)
+{
+    scene_error err = {0};
+    scene *base = scene_create_default(NULL, &err);
+    assert_non_null(base);
+    scene *s = scene__alloc();
+    assert_non_null(s);
+    for (uint32_t m = 0; m < base->material_count; m++)
+        assert_int_not_equal(scene__add_material(s, &base->materials[m], &err), UINT32_MAX);
+    const double xform[16] = {scale, 0, 0, offset, 0, scale, 0, offset, 0, 0, scale, offset, 0, 0, 0, 1};
+    for (uint32_t m = 0; m < base->mesh_count; m++) {
+        const scene_mesh *mesh = &base->meshes[m];
+        assert_int_equal(scene__add_mesh(s, mesh->name, base->positions, base->vertex_count,
+                                         base->indices + 3 * (size_t)mesh->first_triangle, mesh->triangle_count,
+                                         NULL, mesh->material, xform, &err),
+                         SCENE_OK);
+    }
+    for (uint32_t l = 0; l < base->light_count; l++) {
+        scene_light light = base->lights[l];
+        light.intensity *= intensity_scale;
+        assert_int_equal(scene__add_light(s, &light, "test light", &err), SCENE_OK);
+    }
+    memcpy(s->sky_color, base->sky_color, sizeof s->sky_color);
+    s->sky_intensity = base->sky_intensity * intensity_scale;
+    s->ao_radius = (float)(base->ao_radius * scale);
+    if (base->has_camera) {
+        double position[3], target[3];
+        for (int k = 0; k < 3; k++) {
+            position[k] = base->camera_pos[k] * scale + offset;
+            target[k] = base->camera_target[k] * scale + offset;
+        }
+        assert_true(scene__set_camera_world(s, position, target, base->camera_fov_deg));
+    }
+    scene_free(base);
+    assert_int_equal(scene__finalize(s, NULL, &err), SCENE_OK);
+    return s;
+}

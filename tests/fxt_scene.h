@@ -44,4 +44,9 @@ void fxt_island_run_init(fxt_island_run *run, const scene *s, uint32_t island, u
 /* Releases a run's storage. */
 void fxt_island_run_free(fxt_island_run *run);
 
+/* The embedded default scene scaled by `scale` about the world origin, then moved by `offset` on every axis,
+ * with its sun, sky, AO radius and camera transformed alike; lights and sky times `intensity_scale`;
+ * finalised at the automatic density (which follows the scale). */
+scene *fxt_transformed_default(double scale, double offset, float intensity_scale);
+
 #endif
