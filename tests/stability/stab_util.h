@@ -1,0 +1,100 @@
+/* The stability suite's shared checker and helpers (tests/stability/, docs/ERROR.md "Stability suite").
+ *
+ * stab_check_loop() is run after every frame of every case: it reads every float a viewer's frame has
+ * (linear radiance, depth, sRGB bytes, the kept views), every figure of srv_frame_stats and srv_memory, and
+ * every payload texel of every block the caches hold (white-box, through the engine's cache kinds), and fails
+ * the test on the first value that is not finite or not consistent with the others. The closed forms and
+ * the second methods each case compares against are in the case's own file; what several cases share (a
+ * plane's depth along a pixel's ray, the relative RMSE of two images) is here. */
+#ifndef FXC_STAB_UTIL_H
+#define FXC_STAB_UTIL_H
+
+#include "test_util.h"
+
+#include "camera.h"
+#include "engine.h"
+#include "fxt_scene.h"
+
+#include <stdbool.h>
+#include <stdint.h>
+
+/* What a check looked at, so a case can assert it was not vacuous. */
+typedef struct stab_checked {
+    uint64_t pixels;         /* viewer pixels checked (all viewers) */
+    uint64_t sky_pixels;     /* of which saw the sky */
+    uint64_t view_values;    /* kept-view floats checked */
+    uint64_t texels[SRV_MAX_EFFECTS]; /* payload texels (cells) with data checked, per effect */
+    uint64_t blocks;         /* resident blocks walked */
+} stab_checked;
+
+/* Checks the loop's state after srv_loop_frame() returned st: every present viewer's frame, the frame's
+ * statistics, the memory report and every cache payload. Fails the test (cmocka) at the first finding, naming
+ * the viewer, pixel, effect or figure. */
+stab_checked stab_check_loop(srv_loop *loop, const srv_frame_stats *st);
+
+/* Sets the cameras of ids[0..n) (one camera for all when `same`), runs `frames` frames and checks each with
+ * stab_check_loop(); returns what the last check looked at. st receives the last frame's statistics. */
+stab_checked stab_frames(srv_loop *loop, const srv_viewer_id *ids, uint32_t n, const srv_camera *cameras,
+                         bool same, uint32_t frames, srv_frame_stats *st);
+
+/* A copy (caller frees) of a viewer's linear radiance, w * h * 3 floats. */
+float *stab_copy_radiance(const srv_loop *loop, srv_viewer_id id);
+
+/* The world-space point a pixel's primary ray reaches at `depth`, in double (scene-local). */
+void stab_pixel_point(const srv_camera_frame *f, uint32_t x, uint32_t y, float depth, double point[3]);
+
+/* Distance along the pixel's primary ray (as visibility traces it) to the plane y = plane_y, in double;
+ * INFINITY when the ray does not reach it. */
+double stab_plane_depth(const srv_camera_frame *f, uint32_t x, uint32_t y, double plane_y);
+
+/* Root mean square of (b - a) over n floats, relative to the mean of |a|. */
+double stab_relative_rmse(const float *a, const float *b, size_t n);
+
+/* An open square floor y = height, side 2 * half about (cx, cz), cells x cells quads, facing up, grey (0.5). */
+void stab_add_floor(scene *s, double cx, double height, double cz, double half, uint32_t cells);
+
+/* A solid axis-aligned box [lo, hi] with outward faces (cells x cells quads each). */
+void stab_add_box(scene *s, const char *name, const double lo[3], const double hi[3], uint32_t cells);
+
+/* Adds a point light at a scene-local position (the scene is still being built: world == local until
+ * finalisation; call before fxt_finish_scene). */
+void stab_add_point_light(scene *s, float x, float y, float z, float intensity);
+
+/* The sky's radiance (colour x intensity), per channel. */
+void stab_sky(const scene *s, float sky[3]);
+
+/* Sets an open-sky, one-sun lighting: sky colour (r, g, b) at `sky_intensity`, and light 0 (a directional
+ * light fxt_add_sun made) travelling along dir with `intensity`. */
+void stab_set_sun(scene *s, const float dir[3], float intensity);
+
+#endif
+
+/* ---- the bounce scene (stab_light.c, stab_stiffness.c) ------------------------------------------------- */
+
+/* A floor (y = 0.1, x 0.1..4.1, z -5..5, albedo 0.5) lit by a sun straight down (light 0, intensity
+ * `intensity`), a black sky, and a wall (x = 0.1, facing +x, y 0.1..5.1) the sun does not reach (it travels
+ * along the wall's plane): what lights the wall is the floor's bounce, which only the probes carry. The planes
+ * lie off the probe grid's planes (multiples of 0.5 m) so no probe sits on a surface, and reach beyond the
+ * camera's view, so no probe behind the wall's edges is requested (those switch off and on again every other
+ * update: docs/ERROR.md). */
+scene *stab_bounce_scene(float intensity, scene_rt **rt);
+
+/* A camera in the bounce scene looking at the wall across the floor. */
+srv_camera stab_bounce_camera(void);
+
+/* The mean radiance (channel 0) of the wall's inner pixels (away from its edges: y 0.5..1.7, |z| < 1.4) and
+ * of the floor's (x 1.5..3.5, |z| < 1.4), from a viewer's depth and radiance. */
+void stab_bounce_means(const srv_loop *loop, srv_viewer_id id, double *wall, double *floor);
+
+/* The update counts of the probes switched on and requested this frame in the loop's world-space cache, by key
+ * (white-box). */
+typedef struct stab_probe_counts {
+    uint32_t count;
+    uint64_t key[8192];
+    uint32_t updates[8192];
+} stab_probe_counts;
+void stab_probe_snapshot(srv_loop *loop, stab_probe_counts *out);
+
+/* The fewest and most updates since `then` of the probes on both then and now and not restarted since (a
+ * probe switched off and on again starts its count afresh); returns how many such probes there are. */
+uint32_t stab_probe_updates_since(srv_loop *loop, const stab_probe_counts *then, uint32_t *least, uint32_t *most);
