@@ -1,5 +1,6 @@
 /* Stability suite, scale (docs/ERROR.md "Stability suite"): the embedded scene and Sponza scaled by 1e-4 and
- * 1e4 about the world origin, against the same scene at scale 1, through the whole frame loop (every frame checked by stab_check_loop).
+ * 1e4 about the world origin and translated by 1e6 on every axis, against the same scene at scale 1 at the
+ * origin, through the whole frame loop (every frame checked by stab_check_loop).
  *
  * What can differ, and the tolerance for it. Everything the engine derives from the geometry is scale-free:
  * the automatic texel density follows the scale (4096^2 texels over the surface), so islands are the same in
@@ -17,9 +18,11 @@
  *     probe term differs the way another seed's would, so its bound is the relative RMSE between seeds 7 and
  *     8 at scale 1 (measured in the same run; h = 0.5 and 6 frames, so both have settled to the same level
  *     of noise).
+ * A translation keeps the local geometry bit for bit (the scene is rebased onto a whole multiple of a power
+ * of two near its centre) and the probe grid is anchored at the local frame: the images must be identical.
  * Measured (printed): AO and lit fraction at 1e-4 within 0.0005 of scale 1; at 1e4 up to 0.27 and 0.50 at
  * edges, all within one texel's shift; the probe term 0.3 to 0.7 of a new seed's difference for the embedded
- * scene, 0.01 for Sponza. */
+ * scene, 0.01 for Sponza; translations identical. */
 #include "stab_util.h"
 
 #include "camgen.h"
@@ -209,6 +212,11 @@ static void test_default_scaled_1e4(void **state)
     check_default(*state, 1e4, 0.0);
 }
 
+static void test_default_translated_1e6(void **state)
+{
+    check_default(*state, 1.0, 1e6);
+}
+
 /* ---- Sponza -------------------------------------------------------------------------------------------- */
 
 enum { SW = 64, SH = 36 };
@@ -289,15 +297,22 @@ static void test_sponza_scaled_1e4(void **state)
     check_sponza(state, 1e4, 0.0);
 }
 
+static void test_sponza_translated_1e6(void **state)
+{
+    check_sponza(state, 1.0, 1e6);
+}
+
 int main(void)
 {
     const struct CMUnitTest default_tests[] = {
         cmocka_unit_test(test_default_scaled_1e_4),
         cmocka_unit_test(test_default_scaled_1e4),
+        cmocka_unit_test(test_default_translated_1e6),
     };
     const struct CMUnitTest sponza_tests[] = {
         cmocka_unit_test(test_sponza_scaled_1e_4),
         cmocka_unit_test(test_sponza_scaled_1e4),
+        cmocka_unit_test(test_sponza_translated_1e6),
     };
     int failed = cmocka_run_group_tests_name("scale: the embedded scene", default_tests, default_setup, default_teardown);
     failed += cmocka_run_group_tests_name("scale: Sponza", sponza_tests, sponza_setup, sponza_teardown);
