@@ -565,3 +565,82 @@ uint32_t stab_probe_updates_since(srv_loop *loop, const stab_probe_counts *then,
     free(now);
     return matched;
 }
+
+/* ---- an open plane ----------------------------------------------------------------------------------- */
+
+scene *stab_open_plane(const float dir[3], float intensity, float sky_intensity, scene_rt **rt)
+{
+    scene *s = fxt_new_scene();
+    stab_add_floor(s, 0.7, 0.3, -0.4, 20.0, 4);
+    fxt_add_sun(s, dir[0], dir[1], dir[2]);
+    stab_set_sun(s, dir, intensity);
+    s->sky_color[0] = 0.2f, s->sky_color[1] = 0.3f, s->sky_color[2] = 0.4f;
+    s->sky_intensity = sky_intensity;
+    *rt = fxt_finish_scene(s, 4.0f, 1.0f);
+    return s;
+}
+
+void stab_plane_closed_form(const scene *s, double out[3])
+{
+    const scene_light *l = &s->lights[0];
+    double cosine = -(double)l->direction[1]; /* the normal is +y */
+    for (int k = 0; k < 3; k++)
+        out[k] = 0.5 * ((cosine > 0 ? (double)l->intensity * l->color[k] * cosine : 0.0) +
+                        (double)s->sky_color[k] * s->sky_intensity);
+}
+
+stab_plane_result stab_check_open_plane(const srv_loop *loop, srv_viewer_id id, const srv_camera *cam,
+                                        double plane_y, double cx, double cz, double half)
+{
+    stab_plane_result out;
+    memset(&out, 0, sizeof out);
+    uint32_t w = 0, h = 0;
+    assert_int_equal(srv_viewer_size(loop, id, &w, &h), FXC_OK);
+    srv_camera_frame f;
+    assert_true(srv_camera_setup(cam, w, h, &f));
+    const scene *s = srv_loop_desc_of(loop)->s;
+    double expected[3];
+    stab_plane_closed_form(s, expected);
+    bool lit = -(double)s->lights[0].direction[1] > 0;
+    const float *rad = srv_viewer_radiance(loop, id), *depth = srv_viewer_depth(loop, id);
+    const float *ao = srv_viewer_view(loop, id, SRV_VIEW_AO), *shadow = srv_viewer_view(loop, id, SRV_VIEW_SHADOW);
+    for (uint32_t y = 0; y < h; y++)
+        for (uint32_t x = 0; x < w; x++) {
+            size_t p = (size_t)y * w + x;
+            double dir[3];
+            pixel_direction(&f, x, y, dir);
+            double t = stab_plane_depth(&f, x, y, plane_y);
+            double inside = -INFINITY; /* metres inside the floor's border (negative: outside) */
+            if (isfinite(t)) {
+                double hx = f.origin[0] + t * dir[0], hz = f.origin[2] + t * dir[2];
+                inside = half - fmax(fabs(hx - cx), fabs(hz - cz));
+            }
+            double margin = 1e-4 * (isfinite(t) ? t : 0.0) + 1e-6;
+            if (inside > margin) {
+                double bound = 0x1p-20 * (1.0 + f.tan_half_x + f.tan_half_y) / fabs(dir[1]);
+                double error = fabs((double)depth[p] - t) / t;
+                if (!(error <= bound))
+                    fail_msg("pixel (%u, %u): depth %.9g, the plane's %.9g (relative error %.3g, bound %.3g)", x, y,
+                             (double)depth[p], t, error, bound);
+                out.worst_depth = fmax(out.worst_depth, error / bound);
+                out.plane_pixels++;
+                for (int k = 0; k < 3; k++) {
+                    double e = fabs(rad[3 * p + k] - expected[k]) / expected[k];
+                    if (!(e <= STAB_FORMULA_TOLERANCE))
+                        fail_msg("pixel (%u, %u) channel %d: radiance %.9g, closed form %.9g (relative error %.3g)",
+                                 x, y, k, (double)rad[3 * p + k], expected[k], e);
+                    out.worst_radiance = fmax(out.worst_radiance, e);
+                }
+                /* Every texel holds exactly 1 (or 0); a filter's weights sum to 1 within 4 roundings. */
+                if (ao && !(fabs(ao[p] - 1.0) <= 0x1p-22 && fabs(shadow[p] - (lit ? 1.0 : 0.0)) <= 0x1p-22))
+                    fail_msg("pixel (%u, %u): AO %.9g, lit fraction %.9g (expected 1 and %d)", x, y, (double)ao[p],
+                             (double)shadow[p], lit);
+            } else if (inside < -margin) {
+                if (depth[p] != INFINITY)
+                    fail_msg("pixel (%u, %u): depth %.9g, its ray misses the floor by %.3g m", x, y, (double)depth[p],
+                             -inside);
+                out.sky_pixels++;
+            }
+        }
+    return out;
+}

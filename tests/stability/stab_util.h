@@ -98,3 +98,37 @@ void stab_probe_snapshot(srv_loop *loop, stab_probe_counts *out);
 /* The fewest and most updates since `then` of the probes on both then and now and not restarted since (a
  * probe switched off and on again starts its count afresh); returns how many such probes there are. */
 uint32_t stab_probe_updates_since(srv_loop *loop, const stab_probe_counts *then, uint32_t *least, uint32_t *most);
+
+/* ---- an open plane (stab_light.c, stab_cameras.c, stab_geometry.c) --------------------------------------- */
+
+/* Float rounding of compose's formula, albedo x (E cos + sky): the light direction's normalisation (one
+ * rounding per component, so cos is within 2^-23 relative) and six products and sums, each within 2^-24
+ * relative: 2^-19 (1.9e-6) relative bounds them all with room. */
+#define STAB_FORMULA_TOLERANCE 0x1p-19
+
+/* An open floor (y = 0.3, 40 m wide, about (0.7, -0.4), albedo 0.5), a sun along dir with `intensity`, a sky
+ * (0.2, 0.3, 0.4) x sky_intensity; finalised at 4 texels per metre, AO radius 1 m. */
+scene *stab_open_plane(const float dir[3], float intensity, float sky_intensity, scene_rt **rt);
+
+/* The closed form of a floor facing +y under s's light 0 (a sun) and sky, with nothing above it: every shadow
+ * and AO ray escapes, so radiance = albedo 0.5 x (E max(0, cos) + sky), per channel. */
+void stab_plane_closed_form(const scene *s, double out[3]);
+
+/* What stab_check_open_plane found. */
+typedef struct stab_plane_result {
+    uint64_t plane_pixels, sky_pixels;
+    double worst_depth;    /* largest depth error over its bound */
+    double worst_radiance; /* largest relative radiance error */
+} stab_plane_result;
+
+/* Checks every pixel of viewer id (rendered from cam) over the floor stab_open_plane makes (or any floor
+ * y = plane_y, |x - cx|, |z - cz| <= half, with nothing above it), with shadows and AO: a pixel whose ray
+ * reaches the floor more than 1e-4 of its distance inside the border must hit it at the depth along the ray
+ * (computed in double from the camera's float frame) within its rounding bound, 2^-20 (1 + tan_x + tan_y) /
+ * |d_y| relative (the direction's float rounding, 2^-23 per component of a sum of terms up to 1 + tan_x + tan_y,
+ * amplified by 1 / |d_y| at grazing incidence; 8 x for Embree's own arithmetic), with the closed-form radiance
+ * within STAB_FORMULA_TOLERANCE and (when kept) AO and lit fraction 1 (lit 0 when the sun is below the
+ * horizon) within 2^-22: every texel holds exactly 1 (or 0), and a filter's weights sum to 1 within four
+ * roundings; a ray that misses it by as much sees the sky. Fails the test at the first finding. */
+stab_plane_result stab_check_open_plane(const srv_loop *loop, srv_viewer_id id, const srv_camera *cam,
+                                        double plane_y, double cx, double cz, double half);
