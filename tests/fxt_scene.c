@@ -4,6 +4,7 @@
 #include "fxt_scene.h"
 #include "scene_internal.h"
 
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -182,4 +183,38 @@ scene *fxt_transformed_default(double scale, double offset, float intensity_scal
     scene_free(base);
     assert_int_equal(scene__finalize(s, NULL, &err), SCENE_OK);
     return s;
+}
+
+/* ---- the closed form of AO in a corner (test_crease.c, the stability suite) ---------------------------- */
+
+/* Antiderivative of sqrt(1 - x^2) on [-1, 1]. */
+static double half_disk_primitive(double x)
+{
+    x = fmin(fmax(x, -1.0), 1.0);
+    return 0.5 * (x * sqrt(1 - x * x) + asin(x));
+}
+
+/* Area of the unit disk with x > -a and z > -b (a, b >= 0; INFINITY for no bound). */
+static double disk_area_beyond(double a, double b)
+{
+    double lo = -fmin(a, 1.0);
+    /* Integrate sqrt(1 - x^2) + min(sqrt(1 - x^2), b) over x in [lo, 1]. */
+    double area = 2 * (half_disk_primitive(1) - half_disk_primitive(lo));
+    if (b < 1) {
+        double c = sqrt(1 - b * b), from = fmax(lo, -c);
+        if (from < c)
+            area -= half_disk_primitive(c) - half_disk_primitive(from) - b * (c - from);
+    }
+    return area;
+}
+
+double fxt_disk_open(double d1, double d2, double h, double radius)
+{
+    const double pi = 3.14159265358979323846;
+    double a = d1 / radius, b = d2 / radius, open = disk_area_beyond(a, b);
+    if (h < radius) {
+        double rho = sqrt(1 - (h / radius) * (h / radius)); /* rays inside this disk reach the ceiling */
+        open -= rho * rho * disk_area_beyond(a / rho, b / rho);
+    }
+    return open / pi;
 }

@@ -31,7 +31,7 @@ static stab_plane_result plane_view(scene *s, scene_rt *rt, const srv_camera *ca
     srv_loop *loop = plane_loop(s, rt, no_cache, 64, 36, &id);
     srv_frame_stats st;
     stab_frames(loop, &id, 1, cam, true, no_cache ? 1 : 2, &st);
-    stab_plane_result r = stab_check_open_plane(loop, id, cam, (double)0.3f, 0.7, -0.4, 20.0);
+    stab_plane_result r = stab_check_open_plane(loop, id, cam, (double)0.3f, 0.7, -0.4, 20.0, 20.0);
     srv_loop_free(loop);
     return r;
 }
@@ -148,7 +148,7 @@ static void test_near_plane_inside_wall(void **state)
             const float *depth = srv_viewer_depth(loop, id);
             uint64_t down = 0;
             if (above) {
-                stab_plane_result r = stab_check_open_plane(loop, id, &cam, (double)0.3f, 0.7, -0.4, 20.0);
+                stab_plane_result r = stab_check_open_plane(loop, id, &cam, (double)0.3f, 0.7, -0.4, 20.0, 20.0);
                 down = r.plane_pixels;
                 assert_true(r.sky_pixels > 0);
             } else {
@@ -219,7 +219,7 @@ static void test_straight_up_and_down(void **state)
             srv_loop *loop = plane_loop(s, rt, false, 48, 48, &id);
             srv_frame_stats st;
             stab_frames(loop, &id, 1, &cam, true, 2, &st);
-            stab_plane_result r = stab_check_open_plane(loop, id, &cam, (double)0.3f, 0.7, -0.4, 20.0);
+            stab_plane_result r = stab_check_open_plane(loop, id, &cam, (double)0.3f, 0.7, -0.4, 20.0, 20.0);
             print_message("looking straight %s (target off by %g): %llu plane pixels, %llu sky\n", up ? "up" : "down",
                           (double)offsets[i], (unsigned long long)r.plane_pixels, (unsigned long long)r.sky_pixels);
             if (up)
@@ -234,40 +234,14 @@ static void test_straight_up_and_down(void **state)
 
 /* ---- a camera 1e6 m away ------------------------------------------------------------------------------------- */
 
-/* Whether the ray from p towards the sun (against dir) meets the box [lo, hi] (slab test, in double). */
-static bool box_shadows(const double p[3], const float dir[3], const double lo[3], const double hi[3])
-{
-    double t0 = 0, t1 = INFINITY;
-    for (int k = 0; k < 3; k++) {
-        double d = -(double)dir[k];
-        if (d == 0) {
-            if (p[k] < lo[k] || p[k] > hi[k])
-                return false;
-            continue;
-        }
-        double a = (lo[k] - p[k]) / d, b = (hi[k] - p[k]) / d;
-        t0 = fmax(t0, fmin(a, b));
-        t1 = fmin(t1, fmax(a, b));
-    }
-    return t0 <= t1;
-}
-
 /* A sun 37 degrees above the horizon, for long shadows. */
 static const float low_sun[3] = {0.6f, -0.6f, 0.5f};
-
-/* Whether the plane's point p is in the box's shadow (of low_sun) or under the box. */
-static bool in_shadow(const double p[3], const double lo[3], const double hi[3])
-{
-    return box_shadows(p, low_sun, lo, hi) || (p[0] >= lo[0] && p[0] <= hi[0] && p[2] >= lo[2] && p[2] <= hi[2]);
-}
 
 /* A box 6 m tall on the open plane seen from 1e6 m away at 30 degrees of elevation, through a field of view
  * of 0.0012 degrees that frames 21 m (192 x 108 pixels of 0.2 m, 0.4 m on the plane): every plane pixel at the
  * plane's depth (float positions 1e6 away are 0.06 m apart; the bound is 1e-6 relative, 1 m, while a
- * pixel's ray error of about 1e-7 rad moves it 0.1 m), lit where the sun's ray from its point misses the box
- * and dark where it meets it (within 2^-22), except within a band of two texels of the level the pixel reads
- * plus its footprint, where a texel reaching across the edge holds either; AO 1 beyond the AO radius plus
- * that band from the box. Probes from there (the world grid's coarsest level) are checked by the checker. */
+ * pixel's ray error of about 1e-7 rad moves it 0.1 m), the exact shadow and AO 1 away from the box
+ * (stab_check_box_on_plane). Probes from there (the world grid's coarsest level) are checked by the checker. */
 static void test_camera_1e6_away(void **state)
 {
     (void)state;
@@ -292,57 +266,11 @@ static void test_camera_1e6_away(void **state)
         srv_loop *loop = fxt_loop(&d, 1, FW, FH, &id);
         srv_frame_stats st;
         stab_frames(loop, &id, 1, &cam, true, no_cache ? 1 : 2, &st);
-        srv_camera_frame f;
-        assert_true(srv_camera_setup(&cam, FW, FH, &f));
-        const float *depth = srv_viewer_depth(loop, id), *lit = srv_viewer_view(loop, id, SRV_VIEW_SHADOW);
-        const float *ao = srv_viewer_view(loop, id, SRV_VIEW_AO);
-        uint32_t plane = 0, checked_lit = 0, dark = 0, open = 0;
-        double worst = 0;
-        for (uint32_t y = 0; y < FH; y++)
-            for (uint32_t x = 0; x < FW; x++) {
-                size_t p = (size_t)y * FW + x;
-                double t = stab_plane_depth(&f, x, y, (double)0.3f), q[3];
-                if (!(fabs(depth[p] - t) <= 1e-6 * t))
-                    continue; /* the box (it hides the plane there) */
-                stab_pixel_point(&f, x, y, (float)t, q);
-                plane++;
-                worst = fmax(worst, fabs(depth[p] - t) / t);
-                /* The pixel's footprint on the plane: its angular size times the distance over the sine of the
-                 * 30 degree elevation; the level's texel is at most 1.42 times that (the level rounds log2 of the
-                 * footprint in texels to the nearest integer), or a level-0 texel. */
-                double footprint = t * 2.0 * f.tan_half_y / FH / 0.5;
-                double band = 2.0 * fmax(1.42 * footprint, 1.0 / density) + footprint;
-                /* AO: beyond the AO radius and the band from the box's footprint nothing occludes. */
-                double dx = fmax(fmax(lo[0] - q[0], q[0] - hi[0]), 0.0), dz = fmax(fmax(lo[2] - q[2], q[2] - hi[2]), 0.0);
-                if (sqrt(dx * dx + dz * dz) > ao_radius + band) {
-                    open++;
-                    if (!(fabs(ao[p] - 1.0) <= 0x1p-22))
-                        fail_msg("1e6 away%s, pixel (%u, %u) at (%g, %g): AO %.9g, nothing within its radius",
-                                 no_cache ? " (no cache)" : "", x, y, q[0], q[2], (double)ao[p]);
-                }
-                /* Shadow: the exact test at the point, unless some point of the band's square around it differs
-                 * (the floor runs on under the box, dark there: a texel reaching under it is partly dark, the
-                 * wall-on-floor departure of ARCHITECTURE.md, so the footprint counts as shadow here). */
-                bool shadowed = in_shadow(q, lo, hi);
-                bool near_edge = false;
-                for (int a = -8; a <= 8 && !near_edge; a++)
-                    for (int b = -8; b <= 8 && !near_edge; b++) {
-                        double r[3] = {q[0] + band * a / 8.0, q[1], q[2] + band * b / 8.0};
-                        near_edge = in_shadow(r, lo, hi) != shadowed;
-                    }
-                if (near_edge)
-                    continue;
-                checked_lit++;
-                dark += shadowed;
-                if (!(fabs(lit[p] - (shadowed ? 0.0 : 1.0)) <= 0x1p-22))
-                    fail_msg("1e6 away%s, pixel (%u, %u) at (%g, %g): lit fraction %g, %s by the box",
-                             no_cache ? " (no cache)" : "", x, y, q[0], q[2], (double)lit[p],
-                             shadowed ? "shadowed" : "not shadowed");
-            }
+        stab_box_result r = stab_check_box_on_plane(loop, id, &cam, (double)0.3f, lo, hi, true, density, ao_radius, 1e-6);
         print_message("camera 1e6 away%s: %u plane pixels (worst relative depth error %.2e), %u away from shadow "
                       "edges of which %u in the shadow, all exact; AO exactly 1 at %u open ones\n",
-                      no_cache ? " (no cache)" : "", plane, worst, checked_lit, dark, open);
-        assert_true(plane > FW * FH / 2 && checked_lit > plane / 2 && dark > 20 && open > 100);
+                      no_cache ? " (no cache)" : "", r.plane_pixels, r.worst_depth, r.lit_checked, r.dark, r.open);
+        assert_true(r.plane_pixels > FW * FH / 2 && r.lit_checked > r.plane_pixels / 2 && r.dark > 20 && r.open > 100);
         srv_loop_free(loop);
     }
     /* The probes from there: the coarsest grid level, every frame checked. */

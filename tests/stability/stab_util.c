@@ -590,7 +590,7 @@ void stab_plane_closed_form(const scene *s, double out[3])
 }
 
 stab_plane_result stab_check_open_plane(const srv_loop *loop, srv_viewer_id id, const srv_camera *cam,
-                                        double plane_y, double cx, double cz, double half)
+                                        double plane_y, double cx, double cz, double half_x, double half_z)
 {
     stab_plane_result out;
     memset(&out, 0, sizeof out);
@@ -613,7 +613,7 @@ stab_plane_result stab_check_open_plane(const srv_loop *loop, srv_viewer_id id, 
             double inside = -INFINITY; /* metres inside the floor's border (negative: outside) */
             if (isfinite(t)) {
                 double hx = f.origin[0] + t * dir[0], hz = f.origin[2] + t * dir[2];
-                inside = half - fmax(fabs(hx - cx), fabs(hz - cz));
+                inside = fmin(half_x - fabs(hx - cx), half_z - fabs(hz - cz));
             }
             double margin = 1e-4 * (isfinite(t) ? t : 0.0) + 1e-6;
             if (inside > margin) {
@@ -641,6 +641,83 @@ stab_plane_result stab_check_open_plane(const srv_loop *loop, srv_viewer_id id, 
                              -inside);
                 out.sky_pixels++;
             }
+        }
+    return out;
+}
+
+/* ---- a box over a plane ---------------------------------------------------------------------------------- */
+
+bool stab_box_shadows(const double p[3], const float dir[3], const double lo[3], const double hi[3])
+{
+    double t0 = 0, t1 = INFINITY;
+    for (int k = 0; k < 3; k++) {
+        double d = -(double)dir[k];
+        if (d == 0) {
+            if (p[k] < lo[k] || p[k] > hi[k])
+                return false;
+            continue;
+        }
+        double a = (lo[k] - p[k]) / d, b = (hi[k] - p[k]) / d;
+        t0 = fmax(t0, fmin(a, b));
+        t1 = fmin(t1, fmax(a, b));
+    }
+    return t0 <= t1;
+}
+
+static bool box_dark(const double p[3], const float dir[3], const double lo[3], const double hi[3], bool under)
+{
+    return stab_box_shadows(p, dir, lo, hi) ||
+           (under && p[0] >= lo[0] && p[0] <= hi[0] && p[2] >= lo[2] && p[2] <= hi[2]);
+}
+
+stab_box_result stab_check_box_on_plane(const srv_loop *loop, srv_viewer_id id, const srv_camera *cam,
+                                        double plane_y, const double lo[3], const double hi[3], bool under_is_dark,
+                                        float density, float ao_radius, double depth_tolerance)
+{
+    stab_box_result out;
+    memset(&out, 0, sizeof out);
+    uint32_t w = 0, h = 0;
+    assert_int_equal(srv_viewer_size(loop, id, &w, &h), FXC_OK);
+    srv_camera_frame f;
+    assert_true(srv_camera_setup(cam, w, h, &f));
+    const scene *s = srv_loop_desc_of(loop)->s;
+    const float *sun = s->lights[0].direction;
+    const float *depth = srv_viewer_depth(loop, id), *lit = srv_viewer_view(loop, id, SRV_VIEW_SHADOW);
+    const float *ao = srv_viewer_view(loop, id, SRV_VIEW_AO);
+    assert_non_null(lit);
+    for (uint32_t y = 0; y < h; y++)
+        for (uint32_t x = 0; x < w; x++) {
+            size_t p = (size_t)y * w + x;
+            double t = stab_plane_depth(&f, x, y, plane_y), q[3], dir[3];
+            if (!(fabs(depth[p] - t) <= depth_tolerance * t))
+                continue; /* the box, or the sky */
+            pixel_direction(&f, x, y, dir);
+            stab_pixel_point(&f, x, y, (float)t, q);
+            q[1] = plane_y;
+            out.plane_pixels++;
+            out.worst_depth = fmax(out.worst_depth, fabs(depth[p] - t) / t);
+            double footprint = t * 2.0 * f.tan_half_y / h / fabs(dir[1]);
+            double band = 2.0 * fmax(1.42 * footprint, 1.0 / density) + footprint;
+            double dx = fmax(fmax(lo[0] - q[0], q[0] - hi[0]), 0.0), dz = fmax(fmax(lo[2] - q[2], q[2] - hi[2]), 0.0);
+            if (sqrt(dx * dx + dz * dz) > ao_radius + 2 * band) {
+                out.open++;
+                if (!(fabs(ao[p] - 1.0) <= 0x1p-22))
+                    fail_msg("pixel (%u, %u) at (%.9g, %.9g): AO %.9g, nothing within its radius", x, y, q[0], q[2],
+                             (double)ao[p]);
+            }
+            bool shadowed = box_dark(q, sun, lo, hi, under_is_dark), near_edge = false;
+            for (int a = -8; a <= 8 && !near_edge; a++)
+                for (int b = -8; b <= 8 && !near_edge; b++) {
+                    double r[3] = {q[0] + band * a / 8.0, q[1], q[2] + band * b / 8.0};
+                    near_edge = box_dark(r, sun, lo, hi, under_is_dark) != shadowed;
+                }
+            if (near_edge)
+                continue;
+            out.lit_checked++;
+            out.dark += shadowed;
+            if (!(fabs(lit[p] - (shadowed ? 0.0 : 1.0)) <= 0x1p-22))
+                fail_msg("pixel (%u, %u) at (%.9g, %.9g): lit fraction %.9g, %s by the box", x, y, q[0], q[2],
+                         (double)lit[p], shadowed ? "shadowed" : "not shadowed");
         }
     return out;
 }

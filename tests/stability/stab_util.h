@@ -122,7 +122,7 @@ typedef struct stab_plane_result {
 } stab_plane_result;
 
 /* Checks every pixel of viewer id (rendered from cam) over the floor stab_open_plane makes (or any floor
- * y = plane_y, |x - cx|, |z - cz| <= half, with nothing above it), with shadows and AO: a pixel whose ray
+ * y = plane_y, |x - cx| <= half_x, |z - cz| <= half_z, with nothing above it), with shadows and AO: a pixel whose ray
  * reaches the floor more than 1e-4 of its distance inside the border must hit it at the depth along the ray
  * (computed in double from the camera's float frame) within its rounding bound, 2^-20 (1 + tan_x + tan_y) /
  * |d_y| relative (the direction's float rounding, 2^-23 per component of a sum of terms up to 1 + tan_x + tan_y,
@@ -131,4 +131,32 @@ typedef struct stab_plane_result {
  * horizon) within 2^-22: every texel holds exactly 1 (or 0), and a filter's weights sum to 1 within four
  * roundings; a ray that misses it by as much sees the sky. Fails the test at the first finding. */
 stab_plane_result stab_check_open_plane(const srv_loop *loop, srv_viewer_id id, const srv_camera *cam,
-                                        double plane_y, double cx, double cz, double half);
+                                        double plane_y, double cx, double cz, double half_x, double half_z);
+
+/* ---- a box over a plane (stab_cameras.c, stab_geometry.c) ----------------------------------------------- */
+
+/* Whether the ray from p against the light's direction dir (towards the sun) meets the box [lo, hi]. */
+bool stab_box_shadows(const double p[3], const float dir[3], const double lo[3], const double hi[3]);
+
+/* What stab_check_box_on_plane found. */
+typedef struct stab_box_result {
+    uint32_t plane_pixels; /* pixels at the plane's depth (within depth_tolerance relative) */
+    uint32_t lit_checked;  /* of which away from the shadow's edge (lit fraction checked) */
+    uint32_t dark;         /* of which in the shadow */
+    uint32_t open;         /* plane pixels beyond the AO radius plus the band from the box (AO checked) */
+    double worst_depth;    /* relative */
+} stab_box_result;
+
+/* Checks the kept views of viewer id (rendered from cam, shadows and AO) over a plane y = plane_y with one
+ * box [lo, hi] on or over it, lit by a sun travelling along sun (s's light 0), at texel density `density` with
+ * an AO radius ao_radius: plane pixels (the box hides the plane elsewhere) must lie at the plane's depth
+ * within depth_tolerance (relative); their lit fraction is 1 where the sun's ray misses the box and 0 where it
+ * meets it (or where the point lies under the box, when `under_is_dark`: the plane runs on under a box that
+ * stands on it, and a texel reaching under it is partly dark, ARCHITECTURE.md's departure), within 2^-22,
+ * except within a band of 2 texels of the level the pixel reads plus its footprint around the shadow's
+ * edge: a pixel's level is round(log2 footprint), so its texel is at most 1.42 footprints (or one level-0
+ * texel), a filtered read reaches a texel to either side; AO is 1 within 2^-22 beyond the AO radius plus
+ * twice that band (AO reads one level coarser) from the box's footprint. Fails at the first finding. */
+stab_box_result stab_check_box_on_plane(const srv_loop *loop, srv_viewer_id id, const srv_camera *cam,
+                                        double plane_y, const double lo[3], const double hi[3], bool under_is_dark,
+                                        float density, float ao_radius, double depth_tolerance);
