@@ -190,14 +190,16 @@ static uint32_t memo_level(const kind_wsc *k, cell_memo *m, double distance)
 /* Levels blend into each other: over the last quarter of a level's distances (3/4 to 1 of its upper end)
  * the next level's cells fade in, so no seam shows where the level changes; at the boundary a pixel reads
  * the next level alone, as the pixel just beyond it does. A pixel's level (bias included) and the weight
- * of level + 1 in [0, 1]. */
+ * of level + 1 in [0, 1]. The sum is taken in 64 bits (a bias of INT32_MAX overflowed it), and a bias that
+ * puts the next level below 0 too leaves nothing to blend (both clamp to level 0; it used to blend level 1
+ * in: found by tests/stability/stab_caches.c). */
 static uint32_t pixel_level(const kind_wsc *k, cell_memo *m, const srv_pixel *px, int32_t bias, float *blend)
 {
     double distance = (double)px->distance;
-    int32_t l = (int32_t)memo_level(k, m, distance) + bias;
-    uint32_t level = l < 0 ? 0 : (l > (int32_t)WSC_MAX_LEVEL ? WSC_MAX_LEVEL : (uint32_t)l);
+    int64_t l = (int64_t)memo_level(k, m, distance) + bias;
+    uint32_t level = l < 0 ? 0 : (l > (int64_t)WSC_MAX_LEVEL ? WSC_MAX_LEVEL : (uint32_t)l);
     double b = (distance * m->inv_top - 0.75) * 4.0;
-    *blend = level >= WSC_MAX_LEVEL || !(b > 0.0) ? 0.0f : (b >= 1.0 ? 1.0f : (float)b);
+    *blend = level >= WSC_MAX_LEVEL || l + 1 <= 0 || !(b > 0.0) ? 0.0f : (b >= 1.0 ? 1.0f : (float)b);
     return level;
 }
 
