@@ -272,46 +272,6 @@ static void test_light_inside_geometry(void **state)
 
 /* ---- a light switched on and off ------------------------------------------------------------------------ */
 
-enum { BW = 48, BH = 32 };
-
-/* A loop over the bounce scene with probes (64 rays, hysteresis h) and shadows. */
-static srv_loop *bounce_loop(scene *s, scene_rt *rt, float h, srv_viewer_id *id)
-{
-    srv_loop_desc d = {.s = s, .rt = rt, .seed = 21, .threads = 2, .probe_rays = 64, .probe_hysteresis = h,
-                       .probe_cell = 0.5f, .keep_views = true};
-    fxt_effects_on(&d, (const char *const[]){"shadow", "probes"}, 2);
-    return fxt_loop(&d, 1, BW, BH, id);
-}
-
-/* One frame of the bounce scene: the wall's and the floor's mean radiance. */
-static void bounce_frame(srv_loop *loop, srv_viewer_id id, double *wall, double *floor)
-{
-    srv_camera cam = stab_bounce_camera();
-    srv_frame_stats st;
-    stab_frames(loop, &id, 1, &cam, true, 1, &st);
-    stab_bounce_means(loop, id, wall, floor);
-}
-
-/* The wall's steady light: 40 frames at hysteresis 0.5 (the blend's fixed point does not depend on h; the
- * error falls by about 0.5 per frame) and its frame-to-frame spread over 10 more (the probes' Monte Carlo
- * noise after the blend). */
-static void bounce_steady(scene *s, scene_rt *rt, double *mean, double *spread)
-{
-    srv_viewer_id id;
-    srv_loop *loop = bounce_loop(s, rt, 0.5f, &id);
-    double wall = 0, floor = 0, sum = 0, sum2 = 0;
-    for (int f = 0; f < 40; f++)
-        bounce_frame(loop, id, &wall, &floor);
-    for (int f = 0; f < 10; f++) {
-        bounce_frame(loop, id, &wall, &floor);
-        sum += wall;
-        sum2 += wall * wall;
-    }
-    *mean = sum / 10;
-    *spread = sqrt(fmax(sum2 / 10 - *mean * *mean, 0.0));
-    srv_loop_free(loop);
-}
-
 /* A sun switched on and off over the bounce scene. Direct light has no memory: the floor's radiance is
  * albedo x E (+ its small bounce) in the very frame the sun goes on, and falls to its bounce alone in the
  * frame it goes off. The wall's light comes through the probes: with hysteresis h = 0.5 each update blends
@@ -329,27 +289,27 @@ static void test_light_switched_on_and_off(void **state)
     scene_rt *rt;
     scene *s = stab_bounce_scene(intensity, &rt);
     double V, spread;
-    bounce_steady(s, rt, &V, &spread);
+    stab_bounce_steady(s, rt, 10, &V, &spread);
     double bound = 0.04 * V + 4 * spread;
     print_message("bounce scene: the wall's steady radiance %.5f, frame-to-frame spread %.5f, bound %.5f\n", V,
                   spread, bound);
     assert_true(V > 0.01);
 
     srv_viewer_id id;
-    srv_loop *loop = bounce_loop(s, rt, h, &id);
+    srv_loop *loop = stab_bounce_loop(s, rt, h, &id);
     stab_probe_counts *then = malloc(sizeof *then);
     assert_non_null(then);
     double wall, floor, worst = 0, peak = 0;
     s->lights[0].intensity = 0.0f; /* three dark frames: every probe holds 0 */
     for (int f = 0; f < 3; f++)
-        bounce_frame(loop, id, &wall, &floor);
+        stab_bounce_frame(loop, id, &wall, &floor);
     assert_true(wall == 0.0 && floor == 0.0);
     stab_probe_snapshot(loop, then);
     s->lights[0].intensity = intensity;
     int settled_on = -1;
     uint32_t least = 0, most = 0;
     for (int k = 1; k <= 70; k++) {
-        bounce_frame(loop, id, &wall, &floor);
+        stab_bounce_frame(loop, id, &wall, &floor);
         assert_true(stab_probe_updates_since(loop, then, &least, &most) > then->count / 2);
         /* The probes around a wall pixel have had `least` to `most` updates since the switch. */
         double low = V * (1.0 - pow(h, (double)least)), high = V * (1.0 - pow(h, (double)most));
@@ -374,7 +334,7 @@ static void test_light_switched_on_and_off(void **state)
     int settled_off = -1;
     worst = 0;
     for (int k = 1; k <= 48; k++) {
-        bounce_frame(loop, id, &wall, &floor);
+        stab_bounce_frame(loop, id, &wall, &floor);
         assert_true(stab_probe_updates_since(loop, then, &least, &most) > then->count / 2);
         double low = start * pow(h, (double)most), high = start * pow(h, (double)least);
         worst = fmax(worst, fmax(low - wall, wall - high));

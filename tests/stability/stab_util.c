@@ -521,6 +521,39 @@ void stab_bounce_means(const srv_loop *loop, srv_viewer_id id, double *wall, dou
     *floor = sum[1] / count[1];
 }
 
+srv_loop *stab_bounce_loop(scene *s, scene_rt *rt, float h, srv_viewer_id *id)
+{
+    srv_loop_desc d = {.s = s, .rt = rt, .seed = 21, .threads = 2, .probe_rays = 64, .probe_hysteresis = h,
+                       .probe_cell = 0.5f, .keep_views = true};
+    fxt_effects_on(&d, (const char *const[]){"shadow", "probes"}, 2);
+    return fxt_loop(&d, 1, 48, 32, id);
+}
+
+void stab_bounce_frame(srv_loop *loop, srv_viewer_id id, double *wall, double *floor)
+{
+    srv_camera cam = stab_bounce_camera();
+    srv_frame_stats st;
+    stab_frames(loop, &id, 1, &cam, true, 1, &st);
+    stab_bounce_means(loop, id, wall, floor);
+}
+
+void stab_bounce_steady(scene *s, scene_rt *rt, uint32_t frames, double *mean, double *spread)
+{
+    srv_viewer_id id;
+    srv_loop *loop = stab_bounce_loop(s, rt, 0.5f, &id);
+    double wall = 0, floor = 0, sum = 0, sum2 = 0;
+    for (int f = 0; f < 40; f++)
+        stab_bounce_frame(loop, id, &wall, &floor);
+    for (uint32_t f = 0; f < frames; f++) {
+        stab_bounce_frame(loop, id, &wall, &floor);
+        sum += wall;
+        sum2 += wall * wall;
+    }
+    *mean = sum / frames;
+    *spread = sqrt(fmax(sum2 / frames - *mean * *mean, 0.0));
+    srv_loop_free(loop);
+}
+
 void stab_probe_snapshot(srv_loop *loop, stab_probe_counts *out)
 {
     out->count = 0;

@@ -86,6 +86,18 @@ srv_camera stab_bounce_camera(void);
  * of the floor's (x 1.5..3.5, |z| < 1.4), from a viewer's depth and radiance. */
 void stab_bounce_means(const srv_loop *loop, srv_viewer_id id, double *wall, double *floor);
 
+/* A loop over the bounce scene: shadows and probes (64 rays, hysteresis h, finest cell 0.5 m), one viewer of
+ * 48 x 32 (views kept). */
+srv_loop *stab_bounce_loop(scene *s, scene_rt *rt, float h, srv_viewer_id *id);
+
+/* One frame of the bounce scene from stab_bounce_camera() (checked): the wall's and the floor's mean radiance. */
+void stab_bounce_frame(srv_loop *loop, srv_viewer_id id, double *wall, double *floor);
+
+/* The wall's steady light: 40 frames at hysteresis 0.5 (the blend's fixed point does not depend on h; the
+ * error falls by about 0.5 per frame), then its mean and frame-to-frame spread over `frames` more (the probes'
+ * Monte Carlo noise after the blend). */
+void stab_bounce_steady(scene *s, scene_rt *rt, uint32_t frames, double *mean, double *spread);
+
 /* The update counts of the probes switched on and requested this frame in the loop's world-space cache, by key
  * (white-box). */
 typedef struct stab_probe_counts {
