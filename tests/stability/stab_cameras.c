@@ -39,9 +39,9 @@ static stab_plane_result plane_view(scene *s, scene_rt *rt, const srv_camera *ca
 /* ---- fields of view ------------------------------------------------------------------------------------------ */
 
 /* 0.5 and 170 degrees (and 179.9), looking down at the open plane at 30 degrees: every pixel the plane's depth
- * and closed-form radiance (stab_check_open_plane), or the sky. At 0.5 degrees a pixel covers 0.1 mm of the
- * plane, a thousandth of a level-0 texel (the shadow's sub-texel grid is read); at 170 degrees the outer
- * pixels meet the plane at grazing angles, 10 km away (the level clamps at 15). */
+ * and closed-form radiance (stab_check_open_plane), or the sky. At 0.5 degrees a pixel covers 1.5 mm of the
+ * plane, a 170th of a level-0 texel (the shadow's sub-texel grid is read); at 170 and 179.9 degrees the outer
+ * pixels meet the plane at grazing angles, their footprints and levels clamped. */
 static void test_fov_0_5_and_170_deg(void **state)
 {
     (void)state;
