@@ -213,7 +213,9 @@ static void ao_resample(const fx_context *ctx, const void *const finer[4], void 
     fx__put_u16((uint8_t *)texel + 2, FX_AO_MAX_SAMPLES);
 }
 
-/* The sky's visibility: the filtered unoccluded fraction. */
+/* The sky's visibility: the filtered unoccluded fraction. The renormalised weights sum to 1 only to within
+ * rounding, so four texels of 1 can give 1 + 2^-23: the fraction is clamped to 1 (a visibility, never a
+ * gain; found by tests/stability). */
 FXC_HOT_CLONES static void ao_shade(const fx_context *ctx, const fx_shade_run *run)
 {
     (void)ctx;
@@ -224,7 +226,7 @@ FXC_HOT_CLONES static void ao_shade(const fx_context *ctx, const fx_shade_run *r
         float ao = 0;
         for (uint32_t t = 0; t < taps->count; t++)
             ao += taps->weight[t] * fx_ao_sample(taps->texel[t], 0);
-        run->sky_visibility[i] *= ao;
+        run->sky_visibility[i] *= fminf(ao, 1.0f);
     }
 }
 

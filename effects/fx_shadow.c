@@ -295,7 +295,8 @@ static inline int shadow_tap_at(const fx_taps *taps, int from, int ox, int oy)
  * own position, which places shadow edges inside texels (DESIGN.md, "Hard shadows") without more rays; a
  * cell whose texel holds no data takes the nearest cell of the pixel's own texel. A pixel as large as a
  * texel reads the texels' lit fractions bilinearly instead (a point sample of the fine grid would alias);
- * in between, the two are blended by the pixel's size in texels. */
+ * in between, the two are blended by the pixel's size in texels. The renormalised weights sum to 1 only to
+ * within rounding: a fraction is clamped to 1 (a visibility, never a gain; found by tests/stability). */
 FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_run *run)
 {
     (void)ctx;
@@ -323,7 +324,7 @@ FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_ru
                 float lit = 0;
                 for (uint32_t t = 0; t < taps->count; t++)
                     lit += taps->weight[t] * lit_fraction(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
-                run->light_visibility[(size_t)i * lights + l] *= lit;
+                run->light_visibility[(size_t)i * lights + l] *= fminf(lit, 1.0f);
             }
             continue;
         }
@@ -355,7 +356,7 @@ FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_ru
                 for (uint32_t t = 0; t < taps->count; t++)
                     average +=
                         taps->weight[t] * lit_fraction(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
-            run->light_visibility[(size_t)i * lights + l] *= fine + coarse * (average - fine);
+            run->light_visibility[(size_t)i * lights + l] *= fminf(fine + coarse * (average - fine), 1.0f);
         }
     }
 }

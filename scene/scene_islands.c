@@ -163,70 +163,84 @@ static scene_result start_chart(const scene *s, island_work *work, uint32_t char
         for (int c = 0; c < 3; c++)
             pos[k][c] = s->positions[3 * (size_t)corner[k] + c];
 
-    /* The longest edge becomes the u axis, so thin triangles get tight boxes. */
-    int first = 0;
-    double longest = -1;
+    /* The longest edge becomes the u axis, so thin triangles get tight boxes; when the seed does not fit an
+     * island that way (a right triangle's legs may fit where its hypotenuse is 1.41 times too long), the other
+     * edges are tried, longer first. Only a seed that fits along none of its edges is refused. */
+    int order[3] = {0, 1, 2};
+    double edge_len2[3];
     for (int k = 0; k < 3; k++) {
         const double *a = pos[k], *b = pos[(k + 1) % 3];
-        double len2 =
+        edge_len2[k] =
             (b[0] - a[0]) * (b[0] - a[0]) + (b[1] - a[1]) * (b[1] - a[1]) + (b[2] - a[2]) * (b[2] - a[2]);
-        if (len2 > longest) {
-            longest = len2;
-            first = k;
+    }
+    for (int i = 1; i < 3; i++) /* by decreasing length, the first of equal ones first (as before) */
+        for (int j = i; j > 0 && edge_len2[order[j]] > edge_len2[order[j - 1]]; j--) {
+            int t = order[j];
+            order[j] = order[j - 1];
+            order[j - 1] = t;
         }
-    }
-    const double *a = pos[first], *b = pos[(first + 1) % 3], *c = pos[(first + 2) % 3];
-    double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
-    double e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
-    double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
-                   e1[0] * e2[1] - e1[1] * e2[0]};
-    double n_len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-    if (!(n_len > 0)) { /* degenerate slipped through: use the stored normal */
-        for (int k = 0; k < 3; k++)
-            n[k] = s->tri_normal[3 * (size_t)seed + k];
-        n_len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-        if (!(n_len > 0)) {
-            n[0] = n[1] = 0;
-            n[2] = n_len = 1;
+    int first = order[0];
+    double proj_u[3], proj_v[3], width = 0, height = 0, longest_width = 0, longest_height = 0;
+    for (int attempt = 0; attempt < 3; attempt++) {
+        first = order[attempt];
+        const double *a = pos[first], *b = pos[(first + 1) % 3], *c = pos[(first + 2) % 3];
+        double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+        double e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+        double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                       e1[0] * e2[1] - e1[1] * e2[0]};
+        double n_len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        if (!(n_len > 0)) { /* degenerate slipped through: use the stored normal */
+            for (int k = 0; k < 3; k++)
+                n[k] = s->tri_normal[3 * (size_t)seed + k];
+            n_len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+            if (!(n_len > 0)) {
+                n[0] = n[1] = 0;
+                n[2] = n_len = 1;
+            }
         }
-    }
-    for (int k = 0; k < 3; k++)
-        chart->normal[k] = n[k] / n_len;
-    /* u: the longest edge made orthogonal to the normal; v = normal x u (corners then run counter-clockwise).
-     */
-    double along = e1[0] * chart->normal[0] + e1[1] * chart->normal[1] + e1[2] * chart->normal[2];
-    double u_axis[3] = {e1[0] - along * chart->normal[0], e1[1] - along * chart->normal[1],
-                        e1[2] - along * chart->normal[2]};
-    double u_len = sqrt(u_axis[0] * u_axis[0] + u_axis[1] * u_axis[1] + u_axis[2] * u_axis[2]);
-    if (!(u_len > 0)) { /* all corners equal: any axis orthogonal to the normal */
-        const double *nn = chart->normal;
-        double helper[3] = {fabs(nn[0]) < 0.9 ? 1.0 : 0.0, fabs(nn[0]) < 0.9 ? 0.0 : 1.0, 0.0};
-        double h_along = helper[0] * nn[0] + helper[1] * nn[1];
         for (int k = 0; k < 3; k++)
-            u_axis[k] = helper[k] - h_along * nn[k];
-        u_len = sqrt(u_axis[0] * u_axis[0] + u_axis[1] * u_axis[1] + u_axis[2] * u_axis[2]);
-    }
-    for (int k = 0; k < 3; k++) {
-        chart->axis_u[k] = u_axis[k] / u_len;
-        chart->origin[k] = a[k];
-    }
-    const double *nn = chart->normal, *uu = chart->axis_u;
-    chart->axis_v[0] = nn[1] * uu[2] - nn[2] * uu[1];
-    chart->axis_v[1] = nn[2] * uu[0] - nn[0] * uu[2];
-    chart->axis_v[2] = nn[0] * uu[1] - nn[1] * uu[0];
-    chart->steps_per_metre = (double)s->texel_density * ISLAND_SUBTEXELS;
+            chart->normal[k] = n[k] / n_len;
+        /* u: the edge made orthogonal to the normal; v = normal x u (corners then run counter-clockwise). */
+        double along = e1[0] * chart->normal[0] + e1[1] * chart->normal[1] + e1[2] * chart->normal[2];
+        double u_axis[3] = {e1[0] - along * chart->normal[0], e1[1] - along * chart->normal[1],
+                            e1[2] - along * chart->normal[2]};
+        double u_len = sqrt(u_axis[0] * u_axis[0] + u_axis[1] * u_axis[1] + u_axis[2] * u_axis[2]);
+        if (!(u_len > 0)) { /* all corners equal: any axis orthogonal to the normal */
+            const double *nn = chart->normal;
+            double helper[3] = {fabs(nn[0]) < 0.9 ? 1.0 : 0.0, fabs(nn[0]) < 0.9 ? 0.0 : 1.0, 0.0};
+            double h_along = helper[0] * nn[0] + helper[1] * nn[1];
+            for (int k = 0; k < 3; k++)
+                u_axis[k] = helper[k] - h_along * nn[k];
+            u_len = sqrt(u_axis[0] * u_axis[0] + u_axis[1] * u_axis[1] + u_axis[2] * u_axis[2]);
+        }
+        for (int k = 0; k < 3; k++) {
+            chart->axis_u[k] = u_axis[k] / u_len;
+            chart->origin[k] = a[k];
+        }
+        const double *nn = chart->normal, *uu = chart->axis_u;
+        chart->axis_v[0] = nn[1] * uu[2] - nn[2] * uu[1];
+        chart->axis_v[1] = nn[2] * uu[0] - nn[0] * uu[2];
+        chart->axis_v[2] = nn[0] * uu[1] - nn[1] * uu[0];
+        chart->steps_per_metre = (double)s->texel_density * ISLAND_SUBTEXELS;
 
-    /* Unsnapped corners in texels, to check the size before anything is converted to integers. */
-    double proj_u[3], proj_v[3], umin = INFINITY, vmin = INFINITY, umax = -INFINITY, vmax = -INFINITY;
-    for (int k = 0; k < 3; k++) {
-        project_vertex(s, chart, corner[(first + k) % 3], &proj_u[k], &proj_v[k]);
-        umin = fmin(umin, proj_u[k]);
-        umax = fmax(umax, proj_u[k]);
-        vmin = fmin(vmin, proj_v[k]);
-        vmax = fmax(vmax, proj_v[k]);
+        /* Unsnapped corners in texels, to check the size before anything is converted to integers. */
+        double umin = INFINITY, vmin = INFINITY, umax = -INFINITY, vmax = -INFINITY;
+        for (int k = 0; k < 3; k++) {
+            project_vertex(s, chart, corner[(first + k) % 3], &proj_u[k], &proj_v[k]);
+            umin = fmin(umin, proj_u[k]);
+            umax = fmax(umax, proj_u[k]);
+            vmin = fmin(vmin, proj_v[k]);
+            vmax = fmax(vmax, proj_v[k]);
+        }
+        width = ceil((umax - umin) / ISLAND_SUBTEXELS) + 2;
+        height = ceil((vmax - vmin) / ISLAND_SUBTEXELS) + 2;
+        if (attempt == 0) {
+            longest_width = width;
+            longest_height = height;
+        }
+        if (width <= SCENE_MAX_ISLAND_TEXELS && height <= SCENE_MAX_ISLAND_TEXELS)
+            break;
     }
-    double width = ceil((umax - umin) / ISLAND_SUBTEXELS) + 2,
-           height = ceil((vmax - vmin) / ISLAND_SUBTEXELS) + 2;
     if (!(width <= SCENE_MAX_ISLAND_TEXELS && height <= SCENE_MAX_ISLAND_TEXELS)) {
         uint32_t mesh = s->tri_mesh[seed];
         uint32_t local = (s->meshes && mesh < s->mesh_count) ? seed - s->meshes[mesh].first_triangle : seed;
@@ -234,7 +248,7 @@ static scene_result start_chart(const scene *s, island_work *work, uint32_t char
             err, SCENE_ERR_RANGE,
             "mesh '%s' triangle %u (scene triangle %u) needs %.0f x %.0f texels at %g texels/m; "
             "an island may be at most %d texels on a side: lower the texel density",
-            mesh_name(s, mesh), local, seed, width, height, (double)s->texel_density,
+            mesh_name(s, mesh), local, seed, longest_width, longest_height, (double)s->texel_density,
             (int)SCENE_MAX_ISLAND_TEXELS);
     }
 

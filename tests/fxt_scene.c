@@ -4,6 +4,7 @@
 #include "fxt_scene.h"
 #include "scene_internal.h"
 
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -140,4 +141,80 @@ void fxt_island_run_free(fxt_island_run *run)
     free(run->lookup);
     free(run->payload);
     free(run->jobs);
+}
+
+/* The embedded scene scaled by `scale` and moved by `offset` (every axis), with its sun, sky, AO radius and
+ * camera transformed alike (the camera in double, as a scene description gives it); light intensities and
+ * the sky multiplied by `intensity_scale`. Finalised at the automatic texel density, which follows the
+ * scale, so the islands are the same in texels at every scale. */
+scene *fxt_transformed_default(double scale, double offset, float intensity_scale)
+{
+    scene_error err = {0};
+    scene *base = scene_create_default(NULL, &err);
+    assert_non_null(base);
+    scene *s = scene__alloc();
+    assert_non_null(s);
+    for (uint32_t m = 0; m < base->material_count; m++)
+        assert_int_not_equal(scene__add_material(s, &base->materials[m], &err), UINT32_MAX);
+    const double xform[16] = {scale, 0, 0, offset, 0, scale, 0, offset, 0, 0, scale, offset, 0, 0, 0, 1};
+    for (uint32_t m = 0; m < base->mesh_count; m++) {
+        const scene_mesh *mesh = &base->meshes[m];
+        assert_int_equal(scene__add_mesh(s, mesh->name, base->positions, base->vertex_count,
+                                         base->indices + 3 * (size_t)mesh->first_triangle, mesh->triangle_count,
+                                         NULL, mesh->material, xform, &err),
+                         SCENE_OK);
+    }
+    for (uint32_t l = 0; l < base->light_count; l++) {
+        scene_light light = base->lights[l];
+        light.intensity *= intensity_scale;
+        assert_int_equal(scene__add_light(s, &light, "test light", &err), SCENE_OK);
+    }
+    memcpy(s->sky_color, base->sky_color, sizeof s->sky_color);
+    s->sky_intensity = base->sky_intensity * intensity_scale;
+    s->ao_radius = (float)(base->ao_radius * scale);
+    if (base->has_camera) {
+        double position[3], target[3];
+        for (int k = 0; k < 3; k++) {
+            position[k] = base->camera_pos[k] * scale + offset;
+            target[k] = base->camera_target[k] * scale + offset;
+        }
+        assert_true(scene__set_camera_world(s, position, target, base->camera_fov_deg));
+    }
+    scene_free(base);
+    assert_int_equal(scene__finalize(s, NULL, &err), SCENE_OK);
+    return s;
+}
+
+/* ---- the closed form of AO in a corner (test_crease.c, the stability suite) ---------------------------- */
+
+/* Antiderivative of sqrt(1 - x^2) on [-1, 1]. */
+static double half_disk_primitive(double x)
+{
+    x = fmin(fmax(x, -1.0), 1.0);
+    return 0.5 * (x * sqrt(1 - x * x) + asin(x));
+}
+
+/* Area of the unit disk with x > -a and z > -b (a, b >= 0; INFINITY for no bound). */
+static double disk_area_beyond(double a, double b)
+{
+    double lo = -fmin(a, 1.0);
+    /* Integrate sqrt(1 - x^2) + min(sqrt(1 - x^2), b) over x in [lo, 1]. */
+    double area = 2 * (half_disk_primitive(1) - half_disk_primitive(lo));
+    if (b < 1) {
+        double c = sqrt(1 - b * b), from = fmax(lo, -c);
+        if (from < c)
+            area -= half_disk_primitive(c) - half_disk_primitive(from) - b * (c - from);
+    }
+    return area;
+}
+
+double fxt_disk_open(double d1, double d2, double h, double radius)
+{
+    const double pi = 3.14159265358979323846;
+    double a = d1 / radius, b = d2 / radius, open = disk_area_beyond(a, b);
+    if (h < radius) {
+        double rho = sqrt(1 - (h / radius) * (h / radius)); /* rays inside this disk reach the ceiling */
+        open -= rho * rho * disk_area_beyond(a / rho, b / rho);
+    }
+    return open / pi;
 }

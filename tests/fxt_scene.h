@@ -44,4 +44,15 @@ void fxt_island_run_init(fxt_island_run *run, const scene *s, uint32_t island, u
 /* Releases a run's storage. */
 void fxt_island_run_free(fxt_island_run *run);
 
+/* The embedded default scene scaled by `scale` about the world origin, then moved by `offset` on every axis,
+ * with its sun, sky, AO radius and camera transformed alike; lights and sky times `intensity_scale`;
+ * finalised at the automatic density (which follows the scale). */
+scene *fxt_transformed_default(double scale, double offset, float intensity_scale);
+
+/* The unoccluded fraction of cosine-weighted rays of length radius from a floor point at distances d1, d2 from
+ * two perpendicular walls (INFINITY: no wall) under a ceiling at height h (INFINITY: none), in closed form: a
+ * cosine-weighted direction projects to a uniform point of the unit disk (Malley), and a ray meets a wall at
+ * distance d iff its component towards it exceeds d / radius (test_crease.c checks it by counting). */
+double fxt_disk_open(double d1, double d2, double h, double radius);
+
 #endif

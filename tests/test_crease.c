@@ -37,8 +37,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-static const double PI = 3.14159265358979323846;
-
 /* ---- scene building (as in test_effects.c) -------------------------------------------------------- */
 
 
@@ -137,38 +135,8 @@ static void uv_world(const uv_to_world *map, double u, double v, double out[3])
 
 /* ---- closed forms ----------------------------------------------------------------------------------- */
 
-/* Antiderivative of sqrt(1 - x^2) on [-1, 1]. */
-static double half_disk_primitive(double x)
-{
-    x = fmin(fmax(x, -1.0), 1.0);
-    return 0.5 * (x * sqrt(1 - x * x) + asin(x));
-}
-
-/* Area of the unit disk with x > -a and z > -b (a, b >= 0; INFINITY for no bound). */
-static double disk_area_beyond(double a, double b)
-{
-    double lo = -fmin(a, 1.0);
-    /* Integrate sqrt(1 - x^2) + min(sqrt(1 - x^2), b) over x in [lo, 1]. */
-    double area = 2 * (half_disk_primitive(1) - half_disk_primitive(lo));
-    if (b < 1) {
-        double c = sqrt(1 - b * b), from = fmax(lo, -c);
-        if (from < c)
-            area -= half_disk_primitive(c) - half_disk_primitive(from) - b * (c - from);
-    }
-    return area;
-}
-
-/* The unoccluded fraction of cosine-weighted rays of length radius from a floor point at distances d1, d2
- * from two perpendicular walls (INFINITY: no wall) under a ceiling at height h (INFINITY: none). */
-static double disk_open(double d1, double d2, double h, double radius)
-{
-    double a = d1 / radius, b = d2 / radius, open = disk_area_beyond(a, b);
-    if (h < radius) {
-        double rho = sqrt(1 - (h / radius) * (h / radius)); /* rays inside this disk reach the ceiling */
-        open -= rho * rho * disk_area_beyond(a / rho, b / rho);
-    }
-    return open / PI;
-}
+/* disk_open: fxt_disk_open (fxt_scene.c), shared with the stability suite. */
+#define disk_open fxt_disk_open
 
 /* The closed form against a second method: counting the cells of a fine grid over the unit disk. */
 static void test_closed_form(void **state)

@@ -5,50 +5,12 @@
 
 #include "camgen.h"
 #include "engine.h"
-#include "scene_internal.h"
+#include "fxt_scene.h"
 
 #include <float.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
-
-/* The embedded scene scaled by `scale` and moved by `offset` (every axis), with its sun, sky, AO radius and
- * camera transformed alike; light intensities multiplied by `intensity_scale`. */
-static scene *transformed_default(float scale, float offset, float intensity_scale)
-{
-    scene_error err = {0};
-    scene *base = scene_create_default(NULL, &err);
-    assert_non_null(base);
-    scene *s = scene__alloc();
-    assert_non_null(s);
-    for (uint32_t m = 0; m < base->material_count; m++)
-        assert_int_not_equal(scene__add_material(s, &base->materials[m], &err), UINT32_MAX);
-    const double xform[16] = {scale, 0, 0, offset, 0, scale, 0, offset, 0, 0, scale, offset, 0, 0, 0, 1};
-    for (uint32_t m = 0; m < base->mesh_count; m++) {
-        const scene_mesh *mesh = &base->meshes[m];
-        assert_int_equal(scene__add_mesh(s, mesh->name, base->positions, base->vertex_count,
-                                         base->indices + 3 * (size_t)mesh->first_triangle, mesh->triangle_count,
-                                         NULL, mesh->material, xform, &err),
-                         SCENE_OK);
-    }
-    for (uint32_t l = 0; l < base->light_count; l++) {
-        scene_light light = base->lights[l];
-        light.intensity *= intensity_scale;
-        assert_int_equal(scene__add_light(s, &light, "test light", &err), SCENE_OK);
-    }
-    memcpy(s->sky_color, base->sky_color, sizeof s->sky_color);
-    s->sky_intensity = base->sky_intensity * intensity_scale;
-    s->ao_radius = base->ao_radius * scale;
-    s->has_camera = base->has_camera;
-    for (int k = 0; k < 3; k++) {
-        s->camera_pos[k] = base->camera_pos[k] * scale + offset;
-        s->camera_target[k] = base->camera_target[k] * scale + offset;
-    }
-    s->camera_fov_deg = base->camera_fov_deg;
-    scene_free(base);
-    assert_int_equal(scene__finalize(s, NULL, &err), SCENE_OK);
-    return s;
-}
 
 typedef struct frame_result {
     double mean_ao, mean_shadow;
@@ -98,14 +60,14 @@ static frame_result run_view(scene *s, float fov_override)
 static void test_scales_agree(void **state)
 {
     (void)state;
-    scene *unit = transformed_default(1.0f, 0.0f, 1.0f);
+    scene *unit = fxt_transformed_default(1.0f, 0.0f, 1.0f);
     frame_result ref = run_view(unit, 0);
     scene_free(unit);
     assert_true(ref.finite);
     assert_true(ref.visible > 1000);
     const float scales[2][2] = {{1e-4f, 0.0f}, {1e4f, 1e5f}};
     for (int i = 0; i < 2; i++) {
-        scene *s = transformed_default(scales[i][0], scales[i][1], 1.0f);
+        scene *s = fxt_transformed_default(scales[i][0], scales[i][1], 1.0f);
         frame_result r = run_view(s, 0);
         scene_free(s);
         print_message("scale %g offset %g: AO %.4f (scale 1: %.4f), lit %.4f (scale 1: %.4f), visible %llu\n",
@@ -122,7 +84,7 @@ static void test_scales_agree(void **state)
 static void test_extreme_fov(void **state)
 {
     (void)state;
-    scene *s = transformed_default(1.0f, 0.0f, 1.0f);
+    scene *s = fxt_transformed_default(1.0f, 0.0f, 1.0f);
     frame_result narrow = run_view(s, 0.5f);
     frame_result wide = run_view(s, 179.5f);
     assert_true(narrow.finite && wide.finite);
@@ -136,7 +98,7 @@ static void test_extreme_intensity(void **state)
     (void)state;
     const float factors[2] = {1e30f, 1e-30f};
     for (int i = 0; i < 2; i++) {
-        scene *s = transformed_default(1.0f, 0.0f, factors[i]);
+        scene *s = fxt_transformed_default(1.0f, 0.0f, factors[i]);
         frame_result r = run_view(s, 0);
         assert_true(r.finite);
         scene_free(s);

@@ -1,7 +1,8 @@
 /* The world-space cache inside the engine (server/engine/kind_wsc.c) with the probe effect: a scene that
  * needs no indirect light allocates nothing for it; probes light what the sun does not reach; one and two
  * threads give identical images; the local lookup tables change no pixel; probes requested by identical
- * viewers are shared; points outside the grid's range are refused and counted, never wrapped. */
+ * viewers are shared; points outside the grid's range (measured from the scene's local frame) are refused and
+ * counted, never wrapped. */
 #include "test_util.h"
 
 #include "camgen.h"
@@ -177,34 +178,50 @@ static void test_identical_viewers_share_probes(void **state)
     srv_loop_free(loop);
 }
 
-/* A finest cell so small that the room lies outside the grid's range at the levels its distances choose:
- * every point is refused and counted, nothing is requested, nothing wraps onto other cells. */
+/* The grid's range is measured from the scene's local frame (kind_wsc.c): a scene 5e6 m from the world origin
+ * keeps its probes, while points further from the scene's frame than the grid reaches at the level their
+ * distance chooses are refused and counted, never wrapped. Here a floor 80 km above a speck at the origin
+ * (one scene, its frame at the world origin) seen from at most 5 m: at a 0.25 m finest cell, level 0 reaches
+ * 2^17 cells = 32.8 km up and level 1 (blended in from 3 m, alone from 4 m) 65.5 km, so every point of the
+ * high floor is refused; the same floor as a scene of its own, 5e6 m from the world origin, is not. */
 static void test_out_of_range_refused(void **state)
 {
-    fixture *f = *state;
-    scene *s = fxt_new_scene();
-    double far = 5.0e6; /* metres from the world origin */
-    fxt_add_quad(s, "floor", (const double[3]){far - 2, 0, -2}, (const double[3]){0, 0, 4},
-                 (const double[3]){4, 0, 0}, 2);
-    fxt_add_sun(s, 0.3f, -1.0f, 0.2f);
-    scene_rt *rt = fxt_finish_scene(s, 8, 0.5f);
-    (void)f;
-    srv_loop_desc d = {.s = s, .rt = rt, .seed = 1, .probe_cell = 0.001f};
-    fxt_effects_on(&d, (const char *const[]){"probes"}, 1);
-    srv_viewer_id id;
-    srv_loop *loop = fxt_loop(&d, 1, 32, 32, &id);
-    float target[3] = {(float)(far - s->origin[0]), 0, (float)(0 - s->origin[2])};
-    srv_camera cam = {.position = {target[0], 2, target[2] + 3}, .target = {target[0], 0, target[2]},
-                      .up = {0, 1, 0}, .fov_deg = 60};
-    srv_frame_stats st;
-    fxt_frame(loop, &id, 1, &cam, &st);
-    assert_true(st.pixels_visible > 100);
-    assert_true(st.world.refusals > 0);
-    assert_int_equal(st.world.unique_cells, 0);
-    assert_int_equal(st.world.bricks_resident, 0);
-    srv_loop_free(loop);
-    scene_rt_free(rt);
-    scene_free(s);
+    (void)state;
+    for (int alone = 0; alone < 2; alone++) {
+        scene *s = fxt_new_scene();
+        double high = alone ? 5.0e6 : 80000.0; /* metres from the world origin */
+        if (!alone)
+            fxt_add_quad(s, "speck", (const double[3]){0, 0, 0}, (const double[3]){0, 0, 0.1},
+                         (const double[3]){0.1, 0, 0}, 1);
+        fxt_add_quad(s, "floor", (const double[3]){-2, high, -2}, (const double[3]){0, 0, 4},
+                     (const double[3]){4, 0, 0}, 2);
+        fxt_add_sun(s, 0.3f, -1.0f, 0.2f);
+        scene_rt *rt = fxt_finish_scene(s, 8, 0.5f);
+        srv_loop_desc d = {.s = s, .rt = rt, .seed = 1, .probe_cell = 0.25f};
+        fxt_effects_on(&d, (const char *const[]){"probes"}, 1);
+        srv_viewer_id id;
+        srv_loop *loop = fxt_loop(&d, 1, 32, 32, &id);
+        float y = (float)(high - s->origin[1]);
+        srv_camera cam = {.position = {0, y + 2, 2.2f}, .target = {0, y, 0}, .up = {0, 1, 0}, .fov_deg = 60};
+        srv_frame_stats st;
+        fxt_frame(loop, &id, 1, &cam, &st);
+        print_message("floor at %g m, %s: origin y %g, %llu points refused, %llu cells\n", high,
+                      alone ? "a scene of its own" : "beside a speck at the origin", s->origin[1],
+                      (unsigned long long)st.world.refusals, (unsigned long long)st.world.unique_cells);
+        assert_true(st.pixels_visible > 100);
+        if (alone) {
+            assert_int_equal(st.world.refusals, 0);
+            assert_true(st.world.unique_cells > 0);
+        } else {
+            assert_true(s->origin[1] == 0);
+            assert_true(st.world.refusals > 0);
+            assert_int_equal(st.world.unique_cells, 0);
+            assert_int_equal(st.world.bricks_resident, 0);
+        }
+        srv_loop_free(loop);
+        scene_rt_free(rt);
+        scene_free(s);
+    }
 }
 
 /* A test-only volumetric effect with 4 x 4 x 4 bricks, run through the whole loop without any change to the

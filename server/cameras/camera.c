@@ -38,15 +38,28 @@ bool srv_camera_setup(const srv_camera *cam, uint32_t width, uint32_t height, sr
     if (!(len > 0))
         return false;
     normalize3(out->forward);
-    cross3(out->forward, up_hint, out->right);
-    if (out->right[0] == 0 && out->right[1] == 0 && out->right[2] == 0) {
-        /* Looking straight along the up hint: any perpendicular will do. */
+    /* right = forward x up hint, normalised in double: looking within a tiny angle of the up hint (a target
+     * 1e-30 m beside the point straight below) the product is tiny, its squared length underflows a float (or
+     * is flushed to zero in a tracing thread), and right stayed unnormalised: the image plane collapsed onto
+     * the forward direction, every pixel the same ray (found by tests/stability/stab_cameras.c). Within
+     * 1e-6 rad of the up hint any perpendicular will do. */
+    double hint_length = sqrt((double)up_hint[0] * up_hint[0] + (double)up_hint[1] * up_hint[1] +
+                              (double)up_hint[2] * up_hint[2]);
+    double right[3] = {(double)out->forward[1] * up_hint[2] - (double)out->forward[2] * up_hint[1],
+                       (double)out->forward[2] * up_hint[0] - (double)out->forward[0] * up_hint[2],
+                       (double)out->forward[0] * up_hint[1] - (double)out->forward[1] * up_hint[0]};
+    double right_length = sqrt(right[0] * right[0] + right[1] * right[1] + right[2] * right[2]);
+    if (!(hint_length > 0) || !(right_length > 1e-6 * hint_length)) {
+        /* Looking along the up hint: any perpendicular will do. */
         float alt[3] = {1, 0, 0};
         if (fabsf(out->forward[0]) > 0.9f)
             alt[0] = 0, alt[2] = 1;
         cross3(out->forward, alt, out->right);
+        normalize3(out->right);
+    } else {
+        for (int k = 0; k < 3; k++)
+            out->right[k] = (float)(right[k] / right_length);
     }
-    normalize3(out->right);
     cross3(out->right, out->forward, out->up);
     out->tan_half_y = tanf(cam->fov_deg * (float)M_PI / 360.0f);
     out->tan_half_x = out->tan_half_y * (float)width / (float)height;

@@ -88,7 +88,9 @@ typedef struct srv_loop_desc {
                                               (default: the power of two nearest a 64th of the
                                               scene's bounding-box diagonal) */
     uint32_t probe_rays;                   /* rays per probe update (default 144, DDGI's) */
-    float probe_hysteresis;                /* old irradiance's weight in an update (default 0.97, RTXGI's) */
+    float probe_hysteresis;                /* old irradiance's weight in an update, (0, 0.999] (default 0.97,
+                                              RTXGI's; a tiny weight such as 1e-9 spells "none", as the
+                                              command line's 0 does) */
     uint32_t probe_budget;                 /* cells (probes) updated per frame at most, new ones first, then
                                               the longest unrefreshed (default 1024; shares the ray budget) */
     bool no_local_table;                   /* benchmarks: compose finds probes through the hash table only,

@@ -3,9 +3,15 @@
  * effects' own reads (fx_context.world_taps) use, and the cache's figures and memory. Everything in the
  * engine that knows the world grid is here.
  *
- * The grid is fixed in world space: positions go to the grid as scene-local + the scene's origin, in double,
- * so a scene rebased into its local frame keeps the same cells (DESIGN.md, numerical robustness). Points
- * outside the grid's range are refused and counted, never wrapped.
+ * The grid is fixed for the run and anchored at the scene's local frame: positions go to the grid as they
+ * are, scene-local (in double). The frame's origin is a whole multiple of a power of two at least the scene's
+ * extent (scene.h), and the default finest cell is a power of two below the extent, so these are the cells a
+ * grid anchored at the world origin would have; but the grid's range (2^20 cells on each horizontal axis,
+ * 2^17 vertically, wsc.h) is measured from the scene, so a scene 1e6 m from the world origin keeps its probes
+ * and renders like the same scene at the origin, keys and all (DESIGN.md, numerical robustness; anchored at
+ * the world origin, such a scene lay outside the range of every cell of 0.25 to 0.5 m and had no probes at
+ * all: tests/stability/stab_scale.c). Points outside the grid's range are refused and counted, never
+ * wrapped.
  *
  * Local lookup tables (paper section 3.2.2): compose reads the 8 probes of every pixel, and neighbouring
  * pixels read the same ones, so each viewer has local tables around its camera that answer most reads
@@ -30,7 +36,6 @@ typedef struct kind_wsc {
     wsc_cache *wsc;
     const scene *s;
     double c0;        /* finest cell, metres */
-    double origin[3]; /* the scene's local frame in the world */
     uint32_t brick_size[SRV_MAX_EFFECTS];
     uint32_t cell_bytes[SRV_MAX_EFFECTS];
     uint32_t threads;
@@ -94,8 +99,6 @@ static fxc_result wsc_kind_create(srv_loop *loop, void **out, char *err, size_t 
     }
     k->s = loop->s;
     k->c0 = loop->desc.probe_cell > 0 ? (double)loop->desc.probe_cell : default_cell(loop->s);
-    for (int a = 0; a < 3; a++)
-        k->origin[a] = loop->s->origin[a];
     memcpy(k->brick_size, brick_size, sizeof brick_size);
     memcpy(k->cell_bytes, cell_bytes, sizeof cell_bytes);
     k->threads = threads;
@@ -187,14 +190,16 @@ static uint32_t memo_level(const kind_wsc *k, cell_memo *m, double distance)
 /* Levels blend into each other: over the last quarter of a level's distances (3/4 to 1 of its upper end)
  * the next level's cells fade in, so no seam shows where the level changes; at the boundary a pixel reads
  * the next level alone, as the pixel just beyond it does. A pixel's level (bias included) and the weight
- * of level + 1 in [0, 1]. */
+ * of level + 1 in [0, 1]. The sum is taken in 64 bits (a bias of INT32_MAX overflowed it), and a bias that
+ * puts the next level below 0 too leaves nothing to blend (both clamp to level 0; it used to blend level 1
+ * in: found by tests/stability/stab_caches.c). */
 static uint32_t pixel_level(const kind_wsc *k, cell_memo *m, const srv_pixel *px, int32_t bias, float *blend)
 {
     double distance = (double)px->distance;
-    int32_t l = (int32_t)memo_level(k, m, distance) + bias;
-    uint32_t level = l < 0 ? 0 : (l > (int32_t)WSC_MAX_LEVEL ? WSC_MAX_LEVEL : (uint32_t)l);
+    int64_t l = (int64_t)memo_level(k, m, distance) + bias;
+    uint32_t level = l < 0 ? 0 : (l > (int64_t)WSC_MAX_LEVEL ? WSC_MAX_LEVEL : (uint32_t)l);
     double b = (distance * m->inv_top - 0.75) * 4.0;
-    *blend = level >= WSC_MAX_LEVEL || !(b > 0.0) ? 0.0f : (b >= 1.0 ? 1.0f : (float)b);
+    *blend = level >= WSC_MAX_LEVEL || l + 1 <= 0 || !(b > 0.0) ? 0.0f : (b >= 1.0 ? 1.0f : (float)b);
     return level;
 }
 
@@ -231,10 +236,11 @@ static bool cell_at(const kind_wsc *k, const double world[3], uint32_t level, ce
     return true;
 }
 
-static inline void pixel_world(const kind_wsc *k, const srv_pixel *px, double world[3])
+/* Where a pixel's point lies for the grid: scene-local, in double (the grid is anchored at the local frame). */
+static inline void pixel_world(const srv_pixel *px, double world[3])
 {
     for (int a = 0; a < 3; a++)
-        world[a] = (double)px->position[a] + k->origin[a];
+        world[a] = (double)px->position[a];
 }
 
 /* Corner c (0..7) of the memo's cell: g + (c & 1, c >> 1 & 1, c >> 2 & 1); its trilinear weight from t. */
@@ -298,7 +304,7 @@ static uint32_t wsc_kind_pixel_requests(const void *cache, uint32_t slot, const 
         float t[3], blend;
         bool same;
         double world[3];
-        pixel_world(k, &pixels[i], world);
+        pixel_world(&pixels[i], world);
         uint32_t level = pixel_level(k, &memo, &pixels[i], bias, &blend);
         if (!cell_at(k, world, level, &memo, t, &same)) {
             refused++;
@@ -381,7 +387,7 @@ static void wsc_kind_job_location(const void *cache, uint32_t effect, uint64_t k
     job->level = level;
     job->cell = (float)cell;
     for (int a = 0; a < 3; a++)
-        job->origin[a] = (float)((double)first[a] * cell - k->origin[a]);
+        job->origin[a] = (float)((double)first[a] * cell);
 }
 
 /* The cells of one cell's 8 corners that hold data, found once per cell: payload and corner index. */
@@ -438,8 +444,7 @@ uint32_t srv__wsc_world_taps(const void *user, uint32_t effect, const float posi
     taps->count = 0;
     if (effect >= SRV_MAX_EFFECTS || !k->brick_size[effect] || level > WSC_MAX_LEVEL)
         return 0;
-    double world[3] = {(double)position[0] + k->origin[0], (double)position[1] + k->origin[1],
-                       (double)position[2] + k->origin[2]};
+    double world[3] = {(double)position[0], (double)position[1], (double)position[2]};
     int32_t corners[8][3];
     float weights[8];
     if (!wsc_corners(world, level, k->c0, corners, weights))
@@ -485,7 +490,7 @@ static void wsc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t threa
         float t[3], blend;
         bool same;
         double world[3];
-        pixel_world(k, &pixels[i], world);
+        pixel_world(&pixels[i], world);
         uint32_t level = pixel_level(k, &memo, &pixels[i], bias, &blend);
         taps[i].count = 0;
         taps[i].footprint_log2 = 0;

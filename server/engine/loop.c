@@ -198,13 +198,17 @@ fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err,
         loop->desc.pool_bytes = (uint64_t)64 << 20;
     if (!loop->desc.probe_rays)
         loop->desc.probe_rays = 144;
-    if (!(loop->desc.probe_hysteresis > 0))
+    if (loop->desc.probe_hysteresis == 0.0f)
         loop->desc.probe_hysteresis = 0.97f;
     if (!loop->desc.probe_budget)
         loop->desc.probe_budget = 1024;
-    if (loop->desc.probe_rays > 1u << 16 || !(loop->desc.probe_hysteresis < 1.0f) ||
+    /* The probes' commit clamps its weight to 0.999 (fx_probes.c): a larger one, a negative one or NaN was
+     * taken without a word (clamped, or replaced by the default); now each is refused, as the command line
+     * refuses them (found by tests/stability/stab_stiffness.c). */
+    if (loop->desc.probe_rays > 1u << 16 ||
+        !(loop->desc.probe_hysteresis > 0.0f && loop->desc.probe_hysteresis <= 0.999f) ||
         !(loop->desc.probe_cell >= 0.0f && loop->desc.probe_cell <= 1e6f)) {
-        snprintf(err, err_cap, "frame loop: probe rays must be 1..65536, hysteresis in (0, 1), the cell 0..1e6 m");
+        snprintf(err, err_cap, "frame loop: probe rays must be 1..65536, hysteresis in (0, 0.999], the cell 0..1e6 m");
         srv_loop_free(loop);
         return FXC_ERR_INVALID;
     }
