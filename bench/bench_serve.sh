@@ -10,6 +10,8 @@
 #   REPEATS serve/sim pairs per count, alternating (default 2)
 # Cameras: the walk generator's first N viewers (recorded once with `fxcache sim --record`), sent by the
 # clients at their trace times; the server records what it rendered, and sim replays exactly that.
+# Besides the frame times (wall clock, from the statistics both write), the processes' CPU time (user +
+# system, GNU time) of serve against sim: less sensitive to other load on a shared machine.
 # Prints one table row per count and a codec table (4 viewers); the raw files stay in $BENCH_OUT (default a
 # temporary folder, printed).
 set -euo pipefail
@@ -24,14 +26,14 @@ bin=${FXCACHE:-build/server/fxcache}
 viewer=${FXCACHE_VIEWER:-build/viewer_client/fxcache-viewer}
 out=${BENCH_OUT:-$(mktemp -d /tmp/bench_serve.XXXXXX)}
 mkdir -p "$out"
-[ -f "$scene" ] || { echo "bench_serve: $scene is missing" >&2; exit 1; }
+[ "$scene" = default ] || [ -f "$scene" ] || { echo "bench_serve: $scene is missing" >&2; exit 1; }
 [ -x "$bin" ] && [ -x "$viewer" ] || { echo "bench_serve: build first (./run demo): $bin, $viewer" >&2; exit 1; }
 echo "bench_serve: $scene, $res, $frames frames per viewer, --fps $fps, counts: $counts, $repeats repeats; files in $out"
 
 # The cameras: walkers through the scene (the images are not needed: a tiny resolution). A client sends a
 # trace's cameras in real time and stops at its end, so the traces are long (100 s) for the server's frames,
 # slower than --fps with many viewers, to reach FRAMES.
-max=0
+max=4 # the codec runs use 4 viewers
 for n in $counts; do [ "$n" -gt "$max" ] && max=$n; done
 "$bin" sim --scene "$scene" --camera walk --viewers "$max" --frames 3000 --res 16x9 --fps $fps \
   --record "$out/cameras" --quiet --effects shadow >/dev/null
@@ -40,23 +42,26 @@ for n in $counts; do [ "$n" -gt "$max" ] && max=$n; done
 serve_run() { # tag n codec
   local tag=$1 n=$2 codec=$3
   rm -rf "$out/$tag.rec"
-  "$bin" serve --scene "$scene" --port 0 --fps $fps --quiet --record "$out/$tag.rec" \
+  /usr/bin/time -f "%e %U %S" -o "$out/$tag.serve.time" \
+    "$bin" serve --scene "$scene" --port 0 --fps $fps --quiet --record "$out/$tag.rec" \
     --stats "$out/$tag.serve.jsonl" --summary "$out/$tag.summary.json" >"$out/$tag.serve.out" 2>"$out/$tag.serve.err" &
-  local pid=$!
+  local timer=$!
+  local pid=""
+  for _ in $(seq 1 100); do pid=$(pgrep -P $timer || true); [ -n "$pid" ] && break; sleep 0.05; done
   local port=""
   for _ in $(seq 1 600); do
     port=$(grep -o 'ws://127.0.0.1:[0-9]*' "$out/$tag.serve.out" 2>/dev/null | sed 's/.*://' || true)
     [ -n "$port" ] && break
     sleep 0.1
   done
-  [ -n "$port" ] || { echo "bench_serve: serve did not start (see $out/$tag.serve.err)" >&2; kill $pid; exit 1; }
+  [ -n "$port" ] || { echo "bench_serve: serve did not start (see $out/$tag.serve.err)" >&2; kill $pid; wait $timer; exit 1; }
   local traces=()
   for ((v = 0; v < n; v++)); do traces+=(--trace "$out/cameras/$(printf 'viewer_%02u' $v).trace"); done
   "$viewer" --connect "ws://127.0.0.1:$port" --viewers "$n" "${traces[@]}" --res $res --frames "$frames" \
     --codec "$codec" --stats "$out/$tag.client.json" --quiet --timeout 600 >"$out/$tag.client.out" 2>&1 ||
-    { echo "bench_serve: a viewer failed (see $out/$tag.client.out)" >&2; kill -TERM $pid; wait $pid; exit 1; }
+    { echo "bench_serve: a viewer failed (see $out/$tag.client.out)" >&2; kill -TERM $pid; wait $timer; exit 1; }
   kill -TERM $pid
-  wait $pid
+  wait $timer
 }
 
 # The same frames in sim: the traces the server recorded.
@@ -64,7 +69,8 @@ sim_run() { # tag
   local tag=$1
   local traces=()
   for f in "$out/$tag.rec"/viewer_*.trace; do traces+=(--trace "$f"); done
-  "$bin" sim --scene "$scene" "${traces[@]}" --fps $fps --stats "$out/$tag.sim.jsonl" --quiet >/dev/null
+  /usr/bin/time -f "%e %U %S" -o "$out/$tag.sim.time" \
+    "$bin" sim --scene "$scene" "${traces[@]}" --fps $fps --stats "$out/$tag.sim.jsonl" --quiet >/dev/null
 }
 
 for n in $counts; do

@@ -8,10 +8,16 @@ def lines(path):
 def stage_times(rows):
     keys = [k for k in rows[0]["time_ms"] if k != "frame"]
     return {k: statistics.median(r["time_ms"][k] for r in rows) for k in keys}
-print("\n| viewers | serve ms/frame | sim ms/frame | serve/sim (per repeat) | fps per viewer | latency median | latency p95 | bytes/frame (zstd) |")
-print("|---|---|---|---|---|---|---|---|")
+def cpu(path):
+    try:
+        e, u, s_ = open(path).read().split()[:3]
+        return float(u) + float(s_)
+    except (OSError, ValueError):
+        return float("nan")
+print("\n| viewers | serve ms/frame | sim ms/frame | serve/sim frame time (per repeat) | serve/sim CPU s (per repeat) | fps per viewer | latency median | latency p95 | bytes/frame (zstd) |")
+print("|---|---|---|---|---|---|---|---|---|")
 for n in counts:
-    ratios, serve_ms, sim_ms, fpss, lat50, lat95, bpf = [], [], [], [], [], [], []
+    ratios, serve_ms, sim_ms, fpss, lat50, lat95, bpf, cpus = [], [], [], [], [], [], [], []
     for r in range(repeats):
         tag = f"{out}/n{n}.r{r}"
         se, si = lines(tag + ".serve.jsonl"), lines(tag + ".sim.jsonl")
@@ -21,12 +27,14 @@ for n in counts:
         si_ms = [x["time_ms"]["frame"] for x in si[warm:m] if x["viewers"]]
         a, b = statistics.median(se_ms), statistics.median(si_ms)
         serve_ms.append(a); sim_ms.append(b); ratios.append(a / b)
+        cpus.append(cpu(tag + ".serve.time") / cpu(tag + ".sim.time"))
         c = json.load(open(tag + ".client.json"))
         for v in c["viewers"]:
             fpss.append(v["fps"]); lat50.append(v["latency_ms"]["median"]); lat95.append(v["latency_ms"]["p95"])
             bpf.append(v["bytes_per_frame"])
     print(f"| {n} | {statistics.median(serve_ms):.1f} | {statistics.median(sim_ms):.1f} | "
-          f"{statistics.median(ratios):.3f} ({', '.join(f'{x:.3f}' for x in ratios)}) | {statistics.median(fpss):.1f} | "
+          f"{statistics.median(ratios):.3f} ({', '.join(f'{x:.3f}' for x in ratios)}) | "
+          f"{statistics.median(cpus):.3f} ({', '.join(f'{x:.3f}' for x in cpus)}) | {statistics.median(fpss):.1f} | "
           f"{statistics.median(lat50):.0f} ms | {statistics.median(lat95):.0f} ms | {statistics.median(bpf)/1e3:.0f} kB |")
 print("\nserver time per stage, median ms per frame (serve, last repeat of each count):")
 for n in counts:
