@@ -936,7 +936,7 @@ static walk_log walk(uint32_t threads, uint32_t tile)
             assert_true(f.stats.migrated > 0 || tile >= 83);
     }
     uint32_t n = view_rc_point_count(rc);
-    view_rc_point *pts = malloc(sizeof *pts * (n + 1));
+    view_rc_point *pts = calloc(n + 1, sizeof *pts); /* zeroed: the struct's padding is compared too */
     uint32_t got = view_rc_points(rc, 0, n, pts);
     assert_int_equal(got, n);
     log_bytes(&log, pts, sizeof *pts * n);

@@ -1,18 +1,19 @@
 /* The render cache's owner struct and its point store: creation with every default resolved in one place, the
  * one allocation everything lives in, and the two ways points come in (a whole frame, or sparse samples).
  *
- * Points come in at the end of the store (the insert list, placed by the next frame's tile sort) after the
- * points they replace were marked evicted:
- *   - a frame replaces every cached point it saw: one pass projects all points into the frame's camera and
- *     evicts those that are not behind the frame's depth at their pixel by more than supersede_ratio (the new
- *     frame is the truth for everything it shows; an old point of the same surface would otherwise fight the new
- *     one in the z-buffer at nearly the same depth, and show stale colour half the time);
+ * A new point takes a free slot (the stack the last frame's ageing pass rebuilt) after the points it replaces
+ * were freed:
+ *   - a frame replaces every cached point it saw: one pass projects all points into the frame's camera and frees
+ *     those that are not behind the frame's depth at their pixel by more than supersede_ratio (the new frame is
+ *     the truth for everything it shows; an old point of the same surface would otherwise fight the new one in
+ *     the z-buffer at nearly the same depth, and show stale colour half the time);
  *   - a sample replaces the point the last frame showed at its place (found through the last frame's winners,
  *     so it costs nothing per cached point), and when the colours differ the neighbours' points age faster:
  *     their shading has probably changed too (1999 slide 21, "color change heuristic"; 2002 3.4).
- * When the store has no room for the points coming in, it is compacted on the spot: evicted points go, then the
- * oldest (the frame's tile sort drops the oldest down to capacity anyway; this is the rare case of more inserts
- * between two frames than insert_reserve). */
+ * Slots freed between two frames return to the stack at the next frame (the last frame's winners still name
+ * them). When the stack runs short, it is rebuilt on the spot and, if still short, the oldest points go (the
+ * frame's drop plan keeps the cache within capacity anyway; this is the case of more inserts between two frames
+ * than insert_reserve, or a whole frame). */
 #include "rc_internal.h"
 
 #include <math.h>
@@ -88,7 +89,7 @@ typedef struct rc_layout {
 static size_t take(rc_layout *l, size_t count, size_t size)
 {
     size_t at = (l->bytes + 63) & ~(size_t)63;
-    if (at < l->bytes || (size != 0 && count > (SIZE_MAX - at) / size)) {
+    if (at < l->bytes || (size != 0 && count > (SIZE_MAX - at - 64) / size)) {
         l->overflow = true;
         return 0;
     }
@@ -107,54 +108,68 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     view_rc *rc = calloc(1, sizeof *rc);
     if (!rc)
         return FXC_ERR_NOMEM;
-    rc->d = d;
     rc->width = d.width;
     rc->height = d.height;
     rc->pixels = (size_t)d.width * d.height;
     rc->thread_count = d.threads;
 
-    /* Tiles: square, grown until there are at most VIEW_RC_MAX_TILES (the per-chunk counts are chunks x lists). */
-    uint32_t side = d.tile_size;
+    /* Tiles: a power of two on a side, grown until there are at most VIEW_RC_MAX_TILES. */
+    uint32_t shift = 0;
+    while ((1u << shift) < d.tile_size)
+        shift++;
     for (;;) {
-        uint32_t tx = (d.width + side - 1) / side, ty = (d.height + side - 1) / side;
-        if ((uint64_t)tx * ty <= VIEW_RC_MAX_TILES) {
-            rc->tiles_x = tx;
-            rc->tiles_y = ty;
+        uint32_t side = 1u << shift;
+        uint64_t tx = (d.width + side - 1) / side, ty = (d.height + side - 1) / side;
+        if (tx * ty <= VIEW_RC_MAX_TILES) {
+            rc->tiles_x = (uint32_t)tx;
+            rc->tiles_y = (uint32_t)ty;
             break;
         }
-        side *= 2;
+        shift++;
     }
-    rc->tile_w = side < d.width ? side : d.width;
-    rc->tile_h = side < d.height ? side : d.height;
-    rc->tiles_x = (d.width + rc->tile_w - 1) / rc->tile_w;
-    rc->tiles_y = (d.height + rc->tile_h - 1) / rc->tile_h;
+    rc->tile_shift = shift;
+    rc->tile = 1u << shift;
+    d.tile_size = rc->tile;
+    rc->d = d;
     rc->tile_count = rc->tiles_x * rc->tiles_y;
-    rc->list_count = rc->tile_count + 1;
+    rc->list_outside = (uint16_t)rc->tile_count;
+    rc->list_dead = (uint16_t)(rc->tile_count + 1);
+    rc->list_new = (uint16_t)(rc->tile_count + 2);
+    uint32_t longest = d.width > d.height ? d.width : d.height;
+    uint32_t span = rc->tile < longest ? rc->tile : longest; /* the largest tile's side */
     rc->slots = d.capacity + d.insert_reserve;
-    rc->chunk_size = rc->slots / 128 + 1;
-    if (rc->chunk_size < 4096)
-        rc->chunk_size = 4096;
-    rc->chunk_max = (rc->slots + rc->chunk_size - 1) / rc->chunk_size;
+    /* Chunks of slots: at least 4096, at most 512 of them, a multiple of 64 slots. */
+    uint32_t chunk = rc->slots / 512 + 1;
+    chunk = chunk < 4096 ? 4096 : (chunk + 63) & ~63u;
+    rc->chunk_size = chunk;
+    rc->chunk_count = (rc->slots + chunk - 1) / chunk;
     rc->low_w = (d.width + 3) / 4;
     rc->low_h = (d.height + 3) / 4;
+    rc->drop_age = RC_AGE_NO_DROP;
 
     rc_layout l = {0};
-    size_t o_col_tile = take(&l, d.width, sizeof(uint16_t));
-    size_t o_row_tile = take(&l, d.height, sizeof(uint32_t));
-    size_t o_rec[2], o_prj[2];
-    for (int k = 0; k < 2; k++) {
-        o_rec[k] = take(&l, rc->slots, sizeof(rc_rec));
-        o_prj[k] = take(&l, rc->slots, sizeof(rc_prj));
-    }
+    uint32_t lists = rc->tile_count + 2;
+    size_t o_px = take(&l, rc->slots, sizeof(float));
+    size_t o_py = take(&l, rc->slots, sizeof(float));
+    size_t o_pz = take(&l, rc->slots, sizeof(float));
+    size_t o_rgba = take(&l, rc->slots, sizeof(uint32_t));
+    size_t o_tile_of = take(&l, rc->slots, sizeof(uint16_t));
+    size_t o_pix = take(&l, rc->slots, sizeof(uint32_t));
+    size_t o_dep = take(&l, rc->slots, sizeof(float));
     size_t o_dest = take(&l, rc->slots, sizeof(uint16_t));
-    size_t o_list_start = take(&l, rc->list_count + 1, sizeof(uint32_t));
-    size_t o_next_start = take(&l, rc->list_count + 1, sizeof(uint32_t));
-    size_t o_counts = take(&l, (size_t)rc->chunk_max * (rc->list_count + 1), sizeof(uint32_t));
-    size_t o_chunk_hist = take(&l, (size_t)rc->chunk_max * 256, sizeof(uint32_t));
-    size_t o_chunk_quota = take(&l, rc->chunk_max, sizeof(uint32_t));
-    size_t o_chunk_stat = take(&l, rc->chunk_max, sizeof(rc_chunk_stat));
+    size_t o_mark = take(&l, (size_t)rc->slots + 1, 1); /* + a sink byte */
+    size_t o_free_slots = take(&l, rc->slots, sizeof(uint32_t));
+    size_t o_free_list = take(&l, (size_t)rc->chunk_count * chunk, sizeof(uint32_t));
+    size_t o_chunk_free = take(&l, rc->chunk_count, sizeof(uint32_t));
+    size_t o_counts = take(&l, (size_t)rc->chunk_count * lists, sizeof(uint32_t));
+    size_t o_chunk_hist = take(&l, (size_t)rc->chunk_count * 256, sizeof(uint32_t));
+    size_t o_chunk_quota = take(&l, rc->chunk_count, sizeof(uint32_t));
+    size_t o_chunk_stat = take(&l, rc->chunk_count, sizeof(rc_chunk_stat));
+    size_t o_entries = take(&l, (size_t)rc->slots + 1, sizeof(rc_entry)); /* + the sort's sink */
+    size_t o_tile_start = take(&l, rc->tile_count + 1, sizeof(uint32_t));
     size_t o_zbuf = take(&l, rc->pixels, sizeof(float));
     size_t o_win = take(&l, rc->pixels, sizeof(uint32_t));
+    size_t o_pre = take(&l, rc->pixels, sizeof(uint32_t));
     size_t o_pt = take(&l, rc->pixels, sizeof(uint32_t));
     size_t o_rgb = take(&l, rc->pixels, 3);
     size_t o_depth = take(&l, rc->pixels, sizeof(float));
@@ -173,11 +188,14 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_requests = take(&l, d.sample_budget, sizeof(view_rc_pixel));
     size_t o_predicted = take(&l, d.sample_budget / 2 + 1, sizeof(view_rc_pixel));
     size_t o_workers = take(&l, d.threads, sizeof(rc_worker));
-    size_t o_box[VIEW_RC_MAX_THREADS], o_occupied[VIEW_RC_MAX_THREADS], o_err[VIEW_RC_MAX_THREADS];
+    size_t o_occupied[VIEW_RC_MAX_THREADS], o_low[VIEW_RC_MAX_THREADS], o_err[VIEW_RC_MAX_THREADS];
+    size_t o_planes[VIEW_RC_MAX_THREADS], o_box[VIEW_RC_MAX_THREADS];
     for (uint32_t t = 0; t < d.threads; t++) {
-        o_box[t] = take(&l, (size_t)(rc->tile_h + 6) * rc->tile_w * 4, sizeof(uint32_t));
-        o_occupied[t] = take(&l, (size_t)rc->low_w * rc->low_h, 1);
-        o_err[t] = take(&l, 2 * ((size_t)d.width + 2), sizeof(float));
+        o_occupied[t] = take(&l, (size_t)rc->low_w * rc->low_h + 1, 1); /* + a sink byte */
+        o_low[t] = take(&l, chunk, sizeof(uint32_t));
+        o_err[t] = take(&l, RC_DITHER_LANES * 2 * ((size_t)d.width + 2), sizeof(float));
+        o_planes[t] = take(&l, view_rc__interp_scratch(span), sizeof(uint16_t));
+        o_box[t] = take(&l, ((size_t)span + 6) * span * 4, sizeof(uint32_t));
     }
     if (l.overflow) {
         free(rc);
@@ -190,21 +208,28 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     }
     rc->block = block;
     rc->memory_bytes = l.bytes + sizeof *rc;
-    rc->col_tile = (uint16_t *)(block + o_col_tile);
-    rc->row_tile = (uint32_t *)(block + o_row_tile);
-    for (int k = 0; k < 2; k++) {
-        rc->rec[k] = (rc_rec *)(block + o_rec[k]);
-        rc->prj[k] = (rc_prj *)(block + o_prj[k]);
-    }
+    rc->px = (float *)(block + o_px);
+    rc->py = (float *)(block + o_py);
+    rc->pz = (float *)(block + o_pz);
+    rc->rgba = (uint32_t *)(block + o_rgba);
+    rc->tile_of = (uint16_t *)(block + o_tile_of);
+    rc->pix = (uint32_t *)(block + o_pix);
+    rc->dep = (float *)(block + o_dep);
     rc->dest = (uint16_t *)(block + o_dest);
-    rc->list_start = (uint32_t *)(block + o_list_start);
-    rc->next_start = (uint32_t *)(block + o_next_start);
+    rc->mark = (uint8_t *)(block + o_mark);
+    memset(rc->mark, 0, (size_t)rc->slots + 1);
+    rc->free_slots = (uint32_t *)(block + o_free_slots);
+    rc->free_list = (uint32_t *)(block + o_free_list);
+    rc->chunk_free = (uint32_t *)(block + o_chunk_free);
     rc->counts = (uint32_t *)(block + o_counts);
     rc->chunk_hist = (uint32_t *)(block + o_chunk_hist);
     rc->chunk_quota = (uint32_t *)(block + o_chunk_quota);
     rc->chunk_stat = (rc_chunk_stat *)(block + o_chunk_stat);
+    rc->entries = (rc_entry *)(block + o_entries);
+    rc->tile_start = (uint32_t *)(block + o_tile_start);
     rc->zbuf = (float *)(block + o_zbuf);
     rc->win = (uint32_t *)(block + o_win);
+    rc->pre = (uint32_t *)(block + o_pre);
     rc->pt = (uint32_t *)(block + o_pt);
     rc->rgb = (uint8_t *)(block + o_rgb);
     rc->depth = (float *)(block + o_depth);
@@ -224,21 +249,25 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     rc->predicted_requests = (view_rc_pixel *)(block + o_predicted);
     rc->workers = (rc_worker *)(block + o_workers);
     for (uint32_t t = 0; t < d.threads; t++) {
-        rc->workers[t].box = (uint32_t *)(block + o_box[t]);
         rc->workers[t].occupied = (uint8_t *)(block + o_occupied[t]);
+        rc->workers[t].low = (uint32_t *)(block + o_low[t]);
         rc->workers[t].err = (float *)(block + o_err[t]);
+        rc->workers[t].planes = (uint16_t *)(block + o_planes[t]);
+        rc->workers[t].box = (uint32_t *)(block + o_box[t]);
     }
 
-    for (uint32_t x = 0; x < d.width; x++)
-        rc->col_tile[x] = (uint16_t)(x / rc->tile_w);
-    for (uint32_t y = 0; y < d.height; y++)
-        rc->row_tile[y] = (y / rc->tile_h) * rc->tiles_x;
-    memset(rc->list_start, 0, (rc->list_count + 1) * sizeof(uint32_t));
-    memset(rc->chunk_hist, 0, (size_t)rc->chunk_max * 256 * sizeof(uint32_t));
+    /* Every slot free; the stack hands out slot 0 first. */
+    for (uint32_t i = 0; i < rc->slots; i++) {
+        rc->rgba[i] = RC_AGE_DEAD << 24;
+        rc->px[i] = rc->py[i] = rc->pz[i] = 0;
+        rc->tile_of[i] = rc->list_dead;
+        rc->free_slots[i] = rc->slots - 1 - i;
+    }
+    rc->free_count = rc->slots;
+    memset(rc->chunk_hist, 0, (size_t)rc->chunk_count * 256 * sizeof(uint32_t));
     memset(rc->win, 0xFF, rc->pixels * sizeof(uint32_t));
     for (size_t p = 0; p < rc->pixels; p++)
         rc->pt[p] = RC_EMPTY_PT;
-    rc->drop_age = RC_AGE_NO_DROP;
 
     rc->pool = view_rc__pool_create(d.threads);
     if (!rc->pool) {
@@ -273,35 +302,32 @@ size_t view_rc_memory_bytes(const view_rc *rc)
 
 void view_rc__recount_ages(view_rc *rc)
 {
-    const rc_rec *rec = rc->rec[rc->cur];
-    uint32_t end = rc->placed + rc->pending;
-    memset(rc->chunk_hist, 0, (size_t)rc->chunk_max * 256 * sizeof(uint32_t));
-    for (uint32_t i = 0; i < end; i++) {
-        uint32_t age = rc_age(rec[i].rgba);
-        if (age != RC_AGE_EVICTED)
+    memset(rc->chunk_hist, 0, (size_t)rc->chunk_count * 256 * sizeof(uint32_t));
+    for (uint32_t i = 0; i < rc->slots; i++) {
+        uint32_t age = rc_age(rc->rgba[i]);
+        if (age != RC_AGE_DEAD)
             rc->chunk_hist[(size_t)(i / rc->chunk_size) * 256 + age]++;
     }
 }
 
-/* Changes record i's age (and its chunk's histogram). */
+/* Changes slot i's age (and its chunk's histogram). */
 static void set_age(view_rc *rc, uint32_t i, uint32_t age)
 {
-    rc_rec *r = &rc->rec[rc->cur][i];
-    uint32_t old = rc_age(r->rgba);
+    uint32_t old = rc_age(rc->rgba[i]);
     uint32_t *hist = rc->chunk_hist + (size_t)(i / rc->chunk_size) * 256;
-    if (old != RC_AGE_EVICTED)
+    if (old != RC_AGE_DEAD)
         hist[old]--;
-    if (age != RC_AGE_EVICTED)
+    if (age != RC_AGE_DEAD)
         hist[age]++;
-    r->rgba = (r->rgba & 0x00FFFFFFu) | (age << 24);
+    rc->rgba[i] = (rc->rgba[i] & 0x00FFFFFFu) | (age << 24);
 }
 
-/* The ages of all live records, summed over chunks. Returns the live count. */
+/* The ages of all live points, summed over chunks. Returns the live count. */
 static uint64_t total_ages(const view_rc *rc, uint64_t hist[256])
 {
     memset(hist, 0, 256 * sizeof(uint64_t));
     uint64_t live = 0;
-    for (uint32_t c = 0; c < rc->chunk_max; c++)
+    for (uint32_t c = 0; c < rc->chunk_count; c++)
         for (uint32_t a = 0; a < 255; a++) {
             hist[a] += rc->chunk_hist[(size_t)c * 256 + a];
             live += rc->chunk_hist[(size_t)c * 256 + a];
@@ -309,75 +335,58 @@ static uint64_t total_ages(const view_rc *rc, uint64_t hist[256])
     return live;
 }
 
-/* The oldest `drop` live records: all of age above *age_out and *take_out of age *age_out (drop > 0, at most
- * the live count). */
-static void oldest(const uint64_t hist[256], uint64_t drop, uint32_t *age_out, uint64_t *take_out)
-{
-    uint64_t above = 0;
-    for (int a = 254; a >= 0; a--) {
-        if (above + hist[a] >= drop) {
-            *age_out = (uint32_t)a;
-            *take_out = drop - above;
-            return;
-        }
-        above += hist[a];
-    }
-    *age_out = 0;
-    *take_out = hist[0];
-}
-
-/* Compacts the store in place so that `incoming` more records fit: evicted records go, then the oldest. The
- * lists keep their order; the last frame's winners no longer point at the right records. */
+/* Makes `incoming` slots free on the spot: the free stack is rebuilt from every free slot (those freed since the
+ * last frame included), then the oldest points go (all older than some age, and the first ones of that age in
+ * slot order). The last frame's winners may then name reused slots: the sparse supersede stops until the next
+ * frame. */
 static void make_room(view_rc *rc, uint32_t incoming)
 {
     uint64_t hist[256];
     uint64_t live = total_ages(rc, hist);
     uint64_t drop = live + incoming > rc->slots ? live + incoming - rc->slots : 0;
-    uint32_t drop_age = RC_AGE_NO_DROP;
+    uint32_t drop_age = 256;
     uint64_t take = 0;
-    if (drop > 0)
-        oldest(hist, drop, &drop_age, &take);
-    rc_rec *rec = rc->rec[rc->cur];
-    uint32_t write = 0;
-    /* Lists 0..list_count-1, then the insert list as one more. */
-    for (uint32_t list = 0; list <= rc->list_count; list++) {
-        uint32_t begin = list < rc->list_count ? rc->list_start[list] : rc->placed;
-        uint32_t end = list < rc->list_count ? rc->list_start[list + 1] : rc->placed + rc->pending;
-        if (list < rc->list_count)
-            rc->list_start[list] = write;
-        else
-            rc->placed = write;
-        for (uint32_t i = begin; i < end; i++) {
-            uint32_t age = rc_age(rec[i].rgba);
-            if (age == RC_AGE_EVICTED)
+    if (drop > 0) {
+        uint64_t above = 0;
+        int age = 254;
+        while (age > 0 && above + hist[age] < drop)
+            above += hist[age--];
+        drop_age = (uint32_t)age;
+        take = drop - above;
+    }
+    rc->free_count = 0;
+    for (uint32_t n = rc->slots; n-- > 0;) /* descending: the stack hands out low slots first */
+        if (rc_age(rc->rgba[n]) == RC_AGE_DEAD)
+            rc->free_slots[rc->free_count++] = n;
+    if (drop_age < 256) {
+        /* The oldest, in slot order (the first ones of the boundary age). */
+        for (uint32_t i = 0; i < rc->slots; i++) {
+            uint32_t age = rc_age(rc->rgba[i]);
+            if (age == RC_AGE_DEAD || age < drop_age || (age == drop_age && take == 0))
                 continue;
-            if (age > drop_age || (age == drop_age && take > 0)) {
-                if (age == drop_age)
-                    take--;
-                rc->since_dropped++;
-                rc->since_dropped_age_sum += age;
-                continue;
-            }
-            rec[write++] = rec[i];
+            if (age == drop_age)
+                take--;
+            rc->since_dropped++;
+            rc->since_dropped_age_sum += age;
+            set_age(rc, i, RC_AGE_DEAD);
+            rc->free_slots[rc->free_count++] = i;
         }
     }
-    rc->list_start[rc->list_count] = rc->placed;
-    rc->pending = write - rc->placed;
     rc->last_valid = false;
-    view_rc__recount_ages(rc);
 }
 
-/* Appends a record for the point at distance `dist` along dir from the view's origin. */
-static void append_point(view_rc *rc, const rc_view *v, const float dir[3], float dist, const uint8_t rgb[3])
+/* Takes a free slot for the point at distance `dist` along dir from the view's origin. */
+static uint32_t add_point(view_rc *rc, const rc_view *v, const float dir[3], float dist, const uint8_t rgb[3])
 {
-    uint32_t i = rc->placed + rc->pending++;
+    uint32_t i = rc->free_slots[--rc->free_count];
     double d = isinf(dist) ? VIEW_RC_SKY_DISTANCE : (double)dist;
-    rc_rec *r = &rc->rec[rc->cur][i];
-    r->x = (float)(v->origin[0] + d * (double)dir[0] - rc->origin[0]);
-    r->y = (float)(v->origin[1] + d * (double)dir[1] - rc->origin[1]);
-    r->z = (float)(v->origin[2] + d * (double)dir[2] - rc->origin[2]);
-    r->rgba = (uint32_t)rgb[0] | (uint32_t)rgb[1] << 8 | (uint32_t)rgb[2] << 16;
+    rc->px[i] = (float)(v->origin[0] + d * (double)dir[0] - rc->origin[0]);
+    rc->py[i] = (float)(v->origin[1] + d * (double)dir[1] - rc->origin[1]);
+    rc->pz[i] = (float)(v->origin[2] + d * (double)dir[2] - rc->origin[2]);
+    rc->rgba[i] = (uint32_t)rgb[0] | (uint32_t)rgb[1] << 8 | (uint32_t)rgb[2] << 16;
+    rc->tile_of[i] = rc->list_new;
     rc->chunk_hist[(size_t)(i / rc->chunk_size) * 256]++;
+    return i;
 }
 
 static bool depth_usable(float depth)
@@ -418,27 +427,27 @@ fxc_result view_rc_insert_frame(view_rc *rc, const view_rc_camera *cam, uint32_t
         return FXC_ERR_RANGE;
 
     /* Every cached point the frame saw goes: it is not behind the frame's surface at its pixel. */
-    rc_rec *rec = rc->rec[rc->cur];
     float keep = 1.0f + rc->d.supersede_ratio;
-    uint32_t end = rc->placed + rc->pending;
-    for (uint32_t i = 0; i < end; i++) {
-        if (rc_age(rec[i].rgba) == RC_AGE_EVICTED)
+    for (uint32_t i = 0; i < rc->slots; i++) {
+        if (rc_age(rc->rgba[i]) == RC_AGE_DEAD)
             continue;
         uint32_t x, y;
         float zc;
-        if (!rc_project(&v, rec[i].x, rec[i].y, rec[i].z, &x, &y, &zc))
+        if (!rc_project(&v, rc->px[i], rc->py[i], rc->pz[i], &x, &y, &zc))
             continue;
         float d = depth[(size_t)y * width + x];
         if (!depth_usable(d))
             continue;
-        float dx = rec[i].x - v.rel[0], dy = rec[i].y - v.rel[1], dz = rec[i].z - v.rel[2];
+        float dx = rc->px[i] - v.rel[0], dy = rc->py[i] - v.rel[1], dz = rc->pz[i] - v.rel[2];
         float limit = d * keep;
         if (isinf(d) || dx * dx + dy * dy + dz * dz < limit * limit) {
-            set_age(rc, i, RC_AGE_EVICTED);
+            set_age(rc, i, RC_AGE_DEAD);
             rc->since_superseded++;
         }
     }
-    if ((uint64_t)rc->placed + rc->pending + incoming > rc->slots)
+    /* The last frame's winners are gone or replaced: no sparse supersede through them until the next frame. */
+    rc->last_valid = false;
+    if (rc->free_count < incoming)
         make_room(rc, (uint32_t)incoming);
 
     for (uint32_t y = 0; y < height; y++)
@@ -448,7 +457,7 @@ fxc_result view_rc_insert_frame(view_rc *rc, const view_rc_camera *cam, uint32_t
                 continue;
             float dir[3];
             view_rc__view_ray(&v, (float)x + 0.5f, (float)y + 0.5f, dir);
-            append_point(rc, &v, dir, depth[p], rgb + 3 * p);
+            add_point(rc, &v, dir, depth[p], rgb + 3 * p);
         }
     rc->since_inserted += (uint32_t)incoming;
     rc->since_update_ms += view_rc__now_ms() - t0;
@@ -461,8 +470,8 @@ static void penalise(view_rc *rc, uint32_t q)
     uint32_t w = rc->win[q];
     if (rc->pt[q] == RC_EMPTY_PT || w == RC_NO_POINT)
         return;
-    uint32_t age = rc_age(rc->rec[rc->cur][w].rgba);
-    if (age == RC_AGE_EVICTED)
+    uint32_t age = rc_age(rc->rgba[w]);
+    if (age == RC_AGE_DEAD)
         return;
     age += rc->d.change_penalty;
     uint32_t top = rc->d.no_eviction ? 254 : 255;
@@ -484,7 +493,7 @@ fxc_result view_rc_insert_samples(view_rc *rc, const view_rc_camera *cam, uint32
         incoming += samples[s].x < width && samples[s].y < height && depth_usable(samples[s].depth);
     if (incoming > rc->d.capacity)
         return FXC_ERR_RANGE;
-    if ((uint64_t)rc->placed + rc->pending + incoming > rc->slots)
+    if (rc->free_count < incoming)
         make_room(rc, incoming);
 
     const rc_view *last = &rc->last_view;
@@ -495,18 +504,17 @@ fxc_result view_rc_insert_samples(view_rc *rc, const view_rc_camera *cam, uint32
             continue;
         float dir[3];
         view_rc__view_ray(&v, (float)sample->x + 0.5f, (float)sample->y + 0.5f, dir);
-        append_point(rc, &v, dir, sample->depth, sample->rgb);
-        const rc_rec *r = &rc->rec[rc->cur][rc->placed + rc->pending - 1];
+        uint32_t i = add_point(rc, &v, dir, sample->depth, sample->rgb);
         uint32_t qx, qy;
         float zc;
-        if (!rc->last_valid || !rc_project(last, r->x, r->y, r->z, &qx, &qy, &zc))
+        if (!rc->last_valid || !rc_project(last, rc->px[i], rc->py[i], rc->pz[i], &qx, &qy, &zc))
             continue;
         /* The point the last frame showed there, unless it lies well behind the new sample. */
         uint32_t q = qy * last->width + qx, w = rc->win[q];
         if (rc->pt[q] == RC_EMPTY_PT || w == RC_NO_POINT)
             continue;
-        uint32_t old = rc->rec[rc->cur][w].rgba;
-        if (rc_age(old) == RC_AGE_EVICTED || !(rc->zbuf[q] < zc * keep))
+        uint32_t old = rc->rgba[w];
+        if (rc_age(old) == RC_AGE_DEAD || !(rc->zbuf[q] < zc * keep))
             continue;
         int change = 0;
         for (int k = 0; k < 3; k++) {
@@ -520,7 +528,7 @@ fxc_result view_rc_insert_samples(view_rc *rc, const view_rc_camera *cam, uint32
                     if ((dx || dy) && nx >= 0 && ny >= 0 && nx < last->width && ny < last->height)
                         penalise(rc, (uint32_t)ny * last->width + (uint32_t)nx);
                 }
-        set_age(rc, w, RC_AGE_EVICTED);
+        set_age(rc, w, RC_AGE_DEAD);
         rc->since_superseded++;
     }
     rc->since_inserted += incoming;
@@ -536,18 +544,17 @@ uint32_t view_rc_point_count(const view_rc *rc)
 
 uint32_t view_rc_points(const view_rc *rc, uint32_t first, uint32_t count, view_rc_point *out)
 {
-    const rc_rec *rec = rc->rec[rc->cur];
-    uint32_t end = rc->placed + rc->pending, seen = 0, copied = 0;
-    for (uint32_t i = 0; i < end && copied < count; i++) {
-        uint32_t rgba = rec[i].rgba;
-        if (rc_age(rgba) == RC_AGE_EVICTED)
+    uint32_t seen = 0, copied = 0;
+    for (uint32_t i = 0; i < rc->slots && copied < count; i++) {
+        uint32_t rgba = rc->rgba[i];
+        if (rc_age(rgba) == RC_AGE_DEAD)
             continue;
         if (seen++ < first)
             continue;
         view_rc_point *p = &out[copied++];
-        p->position[0] = rc->origin[0] + (double)rec[i].x;
-        p->position[1] = rc->origin[1] + (double)rec[i].y;
-        p->position[2] = rc->origin[2] + (double)rec[i].z;
+        p->position[0] = rc->origin[0] + (double)rc->px[i];
+        p->position[1] = rc->origin[1] + (double)rc->py[i];
+        p->position[2] = rc->origin[2] + (double)rc->pz[i];
         p->rgb[0] = (uint8_t)rgba;
         p->rgb[1] = (uint8_t)(rgba >> 8);
         p->rgb[2] = (uint8_t)(rgba >> 16);

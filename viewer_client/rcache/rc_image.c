@@ -7,20 +7,24 @@
  * above and below, or the ends of a diagonal) are both nearer than it by more than cull_ratio and agree with each
  * other much better than with it: in disparity (1 / depth, linear across a plane in the image) the pair's spread
  * is less than half its lead over the point, 2 |1/a - 1/b| < 1/max(a, b) - 1/c. That is the mark of a point seen
- * through a surface. Two simpler rules fail on frames the server sends whole: against the neighbourhood's mean depth, the
- * background point beside every silhouette is dropped (a still camera would not show the frame as it was
- * sent); with only "both nearer", a floor seen at a grazing angle (its depth changing by more than cull_ratio
- * from row to row) beside an object drops the floor's points along the object's outline.
+ * through a surface. Two simpler rules fail on frames the server sends whole: against the neighbourhood's mean
+ * depth, the background point beside every silhouette is dropped (a still camera would not show the frame as it
+ * was sent); with only "both nearer", a floor seen at a grazing angle (its depth changing by more than cull_ratio
+ * from row to row) beside an object drops the floor's points along the object's outline. What remains: a strip
+ * of background one pixel thin between two nearer surfaces (a floor seen behind the line where a ball touches
+ * it) looks exactly like a gap and goes.
  *
  * Interpolation (1999, slides 15 and 18; 2002 3.3, Figure 3): the 3x3 filter with weights 1-2-1 / 2-4-2 /
  * 1-2-1 over the neighbourhood's points (after the cull), rounded to the nearest integer, fills a pixel without
- * a point (and with smooth_all replaces every pixel by that mean). The same pass writes the priority image:
- * a point's age (older first), or for a pixel without one 255 - 16 n, n the points among its 8 neighbours
- * (emptier first, 255 where there is none).
+ * a point (and with smooth_all replaces every pixel by that mean). The filter is separable: sums along rows,
+ * then along columns, over planes of 16-bit values, in loops the compiler vectorises. The same pass writes the
+ * priority image: a point's age (older first), or for a pixel without one 255 - 16 n, n the points among its 8
+ * neighbours (emptier first, 255 where there is none).
  *
- * Prefilter (2002 3.3): where the 3x3 found no point, the uniform mean of the points in the 7x7 neighbourhood,
- * from running sums whose cost does not depend on the kernel's size (the paper's reference: Smith's moving
- * average); only tiles with such pixels compute it. It does not change the priority (2002 3.3). */
+ * Prefilter (2002 3.3): where the 3x3 found no point, the uniform mean of the points in the 7x7 neighbourhood.
+ * A tile with many such pixels computes running sums (cost independent of the kernel's size: the paper's
+ * reference is Smith's moving average), a tile with few sums each one's 49 pixels; both give the same integers.
+ * It does not change the priority (2002 3.3). */
 #include "rc_internal.h"
 
 #include <math.h>
@@ -33,67 +37,100 @@ typedef struct rc_rect {
 static rc_rect tile_rect(const view_rc *rc, uint32_t tile)
 {
     rc_rect r;
-    r.x0 = (tile % rc->tiles_x) * rc->tile_w;
-    r.y0 = (tile / rc->tiles_x) * rc->tile_h;
-    r.x1 = r.x0 + rc->tile_w < rc->width ? r.x0 + rc->tile_w : rc->width;
-    r.y1 = r.y0 + rc->tile_h < rc->height ? r.y0 + rc->tile_h : rc->height;
+    r.x0 = (tile % rc->tiles_x) << rc->tile_shift;
+    r.y0 = (tile / rc->tiles_x) << rc->tile_shift;
+    r.x1 = r.x0 + rc->tile < rc->width ? r.x0 + rc->tile : rc->width;
+    r.y1 = r.y0 + rc->tile < rc->height ? r.y0 + rc->tile : rc->height;
     return r;
 }
 
 /* ---- depth cull ----------------------------------------------------------------------------------------- */
+
+/* One opposite pair (a, b) around depth z, threshold t = z / (1 + cull_ratio). */
+FXC_HOT_INLINE bool pair_in_front(float a, float b, float z, float t)
+{
+    float lo = a < b ? a : b, hi = a < b ? b : a;
+    return (hi < t) & (2.0f * (hi - lo) * z < (z - hi) * lo);
+}
+
+/* Pixels [xa, xb) of a row with a row above (zu) and below (zd), none of them on the image's left or right
+ * edge. Writes the shown points and the output depth; returns the pixels culled. nearer = 0 turns the cull off. */
+FXC_HOT_CLONES static uint32_t cull_span(const float *restrict zu, const float *restrict zc,
+                                         const float *restrict zd, const uint32_t *restrict pre,
+                                         uint32_t *restrict pt, float *restrict depth,
+                                         const float *restrict sx2, float sy2, float nearer, float sky, uint32_t xa,
+                                         uint32_t xb)
+{
+    uint32_t culled = 0;
+    for (uint32_t x = xa; x < xb; x++) {
+        float z = zc[x], t = z * nearer;
+        bool behind = pair_in_front(zc[x - 1], zc[x + 1], z, t) | pair_in_front(zu[x], zd[x], z, t) |
+                      pair_in_front(zu[x - 1], zd[x + 1], z, t) | pair_in_front(zu[x + 1], zd[x - 1], z, t);
+        uint32_t v = pre[x];
+        uint32_t occupied = v != RC_EMPTY_PT, cull = behind & occupied, mask = 0u - cull;
+        pt[x] = (v & ~mask) | (RC_EMPTY_PT & mask); /* (a select the vectoriser takes) */
+        float root = sqrtf(1.0f + sx2[x] + sy2), d = z * root;
+        float shown = z >= sky ? INFINITY : d;
+        depth[x] = occupied & !cull ? shown : NAN;
+        culled += cull;
+    }
+    return culled;
+}
+
+/* The same for one pixel anywhere (the image's border rows and columns): neighbours outside are +inf. */
+static uint32_t cull_pixel(view_rc *rc, uint32_t x, uint32_t y, float nearer, float sky)
+{
+    size_t w = rc->width, p = y * w + x;
+    uint32_t h = rc->height;
+    const float *zbuf = rc->zbuf;
+    bool l = x > 0, r = x + 1 < w, u = y > 0, d = y + 1 < h;
+    float z = zbuf[p], t = z * nearer;
+    bool behind = pair_in_front(l ? zbuf[p - 1] : INFINITY, r ? zbuf[p + 1] : INFINITY, z, t) |
+                  pair_in_front(u ? zbuf[p - w] : INFINITY, d ? zbuf[p + w] : INFINITY, z, t) |
+                  pair_in_front(l && u ? zbuf[p - w - 1] : INFINITY, r && d ? zbuf[p + w + 1] : INFINITY, z, t) |
+                  pair_in_front(r && u ? zbuf[p - w + 1] : INFINITY, l && d ? zbuf[p + w - 1] : INFINITY, z, t);
+    uint32_t v = rc->pre[p];
+    bool occupied = v != RC_EMPTY_PT, cull = behind & occupied;
+    rc->pt[p] = cull ? RC_EMPTY_PT : v;
+    float depth = z >= sky ? INFINITY : z * sqrtf(1.0f + rc->stretch_x2[x] + rc->stretch_y2[y]);
+    rc->depth[p] = occupied && !cull ? depth : NAN;
+    return cull;
+}
 
 static void cull_task(void *user, uint32_t tile, uint32_t worker)
 {
     (void)worker;
     view_rc *rc = user;
     rc_rect r = tile_rect(rc, tile);
-    const float *zbuf = rc->zbuf;
-    const uint32_t *win = rc->win;
-    const rc_rec *rec = rc->rec[rc->built];
-    uint32_t *pt = rc->pt;
-    float *depth = rc->depth;
     size_t w = rc->width;
     uint32_t h = rc->height, culled = 0;
-    bool cull = !rc->d.no_depth_cull;
-    float nearer = 1.0f / (1.0f + rc->d.cull_ratio);
+    float nearer = rc->d.no_depth_cull ? 0.0f : 1.0f / (1.0f + rc->d.cull_ratio);
     float sky = (float)(0.5 * VIEW_RC_SKY_DISTANCE);
+    uint32_t xa = r.x0 > 0 ? r.x0 : 1, xb = r.x1 < w ? r.x1 : (uint32_t)w - 1;
+    for (uint32_t y = r.y0; y < r.y1; y++) {
+        if (y == 0 || y + 1 >= h || w < 3) {
+            for (uint32_t x = r.x0; x < r.x1; x++)
+                culled += cull_pixel(rc, x, y, nearer, sky);
+            continue;
+        }
+        if (r.x0 == 0)
+            culled += cull_pixel(rc, 0, y, nearer, sky);
+        size_t row = y * w;
+        if (xa < xb)
+            culled += cull_span(rc->zbuf + row - w, rc->zbuf + row, rc->zbuf + row + w, rc->pre + row, rc->pt + row,
+                                rc->depth + row, rc->stretch_x2, rc->stretch_y2[y], nearer, sky, xa, xb);
+        if (r.x1 == w)
+            culled += cull_pixel(rc, (uint32_t)w - 1, y, nearer, sky);
+    }
+    /* The points shown: visible for the ageing (no branch: a pixel without one marks the byte after the last
+     * slot). */
+    const uint32_t *pt = rc->pt, *win = rc->win;
+    uint8_t *mark = rc->mark;
+    uint32_t sink = rc->slots;
     for (uint32_t y = r.y0; y < r.y1; y++)
         for (uint32_t x = r.x0; x < r.x1; x++) {
-            size_t p = y * w + x;
-            uint32_t winner = win[p];
-            if (winner == RC_NO_POINT) {
-                pt[p] = RC_EMPTY_PT;
-                depth[p] = NAN;
-                continue;
-            }
-            float z = zbuf[p], t = z * nearer;
-            if (cull) {
-                /* The eight neighbours' depths (+inf outside the image and where empty: never nearer). */
-                float n[8];
-                bool l = x > 0, rt = x + 1 < w, u = y > 0, d = y + 1 < h;
-                n[0] = l ? zbuf[p - 1] : INFINITY;             /* left */
-                n[1] = rt ? zbuf[p + 1] : INFINITY;             /* right: opposite of 0 */
-                n[2] = u ? zbuf[p - w] : INFINITY;             /* up */
-                n[3] = d ? zbuf[p + w] : INFINITY;             /* down: opposite of 2 */
-                n[4] = l && u ? zbuf[p - w - 1] : INFINITY;   /* up left */
-                n[5] = rt && d ? zbuf[p + w + 1] : INFINITY;   /* down right: opposite of 4 */
-                n[6] = rt && u ? zbuf[p - w + 1] : INFINITY;   /* up right */
-                n[7] = l && d ? zbuf[p + w - 1] : INFINITY;   /* down left: opposite of 6 */
-                bool behind = false;
-                for (int k = 0; k < 8; k += 2) {
-                    float lo = n[k] < n[k + 1] ? n[k] : n[k + 1], hi = n[k] < n[k + 1] ? n[k + 1] : n[k];
-                    /* Both nearer by the ratio; then 2 (1/lo - 1/hi) < 1/hi - 1/z, multiplied by lo hi z. */
-                    behind |= hi < t && 2.0f * (hi - lo) * z < (z - hi) * lo;
-                }
-                if (behind) {
-                    pt[p] = RC_EMPTY_PT;
-                    depth[p] = NAN;
-                    culled++;
-                    continue;
-                }
-            }
-            pt[p] = rec[winner].rgba;
-            depth[p] = z >= sky ? INFINITY : z * sqrtf(1.0f + rc->stretch_x2[x] + rc->stretch_y2[y]);
+            uint32_t none = 0u - (uint32_t)(pt[y * w + x] == RC_EMPTY_PT);
+            mark[(win[y * w + x] & ~none) | (sink & none)] = 1;
         }
     rc->tile_culled[tile] = culled;
 }
@@ -115,67 +152,137 @@ void view_rc__depth_cull(view_rc *rc)
 
 /* ---- interpolation and priority ----------------------------------------------------------------------- */
 
+/* 16-bit values per worker for a tile of side `tile`: the tile and a one-pixel border as four planes (red,
+ * green, blue, occupied), the row sums (tile + 2 rows of tile: red, green, blue, weight, count), and the three
+ * output colour planes (bytes). */
+size_t view_rc__interp_scratch(uint32_t tile)
+{
+    size_t s = (size_t)tile + 2;
+    return 4 * s * s + 5 * s * tile + 2 * (size_t)tile * tile;
+}
+
+/* A row of points as planes: red, green, blue (0 where empty) and occupied. */
+FXC_HOT_CLONES static void unpack_span(const uint32_t *restrict src, uint16_t *restrict r, uint16_t *restrict g,
+                                       uint16_t *restrict b, uint16_t *restrict o, uint32_t n)
+{
+    for (size_t x = 0; x < n; x++) {
+        uint32_t v = src[x];
+        r[x] = (uint16_t)(v & 0xFF);
+        g[x] = (uint16_t)((v >> 8) & 0xFF);
+        b[x] = (uint16_t)((v >> 16) & 0xFF);
+        o[x] = v != RC_EMPTY_PT;
+    }
+}
+
+/* Row sums: weighted 1-2-1 of each plane, and the plain count of occupied pixels. */
+FXC_HOT_CLONES static void row_sums(const uint16_t *restrict r, const uint16_t *restrict g,
+                                    const uint16_t *restrict b, const uint16_t *restrict o, uint16_t *restrict hr,
+                                    uint16_t *restrict hg, uint16_t *restrict hb, uint16_t *restrict hw,
+                                    uint16_t *restrict hn, uint32_t n)
+{
+    for (size_t x = 0; x < n; x++) {
+        hr[x] = (uint16_t)(r[x] + 2 * r[x + 1] + r[x + 2]);
+        hg[x] = (uint16_t)(g[x] + 2 * g[x + 1] + g[x + 2]);
+        hb[x] = (uint16_t)(b[x] + 2 * b[x + 1] + b[x + 2]);
+        hw[x] = (uint16_t)(o[x] + 2 * o[x + 1] + o[x + 2]);
+        hn[x] = (uint16_t)(o[x] + o[x + 1] + o[x + 2]);
+    }
+}
+
+/* One output row: the column sums of three row sums, the choice of colour, kind and priority. */
+FXC_HOT_CLONES static uint64_t finish_row(const uint16_t *restrict h, size_t hstride, const uint16_t *restrict own_o,
+                                          const uint32_t *restrict own, uint8_t *restrict out_r,
+                                          uint8_t *restrict out_g, uint8_t *restrict out_b, uint8_t *restrict kind,
+                                          uint8_t *restrict priority, uint32_t n, bool smooth_all,
+                                          const uint8_t clear[3], uint32_t kinds[VIEW_RC_PIXEL_KINDS])
+{
+    /* h: five row-sum planes one after the other (hstride apart), three rows each (n apart). */
+    const uint16_t *hr = h, *hg = h + hstride, *hb = h + 2 * hstride, *hw = h + 3 * hstride, *hn = h + 4 * hstride;
+    uint64_t weight = 0;
+    uint32_t points = 0, interp = 0, empty = 0;
+    const uint32_t clear_r = clear[0], clear_g = clear[1], clear_b = clear[2], keep_own = smooth_all ? 0u : 1u;
+    for (size_t x = 0; x < n; x++) {
+        uint32_t sr = hr[x] + 2u * hr[x + n] + hr[x + 2 * n];
+        uint32_t sg = hg[x] + 2u * hg[x + n] + hg[x + 2 * n];
+        uint32_t sb = hb[x] + 2u * hb[x + n] + hb[x + 2 * n];
+        uint32_t sw = hw[x] + 2u * hw[x + n] + hw[x + 2 * n];
+        uint32_t count = hn[x] + hn[x + n] + hn[x + 2 * n] - own_o[x]; /* neighbours, not itself */
+        uint32_t v = own[x];
+        uint32_t has = own_o[x] != 0, keep = has & keep_own, filled = sw > 0;
+        /* Rounded division by 1..16: exact through the float reciprocal (an error below 1/64 either way). */
+        float inv = 1.0f / (float)(sw | !filled);
+        uint32_t half = sw / 2;
+        uint32_t qr = (uint32_t)(int32_t)((float)(sr + half) * inv + (1.0f / 64));
+        uint32_t qg = (uint32_t)(int32_t)((float)(sg + half) * inv + (1.0f / 64));
+        uint32_t qb = (uint32_t)(int32_t)((float)(sb + half) * inv + (1.0f / 64));
+        uint32_t mk = 0u - keep, mf = 0u - filled; /* masks: the selects the vectoriser takes */
+        uint32_t fr = (qr & mf) | (clear_r & ~mf), fg = (qg & mf) | (clear_g & ~mf), fb = (qb & mf) | (clear_b & ~mf);
+        out_r[x] = (uint8_t)(((v & 0xFF) & mk) | (fr & ~mk));
+        out_g[x] = (uint8_t)((((v >> 8) & 0xFF) & mk) | (fg & ~mk));
+        out_b[x] = (uint8_t)((((v >> 16) & 0xFF) & mk) | (fb & ~mk));
+        uint32_t k = has ? VIEW_RC_POINT : filled ? VIEW_RC_INTERP : VIEW_RC_EMPTY;
+        kind[x] = (uint8_t)k;
+        uint32_t mh = 0u - has, prio = ((v >> 24) & mh) | ((255 - 16 * count) & ~mh);
+        priority[x] = (uint8_t)prio;
+        weight += prio + 1;
+        points += has;
+        interp += (has ^ 1) & filled;
+        empty += (has ^ 1) & (filled ^ 1);
+    }
+    kinds[VIEW_RC_POINT] += points;
+    kinds[VIEW_RC_INTERP] += interp;
+    kinds[VIEW_RC_EMPTY] += empty;
+    return weight;
+}
+
 static void interpolate_task(void *user, uint32_t tile, uint32_t worker)
 {
-    (void)worker;
     view_rc *rc = user;
     rc_rect r = tile_rect(rc, tile);
-    const uint32_t *pt = rc->pt;
-    uint8_t *rgb = rc->rgb, *kind = rc->kind, *priority = rc->priority;
-    size_t w = rc->width;
-    uint32_t h = rc->height;
-    bool smooth_all = rc->d.smooth_all, prefilter = !rc->d.no_prefilter;
-    const uint8_t *clear = rc->d.clear_rgb;
+    uint32_t w = rc->width, h = rc->height, tw = r.x1 - r.x0, th = r.y1 - r.y0;
+    uint32_t s = tw + 2; /* plane stride */
+    size_t plane = (size_t)s * (th + 2), rows = (size_t)(th + 2) * tw;
+    uint16_t *pr = rc->workers[worker].planes, *pg = pr + plane, *pb = pg + plane, *po = pb + plane;
+    uint16_t *hsum = po + plane; /* five planes of rows x tw */
+    uint8_t *out_r = (uint8_t *)(hsum + 5 * rows), *out_g = out_r + tw, *out_b = out_g + tw;
+    /* The planes, with zeros outside the image. */
+    for (uint32_t j = 0; j < th + 2; j++) {
+        int64_t y = (int64_t)r.y0 + j - 1;
+        size_t q = (size_t)j * s;
+        if (y < 0 || y >= h) {
+            memset(pr + q, 0, s * sizeof(uint16_t));
+            memset(pg + q, 0, s * sizeof(uint16_t));
+            memset(pb + q, 0, s * sizeof(uint16_t));
+            memset(po + q, 0, s * sizeof(uint16_t));
+            continue;
+        }
+        const uint32_t *row = rc->pt + (size_t)y * w;
+        /* Columns x0 - 1 .. x1: the first and last may lie outside. */
+        uint32_t i0 = r.x0 > 0 ? 0 : 1, i1 = r.x1 < w ? s : s - 1;
+        pr[q] = pg[q] = pb[q] = po[q] = 0;
+        pr[q + s - 1] = pg[q + s - 1] = pb[q + s - 1] = po[q + s - 1] = 0;
+        unpack_span(row + r.x0 - 1 + i0, pr + q + i0, pg + q + i0, pb + q + i0, po + q + i0, i1 - i0);
+    }
+    for (uint32_t j = 0; j < th + 2; j++) {
+        size_t q = (size_t)j * s, o = (size_t)j * tw;
+        row_sums(pr + q, pg + q, pb + q, po + q, hsum + o, hsum + rows + o, hsum + 2 * rows + o,
+                 hsum + 3 * rows + o, hsum + 4 * rows + o, tw);
+    }
     uint32_t kinds[VIEW_RC_PIXEL_KINDS] = {0};
     uint64_t weight = 0;
-    for (uint32_t y = r.y0; y < r.y1; y++)
-        for (uint32_t x = r.x0; x < r.x1; x++) {
-            size_t p = y * w + x;
-            uint32_t own = pt[p];
-            bool has_point = own != RC_EMPTY_PT;
-            uint8_t *out = rgb + 3 * p;
-            if (has_point && !smooth_all) {
-                out[0] = (uint8_t)own, out[1] = (uint8_t)(own >> 8), out[2] = (uint8_t)(own >> 16);
-                kind[p] = VIEW_RC_POINT;
-                priority[p] = (uint8_t)rc_age(own);
-                kinds[VIEW_RC_POINT]++;
-                weight += rc_age(own) + 1;
-                continue;
-            }
-            /* 1-2-1 / 2-4-2 / 1-2-1 over the neighbourhood's points. */
-            uint32_t sum[3] = {0, 0, 0}, total = 0, neighbours = 0;
-            for (int dy = -1; dy <= 1; dy++) {
-                if ((dy < 0 && y == 0) || (dy > 0 && y + 1 >= h))
-                    continue;
-                for (int dx = -1; dx <= 1; dx++) {
-                    if ((dx < 0 && x == 0) || (dx > 0 && x + 1 >= w))
-                        continue;
-                    uint32_t v = pt[(size_t)((int64_t)p + dy * (int64_t)w + dx)];
-                    if (v == RC_EMPTY_PT)
-                        continue;
-                    uint32_t k = (uint32_t)((dx ? 1 : 2) * (dy ? 1 : 2));
-                    sum[0] += k * (v & 0xFF);
-                    sum[1] += k * ((v >> 8) & 0xFF);
-                    sum[2] += k * ((v >> 16) & 0xFF);
-                    total += k;
-                    neighbours += dx || dy;
-                }
-            }
-            uint32_t prio = has_point ? rc_age(own) : 255 - 16 * neighbours;
-            priority[p] = (uint8_t)prio;
-            weight += prio + 1;
-            if (total > 0) {
-                for (int c = 0; c < 3; c++)
-                    out[c] = (uint8_t)((sum[c] + total / 2) / total);
-                kind[p] = has_point ? VIEW_RC_POINT : VIEW_RC_INTERP;
-            } else {
-                out[0] = clear[0], out[1] = clear[1], out[2] = clear[2];
-                kind[p] = VIEW_RC_EMPTY;
-            }
-            kinds[kind[p]]++;
+    for (uint32_t j = 0; j < th; j++) {
+        size_t p = (size_t)(r.y0 + j) * w + r.x0;
+        weight += finish_row(hsum + (size_t)j * tw, rows, po + (size_t)(j + 1) * s + 1, rc->pt + p, out_r, out_g,
+                             out_b, rc->kind + p, rc->priority + p, tw, rc->d.smooth_all, rc->d.clear_rgb, kinds);
+        uint8_t *rgb = rc->rgb + 3 * p;
+        for (uint32_t x = 0; x < tw; x++) {
+            rgb[3 * x] = out_r[x];
+            rgb[3 * x + 1] = out_g[x];
+            rgb[3 * x + 2] = out_b[x];
         }
+    }
     memcpy(rc->tile_kind + (size_t)tile * VIEW_RC_PIXEL_KINDS, kinds, sizeof kinds);
-    rc->tile_need[tile] = prefilter ? kinds[VIEW_RC_EMPTY] : 0;
+    rc->tile_need[tile] = rc->d.no_prefilter ? 0 : kinds[VIEW_RC_EMPTY];
     rc->tile_weight[tile] = weight;
 }
 
@@ -186,18 +293,48 @@ void view_rc__interpolate(view_rc *rc)
 
 /* ---- prefilter -------------------------------------------------------------------------------------------- */
 
-static void prefilter_task(void *user, uint32_t tile, uint32_t worker)
+static void fill_from(uint8_t *rgb, const uint32_t acc[4])
 {
-    view_rc *rc = user;
-    if (rc->tile_need[tile] == 0)
-        return;
-    rc_rect r = tile_rect(rc, tile);
+    for (int c = 0; c < 3; c++)
+        rgb[c] = (uint8_t)((acc[c] + acc[3] / 2) / acc[3]);
+}
+
+/* Tiles with few pixels to fill: each one's 7x7 window summed directly. */
+static uint32_t prefilter_direct(view_rc *rc, rc_rect r)
+{
+    uint32_t w = rc->width, h = rc->height, filled = 0;
+    for (uint32_t y = r.y0; y < r.y1; y++)
+        for (uint32_t x = r.x0; x < r.x1; x++) {
+            size_t p = (size_t)y * w + x;
+            if (rc->kind[p] != VIEW_RC_EMPTY)
+                continue;
+            uint32_t acc[4] = {0, 0, 0, 0};
+            uint32_t ya = y >= 3 ? y - 3 : 0, yb = y + 4 < h ? y + 4 : h;
+            uint32_t xa = x >= 3 ? x - 3 : 0, xb = x + 4 < w ? x + 4 : w;
+            for (uint32_t yy = ya; yy < yb; yy++)
+                for (uint32_t xx = xa; xx < xb; xx++) {
+                    uint32_t v = rc->pt[(size_t)yy * w + xx];
+                    if (v == RC_EMPTY_PT)
+                        continue;
+                    acc[0] += v & 0xFF, acc[1] += (v >> 8) & 0xFF, acc[2] += (v >> 16) & 0xFF;
+                    acc[3]++;
+                }
+            if (acc[3] > 0) {
+                fill_from(rc->rgb + 3 * p, acc);
+                rc->kind[p] = VIEW_RC_PREFILTER;
+                filled++;
+            }
+        }
+    return filled;
+}
+
+/* Tiles with many: running sums along the rows (the tile and three rows above and below), then down the
+ * columns. */
+static uint32_t prefilter_running(view_rc *rc, rc_rect r, uint32_t *box)
+{
     const uint32_t *pt = rc->pt;
-    uint8_t *rgb = rc->rgb, *kind = rc->kind;
-    uint32_t w = rc->width, h = rc->height, tw = r.x1 - r.x0;
+    uint32_t w = rc->width, h = rc->height, tw = r.x1 - r.x0, filled = 0;
     uint32_t row_lo = r.y0 >= 3 ? r.y0 - 3 : 0, row_hi = r.y1 + 3 < h ? r.y1 + 3 : h;
-    uint32_t *box = rc->workers[worker].box; /* per row of [row_lo, row_hi), per column: r, g, b, count */
-    /* Horizontal sums over [x - 3, x + 3], sliding along each row. */
     for (uint32_t y = row_lo; y < row_hi; y++) {
         const uint32_t *line = pt + (size_t)y * w;
         uint32_t acc[4] = {0, 0, 0, 0};
@@ -222,22 +359,19 @@ static void prefilter_task(void *user, uint32_t tile, uint32_t worker)
             }
         }
     }
-    /* Vertical sums over [y - 3, y + 3], sliding down each column; only the empty pixels read them. */
-    uint32_t filled = 0;
+    size_t stride = (size_t)tw * 4;
     for (uint32_t x = r.x0; x < r.x1; x++) {
         uint32_t acc[4] = {0, 0, 0, 0};
         const uint32_t *column = box + (x - r.x0) * 4;
-        size_t stride = (size_t)tw * 4;
         uint32_t lo = r.y0 >= 3 ? r.y0 - 3 : 0, hi = r.y0 + 4 < h ? r.y0 + 4 : h;
         for (uint32_t y = lo; y < hi; y++)
             for (int c = 0; c < 4; c++)
                 acc[c] += column[(y - row_lo) * stride + c];
         for (uint32_t y = r.y0; y < r.y1; y++) {
             size_t p = (size_t)y * w + x;
-            if (kind[p] == VIEW_RC_EMPTY && acc[3] > 0) {
-                for (int c = 0; c < 3; c++)
-                    rgb[3 * p + c] = (uint8_t)((acc[c] + acc[3] / 2) / acc[3]);
-                kind[p] = VIEW_RC_PREFILTER;
+            if (rc->kind[p] == VIEW_RC_EMPTY && acc[3] > 0) {
+                fill_from(rc->rgb + 3 * p, acc);
+                rc->kind[p] = VIEW_RC_PREFILTER;
                 filled++;
             }
             if (y >= 3 && y - 3 >= row_lo)
@@ -248,6 +382,20 @@ static void prefilter_task(void *user, uint32_t tile, uint32_t worker)
                     acc[c] += column[(y + 4 - row_lo) * stride + c];
         }
     }
+    return filled;
+}
+
+static void prefilter_task(void *user, uint32_t tile, uint32_t worker)
+{
+    view_rc *rc = user;
+    uint32_t need = rc->tile_need[tile];
+    if (need == 0)
+        return;
+    rc_rect r = tile_rect(rc, tile);
+    /* 49 reads a pixel against about 12 a pixel of the tile and its border for the running sums. */
+    uint64_t tile_pixels = (uint64_t)(r.x1 - r.x0) * (r.y1 - r.y0);
+    uint32_t filled = (uint64_t)need * 49 < tile_pixels * 12 ? prefilter_direct(rc, r)
+                                                             : prefilter_running(rc, r, rc->workers[worker].box);
     rc->tile_kind[(size_t)tile * VIEW_RC_PIXEL_KINDS + VIEW_RC_EMPTY] -= filled;
     rc->tile_kind[(size_t)tile * VIEW_RC_PIXEL_KINDS + VIEW_RC_PREFILTER] += filled;
 }

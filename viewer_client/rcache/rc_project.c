@@ -1,17 +1,16 @@
 /* The point passes of a frame: the drop plan, the predicted projection (2002 3.1), projection and tile sort
- * with migration between tile lists (2002 3.2; Reinhard 2001 section 3), the tiled z-buffer (2002 3.2), the
- * one-pass projection and z-buffer of the 1999 render cache (no_tiling), and ageing with eviction (2002 3.4).
+ * (2002 3.2; the tile lists of Reinhard 2001 section 3), the tiled z-buffer (2002 3.2), the one-pass z-buffer of
+ * the 1999 render cache (no_tiling), and ageing with eviction (2002 3.4).
  *
- * Project and tile sort, per chunk of the store (parallel): every record is projected once; the chunk counts
- * how many of its records go to each list (the tile they landed in, the outside list, or dropped). Then one
- * serial step turns the counts into offsets, list by list and chunk by chunk within a list, and the scatter
- * (parallel again) copies each record with its pixel and depth to its offset in the other array. A point that
- * landed in another tile than the list it came from has migrated. The new array is ordered by list, then by the
- * chunk the record came from, then by its place in that chunk: the same whatever the thread count.
+ * Project and tile sort, per chunk of slots (parallel): every live point is projected once, in a loop without
+ * branches (vectorised); the chunk counts how many of its points go to each tile. One serial step turns the
+ * counts into offsets, tile by tile and chunk by chunk within a tile, and the bucket sort (parallel again) writes
+ * each projected point as a 16-byte entry at its offset: tile after tile, the tiles' point lists. The order
+ * within a list (chunk, then slot) does not depend on the thread count.
  *
- * The z-buffer then reads one tile's list (parallel over tiles) into that tile's part of the image: about
- * 64 x 64 pixels of depth and winner, 32 KiB, resident in cache while the tile's points stream past. The nearer
- * view depth wins; between equal depths, the record placed first (lower index). */
+ * The z-buffer then reads one tile's list (parallel over tiles) into that tile's part of the image: 64 x 64
+ * pixels of depth and winner, 32 KiB, which stays in cache while the tile's entries stream past. The nearer
+ * view depth wins; between equal depths, the entry first in the list. */
 #include "rc_internal.h"
 
 #include <math.h>
@@ -22,12 +21,12 @@
 void view_rc__plan_drops(view_rc *rc)
 {
     uint64_t hist[256] = {0}, live = 0;
-    for (uint32_t c = 0; c < rc->chunk_max; c++)
+    for (uint32_t c = 0; c < rc->chunk_count; c++)
         for (uint32_t a = 0; a < 255; a++) {
             hist[a] += rc->chunk_hist[(size_t)c * 256 + a];
             live += rc->chunk_hist[(size_t)c * 256 + a];
         }
-    memset(rc->chunk_quota, 0, rc->chunk_max * sizeof(uint32_t));
+    memset(rc->chunk_quota, 0, rc->chunk_count * sizeof(uint32_t));
     rc->drop_age = RC_AGE_NO_DROP;
     if (live <= rc->d.capacity)
         return;
@@ -37,54 +36,100 @@ void view_rc__plan_drops(view_rc *rc)
     while (age > 0 && above + hist[age] < drop)
         above += hist[age--];
     rc->drop_age = (uint32_t)age;
-    uint64_t take = drop - above; /* records of exactly that age, the first ones in store order */
-    for (uint32_t c = 0; c < rc->chunk_max && take > 0; c++) {
+    uint64_t take = drop - above; /* points of exactly that age, the first ones in slot order */
+    for (uint32_t c = 0; c < rc->chunk_count && take > 0; c++) {
         uint32_t n = rc->chunk_hist[(size_t)c * 256 + (uint32_t)age];
         rc->chunk_quota[c] = n < take ? n : (uint32_t)take;
         take -= rc->chunk_quota[c];
     }
 }
 
-/* Whether record age `age` goes in this frame's plan; *quota counts down the chunk's share of drop_age. */
-static inline bool dropped(uint32_t age, uint32_t drop_age, uint32_t *quota)
-{
-    if (age == RC_AGE_EVICTED || age > drop_age)
-        return true;
-    if (age == drop_age && *quota > 0) {
-        (*quota)--;
-        return true;
-    }
-    return false;
-}
-
 static void chunk_range(const view_rc *rc, uint32_t c, uint32_t *begin, uint32_t *end)
 {
-    uint32_t total = rc->placed + rc->pending;
     *begin = c * rc->chunk_size;
-    *end = *begin + rc->chunk_size < total ? *begin + rc->chunk_size : total;
-    if (*begin > *end)
-        *begin = *end;
+    *end = *begin + rc->chunk_size < rc->slots ? *begin + rc->chunk_size : rc->slots;
+}
+
+/* ---- projection without branches ----------------------------------------------------------------------- */
+
+/* The pixel of every slot in [begin, end) for view v (RC_NO_PIXEL for free slots, points behind the camera or
+ * outside the image), its view depth, and its list: the tile (two shifts of the pixel's coordinates), or
+ * `outside`, or `dead` for a free slot. rc_project's arithmetic; the conversion to integers happens only on
+ * coordinates known to be inside. */
+FXC_HOT_CLONES static void project_span(const rc_view *v, const float *restrict px, const float *restrict py,
+                                        const float *restrict pz, const uint32_t *restrict rgba,
+                                        uint32_t *restrict pix, float *restrict dep, uint16_t *restrict dest,
+                                        uint32_t begin, uint32_t end, uint32_t shift, uint32_t tiles_x,
+                                        uint16_t outside, uint16_t dead)
+{
+    const float cx = v->rel[0], cy = v->rel[1], cz = v->rel[2];
+    const float fx = v->forward[0], fy = v->forward[1], fz = v->forward[2];
+    const float rx = v->right[0], ry = v->right[1], rz = v->right[2];
+    const float ux = v->up[0], uy = v->up[1], uz = v->up[2];
+    const float hw = v->half_w, hh = v->half_h, kx = v->kx, ky = v->ky;
+    const float w = (float)v->width, h = (float)v->height;
+    const uint32_t width = v->width;
+    for (uint32_t i = begin; i < end; i++) {
+        float vx = px[i] - cx, vy = py[i] - cy, vz = pz[i] - cz;
+        float zc = vx * fx + vy * fy + vz * fz;
+        float xc = vx * rx + vy * ry + vz * rz;
+        float yc = vx * ux + vy * uy + vz * uz;
+        float inv = 1.0f / zc;
+        float sx = hw + kx * xc * inv;
+        float sy = hh - ky * yc * inv;
+        bool live = (rgba[i] >> 24) != RC_AGE_DEAD;
+        bool inside = live & (zc > RC_NEAR) & (sx >= 0.0f) & (sx < w) & (sy >= 0.0f) & (sy < h);
+        uint32_t ix = (uint32_t)(int32_t)(inside ? sx : 0.0f);
+        uint32_t iy = (uint32_t)(int32_t)(inside ? sy : 0.0f);
+        uint32_t tile = (iy >> shift) * tiles_x + (ix >> shift);
+        pix[i] = inside ? iy * width + ix : RC_NO_PIXEL;
+        dep[i] = zc;
+        dest[i] = (uint16_t)(inside ? tile : live ? outside : dead);
+    }
 }
 
 /* ---- predicted projection (2002 3.1) ------------------------------------------------------------------- */
+
+/* The quarter-resolution pixel of every slot in [begin, end) for view v (RC_NO_PIXEL when none). */
+FXC_HOT_CLONES static void predict_span(const rc_view *v, const float *restrict px, const float *restrict py,
+                                        const float *restrict pz, const uint32_t *restrict rgba,
+                                        uint32_t *restrict low, uint32_t begin, uint32_t end, uint32_t low_w)
+{
+    const float cx = v->rel[0], cy = v->rel[1], cz = v->rel[2];
+    const float fx = v->forward[0], fy = v->forward[1], fz = v->forward[2];
+    const float rx = v->right[0], ry = v->right[1], rz = v->right[2];
+    const float ux = v->up[0], uy = v->up[1], uz = v->up[2];
+    const float hw = v->half_w, hh = v->half_h, kx = v->kx, ky = v->ky;
+    const float w = (float)v->width, h = (float)v->height;
+    for (uint32_t i = begin; i < end; i++) {
+        float vx = px[i] - cx, vy = py[i] - cy, vz = pz[i] - cz;
+        float zc = vx * fx + vy * fy + vz * fz;
+        float xc = vx * rx + vy * ry + vz * rz;
+        float yc = vx * ux + vy * uy + vz * uz;
+        float inv = 1.0f / zc;
+        float sx = hw + kx * xc * inv;
+        float sy = hh - ky * yc * inv;
+        bool live = (rgba[i] >> 24) != RC_AGE_DEAD;
+        bool inside = live & (zc > RC_NEAR) & (sx >= 0.0f) & (sx < w) & (sy >= 0.0f) & (sy < h);
+        uint32_t ix = (uint32_t)(int32_t)(inside ? sx : 0.0f) >> 2;
+        uint32_t iy = (uint32_t)(int32_t)(inside ? sy : 0.0f) >> 2;
+        low[i - begin] = inside ? iy * low_w + ix : RC_NO_PIXEL;
+    }
+}
 
 /* No z-buffer and a quarter of the resolution in each direction: only whether any point lands in a pixel. */
 static void predict_task(void *user, uint32_t c, uint32_t worker)
 {
     view_rc *rc = user;
-    const rc_view *v = &rc->predicted;
-    const rc_rec *rec = rc->rec[rc->cur];
-    uint8_t *occupied = rc->workers[worker].occupied;
-    uint32_t begin, end, low_w = rc->low_w;
+    uint32_t begin, end;
     chunk_range(rc, c, &begin, &end);
-    for (uint32_t i = begin; i < end; i++) {
-        if (rc_age(rec[i].rgba) == RC_AGE_EVICTED)
-            continue;
-        uint32_t x, y;
-        float zc;
-        if (rc_project(v, rec[i].x, rec[i].y, rec[i].z, &x, &y, &zc))
-            occupied[(y >> 2) * low_w + (x >> 2)] = 1;
-    }
+    uint32_t *low = rc->workers[worker].low;
+    uint8_t *occupied = rc->workers[worker].occupied;
+    predict_span(&rc->predicted, rc->px, rc->py, rc->pz, rc->rgba, low, begin, end, rc->low_w);
+    /* Without a branch: points that land nowhere mark the byte after the image. */
+    uint32_t sink = rc->low_w * rc->low_h;
+    for (uint32_t k = 0; k < end - begin; k++)
+        occupied[low[k] == RC_NO_PIXEL ? sink : low[k]] = 1;
 }
 
 void view_rc__predict_project(view_rc *rc)
@@ -92,7 +137,7 @@ void view_rc__predict_project(view_rc *rc)
     size_t low = (size_t)rc->low_w * rc->low_h;
     for (uint32_t t = 0; t < rc->thread_count; t++)
         memset(rc->workers[t].occupied, 0, low);
-    view_rc__pool_run(rc->pool, rc->chunks_used, predict_task, rc);
+    view_rc__pool_run(rc->pool, rc->chunk_count, predict_task, rc);
     uint8_t *all = rc->workers[0].occupied;
     for (uint32_t t = 1; t < rc->thread_count; t++) {
         const uint8_t *mine = rc->workers[t].occupied;
@@ -103,114 +148,114 @@ void view_rc__predict_project(view_rc *rc)
 
 /* ---- project and tile sort ----------------------------------------------------------------------------- */
 
+/* Migrations (a projected or outside point whose list changed; new points not counted), and the lists
+ * remembered for the next frame. */
+FXC_HOT_CLONES static uint32_t migrate_span(const uint16_t *restrict dest, uint16_t *restrict tile_of,
+                                            uint32_t begin, uint32_t end, uint16_t dead, uint16_t fresh)
+{
+    uint32_t migrated = 0;
+    for (uint32_t i = begin; i < end; i++) {
+        uint16_t d = dest[i], t = tile_of[i];
+        migrated += (d != dead) & (t != fresh) & (t != d);
+        tile_of[i] = d;
+    }
+    return migrated;
+}
+
 static void project_task(void *user, uint32_t c, uint32_t worker)
 {
     (void)worker;
     view_rc *rc = user;
-    const rc_view *v = &rc->view;
-    rc_rec *rec = rc->rec[rc->cur];
-    rc_prj *prj = rc->prj[rc->cur];
-    uint16_t *dest = rc->dest;
-    const uint16_t *col_tile = rc->col_tile;
-    const uint32_t *row_tile = rc->row_tile;
-    uint32_t lists = rc->list_count, outside = lists - 1, drop = lists;
-    uint32_t *count = rc->counts + (size_t)c * (lists + 1);
-    memset(count, 0, (lists + 1) * sizeof(uint32_t));
-    rc_chunk_stat stat = {0};
-    uint32_t quota = rc->chunk_quota[c], drop_age = rc->drop_age, width = rc->width;
     uint32_t begin, end;
     chunk_range(rc, c, &begin, &end);
-
-    /* The list the chunk starts in (the insert list counts as `lists`: its points have not migrated). */
-    uint32_t list = 0;
-    if (begin >= rc->placed) {
-        list = lists;
-    } else {
-        uint32_t lo = 0, hi = lists - 1; /* the last list whose start is <= begin */
-        while (lo < hi) {
-            uint32_t mid = (lo + hi + 1) / 2;
-            if (rc->list_start[mid] <= begin)
-                lo = mid;
-            else
-                hi = mid - 1;
-        }
-        list = lo;
-    }
-    uint32_t i = begin;
-    while (i < end) {
-        uint32_t list_end = list < lists ? rc->list_start[list + 1] : rc->placed + rc->pending;
-        if (list_end > end)
-            list_end = end;
-        for (; i < list_end; i++) {
-            uint32_t age = rc_age(rec[i].rgba);
-            if (dropped(age, drop_age, &quota)) {
-                if (age != RC_AGE_EVICTED) {
-                    stat.dropped++;
-                    stat.dropped_age_sum += age;
-                }
-                dest[i] = (uint16_t)drop;
-                count[drop]++;
+    uint16_t outside = rc->list_outside, dead = rc->list_dead;
+    project_span(&rc->view, rc->px, rc->py, rc->pz, rc->rgba, rc->pix, rc->dep, rc->dest, begin, end,
+                 rc->tile_shift, rc->tiles_x, outside, dead);
+    rc_chunk_stat stat = {0};
+    /* The drop plan: points older than drop_age, and the chunk's quota of that age, in slot order. */
+    if (rc->drop_age != RC_AGE_NO_DROP) {
+        uint32_t quota = rc->chunk_quota[c], drop_age = rc->drop_age;
+        for (uint32_t i = begin; i < end; i++) {
+            uint32_t age = rc_age(rc->rgba[i]);
+            if (age == RC_AGE_DEAD || age < drop_age || (age == drop_age && quota == 0))
                 continue;
-            }
-            uint32_t x, y, to = outside, pix = RC_NO_PIXEL;
-            float zc;
-            if (rc_project(v, rec[i].x, rec[i].y, rec[i].z, &x, &y, &zc)) {
-                pix = y * width + x;
-                to = row_tile[y] + col_tile[x];
-                stat.projected++;
-            }
-            prj[i].pix = pix;
-            prj[i].depth = zc;
-            dest[i] = (uint16_t)to;
-            count[to]++;
-            stat.migrated += list < lists && to != list;
+            if (age == drop_age)
+                quota--;
+            stat.dropped++;
+            stat.dropped_age_sum += age;
+            rc->rgba[i] = (rc->rgba[i] & 0x00FFFFFFu) | (RC_AGE_DEAD << 24);
+            rc->pix[i] = RC_NO_PIXEL;
+            rc->dest[i] = dead;
         }
-        list++;
     }
+    stat.migrated = migrate_span(rc->dest, rc->tile_of, begin, end, dead, rc->list_new);
+    /* Counts per list, in four interleaved sets (consecutive points mostly go to the same tile). */
+    uint32_t lists = rc->tile_count + 2;
+    uint32_t *count = rc->counts + (size_t)c * lists;
+    memset(count, 0, lists * sizeof(uint32_t));
+    uint32_t part[3][VIEW_RC_MAX_TILES + 2];
+    for (int k = 0; k < 3; k++)
+        memset(part[k], 0, lists * sizeof(uint32_t));
+    const uint16_t *dest = rc->dest;
+    uint32_t i = begin;
+    for (; i + 4 <= end; i += 4) {
+        count[dest[i]]++;
+        part[0][dest[i + 1]]++;
+        part[1][dest[i + 2]]++;
+        part[2][dest[i + 3]]++;
+    }
+    for (; i < end; i++)
+        count[dest[i]]++;
+    for (uint32_t l = 0; l < lists; l++)
+        count[l] += part[0][l] + part[1][l] + part[2][l];
+    stat.projected = 0;
+    for (uint32_t t = 0; t < rc->tile_count; t++)
+        stat.projected += count[t];
     rc->chunk_stat[c] = stat;
 }
 
-static void scatter_task(void *user, uint32_t c, uint32_t worker)
+static void sort_task(void *user, uint32_t c, uint32_t worker)
 {
     (void)worker;
     view_rc *rc = user;
-    const rc_rec *from = rc->rec[rc->cur];
-    const rc_prj *from_prj = rc->prj[rc->cur];
-    rc_rec *to = rc->rec[rc->built];
-    rc_prj *to_prj = rc->prj[rc->built];
-    const uint16_t *dest = rc->dest;
-    uint32_t lists = rc->list_count;
-    uint32_t *offset = rc->counts + (size_t)c * (lists + 1);
     uint32_t begin, end;
     chunk_range(rc, c, &begin, &end);
+    uint32_t *offset = rc->counts + (size_t)c * (rc->tile_count + 2);
+    const uint16_t *dest = rc->dest;
+    const uint32_t *pix = rc->pix, *rgba = rc->rgba;
+    const float *dep = rc->dep;
+    rc_entry *entries = rc->entries;
+    uint32_t tiles = rc->tile_count;
+    /* Without a branch (slots are in no order once points come and go): points that land outside, and free
+     * slots, go to the entry after the last, whose cursor does not move. */
+    offset[tiles] = offset[tiles + 1] = rc->slots;
     for (uint32_t i = begin; i < end; i++) {
-        uint32_t d = dest[i];
-        if (d == lists)
-            continue;
-        uint32_t o = offset[d]++;
-        to[o] = from[i];
-        to_prj[o] = from_prj[i];
+        uint32_t d = dest[i], o = offset[d];
+        offset[d] = o + (d < tiles);
+        rc_entry *e = &entries[o];
+        e->pix = pix[i];
+        e->depth = dep[i];
+        e->rgba = rgba[i];
+        e->slot = i;
     }
 }
 
 void view_rc__project_sort(view_rc *rc)
 {
-    rc->built = 1 - rc->cur;
-    view_rc__pool_run(rc->pool, rc->chunks_used, project_task, rc);
-    /* Offsets: list by list, chunk by chunk. */
-    uint32_t lists = rc->list_count, run = 0;
-    for (uint32_t l = 0; l < lists; l++) {
-        rc->next_start[l] = run;
-        for (uint32_t c = 0; c < rc->chunks_used; c++) {
-            uint32_t *slot = rc->counts + (size_t)c * (lists + 1) + l;
+    view_rc__pool_run(rc->pool, rc->chunk_count, project_task, rc);
+    /* Offsets: tile by tile, chunk by chunk. */
+    uint32_t lists = rc->tile_count + 2, run = 0;
+    for (uint32_t t = 0; t < rc->tile_count; t++) {
+        rc->tile_start[t] = run;
+        for (uint32_t c = 0; c < rc->chunk_count; c++) {
+            uint32_t *slot = rc->counts + (size_t)c * lists + t;
             uint32_t n = *slot;
             *slot = run;
             run += n;
         }
     }
-    rc->next_start[lists] = run;
-    rc->built_count = run;
-    view_rc__pool_run(rc->pool, rc->chunks_used, scatter_task, rc);
+    rc->tile_start[rc->tile_count] = run;
+    view_rc__pool_run(rc->pool, rc->chunk_count, sort_task, rc);
 }
 
 /* ---- z-buffer tiles (2002 3.2) --------------------------------------------------------------------------- */
@@ -219,24 +264,28 @@ static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
 {
     (void)worker;
     view_rc *rc = user;
-    uint32_t x0 = (tile % rc->tiles_x) * rc->tile_w, y0 = (tile / rc->tiles_x) * rc->tile_h;
-    uint32_t x1 = x0 + rc->tile_w < rc->width ? x0 + rc->tile_w : rc->width;
-    uint32_t y1 = y0 + rc->tile_h < rc->height ? y0 + rc->tile_h : rc->height;
+    size_t w = rc->width;
+    uint32_t x0 = (tile % rc->tiles_x) << rc->tile_shift, y0 = (tile / rc->tiles_x) << rc->tile_shift;
+    uint32_t x1 = x0 + rc->tile < rc->width ? x0 + rc->tile : rc->width;
+    uint32_t y1 = y0 + rc->tile < rc->height ? y0 + rc->tile : rc->height;
     float *zbuf = rc->zbuf;
-    uint32_t *win = rc->win;
+    uint32_t *win = rc->win, *pre = rc->pre;
     for (uint32_t y = y0; y < y1; y++)
         for (uint32_t x = x0; x < x1; x++) {
-            zbuf[(size_t)y * rc->width + x] = INFINITY;
-            win[(size_t)y * rc->width + x] = RC_NO_POINT;
+            zbuf[y * w + x] = INFINITY;
+            win[y * w + x] = RC_NO_POINT;
+            pre[y * w + x] = RC_EMPTY_PT;
         }
-    const rc_prj *prj = rc->prj[rc->built];
-    for (uint32_t r = rc->next_start[tile], end = rc->next_start[tile + 1]; r < end; r++) {
-        uint32_t p = prj[r].pix;
-        float z = prj[r].depth;
-        if (z < zbuf[p]) {
-            zbuf[p] = z;
-            win[p] = r;
-        }
+    /* Depth, slot and colour of the nearest, without a branch (which way the test goes is as likely as not: a
+     * branch would be mispredicted half the time). */
+    const rc_entry *entries = rc->entries;
+    for (uint32_t e = rc->tile_start[tile], end = rc->tile_start[tile + 1]; e < end; e++) {
+        uint32_t p = entries[e].pix;
+        float z = entries[e].depth, old = zbuf[p];
+        uint32_t keep = 0u - (uint32_t)!(z < old); /* all ones: the old point stays */
+        zbuf[p] = old < z ? old : z;
+        win[p] = (entries[e].slot & ~keep) | (win[p] & keep);
+        pre[p] = (entries[e].rgba & ~keep) | (pre[p] & keep);
     }
 }
 
@@ -245,98 +294,87 @@ void view_rc__zbuffer(view_rc *rc)
     view_rc__pool_run(rc->pool, rc->tile_count, zbuffer_task, rc);
 }
 
-/* ---- the 1999 render cache: projection and z-buffer in one pass --------------------------------------- */
+/* ---- the 1999 render cache: one z-buffer in slot order -------------------------------------------------- */
 
-/* In cache order, straight into the whole image (about 2 MiB of depth and winners at 512 x 512: the random
- * access the 2002 paper's tiles avoid), one thread; the store is compacted in place. */
+/* The projection as above (without the sort), then every point straight into the whole image in slot order,
+ * one thread: about 2 MiB of depth and winners at 512 x 512, touched at random, which the 2002 paper's tiles
+ * avoid. */
 void view_rc__project_direct(view_rc *rc)
 {
-    rc->built = rc->cur;
-    const rc_view *v = &rc->view;
-    rc_rec *rec = rc->rec[rc->cur];
-    rc_prj *prj = rc->prj[rc->cur];
+    view_rc__pool_run(rc->pool, rc->chunk_count, project_task, rc);
+}
+
+void view_rc__zbuffer_direct(view_rc *rc)
+{
     float *zbuf = rc->zbuf;
     uint32_t *win = rc->win;
     for (size_t p = 0; p < rc->pixels; p++) {
         zbuf[p] = INFINITY;
         win[p] = RC_NO_POINT;
     }
-    uint32_t total = rc->placed + rc->pending, write = 0, width = rc->width, drop_age = rc->drop_age;
-    for (uint32_t c = 0; c < rc->chunks_used; c++) {
-        rc_chunk_stat stat = {0};
-        uint32_t quota = rc->chunk_quota[c];
-        uint32_t begin = c * rc->chunk_size, end = begin + rc->chunk_size < total ? begin + rc->chunk_size : total;
-        for (uint32_t i = begin; i < end; i++) {
-            uint32_t age = rc_age(rec[i].rgba);
-            if (dropped(age, drop_age, &quota)) {
-                if (age != RC_AGE_EVICTED) {
-                    stat.dropped++;
-                    stat.dropped_age_sum += age;
-                }
-                continue;
-            }
-            uint32_t x, y, pix = RC_NO_PIXEL;
-            float zc;
-            if (rc_project(v, rec[i].x, rec[i].y, rec[i].z, &x, &y, &zc)) {
-                pix = y * width + x;
-                stat.projected++;
-                if (zc < zbuf[pix]) {
-                    zbuf[pix] = zc;
-                    win[pix] = write;
-                }
-            }
-            rec[write] = rec[i];
-            prj[write].pix = pix;
-            prj[write].depth = zc;
-            write++;
+    const uint32_t *pix = rc->pix;
+    const float *dep = rc->dep;
+    for (uint32_t i = 0; i < rc->slots; i++) {
+        uint32_t p = pix[i];
+        if (p != RC_NO_PIXEL && dep[i] < zbuf[p]) {
+            zbuf[p] = dep[i];
+            win[p] = i;
         }
-        rc->chunk_stat[c] = stat;
     }
-    /* One list holds everything. */
-    rc->next_start[0] = 0;
-    for (uint32_t l = 1; l <= rc->list_count; l++)
-        rc->next_start[l] = write;
-    rc->built_count = write;
+    for (size_t p = 0; p < rc->pixels; p++)
+        rc->pre[p] = win[p] == RC_NO_POINT ? RC_EMPTY_PT : rc->rgba[win[p]];
 }
 
 /* ---- ageing and eviction (2002 3.4) -------------------------------------------------------------------- */
 
-/* Every point ages by the frame's step, faster when no pixel shows it (off screen, behind a nearer point, or
- * removed by the depth cull); 255 evicts (the next frame drops it). Recounts the chunk's age histogram. */
+/* Every live point ages by the frame's step, faster when no pixel shows it (off screen, behind a nearer point,
+ * or removed by the depth cull: the cull marked the points shown); 255 evicts. Returns the points evicted. */
+FXC_HOT_CLONES static uint32_t age_span(uint32_t *restrict rgba, uint8_t *restrict mark, uint32_t begin,
+                                        uint32_t end, uint32_t step_visible, uint32_t step_hidden, uint32_t top)
+{
+    uint32_t evicted = 0;
+    for (uint32_t i = begin; i < end; i++) {
+        uint32_t v = rgba[i], age = v >> 24;
+        uint32_t live = age != RC_AGE_DEAD;
+        uint32_t aged = age + (mark[i] ? step_visible : step_hidden);
+        aged = aged > top ? top : aged;
+        evicted += live & (aged == RC_AGE_DEAD);
+        rgba[i] = live ? (v & 0x00FFFFFFu) | (aged << 24) : v;
+        mark[i] = 0;
+    }
+    return evicted;
+}
+
 static void age_task(void *user, uint32_t c, uint32_t worker)
 {
     (void)worker;
     view_rc *rc = user;
-    rc_rec *rec = rc->rec[rc->built];
-    const rc_prj *prj = rc->prj[rc->built];
-    const uint32_t *win = rc->win, *pt = rc->pt;
-    uint32_t *hist = rc->chunk_hist + (size_t)c * 256;
+    uint32_t begin, end;
+    chunk_range(rc, c, &begin, &end);
+    uint32_t top = rc->d.no_eviction ? 254 : 255;
+    rc->chunk_stat[c].evicted = age_span(rc->rgba, rc->mark, begin, end, rc->step_visible, rc->step_hidden, top);
+    /* The chunk's age histogram and its free slots, in descending order. */
+    uint32_t *hist = rc->chunk_hist + (size_t)c * 256, *free_list = rc->free_list + (size_t)c * rc->chunk_size;
     memset(hist, 0, 256 * sizeof(uint32_t));
-    uint32_t begin = c * rc->chunk_size;
-    uint32_t end = begin + rc->chunk_size < rc->built_count ? begin + rc->chunk_size : rc->built_count;
-    uint32_t step_visible = rc->step_visible, step_hidden = rc->step_hidden;
-    uint32_t top = rc->d.no_eviction ? 254 : 255, evicted = 0;
-    for (uint32_t r = begin; r < end; r++) {
-        uint32_t rgba = rec[r].rgba, pix = prj[r].pix;
-        bool visible = pix != RC_NO_PIXEL && win[pix] == r && pt[pix] != RC_EMPTY_PT;
-        uint32_t age = rc_age(rgba) + (visible ? step_visible : step_hidden);
-        if (age >= top) {
-            age = top;
-            evicted += top == RC_AGE_EVICTED;
-        }
-        if (age != RC_AGE_EVICTED)
+    uint32_t n = 0;
+    for (uint32_t i = end; i-- > begin;) {
+        uint32_t age = rc_age(rc->rgba[i]);
+        if (age == RC_AGE_DEAD)
+            free_list[n++] = i;
+        else
             hist[age]++;
-        rec[r].rgba = (rgba & 0x00FFFFFFu) | (age << 24);
     }
-    rc->chunk_stat[c].evicted = evicted;
+    rc->chunk_free[c] = n;
 }
 
 void view_rc__age(view_rc *rc)
 {
-    uint32_t chunks = (rc->built_count + rc->chunk_size - 1) / rc->chunk_size;
-    for (uint32_t c = chunks; c < rc->chunk_max; c++) {
-        memset(rc->chunk_hist + (size_t)c * 256, 0, 256 * sizeof(uint32_t));
-        rc->chunk_stat[c].evicted = 0;
+    view_rc__pool_run(rc->pool, rc->chunk_count, age_task, rc);
+    /* The free stack: chunks from the last to the first, so that the lowest free slot is on top. */
+    rc->free_count = 0;
+    for (uint32_t c = rc->chunk_count; c-- > 0;) {
+        memcpy(rc->free_slots + rc->free_count, rc->free_list + (size_t)c * rc->chunk_size,
+               rc->chunk_free[c] * sizeof(uint32_t));
+        rc->free_count += rc->chunk_free[c];
     }
-    view_rc__pool_run(rc->pool, chunks, age_task, rc);
 }

@@ -49,8 +49,6 @@ fxc_result view_rc_render(view_rc *rc, const view_rc_camera *cam, const view_rc_
     stats.age_step = rc->step_visible;
     stats.hidden_age_step = rc->step_hidden;
 
-    uint32_t total = rc->placed + rc->pending;
-    rc->chunks_used = (total + rc->chunk_size - 1) / rc->chunk_size;
     view_rc__plan_drops(rc);
 
     double t = view_rc__now_ms(), t_next;
@@ -65,7 +63,7 @@ fxc_result view_rc_render(view_rc *rc, const view_rc_camera *cam, const view_rc_
         view_rc__project_direct(rc);
     else
         view_rc__project_sort(rc);
-    for (uint32_t c = 0; c < rc->chunks_used; c++) {
+    for (uint32_t c = 0; c < rc->chunk_count; c++) {
         stats.projected += rc->chunk_stat[c].projected;
         stats.migrated += rc->chunk_stat[c].migrated;
         stats.dropped += rc->chunk_stat[c].dropped;
@@ -75,12 +73,13 @@ fxc_result view_rc_render(view_rc *rc, const view_rc_camera *cam, const view_rc_
     stats.stage_ms[VIEW_RC_STAGE_PROJECT_SORT] = t_next - t;
     t = t_next;
 
-    if (!rc->d.no_tiling) {
+    if (rc->d.no_tiling)
+        view_rc__zbuffer_direct(rc);
+    else
         view_rc__zbuffer(rc);
-        t_next = view_rc__now_ms();
-        stats.stage_ms[VIEW_RC_STAGE_ZBUFFER] = t_next - t;
-        t = t_next;
-    }
+    t_next = view_rc__now_ms();
+    stats.stage_ms[VIEW_RC_STAGE_ZBUFFER] = t_next - t;
+    t = t_next;
 
     view_rc__depth_cull(rc);
     t_next = view_rc__now_ms();
@@ -110,18 +109,11 @@ fxc_result view_rc_render(view_rc *rc, const view_rc_camera *cam, const view_rc_
     t = t_next;
 
     view_rc__age(rc);
-    for (uint32_t c = 0; c < rc->chunk_max; c++)
+    for (uint32_t c = 0; c < rc->chunk_count; c++)
         stats.evicted += rc->chunk_stat[c].evicted;
     t_next = view_rc__now_ms();
     stats.stage_ms[VIEW_RC_STAGE_AGE] = t_next - t;
 
-    /* The array built becomes the store; its lists the lists. */
-    rc->cur = rc->built;
-    uint32_t *swap = rc->list_start;
-    rc->list_start = rc->next_start;
-    rc->next_start = swap;
-    rc->placed = rc->built_count;
-    rc->pending = 0;
     rc->last_view = rc->view;
     rc->last_valid = true;
 
@@ -131,7 +123,7 @@ fxc_result view_rc_render(view_rc *rc, const view_rc_camera *cam, const view_rc_
             stats.pixels[k] += rc->tile_kind[(size_t)tile * VIEW_RC_PIXEL_KINDS + k];
     }
     stats.points = 0;
-    for (uint32_t c = 0; c < rc->chunk_max; c++)
+    for (uint32_t c = 0; c < rc->chunk_count; c++)
         for (uint32_t a = 0; a < 255; a++)
             stats.points += rc->chunk_hist[(size_t)c * 256 + a];
     rc->since_inserted = rc->since_superseded = rc->since_dropped = 0;

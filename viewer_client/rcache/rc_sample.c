@@ -103,52 +103,106 @@ void view_rc__band_quotas(const uint64_t *weight, const uint32_t *pixels, uint32
 
 /* ---- one band's dither ------------------------------------------------------------------------------------- */
 
-void view_rc__dither_band(const uint8_t *priority, uint32_t width, uint32_t y0, uint32_t y1, uint64_t weight,
-                          uint32_t quota, uint8_t *chosen, float *err, view_rc_pixel *out)
+/* Pixel x's value plus the error it received; chooses it when that reaches 1/2 (no branch: the choice is as
+ * likely as not) and returns what is left to pass on. */
+FXC_HOT_INLINE float pick(const uint8_t *line, uint8_t *mark, const float *here, uint32_t x, float scale,
+                          uint32_t *picked)
+{
+    float value = (float)(line[x] + 1) * scale + here[x];
+    uint32_t chosen = value >= 0.5f;
+    mark[x] = (uint8_t)chosen;
+    *picked += chosen;
+    return value - (float)chosen;
+}
+
+/* One band's row being diffused. */
+typedef struct rc_lane {
+    const uint8_t *line; /* the row's priorities */
+    uint8_t *mark;       /* the row's choices */
+    float *here, *below; /* errors into this row and into the next, width + 2 each */
+    float scale;         /* (priority + 1) * scale sums to the band's quota */
+    uint32_t picked;
+} rc_lane;
+
+/* One row of Floyd-Steinberg in each of n bands at once (the bands are independent: their chains of error
+ * interleave in the processor), left to right (forward) or right to left: 7/16 of the error ahead, 3/16 below
+ * behind, 5/16 below, 1/16 below ahead; at the row's ends the shares that would leave the band go to the others
+ * in proportion. Not a band's last row (diffuse_last_row). */
+FXC_HOT_CLONES static void diffuse_rows(rc_lane *lanes, uint32_t n, uint32_t width, bool forward)
+{
+    const float a7 = 7.0f / 16, b3 = 3.0f / 16, b5 = 5.0f / 16, b1 = 1.0f / 16;
+    for (uint32_t k = 0; k < n; k++)
+        memset(lanes[k].below, 0, (width + 2) * sizeof(float));
+    if (width == 1) {
+        for (uint32_t k = 0; k < n; k++) {
+            rc_lane *l = &lanes[k];
+            l->below[0] = pick(l->line, l->mark, l->here, 0, l->scale, &l->picked); /* only below is left */
+        }
+        return;
+    }
+    if (forward) {
+        for (uint32_t k = 0; k < n; k++) { /* first: no pixel behind, 7 + 5 + 1 = 13 */
+            rc_lane *l = &lanes[k];
+            float e = pick(l->line, l->mark, l->here, 0, l->scale, &l->picked);
+            l->here[1] += e * (7.0f / 13), l->below[0] += e * (5.0f / 13), l->below[1] += e * (1.0f / 13);
+        }
+        for (uint32_t x = 1; x + 1 < width; x++)
+            for (uint32_t k = 0; k < n; k++) {
+                rc_lane *l = &lanes[k];
+                float e = pick(l->line, l->mark, l->here, x, l->scale, &l->picked);
+                l->here[x + 1] += e * a7, l->below[x - 1] += e * b3, l->below[x] += e * b5;
+                l->below[x + 1] += e * b1;
+            }
+        for (uint32_t k = 0; k < n; k++) { /* last: nothing ahead, 3 + 5 = 8 */
+            rc_lane *l = &lanes[k];
+            float e = pick(l->line, l->mark, l->here, width - 1, l->scale, &l->picked);
+            l->below[width - 2] += e * (3.0f / 8), l->below[width - 1] += e * (5.0f / 8);
+        }
+    } else {
+        for (uint32_t k = 0; k < n; k++) {
+            rc_lane *l = &lanes[k];
+            float e = pick(l->line, l->mark, l->here, width - 1, l->scale, &l->picked);
+            l->here[width - 2] += e * (7.0f / 13), l->below[width - 1] += e * (5.0f / 13);
+            l->below[width - 2] += e * (1.0f / 13);
+        }
+        for (uint32_t x = width - 2; x > 0; x--)
+            for (uint32_t k = 0; k < n; k++) {
+                rc_lane *l = &lanes[k];
+                float e = pick(l->line, l->mark, l->here, x, l->scale, &l->picked);
+                l->here[x - 1] += e * a7, l->below[x + 1] += e * b3, l->below[x] += e * b5;
+                l->below[x - 1] += e * b1;
+            }
+        for (uint32_t k = 0; k < n; k++) {
+            rc_lane *l = &lanes[k];
+            float e = pick(l->line, l->mark, l->here, 0, l->scale, &l->picked);
+            l->below[1] += e * (3.0f / 8), l->below[0] += e * (5.0f / 8);
+        }
+    }
+}
+
+/* A band's last row: everything goes ahead (nothing may leave the band). */
+static void diffuse_last_row(rc_lane *l, uint32_t width, bool forward)
+{
+    if (forward)
+        for (uint32_t x = 0; x < width; x++) {
+            float e = pick(l->line, l->mark, l->here, x, l->scale, &l->picked);
+            if (x + 1 < width)
+                l->here[x + 1] += e;
+        }
+    else
+        for (uint32_t x = width; x-- > 0;) {
+            float e = pick(l->line, l->mark, l->here, x, l->scale, &l->picked);
+            if (x > 0)
+                l->here[x - 1] += e;
+        }
+}
+
+/* Exactly quota in rows [y0, y1): tops up by highest priority, or trims by lowest (in scanline order within a
+ * priority), then lists the chosen pixels in scanline order. */
+static void settle_band(const uint8_t *priority, uint32_t width, uint32_t y0, uint32_t y1, uint64_t picked,
+                        uint32_t quota, uint8_t *chosen, view_rc_pixel *out)
 {
     size_t first = (size_t)y0 * width, end = (size_t)y1 * width;
-    memset(chosen + first, 0, end - first);
-    if (quota == 0)
-        return;
-    float scale = (float)((double)quota / (double)weight);
-    float *here = err, *below = err + width + 2;
-    memset(here, 0, (width + 2) * sizeof(float));
-    uint64_t picked = 0;
-    for (uint32_t y = y0; y < y1; y++) {
-        memset(below, 0, (width + 2) * sizeof(float));
-        bool last_row = y + 1 == y1, forward = ((y - y0) & 1) == 0;
-        const uint8_t *line = priority + (size_t)y * width;
-        uint8_t *mark = chosen + (size_t)y * width;
-        for (uint32_t k = 0; k < width; k++) {
-            uint32_t x = forward ? k : width - 1 - k;
-            float value = (float)(line[x] + 1) * scale + here[x];
-            if (value >= 0.5f) {
-                mark[x] = 1;
-                picked++;
-                value -= 1.0f;
-            }
-            bool ahead = k + 1 < width, behind = k > 0;
-            uint32_t xa = forward ? x + 1 : x - 1, xb = forward ? x - 1 : x + 1;
-            if (last_row) {
-                if (ahead)
-                    here[xa] += value;
-                continue;
-            }
-            float total = 5.0f + (ahead ? 8.0f : 0.0f) + (behind ? 3.0f : 0.0f);
-            float unit = value / total;
-            if (ahead) {
-                here[xa] += 7.0f * unit;
-                below[xa] += 1.0f * unit;
-            }
-            if (behind)
-                below[xb] += 3.0f * unit;
-            below[x] += 5.0f * unit;
-        }
-        float *swap = here;
-        here = below;
-        below = swap;
-    }
-    /* Exactly quota: top up by highest priority, or trim by lowest, in scanline order within a priority. */
     if (picked != quota) {
         bool add = picked < quota;
         uint64_t need = add ? quota - picked : picked - quota;
@@ -188,14 +242,68 @@ void view_rc__dither_band(const uint8_t *priority, uint32_t width, uint32_t y0, 
         }
 }
 
+void view_rc__dither_bands(const uint8_t *priority, uint32_t width, const uint32_t *y0, const uint32_t *y1,
+                           const uint64_t *weight, const uint32_t *quota, uint32_t bands, uint8_t *chosen,
+                           float *err, view_rc_pixel *const *out)
+{
+    rc_lane lanes[RC_DITHER_LANES];
+    uint32_t rows = 0;
+    for (uint32_t k = 0; k < bands; k++) {
+        memset(chosen + (size_t)y0[k] * width, 0, (size_t)(y1[k] - y0[k]) * width);
+        lanes[k].here = err + (size_t)k * 2 * (width + 2);
+        lanes[k].below = lanes[k].here + width + 2;
+        memset(lanes[k].here, 0, (width + 2) * sizeof(float));
+        lanes[k].scale = (float)((double)quota[k] / (double)weight[k]);
+        lanes[k].picked = 0;
+        rows = y1[k] - y0[k] > rows ? y1[k] - y0[k] : rows;
+    }
+    for (uint32_t j = 0; j < rows; j++) {
+        bool forward = (j & 1) == 0;
+        /* The bands past their last row or on it are left out of the interleaved row. */
+        rc_lane run[RC_DITHER_LANES];
+        uint32_t n = 0, index[RC_DITHER_LANES];
+        for (uint32_t k = 0; k < bands; k++) {
+            if (quota[k] == 0 || j >= y1[k] - y0[k])
+                continue;
+            lanes[k].line = priority + (size_t)(y0[k] + j) * width;
+            lanes[k].mark = chosen + (size_t)(y0[k] + j) * width;
+            if (j + 1 == y1[k] - y0[k]) {
+                diffuse_last_row(&lanes[k], width, forward);
+                continue;
+            }
+            index[n] = k;
+            run[n++] = lanes[k];
+        }
+        diffuse_rows(run, n, width, forward);
+        for (uint32_t m = 0; m < n; m++) {
+            rc_lane *l = &lanes[index[m]];
+            l->picked = run[m].picked;
+            l->here = run[m].below; /* the next row's incoming errors */
+            l->below = run[m].here;
+        }
+    }
+    for (uint32_t k = 0; k < bands; k++)
+        if (quota[k] > 0)
+            settle_band(priority, width, y0[k], y1[k], lanes[k].picked, quota[k], chosen, out[k]);
+}
+
 /* ---- the frame's sampling ---------------------------------------------------------------------------------- */
 
-static void dither_task(void *user, uint32_t band, uint32_t worker)
+static void dither_task(void *user, uint32_t group, uint32_t worker)
 {
     view_rc *rc = user;
-    uint32_t y0 = band * rc->tile_h, y1 = y0 + rc->tile_h < rc->height ? y0 + rc->tile_h : rc->height;
-    view_rc__dither_band(rc->priority, rc->width, y0, y1, rc->band_weight[band], rc->band_quota[band], rc->chosen,
-                         rc->workers[worker].err, rc->requests + rc->band_offset[band]);
+    uint32_t first = group * RC_DITHER_LANES, bands = rc->tiles_y - first;
+    bands = bands < RC_DITHER_LANES ? bands : RC_DITHER_LANES;
+    uint32_t y0[RC_DITHER_LANES], y1[RC_DITHER_LANES];
+    view_rc_pixel *out[RC_DITHER_LANES];
+    for (uint32_t k = 0; k < bands; k++) {
+        uint32_t b = first + k;
+        y0[k] = b * rc->tile;
+        y1[k] = y0[k] + rc->tile < rc->height ? y0[k] + rc->tile : rc->height;
+        out[k] = rc->requests + rc->band_offset[b];
+    }
+    view_rc__dither_bands(rc->priority, rc->width, y0, y1, rc->band_weight + first, rc->band_quota + first, bands,
+                          rc->chosen, rc->workers[worker].err, out);
 }
 
 void view_rc__sampling(view_rc *rc)
@@ -206,7 +314,7 @@ void view_rc__sampling(view_rc *rc)
         for (uint32_t t = 0; t < rc->tiles_x; t++)
             sum += rc->tile_weight[b * rc->tiles_x + t];
         rc->band_weight[b] = sum;
-        uint32_t y0 = b * rc->tile_h, y1 = y0 + rc->tile_h < rc->height ? y0 + rc->tile_h : rc->height;
+        uint32_t y0 = b * rc->tile, y1 = y0 + rc->tile < rc->height ? y0 + rc->tile : rc->height;
         pixels[b] = (y1 - y0) * rc->width;
     }
     uint32_t count = rc->d.sample_budget - rc->predicted_count;
@@ -217,14 +325,14 @@ void view_rc__sampling(view_rc *rc)
         run += rc->band_quota[b];
     }
     rc->request_count = run;
-    view_rc__pool_run(rc->pool, rc->tiles_y, dither_task, rc);
+    view_rc__pool_run(rc->pool, (rc->tiles_y + RC_DITHER_LANES - 1) / RC_DITHER_LANES, dither_task, rc);
 }
 
 /* ---- the dither on its own ------------------------------------------------------------------------------- */
 
 size_t view_rc_dither_scratch_bytes(uint32_t width, uint32_t height)
 {
-    return (size_t)width * height + 2 * ((size_t)width + 2) * sizeof(float) + 16;
+    return (size_t)width * height + RC_DITHER_LANES * 2 * ((size_t)width + 2) * sizeof(float) + 16;
 }
 
 fxc_result view_rc_dither(const uint8_t *priority, uint32_t width, uint32_t height, uint32_t band_height,
@@ -244,20 +352,25 @@ fxc_result view_rc_dither(const uint8_t *priority, uint32_t width, uint32_t heig
     uintptr_t at = ((uintptr_t)(chosen + (size_t)width * height) + 15) & ~(uintptr_t)15;
     float *err = (float *)at;
     uint64_t weight[VIEW_RC_MAX_TILES];
-    uint32_t pixels[VIEW_RC_MAX_TILES], quota[VIEW_RC_MAX_TILES];
-    for (uint32_t b = 0; b < bands; b++) {
-        uint32_t y0 = b * band_height, y1 = y0 + band_height < height ? y0 + band_height : height;
-        weight[b] = 0;
-        for (size_t p = (size_t)y0 * width; p < (size_t)y1 * width; p++)
-            weight[b] += priority[p] + 1u;
-        pixels[b] = (y1 - y0) * width;
-    }
-    view_rc__band_quotas(weight, pixels, bands, count, quota);
+    uint32_t pixels[VIEW_RC_MAX_TILES], quota[VIEW_RC_MAX_TILES], y0[VIEW_RC_MAX_TILES], y1[VIEW_RC_MAX_TILES];
+    view_rc_pixel *outs[VIEW_RC_MAX_TILES];
     uint32_t run = 0;
     for (uint32_t b = 0; b < bands; b++) {
-        uint32_t y0 = b * band_height, y1 = y0 + band_height < height ? y0 + band_height : height;
-        view_rc__dither_band(priority, width, y0, y1, weight[b], quota[b], chosen, err, out + run);
+        y0[b] = b * band_height;
+        y1[b] = y0[b] + band_height < height ? y0[b] + band_height : height;
+        weight[b] = 0;
+        for (size_t p = (size_t)y0[b] * width; p < (size_t)y1[b] * width; p++)
+            weight[b] += priority[p] + 1u;
+        pixels[b] = (y1[b] - y0[b]) * width;
+    }
+    view_rc__band_quotas(weight, pixels, bands, count, quota);
+    for (uint32_t b = 0; b < bands; b++) {
+        outs[b] = out + run;
         run += quota[b];
+    }
+    for (uint32_t b = 0; b < bands; b += RC_DITHER_LANES) {
+        uint32_t n = bands - b < RC_DITHER_LANES ? bands - b : RC_DITHER_LANES;
+        view_rc__dither_bands(priority, width, y0 + b, y1 + b, weight + b, quota + b, n, chosen, err, outs + b);
     }
     return FXC_OK;
 }

@@ -1,19 +1,27 @@
 /* The render cache's private parts: the owner struct, the point store's layout, the camera maths and the stage
  * functions each source file gives the frame driver (rc_render.c). Only the library and white-box tests see it.
  *
- * The point store (2002 3.2, Reinhard 2001 section 3). Points live in one array of records, grouped by list:
- * list i < tile_count holds the points that landed in tile i in the last frame, list tile_count those that
- * landed outside the image (or behind the camera); after the lists come the points inserted since the last frame.
- * A frame projects every record, counts per chunk of the array how many go to each list, and copies each record
- * into the other array at its list's place: a counting sort by tile that is also the migration of points between
- * tile lists. Records are AoS (rc_rec, 16 bytes) because every pass that reads one reads all of it; what a frame
- * computes per record (pixel and depth) is a second array beside it (rc_prj), copied along.
+ * The point store is structure-of-arrays over fixed slots (capacity + insert_reserve of them): position (x, y, z
+ * as float offsets from the cache's origin), colour and age packed in one word (r | g << 8 | b << 16 | age << 24,
+ * age 255 = a free slot), and what a frame computes per slot (pixel, view depth, destination list). A slot keeps
+ * its point until the point is evicted or dropped; new points take free slots from a stack rebuilt every frame.
+ * Each pass that streams over the points touches only the arrays it needs (CONVENTIONS 6: the projection reads
+ * 16 bytes a point, ageing 5).
+ *
+ * Tile lists (2002 3.2, Reinhard 2001 section 3): every frame the projected points are bucket-sorted by tile
+ * (counting sort, per chunk of slots) into one array of 16-byte entries, tile after tile: each tile's point list
+ * for this frame. A point that lands in another tile than in the last frame moves to that tile's list
+ * (tile_of[] remembers the list; the move is counted as a migration). The z-buffer then reads one tile's list
+ * into that tile's part of the image, which stays in cache.
  *
  * Determinism: every parallel pass writes per-chunk, per-tile or per-band outputs, and the serial steps between
- * them combine those in a fixed order, so the result does not depend on which thread ran what. */
+ * them combine those in a fixed order, so the result does not depend on which thread ran what. Hot loops are
+ * written without branches so the compiler vectorises them (FXC_HOT_CLONES adds an AVX2 copy); with
+ * -ffp-contract=off every copy computes the same floats. */
 #ifndef FXC_VIEW_RC_INTERNAL_H
 #define FXC_VIEW_RC_INTERNAL_H
 
+#include "fxc_hot.h"
 #include "rcache.h"
 
 #include <math.h>
@@ -21,28 +29,23 @@
 
 #define RC_NO_PIXEL UINT32_MAX
 #define RC_NO_POINT UINT32_MAX
-#define RC_AGE_EVICTED 255u
-#define RC_AGE_NO_DROP 256u      /* drop plan: no age is old enough */
-#define RC_EMPTY_PT 0xFF000000u  /* a pixel without a point: colour 0, age 255 */
-#define RC_NEAR 1.0e-4f          /* points nearer than this (metres along the view axis) are behind */
-
-/* A cached point: position relative to the cache's origin, colour and age (r | g << 8 | b << 16 | age << 24). */
-typedef struct rc_rec {
-    float x, y, z;
-    uint32_t rgba;
-} rc_rec;
-
-/* Where a record landed in the current frame: pixel index (RC_NO_PIXEL outside) and view depth (metres along
- * the camera's forward axis). */
-typedef struct rc_prj {
-    uint32_t pix;
-    float depth;
-} rc_prj;
+#define RC_AGE_DEAD 255u        /* a free slot (an evicted or dropped point) */
+#define RC_AGE_NO_DROP 255u     /* drop plan: no age is old enough */
+#define RC_EMPTY_PT 0xFF000000u /* a pixel without a point: colour 0, age 255 */
+#define RC_NEAR 1.0e-4f         /* points nearer than this (metres along the view axis) are behind */
 
 static inline uint32_t rc_age(uint32_t rgba)
 {
     return rgba >> 24;
 }
+
+/* A projected point in its tile's list. */
+typedef struct rc_entry {
+    uint32_t pix;  /* pixel index */
+    float depth;   /* view depth, metres along the camera's forward axis */
+    uint32_t rgba; /* colour and age */
+    uint32_t slot; /* where the point lives */
+} rc_entry;
 
 /* A camera set up for an image: the server's frame (srv_camera_setup) and the projection that inverts
  * srv_camera_ray. rel is the camera position relative to the cache origin, in float, for the hot loops. */
@@ -65,9 +68,8 @@ bool view_rc__view_setup(const view_rc_camera *cam, uint32_t width, uint32_t hei
 void view_rc__view_ray(const rc_view *v, float px, float py, float dir[3]);
 
 /* Projects a point given relative to the cache origin. Returns false when it is behind the camera or outside
- * the image; else the pixel and the view depth. Inline: the hot loops use the same code. */
-static inline bool rc_project(const rc_view *v, float x, float y, float z, uint32_t *ix, uint32_t *iy,
-                              float *depth)
+ * the image; else the pixel and the view depth. The hot loops use the same arithmetic without branches. */
+FXC_HOT_INLINE bool rc_project(const rc_view *v, float x, float y, float z, uint32_t *ix, uint32_t *iy, float *depth)
 {
     float vx = x - v->rel[0], vy = y - v->rel[1], vz = z - v->rel[2];
     float zc = vx * v->forward[0] + vy * v->forward[1] + vz * v->forward[2];
@@ -95,9 +97,11 @@ void view_rc__pool_run(rc_pool *pool, uint32_t count, rc_pool_task task, void *u
 
 /* Per-thread scratch. */
 typedef struct rc_worker {
-    uint32_t *box;     /* prefilter: (tile_h + 6) x tile_w x 4 running sums */
     uint8_t *occupied; /* predicted occupancy at quarter resolution, low_w x low_h */
-    float *err;        /* dither: two rows of width + 2 errors */
+    uint32_t *low;     /* predicted projection: quarter-resolution pixel per slot of a chunk */
+    float *err;        /* dither: RC_DITHER_LANES x two rows of width + 2 errors */
+    uint16_t *planes;  /* interpolation: (tile + 2)^2 x 4 inputs, then tile x (tile + 2) x 5 row sums */
+    uint32_t *box;     /* prefilter: (tile + 6) x tile x 4 running sums */
 } rc_worker;
 
 /* Per-chunk figures of the passes over the store, added up in chunk order. */
@@ -113,33 +117,35 @@ struct view_rc {
     size_t memory_bytes;
     void *block; /* the one allocation every array below points into */
 
-    /* Tiles (Reinhard 2001; 2002 3.2). */
-    uint32_t tile_w, tile_h, tiles_x, tiles_y, tile_count;
-    uint32_t list_count;  /* tile_count + 1: the tiles and the outside list */
-    uint16_t *col_tile;   /* per column: its tile's column */
-    uint32_t *row_tile;   /* per row: tiles_x times its tile's row */
+    /* Tiles: square, a power of two on a side (the tile of a pixel is two shifts). */
+    uint32_t tile, tile_shift, tiles_x, tiles_y, tile_count;
+    uint16_t list_outside, list_dead, list_new; /* tile_count, + 1, + 2: the other values of dest / tile_of */
 
-    /* The point store: two arrays, the current one is [cur]. */
-    uint32_t slots;       /* capacity + insert_reserve */
-    rc_rec *rec[2];
-    rc_prj *prj[2];
-    int cur;
-    int built;            /* the array this frame builds: 1 - cur (tiled) or cur (no_tiling, in place) */
-    uint32_t built_count; /* records in it */
-    uint32_t chunks_used; /* chunks covering [0, placed + pending) at the frame's start */
-    uint16_t *dest;       /* per slot of the current array: the list it goes to this frame (list_count: dropped) */
-    uint32_t *list_start; /* list_count + 1 entries: list i is [list_start[i], list_start[i + 1]) */
-    uint32_t *next_start; /* the same for the array being built */
-    uint32_t placed;      /* records in lists: [0, placed) */
-    uint32_t pending;     /* inserted since the last frame: [placed, placed + pending) */
+    /* The point store (structure of arrays over slots). */
+    uint32_t slots;    /* capacity + insert_reserve */
+    float *px, *py, *pz;
+    uint32_t *rgba;
+    uint16_t *tile_of; /* the list a point was in last frame (list_new: inserted since) */
+    uint32_t *pix;     /* this frame: pixel (RC_NO_PIXEL outside) */
+    float *dep;        /* this frame: view depth */
+    uint16_t *dest;    /* this frame: tile, list_outside or list_dead */
+    uint8_t *mark;     /* this frame: shown in a pixel (slots + 1: the last is a sink) */
+    uint32_t *free_slots; /* stack of free slots: the next insert takes free_slots[free_count - 1] */
+    uint32_t free_count;
+    uint32_t *chunk_free; /* per chunk: free slots the ageing pass listed (in free_list at chunk * chunk_size) */
+    uint32_t *free_list;  /* slots: per chunk, its free slots in descending order */
 
-    /* Chunks of the store (fixed-size ranges of slot indices): the unit of the parallel passes over points. */
-    uint32_t chunk_size, chunk_max;
-    uint32_t *counts;      /* chunk_max x (list_count + 1): records going to each list, then their offsets */
-    uint32_t *chunk_hist;  /* chunk_max x 256: ages of live records per chunk of the current array */
-    uint32_t *chunk_quota; /* per chunk: records of age drop_age to drop this frame */
+    /* Chunks of slots: the unit of the parallel passes over points. */
+    uint32_t chunk_size, chunk_count;
+    uint32_t *counts;      /* chunk_count x (tile_count + 2): points going to each list, then offsets */
+    uint32_t *chunk_hist;  /* chunk_count x 256: ages of the live points per chunk */
+    uint32_t *chunk_quota; /* per chunk: points of age drop_age to drop this frame */
     rc_chunk_stat *chunk_stat;
-    uint32_t drop_age;     /* this frame's drop plan: drop ages above it and chunk_quota of it (256: none) */
+    uint32_t drop_age;     /* this frame's drop plan: drop ages above it and chunk_quota of it (255: none) */
+
+    /* The tile lists of this frame: entries of tile t are [tile_start[t], tile_start[t + 1]). */
+    rc_entry *entries;     /* slots entries */
+    uint32_t *tile_start;  /* tile_count + 1 */
 
     /* Ageing (2002 3.4). */
     double age_carry, hidden_carry; /* fractional parts carried to the next frame */
@@ -150,7 +156,7 @@ struct view_rc {
     uint64_t since_dropped_age_sum;
     double since_update_ms;
 
-    /* The cache's origin: points are stored as float offsets from it (set by the first insert). */
+    /* The cache's origin: points are stored as float offsets from it (set by the first insert or frame). */
     bool has_origin;
     double origin[3];
 
@@ -163,8 +169,9 @@ struct view_rc {
     bool predict;
 
     /* Images, width x height. */
-    float *zbuf;       /* nearest view depth per pixel */
-    uint32_t *win;     /* its record in the current array (RC_NO_POINT: none) */
+    float *zbuf;       /* nearest view depth per pixel (+inf: none) */
+    uint32_t *win;     /* its slot (RC_NO_POINT: none) */
+    uint32_t *pre;     /* its rgba before the depth cull (RC_EMPTY_PT: none) */
     uint32_t *pt;      /* after the depth cull: the shown point's rgba, RC_EMPTY_PT when none */
     uint8_t *rgb;      /* output colour */
     float *depth;      /* output depth */
@@ -183,7 +190,7 @@ struct view_rc {
     uint32_t low_w, low_h;
 
     /* Requests. */
-    view_rc_pixel *requests;   /* sample_budget entries */
+    view_rc_pixel *requests;           /* sample_budget entries */
     view_rc_pixel *predicted_requests; /* sample_budget / 2 entries */
     uint32_t request_count, predicted_count;
 
@@ -193,18 +200,20 @@ struct view_rc {
 };
 
 /* rc_cache.c */
-/* Recomputes the age histogram of every chunk from the current array's records. */
+/* Recomputes the age histogram of every chunk. */
 void view_rc__recount_ages(view_rc *rc);
 
 /* rc_project.c: the point passes of a frame. */
 void view_rc__plan_drops(view_rc *rc);      /* serial: this frame's drop plan from the chunk histograms */
 void view_rc__predict_project(view_rc *rc); /* parallel: quarter-resolution occupancy per worker */
-void view_rc__project_sort(view_rc *rc);    /* parallel + serial offsets + parallel scatter */
+void view_rc__project_sort(view_rc *rc);    /* parallel projection + serial offsets + parallel bucket sort */
 void view_rc__zbuffer(view_rc *rc);         /* parallel over tiles */
-void view_rc__project_direct(view_rc *rc);  /* no_tiling: serial projection and z-buffer in cache order */
-void view_rc__age(view_rc *rc);             /* parallel over chunks of the new array */
+void view_rc__project_direct(view_rc *rc);  /* no_tiling: the projection without the sort (parallel) */
+void view_rc__zbuffer_direct(view_rc *rc);  /* no_tiling: one z-buffer pass in slot order (serial) */
+void view_rc__age(view_rc *rc);             /* parallel over chunks, then the free stack (serial) */
 
 /* rc_image.c: the pixel passes, parallel over tiles. */
+size_t view_rc__interp_scratch(uint32_t tile); /* 16-bit values of a worker's interpolation scratch */
 void view_rc__depth_cull(view_rc *rc);
 void view_rc__interpolate(view_rc *rc);
 void view_rc__prefilter(view_rc *rc);
@@ -215,11 +224,13 @@ void view_rc__sampling(view_rc *rc);           /* serial quotas, parallel bands 
 /* Splits count over bands by weight (largest remainder, each band at most its pixels). */
 void view_rc__band_quotas(const uint64_t *weight, const uint32_t *pixels, uint32_t bands, uint32_t count,
                           uint32_t *quota);
-/* Dithers one band: rows [y0, y1) of a width-wide priority image; chooses exactly quota pixels (quota at most
- * the band's pixels), marks them in chosen and writes them to out in scanline order. err: 2 * (width + 2)
- * floats. */
-void view_rc__dither_band(const uint8_t *priority, uint32_t width, uint32_t y0, uint32_t y1, uint64_t weight,
-                          uint32_t quota, uint8_t *chosen, float *err, view_rc_pixel *out);
+/* Dithers up to RC_DITHER_LANES bands at once (each independent, the same result as alone): band k is rows
+ * [y0[k], y1[k]) of a width-wide priority image, gets exactly quota[k] pixels (at most its pixels), marked in
+ * chosen and written to out[k] in scanline order. err: RC_DITHER_LANES * 2 * (width + 2) floats. */
+#define RC_DITHER_LANES 4
+void view_rc__dither_bands(const uint8_t *priority, uint32_t width, const uint32_t *y0, const uint32_t *y1,
+                           const uint64_t *weight, const uint32_t *quota, uint32_t bands, uint8_t *chosen,
+                           float *err, view_rc_pixel *const *out);
 
 /* Monotonic clock, milliseconds. */
 double view_rc__now_ms(void);
