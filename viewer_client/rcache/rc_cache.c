@@ -51,7 +51,7 @@ static bool resolve_desc(view_rc_desc *d)
     if (d->sample_budget > pixels)
         return false;
     if (d->capacity == 0)
-        d->capacity = (uint32_t)(2 * pixels);
+        d->capacity = (uint32_t)pixels;
     if (d->insert_reserve == 0)
         d->insert_reserve = 4 * d->sample_budget;
     if ((uint64_t)d->capacity + d->insert_reserve > UINT32_MAX - 1)
@@ -138,9 +138,12 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     uint32_t longest = d.width > d.height ? d.width : d.height;
     uint32_t span = rc->tile < longest ? rc->tile : longest; /* the largest tile's side */
     rc->slots = d.capacity + d.insert_reserve;
-    /* Chunks of slots: at least 4096, at most 512 of them, a multiple of 64 slots. */
-    uint32_t chunk = rc->slots / 512 + 1;
-    chunk = chunk < 4096 ? 4096 : (chunk + 63) & ~63u;
+    /* Chunks of slots: a power of two, at least 4096, at most 512 of them. */
+    uint32_t chunk_shift = 12;
+    while ((uint64_t)rc->slots > (uint64_t)512 << chunk_shift)
+        chunk_shift++;
+    uint32_t chunk = 1u << chunk_shift;
+    rc->chunk_shift = chunk_shift;
     rc->chunk_size = chunk;
     rc->chunk_count = (rc->slots + chunk - 1) / chunk;
     rc->low_w = (d.width + 3) / 4;
@@ -189,13 +192,14 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_predicted = take(&l, d.sample_budget / 2 + 1, sizeof(view_rc_pixel));
     size_t o_workers = take(&l, d.threads, sizeof(rc_worker));
     size_t o_occupied[VIEW_RC_MAX_THREADS], o_low[VIEW_RC_MAX_THREADS], o_err[VIEW_RC_MAX_THREADS];
-    size_t o_planes[VIEW_RC_MAX_THREADS], o_box[VIEW_RC_MAX_THREADS];
+    size_t o_planes[VIEW_RC_MAX_THREADS], o_box[VIEW_RC_MAX_THREADS], o_spare[VIEW_RC_MAX_THREADS];
     for (uint32_t t = 0; t < d.threads; t++) {
         o_occupied[t] = take(&l, (size_t)rc->low_w * rc->low_h + 1, 1); /* + a sink byte */
         o_low[t] = take(&l, chunk, sizeof(uint32_t));
-        o_err[t] = take(&l, RC_DITHER_LANES * 2 * ((size_t)d.width + 2), sizeof(float));
+        o_err[t] = take(&l, 2 * RC_DITHER_LANES * 2 * ((size_t)d.width + 2), sizeof(float));
+        o_spare[t] = take(&l, d.width, 1);
         o_planes[t] = take(&l, view_rc__interp_scratch(span), sizeof(uint16_t));
-        o_box[t] = take(&l, ((size_t)span + 6) * span * 4, sizeof(uint32_t));
+        o_box[t] = take(&l, view_rc__prefilter_scratch(span), sizeof(uint16_t));
     }
     if (l.overflow) {
         free(rc);
@@ -252,8 +256,9 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
         rc->workers[t].occupied = (uint8_t *)(block + o_occupied[t]);
         rc->workers[t].low = (uint32_t *)(block + o_low[t]);
         rc->workers[t].err = (float *)(block + o_err[t]);
+        rc->workers[t].spare = (uint8_t *)(block + o_spare[t]);
         rc->workers[t].planes = (uint16_t *)(block + o_planes[t]);
-        rc->workers[t].box = (uint32_t *)(block + o_box[t]);
+        rc->workers[t].box = (uint16_t *)(block + o_box[t]);
     }
 
     /* Every slot free; the stack hands out slot 0 first. */
@@ -306,7 +311,7 @@ void view_rc__recount_ages(view_rc *rc)
     for (uint32_t i = 0; i < rc->slots; i++) {
         uint32_t age = rc_age(rc->rgba[i]);
         if (age != RC_AGE_DEAD)
-            rc->chunk_hist[(size_t)(i / rc->chunk_size) * 256 + age]++;
+            rc->chunk_hist[(size_t)(i >> rc->chunk_shift) * 256 + age]++;
     }
 }
 
@@ -314,7 +319,7 @@ void view_rc__recount_ages(view_rc *rc)
 static void set_age(view_rc *rc, uint32_t i, uint32_t age)
 {
     uint32_t old = rc_age(rc->rgba[i]);
-    uint32_t *hist = rc->chunk_hist + (size_t)(i / rc->chunk_size) * 256;
+    uint32_t *hist = rc->chunk_hist + (size_t)(i >> rc->chunk_shift) * 256;
     if (old != RC_AGE_DEAD)
         hist[old]--;
     if (age != RC_AGE_DEAD)
@@ -385,7 +390,7 @@ static uint32_t add_point(view_rc *rc, const rc_view *v, const float dir[3], flo
     rc->pz[i] = (float)(v->origin[2] + d * (double)dir[2] - rc->origin[2]);
     rc->rgba[i] = (uint32_t)rgb[0] | (uint32_t)rgb[1] << 8 | (uint32_t)rgb[2] << 16;
     rc->tile_of[i] = rc->list_new;
-    rc->chunk_hist[(size_t)(i / rc->chunk_size) * 256]++;
+    rc->chunk_hist[(size_t)(i >> rc->chunk_shift) * 256]++;
     return i;
 }
 

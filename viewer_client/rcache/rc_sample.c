@@ -119,65 +119,100 @@ FXC_HOT_INLINE float pick(const uint8_t *line, uint8_t *mark, const float *here,
 typedef struct rc_lane {
     const uint8_t *line; /* the row's priorities */
     uint8_t *mark;       /* the row's choices */
-    float *here, *below; /* errors into this row and into the next, width + 2 each */
+    float *here, *below; /* errors into this row (read) and into the next (written), width + 2 each */
     float scale;         /* (priority + 1) * scale sums to the band's quota */
     uint32_t picked;
 } rc_lane;
 
-/* One row of Floyd-Steinberg in each of n bands at once (the bands are independent: their chains of error
- * interleave in the processor), left to right (forward) or right to left: 7/16 of the error ahead, 3/16 below
- * behind, 5/16 below, 1/16 below ahead; at the row's ends the shares that would leave the band go to the others
- * in proportion. Not a band's last row (diffuse_last_row). */
-FXC_HOT_CLONES static void diffuse_rows(rc_lane *lanes, uint32_t n, uint32_t width, bool forward)
+/* One row of Floyd-Steinberg in four bands at once (the bands are independent: their chains of error interleave
+ * in the processor), left to right (forward) or right to left: 7/16 of the error ahead, 3/16 below behind, 5/16
+ * below, 1/16 below ahead; at the row's ends the shares that would leave the band go to the others in
+ * proportion. Not a band's last row (diffuse_last_row). The error ahead and the three errors below that are not
+ * final yet stay in registers (the additions happen in the same order as into memory, so the floats are those
+ * of the plain loop); each lane's state is local, out of reach of the byte stores of the choices. */
+#define RC_LANE_VARS(k)                                                                                       \
+    const uint8_t *line##k = lanes[k].line;                                                                   \
+    uint8_t *mark##k = lanes[k].mark;                                                                         \
+    const float *here##k = lanes[k].here;                                                                     \
+    float *below##k = lanes[k].below;                                                                         \
+    float scale##k = lanes[k].scale, ahead##k = 0, near##k = 0, far##k = 0;                                   \
+    uint32_t picked##k = 0;
+/* Pixel x of lane k: its value and choice; e is what it passes on. */
+#define RC_LANE_PICK(k, x)                                                                                    \
+    float value##k = (float)(line##k[x] + 1) * scale##k + (here##k[x] + ahead##k);                            \
+    uint32_t chosen##k = value##k >= 0.5f;                                                                    \
+    mark##k[x] = (uint8_t)chosen##k;                                                                          \
+    picked##k += chosen##k;                                                                                   \
+    float e##k = value##k - (float)chosen##k;
+/* Interior pixel x, moving by step (+1 or -1): below[x - step] is final with 3/16 of e; below[x] gets 5/16 (after
+ * 1/16 from the pixel before), below[x + step] starts with 1/16. */
+#define RC_LANE_STEP(k, x, step)                                                                              \
+    {                                                                                                         \
+        RC_LANE_PICK(k, x)                                                                                    \
+        below##k[(x) - (step)] = near##k + e##k * b3;                                                         \
+        near##k = far##k + e##k * b5;                                                                         \
+        far##k = e##k * b1;                                                                                   \
+        ahead##k = e##k * a7;                                                                                 \
+    }
+#define RC_LANES(macro, ...) macro(0, __VA_ARGS__) macro(1, __VA_ARGS__) macro(2, __VA_ARGS__) macro(3, __VA_ARGS__)
+#define RC_EACH(macro) macro(0) macro(1) macro(2) macro(3)
+
+FXC_HOT_CLONES static void diffuse_rows(rc_lane *lanes, uint32_t width, bool forward)
 {
     const float a7 = 7.0f / 16, b3 = 3.0f / 16, b5 = 5.0f / 16, b1 = 1.0f / 16;
-    for (uint32_t k = 0; k < n; k++)
-        memset(lanes[k].below, 0, (width + 2) * sizeof(float));
+    RC_EACH(RC_LANE_VARS)
     if (width == 1) {
-        for (uint32_t k = 0; k < n; k++) {
-            rc_lane *l = &lanes[k];
-            l->below[0] = pick(l->line, l->mark, l->here, 0, l->scale, &l->picked); /* only below is left */
-        }
-        return;
+#define RC_ONLY(k)                                                                                            \
+    {                                                                                                         \
+        RC_LANE_PICK(k, 0)                                                                                    \
+        below##k[0] = e##k; /* only below is left */                                                          \
     }
-    if (forward) {
-        for (uint32_t k = 0; k < n; k++) { /* first: no pixel behind, 7 + 5 + 1 = 13 */
-            rc_lane *l = &lanes[k];
-            float e = pick(l->line, l->mark, l->here, 0, l->scale, &l->picked);
-            l->here[1] += e * (7.0f / 13), l->below[0] += e * (5.0f / 13), l->below[1] += e * (1.0f / 13);
+        RC_EACH(RC_ONLY)
+#undef RC_ONLY
+    } else if (forward) {
+        /* First: no pixel behind, 7 + 5 + 1 = 13. */
+#define RC_FIRST(k)                                                                                           \
+    {                                                                                                         \
+        RC_LANE_PICK(k, 0)                                                                                    \
+        ahead##k = e##k * (7.0f / 13), near##k = e##k * (5.0f / 13), far##k = e##k * (1.0f / 13);            \
+    }
+        RC_EACH(RC_FIRST)
+#undef RC_FIRST
+        for (uint32_t x = 1; x + 1 < width; x++) {
+            RC_LANES(RC_LANE_STEP, x, 1)
         }
-        for (uint32_t x = 1; x + 1 < width; x++)
-            for (uint32_t k = 0; k < n; k++) {
-                rc_lane *l = &lanes[k];
-                float e = pick(l->line, l->mark, l->here, x, l->scale, &l->picked);
-                l->here[x + 1] += e * a7, l->below[x - 1] += e * b3, l->below[x] += e * b5;
-                l->below[x + 1] += e * b1;
-            }
-        for (uint32_t k = 0; k < n; k++) { /* last: nothing ahead, 3 + 5 = 8 */
-            rc_lane *l = &lanes[k];
-            float e = pick(l->line, l->mark, l->here, width - 1, l->scale, &l->picked);
-            l->below[width - 2] += e * (3.0f / 8), l->below[width - 1] += e * (5.0f / 8);
-        }
+        /* Last: nothing ahead, 3 + 5 = 8. */
+#define RC_LAST(k)                                                                                            \
+    {                                                                                                         \
+        RC_LANE_PICK(k, width - 1)                                                                            \
+        below##k[width - 2] = near##k + e##k * (3.0f / 8);                                                    \
+        below##k[width - 1] = far##k + e##k * (5.0f / 8);                                                     \
+    }
+        RC_EACH(RC_LAST)
+#undef RC_LAST
     } else {
-        for (uint32_t k = 0; k < n; k++) {
-            rc_lane *l = &lanes[k];
-            float e = pick(l->line, l->mark, l->here, width - 1, l->scale, &l->picked);
-            l->here[width - 2] += e * (7.0f / 13), l->below[width - 1] += e * (5.0f / 13);
-            l->below[width - 2] += e * (1.0f / 13);
-        }
-        for (uint32_t x = width - 2; x > 0; x--)
-            for (uint32_t k = 0; k < n; k++) {
-                rc_lane *l = &lanes[k];
-                float e = pick(l->line, l->mark, l->here, x, l->scale, &l->picked);
-                l->here[x - 1] += e * a7, l->below[x + 1] += e * b3, l->below[x] += e * b5;
-                l->below[x - 1] += e * b1;
-            }
-        for (uint32_t k = 0; k < n; k++) {
-            rc_lane *l = &lanes[k];
-            float e = pick(l->line, l->mark, l->here, 0, l->scale, &l->picked);
-            l->below[1] += e * (3.0f / 8), l->below[0] += e * (5.0f / 8);
-        }
+#define RC_FIRST(k)                                                                                           \
+    {                                                                                                         \
+        RC_LANE_PICK(k, width - 1)                                                                            \
+        ahead##k = e##k * (7.0f / 13), near##k = e##k * (5.0f / 13), far##k = e##k * (1.0f / 13);            \
     }
+        RC_EACH(RC_FIRST)
+#undef RC_FIRST
+        for (uint32_t x = width - 2; x > 0; x--) {
+            RC_LANES(RC_LANE_STEP, x, -1)
+        }
+#define RC_LAST(k)                                                                                            \
+    {                                                                                                         \
+        RC_LANE_PICK(k, 0)                                                                                    \
+        below##k[1] = near##k + e##k * (3.0f / 8);                                                            \
+        below##k[0] = far##k + e##k * (5.0f / 8);                                                             \
+    }
+        RC_EACH(RC_LAST)
+#undef RC_LAST
+    }
+#define RC_SAVE(k) lanes[k].picked += picked##k;
+    RC_EACH(RC_SAVE)
+#undef RC_SAVE
 }
 
 /* A band's last row: everything goes ahead (nothing may leave the band). */
@@ -244,7 +279,7 @@ static void settle_band(const uint8_t *priority, uint32_t width, uint32_t y0, ui
 
 void view_rc__dither_bands(const uint8_t *priority, uint32_t width, const uint32_t *y0, const uint32_t *y1,
                            const uint64_t *weight, const uint32_t *quota, uint32_t bands, uint8_t *chosen,
-                           float *err, view_rc_pixel *const *out)
+                           float *err, uint8_t *spare, view_rc_pixel *const *out)
 {
     rc_lane lanes[RC_DITHER_LANES];
     uint32_t rows = 0;
@@ -257,9 +292,11 @@ void view_rc__dither_bands(const uint8_t *priority, uint32_t width, const uint32
         lanes[k].picked = 0;
         rows = y1[k] - y0[k] > rows ? y1[k] - y0[k] : rows;
     }
+    /* Spare lanes (fewer bands, or bands done) run on the spare rows after the real ones: line 0 of band 0 read
+     * again, choices into `spare`. */
+    float *spare_err = err + (size_t)RC_DITHER_LANES * 2 * (width + 2);
     for (uint32_t j = 0; j < rows; j++) {
         bool forward = (j & 1) == 0;
-        /* The bands past their last row or on it are left out of the interleaved row. */
         rc_lane run[RC_DITHER_LANES];
         uint32_t n = 0, index[RC_DITHER_LANES];
         for (uint32_t k = 0; k < bands; k++) {
@@ -274,10 +311,20 @@ void view_rc__dither_bands(const uint8_t *priority, uint32_t width, const uint32
             index[n] = k;
             run[n++] = lanes[k];
         }
-        diffuse_rows(run, n, width, forward);
+        if (n == 0)
+            continue;
+        for (uint32_t m = n; m < RC_DITHER_LANES; m++) {
+            run[m] = run[0];
+            run[m].here = spare_err + (m - n) * 2 * (size_t)(width + 2);
+            run[m].below = run[m].here + width + 2;
+            run[m].mark = spare;
+        }
+        for (uint32_t m = 0; m < RC_DITHER_LANES; m++)
+            run[m].picked = 0;
+        diffuse_rows(run, width, forward);
         for (uint32_t m = 0; m < n; m++) {
             rc_lane *l = &lanes[index[m]];
-            l->picked = run[m].picked;
+            l->picked += run[m].picked;
             l->here = run[m].below; /* the next row's incoming errors */
             l->below = run[m].here;
         }
@@ -303,7 +350,7 @@ static void dither_task(void *user, uint32_t group, uint32_t worker)
         out[k] = rc->requests + rc->band_offset[b];
     }
     view_rc__dither_bands(rc->priority, rc->width, y0, y1, rc->band_weight + first, rc->band_quota + first, bands,
-                          rc->chosen, rc->workers[worker].err, out);
+                          rc->chosen, rc->workers[worker].err, rc->workers[worker].spare, out);
 }
 
 void view_rc__sampling(view_rc *rc)
@@ -332,7 +379,8 @@ void view_rc__sampling(view_rc *rc)
 
 size_t view_rc_dither_scratch_bytes(uint32_t width, uint32_t height)
 {
-    return (size_t)width * height + RC_DITHER_LANES * 2 * ((size_t)width + 2) * sizeof(float) + 16;
+    return (size_t)width * height + (size_t)width + 2 * RC_DITHER_LANES * 2 * ((size_t)width + 2) * sizeof(float) +
+           16;
 }
 
 fxc_result view_rc_dither(const uint8_t *priority, uint32_t width, uint32_t height, uint32_t band_height,
@@ -347,9 +395,9 @@ fxc_result view_rc_dither(const uint8_t *priority, uint32_t width, uint32_t heig
     uint32_t bands = (height + band_height - 1) / band_height;
     if (bands > VIEW_RC_MAX_TILES)
         return FXC_ERR_INVALID;
-    uint8_t *chosen = scratch;
-    /* The error rows after the mask, float-aligned. */
-    uintptr_t at = ((uintptr_t)(chosen + (size_t)width * height) + 15) & ~(uintptr_t)15;
+    uint8_t *chosen = scratch, *spare = chosen + (size_t)width * height;
+    /* The error rows after the mask and the spare row, float-aligned. */
+    uintptr_t at = ((uintptr_t)(spare + width) + 15) & ~(uintptr_t)15;
     float *err = (float *)at;
     uint64_t weight[VIEW_RC_MAX_TILES];
     uint32_t pixels[VIEW_RC_MAX_TILES], quota[VIEW_RC_MAX_TILES], y0[VIEW_RC_MAX_TILES], y1[VIEW_RC_MAX_TILES];
@@ -370,7 +418,7 @@ fxc_result view_rc_dither(const uint8_t *priority, uint32_t width, uint32_t heig
     }
     for (uint32_t b = 0; b < bands; b += RC_DITHER_LANES) {
         uint32_t n = bands - b < RC_DITHER_LANES ? bands - b : RC_DITHER_LANES;
-        view_rc__dither_bands(priority, width, y0 + b, y1 + b, weight + b, quota + b, n, chosen, err, outs + b);
+        view_rc__dither_bands(priority, width, y0 + b, y1 + b, weight + b, quota + b, n, chosen, err, spare, outs + b);
     }
     return FXC_OK;
 }

@@ -99,9 +99,10 @@ void view_rc__pool_run(rc_pool *pool, uint32_t count, rc_pool_task task, void *u
 typedef struct rc_worker {
     uint8_t *occupied; /* predicted occupancy at quarter resolution, low_w x low_h */
     uint32_t *low;     /* predicted projection: quarter-resolution pixel per slot of a chunk */
-    float *err;        /* dither: RC_DITHER_LANES x two rows of width + 2 errors */
+    float *err;        /* dither: 2 x RC_DITHER_LANES x two rows of width + 2 errors */
+    uint8_t *spare;    /* dither: a row of choices for spare lanes */
     uint16_t *planes;  /* interpolation: (tile + 2)^2 x 4 inputs, then tile x (tile + 2) x 5 row sums */
-    uint32_t *box;     /* prefilter: (tile + 6) x tile x 4 running sums */
+    uint16_t *box;     /* prefilter: view_rc__prefilter_scratch(tile) values */
 } rc_worker;
 
 /* Per-chunk figures of the passes over the store, added up in chunk order. */
@@ -136,7 +137,7 @@ struct view_rc {
     uint32_t *free_list;  /* slots: per chunk, its free slots in descending order */
 
     /* Chunks of slots: the unit of the parallel passes over points. */
-    uint32_t chunk_size, chunk_count;
+    uint32_t chunk_size, chunk_shift, chunk_count; /* chunk_size = 1 << chunk_shift */
     uint32_t *counts;      /* chunk_count x (tile_count + 2): points going to each list, then offsets */
     uint32_t *chunk_hist;  /* chunk_count x 256: ages of the live points per chunk */
     uint32_t *chunk_quota; /* per chunk: points of age drop_age to drop this frame */
@@ -213,7 +214,8 @@ void view_rc__zbuffer_direct(view_rc *rc);  /* no_tiling: one z-buffer pass in s
 void view_rc__age(view_rc *rc);             /* parallel over chunks, then the free stack (serial) */
 
 /* rc_image.c: the pixel passes, parallel over tiles. */
-size_t view_rc__interp_scratch(uint32_t tile); /* 16-bit values of a worker's interpolation scratch */
+size_t view_rc__interp_scratch(uint32_t tile);    /* 16-bit values of a worker's interpolation scratch */
+size_t view_rc__prefilter_scratch(uint32_t tile); /* ... and prefilter scratch */
 void view_rc__depth_cull(view_rc *rc);
 void view_rc__interpolate(view_rc *rc);
 void view_rc__prefilter(view_rc *rc);
@@ -226,11 +228,12 @@ void view_rc__band_quotas(const uint64_t *weight, const uint32_t *pixels, uint32
                           uint32_t *quota);
 /* Dithers up to RC_DITHER_LANES bands at once (each independent, the same result as alone): band k is rows
  * [y0[k], y1[k]) of a width-wide priority image, gets exactly quota[k] pixels (at most its pixels), marked in
- * chosen and written to out[k] in scanline order. err: RC_DITHER_LANES * 2 * (width + 2) floats. */
+ * chosen and written to out[k] in scanline order. err: 2 * RC_DITHER_LANES * 2 * (width + 2) floats (the band's
+ * rows, then spare lanes'); spare: width bytes. */
 #define RC_DITHER_LANES 4
 void view_rc__dither_bands(const uint8_t *priority, uint32_t width, const uint32_t *y0, const uint32_t *y1,
                            const uint64_t *weight, const uint32_t *quota, uint32_t bands, uint8_t *chosen,
-                           float *err, view_rc_pixel *const *out);
+                           float *err, uint8_t *spare, view_rc_pixel *const *out);
 
 /* Monotonic clock, milliseconds. */
 double view_rc__now_ms(void);
