@@ -380,23 +380,67 @@ static void make_room(view_rc *rc, uint32_t incoming)
     rc->last_valid = false;
 }
 
-/* Takes a free slot for the point at distance `dist` along dir from the view's origin. */
-static uint32_t add_point(view_rc *rc, const rc_view *v, const float dir[3], float dist, const uint8_t rgb[3])
+static bool depth_usable(float depth)
+{
+    return depth > 0; /* false for NaN and <= 0; +inf is the sky */
+}
+
+/* The batch's positions: the unit ray through each image position with srv_camera_ray's arithmetic, operation
+ * for operation, then origin + distance x direction in double, stored relative to the cache's origin; and their
+ * pixels in `last` (NULL: none). */
+FXC_HOT_CLONES static void place_batch(rc_batch *restrict b, const rc_view *v, const rc_view *last,
+                                       const double cache_origin[3])
+{
+    const float w = (float)v->width, h = (float)v->height, thx = v->tan_half_x, thy = v->tan_half_y;
+    const float f0 = v->forward[0], f1 = v->forward[1], f2 = v->forward[2];
+    const float r0 = v->right[0], r1 = v->right[1], r2 = v->right[2];
+    const float u0 = v->up[0], u1 = v->up[1], u2 = v->up[2];
+    const double o0 = v->origin[0] - cache_origin[0], o1 = v->origin[1] - cache_origin[1],
+                 o2 = v->origin[2] - cache_origin[2];
+    for (uint32_t k = 0; k < b->n; k++) {
+        float sx = (2.0f * b->px[k] / w - 1.0f) * thx;
+        float sy = (1.0f - 2.0f * b->py[k] / h) * thy;
+        float d0 = f0 + sx * r0 + sy * u0, d1 = f1 + sx * r1 + sy * u1, d2 = f2 + sx * r2 + sy * u2;
+        float inv = 1.0f / sqrtf(d0 * d0 + d1 * d1 + d2 * d2);
+        d0 *= inv, d1 *= inv, d2 *= inv;
+        double dist = b->dist[k] > 3.0e38f ? VIEW_RC_SKY_DISTANCE : (double)b->dist[k];
+        b->x[k] = (float)(o0 + dist * (double)d0);
+        b->y[k] = (float)(o1 + dist * (double)d1);
+        b->z[k] = (float)(o2 + dist * (double)d2);
+    }
+    if (!last)
+        return;
+    const float cx = last->rel[0], cy = last->rel[1], cz = last->rel[2];
+    const float lf0 = last->forward[0], lf1 = last->forward[1], lf2 = last->forward[2];
+    const float lr0 = last->right[0], lr1 = last->right[1], lr2 = last->right[2];
+    const float lu0 = last->up[0], lu1 = last->up[1], lu2 = last->up[2];
+    const float lw = (float)last->width, lh = (float)last->height;
+    for (uint32_t k = 0; k < b->n; k++) {
+        float vx = b->x[k] - cx, vy = b->y[k] - cy, vz = b->z[k] - cz;
+        float zc = vx * lf0 + vy * lf1 + vz * lf2;
+        float xc = vx * lr0 + vy * lr1 + vz * lr2;
+        float yc = vx * lu0 + vy * lu1 + vz * lu2;
+        float inv = 1.0f / zc;
+        float qx = last->half_w + last->kx * xc * inv, qy = last->half_h - last->ky * yc * inv;
+        bool inside = (zc > RC_NEAR) & (qx >= 0.0f) & (qx < lw) & (qy >= 0.0f) & (qy < lh);
+        uint32_t ix = (uint32_t)(int32_t)(inside ? qx : 0.0f), iy = (uint32_t)(int32_t)(inside ? qy : 0.0f);
+        b->last_pix[k] = inside ? iy * last->width + ix : RC_NO_PIXEL;
+        b->last_depth[k] = zc;
+    }
+}
+
+/* Takes a free slot for the batch's point k. */
+static uint32_t add_batch_point(view_rc *rc, const rc_batch *b, uint32_t k)
 {
     uint32_t i = rc->free_slots[--rc->free_count];
-    double d = isinf(dist) ? VIEW_RC_SKY_DISTANCE : (double)dist;
-    rc->px[i] = (float)(v->origin[0] + d * (double)dir[0] - rc->origin[0]);
-    rc->py[i] = (float)(v->origin[1] + d * (double)dir[1] - rc->origin[1]);
-    rc->pz[i] = (float)(v->origin[2] + d * (double)dir[2] - rc->origin[2]);
+    const uint8_t *rgb = b->rgb[k];
+    rc->px[i] = b->x[k];
+    rc->py[i] = b->y[k];
+    rc->pz[i] = b->z[k];
     rc->rgba[i] = (uint32_t)rgb[0] | (uint32_t)rgb[1] << 8 | (uint32_t)rgb[2] << 16;
     rc->tile_of[i] = rc->list_new;
     rc->chunk_hist[(size_t)(i >> rc->chunk_shift) * 256]++;
     return i;
-}
-
-static bool depth_usable(float depth)
-{
-    return depth > 0; /* false for NaN and <= 0; +inf is the sky */
 }
 
 /* Sets up an insert's camera (and the cache's origin at the first insert). */
@@ -455,15 +499,27 @@ fxc_result view_rc_insert_frame(view_rc *rc, const view_rc_camera *cam, uint32_t
     if (rc->free_count < incoming)
         make_room(rc, (uint32_t)incoming);
 
+    rc_batch *b = &rc->batch;
+    b->n = 0;
     for (uint32_t y = 0; y < height; y++)
         for (uint32_t x = 0; x < width; x++) {
             size_t p = (size_t)y * width + x;
             if (!depth_usable(depth[p]))
                 continue;
-            float dir[3];
-            view_rc__view_ray(&v, (float)x + 0.5f, (float)y + 0.5f, dir);
-            add_point(rc, &v, dir, depth[p], rgb + 3 * p);
+            b->px[b->n] = (float)x + 0.5f, b->py[b->n] = (float)y + 0.5f, b->dist[b->n] = depth[p];
+            b->rgb[b->n++] = rgb + 3 * p;
+            if (b->n == RC_BATCH) {
+                place_batch(b, &v, NULL, rc->origin);
+                for (uint32_t k = 0; k < b->n; k++)
+                    add_batch_point(rc, b, k);
+                b->n = 0;
+            }
         }
+    if (b->n > 0) {
+        place_batch(b, &v, NULL, rc->origin);
+        for (uint32_t k = 0; k < b->n; k++)
+            add_batch_point(rc, b, k);
+    }
     rc->since_inserted += (uint32_t)incoming;
     rc->since_update_ms += view_rc__now_ms() - t0;
     return FXC_OK;
@@ -481,6 +537,36 @@ static void penalise(view_rc *rc, uint32_t q)
     age += rc->d.change_penalty;
     uint32_t top = rc->d.no_eviction ? 254 : 255;
     set_age(rc, w, age > top ? top : age);
+}
+
+/* The point the last frame showed at pixel q is replaced by a new sample at view depth `depth` there, unless it
+ * lies well behind it; when their colours differ, the pixel's neighbours age. */
+static void supersede(view_rc *rc, uint32_t q, float depth, const uint8_t rgb[3])
+{
+    if (q == RC_NO_PIXEL)
+        return;
+    uint32_t w = rc->win[q];
+    if (rc->pt[q] == RC_EMPTY_PT || w == RC_NO_POINT)
+        return;
+    uint32_t old = rc->rgba[w];
+    if (rc_age(old) == RC_AGE_DEAD || !(rc->zbuf[q] < depth * (1.0f + rc->d.supersede_ratio)))
+        return;
+    int change = 0;
+    for (int k = 0; k < 3; k++) {
+        int diff = abs((int)((old >> (8 * k)) & 0xFF) - (int)rgb[k]);
+        change = diff > change ? diff : change;
+    }
+    const rc_view *last = &rc->last_view;
+    uint32_t qx = q % last->width, qy = q / last->width;
+    if (change > rc->d.change_threshold)
+        for (int dy = -1; dy <= 1; dy++)
+            for (int dx = -1; dx <= 1; dx++) {
+                int64_t nx = (int64_t)qx + dx, ny = (int64_t)qy + dy;
+                if ((dx || dy) && nx >= 0 && ny >= 0 && nx < last->width && ny < last->height)
+                    penalise(rc, (uint32_t)ny * last->width + (uint32_t)nx);
+            }
+    set_age(rc, w, RC_AGE_DEAD);
+    rc->since_superseded++;
 }
 
 fxc_result view_rc_insert_samples(view_rc *rc, const view_rc_camera *cam, uint32_t width, uint32_t height,
@@ -501,40 +587,25 @@ fxc_result view_rc_insert_samples(view_rc *rc, const view_rc_camera *cam, uint32
     if (rc->free_count < incoming)
         make_room(rc, incoming);
 
-    const rc_view *last = &rc->last_view;
-    float keep = 1.0f + rc->d.supersede_ratio;
-    for (uint32_t s = 0; s < count; s++) {
-        const view_rc_sample *sample = &samples[s];
-        if (!(sample->x < width && sample->y < height && depth_usable(sample->depth)))
-            continue;
-        float dir[3];
-        view_rc__view_ray(&v, (float)sample->x + 0.5f, (float)sample->y + 0.5f, dir);
-        uint32_t i = add_point(rc, &v, dir, sample->depth, sample->rgb);
-        uint32_t qx, qy;
-        float zc;
-        if (!rc->last_valid || !rc_project(last, rc->px[i], rc->py[i], rc->pz[i], &qx, &qy, &zc))
-            continue;
-        /* The point the last frame showed there, unless it lies well behind the new sample. */
-        uint32_t q = qy * last->width + qx, w = rc->win[q];
-        if (rc->pt[q] == RC_EMPTY_PT || w == RC_NO_POINT)
-            continue;
-        uint32_t old = rc->rgba[w];
-        if (rc_age(old) == RC_AGE_DEAD || !(rc->zbuf[q] < zc * keep))
-            continue;
-        int change = 0;
-        for (int k = 0; k < 3; k++) {
-            int diff = abs((int)((old >> (8 * k)) & 0xFF) - (int)sample->rgb[k]);
-            change = diff > change ? diff : change;
+    rc_batch *b = &rc->batch;
+    for (uint32_t s = 0; s < count;) {
+        const view_rc_sample *in[RC_BATCH];
+        b->n = 0;
+        for (; s < count && b->n < RC_BATCH; s++) {
+            const view_rc_sample *sample = &samples[s];
+            if (!(sample->x < width && sample->y < height && depth_usable(sample->depth)))
+                continue;
+            in[b->n] = sample;
+            b->px[b->n] = (float)sample->x + 0.5f, b->py[b->n] = (float)sample->y + 0.5f;
+            b->dist[b->n] = sample->depth;
+            b->rgb[b->n++] = sample->rgb;
         }
-        if (change > rc->d.change_threshold)
-            for (int dy = -1; dy <= 1; dy++)
-                for (int dx = -1; dx <= 1; dx++) {
-                    int64_t nx = (int64_t)qx + dx, ny = (int64_t)qy + dy;
-                    if ((dx || dy) && nx >= 0 && ny >= 0 && nx < last->width && ny < last->height)
-                        penalise(rc, (uint32_t)ny * last->width + (uint32_t)nx);
-                }
-        set_age(rc, w, RC_AGE_DEAD);
-        rc->since_superseded++;
+        place_batch(b, &v, rc->last_valid ? &rc->last_view : NULL, rc->origin);
+        for (uint32_t k = 0; k < b->n; k++) {
+            add_batch_point(rc, b, k);
+            if (rc->last_valid)
+                supersede(rc, b->last_pix[k], b->last_depth[k], in[k]->rgb);
+        }
     }
     rc->since_inserted += incoming;
     rc->since_update_ms += view_rc__now_ms() - t0;

@@ -63,17 +63,3 @@ bool view_rc__view_setup(const view_rc_camera *cam, uint32_t width, uint32_t hei
     out->ky = (float)height / (2.0f * out->tan_half_y);
     return true;
 }
-
-void view_rc__view_ray(const rc_view *v, float px, float py, float dir[3])
-{
-    float sx = (2.0f * px / (float)v->width - 1.0f) * v->tan_half_x;
-    float sy = (1.0f - 2.0f * py / (float)v->height) * v->tan_half_y;
-    float len2 = 0;
-    for (int k = 0; k < 3; k++) {
-        dir[k] = v->forward[k] + sx * v->right[k] + sy * v->up[k];
-        len2 += dir[k] * dir[k];
-    }
-    float inv = 1.0f / sqrtf(len2);
-    for (int k = 0; k < 3; k++)
-        dir[k] *= inv;
-}

@@ -408,9 +408,10 @@ static void prefilter_task(void *user, uint32_t tile, uint32_t worker)
     if (need == 0)
         return;
     rc_rect r = tile_rect(rc, tile);
-    /* 49 reads a pixel, against the planes' few vector operations per pixel of the tile. */
+    /* 49 reads a pixel, against the planes' few vector operations per pixel of the tile (about 25 pixels to fill
+     * in a 64 x 64 tile cost as much either way). */
     uint64_t tile_pixels = (uint64_t)(r.x1 - r.x0) * (r.y1 - r.y0);
-    uint32_t filled = (uint64_t)need * 49 < tile_pixels * 2 ? prefilter_direct(rc, r)
+    uint32_t filled = (uint64_t)need * 49 * 4 < tile_pixels * 1 ? prefilter_direct(rc, r)
                                                             : prefilter_planes(rc, r, rc->workers[worker].box);
     rc->tile_kind[(size_t)tile * VIEW_RC_PIXEL_KINDS + VIEW_RC_EMPTY] -= filled;
     rc->tile_kind[(size_t)tile * VIEW_RC_PIXEL_KINDS + VIEW_RC_PREFILTER] += filled;

@@ -64,8 +64,6 @@ typedef struct rc_view {
  * values, direction not zero, field of view in (0, 180)). cache_origin: the origin rel is taken from. */
 bool view_rc__view_setup(const view_rc_camera *cam, uint32_t width, uint32_t height, const double cache_origin[3],
                          rc_view *out);
-/* The unit direction through image position (px, py): srv_camera_ray's arithmetic, operation for operation. */
-void view_rc__view_ray(const rc_view *v, float px, float py, float dir[3]);
 
 /* Projects a point given relative to the cache origin. Returns false when it is behind the camera or outside
  * the image; else the pixel and the view depth. The hot loops use the same arithmetic without branches. */
@@ -104,6 +102,18 @@ typedef struct rc_worker {
     uint16_t *planes;  /* interpolation: (tile + 2)^2 x 4 inputs, then tile x (tile + 2) x 5 row sums */
     uint16_t *box;     /* prefilter: view_rc__prefilter_scratch(tile) values */
 } rc_worker;
+
+/* Points being inserted, a batch at a time (rc_cache.c): their positions computed in one loop without branches,
+ * then the slots taken one by one. */
+enum { RC_BATCH = 256 };
+typedef struct rc_batch {
+    uint32_t n;
+    float px[RC_BATCH], py[RC_BATCH], dist[RC_BATCH]; /* image position, distance along the ray (inf: sky) */
+    const uint8_t *rgb[RC_BATCH];
+    float x[RC_BATCH], y[RC_BATCH], z[RC_BATCH];      /* out: position relative to the cache origin */
+    uint32_t last_pix[RC_BATCH];                      /* out: pixel in the last frame (RC_NO_PIXEL: none) */
+    float last_depth[RC_BATCH];                       /* out: view depth there */
+} rc_batch;
 
 /* Per-chunk figures of the passes over the store, added up in chunk order. */
 typedef struct rc_chunk_stat {
@@ -198,6 +208,8 @@ struct view_rc {
     uint32_t thread_count;
     rc_worker *workers;
     rc_pool *pool;
+
+    rc_batch batch; /* the inserts' points, a batch at a time */
 };
 
 /* rc_cache.c */
