@@ -130,7 +130,8 @@ static void cull_task(void *user, uint32_t tile, uint32_t worker)
             culled += cull_pixel(rc, (uint32_t)w - 1, y, nearer, sky);
     }
     /* The points shown: visible for the ageing (no branch: a pixel without one marks the byte after the last
-     * slot). */
+     * slot). Marking entries instead (tile-local writes) and reading them back through each slot's entry in the
+     * ageing was slower: 0.8 against 0.3 ms for the ageing, the cull unchanged. */
     const uint32_t *pt = rc->pt, *win = rc->win;
     uint8_t *mark = rc->mark;
     uint32_t sink = rc->slots;
@@ -193,6 +194,17 @@ FXC_HOT_CLONES static void row_sums(const uint16_t *restrict r, const uint16_t *
         hb[x] = (uint16_t)(b[x] + 2 * b[x + 1] + b[x + 2]);
         hw[x] = (uint16_t)(o[x] + 2 * o[x + 1] + o[x + 2]);
         hn[x] = (uint16_t)(o[x] + o[x + 1] + o[x + 2]);
+    }
+}
+
+/* Three planes of a row into rgb triples. */
+FXC_HOT_CLONES static void interleave(const uint8_t *restrict r, const uint8_t *restrict g, const uint8_t *restrict b,
+                                      uint8_t *restrict rgb, uint32_t n)
+{
+    for (size_t x = 0; x < n; x++) {
+        rgb[3 * x] = r[x];
+        rgb[3 * x + 1] = g[x];
+        rgb[3 * x + 2] = b[x];
     }
 }
 
@@ -281,12 +293,7 @@ static void interpolate_task(void *user, uint32_t tile, uint32_t worker)
         size_t p = (size_t)(r.y0 + j) * w + r.x0;
         weight += finish_row(hsum + (size_t)j * tw, rows, po + (size_t)(j + 1) * s + 1, rc->pt + p, out_r, out_g,
                              out_b, rc->kind + p, rc->priority + p, tw, rc->d.smooth_all, rc->d.clear_rgb, kinds);
-        uint8_t *rgb = rc->rgb + 3 * p;
-        for (uint32_t x = 0; x < tw; x++) {
-            rgb[3 * x] = out_r[x];
-            rgb[3 * x + 1] = out_g[x];
-            rgb[3 * x + 2] = out_b[x];
-        }
+        interleave(out_r, out_g, out_b, rc->rgb + 3 * p, tw);
     }
     memcpy(rc->tile_kind + (size_t)tile * VIEW_RC_PIXEL_KINDS, kinds, sizeof kinds);
     rc->tile_need[tile] = rc->d.no_prefilter ? 0 : kinds[VIEW_RC_EMPTY];
