@@ -181,10 +181,11 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_chosen = take(&l, rc->pixels, 1);
     size_t o_stretch_x2 = take(&l, d.width, sizeof(float));
     size_t o_stretch_y2 = take(&l, d.height, sizeof(float));
-    size_t o_tile_need = take(&l, rc->tile_count, sizeof(uint32_t));
-    size_t o_tile_culled = take(&l, rc->tile_count, sizeof(uint32_t));
-    size_t o_tile_kind = take(&l, (size_t)rc->tile_count * VIEW_RC_PIXEL_KINDS, sizeof(uint32_t));
-    size_t o_tile_weight = take(&l, rc->tile_count, sizeof(uint64_t));
+    size_t o_row_need = take(&l, d.height, sizeof(uint32_t));
+    size_t o_band_need = take(&l, rc->tiles_y, sizeof(uint32_t));
+    size_t o_band_culled = take(&l, rc->tiles_y, sizeof(uint32_t));
+    size_t o_band_kind = take(&l, (size_t)rc->tiles_y * VIEW_RC_PIXEL_KINDS, sizeof(uint32_t));
+    size_t o_tile_filled = take(&l, rc->tile_count, sizeof(uint32_t));
     size_t o_band_weight = take(&l, rc->tiles_y, sizeof(uint64_t));
     size_t o_band_quota = take(&l, rc->tiles_y, sizeof(uint32_t));
     size_t o_band_offset = take(&l, rc->tiles_y, sizeof(uint32_t));
@@ -198,7 +199,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
         o_low[t] = take(&l, chunk, sizeof(uint32_t));
         o_err[t] = take(&l, 2 * RC_DITHER_LANES * 2 * ((size_t)d.width + 2), sizeof(float));
         o_spare[t] = take(&l, d.width, 1);
-        o_planes[t] = take(&l, view_rc__interp_scratch(span), sizeof(uint16_t));
+        o_planes[t] = take(&l, view_rc__interp_scratch(d.width), sizeof(uint16_t));
         o_box[t] = take(&l, view_rc__prefilter_scratch(span), sizeof(uint16_t));
     }
     if (l.overflow) {
@@ -242,10 +243,11 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     rc->chosen = (uint8_t *)(block + o_chosen);
     rc->stretch_x2 = (float *)(block + o_stretch_x2);
     rc->stretch_y2 = (float *)(block + o_stretch_y2);
-    rc->tile_need = (uint32_t *)(block + o_tile_need);
-    rc->tile_culled = (uint32_t *)(block + o_tile_culled);
-    rc->tile_kind = (uint32_t *)(block + o_tile_kind);
-    rc->tile_weight = (uint64_t *)(block + o_tile_weight);
+    rc->row_need = (uint32_t *)(block + o_row_need);
+    rc->band_need = (uint32_t *)(block + o_band_need);
+    rc->band_culled = (uint32_t *)(block + o_band_culled);
+    rc->band_kind = (uint32_t *)(block + o_band_kind);
+    rc->tile_filled = (uint32_t *)(block + o_tile_filled);
     rc->band_weight = (uint64_t *)(block + o_band_weight);
     rc->band_quota = (uint32_t *)(block + o_band_quota);
     rc->band_offset = (uint32_t *)(block + o_band_offset);

@@ -1,5 +1,5 @@
-/* The pixel passes of a frame, each parallel over tiles (a tile reads its neighbours' pixels across its border,
- * written by the previous pass, and writes only its own):
+/* The pixel passes of a frame, each parallel over bands of rows (a band reads its neighbours' rows across its
+ * border, written by the previous pass, and writes only its own):
  *
  * Depth cull (1999, slide 14: "z-buffering only works within a pixel; find pixels with locally inconsistent
  * depths"). A point that won its pixel may still lie behind a surface whose points are spread apart, showing
@@ -22,28 +22,23 @@
  * neighbours (emptier first, 255 where there is none).
  *
  * Prefilter (2002 3.3): where the 3x3 found no point, the uniform mean of the points in the 7x7 neighbourhood.
- * A tile with many such pixels filters all of it, separated into 7-sums along rows and then columns over
- * 16-bit planes (the paper uses running sums, whose cost does not depend on the kernel's size: Smith's moving
- * average; vector adds of 7 values are cheaper here); a tile with few sums each one's 49 pixels. Both give the
- * same integers.
+ * It works by tiles (only tiles with pixels to fill do anything): a tile with many such pixels is filtered
+ * whole, separated into 7-sums along rows and then down columns over 16-bit planes (the paper uses running sums,
+ * whose cost does not depend on the kernel's size: Smith's moving average; vector adds of 7 values are cheaper
+ * here); a tile with few sums each one's 49 pixels. Both give the same integers. (By full-width bands, as the
+ * other pixel passes, it was slower: 0.6-0.8 against 0.4 ms.)
  * It does not change the priority (2002 3.3). */
 #include "rc_internal.h"
 
 #include <math.h>
 #include <string.h>
 
-typedef struct rc_rect {
-    uint32_t x0, y0, x1, y1;
-} rc_rect;
-
-static rc_rect tile_rect(const view_rc *rc, uint32_t tile)
+/* The pixel passes work on bands of full rows (the tile rows: tile_size rows each), so that every row is one long
+ * stream for the prefetcher (64-pixel rows of a tile were short streams, each starting with a miss). */
+static void band_rows(const view_rc *rc, uint32_t band, uint32_t *y0, uint32_t *y1)
 {
-    rc_rect r;
-    r.x0 = (tile % rc->tiles_x) << rc->tile_shift;
-    r.y0 = (tile / rc->tiles_x) << rc->tile_shift;
-    r.x1 = r.x0 + rc->tile < rc->width ? r.x0 + rc->tile : rc->width;
-    r.y1 = r.y0 + rc->tile < rc->height ? r.y0 + rc->tile : rc->height;
-    return r;
+    *y0 = band << rc->tile_shift;
+    *y1 = *y0 + rc->tile < rc->height ? *y0 + rc->tile : rc->height;
 }
 
 /* ---- depth cull ----------------------------------------------------------------------------------------- */
@@ -104,30 +99,27 @@ static uint32_t cull_pixel(view_rc *rc, uint32_t x, uint32_t y, float nearer, fl
     return cull;
 }
 
-static void cull_task(void *user, uint32_t tile, uint32_t worker)
+static void cull_task(void *user, uint32_t band, uint32_t worker)
 {
     (void)worker;
     view_rc *rc = user;
-    rc_rect r = tile_rect(rc, tile);
+    uint32_t y0, y1;
+    band_rows(rc, band, &y0, &y1);
     size_t w = rc->width;
     uint32_t h = rc->height, culled = 0;
     float nearer = rc->d.no_depth_cull ? 0.0f : 1.0f / (1.0f + rc->d.cull_ratio);
     float sky = (float)(0.5 * VIEW_RC_SKY_DISTANCE);
-    uint32_t xa = r.x0 > 0 ? r.x0 : 1, xb = r.x1 < w ? r.x1 : (uint32_t)w - 1;
-    for (uint32_t y = r.y0; y < r.y1; y++) {
+    for (uint32_t y = y0; y < y1; y++) {
         if (y == 0 || y + 1 >= h || w < 3) {
-            for (uint32_t x = r.x0; x < r.x1; x++)
+            for (uint32_t x = 0; x < w; x++)
                 culled += cull_pixel(rc, x, y, nearer, sky);
             continue;
         }
-        if (r.x0 == 0)
-            culled += cull_pixel(rc, 0, y, nearer, sky);
         size_t row = y * w;
-        if (xa < xb)
-            culled += cull_span(rc->zbuf + row - w, rc->zbuf + row, rc->zbuf + row + w, rc->pre + row, rc->pt + row,
-                                rc->depth + row, rc->stretch_x2, rc->stretch_y2[y], nearer, sky, xa, xb);
-        if (r.x1 == w)
-            culled += cull_pixel(rc, (uint32_t)w - 1, y, nearer, sky);
+        culled += cull_pixel(rc, 0, y, nearer, sky);
+        culled += cull_span(rc->zbuf + row - w, rc->zbuf + row, rc->zbuf + row + w, rc->pre + row, rc->pt + row,
+                            rc->depth + row, rc->stretch_x2, rc->stretch_y2[y], nearer, sky, 1, (uint32_t)w - 1);
+        culled += cull_pixel(rc, (uint32_t)w - 1, y, nearer, sky);
     }
     /* The points shown: visible for the ageing (no branch: a pixel without one marks the byte after the last
      * slot). Marking entries instead (tile-local writes) and reading them back through each slot's entry in the
@@ -135,12 +127,11 @@ static void cull_task(void *user, uint32_t tile, uint32_t worker)
     const uint32_t *pt = rc->pt, *win = rc->win;
     uint8_t *mark = rc->mark;
     uint32_t sink = rc->slots;
-    for (uint32_t y = r.y0; y < r.y1; y++)
-        for (uint32_t x = r.x0; x < r.x1; x++) {
-            uint32_t none = 0u - (uint32_t)(pt[y * w + x] == RC_EMPTY_PT);
-            mark[(win[y * w + x] & ~none) | (sink & none)] = 1;
-        }
-    rc->tile_culled[tile] = culled;
+    for (size_t p = y0 * w; p < y1 * w; p++) {
+        uint32_t none = 0u - (uint32_t)(pt[p] == RC_EMPTY_PT);
+        mark[(win[p] & ~none) | (sink & none)] = 1;
+    }
+    rc->band_culled[band] = culled;
 }
 
 void view_rc__depth_cull(view_rc *rc)
@@ -155,18 +146,17 @@ void view_rc__depth_cull(view_rc *rc)
         float sy = (1.0f - 2.0f * ((float)y + 0.5f) / (float)v->height) * v->tan_half_y;
         rc->stretch_y2[y] = sy * sy;
     }
-    view_rc__pool_run(rc->pool, rc->tile_count, cull_task, rc);
+    view_rc__pool_run(rc->pool, rc->tiles_y, cull_task, rc);
 }
 
 /* ---- interpolation and priority ----------------------------------------------------------------------- */
 
-/* 16-bit values per worker for a tile of side `tile`: the tile and a one-pixel border as four planes (red,
- * green, blue, occupied), the row sums (tile + 2 rows of tile: red, green, blue, weight, count), and the three
- * output colour planes (bytes). */
-size_t view_rc__interp_scratch(uint32_t tile)
+/* 16-bit values per worker for an image `width` wide: three rows of row sums (red, green, blue, weight, count),
+ * their rows of occupied pixels (width + 2), one row of four planes (width + 2), three output rows of bytes. */
+size_t view_rc__interp_scratch(uint32_t width)
 {
-    size_t s = (size_t)tile + 2;
-    return 4 * s * s + 5 * s * tile + 2 * (size_t)tile * tile;
+    size_t w = width;
+    return 3 * 5 * w + 3 * (w + 2) + 4 * (w + 2) + 2 * w;
 }
 
 /* A row of points as planes: red, green, blue (0 where empty) and occupied. */
@@ -208,24 +198,25 @@ FXC_HOT_CLONES static void interleave(const uint8_t *restrict r, const uint8_t *
     }
 }
 
-/* One output row: the column sums of three row sums, the choice of colour, kind and priority. */
-FXC_HOT_CLONES static uint64_t finish_row(const uint16_t *restrict h, size_t hstride, const uint16_t *restrict own_o,
-                                          const uint32_t *restrict own, uint8_t *restrict out_r,
-                                          uint8_t *restrict out_g, uint8_t *restrict out_b, uint8_t *restrict kind,
-                                          uint8_t *restrict priority, uint32_t n, bool smooth_all,
-                                          const uint8_t clear[3], uint32_t kinds[VIEW_RC_PIXEL_KINDS])
+/* One output row: the column sums of three rows of row sums (up, here, down: five planes each, `plane` apart),
+ * the choice of colour, kind and priority. */
+FXC_HOT_CLONES static uint64_t finish_row(const uint16_t *restrict up, const uint16_t *restrict here,
+                                          const uint16_t *restrict down, size_t plane,
+                                          const uint16_t *restrict own_o, const uint32_t *restrict own,
+                                          uint8_t *restrict out_r, uint8_t *restrict out_g, uint8_t *restrict out_b,
+                                          uint8_t *restrict kind, uint8_t *restrict priority, uint32_t n,
+                                          bool smooth_all, const uint8_t clear[3],
+                                          uint32_t kinds[VIEW_RC_PIXEL_KINDS])
 {
-    /* h: five row-sum planes one after the other (hstride apart), three rows each (n apart). */
-    const uint16_t *hr = h, *hg = h + hstride, *hb = h + 2 * hstride, *hw = h + 3 * hstride, *hn = h + 4 * hstride;
     uint64_t weight = 0;
     uint32_t points = 0, interp = 0, empty = 0;
     const uint32_t clear_r = clear[0], clear_g = clear[1], clear_b = clear[2], keep_own = smooth_all ? 0u : 1u;
     for (size_t x = 0; x < n; x++) {
-        uint32_t sr = hr[x] + 2u * hr[x + n] + hr[x + 2 * n];
-        uint32_t sg = hg[x] + 2u * hg[x + n] + hg[x + 2 * n];
-        uint32_t sb = hb[x] + 2u * hb[x + n] + hb[x + 2 * n];
-        uint32_t sw = hw[x] + 2u * hw[x + n] + hw[x + 2 * n];
-        uint32_t count = hn[x] + hn[x + n] + hn[x + 2 * n] - own_o[x]; /* neighbours, not itself */
+        uint32_t sr = up[x] + 2u * here[x] + down[x];
+        uint32_t sg = up[x + plane] + 2u * here[x + plane] + down[x + plane];
+        uint32_t sb = up[x + 2 * plane] + 2u * here[x + 2 * plane] + down[x + 2 * plane];
+        uint32_t sw = up[x + 3 * plane] + 2u * here[x + 3 * plane] + down[x + 3 * plane];
+        uint32_t count = up[x + 4 * plane] + here[x + 4 * plane] + down[x + 4 * plane] - own_o[x]; /* not itself */
         uint32_t v = own[x];
         uint32_t has = own_o[x] != 0, keep = has & keep_own, filled = sw > 0;
         /* Rounded division by 1..16: exact through the float reciprocal (an error below 1/64 either way). */
@@ -254,55 +245,74 @@ FXC_HOT_CLONES static uint64_t finish_row(const uint16_t *restrict h, size_t hst
     return weight;
 }
 
-static void interpolate_task(void *user, uint32_t tile, uint32_t worker)
+/* Row y of the shown points as row sums into `sums` (five planes, `plane` apart) and its occupied pixels into
+ * `occupied` (width + 2, zero at both ends); zeros for a row outside the image. */
+static void interp_row(const view_rc *rc, int64_t y, uint16_t *sums, size_t plane, uint16_t *occupied,
+                       uint16_t *unpacked)
+{
+    uint32_t w = rc->width;
+    size_t s = (size_t)w + 2;
+    if (y < 0 || y >= rc->height) {
+        memset(sums, 0, 5 * plane * sizeof(uint16_t));
+        memset(occupied, 0, s * sizeof(uint16_t));
+        return;
+    }
+    uint16_t *r = unpacked, *g = r + s, *b = g + s;
+    r[0] = g[0] = b[0] = occupied[0] = 0;
+    r[s - 1] = g[s - 1] = b[s - 1] = occupied[s - 1] = 0;
+    unpack_span(rc->pt + (size_t)y * w, r + 1, g + 1, b + 1, occupied + 1, w);
+    row_sums(r, g, b, occupied, sums, sums + plane, sums + 2 * plane, sums + 3 * plane, sums + 4 * plane, w);
+}
+
+/* Rows of a band, each from the row sums of the rows above, itself and below (three kept, one new a row). */
+static void interpolate_task(void *user, uint32_t band, uint32_t worker)
 {
     view_rc *rc = user;
-    rc_rect r = tile_rect(rc, tile);
-    uint32_t w = rc->width, h = rc->height, tw = r.x1 - r.x0, th = r.y1 - r.y0;
-    uint32_t s = tw + 2; /* plane stride */
-    size_t plane = (size_t)s * (th + 2), rows = (size_t)(th + 2) * tw;
-    uint16_t *pr = rc->workers[worker].planes, *pg = pr + plane, *pb = pg + plane, *po = pb + plane;
-    uint16_t *hsum = po + plane; /* five planes of rows x tw */
-    uint8_t *out_r = (uint8_t *)(hsum + 5 * rows), *out_g = out_r + tw, *out_b = out_g + tw;
-    /* The planes, with zeros outside the image. */
-    for (uint32_t j = 0; j < th + 2; j++) {
-        int64_t y = (int64_t)r.y0 + j - 1;
-        size_t q = (size_t)j * s;
-        if (y < 0 || y >= h) {
-            memset(pr + q, 0, s * sizeof(uint16_t));
-            memset(pg + q, 0, s * sizeof(uint16_t));
-            memset(pb + q, 0, s * sizeof(uint16_t));
-            memset(po + q, 0, s * sizeof(uint16_t));
-            continue;
-        }
-        const uint32_t *row = rc->pt + (size_t)y * w;
-        /* Columns x0 - 1 .. x1: the first and last may lie outside. */
-        uint32_t i0 = r.x0 > 0 ? 0 : 1, i1 = r.x1 < w ? s : s - 1;
-        pr[q] = pg[q] = pb[q] = po[q] = 0;
-        pr[q + s - 1] = pg[q + s - 1] = pb[q + s - 1] = po[q + s - 1] = 0;
-        unpack_span(row + r.x0 - 1 + i0, pr + q + i0, pg + q + i0, pb + q + i0, po + q + i0, i1 - i0);
-    }
-    for (uint32_t j = 0; j < th + 2; j++) {
-        size_t q = (size_t)j * s, o = (size_t)j * tw;
-        row_sums(pr + q, pg + q, pb + q, po + q, hsum + o, hsum + rows + o, hsum + 2 * rows + o,
-                 hsum + 3 * rows + o, hsum + 4 * rows + o, tw);
-    }
+    uint32_t y0, y1;
+    band_rows(rc, band, &y0, &y1);
+    uint32_t w = rc->width;
+    size_t plane = w, s = (size_t)w + 2;
+    uint16_t *scratch = rc->workers[worker].planes;
+    uint16_t *sums[3] = {scratch, scratch + 5 * plane, scratch + 10 * plane};
+    uint16_t *occupied[3] = {scratch + 15 * plane, scratch + 15 * plane + s, scratch + 15 * plane + 2 * s};
+    uint16_t *unpacked = scratch + 15 * plane + 3 * s;
+    uint8_t *out_r = (uint8_t *)(unpacked + 4 * s), *out_g = out_r + w, *out_b = out_g + w;
+    interp_row(rc, (int64_t)y0 - 1, sums[(y0 + 2) % 3], plane, occupied[(y0 + 2) % 3], unpacked);
+    interp_row(rc, y0, sums[y0 % 3], plane, occupied[y0 % 3], unpacked);
     uint32_t kinds[VIEW_RC_PIXEL_KINDS] = {0};
     uint64_t weight = 0;
-    for (uint32_t j = 0; j < th; j++) {
-        size_t p = (size_t)(r.y0 + j) * w + r.x0;
-        weight += finish_row(hsum + (size_t)j * tw, rows, po + (size_t)(j + 1) * s + 1, rc->pt + p, out_r, out_g,
-                             out_b, rc->kind + p, rc->priority + p, tw, rc->d.smooth_all, rc->d.clear_rgb, kinds);
-        interleave(out_r, out_g, out_b, rc->rgb + 3 * p, tw);
+    for (uint32_t y = y0; y < y1; y++) {
+        interp_row(rc, (int64_t)y + 1, sums[(y + 1) % 3], plane, occupied[(y + 1) % 3], unpacked);
+        size_t p = (size_t)y * w;
+        uint32_t before = kinds[VIEW_RC_EMPTY];
+        weight += finish_row(sums[(y + 2) % 3], sums[y % 3], sums[(y + 1) % 3], plane, occupied[y % 3] + 1,
+                             rc->pt + p, out_r, out_g, out_b, rc->kind + p, rc->priority + p, w, rc->d.smooth_all,
+                             rc->d.clear_rgb, kinds);
+        rc->row_need[y] = kinds[VIEW_RC_EMPTY] - before;
+        interleave(out_r, out_g, out_b, rc->rgb + 3 * p, w);
     }
-    memcpy(rc->tile_kind + (size_t)tile * VIEW_RC_PIXEL_KINDS, kinds, sizeof kinds);
-    rc->tile_need[tile] = rc->d.no_prefilter ? 0 : kinds[VIEW_RC_EMPTY];
-    rc->tile_weight[tile] = weight;
+    memcpy(rc->band_kind + (size_t)band * VIEW_RC_PIXEL_KINDS, kinds, sizeof kinds);
+    rc->band_need[band] = rc->d.no_prefilter ? 0 : kinds[VIEW_RC_EMPTY];
+    rc->band_weight[band] = weight;
 }
 
 void view_rc__interpolate(view_rc *rc)
 {
-    view_rc__pool_run(rc->pool, rc->tile_count, interpolate_task, rc);
+    view_rc__pool_run(rc->pool, rc->tiles_y, interpolate_task, rc);
+}
+
+typedef struct rc_rect {
+    uint32_t x0, y0, x1, y1;
+} rc_rect;
+
+static rc_rect tile_rect(const view_rc *rc, uint32_t tile)
+{
+    rc_rect r;
+    r.x0 = (tile % rc->tiles_x) << rc->tile_shift;
+    r.y0 = (tile / rc->tiles_x) << rc->tile_shift;
+    r.x1 = r.x0 + rc->tile < rc->width ? r.x0 + rc->tile : rc->width;
+    r.y1 = r.y0 + rc->tile < rc->height ? r.y0 + rc->tile : rc->height;
+    return r;
 }
 
 /* ---- prefilter -------------------------------------------------------------------------------------------- */
@@ -411,20 +421,31 @@ static uint32_t prefilter_planes(view_rc *rc, rc_rect r, uint16_t *scratch)
 static void prefilter_task(void *user, uint32_t tile, uint32_t worker)
 {
     view_rc *rc = user;
-    uint32_t need = rc->tile_need[tile];
-    if (need == 0)
+    if (rc->band_need[tile / rc->tiles_x] == 0)
         return;
     rc_rect r = tile_rect(rc, tile);
+    uint32_t need = 0;
+    for (uint32_t y = r.y0; y < r.y1; y++)
+        if (rc->row_need[y] > 0)
+            for (uint32_t x = r.x0; x < r.x1; x++)
+                need += rc->kind[(size_t)y * rc->width + x] == VIEW_RC_EMPTY;
+    if (need == 0)
+        return;
     /* 49 reads a pixel, against the planes' few vector operations per pixel of the tile (about 25 pixels to fill
      * in a 64 x 64 tile cost as much either way). */
     uint64_t tile_pixels = (uint64_t)(r.x1 - r.x0) * (r.y1 - r.y0);
     uint32_t filled = (uint64_t)need * 49 * 4 < tile_pixels * 1 ? prefilter_direct(rc, r)
                                                             : prefilter_planes(rc, r, rc->workers[worker].box);
-    rc->tile_kind[(size_t)tile * VIEW_RC_PIXEL_KINDS + VIEW_RC_EMPTY] -= filled;
-    rc->tile_kind[(size_t)tile * VIEW_RC_PIXEL_KINDS + VIEW_RC_PREFILTER] += filled;
+    rc->tile_filled[tile] = filled;
 }
 
 void view_rc__prefilter(view_rc *rc)
 {
+    memset(rc->tile_filled, 0, rc->tile_count * sizeof(uint32_t));
     view_rc__pool_run(rc->pool, rc->tile_count, prefilter_task, rc);
+    for (uint32_t tile = 0; tile < rc->tile_count; tile++) {
+        uint32_t *kinds = rc->band_kind + (size_t)(tile / rc->tiles_x) * VIEW_RC_PIXEL_KINDS;
+        kinds[VIEW_RC_EMPTY] -= rc->tile_filled[tile];
+        kinds[VIEW_RC_PREFILTER] += rc->tile_filled[tile];
+    }
 }

@@ -117,10 +117,10 @@ fxc_result view_rc_render(view_rc *rc, const view_rc_camera *cam, const view_rc_
     rc->last_view = rc->view;
     rc->last_valid = true;
 
-    for (uint32_t tile = 0; tile < rc->tile_count; tile++) {
-        stats.culled += rc->tile_culled[tile];
+    for (uint32_t band = 0; band < rc->tiles_y; band++) {
+        stats.culled += rc->band_culled[band];
         for (int k = 0; k < VIEW_RC_PIXEL_KINDS; k++)
-            stats.pixels[k] += rc->tile_kind[(size_t)tile * VIEW_RC_PIXEL_KINDS + k];
+            stats.pixels[k] += rc->band_kind[(size_t)band * VIEW_RC_PIXEL_KINDS + k];
     }
     stats.points = 0;
     for (uint32_t c = 0; c < rc->chunk_count; c++)

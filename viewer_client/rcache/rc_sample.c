@@ -365,10 +365,6 @@ void view_rc__sampling(view_rc *rc)
 {
     uint32_t pixels[VIEW_RC_MAX_TILES];
     for (uint32_t b = 0; b < rc->tiles_y; b++) {
-        uint64_t sum = 0;
-        for (uint32_t t = 0; t < rc->tiles_x; t++)
-            sum += rc->tile_weight[b * rc->tiles_x + t];
-        rc->band_weight[b] = sum;
         uint32_t y0 = b * rc->tile, y1 = y0 + rc->tile < rc->height ? y0 + rc->tile : rc->height;
         pixels[b] = (y1 - y0) * rc->width;
     }

@@ -99,8 +99,8 @@ typedef struct rc_worker {
     uint32_t *low;     /* predicted projection: quarter-resolution pixel per slot of a chunk */
     float *err;        /* dither: 2 x RC_DITHER_LANES x two rows of width + 2 errors */
     uint8_t *spare;    /* dither: a row of choices for spare lanes */
-    uint16_t *planes;  /* interpolation: (tile + 2)^2 x 4 inputs, then tile x (tile + 2) x 5 row sums */
-    uint16_t *box;     /* prefilter: view_rc__prefilter_scratch(tile) values */
+    uint16_t *planes;  /* interpolation: view_rc__interp_scratch(width) values */
+    uint16_t *box;     /* prefilter: view_rc__prefilter_scratch(tile side) values */
 } rc_worker;
 
 /* Points being inserted, a batch at a time (rc_cache.c): their positions computed in one loop without branches,
@@ -190,10 +190,11 @@ struct view_rc {
     uint8_t *priority; /* output priority */
     uint8_t *chosen;   /* dither: chosen pixels */
     float *stretch_x2, *stretch_y2; /* per column / row: the squared image-plane coordinate of the pixel centre */
-    uint32_t *tile_need;           /* per tile: pixels the prefilter must fill */
-    uint32_t *tile_culled;         /* per tile: pixels the depth cull emptied */
-    uint32_t *tile_kind;           /* per tile: pixels by kind (x VIEW_RC_PIXEL_KINDS) */
-    uint64_t *tile_weight;         /* per tile: sum of priority + 1 */
+    uint32_t *row_need;            /* per row: pixels the prefilter must fill */
+    uint32_t *band_need;           /* per band (tiles_y of them, tile_size rows each): pixels to fill */
+    uint32_t *band_culled;         /* per band: pixels the depth cull emptied */
+    uint32_t *band_kind;           /* per band: pixels by kind (x VIEW_RC_PIXEL_KINDS) */
+    uint32_t *tile_filled;         /* per tile: pixels the prefilter filled */
     uint64_t *band_weight;         /* per band: sum of priority + 1 */
     uint32_t *band_quota, *band_offset;
 
@@ -225,9 +226,9 @@ void view_rc__project_direct(view_rc *rc);  /* no_tiling: the projection without
 void view_rc__zbuffer_direct(view_rc *rc);  /* no_tiling: one z-buffer pass in slot order (serial) */
 void view_rc__age(view_rc *rc);             /* parallel over chunks, then the free stack (serial) */
 
-/* rc_image.c: the pixel passes, parallel over tiles. */
-size_t view_rc__interp_scratch(uint32_t tile);    /* 16-bit values of a worker's interpolation scratch */
-size_t view_rc__prefilter_scratch(uint32_t tile); /* ... and prefilter scratch */
+/* rc_image.c: the pixel passes, parallel over bands of rows. */
+size_t view_rc__interp_scratch(uint32_t width);    /* 16-bit values of a worker's interpolation scratch */
+size_t view_rc__prefilter_scratch(uint32_t tile);  /* ... and prefilter scratch (tiles of that side) */
 void view_rc__depth_cull(view_rc *rc);
 void view_rc__interpolate(view_rc *rc);
 void view_rc__prefilter(view_rc *rc);
