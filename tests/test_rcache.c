@@ -15,7 +15,8 @@
  *   - ageing steps of 128 k / N with the fraction carried, hidden points twice as fast, eviction at 255 (and
  *     none with no_eviction), a full cache dropping its oldest points at age 128, a colour change ageing the
  *     neighbours, a new frame replacing what it saw;
- *   - 1, 2 and 4 threads give bit-identical frames, requests and caches over a moving sequence;
+ *   - 1, 2 and 4 threads give bit-identical frames, requests and caches over a moving sequence, and tiles of any
+ *     size (or none) the same image;
  *   - descriptions and cameras out of range are refused. */
 #include "test_util.h"
 
@@ -967,6 +968,61 @@ static void test_threads_bit_identical(void **state)
     }
 }
 
+/* ---- tiles ---------------------------------------------------------------------------------------------------------- */
+
+/* Tiles organise the work; they must not change the picture: the same sparse points (a pattern dense here, sparse
+ * there, so that both ways of the prefilter run) through tiles of 8, 16, 64 and 256 pixels, and through the
+ * one-pass z-buffer of no_tiling, give the same image, depths, kinds and priorities. */
+static void test_tiles_do_not_change_the_image(void **state)
+{
+    (void)state;
+    const uint32_t w = 150, h = 90;
+    view_rc_camera cam = look(0, 0.5, 0, 0, 0, -5, 60);
+    view_rc_sample *s = malloc(sizeof *s * w * h);
+    uint32_t n = 0;
+    uint64_t seed = 12345;
+    for (uint32_t y = 0; y < h; y++)
+        for (uint32_t x = 0; x < w; x++) {
+            seed = seed * 6364136223846793005u + 1442695040888963407u;
+            uint32_t r = (uint32_t)(seed >> 33);
+            /* Dense on the left third, one in 12 in the middle, one in 60 on the right. */
+            uint32_t keep = x < w / 3 ? 2 : x < 2 * w / 3 ? 12 : 60;
+            if (r % keep != 0)
+                continue;
+            double d[3];
+            pixel_ray(&cam, w, h, x, y, d);
+            scene_hit hit = cast(cam.position, d, true, true);
+            s[n] = (view_rc_sample){.x = (uint16_t)x, .y = (uint16_t)y, .depth = (float)hit.t};
+            memcpy(s[n++].rgb, hit.rgb, 3);
+        }
+    view_rc_camera moved = look(0.2, 0.6, -0.3, 0.1, 0, -5, 60);
+    walk_log reference = {0};
+    const uint32_t tiles[] = {64, 8, 16, 256, 64};
+    for (size_t t = 0; t < sizeof tiles / sizeof tiles[0]; t++) {
+        bool direct = t + 1 == sizeof tiles / sizeof tiles[0];
+        view_rc *rc = make(&(view_rc_desc){.width = w, .height = h, .tile_size = tiles[t], .no_tiling = direct});
+        assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, s, n), FXC_OK);
+        view_rc_frame f;
+        render(rc, &moved, NULL, &f);
+        assert_true(f.stats.pixels[VIEW_RC_PREFILTER] > 100 && f.stats.pixels[VIEW_RC_INTERP] > 100);
+        walk_log log = {0};
+        log_bytes(&log, f.rgb, (size_t)w * h * 3);
+        log_bytes(&log, f.depth, (size_t)w * h * sizeof(float));
+        log_bytes(&log, f.kind, (size_t)w * h);
+        log_bytes(&log, f.priority, (size_t)w * h);
+        if (t == 0) {
+            reference = log;
+        } else {
+            assert_int_equal(log.used, reference.used);
+            assert_memory_equal(log.bytes, reference.bytes, reference.used);
+            free(log.bytes);
+        }
+        view_rc_destroy(rc);
+    }
+    free(reference.bytes);
+    free(s);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -983,6 +1039,7 @@ int main(void)
         cmocka_unit_test(test_colour_change_penalty),
         cmocka_unit_test(test_frame_replaces_what_it_saw),
         cmocka_unit_test(test_threads_bit_identical),
+        cmocka_unit_test(test_tiles_do_not_change_the_image),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
