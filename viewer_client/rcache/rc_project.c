@@ -276,8 +276,9 @@ static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
             win[y * w + x] = RC_NO_POINT;
             pre[y * w + x] = RC_EMPTY_PT;
         }
-    /* Depth, slot and colour of the nearest. (A version without the branch was slower: 2.2 against 1.9 ms a frame
-     * in bench_rcache.) */
+    /* Depth, slot and colour of the nearest. Tried and slower in bench_rcache: the same without the branch (2.2
+     * against 1.9 ms), and 64-bit keys of depth and entry (one load, minimum and store a point; entries split in
+     * 8 bytes for the test and 8 for the winners: 1.6 against 1.2 ms, and the sort 0.3 ms slower). */
     const rc_entry *entries = rc->entries;
     for (uint32_t e = rc->tile_start[tile], end = rc->tile_start[tile + 1]; e < end; e++) {
         uint32_t p = entries[e].pix;
