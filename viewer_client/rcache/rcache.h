@@ -12,7 +12,8 @@
  *                      in: a counting sort by tile (2002 3.2) that is also the migration of points between the
  *                      tiles' point lists (Reinhard 2001 section 3)
  *   z-buffer tiles     each tile's list depth-tested into that tile only (cache-sized, 2002 3.2)
- *   depth cull         points with nearer points on two opposite sides dropped (1999, slide 14)
+ *   depth cull         points with nearer points on two opposite sides, agreeing with each other, dropped
+ *                      (1999, slide 14)
  *   interpolate        the 3x3 weighted filter (1-2-1 / 2-4-2 / 1-2-1) where a pixel has no point, and the
  *                      priority image: older points and emptier neighbourhoods first (1999, slides 15-18)
  *   prefilter          the 7x7 uniform filter, only where the 3x3 found no point (2002 3.3, Figure 3)
@@ -20,7 +21,8 @@
  *                      slide 19)
  *   age and evict      every point aged so that it reaches 128 before it is overwritten on average, faster when
  *                      not visible; a new sample whose colour differs ages its neighbours; 255 evicts (2002 3.4)
- * The tiles' stages run on several threads (Reinhard 2001); the result does not depend on the thread count.
+ * Every stage but the last steps of sampling runs on several threads (Reinhard 2001: tiles for the z-buffer,
+ * chunks of the point store, bands of rows for the pixel passes); the result does not depend on the thread count.
  *
  * It links nothing but libc, libm and pthreads: no proto, no scene, no server code. Cameras are the wire's
  * (proto_pose: world position in double, a view direction with +Y up, vertical field of view); the pinhole model
@@ -65,7 +67,8 @@ typedef struct view_rc_desc {
                                  1; at most width * height) */
     uint32_t insert_reserve;  /* points that can wait for the next frame beyond capacity before an insert has to
                                  compact the cache on the spot (default 4 * sample_budget) */
-    uint32_t tile_size;       /* tile side, pixels (default 64; grown to at most VIEW_RC_MAX_TILES tiles) */
+    uint32_t tile_size;       /* tile side, pixels (default 64; rounded up to a power of two, grown until the image
+                                 has at most VIEW_RC_MAX_TILES tiles); also the height of the pixel passes' bands */
     uint32_t threads;         /* threads for a frame, the caller included (default 1, at most 64) */
     float cull_ratio;         /* depth cull: a point is dropped when points nearer by more than this fraction of
                                  its depth lie on two opposite sides of it (default 0.1) */
@@ -83,8 +86,8 @@ typedef struct view_rc_desc {
     bool no_prediction;       /* no predicted projection or predicted requests */
     bool no_prefilter;        /* no 7x7 prefilter */
     bool no_eviction;         /* ages stop at 254; points go only to make room */
-    bool no_tiling;           /* project and z-buffer the whole image in one pass in cache order, one thread,
-                                 no tile lists (the 1999 render cache) */
+    bool no_tiling;           /* no tile sort: the z-buffer takes the points in cache order straight into the whole
+                                 image, on one thread (the 1999 render cache); the other stages are unchanged */
     bool no_depth_cull;       /* no depth cull */
 } view_rc_desc;
 
@@ -117,7 +120,7 @@ typedef struct view_rc_sample {
     X(VIEW_RC_STAGE_UPDATE, "update points")              /* inserts since the previous frame */           \
     X(VIEW_RC_STAGE_PREDICT_PROJECT, "predicted projection")                                               \
     X(VIEW_RC_STAGE_PREDICT_SAMPLE, "predicted sampling")                                                  \
-    X(VIEW_RC_STAGE_PROJECT_SORT, "project and tile sort") /* no_tiling: projection and z-buffer */        \
+    X(VIEW_RC_STAGE_PROJECT_SORT, "project and tile sort") /* no_tiling: projection only */                 \
     X(VIEW_RC_STAGE_ZBUFFER, "z-buffer tiles")                                                             \
     X(VIEW_RC_STAGE_DEPTH_CULL, "depth cull")                                                              \
     X(VIEW_RC_STAGE_INTERPOLATE, "interpolate / smooth")  /* and the priority image */                     \
