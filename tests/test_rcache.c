@@ -17,7 +17,8 @@
  *     neighbours, a new frame replacing what it saw;
  *   - 1, 2 and 4 threads give bit-identical frames, requests and caches over a moving sequence, and tiles of any
  *     size (or none) the same image;
- *   - descriptions and cameras out of range are refused. */
+ *   - descriptions and cameras out of range are refused;
+ *   - the library needs nothing but libc, libm and pthreads (nm; the same check refuses fxc_proto). */
 #include "test_util.h"
 
 #include "rcache.h"
@@ -1023,6 +1024,69 @@ static void test_tiles_do_not_change_the_image(void **state)
     free(s);
 }
 
+/* ---- the client stays light --------------------------------------------------------------------------------- */
+
+/* The symbols an archive leaves undefined that are not its own (view_rc_), libc's, libm's, pthreads' or the
+ * compiler runtime's (function multi-versioning, sanitizers), through `nm -u`; their count, the first few in
+ * `names`. -1 when nm cannot run. */
+static int foreign_symbols(const char *archive, char *names, size_t cap)
+{
+    static const char *const allowed[] = {"aligned_alloc", "calloc", "malloc", "realloc", "free", "memcpy",
+                                          "memmove", "memset", "memcmp", "abs", "clock_gettime", "sqrtf", "tanf",
+                                          "floor", "floorf", "_GLOBAL_OFFSET_TABLE_"};
+    char command[1200];
+    snprintf(command, sizeof command, "nm -u '%s' 2>/dev/null", archive);
+    FILE *pipe = popen(command, "r");
+    if (!pipe)
+        return -1;
+    int foreign = 0, lines = 0;
+    names[0] = 0;
+    char line[512];
+    while (fgets(line, sizeof line, pipe)) {
+        char kind[8], symbol[400];
+        if (sscanf(line, " %7s %399s", kind, symbol) != 2 || strlen(kind) != 1)
+            continue;
+        lines++;
+        if (!strncmp(symbol, "view_rc_", 8) || !strncmp(symbol, "pthread_", 8) || !strncmp(symbol, "__", 2))
+            continue;
+        bool ok = false;
+        for (size_t i = 0; i < sizeof allowed / sizeof allowed[0]; i++)
+            ok |= !strcmp(symbol, allowed[i]);
+        if (!ok) {
+            if (strlen(names) + strlen(symbol) + 2 < cap) {
+                strcat(names, symbol);
+                strcat(names, " ");
+            }
+            foreign++;
+        }
+    }
+    return pclose(pipe) == 0 && lines > 0 ? foreign : -1;
+}
+
+/* libfxc_rcache.a needs nothing but libc, libm and pthreads; the check refuses fxc_proto (zstd, libturbojpeg). The
+ * archives are found from this test's scratch folder, <build>/tests/tmp_test_rcache. */
+static void test_links_only_libc_libm_pthreads(void **state)
+{
+    (void)state;
+    char build[1024], archive[1200], names[600];
+    snprintf(build, sizeof build, "%s", FXC_TEST_TMP);
+    for (int up = 0; up < 2; up++) {
+        char *slash = strrchr(build, '/');
+        assert_non_null(slash);
+        *slash = 0;
+    }
+    snprintf(archive, sizeof archive, "%s/viewer_client/rcache/libfxc_rcache.a", build);
+    int foreign = foreign_symbols(archive, names, sizeof names);
+    if (foreign < 0)
+        skip(); /* no nm */
+    if (foreign != 0)
+        fail_msg("%s needs %d symbols from outside libc, libm and pthreads: %s", archive, foreign, names);
+    snprintf(archive, sizeof archive, "%s/proto/libfxc_proto.a", build);
+    foreign = foreign_symbols(archive, names, sizeof names);
+    assert_true(foreign > 0);
+    assert_non_null(strstr(names, "ZSTD_"));
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -1040,6 +1104,7 @@ int main(void)
         cmocka_unit_test(test_frame_replaces_what_it_saw),
         cmocka_unit_test(test_threads_bit_identical),
         cmocka_unit_test(test_tiles_do_not_change_the_image),
+        cmocka_unit_test(test_links_only_libc_libm_pthreads),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
