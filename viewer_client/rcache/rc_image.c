@@ -1,0 +1,451 @@
+/* The pixel passes of a frame, each parallel over bands of rows (a band reads its neighbours' rows across its
+ * border, written by the previous pass, and writes only its own):
+ *
+ * Depth cull (1999, slide 14: "z-buffering only works within a pixel; find pixels with locally inconsistent
+ * depths"). A point that won its pixel may still lie behind a surface whose points are spread apart, showing
+ * through the gaps. Here a point is dropped when two opposite neighbours in its 3x3 neighbourhood (left and right,
+ * above and below, or the ends of a diagonal) are both nearer than it by more than cull_ratio and agree with each
+ * other much better than with it: in disparity (1 / depth, linear across a plane in the image) the pair's spread
+ * is less than half its lead over the point, 2 |1/a - 1/b| < 1/max(a, b) - 1/c. That is the mark of a point seen
+ * through a surface. Two simpler rules fail on frames the server sends whole: against the neighbourhood's mean
+ * depth, the background point beside every silhouette is dropped (a still camera would not show the frame as it
+ * was sent); with only "both nearer", a floor seen at a grazing angle (its depth changing by more than cull_ratio
+ * from row to row) beside an object drops the floor's points along the object's outline. What remains: a strip
+ * of background one pixel thin between two nearer surfaces (a floor seen behind the line where a ball touches
+ * it) looks exactly like a gap and goes.
+ *
+ * Interpolation (1999, slides 15 and 18; 2002 3.3, Figure 3): the 3x3 filter with weights 1-2-1 / 2-4-2 /
+ * 1-2-1 over the neighbourhood's points (after the cull), rounded to the nearest integer, fills a pixel without
+ * a point (and with smooth_all replaces every pixel by that mean). The filter is separable: sums along rows,
+ * then along columns, over planes of 16-bit values, in loops the compiler vectorises. The same pass writes the
+ * priority image: a point's age (older first), or for a pixel without one 255 - 16 n, n the points among its 8
+ * neighbours (emptier first, 255 where there is none).
+ *
+ * Prefilter (2002 3.3): where the 3x3 found no point, the uniform mean of the points in the 7x7 neighbourhood.
+ * It works by tiles (only tiles with pixels to fill do anything): a tile with many such pixels is filtered
+ * whole, separated into 7-sums along rows and then down columns over 16-bit planes (the paper uses running sums,
+ * whose cost does not depend on the kernel's size: Smith's moving average; vector adds of 7 values are cheaper
+ * here); a tile with few sums each one's 49 pixels. Both give the same integers. (By full-width bands, as the
+ * other pixel passes, it was slower: 0.6-0.8 against 0.4 ms.)
+ * It does not change the priority (2002 3.3). */
+#include "rc_internal.h"
+
+#include <math.h>
+#include <string.h>
+
+/* The pixel passes work on bands of full rows (the tile rows: tile_size rows each), so that every row is one long
+ * stream for the prefetcher (64-pixel rows of a tile were short streams, each starting with a miss). */
+static void band_rows(const view_rc *rc, uint32_t band, uint32_t *y0, uint32_t *y1)
+{
+    *y0 = band << rc->tile_shift;
+    *y1 = *y0 + rc->tile < rc->height ? *y0 + rc->tile : rc->height;
+}
+
+/* ---- depth cull ----------------------------------------------------------------------------------------- */
+
+/* One opposite pair (a, b) around depth z, threshold t = z / (1 + cull_ratio). */
+FXC_HOT_INLINE bool pair_in_front(float a, float b, float z, float t)
+{
+    float lo = a < b ? a : b, hi = a < b ? b : a;
+    return (hi < t) & (2.0f * (hi - lo) * z < (z - hi) * lo);
+}
+
+/* Pixels [xa, xb) of a row with a row above (zu) and below (zd), none of them on the image's left or right
+ * edge. Writes the shown points and the output depth; returns the pixels culled. nearer = 0 turns the cull off.
+ * The nine neighbourhood rows are nine pointers indexed alike, so each is one contiguous vector load. */
+FXC_HOT_CLONES static uint32_t cull_span(const float *zu, const float *zc, const float *zd,
+                                         const uint32_t *restrict pre, uint32_t *restrict pt,
+                                         float *restrict depth, const float *restrict sx2, float sy2, float nearer,
+                                         float sky, uint32_t xa, uint32_t xb)
+{
+    const float *restrict l = zc + xa - 1, *restrict c = zc + xa, *restrict r = zc + xa + 1;
+    const float *restrict ul = zu + xa - 1, *restrict u = zu + xa, *restrict ur = zu + xa + 1;
+    const float *restrict dl = zd + xa - 1, *restrict d = zd + xa, *restrict dr = zd + xa + 1;
+    pre += xa, pt += xa, depth += xa, sx2 += xa;
+    size_t n = xb - xa;
+    uint32_t culled = 0;
+    for (size_t x = 0; x < n; x++) {
+        float z = c[x], t = z * nearer;
+        bool behind = pair_in_front(l[x], r[x], z, t) | pair_in_front(u[x], d[x], z, t) |
+                      pair_in_front(ul[x], dr[x], z, t) | pair_in_front(ur[x], dl[x], z, t);
+        uint32_t v = pre[x];
+        uint32_t occupied = v != RC_EMPTY_PT, cull = behind & occupied, mask = 0u - cull;
+        pt[x] = (v & ~mask) | (RC_EMPTY_PT & mask); /* (a select the vectoriser takes) */
+        float root = sqrtf(1.0f + sx2[x] + sy2), dist = z * root;
+        float shown = z >= sky ? INFINITY : dist;
+        depth[x] = occupied & !cull ? shown : NAN;
+        culled += cull;
+    }
+    return culled;
+}
+
+/* The same for one pixel anywhere (the image's border rows and columns): neighbours outside are +inf. */
+static uint32_t cull_pixel(view_rc *rc, uint32_t x, uint32_t y, float nearer, float sky)
+{
+    size_t w = rc->width, p = y * w + x;
+    uint32_t h = rc->height;
+    const float *zbuf = rc->zbuf;
+    bool l = x > 0, r = x + 1 < w, u = y > 0, d = y + 1 < h;
+    float z = zbuf[p], t = z * nearer;
+    bool behind = pair_in_front(l ? zbuf[p - 1] : INFINITY, r ? zbuf[p + 1] : INFINITY, z, t) |
+                  pair_in_front(u ? zbuf[p - w] : INFINITY, d ? zbuf[p + w] : INFINITY, z, t) |
+                  pair_in_front(l && u ? zbuf[p - w - 1] : INFINITY, r && d ? zbuf[p + w + 1] : INFINITY, z, t) |
+                  pair_in_front(r && u ? zbuf[p - w + 1] : INFINITY, l && d ? zbuf[p + w - 1] : INFINITY, z, t);
+    uint32_t v = rc->pre[p];
+    bool occupied = v != RC_EMPTY_PT, cull = behind & occupied;
+    rc->pt[p] = cull ? RC_EMPTY_PT : v;
+    float depth = z >= sky ? INFINITY : z * sqrtf(1.0f + rc->stretch_x2[x] + rc->stretch_y2[y]);
+    rc->depth[p] = occupied && !cull ? depth : NAN;
+    return cull;
+}
+
+static void cull_task(void *user, uint32_t band, uint32_t worker)
+{
+    (void)worker;
+    view_rc *rc = user;
+    uint32_t y0, y1;
+    band_rows(rc, band, &y0, &y1);
+    size_t w = rc->width;
+    uint32_t h = rc->height, culled = 0;
+    float nearer = rc->d.no_depth_cull ? 0.0f : 1.0f / (1.0f + rc->d.cull_ratio);
+    float sky = (float)(0.5 * VIEW_RC_SKY_DISTANCE);
+    for (uint32_t y = y0; y < y1; y++) {
+        if (y == 0 || y + 1 >= h || w < 3) {
+            for (uint32_t x = 0; x < w; x++)
+                culled += cull_pixel(rc, x, y, nearer, sky);
+            continue;
+        }
+        size_t row = y * w;
+        culled += cull_pixel(rc, 0, y, nearer, sky);
+        culled += cull_span(rc->zbuf + row - w, rc->zbuf + row, rc->zbuf + row + w, rc->pre + row, rc->pt + row,
+                            rc->depth + row, rc->stretch_x2, rc->stretch_y2[y], nearer, sky, 1, (uint32_t)w - 1);
+        culled += cull_pixel(rc, (uint32_t)w - 1, y, nearer, sky);
+    }
+    /* The points shown: visible for the ageing (no branch: a pixel without one marks the byte after the last
+     * slot). Marking entries instead (tile-local writes) and reading them back through each slot's entry in the
+     * ageing was slower: 0.8 against 0.3 ms for the ageing, the cull unchanged. */
+    const uint32_t *pt = rc->pt, *win = rc->win;
+    uint8_t *mark = rc->mark;
+    uint32_t sink = rc->slots;
+    for (size_t p = y0 * w; p < y1 * w; p++) {
+        uint32_t none = 0u - (uint32_t)(pt[p] == RC_EMPTY_PT);
+        mark[(win[p] & ~none) | (sink & none)] = 1;
+    }
+    rc->band_culled[band] = culled;
+}
+
+void view_rc__depth_cull(view_rc *rc)
+{
+    /* The squared image-plane coordinates of the pixel centres (srv_camera_ray's sx, sy). */
+    const rc_view *v = &rc->view;
+    for (uint32_t x = 0; x < rc->width; x++) {
+        float sx = (2.0f * ((float)x + 0.5f) / (float)v->width - 1.0f) * v->tan_half_x;
+        rc->stretch_x2[x] = sx * sx;
+    }
+    for (uint32_t y = 0; y < rc->height; y++) {
+        float sy = (1.0f - 2.0f * ((float)y + 0.5f) / (float)v->height) * v->tan_half_y;
+        rc->stretch_y2[y] = sy * sy;
+    }
+    view_rc__pool_run(rc->pool, rc->tiles_y, cull_task, rc);
+}
+
+/* ---- interpolation and priority ----------------------------------------------------------------------- */
+
+/* 16-bit values per worker for an image `width` wide: three rows of row sums (red, green, blue, weight, count),
+ * their rows of occupied pixels (width + 2), one row of four planes (width + 2), three output rows of bytes. */
+size_t view_rc__interp_scratch(uint32_t width)
+{
+    size_t w = width;
+    return 3 * 5 * w + 3 * (w + 2) + 4 * (w + 2) + 2 * w;
+}
+
+/* A row of points as planes: red, green, blue (0 where empty) and occupied. */
+FXC_HOT_CLONES static void unpack_span(const uint32_t *restrict src, uint16_t *restrict r, uint16_t *restrict g,
+                                       uint16_t *restrict b, uint16_t *restrict o, uint32_t n)
+{
+    for (size_t x = 0; x < n; x++) {
+        uint32_t v = src[x];
+        r[x] = (uint16_t)(v & 0xFF);
+        g[x] = (uint16_t)((v >> 8) & 0xFF);
+        b[x] = (uint16_t)((v >> 16) & 0xFF);
+        o[x] = v != RC_EMPTY_PT;
+    }
+}
+
+/* Row sums: weighted 1-2-1 of each plane, and the plain count of occupied pixels. */
+FXC_HOT_CLONES static void row_sums(const uint16_t *restrict r, const uint16_t *restrict g,
+                                    const uint16_t *restrict b, const uint16_t *restrict o, uint16_t *restrict hr,
+                                    uint16_t *restrict hg, uint16_t *restrict hb, uint16_t *restrict hw,
+                                    uint16_t *restrict hn, uint32_t n)
+{
+    for (size_t x = 0; x < n; x++) {
+        hr[x] = (uint16_t)(r[x] + 2 * r[x + 1] + r[x + 2]);
+        hg[x] = (uint16_t)(g[x] + 2 * g[x + 1] + g[x + 2]);
+        hb[x] = (uint16_t)(b[x] + 2 * b[x + 1] + b[x + 2]);
+        hw[x] = (uint16_t)(o[x] + 2 * o[x + 1] + o[x + 2]);
+        hn[x] = (uint16_t)(o[x] + o[x + 1] + o[x + 2]);
+    }
+}
+
+/* Three planes of a row into rgb triples. */
+FXC_HOT_CLONES static void interleave(const uint8_t *restrict r, const uint8_t *restrict g, const uint8_t *restrict b,
+                                      uint8_t *restrict rgb, uint32_t n)
+{
+    for (size_t x = 0; x < n; x++) {
+        rgb[3 * x] = r[x];
+        rgb[3 * x + 1] = g[x];
+        rgb[3 * x + 2] = b[x];
+    }
+}
+
+/* One output row: the column sums of three rows of row sums (up, here, down: five planes each, `plane` apart),
+ * the choice of colour, kind and priority. */
+FXC_HOT_CLONES static uint64_t finish_row(const uint16_t *restrict up, const uint16_t *restrict here,
+                                          const uint16_t *restrict down, size_t plane,
+                                          const uint16_t *restrict own_o, const uint32_t *restrict own,
+                                          uint8_t *restrict out_r, uint8_t *restrict out_g, uint8_t *restrict out_b,
+                                          uint8_t *restrict kind, uint8_t *restrict priority, uint32_t n,
+                                          bool smooth_all, const uint8_t clear[3],
+                                          uint32_t kinds[VIEW_RC_PIXEL_KINDS])
+{
+    uint64_t weight = 0;
+    uint32_t points = 0, interp = 0, empty = 0;
+    const uint32_t clear_r = clear[0], clear_g = clear[1], clear_b = clear[2], keep_own = smooth_all ? 0u : 1u;
+    for (size_t x = 0; x < n; x++) {
+        uint32_t sr = up[x] + 2u * here[x] + down[x];
+        uint32_t sg = up[x + plane] + 2u * here[x + plane] + down[x + plane];
+        uint32_t sb = up[x + 2 * plane] + 2u * here[x + 2 * plane] + down[x + 2 * plane];
+        uint32_t sw = up[x + 3 * plane] + 2u * here[x + 3 * plane] + down[x + 3 * plane];
+        uint32_t count = up[x + 4 * plane] + here[x + 4 * plane] + down[x + 4 * plane] - own_o[x]; /* not itself */
+        uint32_t v = own[x];
+        uint32_t has = own_o[x] != 0, keep = has & keep_own, filled = sw > 0;
+        /* Rounded division by 1..16: exact through the float reciprocal (an error below 1/64 either way). */
+        float inv = 1.0f / (float)(sw | !filled);
+        uint32_t half = sw / 2;
+        uint32_t qr = (uint32_t)(int32_t)((float)(sr + half) * inv + (1.0f / 64));
+        uint32_t qg = (uint32_t)(int32_t)((float)(sg + half) * inv + (1.0f / 64));
+        uint32_t qb = (uint32_t)(int32_t)((float)(sb + half) * inv + (1.0f / 64));
+        uint32_t mk = 0u - keep, mf = 0u - filled; /* masks: the selects the vectoriser takes */
+        uint32_t fr = (qr & mf) | (clear_r & ~mf), fg = (qg & mf) | (clear_g & ~mf), fb = (qb & mf) | (clear_b & ~mf);
+        out_r[x] = (uint8_t)(((v & 0xFF) & mk) | (fr & ~mk));
+        out_g[x] = (uint8_t)((((v >> 8) & 0xFF) & mk) | (fg & ~mk));
+        out_b[x] = (uint8_t)((((v >> 16) & 0xFF) & mk) | (fb & ~mk));
+        uint32_t k = has ? VIEW_RC_POINT : filled ? VIEW_RC_INTERP : VIEW_RC_EMPTY;
+        kind[x] = (uint8_t)k;
+        uint32_t mh = 0u - has, prio = ((v >> 24) & mh) | ((255 - 16 * count) & ~mh);
+        priority[x] = (uint8_t)prio;
+        weight += prio + 1;
+        points += has;
+        interp += (has ^ 1) & filled;
+        empty += (has ^ 1) & (filled ^ 1);
+    }
+    kinds[VIEW_RC_POINT] += points;
+    kinds[VIEW_RC_INTERP] += interp;
+    kinds[VIEW_RC_EMPTY] += empty;
+    return weight;
+}
+
+/* Row y of the shown points as row sums into `sums` (five planes, `plane` apart) and its occupied pixels into
+ * `occupied` (width + 2, zero at both ends); zeros for a row outside the image. */
+static void interp_row(const view_rc *rc, int64_t y, uint16_t *sums, size_t plane, uint16_t *occupied,
+                       uint16_t *unpacked)
+{
+    uint32_t w = rc->width;
+    size_t s = (size_t)w + 2;
+    if (y < 0 || y >= rc->height) {
+        memset(sums, 0, 5 * plane * sizeof(uint16_t));
+        memset(occupied, 0, s * sizeof(uint16_t));
+        return;
+    }
+    uint16_t *r = unpacked, *g = r + s, *b = g + s;
+    r[0] = g[0] = b[0] = occupied[0] = 0;
+    r[s - 1] = g[s - 1] = b[s - 1] = occupied[s - 1] = 0;
+    unpack_span(rc->pt + (size_t)y * w, r + 1, g + 1, b + 1, occupied + 1, w);
+    row_sums(r, g, b, occupied, sums, sums + plane, sums + 2 * plane, sums + 3 * plane, sums + 4 * plane, w);
+}
+
+/* Rows of a band, each from the row sums of the rows above, itself and below (three kept, one new a row). */
+static void interpolate_task(void *user, uint32_t band, uint32_t worker)
+{
+    view_rc *rc = user;
+    uint32_t y0, y1;
+    band_rows(rc, band, &y0, &y1);
+    uint32_t w = rc->width;
+    size_t plane = w, s = (size_t)w + 2;
+    uint16_t *scratch = rc->workers[worker].planes;
+    uint16_t *sums[3] = {scratch, scratch + 5 * plane, scratch + 10 * plane};
+    uint16_t *occupied[3] = {scratch + 15 * plane, scratch + 15 * plane + s, scratch + 15 * plane + 2 * s};
+    uint16_t *unpacked = scratch + 15 * plane + 3 * s;
+    uint8_t *out_r = (uint8_t *)(unpacked + 4 * s), *out_g = out_r + w, *out_b = out_g + w;
+    interp_row(rc, (int64_t)y0 - 1, sums[(y0 + 2) % 3], plane, occupied[(y0 + 2) % 3], unpacked);
+    interp_row(rc, y0, sums[y0 % 3], plane, occupied[y0 % 3], unpacked);
+    uint32_t kinds[VIEW_RC_PIXEL_KINDS] = {0};
+    uint64_t weight = 0;
+    for (uint32_t y = y0; y < y1; y++) {
+        interp_row(rc, (int64_t)y + 1, sums[(y + 1) % 3], plane, occupied[(y + 1) % 3], unpacked);
+        size_t p = (size_t)y * w;
+        uint32_t before = kinds[VIEW_RC_EMPTY];
+        weight += finish_row(sums[(y + 2) % 3], sums[y % 3], sums[(y + 1) % 3], plane, occupied[y % 3] + 1,
+                             rc->pt + p, out_r, out_g, out_b, rc->kind + p, rc->priority + p, w, rc->d.smooth_all,
+                             rc->d.clear_rgb, kinds);
+        rc->row_need[y] = kinds[VIEW_RC_EMPTY] - before;
+        interleave(out_r, out_g, out_b, rc->rgb + 3 * p, w);
+    }
+    memcpy(rc->band_kind + (size_t)band * VIEW_RC_PIXEL_KINDS, kinds, sizeof kinds);
+    rc->band_need[band] = rc->d.no_prefilter ? 0 : kinds[VIEW_RC_EMPTY];
+    rc->band_weight[band] = weight;
+}
+
+void view_rc__interpolate(view_rc *rc)
+{
+    view_rc__pool_run(rc->pool, rc->tiles_y, interpolate_task, rc);
+}
+
+typedef struct rc_rect {
+    uint32_t x0, y0, x1, y1;
+} rc_rect;
+
+static rc_rect tile_rect(const view_rc *rc, uint32_t tile)
+{
+    rc_rect r;
+    r.x0 = (tile % rc->tiles_x) << rc->tile_shift;
+    r.y0 = (tile / rc->tiles_x) << rc->tile_shift;
+    r.x1 = r.x0 + rc->tile < rc->width ? r.x0 + rc->tile : rc->width;
+    r.y1 = r.y0 + rc->tile < rc->height ? r.y0 + rc->tile : rc->height;
+    return r;
+}
+
+/* ---- prefilter -------------------------------------------------------------------------------------------- */
+
+static void fill_from(uint8_t *rgb, const uint32_t acc[4])
+{
+    for (int c = 0; c < 3; c++)
+        rgb[c] = (uint8_t)((acc[c] + acc[3] / 2) / acc[3]);
+}
+
+/* Tiles with few pixels to fill: each one's 7x7 window summed directly. */
+static uint32_t prefilter_direct(view_rc *rc, rc_rect r)
+{
+    uint32_t w = rc->width, h = rc->height, filled = 0;
+    for (uint32_t y = r.y0; y < r.y1; y++)
+        for (uint32_t x = r.x0; x < r.x1; x++) {
+            size_t p = (size_t)y * w + x;
+            if (rc->kind[p] != VIEW_RC_EMPTY)
+                continue;
+            uint32_t acc[4] = {0, 0, 0, 0};
+            uint32_t ya = y >= 3 ? y - 3 : 0, yb = y + 4 < h ? y + 4 : h;
+            uint32_t xa = x >= 3 ? x - 3 : 0, xb = x + 4 < w ? x + 4 : w;
+            for (uint32_t yy = ya; yy < yb; yy++)
+                for (uint32_t xx = xa; xx < xb; xx++) {
+                    uint32_t v = rc->pt[(size_t)yy * w + xx];
+                    if (v == RC_EMPTY_PT)
+                        continue;
+                    acc[0] += v & 0xFF, acc[1] += (v >> 8) & 0xFF, acc[2] += (v >> 16) & 0xFF;
+                    acc[3]++;
+                }
+            if (acc[3] > 0) {
+                fill_from(rc->rgb + 3 * p, acc);
+                rc->kind[p] = VIEW_RC_PREFILTER;
+                filled++;
+            }
+        }
+    return filled;
+}
+
+/* 16-bit values of a worker's prefilter scratch for tiles of side `tile`: four planes (red, green, blue,
+ * occupied) of the tile and a three-pixel border, their 7-sums along the rows, and one row of 7-sums down the
+ * columns. */
+size_t view_rc__prefilter_scratch(uint32_t tile)
+{
+    size_t s = (size_t)tile + 6;
+    return 4 * s * s + 4 * s * tile + 4 * (size_t)tile;
+}
+
+/* Sums of 7 consecutive values, n of them (src holds n + 6). */
+FXC_HOT_CLONES static void sums7(const uint16_t *restrict src, uint16_t *restrict out, uint32_t n)
+{
+    for (size_t x = 0; x < n; x++)
+        out[x] = (uint16_t)(src[x] + src[x + 1] + src[x + 2] + src[x + 3] + src[x + 4] + src[x + 5] + src[x + 6]);
+}
+
+/* Sums of the same column over 7 rows `stride` apart, n columns. */
+FXC_HOT_CLONES static void sums7_down(const uint16_t *restrict src, size_t stride, uint16_t *restrict out,
+                                      uint32_t n)
+{
+    for (size_t x = 0; x < n; x++)
+        out[x] = (uint16_t)(src[x] + src[x + stride] + src[x + 2 * stride] + src[x + 3 * stride] +
+                            src[x + 4 * stride] + src[x + 5 * stride] + src[x + 6 * stride]);
+}
+
+/* Tiles with many: the box filter separated, rows then columns, on 16-bit planes (the loops vectorise; the
+ * largest sum, 49 x 255, fits). */
+static uint32_t prefilter_planes(view_rc *rc, rc_rect r, uint16_t *scratch)
+{
+    uint32_t w = rc->width, h = rc->height, tw = r.x1 - r.x0, th = r.y1 - r.y0, filled = 0;
+    uint32_t s = tw + 6;
+    size_t plane = (size_t)s * (th + 6), rows = (size_t)(th + 6) * tw;
+    uint16_t *planes = scratch, *hsum = planes + 4 * plane, *vsum = hsum + 4 * rows;
+    for (uint32_t j = 0; j < th + 6; j++) {
+        int64_t y = (int64_t)r.y0 + j - 3;
+        size_t q = (size_t)j * s;
+        for (int c = 0; c < 4; c++)
+            memset(planes + c * plane + q, 0, s * sizeof(uint16_t));
+        if (y < 0 || y >= h)
+            continue;
+        /* Columns x0 - 3 .. x1 + 2, those inside the image. */
+        int64_t xa = (int64_t)r.x0 - 3 < 0 ? 0 : (int64_t)r.x0 - 3, xb = r.x1 + 3 < w ? r.x1 + 3 : w;
+        size_t i0 = (size_t)(xa - ((int64_t)r.x0 - 3));
+        unpack_span(rc->pt + (size_t)y * w + xa, planes + q + i0, planes + plane + q + i0,
+                    planes + 2 * plane + q + i0, planes + 3 * plane + q + i0, (uint32_t)(xb - xa));
+    }
+    for (int c = 0; c < 4; c++)
+        for (uint32_t j = 0; j < th + 6; j++)
+            sums7(planes + c * plane + (size_t)j * s, hsum + c * rows + (size_t)j * tw, tw);
+    for (uint32_t j = 0; j < th; j++) {
+        size_t p = (size_t)(r.y0 + j) * w + r.x0;
+        for (int c = 0; c < 4; c++)
+            sums7_down(hsum + c * rows + (size_t)j * tw, tw, vsum + (size_t)c * tw, tw);
+        for (uint32_t x = 0; x < tw; x++) {
+            uint32_t count = vsum[3 * (size_t)tw + x];
+            if (rc->kind[p + x] != VIEW_RC_EMPTY || count == 0)
+                continue;
+            uint32_t acc[4] = {vsum[x], vsum[(size_t)tw + x], vsum[2 * (size_t)tw + x], count};
+            fill_from(rc->rgb + 3 * (p + x), acc);
+            rc->kind[p + x] = VIEW_RC_PREFILTER;
+            filled++;
+        }
+    }
+    return filled;
+}
+
+static void prefilter_task(void *user, uint32_t tile, uint32_t worker)
+{
+    view_rc *rc = user;
+    if (rc->band_need[tile / rc->tiles_x] == 0)
+        return;
+    rc_rect r = tile_rect(rc, tile);
+    uint32_t need = 0;
+    for (uint32_t y = r.y0; y < r.y1; y++)
+        if (rc->row_need[y] > 0)
+            for (uint32_t x = r.x0; x < r.x1; x++)
+                need += rc->kind[(size_t)y * rc->width + x] == VIEW_RC_EMPTY;
+    if (need == 0)
+        return;
+    /* 49 reads a pixel, against the planes' few vector operations per pixel of the tile (about 25 pixels to fill
+     * in a 64 x 64 tile cost as much either way). */
+    uint64_t tile_pixels = (uint64_t)(r.x1 - r.x0) * (r.y1 - r.y0);
+    uint32_t filled = (uint64_t)need * 49 * 4 < tile_pixels * 1 ? prefilter_direct(rc, r)
+                                                            : prefilter_planes(rc, r, rc->workers[worker].box);
+    rc->tile_filled[tile] = filled;
+}
+
+void view_rc__prefilter(view_rc *rc)
+{
+    memset(rc->tile_filled, 0, rc->tile_count * sizeof(uint32_t));
+    view_rc__pool_run(rc->pool, rc->tile_count, prefilter_task, rc);
+    for (uint32_t tile = 0; tile < rc->tile_count; tile++) {
+        uint32_t *kinds = rc->band_kind + (size_t)(tile / rc->tiles_x) * VIEW_RC_PIXEL_KINDS;
+        kinds[VIEW_RC_EMPTY] -= rc->tile_filled[tile];
+        kinds[VIEW_RC_PREFILTER] += rc->tile_filled[tile];
+    }
+}

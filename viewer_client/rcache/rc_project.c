@@ -1,0 +1,382 @@
+/* The point passes of a frame: the drop plan, the predicted projection (2002 3.1), projection and tile sort
+ * (2002 3.2; the tile lists of Reinhard 2001 section 3), the tiled z-buffer (2002 3.2), the one-pass z-buffer of
+ * the 1999 render cache (no_tiling), and ageing with eviction (2002 3.4).
+ *
+ * Project and tile sort, per chunk of slots (parallel): every live point is projected once, in a loop without
+ * branches (vectorised); the chunk counts how many of its points go to each tile. One serial step turns the
+ * counts into offsets, tile by tile and chunk by chunk within a tile, and the bucket sort (parallel again) writes
+ * each projected point as a 16-byte entry at its offset: tile after tile, the tiles' point lists. The order
+ * within a list (chunk, then slot) does not depend on the thread count.
+ *
+ * The z-buffer then reads one tile's list (parallel over tiles) into that tile's part of the image: 64 x 64
+ * pixels of depth and winner, 32 KiB, which stays in cache while the tile's entries stream past. The nearer
+ * view depth wins; between equal depths, the entry first in the list. */
+#include "rc_internal.h"
+
+#include <math.h>
+#include <string.h>
+
+/* ---- drop plan ----------------------------------------------------------------------------------------- */
+
+void view_rc__plan_drops(view_rc *rc)
+{
+    uint64_t hist[256] = {0}, live = 0;
+    for (uint32_t c = 0; c < rc->chunk_count; c++)
+        for (uint32_t a = 0; a < 255; a++) {
+            hist[a] += rc->chunk_hist[(size_t)c * 256 + a];
+            live += rc->chunk_hist[(size_t)c * 256 + a];
+        }
+    memset(rc->chunk_quota, 0, rc->chunk_count * sizeof(uint32_t));
+    rc->drop_age = RC_AGE_NO_DROP;
+    if (live <= rc->d.capacity)
+        return;
+    /* The oldest first (2002 3.4: ageing is set so that a point reaches 128 before it is overwritten). */
+    uint64_t drop = live - rc->d.capacity, above = 0;
+    int age = 254;
+    while (age > 0 && above + hist[age] < drop)
+        above += hist[age--];
+    rc->drop_age = (uint32_t)age;
+    uint64_t take = drop - above; /* points of exactly that age, the first ones in slot order */
+    for (uint32_t c = 0; c < rc->chunk_count && take > 0; c++) {
+        uint32_t n = rc->chunk_hist[(size_t)c * 256 + (uint32_t)age];
+        rc->chunk_quota[c] = n < take ? n : (uint32_t)take;
+        take -= rc->chunk_quota[c];
+    }
+}
+
+static void chunk_range(const view_rc *rc, uint32_t c, uint32_t *begin, uint32_t *end)
+{
+    *begin = c * rc->chunk_size;
+    *end = *begin + rc->chunk_size < rc->slots ? *begin + rc->chunk_size : rc->slots;
+}
+
+/* ---- projection without branches ----------------------------------------------------------------------- */
+
+/* The pixel of every slot in [begin, end) for view v (RC_NO_PIXEL for free slots, points behind the camera or
+ * outside the image), its view depth, and its list: the tile (two shifts of the pixel's coordinates), or
+ * `outside`, or `dead` for a free slot. rc_project's arithmetic; the conversion to integers happens only on
+ * coordinates known to be inside. */
+FXC_HOT_CLONES static void project_span(const rc_view *v, const float *restrict px, const float *restrict py,
+                                        const float *restrict pz, const uint32_t *restrict rgba,
+                                        uint32_t *restrict pix, float *restrict dep, uint16_t *restrict dest,
+                                        uint32_t begin, uint32_t end, uint32_t shift, uint32_t tiles_x,
+                                        uint16_t outside, uint16_t dead)
+{
+    const float cx = v->rel[0], cy = v->rel[1], cz = v->rel[2];
+    const float fx = v->forward[0], fy = v->forward[1], fz = v->forward[2];
+    const float rx = v->right[0], ry = v->right[1], rz = v->right[2];
+    const float ux = v->up[0], uy = v->up[1], uz = v->up[2];
+    const float hw = v->half_w, hh = v->half_h, kx = v->kx, ky = v->ky;
+    const float w = (float)v->width, h = (float)v->height;
+    const uint32_t width = v->width;
+    for (uint32_t i = begin; i < end; i++) {
+        float vx = px[i] - cx, vy = py[i] - cy, vz = pz[i] - cz;
+        float zc = vx * fx + vy * fy + vz * fz;
+        float xc = vx * rx + vy * ry + vz * rz;
+        float yc = vx * ux + vy * uy + vz * uz;
+        float inv = 1.0f / zc;
+        float sx = hw + kx * xc * inv;
+        float sy = hh - ky * yc * inv;
+        bool live = (rgba[i] >> 24) != RC_AGE_DEAD;
+        bool inside = live & (zc > RC_NEAR) & (sx >= 0.0f) & (sx < w) & (sy >= 0.0f) & (sy < h);
+        uint32_t ix = (uint32_t)(int32_t)(inside ? sx : 0.0f);
+        uint32_t iy = (uint32_t)(int32_t)(inside ? sy : 0.0f);
+        uint32_t tile = (iy >> shift) * tiles_x + (ix >> shift);
+        pix[i] = inside ? iy * width + ix : RC_NO_PIXEL;
+        dep[i] = zc;
+        dest[i] = (uint16_t)(inside ? tile : live ? outside : dead);
+    }
+}
+
+/* ---- predicted projection (2002 3.1) ------------------------------------------------------------------- */
+
+/* The quarter-resolution pixel of every slot in [begin, end) for view v (RC_NO_PIXEL when none). */
+FXC_HOT_CLONES static void predict_span(const rc_view *v, const float *restrict px, const float *restrict py,
+                                        const float *restrict pz, const uint32_t *restrict rgba,
+                                        uint32_t *restrict low, uint32_t begin, uint32_t end, uint32_t low_w)
+{
+    const float cx = v->rel[0], cy = v->rel[1], cz = v->rel[2];
+    const float fx = v->forward[0], fy = v->forward[1], fz = v->forward[2];
+    const float rx = v->right[0], ry = v->right[1], rz = v->right[2];
+    const float ux = v->up[0], uy = v->up[1], uz = v->up[2];
+    const float hw = v->half_w, hh = v->half_h, kx = v->kx, ky = v->ky;
+    const float w = (float)v->width, h = (float)v->height;
+    for (uint32_t i = begin; i < end; i++) {
+        float vx = px[i] - cx, vy = py[i] - cy, vz = pz[i] - cz;
+        float zc = vx * fx + vy * fy + vz * fz;
+        float xc = vx * rx + vy * ry + vz * rz;
+        float yc = vx * ux + vy * uy + vz * uz;
+        float inv = 1.0f / zc;
+        float sx = hw + kx * xc * inv;
+        float sy = hh - ky * yc * inv;
+        bool live = (rgba[i] >> 24) != RC_AGE_DEAD;
+        bool inside = live & (zc > RC_NEAR) & (sx >= 0.0f) & (sx < w) & (sy >= 0.0f) & (sy < h);
+        uint32_t ix = (uint32_t)(int32_t)(inside ? sx : 0.0f) >> 2;
+        uint32_t iy = (uint32_t)(int32_t)(inside ? sy : 0.0f) >> 2;
+        low[i - begin] = inside ? iy * low_w + ix : RC_NO_PIXEL;
+    }
+}
+
+/* No z-buffer and a quarter of the resolution in each direction: only whether any point lands in a pixel. */
+static void predict_task(void *user, uint32_t c, uint32_t worker)
+{
+    view_rc *rc = user;
+    uint32_t begin, end;
+    chunk_range(rc, c, &begin, &end);
+    uint32_t *low = rc->workers[worker].low;
+    uint8_t *occupied = rc->workers[worker].occupied;
+    predict_span(&rc->predicted, rc->px, rc->py, rc->pz, rc->rgba, low, begin, end, rc->low_w);
+    /* Without a branch: points that land nowhere mark the byte after the image. */
+    uint32_t sink = rc->low_w * rc->low_h;
+    for (uint32_t k = 0; k < end - begin; k++)
+        occupied[low[k] == RC_NO_PIXEL ? sink : low[k]] = 1;
+}
+
+void view_rc__predict_project(view_rc *rc)
+{
+    size_t low = (size_t)rc->low_w * rc->low_h;
+    for (uint32_t t = 0; t < rc->thread_count; t++)
+        memset(rc->workers[t].occupied, 0, low);
+    view_rc__pool_run(rc->pool, rc->chunk_count, predict_task, rc);
+    uint8_t *all = rc->workers[0].occupied;
+    for (uint32_t t = 1; t < rc->thread_count; t++) {
+        const uint8_t *mine = rc->workers[t].occupied;
+        for (size_t p = 0; p < low; p++)
+            all[p] |= mine[p];
+    }
+}
+
+/* ---- project and tile sort ----------------------------------------------------------------------------- */
+
+/* Migrations (a projected or outside point whose list changed; new points not counted), and the lists
+ * remembered for the next frame. */
+FXC_HOT_CLONES static uint32_t migrate_span(const uint16_t *restrict dest, uint16_t *restrict tile_of,
+                                            uint32_t begin, uint32_t end, uint16_t dead, uint16_t fresh)
+{
+    uint32_t migrated = 0;
+    for (uint32_t i = begin; i < end; i++) {
+        uint16_t d = dest[i], t = tile_of[i];
+        migrated += (d != dead) & (t != fresh) & (t != d);
+        tile_of[i] = d;
+    }
+    return migrated;
+}
+
+static void project_task(void *user, uint32_t c, uint32_t worker)
+{
+    (void)worker;
+    view_rc *rc = user;
+    uint32_t begin, end;
+    chunk_range(rc, c, &begin, &end);
+    uint16_t outside = rc->list_outside, dead = rc->list_dead;
+    project_span(&rc->view, rc->px, rc->py, rc->pz, rc->rgba, rc->pix, rc->dep, rc->dest, begin, end,
+                 rc->tile_shift, rc->tiles_x, outside, dead);
+    rc_chunk_stat stat = {0};
+    /* The drop plan: points older than drop_age, and the chunk's quota of that age, in slot order. */
+    if (rc->drop_age != RC_AGE_NO_DROP) {
+        uint32_t quota = rc->chunk_quota[c], drop_age = rc->drop_age;
+        for (uint32_t i = begin; i < end; i++) {
+            uint32_t age = rc_age(rc->rgba[i]);
+            if (age == RC_AGE_DEAD || age < drop_age || (age == drop_age && quota == 0))
+                continue;
+            if (age == drop_age)
+                quota--;
+            stat.dropped++;
+            stat.dropped_age_sum += age;
+            rc->rgba[i] = (rc->rgba[i] & 0x00FFFFFFu) | (RC_AGE_DEAD << 24);
+            rc->pix[i] = RC_NO_PIXEL;
+            rc->dest[i] = dead;
+        }
+    }
+    stat.migrated = migrate_span(rc->dest, rc->tile_of, begin, end, dead, rc->list_new);
+    /* Counts per list, in four interleaved sets (consecutive points mostly go to the same tile). */
+    uint32_t lists = rc->tile_count + 2;
+    uint32_t *count = rc->counts + (size_t)c * lists;
+    memset(count, 0, lists * sizeof(uint32_t));
+    uint32_t part[3][VIEW_RC_MAX_TILES + 2];
+    for (int k = 0; k < 3; k++)
+        memset(part[k], 0, lists * sizeof(uint32_t));
+    const uint16_t *dest = rc->dest;
+    uint32_t i = begin;
+    for (; i + 4 <= end; i += 4) {
+        count[dest[i]]++;
+        part[0][dest[i + 1]]++;
+        part[1][dest[i + 2]]++;
+        part[2][dest[i + 3]]++;
+    }
+    for (; i < end; i++)
+        count[dest[i]]++;
+    for (uint32_t l = 0; l < lists; l++)
+        count[l] += part[0][l] + part[1][l] + part[2][l];
+    stat.projected = 0;
+    for (uint32_t t = 0; t < rc->tile_count; t++)
+        stat.projected += count[t];
+    rc->chunk_stat[c] = stat;
+}
+
+static void sort_task(void *user, uint32_t c, uint32_t worker)
+{
+    (void)worker;
+    view_rc *rc = user;
+    uint32_t begin, end;
+    chunk_range(rc, c, &begin, &end);
+    uint32_t *offset = rc->counts + (size_t)c * (rc->tile_count + 2);
+    const uint16_t *dest = rc->dest;
+    const uint32_t *pix = rc->pix, *rgba = rc->rgba;
+    const float *dep = rc->dep;
+    rc_entry *entries = rc->entries;
+    uint32_t tiles = rc->tile_count;
+    /* Without a branch (slots are in no order once points come and go): points that land outside, and free
+     * slots, go to the entry after the last, whose cursor does not move. */
+    offset[tiles] = offset[tiles + 1] = rc->slots;
+    for (uint32_t i = begin; i < end; i++) {
+        uint32_t d = dest[i], o = offset[d];
+        offset[d] = o + (d < tiles);
+        rc_entry *e = &entries[o];
+        e->pix = pix[i];
+        e->depth = dep[i];
+        e->rgba = rgba[i];
+        e->slot = i;
+    }
+}
+
+void view_rc__project_sort(view_rc *rc)
+{
+    view_rc__pool_run(rc->pool, rc->chunk_count, project_task, rc);
+    /* Offsets: tile by tile, chunk by chunk. */
+    uint32_t lists = rc->tile_count + 2, run = 0;
+    for (uint32_t t = 0; t < rc->tile_count; t++) {
+        rc->tile_start[t] = run;
+        for (uint32_t c = 0; c < rc->chunk_count; c++) {
+            uint32_t *slot = rc->counts + (size_t)c * lists + t;
+            uint32_t n = *slot;
+            *slot = run;
+            run += n;
+        }
+    }
+    rc->tile_start[rc->tile_count] = run;
+    view_rc__pool_run(rc->pool, rc->chunk_count, sort_task, rc);
+}
+
+/* ---- z-buffer tiles (2002 3.2) --------------------------------------------------------------------------- */
+
+static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
+{
+    (void)worker;
+    view_rc *rc = user;
+    size_t w = rc->width;
+    uint32_t x0 = (tile % rc->tiles_x) << rc->tile_shift, y0 = (tile / rc->tiles_x) << rc->tile_shift;
+    uint32_t x1 = x0 + rc->tile < rc->width ? x0 + rc->tile : rc->width;
+    uint32_t y1 = y0 + rc->tile < rc->height ? y0 + rc->tile : rc->height;
+    float *zbuf = rc->zbuf;
+    uint32_t *win = rc->win, *pre = rc->pre;
+    for (uint32_t y = y0; y < y1; y++)
+        for (uint32_t x = x0; x < x1; x++) {
+            zbuf[y * w + x] = INFINITY;
+            win[y * w + x] = RC_NO_POINT;
+            pre[y * w + x] = RC_EMPTY_PT;
+        }
+    /* Depth, slot and colour of the nearest. Tried and slower in bench_rcache: the same without the branch (2.2
+     * against 1.9 ms), and 64-bit keys of depth and entry (one load, minimum and store a point; entries split in
+     * 8 bytes for the test and 8 for the winners: 1.6 against 1.2 ms, and the sort 0.3 ms slower). */
+    const rc_entry *entries = rc->entries;
+    for (uint32_t e = rc->tile_start[tile], end = rc->tile_start[tile + 1]; e < end; e++) {
+        uint32_t p = entries[e].pix;
+        float z = entries[e].depth, old = zbuf[p];
+        if (z < old) {
+            zbuf[p] = z;
+            win[p] = entries[e].slot;
+            pre[p] = entries[e].rgba;
+        }
+    }
+}
+
+void view_rc__zbuffer(view_rc *rc)
+{
+    view_rc__pool_run(rc->pool, rc->tile_count, zbuffer_task, rc);
+}
+
+/* ---- the 1999 render cache: one z-buffer in slot order -------------------------------------------------- */
+
+/* The projection as above (without the sort), then every point straight into the whole image in slot order,
+ * one thread: about 2 MiB of depth and winners at 512 x 512, touched at random, which the 2002 paper's tiles
+ * avoid. */
+void view_rc__project_direct(view_rc *rc)
+{
+    view_rc__pool_run(rc->pool, rc->chunk_count, project_task, rc);
+}
+
+void view_rc__zbuffer_direct(view_rc *rc)
+{
+    float *zbuf = rc->zbuf;
+    uint32_t *win = rc->win;
+    for (size_t p = 0; p < rc->pixels; p++) {
+        zbuf[p] = INFINITY;
+        win[p] = RC_NO_POINT;
+    }
+    const uint32_t *pix = rc->pix;
+    const float *dep = rc->dep;
+    for (uint32_t i = 0; i < rc->slots; i++) {
+        uint32_t p = pix[i];
+        if (p != RC_NO_PIXEL && dep[i] < zbuf[p]) {
+            zbuf[p] = dep[i];
+            win[p] = i;
+        }
+    }
+    for (size_t p = 0; p < rc->pixels; p++)
+        rc->pre[p] = win[p] == RC_NO_POINT ? RC_EMPTY_PT : rc->rgba[win[p]];
+}
+
+/* ---- ageing and eviction (2002 3.4) -------------------------------------------------------------------- */
+
+/* Every live point ages by the frame's step, faster when no pixel shows it (off screen, behind a nearer point,
+ * or removed by the depth cull: the cull marked the points shown); 255 evicts. Returns the points evicted. */
+FXC_HOT_CLONES static uint32_t age_span(uint32_t *restrict rgba, uint8_t *restrict mark, uint32_t begin,
+                                        uint32_t end, uint32_t step_visible, uint32_t step_hidden, uint32_t top)
+{
+    uint32_t evicted = 0;
+    for (uint32_t i = begin; i < end; i++) {
+        uint32_t v = rgba[i], age = v >> 24;
+        uint32_t live = age != RC_AGE_DEAD;
+        uint32_t aged = age + (mark[i] ? step_visible : step_hidden);
+        aged = aged > top ? top : aged;
+        evicted += live & (aged == RC_AGE_DEAD);
+        rgba[i] = live ? (v & 0x00FFFFFFu) | (aged << 24) : v;
+        mark[i] = 0;
+    }
+    return evicted;
+}
+
+static void age_task(void *user, uint32_t c, uint32_t worker)
+{
+    (void)worker;
+    view_rc *rc = user;
+    uint32_t begin, end;
+    chunk_range(rc, c, &begin, &end);
+    uint32_t top = rc->d.no_eviction ? 254 : 255;
+    rc->chunk_stat[c].evicted = age_span(rc->rgba, rc->mark, begin, end, rc->step_visible, rc->step_hidden, top);
+    /* The chunk's age histogram and its free slots, in descending order. */
+    uint32_t *hist = rc->chunk_hist + (size_t)c * 256, *free_list = rc->free_list + (size_t)c * rc->chunk_size;
+    memset(hist, 0, 256 * sizeof(uint32_t));
+    uint32_t n = 0;
+    for (uint32_t i = end; i-- > begin;) {
+        uint32_t age = rc_age(rc->rgba[i]);
+        if (age == RC_AGE_DEAD)
+            free_list[n++] = i;
+        else
+            hist[age]++;
+    }
+    rc->chunk_free[c] = n;
+}
+
+void view_rc__age(view_rc *rc)
+{
+    view_rc__pool_run(rc->pool, rc->chunk_count, age_task, rc);
+    /* The free stack: chunks from the last to the first, so that the lowest free slot is on top. */
+    rc->free_count = 0;
+    for (uint32_t c = rc->chunk_count; c-- > 0;) {
+        memcpy(rc->free_slots + rc->free_count, rc->free_list + (size_t)c * rc->chunk_size,
+               rc->chunk_free[c] * sizeof(uint32_t));
+        rc->free_count += rc->chunk_free[c];
+    }
+}
