@@ -15,6 +15,7 @@ packages=(
   libwebsockets-dev
   libcmocka-dev
   nodejs node-ws zstd
+  gnuplot-nox
   uthash-dev libglib2.0-dev
   glmark2-data
   assimp-testmodels
