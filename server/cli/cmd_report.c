@@ -94,12 +94,12 @@ static const char report_usage[] =
     "  --viewers N          the most viewers, 1..64 (default 8, or the number of traces): the generator's\n"
     "                       cameras are those of N viewers, and fewer viewers take the first ones\n"
     "Frames:\n"
-    "  --frames F           frames per configuration, 2..100000 (default 60; --quick 24)\n"
+    "  --frames F           frames per configuration, 2..100000 (default 60; --quick 30)\n"
     "  --warmup W           frames before the steady state, 0..F-1 (default 10, DESIGN.md's): compared\n"
     "                       and in frames.csv, not in the configuration's figures\n"
     "  --every K            compare frames 0, K, 2K, ... and the last, 1..100000 (default 10; --quick 6);\n"
     "                       the no-cache baseline keeps nothing between frames and renders only those\n"
-    "  --res WxH            resolution, sides 1..8192 (default 320x180; --quick 128x72; a version 2\n"
+    "  --res WxH            resolution, sides 1..8192 (default 320x180; --quick 160x90; a version 2\n"
     "                       trace's own resolution wins unless --res is given)\n"
     "References (DIR/ref/, rendered once per camera and resolution, reused by every configuration and a\n"
     "resumed report; their time is in no configuration's):\n"
@@ -261,11 +261,11 @@ static int parse_options(int argc, char **argv, report_options *o)
     }
     /* --quick's defaults, where the option was not given. */
     if (!o->frames_set)
-        o->frames = o->quick ? 24 : 60;
+        o->frames = o->quick ? 30 : 60;
     if (!o->every_set)
         o->every = o->quick ? 6 : 10;
     if (!o->res_set && o->quick)
-        o->width = 128, o->height = 72;
+        o->width = 160, o->height = 90;
     if (!(o->ref_samples > 0))
         o->ref_samples = o->quick ? 0.25 : 1.0;
     if (!o->warmup_set)
