@@ -16,6 +16,7 @@ packages=(
   libcmocka-dev
   nodejs node-ws zstd
   time
+  gnuplot-nox
   uthash-dev libglib2.0-dev
   glmark2-data
   assimp-testmodels

@@ -25,8 +25,15 @@ enum {
     FX_SHADOW = SCENE_FX_SHADOW,              /* 1 */
     FX_AO = SCENE_FX_AO,                      /* 2 */
     FX_PROBES = SCENE_FX_PROBES,              /* 3: the effect id world_taps is called with for probes */
-    FX_SHADOW_RAYS = 16,                      /* rays per texel and light */
-    FX_AO_MAX_SAMPLES = 64,                   /* AO converges here */
+    FX_SHADOW_RAYS = 16,                      /* rays per texel and light (default; fx_context.shadow_rays) */
+    FX_AO_MAX_SAMPLES = 64,                   /* AO converges here (default; fx_context.ao_samples) */
+    FX_AO_SAMPLES_LIMIT = 4096,               /* most AO samples a texel may converge at: the payload's uint16
+                                                 count holds it, and its unorm16 mean still gives back the exact
+                                                 number of unoccluded rays (count < 65535) */
+    FX_SHADOW_TEXEL_RAYS_MAX = 16,            /* most shadow rays per texel and light: one bit per cell of the
+                                                 texel's 4 x 4 mask */
+    FX_SHADOW_POINT_RAYS_MAX = 256,           /* most shadow rays per pixel and light in the no-cache baseline
+                                                 (sets of 16 above 16) */
 };
 
 typedef enum fx_filter { FX_FILTER_POINT = 0, FX_FILTER_BILINEAR, FX_FILTER_TRILINEAR } fx_filter;
@@ -76,6 +83,14 @@ typedef struct fx_context {
     float probe_hysteresis; /* weight of the old irradiance in a probe update's blend (default 0.97, RTXGI's) */
     uint32_t reference_bounces; /* the reference's path tracing (fx_indirect_reference_point): bounces at most
                                    (0: until Russian roulette ends the path) */
+    /* Run-time sample counts (0: the default). In a cached run they are what a texel converges at; in the
+     * no-cache baseline they are the counts each pixel traces (srv_loop_desc.no_cache_samples scales them). */
+    uint32_t ao_samples;  /* AO rays a texel converges at, 1..FX_AO_SAMPLES_LIMIT; the baseline's AO rays per
+                             pixel (default FX_AO_MAX_SAMPLES) */
+    uint32_t shadow_rays; /* shadow rays per texel and light: 1, 2, 4, 8 or 16 (strata of 1x1, 2x1, 2x2, 4x2,
+                             4x4 cells of the texel, each ray setting the mask bits of its stratum); the
+                             baseline's per pixel and light: those, or a multiple of 16 up to
+                             FX_SHADOW_POINT_RAYS_MAX in sets of 16 (default FX_SHADOW_RAYS) */
 } fx_context;
 
 /* One queued block. payload and lookup point into the cache; the effect writes payload texels of mask. */
@@ -96,7 +111,8 @@ typedef struct fx_block_job {
     uint32_t effect; /* the effect's index in the loop's list (what ctx->world_taps takes) */
 } fx_block_job;
 
-/* Hard shadows: for each texel of mask and each light, FX_SHADOW_RAYS rays from stratified jittered points
+/* Hard shadows: for each texel of mask and each light, ctx->shadow_rays (default FX_SHADOW_RAYS) rays from
+ * stratified jittered points
  * of the texel's footprint on the surface (kept a sixteenth of a texel inside the lookup triangle's edges,
  * so a texel at a crease never samples the wall's plane) towards the light; bit i set = ray i reached the
  * light. Stored
@@ -109,7 +125,8 @@ uint64_t fx_shadow_update(const fx_context *ctx, const fx_block_job *jobs, uint3
 float fx_shadow_sample(const void *payload, uint32_t texel, uint32_t light_count, uint32_t light);
 
 /* Ambient occlusion: adds `samples` cosine-weighted rays of length ao_radius to each texel of mask (never
- * past FX_AO_MAX_SAMPLES in all), keeping a running mean. Texel t: uint16 unoccluded fraction (unorm16)
+ * past ctx->ao_samples in all, default FX_AO_MAX_SAMPLES; at most FX_RAY_BATCH = 256 per texel and call),
+ * keeping a running mean. Texel t: uint16 unoccluded fraction (unorm16)
  * then uint16 sample count, at payload bytes t * 4. Returns the number of rays traced. */
 uint64_t fx_ao_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count, uint32_t samples);
 
@@ -304,6 +321,11 @@ typedef struct fx_effect {
     /* Progressive effects: the samples a texel holds (converged at max_samples). NULL: a texel with data
      * is final. */
     uint32_t (*texel_samples)(const void *texel);
+    /* The run's own sample count, from the context (fx_context.ao_samples, shadow_rays): for a progressive
+     * effect the samples a texel converges at (it replaces max_samples for the run); for an effect updated
+     * once the samples per texel its cost and update are handed. NULL: max_samples, and 0 for an effect
+     * updated once. */
+    uint32_t (*run_samples)(const fx_context *ctx);
     /* Writes one texel at level l >= 1 from its four final texels of level l - 1 (resampling queue).
      * NULL: no resampling. */
     void (*resample)(const fx_context *ctx, const void *const finer[4], void *texel);

@@ -1,10 +1,11 @@
 /* Ambient occlusion (DESIGN.md "Effects"): cosine-weighted occlusion rays of length ao_radius, accumulated
- * progressively up to FX_AO_MAX_SAMPLES = 64 per texel (frame stage 6 for AO), and the same rays per pixel
- * for the no-cache baseline.
+ * progressively up to the run's maximum per texel (fx_context.ao_samples, default FX_AO_MAX_SAMPLES = 64;
+ * frame stage 6 for AO), and the same rays per pixel for the no-cache baseline.
  *
  * Payload, texel t at bytes 4t: uint16 fraction of unoccluded rays (unorm16, little-endian), uint16 count.
- * Every ray is either occluded or not, so the stored mean is U / count for an integer U <= 64; unorm16 holds
- * it to 1/131070, far below 1/64, and U is recovered exactly as round(fraction * count). Adding samples is
+ * Every ray is either occluded or not, so the stored mean is U / count for an integer U <= count; unorm16
+ * rounds it by at most 1/131070, so U is recovered exactly as round(fraction * count) while that error times
+ * the count stays below 1/2, i.e. for counts below 65535 (the maximum is FX_AO_SAMPLES_LIMIT = 4096). Adding samples is
  * therefore exact integer arithmetic: a texel given 16+16+16+16 samples over four frames stores bit for bit
  * what one given 64 at once stores.
  *
@@ -43,9 +44,17 @@ typedef struct ao_batch {
     uint32_t ray_count, pending_count;
 } ao_batch;
 
+/* The samples a texel converges at in this run. */
+static inline uint32_t ao_max_samples(const fx_context *ctx)
+{
+    uint32_t max = ctx->ao_samples ? ctx->ao_samples : FX_AO_MAX_SAMPLES;
+    return max > FX_AO_SAMPLES_LIMIT ? FX_AO_SAMPLES_LIMIT : max;
+}
+
 /* Traces the batch, then writes every pending texel's new mean and count (saturating). */
 static void ao_flush(const fx_context *ctx, ao_batch *batch)
 {
+    uint32_t max = ao_max_samples(ctx);
     fx__occluded(ctx, batch->rays, batch->ray_count);
     for (uint32_t r = 0; r < batch->ray_count; r++)
         batch->pending[batch->owner[r]].unoccluded += batch->rays[r].tfar != -INFINITY;
@@ -55,7 +64,7 @@ static void ao_flush(const fx_context *ctx, ao_batch *batch)
         uint32_t fraction = (uint32_t)lrint((double)texel->unoccluded * 65535.0 / (double)total);
         fx__put_u16(texel->texel_bytes, (uint16_t)(fraction > 65535u ? 65535u : fraction));
         fx__put_u16(texel->texel_bytes + 2,
-                    (uint16_t)(total > FX_AO_MAX_SAMPLES ? FX_AO_MAX_SAMPLES : total));
+                    (uint16_t)(total > max ? max : total));
     }
     batch->ray_count = 0;
     batch->pending_count = 0;
@@ -81,6 +90,7 @@ uint64_t fx_ao_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
     ao_batch batch;
     batch.ray_count = batch.pending_count = 0;
     uint64_t rays_traced = 0;
+    uint32_t max = ao_max_samples(ctx);
 
     for (uint32_t j = 0; j < count; j++) {
         const fx_block_job *job = &jobs[j];
@@ -89,10 +99,11 @@ uint64_t fx_ao_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
             uint32_t texel = (uint32_t)__builtin_ctzll(bits);
             uint8_t *texel_bytes = (uint8_t *)job->payload + 4u * texel;
             uint32_t stored = fx__get_u16(texel_bytes + 2);
-            if (stored >= FX_AO_MAX_SAMPLES)
+            if (stored >= max)
                 continue; /* converged (a larger stored count saturates here too) */
-            uint32_t add = FX_AO_MAX_SAMPLES - stored;
+            uint32_t add = max - stored;
             add = samples < add ? samples : add;
+            add = add < FX_RAY_BATCH ? add : FX_RAY_BATCH; /* a texel's rays fit one batch; the rest next time */
             /* Recover the exact number of unoccluded rays from the stored mean. */
             long unoccluded = stored ? lrint((double)fx__get_u16(texel_bytes) * stored / 65535.0) : 0;
             if (unoccluded > (long)stored)
@@ -202,15 +213,20 @@ static uint32_t ao_texel_samples(const void *texel)
     return fx_ao_count(texel, 0);
 }
 
+/* The run's convergence count (--ao-samples). */
+static uint32_t ao_run_samples(const fx_context *ctx)
+{
+    return ao_max_samples(ctx);
+}
+
 /* The mean of four converged finer texels, itself converged. */
 static void ao_resample(const fx_context *ctx, const void *const finer[4], void *texel)
 {
-    (void)ctx;
     float mean = 0;
     for (int c = 0; c < 4; c++)
         mean += 0.25f * fx_ao_sample(finer[c], 0);
     fx__put_u16(texel, (uint16_t)lrintf(fminf(fmaxf(mean, 0.0f), 1.0f) * 65535.0f));
-    fx__put_u16((uint8_t *)texel + 2, FX_AO_MAX_SAMPLES);
+    fx__put_u16((uint8_t *)texel + 2, (uint16_t)ao_max_samples(ctx));
 }
 
 /* The sky's visibility: the filtered unoccluded fraction. The renormalised weights sum to 1 only to within
@@ -233,7 +249,7 @@ FXC_HOT_CLONES static void ao_shade(const fx_context *ctx, const fx_shade_run *r
 static uint64_t ao_eval(const fx_context *ctx, const fx_point *point, fx_shade_point *out)
 {
     uint64_t rays = 0;
-    *out->sky_visibility *= fx_ao_eval_point(ctx, point->position, point->normal, FX_AO_MAX_SAMPLES,
+    *out->sky_visibility *= fx_ao_eval_point(ctx, point->position, point->normal, ao_max_samples(ctx),
                                              point->pixel_id, &rays);
     return rays;
 }
@@ -247,7 +263,8 @@ static uint64_t ao_reference(const fx_context *ctx, const fx_point *point, uint3
     return rays;
 }
 
-/* Ambient occlusion: progressive to 64 cosine-weighted samples per texel, one level coarser by default. */
+/* Ambient occlusion: progressive to 64 cosine-weighted samples per texel (the run's ao_samples), one level
+ * coarser by default. */
 const fx_effect fx_effect_ao = {
     .name = "ao",
     .cache = SCENE_CACHE_ON_SURFACE,
@@ -261,6 +278,7 @@ const fx_effect fx_effect_ao = {
     .cost = ao_cost,
     .update = ao_update,
     .texel_samples = ao_texel_samples,
+    .run_samples = ao_run_samples,
     .resample = ao_resample,
     .shade = ao_shade,
     .eval = ao_eval,

@@ -1,6 +1,8 @@
 /* Hard shadows (DESIGN.md "Effects"): per texel and light, FX_SHADOW_RAYS = 16 occlusion rays from 4 x 4
  * stratified, jittered points of the texel's footprint on the surface, kept as a 16-bit mask (bit i set: ray
- * i reached the light). Frame stage 6 for the shadow effect, and the same rays per pixel for the no-cache
+ * i reached the light). A run may trace fewer (fx_context.shadow_rays: 1, 2, 4 or 8, strata of 1x1, 2x1, 2x2
+ * or 4x2 cells): each ray then sets the bits of the 4 x 4 cells its stratum covers, so the payload, the
+ * resampling and compose's reading of the mask stay the same. Frame stage 6 for the shadow effect, and the same rays per pixel for the no-cache
  * baseline.
  *
  * Sample points: sample i lies in stratum (i % 4, i / 4) of the texel's footprint square in level-0 island
@@ -28,7 +30,7 @@
 typedef struct shadow_ray_target {
     uint32_t job;
     uint32_t payload_offset; /* byte offset of the texel's uint16 for this light */
-    uint32_t bit;            /* sample index 0..15 */
+    uint32_t bits;           /* the mask bits the ray's stratum covers (1 << i with 16 rays) */
 } shadow_ray_target;
 
 /* A batch of rays in flight and their targets; the ray array is 64-byte aligned for Embree's stream API. */
@@ -38,14 +40,48 @@ typedef struct shadow_batch {
     uint32_t count;
 } shadow_batch;
 
-/* The 16 jitter offsets in [0,1)^2 of the stratified pattern for hash inputs (seed, key, texel). */
-static void shadow_jitter(uint32_t seed, uint64_t key, uint32_t texel, float offsets[FX_SHADOW_RAYS][2])
+/* Columns of the strata grid of n rays (1, 2, 4, 8, 16): 1, 2, 2, 4, 4; rows are n / columns. */
+static inline uint32_t shadow_columns(uint32_t n)
 {
-    for (uint32_t i = 0; i < FX_SHADOW_RAYS; i++) {
+    return n >= 8 ? 4u : (n >= 2 ? 2u : 1u);
+}
+
+/* Rays of one stratified set: n when it is 1, 2, 4 or 8, else 16. */
+static inline uint32_t shadow_set_rays(uint32_t n)
+{
+    return n == 1 || n == 2 || n == 4 || n == 8 ? n : FX_SHADOW_RAYS;
+}
+
+/* The rays per texel and light of a cached run (1, 2, 4, 8 or 16; anything else is taken as 16). */
+static inline uint32_t shadow_texel_rays(const fx_context *ctx)
+{
+    return shadow_set_rays(ctx->shadow_rays);
+}
+
+/* The n jitter offsets in [0,1)^2 of the stratified pattern (n of 1, 2, 4, 8, 16: a columns x rows grid of
+ * strata, ray i in stratum (i % columns, i / columns)) for hash inputs (seed, key, texel). With 16 rays this is
+ * the 4 x 4 pattern whose cell i is mask bit i. */
+static void shadow_jitter(uint32_t seed, uint64_t key, uint32_t texel, uint32_t n, float offsets[FX_SHADOW_RAYS][2])
+{
+    uint32_t columns = shadow_columns(n), rows = n / columns;
+    float cell_x = 1.0f / (float)columns, cell_y = 1.0f / (float)rows; /* 0.25f exactly for 4 */
+    for (uint32_t i = 0; i < n; i++) {
         uint64_t h = fx__hash(seed, key, texel, i, FX_STREAM_SHADOW_JITTER);
-        offsets[i][0] = ((float)(i & 3u) + fx__unit_float((uint32_t)h)) * 0.25f;
-        offsets[i][1] = ((float)(i >> 2) + fx__unit_float((uint32_t)(h >> 32))) * 0.25f;
+        offsets[i][0] = ((float)(i % columns) + fx__unit_float((uint32_t)h)) * cell_x;
+        offsets[i][1] = ((float)(i / columns) + fx__unit_float((uint32_t)(h >> 32))) * cell_y;
     }
+}
+
+/* The bits of the 4 x 4 mask (bit y * 4 + x) that stratum i of n rays covers. */
+static uint32_t shadow_stratum_bits(uint32_t i, uint32_t n)
+{
+    uint32_t columns = shadow_columns(n), rows = n / columns;
+    uint32_t width = 4 / columns, height = 4 / rows, x0 = (i % columns) * width, y0 = (i / columns) * height;
+    uint32_t bits = 0;
+    for (uint32_t y = y0; y < y0 + height; y++)
+        for (uint32_t x = x0; x < x0 + width; x++)
+            bits |= 1u << (y * 4 + x);
+    return bits;
 }
 
 /* Direction and ray length from an origin towards a light; false when the light is behind the surface. */
@@ -70,7 +106,7 @@ static void shadow_flush(const fx_context *ctx, const fx_block_job *jobs, shadow
             continue;
         const shadow_ray_target *target = &batch->targets[r];
         uint8_t *slot = (uint8_t *)jobs[target->job].payload + target->payload_offset;
-        fx__put_u16(slot, (uint16_t)(fx__get_u16(slot) | (1u << target->bit)));
+        fx__put_u16(slot, (uint16_t)(fx__get_u16(slot) | target->bits));
     }
     batch->count = 0;
 }
@@ -84,17 +120,21 @@ uint64_t fx_shadow_update(const fx_context *ctx, const fx_block_job *jobs, uint3
     shadow_batch batch;
     batch.count = 0;
     uint64_t rays_traced = 0;
+    uint32_t n = shadow_texel_rays(ctx);
+    uint32_t stratum_bits[FX_SHADOW_RAYS];
+    for (uint32_t i = 0; i < n; i++)
+        stratum_bits[i] = shadow_stratum_bits(i, n);
 
     for (uint32_t j = 0; j < count; j++) {
         const fx_block_job *job = &jobs[j];
         for (uint64_t bits = job->mask; bits != 0; bits &= bits - 1) {
             uint32_t texel = (uint32_t)__builtin_ctzll(bits);
             float offsets[FX_SHADOW_RAYS][2], origins[FX_SHADOW_RAYS][3];
-            shadow_jitter(ctx->seed, job->key, texel, offsets);
+            shadow_jitter(ctx->seed, job->key, texel, n, offsets);
             fx__surface_map map;
             fx__surface_map_init(s, job->island, job->lookup[texel], fx__texel_margin(s, job->level), &map);
             const float *normal = map.normal;
-            for (uint32_t i = 0; i < FX_SHADOW_RAYS; i++) {
+            for (uint32_t i = 0; i < n; i++) {
                 float u, v, position[3];
                 fx__texel_uv(job->level, job->block_x, job->block_y, texel, offsets[i][0], offsets[i][1], &u,
                              &v);
@@ -104,15 +144,15 @@ uint64_t fx_shadow_update(const fx_context *ctx, const fx_block_job *jobs, uint3
             for (uint32_t l = 0; l < light_count; l++) {
                 uint32_t offset = (texel * light_count + l) * 2u;
                 fx__put_u16((uint8_t *)job->payload + offset, 0);
-                if (batch.count + FX_SHADOW_RAYS > FX_RAY_BATCH)
+                if (batch.count + n > FX_RAY_BATCH)
                     shadow_flush(ctx, jobs, &batch);
-                for (uint32_t i = 0; i < FX_SHADOW_RAYS; i++) {
+                for (uint32_t i = 0; i < n; i++) {
                     float dir[3], tfar;
                     if (!shadow_ray_towards(&s->lights[l], origins[i], normal, dir, &tfar))
                         continue;
                     fx__set_ray(&batch.rays[batch.count], origins[i], dir, tfar, batch.count);
                     batch.targets[batch.count] =
-                        (shadow_ray_target){.job = j, .payload_offset = offset, .bit = i};
+                        (shadow_ray_target){.job = j, .payload_offset = offset, .bits = stratum_bits[i]};
                     batch.count++;
                     rays_traced++;
                 }
@@ -151,15 +191,15 @@ float fx_shadow_sample(const void *payload, uint32_t texel, uint32_t light_count
     return lit_fraction(mask);
 }
 
-float fx_shadow_eval_point(const fx_context *ctx, const float pos[3], const float normal[3],
-                           const float dpdx[3], const float dpdy[3], uint32_t light, uint64_t pixel_id,
-                           uint64_t *rays)
+/* fx_shadow_eval_point with n rays (1, 2, 4, 8 or 16) in n strata of the footprint. */
+static float shadow_eval_rays(const fx_context *ctx, const float pos[3], const float normal[3], const float dpdx[3],
+                              const float dpdy[3], uint32_t light, uint64_t pixel_id, uint32_t n, uint64_t *rays)
 {
-    FX_ASSERT(light < ctx->s->light_count);
+    FX_ASSERT(light < ctx->s->light_count && n >= 1 && n <= FX_SHADOW_RAYS);
     const scene *s = ctx->s;
     const scene_light *lamp = &s->lights[light];
     float offsets[FX_SHADOW_RAYS][2];
-    shadow_jitter(ctx->seed, pixel_id, 0, offsets);
+    shadow_jitter(ctx->seed, pixel_id, 0, n, offsets);
 
     /* The centre: the visible point moved inside its triangle (a pixel on a crease lies on the wall too). */
     fx__surface_map map;
@@ -175,7 +215,7 @@ float fx_shadow_eval_point(const fx_context *ctx, const float pos[3], const floa
     float points[FX_SHADOW_RAYS][3];
     _Alignas(64) struct RTCRay batch[FX_SHADOW_RAYS];
     uint32_t checks = 0;
-    for (uint32_t i = 0; i < FX_SHADOW_RAYS; i++) {
+    for (uint32_t i = 0; i < n; i++) {
         float a = offsets[i][0] - 0.5f, b = offsets[i][1] - 0.5f, origin[3], dir[3], tfar;
         for (int k = 0; k < 3; k++)
             points[i][k] = centre[k] + a * dpdx[k] + b * dpdy[k];
@@ -217,7 +257,7 @@ float fx_shadow_eval_point(const fx_context *ctx, const float pos[3], const floa
     }
 
     uint32_t traced = 0;
-    for (uint32_t i = 0; i < FX_SHADOW_RAYS; i++) {
+    for (uint32_t i = 0; i < n; i++) {
         float origin[3], dir[3], tfar;
         scene_offset_ray_origin(points[i], normal, s->ray_offset_scale, origin);
         if (shadow_ray_towards(lamp, origin, normal, dir, &tfar))
@@ -229,7 +269,21 @@ float fx_shadow_eval_point(const fx_context *ctx, const float pos[3], const floa
         lit += batch[r].tfar != -INFINITY;
     if (rays)
         *rays = checks + traced;
-    return (float)lit * (1.0f / FX_SHADOW_RAYS);
+    return (float)lit * (1.0f / (float)n); /* 1/16 exactly as before for 16 */
+}
+
+float fx_shadow_eval_point(const fx_context *ctx, const float pos[3], const float normal[3],
+                           const float dpdx[3], const float dpdy[3], uint32_t light, uint64_t pixel_id,
+                           uint64_t *rays)
+{
+    return shadow_eval_rays(ctx, pos, normal, dpdx, dpdy, light, pixel_id, FX_SHADOW_RAYS, rays);
+}
+
+/* The identity of shadow ray set `set` of a pixel: set 0 is the pixel's own (so 16 rays are exactly
+ * fx_shadow_eval_point's), the others independent. */
+static inline uint64_t shadow_set_id(uint64_t pixel_id, uint32_t set)
+{
+    return set == 0 ? pixel_id : fx__mix64(pixel_id ^ ((uint64_t)(set + 1) * 0x9e3779b97f4a7c15ull));
 }
 
 /* ---- the effect table ------------------------------------------------------------------------------- */
@@ -244,10 +298,16 @@ static bool shadow_needs(const scene *s, char *why, size_t why_cap)
     return fx__scene_needs(s, SCENE_FX_SHADOW, why, why_cap);
 }
 
+/* `samples`: the run's rays per texel and light (run_samples; 0: FX_SHADOW_RAYS). */
 static uint64_t shadow_cost(const scene *s, uint32_t samples)
 {
-    (void)samples;
-    return (uint64_t)FX_SHADOW_RAYS * (s->light_count ? s->light_count : 1u);
+    return (uint64_t)(samples ? samples : FX_SHADOW_RAYS) * (s->light_count ? s->light_count : 1u);
+}
+
+/* The run's rays per texel and light (--shadow-rays). */
+static uint32_t shadow_run_samples(const fx_context *ctx)
+{
+    return shadow_texel_rays(ctx);
 }
 
 static uint64_t shadow_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count, uint32_t samples)
@@ -361,14 +421,25 @@ FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_ru
     }
 }
 
+/* The baseline: ctx->shadow_rays per light (default 16) over the pixel's footprint; up to 16 in one stratified
+ * set, more in sets of 16 (as the reference), each set with its own jitter. */
 static uint64_t shadow_eval(const fx_context *ctx, const fx_point *point, fx_shade_point *out)
 {
+    uint32_t n = ctx->shadow_rays ? ctx->shadow_rays : FX_SHADOW_RAYS;
+    if (n > FX_SHADOW_POINT_RAYS_MAX)
+        n = FX_SHADOW_POINT_RAYS_MAX;
+    uint32_t per_set = n > FX_SHADOW_RAYS ? FX_SHADOW_RAYS : shadow_set_rays(n);
+    uint32_t sets = n > FX_SHADOW_RAYS ? n / FX_SHADOW_RAYS : 1;
     uint64_t rays = 0;
     for (uint32_t l = 0; l < ctx->s->light_count; l++) {
-        uint64_t r = 0;
-        out->light_visibility[l] *= fx_shadow_eval_point(ctx, point->position, point->normal, point->dpdx,
-                                                         point->dpdy, l, point->pixel_id, &r);
-        rays += r;
+        float lit = 0;
+        for (uint32_t set = 0; set < sets; set++) {
+            uint64_t r = 0;
+            lit += shadow_eval_rays(ctx, point->position, point->normal, point->dpdx, point->dpdy, l,
+                                    shadow_set_id(point->pixel_id, set), per_set, &r);
+            rays += r;
+        }
+        out->light_visibility[l] *= sets == 1 ? lit : lit / (float)sets;
     }
     return rays;
 }
@@ -395,7 +466,7 @@ static uint64_t shadow_reference(const fx_context *ctx, const fx_point *point, u
     return rays;
 }
 
-/* Hard shadows: 16 rays per texel and light, computed once. */
+/* Hard shadows: 16 rays per texel and light (the run's shadow_rays), computed once. */
 const fx_effect fx_effect_shadow = {
     .name = "shadow",
     .alias = "shadows",
@@ -407,6 +478,7 @@ const fx_effect fx_effect_shadow = {
     .texel_bytes = shadow_texel_bytes,
     .needs = shadow_needs,
     .cost = shadow_cost,
+    .run_samples = shadow_run_samples,
     .update = shadow_update,
     .resample = shadow_resample,
     .shade = shadow_shade,

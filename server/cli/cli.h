@@ -49,5 +49,6 @@ int srv_cmd_render(int argc, char **argv);
 int srv_cmd_sim(int argc, char **argv);
 int srv_cmd_serve(int argc, char **argv);
 int srv_cmd_ref(int argc, char **argv);
+int srv_cmd_report(int argc, char **argv);
 
 #endif

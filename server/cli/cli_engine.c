@@ -21,6 +21,10 @@ const char srv_cli_engine_usage[] =
     "  --ray-budget R       effect rays per frame, 0 = unlimited (default 0)\n"
     "  --ao-step S          samples added per texel and update of progressive effects (AO), 1..64\n"
     "                       (default 16)\n"
+    "  --ao-samples N       AO samples a texel converges at, 1..4096 (default 64; the no-cache baseline's\n"
+    "                       AO rays per pixel)\n"
+    "  --shadow-rays N      shadow rays per texel and light, 1, 2, 4, 8 or 16, stratified over the texel\n"
+    "                       (default 16; the no-cache baseline's per pixel and light)\n"
     "  --probe-cell M       finest world-grid cell in metres, [0.001, 1000]; a cell at distance d from a\n"
     "                       viewer is about d/16..d/8 wide, never finer (default: the power of two nearest\n"
     "                       a 64th of the scene's bounding-box diagonal)\n"
@@ -30,6 +34,9 @@ const char srv_cli_engine_usage[] =
     "  --no-local-table     compose finds probes through the hash table only (for measuring the\n"
     "                       viewers' local lookup tables)\n"
     "  --no-cache           the baseline: every effect per pixel per frame at the converged sample counts\n"
+    "  --no-cache-samples S with --no-cache: the baseline's AO, shadow and probe rays per pixel as S times\n"
+    "                       the converged counts, S a power of two in [1/16, 16] ('0.25' or '1/4'; default\n"
+    "                       1; shadow rays above 16 go in sets of 16, at most 256)\n"
     "  --seed S             random seed, 0..4294967295 (default 1)\n"
     "  --threads T          worker threads, 0 = all cores (default 0)\n"
     "  --density D          level-0 texels per metre, [1e-6, 1e6] (default: the scene's, else auto)\n";
@@ -50,6 +57,9 @@ const struct option srv_cli_engine_options[] = {
     {"seed", required_argument, NULL, SRV_CLI_O_SEED},
     {"threads", required_argument, NULL, SRV_CLI_O_THREADS},
     {"density", required_argument, NULL, SRV_CLI_O_DENSITY},
+    {"ao-samples", required_argument, NULL, SRV_CLI_O_AOSAMPLES},
+    {"shadow-rays", required_argument, NULL, SRV_CLI_O_SHADOWRAYS},
+    {"no-cache-samples", required_argument, NULL, SRV_CLI_O_NCSAMPLES},
 };
 const size_t srv_cli_engine_option_count = sizeof srv_cli_engine_options / sizeof srv_cli_engine_options[0];
 
@@ -146,6 +156,52 @@ static bool effects_list_valid(const char *cmd, const char *list)
     }
 }
 
+/* Parses --shadow-rays: 1, 2, 4, 8 or 16 (the texel's 16-bit mask has one bit per cell of its 4 x 4 grid). */
+static bool parse_shadow_rays(const char *cmd, const char *arg, srv_cli_engine *e)
+{
+    uint32_t n;
+    if (!srv_cli_u32(cmd, "--shadow-rays", arg, 1, FX_SHADOW_TEXEL_RAYS_MAX, &n))
+        return false;
+    if (n & (n - 1)) {
+        fprintf(stderr, "fxcache %s: --shadow-rays: '%s' must be 1, 2, 4, 8 or 16 (strata of the texel's 4x4 "
+                        "shadow mask)\n", cmd, arg);
+        return false;
+    }
+    e->shadow_rays = n;
+    return true;
+}
+
+/* Parses --no-cache-samples: a power of two in [1/16, 16], as a decimal or as 1/N. */
+static bool parse_no_cache_samples(const char *cmd, const char *arg, srv_cli_engine *e)
+{
+    double value = 0;
+    const char *slash = arg ? strchr(arg, '/') : NULL;
+    if (slash && strncmp(arg, "1/", 2) == 0) {
+        uint32_t divisor;
+        if (!srv_cli_u32(cmd, "--no-cache-samples", slash + 1, 1, 16, &divisor))
+            return false;
+        value = 1.0 / divisor;
+    } else if (!srv_cli_double(cmd, "--no-cache-samples", arg, 1.0 / 16, 16, &value)) {
+        return false;
+    }
+    int exponent;
+    if (frexp(value, &exponent) != 0.5) {
+        fprintf(stderr, "fxcache %s: --no-cache-samples: '%s' is not a power of two in [1/16, 16]\n", cmd, arg);
+        return false;
+    }
+    e->no_cache_samples = value;
+    return true;
+}
+
+bool srv_cli_engine_check(const char *cmd, const srv_cli_engine *e)
+{
+    if (e->no_cache_samples > 0 && !e->no_cache) {
+        fprintf(stderr, "fxcache %s: --no-cache-samples scales the no-cache baseline: it needs --no-cache\n", cmd);
+        return false;
+    }
+    return true;
+}
+
 int srv_cli_engine_option(const char *cmd, int code, const char *arg, srv_cli_engine *e)
 {
     switch (code) {
@@ -169,6 +225,9 @@ int srv_cli_engine_option(const char *cmd, int code, const char *arg, srv_cli_en
     case SRV_CLI_O_SEED: return srv_cli_u32(cmd, "--seed", arg, 0, UINT32_MAX, &e->seed);
     case SRV_CLI_O_THREADS: return srv_cli_u32(cmd, "--threads", arg, 0, 256, &e->threads);
     case SRV_CLI_O_DENSITY: return srv_cli_double(cmd, "--density", arg, 1e-6, 1e6, &e->density);
+    case SRV_CLI_O_AOSAMPLES: return srv_cli_u32(cmd, "--ao-samples", arg, 1, FX_AO_SAMPLES_LIMIT, &e->ao_samples);
+    case SRV_CLI_O_SHADOWRAYS: return parse_shadow_rays(cmd, arg, e);
+    case SRV_CLI_O_NCSAMPLES: return parse_no_cache_samples(cmd, arg, e);
     default: return -1;
     }
 }
@@ -231,6 +290,8 @@ int srv_cli_run_open(const char *cmd, const srv_cli_engine *e, bool keep_views, 
     memset(run, 0, sizeof *run);
     run->cmd = cmd;
     run->left_out_extra = json_object();
+    if (!srv_cli_engine_check(cmd, e))
+        return 2;
     run->s = srv_cli_load_scene(cmd, e->scene_path, (float)e->density);
     if (stop && *stop)
         return srv_cli_interrupted(cmd, *stop, "while loading the scene");
@@ -247,7 +308,8 @@ int srv_cli_run_open(const char *cmd, const srv_cli_engine *e, bool keep_views, 
                           .no_cache = e->no_cache, .seed = e->seed, .threads = e->threads, .keep_views = keep_views,
                           .probe_cell = (float)e->probe_cell, .probe_rays = e->probe_rays,
                           .probe_hysteresis = (float)e->probe_hysteresis, .probe_budget = e->probe_budget,
-                          .no_local_table = e->no_local_table};
+                          .no_local_table = e->no_local_table, .ao_samples = e->ao_samples,
+                          .shadow_rays = e->shadow_rays, .no_cache_samples = (float)e->no_cache_samples};
     if (!srv_cli_choose_effects(cmd, run->s, e->effects, desc.effect_on, run->reasons, run->left_out_extra))
         return 2;
     memcpy(desc.bias, e->bias, sizeof desc.bias);
@@ -330,6 +392,11 @@ json_t *srv_cli_summary_json(const srv_cli_run *run, const srv_cli_engine *e)
     json_object_set_new(sum, "seed", json_integer(e->seed));
     json_object_set_new(sum, "pool_mb", json_real(e->pool_mb));
     json_object_set_new(sum, "ray_budget", json_integer((json_int_t)e->ray_budget));
+    const srv_loop_desc *resolved = srv_loop_desc_of(loop);
+    json_object_set_new(sum, "ao_samples", json_integer(resolved->ao_samples));
+    json_object_set_new(sum, "shadow_rays", json_integer(resolved->shadow_rays));
+    if (e->no_cache)
+        json_object_set_new(sum, "no_cache_samples", json_real(resolved->no_cache_samples));
     if (srv_loop_probe_cell(loop) > 0)
         json_object_set_new(sum, "probes",
                             json_pack("{s:f,s:I,s:f,s:I,s:b}", "cell_m", (double)srv_loop_probe_cell(loop), "rays",

@@ -20,6 +20,8 @@ typedef struct srv_cli_engine {
     bool bias_set[SRV_MAX_EFFECTS];
     double pool_mb, ray_budget, density, probe_cell, probe_hysteresis;
     uint32_t seed, threads, ao_step, probe_rays, probe_budget;
+    uint32_t ao_samples, shadow_rays; /* converged sample counts (0: the loop's defaults, 64 and 16) */
+    double no_cache_samples;          /* --no-cache: the baseline's counts as a multiple of those (0: 1) */
     bool no_cache, no_local_table;
 } srv_cli_engine;
 
@@ -27,7 +29,8 @@ typedef struct srv_cli_engine {
 enum {
     SRV_CLI_O_SCENE = 256, SRV_CLI_O_EFFECTS, SRV_CLI_O_BIAS, SRV_CLI_O_POOL, SRV_CLI_O_BUDGET, SRV_CLI_O_AOSTEP,
     SRV_CLI_O_PCELL, SRV_CLI_O_PRAYS, SRV_CLI_O_PHYST, SRV_CLI_O_PBUDGET, SRV_CLI_O_NOLOCAL, SRV_CLI_O_NOCACHE,
-    SRV_CLI_O_SEED, SRV_CLI_O_THREADS, SRV_CLI_O_DENSITY,
+    SRV_CLI_O_SEED, SRV_CLI_O_THREADS, SRV_CLI_O_DENSITY, SRV_CLI_O_AOSAMPLES, SRV_CLI_O_SHADOWRAYS,
+    SRV_CLI_O_NCSAMPLES,
     SRV_CLI_O_COMMAND = 320
 };
 
@@ -69,6 +72,10 @@ typedef struct srv_cli_run {
     json_t *left_out_extra;             /* what the scene needs that no registered effect serves */
     double bvh_ms;
 } srv_cli_run;
+
+/* Checks the engine options against each other (--no-cache-samples needs --no-cache): true, or false with a
+ * one-line error. srv_cli_run_open calls it first. */
+bool srv_cli_engine_check(const char *cmd, const srv_cli_engine *e);
 
 /* Opens a run. Returns -1 on success, else the exit code (an error line was printed; srv_cli_run_close
  * still frees what was made). A signal flagged in *stop during the scene load ends it (128 + signal). */

@@ -20,6 +20,8 @@ static const char usage[] =
     "                       and get composed frames for their cameras\n"
     "  ref [options]        reference images: the same shading per pixel with no cache and converged\n"
     "                       samples, for the frames sim renders, with their noise estimate\n"
+    "  report --out DIR     error against run time: sweeps of the settings, each frame's error against\n"
+    "                       the reference, CSV, plots, heat maps and an HTML page\n"
     "\n"
     "SCENE is a JSON scene description (*.json), any mesh file Assimp reads (optionally .gz), or\n"
     "'default' (the embedded scene, also used when SCENE is omitted).\n"
@@ -50,6 +52,8 @@ int main(int argc, char **argv)
         return srv_cmd_serve(argc - 1, argv + 1);
     if (strcmp(cmd, "ref") == 0)
         return srv_cmd_ref(argc - 1, argv + 1);
+    if (strcmp(cmd, "report") == 0)
+        return srv_cmd_report(argc - 1, argv + 1);
     fprintf(stderr, "fxcache: unknown command '%s' (try 'fxcache --help')\n", cmd);
     return 2;
 }

@@ -11,7 +11,7 @@
  *                          returns the frame's statistics
  *
  * With no_cache set the same shading is evaluated per pixel with the sample counts the cache converges to
- * (the baseline a renderer without the cache pays). Results are fxc_result codes (common/fxc_result.h). */
+ * (the baseline a renderer without the cache pays), or a power-of-two multiple of them (no_cache_samples). Results are fxc_result codes (common/fxc_result.h). */
 #ifndef FXC_ENGINE_H
 #define FXC_ENGINE_H
 
@@ -80,6 +80,15 @@ typedef struct srv_loop_desc {
     uint32_t samples_per_update;           /* progressive effects: samples added per texel per update
                                               (default 16, at most the effect's max_samples) */
     bool no_cache;                         /* the per-pixel baseline */
+    /* Sample counts (effects.h, fx_context). In a cached run: what a texel converges at; in the no-cache
+     * baseline: what each pixel traces, times no_cache_samples. */
+    uint32_t ao_samples;                   /* AO samples a texel converges at, 1..FX_AO_SAMPLES_LIMIT
+                                              (default 64) */
+    uint32_t shadow_rays;                  /* shadow rays per texel and light: 1, 2, 4, 8 or 16 (default 16) */
+    float no_cache_samples;                /* no_cache: the baseline's AO rays, shadow rays and probe rays per
+                                              pixel as a multiple of ao_samples, shadow_rays and probe_rays, a
+                                              power of two in [1/16, 16] (default 1; AO at least 1 ray, shadow
+                                              rays 1..256, probe rays 1..4096) */
     uint32_t seed;
     uint32_t threads;                      /* 0 = all cores */
     bool keep_views;                       /* keep per-viewer AO, shadow and sharing images */
@@ -250,6 +259,10 @@ bool srv_loop_effect_cached(const srv_loop *loop, uint32_t index);
  * and observe_hits; NULL: none), from the tracing thread. */
 void srv_loop_set_observer(srv_loop *loop, void (*occlusion)(void *user, const void *rays, uint32_t count),
                            void (*hits)(void *user, const void *rayhits, uint32_t count), void *user);
+
+/* The finest world-grid cell a loop on scene s uses when probe_cell is 0 (the power of two nearest a 64th of
+ * the bounding-box diagonal, at least 1/64 m), metres. */
+double srv_probe_cell_default(const scene *s);
 
 /* The finest world-grid cell the run uses, metres; 0 when no world-space cache exists. */
 float srv_loop_probe_cell(const srv_loop *loop);

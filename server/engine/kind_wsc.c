@@ -61,6 +61,11 @@ static double default_cell(const scene *s)
     return ldexp(1.0, (int)lround(log2(target)));
 }
 
+double srv_probe_cell_default(const scene *s)
+{
+    return default_cell(s);
+}
+
 static fxc_result wsc_kind_create(srv_loop *loop, void **out, char *err, size_t err_cap)
 {
     *out = NULL;

@@ -164,7 +164,11 @@ static fxc_result resolve_effects(srv_loop *loop, char *err, size_t err_cap)
         loop->effect_shading[e] = loop->effect_cached[e] && fx->shade != NULL;
         loop->bias[e] = d->bias_set[e] ? d->bias[e] : fx->level_bias;
         uint32_t step = d->samples_per_update ? d->samples_per_update : 16;
-        loop->samples[e] = fx->policy == FX_UPDATE_PROGRESSIVE ? (step < fx->max_samples ? step : fx->max_samples) : 0;
+        uint32_t run = fx->run_samples ? fx->run_samples(&loop->fx) : 0;
+        loop->max_samples[e] = fx->policy == FX_UPDATE_PROGRESSIVE && run ? run : fx->max_samples;
+        loop->samples[e] = fx->policy == FX_UPDATE_PROGRESSIVE
+                               ? (step < loop->max_samples[e] ? step : loop->max_samples[e])
+                               : (fx->policy == FX_UPDATE_ONCE ? run : 0);
         if (fx->policy == FX_UPDATE_CONTINUOUS && fx->cache == SCENE_CACHE_WORLD_SPACE)
             loop->samples[e] = loop->desc.probe_rays; /* the rays of one update: what its cost counts */
         if (loop->effect_on[e] && !loop->effect_cached[e] && !d->no_cache) {
@@ -202,6 +206,12 @@ fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err,
         loop->desc.probe_hysteresis = 0.97f;
     if (!loop->desc.probe_budget)
         loop->desc.probe_budget = 1024;
+    if (!loop->desc.ao_samples)
+        loop->desc.ao_samples = FX_AO_MAX_SAMPLES;
+    if (!loop->desc.shadow_rays)
+        loop->desc.shadow_rays = FX_SHADOW_RAYS;
+    if (!(loop->desc.no_cache_samples > 0))
+        loop->desc.no_cache_samples = 1.0f;
     /* The probes' commit clamps its weight to 0.999 (fx_probes.c): a larger one, a negative one or NaN was
      * taken without a word (clamped, or replaced by the default); now each is refused, as the command line
      * refuses them (found by tests/stability/stab_stiffness.c). */
@@ -212,12 +222,35 @@ fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err,
         srv_loop_free(loop);
         return FXC_ERR_INVALID;
     }
+    uint32_t shadow_rays = loop->desc.shadow_rays;
+    int scale_exponent = 0;
+    float scale_mantissa = frexpf(loop->desc.no_cache_samples, &scale_exponent);
+    if (loop->desc.ao_samples > FX_AO_SAMPLES_LIMIT || shadow_rays > FX_SHADOW_TEXEL_RAYS_MAX ||
+        (shadow_rays & (shadow_rays - 1)) != 0 || scale_mantissa != 0.5f || scale_exponent < -3 ||
+        scale_exponent > 5) {
+        snprintf(err, err_cap, "frame loop: AO samples must be 1..%d, shadow rays 1, 2, 4, 8 or 16, the no-cache "
+                               "sample scale a power of two in [1/16, 16]",
+                 FX_AO_SAMPLES_LIMIT);
+        srv_loop_free(loop);
+        return FXC_ERR_INVALID;
+    }
     loop->fx = (fx_context){.s = desc->s,
                             .rt = desc->rt,
                             .seed = desc->seed,
                             .ao_radius = desc->s->ao_radius,
                             .probe_rays = loop->desc.probe_rays,
-                            .probe_hysteresis = loop->desc.probe_hysteresis};
+                            .probe_hysteresis = loop->desc.probe_hysteresis,
+                            .ao_samples = loop->desc.ao_samples,
+                            .shadow_rays = shadow_rays};
+    if (loop->desc.no_cache) { /* the baseline's counts per pixel: the converged ones, scaled */
+        double scale = loop->desc.no_cache_samples;
+        double ao = fmax(1.0, floor(loop->desc.ao_samples * scale + 0.5));
+        double shadow = fmin(fmax(1.0, shadow_rays * scale), FX_SHADOW_POINT_RAYS_MAX);
+        double probe = fmin(fmax(1.0, floor(loop->desc.probe_rays * scale + 0.5)), FX_PROBE_MAX_RAYS);
+        loop->fx.ao_samples = (uint32_t)ao;
+        loop->fx.shadow_rays = (uint32_t)shadow;
+        loop->fx.probe_rays = (uint32_t)probe;
+    }
     fxc_result r = resolve_effects(loop, err, err_cap);
     if (r != FXC_OK) {
         srv_loop_free(loop);

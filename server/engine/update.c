@@ -45,13 +45,14 @@ static bool queue_reserve(srv_loop *loop, srv_effect_queue *q, size_t n)
     return true;
 }
 
-/* Texels of mask whose sample count is below the effect's maximum. */
-static uint64_t unconverged(const fx_effect *e, const uint8_t *payload, uint32_t texel_bytes, uint64_t mask)
+/* Texels of mask whose sample count is below the run's maximum for the effect. */
+static uint64_t unconverged(const fx_effect *e, uint32_t max_samples, const uint8_t *payload, uint32_t texel_bytes,
+                            uint64_t mask)
 {
     uint64_t out = 0;
     for (uint64_t m = mask; m; m &= m - 1) {
         uint32_t t = (uint32_t)__builtin_ctzll(m);
-        if (e->texel_samples(payload + (size_t)t * texel_bytes) < e->max_samples)
+        if (e->texel_samples(payload + (size_t)t * texel_bytes) < max_samples)
             out |= (uint64_t)1 << t;
     }
     return out;
@@ -72,7 +73,7 @@ static uint64_t resample_block(srv_loop *loop, uint32_t e, uint32_t block, uint6
         bool final = true;
         if (fx->texel_samples)
             for (int c = 0; c < 4; c++)
-                final &= fx->texel_samples(finer[t][c]) >= fx->max_samples;
+                final &= fx->texel_samples(finer[t][c]) >= loop->max_samples[e];
         if (!final)
             continue;
         fx->resample(&loop->fx, finer[t], payload + (size_t)t * texel_bytes);
@@ -144,11 +145,11 @@ static void continuous_order(srv_loop *loop, uint32_t e, srv_effect_queue *q, co
             continue;
         uint32_t *word = kind->block_word ? kind->block_word(cache, e, blocks[i]) : NULL;
         uint32_t age = word && *word ? stamp - *word : UINT32_MAX / 2;
-        if (fx->texel_samples && fx->max_samples > 0 && age < CONVERGED_REFRESH) { /* 0: never converged */
+        if (fx->texel_samples && loop->max_samples[e] > 0 && age < CONVERGED_REFRESH) { /* 0: never converged */
             const uint8_t *payload = kind->block_payload(cache, e, blocks[i]);
             bool converged = true;
             for (uint64_t m = have; m && converged; m &= m - 1)
-                converged = fx->texel_samples(payload + (size_t)__builtin_ctzll(m) * texel_bytes) >= fx->max_samples;
+                converged = fx->texel_samples(payload + (size_t)__builtin_ctzll(m) * texel_bytes) >= loop->max_samples[e];
             if (converged)
                 continue;
         }
@@ -223,7 +224,7 @@ void srv__queues(srv_loop *loop, srv_frame_stats *st)
             }
             q->empty[i] = need;
             q->refine[i] = fx->policy == FX_UPDATE_PROGRESSIVE
-                               ? unconverged(fx, kind->block_payload(cache, e, b), texel_bytes[e], requested & valid)
+                               ? unconverged(fx, loop->max_samples[e], kind->block_payload(cache, e, b), texel_bytes[e], requested & valid)
                                : 0;
             q->dependency[i] = dep == SRV_NO_EFFECT
                                    ? SRV_NONE

@@ -173,6 +173,8 @@ struct srv_loop {
     bool depended_on[SRV_MAX_EFFECTS];      /* an effect that runs depends on it: updated in the lookup stage */
     int32_t bias[SRV_MAX_EFFECTS];
     uint32_t samples[SRV_MAX_EFFECTS];      /* samples per update handed to the effect */
+    uint32_t max_samples[SRV_MAX_EFFECTS];  /* progressive: the samples a texel converges at this run (the
+                                               effect's run_samples, else its max_samples) */
     /* Caches, one per kind that an effect needs. */
     const srv_cache_kind *kinds[SCENE_CACHE_COUNT];
     void *caches[SCENE_CACHE_COUNT];
