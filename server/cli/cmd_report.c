@@ -829,8 +829,8 @@ static bool write_outputs(report_plan *plan, const report_options *o, const char
             rows[i].ms_per_frame = rows[i].cpu_ms_per_frame;
         }
     }
-    const char *time_label = o->time_cpu ? "process CPU time of the frame, less the sink's"
-                                         : "the engine's elapsed frame time, sinks stage excluded";
+    const char *time_label = o->time_cpu ? "process CPU time of the frame, less the sink"
+                                         : "engine elapsed frame time, sinks stage excluded";
     /* The Pareto front per viewer count. */
     double t[MAX_CONFIGS], e[MAX_CONFIGS];
     bool front[MAX_CONFIGS];
