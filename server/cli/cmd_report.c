@@ -1085,10 +1085,13 @@ int srv_cmd_report(int argc, char **argv)
         if (!write_marker(o.out_dir, c))
             goto done;
         const srv_rep_row *row = &c->row;
+        char ao_text[48] = "";
+        if (isfinite(row->rmse_ao))
+            snprintf(ao_text, sizeof ao_text, ", AO %.3g", row->rmse_ao);
         fprintf(stderr, "report: [%zu/%zu] %s: %.1f ms/frame (%.1f per viewer, CPU %.1f), RMSE %.4g, PSNR %.2f dB, "
                         "shadow %.3g%s (%.1f s)\n",
                 i + 1, plan->count, row->id, row->ms_per_frame, row->ms_per_viewer, row->cpu_ms_per_frame, row->rmse,
-                row->psnr_db, row->rmse_shadow, ctx.probes_on ? "" : "", row->run_s);
+                row->psnr_db, row->rmse_shadow, ao_text, row->run_s);
         if (!write_outputs(plan, &o, NULL, NULL, NULL, false, NULL)) /* the CSVs after every configuration */
             goto done;
     }
