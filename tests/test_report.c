@@ -1,9 +1,9 @@
-/* `fxcache report` and its parts: the error sink against a hand-made image difference (closed-form RMSE, PSNR,
- * shadow error, time without the sinks stage), the Pareto front and the equal-time interpolation on hand-made
- * points, the run-time sample counts the sweeps set (shadow rays per texel, AO samples a texel converges at),
- * the command line's option errors, an interrupted report resumed without redoing finished configurations,
- * and a tiny end-to-end report whose files exist and whose CSV parses. Tiny images and few frames keep it
- * quick, also in the sanitizer build. */
+/* `fxcache report` and its parts: the error sink against a hand-made image difference (closed-form RMSE,
+ * PSNR, shadow error, time without the sinks stage), the Pareto front and the equal-time interpolation on
+ * hand-made points, the run-time sample counts the sweeps set (shadow rays per texel, AO samples a texel
+ * converges at), the command line's option errors, an interrupted report resumed without redoing finished
+ * configurations, and a tiny end-to-end report whose files exist and whose CSV parses. Tiny images and few
+ * frames keep it quick, also in the sanitizer build. */
 #include "test_util.h"
 
 #include "error_sink.h"
@@ -83,12 +83,20 @@ static void test_error_sink_closed_form(void **state)
     char heatmap[1200];
     snprintf(heatmap, sizeof heatmap, "%s/heat.png", dir);
     srv_err_sink sink;
-    srv_err_sink_init(&sink, &(srv_err_sink_desc){.refs = cache, .every = 2, .last_frame = 5, .warmup = 2,
-                                                  .compare_shadow = true, .heatmap_viewer = "viewer_00",
+    srv_err_sink_init(&sink, &(srv_err_sink_desc){.refs = cache,
+                                                  .every = 2,
+                                                  .last_frame = 5,
+                                                  .warmup = 2,
+                                                  .compare_shadow = true,
+                                                  .heatmap_viewer = "viewer_00",
                                                   .heatmap_path = heatmap});
     srv_sink s = srv_err_sink_sink(&sink);
     const float *views[3] = {ones, shadow, NULL};
-    srv_viewer_frame vf = {.name = "viewer_00", .width = w, .height = h, .radiance = frame, .camera = camera,
+    srv_viewer_frame vf = {.name = "viewer_00",
+                           .width = w,
+                           .height = h,
+                           .radiance = frame,
+                           .camera = camera,
                            .views = {views[0], views[1], views[2]}};
     for (uint32_t fr = 0; fr < 6; fr++) {
         sink.frame = fr;
@@ -104,7 +112,7 @@ static void test_error_sink_closed_form(void **state)
     assert_true(fabs(sqrt(t->mse_sum / t->images) - expected) < 1e-6);
     assert_true(fabs(sqrt(t->mse_shadow_sum / t->images) - sqrt(0.125)) < 1e-6);
     assert_true(fabs(sqrt(t->noise2_sum / t->images) - 0.01) < 1e-12);
-    assert_int_equal(t->frames, 4);                  /* frames 2..5 timed */
+    assert_int_equal(t->frames, 4);                 /* frames 2..5 timed */
     assert_true(fabs(t->ms_sum - 4 * 6.0) < 1e-12); /* frame time less the sinks stage */
     assert_int_equal(t->effect_rays, 400);
     assert_int_equal(access(heatmap, R_OK), 0);
@@ -143,7 +151,7 @@ static void test_pareto_front(void **state)
     assert_int_equal(where, 1);
 }
 
-/* ---- run-time sample counts ------------------------------------------------------------------------------ */
+/* ---- run-time sample counts ---------------------------------------------------------------------------- */
 
 /* The same frame with 4 and with 16 shadow rays per texel: the same texels updated, a quarter of the rays
  * (a directional sun: a texel's rays face it alike); AO converging at 16 samples stops tracing after one
@@ -157,8 +165,8 @@ static void test_sample_counts(void **state)
     srv_camera camera = {.position = {0, 1.6f, 3}, .target = {0, 1, 0}, .fov_deg = 60};
     uint64_t shadow_rays[2], shadow_texels[2], ao_rays_second[2];
     for (int run = 0; run < 2; run++) {
-        srv_loop_desc d = {.s = fx->s, .rt = fx->rt, .threads = 2, .shadow_rays = run ? 16 : 4,
-                           .ao_samples = run ? 64 : 16};
+        srv_loop_desc d = {
+            .s = fx->s, .rt = fx->rt, .threads = 2, .shadow_rays = run ? 16 : 4, .ao_samples = run ? 64 : 16};
         const char *names[] = {"shadow", "ao"};
         fxt_effects_on(&d, names, 2);
         srv_viewer_id id;
@@ -178,7 +186,7 @@ static void test_sample_counts(void **state)
     assert_true(ao_rays_second[1] > 0);
 }
 
-/* ---- the command line ------------------------------------------------------------------------------------ */
+/* ---- the command line ---------------------------------------------------------------------------------- */
 
 static void test_cli_option_errors(void **state)
 {
@@ -203,7 +211,8 @@ static void test_cli_option_errors(void **state)
         char err[2048] = "";
         int rc = fxt_run_cli(cases[i].args, NULL, 0, err, sizeof err);
         if (rc != 2 || !strstr(err, cases[i].needle))
-            fail_msg("'%s': exit %d, stderr '%s' (wanted 2 and '%s')", cases[i].args, rc, err, cases[i].needle);
+            fail_msg("'%s': exit %d, stderr '%s' (wanted 2 and '%s')", cases[i].args, rc, err,
+                     cases[i].needle);
         const char *newline = strchr(err, '\n');
         assert_true(newline && newline[1] == 0); /* one line */
     }
@@ -279,8 +288,14 @@ static void test_cli_end_to_end(void **state)
     if (rc != 0)
         fail_msg("exit %d: %s", rc, err);
     assert_non_null(strstr(err, "report: [1/")); /* a line per configuration */
-    const char *files[] = {"index.html", "configs.csv", "frames.csv", "summary.json", "heatmaps/default_v1.png",
-                           "frames/default_v1.png", "done/default_v1.json", "plots/plots.gp"};
+    const char *files[] = {"index.html",
+                           "configs.csv",
+                           "frames.csv",
+                           "summary.json",
+                           "heatmaps/default_v1.png",
+                           "frames/default_v1.png",
+                           "done/default_v1.json",
+                           "plots/plots.gp"};
     for (size_t i = 0; i < sizeof files / sizeof files[0]; i++) {
         snprintf(path, sizeof path, "%s/%s", dir, files[i]);
         if (access(path, R_OK) != 0)
@@ -290,8 +305,8 @@ static void test_cli_end_to_end(void **state)
         snprintf(path, sizeof path, "%s/plots/error_time_v1.svg", dir);
         assert_int_equal(access(path, R_OK), 0);
     }
-    /* default 1 and 2 viewers, no cache at three scales for 1 and for 2 viewers. */
-    assert_int_equal(check_configs_csv(dir), 8);
+    /* default 1 and 2 viewers, no cache at four scales for 1 and for 2 viewers. */
+    assert_int_equal(check_configs_csv(dir), 10);
     int ao = -1;
     for (int k = 0; k < 64 && csv[0][k][0]; k++)
         if (strcmp(csv[0][k], "rmse_ao") == 0)
@@ -324,9 +339,10 @@ static void test_cli_resume(void **state)
     snprintf(dir, sizeof dir, "%s", fxt_tmp_path("report_resume"));
     remove_tree(dir);
     snprintf(marker, sizeof marker, "%s/done/default_v1.json", dir);
-    const char *argv[] = {FXC_BIN, "report", "--out", dir, "--res", "24x14", "--frames", "40", "--warmup", "2",
-                          "--every", "13", "--viewers", "2", "--threads", "1", "--only", "default,viewers",
-                          "--ref-samples", "1/8", "--quiet", NULL};
+    const char *argv[] = {FXC_BIN,         "report", "--out",     dir, "--res",   "24x14",
+                          "--frames",      "40",     "--warmup",  "2", "--every", "13",
+                          "--viewers",     "2",      "--threads", "1", "--only",  "default,viewers",
+                          "--ref-samples", "1/8",    "--quiet",   NULL};
     pid_t pid = fork();
     assert_true(pid >= 0);
     if (pid == 0) {
@@ -373,7 +389,8 @@ static void test_cli_resume(void **state)
     assert_int_equal(check_configs_csv(dir), 2);
 }
 
-#define SCENE_TEST(fn) cmocka_unit_test_setup_teardown(fn, fxt_default_scene_setup, fxt_default_scene_teardown)
+#define SCENE_TEST(fn)                                                                                       \
+    cmocka_unit_test_setup_teardown(fn, fxt_default_scene_setup, fxt_default_scene_teardown)
 
 int main(void)
 {

@@ -35,7 +35,7 @@ const char srv_cli_engine_usage[] =
     "                       viewers' local lookup tables)\n"
     "  --no-cache           the baseline: every effect per pixel per frame at the converged sample counts\n"
     "  --no-cache-samples S with --no-cache: the baseline's AO, shadow and probe rays per pixel as S times\n"
-    "                       the converged counts, S a power of two in [1/16, 16] ('0.25' or '1/4'; default\n"
+    "                       the converged counts, S a power of two in [1/64, 16] ('0.25' or '1/4'; default\n"
     "                       1; shadow rays above 16 go in sets of 16, at most 256)\n"
     "  --seed S             random seed, 0..4294967295 (default 1)\n"
     "  --threads T          worker threads, 0 = all cores (default 0)\n"
@@ -171,22 +171,22 @@ static bool parse_shadow_rays(const char *cmd, const char *arg, srv_cli_engine *
     return true;
 }
 
-/* Parses --no-cache-samples: a power of two in [1/16, 16], as a decimal or as 1/N. */
+/* Parses --no-cache-samples: a power of two in [1/64, 16], as a decimal or as 1/N. */
 static bool parse_no_cache_samples(const char *cmd, const char *arg, srv_cli_engine *e)
 {
     double value = 0;
     const char *slash = arg ? strchr(arg, '/') : NULL;
     if (slash && strncmp(arg, "1/", 2) == 0) {
         uint32_t divisor;
-        if (!srv_cli_u32(cmd, "--no-cache-samples", slash + 1, 1, 16, &divisor))
+        if (!srv_cli_u32(cmd, "--no-cache-samples", slash + 1, 1, 64, &divisor))
             return false;
         value = 1.0 / divisor;
-    } else if (!srv_cli_double(cmd, "--no-cache-samples", arg, 1.0 / 16, 16, &value)) {
+    } else if (!srv_cli_double(cmd, "--no-cache-samples", arg, 1.0 / 64, 16, &value)) {
         return false;
     }
     int exponent;
     if (frexp(value, &exponent) != 0.5) {
-        fprintf(stderr, "fxcache %s: --no-cache-samples: '%s' is not a power of two in [1/16, 16]\n", cmd, arg);
+        fprintf(stderr, "fxcache %s: --no-cache-samples: '%s' is not a power of two in [1/64, 16]\n", cmd, arg);
         return false;
     }
     e->no_cache_samples = value;

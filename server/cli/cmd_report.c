@@ -62,6 +62,7 @@ typedef struct report_options {
     bool only[FAMILIES];
     bool only_set;
     double heatmap_max;
+    bool time_cpu; /* plots, front and comparison on process CPU time instead of the elapsed frame time */
 } report_options;
 
 static const char report_usage[] =
@@ -82,10 +83,10 @@ static const char report_usage[] =
     "  probe_rays   rays per probe update: 36, 144, 576\n"
     "  ray_budget   effect rays per frame: 25000, 100000\n"
     "  viewers      the base settings with 2, 4, 8 viewers (the same cameras: the first N viewers)\n"
-    "  no_cache     the no-cache baseline at sample scales 1/16, 1/4, 1, 4 with one viewer and 1/16, 1/4,\n"
-    "               1 with the most viewers: the curve the equal-time comparison reads\n"
+    "  no_cache     the no-cache baseline at sample scales 1/64, 1/16, 1/4, 1, 4 with one viewer and\n"
+    "               1/64, 1/16, 1/4, 1 with the most viewers: the curve the equal-time comparison reads\n"
     "--quick keeps fewer points (bias 2, AO 16 and 256, shadow rays 4, probe rays 36, budget 25000, the\n"
-    "viewer counts 1 and the most, no cache at 1/16, 1/4 and 1).\n"
+    "viewer counts 1 and the most, no cache at 1/64, 1/16, 1/4 and 1).\n"
     "\n"
     "Cameras (as sim):\n"
     "  --trace FILE         a viewer trace (repeat once per viewer); frame f at time start + f / fps\n"
@@ -110,6 +111,10 @@ static const char report_usage[] =
     "                       summary.json, index.html\n"
     "  --only LIST          only these sweeps (comma list of the names above)\n"
     "  --heatmap-max E      the error shown white in the heat maps, linear radiance (default 0.1)\n"
+    "  --time elapsed|cpu   the time the plots, the Pareto front and the equal-time comparison use:\n"
+    "                       'elapsed', the engine's frame time less the sinks stage (default), or 'cpu',\n"
+    "                       the process CPU time of the frame less the sink's (steadier on a busy machine);\n"
+    "                       the CSV has both. A rerun on a finished folder only rewrites the outputs\n"
     "  --quick              the short report (under 5 minutes on the embedded scene here)\n"
     "  --quiet              no summary on stdout\n"
     "Engine options (the base settings; --effects also sets the reference's terms):\n";
@@ -165,7 +170,7 @@ static bool parse_only(const char *arg, report_options *o)
 static int parse_options(int argc, char **argv, report_options *o)
 {
     enum { O_VIEWERS = SRV_CLI_O_COMMAND, O_FRAMES, O_WARMUP, O_EVERY, O_RES, O_OUT, O_QUICK, O_QUIET, O_CAMERA,
-           O_TRACE, O_FPS, O_REFS, O_ONLY, O_HEATMAX };
+           O_TRACE, O_FPS, O_REFS, O_ONLY, O_HEATMAX, O_TIME };
     static const struct option own[] = {
         {"viewers", required_argument, NULL, O_VIEWERS}, {"frames", required_argument, NULL, O_FRAMES},
         {"warmup", required_argument, NULL, O_WARMUP},   {"every", required_argument, NULL, O_EVERY},
@@ -174,6 +179,7 @@ static int parse_options(int argc, char **argv, report_options *o)
         {"camera", required_argument, NULL, O_CAMERA},   {"trace", required_argument, NULL, O_TRACE},
         {"fps", required_argument, NULL, O_FPS},         {"ref-samples", required_argument, NULL, O_REFS},
         {"only", required_argument, NULL, O_ONLY},       {"heatmap-max", required_argument, NULL, O_HEATMAX},
+        {"time", required_argument, NULL, O_TIME},
         {"help", no_argument, NULL, 'h'},
     };
     struct option options[sizeof own / sizeof own[0] + 40];
@@ -215,6 +221,13 @@ static int parse_options(int argc, char **argv, report_options *o)
         case O_REFS: ok = parse_power_of_two("--ref-samples", optarg, 0.125, 4, &o->ref_samples); break;
         case O_ONLY: ok = parse_only(optarg, o); break;
         case O_HEATMAX: ok = srv_cli_double("report", "--heatmap-max", optarg, 1e-6, 1e6, &o->heatmap_max); break;
+        case O_TIME:
+            o->time_cpu = strcmp(optarg, "cpu") == 0;
+            if (!o->time_cpu && strcmp(optarg, "elapsed") != 0) {
+                fprintf(stderr, "fxcache report: --time: '%s' is not elapsed or cpu\n", optarg);
+                ok = false;
+            }
+            break;
         case 'h': {
             char names[256];
             srv_cli_effect_names(names, sizeof names);
@@ -279,7 +292,7 @@ static int parse_options(int argc, char **argv, report_options *o)
     return -1;
 }
 
-/* ---- configurations -------------------------------------------------------------------------------------- */
+/* ---- configurations ------------------------------------------------------------------------------------ */
 
 /* One configuration: its row and the engine settings it runs with. */
 typedef struct report_config {
@@ -449,12 +462,12 @@ static void build_plan(report_plan *plan, const report_context *ctx)
             if (steps[i] > 1)
                 add_config(plan, ctx, "viewers", "default", "default", steps[i]);
     if (WANT(8)) {
-        static const double scales[] = {1.0 / 16, 0.25, 1, 4};
+        static const double scales[] = {1.0 / 64, 1.0 / 16, 0.25, 1, 4};
         for (uint32_t v = 0; v < 2; v++) {
             uint32_t viewers = v == 0 ? 1 : o->viewers;
             if (v == 1 && viewers == 1)
                 break;
-            size_t count = (quick || v == 1) ? 3 : 4;
+            size_t count = (quick || v == 1) ? 4 : 5;
             for (size_t i = 0; i < count; i++) {
                 char scale[16];
                 if (scales[i] < 1)
@@ -475,7 +488,7 @@ static void build_plan(report_plan *plan, const report_context *ctx)
         finish_config(&plan->configs[i], ctx);
 }
 
-/* ---- cameras --------------------------------------------------------------------------------------------- */
+/* ---- cameras ------------------------------------------------------------------------------------------- */
 
 typedef struct report_cameras {
     const report_options *o;
@@ -510,7 +523,7 @@ static bool frame_compared(const report_options *o, uint32_t frame)
     return frame == o->frames - 1 || frame % o->every == 0;
 }
 
-/* ---- files ----------------------------------------------------------------------------------------------- */
+/* ---- files --------------------------------------------------------------------------------------------- */
 
 static bool make_dir(const char *path)
 {
@@ -577,7 +590,7 @@ static double flip_mean(const char *dir, const srv_rep_row *r)
     return mean;
 }
 
-/* ---- running one configuration --------------------------------------------------------------------------- */
+/* ---- running one configuration ------------------------------------------------------------------------- */
 
 /* Writes viewer_00's frame at the last frame as the configuration's picture (inside the sinks stage). */
 typedef struct picture_sink {
@@ -807,8 +820,17 @@ static bool write_outputs(report_plan *plan, const report_options *o, const char
     srv_rep_row *rows = malloc((n ? n : 1) * sizeof *rows);
     if (!rows)
         return false;
-    for (size_t i = 0; i < n; i++)
+    for (size_t i = 0; i < n; i++) {
         rows[i] = plan->configs[i].row;
+        if (o->time_cpu && rows[i].done) { /* the chosen time in ms_per_frame, for everything below the CSV */
+            rows[i].ms_per_viewer = rows[i].ms_per_frame > 0
+                                        ? rows[i].cpu_ms_per_frame * rows[i].ms_per_viewer / rows[i].ms_per_frame
+                                        : NAN;
+            rows[i].ms_per_frame = rows[i].cpu_ms_per_frame;
+        }
+    }
+    const char *time_label = o->time_cpu ? "process CPU time of the frame, less the sink"
+                                         : "engine elapsed frame time, sinks stage excluded";
     /* The Pareto front per viewer count. */
     double t[MAX_CONFIGS], e[MAX_CONFIGS];
     bool front[MAX_CONFIGS];
@@ -826,7 +848,18 @@ static bool write_outputs(report_plan *plan, const report_options *o, const char
     char path[1400], err[1400];
     bool ok = true;
     snprintf(path, sizeof path, "%s/configs.csv", o->out_dir);
-    if (!srv_rep_write_csv(path, rows, n, err, sizeof err)) {
+    srv_rep_row *measured = malloc((n ? n : 1) * sizeof *measured); /* both times as measured */
+    if (!measured) {
+        free(rows);
+        return false;
+    }
+    for (size_t i = 0; i < n; i++) {
+        measured[i] = plan->configs[i].row;
+        measured[i].pareto = rows[i].pareto;
+    }
+    bool csv_ok = srv_rep_write_csv(path, measured, n, err, sizeof err);
+    free(measured);
+    if (!csv_ok) {
         fprintf(stderr, "fxcache report: %s\n", err);
         ok = false;
     }
@@ -836,12 +869,12 @@ static bool write_outputs(report_plan *plan, const report_options *o, const char
         ok = false;
     }
     if (ok && plots_made) {
-        int plots = srv_rep_plots(o->out_dir, rows, n, err, sizeof err);
+        int plots = srv_rep_plots(o->out_dir, rows, n, time_label, err, sizeof err);
         if (plots < 0)
             fprintf(stderr, "fxcache report: warning: no plots: %s\n", err);
         *plots_made = plots > 0;
     }
-    srv_rep_page page = {.title = title, .command = command, .settings = settings,
+    srv_rep_page page = {.title = title, .command = command, .settings = settings, .time_label = time_label,
                          .plots = plots_made && *plots_made, .interrupted = interrupted, .planned = (uint32_t)n};
     if (ok && !srv_rep_write_html(o->out_dir, rows, n, &page, err, sizeof err)) {
         fprintf(stderr, "fxcache report: %s\n", err);
@@ -863,9 +896,22 @@ static bool write_outputs(report_plan *plan, const report_options *o, const char
                                               : "yes",
                             "ratio", isfinite(eq[k].ratio) ? json_real(eq[k].ratio) : json_null(), "goal_met",
                             eq[k].goal_met));
+    for (size_t k = 0; k < m; k++) {
+        json_t *item = json_array_get(list, k);
+        json_object_set_new(item, "cached_rmse_shadow", isfinite(eq[k].cached_shadow) ? json_real(eq[k].cached_shadow) : json_null());
+        json_object_set_new(item, "no_cache_rmse_shadow_at_equal_time",
+                            isfinite(eq[k].no_cache_shadow) ? json_real(eq[k].no_cache_shadow) : json_null());
+        if (eq[k].best)
+            json_object_set_new(item, "most_exact_cached",
+                                json_pack("{s:s,s:f,s:f,s:o}", "config", eq[k].best->id, "rmse", eq[k].best->rmse,
+                                          "ms_per_frame", eq[k].best->ms_per_frame, "no_cache_rmse_at_equal_time",
+                                          isfinite(eq[k].no_cache_at_best) ? json_real(eq[k].no_cache_at_best)
+                                                                           : json_null()));
+    }
     json_object_set_new(sum, "goal", json_string("cached RMSE at most half the no-cache RMSE at equal time per frame"));
     json_object_set_new(sum, "equal_time", list);
     json_object_set_new(sum, "interrupted", json_boolean(interrupted));
+    json_object_set_new(sum, "time", json_string(time_label));
     snprintf(path, sizeof path, "%s/summary.json", o->out_dir);
     if (ok && !srv_cli_write_json("report", path, sum))
         ok = false;
@@ -885,7 +931,7 @@ static bool write_outputs(report_plan *plan, const report_options *o, const char
     return ok;
 }
 
-/* ---- the command ----------------------------------------------------------------------------------------- */
+/* ---- the command --------------------------------------------------------------------------------------- */
 
 int srv_cmd_report(int argc, char **argv)
 {
@@ -1039,10 +1085,13 @@ int srv_cmd_report(int argc, char **argv)
         if (!write_marker(o.out_dir, c))
             goto done;
         const srv_rep_row *row = &c->row;
+        char ao_text[48] = "";
+        if (isfinite(row->rmse_ao))
+            snprintf(ao_text, sizeof ao_text, ", AO %.3g", row->rmse_ao);
         fprintf(stderr, "report: [%zu/%zu] %s: %.1f ms/frame (%.1f per viewer, CPU %.1f), RMSE %.4g, PSNR %.2f dB, "
                         "shadow %.3g%s (%.1f s)\n",
                 i + 1, plan->count, row->id, row->ms_per_frame, row->ms_per_viewer, row->cpu_ms_per_frame, row->rmse,
-                row->psnr_db, row->rmse_shadow, ctx.probes_on ? "" : "", row->run_s);
+                row->psnr_db, row->rmse_shadow, ao_text, row->run_s);
         if (!write_outputs(plan, &o, NULL, NULL, NULL, false, NULL)) /* the CSVs after every configuration */
             goto done;
     }
@@ -1058,7 +1107,7 @@ int srv_cmd_report(int argc, char **argv)
              o.engine.threads, ctx.probes_on ? "AO error is not reported: the probes replace the sky term, so the "
                                                "frames' AO view is not the AO term."
                                              : "");
-    for (int i = 1; i < argc; i++) {
+    for (int i = 0; i < argc; i++) { /* argv[0] is "report" */
         size_t used = strlen(command);
         snprintf(command + used, sizeof command - used, " %s", argv[i]);
     }

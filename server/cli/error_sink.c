@@ -45,8 +45,8 @@ double srv_err_cpu_ms(void)
 
 /* ---- heat maps ----------------------------------------------------------------------------------------- */
 
-int srv_err_heatmap(const char *path, const float *a, const float *b, uint32_t width, uint32_t height, float max,
-                    char *msg, size_t msg_cap)
+int srv_err_heatmap(const char *path, const float *a, const float *b, uint32_t width, uint32_t height,
+                    float max, char *msg, size_t msg_cap)
 {
     size_t n = (size_t)width * height;
     uint8_t *rgb = malloc(n > 0 ? n * 3 : 1);
@@ -56,7 +56,8 @@ int srv_err_heatmap(const char *path, const float *a, const float *b, uint32_t w
     }
     float scale = max > 0 ? 1.0f / max : 10.0f;
     for (size_t p = 0; p < n; p++) {
-        float e = (fabsf(a[3 * p] - b[3 * p]) + fabsf(a[3 * p + 1] - b[3 * p + 1]) + fabsf(a[3 * p + 2] - b[3 * p + 2])) /
+        float e = (fabsf(a[3 * p] - b[3 * p]) + fabsf(a[3 * p + 1] - b[3 * p + 1]) +
+                   fabsf(a[3 * p + 2] - b[3 * p + 2])) /
                   3.0f * scale;
         e = e > 1.0f ? 1.0f : (e > 0 ? e : 0.0f); /* NaN reads as 0 */
         /* Black -> red (first third) -> yellow (second) -> white (last). */
@@ -91,7 +92,8 @@ static void entry_free(srv_refcache_entry *e)
     memset(e, 0, sizeof *e);
 }
 
-srv_refcache *srv_refcache_create(srv_ref *ref, const char *dir, const char *settings, char *err, size_t err_cap)
+srv_refcache *srv_refcache_create(srv_ref *ref, const char *dir, const char *settings, char *err,
+                                  size_t err_cap)
 {
     if (mkdir(dir, 0755) != 0 && errno != EEXIST) {
         snprintf(err, err_cap, "cannot create folder %s: %s", dir, strerror(errno));
@@ -145,8 +147,8 @@ uint64_t srv_refcache_key(const srv_refcache *cache, const srv_camera *c, uint32
     char text[512];
     snprintf(text, sizeof text, "%a %a %a|%a %a %a|%a %a %a|%a|%ux%u|", (double)c->position[0],
              (double)c->position[1], (double)c->position[2], (double)c->target[0], (double)c->target[1],
-             (double)c->target[2], (double)c->up[0], (double)c->up[1], (double)c->up[2], (double)c->fov_deg, width,
-             height);
+             (double)c->target[2], (double)c->up[0], (double)c->up[1], (double)c->up[2], (double)c->fov_deg,
+             width, height);
     return fnv1a(fnv1a(0xcbf29ce484222325ull, text), cache->settings);
 }
 
@@ -215,8 +217,8 @@ static bool entry_render(srv_refcache *cache, srv_refcache_entry *e, const srv_c
     srv_ref_stats st;
     /* The frame number only seeds the noise: a camera's key gives it, so a reference is the same whichever
      * frame asked for it first. */
-    fxc_result r = srv_ref_render(cache->ref, camera, e->width, e->height, (uint32_t)(e->key >> 32), &out, &st, NULL,
-                                  NULL);
+    fxc_result r = srv_ref_render(cache->ref, camera, e->width, e->height, (uint32_t)(e->key >> 32), &out,
+                                  &st, NULL, NULL);
     if (r != FXC_OK) {
         free(srgb);
         snprintf(err, err_cap, "reference image %s: %s", e->path, fxc_strerror(r));
@@ -227,7 +229,8 @@ static bool entry_render(srv_refcache *cache, srv_refcache_entry *e, const srv_c
     char path[1100], msg[512];
     bool written = true;
     snprintf(path, sizeof path, "%s.exr", e->path);
-    written = written && scene_image_write_f32(path, e->width, e->height, 3, e->radiance, msg, sizeof msg) == 0;
+    written =
+        written && scene_image_write_f32(path, e->width, e->height, 3, e->radiance, msg, sizeof msg) == 0;
     snprintf(path, sizeof path, "%s_ao.exr", e->path);
     written = written && scene_image_write_f32(path, e->width, e->height, 1, e->ao, msg, sizeof msg) == 0;
     snprintf(path, sizeof path, "%s_shadow.exr", e->path);
@@ -239,18 +242,18 @@ static bool entry_render(srv_refcache *cache, srv_refcache_entry *e, const srv_c
         snprintf(err, err_cap, "%s", msg);
         return false;
     }
-    json_t *record = json_pack("{s:I,s:I,s:[f,f,f],s:[f,f,f],s:[f,f,f],s:f,s:f,s:f,s:I,s:s}", "width",
-                               (json_int_t)e->width, "height", (json_int_t)e->height, "position",
-                               (double)camera->position[0], (double)camera->position[1], (double)camera->position[2],
-                               "target", (double)camera->target[0], (double)camera->target[1],
-                               (double)camera->target[2], "up", (double)camera->up[0], (double)camera->up[1],
-                               (double)camera->up[2], "fov_deg", (double)camera->fov_deg, "noise_rmse", st.noise_rmse,
-                               "render_ms", st.render_ms, "rays", (json_int_t)st.rays_total, "settings",
-                               cache->settings);
+    json_t *record = json_pack(
+        "{s:I,s:I,s:[f,f,f],s:[f,f,f],s:[f,f,f],s:f,s:f,s:f,s:I,s:s}", "width", (json_int_t)e->width,
+        "height", (json_int_t)e->height, "position", (double)camera->position[0], (double)camera->position[1],
+        (double)camera->position[2], "target", (double)camera->target[0], (double)camera->target[1],
+        (double)camera->target[2], "up", (double)camera->up[0], (double)camera->up[1], (double)camera->up[2],
+        "fov_deg", (double)camera->fov_deg, "noise_rmse", st.noise_rmse, "render_ms", st.render_ms, "rays",
+        (json_int_t)st.rays_total, "settings", cache->settings);
     snprintf(path, sizeof path, "%s.json", e->path);
     char tmp[1120];
     snprintf(tmp, sizeof tmp, "%s.tmp", path);
-    bool ok = record && json_dump_file(record, tmp, JSON_INDENT(2) | JSON_PRESERVE_ORDER) == 0 && rename(tmp, path) == 0;
+    bool ok = record && json_dump_file(record, tmp, JSON_INDENT(2) | JSON_PRESERVE_ORDER) == 0 &&
+              rename(tmp, path) == 0;
     json_decref(record);
     if (!ok) {
         snprintf(err, err_cap, "cannot write %s: %s", path, strerror(errno));
@@ -266,11 +269,13 @@ const srv_refcache_entry *srv_refcache_get(srv_refcache *cache, const srv_camera
         *rendered = false;
     uint64_t key = srv_refcache_key(cache, camera, width, height);
     for (size_t i = 0; i < cache->count; i++)
-        if (cache->entries[i].key == key && cache->entries[i].width == width && cache->entries[i].height == height)
+        if (cache->entries[i].key == key && cache->entries[i].width == width &&
+            cache->entries[i].height == height)
             return &cache->entries[i];
     if (cache->count == cache->capacity) {
         size_t cap = cache->capacity ? cache->capacity * 2 : 64;
-        srv_refcache_entry *grown = cap <= SIZE_MAX / sizeof *grown ? realloc(cache->entries, cap * sizeof *grown) : NULL;
+        srv_refcache_entry *grown =
+            cap <= SIZE_MAX / sizeof *grown ? realloc(cache->entries, cap * sizeof *grown) : NULL;
         if (!grown) {
             snprintf(err, err_cap, "out of memory");
             return NULL;
@@ -329,7 +334,8 @@ static int err_viewer_frame(void *user, const srv_viewer_frame *vf)
         return 0;
     double cpu_start = srv_err_cpu_ms();
     char err[512];
-    const srv_refcache_entry *ref = srv_refcache_get(d->refs, &vf->camera, vf->width, vf->height, NULL, err, sizeof err);
+    const srv_refcache_entry *ref =
+        srv_refcache_get(d->refs, &vf->camera, vf->width, vf->height, NULL, err, sizeof err);
     if (!ref) {
         if (!sink->totals.error[0])
             snprintf(sink->totals.error, sizeof sink->totals.error, "%s", err);
@@ -337,8 +343,12 @@ static int err_viewer_frame(void *user, const srv_viewer_frame *vf)
         return -1;
     }
     size_t n = (size_t)vf->width * vf->height;
-    srv_err_image image = {.frame = frame, .viewer = vf->name, .steady = frame >= d->warmup,
-                           .rmse_shadow = NAN, .rmse_ao = NAN, .ref_noise = ref->noise_rmse};
+    srv_err_image image = {.frame = frame,
+                           .viewer = vf->name,
+                           .steady = frame >= d->warmup,
+                           .rmse_shadow = NAN,
+                           .rmse_ao = NAN,
+                           .ref_noise = ref->noise_rmse};
     double mse = srv_err_mse(vf->radiance, ref->radiance, 3 * n);
     image.rmse = sqrt(mse);
     image.psnr_db = srv_err_psnr(image.rmse);
@@ -361,10 +371,11 @@ static int err_viewer_frame(void *user, const srv_viewer_frame *vf)
         t->noise2_sum += ref->noise_rmse * ref->noise_rmse;
     }
     int rc = 0;
-    if (d->heatmap_path && d->heatmap_viewer && frame == d->last_frame && strcmp(vf->name, d->heatmap_viewer) == 0) {
+    if (d->heatmap_path && d->heatmap_viewer && frame == d->last_frame &&
+        strcmp(vf->name, d->heatmap_viewer) == 0) {
         char msg[512];
-        if (srv_err_heatmap(d->heatmap_path, vf->radiance, ref->radiance, vf->width, vf->height, d->heatmap_max, msg,
-                            sizeof msg) != 0) {
+        if (srv_err_heatmap(d->heatmap_path, vf->radiance, ref->radiance, vf->width, vf->height,
+                            d->heatmap_max, msg, sizeof msg) != 0) {
             if (!t->error[0])
                 snprintf(t->error, sizeof t->error, "%s", msg);
             rc = -1;

@@ -10,7 +10,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-/* ---- rows ------------------------------------------------------------------------------------------------ */
+/* ---- rows ---------------------------------------------------------------------------------------------- */
 
 bool srv_rep_row_add_image(srv_rep_row *row, const srv_rep_image *image)
 {
@@ -81,10 +81,11 @@ json_t *srv_rep_row_json(const srv_rep_row *r)
     json_t *images = json_array();
     for (size_t i = 0; i < r->image_count; i++) {
         const srv_rep_image *im = &r->images_list[i];
-        json_array_append_new(images, json_pack("{s:I,s:s,s:b,s:o,s:o,s:o,s:o}", "frame", (json_int_t)im->frame,
-                                                "viewer", im->viewer, "steady", im->steady, "rmse", number(im->rmse),
-                                                "psnr_db", number(im->psnr_db), "rmse_shadow",
-                                                number(im->rmse_shadow), "rmse_ao", number(im->rmse_ao)));
+        json_array_append_new(images,
+                              json_pack("{s:I,s:s,s:b,s:o,s:o,s:o,s:o}", "frame", (json_int_t)im->frame,
+                                        "viewer", im->viewer, "steady", im->steady, "rmse", number(im->rmse),
+                                        "psnr_db", number(im->psnr_db), "rmse_shadow",
+                                        number(im->rmse_shadow), "rmse_ao", number(im->rmse_ao)));
     }
     json_object_set_new(o, "compared", images);
     return o;
@@ -136,7 +137,7 @@ bool srv_rep_row_from_json(srv_rep_row *r, const json_t *o)
     return true;
 }
 
-/* ---- Pareto front and equal time --------------------------------------------------------------------- */
+/* ---- Pareto front and equal time ----------------------------------------------------------------------- */
 
 void srv_rep_pareto(const double *time, const double *error, size_t n, bool *on_front)
 {
@@ -208,18 +209,25 @@ size_t srv_rep_equal_times(const srv_rep_row *rows, size_t n, srv_rep_equal *out
     size_t count = 0;
     for (size_t i = 0; i < n && count < cap; i++) {
         const srv_rep_row *c = &rows[i];
-        bool is_default = strcmp(c->family, "default") == 0 ||
-                          (strcmp(c->family, "viewers") == 0 && !c->no_cache);
+        bool is_default =
+            strcmp(c->family, "default") == 0 || (strcmp(c->family, "viewers") == 0 && !c->no_cache);
         if (!c->done || c->no_cache || !is_default)
             continue;
-        double t[64], e[64];
+        double t[64], e[64], es[64];
         size_t m = 0;
-        for (size_t j = 0; j < n && m < 64; j++)
-            if (rows[j].done && rows[j].no_cache && rows[j].viewers == c->viewers) {
+        const srv_rep_row *best = NULL;
+        for (size_t j = 0; j < n; j++) {
+            if (!rows[j].done || rows[j].viewers != c->viewers)
+                continue;
+            if (!rows[j].no_cache && (!best || rows[j].rmse < best->rmse))
+                best = &rows[j];
+            if (rows[j].no_cache && m < 64) {
                 t[m] = rows[j].ms_per_frame;
                 e[m] = rows[j].rmse;
+                es[m] = rows[j].rmse_shadow;
                 m++;
             }
+        }
         if (m == 0)
             continue;
         srv_rep_equal *q = &out[count++];
@@ -232,11 +240,16 @@ size_t srv_rep_equal_times(const srv_rep_row *rows, size_t n, srv_rep_equal *out
         q->no_cache_rmse = srv_rep_equal_time(t, e, m, c->ms_per_frame, &q->where);
         q->ratio = q->no_cache_rmse > 0 ? c->rmse / q->no_cache_rmse : NAN;
         q->goal_met = q->ratio <= 0.5;
+        int ignored;
+        q->cached_shadow = c->rmse_shadow;
+        q->no_cache_shadow = srv_rep_equal_time(t, es, m, c->ms_per_frame, &ignored);
+        q->best = best;
+        q->no_cache_at_best = best ? srv_rep_equal_time(t, e, m, best->ms_per_frame, &q->where_best) : NAN;
     }
     return count;
 }
 
-/* ---- CSV --------------------------------------------------------------------------------------------- */
+/* ---- CSV ----------------------------------------------------------------------------------------------- */
 
 /* A figure in a CSV cell: empty for NaN. */
 static void cell(FILE *f, double v)
@@ -275,8 +288,8 @@ bool srv_rep_write_csv(const char *path, const srv_rep_row *rows, size_t n, char
         const srv_rep_row *r = &rows[i];
         if (!r->done)
             continue;
-        fprintf(f, "%s,%s,%s,%u,%d,%d,%u,%u,%u", r->id, r->family, r->no_cache ? "no-cache" : "cached", r->viewers,
-                r->bias_shadow, r->bias_ao, r->ao_samples, r->shadow_rays, r->probe_rays);
+        fprintf(f, "%s,%s,%s,%u,%d,%d,%u,%u,%u", r->id, r->family, r->no_cache ? "no-cache" : "cached",
+                r->viewers, r->bias_shadow, r->bias_ao, r->ao_samples, r->shadow_rays, r->probe_rays);
         cell(f, r->probe_cell);
         cell(f, r->ray_budget);
         cell(f, r->no_cache ? r->no_cache_samples : NAN);
@@ -325,10 +338,10 @@ bool srv_rep_write_frames_csv(const char *path, const srv_rep_row *rows, size_t 
     return finish_file(f, tmp, path, err, err_cap);
 }
 
-/* ---- plots ------------------------------------------------------------------------------------------- */
+/* ---- plots --------------------------------------------------------------------------------------------- */
 
-static const char *const families[] = {"default", "bias", "ao_samples", "shadow_rays", "probe_cell", "probe_rays",
-                                       "ray_budget", "viewers", "no_cache"};
+static const char *const families[] = {"default",    "bias",       "ao_samples", "shadow_rays", "probe_cell",
+                                       "probe_rays", "ray_budget", "viewers",    "no_cache"};
 enum { FAMILY_COUNT = sizeof families / sizeof families[0] };
 
 bool srv_rep_on_path(const char *name)
@@ -383,7 +396,8 @@ static int compare_points(const void *a, const void *b)
 }
 
 /* Writes the data files and the script for one viewer count; returns the number of plots it draws. */
-static int plot_files(const char *plots, FILE *gp, const srv_rep_row *rows, size_t n, uint32_t viewers)
+static int plot_files(const char *plots, FILE *gp, const srv_rep_row *rows, size_t n, uint32_t viewers,
+                      const char *time_label)
 {
     char path[1200];
     snprintf(path, sizeof path, "%s/points_v%u.dat", plots, viewers);
@@ -401,7 +415,12 @@ static int plot_files(const char *plots, FILE *gp, const srv_rep_row *rows, size
                 if (!any && blocks)
                     fputs("\n\n", f);
                 any = true;
-                fprintf(f, "%.6g %.6g \"%s\"\n", rows[i].ms_per_frame, rows[i].rmse, rows[i].label);
+                char label[96]; /* the plot is of one viewer count: without ", N viewers" */
+                snprintf(label, sizeof label, "%s", rows[i].label);
+                char *comma = strrchr(label, ',');
+                if (comma && strstr(comma, "viewer"))
+                    *comma = 0;
+                fprintf(f, "%.6g %.6g \"%s\"\n", rows[i].ms_per_frame, rows[i].rmse, label);
             }
         if (any) {
             used[k] = true;
@@ -416,7 +435,7 @@ static int plot_files(const char *plots, FILE *gp, const srv_rep_row *rows, size
     f = fopen(path, "w");
     if (!f)
         return 0;
-    double (*front)[2] = malloc((n ? n : 1) * sizeof *front);
+    double(*front)[2] = malloc((n ? n : 1) * sizeof *front);
     size_t m = 0;
     for (size_t i = 0; front && i < n; i++)
         if (rows[i].done && rows[i].viewers == viewers && rows[i].pareto) {
@@ -434,25 +453,33 @@ static int plot_files(const char *plots, FILE *gp, const srv_rep_row *rows, size
     static const int point_type[FAMILY_COUNT] = {7, 5, 9, 11, 13, 15, 4, 6, 2};
     for (int term = 0; term < 2; term++) {
         if (term == 0)
-            fprintf(gp, "set terminal pngcairo size 960,640 noenhanced font 'sans,10'\nset output 'error_time_v%u.png'\n",
+            fprintf(gp,
+                    "set terminal pngcairo size 960,640 noenhanced font 'sans,10'\nset output "
+                    "'error_time_v%u.png'\n",
                     viewers);
         else
-            fprintf(gp, "set terminal svg size 960,640 noenhanced font 'sans,10'\nset output 'error_time_v%u.svg'\n",
-                    viewers);
-        fprintf(gp,
-                "set title 'RMSE against time per frame, %u viewer%s (front: no configuration is both faster and "
-                "more exact)'\n"
-                "set logscale xy\nset grid\nset key outside right top\n"
-                "set xlabel 'time per frame, ms (engine statistics, sinks stage excluded)'\n"
-                "set ylabel 'RMSE against the reference, linear radiance'\n",
-                viewers, viewers == 1 ? "" : "s");
-        fprintf(gp, "plot 'pareto_v%u.dat' using 1:2 with lines lw 2 lc rgb '#888888' title 'Pareto front'", viewers);
+            fprintf(
+                gp,
+                "set terminal svg size 960,640 noenhanced font 'sans,10'\nset output 'error_time_v%u.svg'\n",
+                viewers);
+        fprintf(
+            gp,
+            "set title 'RMSE against time per frame, %u viewer%s (front: no configuration is both faster and "
+            "more exact)'\n"
+            "set logscale xy\nset grid\nset key outside right top\n"
+            "set xlabel 'time per frame, ms (%s)'\n"
+            "set ylabel 'RMSE against the reference, linear radiance'\n",
+            viewers, viewers == 1 ? "" : "s", time_label);
+        fprintf(gp, "plot 'pareto_v%u.dat' using 1:2 with lines lw 2 lc rgb '#888888' title 'Pareto front'",
+                viewers);
         for (int k = 0; k < FAMILY_COUNT; k++)
             if (used[k])
-                fprintf(gp, ", \\\n  'points_v%u.dat' index %d using 1:2 with points pt %d ps 1.3 title '%s'", viewers,
-                        block_of[k], point_type[k], families[k]);
-        fprintf(gp, ", \\\n  'points_v%u.dat' using 1:2:3 with labels font ',7' offset char 0.6,0.6 left notitle\n",
-                viewers);
+                fprintf(gp, ", \\\n  'points_v%u.dat' index %d using 1:2 with points pt %d ps 1.3 title '%s'",
+                        viewers, block_of[k], point_type[k], families[k]);
+        fprintf(
+            gp,
+            ", \\\n  'points_v%u.dat' using 1:2:3 with labels font ',7' offset char 0.6,0.6 left notitle\n",
+            viewers);
         fputs("unset logscale\n", gp);
     }
 
@@ -489,24 +516,29 @@ static int plot_files(const char *plots, FILE *gp, const srv_rep_row *rows, size
         return 1;
     for (int term = 0; term < 2; term++) {
         if (term == 0)
-            fprintf(gp, "set terminal pngcairo size 960,480 noenhanced font 'sans,10'\nset output 'error_frames_v%u.png'\n",
+            fprintf(gp,
+                    "set terminal pngcairo size 960,480 noenhanced font 'sans,10'\nset output "
+                    "'error_frames_v%u.png'\n",
                     viewers);
         else
-            fprintf(gp, "set terminal svg size 960,480 noenhanced font 'sans,10'\nset output 'error_frames_v%u.svg'\n",
+            fprintf(gp,
+                    "set terminal svg size 960,480 noenhanced font 'sans,10'\nset output "
+                    "'error_frames_v%u.svg'\n",
                     viewers);
         fprintf(gp,
                 "set title 'RMSE over frames (moving cameras), %u viewer%s'\nset logscale y\nset grid\n"
                 "set key outside right top\nset xlabel 'frame'\nset ylabel 'RMSE, linear radiance'\nplot ",
                 viewers, viewers == 1 ? "" : "s");
         for (int s = 0; s < series; s++)
-            fprintf(gp, "%s'frames_v%u.dat' index %d using 1:2 with linespoints title '%s'", s ? ", \\\n  " : "", viewers,
-                    s, titles[s]);
+            fprintf(gp, "%s'frames_v%u.dat' index %d using 1:2 with linespoints title '%s'",
+                    s ? ", \\\n  " : "", viewers, s, titles[s]);
         fputs("\nunset logscale\n", gp);
     }
     return 2;
 }
 
-int srv_rep_plots(const char *dir, const srv_rep_row *rows, size_t n, char *err, size_t err_cap)
+int srv_rep_plots(const char *dir, const srv_rep_row *rows, size_t n, const char *time_label, char *err,
+                  size_t err_cap)
 {
     char plots[1100], path[1200];
     snprintf(plots, sizeof plots, "%s/plots", dir);
@@ -525,14 +557,16 @@ int srv_rep_plots(const char *dir, const srv_rep_row *rows, size_t n, char *err,
     size_t m = viewer_counts(rows, n, counts, SRV_REP_MAX_VIEWER_COUNTS);
     int made = 0;
     for (size_t k = 0; k < m; k++)
-        made += plot_files(plots, gp, rows, n, counts[k]);
+        made += plot_files(plots, gp, rows, n, counts[k], time_label);
     if (fclose(gp) != 0) {
         snprintf(err, err_cap, "cannot write %s", path);
         return -1;
     }
     if (!srv_rep_on_path("gnuplot")) {
-        snprintf(err, err_cap, "gnuplot is not on PATH (install-deps.sh installs gnuplot-nox): the data and the "
-                               "script are in %s", plots);
+        snprintf(err, err_cap,
+                 "gnuplot is not on PATH (install-deps.sh installs gnuplot-nox): the data and the "
+                 "script are in %s",
+                 plots);
         return -1;
     }
     char command[2600];
@@ -545,18 +579,27 @@ int srv_rep_plots(const char *dir, const srv_rep_row *rows, size_t n, char *err,
     return made * 2;
 }
 
-/* ---- HTML -------------------------------------------------------------------------------------------- */
+/* ---- HTML ---------------------------------------------------------------------------------------------- */
 
 /* Text with &, <, > and " escaped. */
 static void html_text(FILE *f, const char *s)
 {
     for (; *s; s++) {
         switch (*s) {
-        case '&': fputs("&amp;", f); break;
-        case '<': fputs("&lt;", f); break;
-        case '>': fputs("&gt;", f); break;
-        case '"': fputs("&quot;", f); break;
-        default: fputc(*s, f);
+        case '&':
+            fputs("&amp;", f);
+            break;
+        case '<':
+            fputs("&lt;", f);
+            break;
+        case '>':
+            fputs("&gt;", f);
+            break;
+        case '"':
+            fputs("&quot;", f);
+            break;
+        default:
+            fputc(*s, f);
         }
     }
 }
@@ -576,8 +619,8 @@ static bool file_exists(const char *dir, const char *rel)
     return rel[0] && access(path, R_OK) == 0;
 }
 
-bool srv_rep_write_html(const char *dir, const srv_rep_row *rows, size_t n, const srv_rep_page *page, char *err,
-                        size_t err_cap)
+bool srv_rep_write_html(const char *dir, const srv_rep_row *rows, size_t n, const srv_rep_page *page,
+                        char *err, size_t err_cap)
 {
     char path[1100], tmp[1120];
     snprintf(path, sizeof path, "%s/index.html", dir);
@@ -592,50 +635,86 @@ bool srv_rep_write_html(const char *dir, const srv_rep_row *rows, size_t n, cons
         done += rows[i].done;
     fputs("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>fxcache report</title>\n"
           "<style>body{font-family:sans-serif;max-width:1200px;margin:1em auto;padding:0 1em}"
-          "table{border-collapse:collapse;font-size:85%}td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}"
+          "table{border-collapse:collapse;font-size:85%}td,th{border:1px solid #ccc;padding:2px "
+          "6px;text-align:right}"
           "td:first-child,th:first-child,td:nth-child(2){text-align:left}tr.front{background:#eef7ee}"
-          "figure{display:inline-block;margin:4px;text-align:center;font-size:80%}img{image-rendering:pixelated}"
+          "figure{display:inline-block;margin:4px;text-align:center;font-size:80%}img{image-rendering:"
+          "pixelated}"
           ".met{color:#060}.unmet{color:#a00}</style></head><body>\n<h1>fxcache report</h1>\n<p>",
           f);
     html_text(f, page->title ? page->title : "");
     fputs("</p>\n<p>", f);
     html_text(f, page->settings ? page->settings : "");
     fprintf(f, "</p>\n<p>%zu of %u configurations done%s.</p>\n", done, page->planned,
-            page->interrupted ? " (interrupted: rerun the same command to finish; finished configurations are kept)"
-                              : "");
+            page->interrupted
+                ? " (interrupted: rerun the same command to finish; finished configurations are kept)"
+                : "");
     if (page->command) {
         fputs("<pre>", f);
         html_text(f, page->command);
         fputs("</pre>\n", f);
     }
 
-    fputs("<h2>Equal-time comparison</h2>\n<p>At equal server time per frame, the RMSE of the cached renderer "
-          "(default settings) against the no-cache renderer, whose error at that time is interpolated along its "
-          "curve over sample counts (log-log, its lower envelope). The goal: cached error at most half the "
-          "no-cache error.</p>\n<ul>\n",
-          f);
+    fputs(
+        "<h2>Equal-time comparison</h2>\n<p>At equal server time per frame, the RMSE of the cached renderer "
+        "(default settings) against the no-cache renderer, whose error at that time is interpolated along "
+        "its "
+        "curve over sample counts (log-log, its lower envelope). The goal: cached error at most half the "
+        "no-cache error.</p>\n<ul>\n",
+        f);
     srv_rep_equal eq[SRV_REP_MAX_VIEWER_COUNTS];
     size_t m = srv_rep_equal_times(rows, n, eq, SRV_REP_MAX_VIEWER_COUNTS);
     if (m == 0)
-        fputs("<li>Not measured: it needs a done default cached configuration and no-cache configurations of the same "
+        fputs("<li>Not measured: it needs a done default cached configuration and no-cache configurations of "
+              "the same "
               "viewer count.</li>\n",
               f);
     for (size_t k = 0; k < m; k++) {
-        fprintf(f, "<li class=\"%s\">%u viewer%s: cached RMSE %.4g at %.1f ms per frame; no cache at that time %.4g "
-                   "(%u no-cache points%s): ratio %.2f, goal %s.</li>\n",
-                eq[k].goal_met ? "met" : "unmet", eq[k].viewers, eq[k].viewers == 1 ? "" : "s", eq[k].cached_rmse,
-                eq[k].cached_ms, eq[k].no_cache_rmse, eq[k].no_cache_points,
-                eq[k].where < 0   ? "; the cache is faster than the fastest no-cache point, compared with that point"
-                : eq[k].where > 0 ? "; the cache is slower than the slowest no-cache point, compared with that point"
-                                  : "",
-                eq[k].ratio, eq[k].goal_met ? "met" : "NOT met");
+        fprintf(
+            f,
+            "<li class=\"%s\">%u viewer%s: cached RMSE %.4g at %.1f ms per frame; no cache at that time %.4g "
+            "(%u no-cache points%s): ratio %.2f, goal %s.</li>\n",
+            eq[k].goal_met ? "met" : "unmet", eq[k].viewers, eq[k].viewers == 1 ? "" : "s", eq[k].cached_rmse,
+            eq[k].cached_ms, eq[k].no_cache_rmse, eq[k].no_cache_points,
+            eq[k].where < 0
+                ? "; the cache is faster than the fastest no-cache point, compared with that point"
+            : eq[k].where > 0
+                ? "; the cache is slower than the slowest no-cache point, compared with that point"
+                : "",
+            eq[k].ratio, eq[k].goal_met ? "met" : "NOT met");
+        if (eq[k].goal_met || !eq[k].best)
+            continue;
+        /* Why not: is there a cached setting that would meet it, and where does the error sit? */
+        const srv_rep_row *b = eq[k].best;
+        bool best_meets = b->rmse <= 0.5 * eq[k].no_cache_at_best;
+        fprintf(f, "<li>Why: the most exact cached configuration of %u viewer%s, ", eq[k].viewers,
+                eq[k].viewers == 1 ? "" : "s");
+        html_text(f, b->label);
+        fprintf(
+            f,
+            ", has RMSE %.4g at %.1f ms per frame, against %.4g for no cache at that time (ratio %.2f): %s. ",
+            b->rmse, b->ms_per_frame, eq[k].no_cache_at_best, b->rmse / eq[k].no_cache_at_best,
+            best_meets
+                ? "that setting would meet the goal"
+                : "no swept setting brings the cached error under half, so the cached error is a floor "
+                  "the sample counts do not move, not noise");
+        if (isfinite(eq[k].cached_shadow) && isfinite(eq[k].no_cache_shadow))
+            fprintf(f,
+                    "The shadow term (lit fraction of light 0) has RMSE %.4g cached against %.4g without the "
+                    "cache "
+                    "at equal time.",
+                    eq[k].cached_shadow, eq[k].no_cache_shadow);
+        fputs("</li>\n", f);
     }
     fputs("</ul>\n", f);
 
-    fputs("<h2>Error against time per frame</h2>\n<p>Time per frame: the engine's frame time (the statistics sim "
-          "writes) without the sinks stage, so the comparison with the reference is not counted; mean over the "
-          "steady-state frames, on a shared, noisy machine. Points on the Pareto front are no slower and no less "
-          "exact than any other of their viewer count.</p>\n",
+    fputs(
+        "<h2>Error against time per frame</h2>\n<p>Time per frame here: ", f);
+    html_text(f, page->time_label ? page->time_label : "");
+    fputs("; mean over the steady-state frames, on a shared, noisy machine. The CSV has both the engine's "
+          "elapsed frame time (the statistics sim writes, without the sinks stage, so the comparison with the "
+          "reference is not counted) and the process CPU time of the frame less the sink's. Points on the "
+          "Pareto front are no slower and no less exact than any other of their viewer count.</p>\n",
           f);
     uint32_t counts[SRV_REP_MAX_VIEWER_COUNTS];
     size_t vc = viewer_counts(rows, n, counts, SRV_REP_MAX_VIEWER_COUNTS);
@@ -643,26 +722,34 @@ bool srv_rep_write_html(const char *dir, const srv_rep_row *rows, size_t n, cons
         char rel[64];
         snprintf(rel, sizeof rel, "plots/error_time_v%u.png", counts[k]);
         if (page->plots && file_exists(dir, rel))
-            fprintf(f, "<p><a href=\"plots/error_time_v%u.svg\"><img src=\"%s\" alt=\"error against time, %u viewers\" "
-                       "width=\"960\"></a></p>\n",
+            fprintf(f,
+                    "<p><a href=\"plots/error_time_v%u.svg\"><img src=\"%s\" alt=\"error against time, %u "
+                    "viewer(s)\" "
+                    "width=\"960\"></a></p>\n",
                     counts[k], rel, counts[k]);
         snprintf(rel, sizeof rel, "plots/error_frames_v%u.png", counts[k]);
         if (page->plots && file_exists(dir, rel))
-            fprintf(f, "<p><a href=\"plots/error_frames_v%u.svg\"><img src=\"%s\" alt=\"error over frames, %u viewers\" "
-                       "width=\"960\"></a></p>\n",
+            fprintf(f,
+                    "<p><a href=\"plots/error_frames_v%u.svg\"><img src=\"%s\" alt=\"error over frames, %u "
+                    "viewer(s)\" "
+                    "width=\"960\"></a></p>\n",
                     counts[k], rel, counts[k]);
     }
     if (!page->plots)
         fputs("<p>No plots: gnuplot was not available (the data and script are under plots/).</p>\n", f);
 
-    fputs("<h2>Configurations</h2>\n<p>The same as <a href=\"configs.csv\">configs.csv</a>; error over frames per "
-          "image in <a href=\"frames.csv\">frames.csv</a>. RMSE and PSNR in linear radiance (peak 1.0), over every "
-          "pixel; <i>denoised</i> removes the reference's own noise in quadrature (sqrt(RMSE&sup2; &minus; "
-          "noise&sup2;)); shadow: the lit fraction of light 0; AO only where no probes replace the sky term.</p>\n"
-          "<table><tr><th>configuration</th><th>family</th><th>viewers</th><th>ms/frame</th><th>ms/viewer</th>"
-          "<th>CPU ms/frame</th><th>effect rays/frame</th><th>RMSE</th><th>PSNR dB</th><th>RMSE denoised</th>"
-          "<th>shadow RMSE</th><th>AO RMSE</th><th>ref noise</th><th>FLIP</th></tr>\n",
-          f);
+    fputs(
+        "<h2>Configurations</h2>\n<p>The same as <a href=\"configs.csv\">configs.csv</a>; error over frames "
+        "per "
+        "image in <a href=\"frames.csv\">frames.csv</a>. RMSE and PSNR in linear radiance (peak 1.0), over "
+        "every "
+        "pixel; <i>denoised</i> removes the reference's own noise in quadrature (sqrt(RMSE&sup2; &minus; "
+        "noise&sup2;)); shadow: the lit fraction of light 0; AO only where no probes replace the sky "
+        "term.</p>\n"
+        "<table><tr><th>configuration</th><th>family</th><th>viewers</th><th>ms/frame (the time above)</th><th>ms/viewer</th>"
+        "<th>CPU ms/frame</th><th>effect rays/frame</th><th>RMSE</th><th>PSNR dB</th><th>RMSE denoised</th>"
+        "<th>shadow RMSE</th><th>AO RMSE</th><th>ref noise</th><th>FLIP</th></tr>\n",
+        f);
     for (size_t i = 0; i < n; i++) {
         const srv_rep_row *r = &rows[i];
         if (!r->done)
@@ -705,11 +792,14 @@ bool srv_rep_write_html(const char *dir, const srv_rep_row *rows, size_t n, cons
         if (!r->done || !file_exists(dir, r->heatmap))
             continue;
         if (first && file_exists(dir, r->frame_png) && file_exists(dir, r->ref_png)) {
-            fprintf(f, "<figure><img src=\"%s\" width=\"320\" alt=\"frame\"><figcaption>frame: ", r->frame_png);
+            fprintf(f,
+                    "<figure><img src=\"%s\" width=\"320\" alt=\"frame\"><figcaption>frame: ", r->frame_png);
             html_text(f, r->label);
-            fprintf(f, "</figcaption></figure><figure><img src=\"%s\" width=\"320\" alt=\"reference\"><figcaption>"
-                       "reference</figcaption></figure><br>\n",
-                    r->ref_png);
+            fprintf(
+                f,
+                "</figcaption></figure><figure><img src=\"%s\" width=\"320\" alt=\"reference\"><figcaption>"
+                "reference</figcaption></figure><br>\n",
+                r->ref_png);
         }
         first = false;
         fprintf(f, "<figure><img src=\"%s\" width=\"240\" alt=\"heat map\"><figcaption>", r->heatmap);

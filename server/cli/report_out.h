@@ -1,8 +1,8 @@
 /* What `fxcache report` writes (cmd_report.c runs the configurations): one row per configuration and its
  * compared images, kept as DIR/done/ID.json when the configuration finished (so an interrupted report resumes
- * without redoing it), and from those the CSVs, the Pareto front, the equal-time comparison, the gnuplot plots
- * and the HTML page. Everything here is rebuilt from the rows, so writing it again after a resume gives one
- * row per configuration, never a duplicate. */
+ * without redoing it), and from those the CSVs, the Pareto front, the equal-time comparison, the gnuplot
+ * plots and the HTML page. Everything here is rebuilt from the rows, so writing it again after a resume gives
+ * one row per configuration, never a duplicate. */
 #ifndef FXC_SERVER_REPORT_OUT_H
 #define FXC_SERVER_REPORT_OUT_H
 
@@ -27,16 +27,16 @@ typedef struct srv_rep_image {
 /* One configuration: what it sets, and once done what it measured. */
 typedef struct srv_rep_row {
     char id[64];     /* file-safe, unique: the marker's and the heat map's name */
-    char family[24]; /* the sweep it belongs to: default, bias, ao_samples, shadow_rays, probe_cell, probe_rays,
-                        ray_budget, viewers, no_cache */
+    char family[24]; /* the sweep it belongs to: default, bias, ao_samples, shadow_rays, probe_cell,
+                        probe_rays, ray_budget, viewers, no_cache */
     char label[96];  /* for people: "ao bias 2", "no cache x1/4" */
     uint32_t viewers;
     bool no_cache;
     double no_cache_samples;      /* the baseline's sample scale (1 when cached) */
     int32_t bias_shadow, bias_ao; /* level bias used */
     uint32_t ao_samples, shadow_rays, probe_rays;
-    double probe_cell;            /* metres, as used */
-    double ray_budget;            /* 0: unlimited */
+    double probe_cell; /* metres, as used */
+    double ray_budget; /* 0: unlimited */
     /* Results (valid when done). */
     bool done;
     uint32_t frames_timed, images;
@@ -55,8 +55,8 @@ typedef struct srv_rep_row {
 bool srv_rep_row_add_image(srv_rep_row *row, const srv_rep_image *image);
 void srv_rep_row_free_images(srv_rep_row *row);
 
-/* The row (settings, results and images) as JSON, and back: the marker's body. from_json fills the results and
- * images of a row whose settings are already set; false when the JSON lacks them. */
+/* The row (settings, results and images) as JSON, and back: the marker's body. from_json fills the results
+ * and images of a row whose settings are already set; false when the JSON lacks them. */
 json_t *srv_rep_row_json(const srv_rep_row *row);
 bool srv_rep_row_from_json(srv_rep_row *row, const json_t *json);
 
@@ -84,8 +84,13 @@ typedef struct srv_rep_equal {
     double no_cache_rmse; /* interpolated at cached_ms */
     int where;            /* srv_rep_equal_time's */
     uint32_t no_cache_points;
-    double ratio;         /* cached / no cache (NAN when not measured) */
-    bool goal_met;        /* ratio <= 0.5 */
+    double ratio;  /* cached / no cache (NAN when not measured) */
+    bool goal_met; /* ratio <= 0.5 */
+    /* For the reason when it is not met: */
+    double cached_shadow, no_cache_shadow; /* the shadow term's RMSE, the no-cache one at the same time */
+    const srv_rep_row *best; /* the cached configuration of this viewer count with the least RMSE */
+    double no_cache_at_best; /* the no-cache RMSE at the best one's time */
+    int where_best;
 } srv_rep_equal;
 
 /* Fills out for the default cached configuration of each viewer count that has a no-cache curve; returns how
@@ -93,23 +98,26 @@ typedef struct srv_rep_equal {
 size_t srv_rep_equal_times(const srv_rep_row *rows, size_t n, srv_rep_equal *out, size_t cap);
 
 /* The plots with gnuplot, if it is on PATH: per viewer count error against time per frame (Pareto front
- * marked) and error over frames, PNG and SVG under dir/plots/. Returns the number of plots made; -1 when
- * gnuplot is missing or failed (a line in err); the data and the script stay for a later run. */
-int srv_rep_plots(const char *dir, const srv_rep_row *rows, size_t n, char *err, size_t err_cap);
+ * marked) and error over frames, PNG and SVG under dir/plots/; time_label says what the rows' ms_per_frame
+ * is. Returns the number of plots made; -1 when gnuplot is missing or failed (a line in err); the data and the
+ * script stay for a later run. */
+int srv_rep_plots(const char *dir, const srv_rep_row *rows, size_t n, const char *time_label, char *err,
+                  size_t err_cap);
 
 /* What the page says of the run besides the rows. */
 typedef struct srv_rep_page {
-    const char *title;        /* the scene and cameras */
-    const char *command;      /* the command line */
-    const char *settings;     /* one paragraph: resolution, frames, warm-up, references */
-    bool plots;               /* the plots exist */
+    const char *title;    /* the scene and cameras */
+    const char *command;  /* the command line */
+    const char *settings; /* one paragraph: resolution, frames, warm-up, references */
+    bool plots;           /* the plots exist */
+    const char *time_label; /* what ms_per_frame is (the plots' and the comparison's time) */
     bool interrupted;
-    uint32_t planned;         /* configurations planned */
+    uint32_t planned; /* configurations planned */
 } srv_rep_page;
 
 /* dir/index.html: the headline comparison, the table, the plots, the heat maps and images; relative links
  * only, no script, readable offline. */
-bool srv_rep_write_html(const char *dir, const srv_rep_row *rows, size_t n, const srv_rep_page *page, char *err,
-                        size_t err_cap);
+bool srv_rep_write_html(const char *dir, const srv_rep_row *rows, size_t n, const srv_rep_page *page,
+                        char *err, size_t err_cap);
 
 #endif

@@ -87,7 +87,7 @@ typedef struct srv_loop_desc {
     uint32_t shadow_rays;                  /* shadow rays per texel and light: 1, 2, 4, 8 or 16 (default 16) */
     float no_cache_samples;                /* no_cache: the baseline's AO rays, shadow rays and probe rays per
                                               pixel as a multiple of ao_samples, shadow_rays and probe_rays, a
-                                              power of two in [1/16, 16] (default 1; AO at least 1 ray, shadow
+                                              power of two in [1/64, 16] (default 1; AO at least 1 ray, shadow
                                               rays 1..256, probe rays 1..4096) */
     uint32_t seed;
     uint32_t threads;                      /* 0 = all cores */

@@ -226,10 +226,10 @@ fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err,
     int scale_exponent = 0;
     float scale_mantissa = frexpf(loop->desc.no_cache_samples, &scale_exponent);
     if (loop->desc.ao_samples > FX_AO_SAMPLES_LIMIT || shadow_rays > FX_SHADOW_TEXEL_RAYS_MAX ||
-        (shadow_rays & (shadow_rays - 1)) != 0 || scale_mantissa != 0.5f || scale_exponent < -3 ||
+        (shadow_rays & (shadow_rays - 1)) != 0 || scale_mantissa != 0.5f || scale_exponent < -5 ||
         scale_exponent > 5) {
         snprintf(err, err_cap, "frame loop: AO samples must be 1..%d, shadow rays 1, 2, 4, 8 or 16, the no-cache "
-                               "sample scale a power of two in [1/16, 16]",
+                               "sample scale a power of two in [1/64, 16]",
                  FX_AO_SAMPLES_LIMIT);
         srv_loop_free(loop);
         return FXC_ERR_INVALID;
