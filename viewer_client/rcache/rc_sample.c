@@ -143,7 +143,7 @@ typedef struct rc_lane {
     uint32_t chosen##k = value##k >= 0.5f;                                                                    \
     mark##k[x] = (uint8_t)chosen##k;                                                                          \
     picked##k += chosen##k;                                                                                   \
-    float e##k = value##k - (float)chosen##k;
+    float e##k = value##k - (value##k >= 0.5f ? 1.0f : 0.0f); /* a compare and a mask: no int-to-float */
 /* Interior pixel x, moving by step (+1 or -1): below[x - step] is final with 3/16 of e; below[x] gets 5/16 (after
  * 1/16 from the pixel before), below[x + step] starts with 1/16. */
 #define RC_LANE_STEP(k, x, step)                                                                              \
