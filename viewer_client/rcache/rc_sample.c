@@ -125,7 +125,7 @@ typedef struct rc_lane {
 } rc_lane;
 
 /* One row of Floyd-Steinberg in four bands at once (the bands are independent: their chains of error interleave
- * in the processor), left to right (forward) or right to left: 7/16 of the error ahead, 3/16 below behind, 5/16
+ * in the processor; eight at once was slower, 1.1 against 0.7 ms: the lanes' state no longer fits in registers), left to right (forward) or right to left: 7/16 of the error ahead, 3/16 below behind, 5/16
  * below, 1/16 below ahead; at the row's ends the shares that would leave the band go to the others in
  * proportion. Not a band's last row (diffuse_last_row). The error ahead and the three errors below that are not
  * final yet stay in registers (the additions happen in the same order as into memory, so the floats are those
