@@ -1,29 +1,31 @@
 /* Benchmark of the viewer client's render cache (viewer_client/rcache): the client frame time stage by stage
- * (the 2002 paper's Table 1, which measured 62.1 ms at 512 x 512 on a 1.7 GHz Pentium 4; the issue's target here
- * is at most 4 ms on one core), its scaling to 1024 x 1024 (target: linear in the pixels) and to 2 threads
- * (target: at least 1.7 times faster), what each stage switch saves, and what it costs in image quality.
+ * (the 2002 paper's Table 1, which measured 62.1 ms at 512 x 512 on a 1.7 GHz Pentium 4; the issue's target
+ * here is at most 4 ms on one core), its scaling to 1024 x 1024 (target: linear in the pixels) and to 2
+ * threads (target: at least 1.7 times faster), what each stage switch saves, and what it costs in image
+ * quality.
  *
- * Input: a small analytic scene ray cast on the CPU here (a checkered floor, five spheres lit by one directional
- * light, the sky at +inf), standing in for the server. A camera orbits the scene at 7 m, turning `--deg` degrees a
- * frame (default 2) while it looks at the centre. Frame 0 inserts one whole frame (colour and depth, as the
- * server's first frame); from then on every client frame inserts the answers to the previous frame's requests
- * (both kinds, each pixel ray cast exactly at the camera it was asked for, one frame late: the server's answer),
- * then renders with the predicted camera `--lead` frames ahead (default 2). The budget is the default,
- * width * height / 32 samples a frame (8192 at 512 x 512, the paper's "roughly 8000"); capacity the default,
- * width * height points (`--capacity F`: F points a pixel), tiles of 64 (`--tile`). The first `--warmup` frames (default 60: the cache fills after 32) are not timed;
- * the next `--frames` (default 100) are, and each repetition reports the median of its frames; tables give the
- * median over `--reps` repetitions (default 5) and their range. A frame's time is the render call plus the
- * inserts before it ("update points"); the ray casting of the answers is the server's and is not counted.
+ * Input: a small analytic scene ray cast on the CPU here (a checkered floor, five spheres lit by one
+ * directional light, the sky at +inf), standing in for the server. A camera orbits the scene at 7 m, turning
+ * `--deg` degrees a frame (default 2) while it looks at the centre. Frame 0 inserts one whole frame (colour
+ * and depth, as the server's first frame); from then on every client frame inserts the answers to the
+ * previous frame's requests (both kinds, each pixel ray cast exactly at the camera it was asked for, one
+ * frame late: the server's answer), then renders with the predicted camera `--lead` frames ahead (default 2).
+ * The budget is the default, width * height / 32 samples a frame (8192 at 512 x 512, the paper's "roughly
+ * 8000"); capacity the default, width * height points (`--capacity F`: F points a pixel), tiles of 64
+ * (`--tile`). The first `--warmup` frames (default 60: the cache fills after 32) are not timed; the next
+ * `--frames` (default 100) are, and each repetition reports the median of its frames; tables give the median
+ * over `--reps` repetitions (default 5) and their range. A frame's time is the render call plus the inserts
+ * before it ("update points"); the ray casting of the answers is the server's and is not counted.
  *
  * Comparisons alternate inside every repetition (1 against 2 threads; default against each switch), so each
  * repetition gives a ratio measured under the same load; the tables report medians of those per-repetition
- * ratios. Image quality: every 10th measured frame is compared with the exact ray-cast image of the same camera
- * (mean absolute error over channels, and the share of pixels off by more than 32 in a channel).
+ * ratios. Image quality: every 10th measured frame is compared with the exact ray-cast image of the same
+ * camera (mean absolute error over channels, and the share of pixels off by more than 32 in a channel).
  *
  * Usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] [--lead 2] [--tile 64]
- *        [--capacity F] [--pin CPU] [--only table|scaling|threads|switches|quality] (default: all, in that order)
- * Each table also gives the process CPU time of a frame: on a machine shared with other jobs the wall time
- * includes the time the process waited for a core. */
+ *        [--capacity F] [--pin CPU] [--only table|scaling|threads|switches|quality] (default: all, in that
+ * order) Each table also gives the process CPU time of a frame: on a machine shared with other jobs the wall
+ * time includes the time the process waited for a core. */
 #define _GNU_SOURCE
 #include "rcache.h"
 
@@ -39,7 +41,7 @@
 
 enum { MAX_REPS = 64 };
 
-/* ---- the scene, ray cast in double --------------------------------------------------------------------------- */
+/* ---- the scene, ray cast in double --------------------------------------------------------------------- */
 
 typedef struct ball {
     double c[3], r;
@@ -47,8 +49,8 @@ typedef struct ball {
 } ball;
 
 static const ball balls[] = {
-    {{0, 1, 0}, 1.0, {0.85, 0.25, 0.2}},     {{2.5, 0.6, -1}, 0.6, {0.2, 0.7, 0.3}},
-    {{-2, 0.8, 1.5}, 0.8, {0.25, 0.35, 0.9}}, {{1.2, 0.4, 2.2}, 0.4, {0.9, 0.8, 0.2}},
+    {{0, 1, 0}, 1.0, {0.85, 0.25, 0.2}},       {{2.5, 0.6, -1}, 0.6, {0.2, 0.7, 0.3}},
+    {{-2, 0.8, 1.5}, 0.8, {0.25, 0.35, 0.9}},  {{1.2, 0.4, 2.2}, 0.4, {0.9, 0.8, 0.2}},
     {{-1.5, 1.5, -2.5}, 1.5, {0.7, 0.7, 0.7}},
 };
 static const double light[3] = {0.48, 0.8, 0.36}; /* unit */
@@ -151,7 +153,7 @@ static view_rc_camera orbit(double frame, double deg)
     return c;
 }
 
-/* ---- one run of the sequence ---------------------------------------------------------------------------------- */
+/* ---- one run of the sequence --------------------------------------------------------------------------- */
 
 typedef struct bench_opts {
     uint32_t res, tile;
@@ -165,8 +167,8 @@ typedef struct run_result {
     double frame_ms;                      /* median of render + inserts */
     double points, migrated, projected, culled, dropped, evicted, predicted, empty; /* medians */
     double interp, prefiltered;                                                     /* medians */
-    double cpu_ms;                        /* median of the frame's process CPU time (render + inserts) */
-    double mean_abs_error, bad_share;     /* quality (when asked) */
+    double cpu_ms;                    /* median of the frame's process CPU time (render + inserts) */
+    double mean_abs_error, bad_share; /* quality (when asked) */
 } run_result;
 
 static int cmp_double(const void *a, const void *b)
@@ -208,8 +210,8 @@ static void insert(view_rc *rc, const frame_cam *c, const view_rc_sample *buf, u
     }
 }
 
-static void run(const bench_opts *o, uint32_t res, const view_rc_desc *switches, uint32_t threads, bool quality,
-                run_result *out)
+static void run(const bench_opts *o, uint32_t res, const view_rc_desc *switches, uint32_t threads,
+                bool quality, run_result *out)
 {
     view_rc_desc d = *switches;
     d.width = d.height = res;
@@ -302,8 +304,8 @@ static void run(const bench_opts *o, uint32_t res, const view_rc_desc *switches,
     for (int s = 0; s < VIEW_RC_STAGE_COUNT; s++)
         out->stage_ms[s] = median_of(series[s], o->frames);
     out->frame_ms = median_of(series[VIEW_RC_STAGE_COUNT], o->frames);
-    double *figs[] = {&out->points,  &out->migrated,  &out->projected, &out->culled,
-                      &out->dropped, &out->evicted,   &out->predicted, &out->empty,
+    double *figs[] = {&out->points,  &out->migrated,    &out->projected, &out->culled,
+                      &out->dropped, &out->evicted,     &out->predicted, &out->empty,
                       &out->interp,  &out->prefiltered, &out->cpu_ms};
     for (int k = 0; k < 11; k++)
         *figs[k] = median_of(series[VIEW_RC_STAGE_COUNT + 1 + k], o->frames);
@@ -319,7 +321,7 @@ static void run(const bench_opts *o, uint32_t res, const view_rc_desc *switches,
     view_rc_destroy(rc);
 }
 
-/* ---- sections ------------------------------------------------------------------------------------------------ */
+/* ---- sections ------------------------------------------------------------------------------------------ */
 
 static void range_of(const double *v, int n, double *lo, double *mid, double *hi)
 {
@@ -328,62 +330,86 @@ static void range_of(const double *v, int n, double *lo, double *mid, double *hi
     *hi = bench_quantile(v, n, 1);
 }
 
-static void section_table(const bench_opts *o, uint32_t res, double *frame_median_out)
+static void section_table(const bench_opts *o, uint32_t res)
 {
-    double per[VIEW_RC_STAGE_COUNT + 1][MAX_REPS];
+    double per[VIEW_RC_STAGE_COUNT][MAX_REPS], frame[MAX_REPS], sums[MAX_REPS], cpu[MAX_REPS];
     run_result last = {0};
     for (int r = 0; r < o->reps; r++) {
         run(o, res, &(view_rc_desc){0}, 1, false, &last);
-        for (int s = 0; s < VIEW_RC_STAGE_COUNT; s++)
+        sums[r] = 0;
+        for (int s = 0; s < VIEW_RC_STAGE_COUNT; s++) {
             per[s][r] = last.stage_ms[s];
-        per[VIEW_RC_STAGE_COUNT][r] = last.frame_ms;
+            sums[r] += last.stage_ms[s];
+        }
+        frame[r] = last.frame_ms;
+        cpu[r] = last.cpu_ms;
     }
-    double lo, mid, hi, frame_mid;
-    range_of(per[VIEW_RC_STAGE_COUNT], o->reps, &lo, &frame_mid, &hi);
-    printf("\n%ux%u, 1 thread: median of %d repetitions (each the median of %d frames after %d of warm-up)\n", res,
-           res, o->reps, o->frames, o->warmup);
-    printf("| stage | ms | range | %% of the frame |\n|---|---|---|---|\n");
+    double lo, mid, hi, sum_mid;
+    range_of(sums, o->reps, &lo, &sum_mid, &hi);
+    printf("\n%ux%u, 1 thread: median of %d repetitions (each the median of %d frames after %d of warm-up)\n",
+           res, res, o->reps, o->frames, o->warmup);
+    printf("| stage | ms | range | %% of the sum |\n|---|---|---|---|\n");
     for (int s = 0; s < VIEW_RC_STAGE_COUNT; s++) {
         range_of(per[s], o->reps, &lo, &mid, &hi);
-        printf("| %s | %.3f | %.3f-%.3f | %.1f |\n", view_rc_stage_name(s), mid, lo, hi, 100 * mid / frame_mid);
+        printf("| %s | %.3f | %.3f-%.3f | %.1f |\n", view_rc_stage_name(s), mid, lo, hi, 100 * mid / sum_mid);
     }
-    range_of(per[VIEW_RC_STAGE_COUNT], o->reps, &lo, &mid, &hi);
-    printf("| **frame** (median of per-frame totals) | **%.3f** | %.3f-%.3f | |\n", mid, lo, hi);
-    printf("per frame (last repetition, medians): %.0f points, %.0f projected, %.0f migrated, %.0f culled, "
-           "%.0f dropped, %.0f evicted, %.0f predicted requests; pixels: %.0f interpolated, %.0f prefiltered, "
-           "%.0f empty; process CPU time %.3f ms\n",
-           last.points, last.projected, last.migrated, last.culled, last.dropped, last.evicted, last.predicted,
-           last.interp, last.prefiltered, last.empty, last.cpu_ms);
-    if (frame_median_out)
-        *frame_median_out = frame_mid;
+    range_of(sums, o->reps, &lo, &mid, &hi);
+    printf("| **sum of the stage medians** | **%.3f** | %.3f-%.3f | |\n", mid, lo, hi);
+    range_of(cpu, o->reps, &lo, &mid, &hi);
+    printf("| frame, process CPU time | %.3f | %.3f-%.3f | |\n", mid, lo, hi);
+    range_of(frame, o->reps, &lo, &mid, &hi);
+    printf("| frame, wall (median of per-frame totals) | %.3f | %.3f-%.3f | |\n", mid, lo, hi);
+    printf(
+        "per frame (last repetition, medians): %.0f points, %.0f projected, %.0f migrated, %.0f culled, "
+        "%.0f dropped, %.0f evicted, %.0f predicted requests; pixels: %.0f interpolated, %.0f prefiltered, "
+        "%.0f empty\n",
+        last.points, last.projected, last.migrated, last.culled, last.dropped, last.evicted, last.predicted,
+        last.interp, last.prefiltered, last.empty);
+}
+
+/* The sum of a run's stage medians: each stage is short, so its median over the frames leaves out the frames
+ * in which the process waited for a core; the sum is the frame as it runs when it has one. */
+static double stage_sum(const run_result *r)
+{
+    double sum = 0;
+    for (int s = 0; s < VIEW_RC_STAGE_COUNT; s++)
+        sum += r->stage_ms[s];
+    return sum;
 }
 
 static void section_scaling(const bench_opts *o)
 {
-    /* 512 and 1024 alternate inside each repetition; the ratio is per pixel (1.0 = linear). */
-    double r512[MAX_REPS], r1024[MAX_REPS], ratio[MAX_REPS];
+    /* 512 and 1024 alternate inside each repetition; the ratios are per pixel (1.0 = linear). */
+    double wall[2][MAX_REPS], sums[2][MAX_REPS], cpu[2][MAX_REPS], ratio[3][MAX_REPS];
     for (int r = 0; r < o->reps; r++) {
         run_result a, b;
         run(o, 512, &(view_rc_desc){0}, 1, false, &a);
         run(o, 1024, &(view_rc_desc){0}, 1, false, &b);
-        r512[r] = a.frame_ms;
-        r1024[r] = b.frame_ms;
-        ratio[r] = b.frame_ms / (4 * a.frame_ms);
+        wall[0][r] = a.frame_ms, wall[1][r] = b.frame_ms;
+        sums[0][r] = stage_sum(&a), sums[1][r] = stage_sum(&b);
+        cpu[0][r] = a.cpu_ms, cpu[1][r] = b.cpu_ms;
+        ratio[0][r] = b.frame_ms / (4 * a.frame_ms);
+        ratio[1][r] = sums[1][r] / (4 * sums[0][r]);
+        ratio[2][r] = b.cpu_ms / (4 * a.cpu_ms);
     }
     double lo, mid, hi;
     printf("\nscaling, 1 thread, %d repetitions alternating 512x512 and 1024x1024\n", o->reps);
-    printf("| figure | median | range |\n|---|---|---|\n");
-    range_of(r512, o->reps, &lo, &mid, &hi);
-    printf("| 512x512 frame ms | %.3f | %.3f-%.3f |\n", mid, lo, hi);
-    range_of(r1024, o->reps, &lo, &mid, &hi);
-    printf("| 1024x1024 frame ms | %.3f | %.3f-%.3f |\n", mid, lo, hi);
-    range_of(ratio, o->reps, &lo, &mid, &hi);
-    printf("| 1024 time / (4 x 512 time) | %.3f | %.3f-%.3f |\n", mid, lo, hi);
+    printf("| figure | 512x512 ms | 1024x1024 ms | 1024 / (4 x 512), median (range) |\n|---|---|---|---|\n");
+    const char *names[3] = {"frame, wall (median of per-frame totals)", "sum of the stage medians",
+                            "frame, process CPU time"};
+    double(*series[3])[MAX_REPS] = {wall, sums, cpu};
+    for (int k = 0; k < 3; k++) {
+        range_of(ratio[k], o->reps, &lo, &mid, &hi);
+        printf("| %s | %.3f | %.3f | %.3f (%.3f-%.3f) |\n", names[k],
+               bench_quantile(series[k][0], o->reps, 0.5), bench_quantile(series[k][1], o->reps, 0.5), mid,
+               lo, hi);
+    }
 }
 
 static void section_threads(const bench_opts *o)
 {
-    double t1[MAX_REPS], t2[MAX_REPS], speedup[MAX_REPS];
+    double t1[MAX_REPS], t2[MAX_REPS], speedup[MAX_REPS], sum1[MAX_REPS], sum2[MAX_REPS],
+        sum_speedup[MAX_REPS];
     double s1[VIEW_RC_STAGE_COUNT][MAX_REPS], s2[VIEW_RC_STAGE_COUNT][MAX_REPS];
     for (int r = 0; r < o->reps; r++) {
         run_result a, b;
@@ -392,6 +418,8 @@ static void section_threads(const bench_opts *o)
         t1[r] = a.frame_ms;
         t2[r] = b.frame_ms;
         speedup[r] = a.frame_ms / b.frame_ms;
+        sum1[r] = stage_sum(&a), sum2[r] = stage_sum(&b);
+        sum_speedup[r] = sum1[r] / sum2[r];
         for (int s = 0; s < VIEW_RC_STAGE_COUNT; s++)
             s1[s][r] = a.stage_ms[s], s2[s][r] = b.stage_ms[s];
     }
@@ -405,8 +433,13 @@ static void section_threads(const bench_opts *o)
     printf("| frame, 1 thread | %.3f (%.3f-%.3f) | |\n", mid, lo, hi);
     range_of(t2, o->reps, &lo, &mid, &hi);
     printf("| frame, 2 threads | | %.3f (%.3f-%.3f) |\n", mid, lo, hi);
+    printf("| sum of the stage medians | %.3f | %.3f |\n", bench_quantile(sum1, o->reps, 0.5),
+           bench_quantile(sum2, o->reps, 0.5));
     range_of(speedup, o->reps, &lo, &mid, &hi);
-    printf("speed-up (per-repetition ratio 1 thread / 2 threads): median %.3f, range %.3f-%.3f\n", mid, lo, hi);
+    printf("speed-up (per-repetition ratio 1 thread / 2 threads), frames: median %.3f, range %.3f-%.3f\n",
+           mid, lo, hi);
+    range_of(sum_speedup, o->reps, &lo, &mid, &hi);
+    printf("speed-up, sums of the stage medians: median %.3f, range %.3f-%.3f\n", mid, lo, hi);
 }
 
 typedef struct variant {
@@ -424,7 +457,8 @@ static void section_switches(const bench_opts *o)
 {
     printf("\n%ux%u, 1 thread, each switch against the default, %d repetitions alternating\n", o->res, o->res,
            o->reps);
-    printf("| switch | default frame ms | switched frame ms | switched / default (range) | stages that change |\n");
+    printf("| switch | default frame ms | switched frame ms | switched / default (range) | stages that "
+           "change |\n");
     printf("|---|---|---|---|---|\n");
     for (size_t v = 0; v < sizeof variants / sizeof variants[0]; v++) {
         double a_ms[MAX_REPS], b_ms[MAX_REPS], ratio[MAX_REPS];
@@ -443,7 +477,8 @@ static void section_switches(const bench_opts *o)
         int most[2] = {0, 0};
         double moved[2] = {0, 0};
         for (int st = 0; st < VIEW_RC_STAGE_COUNT; st++) {
-            double delta = bench_quantile(b_stage[st], o->reps, 0.5) - bench_quantile(a_stage[st], o->reps, 0.5);
+            double delta =
+                bench_quantile(b_stage[st], o->reps, 0.5) - bench_quantile(a_stage[st], o->reps, 0.5);
             if (fabs(delta) > fabs(moved[0])) {
                 moved[1] = moved[0], most[1] = most[0];
                 moved[0] = delta, most[0] = st;
@@ -474,8 +509,8 @@ static void section_quality(const bench_opts *o)
         if (variants[v].d.no_tiling)
             continue; /* the same image as the default up to ties */
         run(o, o->res, &variants[v].d, 1, true, &a);
-        printf("| %s | %.2f | %.2f %% | %.0f | %.0f |\n", variants[v].name, a.mean_abs_error, 100 * a.bad_share,
-               a.empty, a.predicted);
+        printf("| %s | %.2f | %.2f %% | %.0f | %.0f |\n", variants[v].name, a.mean_abs_error,
+               100 * a.bad_share, a.empty, a.predicted);
     }
 }
 
@@ -507,14 +542,16 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--only") && next)
             only = argv[++i];
         else {
-            fprintf(stderr, "usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] "
-                            "[--lead 2] [--tile 64] [--capacity F] [--pin CPU] "
-                            "[--only table|scaling|threads|switches|quality]\n");
+            fprintf(stderr,
+                    "usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] "
+                    "[--lead 2] [--tile 64] [--capacity F] [--pin CPU] "
+                    "[--only table|scaling|threads|switches|quality]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }
     }
     if (o.reps < 1 || o.reps > MAX_REPS || o.frames < 1 || o.warmup < 0 || o.res < 16 || o.res > 4096) {
-        fprintf(stderr, "bench_rcache: bad --reps (1..%d), --frames, --warmup or --res (16..4096)\n", MAX_REPS);
+        fprintf(stderr, "bench_rcache: bad --reps (1..%d), --frames, --warmup or --res (16..4096)\n",
+                MAX_REPS);
         return 2;
     }
     if (pin >= 0) {
@@ -524,11 +561,12 @@ int main(int argc, char **argv)
         if (sched_setaffinity(0, sizeof set, &set) != 0)
             perror("bench_rcache: sched_setaffinity");
     }
-    printf("bench_rcache: %ux%u, orbit %.1f deg/frame, prediction %d frames ahead, %d warm-up + %d measured frames, "
+    printf("bench_rcache: %ux%u, orbit %.1f deg/frame, prediction %d frames ahead, %d warm-up + %d measured "
+           "frames, "
            "%d repetitions%s\n",
            o.res, o.res, o.deg, o.lead, o.warmup, o.frames, o.reps, pin >= 0 ? ", pinned" : "");
     if (!only || !strcmp(only, "table"))
-        section_table(&o, o.res, NULL);
+        section_table(&o, o.res);
     if (!only || !strcmp(only, "scaling"))
         section_scaling(&o);
     if (!only || !strcmp(only, "threads"))

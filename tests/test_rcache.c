@@ -1,7 +1,7 @@
 /* Tests of the client's render cache (viewer_client/rcache/rcache.h), each against something worked out apart
- * from the code: a ray caster of a small analytic scene written here in double (a floor, a sphere, a wall and the
- * sky), closed-form projections by angles, filter outputs computed by hand, and counts that follow from the
- * stated rules.
+ * from the code: a ray caster of a small analytic scene written here in double (a floor, a sphere, a wall and
+ * the sky), closed-form projections by angles, filter outputs computed by hand, and counts that follow from
+ * the stated rules.
  *
  *   - a frame reprojected to its own camera gives back its colours exactly and its depths up to their
  *     quantization (binary16 as on the wire), with 1 and 3 threads and odd sizes;
@@ -15,8 +15,8 @@
  *   - ageing steps of 128 k / N with the fraction carried, hidden points twice as fast, eviction at 255 (and
  *     none with no_eviction), a full cache dropping its oldest points at age 128, a colour change ageing the
  *     neighbours, a new frame replacing what it saw;
- *   - 1, 2 and 4 threads give bit-identical frames, requests and caches over a moving sequence, and tiles of any
- *     size (or none) the same image;
+ *   - 1, 2 and 4 threads give bit-identical frames, requests and caches over a moving sequence, and tiles of
+ * any size (or none) the same image;
  *   - descriptions and cameras out of range are refused;
  *   - the library needs nothing but libc, libm and pthreads (nm; the same check refuses fxc_proto). */
 #include "test_util.h"
@@ -30,10 +30,11 @@
 
 #define PI 3.14159265358979323846
 
-/* ---- a small analytic scene, ray cast in double ---------------------------------------------------------- */
+/* ---- a small analytic scene, ray cast in double -------------------------------------------------------- */
 
-/* Floor y = floor_y (checkered; -1.5 unless a test lowers the sphere onto it), sphere of radius 1 at (0, 0, -5)
- * (shaded by its normal), wall z = -12 up to y = 3 (striped), sky beyond. Returns the distance along the unit ray dir from o (+inf for the sky) and the colour. */
+/* Floor y = floor_y (checkered; -1.5 unless a test lowers the sphere onto it), sphere of radius 1 at (0, 0,
+ * -5) (shaded by its normal), wall z = -12 up to y = 3 (striped), sky beyond. Returns the distance along the
+ * unit ray dir from o (+inf for the sky) and the colour. */
 typedef struct scene_hit {
     double t;
     uint8_t rgb[3];
@@ -92,7 +93,8 @@ static view_rc_camera look(double px, double py, double pz, double tx, double ty
     return c;
 }
 
-/* The unit ray through pixel (x + 0.5, y + 0.5) of cam's w x h image, the server's pinhole model in double. */
+/* The unit ray through pixel (x + 0.5, y + 0.5) of cam's w x h image, the server's pinhole model in double.
+ */
 static void pixel_ray(const view_rc_camera *cam, uint32_t w, uint32_t h, uint32_t x, uint32_t y, double d[3])
 {
     double f[3] = {cam->direction[0], cam->direction[1], cam->direction[2]};
@@ -154,7 +156,7 @@ static void render(view_rc *rc, const view_rc_camera *cam, const view_rc_camera 
     assert_int_equal(view_rc_render(rc, cam, predicted, f), FXC_OK);
 }
 
-/* ---- descriptions and cameras ------------------------------------------------------------------------------ */
+/* ---- descriptions and cameras -------------------------------------------------------------------------- */
 
 static void test_desc_defaults_and_refusals(void **state)
 {
@@ -225,7 +227,7 @@ static void test_desc_defaults_and_refusals(void **state)
     view_rc_destroy(rc);
 }
 
-/* ---- reprojection to the frame's own camera ------------------------------------------------------------- */
+/* ---- reprojection to the frame's own camera ------------------------------------------------------------ */
 
 static void check_own_camera(uint32_t threads, bool half, bool cull)
 {
@@ -237,8 +239,8 @@ static void check_own_camera(uint32_t threads, bool half, bool cull)
     if (half)
         for (size_t p = 0; p < (size_t)w * h; p++)
             depth[p] = to_half(depth[p]);
-    view_rc *rc = make(&(view_rc_desc){.width = w, .height = h, .tile_size = 16, .threads = threads,
-                                       .no_depth_cull = !cull});
+    view_rc *rc = make(&(view_rc_desc){
+        .width = w, .height = h, .tile_size = 16, .threads = threads, .no_depth_cull = !cull});
     assert_int_equal(view_rc_insert_frame(rc, &cam, w, h, rgb, depth), FXC_OK);
     view_rc_frame f;
     render(rc, &cam, NULL, &f);
@@ -270,20 +272,21 @@ static void test_reprojection_own_camera(void **state)
     check_own_camera(1, false, true);
     check_own_camera(1, true, true);
     check_own_camera(3, true, true);
-    /* With the sphere resting on the floor, the floor shows in slivers one pixel thin behind the contact, which
-     * the depth cull (a 3x3 heuristic) cannot tell from a gap in the sphere: exact without the cull. */
+    /* With the sphere resting on the floor, the floor shows in slivers one pixel thin behind the contact,
+     * which the depth cull (a 3x3 heuristic) cannot tell from a gap in the sphere: exact without the cull. */
     floor_y = -1.0;
     check_own_camera(1, true, false);
     check_own_camera(2, false, false);
     floor_y = -1.5;
 }
 
-/* ---- closed-form motion ----------------------------------------------------------------------------------- */
+/* ---- closed-form motion -------------------------------------------------------------------------------- */
 
 /* Points on the middle row of a camera at the origin looking down -z (the row's rays have y = 0 exactly: the
- * height is odd), then the camera turned by yaw a about +y or moved by (tx, ty, 0): a point at (X, 0, -Z) seen
- * under azimuth atan(X / Z) from -z appears at column W/2 (1 + tan(azimuth - a) / tan_half_x) after the turn, and
- * at column W/2 (1 + (X - tx) / (Z tan_half_x)), row H/2 (1 + ty / (Z tan_half_y)) after the move. */
+ * height is odd), then the camera turned by yaw a about +y or moved by (tx, ty, 0): a point at (X, 0, -Z)
+ * seen under azimuth atan(X / Z) from -z appears at column W/2 (1 + tan(azimuth - a) / tan_half_x) after the
+ * turn, and at column W/2 (1 + (X - tx) / (Z tan_half_x)), row H/2 (1 + ty / (Z tan_half_y)) after the move.
+ */
 static void test_closed_form_motion(void **state)
 {
     (void)state;
@@ -298,14 +301,16 @@ static void test_closed_form_motion(void **state)
     double X[N], Z[N];
     for (int i = 0; i < N; i++) {
         samples[i] = (view_rc_sample){.x = (uint16_t)columns[i], .y = (h - 1) / 2, .depth = dist[i]};
-        samples[i].rgb[0] = (uint8_t)(30 * i + 10), samples[i].rgb[1] = 200, samples[i].rgb[2] = (uint8_t)(7 * i);
+        samples[i].rgb[0] = (uint8_t)(30 * i + 10), samples[i].rgb[1] = 200,
+        samples[i].rgb[2] = (uint8_t)(7 * i);
         double sx = (2.0 * (columns[i] + 0.5) / w - 1.0) * thx;
         Z[i] = dist[i] / sqrt(1 + sx * sx);
         X[i] = sx * Z[i];
     }
     struct {
         double yaw_deg, tx, ty;
-    } moves[] = {{0, 0, 0}, {4, 0, 0}, {-7.5, 0, 0}, {12, 0, 0}, {0, 0.6, 0}, {0, -1.1, 0.35}, {0, 0.25, -0.5}};
+    } moves[] = {{0, 0, 0},   {4, 0, 0},       {-7.5, 0, 0},   {12, 0, 0},
+                 {0, 0.6, 0}, {0, -1.1, 0.35}, {0, 0.25, -0.5}};
     for (size_t m = 0; m < sizeof moves / sizeof moves[0]; m++) {
         view_rc *rc = make(&(view_rc_desc){.width = w, .height = h, .tile_size = 32, .no_prefilter = true});
         assert_int_equal(view_rc_insert_samples(rc, &c0, w, h, samples, N), FXC_OK);
@@ -332,7 +337,8 @@ static void test_closed_form_motion(void **state)
                 continue;
             size_t p = (size_t)floor(py) * w + (size_t)floor(px);
             if (f.kind[p] != VIEW_RC_POINT || memcmp(f.rgb + 3 * p, samples[i].rgb, 3) != 0)
-                fail_msg("move %zu, point %d: expected at (%.3f, %.3f), kind %d there", m, i, px, py, f.kind[p]);
+                fail_msg("move %zu, point %d: expected at (%.3f, %.3f), kind %d there", m, i, px, py,
+                         f.kind[p]);
             expected_points++;
         }
         assert_true(expected_points >= 4);
@@ -341,7 +347,7 @@ static void test_closed_form_motion(void **state)
     }
 }
 
-/* ---- the depth test ---------------------------------------------------------------------------------------- */
+/* ---- the depth test ------------------------------------------------------------------------------------ */
 
 static void test_depth_test_keeps_nearer(void **state)
 {
@@ -381,7 +387,8 @@ static void test_depth_test_keeps_nearer(void **state)
     assert_int_equal(view_rc_insert_frame(rc, &cam, w, h, rgb, depth), FXC_OK);
     view_rc_sample s[4];
     for (int i = 0; i < 4; i++)
-        s[i] = (view_rc_sample){.x = (uint16_t)(4 + 6 * i), .y = 9, .rgb = {200, 100, (uint8_t)i}, .depth = 2.5f};
+        s[i] = (view_rc_sample){
+            .x = (uint16_t)(4 + 6 * i), .y = 9, .rgb = {200, 100, (uint8_t)i}, .depth = 2.5f};
     assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, s, 4), FXC_OK);
     view_rc_frame f;
     render(rc, &cam, NULL, &f);
@@ -391,7 +398,7 @@ static void test_depth_test_keeps_nearer(void **state)
     view_rc_destroy(rc);
 }
 
-/* ---- disocclusion --------------------------------------------------------------------------------------------- */
+/* ---- disocclusion -------------------------------------------------------------------------------------- */
 
 static void test_disocclusion_empty_and_first(void **state)
 {
@@ -408,7 +415,8 @@ static void test_disocclusion_empty_and_first(void **state)
     view_rc_camera c1 = look(1.5, 0, 0, 1.5, 0, -1, 50); /* 1.5 m to the right */
     render(rc, &c1, NULL, &f);
 
-    /* Disoccluded: pixels of c1 that see the wall where c0's view of that wall point was blocked by the sphere. */
+    /* Disoccluded: pixels of c1 that see the wall where c0's view of that wall point was blocked by the
+     * sphere. */
     uint8_t *dis = calloc(w * h, 1);
     uint32_t dis_count = 0;
     for (uint32_t y = 0; y < h; y++)
@@ -481,10 +489,11 @@ static void test_disocclusion_empty_and_first(void **state)
     free(depth);
 }
 
-/* ---- filters on hand-made patterns ------------------------------------------------------------------------- */
+/* ---- filters on hand-made patterns --------------------------------------------------------------------- */
 
 /* Samples at chosen pixels of a camera, all 5 m away along their rays, rendered with the same camera. */
-static view_rc_frame filter_frame(view_rc **rc_out, const view_rc_desc *d, const view_rc_sample *s, uint32_t n)
+static view_rc_frame filter_frame(view_rc **rc_out, const view_rc_desc *d, const view_rc_sample *s,
+                                  uint32_t n)
 {
     view_rc *rc = make(d);
     view_rc_camera cam = look(0, 0, 0, 0, 0, -1, 60);
@@ -525,7 +534,8 @@ static void test_filters_by_hand(void **state)
     /* (10, 11): above (200,0,0) weight 2, right (30,60,90) weight 2; total 4:
      * (400 + 60 + 2) / 4 = 115, (0 + 120 + 2) / 4 = 30, (0 + 180 + 2) / 4 = 45. */
     expect_pixel(&f, 10, 11, VIEW_RC_INTERP, 115, 30, 45);
-    /* (11, 9): two corners, weight 1 each: (200 + 0 + 1) / 2 = 100, (0 + 100 + 1) / 2 = 50, (0 + 50 + 1) / 2 = 25. */
+    /* (11, 9): two corners, weight 1 each: (200 + 0 + 1) / 2 = 100, (0 + 100 + 1) / 2 = 50, (0 + 50 + 1) / 2
+     * = 25. */
     expect_pixel(&f, 11, 9, VIEW_RC_INTERP, 100, 50, 25);
     /* (12, 12): one corner (30,60,90): itself. */
     expect_pixel(&f, 12, 12, VIEW_RC_INTERP, 30, 60, 90);
@@ -563,7 +573,7 @@ static void test_filters_by_hand(void **state)
     view_rc_destroy(rc);
 }
 
-/* ---- the dither -------------------------------------------------------------------------------------------------- */
+/* ---- the dither ---------------------------------------------------------------------------------------- */
 
 static void check_distinct(const view_rc_pixel *px, uint32_t n, uint32_t w, uint32_t h)
 {
@@ -629,7 +639,7 @@ static void test_dither(void **state)
     free(out);
 }
 
-/* ---- prediction ----------------------------------------------------------------------------------------------- */
+/* ---- prediction ---------------------------------------------------------------------------------------- */
 
 static void test_predicted_requests(void **state)
 {
@@ -649,8 +659,8 @@ static void test_predicted_requests(void **state)
                                  .fov_deg = 60};
         view_rc_frame f;
         render(rc, &c0, &turned, &f);
-        /* Where a ray of `turned` through image-plane point (sx, sy) meets c0's image plane: c0 sees along -z,
-         * `turned` along (sin a, 0, -cos a) with right (cos a, 0, sin a), so the ray's c0 coordinates are
+        /* Where a ray of `turned` through image-plane point (sx, sy) meets c0's image plane: c0 sees along
+         * -z, `turned` along (sin a, 0, -cos a) with right (cos a, 0, sin a), so the ray's c0 coordinates are
          * x = sin a + sx cos a, y = sy, depth = cos a - sx sin a. Outside c0's frustum when |x| / depth or
          * |y| / depth exceeds c0's tangents: nothing is cached there. */
         double a = 25 * PI / 180, thy = tan(30 * PI / 180), thx = thy * w / h;
@@ -662,8 +672,8 @@ static void test_predicted_requests(void **state)
                     double sx = (2.0 * (4 * lx + (corner & 1) * 4) / w - 1.0) * thx;
                     double sy = (1.0 - 2.0 * (4 * ly + (corner >> 1) * 4) / h) * thy;
                     double depth0 = cos(a) - sx * sin(a), x0 = sin(a) + sx * cos(a);
-                    all_out &= depth0 > 0 && (x0 / depth0 > thx * (1 + 2.0 / w) ||
-                                              fabs(sy) / depth0 > thy * (1 + 2.0 / h));
+                    all_out &= depth0 > 0 &&
+                               (x0 / depth0 > thx * (1 + 2.0 / w) || fabs(sy) / depth0 > thy * (1 + 2.0 / h));
                 }
                 surely_empty += all_out;
             }
@@ -696,7 +706,7 @@ static void test_predicted_requests(void **state)
     free(depth);
 }
 
-/* ---- ageing and eviction ---------------------------------------------------------------------------------------- */
+/* ---- ageing and eviction ------------------------------------------------------------------------------- */
 
 /* The age of the cached point with colour (r, g, b), or -1. */
 static int age_of(const view_rc *rc, uint8_t r, uint8_t g, uint8_t b)
@@ -713,14 +723,15 @@ static int age_of(const view_rc *rc, uint8_t r, uint8_t g, uint8_t b)
 }
 
 /* 48 samples a frame into a cache of 4096 points: steps of 128 * 48 / 4096 = 1.5, carried: 1, 2, 1, 2, ... so
- * after F frames a visible point is floor(1.5 F) old and a hidden one floor(3 F); the hidden one reaches 255 at
- * frame 85 and is evicted; with no_eviction it stays at 254. */
+ * after F frames a visible point is floor(1.5 F) old and a hidden one floor(3 F); the hidden one reaches 255
+ * at frame 85 and is evicted; with no_eviction it stays at 254. */
 static void test_ageing_and_eviction(void **state)
 {
     (void)state;
     const uint32_t w = 64, h = 64;
     for (int no_eviction = 0; no_eviction < 2; no_eviction++) {
-        view_rc *rc = make(&(view_rc_desc){.width = w, .height = h, .capacity = 4096, .no_eviction = no_eviction});
+        view_rc *rc =
+            make(&(view_rc_desc){.width = w, .height = h, .capacity = 4096, .no_eviction = no_eviction});
         view_rc_camera cam = look(0, 0, 0, 0, 0, -1, 60), back = look(0, 0, 0, 0, 0, 1, 60);
         /* One point in view (colour 1, 2, 3) and one behind the camera (4, 5, 6). */
         view_rc_sample seen = {.x = 0, .y = 0, .rgb = {1, 2, 3}, .depth = 4};
@@ -731,11 +742,14 @@ static void test_ageing_and_eviction(void **state)
         view_rc_frame f;
         render(rc, &cam, NULL, &f); /* frame 0 inserted 2: its step is 0 */
         assert_int_equal(age_of(rc, 1, 2, 3), 0);
-        for (int frame = 1; frame <= 85; frame++) { /* 85 * 48 + 2 points: within the capacity and the image */
+        for (int frame = 1; frame <= 85;
+             frame++) { /* 85 * 48 + 2 points: within the capacity and the image */
             view_rc_sample fill[48];
             for (int i = 0; i < 48; i++) {
                 uint32_t p = next_pixel++;
-                fill[i] = (view_rc_sample){.x = (uint16_t)(p % w), .y = (uint16_t)(p / w), .depth = 6,
+                fill[i] = (view_rc_sample){.x = (uint16_t)(p % w),
+                                           .y = (uint16_t)(p / w),
+                                           .depth = 6,
                                            .rgb = {200, (uint8_t)(p & 0xFF), (uint8_t)(p >> 8)}};
             }
             assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, fill, 48), FXC_OK);
@@ -772,8 +786,8 @@ static void test_full_cache_drops_oldest_at_128(void **state)
         view_rc_sample s[256];
         for (uint32_t i = 0; i < 256; i++) {
             uint32_t p = frame * 256 + i; /* never the same pixel twice */
-            s[i] = (view_rc_sample){.x = (uint16_t)(p % w), .y = (uint16_t)(p / w), .depth = 5,
-                                    .rgb = {(uint8_t)frame, 9, 9}};
+            s[i] = (view_rc_sample){
+                .x = (uint16_t)(p % w), .y = (uint16_t)(p / w), .depth = 5, .rgb = {(uint8_t)frame, 9, 9}};
         }
         assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, s, 256), FXC_OK);
         view_rc_frame f;
@@ -833,7 +847,8 @@ static void test_colour_change_penalty(void **state)
     view_rc_destroy(rc);
 }
 
-/* A frame replaces what it saw: the same view twice holds one frame's points, showing the second's colours. */
+/* A frame replaces what it saw: the same view twice holds one frame's points, showing the second's colours.
+ */
 static void test_frame_replaces_what_it_saw(void **state)
 {
     (void)state;
@@ -858,7 +873,7 @@ static void test_frame_replaces_what_it_saw(void **state)
     free(depth);
 }
 
-/* ---- threads -------------------------------------------------------------------------------------------------------- */
+/* ---- threads ------------------------------------------------------------------------------------------- */
 
 /* A walk: a first frame, then each client frame the camera turns and moves a little, the previous frame's
  * requests (both kinds) are answered by the ray caster with one frame of delay, and every few frames a whole
@@ -903,8 +918,8 @@ static walk_log walk(uint32_t threads, uint32_t tile)
 {
     const uint32_t w = 83, h = 57;
     walk_log log = {0};
-    view_rc *rc = make(&(view_rc_desc){.width = w, .height = h, .threads = threads, .tile_size = tile,
-                                       .capacity = w * h * 3 / 2});
+    view_rc *rc = make(&(view_rc_desc){
+        .width = w, .height = h, .threads = threads, .tile_size = tile, .capacity = w * h * 3 / 2});
     uint8_t *rgb = malloc(w * h * 3);
     float *depth = malloc(w * h * sizeof(float));
     view_rc_pixel *req = malloc(sizeof *req * w * h), *pred = malloc(sizeof *pred * w * h);
@@ -926,8 +941,8 @@ static walk_log walk(uint32_t threads, uint32_t tile)
         log_bytes(&log, f.priority, (size_t)w * h);
         log_bytes(&log, f.requests, f.request_count * sizeof(view_rc_pixel));
         log_bytes(&log, f.predicted_requests, f.predicted_count * sizeof(view_rc_pixel));
-        uint32_t counts[] = {f.stats.points, f.stats.projected, f.stats.migrated, f.stats.culled,
-                             f.stats.evicted, f.stats.dropped, f.stats.superseded};
+        uint32_t counts[] = {f.stats.points,  f.stats.projected, f.stats.migrated,  f.stats.culled,
+                             f.stats.evicted, f.stats.dropped,   f.stats.superseded};
         log_bytes(&log, counts, sizeof counts);
         memcpy(req, f.requests, f.request_count * sizeof *req);
         memcpy(pred, f.predicted_requests, f.predicted_count * sizeof *pred);
@@ -969,11 +984,11 @@ static void test_threads_bit_identical(void **state)
     }
 }
 
-/* ---- tiles ---------------------------------------------------------------------------------------------------------- */
+/* ---- tiles --------------------------------------------------------------------------------------------- */
 
-/* Tiles organise the work; they must not change the picture: the same sparse points (a pattern dense here, sparse
- * there, so that both ways of the prefilter run) through tiles of 8, 16, 64 and 256 pixels, and through the
- * one-pass z-buffer of no_tiling, give the same image, depths, kinds and priorities. */
+/* Tiles organise the work; they must not change the picture: the same sparse points (a pattern dense here,
+ * sparse there, so that both ways of the prefilter run) through tiles of 8, 16, 64 and 256 pixels, and
+ * through the one-pass z-buffer of no_tiling, give the same image, depths, kinds and priorities. */
 static void test_tiles_do_not_change_the_image(void **state)
 {
     (void)state;
@@ -1001,7 +1016,8 @@ static void test_tiles_do_not_change_the_image(void **state)
     const uint32_t tiles[] = {64, 8, 16, 256, 64};
     for (size_t t = 0; t < sizeof tiles / sizeof tiles[0]; t++) {
         bool direct = t + 1 == sizeof tiles / sizeof tiles[0];
-        view_rc *rc = make(&(view_rc_desc){.width = w, .height = h, .tile_size = tiles[t], .no_tiling = direct});
+        view_rc *rc =
+            make(&(view_rc_desc){.width = w, .height = h, .tile_size = tiles[t], .no_tiling = direct});
         assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, s, n), FXC_OK);
         view_rc_frame f;
         render(rc, &moved, NULL, &f);
@@ -1024,16 +1040,18 @@ static void test_tiles_do_not_change_the_image(void **state)
     free(s);
 }
 
-/* ---- the client stays light --------------------------------------------------------------------------------- */
+/* ---- the client stays light ---------------------------------------------------------------------------- */
 
 /* The symbols an archive leaves undefined that are not its own (view_rc_), libc's, libm's, pthreads' or the
  * compiler runtime's (function multi-versioning, sanitizers), through `nm -u`; their count, the first few in
  * `names`. -1 when nm cannot run. */
 static int foreign_symbols(const char *archive, char *names, size_t cap)
 {
-    static const char *const allowed[] = {"aligned_alloc", "calloc", "malloc", "realloc", "free", "memcpy",
-                                          "memmove", "memset", "memcmp", "abs", "clock_gettime", "sqrtf", "tanf",
-                                          "floor", "floorf", "_GLOBAL_OFFSET_TABLE_"};
+    static const char *const allowed[] = {
+        "aligned_alloc", "calloc", "malloc",        "realloc",
+        "free",          "memcpy", "memmove",       "memset",
+        "memcmp",        "abs",    "clock_gettime", "sqrtf",
+        "tanf",          "floor",  "floorf",        "_GLOBAL_OFFSET_TABLE_"};
     char command[1200];
     snprintf(command, sizeof command, "nm -u '%s' 2>/dev/null", archive);
     FILE *pipe = popen(command, "r");
@@ -1063,8 +1081,8 @@ static int foreign_symbols(const char *archive, char *names, size_t cap)
     return pclose(pipe) == 0 && lines > 0 ? foreign : -1;
 }
 
-/* libfxc_rcache.a needs nothing but libc, libm and pthreads; the check refuses fxc_proto (zstd, libturbojpeg). The
- * archives are found from this test's scratch folder, <build>/tests/tmp_test_rcache. */
+/* libfxc_rcache.a needs nothing but libc, libm and pthreads; the check refuses fxc_proto (zstd,
+ * libturbojpeg). The archives are found from this test's scratch folder, <build>/tests/tmp_test_rcache. */
 static void test_links_only_libc_libm_pthreads(void **state)
 {
     (void)state;

@@ -3,17 +3,17 @@
  *
  * A new point takes a free slot (the stack the last frame's ageing pass rebuilt) after the points it replaces
  * were freed:
- *   - a frame replaces every cached point it saw: one pass projects all points into the frame's camera and frees
- *     those that are not behind the frame's depth at their pixel by more than supersede_ratio (the new frame is
- *     the truth for everything it shows; an old point of the same surface would otherwise fight the new one in
- *     the z-buffer at nearly the same depth, and show stale colour half the time);
+ *   - a frame replaces every cached point it saw: one pass projects all points into the frame's camera and
+ * frees those that are not behind the frame's depth at their pixel by more than supersede_ratio (the new
+ * frame is the truth for everything it shows; an old point of the same surface would otherwise fight the new
+ * one in the z-buffer at nearly the same depth, and show stale colour half the time);
  *   - a sample replaces the point the last frame showed at its place (found through the last frame's winners,
  *     so it costs nothing per cached point), and when the colours differ the neighbours' points age faster:
  *     their shading has probably changed too (1999 slide 21, "color change heuristic"; 2002 3.4).
  * Slots freed between two frames return to the stack at the next frame (the last frame's winners still name
  * them). When the stack runs short, it is rebuilt on the spot and, if still short, the oldest points go (the
- * frame's drop plan keeps the cache within capacity anyway; this is the case of more inserts between two frames
- * than insert_reserve, or a whole frame). */
+ * frame's drop plan keeps the cache within capacity anyway; this is the case of more inserts between two
+ * frames than insert_reserve, or a whole frame). */
 #include "rc_internal.h"
 
 #include <math.h>
@@ -70,7 +70,8 @@ static bool resolve_desc(view_rc_desc *d)
         d->supersede_ratio = 0.02f;
     if (d->hidden_age_factor == 0)
         d->hidden_age_factor = 2.0f;
-    if (!(d->cull_ratio > 0 && d->cull_ratio < 1e6f) || !(d->supersede_ratio > 0 && d->supersede_ratio < 1e6f) ||
+    if (!(d->cull_ratio > 0 && d->cull_ratio < 1e6f) ||
+        !(d->supersede_ratio > 0 && d->supersede_ratio < 1e6f) ||
         !(d->hidden_age_factor >= 1 && d->hidden_age_factor <= 256))
         return false;
     if (d->change_threshold == 0)
@@ -342,10 +343,10 @@ static uint64_t total_ages(const view_rc *rc, uint64_t hist[256])
     return live;
 }
 
-/* Makes `incoming` slots free on the spot: the free stack is rebuilt from every free slot (those freed since the
- * last frame included), then the oldest points go (all older than some age, and the first ones of that age in
- * slot order). The last frame's winners may then name reused slots: the sparse supersede stops until the next
- * frame. */
+/* Makes `incoming` slots free on the spot: the free stack is rebuilt from every free slot (those freed since
+ * the last frame included), then the oldest points go (all older than some age, and the first ones of that
+ * age in slot order). The last frame's winners may then name reused slots: the sparse supersede stops until
+ * the next frame. */
 static void make_room(view_rc *rc, uint32_t incoming)
 {
     uint64_t hist[256];
@@ -388,8 +389,8 @@ static bool depth_usable(float depth)
 }
 
 /* The batch's positions: the unit ray through each image position with srv_camera_ray's arithmetic, operation
- * for operation, then origin + distance x direction in double, stored relative to the cache's origin; and their
- * pixels in `last` (NULL: none). */
+ * for operation, then origin + distance x direction in double, stored relative to the cache's origin; and
+ * their pixels in `last` (NULL: none). */
 FXC_HOT_CLONES static void place_batch(rc_batch *restrict b, const rc_view *v, const rc_view *last,
                                        const double cache_origin[3])
 {
@@ -446,7 +447,8 @@ static uint32_t add_batch_point(view_rc *rc, const rc_batch *b, uint32_t k)
 }
 
 /* Sets up an insert's camera (and the cache's origin at the first insert). */
-static fxc_result insert_view(view_rc *rc, const view_rc_camera *cam, uint32_t width, uint32_t height, rc_view *v)
+static fxc_result insert_view(view_rc *rc, const view_rc_camera *cam, uint32_t width, uint32_t height,
+                              rc_view *v)
 {
     if (!cam || width == 0 || height == 0 || width > VIEW_RC_MAX_SIDE || height > VIEW_RC_MAX_SIDE)
         return FXC_ERR_INVALID;
@@ -496,7 +498,8 @@ fxc_result view_rc_insert_frame(view_rc *rc, const view_rc_camera *cam, uint32_t
             rc->since_superseded++;
         }
     }
-    /* The last frame's winners are gone or replaced: no sparse supersede through them until the next frame. */
+    /* The last frame's winners are gone or replaced: no sparse supersede through them until the next frame.
+     */
     rc->last_valid = false;
     if (rc->free_count < incoming)
         make_room(rc, (uint32_t)incoming);
@@ -541,8 +544,8 @@ static void penalise(view_rc *rc, uint32_t q)
     set_age(rc, w, age > top ? top : age);
 }
 
-/* The point the last frame showed at pixel q is replaced by a new sample at view depth `depth` there, unless it
- * lies well behind it; when their colours differ, the pixel's neighbours age. */
+/* The point the last frame showed at pixel q is replaced by a new sample at view depth `depth` there, unless
+ * it lies well behind it; when their colours differ, the pixel's neighbours age. */
 static void supersede(view_rc *rc, uint32_t q, float depth, const uint8_t rgb[3])
 {
     if (q == RC_NO_PIXEL)

@@ -1,7 +1,7 @@
 /* Cameras: the server's pinhole model (server/cameras/camera.h, srv_camera_setup and srv_camera_ray), rebuilt
- * from a wire pose (position, direction with +Y up, vertical field of view) with the same float operations, so
- * that projecting a point the server's ray produced lands it back on the pixel the ray went through. The client
- * may not link server code: this copies the arithmetic, not the file. */
+ * from a wire pose (position, direction with +Y up, vertical field of view) with the same float operations,
+ * so that projecting a point the server's ray produced lands it back on the pixel the ray went through. The
+ * client may not link server code: this copies the arithmetic, not the file. */
 #include "rc_internal.h"
 
 #include <math.h>
@@ -22,8 +22,8 @@ static void cross3(const float a[3], const float b[3], float out[3])
     out[2] = a[0] * b[1] - a[1] * b[0];
 }
 
-bool view_rc__view_setup(const view_rc_camera *cam, uint32_t width, uint32_t height, const double cache_origin[3],
-                         rc_view *out)
+bool view_rc__view_setup(const view_rc_camera *cam, uint32_t width, uint32_t height,
+                         const double cache_origin[3], rc_view *out)
 {
     memset(out, 0, sizeof *out);
     if (width == 0 || height == 0 || !(cam->fov_deg > 0 && cam->fov_deg < 180))

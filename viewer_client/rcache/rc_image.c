@@ -3,45 +3,45 @@
  *
  * Depth cull (1999, slide 14: "z-buffering only works within a pixel; find pixels with locally inconsistent
  * depths"). A point that won its pixel may still lie behind a surface whose points are spread apart, showing
- * through the gaps. Here a point is dropped when two opposite neighbours in its 3x3 neighbourhood (left and right,
- * above and below, or the ends of a diagonal) are both nearer than it by more than cull_ratio and agree with each
- * other much better than with it: in disparity (1 / depth, linear across a plane in the image) the pair's spread
- * is less than half its lead over the point, 2 |1/a - 1/b| < 1/max(a, b) - 1/c. That is the mark of a point seen
- * through a surface. Two simpler rules fail on frames the server sends whole: against the neighbourhood's mean
- * depth, the background point beside every silhouette is dropped (a still camera would not show the frame as it
- * was sent); with only "both nearer", a floor seen at a grazing angle (its depth changing by more than cull_ratio
- * from row to row) beside an object drops the floor's points along the object's outline. What remains: a strip
- * of background one pixel thin between two nearer surfaces (a floor seen behind the line where a ball touches
- * it) looks exactly like a gap and goes.
+ * through the gaps. Here a point is dropped when two opposite neighbours in its 3x3 neighbourhood (left and
+ * right, above and below, or the ends of a diagonal) are both nearer than it by more than cull_ratio and
+ * agree with each other much better than with it: in disparity (1 / depth, linear across a plane in the
+ * image) the pair's spread is less than half its lead over the point, 2 |1/a - 1/b| < 1/max(a, b) - 1/c. That
+ * is the mark of a point seen through a surface. Two simpler rules fail on frames the server sends whole:
+ * against the neighbourhood's mean depth, the background point beside every silhouette is dropped (a still
+ * camera would not show the frame as it was sent); with only "both nearer", a floor seen at a grazing angle
+ * (its depth changing by more than cull_ratio from row to row) beside an object drops the floor's points
+ * along the object's outline. What remains: a strip of background one pixel thin between two nearer surfaces
+ * (a floor seen behind the line where a ball touches it) looks exactly like a gap and goes.
  *
  * Interpolation (1999, slides 15 and 18; 2002 3.3, Figure 3): the 3x3 filter with weights 1-2-1 / 2-4-2 /
- * 1-2-1 over the neighbourhood's points (after the cull), rounded to the nearest integer, fills a pixel without
- * a point (and with smooth_all replaces every pixel by that mean). The filter is separable: sums along rows,
- * then along columns, over planes of 16-bit values, in loops the compiler vectorises. The same pass writes the
- * priority image: a point's age (older first), or for a pixel without one 255 - 16 n, n the points among its 8
- * neighbours (emptier first, 255 where there is none).
+ * 1-2-1 over the neighbourhood's points (after the cull), rounded to the nearest integer, fills a pixel
+ * without a point (and with smooth_all replaces every pixel by that mean). The filter is separable: sums
+ * along rows, then along columns, over planes of 16-bit values, in loops the compiler vectorises. The same
+ * pass writes the priority image: a point's age (older first), or for a pixel without one 255 - 16 n, n the
+ * points among its 8 neighbours (emptier first, 255 where there is none).
  *
- * Prefilter (2002 3.3): where the 3x3 found no point, the uniform mean of the points in the 7x7 neighbourhood.
- * It works by tiles (only tiles with pixels to fill do anything): a tile with many such pixels is filtered
- * whole, separated into 7-sums along rows and then down columns over 16-bit planes (the paper uses running sums,
- * whose cost does not depend on the kernel's size: Smith's moving average; vector adds of 7 values are cheaper
- * here); a tile with few sums each one's 49 pixels. Both give the same integers. (By full-width bands, as the
- * other pixel passes, it was slower: 0.6-0.8 against 0.4 ms.)
- * It does not change the priority (2002 3.3). */
+ * Prefilter (2002 3.3): where the 3x3 found no point, the uniform mean of the points in the 7x7
+ * neighbourhood. It works by tiles (only tiles with pixels to fill do anything): a tile with many such pixels
+ * is filtered whole, separated into 7-sums along rows and then down columns over 16-bit planes (the paper
+ * uses running sums, whose cost does not depend on the kernel's size: Smith's moving average; vector adds of
+ * 7 values are cheaper here); a tile with few sums each one's 49 pixels. Both give the same integers. (By
+ * full-width bands, as the other pixel passes, it was slower: 0.6-0.8 against 0.4 ms.) It does not change the
+ * priority (2002 3.3). */
 #include "rc_internal.h"
 
 #include <math.h>
 #include <string.h>
 
-/* The pixel passes work on bands of full rows (the tile rows: tile_size rows each), so that every row is one long
- * stream for the prefetcher (64-pixel rows of a tile were short streams, each starting with a miss). */
+/* The pixel passes work on bands of full rows (the tile rows: tile_size rows each), so that every row is one
+ * long stream for the prefetcher (64-pixel rows of a tile were short streams, each starting with a miss). */
 static void band_rows(const view_rc *rc, uint32_t band, uint32_t *y0, uint32_t *y1)
 {
     *y0 = band << rc->tile_shift;
     *y1 = *y0 + rc->tile < rc->height ? *y0 + rc->tile : rc->height;
 }
 
-/* ---- depth cull ----------------------------------------------------------------------------------------- */
+/* ---- depth cull ---------------------------------------------------------------------------------------- */
 
 /* One opposite pair (a, b) around depth z, threshold t = z / (1 + cull_ratio). */
 FXC_HOT_INLINE bool pair_in_front(float a, float b, float z, float t)
@@ -51,12 +51,12 @@ FXC_HOT_INLINE bool pair_in_front(float a, float b, float z, float t)
 }
 
 /* Pixels [xa, xb) of a row with a row above (zu) and below (zd), none of them on the image's left or right
- * edge. Writes the shown points and the output depth; returns the pixels culled. nearer = 0 turns the cull off.
- * The nine neighbourhood rows are nine pointers indexed alike, so each is one contiguous vector load. */
+ * edge. Writes the shown points and the output depth; returns the pixels culled. nearer = 0 turns the cull
+ * off. The nine neighbourhood rows are nine pointers indexed alike, so each is one contiguous vector load. */
 FXC_HOT_CLONES static uint32_t cull_span(const float *zu, const float *zc, const float *zd,
                                          const uint32_t *restrict pre, uint32_t *restrict pt,
-                                         float *restrict depth, const float *restrict sx2, float sy2, float nearer,
-                                         float sky, uint32_t xa, uint32_t xb)
+                                         float *restrict depth, const float *restrict sx2, float sy2,
+                                         float nearer, float sky, uint32_t xa, uint32_t xb)
 {
     const float *restrict l = zc + xa - 1, *restrict c = zc + xa, *restrict r = zc + xa + 1;
     const float *restrict ul = zu + xa - 1, *restrict u = zu + xa, *restrict ur = zu + xa + 1;
@@ -87,10 +87,11 @@ static uint32_t cull_pixel(view_rc *rc, uint32_t x, uint32_t y, float nearer, fl
     const float *zbuf = rc->zbuf;
     bool l = x > 0, r = x + 1 < w, u = y > 0, d = y + 1 < h;
     float z = zbuf[p], t = z * nearer;
-    bool behind = pair_in_front(l ? zbuf[p - 1] : INFINITY, r ? zbuf[p + 1] : INFINITY, z, t) |
-                  pair_in_front(u ? zbuf[p - w] : INFINITY, d ? zbuf[p + w] : INFINITY, z, t) |
-                  pair_in_front(l && u ? zbuf[p - w - 1] : INFINITY, r && d ? zbuf[p + w + 1] : INFINITY, z, t) |
-                  pair_in_front(r && u ? zbuf[p - w + 1] : INFINITY, l && d ? zbuf[p + w - 1] : INFINITY, z, t);
+    bool behind =
+        pair_in_front(l ? zbuf[p - 1] : INFINITY, r ? zbuf[p + 1] : INFINITY, z, t) |
+        pair_in_front(u ? zbuf[p - w] : INFINITY, d ? zbuf[p + w] : INFINITY, z, t) |
+        pair_in_front(l && u ? zbuf[p - w - 1] : INFINITY, r && d ? zbuf[p + w + 1] : INFINITY, z, t) |
+        pair_in_front(r && u ? zbuf[p - w + 1] : INFINITY, l && d ? zbuf[p + w - 1] : INFINITY, z, t);
     uint32_t v = rc->pre[p];
     bool occupied = v != RC_EMPTY_PT, cull = behind & occupied;
     rc->pt[p] = cull ? RC_EMPTY_PT : v;
@@ -117,13 +118,14 @@ static void cull_task(void *user, uint32_t band, uint32_t worker)
         }
         size_t row = y * w;
         culled += cull_pixel(rc, 0, y, nearer, sky);
-        culled += cull_span(rc->zbuf + row - w, rc->zbuf + row, rc->zbuf + row + w, rc->pre + row, rc->pt + row,
-                            rc->depth + row, rc->stretch_x2, rc->stretch_y2[y], nearer, sky, 1, (uint32_t)w - 1);
+        culled +=
+            cull_span(rc->zbuf + row - w, rc->zbuf + row, rc->zbuf + row + w, rc->pre + row, rc->pt + row,
+                      rc->depth + row, rc->stretch_x2, rc->stretch_y2[y], nearer, sky, 1, (uint32_t)w - 1);
         culled += cull_pixel(rc, (uint32_t)w - 1, y, nearer, sky);
     }
     /* The points shown: visible for the ageing (no branch: a pixel without one marks the byte after the last
-     * slot). Marking entries instead (tile-local writes) and reading them back through each slot's entry in the
-     * ageing was slower: 0.8 against 0.3 ms for the ageing, the cull unchanged. */
+     * slot). Marking entries instead (tile-local writes) and reading them back through each slot's entry in
+     * the ageing was slower: 0.8 against 0.3 ms for the ageing, the cull unchanged. */
     const uint32_t *pt = rc->pt, *win = rc->win;
     uint8_t *mark = rc->mark;
     uint32_t sink = rc->slots;
@@ -151,8 +153,9 @@ void view_rc__depth_cull(view_rc *rc)
 
 /* ---- interpolation and priority ----------------------------------------------------------------------- */
 
-/* 16-bit values per worker for an image `width` wide: three rows of row sums (red, green, blue, weight, count),
- * their rows of occupied pixels (width + 2), one row of four planes (width + 2), three output rows of bytes. */
+/* 16-bit values per worker for an image `width` wide: three rows of row sums (red, green, blue, weight,
+ * count), their rows of occupied pixels (width + 2), one row of four planes (width + 2), three output rows of
+ * bytes. */
 size_t view_rc__interp_scratch(uint32_t width)
 {
     size_t w = width;
@@ -160,8 +163,9 @@ size_t view_rc__interp_scratch(uint32_t width)
 }
 
 /* A row of points as planes: red, green, blue (0 where empty) and occupied. */
-FXC_HOT_CLONES static void unpack_span(const uint32_t *restrict src, uint16_t *restrict r, uint16_t *restrict g,
-                                       uint16_t *restrict b, uint16_t *restrict o, uint32_t n)
+FXC_HOT_CLONES static void unpack_span(const uint32_t *restrict src, uint16_t *restrict r,
+                                       uint16_t *restrict g, uint16_t *restrict b, uint16_t *restrict o,
+                                       uint32_t n)
 {
     for (size_t x = 0; x < n; x++) {
         uint32_t v = src[x];
@@ -174,9 +178,9 @@ FXC_HOT_CLONES static void unpack_span(const uint32_t *restrict src, uint16_t *r
 
 /* Row sums: weighted 1-2-1 of each plane, and the plain count of occupied pixels. */
 FXC_HOT_CLONES static void row_sums(const uint16_t *restrict r, const uint16_t *restrict g,
-                                    const uint16_t *restrict b, const uint16_t *restrict o, uint16_t *restrict hr,
-                                    uint16_t *restrict hg, uint16_t *restrict hb, uint16_t *restrict hw,
-                                    uint16_t *restrict hn, uint32_t n)
+                                    const uint16_t *restrict b, const uint16_t *restrict o,
+                                    uint16_t *restrict hr, uint16_t *restrict hg, uint16_t *restrict hb,
+                                    uint16_t *restrict hw, uint16_t *restrict hn, uint32_t n)
 {
     for (size_t x = 0; x < n; x++) {
         hr[x] = (uint16_t)(r[x] + 2 * r[x + 1] + r[x + 2]);
@@ -188,8 +192,8 @@ FXC_HOT_CLONES static void row_sums(const uint16_t *restrict r, const uint16_t *
 }
 
 /* Three planes of a row into rgb triples. */
-FXC_HOT_CLONES static void interleave(const uint8_t *restrict r, const uint8_t *restrict g, const uint8_t *restrict b,
-                                      uint8_t *restrict rgb, uint32_t n)
+FXC_HOT_CLONES static void interleave(const uint8_t *restrict r, const uint8_t *restrict g,
+                                      const uint8_t *restrict b, uint8_t *restrict rgb, uint32_t n)
 {
     for (size_t x = 0; x < n; x++) {
         rgb[3 * x] = r[x];
@@ -198,25 +202,27 @@ FXC_HOT_CLONES static void interleave(const uint8_t *restrict r, const uint8_t *
     }
 }
 
-/* One output row: the column sums of three rows of row sums (up, here, down: five planes each, `plane` apart),
- * the choice of colour, kind and priority. */
+/* One output row: the column sums of three rows of row sums (up, here, down: five planes each, `plane`
+ * apart), the choice of colour, kind and priority. */
 FXC_HOT_CLONES static uint64_t finish_row(const uint16_t *restrict up, const uint16_t *restrict here,
                                           const uint16_t *restrict down, size_t plane,
                                           const uint16_t *restrict own_o, const uint32_t *restrict own,
-                                          uint8_t *restrict out_r, uint8_t *restrict out_g, uint8_t *restrict out_b,
-                                          uint8_t *restrict kind, uint8_t *restrict priority, uint32_t n,
-                                          bool smooth_all, const uint8_t clear[3],
-                                          uint32_t kinds[VIEW_RC_PIXEL_KINDS])
+                                          uint8_t *restrict out_r, uint8_t *restrict out_g,
+                                          uint8_t *restrict out_b, uint8_t *restrict kind,
+                                          uint8_t *restrict priority, uint32_t n, bool smooth_all,
+                                          const uint8_t clear[3], uint32_t kinds[VIEW_RC_PIXEL_KINDS])
 {
     uint64_t weight = 0;
     uint32_t points = 0, interp = 0, empty = 0;
-    const uint32_t clear_r = clear[0], clear_g = clear[1], clear_b = clear[2], keep_own = smooth_all ? 0u : 1u;
+    const uint32_t clear_r = clear[0], clear_g = clear[1], clear_b = clear[2],
+                   keep_own = smooth_all ? 0u : 1u;
     for (size_t x = 0; x < n; x++) {
         uint32_t sr = up[x] + 2u * here[x] + down[x];
         uint32_t sg = up[x + plane] + 2u * here[x + plane] + down[x + plane];
         uint32_t sb = up[x + 2 * plane] + 2u * here[x + 2 * plane] + down[x + 2 * plane];
         uint32_t sw = up[x + 3 * plane] + 2u * here[x + 3 * plane] + down[x + 3 * plane];
-        uint32_t count = up[x + 4 * plane] + here[x + 4 * plane] + down[x + 4 * plane] - own_o[x]; /* not itself */
+        uint32_t count =
+            up[x + 4 * plane] + here[x + 4 * plane] + down[x + 4 * plane] - own_o[x]; /* not itself */
         uint32_t v = own[x];
         uint32_t has = own_o[x] != 0, keep = has & keep_own, filled = sw > 0;
         /* Rounded division by 1..16: exact through the float reciprocal (an error below 1/64 either way). */
@@ -226,7 +232,8 @@ FXC_HOT_CLONES static uint64_t finish_row(const uint16_t *restrict up, const uin
         uint32_t qg = (uint32_t)(int32_t)((float)(sg + half) * inv + (1.0f / 64));
         uint32_t qb = (uint32_t)(int32_t)((float)(sb + half) * inv + (1.0f / 64));
         uint32_t mk = 0u - keep, mf = 0u - filled; /* masks: the selects the vectoriser takes */
-        uint32_t fr = (qr & mf) | (clear_r & ~mf), fg = (qg & mf) | (clear_g & ~mf), fb = (qb & mf) | (clear_b & ~mf);
+        uint32_t fr = (qr & mf) | (clear_r & ~mf), fg = (qg & mf) | (clear_g & ~mf),
+                 fb = (qb & mf) | (clear_b & ~mf);
         out_r[x] = (uint8_t)(((v & 0xFF) & mk) | (fr & ~mk));
         out_g[x] = (uint8_t)((((v >> 8) & 0xFF) & mk) | (fg & ~mk));
         out_b[x] = (uint8_t)((((v >> 16) & 0xFF) & mk) | (fb & ~mk));
@@ -286,8 +293,8 @@ static void interpolate_task(void *user, uint32_t band, uint32_t worker)
         size_t p = (size_t)y * w;
         uint32_t before = kinds[VIEW_RC_EMPTY];
         weight += finish_row(sums[(y + 2) % 3], sums[y % 3], sums[(y + 1) % 3], plane, occupied[y % 3] + 1,
-                             rc->pt + p, out_r, out_g, out_b, rc->kind + p, rc->priority + p, w, rc->d.smooth_all,
-                             rc->d.clear_rgb, kinds);
+                             rc->pt + p, out_r, out_g, out_b, rc->kind + p, rc->priority + p, w,
+                             rc->d.smooth_all, rc->d.clear_rgb, kinds);
         rc->row_need[y] = kinds[VIEW_RC_EMPTY] - before;
         interleave(out_r, out_g, out_b, rc->rgb + 3 * p, w);
     }
@@ -315,7 +322,7 @@ static rc_rect tile_rect(const view_rc *rc, uint32_t tile)
     return r;
 }
 
-/* ---- prefilter -------------------------------------------------------------------------------------------- */
+/* ---- prefilter ----------------------------------------------------------------------------------------- */
 
 static void fill_from(uint8_t *rgb, const uint32_t acc[4])
 {
@@ -365,7 +372,8 @@ size_t view_rc__prefilter_scratch(uint32_t tile)
 FXC_HOT_CLONES static void sums7(const uint16_t *restrict src, uint16_t *restrict out, uint32_t n)
 {
     for (size_t x = 0; x < n; x++)
-        out[x] = (uint16_t)(src[x] + src[x + 1] + src[x + 2] + src[x + 3] + src[x + 4] + src[x + 5] + src[x + 6]);
+        out[x] =
+            (uint16_t)(src[x] + src[x + 1] + src[x + 2] + src[x + 3] + src[x + 4] + src[x + 5] + src[x + 6]);
 }
 
 /* Sums of the same column over 7 rows `stride` apart, n columns. */
@@ -431,11 +439,12 @@ static void prefilter_task(void *user, uint32_t tile, uint32_t worker)
                 need += rc->kind[(size_t)y * rc->width + x] == VIEW_RC_EMPTY;
     if (need == 0)
         return;
-    /* 49 reads a pixel, against the planes' few vector operations per pixel of the tile (about 25 pixels to fill
-     * in a 64 x 64 tile cost as much either way). */
+    /* 49 reads a pixel, against the planes' few vector operations per pixel of the tile (about 25 pixels to
+     * fill in a 64 x 64 tile cost as much either way). */
     uint64_t tile_pixels = (uint64_t)(r.x1 - r.x0) * (r.y1 - r.y0);
-    uint32_t filled = (uint64_t)need * 49 * 4 < tile_pixels * 1 ? prefilter_direct(rc, r)
-                                                            : prefilter_planes(rc, r, rc->workers[worker].box);
+    uint32_t filled = (uint64_t)need * 49 * 4 < tile_pixels * 1
+                          ? prefilter_direct(rc, r)
+                          : prefilter_planes(rc, r, rc->workers[worker].box);
     rc->tile_filled[tile] = filled;
 }
 

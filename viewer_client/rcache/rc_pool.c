@@ -1,8 +1,9 @@
-/* The render cache's threads (Reinhard 2001 section 3: tiles processed by several threads). A frame is a fixed
- * sequence of passes; each pass is a count of tasks (chunks of the point store, tiles or bands) handed out by an
- * atomic counter to the workers and the calling thread, and the call returns when all are done. Every task
- * writes only its own outputs, so which thread ran it does not change the result. One mutex and two condition
- * variables; a pass of one task, or a pool of one thread, runs on the caller without touching them. */
+/* The render cache's threads (Reinhard 2001 section 3: tiles processed by several threads). A frame is a
+ * fixed sequence of passes; each pass is a count of tasks (chunks of the point store, tiles or bands) handed
+ * out by an atomic counter to the workers and the calling thread, and the call returns when all are done.
+ * Every task writes only its own outputs, so which thread ran it does not change the result. One mutex and
+ * two condition variables; a pass of one task, or a pool of one thread, runs on the caller without touching
+ * them. */
 #include "rc_internal.h"
 
 #include <pthread.h>
@@ -12,16 +13,16 @@
 struct rc_pool {
     uint32_t thread_count; /* the caller included */
     pthread_t threads[VIEW_RC_MAX_THREADS];
-    uint32_t started;      /* workers running (thread_count - 1 once created) */
+    uint32_t started; /* workers running (thread_count - 1 once created) */
     pthread_mutex_t lock;
     pthread_cond_t work_ready, work_done;
-    uint64_t generation;   /* bumped for every pass */
+    uint64_t generation; /* bumped for every pass */
     bool stopping;
     rc_pool_task task;
     void *user;
     uint32_t count;
     atomic_uint next;
-    uint32_t busy;         /* workers inside the current pass */
+    uint32_t busy; /* workers inside the current pass */
 };
 
 typedef struct rc_worker_start {

@@ -1,12 +1,12 @@
 /* The point passes of a frame: the drop plan, the predicted projection (2002 3.1), projection and tile sort
- * (2002 3.2; the tile lists of Reinhard 2001 section 3), the tiled z-buffer (2002 3.2), the one-pass z-buffer of
- * the 1999 render cache (no_tiling), and ageing with eviction (2002 3.4).
+ * (2002 3.2; the tile lists of Reinhard 2001 section 3), the tiled z-buffer (2002 3.2), the one-pass z-buffer
+ * of the 1999 render cache (no_tiling), and ageing with eviction (2002 3.4).
  *
  * Project and tile sort, per chunk of slots (parallel): every live point is projected once, in a loop without
  * branches (vectorised); the chunk counts how many of its points go to each tile. One serial step turns the
- * counts into offsets, tile by tile and chunk by chunk within a tile, and the bucket sort (parallel again) writes
- * each projected point as a 16-byte entry at its offset: tile after tile, the tiles' point lists. The order
- * within a list (chunk, then slot) does not depend on the thread count.
+ * counts into offsets, tile by tile and chunk by chunk within a tile, and the bucket sort (parallel again)
+ * writes each projected point as a 16-byte entry at its offset: tile after tile, the tiles' point lists. The
+ * order within a list (chunk, then slot) does not depend on the thread count.
  *
  * The z-buffer then reads one tile's list (parallel over tiles) into that tile's part of the image: 64 x 64
  * pixels of depth and winner, 32 KiB, which stays in cache while the tile's entries stream past. The nearer
@@ -258,7 +258,7 @@ void view_rc__project_sort(view_rc *rc)
     view_rc__pool_run(rc->pool, rc->chunk_count, sort_task, rc);
 }
 
-/* ---- z-buffer tiles (2002 3.2) --------------------------------------------------------------------------- */
+/* ---- z-buffer tiles (2002 3.2) ------------------------------------------------------------------------- */
 
 static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
 {
@@ -276,9 +276,10 @@ static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
             win[y * w + x] = RC_NO_POINT;
             pre[y * w + x] = RC_EMPTY_PT;
         }
-    /* Depth, slot and colour of the nearest. Tried and slower in bench_rcache: the same without the branch (2.2
-     * against 1.9 ms), and 64-bit keys of depth and entry (one load, minimum and store a point; entries split in
-     * 8 bytes for the test and 8 for the winners: 1.6 against 1.2 ms, and the sort 0.3 ms slower). */
+    /* Depth, slot and colour of the nearest. Tried and slower in bench_rcache: the same without the branch
+     * (2.2 against 1.9 ms), and 64-bit keys of depth and entry (one load, minimum and store a point; entries
+     * split in 8 bytes for the test and 8 for the winners: 1.6 against 1.2 ms, and the sort 0.3 ms slower).
+     */
     const rc_entry *entries = rc->entries;
     for (uint32_t e = rc->tile_start[tile], end = rc->tile_start[tile + 1]; e < end; e++) {
         uint32_t p = entries[e].pix;
@@ -296,7 +297,7 @@ void view_rc__zbuffer(view_rc *rc)
     view_rc__pool_run(rc->pool, rc->tile_count, zbuffer_task, rc);
 }
 
-/* ---- the 1999 render cache: one z-buffer in slot order -------------------------------------------------- */
+/* ---- the 1999 render cache: one z-buffer in slot order ------------------------------------------------- */
 
 /* The projection as above (without the sort), then every point straight into the whole image in slot order,
  * one thread: about 2 MiB of depth and winners at 512 x 512, touched at random, which the 2002 paper's tiles
@@ -329,10 +330,12 @@ void view_rc__zbuffer_direct(view_rc *rc)
 
 /* ---- ageing and eviction (2002 3.4) -------------------------------------------------------------------- */
 
-/* Every live point ages by the frame's step, faster when no pixel shows it (off screen, behind a nearer point,
- * or removed by the depth cull: the cull marked the points shown); 255 evicts. Returns the points evicted. */
+/* Every live point ages by the frame's step, faster when no pixel shows it (off screen, behind a nearer
+ * point, or removed by the depth cull: the cull marked the points shown); 255 evicts. Returns the points
+ * evicted. */
 FXC_HOT_CLONES static uint32_t age_span(uint32_t *restrict rgba, uint8_t *restrict mark, uint32_t begin,
-                                        uint32_t end, uint32_t step_visible, uint32_t step_hidden, uint32_t top)
+                                        uint32_t end, uint32_t step_visible, uint32_t step_hidden,
+                                        uint32_t top)
 {
     uint32_t evicted = 0;
     for (uint32_t i = begin; i < end; i++) {
@@ -354,9 +357,11 @@ static void age_task(void *user, uint32_t c, uint32_t worker)
     uint32_t begin, end;
     chunk_range(rc, c, &begin, &end);
     uint32_t top = rc->d.no_eviction ? 254 : 255;
-    rc->chunk_stat[c].evicted = age_span(rc->rgba, rc->mark, begin, end, rc->step_visible, rc->step_hidden, top);
+    rc->chunk_stat[c].evicted =
+        age_span(rc->rgba, rc->mark, begin, end, rc->step_visible, rc->step_hidden, top);
     /* The chunk's age histogram and its free slots, in descending order. */
-    uint32_t *hist = rc->chunk_hist + (size_t)c * 256, *free_list = rc->free_list + (size_t)c * rc->chunk_size;
+    uint32_t *hist = rc->chunk_hist + (size_t)c * 256,
+             *free_list = rc->free_list + (size_t)c * rc->chunk_size;
     memset(hist, 0, 256 * sizeof(uint32_t));
     uint32_t n = 0;
     for (uint32_t i = end; i-- > begin;) {

@@ -1,22 +1,23 @@
-/* The render cache's private parts: the owner struct, the point store's layout, the camera maths and the stage
- * functions each source file gives the frame driver (rc_render.c). Only the library and white-box tests see it.
+/* The render cache's private parts: the owner struct, the point store's layout, the camera maths and the
+ * stage functions each source file gives the frame driver (rc_render.c). Only the library and white-box tests
+ * see it.
  *
- * The point store is structure-of-arrays over fixed slots (capacity + insert_reserve of them): position (x, y, z
- * as float offsets from the cache's origin), colour and age packed in one word (r | g << 8 | b << 16 | age << 24,
- * age 255 = a free slot), and what a frame computes per slot (pixel, view depth, destination list). A slot keeps
- * its point until the point is evicted or dropped; new points take free slots from a stack rebuilt every frame.
- * Each pass that streams over the points touches only the arrays it needs (CONVENTIONS 6: the projection reads
- * 16 bytes a point, ageing 5).
+ * The point store is structure-of-arrays over fixed slots (capacity + insert_reserve of them): position (x,
+ * y, z as float offsets from the cache's origin), colour and age packed in one word (r | g << 8 | b << 16 |
+ * age << 24, age 255 = a free slot), and what a frame computes per slot (pixel, view depth, destination
+ * list). A slot keeps its point until the point is evicted or dropped; new points take free slots from a
+ * stack rebuilt every frame. Each pass that streams over the points touches only the arrays it needs
+ * (CONVENTIONS 6: the projection reads 16 bytes a point, ageing 5).
  *
  * Tile lists (2002 3.2, Reinhard 2001 section 3): every frame the projected points are bucket-sorted by tile
- * (counting sort, per chunk of slots) into one array of 16-byte entries, tile after tile: each tile's point list
- * for this frame. A point that lands in another tile than in the last frame moves to that tile's list
+ * (counting sort, per chunk of slots) into one array of 16-byte entries, tile after tile: each tile's point
+ * list for this frame. A point that lands in another tile than in the last frame moves to that tile's list
  * (tile_of[] remembers the list; the move is counted as a migration). The z-buffer then reads one tile's list
  * into that tile's part of the image, which stays in cache.
  *
- * Determinism: every parallel pass writes per-chunk, per-tile or per-band outputs, and the serial steps between
- * them combine those in a fixed order, so the result does not depend on which thread ran what. Hot loops are
- * written without branches so the compiler vectorises them (FXC_HOT_CLONES adds an AVX2 copy); with
+ * Determinism: every parallel pass writes per-chunk, per-tile or per-band outputs, and the serial steps
+ * between them combine those in a fixed order, so the result does not depend on which thread ran what. Hot
+ * loops are written without branches so the compiler vectorises them (FXC_HOT_CLONES adds an AVX2 copy); with
  * -ffp-contract=off every copy computes the same floats. */
 #ifndef FXC_VIEW_RC_INTERNAL_H
 #define FXC_VIEW_RC_INTERNAL_H
@@ -27,12 +28,12 @@
 #include <math.h>
 #include <stdint.h>
 
-#define RC_NO_PIXEL UINT32_MAX
-#define RC_NO_POINT UINT32_MAX
-#define RC_AGE_DEAD 255u        /* a free slot (an evicted or dropped point) */
-#define RC_AGE_NO_DROP 255u     /* drop plan: no age is old enough */
-#define RC_EMPTY_PT 0xFF000000u /* a pixel without a point: colour 0, age 255 */
-#define RC_NEAR 1.0e-4f         /* points nearer than this (metres along the view axis) are behind */
+#define RC_NO_PIXEL    UINT32_MAX
+#define RC_NO_POINT    UINT32_MAX
+#define RC_AGE_DEAD    255u        /* a free slot (an evicted or dropped point) */
+#define RC_AGE_NO_DROP 255u        /* drop plan: no age is old enough */
+#define RC_EMPTY_PT    0xFF000000u /* a pixel without a point: colour 0, age 255 */
+#define RC_NEAR        1.0e-4f     /* points nearer than this (metres along the view axis) are behind */
 
 static inline uint32_t rc_age(uint32_t rgba)
 {
@@ -62,12 +63,13 @@ typedef struct rc_view {
 /* rc_camera.c */
 /* Sets up cam for a width x height image. False when the camera is not valid (the server's rules: finite
  * values, direction not zero, field of view in (0, 180)). cache_origin: the origin rel is taken from. */
-bool view_rc__view_setup(const view_rc_camera *cam, uint32_t width, uint32_t height, const double cache_origin[3],
-                         rc_view *out);
+bool view_rc__view_setup(const view_rc_camera *cam, uint32_t width, uint32_t height,
+                         const double cache_origin[3], rc_view *out);
 
 /* Projects a point given relative to the cache origin. Returns false when it is behind the camera or outside
  * the image; else the pixel and the view depth. The hot loops use the same arithmetic without branches. */
-FXC_HOT_INLINE bool rc_project(const rc_view *v, float x, float y, float z, uint32_t *ix, uint32_t *iy, float *depth)
+FXC_HOT_INLINE bool rc_project(const rc_view *v, float x, float y, float z, uint32_t *ix, uint32_t *iy,
+                               float *depth)
 {
     float vx = x - v->rel[0], vy = y - v->rel[1], vz = z - v->rel[2];
     float zc = vx * v->forward[0] + vy * v->forward[1] + vz * v->forward[2];
@@ -103,16 +105,16 @@ typedef struct rc_worker {
     uint16_t *box;     /* prefilter: view_rc__prefilter_scratch(tile side) values */
 } rc_worker;
 
-/* Points being inserted, a batch at a time (rc_cache.c): their positions computed in one loop without branches,
- * then the slots taken one by one. */
+/* Points being inserted, a batch at a time (rc_cache.c): their positions computed in one loop without
+ * branches, then the slots taken one by one. */
 enum { RC_BATCH = 256 };
 typedef struct rc_batch {
     uint32_t n;
     float px[RC_BATCH], py[RC_BATCH], dist[RC_BATCH]; /* image position, distance along the ray (inf: sky) */
     const uint8_t *rgb[RC_BATCH];
-    float x[RC_BATCH], y[RC_BATCH], z[RC_BATCH];      /* out: position relative to the cache origin */
-    uint32_t last_pix[RC_BATCH];                      /* out: pixel in the last frame (RC_NO_PIXEL: none) */
-    float last_depth[RC_BATCH];                       /* out: view depth there */
+    float x[RC_BATCH], y[RC_BATCH], z[RC_BATCH]; /* out: position relative to the cache origin */
+    uint32_t last_pix[RC_BATCH];                 /* out: pixel in the last frame (RC_NO_PIXEL: none) */
+    float last_depth[RC_BATCH];                  /* out: view depth there */
 } rc_batch;
 
 /* Per-chunk figures of the passes over the store, added up in chunk order. */
@@ -133,18 +135,19 @@ struct view_rc {
     uint16_t list_outside, list_dead, list_new; /* tile_count, + 1, + 2: the other values of dest / tile_of */
 
     /* The point store (structure of arrays over slots). */
-    uint32_t slots;    /* capacity + insert_reserve */
+    uint32_t slots; /* capacity + insert_reserve */
     float *px, *py, *pz;
     uint32_t *rgba;
-    uint16_t *tile_of; /* the list a point was in last frame (list_new: inserted since) */
-    uint32_t *pix;     /* this frame: pixel (RC_NO_PIXEL outside) */
-    float *dep;        /* this frame: view depth */
-    uint16_t *dest;    /* this frame: tile, list_outside or list_dead */
-    uint8_t *mark;     /* this frame: shown in a pixel (slots + 1: the last is a sink) */
+    uint16_t *tile_of;    /* the list a point was in last frame (list_new: inserted since) */
+    uint32_t *pix;        /* this frame: pixel (RC_NO_PIXEL outside) */
+    float *dep;           /* this frame: view depth */
+    uint16_t *dest;       /* this frame: tile, list_outside or list_dead */
+    uint8_t *mark;        /* this frame: shown in a pixel (slots + 1: the last is a sink) */
     uint32_t *free_slots; /* stack of free slots: the next insert takes free_slots[free_count - 1] */
     uint32_t free_count;
-    uint32_t *chunk_free; /* per chunk: free slots the ageing pass listed (in free_list at chunk * chunk_size) */
-    uint32_t *free_list;  /* slots: per chunk, its free slots in descending order */
+    uint32_t
+        *chunk_free; /* per chunk: free slots the ageing pass listed (in free_list at chunk * chunk_size) */
+    uint32_t *free_list; /* slots: per chunk, its free slots in descending order */
 
     /* Chunks of slots: the unit of the parallel passes over points. */
     uint32_t chunk_size, chunk_shift, chunk_count; /* chunk_size = 1 << chunk_shift */
@@ -152,11 +155,11 @@ struct view_rc {
     uint32_t *chunk_hist;  /* chunk_count x 256: ages of the live points per chunk */
     uint32_t *chunk_quota; /* per chunk: points of age drop_age to drop this frame */
     rc_chunk_stat *chunk_stat;
-    uint32_t drop_age;     /* this frame's drop plan: drop ages above it and chunk_quota of it (255: none) */
+    uint32_t drop_age; /* this frame's drop plan: drop ages above it and chunk_quota of it (255: none) */
 
     /* The tile lists of this frame: entries of tile t are [tile_start[t], tile_start[t + 1]). */
-    rc_entry *entries;     /* slots entries */
-    uint32_t *tile_start;  /* tile_count + 1 */
+    rc_entry *entries;    /* slots entries */
+    uint32_t *tile_start; /* tile_count + 1 */
 
     /* Ageing (2002 3.4). */
     double age_carry, hidden_carry; /* fractional parts carried to the next frame */
@@ -189,13 +192,14 @@ struct view_rc {
     uint8_t *kind;     /* output pixel kinds */
     uint8_t *priority; /* output priority */
     uint8_t *chosen;   /* dither: chosen pixels */
-    float *stretch_x2, *stretch_y2; /* per column / row: the squared image-plane coordinate of the pixel centre */
-    uint32_t *row_need;            /* per row: pixels the prefilter must fill */
-    uint32_t *band_need;           /* per band (tiles_y of them, tile_size rows each): pixels to fill */
-    uint32_t *band_culled;         /* per band: pixels the depth cull emptied */
-    uint32_t *band_kind;           /* per band: pixels by kind (x VIEW_RC_PIXEL_KINDS) */
-    uint32_t *tile_filled;         /* per tile: pixels the prefilter filled */
-    uint64_t *band_weight;         /* per band: sum of priority + 1 */
+    float *stretch_x2,
+        *stretch_y2;       /* per column / row: the squared image-plane coordinate of the pixel centre */
+    uint32_t *row_need;    /* per row: pixels the prefilter must fill */
+    uint32_t *band_need;   /* per band (tiles_y of them, tile_size rows each): pixels to fill */
+    uint32_t *band_culled; /* per band: pixels the depth cull emptied */
+    uint32_t *band_kind;   /* per band: pixels by kind (x VIEW_RC_PIXEL_KINDS) */
+    uint32_t *tile_filled; /* per tile: pixels the prefilter filled */
+    uint64_t *band_weight; /* per band: sum of priority + 1 */
     uint32_t *band_quota, *band_offset;
 
     /* Prediction: quarter resolution (2002 3.1). */
@@ -227,8 +231,8 @@ void view_rc__zbuffer_direct(view_rc *rc);  /* no_tiling: one z-buffer pass in s
 void view_rc__age(view_rc *rc);             /* parallel over chunks, then the free stack (serial) */
 
 /* rc_image.c: the pixel passes, parallel over bands of rows. */
-size_t view_rc__interp_scratch(uint32_t width);    /* 16-bit values of a worker's interpolation scratch */
-size_t view_rc__prefilter_scratch(uint32_t tile);  /* ... and prefilter scratch (tiles of that side) */
+size_t view_rc__interp_scratch(uint32_t width);   /* 16-bit values of a worker's interpolation scratch */
+size_t view_rc__prefilter_scratch(uint32_t tile); /* ... and prefilter scratch (tiles of that side) */
 void view_rc__depth_cull(view_rc *rc);
 void view_rc__interpolate(view_rc *rc);
 void view_rc__prefilter(view_rc *rc);
@@ -241,8 +245,8 @@ void view_rc__band_quotas(const uint64_t *weight, const uint32_t *pixels, uint32
                           uint32_t *quota);
 /* Dithers up to RC_DITHER_LANES bands at once (each independent, the same result as alone): band k is rows
  * [y0[k], y1[k]) of a width-wide priority image, gets exactly quota[k] pixels (at most its pixels), marked in
- * chosen and written to out[k] in scanline order. err: 2 * RC_DITHER_LANES * 2 * (width + 2) floats (the band's
- * rows, then spare lanes'); spare: width bytes. */
+ * chosen and written to out[k] in scanline order. err: 2 * RC_DITHER_LANES * 2 * (width + 2) floats (the
+ * band's rows, then spare lanes'); spare: width bytes. */
 #define RC_DITHER_LANES 4
 void view_rc__dither_bands(const uint8_t *priority, uint32_t width, const uint32_t *y0, const uint32_t *y1,
                            const uint64_t *weight, const uint32_t *quota, uint32_t bands, uint8_t *chosen,
