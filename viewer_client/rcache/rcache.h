@@ -206,18 +206,19 @@ size_t view_rc_memory_bytes(const view_rc *rc);
 /* Inserts a whole frame the server rendered with camera cam: width x height pixels of rgb (3 bytes each) and
  * depth (metres along the primary ray, +inf for the sky; NaN or <= 0 skips the pixel). Every cached point the
  * frame saw (projected into one of its pixels, not behind that pixel's depth by more than supersede_ratio) is
- * replaced. The points wait in the cache's insert list until the next view_rc_render places them. Returns
- * FXC_OK, FXC_ERR_INVALID (NULL arrays, a size of 0 or above VIEW_RC_MAX_SIDE), FXC_ERR_CAMERA (cam not
- * valid) or FXC_ERR_RANGE (more pixels than the capacity). */
+ * replaced. The new points show from the next view_rc_render on. When the free slots run short, the oldest
+ * points make room on the spot. Returns FXC_OK, FXC_ERR_INVALID (NULL arrays, a size of 0 or above
+ * VIEW_RC_MAX_SIDE), FXC_ERR_CAMERA (cam not valid) or FXC_ERR_RANGE (more pixels than the capacity). */
 fxc_result view_rc_insert_frame(view_rc *rc, const view_rc_camera *cam, uint32_t width, uint32_t height,
                                 const uint8_t *rgb, const float *depth);
 
 /* Inserts count samples of camera cam's width x height image (an answer to a request). A sample replaces the
  * point the previous frame showed at its place when that point is not behind it by more than supersede_ratio
- * (nothing is replaced before the first frame or when the cache was compacted since), and when its colour
- * differs by more than change_threshold the neighbours of that place age by change_penalty. Samples outside
- * the image or with a depth that is NaN or <= 0 are skipped. Returns FXC_OK, FXC_ERR_INVALID, FXC_ERR_CAMERA
- * or FXC_ERR_RANGE (more samples than the capacity). */
+ * (nothing is replaced before the first frame, nor after a whole frame or room made on the spot since the
+ * last frame: the last frame's winners may be gone), and when its colour differs by more than
+ * change_threshold the neighbours of that place age by change_penalty. Samples outside the image or with a
+ * depth that is NaN or <= 0 are skipped. Returns FXC_OK, FXC_ERR_INVALID, FXC_ERR_CAMERA or FXC_ERR_RANGE
+ * (more samples than the capacity). */
 fxc_result view_rc_insert_samples(view_rc *rc, const view_rc_camera *cam, uint32_t width, uint32_t height,
                                   const view_rc_sample *samples, uint32_t count);
 
