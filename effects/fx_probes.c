@@ -146,14 +146,8 @@ static uint32_t queue_shadow_rays(const fx_context *ctx, hit_shading *hs, uint32
     uint32_t queued = 0;
     for (uint32_t l = 0; l < s->light_count; l++) {
         const scene_light *light = &s->lights[l];
-        float dir[3], distance;
-        fx_light_direction(light, origin, dir, &distance);
-        float cosine = fx__dot(normal, dir);
-        if (!(cosine > 0))
-            continue;
-        float falloff = light->type == SCENE_LIGHT_POINT ? 1.0f / fmaxf(distance * distance, 1e-8f) : 1.0f;
-        float scale = light->intensity * cosine * falloff;
-        if (!(scale > 0))
+        float dir[3], distance, scale;
+        if (!fx__light_arriving(light, origin, normal, dir, &distance, &scale))
             continue;
         if (hs->count == FX_RAY_BATCH)
             shadow_flush(ctx, hs);

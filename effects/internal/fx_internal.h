@@ -134,6 +134,21 @@ static inline float fx__dot(const float a[3], const float b[3])
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
 }
 
+/* Direct light arriving at a point with this normal from one light: its direction and distance (as
+ * fx_light_direction) and the unshadowed irradiance scale intensity x cos x falloff (1/d^2 for a point light).
+ * False when it arrives from behind or with no energy; the probe update and the path tracer both use it. */
+static inline bool fx__light_arriving(const scene_light *light, const float origin[3], const float normal[3],
+                                      float dir[3], float *distance, float *scale)
+{
+    fx_light_direction(light, origin, dir, distance);
+    float cosine = fx__dot(normal, dir);
+    if (!(cosine > 0))
+        return false;
+    float falloff = light->type == SCENE_LIGHT_POINT ? 1.0f / fmaxf(*distance * *distance, 1e-8f) : 1.0f;
+    *scale = light->intensity * cosine * falloff;
+    return *scale > 0;
+}
+
 /* An orthonormal basis (t, b) around unit n, branchless and continuous except at n.z = 0 sign flips
  * (Duff et al. 2017, "Building an Orthonormal Basis, Revisited"). */
 static inline void fx__onb(const float n[3], float t[3], float b[3])
