@@ -12,6 +12,7 @@
 #include "test_util.h"
 
 #include "fxt_scene.h"
+#include "image.h"
 #include "reference.h"
 #include "scene_internal.h"
 #include "trace.h"
@@ -763,6 +764,15 @@ static void test_cli_trace_frames_match_sim(void **state)
     assert_string_equal(sim_names, ref_names);
     assert_string_equal(ref_names, "frame_0000_viewer_00.png frame_0003_viewer_00.png frame_0003_viewer_01.png "
                                    "frame_0006_viewer_00.png frame_0006_viewer_01.png frame_0009_viewer_00.png ");
+    /* The same resolution rule as ref: --res wins over the trace's own 24 x 14 (cli_cameras.c). */
+    char png[1100], msg[256];
+    snprintf(png, sizeof png, "%s/frame_0000_viewer_00.png", sim_dir);
+    uint32_t pw = 0, ph = 0;
+    float *pixels = NULL;
+    assert_int_equal(scene_image_read_rgb(png, &pw, &ph, &pixels, msg, sizeof msg), 0);
+    free(pixels);
+    assert_int_equal(pw, 16);
+    assert_int_equal(ph, 9);
     char record[1100];
     snprintf(record, sizeof record, "%s/ref.json", ref_dir);
     json_t *root = load_json(record);

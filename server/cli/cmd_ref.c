@@ -5,6 +5,7 @@
  * (rewritten after every image, so whatever is done is on disk). SIGINT and SIGTERM end the run after the
  * current image. */
 #include "camgen.h"
+#include "cli_cameras.h"
 #include "cli.h"
 #include "cli_engine.h"
 #include "image.h"
@@ -22,7 +23,6 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-enum { MAX_TRACES = SRV_MAX_VIEWERS };
 
 static volatile sig_atomic_t stop_requested = 0;
 
@@ -57,7 +57,7 @@ typedef struct ref_options {
     bool views, quiet;
     srv_camgen_kind camera;
     bool camera_set;
-    const char *traces[MAX_TRACES];
+    const char *traces[SRV_CLI_MAX_TRACES];
     uint32_t trace_count;
     double fps;
     uint32_t samples[SAMPLE_OPTIONS]; /* 0: the effect's default */
@@ -181,14 +181,7 @@ static int parse_options(int argc, char **argv, ref_options *o)
                 ok = false;
             }
             break;
-        case O_TRACE:
-            if (o->trace_count == MAX_TRACES) {
-                fprintf(stderr, "fxcache ref: --trace: at most %d traces\n", MAX_TRACES);
-                ok = false;
-            } else {
-                o->traces[o->trace_count++] = optarg;
-            }
-            break;
+        case O_TRACE: ok = srv_cli_add_trace("ref", o->traces, &o->trace_count, optarg); break;
         case O_FPS: ok = srv_cli_double("ref", "--fps", optarg, 0.001, 1000, &o->fps); break;
         case O_AO:
         case O_SHADOW:
@@ -220,60 +213,17 @@ static int parse_options(int argc, char **argv, ref_options *o)
         fprintf(stderr, "fxcache ref: --out DIR is required (where the images and ref.json go)\n");
         return 2;
     }
-    if (o->trace_count && o->viewers_set && o->viewers != o->trace_count) {
-        fprintf(stderr, "fxcache ref: --viewers %u but %u traces: give one --trace per viewer\n", o->viewers,
-                o->trace_count);
+    if (!srv_cli_check_cameras("ref", o->trace_count, o->viewers_set, o->viewers, o->camera_set))
         return 2;
-    }
-    if (o->trace_count && o->camera_set) {
-        fprintf(stderr, "fxcache ref: --camera and --trace both choose the cameras: give one of them\n");
-        return 2;
-    }
     return -1;
 }
 
 /* ---- the cameras: sim's frames --------------------------------------------------------------------------- */
 
-/* What drives the cameras: traces on sim's clock, or a generator. */
-typedef struct ref_cameras {
-    const ref_options *o;
-    srv_trace *traces[MAX_TRACES];
-    double start_time; /* sim's frame 0 */
-} ref_cameras;
-
 /* Whether frame f is one to render: sim --save-every's choice. */
 static bool frame_chosen(const ref_options *o, uint32_t frame)
 {
     return frame == o->frames - 1 || (o->every && frame % o->every == 0);
-}
-
-/* The time of sim's frame f (with traces: start + f / fps; sim records a generator's cameras on the same
- * clock from 0). */
-static double frame_time(const ref_cameras *c, uint32_t frame)
-{
-    return c->start_time + frame / c->o->fps;
-}
-
-/* Whether viewer v is in sim's frame f, and if so its camera (scene-local) and resolution. */
-static bool viewer_camera(const ref_cameras *c, const scene *s, uint32_t frame, uint32_t v, srv_camera *camera,
-                          uint32_t *width, uint32_t *height)
-{
-    const ref_options *o = c->o;
-    *width = o->width;
-    *height = o->height;
-    const srv_trace *t = c->traces[v];
-    if (!t) {
-        *camera = srv_camgen_camera(o->camera, s, v, o->viewers, frame, o->engine.seed);
-        return true;
-    }
-    double now = frame_time(c, frame);
-    if (!(srv_trace_first_time(t) <= now + SRV_TRACE_TIME_EPSILON &&
-          now <= srv_trace_last_time(t) + SRV_TRACE_TIME_EPSILON))
-        return false; /* not joined yet, or left: sim renders nothing for it then */
-    if (!o->res_set)
-        srv_trace_resolution(t, width, height);
-    *camera = srv_trace_camera_at(t, s, now);
-    return true;
 }
 
 /* ---- output -------------------------------------------------------------------------------------------- */
@@ -372,7 +322,8 @@ int srv_cmd_ref(int argc, char **argv)
     int rc = parse_options(argc, argv, &o);
     if (rc >= 0)
         return rc;
-    ref_cameras cams = {.o = &o};
+    srv_cli_cameras cams = {.generator = o.camera, .viewers = o.viewers, .seed = o.engine.seed, .fps = o.fps,
+                            .width = o.width, .height = o.height, .res_set = o.res_set};
     scene *s = NULL;
     scene_rt *rt = NULL;
     srv_ref *ref = NULL;
@@ -382,29 +333,19 @@ int srv_cmd_ref(int argc, char **argv)
     char err[512];
 
     /* Traces: sim's clock starts at the earliest first time; frames until the last trace ends. */
+    if (!srv_cli_cameras_load("ref", &cams, o.traces, o.trace_count))
+        goto done;
     if (o.trace_count) {
         o.viewers = o.trace_count;
-        double first = INFINITY, last = -INFINITY;
-        for (uint32_t i = 0; i < o.trace_count; i++) {
-            cams.traces[i] = srv_trace_read(o.traces[i], err, sizeof err);
-            if (!cams.traces[i]) {
-                fprintf(stderr, "fxcache ref: %s\n", err);
-                goto done;
-            }
-            first = fmin(first, srv_trace_first_time(cams.traces[i]));
-            last = fmax(last, srv_trace_last_time(cams.traces[i]));
-        }
-        cams.start_time = first;
-        if (!o.frames_set) {
-            double span = (last - first) * o.fps;
-            o.frames = span < 1e6 ? (uint32_t)floor(span + 1e-6) + 1 : 1000000;
-        }
+        if (!o.frames_set)
+            o.frames = srv_cli_cameras_frames(&cams);
     }
     /* Memory: the largest image's buffers within the machine's physical memory, before anything is loaded. */
     uint64_t largest = (uint64_t)o.width * o.height;
     for (uint32_t v = 0; v < o.trace_count; v++) {
         uint32_t w, h;
-        if (!o.res_set && srv_trace_resolution(cams.traces[v], &w, &h) && (uint64_t)w * h > largest)
+        srv_cli_cameras_size(&cams, v, &w, &h);
+        if ((uint64_t)w * h > largest)
             largest = (uint64_t)w * h;
     }
     uint64_t per_pixel = SRV_REF_BYTES_PER_PIXEL + 12 + 3 + (o.views ? 8 : 0);
@@ -504,7 +445,7 @@ int srv_cmd_ref(int argc, char **argv)
             for (uint32_t v = 0; v < o.viewers; v++) {
                 srv_camera cam;
                 uint32_t w, h;
-                planned += viewer_camera(&cams, s, f, v, &cam, &w, &h);
+                planned += srv_cli_cameras_get(&cams, s, f, v, &cam, &w, &h);
             }
     json_object_set_new(root, "images_planned", json_integer(planned));
     if (!write_record(&o, root))
@@ -517,7 +458,7 @@ int srv_cmd_ref(int argc, char **argv)
         for (uint32_t v = 0; v < o.viewers && !stop_requested; v++) {
             srv_camera cam;
             uint32_t w, h;
-            if (!viewer_camera(&cams, s, f, v, &cam, &w, &h))
+            if (!srv_cli_cameras_get(&cams, s, f, v, &cam, &w, &h))
                 continue;
             if (!buffers_reserve(&buffers, (size_t)w * h, o.views)) {
                 fprintf(stderr, "fxcache ref: out of memory for a %ux%u image\n", w, h);
@@ -559,7 +500,7 @@ int srv_cmd_ref(int argc, char **argv)
             const char *name = strrchr(base, '/') + 1;
             json_t *image = json_pack(
                 "{s:I,s:I,s:f,s:I,s:I,s:o,s:s+,s:s+,s:f,s:o,s:f,s:f,s:f,s:f,s:[f,f,f],s:I}", "frame", (json_int_t)f,
-                "viewer", (json_int_t)v, "time_s", frame_time(&cams, f), "width", (json_int_t)w, "height",
+                "viewer", (json_int_t)v, "time_s", srv_cli_cameras_time(&cams, f), "width", (json_int_t)w, "height",
                 (json_int_t)h, "camera", camera_json(s, &cam), "exr", name, ".exr", "png", name, ".png", "render_ms",
                 st.render_ms, "rays", rays, "noise_rmse", st.noise_rmse, "noise_rmse_visible",
                 st.noise_rmse_visible, "noise_ao", st.noise_ao, "noise_shadow", st.noise_shadow, "mean_radiance",
@@ -592,7 +533,6 @@ done:
     srv_ref_free(ref);
     scene_rt_free(rt);
     scene_free(s);
-    for (uint32_t i = 0; i < MAX_TRACES; i++)
-        srv_trace_free(cams.traces[i]);
+    srv_cli_cameras_free(&cams);
     return exit_code;
 }

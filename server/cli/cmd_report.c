@@ -8,6 +8,7 @@
  * an interrupted report, run again with the same options, resumes without redoing it. SIGINT and SIGTERM stop
  * after the current frame (or reference image) with everything finished written. */
 #include "camgen.h"
+#include "cli_cameras.h"
 #include "cli.h"
 #include "cli_engine.h"
 #include "error_sink.h"
@@ -28,7 +29,7 @@
 #include <time.h>
 #include <unistd.h>
 
-enum { MAX_TRACES = SRV_MAX_VIEWERS, MAX_CONFIGS = 96 };
+enum { MAX_CONFIGS = 96 };
 
 static volatile sig_atomic_t stop_requested = 0;
 
@@ -55,7 +56,7 @@ typedef struct report_options {
     const char *out_dir;
     bool quick, quiet;
     srv_camgen_kind camera;
-    const char *traces[MAX_TRACES];
+    const char *traces[SRV_CLI_MAX_TRACES];
     uint32_t trace_count;
     double fps;
     double ref_samples; /* scale of the reference's default samples (0: 1, or 1/4 with --quick) */
@@ -209,14 +210,7 @@ static int parse_options(int argc, char **argv, report_options *o)
                 ok = false;
             }
             break;
-        case O_TRACE:
-            if (o->trace_count == MAX_TRACES) {
-                fprintf(stderr, "fxcache report: --trace: at most %d traces\n", MAX_TRACES);
-                ok = false;
-            } else {
-                o->traces[o->trace_count++] = optarg;
-            }
-            break;
+        case O_TRACE: ok = srv_cli_add_trace("report", o->traces, &o->trace_count, optarg); break;
         case O_FPS: ok = srv_cli_double("report", "--fps", optarg, 0.001, 1000, &o->fps); break;
         case O_REFS: ok = parse_power_of_two("--ref-samples", optarg, 0.125, 4, &o->ref_samples); break;
         case O_ONLY: ok = parse_only(optarg, o); break;
@@ -255,15 +249,8 @@ static int parse_options(int argc, char **argv, report_options *o)
         fprintf(stderr, "fxcache report: --out DIR is required (where the report goes)\n");
         return 2;
     }
-    if (o->trace_count && camera_set) {
-        fprintf(stderr, "fxcache report: --camera and --trace both choose the cameras: give one of them\n");
+    if (!srv_cli_check_cameras("report", o->trace_count, o->viewers_set, o->viewers, camera_set))
         return 2;
-    }
-    if (o->trace_count && o->viewers_set && o->viewers != o->trace_count) {
-        fprintf(stderr, "fxcache report: --viewers %u but %u traces: give one --trace per viewer\n", o->viewers,
-                o->trace_count);
-        return 2;
-    }
     if (o->engine.no_cache) {
         fprintf(stderr, "fxcache report: --no-cache is a sweep of the report (no_cache), not a base setting\n");
         return 2;
@@ -490,34 +477,6 @@ static void build_plan(report_plan *plan, const report_context *ctx)
 
 /* ---- cameras ------------------------------------------------------------------------------------------- */
 
-typedef struct report_cameras {
-    const report_options *o;
-    srv_trace *traces[MAX_TRACES];
-    double start_time;
-} report_cameras;
-
-/* Whether viewer v is in frame f, and its camera and resolution (sim's clock and rules). */
-static bool viewer_camera(const report_cameras *c, const scene *s, uint32_t frame, uint32_t v, srv_camera *camera,
-                          uint32_t *width, uint32_t *height)
-{
-    const report_options *o = c->o;
-    *width = o->width;
-    *height = o->height;
-    const srv_trace *t = c->traces[v];
-    if (!t) {
-        *camera = srv_camgen_camera(o->camera, s, v, o->viewers, frame, o->engine.seed);
-        return true;
-    }
-    double now = c->start_time + frame / o->fps;
-    if (!(srv_trace_first_time(t) <= now + SRV_TRACE_TIME_EPSILON &&
-          now <= srv_trace_last_time(t) + SRV_TRACE_TIME_EPSILON))
-        return false;
-    if (!o->res_set)
-        srv_trace_resolution(t, width, height);
-    *camera = srv_trace_camera_at(t, s, now);
-    return true;
-}
-
 static bool frame_compared(const report_options *o, uint32_t frame)
 {
     return frame == o->frames - 1 || frame % o->every == 0;
@@ -632,7 +591,7 @@ static double now_s(void)
 }
 
 /* Runs configuration c: 1 finished, 0 interrupted, -1 failed (a line was printed). */
-static int run_config(report_config *c, const report_context *ctx, const report_cameras *cams, scene_rt *rt,
+static int run_config(report_config *c, const report_context *ctx, const srv_cli_cameras *cams, scene_rt *rt,
                       const bool effect_on[SRV_MAX_EFFECTS], srv_refcache *refs, bool progress, size_t index,
                       size_t total)
 {
@@ -691,7 +650,7 @@ static int run_config(report_config *c, const report_context *ctx, const report_
         for (uint32_t v = 0; v < row->viewers; v++) {
             srv_camera cam;
             uint32_t w, h;
-            bool present = viewer_camera(cams, ctx->s, frame, v, &cam, &w, &h);
+            bool present = srv_cli_cameras_get(cams, ctx->s, frame, v, &cam, &w, &h);
             if (!present && joined[v] && !left[v]) {
                 srv_viewer_remove(loop, ids[v]);
                 left[v] = true;
@@ -768,7 +727,7 @@ done:
 
 /* Renders (or finds on disk) every reference image the plan needs, before any configuration runs, so their
  * time is apart from the configurations'. Returns false on a failure or an interruption. */
-static bool prepare_references(const report_context *ctx, const report_cameras *cams, srv_refcache *refs,
+static bool prepare_references(const report_context *ctx, const srv_cli_cameras *cams, srv_refcache *refs,
                                uint32_t viewers, bool progress)
 {
     const report_options *o = ctx->o;
@@ -778,7 +737,7 @@ static bool prepare_references(const report_context *ctx, const report_cameras *
             for (uint32_t v = 0; v < viewers; v++) {
                 srv_camera cam;
                 uint32_t w, h;
-                planned += viewer_camera(cams, ctx->s, f, v, &cam, &w, &h);
+                planned += srv_cli_cameras_get(cams, ctx->s, f, v, &cam, &w, &h);
             }
     double start = now_s();
     for (uint32_t f = 0; f < o->frames; f++) {
@@ -789,7 +748,7 @@ static bool prepare_references(const report_context *ctx, const report_cameras *
                 return false;
             srv_camera cam;
             uint32_t w, h;
-            if (!viewer_camera(cams, ctx->s, f, v, &cam, &w, &h))
+            if (!srv_cli_cameras_get(cams, ctx->s, f, v, &cam, &w, &h))
                 continue;
             char err[512];
             bool rendered = false;
@@ -941,7 +900,8 @@ int srv_cmd_report(int argc, char **argv)
     if (rc >= 0)
         return rc;
     double started = now_s();
-    report_cameras cams = {.o = &o};
+    srv_cli_cameras cams = {.generator = o.camera, .viewers = o.viewers, .seed = o.engine.seed, .fps = o.fps,
+                            .width = o.width, .height = o.height, .res_set = o.res_set};
     scene *s = NULL;
     scene_rt *rt = NULL;
     srv_ref *ref = NULL;
@@ -954,18 +914,8 @@ int srv_cmd_report(int argc, char **argv)
         fprintf(stderr, "fxcache report: out of memory\n");
         goto done;
     }
-    if (o.trace_count) {
-        double first = INFINITY;
-        for (uint32_t i = 0; i < o.trace_count; i++) {
-            cams.traces[i] = srv_trace_read(o.traces[i], err, sizeof err);
-            if (!cams.traces[i]) {
-                fprintf(stderr, "fxcache report: %s\n", err);
-                goto done;
-            }
-            first = fmin(first, srv_trace_first_time(cams.traces[i]));
-        }
-        cams.start_time = first;
-    }
+    if (!srv_cli_cameras_load("report", &cams, o.traces, o.trace_count))
+        goto done;
     signal(SIGINT, on_signal);
     signal(SIGTERM, on_signal);
     s = srv_cli_load_scene("report", o.engine.scene_path, (float)o.engine.density);
@@ -1136,7 +1086,6 @@ done:
     scene_rt_free(rt);
     scene_free(s);
     json_decref(left_out_extra);
-    for (uint32_t i = 0; i < MAX_TRACES; i++)
-        srv_trace_free(cams.traces[i]);
+    srv_cli_cameras_free(&cams);
     return exit_code;
 }

@@ -6,6 +6,7 @@
  * make the summary (--summary, and in words on stdout). SIGINT and SIGTERM end the run after the current
  * frame, with the summary and every file complete. */
 #include "camgen.h"
+#include "cli_cameras.h"
 #include "cli.h"
 #include "cli_engine.h"
 #include "engine.h"
@@ -24,7 +25,6 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-enum { MAX_TRACES = SRV_MAX_VIEWERS };
 
 static volatile sig_atomic_t stop_requested = 0;
 
@@ -48,7 +48,7 @@ typedef struct sim_options {
     const char *summary_path;
     srv_camgen_kind camera;
     bool camera_set;
-    const char *traces[MAX_TRACES];
+    const char *traces[SRV_CLI_MAX_TRACES];
     uint32_t trace_count;
     const char *record_dir;
     double fps;
@@ -65,7 +65,7 @@ static const char sim_usage[] =
     "  --viewers N          viewers, 1..64 (default 4, or one per --trace)\n"
     "  --frames F           frames, 1..1000000 (default 30, or until the last trace ends)\n"
     "  --res WxH            resolution per viewer, sides 1..8192 (default 640x360; a version 2 trace's own\n"
-    "                       resolution wins for its viewer)\n"
+    "                       resolution wins for its viewer unless --res is given)\n"
     "  --camera GEN         camera generator when no --trace is given (default room): %s\n"
     "  --trace FILE         a viewer trace (repeat once per viewer; see docs/TRACE_FORMAT.md): the viewer\n"
     "                       joins at its first time and leaves after its last\n"
@@ -118,14 +118,7 @@ static int parse_options(int argc, char **argv, sim_options *o)
                 ok = false;
             }
             break;
-        case O_TRACE:
-            if (o->trace_count == MAX_TRACES) {
-                fprintf(stderr, "fxcache sim: --trace: at most %d traces\n", MAX_TRACES);
-                ok = false;
-            } else {
-                o->traces[o->trace_count++] = optarg;
-            }
-            break;
+        case O_TRACE: ok = srv_cli_add_trace("sim", o->traces, &o->trace_count, optarg); break;
         case O_RECORD: o->record_dir = optarg; break;
         case O_QUIET: o->quiet = true; break;
         case O_FPS: ok = srv_cli_double("sim", "--fps", optarg, 0.001, 1000, &o->fps); break;
@@ -147,19 +140,8 @@ static int parse_options(int argc, char **argv, sim_options *o)
         fprintf(stderr, "fxcache sim: unexpected argument '%s' (the scene is given with --scene)\n", argv[optind]);
         return 2;
     }
-    if (o->trace_count && o->viewers_set && o->viewers != o->trace_count) {
-        fprintf(stderr, "fxcache sim: --viewers %u but %u traces: give one --trace per viewer\n", o->viewers,
-                o->trace_count);
+    if (!srv_cli_check_cameras("sim", o->trace_count, o->viewers_set, o->viewers, o->camera_set))
         return 2;
-    }
-    if (o->save_every && !o->out_dir) {
-        fprintf(stderr, "fxcache sim: --save-every needs --out DIR\n");
-        return 2;
-    }
-    if (o->trace_count && o->camera_set) {
-        fprintf(stderr, "fxcache sim: --camera and --trace both choose the cameras: give one of them\n");
-        return 2;
-    }
     if (o->views && !o->out_dir) {
         fprintf(stderr, "fxcache sim: --views needs --out DIR\n");
         return 2;
@@ -263,7 +245,8 @@ int srv_cmd_sim(int argc, char **argv)
     int rc = parse_options(argc, argv, &o);
     if (rc >= 0)
         return rc;
-    srv_trace *traces[MAX_TRACES] = {0};
+    srv_cli_cameras cams = {.generator = o.camera, .viewers = o.viewers, .seed = o.engine.seed, .fps = o.fps,
+                            .width = o.width, .height = o.height, .res_set = o.res_set};
     record_sink recorder = {.fps = o.fps};
     uint32_t index_of_slot[SRV_MAX_VIEWERS];
     srv_viewer_id ids[SRV_MAX_VIEWERS] = {{0}};
@@ -276,33 +259,20 @@ int srv_cmd_sim(int argc, char **argv)
         index_of_slot[v] = UINT32_MAX;
 
     /* Traces: each viewer joins at its first time and leaves after its last, on one clock at --fps. */
-    double start_time = 0;
+    if (!srv_cli_cameras_load("sim", &cams, o.traces, o.trace_count))
+        goto done;
     if (o.trace_count) {
         o.viewers = o.trace_count;
-        double first = INFINITY, last = -INFINITY;
-        for (uint32_t i = 0; i < o.trace_count; i++) {
-            traces[i] = srv_trace_read(o.traces[i], err, sizeof err);
-            if (!traces[i]) {
-                fprintf(stderr, "fxcache sim: %s\n", err);
-                goto done;
-            }
-            first = fmin(first, srv_trace_first_time(traces[i]));
-            last = fmax(last, srv_trace_last_time(traces[i]));
-        }
-        start_time = first;
-        if (!o.frames_set) {
-            double span = (last - first) * o.fps;
-            o.frames = span < 1e6 ? (uint32_t)floor(span + 1e-6) + 1 : 1000000;
-        }
+        if (!o.frames_set)
+            o.frames = srv_cli_cameras_frames(&cams);
     }
-    recorder.start_time = start_time;
+    recorder.start_time = cams.start_time;
     /* Memory: the pools and every viewer's buffers (at its trace's resolution, if it records one) within the
      * machine's physical memory, before anything is loaded. */
     uint64_t pixels = 0;
     for (uint32_t v = 0; v < o.viewers; v++) {
-        uint32_t w = o.width, h = o.height;
-        if (traces[v] && !o.res_set)
-            srv_trace_resolution(traces[v], &w, &h);
+        uint32_t w, h;
+        srv_cli_cameras_size(&cams, v, &w, &h);
         pixels += (uint64_t)w * h;
     }
     if (!srv_cli_check_memory("sim", o.engine.no_cache ? 0 : o.engine.pool_mb, o.viewers, pixels, o.views)) {
@@ -336,12 +306,10 @@ int srv_cmd_sim(int argc, char **argv)
     bool progress = isatty(STDERR_FILENO);
     uint32_t frame = 0;
     for (; frame < o.frames && !stop_requested; frame++) {
-        double now = start_time + frame / o.fps;
         /* Stage 1: viewers join and leave, then every present viewer gets its camera. */
         for (uint32_t v = 0; v < o.viewers; v++) {
-            bool present = !traces[v] || (srv_trace_first_time(traces[v]) <= now + SRV_TRACE_TIME_EPSILON &&
-                                          now <= srv_trace_last_time(traces[v]) + SRV_TRACE_TIME_EPSILON);
-            if (traces[v] && !present && joined[v] && !left[v]) {
+            bool traced = cams.traces[v] != NULL, present = srv_cli_cameras_present(&cams, v, frame);
+            if (traced && !present && joined[v] && !left[v]) {
                 srv_viewer_remove(loop, ids[v]);
                 left[v] = true;
                 continue;
@@ -349,13 +317,13 @@ int srv_cmd_sim(int argc, char **argv)
             if (!present || left[v])
                 continue;
             if (!joined[v]) {
-                srv_viewer_desc vd = {.width = o.width, .height = o.height};
-                if (traces[v] && !o.res_set)
-                    srv_trace_resolution(traces[v], &vd.width, &vd.height);
-                else if (traces[v] && srv_trace_resolution(traces[v], &vd.width, &vd.height) &&
-                         (vd.width != o.width || vd.height != o.height))
-                    fprintf(stderr, "fxcache sim: note: %s records %ux%u; that is used for its viewer, not --res\n",
-                            o.traces[v], vd.width, vd.height);
+                srv_viewer_desc vd;
+                srv_cli_cameras_size(&cams, v, &vd.width, &vd.height);
+                uint32_t tw, th;
+                if (traced && o.res_set && srv_trace_resolution(cams.traces[v], &tw, &th) &&
+                    (tw != o.width || th != o.height))
+                    fprintf(stderr, "fxcache sim: note: %s records %ux%u; --res %ux%u is used for its viewer\n",
+                            o.traces[v], tw, th, o.width, o.height);
                 snprintf(vd.name, sizeof vd.name, "viewer_%02u", v);
                 r = srv_viewer_add(loop, &vd, &ids[v]);
                 if (r != FXC_OK) {
@@ -374,8 +342,9 @@ int srv_cmd_sim(int argc, char **argv)
                     }
                 }
             }
-            srv_camera cam = traces[v] ? srv_trace_camera_at(traces[v], s, now)
-                                       : srv_camgen_camera(o.camera, s, v, o.viewers, frame, o.engine.seed);
+            srv_camera cam;
+            uint32_t w, h;
+            srv_cli_cameras_get(&cams, s, frame, v, &cam, &w, &h);
             r = srv_viewer_set_camera(loop, ids[v], &cam);
             if (r != FXC_OK) {
                 fprintf(stderr, "fxcache sim: frame %u, viewer %u: %s\n", frame, v, fxc_strerror(r));
@@ -440,8 +409,7 @@ done:
             fprintf(stderr, "fxcache sim: writing a trace failed\n");
             exit_code = 1;
         }
-    for (uint32_t i = 0; i < MAX_TRACES; i++)
-        srv_trace_free(traces[i]);
+    srv_cli_cameras_free(&cams);
     if (!srv_cli_stats_close(&stats) && exit_code == 0)
         exit_code = 1;
     srv_cli_run_close(&run);

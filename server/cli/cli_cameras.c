@@ -1,0 +1,108 @@
+/* The cameras of a run, shared by sim, ref and report (cli_cameras.h). */
+#include "cli_cameras.h"
+
+#include <math.h>
+#include <stdio.h>
+
+bool srv_cli_add_trace(const char *cmd, const char **paths, uint32_t *count, const char *path)
+{
+    if (*count == SRV_CLI_MAX_TRACES) {
+        fprintf(stderr, "fxcache %s: --trace: at most %d traces\n", cmd, SRV_CLI_MAX_TRACES);
+        return false;
+    }
+    paths[(*count)++] = path;
+    return true;
+}
+
+bool srv_cli_check_cameras(const char *cmd, uint32_t trace_count, bool viewers_set, uint32_t viewers,
+                           bool camera_set)
+{
+    if (trace_count && viewers_set && viewers != trace_count) {
+        fprintf(stderr, "fxcache %s: --viewers %u but %u traces: give one --trace per viewer\n", cmd, viewers,
+                trace_count);
+        return false;
+    }
+    if (trace_count && camera_set) {
+        fprintf(stderr, "fxcache %s: --camera and --trace both choose the cameras: give one of them\n", cmd);
+        return false;
+    }
+    return true;
+}
+
+bool srv_cli_cameras_load(const char *cmd, srv_cli_cameras *c, const char *const *paths, uint32_t count)
+{
+    if (!count)
+        return true;
+    char err[512];
+    double first = INFINITY, last = -INFINITY;
+    for (uint32_t i = 0; i < count && i < SRV_CLI_MAX_TRACES; i++) {
+        c->traces[i] = srv_trace_read(paths[i], err, sizeof err);
+        if (!c->traces[i]) {
+            fprintf(stderr, "fxcache %s: %s\n", cmd, err);
+            return false;
+        }
+        c->trace_count = i + 1;
+        first = fmin(first, srv_trace_first_time(c->traces[i]));
+        last = fmax(last, srv_trace_last_time(c->traces[i]));
+    }
+    c->viewers = c->trace_count;
+    c->start_time = first;
+    c->last_time = last;
+    return true;
+}
+
+uint32_t srv_cli_cameras_frames(const srv_cli_cameras *c)
+{
+    if (!c->trace_count)
+        return 0;
+    double span = (c->last_time - c->start_time) * c->fps;
+    return span < 1e6 ? (uint32_t)floor(span + 1e-6) + 1 : 1000000;
+}
+
+double srv_cli_cameras_time(const srv_cli_cameras *c, uint32_t frame)
+{
+    return c->start_time + frame / c->fps;
+}
+
+bool srv_cli_cameras_present(const srv_cli_cameras *c, uint32_t v, uint32_t frame)
+{
+    const srv_trace *t = v < SRV_CLI_MAX_TRACES ? c->traces[v] : NULL;
+    if (!t)
+        return true;
+    double now = srv_cli_cameras_time(c, frame);
+    return srv_trace_first_time(t) <= now + SRV_TRACE_TIME_EPSILON &&
+           now <= srv_trace_last_time(t) + SRV_TRACE_TIME_EPSILON;
+}
+
+void srv_cli_cameras_size(const srv_cli_cameras *c, uint32_t v, uint32_t *width, uint32_t *height)
+{
+    *width = c->width;
+    *height = c->height;
+    const srv_trace *t = v < SRV_CLI_MAX_TRACES ? c->traces[v] : NULL;
+    if (t && !c->res_set)
+        srv_trace_resolution(t, width, height);
+}
+
+bool srv_cli_cameras_get(const srv_cli_cameras *c, const scene *s, uint32_t frame, uint32_t v, srv_camera *camera,
+                         uint32_t *width, uint32_t *height)
+{
+    srv_cli_cameras_size(c, v, width, height);
+    const srv_trace *t = v < SRV_CLI_MAX_TRACES ? c->traces[v] : NULL;
+    if (!t) {
+        *camera = srv_camgen_camera(c->generator, s, v, c->viewers, frame, c->seed);
+        return true;
+    }
+    if (!srv_cli_cameras_present(c, v, frame))
+        return false; /* not joined yet, or left: sim renders nothing for it then */
+    *camera = srv_trace_camera_at(t, s, srv_cli_cameras_time(c, frame));
+    return true;
+}
+
+void srv_cli_cameras_free(srv_cli_cameras *c)
+{
+    for (uint32_t i = 0; i < SRV_CLI_MAX_TRACES; i++) {
+        srv_trace_free(c->traces[i]);
+        c->traces[i] = NULL;
+    }
+    c->trace_count = 0;
+}
