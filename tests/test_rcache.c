@@ -1051,7 +1051,7 @@ static int foreign_symbols(const char *archive, char *names, size_t cap)
         "aligned_alloc", "calloc", "malloc",        "realloc",
         "free",          "memcpy", "memmove",       "memset",
         "memcmp",        "abs",    "clock_gettime", "sqrtf",
-        "tanf",          "floor",  "floorf",        "_GLOBAL_OFFSET_TABLE_"};
+        "tanf",          "floor",  "floorf",        "sysconf", "_GLOBAL_OFFSET_TABLE_"};
     char command[1200];
     snprintf(command, sizeof command, "nm -u '%s' 2>/dev/null", archive);
     FILE *pipe = popen(command, "r");
@@ -1065,7 +1065,8 @@ static int foreign_symbols(const char *archive, char *names, size_t cap)
         if (sscanf(line, " %7s %399s", kind, symbol) != 2 || strlen(kind) != 1)
             continue;
         lines++;
-        if (!strncmp(symbol, "view_rc_", 8) || !strncmp(symbol, "pthread_", 8) || !strncmp(symbol, "__", 2))
+        if (!strncmp(symbol, "view_rc_", 8) || !strncmp(symbol, "fxc_pool_", 9) || !strncmp(symbol, "pthread_", 8) ||
+            !strncmp(symbol, "__", 2))
             continue;
         bool ok = false;
         for (size_t i = 0; i < sizeof allowed / sizeof allowed[0]; i++)
@@ -1081,8 +1082,8 @@ static int foreign_symbols(const char *archive, char *names, size_t cap)
     return pclose(pipe) == 0 && lines > 0 ? foreign : -1;
 }
 
-/* libfxc_rcache.a needs nothing but libc, libm and pthreads; the check refuses fxc_proto (zstd,
- * libturbojpeg). The archives are found from this test's scratch folder, <build>/tests/tmp_test_rcache. */
+/* libfxc_rcache.a needs nothing but libc, libm, pthreads and the shared thread pool (libfxc_pool.a, itself
+ * libc and pthreads only); the check refuses fxc_proto (zstd, libturbojpeg). The archives are found from this test's scratch folder, <build>/tests/tmp_test_rcache. */
 static void test_links_only_libc_libm_pthreads(void **state)
 {
     (void)state;
@@ -1099,6 +1100,10 @@ static void test_links_only_libc_libm_pthreads(void **state)
         skip(); /* no nm */
     if (foreign != 0)
         fail_msg("%s needs %d symbols from outside libc, libm and pthreads: %s", archive, foreign, names);
+    snprintf(archive, sizeof archive, "%s/libfxc_pool.a", build);
+    foreign = foreign_symbols(archive, names, sizeof names);
+    if (foreign != 0)
+        fail_msg("%s needs %d symbols from outside libc and pthreads: %s", archive, foreign, names);
     snprintf(archive, sizeof archive, "%s/proto/libfxc_proto.a", build);
     foreign = foreign_symbols(archive, names, sizeof names);
     assert_true(foreign > 0);

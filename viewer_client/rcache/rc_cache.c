@@ -277,7 +277,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     for (size_t p = 0; p < rc->pixels; p++)
         rc->pt[p] = RC_EMPTY_PT;
 
-    rc->pool = view_rc__pool_create(d.threads);
+    rc->pool = fxc_pool_create(d.threads, NULL);
     if (!rc->pool) {
         free(block);
         free(rc);
@@ -291,7 +291,7 @@ void view_rc_destroy(view_rc *rc)
 {
     if (!rc)
         return;
-    view_rc__pool_free(rc->pool);
+    fxc_pool_free(rc->pool);
     free(rc->block);
     free(rc);
 }

@@ -148,7 +148,7 @@ void view_rc__depth_cull(view_rc *rc)
         float sy = (1.0f - 2.0f * ((float)y + 0.5f) / (float)v->height) * v->tan_half_y;
         rc->stretch_y2[y] = sy * sy;
     }
-    view_rc__pool_run(rc->pool, rc->tiles_y, cull_task, rc);
+    fxc_pool_run(rc->pool, rc->tiles_y, cull_task, rc);
 }
 
 /* ---- interpolation and priority ----------------------------------------------------------------------- */
@@ -305,7 +305,7 @@ static void interpolate_task(void *user, uint32_t band, uint32_t worker)
 
 void view_rc__interpolate(view_rc *rc)
 {
-    view_rc__pool_run(rc->pool, rc->tiles_y, interpolate_task, rc);
+    fxc_pool_run(rc->pool, rc->tiles_y, interpolate_task, rc);
 }
 
 typedef struct rc_rect {
@@ -451,7 +451,7 @@ static void prefilter_task(void *user, uint32_t tile, uint32_t worker)
 void view_rc__prefilter(view_rc *rc)
 {
     memset(rc->tile_filled, 0, rc->tile_count * sizeof(uint32_t));
-    view_rc__pool_run(rc->pool, rc->tile_count, prefilter_task, rc);
+    fxc_pool_run(rc->pool, rc->tile_count, prefilter_task, rc);
     for (uint32_t tile = 0; tile < rc->tile_count; tile++) {
         uint32_t *kinds = rc->band_kind + (size_t)(tile / rc->tiles_x) * VIEW_RC_PIXEL_KINDS;
         kinds[VIEW_RC_EMPTY] -= rc->tile_filled[tile];

@@ -137,7 +137,7 @@ void view_rc__predict_project(view_rc *rc)
     size_t low = (size_t)rc->low_w * rc->low_h;
     for (uint32_t t = 0; t < rc->thread_count; t++)
         memset(rc->workers[t].occupied, 0, low);
-    view_rc__pool_run(rc->pool, rc->chunk_count, predict_task, rc);
+    fxc_pool_run(rc->pool, rc->chunk_count, predict_task, rc);
     uint8_t *all = rc->workers[0].occupied;
     for (uint32_t t = 1; t < rc->thread_count; t++) {
         const uint8_t *mine = rc->workers[t].occupied;
@@ -242,7 +242,7 @@ static void sort_task(void *user, uint32_t c, uint32_t worker)
 
 void view_rc__project_sort(view_rc *rc)
 {
-    view_rc__pool_run(rc->pool, rc->chunk_count, project_task, rc);
+    fxc_pool_run(rc->pool, rc->chunk_count, project_task, rc);
     /* Offsets: tile by tile, chunk by chunk. */
     uint32_t lists = rc->tile_count + 2, run = 0;
     for (uint32_t t = 0; t < rc->tile_count; t++) {
@@ -255,7 +255,7 @@ void view_rc__project_sort(view_rc *rc)
         }
     }
     rc->tile_start[rc->tile_count] = run;
-    view_rc__pool_run(rc->pool, rc->chunk_count, sort_task, rc);
+    fxc_pool_run(rc->pool, rc->chunk_count, sort_task, rc);
 }
 
 /* ---- z-buffer tiles (2002 3.2) ------------------------------------------------------------------------- */
@@ -294,7 +294,7 @@ static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
 
 void view_rc__zbuffer(view_rc *rc)
 {
-    view_rc__pool_run(rc->pool, rc->tile_count, zbuffer_task, rc);
+    fxc_pool_run(rc->pool, rc->tile_count, zbuffer_task, rc);
 }
 
 /* ---- the 1999 render cache: one z-buffer in slot order ------------------------------------------------- */
@@ -304,7 +304,7 @@ void view_rc__zbuffer(view_rc *rc)
  * avoid. */
 void view_rc__project_direct(view_rc *rc)
 {
-    view_rc__pool_run(rc->pool, rc->chunk_count, project_task, rc);
+    fxc_pool_run(rc->pool, rc->chunk_count, project_task, rc);
 }
 
 void view_rc__zbuffer_direct(view_rc *rc)
@@ -376,7 +376,7 @@ static void age_task(void *user, uint32_t c, uint32_t worker)
 
 void view_rc__age(view_rc *rc)
 {
-    view_rc__pool_run(rc->pool, rc->chunk_count, age_task, rc);
+    fxc_pool_run(rc->pool, rc->chunk_count, age_task, rc);
     /* The free stack: chunks from the last to the first, so that the lowest free slot is on top. */
     rc->free_count = 0;
     for (uint32_t c = rc->chunk_count; c-- > 0;) {

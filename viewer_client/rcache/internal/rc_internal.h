@@ -22,6 +22,7 @@
 #ifndef FXC_VIEW_RC_INTERNAL_H
 #define FXC_VIEW_RC_INTERNAL_H
 
+#include "fxc_pool.h"
 #include "fxc_hot.h"
 #include "rcache.h"
 
@@ -88,12 +89,11 @@ FXC_HOT_INLINE bool rc_project(const rc_view *v, float x, float y, float z, uint
     return true;
 }
 
-/* rc_pool.c: a pool of threads that run task 0..count-1 of a function, the caller included. */
-typedef struct rc_pool rc_pool;
-typedef void (*rc_pool_task)(void *user, uint32_t task, uint32_t worker);
-rc_pool *view_rc__pool_create(uint32_t threads); /* NULL when threads cannot start */
-void view_rc__pool_free(rc_pool *pool);
-void view_rc__pool_run(rc_pool *pool, uint32_t count, rc_pool_task task, void *user);
+/* The frame's threads: common/fxc_pool.h, a pool that runs task 0..count-1 of a function, the caller included
+ * (Reinhard 2001 section 3: tiles processed by several threads). Each pass is a count of tasks (chunks of the
+ * point store, tiles or bands); every task writes only its own outputs, so which thread ran it does not change
+ * the result. */
+typedef fxc_pool rc_pool;
 
 /* Per-thread scratch. */
 typedef struct rc_worker {

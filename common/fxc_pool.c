@@ -1,51 +1,53 @@
-/* The render cache's threads (Reinhard 2001 section 3: tiles processed by several threads). A frame is a
- * fixed sequence of passes; each pass is a count of tasks (chunks of the point store, tiles or bands) handed
- * out by an atomic counter to the workers and the calling thread, and the call returns when all are done.
- * Every task writes only its own outputs, so which thread ran it does not change the result. One mutex and
- * two condition variables; a pass of one task, or a pool of one thread, runs on the caller without touching
- * them. */
-#include "rc_internal.h"
+/* The thread pool (fxc_pool.h). One mutex and two condition variables; tasks are claimed with an atomic
+ * counter, so the hot path takes no lock. */
+#include "fxc_pool.h"
 
 #include <pthread.h>
 #include <stdatomic.h>
+#include <stdbool.h>
 #include <stdlib.h>
+#include <unistd.h>
 
-struct rc_pool {
+struct fxc_pool {
     uint32_t thread_count; /* the caller included */
-    pthread_t threads[VIEW_RC_MAX_THREADS];
-    uint32_t started; /* workers running (thread_count - 1 once created) */
+    uint32_t started;      /* workers running (thread_count - 1 once created) */
+    pthread_t *threads;    /* [1, thread_count) */
+    void (*thread_init)(void);
     pthread_mutex_t lock;
     pthread_cond_t work_ready, work_done;
-    uint64_t generation; /* bumped for every pass */
+    uint64_t generation; /* bumped for every run that wakes the workers */
     bool stopping;
-    rc_pool_task task;
+    /* The current run. */
+    fxc_pool_task task;
     void *user;
     uint32_t count;
     atomic_uint next;
-    uint32_t busy; /* workers inside the current pass */
+    uint32_t busy; /* workers inside the current run */
 };
 
-typedef struct rc_worker_start {
-    rc_pool *pool;
+typedef struct worker_start {
+    fxc_pool *pool;
     uint32_t index;
-} rc_worker_start;
+} worker_start;
 
 /* Claims and runs tasks until none is left. */
-static void drain(rc_pool *pool, uint32_t worker)
+static void drain(fxc_pool *pool, uint32_t thread_index)
 {
     for (;;) {
         uint32_t i = atomic_fetch_add(&pool->next, 1);
         if (i >= pool->count)
             return;
-        pool->task(pool->user, i, worker);
+        pool->task(pool->user, i, thread_index);
     }
 }
 
 static void *worker_main(void *arg)
 {
-    rc_pool *pool = ((rc_worker_start *)arg)->pool;
-    uint32_t index = ((rc_worker_start *)arg)->index;
+    fxc_pool *pool = ((worker_start *)arg)->pool;
+    uint32_t index = ((worker_start *)arg)->index;
     free(arg);
+    if (pool->thread_init)
+        pool->thread_init();
     uint64_t seen = 0;
     pthread_mutex_lock(&pool->lock);
     for (;;) {
@@ -65,28 +67,38 @@ static void *worker_main(void *arg)
     return NULL;
 }
 
-rc_pool *view_rc__pool_create(uint32_t threads)
+fxc_pool *fxc_pool_create(uint32_t threads, void (*thread_init)(void))
 {
-    if (threads == 0 || threads > VIEW_RC_MAX_THREADS)
+    if (threads == 0) {
+        long n = sysconf(_SC_NPROCESSORS_ONLN);
+        threads = n > 0 ? (n < FXC_POOL_MAX_THREADS ? (uint32_t)n : FXC_POOL_MAX_THREADS) : 1;
+    }
+    if (threads > FXC_POOL_MAX_THREADS)
         return NULL;
-    rc_pool *pool = calloc(1, sizeof *pool);
+    fxc_pool *pool = calloc(1, sizeof *pool);
     if (!pool)
         return NULL;
+    pool->threads = calloc(threads, sizeof *pool->threads);
+    if (!pool->threads) {
+        free(pool);
+        return NULL;
+    }
     pool->thread_count = threads;
+    pool->thread_init = thread_init;
     pthread_mutex_init(&pool->lock, NULL);
     pthread_cond_init(&pool->work_ready, NULL);
     pthread_cond_init(&pool->work_done, NULL);
     for (uint32_t i = 1; i < threads; i++) {
-        rc_worker_start *start = malloc(sizeof *start);
+        worker_start *start = malloc(sizeof *start);
         if (!start) {
-            view_rc__pool_free(pool);
+            fxc_pool_free(pool);
             return NULL;
         }
         start->pool = pool;
         start->index = i;
         if (pthread_create(&pool->threads[i], NULL, worker_main, start) != 0) {
             free(start);
-            view_rc__pool_free(pool);
+            fxc_pool_free(pool);
             return NULL;
         }
         pool->started = i;
@@ -94,10 +106,17 @@ rc_pool *view_rc__pool_create(uint32_t threads)
     return pool;
 }
 
-void view_rc__pool_run(rc_pool *pool, uint32_t count, rc_pool_task task, void *user)
+uint32_t fxc_pool_threads(const fxc_pool *pool)
+{
+    return pool->thread_count;
+}
+
+void fxc_pool_run(fxc_pool *pool, uint32_t count, fxc_pool_task task, void *user)
 {
     if (count == 0)
         return;
+    if (pool->thread_init)
+        pool->thread_init();
     if (pool->thread_count == 1 || count == 1) {
         for (uint32_t i = 0; i < count; i++)
             task(user, i, 0);
@@ -118,7 +137,7 @@ void view_rc__pool_run(rc_pool *pool, uint32_t count, rc_pool_task task, void *u
     pthread_mutex_unlock(&pool->lock);
 }
 
-void view_rc__pool_free(rc_pool *pool)
+void fxc_pool_free(fxc_pool *pool)
 {
     if (!pool)
         return;
@@ -131,5 +150,6 @@ void view_rc__pool_free(rc_pool *pool)
     pthread_cond_destroy(&pool->work_ready);
     pthread_cond_destroy(&pool->work_done);
     pthread_mutex_destroy(&pool->lock);
+    free(pool->threads);
     free(pool);
 }
