@@ -14,6 +14,14 @@ bool srv_cli_add_trace(const char *cmd, const char **paths, uint32_t *count, con
     return true;
 }
 
+bool srv_cli_camera_option(const char *cmd, const char *gen, srv_camgen_kind *out)
+{
+    if (srv_camgen_parse(gen, out))
+        return true;
+    fprintf(stderr, "fxcache %s: --camera: unknown generator '%s' (one of: %s)\n", cmd, gen, srv_camgen_list());
+    return false;
+}
+
 bool srv_cli_check_cameras(const char *cmd, uint32_t trace_count, bool viewers_set, uint32_t viewers,
                            bool camera_set)
 {

@@ -34,6 +34,10 @@ typedef struct srv_cli_cameras {
  * 64 traces" and returns false. */
 bool srv_cli_add_trace(const char *cmd, const char **paths, uint32_t *count, const char *path);
 
+/* --camera GEN while parsing: the generator named gen, or false after "fxcache CMD: --camera: unknown
+ * generator 'GEN' (one of: ...)". */
+bool srv_cli_camera_option(const char *cmd, const char *gen, srv_camgen_kind *out);
+
 /* The checks every command makes once its options are parsed: one --trace per viewer when --viewers is given
  * too, and not both --camera and --trace. False with a one-line error. */
 bool srv_cli_check_cameras(const char *cmd, uint32_t trace_count, bool viewers_set, uint32_t viewers,

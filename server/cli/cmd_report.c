@@ -204,11 +204,7 @@ static int parse_options(int argc, char **argv, report_options *o)
         case O_QUIET: o->quiet = true; break;
         case O_CAMERA:
             camera_set = true;
-            if (!srv_camgen_parse(optarg, &o->camera)) {
-                fprintf(stderr, "fxcache report: --camera: unknown generator '%s' (one of: %s)\n", optarg,
-                        srv_camgen_list());
-                ok = false;
-            }
+            ok = srv_cli_camera_option("report", optarg, &o->camera);
             break;
         case O_TRACE: ok = srv_cli_add_trace("report", o->traces, &o->trace_count, optarg); break;
         case O_FPS: ok = srv_cli_double("report", "--fps", optarg, 0.001, 1000, &o->fps); break;

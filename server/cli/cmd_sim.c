@@ -113,10 +113,7 @@ static int parse_options(int argc, char **argv, sim_options *o)
         case O_SUMMARY: o->summary_path = optarg; break;
         case O_CAMERA:
             o->camera_set = true;
-            if (!srv_camgen_parse(optarg, &o->camera)) {
-                fprintf(stderr, "fxcache sim: --camera: unknown generator '%s' (one of: %s)\n", optarg, srv_camgen_list());
-                ok = false;
-            }
+            ok = srv_cli_camera_option("sim", optarg, &o->camera);
             break;
         case O_TRACE: ok = srv_cli_add_trace("sim", o->traces, &o->trace_count, optarg); break;
         case O_RECORD: o->record_dir = optarg; break;
