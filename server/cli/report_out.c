@@ -759,27 +759,18 @@ bool srv_rep_write_html(const char *dir, const srv_rep_row *rows, size_t n, cons
         fprintf(f, "<tr%s><td>", r->pareto ? " class=\"front\"" : "");
         html_text(f, r->label);
         fprintf(f, "</td><td>%s</td><td>%u</td><td>", r->family, r->viewers);
-        html_number(f, "%.1f", r->ms_per_frame);
-        fputs("</td><td>", f);
-        html_number(f, "%.1f", r->ms_per_viewer);
-        fputs("</td><td>", f);
-        html_number(f, "%.1f", r->cpu_ms_per_frame);
-        fputs("</td><td>", f);
-        html_number(f, "%.0f", r->rays_per_frame);
-        fputs("</td><td>", f);
-        html_number(f, "%.4g", r->rmse);
-        fputs("</td><td>", f);
-        html_number(f, "%.2f", r->psnr_db);
-        fputs("</td><td>", f);
-        html_number(f, "%.4g", r->rmse_denoised);
-        fputs("</td><td>", f);
-        html_number(f, "%.4g", r->rmse_shadow);
-        fputs("</td><td>", f);
-        html_number(f, "%.4g", r->rmse_ao);
-        fputs("</td><td>", f);
-        html_number(f, "%.3g", r->ref_noise);
-        fputs("</td><td>", f);
-        html_number(f, "%.4f", r->flip_mean);
+        const struct {
+            const char *format;
+            double value;
+        } cells[] = {{"%.1f", r->ms_per_frame}, {"%.1f", r->ms_per_viewer}, {"%.1f", r->cpu_ms_per_frame},
+                     {"%.0f", r->rays_per_frame}, {"%.4g", r->rmse}, {"%.2f", r->psnr_db},
+                     {"%.4g", r->rmse_denoised}, {"%.4g", r->rmse_shadow}, {"%.4g", r->rmse_ao},
+                     {"%.3g", r->ref_noise}, {"%.4f", r->flip_mean}};
+        for (size_t k = 0; k < sizeof cells / sizeof cells[0]; k++) {
+            if (k)
+                fputs("</td><td>", f);
+            html_number(f, cells[k].format, cells[k].value);
+        }
         fputs("</td></tr>\n", f);
     }
     fputs("</table>\n<p>Highlighted rows are on the Pareto front of their viewer count.</p>\n", f);
