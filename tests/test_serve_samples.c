@@ -11,7 +11,7 @@
  *   - strategies: fan's frames carry a vertical fov of 2 atan(1.5 tan(fov/2)) (closed form), the same
  *     position and direction; predictive renders the camera message's predicted pose when it has one, and
  *     otherwise a pose extrapolated along the motion by between one frame period and a second; an unknown
- *     strategy is refused. */
+ *     strategy is refused; --record writes the camera rendered (fan's widened fov). */
 #include "proto.h"
 #include "test_util.h"
 
@@ -532,7 +532,10 @@ static void test_strategies(void **state)
 {
     (void)state;
     server sv;
-    const char *args[] = {"--fps", "20", "--effects", "shadow,ao", "--max-samples", "1000", NULL};
+    char record_dir[512];
+    snprintf(record_dir, sizeof record_dir, "%s", fxt_tmp_path("strategies_rec"));
+    const char *args[] = {"--fps", "20",       "--effects", "shadow,ao", "--max-samples",
+                          "1000",  "--record", record_dir,  NULL};
     server_start(&sv, "strategies", args);
     /* A request over --max-samples whose message is within --max-message (65536): refused by its count. */
     int over_fd = ws_connect(sv.port);
@@ -612,6 +615,23 @@ static void test_strategies(void **state)
     assert_same_direction(got.direction, w.camera.direction);
     close(fd);
     assert_int_equal(server_stop(&sv), 0);
+    /* --record writes the camera rendered: the fan viewer (viewer_03: viewer_00 never sent a camera, then "",
+     * basic, fan) ends with the widened fov of its 90-degree camera. */
+    char path[600], line[512];
+    snprintf(path, sizeof path, "%s/viewer_03.trace", record_dir);
+    FILE *trace = fopen(path, "r");
+    assert_non_null(trace);
+    double last_fov = 0;
+    while (fgets(line, sizeof line, trace)) {
+        double v[8];
+        if (sscanf(line, "%lf %lf %lf %lf %lf %lf %lf %lf", &v[0], &v[1], &v[2], &v[3], &v[4], &v[5], &v[6],
+                   &v[7]) == 8)
+            last_fov = v[7];
+    }
+    fclose(trace);
+    double want = 360.0 / M_PI * atan(1.5 * tan(90.0 * M_PI / 360.0));
+    if (fabs(last_fov - want) > 1e-3)
+        fail_msg("%s: last fov %g, expected %g", path, last_fov, want);
 }
 
 int main(void)
