@@ -314,7 +314,7 @@ int srv_cmd_sim(int argc, char **argv)
             if (!present || left[v])
                 continue;
             if (!joined[v]) {
-                srv_viewer_desc vd;
+                srv_viewer_desc vd = {0};
                 srv_cli_cameras_size(&cams, v, &vd.width, &vd.height);
                 uint32_t tw, th;
                 if (traced && o.res_set && srv_trace_resolution(cams.traces[v], &tw, &th) &&
