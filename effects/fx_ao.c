@@ -242,7 +242,7 @@ FXC_HOT_CLONES static void ao_shade(const fx_context *ctx, const fx_shade_run *r
         float ao = 0;
         for (uint32_t t = 0; t < taps->count; t++)
             ao += taps->weight[t] * fx_ao_sample(taps->texel[t], 0);
-        run->sky_visibility[i] *= fminf(ao, 1.0f);
+        run->sky_visibility[i] *= fx__min1(ao);
     }
 }
 

@@ -173,12 +173,13 @@ typedef struct compose_task {
     atomic_uint_fast64_t rays[SRV_MAX_EFFECTS];
 } compose_task;
 
-/* Gathers the visible pixels of one run (rows y0..y1, columns x0..x1, at most SRV_RUN pixels): their points,
- * albedo and cache pixels (with position and distance only when `positions`: a cache kind asks for them);
- * misses get the sky. Returns how many are visible. */
+/* Gathers the visible pixels of one run (rows y0..y1, columns x0..x1, at most SRV_RUN pixels): their shading
+ * normals, albedo and cache pixels (with position and distance only when `positions`: a cache kind asks for
+ * them), and their points (fx_point) only when `points` (no-cache mode, a cache kind that needs positions, or
+ * a light that is not directional); misses get the sky. Returns how many are visible. */
 FXC_HOT_INLINE uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32_t x1, uint32_t y0,
                            uint32_t y1, compose_scratch *cs, const float sky[3], float log2_density,
-                           bool positions)
+                           bool positions, bool points)
 {
     const scene *s = loop->s;
     const srv_camera_frame *f = &view->frame;
@@ -204,7 +205,6 @@ FXC_HOT_INLINE uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0
             }
             uint32_t i = count++;
             cs->index[i] = p;
-            fx_point *pt = &cs->points[i];
             float u = view->bary_u[p], v = view->bary_v[p], dir[3];
             if (tri != memo_tri) {
                 memo_tri = tri;
@@ -216,42 +216,50 @@ FXC_HOT_INLINE uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0
                 memo_island = s->tri_island[tri];
             }
             float w = 1.0f - u - v;
-            for (int k = 0; k < 3; k++) {
-                pt->position[k] = w * corner[0][k] + u * corner[1][k] + v * corner[2][k];
-                pt->normal[k] = normal[k];
-            }
-            /* The ray's direction, not normalised: only its side of the surface matters here. */
+            /* The ray's direction, not normalised: only its side of the surface matters here. The loops over
+             * the three axes are written out (at -O2 they stayed loops). */
             float sx = ((float)x + 0.5f) * scale_x - f->tan_half_x,
                   sy = f->tan_half_y - ((float)y + 0.5f) * scale_y;
-            for (int k = 0; k < 3; k++)
-                dir[k] = f->forward[k] + sx * f->right[k] + sy * f->up[k];
-            float facing = pt->normal[0] * dir[0] + pt->normal[1] * dir[1] + pt->normal[2] * dir[2];
-            for (int k = 0; k < 3; k++) /* seen from behind: light the side the viewer sees */
-                pt->view_normal[k] = cs->shade_normal[i][k] = facing > 0 ? -pt->normal[k] : pt->normal[k];
+            dir[0] = f->forward[0] + sx * f->right[0] + sy * f->up[0];
+            dir[1] = f->forward[1] + sx * f->right[1] + sy * f->up[1];
+            dir[2] = f->forward[2] + sx * f->right[2] + sy * f->up[2];
+            float facing = normal[0] * dir[0] + normal[1] * dir[1] + normal[2] * dir[2];
+            float *sn = cs->shade_normal[i]; /* seen from behind: light the side the viewer sees */
+            sn[0] = facing > 0 ? -normal[0] : normal[0];
+            sn[1] = facing > 0 ? -normal[1] : normal[1];
+            sn[2] = facing > 0 ? -normal[2] : normal[2];
             /* The pixel's footprint in metres: level-0 texels per pixel over texels per metre. The albedo is
              * sampled after the loop, for the whole run. */
             cs->triangle[i] = tri;
             cs->bary_u[i] = u;
             cs->bary_v[i] = v;
             cs->albedo_footprint[i] = view->footprint[p] - log2_density;
-            pt->triangle = tri;
-            pt->u = u;
-            pt->v = v;
-            pt->pixel_id = p;
-            if (no_cache) {
-                srv_camera_ray(f, (float)x + 0.5f, (float)y + 0.5f, dir);
-                srv__pixel_differentials(f, dir, view->depth[p], pt->normal, pt->dpdx, pt->dpdy);
-            }
             srv_pixel *px = &cs->pixels[i];
+            if (points) {
+                fx_point *pt = &cs->points[i];
+                for (int k = 0; k < 3; k++) {
+                    pt->position[k] = w * corner[0][k] + u * corner[1][k] + v * corner[2][k];
+                    pt->normal[k] = normal[k];
+                    pt->view_normal[k] = sn[k];
+                }
+                pt->triangle = tri;
+                pt->u = u;
+                pt->v = v;
+                pt->pixel_id = p;
+                if (no_cache) {
+                    srv_camera_ray(f, (float)x + 0.5f, (float)y + 0.5f, dir);
+                    srv__pixel_differentials(f, dir, view->depth[p], pt->normal, pt->dpdx, pt->dpdy);
+                }
+                if (positions)
+                    memcpy(px->position, pt->position, sizeof px->position);
+            }
             px->triangle = tri;
             px->island = memo_island;
             px->footprint = view->footprint[p];
             px->island_u = w * island_uv[0] + u * island_uv[2] + v * island_uv[4];
             px->island_v = w * island_uv[1] + u * island_uv[3] + v * island_uv[5];
-            if (positions) {
-                memcpy(px->position, pt->position, sizeof px->position);
+            if (positions)
                 px->distance = view->depth[p];
-            }
         }
     scene_albedo_run(s, cs->triangle, cs->bary_u, cs->bary_v, cs->albedo_footprint, count, cs->albedo);
     return count;
@@ -285,6 +293,12 @@ FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_
         for (int k = 0; k < 3; k++)
             light_rgb[l][k] = s->lights[l].intensity * s->lights[l].color[k];
     }
+    /* The visible points (fx_point) are gathered only for whoever reads them: the no-cache evaluation, a
+     * shading cache kind that needs positions (its shade callback reads them), and lights whose direction
+     * depends on the position. */
+    bool points = no_cache || positions;
+    for (uint32_t l = 0; l < lights; l++)
+        points |= !(s->lights[l].type == SCENE_LIGHT_DIRECTIONAL && l < CONSTANT_LIGHTS);
     /* A 16 x 16 tile in runs of 4 rows x 16 columns: neighbouring pixels read the same blocks and texels. */
     uint32_t tiles_x = (f->width + SRV_TILE - 1) / SRV_TILE;
     uint32_t tx0 = (task_index % tiles_x) * SRV_TILE, ty0 = (task_index / tiles_x) * SRV_TILE;
@@ -292,7 +306,7 @@ FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_
     uint32_t ty1 = ty0 + SRV_TILE < f->height ? ty0 + SRV_TILE : f->height;
     for (uint32_t ry = ty0; ry < ty1; ry += SRV_RUN / SRV_TILE) {
         uint32_t ry1 = ry + SRV_RUN / SRV_TILE < ty1 ? ry + SRV_RUN / SRV_TILE : ty1;
-        uint32_t count = gather_run(loop, view, tx0, tx1, ry, ry1, cs, sky, log2_density, positions);
+        uint32_t count = gather_run(loop, view, tx0, tx1, ry, ry1, cs, sky, log2_density, positions, points);
         for (uint32_t i = 0; i < count * stride; i++)
             cs->light_visibility[i] = 1.0f;
         for (uint32_t i = 0; i < count; i++) {
@@ -314,7 +328,7 @@ FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_
             fx_shade_run run = {.count = count,
                                 .light_count = lights,
                                 .taps = cs->taps,
-                                .points = cs->points,
+                                .points = points ? cs->points : NULL,
                                 .light_visibility = cs->light_visibility,
                                 .sky_visibility = cs->sky_visibility,
                                 .indirect = cs->indirect};
@@ -337,7 +351,7 @@ FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_
         for (uint32_t i = 0; i < count; i++) {
             size_t p = cs->index[i];
             const float *sn = cs->shade_normal[i];
-            const float *pos = cs->points[i].position;
+            const float *pos = points ? cs->points[i].position : NULL; /* set for every non-constant light */
             const float *visibility = cs->light_visibility + (size_t)i * stride;
             float irradiance[3] = {0, 0, 0};
             for (uint32_t l = 0; l < lights; l++) {
@@ -345,9 +359,11 @@ FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_
                 if (light->type == SCENE_LIGHT_DIRECTIONAL && l < CONSTANT_LIGHTS) {
                     const float *ldir = light_dir[l];
                     float cosine = sn[0] * ldir[0] + sn[1] * ldir[1] + sn[2] * ldir[2];
-                    if (cosine > 0)
-                        for (int k = 0; k < 3; k++)
-                            irradiance[k] += cosine * visibility[l] * light_rgb[l][k];
+                    if (cosine > 0) {
+                        irradiance[0] += cosine * visibility[l] * light_rgb[l][0];
+                        irradiance[1] += cosine * visibility[l] * light_rgb[l][1];
+                        irradiance[2] += cosine * visibility[l] * light_rgb[l][2];
+                    }
                     continue;
                 }
                 float ldir[3], dist;
@@ -362,6 +378,7 @@ FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_
             }
             /* Saturate, never overflow to infinity (extreme light intensities): DESIGN.md, robustness. */
             float *rad = view->radiance + 3 * p;
+#pragma GCC unroll 3
             for (int k = 0; k < 3; k++) {
                 float irr = saturate_max(irradiance[k]) + saturate_max(sky[k] * cs->sky_visibility[i]) +
                             saturate_max(cs->indirect[3 * i + k]);
@@ -380,6 +397,7 @@ FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_
                 size_t p = (size_t)y * f->width + x;
                 const float *rad = view->radiance + 3 * p;
                 uint8_t *px = view->image + 3 * p;
+#pragma GCC unroll 3
                 for (int k = 0; k < 3; k++)
                     px[k] = tone_map_srgb8(rad[k]);
             }

@@ -310,12 +310,13 @@ FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot,
         float fx0 = floorf(x), fy0 = floorf(y);
         float ax = x - fx0, ay = y - fy0;
         long x0 = (long)fx0, y0 = (long)fy0;
-        long tx[2], ty[2]; /* the two columns and rows, clamped */
-        for (int c = 0; c < 2; c++) {
-            long xi = x0 + c, yi = y0 + c;
-            tx[c] = xi < 0 ? 0 : (xi >= w ? w - 1 : xi);
-            ty[c] = yi < 0 ? 0 : (yi >= h ? h - 1 : yi);
-        }
+        long tx[2] = {x0, x0 + 1}, ty[2] = {y0, y0 + 1}; /* the two columns and rows, clamped */
+        if (!(x0 >= 0 && x0 + 1 < w)) /* one test for the usual case, inside the island */
+            for (int c = 0; c < 2; c++)
+                tx[c] = tx[c] < 0 ? 0 : (tx[c] >= w ? w - 1 : tx[c]);
+        if (!(y0 >= 0 && y0 + 1 < h))
+            for (int c = 0; c < 2; c++)
+                ty[c] = ty[c] < 0 ? 0 : (ty[c] >= h ? h - 1 : ty[c]);
         float wx[2] = {1 - ax, ax}, wy[2] = {1 - ay, ay};
         uint32_t tap_memo_slot[4];
         uint64_t key0 = base | ((uint64_t)(ty[0] >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
