@@ -28,6 +28,7 @@ typedef struct compose_scratch {
     uint32_t triangle[SRV_RUN];                      /* the albedo's arguments, one array each */
     float bary_u[SRV_RUN], bary_v[SRV_RUN], albedo_footprint[SRV_RUN];
     float shade_normal[SRV_RUN][3];
+    float irradiance[SRV_RUN][3]; /* from the lights, summed light by light */
     uint8_t missing[SRV_RUN];
     float sharing[SRV_RUN];
     float sky_visibility[SRV_RUN];
@@ -348,34 +349,43 @@ FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_
                 }
             }
         }
-        for (uint32_t i = 0; i < count; i++) {
-            size_t p = cs->index[i];
-            const float *sn = cs->shade_normal[i];
-            const float *pos = points ? cs->points[i].position : NULL; /* set for every non-constant light */
-            const float *visibility = cs->light_visibility + (size_t)i * stride;
-            float irradiance[3] = {0, 0, 0};
-            for (uint32_t l = 0; l < lights; l++) {
-                const scene_light *light = &s->lights[l];
-                if (light->type == SCENE_LIGHT_DIRECTIONAL && l < CONSTANT_LIGHTS) {
-                    const float *ldir = light_dir[l];
+        /* The lights' irradiance, light by light over the run (each pixel sums its lights in the same order
+         * as before): the constant directional ones in a loop of plain arithmetic. */
+        for (uint32_t i = 0; i < count; i++)
+            cs->irradiance[i][0] = cs->irradiance[i][1] = cs->irradiance[i][2] = 0.0f;
+        for (uint32_t l = 0; l < lights; l++) {
+            const scene_light *light = &s->lights[l];
+            if (light->type == SCENE_LIGHT_DIRECTIONAL && l < CONSTANT_LIGHTS) {
+                const float *ldir = light_dir[l], *rgb = light_rgb[l];
+                for (uint32_t i = 0; i < count; i++) {
+                    const float *sn = cs->shade_normal[i];
                     float cosine = sn[0] * ldir[0] + sn[1] * ldir[1] + sn[2] * ldir[2];
+                    float visibility = cs->light_visibility[(size_t)i * stride + l];
                     if (cosine > 0) {
-                        irradiance[0] += cosine * visibility[l] * light_rgb[l][0];
-                        irradiance[1] += cosine * visibility[l] * light_rgb[l][1];
-                        irradiance[2] += cosine * visibility[l] * light_rgb[l][2];
+                        cs->irradiance[i][0] += cosine * visibility * rgb[0];
+                        cs->irradiance[i][1] += cosine * visibility * rgb[1];
+                        cs->irradiance[i][2] += cosine * visibility * rgb[2];
                     }
-                    continue;
                 }
+                continue;
+            }
+            for (uint32_t i = 0; i < count; i++) {
+                const float *sn = cs->shade_normal[i];
                 float ldir[3], dist;
-                fx_light_direction(light, pos, ldir, &dist);
+                fx_light_direction(light, cs->points[i].position, ldir, &dist); /* `points` holds them */
                 float cosine = sn[0] * ldir[0] + sn[1] * ldir[1] + sn[2] * ldir[2];
                 if (!(cosine > 0))
                     continue;
                 float falloff = light->type == SCENE_LIGHT_POINT ? 1.0f / fmaxf(dist * dist, 1e-8f) : 1.0f;
-                float scale = light->intensity * cosine * visibility[l] * falloff;
+                float scale = light->intensity * cosine * cs->light_visibility[(size_t)i * stride + l] * falloff;
                 for (int k = 0; k < 3; k++)
-                    irradiance[k] += scale * light->color[k];
+                    cs->irradiance[i][k] += scale * light->color[k];
             }
+        }
+        for (uint32_t i = 0; i < count; i++) {
+            size_t p = cs->index[i];
+            const float *visibility = cs->light_visibility + (size_t)i * stride;
+            const float *irradiance = cs->irradiance[i];
             /* Saturate, never overflow to infinity (extreme light intensities): DESIGN.md, robustness. */
             float *rad = view->radiance + 3 * p;
 #pragma GCC unroll 3

@@ -310,31 +310,35 @@ FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot,
         float fx0 = floorf(x), fy0 = floorf(y);
         float ax = x - fx0, ay = y - fy0;
         long x0 = (long)fx0, y0 = (long)fy0;
-        long tx[2] = {x0, x0 + 1}, ty[2] = {y0, y0 + 1}; /* the two columns and rows, clamped */
-        if (!(x0 >= 0 && x0 + 1 < w)) /* one test for the usual case, inside the island */
-            for (int c = 0; c < 2; c++)
-                tx[c] = tx[c] < 0 ? 0 : (tx[c] >= w ? w - 1 : tx[c]);
-        if (!(y0 >= 0 && y0 + 1 < h))
-            for (int c = 0; c < 2; c++)
-                ty[c] = ty[c] < 0 ? 0 : (ty[c] >= h ? h - 1 : ty[c]);
-        float wx[2] = {1 - ax, ax}, wy[2] = {1 - ay, ay};
+        /* The two columns and rows, clamped to the island (one test each for the usual case, inside it), in
+         * scalars: arrays indexed by the tap are built only for the general path below. */
+        long tx0 = x0, tx1 = x0 + 1, ty0 = y0, ty1 = y0 + 1;
+        if (!(x0 >= 0 && x0 + 1 < w)) {
+            tx0 = tx0 < 0 ? 0 : (tx0 >= w ? w - 1 : tx0);
+            tx1 = tx1 < 0 ? 0 : (tx1 >= w ? w - 1 : tx1);
+        }
+        if (!(y0 >= 0 && y0 + 1 < h)) {
+            ty0 = ty0 < 0 ? 0 : (ty0 >= h ? h - 1 : ty0);
+            ty1 = ty1 < 0 ? 0 : (ty1 >= h ? h - 1 : ty1);
+        }
+        float wx0 = 1 - ax, wx1 = ax, wy0 = 1 - ay, wy1 = ay;
         uint32_t tap_memo_slot[4];
-        uint64_t key0 = base | ((uint64_t)(ty[0] >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
-                        ((uint64_t)(tx[0] >> 3) << OSC_KEY_BLOCK_X_SHIFT);
+        uint64_t key0 = base | ((uint64_t)(ty0 >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
+                        ((uint64_t)(tx0 >> 3) << OSC_KEY_BLOCK_X_SHIFT);
         if (memo.key[last_slot] != key0) /* the slot may since hold another block */
             last_slot = memo_lookup(osc, &memo, effect, key0);
         tap_memo_slot[0] = last_slot;
-        bool same_x = (tx[0] >> 3) == (tx[1] >> 3), same_y = (ty[0] >> 3) == (ty[1] >> 3);
+        bool same_x = (tx0 >> 3) == (tx1 >> 3), same_y = (ty0 >> 3) == (ty1 >> 3);
         out->footprint_log2 = px->footprint - (float)level;
         uint32_t m0 = tap_memo_slot[0];
         if (same_x && same_y && memo.block[m0] != OSC_NONE) {
             /* The common case, straight-line: four texels of one block, all holding data, no weight 0. What
              * the general path below gives for it, operation for operation. */
-            uint32_t row0 = ((uint32_t)ty[0] & 7) * 8, row1 = ((uint32_t)ty[1] & 7) * 8;
-            uint32_t col0 = (uint32_t)tx[0] & 7, col1 = (uint32_t)tx[1] & 7;
+            uint32_t row0 = ((uint32_t)ty0 & 7) * 8, row1 = ((uint32_t)ty1 & 7) * 8;
+            uint32_t col0 = (uint32_t)tx0 & 7, col1 = (uint32_t)tx1 & 7;
             uint64_t need = (uint64_t)1 << (row0 + col0) | (uint64_t)1 << (row0 + col1) |
                             (uint64_t)1 << (row1 + col0) | (uint64_t)1 << (row1 + col1);
-            float w00 = wx[0] * wy[0], w10 = wx[1] * wy[0], w01 = wx[0] * wy[1], w11 = wx[1] * wy[1];
+            float w00 = wx0 * wy0, w10 = wx1 * wy0, w01 = wx0 * wy1, w11 = wx1 * wy1;
             if ((memo.valid[m0] & need) == need && w00 > 0 && w10 > 0 && w01 > 0 && w11 > 0) {
                 const uint8_t *payload = memo.payload[m0];
                 out->texel[0] = payload + (row0 + col0) * texel_bytes;
@@ -347,8 +351,8 @@ FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot,
                 out->weight[1] = w10 * inv;
                 out->weight[2] = w01 * inv;
                 out->weight[3] = w11 * inv;
-                float at_x0 = x + 0.5f - (float)tx[0], at_x1 = x + 0.5f - (float)tx[1];
-                float at_y0 = y + 0.5f - (float)ty[0], at_y1 = y + 0.5f - (float)ty[1];
+                float at_x0 = x + 0.5f - (float)tx0, at_x1 = x + 0.5f - (float)tx1;
+                float at_y0 = y + 0.5f - (float)ty0, at_y1 = y + 0.5f - (float)ty1;
                 out->at_x[0] = at_x0, out->at_x[1] = at_x1, out->at_x[2] = at_x0, out->at_x[3] = at_x1;
                 out->at_y[0] = at_y0, out->at_y[1] = at_y0, out->at_y[2] = at_y1, out->at_y[3] = at_y1;
                 out->count = 4;
@@ -357,6 +361,9 @@ FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot,
                 continue;
             }
         }
+        const long tx[2] = {tx0, tx1}, ty[2] = {ty0, ty1};
+        const float wx[2] = {wx0, wx1}, wy[2] = {wy0, wy1};
+#pragma GCC unroll 4
         for (int t = 1; t < 4; t++) {
             long xi = tx[t & 1], yi = ty[t >> 1];
             bool same = ((t & 1) == 0 || same_x) && ((t >> 1) == 0 || same_y);
@@ -368,6 +375,7 @@ FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot,
         float total = 0;
         uint32_t n = 0;
         uint32_t first_block = SRV_NONE;
+#pragma GCC unroll 4
         for (int t = 0; t < 4; t++) {
             uint32_t m = tap_memo_slot[t];
             if (memo.block[m] == OSC_NONE)
