@@ -892,6 +892,32 @@ static void test_shadow_shade_uniform_masks(void **state)
     assert_true(uniform > 1000 && mixed > 1000); /* both paths taken many times */
 }
 
+/* AO shading reads a texel's fraction with a multiply: the same float as fx_ao_sample (a division) for
+ * every stored value, and the shade callback gives the weighted sum of fx_ao_sample's, clamped to 1. */
+static void test_ao_fraction_every_value(void **state)
+{
+    (void)state;
+    for (uint32_t n = 0; n <= 65535; n++) {
+        uint8_t texel[4] = {(uint8_t)(n & 0xFF), (uint8_t)(n >> 8), 64, 0};
+        float a = fx__unorm16(n), b = fx_ao_sample(texel, 0);
+        if (memcmp(&a, &b, sizeof a) != 0)
+            fail_msg("%u: %.9g against fx_ao_sample's %.9g", n, (double)a, (double)b);
+    }
+    uint8_t payload[4][4];
+    const uint16_t values[4] = {65535, 12345, 40000, 1};
+    fx_taps taps = {.count = 4, .weight = {0.1f, 0.2f, 0.3f, 0.4f}};
+    for (int t = 0; t < 4; t++) {
+        payload[t][0] = (uint8_t)(values[t] & 0xFF), payload[t][1] = (uint8_t)(values[t] >> 8);
+        taps.texel[t] = payload[t];
+    }
+    float sky = 0.5f, expected = 0;
+    for (int t = 0; t < 4; t++)
+        expected += taps.weight[t] * fx_ao_sample(payload[t], 0);
+    fx_shade_run run = {.count = 1, .taps = &taps, .sky_visibility = &sky};
+    fx_effect_ao.shade(NULL, &run);
+    assert_true(sky == 0.5f * expected);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -908,6 +934,7 @@ int main(void)
         cmocka_unit_test(test_ao_saturation),
         cmocka_unit_test(test_shadow_occluder),
         cmocka_unit_test(test_shadow_shade_uniform_masks),
+        cmocka_unit_test(test_ao_fraction_every_value),
         cmocka_unit_test(test_robust_small_scale),
         cmocka_unit_test(test_robust_large_scale_far),
     };
