@@ -275,7 +275,8 @@ typedef struct fx_shade_run {
     uint32_t count;               /* pixels in the run, <= FX_RUN_PIXELS */
     uint32_t light_count;         /* the scene's lights */
     const fx_taps *taps;          /* per pixel: this effect's filtered texels (cached mode) */
-    const fx_point *points;       /* per pixel: the visible point */
+    const fx_point *points;       /* per pixel: the visible point; may be NULL when no shading cache
+                                     kind needs positions (compose gathers points for readers only) */
     float *light_visibility;      /* count * light_count, pixel-major */
     float *sky_visibility;        /* count */
     float *indirect;              /* count * 3, linear RGB irradiance */

@@ -241,8 +241,8 @@ FXC_HOT_CLONES static void ao_shade(const fx_context *ctx, const fx_shade_run *r
             continue;
         float ao = 0;
         for (uint32_t t = 0; t < taps->count; t++)
-            ao += taps->weight[t] * fx_ao_sample(taps->texel[t], 0);
-        run->sky_visibility[i] *= fminf(ao, 1.0f);
+            ao += taps->weight[t] * fx__unorm16(fx__get_u16(taps->texel[t])); /* fx_ao_sample(texel, 0) */
+        run->sky_visibility[i] *= fx__min1(ao);
     }
 }
 

@@ -365,6 +365,16 @@ FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_ru
         const fx_taps *taps = &run->taps[i];
         if (taps->count == 0)
             continue;
+        float *visibility = run->light_visibility + (size_t)i * lights;
+        if (taps->footprint_log2 >= 0.0f) { /* as large as a texel: the texels' lit fractions */
+            for (uint32_t l = 0; l < lights; l++) {
+                float lit = 0;
+                for (uint32_t t = 0; t < taps->count; t++)
+                    lit += taps->weight[t] * lit_fraction(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
+                visibility[l] *= fx__min1(lit);
+            }
+            continue;
+        }
         /* The tap whose texel holds the pixel (the one with the largest weight if none does exactly). */
         int home = 0;
         for (uint32_t t = 0; t < taps->count; t++) {
@@ -379,44 +389,53 @@ FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_ru
         float fx = taps->at_x[home] * 4.0f - 0.5f, fy = taps->at_y[home] * 4.0f - 0.5f;
         float cx0 = floorf(fx), cy0 = floorf(fy);
         float wx = fx - cx0, wy = fy - cy0;
-        if (taps->footprint_log2 >= 0.0f) { /* as large as a texel: the texels' lit fractions */
-            for (uint32_t l = 0; l < lights; l++) {
-                float lit = 0;
-                for (uint32_t t = 0; t < taps->count; t++)
-                    lit += taps->weight[t] * lit_fraction(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
-                run->light_visibility[(size_t)i * lights + l] *= fminf(lit, 1.0f);
-            }
-            continue;
-        }
+        /* Cell c at (c & 1, c >> 1) from the first; written out (a loop of four stayed a loop at -O2). */
+        const float cell_weight[4] = {(1 - wx) * (1 - wy), wx * (1 - wy), (1 - wx) * wy, wx * wy};
+        /* Which texel and bit each cell reads, found only for a light whose taps' masks differ (below). */
+        bool cells_found = false;
         const uint8_t *cell_texel[4];
         uint32_t cell_bit[4];
-        float cell_weight[4];
-        for (int c = 0; c < 4; c++) {
-            int cx = (int)cx0 + (c & 1), cy = (int)cy0 + (c >> 1);
-            int ox = cx < 0 ? -1 : (cx > 3 ? 1 : 0), oy = cy < 0 ? -1 : (cy > 3 ? 1 : 0);
-            int t = (ox || oy) ? shadow_tap_at(taps, home, ox, oy) : home;
-            if (t < 0) { /* no data there: the nearest cell of the pixel's own texel */
-                t = home;
-                ox = oy = 0;
-                cx = cx < 0 ? 0 : (cx > 3 ? 3 : cx);
-                cy = cy < 0 ? 0 : (cy > 3 ? 3 : cy);
-            }
-            cell_texel[c] = taps->texel[t];
-            cell_bit[c] = (uint32_t)((cy - 4 * oy) * 4 + (cx - 4 * ox));
-            cell_weight[c] = ((c & 1) ? wx : 1 - wx) * ((c >> 1) ? wy : 1 - wy);
-        }
         float coarse = exp2f(taps->footprint_log2); /* weight of the texel average: the pixel's size, < 1 */
         for (uint32_t l = 0; l < lights; l++) {
             float fine = 0, average = 0;
-            for (int c = 0; c < 4; c++) {
-                uint32_t mask = fx__get_u16(cell_texel[c] + 2u * l);
-                fine += cell_weight[c] * (float)((mask >> cell_bit[c]) & 1u);
+            uint32_t any_lit = 0, all_lit = 0xFFFFu;
+            for (uint32_t t = 0; t < taps->count; t++) {
+                uint32_t mask = fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l);
+                any_lit |= mask;
+                all_lit &= mask;
+                average += taps->weight[t] * lit_fraction(mask);
             }
-            if (coarse > 0)
-                for (uint32_t t = 0; t < taps->count; t++)
-                    average +=
-                        taps->weight[t] * lit_fraction(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
-            run->light_visibility[(size_t)i * lights + l] *= fminf(fine + coarse * (average - fine), 1.0f);
+            if (!(coarse > 0))
+                average = 0;
+            /* Every cell reads a bit of some tap's mask: when the taps' masks are all 0 or all 0xFFFF (most
+             * texels: wholly shadowed or wholly lit), every bit read is 0, or 1, and the sum below is the sum
+             * of the cell weights times 0 or 1, the same floats without finding the cells. */
+            if (all_lit == 0xFFFFu) {
+                fine = fine + cell_weight[0] * 1.0f + cell_weight[1] * 1.0f + cell_weight[2] * 1.0f +
+                       cell_weight[3] * 1.0f;
+            } else if (any_lit != 0) {
+                if (!cells_found) {
+                    cells_found = true;
+                    for (int c = 0; c < 4; c++) {
+                        int cx = (int)cx0 + (c & 1), cy = (int)cy0 + (c >> 1);
+                        int ox = cx < 0 ? -1 : (cx > 3 ? 1 : 0), oy = cy < 0 ? -1 : (cy > 3 ? 1 : 0);
+                        int t = (ox || oy) ? shadow_tap_at(taps, home, ox, oy) : home;
+                        if (t < 0) { /* no data there: the nearest cell of the pixel's own texel */
+                            t = home;
+                            ox = oy = 0;
+                            cx = cx < 0 ? 0 : (cx > 3 ? 3 : cx);
+                            cy = cy < 0 ? 0 : (cy > 3 ? 3 : cy);
+                        }
+                        cell_texel[c] = taps->texel[t];
+                        cell_bit[c] = (uint32_t)((cy - 4 * oy) * 4 + (cx - 4 * ox));
+                    }
+                }
+                for (int c = 0; c < 4; c++) {
+                    uint32_t mask = fx__get_u16(cell_texel[c] + 2u * l);
+                    fine += cell_weight[c] * (float)((mask >> cell_bit[c]) & 1u);
+                }
+            }
+            visibility[l] *= fx__min1(fine + coarse * (average - fine));
         }
     }
 }

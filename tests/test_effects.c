@@ -754,6 +754,170 @@ static void test_robust_large_scale_far(void **state)
     check_open_planes_at_scale(1e4, 1e5);
 }
 
+/* ---- shadow shading: the fast path for uniform masks against the definition ---------------------------- */
+
+/* splitmix64, and a uniform double in [0, 1) from it. */
+static uint64_t shade_rng_next(uint64_t *state)
+{
+    uint64_t z = (*state += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+}
+
+static double shade_rng_unit(uint64_t *state)
+{
+    return (double)(shade_rng_next(state) >> 11) * 0x1p-53;
+}
+
+/* The tap whose texel lies (ox, oy) texels from tap `from`'s, or -1 (the definition's search). */
+static int ref_tap_at(const fx_taps *taps, int from, int ox, int oy)
+{
+    for (uint32_t t = 0; t < taps->count; t++)
+        if (fabsf(taps->at_x[from] - (float)ox - taps->at_x[t]) < 0.5f &&
+            fabsf(taps->at_y[from] - (float)oy - taps->at_y[t]) < 0.5f)
+            return (int)t;
+    return -1;
+}
+
+static float ref_lit_fraction(uint32_t mask)
+{
+    return (float)__builtin_popcount(mask & 0xFFFFu) * (1.0f / FX_SHADOW_RAYS);
+}
+
+/* The shadow shading of one pixel and light as DESIGN.md defines it, every cell looked up: the reference the
+ * shade callback (which skips the lookup when the taps' masks are uniform) must equal bit for bit. */
+static float ref_shadow_visibility(const fx_taps *taps, uint32_t lights, uint32_t l)
+{
+    float lit_average = 0;
+    for (uint32_t t = 0; t < taps->count; t++)
+        lit_average += taps->weight[t] * ref_lit_fraction(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
+    (void)lights;
+    if (taps->footprint_log2 >= 0.0f)
+        return fminf(lit_average, 1.0f);
+    int home = 0;
+    for (uint32_t t = 0; t < taps->count; t++) {
+        if (taps->at_x[t] >= 0 && taps->at_x[t] < 1 && taps->at_y[t] >= 0 && taps->at_y[t] < 1) {
+            home = (int)t;
+            break;
+        }
+        if (taps->weight[t] > taps->weight[home])
+            home = (int)t;
+    }
+    float fx = taps->at_x[home] * 4.0f - 0.5f, fy = taps->at_y[home] * 4.0f - 0.5f;
+    float cx0 = floorf(fx), cy0 = floorf(fy);
+    float wx = fx - cx0, wy = fy - cy0;
+    float fine = 0;
+    for (int c = 0; c < 4; c++) {
+        int cx = (int)cx0 + (c & 1), cy = (int)cy0 + (c >> 1);
+        int ox = cx < 0 ? -1 : (cx > 3 ? 1 : 0), oy = cy < 0 ? -1 : (cy > 3 ? 1 : 0);
+        int t = (ox || oy) ? ref_tap_at(taps, home, ox, oy) : home;
+        if (t < 0) {
+            t = home;
+            ox = oy = 0;
+            cx = cx < 0 ? 0 : (cx > 3 ? 3 : cx);
+            cy = cy < 0 ? 0 : (cy > 3 ? 3 : cy);
+        }
+        uint32_t mask = fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l);
+        uint32_t bit = (uint32_t)((cy - 4 * oy) * 4 + (cx - 4 * ox));
+        fine += (((c & 1) ? wx : 1 - wx) * ((c >> 1) ? wy : 1 - wy)) * (float)((mask >> bit) & 1u);
+    }
+    float coarse = exp2f(taps->footprint_log2);
+    float average = coarse > 0 ? lit_average : 0.0f;
+    return fminf(fine + coarse * (average - fine), 1.0f);
+}
+
+/* Random pixels over random masks (a third of them all lit, a third all shadowed, the rest random, per tap
+ * and light; taps dropped at random as texels without data are): the shade callback gives the reference's
+ * floats exactly, through both its paths. */
+static void test_shadow_shade_uniform_masks(void **state)
+{
+    (void)state;
+    enum { PIXELS = 64, LIGHTS = 2, ROUNDS = 400 };
+    uint64_t rng = 0x243F6A8885A308D3ull;
+    uint8_t payload[PIXELS][4][2 * LIGHTS];
+    fx_taps taps[PIXELS];
+    float visibility[PIXELS * LIGHTS], sky[PIXELS], indirect[PIXELS * 3];
+    uint32_t uniform = 0, mixed = 0;
+    for (int round = 0; round < ROUNDS; round++) {
+        for (int i = 0; i < PIXELS; i++) {
+            fx_taps *tp = &taps[i];
+            float px = (float)shade_rng_unit(&rng) * 3.0f + 0.5f, py = (float)shade_rng_unit(&rng) * 3.0f + 0.5f;
+            float x = px - 0.5f, y = py - 0.5f, ax = x - floorf(x), ay = y - floorf(y);
+            float tx0 = floorf(x), ty0 = floorf(y), total = 0;
+            tp->count = 0;
+            for (int t = 0; t < 4; t++) {
+                float weight = ((t & 1) ? ax : 1 - ax) * ((t >> 1) ? ay : 1 - ay);
+                if (shade_rng_unit(&rng) < 0.15 || !(weight > 0))
+                    continue; /* no data there */
+                uint32_t n = tp->count++;
+                for (int l = 0; l < LIGHTS; l++) {
+                    double pick = shade_rng_unit(&rng);
+                    uint32_t mask = pick < 0.33 ? 0xFFFFu : (pick < 0.66 ? 0u : (uint32_t)(shade_rng_next(&rng) >> 20) & 0xFFFFu);
+                    payload[i][n][2 * l] = (uint8_t)(mask & 0xFF);
+                    payload[i][n][2 * l + 1] = (uint8_t)(mask >> 8);
+                }
+                tp->texel[n] = payload[i][n];
+                tp->weight[n] = weight;
+                tp->at_x[n] = px - (tx0 + (float)(t & 1));
+                tp->at_y[n] = py - (ty0 + (float)(t >> 1));
+                total += weight;
+            }
+            for (uint32_t t = 0; t < tp->count; t++)
+                tp->weight[t] *= 1.0f / total;
+            tp->footprint_log2 = (float)shade_rng_unit(&rng) * 4.0f - 3.5f;
+            for (int l = 0; l < LIGHTS; l++) {
+                visibility[i * LIGHTS + l] = 1.0f;
+                uint32_t any = 0, all = 0xFFFFu;
+                for (uint32_t t = 0; t < tp->count; t++) {
+                    any |= fx__get_u16(payload[i][t] + 2 * l);
+                    all &= fx__get_u16(payload[i][t] + 2 * l);
+                }
+                if (tp->count && tp->footprint_log2 < 0)
+                    (any == 0 || all == 0xFFFFu) ? uniform++ : mixed++;
+            }
+        }
+        fx_shade_run run = {.count = PIXELS, .light_count = LIGHTS, .taps = taps, .light_visibility = visibility,
+                            .sky_visibility = sky, .indirect = indirect};
+        fx_effect_shadow.shade(NULL, &run);
+        for (int i = 0; i < PIXELS; i++)
+            for (uint32_t l = 0; l < LIGHTS; l++) {
+                float expected = taps[i].count ? ref_shadow_visibility(&taps[i], LIGHTS, l) : 1.0f;
+                float got = visibility[i * LIGHTS + (int)l];
+                if (memcmp(&expected, &got, sizeof got) != 0)
+                    fail_msg("round %d pixel %d light %u: %.9g, the definition %.9g", round, i, l, (double)got,
+                             (double)expected);
+            }
+    }
+    assert_true(uniform > 1000 && mixed > 1000); /* both paths taken many times */
+}
+
+/* AO shading reads a texel's fraction with a multiply: the same float as fx_ao_sample (a division) for
+ * every stored value, and the shade callback gives the weighted sum of fx_ao_sample's, clamped to 1. */
+static void test_ao_fraction_every_value(void **state)
+{
+    (void)state;
+    for (uint32_t n = 0; n <= 65535; n++) {
+        uint8_t texel[4] = {(uint8_t)(n & 0xFF), (uint8_t)(n >> 8), 64, 0};
+        float a = fx__unorm16(n), b = fx_ao_sample(texel, 0);
+        if (memcmp(&a, &b, sizeof a) != 0)
+            fail_msg("%u: %.9g against fx_ao_sample's %.9g", n, (double)a, (double)b);
+    }
+    uint8_t payload[4][4];
+    const uint16_t values[4] = {65535, 12345, 40000, 1};
+    fx_taps taps = {.count = 4, .weight = {0.1f, 0.2f, 0.3f, 0.4f}};
+    for (int t = 0; t < 4; t++) {
+        payload[t][0] = (uint8_t)(values[t] & 0xFF), payload[t][1] = (uint8_t)(values[t] >> 8);
+        taps.texel[t] = payload[t];
+    }
+    float sky = 0.5f, expected = 0;
+    for (int t = 0; t < 4; t++)
+        expected += taps.weight[t] * fx_ao_sample(payload[t], 0);
+    fx_shade_run run = {.count = 1, .taps = &taps, .sky_visibility = &sky};
+    fx_effect_ao.shade(NULL, &run);
+    assert_true(sky == 0.5f * expected);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -769,6 +933,8 @@ int main(void)
         cmocka_unit_test(test_ao_stratified_error),
         cmocka_unit_test(test_ao_saturation),
         cmocka_unit_test(test_shadow_occluder),
+        cmocka_unit_test(test_shadow_shade_uniform_masks),
+        cmocka_unit_test(test_ao_fraction_every_value),
         cmocka_unit_test(test_robust_small_scale),
         cmocka_unit_test(test_robust_large_scale_far),
     };

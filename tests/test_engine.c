@@ -336,6 +336,69 @@ static void test_late_viewer_same_pixels(void **state)
     srv_loop_free(loop);
 }
 
+/* The on-surface kind's taps of a run of pixels equal each pixel's taps found alone, bit for bit: a pixel
+ * that reuses the previous pixel's four texels (same island, level and corner texel) gets what the full
+ * lookup gives. Pixels from a converged frame of the fixture, every row in runs of up to 64 and in reverse
+ * order too (other neighbours), for each effect at its own level bias and one finer. */
+static void test_osc_taps_run_equals_single(void **state)
+{
+    fixture *f = *state;
+    srv_loop_desc d = {.s = f->s, .rt = f->rt, .seed = 5};
+    fxt_effects_on(&d, (const char *const[]){"shadow", "ao"}, 2);
+    enum { W = 96, H = 54 };
+    srv_viewer_id id;
+    srv_loop *loop = fxt_loop(&d, 1, W, H, &id);
+    srv_camera cam = srv_camgen_camera(SRV_CAMGEN_STATIC, f->s, 0, 1, 0, 1);
+    srv_frame_stats st;
+    for (int frame = 0; frame < 8; frame++)
+        fxt_frame(loop, &id, 1, &cam, &st);
+    const srv_viewer *view = &loop->viewers[0];
+    srv_pixel pixels[SRV_RUN];
+    fx_taps run_taps[SRV_RUN], one;
+    uint32_t run_blocks[SRV_RUN], one_block;
+    uint64_t compared = 0, four = 0;
+    for (uint32_t e = 0; e < loop->effect_count; e++) {
+        if (!loop->effect_shading[e] || loop->effect_kind[e] != SCENE_CACHE_ON_SURFACE)
+            continue;
+        const srv_cache_kind *kind = loop->kinds[SCENE_CACHE_ON_SURFACE];
+        void *cache = loop->caches[SCENE_CACHE_ON_SURFACE];
+        for (int32_t bias = loop->bias[e] - 1; bias <= loop->bias[e]; bias++)
+            for (int reverse = 0; reverse < 2; reverse++)
+                for (uint32_t y = 0; y < H; y++) {
+                    uint32_t n = 0;
+                    for (uint32_t k = 0; k < W && n < SRV_RUN; k++) {
+                        uint32_t x = reverse ? W - 1 - k : k;
+                        size_t p = (size_t)y * W + x;
+                        uint32_t tri = view->tri[p];
+                        if (tri == SRV_MISS)
+                            continue;
+                        srv_pixel *px = &pixels[n++];
+                        memset(px, 0, sizeof *px);
+                        px->triangle = tri;
+                        px->island = f->s->tri_island[tri];
+                        px->footprint = view->footprint[p];
+                        srv__island_uv(f->s, tri, view->bary_u[p], view->bary_v[p], &px->island_u, &px->island_v);
+                    }
+                    kind->pixel_taps(cache, 0, 0, pixels, n, e, bias, run_taps, run_blocks);
+                    for (uint32_t i = 0; i < n; i++) {
+                        kind->pixel_taps(cache, 0, 0, &pixels[i], 1, e, bias, &one, &one_block);
+                        const fx_taps *a = &run_taps[i];
+                        assert_int_equal(a->count, one.count);
+                        assert_int_equal(run_blocks[i], one_block);
+                        assert_memory_equal(&a->footprint_log2, &one.footprint_log2, sizeof(float));
+                        assert_memory_equal(a->texel, one.texel, one.count * sizeof one.texel[0]);
+                        assert_memory_equal(a->weight, one.weight, one.count * sizeof(float));
+                        assert_memory_equal(a->at_x, one.at_x, one.count * sizeof(float));
+                        assert_memory_equal(a->at_y, one.at_y, one.count * sizeof(float));
+                        compared++;
+                        four += one.count == 4;
+                    }
+                }
+    }
+    assert_true(compared > 4 * W * H / 2 && four > compared / 2); /* most pixels, most of them four taps */
+    srv_loop_free(loop);
+}
+
 /* ---- sinks and the report ----------------------------------------------------------------------------- */
 
 typedef struct counting_sink {
@@ -657,6 +720,7 @@ int main(void)
         SCENE_TEST(test_viewer_handles),
         SCENE_TEST(test_sixty_four_viewers),
         SCENE_TEST(test_late_viewer_same_pixels),
+        SCENE_TEST(test_osc_taps_run_equals_single),
         SCENE_TEST(test_sinks_and_report),
         SCENE_TEST(test_replay_matches_api),
         cmocka_unit_test(test_result_codes),

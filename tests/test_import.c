@@ -149,6 +149,53 @@ static void test_texture_mip_levels(void **state)
     scene_free(s);
 }
 
+/* Bilinear texture lookup with wrap-around, against the same lookup in double: a 5 x 3 texture of distinct
+ * texels, read at level 0 at random texture coordinates (negative, beyond 1, and on the texels next to each
+ * edge, where the lookup wraps) and at every texel centre (the texel itself). */
+static void test_texture_bilinear_wrap(void **state)
+{
+    (void)state;
+    enum { W = 5, H = 3 };
+    float texels[W * H * 3];
+    for (int i = 0; i < W * H * 3; i++)
+        texels[i] = (float)((i * 37) % 101) / 100.0f;
+    scene_texture tex = {.width = W, .height = H, .rgb = texels, .levels = 1};
+    tex.mip_rgb[0] = texels;
+    tex.mip_width[0] = W;
+    tex.mip_height[0] = H;
+    /* One triangle whose texture coordinates equal its barycentrics (u, v): uv = (0,0), (1,0), (0,1). */
+    scene_albedo_triangle tri = {.texture = &tex, .diffuse = {1, 1, 1}, .uv = {0, 0, 1, 0, 0, 1}, .lod = 0};
+    uint64_t rng = 12345;
+    int edge = 0;
+    for (int n = 0; n < 20000; n++) {
+        rng = rng * 6364136223846793005ull + 1442695040888963407ull;
+        float u = (float)((double)(rng >> 11) * 0x1p-53 * 4.0 - 2.0);
+        rng = rng * 6364136223846793005ull + 1442695040888963407ull;
+        float v = (float)((double)(rng >> 11) * 0x1p-53 * 4.0 - 2.0);
+        if (n < W * H) /* texel centres first */
+            u = ((float)(n % W) + 0.5f) / W, v = 1.0f - ((float)(n / W) + 0.5f) / H;
+        float rgb[3];
+        scene_albedo_sample(&tri, u, v, -1000.0f, rgb); /* the finest level */
+        double fu = (double)u - floor((double)u), fv = (double)v - floor((double)v);
+        double x = fu * W - 0.5, y = (1.0 - fv) * H - 0.5, x0 = floor(x), y0 = floor(y);
+        double ax = x - x0, ay = y - y0;
+        edge += x0 < 0 || x0 + 1 >= W || y0 < 0 || y0 + 1 >= H;
+        for (int k = 0; k < 3; k++) {
+            double expected = 0;
+            for (int c = 0; c < 4; c++) {
+                int xi = ((int)x0 + (c & 1) + W) % W, yi = ((int)y0 + (c >> 1) + H) % H;
+                expected += ((c & 1) ? ax : 1 - ax) * ((c >> 1) ? ay : 1 - ay) * texels[3 * (yi * W + xi) + k];
+            }
+            if (n < W * H)
+                expected = texels[3 * n + k];
+            if (fabs(rgb[k] - expected) > 2e-6)
+                fail_msg("uv (%.9g, %.9g) channel %d: %.9g, expected %.9g", (double)u, (double)v, k, (double)rgb[k],
+                         expected);
+        }
+    }
+    assert_true(edge > 5000); /* the wrapped path was taken, as well as the inside one */
+}
+
 /* A texture that is not there: the material keeps its colour, the miss is counted, the load succeeds. */
 static void test_missing_texture_counted(void **state)
 {
@@ -615,6 +662,7 @@ int main(void)
         cmocka_unit_test(test_bad_gz),
         cmocka_unit_test(test_obj_texture_and_non_triangles),
         cmocka_unit_test(test_texture_mip_levels),
+        cmocka_unit_test(test_texture_bilinear_wrap),
         cmocka_unit_test(test_missing_texture_counted),
         cmocka_unit_test(test_builder_cleaning),
         cmocka_unit_test(test_mirrored_transform_keeps_winding),

@@ -285,6 +285,21 @@ bool fx__locate_point(const fx_context *ctx, const float pos[3], const float nor
 /* The scene's own decision (scene_needs) for one of its effects, with the reason copied into why. */
 bool fx__scene_needs(const scene *s, scene_effect which, char *why, size_t why_cap);
 
+/* fminf(x, 1.0f) without a libm call (GCC keeps fminf a call without -ffinite-math-only): x below 1, else
+ * 1, also 1 for NaN as fminf gives. Compose clamps every filtered visibility with it. */
+static inline float fx__min1(float x)
+{
+    return x < 1.0f ? x : 1.0f;
+}
+
+/* A unorm16 as a float, n / 65535 rounded to float, as the double product n * (1 / 65535) rounded once to
+ * float: the same float for every n (all 65536 checked, tests/test_effects.c), with a multiply where the
+ * division was the slowest step of AO shading. */
+static inline float fx__unorm16(uint32_t n)
+{
+    return (float)((double)n * (1.0 / 65535.0));
+}
+
 /* ---- payload bytes (little-endian, host independent) --------------------------------------------- */
 
 /* Reads a little-endian uint16 at p. */

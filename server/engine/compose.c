@@ -29,6 +29,7 @@ typedef struct compose_scratch {
     uint32_t triangle[SRV_RUN];                      /* the albedo's arguments, one array each */
     float bary_u[SRV_RUN], bary_v[SRV_RUN], albedo_footprint[SRV_RUN];
     float shade_normal[SRV_RUN][3];
+    float irradiance[SRV_RUN][3]; /* from the lights, summed light by light */
     uint8_t missing[SRV_RUN];
     float sharing[SRV_RUN];
     float sky_visibility[SRV_RUN];
@@ -181,11 +182,13 @@ typedef struct gather_memo {
 } gather_memo;
 
 /* Pixel (x, y) of the viewer's frame, held at buffer entry p (y * width + x, or a sparse viewer's list
- * position): a miss gets the sky; a visible pixel is appended to the run (its point, albedo arguments and
- * cache pixel, with position and distance only when `positions`: a cache kind asks for them). */
+ * position): a miss gets the sky; a visible pixel is appended to the run (its shading normal, albedo arguments
+ * and cache pixel, with position and distance only when `positions`: a cache kind asks for them; its point
+ * (fx_point) only when `points`: no-cache mode, a cache kind that needs positions, or a light that is not
+ * directional). */
 FXC_HOT_INLINE void gather_pixel(srv_loop *loop, srv_viewer *view, uint32_t x, uint32_t y, size_t p,
                                  compose_scratch *cs, uint32_t *count, const float sky[3], float log2_density,
-                                 bool positions, gather_memo *memo)
+                                 bool positions, bool points, gather_memo *memo)
 {
     const scene *s = loop->s;
     const srv_camera_frame *f = &view->frame;
@@ -202,7 +205,6 @@ FXC_HOT_INLINE void gather_pixel(srv_loop *loop, srv_viewer *view, uint32_t x, u
     const float scale_x = 2.0f * f->tan_half_x / (float)f->width, scale_y = 2.0f * f->tan_half_y / (float)f->height;
     uint32_t i = (*count)++;
     cs->index[i] = p;
-    fx_point *pt = &cs->points[i];
     float u = view->bary_u[p], v = view->bary_v[p], dir[3];
     if (tri != memo->tri) {
         memo->tri = tri;
@@ -213,69 +215,78 @@ FXC_HOT_INLINE void gather_pixel(srv_loop *loop, srv_viewer *view, uint32_t x, u
         memcpy(memo->island_uv, s->tri_island_uv + 6 * (size_t)tri, sizeof memo->island_uv);
         memo->island = s->tri_island[tri];
     }
+    const float *normal = memo->normal;
     float w = 1.0f - u - v;
-    for (int k = 0; k < 3; k++) {
-        pt->position[k] = w * memo->corner[0][k] + u * memo->corner[1][k] + v * memo->corner[2][k];
-        pt->normal[k] = memo->normal[k];
-    }
-    /* The ray's direction, not normalised: only its side of the surface matters here. */
+    /* The ray's direction, not normalised: only its side of the surface matters here. The loops over the
+     * three axes are written out (at -O2 they stayed loops). */
     float sx = ((float)x + 0.5f) * scale_x - f->tan_half_x, sy = f->tan_half_y - ((float)y + 0.5f) * scale_y;
-    for (int k = 0; k < 3; k++)
-        dir[k] = f->forward[k] + sx * f->right[k] + sy * f->up[k];
-    float facing = pt->normal[0] * dir[0] + pt->normal[1] * dir[1] + pt->normal[2] * dir[2];
-    for (int k = 0; k < 3; k++) /* seen from behind: light the side the viewer sees */
-        pt->view_normal[k] = cs->shade_normal[i][k] = facing > 0 ? -pt->normal[k] : pt->normal[k];
+    dir[0] = f->forward[0] + sx * f->right[0] + sy * f->up[0];
+    dir[1] = f->forward[1] + sx * f->right[1] + sy * f->up[1];
+    dir[2] = f->forward[2] + sx * f->right[2] + sy * f->up[2];
+    float facing = normal[0] * dir[0] + normal[1] * dir[1] + normal[2] * dir[2];
+    float *sn = cs->shade_normal[i]; /* seen from behind: light the side the viewer sees */
+    sn[0] = facing > 0 ? -normal[0] : normal[0];
+    sn[1] = facing > 0 ? -normal[1] : normal[1];
+    sn[2] = facing > 0 ? -normal[2] : normal[2];
     /* The pixel's footprint in metres: level-0 texels per pixel over texels per metre. The albedo is
      * sampled after the loop, for the whole run. */
     cs->triangle[i] = tri;
     cs->bary_u[i] = u;
     cs->bary_v[i] = v;
     cs->albedo_footprint[i] = view->footprint[p] - log2_density;
-    pt->triangle = tri;
-    pt->u = u;
-    pt->v = v;
-    pt->pixel_id = (uint64_t)y * f->width + x; /* the image position, whatever buffer entry holds it */
-    if (loop->desc.no_cache) {
-        srv_camera_ray(f, (float)x + 0.5f, (float)y + 0.5f, dir);
-        srv__pixel_differentials(f, dir, view->depth[p], pt->normal, pt->dpdx, pt->dpdy);
-    }
     srv_pixel *px = &cs->pixels[i];
+    if (points) {
+        fx_point *pt = &cs->points[i];
+        for (int k = 0; k < 3; k++) {
+            pt->position[k] = w * memo->corner[0][k] + u * memo->corner[1][k] + v * memo->corner[2][k];
+            pt->normal[k] = normal[k];
+            pt->view_normal[k] = sn[k];
+        }
+        pt->triangle = tri;
+        pt->u = u;
+        pt->v = v;
+        pt->pixel_id = (uint64_t)y * f->width + x; /* the image position, whatever buffer entry holds it */
+        if (loop->desc.no_cache) {
+            srv_camera_ray(f, (float)x + 0.5f, (float)y + 0.5f, dir);
+            srv__pixel_differentials(f, dir, view->depth[p], pt->normal, pt->dpdx, pt->dpdy);
+        }
+        if (positions)
+            memcpy(px->position, pt->position, sizeof px->position);
+    }
     px->triangle = tri;
     px->island = memo->island;
     px->footprint = view->footprint[p];
     px->island_u = w * memo->island_uv[0] + u * memo->island_uv[2] + v * memo->island_uv[4];
     px->island_v = w * memo->island_uv[1] + u * memo->island_uv[3] + v * memo->island_uv[5];
-    if (positions) {
-        memcpy(px->position, pt->position, sizeof px->position);
+    if (positions)
         px->distance = view->depth[p];
-    }
 }
 
 /* Gathers the visible pixels of one run (rows y0..y1, columns x0..x1, at most SRV_RUN pixels). Returns how
  * many are visible. */
 FXC_HOT_INLINE uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32_t x1, uint32_t y0,
                                    uint32_t y1, compose_scratch *cs, const float sky[3], float log2_density,
-                                   bool positions)
+                                   bool positions, bool points)
 {
     gather_memo memo = {.tri = SRV_MISS};
     uint32_t count = 0;
     for (uint32_t y = y0; y < y1; y++)
         for (uint32_t x = x0; x < x1; x++)
             gather_pixel(loop, view, x, y, (size_t)y * view->frame.width + x, cs, &count, sky, log2_density,
-                         positions, &memo);
+                         positions, points, &memo);
     scene_albedo_run(loop->s, cs->triangle, cs->bary_u, cs->bary_v, cs->albedo_footprint, count, cs->albedo);
     return count;
 }
 
 /* A sparse viewer's run: list entries first..end-1 (at most SRV_RUN). */
 static uint32_t gather_list(srv_loop *loop, srv_viewer *view, size_t first, size_t end, compose_scratch *cs,
-                            const float sky[3], float log2_density, bool positions)
+                            const float sky[3], float log2_density, bool positions, bool points)
 {
     gather_memo memo = {.tri = SRV_MISS};
     uint32_t count = 0;
     for (size_t p = first; p < end; p++)
         gather_pixel(loop, view, view->list[p] & 0xFFFFu, view->list[p] >> 16, p, cs, &count, sky, log2_density,
-                     positions, &memo);
+                     positions, points, &memo);
     scene_albedo_run(loop->s, cs->triangle, cs->bary_u, cs->bary_v, cs->albedo_footprint, count, cs->albedo);
     return count;
 }
@@ -287,6 +298,7 @@ typedef struct compose_setup {
     float sky[3];
     float log2_density;
     bool positions; /* some shading cache kind reads the pixels' positions */
+    bool points;    /* the visible points (fx_point) are gathered: someone reads them */
     uint32_t lights, stride;
     float light_dir[CONSTANT_LIGHTS][3], light_rgb[CONSTANT_LIGHTS][3]; /* the same for every pixel */
 } compose_setup;
@@ -308,6 +320,12 @@ static void compose_setup_init(const srv_loop *loop, compose_setup *cu)
         for (int k = 0; k < 3; k++)
             cu->light_rgb[l][k] = s->lights[l].intensity * s->lights[l].color[k];
     }
+    /* The visible points (fx_point) are gathered only for whoever reads them: the no-cache evaluation, a
+     * shading cache kind that needs positions (its shade callback reads them), and lights whose direction
+     * depends on the position. */
+    cu->points = loop->desc.no_cache || cu->positions;
+    for (uint32_t l = 0; l < cu->lights; l++)
+        cu->points |= !(s->lights[l].type == SCENE_LIGHT_DIRECTIONAL && l < CONSTANT_LIGHTS);
 }
 
 /* Shades the count gathered pixels of a run into the viewer's radiance (and kept views): the effects' terms
@@ -338,7 +356,7 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
         fx_shade_run run = {.count = count,
                             .light_count = lights,
                             .taps = cs->taps,
-                            .points = cs->points,
+                            .points = cu->points ? cs->points : NULL,
                             .light_visibility = cs->light_visibility,
                             .sky_visibility = cs->sky_visibility,
                             .indirect = cs->indirect};
@@ -357,34 +375,46 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
             }
         }
     }
-    for (uint32_t i = 0; i < count; i++) {
-        size_t p = cs->index[i];
-        const float *sn = cs->shade_normal[i];
-        const float *pos = cs->points[i].position;
-        const float *visibility = cs->light_visibility + (size_t)i * stride;
-        float irradiance[3] = {0, 0, 0};
-        for (uint32_t l = 0; l < lights; l++) {
-            const scene_light *light = &s->lights[l];
-            if (light->type == SCENE_LIGHT_DIRECTIONAL && l < CONSTANT_LIGHTS) {
-                const float *ldir = cu->light_dir[l];
+    /* The lights' irradiance, light by light over the run (each pixel sums its lights in the same order as
+     * before): the constant directional ones in a loop of plain arithmetic. */
+    for (uint32_t i = 0; i < count; i++)
+        cs->irradiance[i][0] = cs->irradiance[i][1] = cs->irradiance[i][2] = 0.0f;
+    for (uint32_t l = 0; l < lights; l++) {
+        const scene_light *light = &s->lights[l];
+        if (light->type == SCENE_LIGHT_DIRECTIONAL && l < CONSTANT_LIGHTS) {
+            const float *ldir = cu->light_dir[l], *rgb = cu->light_rgb[l];
+            for (uint32_t i = 0; i < count; i++) {
+                const float *sn = cs->shade_normal[i];
                 float cosine = sn[0] * ldir[0] + sn[1] * ldir[1] + sn[2] * ldir[2];
-                if (cosine > 0)
-                    for (int k = 0; k < 3; k++)
-                        irradiance[k] += cosine * visibility[l] * cu->light_rgb[l][k];
-                continue;
+                float visibility = cs->light_visibility[(size_t)i * stride + l];
+                if (cosine > 0) {
+                    cs->irradiance[i][0] += cosine * visibility * rgb[0];
+                    cs->irradiance[i][1] += cosine * visibility * rgb[1];
+                    cs->irradiance[i][2] += cosine * visibility * rgb[2];
+                }
             }
+            continue;
+        }
+        for (uint32_t i = 0; i < count; i++) {
+            const float *sn = cs->shade_normal[i];
             float ldir[3], dist;
-            fx_light_direction(light, pos, ldir, &dist);
+            fx_light_direction(light, cs->points[i].position, ldir, &dist); /* cu->points holds them */
             float cosine = sn[0] * ldir[0] + sn[1] * ldir[1] + sn[2] * ldir[2];
             if (!(cosine > 0))
                 continue;
             float falloff = light->type == SCENE_LIGHT_POINT ? 1.0f / fmaxf(dist * dist, 1e-8f) : 1.0f;
-            float scale = light->intensity * cosine * visibility[l] * falloff;
+            float scale = light->intensity * cosine * cs->light_visibility[(size_t)i * stride + l] * falloff;
             for (int k = 0; k < 3; k++)
-                irradiance[k] += scale * light->color[k];
+                cs->irradiance[i][k] += scale * light->color[k];
         }
+    }
+    for (uint32_t i = 0; i < count; i++) {
+        size_t p = cs->index[i];
+        const float *visibility = cs->light_visibility + (size_t)i * stride;
+        const float *irradiance = cs->irradiance[i];
         /* Saturate, never overflow to infinity (extreme light intensities): DESIGN.md, robustness. */
         float *rad = view->radiance + 3 * p;
+#pragma GCC unroll 3
         for (int k = 0; k < 3; k++) {
             float irr = saturate_max(irradiance[k]) + saturate_max(cu->sky[k] * cs->sky_visibility[i]) +
                         saturate_max(cs->indirect[3 * i + k]);
@@ -405,6 +435,7 @@ FXC_HOT_INLINE void tone_map_entry(srv_viewer *view, size_t p)
 {
     const float *rad = view->radiance + 3 * p;
     uint8_t *px = view->image + 3 * p;
+#pragma GCC unroll 3
     for (int k = 0; k < 3; k++)
         px[k] = tone_map_srgb8(rad[k]);
 }
@@ -435,7 +466,8 @@ FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_
     uint32_t ty1 = ty0 + SRV_TILE < f->height ? ty0 + SRV_TILE : f->height;
     for (uint32_t ry = ty0; ry < ty1; ry += SRV_RUN / SRV_TILE) {
         uint32_t ry1 = ry + SRV_RUN / SRV_TILE < ty1 ? ry + SRV_RUN / SRV_TILE : ty1;
-        uint32_t count = gather_run(loop, view, tx0, tx1, ry, ry1, cs, cu.sky, cu.log2_density, cu.positions);
+        uint32_t count = gather_run(loop, view, tx0, tx1, ry, ry1, cs, cu.sky, cu.log2_density, cu.positions,
+                                    cu.points);
         shade_run(loop, view, cs, count, &cu, thread_index, &missing, rays);
         for (uint32_t y = ry; y < ry1; y++)
             for (uint32_t x = tx0; x < tx1; x++)
@@ -467,7 +499,8 @@ FXC_HOT_CLONES static void compose_list_task(void *user, uint32_t task_index, ui
         uint32_t run_index = srv__run_key(view->list[run], tiles_x) >> 6;
         for (run_end = run + 1; run_end < end && srv__run_key(view->list[run_end], tiles_x) >> 6 == run_index;)
             run_end++;
-        uint32_t count = gather_list(loop, view, run, run_end, cs, cu.sky, cu.log2_density, cu.positions);
+        uint32_t count = gather_list(loop, view, run, run_end, cs, cu.sky, cu.log2_density, cu.positions,
+                                    cu.points);
         shade_run(loop, view, cs, count, &cu, thread_index, &missing, rays);
         for (size_t p = run; p < run_end; p++)
             tone_map_entry(view, p);

@@ -272,6 +272,28 @@ FXC_HOT_INLINE uint32_t memo_lookup(const osc_cache *osc, tap_memo *memo, uint32
     return m;
 }
 
+/* The taps of the common case: four texels of one block, all holding data, weights above 0 (renormalised),
+ * in the order (x0, y0), (x0 + 1, y0), (x0, y0 + 1), (x0 + 1, y0 + 1). */
+FXC_HOT_INLINE void four_taps(fx_taps *out, const uint8_t *const texel[4], float w00, float w10, float w01,
+                              float w11, float x, float y, long tx0, long tx1, long ty0, long ty1)
+{
+    out->texel[0] = texel[0];
+    out->texel[1] = texel[1];
+    out->texel[2] = texel[2];
+    out->texel[3] = texel[3];
+    float total = w00 + w10 + w01 + w11;
+    float inv = 1.0f / total;
+    out->weight[0] = w00 * inv;
+    out->weight[1] = w10 * inv;
+    out->weight[2] = w01 * inv;
+    out->weight[3] = w11 * inv;
+    float at_x0 = x + 0.5f - (float)tx0, at_x1 = x + 0.5f - (float)tx1;
+    float at_y0 = y + 0.5f - (float)ty0, at_y1 = y + 0.5f - (float)ty1;
+    out->at_x[0] = at_x0, out->at_x[1] = at_x1, out->at_x[2] = at_x0, out->at_x[3] = at_x1;
+    out->at_y[0] = at_y0, out->at_y[1] = at_y0, out->at_y[2] = at_y1, out->at_y[3] = at_y1;
+    out->count = 4;
+}
+
 /* Per pixel the bilinear taps at its level, in the order (x0, y0), (x0 + 1, y0), (x0, y0 + 1),
  * (x0 + 1, y0 + 1) with texels clamped to the island, leaving out taps whose block is absent, whose texel
  * holds no data or whose weight is 0; the weights renormalised. The four texels lie in one block unless the
@@ -292,6 +314,11 @@ FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot,
     long w = 0, h = 0;
     uint64_t base = 0;
     uint32_t last_slot = 0; /* the memo slot of the previous pixel's first block */
+    /* The four texels of the last pixel that took the common path, its corner texel and block. */
+    bool reuse = false;
+    long reuse_x0 = 0, reuse_y0 = 0;
+    const uint8_t *reuse_texel[4] = {NULL, NULL, NULL, NULL};
+    uint32_t reuse_block = 0;
     for (uint32_t i = 0; i < count; i++) {
         const srv_pixel *px = &pixels[i];
         fx_taps *out = &taps[i];
@@ -304,58 +331,68 @@ FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot,
             h = (long)((is->height + (1u << level) - 1u) >> level);
             base = effect_field | ((uint64_t)px->island << OSC_KEY_ISLAND_SHIFT) |
                    ((uint64_t)level << OSC_KEY_LEVEL_SHIFT);
+            reuse = false;
         }
         float scale = inverse_power_of_two[level];
         float x = px->island_u * scale - 0.5f, y = px->island_v * scale - 0.5f;
         float fx0 = floorf(x), fy0 = floorf(y);
         float ax = x - fx0, ay = y - fy0;
         long x0 = (long)fx0, y0 = (long)fy0;
-        long tx[2], ty[2]; /* the two columns and rows, clamped */
-        for (int c = 0; c < 2; c++) {
-            long xi = x0 + c, yi = y0 + c;
-            tx[c] = xi < 0 ? 0 : (xi >= w ? w - 1 : xi);
-            ty[c] = yi < 0 ? 0 : (yi >= h ? h - 1 : yi);
+        /* The two columns and rows, clamped to the island (one test each for the usual case, inside it), in
+         * scalars: arrays indexed by the tap are built only for the general path below. */
+        long tx0 = x0, tx1 = x0 + 1, ty0 = y0, ty1 = y0 + 1;
+        if (!(x0 >= 0 && x0 + 1 < w)) {
+            tx0 = tx0 < 0 ? 0 : (tx0 >= w ? w - 1 : tx0);
+            tx1 = tx1 < 0 ? 0 : (tx1 >= w ? w - 1 : tx1);
         }
-        float wx[2] = {1 - ax, ax}, wy[2] = {1 - ay, ay};
+        if (!(y0 >= 0 && y0 + 1 < h)) {
+            ty0 = ty0 < 0 ? 0 : (ty0 >= h ? h - 1 : ty0);
+            ty1 = ty1 < 0 ? 0 : (ty1 >= h ? h - 1 : ty1);
+        }
+        float wx0 = 1 - ax, wx1 = ax, wy0 = 1 - ay, wy1 = ay;
+        out->footprint_log2 = px->footprint - (float)level;
+        float w00 = wx0 * wy0, w10 = wx1 * wy0, w01 = wx0 * wy1, w11 = wx1 * wy1;
+        bool positive = w00 > 0 && w10 > 0 && w01 > 0 && w11 > 0;
+        if (reuse && x0 == reuse_x0 && y0 == reuse_y0 && positive) {
+            /* The previous pixel's four texels (same island, level and corner texel, and it took the common
+             * path below): the same block, texels and data, known without the key and the memo. */
+            four_taps(out, reuse_texel, w00, w10, w01, w11, x, y, tx0, tx1, ty0, ty1);
+            if (blocks)
+                blocks[i] = reuse_block;
+            continue;
+        }
+        reuse = false;
         uint32_t tap_memo_slot[4];
-        uint64_t key0 = base | ((uint64_t)(ty[0] >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
-                        ((uint64_t)(tx[0] >> 3) << OSC_KEY_BLOCK_X_SHIFT);
+        uint64_t key0 = base | ((uint64_t)(ty0 >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
+                        ((uint64_t)(tx0 >> 3) << OSC_KEY_BLOCK_X_SHIFT);
         if (memo.key[last_slot] != key0) /* the slot may since hold another block */
             last_slot = memo_lookup(osc, &memo, effect, key0);
         tap_memo_slot[0] = last_slot;
-        bool same_x = (tx[0] >> 3) == (tx[1] >> 3), same_y = (ty[0] >> 3) == (ty[1] >> 3);
-        out->footprint_log2 = px->footprint - (float)level;
+        bool same_x = (tx0 >> 3) == (tx1 >> 3), same_y = (ty0 >> 3) == (ty1 >> 3);
         uint32_t m0 = tap_memo_slot[0];
         if (same_x && same_y && memo.block[m0] != OSC_NONE) {
             /* The common case, straight-line: four texels of one block, all holding data, no weight 0. What
              * the general path below gives for it, operation for operation. */
-            uint32_t row0 = ((uint32_t)ty[0] & 7) * 8, row1 = ((uint32_t)ty[1] & 7) * 8;
-            uint32_t col0 = (uint32_t)tx[0] & 7, col1 = (uint32_t)tx[1] & 7;
+            uint32_t row0 = ((uint32_t)ty0 & 7) * 8, row1 = ((uint32_t)ty1 & 7) * 8;
+            uint32_t col0 = (uint32_t)tx0 & 7, col1 = (uint32_t)tx1 & 7;
             uint64_t need = (uint64_t)1 << (row0 + col0) | (uint64_t)1 << (row0 + col1) |
                             (uint64_t)1 << (row1 + col0) | (uint64_t)1 << (row1 + col1);
-            float w00 = wx[0] * wy[0], w10 = wx[1] * wy[0], w01 = wx[0] * wy[1], w11 = wx[1] * wy[1];
-            if ((memo.valid[m0] & need) == need && w00 > 0 && w10 > 0 && w01 > 0 && w11 > 0) {
+            if ((memo.valid[m0] & need) == need && positive) {
                 const uint8_t *payload = memo.payload[m0];
-                out->texel[0] = payload + (row0 + col0) * texel_bytes;
-                out->texel[1] = payload + (row0 + col1) * texel_bytes;
-                out->texel[2] = payload + (row1 + col0) * texel_bytes;
-                out->texel[3] = payload + (row1 + col1) * texel_bytes;
-                float total = w00 + w10 + w01 + w11;
-                float inv = 1.0f / total;
-                out->weight[0] = w00 * inv;
-                out->weight[1] = w10 * inv;
-                out->weight[2] = w01 * inv;
-                out->weight[3] = w11 * inv;
-                float at_x0 = x + 0.5f - (float)tx[0], at_x1 = x + 0.5f - (float)tx[1];
-                float at_y0 = y + 0.5f - (float)ty[0], at_y1 = y + 0.5f - (float)ty[1];
-                out->at_x[0] = at_x0, out->at_x[1] = at_x1, out->at_x[2] = at_x0, out->at_x[3] = at_x1;
-                out->at_y[0] = at_y0, out->at_y[1] = at_y0, out->at_y[2] = at_y1, out->at_y[3] = at_y1;
-                out->count = 4;
+                reuse_texel[0] = payload + (row0 + col0) * texel_bytes;
+                reuse_texel[1] = payload + (row0 + col1) * texel_bytes;
+                reuse_texel[2] = payload + (row1 + col0) * texel_bytes;
+                reuse_texel[3] = payload + (row1 + col1) * texel_bytes;
+                reuse = true, reuse_x0 = x0, reuse_y0 = y0, reuse_block = memo.block[m0];
+                four_taps(out, reuse_texel, w00, w10, w01, w11, x, y, tx0, tx1, ty0, ty1);
                 if (blocks)
-                    blocks[i] = memo.block[m0];
+                    blocks[i] = reuse_block;
                 continue;
             }
         }
+        const long tx[2] = {tx0, tx1}, ty[2] = {ty0, ty1};
+        const float wx[2] = {wx0, wx1}, wy[2] = {wy0, wy1};
+#pragma GCC unroll 4
         for (int t = 1; t < 4; t++) {
             long xi = tx[t & 1], yi = ty[t >> 1];
             bool same = ((t & 1) == 0 || same_x) && ((t >> 1) == 0 || same_y);
@@ -367,6 +404,7 @@ FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot,
         float total = 0;
         uint32_t n = 0;
         uint32_t first_block = SRV_NONE;
+#pragma GCC unroll 4
         for (int t = 0; t < 4; t++) {
             uint32_t m = tap_memo_slot[t];
             if (memo.block[m] == OSC_NONE)
