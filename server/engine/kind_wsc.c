@@ -208,17 +208,30 @@ typedef struct cell_memo {
     double inv_top;
 } cell_memo;
 
-/* The float nearest x from above (below): (double)float_above(x) >= x. */
+/* The float nearest x from above (below): (double)float_above(x) >= x. One step of the float's bits towards
+ * x when the conversion rounded the other way (not for infinities or NaN: they convert exactly). */
+static float float_step(float f, bool up)
+{
+    uint32_t bits;
+    memcpy(&bits, &f, sizeof bits);
+    if (f == 0.0f)
+        bits = up ? 1u : 0x80000001u; /* the smallest subnormal of the right sign */
+    else
+        bits = (f > 0.0f) == up ? bits + 1 : bits - 1;
+    memcpy(&f, &bits, sizeof f);
+    return f;
+}
+
 static float float_above(double x)
 {
     float f = (float)x;
-    return (double)f < x ? nextafterf(f, INFINITY) : f;
+    return (double)f < x ? float_step(f, true) : f;
 }
 
 static float float_below(double x)
 {
     float f = (float)x;
-    return (double)f > x ? nextafterf(f, -INFINITY) : f;
+    return (double)f > x ? float_step(f, false) : f;
 }
 
 /* wsc_level of a distance, remembering the range of distances of the last level (a millionth inside its
@@ -276,20 +289,20 @@ static inline bool cell_enter(const kind_wsc *k, const float p[3], uint32_t leve
 static __attribute__((noinline)) bool cell_enter_slow(const kind_wsc *k, const float p[3], uint32_t level,
                                                       cell_memo *m, bool *same)
 {
-    int32_t corners[8][3];
-    float weights[8];
+    int32_t g[3];
     double world[3] = {(double)p[0], (double)p[1], (double)p[2]};
-    if (!wsc_corners(world, level, k->c0, corners, weights)) {
+    /* wsc_corners' cell and range (the far corner g + 1 inside it too), without its 8 weights. */
+    if (!wsc_grid_point(world, level, k->c0, g) || g[0] >= WSC_XZ_MAX || g[2] >= WSC_XZ_MAX || g[1] >= WSC_Y_MAX) {
         m->level = UINT32_MAX;
         return false;
     }
     double cell = wsc_cell_size(level, k->c0);
-    bool moved = m->level != level || memcmp(m->g, corners[0], sizeof m->g) != 0;
+    bool moved = m->level != level || memcmp(m->g, g, sizeof m->g) != 0;
     m->level = level;
     m->inv_cell = 1.0 / cell;
     for (int a = 0; a < 3; a++) {
-        m->g[a] = corners[0][a];
-        m->lo[a] = (double)corners[0][a] * cell;
+        m->g[a] = g[a];
+        m->lo[a] = (double)g[a] * cell;
         m->inside_lo[a] = float_above(m->lo[a] + 1e-6 * cell);
         m->inside_hi[a] = float_below(m->lo[a] + cell - 1e-6 * cell);
     }
@@ -301,8 +314,8 @@ static __attribute__((noinline)) bool cell_enter_slow(const kind_wsc *k, const f
 static inline void cell_position(const cell_memo *m, const float p[3], float t[3])
 {
     for (int a = 0; a < 3; a++) {
-        double u = ((double)p[a] - m->lo[a]) * m->inv_cell;
-        t[a] = u < 0.0 ? 0.0f : (u > 1.0 ? 1.0f : (float)u);
+        float u = (float)(((double)p[a] - m->lo[a]) * m->inv_cell);
+        t[a] = fminf(fmaxf(u, 0.0f), 1.0f); /* [0, 1]; NaN cannot occur (the point is inside the cell) */
     }
 }
 
@@ -491,18 +504,29 @@ static void find_cell_cached(kind_wsc *k, wsc_local *local, cell_cache_entry *ca
     *out = e->taps;
 }
 
-/* Appends a point's taps from its cell's: trilinear weights times `scale` (not renormalised), corners of
- * zero weight left out (written, then overwritten: no branch). */
+/* Appends a point's taps from its cell's: trilinear weights times `scale` (not renormalised). A cell with all
+ * 8 corners (the usual case) appends all 8, weights of 0 included (at a face of the cell: they add nothing),
+ * in one pass without branches; otherwise the corners of zero weight are left out, as before. */
 static inline void add_taps(const cell_taps *ct, const float t[3], float scale, fx_taps *out)
 {
-    const float wx[2] = {1.0f - t[0], t[0]}, wy[2] = {1.0f - t[1], t[1]}, wz[2] = {(1.0f - t[2]) * scale, t[2] * scale};
+    float wz0 = (1.0f - t[2]) * scale, wz1 = t[2] * scale;
+    float wxy[4] = {(1.0f - t[0]) * (1.0f - t[1]), t[0] * (1.0f - t[1]), (1.0f - t[0]) * t[1], t[0] * t[1]};
+    float w[8];
+    for (int c = 0; c < 4; c++) {
+        w[c] = wxy[c] * wz0;
+        w[c + 4] = wxy[c] * wz1;
+    }
     uint32_t n = out->count;
-    for (uint32_t i = 0; i < ct->count; i++) {
-        uint32_t c = ct->corner[i];
-        float w = wx[c & 1] * wy[(c >> 1) & 1] * wz[c >> 2]; /* at_x, at_y: on-surface taps only (effects.h) */
+    if (ct->count == 8) {
+        memcpy(out->texel + n, ct->texel, sizeof ct->texel);
+        memcpy(out->weight + n, w, sizeof w);
+        out->count = n + 8;
+        return;
+    }
+    for (uint32_t i = 0; i < ct->count; i++) { /* at_x, at_y: on-surface taps only (effects.h) */
         out->texel[n] = ct->texel[i];
-        out->weight[n] = w;
-        n += w > 0;
+        out->weight[n] = w[ct->corner[i]];
+        n += out->weight[n] > 0; /* written, then overwritten when 0: no branch */
     }
     out->count = n;
 }
