@@ -16,9 +16,12 @@
  *             ((requests + compose) with - (requests + compose) without) / visibility (mean of the two
  *             loops' visibility times for that frame); median and spread.
  *   memory:   bytes per probe (payload, and all of the cache per resident probe) beside RTXGI's layout.
+ *   image:    (not in all) the radiance of the measured frames with and without probes, to --out FILE, for
+ *             comparing the indirect term of two builds (tools: bench/compare_radiance.py).
  *
  * Usage: bench_probes [--scene PATH (default ../shared/scenes/sponza/sponza.3ds)] [--res WxH (640x360)]
- *                     [--warmup N (10)] [--frames N (20)] [--camera GEN (group)] [--part rays|viewers|overhead|all]
+ *                     [--warmup N (10)] [--frames N (20)] [--camera GEN (group)]
+ *                     [--part rays|viewers|overhead|memory|image|all] [--out FILE (image)]
  */
 #include "bench_engine.h"
 #include "scene.h"
@@ -41,6 +44,7 @@ typedef struct options {
     uint32_t w, h, warmup, frames;
     srv_camgen_kind gen;
     const char *part;
+    const char *out; /* --part image: where the radiance goes */
 } options;
 
 static int32_t effect_index(const char *name)
@@ -312,6 +316,46 @@ static void part_overhead(const options *o, scene *s, scene_rt *rt)
     srv_loop_free(without);
 }
 
+/* ---- image: the radiance of one loop's frames, for comparing two builds ---------------------------------- */
+
+/* One viewer on one thread with probes, and one without, the same frames: after the warm-up, each measured
+ * frame's linear radiance of both is appended to o->out (floats, width x height x 3 per frame, with first,
+ * then without). Two builds run on the same arguments give files whose difference is the change in the
+ * indirect term times the albedo (everything else in the frame is deterministic and the same);
+ * with - without says how much light the probes bring (their term minus the sky term they replace). */
+static int part_image(const options *o, scene *s, scene_rt *rt)
+{
+    FILE *f = o->out ? fopen(o->out, "wb") : NULL;
+    if (!f) {
+        fprintf(stderr, "bench_probes: --part image needs --out FILE (writable)\n");
+        return 1;
+    }
+    srv_viewer_id with_ids[1], without_ids[1];
+    srv_loop *with = bench_make_loop_desc("bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .threads = 1},
+                                          NULL, 1, o->w, o->h, with_ids);
+    srv_loop *without = bench_make_loop_desc(
+        "bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .threads = 1}, "probes", 1, o->w, o->h, without_ids);
+    size_t n = (size_t)o->w * o->h * 3;
+    for (uint32_t frame = 0; frame < o->warmup + o->frames; frame++) {
+        srv_frame_stats a, b;
+        bench_run_frame("bench_probes", with, s, o->gen, with_ids, 1, frame, &a);
+        bench_run_frame("bench_probes", without, s, o->gen, without_ids, 1, frame, &b);
+        if (frame < o->warmup)
+            continue;
+        const float *ra = srv_viewer_radiance(with, with_ids[0]), *rb = srv_viewer_radiance(without, without_ids[0]);
+        if (!ra || !rb || fwrite(ra, sizeof(float), n, f) != n || fwrite(rb, sizeof(float), n, f) != n) {
+            fprintf(stderr, "bench_probes: cannot write %s\n", o->out);
+            fclose(f);
+            return 1;
+        }
+    }
+    srv_loop_free(with);
+    srv_loop_free(without);
+    printf("\nimage: %u frames of %ux%u radiance (with probes, then without, float RGB) in %s\n", o->frames, o->w,
+           o->h, o->out);
+    return fclose(f) == 0 ? 0 : 1;
+}
+
 /* ---- memory ------------------------------------------------------------------------------------------- */
 
 static void part_memory(const options *o, scene *s, scene_rt *rt)
@@ -362,9 +406,11 @@ int main(int argc, char **argv)
             i++;
         else if (!strcmp(a, "--part") && v)
             o.part = v, i++;
+        else if (!strcmp(a, "--out") && v)
+            o.out = v, i++;
         else {
             fprintf(stderr, "usage: bench_probes [--scene PATH] [--res WxH] [--warmup N] [--frames N] [--camera GEN] "
-                            "[--part rays|viewers|overhead|memory|all]\n");
+                            "[--part rays|viewers|overhead|memory|image|all] [--out FILE (image)]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }
     }
@@ -398,7 +444,8 @@ int main(int argc, char **argv)
         part_viewers(&o, s, rt);
     if (all || !strcmp(o.part, "memory"))
         part_memory(&o, s, rt);
+    int status = !strcmp(o.part, "image") ? part_image(&o, s, rt) : 0;
     scene_rt_free(rt);
     scene_free(s);
-    return 0;
+    return status;
 }

@@ -3,6 +3,7 @@
  * the DDGI shading filter (trilinear x wrap x Chebyshev weights), a per-thread memo of irradiance within a
  * frame, and compose's shade over runs of pixels. Everything here only reads payloads. */
 #include "fx_probes_internal.h"
+#include "fxc_hot.h"
 
 /* ---- directions ------------------------------------------------------------------------------------ */
 
@@ -262,24 +263,22 @@ typedef struct shade_group {
     float normal[3];
     float position_sum[3];
     uint32_t pixels;
-    float weight[FX_MAX_TAPS];   /* wrap x Chebyshev per tap, at the mean position */
-    float e[FX_MAX_TAPS][3];     /* irradiance of each tap towards the normal */
+    /* Per tap: its wrap x Chebyshev weight w at the mean position times its irradiance towards the normal
+     * (RGB), and w: a pixel's sum is then one 4-wide multiply-add per tap. */
+    _Alignas(16) float weighted[FX_MAX_TAPS][4];
 } shade_group;
 
 static bool same_group(const shade_group *g, const fx_taps *taps, const float normal[3])
 {
     /* Normals within 1e-3 per component (0.06 degrees) count as one: coplanar triangles of a wall have
      * normals that differ in their last bits, and the irradiance cannot tell them apart. */
-    if (g->count != taps->count || fabsf(g->normal[0] - normal[0]) > 1e-3f || fabsf(g->normal[1] - normal[1]) > 1e-3f ||
-        fabsf(g->normal[2] - normal[2]) > 1e-3f)
+    if (g->count != taps->count || g->texel[0] != taps->texel[0] || fabsf(g->normal[0] - normal[0]) > 1e-3f ||
+        fabsf(g->normal[1] - normal[1]) > 1e-3f || fabsf(g->normal[2] - normal[2]) > 1e-3f)
         return false;
-    for (uint32_t t = 0; t < taps->count; t++)
-        if (g->texel[t] != taps->texel[t])
-            return false;
-    return true;
+    return memcmp(g->texel + 1, taps->texel + 1, (taps->count - 1) * sizeof taps->texel[0]) == 0;
 }
 
-void fx__probes_shade(const fx_context *ctx, const fx_shade_run *run)
+FXC_HOT_CLONES void fx__probes_shade(const fx_context *ctx, const fx_shade_run *run)
 {
     shade_group groups[SHADE_GROUPS];
     uint8_t group_of[FX_RUN_PIXELS];
@@ -328,9 +327,12 @@ void fx__probes_shade(const fx_context *ctx, const fx_shade_run *run)
                 mean[k] = sg->pixels == 1 ? run->points[sample].position[k] : sg->position_sum[k] / (float)sg->pixels;
             for (uint32_t t = 0; t < taps->count; t++) {
                 const uint8_t *p = taps->texel[t];
-                sg->weight[t] = probe_weight(p, mean, sg->normal, true);
-                if (sg->weight[t] > 0)
-                    probe_irradiance_memo(ctx, true, p, sg->normal, sg->e[t]);
+                float weight = probe_weight(p, mean, sg->normal, true), e[3] = {0, 0, 0};
+                if (weight > 0)
+                    probe_irradiance_memo(ctx, true, p, sg->normal, e);
+                for (int k = 0; k < 3; k++)
+                    sg->weighted[t][k] = weight * e[k];
+                sg->weighted[t][3] = weight;
             }
         }
         /* Pass 3: per pixel, the trilinear weights. */
@@ -339,15 +341,13 @@ void fx__probes_shade(const fx_context *ctx, const fx_shade_run *run)
                 continue;
             const shade_group *sg = &groups[group_of[i]];
             const fx_taps *taps = &run->taps[i];
-            float sum[3] = {0, 0, 0}, total = 0;
+            float acc[4] = {0, 0, 0, 0}; /* RGB, then the total weight */
             for (uint32_t t = 0; t < taps->count; t++) {
-                float w = sg->weight[t] * taps->weight[t];
-                if (!(w > 0))
-                    continue;
-                for (int k = 0; k < 3; k++)
-                    sum[k] += w * sg->e[t][k];
-                total += w;
+                float w = taps->weight[t];
+                for (int k = 0; k < 4; k++)
+                    acc[k] += w * sg->weighted[t][k];
             }
+            float sum[3] = {acc[0], acc[1], acc[2]}, total = acc[3];
             if (!(total > 0))
                 continue;
             float open = run->sky_visibility[i] * (1.0f / FX_PROBE_PI) / total;

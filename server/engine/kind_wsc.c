@@ -32,6 +32,28 @@
  * an eighth of the memory (docs/BENCHMARKS.md). */
 enum { LOCAL_SIDE = 8, LOCAL_LEVELS = 8 };
 
+/* Cells compose looked up this frame, per pool thread, direct-mapped (cell_cache_entry). */
+enum { CELL_CACHE = 256 };
+
+/* The cells of one cell's 8 corners that hold data, found once per cell: payload and corner index. */
+typedef struct cell_taps {
+    uint32_t count;
+    const void *texel[8];
+    uint8_t corner[8];
+    uint32_t first_block; /* the brick of the first corner found, or SRV_NONE */
+} cell_taps;
+
+/* A cell compose looked up this frame: within compose the table, the bricks' valid bits and the payloads do
+ * not change (every update and commit of the frame ran before it, housekeeping runs after), so the corners
+ * found for a cell stay right for the whole stage, for every viewer. Pixels enter a new cell about every 9
+ * pixels on Sponza, mostly one they or the run before met: the lookup of 8 corners (brick keys, hashing,
+ * valid bits) is then done once per cell and thread instead of once per run. */
+typedef struct cell_cache_entry {
+    uint64_t cell; /* wsc_wgi_pack of (level, grid point) */
+    uint32_t stamp, effect;
+    cell_taps taps;
+} cell_cache_entry;
+
 typedef struct kind_wsc {
     wsc_cache *wsc;
     const scene *s;
@@ -44,6 +66,8 @@ typedef struct kind_wsc {
     _Atomic uint64_t refused;       /* this frame, from the request threads */
     _Atomic uint64_t local_lookups; /* this frame, compose */
     _Atomic uint64_t local_hits;
+    cell_cache_entry *cell_cache; /* [threads * CELL_CACHE]: compose's cells of this frame, per thread */
+    uint32_t stamp;               /* the frame's stamp in cell_cache (bumped at begin_frame; 0: none yet) */
 } kind_wsc;
 
 /* The default finest cell: the power of two nearest a 64th of the bounding-box diagonal (a grid that does
@@ -96,9 +120,11 @@ static fxc_result wsc_kind_create(srv_loop *loop, void **out, char *err, size_t 
     kind_wsc *k = calloc(1, sizeof *k);
     uint32_t threads = srv_pool_threads(loop->pool);
     wsc_local **local = calloc((size_t)SRV_MAX_VIEWERS * threads, sizeof *local);
-    if (!k || !local) {
+    cell_cache_entry *cell_cache = calloc((size_t)threads * CELL_CACHE, sizeof *cell_cache);
+    if (!k || !local || !cell_cache) {
         free(k);
         free(local);
+        free(cell_cache);
         snprintf(err, err_cap, "frame loop: out of memory for the world-space cache");
         return FXC_ERR_NOMEM;
     }
@@ -108,11 +134,13 @@ static fxc_result wsc_kind_create(srv_loop *loop, void **out, char *err, size_t 
     memcpy(k->cell_bytes, cell_bytes, sizeof cell_bytes);
     k->threads = threads;
     k->local = local;
+    k->cell_cache = cell_cache;
     k->use_local = !loop->desc.no_local_table;
     char msg[256];
     osc_result r = wsc_create(&wd, &k->wsc, msg, sizeof msg);
     if (r != OSC_OK) {
         snprintf(err, err_cap, "frame loop: cannot create the world-space cache: %s", msg);
+        free(cell_cache);
         free(local);
         free(k);
         return (fxc_result)r;
@@ -141,6 +169,7 @@ static void wsc_kind_destroy(void *cache)
     for (uint32_t v = 0; v < SRV_MAX_VIEWERS; v++)
         drop_locals(k, v);
     wsc_destroy(k->wsc);
+    free(k->cell_cache);
     free(k->local);
     free(k);
 }
@@ -154,6 +183,7 @@ static void wsc_kind_begin_frame(void *cache, uint32_t frame)
 {
     kind_wsc *k = cache;
     wsc_begin_frame(k->wsc, frame);
+    k->stamp = k->stamp == UINT32_MAX ? 1 : k->stamp + 1; /* forgets compose's cells of the last frame */
     atomic_store_explicit(&k->refused, 0, memory_order_relaxed);
     atomic_store_explicit(&k->local_lookups, 0, memory_order_relaxed);
     atomic_store_explicit(&k->local_hits, 0, memory_order_relaxed);
@@ -162,30 +192,60 @@ static void wsc_kind_begin_frame(void *cache, uint32_t frame)
 /* The cell of the last pixel: neighbouring pixels lie in the same cell far more often than not, and a point
  * well inside the last cell's box (by a millionth of a cell, so rounding can never put it in another) is in
  * it without the divisions and floors of wsc_corners. Decisions near a face go through wsc_corners, so the
- * cell of a point never depends on which pixel came before it. */
+ * cell of a point never depends on which pixel came before it. The boxes are kept in float too, rounded
+ * inwards: a pixel's position and distance are floats, so a float inside the float box is inside the double
+ * one, and the test per pixel is six float comparisons (the answer is the same as in double). */
 typedef struct cell_memo {
     uint32_t level; /* UINT32_MAX: none */
     int32_t g[3];   /* the cell's grid point */
-    double lo[3], inside_lo[3], inside_hi[3]; /* the cell's lower corner; its box a millionth inside */
+    float inside_lo[3], inside_hi[3]; /* the cell's box a millionth inside, rounded inwards to float */
+    double lo[3];                     /* the cell's lower corner */
     double inv_cell;
-    /* The last distance's level (before the bias), the distances well inside its range, and the inverse of
-     * the range's upper end (for the blend). */
+    /* The last distance's level (before the bias), the distances well inside its range (rounded inwards
+     * to float), and the inverse of the range's upper end (for the blend). */
     uint32_t distance_level;
-    double distance_lo, distance_hi, inv_top;
+    float distance_lo, distance_hi;
+    double inv_top;
 } cell_memo;
+
+/* The float nearest x from above (below): (double)float_above(x) >= x. One step of the float's bits towards
+ * x when the conversion rounded the other way (not for infinities or NaN: they convert exactly). */
+static float float_step(float f, bool up)
+{
+    uint32_t bits;
+    memcpy(&bits, &f, sizeof bits);
+    if (f == 0.0f)
+        bits = up ? 1u : 0x80000001u; /* the smallest subnormal of the right sign */
+    else
+        bits = (f > 0.0f) == up ? bits + 1 : bits - 1;
+    memcpy(&f, &bits, sizeof f);
+    return f;
+}
+
+static float float_above(double x)
+{
+    float f = (float)x;
+    return (double)f < x ? float_step(f, true) : f;
+}
+
+static float float_below(double x)
+{
+    float f = (float)x;
+    return (double)f > x ? float_step(f, false) : f;
+}
 
 /* wsc_level of a distance, remembering the range of distances of the last level (a millionth inside its
  * bounds, so the answer is always wsc_level's). */
-static uint32_t memo_level(const kind_wsc *k, cell_memo *m, double distance)
+static inline uint32_t memo_level(const kind_wsc *k, cell_memo *m, float distance)
 {
     if (distance > m->distance_lo && distance < m->distance_hi)
         return m->distance_level;
-    uint32_t level = wsc_level(distance, k->c0);
+    uint32_t level = wsc_level((double)distance, k->c0);
     double step = 16.0 * k->c0;
     double lo = level == 0 ? -INFINITY : ldexp(step, (int)level - 1), hi = level == WSC_MAX_LEVEL ? INFINITY : ldexp(step, (int)level);
     m->distance_level = level;
-    m->distance_lo = level == 0 ? -INFINITY : lo * (1.0 + 1e-6);
-    m->distance_hi = hi * (1.0 - 1e-6);
+    m->distance_lo = level == 0 ? -INFINITY : float_above(lo * (1.0 + 1e-6));
+    m->distance_hi = float_below(hi * (1.0 - 1e-6));
     m->inv_top = level == WSC_MAX_LEVEL ? 0.0 : 1.0 / hi;
     if (!(distance == distance)) /* NaN: no range */
         m->distance_lo = m->distance_hi = 0;
@@ -198,54 +258,65 @@ static uint32_t memo_level(const kind_wsc *k, cell_memo *m, double distance)
  * of level + 1 in [0, 1]. The sum is taken in 64 bits (a bias of INT32_MAX overflowed it), and a bias that
  * puts the next level below 0 too leaves nothing to blend (both clamp to level 0; it used to blend level 1
  * in: found by tests/stability/stab_caches.c). */
-static uint32_t pixel_level(const kind_wsc *k, cell_memo *m, const srv_pixel *px, int32_t bias, float *blend)
+static inline uint32_t pixel_level(const kind_wsc *k, cell_memo *m, const srv_pixel *px, int32_t bias, float *blend)
 {
     double distance = (double)px->distance;
-    int64_t l = (int64_t)memo_level(k, m, distance) + bias;
+    int64_t l = (int64_t)memo_level(k, m, px->distance) + bias;
     uint32_t level = l < 0 ? 0 : (l > (int64_t)WSC_MAX_LEVEL ? WSC_MAX_LEVEL : (uint32_t)l);
     double b = (distance * m->inv_top - 0.75) * 4.0;
     *blend = level >= WSC_MAX_LEVEL || l + 1 <= 0 || !(b > 0.0) ? 0.0f : (b >= 1.0 ? 1.0f : (float)b);
     return level;
 }
 
-/* The cell of a world position at a level (memo m) and the position in it (t, each in [0, 1]); false when
- * the point is outside the grid's range. *same: the memo's cell already was this one. */
-static bool cell_at(const kind_wsc *k, const double world[3], uint32_t level, cell_memo *m, float t[3], bool *same)
+/* Whether a point (scene-local, float) lies well inside the memo's cell at `level`. */
+static inline bool cell_same(const cell_memo *m, uint32_t level, const float p[3])
 {
-    *same = m->level == level && world[0] >= m->inside_lo[0] && world[0] < m->inside_hi[0] &&
-            world[1] >= m->inside_lo[1] && world[1] < m->inside_hi[1] && world[2] >= m->inside_lo[2] &&
-            world[2] < m->inside_hi[2];
-    if (!*same) {
-        int32_t corners[8][3];
-        float weights[8];
-        if (!wsc_corners(world, level, k->c0, corners, weights)) {
-            m->level = UINT32_MAX;
-            return false;
-        }
-        double cell = wsc_cell_size(level, k->c0);
-        bool moved = m->level != level || memcmp(m->g, corners[0], sizeof m->g) != 0;
-        m->level = level;
-        m->inv_cell = 1.0 / cell;
-        for (int a = 0; a < 3; a++) {
-            m->g[a] = corners[0][a];
-            m->lo[a] = (double)corners[0][a] * cell;
-            m->inside_lo[a] = m->lo[a] + 1e-6 * cell;
-            m->inside_hi[a] = m->lo[a] + cell - 1e-6 * cell;
-        }
-        *same = !moved; /* a point near a face of the same cell */
+    return m->level == level && p[0] >= m->inside_lo[0] && p[0] < m->inside_hi[0] && p[1] >= m->inside_lo[1] &&
+           p[1] < m->inside_hi[1] && p[2] >= m->inside_lo[2] && p[2] < m->inside_hi[2];
+}
+
+/* The cell of a point at a level (memo m); false when the point is outside the grid's range. *same: the
+ * memo's cell already was this one. */
+static bool cell_enter_slow(const kind_wsc *k, const float p[3], uint32_t level, cell_memo *m, bool *same);
+
+static inline bool cell_enter(const kind_wsc *k, const float p[3], uint32_t level, cell_memo *m, bool *same)
+{
+    *same = cell_same(m, level, p);
+    return *same || cell_enter_slow(k, p, level, m, same);
+}
+
+/* cell_enter for a point not well inside the memo's cell (kept out of line: about one pixel in ten). */
+static __attribute__((noinline)) bool cell_enter_slow(const kind_wsc *k, const float p[3], uint32_t level,
+                                                      cell_memo *m, bool *same)
+{
+    int32_t g[3];
+    double world[3] = {(double)p[0], (double)p[1], (double)p[2]};
+    /* wsc_corners' cell and range (the far corner g + 1 inside it too), without its 8 weights. */
+    if (!wsc_grid_point(world, level, k->c0, g) || g[0] >= WSC_XZ_MAX || g[2] >= WSC_XZ_MAX || g[1] >= WSC_Y_MAX) {
+        m->level = UINT32_MAX;
+        return false;
     }
+    double cell = wsc_cell_size(level, k->c0);
+    bool moved = m->level != level || memcmp(m->g, g, sizeof m->g) != 0;
+    m->level = level;
+    m->inv_cell = 1.0 / cell;
     for (int a = 0; a < 3; a++) {
-        double u = (world[a] - m->lo[a]) * m->inv_cell;
-        t[a] = u < 0.0 ? 0.0f : (u > 1.0 ? 1.0f : (float)u);
+        m->g[a] = g[a];
+        m->lo[a] = (double)g[a] * cell;
+        m->inside_lo[a] = float_above(m->lo[a] + 1e-6 * cell);
+        m->inside_hi[a] = float_below(m->lo[a] + cell - 1e-6 * cell);
     }
+    *same = !moved; /* a point near a face of the same cell */
     return true;
 }
 
-/* Where a pixel's point lies for the grid: scene-local, in double (the grid is anchored at the local frame). */
-static inline void pixel_world(const srv_pixel *px, double world[3])
+/* The position of a point in the memo's cell (each in [0, 1]). */
+static inline void cell_position(const cell_memo *m, const float p[3], float t[3])
 {
-    for (int a = 0; a < 3; a++)
-        world[a] = (double)px->position[a];
+    for (int a = 0; a < 3; a++) {
+        float u = (float)(((double)p[a] - m->lo[a]) * m->inv_cell);
+        t[a] = fminf(fmaxf(u, 0.0f), 1.0f); /* [0, 1]; NaN cannot occur (the point is inside the cell) */
+    }
 }
 
 /* Corner c (0..7) of the memo's cell: g + (c & 1, c >> 1 & 1, c >> 2 & 1); its trilinear weight from t. */
@@ -254,12 +325,6 @@ static void corner_of(const cell_memo *m, int c, int32_t out[3])
     out[0] = m->g[0] + (c & 1);
     out[1] = m->g[1] + ((c >> 1) & 1);
     out[2] = m->g[2] + ((c >> 2) & 1);
-}
-
-static inline float corner_weight(const float t[3], int c)
-{
-    return ((c & 1) ? t[0] : 1.0f - t[0]) * (((c >> 1) & 1) ? t[1] : 1.0f - t[1]) *
-           (((c >> 2) & 1) ? t[2] : 1.0f - t[2]);
 }
 
 /* Writes the keys of the memo's cell's 8 corners unless a recent pixel wrote them (seen). */
@@ -306,18 +371,17 @@ static uint32_t wsc_kind_pixel_requests(const void *cache, uint32_t slot, const 
     memset(seen, 0xFF, sizeof seen);
     cell_memo memo = {.level = UINT32_MAX}, next = {.level = UINT32_MAX}; /* the pixel's level, and level + 1 */
     for (uint32_t i = 0; i < count; i++) {
-        float t[3], blend;
+        float blend;
         bool same;
-        double world[3];
-        pixel_world(&pixels[i], world);
+        const float *p = pixels[i].position;
         uint32_t level = pixel_level(k, &memo, &pixels[i], bias, &blend);
-        if (!cell_at(k, world, level, &memo, t, &same)) {
+        if (!cell_enter(k, p, level, &memo, &same)) {
             refused++;
             continue;
         }
         if (!same)
             n = cell_keys(&memo, brick_size, seen, keys, masks, n, &refused);
-        if (blend > 0 && cell_at(k, world, level + 1, &next, t, &same) && !same)
+        if (blend > 0 && cell_enter(k, p, level + 1, &next, &same) && !same)
             n = cell_keys(&next, brick_size, seen, keys, masks, n, &refused);
     }
     if (refused)
@@ -395,13 +459,6 @@ static void wsc_kind_job_location(const void *cache, uint32_t effect, uint64_t k
         job->origin[a] = (float)((double)first[a] * cell);
 }
 
-/* The cells of one cell's 8 corners that hold data, found once per cell: payload and corner index. */
-typedef struct cell_taps {
-    uint32_t count;
-    const void *texel[8];
-    uint8_t corner[8];
-    uint32_t first_block; /* the brick of the first corner found, or SRV_NONE */
-} cell_taps;
 
 /* Looks the memo's cell's corners up (through `local` when not NULL, else the hash table). */
 static void find_cell_taps(kind_wsc *k, wsc_local *local, uint32_t effect, const cell_memo *m, cell_taps *out)
@@ -428,18 +485,56 @@ static void find_cell_taps(kind_wsc *k, wsc_local *local, uint32_t effect, const
     }
 }
 
-/* Appends a point's taps from its cell's: trilinear weights times `scale` (not renormalised), corners of
- * zero weight left out. */
-static void add_taps(const cell_taps *ct, const float t[3], float scale, fx_taps *out)
+
+static void find_cell_cached(kind_wsc *k, wsc_local *local, cell_cache_entry *cache, uint32_t effect,
+                             const cell_memo *m, cell_taps *out)
 {
-    for (uint32_t i = 0; i < ct->count; i++) {
-        float w = corner_weight(t, ct->corner[i]) * scale;
-        if (!(w > 0))
-            continue;
-        out->texel[out->count] = ct->texel[i];
-        out->weight[out->count] = w; /* at_x, at_y: on-surface taps only (effects.h) */
-        out->count++;
+    uint64_t cell;
+    if (!cache || k->stamp == 0 || !wsc_wgi_pack(m->level, m->g[0], m->g[1], m->g[2], &cell)) {
+        find_cell_taps(k, local, effect, m, out);
+        return;
     }
+    cell_cache_entry *e = &cache[((cell ^ effect) * 0x9E3779B97F4A7C15ull) >> 56]; /* 8 bits: CELL_CACHE */
+    if (e->stamp != k->stamp || e->cell != cell || e->effect != effect) {
+        find_cell_taps(k, local, effect, m, &e->taps);
+        e->stamp = k->stamp;
+        e->cell = cell;
+        e->effect = effect;
+    }
+    *out = e->taps;
+}
+
+/* Appends a point's taps from its cell's: trilinear weights times `scale` (not renormalised), corners of zero
+ * weight left out. A point strictly inside a cell with all 8 corners (the usual case) appends the 8 in two
+ * copies. Zero weights must stay out, not only because they add nothing: shade groups pixels by their list of
+ * taps, and a point on a face of the cell (a wall on a grid plane) joining the group of the points inside
+ * would move the group's mean position and so its Chebyshev weights (measured: up to 3 % on the embedded
+ * scene's walls). */
+static inline void add_taps(const cell_taps *ct, const float t[3], float scale, fx_taps *out)
+{
+    float wz0 = (1.0f - t[2]) * scale, wz1 = t[2] * scale;
+    float wxy[4] = {(1.0f - t[0]) * (1.0f - t[1]), t[0] * (1.0f - t[1]), (1.0f - t[0]) * t[1], t[0] * t[1]};
+    float w[8];
+    for (int c = 0; c < 4; c++) {
+        w[c] = wxy[c] * wz0;
+        w[c + 4] = wxy[c] * wz1;
+    }
+    uint32_t n = out->count;
+    bool positive = true;
+    for (int c = 0; c < 8; c++)
+        positive &= w[c] > 0;
+    if (ct->count == 8 && positive) {
+        memcpy(out->texel + n, ct->texel, sizeof ct->texel);
+        memcpy(out->weight + n, w, sizeof w);
+        out->count = n + 8;
+        return;
+    }
+    for (uint32_t i = 0; i < ct->count; i++) { /* at_x, at_y: on-surface taps only (effects.h) */
+        out->texel[n] = ct->texel[i];
+        out->weight[n] = w[ct->corner[i]];
+        n += out->weight[n] > 0; /* written, then overwritten when 0: no branch */
+    }
+    out->count = n;
 }
 
 uint32_t srv__wsc_world_taps(const void *user, uint32_t effect, const float position[3], uint32_t level,
@@ -489,29 +584,31 @@ static void wsc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t threa
     wsc_local_stats before = {0}, after = {0};
     if (local)
         wsc_local_stats_get(local, &before);
+    cell_cache_entry *cells = k->cell_cache && thread < k->threads ? k->cell_cache + (size_t)thread * CELL_CACHE : NULL;
     cell_memo memo = {.level = UINT32_MAX}, next = {.level = UINT32_MAX};
     cell_taps ct = {.count = 0, .first_block = SRV_NONE}, next_ct = {.count = 0, .first_block = SRV_NONE};
     for (uint32_t i = 0; i < count; i++) {
         float t[3], blend;
         bool same;
-        double world[3];
-        pixel_world(&pixels[i], world);
+        const float *p = pixels[i].position;
         uint32_t level = pixel_level(k, &memo, &pixels[i], bias, &blend);
         taps[i].count = 0;
         taps[i].footprint_log2 = 0;
-        if (!cell_at(k, world, level, &memo, t, &same)) {
+        if (!cell_enter(k, p, level, &memo, &same)) {
             if (blocks)
                 blocks[i] = SRV_NONE;
             continue;
         }
         if (!same)
-            find_cell_taps(k, local, effect, &memo, &ct);
+            find_cell_cached(k, local, cells, effect, &memo, &ct);
+        cell_position(&memo, p, t);
         add_taps(&ct, t, 1.0f - blend, &taps[i]);
         if (blocks)
             blocks[i] = ct.first_block;
-        if (blend > 0 && cell_at(k, world, level + 1, &next, t, &same)) {
+        if (blend > 0 && cell_enter(k, p, level + 1, &next, &same)) {
             if (!same)
-                find_cell_taps(k, local, effect, &next, &next_ct);
+                find_cell_cached(k, local, cells, effect, &next, &next_ct);
+            cell_position(&next, p, t);
             add_taps(&next_ct, t, blend, &taps[i]);
         }
     }
@@ -545,7 +642,8 @@ static void wsc_kind_housekeeping(void *cache)
 
 static size_t locals_bytes(const kind_wsc *k)
 {
-    size_t bytes = (size_t)SRV_MAX_VIEWERS * k->threads * sizeof *k->local;
+    size_t bytes = (size_t)SRV_MAX_VIEWERS * k->threads * sizeof *k->local +
+                   (size_t)k->threads * CELL_CACHE * sizeof *k->cell_cache;
     for (size_t i = 0; i < (size_t)SRV_MAX_VIEWERS * k->threads; i++)
         if (k->local[i]) {
             wsc_local_stats ls;
