@@ -12,9 +12,22 @@
 #include <stdint.h>
 
 enum {
-    VIEW_MAX_VIEWERS = 64,      /* --viewers upper bound */
-    VIEW_MAX_LATENCY_MS = 10000 /* --latency upper bound */
+    VIEW_MAX_VIEWERS = 64,       /* --viewers upper bound */
+    VIEW_MAX_LATENCY_MS = 10000, /* --latency upper bound */
+    VIEW_MAX_RC_THREADS = 64,    /* --rc-threads upper bound (rcache.h's VIEW_RC_MAX_THREADS) */
 };
+
+/* Reference-frame strategies (Baxter 1999), named in the hello: which camera the server renders whole frames
+ * for. */
+typedef enum view_strategy {
+    VIEW_STRATEGY_BASIC,      /* the camera the viewer reports */
+    VIEW_STRATEGY_FAN,        /* a wider field of view at a lower resolution */
+    VIEW_STRATEGY_PREDICTIVE, /* the camera extrapolated by the measured latency (camera.has_predicted) */
+    VIEW_STRATEGY_COUNT
+} view_strategy;
+
+/* The strategy's name on the wire ("unknown" outside the table). */
+const char *view_strategy_name(uint32_t strategy);
 
 #define VIEW_DEFAULT_URL "ws://127.0.0.1:7681"
 
@@ -45,6 +58,17 @@ typedef struct view_options {
     const char *stats_path;               /* --stats (NULL = none) */
     double timeout_s;                     /* (0, 86400], default 10 */
     bool quiet;
+    /* The display clock and the render cache (--reproject): */
+    double display_fps;      /* display frames per second per viewer, (0, 1000] (default 30) */
+    const char *display_out; /* --display-out DIR: every display frame as PNG, its camera as a trace */
+    bool reproject;          /* the display shows the render cache's frame (else the last frame received) */
+    bool depth_given;
+    bool no_prediction, no_prefilter, no_eviction, no_tiling; /* view_rc_desc's stage switches */
+    uint32_t rc_threads;    /* the render cache's threads, 1..64 (default 1) */
+    uint32_t sample_budget; /* pixels requested per display frame (0: the render cache's default, width *
+                               height / 32); 0 with --sample-budget 0: no sample requests */
+    bool sample_budget_given;
+    uint8_t strategy; /* view_strategy (default basic) */
 } view_options;
 
 typedef enum view_parse_result {
