@@ -14,6 +14,8 @@
 
 /* Bytes of a pose on the wire: 3 f64 position, 3 f32 direction, f32 fov. */
 enum { POSE_BYTES = 3 * 8 + 3 * 4 + 4 };
+/* Fixed parts of the sample messages: request, pose, width, height, count (and the answer's frame). */
+enum { SAMPLE_REQUEST_FIXED = 4 + POSE_BYTES + 4 + 4 + 4, SAMPLES_FIXED = 4 + 4 + POSE_BYTES + 4 + 4 + 4 };
 
 /* ---- bytes ------------------------------------------------------------------------------------------- */
 
@@ -50,6 +52,59 @@ uint32_t proto_get_u32le(const uint8_t *p)
 uint64_t proto_get_u64le(const uint8_t *p)
 {
     return (uint64_t)proto_get_u32le(p) | (uint64_t)proto_get_u32le(p + 4) << 32;
+}
+
+static float f32_from_bits(uint32_t bits)
+{
+    float v;
+    memcpy(&v, &bits, sizeof v);
+    return v;
+}
+
+static uint32_t bits_from_f32(float v)
+{
+    uint32_t bits;
+    memcpy(&bits, &v, sizeof bits);
+    return bits;
+}
+
+/* ---- sample arrays ------------------------------------------------------------------------------------ */
+
+void proto_request_pixel_put(uint8_t *pixels, uint32_t i, uint16_t x, uint16_t y)
+{
+    uint8_t *p = pixels + (size_t)i * PROTO_REQUEST_PIXEL_BYTES;
+    proto_put_u16le(p, x);
+    proto_put_u16le(p + 2, y);
+}
+
+void proto_request_pixel_get(const uint8_t *pixels, uint32_t i, uint16_t *x, uint16_t *y)
+{
+    const uint8_t *p = pixels + (size_t)i * PROTO_REQUEST_PIXEL_BYTES;
+    *x = proto_get_u16le(p);
+    *y = proto_get_u16le(p + 2);
+}
+
+void proto_sample_put(uint8_t *samples, uint32_t i, const proto_sample *s)
+{
+    uint8_t *p = samples + (size_t)i * PROTO_SAMPLE_BYTES;
+    proto_put_u16le(p, s->x);
+    proto_put_u16le(p + 2, s->y);
+    p[4] = s->rgb[0];
+    p[5] = s->rgb[1];
+    p[6] = s->rgb[2];
+    p[7] = 0;
+    proto_put_u32le(p + 8, bits_from_f32(s->depth));
+}
+
+void proto_sample_get(const uint8_t *samples, uint32_t i, proto_sample *s)
+{
+    const uint8_t *p = samples + (size_t)i * PROTO_SAMPLE_BYTES;
+    s->x = proto_get_u16le(p);
+    s->y = proto_get_u16le(p + 2);
+    s->rgb[0] = p[4];
+    s->rgb[1] = p[5];
+    s->rgb[2] = p[6];
+    s->depth = f32_from_bits(proto_get_u32le(p + 8));
 }
 
 /* ---- names ------------------------------------------------------------------------------------------- */
@@ -91,6 +146,26 @@ bool proto_codec_parse(const char *text, proto_codec *out)
         if (strcmp(text, codec_names[codec]) == 0) {
             if (out)
                 *out = (proto_codec)codec;
+            return true;
+        }
+    return false;
+}
+
+static const char *const strategy_names[PROTO_STRATEGY_COUNT] = {"basic", "fan", "predictive"};
+
+const char *proto_strategy_name(uint32_t strategy)
+{
+    return strategy < PROTO_STRATEGY_COUNT ? strategy_names[strategy] : "unknown";
+}
+
+bool proto_strategy_parse(const char *text, proto_strategy *out)
+{
+    if (!text)
+        return false;
+    for (uint32_t strategy = 0; strategy < PROTO_STRATEGY_COUNT; strategy++)
+        if (strcmp(text, strategy_names[strategy]) == 0 || (strategy == PROTO_STRATEGY_BASIC && !text[0])) {
+            if (out)
+                *out = (proto_strategy)strategy;
             return true;
         }
     return false;
@@ -200,6 +275,44 @@ static fxc_result check_frame(const proto_frame *f)
     return FXC_OK;
 }
 
+/* A sample request: the image, the count within 1..min(w*h, PROTO_MAX_SAMPLES), every pixel inside the
+ * image (O(count): the pixels are the message). NULL pixels with a count are the caller's error. */
+static fxc_result check_sample_request(const proto_sample_request *q)
+{
+    if (check_pose(&q->camera) || !side_ok(q->width) || !side_ok(q->height))
+        return FXC_ERR_RANGE;
+    uint64_t image = (uint64_t)q->width * q->height;
+    if (q->count == 0 || q->count > PROTO_MAX_SAMPLES || q->count > image)
+        return FXC_ERR_RANGE;
+    if (!q->pixels)
+        return FXC_ERR_INVALID;
+    for (uint32_t i = 0; i < q->count; i++) {
+        uint16_t x, y;
+        proto_request_pixel_get(q->pixels, i, &x, &y);
+        if (x >= q->width || y >= q->height)
+            return FXC_ERR_RANGE;
+    }
+    return FXC_OK;
+}
+
+/* An answer: the image, at most PROTO_MAX_SAMPLES samples, each inside the image, its pad byte 0 and its
+ * depth > 0 and not NaN (+infinity is the sky). */
+static fxc_result check_samples(const proto_samples *a)
+{
+    if (check_pose(&a->camera) || !side_ok(a->width) || !side_ok(a->height) || a->count > PROTO_MAX_SAMPLES)
+        return FXC_ERR_RANGE;
+    if (a->count && !a->samples)
+        return FXC_ERR_INVALID;
+    for (uint32_t i = 0; i < a->count; i++) {
+        proto_sample s;
+        proto_sample_get(a->samples, i, &s);
+        if (s.x >= a->width || s.y >= a->height || a->samples[(size_t)i * PROTO_SAMPLE_BYTES + 7] != 0 ||
+            !(s.depth > 0.0f))
+            return FXC_ERR_RANGE;
+    }
+    return FXC_OK;
+}
+
 static fxc_result check_reason(const char *reason)
 {
     size_t len;
@@ -257,6 +370,16 @@ static fxc_result payload_size(const proto_msg *m, uint64_t *size)
             return FXC_ERR_RANGE;
         *size = 2 + strlen(m->u.bye.reason);
         break;
+    case PROTO_SAMPLE_REQUEST:
+        if ((r = check_sample_request(&m->u.sample_request)))
+            return r;
+        *size = SAMPLE_REQUEST_FIXED + (uint64_t)m->u.sample_request.count * PROTO_REQUEST_PIXEL_BYTES;
+        break;
+    case PROTO_SAMPLES:
+        if ((r = check_samples(&m->u.samples)))
+            return r;
+        *size = SAMPLES_FIXED + (uint64_t)m->u.samples.count * PROTO_SAMPLE_BYTES;
+        break;
     default:
         return FXC_ERR_INVALID;
     }
@@ -295,9 +418,7 @@ static void put_u64(writer *w, uint64_t v)
 
 static void put_f32(writer *w, float v)
 {
-    uint32_t bits;
-    memcpy(&bits, &v, sizeof bits);
-    put_u32(w, bits);
+    put_u32(w, bits_from_f32(v));
 }
 
 static void put_f64(writer *w, double v)
@@ -415,6 +536,27 @@ static void put_payload(writer *w, const proto_msg *m)
     case PROTO_BYE:
         put_text16(w, m->u.bye.reason);
         break;
+    case PROTO_SAMPLE_REQUEST: {
+        const proto_sample_request *q = &m->u.sample_request;
+        put_u32(w, q->request);
+        put_pose(w, &q->camera);
+        put_u32(w, q->width);
+        put_u32(w, q->height);
+        put_u32(w, q->count);
+        put_bytes(w, q->pixels, (size_t)q->count * PROTO_REQUEST_PIXEL_BYTES);
+        break;
+    }
+    case PROTO_SAMPLES: {
+        const proto_samples *a = &m->u.samples;
+        put_u32(w, a->request);
+        put_u32(w, a->frame);
+        put_pose(w, &a->camera);
+        put_u32(w, a->width);
+        put_u32(w, a->height);
+        put_u32(w, a->count);
+        put_bytes(w, a->samples, (size_t)a->count * PROTO_SAMPLE_BYTES);
+        break;
+    }
     }
 }
 
@@ -521,10 +663,7 @@ static uint64_t get_u64(reader *r)
 
 static float get_f32(reader *r)
 {
-    uint32_t bits = get_u32(r);
-    float v;
-    memcpy(&v, &bits, sizeof v);
-    return v;
+    return f32_from_bits(get_u32(r));
 }
 
 static double get_f64(reader *r)
@@ -591,6 +730,19 @@ static const uint8_t *get_blob(reader *r, uint32_t *bytes)
     *bytes = get_u32(r);
     const uint8_t *p = take(r, *bytes);
     return *bytes ? p : NULL;
+}
+
+/* A sample count, then a pointer to count entries of entry_bytes each: a count above PROTO_MAX_SAMPLES is
+ * RANGE as it is read (it decides the layout, and the product cannot overflow below it). */
+static const uint8_t *get_entries(reader *r, uint32_t *count, size_t entry_bytes)
+{
+    *count = get_u32(r);
+    if (!r->fault && *count > PROTO_MAX_SAMPLES) {
+        r->fault = FXC_ERR_RANGE;
+        return NULL;
+    }
+    const uint8_t *p = take(r, (size_t)*count * entry_bytes);
+    return *count ? p : NULL;
 }
 
 /* An i32 from its two's complement bits, without the implementation-defined conversion of large values. */
@@ -673,6 +825,25 @@ static void get_payload(reader *r, proto_msg *m)
     case PROTO_BYE:
         get_text16(r, PROTO_REASON_MAX, m->u.bye.reason);
         break;
+    case PROTO_SAMPLE_REQUEST: {
+        proto_sample_request *q = &m->u.sample_request;
+        q->request = get_u32(r);
+        get_pose(r, &q->camera);
+        q->width = get_u32(r);
+        q->height = get_u32(r);
+        q->pixels = get_entries(r, &q->count, PROTO_REQUEST_PIXEL_BYTES);
+        break;
+    }
+    case PROTO_SAMPLES: {
+        proto_samples *a = &m->u.samples;
+        a->request = get_u32(r);
+        a->frame = get_u32(r);
+        get_pose(r, &a->camera);
+        a->width = get_u32(r);
+        a->height = get_u32(r);
+        a->samples = get_entries(r, &a->count, PROTO_SAMPLE_BYTES);
+        break;
+    }
     }
 }
 

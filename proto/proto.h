@@ -41,6 +41,7 @@ enum {
     PROTO_MAX_SIDE = 8192,       /* largest width or height a message may name */
     PROTO_MAX_PAYLOAD = 1u << 30 /* largest payload length a header may declare (1 GiB) */
 };
+enum { PROTO_MAX_SAMPLES = 1 << 20 }; /* pixels in one request or answer */
 
 /* Message types. Values are fixed on the wire; new types get new numbers. */
 #define PROTO_TYPES(X)                                                                                       \
@@ -51,7 +52,9 @@ enum {
     X(PROTO_STATS_REQUEST, 5, "stats-request") /* client -> server: send the run report's figures */         \
     X(PROTO_STATS, 6, "stats")                 /* server -> client: the run report as JSON text */           \
     X(PROTO_ERROR, 7, "error")                 /* either way: a code from fxc_result.h and a reason */       \
-    X(PROTO_BYE, 8, "bye")                     /* either way: closing, with a reason */
+    X(PROTO_BYE, 8, "bye")                     /* either way: closing, with a reason */                      \
+    X(PROTO_SAMPLE_REQUEST, 9, "sample-request") /* client -> server: pixels of a camera's image to render */ \
+    X(PROTO_SAMPLES, 10, "samples")              /* server -> client: those pixels, rendered */
 
 typedef enum proto_type {
 #define PROTO_TYPE_ENUM(name, value, text) name = value,
@@ -98,8 +101,26 @@ typedef struct proto_hello {
     uint8_t jpeg_quality;                   /* 1..100 with PROTO_CODEC_JPEG, else 0 */
     uint8_t depth;                          /* proto_depth */
     char token[PROTO_TOKEN_MAX + 1];        /* optional access token ("" = none) */
-    char strategy[PROTO_STRATEGY_MAX + 1];  /* optional reference strategy, for later use ("" = none) */
+    char strategy[PROTO_STRATEGY_MAX + 1];  /* reference strategy (proto_strategy_parse; "" = basic). Any
+                                               printable text decodes: the server refuses names it does not
+                                               know (docs/PROTOCOL.md, "Session rules") */
 } proto_hello;
+
+/* Baxter's reference-frame strategies, named in hello's strategy field: which camera the server renders the
+ * viewer's frames for. basic: the reported camera; fan: the reported camera with a wider field of view at
+ * the same pixel count; predictive: the camera message's predicted pose (or an extrapolation). */
+typedef enum proto_strategy {
+    PROTO_STRATEGY_BASIC = 0,
+    PROTO_STRATEGY_FAN = 1,
+    PROTO_STRATEGY_PREDICTIVE = 2,
+    PROTO_STRATEGY_COUNT
+} proto_strategy;
+
+/* "basic", "fan", "predictive" ("unknown" outside the table). */
+const char *proto_strategy_name(uint32_t strategy);
+/* Parses a hello's strategy: "" and "basic" are basic, "fan", "predictive"; false for anything else
+ * (*out untouched). */
+bool proto_strategy_parse(const char *text, proto_strategy *out);
 
 typedef struct proto_welcome {
     uint32_t viewer_id;        /* the server's id for this viewer (nonzero) */
@@ -160,6 +181,45 @@ typedef struct proto_bye {
     char reason[PROTO_REASON_MAX + 1];
 } proto_bye;
 
+/* A request for some pixels of one camera's image (the client's render cache asks for the pixels it needs
+ * most). The server answers with a samples message for the same request number. */
+typedef struct proto_sample_request {
+    uint32_t request;        /* the client's number for it (echoed in the answer) */
+    proto_pose camera;       /* the camera whose image the pixels belong to */
+    uint32_t width, height;  /* that image's size, 1..PROTO_MAX_SIDE */
+    uint32_t count;          /* 1..min(width*height, PROTO_MAX_SAMPLES) */
+    const uint8_t *pixels;   /* count x (u16 x, u16 y), little-endian, x < width, y < height (points into
+                                the message buffer when decoded); duplicates are allowed here */
+} proto_sample_request;
+
+/* One rendered pixel, as proto_sample_get reads it. */
+typedef struct proto_sample {
+    uint16_t x, y;           /* pixel of the request's image, x < width, y < height */
+    uint8_t rgb[3];          /* sRGB, as in a frame */
+    float depth;             /* metres along the primary ray, +infinity for the sky; > 0, not NaN */
+} proto_sample;
+
+typedef struct proto_samples {
+    uint32_t request;        /* the request answered */
+    uint32_t frame;          /* the server frame that rendered them */
+    proto_pose camera;
+    uint32_t width, height;
+    uint32_t count;          /* 0..PROTO_MAX_SAMPLES */
+    const uint8_t *samples;  /* count x PROTO_SAMPLE_BYTES: u16 x, u16 y, u8 r, g, b, u8 0, f32 depth
+                                (metres along the primary ray, +inf for the sky) */
+} proto_samples;
+
+#define PROTO_REQUEST_PIXEL_BYTES 4u
+#define PROTO_SAMPLE_BYTES 12u
+
+/* Writes / reads entry i of a sample request's pixel array (4 bytes each). No range checks: the caller
+ * sized the array (count x PROTO_REQUEST_PIXEL_BYTES). */
+void proto_request_pixel_put(uint8_t *pixels, uint32_t i, uint16_t x, uint16_t y);
+void proto_request_pixel_get(const uint8_t *pixels, uint32_t i, uint16_t *x, uint16_t *y);
+/* Writes / reads entry i of a samples array (PROTO_SAMPLE_BYTES each; the pad byte is written 0). */
+void proto_sample_put(uint8_t *samples, uint32_t i, const proto_sample *s);
+void proto_sample_get(const uint8_t *samples, uint32_t i, proto_sample *s);
+
 /* Any message: the type says which member is valid (stats-request has none). */
 typedef struct proto_msg {
     uint32_t type;              /* proto_type */
@@ -171,6 +231,8 @@ typedef struct proto_msg {
         proto_stats stats;
         proto_error error;
         proto_bye bye;
+        proto_sample_request sample_request;
+        proto_samples samples;
     } u;
 } proto_msg;
 
@@ -191,7 +253,8 @@ size_t proto_bound(const proto_msg *m);
 
 /* Encodes m into buf (cap bytes). Returns the bytes written (exactly proto_bound(m)), or 0 when m is invalid
  * or cap is too small; then *result (may be NULL) says why: FXC_ERR_RANGE (a field out of range, or a string
- * not printable), FXC_ERR_INVALID (unknown type, or a NULL payload pointer with a nonzero count),
+ * not printable, a pixel outside its image), FXC_ERR_INVALID (unknown type, or a NULL payload pointer with
+ * a nonzero count),
  * FXC_ERR_TOO_LARGE (cap too small or a payload too large). */
 size_t proto_encode(const proto_msg *m, uint8_t *buf, size_t cap, fxc_result *result);
 

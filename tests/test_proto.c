@@ -63,6 +63,10 @@ enum {
     S_ERROR,           /* reason "missing or wrong access token" (29 bytes) */
     S_BYE,             /* reason "client closing" (14 bytes) */
     S_BYE_EMPTY,
+    S_SAMPLE_REQUEST,  /* 640x480, pixels (0,0), (639,479), (17,200) */
+    S_SAMPLE_REQUEST_EDGE, /* 2x1, count 2 = width*height, pixel (1,0) twice (duplicates are allowed) */
+    S_SAMPLES,         /* 4x3, two samples: (3,2) at 2.5 m, (0,0) the sky */
+    S_SAMPLES_EMPTY,   /* count 0 */
     SAMPLE_COUNT
 };
 
@@ -70,6 +74,13 @@ static const uint8_t frame_color[36] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 1
                                         19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31, 32, 33, 34, 35, 36};
 static const uint8_t frame_depth[7] = {0xde, 0xad, 0xbe, 0xef, 0x00, 0x01, 0xff};
 static const char stats_json[] = "{\"frames\": 10, \"viewers\": [1, 2]}";
+/* The request's pixels as bytes: x, y little-endian u16 each. */
+static const uint8_t request_pixels[12] = {0, 0, 0, 0, 0x7f, 0x02, 0xdf, 0x01, 17, 0, 200, 0};
+/* Four entries, of which the edge sample uses two (an edit may raise its count to 3 without an over-read). */
+static const uint8_t edge_pixels[16] = {1, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0};
+/* Two samples: (3,2) rgb 10,20,30 depth 2.5 (0x40200000); (0,0) rgb 255,0,128 depth +inf (0x7f800000). */
+static const uint8_t samples_bytes[24] = {3, 0, 2, 0, 10, 20, 30, 0, 0x00, 0x00, 0x20, 0x40,
+                                          0, 0, 0, 0, 255, 0, 128, 0, 0x00, 0x00, 0x80, 0x7f};
 
 static proto_pose sample_pose(double offset)
 {
@@ -155,6 +166,27 @@ static proto_msg sample(int i)
     case S_BYE_EMPTY:
         m.type = PROTO_BYE;
         break;
+    case S_SAMPLE_REQUEST:
+        m.type = PROTO_SAMPLE_REQUEST;
+        m.u.sample_request = (proto_sample_request){.request = 0x01020304u, .camera = sample_pose(6.0),
+                                                    .width = 640, .height = 480, .count = 3,
+                                                    .pixels = request_pixels};
+        break;
+    case S_SAMPLE_REQUEST_EDGE:
+        m.type = PROTO_SAMPLE_REQUEST;
+        m.u.sample_request = (proto_sample_request){.request = 0, .camera = sample_pose(7.0), .width = 2,
+                                                    .height = 1, .count = 2, .pixels = edge_pixels};
+        break;
+    case S_SAMPLES:
+        m.type = PROTO_SAMPLES;
+        m.u.samples = (proto_samples){.request = 77, .frame = 1000, .camera = sample_pose(8.0), .width = 4,
+                                      .height = 3, .count = 2, .samples = samples_bytes};
+        break;
+    case S_SAMPLES_EMPTY:
+        m.type = PROTO_SAMPLES;
+        m.u.samples = (proto_samples){.request = 0xffffffffu, .frame = 0, .camera = sample_pose(9.0),
+                                      .width = PROTO_MAX_SIDE, .height = PROTO_MAX_SIDE};
+        break;
     }
     return m;
 }
@@ -175,6 +207,10 @@ static const size_t sample_payload_bytes[SAMPLE_COUNT] = {
     [S_ERROR] = 6 + 29,
     [S_BYE] = 2 + 14,
     [S_BYE_EMPTY] = 2,
+    [S_SAMPLE_REQUEST] = 56 + 3 * 4,
+    [S_SAMPLE_REQUEST_EDGE] = 56 + 2 * 4,
+    [S_SAMPLES] = 60 + 2 * 12,
+    [S_SAMPLES_EMPTY] = 60,
 };
 
 /* Encodes m into a new allocation of exactly proto_bound(m) bytes (the test fails if it cannot). */
@@ -286,6 +322,30 @@ static void assert_same_message(const proto_msg *a, const proto_msg *b)
     case PROTO_BYE:
         assert_string_equal(a->u.bye.reason, b->u.bye.reason);
         break;
+    case PROTO_SAMPLE_REQUEST: {
+        const proto_sample_request *x = &a->u.sample_request, *y = &b->u.sample_request;
+        assert_int_equal(x->request, y->request);
+        assert_true(same_pose(&x->camera, &y->camera));
+        assert_int_equal(x->width, y->width);
+        assert_int_equal(x->height, y->height);
+        assert_int_equal(x->count, y->count);
+        assert_memory_equal(x->pixels, y->pixels, (size_t)x->count * 4);
+        break;
+    }
+    case PROTO_SAMPLES: {
+        const proto_samples *x = &a->u.samples, *y = &b->u.samples;
+        assert_int_equal(x->request, y->request);
+        assert_int_equal(x->frame, y->frame);
+        assert_true(same_pose(&x->camera, &y->camera));
+        assert_int_equal(x->width, y->width);
+        assert_int_equal(x->height, y->height);
+        assert_int_equal(x->count, y->count);
+        if (x->count)
+            assert_memory_equal(x->samples, y->samples, (size_t)x->count * 12);
+        else
+            assert_null(y->samples);
+        break;
+    }
     }
 }
 
@@ -313,12 +373,12 @@ static void test_byte_order(void **state)
 static void test_names(void **state)
 {
     (void)state;
-    static const char *const types[] = {NULL,    "hello",         "welcome", "camera", "frame",
-                                        "stats-request", "stats", "error",   "bye"};
-    for (uint32_t t = 1; t <= 8; t++)
+    static const char *const types[] = {NULL,    "hello", "welcome", "camera", "frame", "stats-request",
+                                        "stats", "error", "bye",     "sample-request", "samples"};
+    for (uint32_t t = 1; t <= 10; t++)
         assert_string_equal(proto_type_name(t), types[t]);
     assert_string_equal(proto_type_name(0), "unknown");
-    assert_string_equal(proto_type_name(9), "unknown");
+    assert_string_equal(proto_type_name(11), "unknown");
     assert_string_equal(proto_type_name(0xffffffffu), "unknown");
     assert_string_equal(proto_codec_name(PROTO_CODEC_RAW), "raw");
     assert_string_equal(proto_codec_name(PROTO_CODEC_ZSTD), "zstd");
@@ -338,6 +398,59 @@ static void test_names(void **state)
         assert_int_equal(codec, PROTO_CODEC_COUNT);
     }
     assert_false(proto_codec_parse(NULL, &codec));
+
+    /* Strategies: "" is basic; names are exact. */
+    static const struct {
+        const char *text;
+        int strategy; /* -1: refused */
+    } strategies[] = {{"", PROTO_STRATEGY_BASIC},   {"basic", PROTO_STRATEGY_BASIC},
+                      {"fan", PROTO_STRATEGY_FAN},  {"predictive", PROTO_STRATEGY_PREDICTIVE},
+                      {"Basic", -1},                {"fan ", -1},
+                      {"nearest", -1},              {"predict", -1}};
+    for (size_t i = 0; i < sizeof strategies / sizeof strategies[0]; i++) {
+        proto_strategy strategy = PROTO_STRATEGY_COUNT;
+        bool ok = proto_strategy_parse(strategies[i].text, &strategy);
+        assert_int_equal(ok, strategies[i].strategy >= 0);
+        assert_int_equal(strategy, ok ? strategies[i].strategy : PROTO_STRATEGY_COUNT);
+    }
+    assert_false(proto_strategy_parse(NULL, NULL));
+    assert_string_equal(proto_strategy_name(PROTO_STRATEGY_BASIC), "basic");
+    assert_string_equal(proto_strategy_name(PROTO_STRATEGY_FAN), "fan");
+    assert_string_equal(proto_strategy_name(PROTO_STRATEGY_PREDICTIVE), "predictive");
+    assert_string_equal(proto_strategy_name(PROTO_STRATEGY_COUNT), "unknown");
+}
+
+/* The sample arrays' entries against literal bytes, and back. */
+static void test_sample_entries(void **state)
+{
+    (void)state;
+    uint8_t pixels[8];
+    memset(pixels, 0xaa, sizeof pixels);
+    proto_request_pixel_put(pixels, 1, 0x0102, 0xfffe);
+    static const uint8_t want_pixels[8] = {0xaa, 0xaa, 0xaa, 0xaa, 0x02, 0x01, 0xfe, 0xff};
+    assert_memory_equal(pixels, want_pixels, sizeof pixels);
+    uint16_t x = 0, y = 0;
+    proto_request_pixel_get(request_pixels, 1, &x, &y);
+    assert_int_equal(x, 639);
+    assert_int_equal(y, 479);
+
+    uint8_t samples[24];
+    memset(samples, 0xaa, sizeof samples);
+    proto_sample s = {3, 2, {10, 20, 30}, 2.5f};
+    proto_sample_put(samples, 0, &s);
+    s = (proto_sample){0, 0, {255, 0, 128}, INFINITY};
+    proto_sample_put(samples, 1, &s);
+    assert_memory_equal(samples, samples_bytes, sizeof samples); /* the pad byte is written 0 */
+    proto_sample back;
+    proto_sample_get(samples_bytes, 0, &back);
+    assert_int_equal(back.x, 3);
+    assert_int_equal(back.y, 2);
+    assert_int_equal(back.rgb[0], 10);
+    assert_int_equal(back.rgb[2], 30);
+    assert_true(back.depth == 2.5f);
+    proto_sample_get(samples_bytes, 1, &back);
+    assert_int_equal(back.rgb[0], 255);
+    assert_true(isinf(back.depth) && back.depth > 0.0f);
 }
 
 /* ---- messages --------------------------------------------------------------------------------------- */
@@ -377,6 +490,10 @@ static void test_round_trip(void **state)
             else
                 assert_null(back.u.frame.depth_data);
         }
+        if (m.type == PROTO_SAMPLE_REQUEST)
+            assert_ptr_equal(back.u.sample_request.pixels, buf + PROTO_HEADER_BYTES + 56);
+        if (m.type == PROTO_SAMPLES && m.u.samples.count)
+            assert_ptr_equal(back.u.samples.samples, buf + PROTO_HEADER_BYTES + 60);
         if (m.type == PROTO_STATS && m.u.stats.json_bytes)
             assert_ptr_equal(back.u.stats.json, (const char *)buf + PROTO_HEADER_BYTES + 4);
         /* A camera without a predicted pose decodes with the predicted fields zeroed. */
@@ -449,6 +566,31 @@ static void test_documented_offsets(void **state)
     assert_int_equal(proto_get_u32le(p), (uint32_t)FXC_ERR_UNAUTHORIZED);
     assert_int_equal(proto_get_u16le(p + 4), 29);
     free(buf);
+
+    m = sample(S_SAMPLE_REQUEST);
+    buf = encode_alloc(&m, &len);
+    p = buf + PROTO_HEADER_BYTES;
+    assert_int_equal(proto_get_u32le(p), 0x01020304u);
+    assert_int_equal(proto_get_u32le(p + 40), bits_from_float(60.0f)); /* camera fov */
+    assert_int_equal(proto_get_u32le(p + 44), 640);
+    assert_int_equal(proto_get_u32le(p + 48), 480);
+    assert_int_equal(proto_get_u32le(p + 52), 3);
+    assert_int_equal(proto_get_u16le(p + 60), 639);
+    assert_int_equal(proto_get_u16le(p + 62), 479);
+    free(buf);
+
+    m = sample(S_SAMPLES);
+    buf = encode_alloc(&m, &len);
+    p = buf + PROTO_HEADER_BYTES;
+    assert_int_equal(proto_get_u32le(p), 77);
+    assert_int_equal(proto_get_u32le(p + 4), 1000);
+    assert_int_equal(proto_get_u32le(p + 44), bits_from_float(60.0f));
+    assert_int_equal(proto_get_u32le(p + 48), 4);
+    assert_int_equal(proto_get_u32le(p + 52), 3);
+    assert_int_equal(proto_get_u32le(p + 56), 2);
+    assert_int_equal(p[60 + 12 + 4], 255);
+    assert_int_equal(proto_get_u32le(p + 60 + 8), bits_from_float(2.5f));
+    free(buf);
 }
 
 /* Every prefix of every sample, each in its own allocation of exactly that many bytes, is TRUNCATED. */
@@ -513,7 +655,7 @@ static void test_header_faults(void **state)
         buf[0] = 'F';
     }
     proto_put_u16le(buf + 4, PROTO_VERSION);
-    static const uint16_t bad_types[] = {0, 9, 0x100 | PROTO_BYE, 0xffff};
+    static const uint16_t bad_types[] = {0, 11, 0x100 | PROTO_BYE, 0xffff};
     for (size_t k = 0; k < sizeof bad_types / sizeof bad_types[0]; k++) {
         proto_put_u16le(buf + 6, bad_types[k]);
         assert_int_equal(decode_copy(buf, len, &out), FXC_ERR_UNKNOWN_TYPE);
@@ -576,6 +718,9 @@ enum {
     F_ENCODE_MS = 102, F_COLOR_BYTES = 106, F_COLOR = 110,
     /* error and bye */
     E_CODE = 0, E_REASON = 4, B_REASON = 0,
+    /* sample request and samples */
+    SR_FOV = 40, SR_DIR = 28, SR_WIDTH = 44, SR_HEIGHT = 48, SR_COUNT = 52, SR_PIXELS = 56,
+    SA_POS = 8, SA_FOV = 44, SA_WIDTH = 48, SA_HEIGHT = 52, SA_COUNT = 56, SA_SAMPLES = 60,
 };
 
 static const byte_edit byte_edits[] = {
@@ -679,7 +824,45 @@ static const byte_edit byte_edits[] = {
     {"bye reason NUL", S_BYE, B_REASON + 2 + 6, 1, 1, 0, FXC_ERR_RANGE},
     {"bye reason 0xff", S_BYE, B_REASON + 2, 1, 1, 0xff, FXC_ERR_RANGE},
     {"bye reason shorter than its bytes", S_BYE, B_REASON, 2, 2, 13, FXC_ERR_TRAILING},
+    /* sample request */
+    {"request camera fov NaN", S_SAMPLE_REQUEST, SR_FOV, 4, 4, F32_NAN, FXC_ERR_RANGE},
+    {"request camera direction zero", S_SAMPLE_REQUEST, SR_DIR, 12, 12, 0, FXC_ERR_RANGE},
+    {"request width 0", S_SAMPLE_REQUEST, SR_WIDTH, 4, 4, 0, FXC_ERR_RANGE},
+    {"request width 8193", S_SAMPLE_REQUEST, SR_WIDTH, 4, 4, 8193, FXC_ERR_RANGE},
+    {"request height 0", S_SAMPLE_REQUEST, SR_HEIGHT, 4, 4, 0, FXC_ERR_RANGE},
+    {"request count 0, no pixels", S_SAMPLE_REQUEST, SR_COUNT, 4 + 12, 4, 0, FXC_ERR_RANGE},
+    {"request count above width*height", S_SAMPLE_REQUEST_EDGE, SR_COUNT, 4, 8, 3, FXC_ERR_RANGE},
+    {"request count above 2^20", S_SAMPLE_REQUEST, SR_COUNT, 4, 4, PROTO_MAX_SAMPLES + 1, FXC_ERR_RANGE},
+    {"request count 2^32-1", S_SAMPLE_REQUEST, SR_COUNT, 4, 4, 0xffffffffu, FXC_ERR_RANGE},
+    {"request count 2^20 runs past the end", S_SAMPLE_REQUEST, SR_COUNT, 4, 4, PROTO_MAX_SAMPLES, FXC_ERR_TRUNCATED},
+    {"request count 4 runs past the end", S_SAMPLE_REQUEST, SR_COUNT, 4, 4, 4, FXC_ERR_TRUNCATED},
+    {"request count one short", S_SAMPLE_REQUEST, SR_COUNT, 4, 4, 2, FXC_ERR_TRAILING},
+    {"request pixel x = width", S_SAMPLE_REQUEST, SR_PIXELS + 4, 2, 2, 640, FXC_ERR_RANGE},
+    {"request pixel y = height", S_SAMPLE_REQUEST, SR_PIXELS + 6, 2, 2, 480, FXC_ERR_RANGE},
+    {"request pixel x 0xffff", S_SAMPLE_REQUEST, SR_PIXELS + 8, 2, 2, 0xffff, FXC_ERR_RANGE},
+    {"request pixel y 1 of height 1", S_SAMPLE_REQUEST_EDGE, SR_PIXELS + 2, 2, 2, 1, FXC_ERR_RANGE},
+    /* samples */
+    {"samples position inf", S_SAMPLES, SA_POS, 8, 8, F64_INF, FXC_ERR_RANGE},
+    {"samples camera fov 180", S_SAMPLES, SA_FOV, 4, 4, F32_180, FXC_ERR_RANGE},
+    {"samples width 0", S_SAMPLES, SA_WIDTH, 4, 4, 0, FXC_ERR_RANGE},
+    {"samples height 8193", S_SAMPLES_EMPTY, SA_HEIGHT, 4, 4, 8193, FXC_ERR_RANGE},
+    {"samples count above 2^20", S_SAMPLES_EMPTY, SA_COUNT, 4, 4, PROTO_MAX_SAMPLES + 1, FXC_ERR_RANGE},
+    {"samples count runs past the end", S_SAMPLES, SA_COUNT, 4, 4, 3, FXC_ERR_TRUNCATED},
+    {"samples count one short", S_SAMPLES, SA_COUNT, 4, 4, 1, FXC_ERR_TRAILING},
+    {"samples x = width", S_SAMPLES, SA_SAMPLES, 2, 2, 4, FXC_ERR_RANGE},
+    {"samples y = height", S_SAMPLES, SA_SAMPLES + 2, 2, 2, 3, FXC_ERR_RANGE},
+    {"samples pad byte 1", S_SAMPLES, SA_SAMPLES + 7, 1, 1, 1, FXC_ERR_RANGE},
+    {"samples second pad byte 0x80", S_SAMPLES, SA_SAMPLES + 12 + 7, 1, 1, 0x80, FXC_ERR_RANGE},
+    {"samples depth NaN", S_SAMPLES, SA_SAMPLES + 8, 4, 4, F32_NAN, FXC_ERR_RANGE},
+    {"samples depth 0", S_SAMPLES, SA_SAMPLES + 8, 4, 4, F32_ZERO, FXC_ERR_RANGE},
+    {"samples depth -0", S_SAMPLES, SA_SAMPLES + 8, 4, 4, 0x80000000u, FXC_ERR_RANGE},
+    {"samples depth -1", S_SAMPLES, SA_SAMPLES + 8, 4, 4, F32_NEG_ONE, FXC_ERR_RANGE},
+    {"samples depth -inf", S_SAMPLES, SA_SAMPLES + 12 + 8, 4, 4, F32_NEG_INF, FXC_ERR_RANGE},
     /* controls: edits that stay valid, so the table's offsets are known to hit the right fields */
+    {"control: request pixel x = width - 1", S_SAMPLE_REQUEST, SR_PIXELS + 4, 2, 2, 639, FXC_OK},
+    {"control: request count 1", S_SAMPLE_REQUEST, SR_COUNT, 4 + 12, 8, 1, FXC_OK},
+    {"control: samples depth smallest subnormal", S_SAMPLES, SA_SAMPLES + 8, 4, 4, 1, FXC_OK},
+    {"control: samples depth 1e38", S_SAMPLES, SA_SAMPLES + 12 + 8, 4, 4, 0x7e967699u, FXC_OK},
     {"control: hello width 8192", S_HELLO_JPEG, HJ_WIDTH, 4, 4, 8192, FXC_OK},
     {"control: hello jpeg quality 100", S_HELLO_JPEG, HJ_QUALITY, 1, 1, 100, FXC_OK},
     {"control: hello depth 32", S_HELLO_JPEG, HJ_DEPTH, 1, 1, 32, FXC_OK},
@@ -742,7 +925,7 @@ typedef struct struct_edit {
 
 static const struct_edit struct_edits[] = {
     {"type 0", S_BYE, AT(type), EDIT_U32, 0, 0, NULL, FXC_ERR_INVALID},
-    {"type 9", S_BYE, AT(type), EDIT_U32, 0, 9, NULL, FXC_ERR_INVALID},
+    {"type 11", S_BYE, AT(type), EDIT_U32, 0, 11, NULL, FXC_ERR_INVALID},
     {"hello name control byte", S_HELLO_JPEG, AT(u.hello.name), EDIT_TEXT, 0, 0, "a\x02", FXC_ERR_RANGE},
     {"hello name unterminated", S_HELLO_JPEG, AT(u.hello.name), EDIT_FILL, PROTO_NAME_MAX + 1, 0, NULL, FXC_ERR_RANGE},
     {"hello name non-ASCII", S_HELLO_JPEG, AT(u.hello.name), EDIT_TEXT, 0, 0, "caf\xc3\xa9", FXC_ERR_RANGE},
@@ -794,6 +977,18 @@ static const struct_edit struct_edits[] = {
     {"error reason newline", S_ERROR, AT(u.error.reason), EDIT_TEXT, 0, 0, "line\n", FXC_ERR_RANGE},
     {"error reason unterminated", S_ERROR, AT(u.error.reason), EDIT_FILL, PROTO_REASON_MAX + 1, 0, NULL, FXC_ERR_RANGE},
     {"bye reason DEL", S_BYE, AT(u.bye.reason), EDIT_TEXT, 0, 0, "\x7f", FXC_ERR_RANGE},
+    {"request pixels NULL", S_SAMPLE_REQUEST, AT(u.sample_request.pixels), EDIT_ZERO, sizeof(void *), 0, NULL, FXC_ERR_INVALID},
+    {"request count 0", S_SAMPLE_REQUEST, AT(u.sample_request.count), EDIT_U32, 0, 0, NULL, FXC_ERR_RANGE},
+    {"request count above width*height", S_SAMPLE_REQUEST_EDGE, AT(u.sample_request.count), EDIT_U32, 0, 3, NULL, FXC_ERR_RANGE},
+    {"request count above 2^20", S_SAMPLE_REQUEST, AT(u.sample_request.count), EDIT_U32, 0, PROTO_MAX_SAMPLES + 1, NULL, FXC_ERR_RANGE},
+    {"request width 2^16", S_SAMPLE_REQUEST, AT(u.sample_request.width), EDIT_U32, 0, 65536, NULL, FXC_ERR_RANGE},
+    {"request height 1 (pixel y 479)", S_SAMPLE_REQUEST, AT(u.sample_request.height), EDIT_U32, 0, 1, NULL, FXC_ERR_RANGE},
+    {"request camera fov 0", S_SAMPLE_REQUEST, AT(u.sample_request.camera.fov_deg), EDIT_F32, 0, 0, NULL, FXC_ERR_RANGE},
+    {"samples NULL with a count", S_SAMPLES, AT(u.samples.samples), EDIT_ZERO, sizeof(void *), 0, NULL, FXC_ERR_INVALID},
+    {"samples width 3 (x 3)", S_SAMPLES, AT(u.samples.width), EDIT_U32, 0, 3, NULL, FXC_ERR_RANGE},
+    {"samples count above 2^20", S_SAMPLES_EMPTY, AT(u.samples.count), EDIT_U32, 0, PROTO_MAX_SAMPLES + 1, NULL, FXC_ERR_RANGE},
+    {"control: samples NULL without a count", S_SAMPLES_EMPTY, AT(u.samples.samples), EDIT_ZERO, sizeof(void *), 0, NULL, FXC_OK},
+    {"control: request width 8192", S_SAMPLE_REQUEST, AT(u.sample_request.width), EDIT_U32, 0, 8192, NULL, FXC_OK},
     {"control: bye reason of 200", S_BYE, AT(u.bye.reason), EDIT_FILL, PROTO_REASON_MAX, 0, NULL, FXC_OK},
 };
 
@@ -1600,7 +1795,7 @@ static void test_corpus(void **state)
     }
     closedir(dir);
     assert_true(seeds >= 8);
-    assert_int_equal(types_seen, 0x1feu);  /* types 1..8 */
+    assert_int_equal(types_seen, 0x7feu);  /* types 1..10 */
     assert_int_equal(codecs_seen, 0x7u);   /* raw, zstd, jpeg */
     assert_int_equal(depths_seen, 0x7u);   /* none, half, float */
 }
@@ -1610,6 +1805,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_byte_order),
         cmocka_unit_test(test_names),
+        cmocka_unit_test(test_sample_entries),
         cmocka_unit_test(test_round_trip),
         cmocka_unit_test(test_documented_offsets),
         cmocka_unit_test(test_every_prefix),

@@ -1,6 +1,6 @@
 /* Writes the seed corpus of fuzz_proto: one valid message of every type, a hello for every colour codec,
  * a camera with and without its predicted pose, and a frame for every colour codec x depth codec pair with
- * real payloads of a small image. Usage: make_corpus_proto DIR (the files are overwritten). */
+ * real payloads of a small image, a sample request and its answer. Usage: make_corpus_proto DIR (the files are overwritten). */
 #include "proto.h"
 
 #include <math.h>
@@ -112,5 +112,26 @@ int main(int argc, char **argv)
     m.type = PROTO_BYE;
     strcpy(m.u.bye.reason, "client closing");
     write_message(dir, "bye", &m);
+
+    /* A sample request for a few pixels of the W x H image, and its answer (colour and depth of the image
+     * above at those pixels, the first one the sky). */
+    static const uint16_t wanted[5][2] = {{0, 0}, {W - 1, H - 1}, {3, 2}, {3, 2}, {0, H - 1}};
+    uint8_t pixels[5 * PROTO_REQUEST_PIXEL_BYTES], samples[5 * PROTO_SAMPLE_BYTES];
+    for (uint32_t i = 0; i < 5; i++) {
+        proto_request_pixel_put(pixels, i, wanted[i][0], wanted[i][1]);
+        uint32_t at = wanted[i][1] * W + wanted[i][0];
+        proto_sample s = {wanted[i][0], wanted[i][1], {rgb[3 * at], rgb[3 * at + 1], rgb[3 * at + 2]}, depth[at]};
+        proto_sample_put(samples, i, &s);
+    }
+    memset(&m, 0, sizeof m);
+    m.type = PROTO_SAMPLE_REQUEST;
+    m.u.sample_request = (proto_sample_request){.request = 3, .camera = pose(), .width = W, .height = H,
+                                                .count = 5, .pixels = pixels};
+    write_message(dir, "sample-request", &m);
+    memset(&m, 0, sizeof m);
+    m.type = PROTO_SAMPLES;
+    m.u.samples = (proto_samples){.request = 3, .frame = 8, .camera = pose(), .width = W, .height = H,
+                                  .count = 5, .samples = samples};
+    write_message(dir, "samples", &m);
     return 0;
 }
