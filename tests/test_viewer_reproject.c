@@ -5,10 +5,13 @@
  *     the frame went through depth (binary16 on the wire), its 3-D points and the render cache's projection
  *     back to the same camera; the tolerance is exact colours, as tests/test_rcache.c proves for the cache
  *     alone (depth quantization moves a point along its own ray only, so it lands on its own pixel);
+ * Both runs against the server send no sample requests (--sample-budget 0): the static comparison is with the
+ * frames alone, and the server does not answer them yet.
  *   - a camera turning in place with 50 ms of simulated latency each way: the render cache's displayed
  *     frames have at most the empty fraction the closed form gives for the turn during the measured latency
  *     (a pure turn has no parallax: only the strip no frame saw yet is empty);
  *   - --stats carries the display's and the render cache's figures, consistent with the display's CSV.
+ *   - sample requests against a fake server (tests/peer_rc_server.js) that answers them and sends no frames.
  * The program is built only with the wire format's implementation in the tree; until then every test skips.
  */
 #include "image.h"
@@ -19,6 +22,7 @@
 #include <jansson.h>
 #include <math.h>
 #include <signal.h>
+#include <stdbool.h>
 #include <spawn.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -88,8 +92,9 @@ static int server_stop(pid_t pid)
     return -1;
 }
 
-/* Runs fxcache-viewer with args (NULL-terminated) to its end (at most 300 s); returns its exit status. */
-static int run_viewer(const char *const *args, const char *name)
+/* Runs fxcache-viewer with args (NULL-terminated) to its end (at most 300 s), sending SIGTERM after
+ * term_after_s seconds (0: never); returns its exit status. */
+static int run_viewer_for(const char *const *args, const char *name, double term_after_s)
 {
     const char *argv[48] = {FXC_VIEWER_BIN};
     int n = 1;
@@ -107,7 +112,12 @@ static int run_viewer(const char *const *args, const char *name)
     pid_t pid;
     assert_int_equal(posix_spawn(&pid, FXC_VIEWER_BIN, &fa, NULL, (char *const *)argv, environ), 0);
     posix_spawn_file_actions_destroy(&fa);
+    bool signalled = false;
     for (double t0 = now_s(); now_s() - t0 < 300;) {
+        if (term_after_s > 0 && !signalled && now_s() - t0 > term_after_s) {
+            kill(pid, SIGTERM);
+            signalled = true;
+        }
         int status;
         if (waitpid(pid, &status, WNOHANG) == pid) {
             int code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
@@ -127,6 +137,11 @@ static int run_viewer(const char *const *args, const char *name)
     waitpid(pid, NULL, 0);
     fail_msg("fxcache-viewer did not end within 300 s");
     return -1;
+}
+
+static int run_viewer(const char *const *args, const char *name)
+{
+    return run_viewer_for(args, name, 0);
 }
 
 /* One line of the display's CSV (--display-out). */
@@ -224,10 +239,10 @@ static void test_static_camera(void **state)
         remove_tree(out);
         remove_tree(display);
         const char *args[] = {
-            "--connect", url,       "--camera", "static",    "--res",   "96x54",
-            "--frames",  "45",      "--out",    out,         "--quiet", "--display-out",
-            display,     "--stats", stats,      "--timeout", "120",     reproject ? "--reproject" : NULL,
-            NULL};
+            "--connect", url, "--camera", "static", "--res", "96x54", "--frames", "45", "--out", out,
+            "--quiet", "--display-out", display, "--stats", stats, "--timeout", "120",
+            /* the render cache, without sample requests; the list ends here without --reproject */
+            reproject ? "--reproject" : NULL, "--sample-budget", "0", NULL};
         assert_int_equal(run_viewer(args, "static"), 0);
         size_t count;
         char name[64];
@@ -327,9 +342,10 @@ static void test_turning_camera(void **state)
     snprintf(display, sizeof display, "%s", fxt_tmp_path("turning_display"));
     snprintf(stats, sizeof stats, "%s", fxt_tmp_path("turning_stats.json"));
     remove_tree(display);
-    const char *args[] = {"--connect",     url,     "--trace",   trace,         "--res",   "96x54",
-                          "--latency",     "50",    "--quiet",   "--reproject", "--stats", stats,
-                          "--display-out", display, "--timeout", "120",         NULL};
+    const char *args[] = {
+        "--connect", url,       "--trace",         trace,     "--res", "96x54",         "--latency",
+        "50",        "--quiet", "--reproject",     "--stats", stats,   "--display-out", display,
+        "--timeout", "120",     "--sample-budget", "0",       NULL};
     assert_int_equal(run_viewer(args, "turning"), 0);
     assert_int_equal(server_stop(server), 0);
     json_error_t error;
@@ -376,6 +392,131 @@ static void test_turning_camera(void **state)
 #endif
 }
 
+/* Sample requests against a fake server (tests/peer_rc_server.js, Node's ws, the wire format written by
+ * hand): it sends no frames and answers every sample-request at once with each pixel red at 4 m. A static
+ * camera fills its display from the answers alone: every request arrives well formed with the viewer's
+ * camera, both sides count the same requests, every answer but those in flight at the end is inserted, and
+ * the last display frame is all the answers' red, no pixel empty. */
+static void test_sample_requests(void **state)
+{
+    (void)state;
+#ifndef FXC_VIEWER_BIN
+    print_message("SKIP: fxcache-viewer is not built\n");
+    skip();
+#else
+    if (system("node --version >/dev/null 2>&1") != 0) {
+        print_message("node is missing (./install-deps.sh installs it): skipped\n");
+        skip();
+    }
+    char report[512], out[512], display[512], stats[512], cmd[2048];
+    snprintf(report, sizeof report, "%s", fxt_tmp_path("fake_report.json"));
+    snprintf(out, sizeof out, "%s", fxt_tmp_path("fake.out"));
+    snprintf(display, sizeof display, "%s", fxt_tmp_path("fake_display"));
+    snprintf(stats, sizeof stats, "%s", fxt_tmp_path("fake_stats.json"));
+    remove_tree(display);
+    remove(report);
+    remove(out); /* a port from an earlier run must not be read */
+    snprintf(cmd, sizeof cmd,
+             "NODE_PATH=/usr/share/nodejs exec node '%s/tests/peer_rc_server.js' '%s' > '%s' 2>&1",
+             FXC_SOURCE_DIR, report, out);
+    pid_t fake;
+    const char *sh[] = {"/bin/sh", "-c", cmd, NULL};
+    assert_int_equal(posix_spawn(&fake, "/bin/sh", NULL, NULL, (char *const *)sh, environ), 0);
+    int port = 0;
+    for (double t0 = now_s(); now_s() - t0 < 30 && !port;) {
+        FILE *f = fopen(out, "r");
+        char line[256];
+        while (f && fgets(line, sizeof line, f)) {
+            const char *at = strstr(line, "listening on ws://127.0.0.1:");
+            if (at)
+                port = atoi(at + strlen("listening on ws://127.0.0.1:"));
+            if (strstr(line, "ws module is missing")) {
+                fclose(f);
+                waitpid(fake, NULL, 0);
+                print_message("Node's ws module is missing (Debian's node-ws): skipped\n");
+                skip();
+            }
+        }
+        if (f)
+            fclose(f);
+        if (!port)
+            usleep(20000);
+    }
+    assert_true(port > 0);
+    char url[64];
+    snprintf(url, sizeof url, "ws://127.0.0.1:%d", port);
+    const char *args[] = {
+        "--connect", url,       "--camera",    "static",        "--res", "64x36",   "--latency",
+        "20",        "--quiet", "--reproject", "--display-out", display, "--stats", stats,
+        "--timeout", "60",      NULL};
+    assert_int_equal(run_viewer_for(args, "fake", 4.0), 0);
+    int status = 0;
+    for (double t0 = now_s(); now_s() - t0 < 30;) {
+        if (waitpid(fake, &status, WNOHANG) == fake)
+            break;
+        usleep(20000);
+    }
+    json_error_t error;
+    json_t *fake_report = json_load_file(report, 0, &error);
+    if (!fake_report)
+        fail_msg("%s: %s (the fake server did not finish: see %s)", report, error.text, out);
+    json_t *errors = json_object_get(fake_report, "errors");
+    for (size_t i = 0; i < json_array_size(errors); i++)
+        print_message("fake server: %s\n", json_string_value(json_array_get(errors, i)));
+    assert_int_equal(json_array_size(errors), 0);
+    json_int_t requests = json_integer_value(json_object_get(fake_report, "requests"));
+    json_int_t pixels = json_integer_value(json_object_get(fake_report, "pixels"));
+    /* Every request is for the static camera (the welcome's): the current one, or the predicted one, which
+     * for a camera at rest is the same. */
+    json_t *cameras = json_object_get(fake_report, "cameras");
+    const double expected[7] = {0, 1.6, 3, 0, 0, -1, 60};
+    for (size_t i = 0; i < json_array_size(cameras); i++)
+        for (int k = 0; k < 7; k++)
+            assert_true(fabs(json_number_value(json_array_get(json_array_get(cameras, i), k)) - expected[k]) <
+                        1e-6);
+
+    json_t *root = json_load_file(stats, 0, &error);
+    if (!root)
+        fail_msg("%s:%d: %s", stats, error.line, error.text);
+    json_t *rc = json_object_get(json_array_get(json_object_get(root, "viewers"), 0), "render_cache");
+    json_int_t sent = json_integer_value(json_object_get(rc, "requests_sent"));
+    json_int_t answered = json_integer_value(json_object_get(rc, "requests_answered"));
+    json_int_t received = json_integer_value(json_object_get(rc, "samples_received"));
+    print_message(
+        "fake server: %lld requests of %lld pixels; the viewer sent %lld, inserted %lld answers of %lld "
+        "samples\n",
+        (long long)requests, (long long)pixels, (long long)sent, (long long)answered, (long long)received);
+    assert_true(requests >= 20);
+    assert_int_equal(sent, requests);
+    assert_int_equal(json_integer_value(json_object_get(rc, "request_pixels")), pixels);
+    assert_true(answered <= requests && answered >= requests - 3);  /* answers in flight when it stopped */
+    assert_true(received <= pixels && received >= pixels - 3 * 72); /* 72: the budget, 64 * 36 / 32 */
+    assert_int_equal(json_integer_value(json_object_get(rc, "insert_errors")), 0);
+    json_decref(root);
+    json_decref(fake_report);
+
+    size_t count;
+    char name[64];
+    display_row *rows = read_display_csv(display, &count, name);
+    assert_string_equal(name, "fake_00");
+    assert_true(count > 10);
+    display_row last = rows[count - 1];
+    free(rows);
+    assert_true(last.empty_fraction == 0);
+    assert_true(last.kinds[1] > 64 * 36 / 2); /* most pixels show a sample of their own */
+    char path[1024], msg[256];
+    snprintf(path, sizeof path, "%s/display_%05ld_fake_00.png", display, last.index);
+    uint32_t w, h;
+    float *rgb = NULL;
+    if (scene_image_read_rgb(path, &w, &h, &rgb, msg, sizeof msg) != 0)
+        fail_msg("%s", msg);
+    for (size_t p = 0; p < (size_t)w * h; p++)
+        assert_true(rgb[3 * p] == rgb[0] && rgb[3 * p + 1] == rgb[1] && rgb[3 * p + 2] == rgb[2]);
+    assert_true(rgb[0] > 20 * rgb[1] && rgb[1] == rgb[2]); /* sRGB (200, 30, 30), read as linear */
+    free(rgb);
+#endif
+}
+
 int main(void)
 {
     signal(SIGPIPE, SIG_IGN);
@@ -383,6 +524,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_static_camera),
         cmocka_unit_test(test_turning_camera),
+        cmocka_unit_test(test_sample_requests),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -29,14 +29,13 @@
 #include <unistd.h>
 
 enum {
-    RC_CAPACITY_FRAMES = 4,   /* the render cache keeps this many whole frames' worth of points (below) */
-    REQUEST_MESSAGES = 4,     /* sample-request messages a display frame may need (REQUEST_PIXELS each) */
-    REQUEST_PIXELS = 8192,    /* pixels in one sample-request message: 32 KiB, within a server's 64 KiB */
-    SENT_RING = 4096,         /* sequences whose send time is remembered (older frames get no latency) */
-    TX_BYTES = 1024,          /* the largest message a viewer sends (hello, camera, bye), without LWS_PRE */
-    RX_CHUNK = 65536,         /* libwebsockets' receive buffer per read */
-    HOUSEKEEPING_US = 100000, /* the housekeeping timer's period */
-    CLOSE_GRACE_US = 2000000, /* a closing viewer is cut off after this long */
+    RC_CAPACITY_FRAMES = 4,     /* the render cache keeps this many whole frames' worth of points (below) */
+    REQUEST_MAX_PIXELS = 65536, /* pixels in one sample request: a server's default --max-samples */
+    SENT_RING = 4096,           /* sequences whose send time is remembered (older frames get no latency) */
+    TX_BYTES = 1024,            /* the largest message a viewer sends (hello, camera, bye), without LWS_PRE */
+    RX_CHUNK = 65536,           /* libwebsockets' receive buffer per read */
+    HOUSEKEEPING_US = 100000,   /* the housekeeping timer's period */
+    CLOSE_GRACE_US = 2000000,   /* a closing viewer is cut off after this long */
 };
 
 typedef enum viewer_state {
@@ -204,8 +203,10 @@ typedef struct view_viewer {
     view_rc *rc;
     view_rc_sample *samples; /* a samples message converted for view_rc_insert_samples */
     uint32_t samples_cap;
-    uint32_t next_request; /* the next sample request's number */
-    queued_message *out;   /* ring of out_capacity: requests waiting for --latency */
+    uint32_t next_request;      /* the next sample request's number */
+    lws_usec_t last_request_us; /* the last sample request was made (0: none yet) */
+    uint8_t *request_pixels;    /* REQUEST_MAX_PIXELS entries of proto_request_pixel_put */
+    queued_message *out;        /* ring of out_capacity: requests waiting for --latency */
     uint32_t out_capacity, out_head, out_count;
     buffer_pool out_pool;
 
@@ -294,6 +295,11 @@ static void viewer_schedule(view_viewer *v, lws_usec_t now)
             lws_usec_t shown = v->held[v->held_head].shown_us;
             if (!next || shown < next)
                 next = shown;
+        }
+        if (v->out_count) {
+            lws_usec_t send = v->out[v->out_head].send_us;
+            if (send > now && (!next || send < next))
+                next = send;
         }
     }
     if (!next) {
@@ -730,19 +736,112 @@ static void viewer_display(view_viewer *v, lws_usec_t now)
 
 /* ---- sample requests ---------------------------------------------------------------------------------- */
 
-/* The render cache's requests of a display frame: without the sample-request message pair in proto they
- * cannot go out, and are counted as not sent. */
+/* True when the oldest queued sample request is due to be sent. */
+static bool request_due(const view_viewer *v, lws_usec_t now)
+{
+    return v->out_count && v->out[v->out_head].send_us <= now;
+}
+
+/* The render cache's requests of a display frame, as one sample-request message held for --latency (as
+ * cameras are). The server renders only the latest request in each frame of its clock (docs/PROTOCOL.md,
+ * session rule 9), so a viewer makes at most one request a display frame and none sooner than 0.9 of the
+ * server's frame interval after the previous one; the current camera's requests and the predicted camera's
+ * take turns (odd display frames the predicted ones) when both have some. At most REQUEST_MAX_PIXELS pixels.
+ * What is not sent is counted. */
 static void viewer_send_requests(view_viewer *v, const view_rc_frame *frame, const proto_pose *camera,
                                  const proto_pose *predicted, lws_usec_t now)
 {
-    (void)camera, (void)predicted, (void)now;
-    v->stats->display.requests_dropped += frame->request_count + frame->predicted_count;
+    view_display_stats *d = &v->stats->display;
+    uint32_t all = frame->request_count + frame->predicted_count;
+    bool use_predicted = frame->predicted_count && (!frame->request_count || (v->display_index & 1));
+    const view_rc_pixel *pixels = use_predicted ? frame->predicted_requests : frame->requests;
+    uint32_t count = use_predicted ? frame->predicted_count : frame->request_count;
+    lws_usec_t interval = (lws_usec_t)(0.9e6 / v->welcome.fps);
+    bool wanted = v->client->options->sample_budget > 0 || !v->client->options->sample_budget_given;
+    if (!count || !wanted || (v->last_request_us && now - v->last_request_us < interval) ||
+        v->out_count == v->out_capacity) {
+        d->requests_dropped += all;
+        return;
+    }
+    if (count > REQUEST_MAX_PIXELS)
+        count = REQUEST_MAX_PIXELS;
+    proto_msg m = {.type = PROTO_SAMPLE_REQUEST};
+    proto_sample_request *q = &m.u.sample_request;
+    q->request = v->next_request;
+    q->camera = use_predicted ? *predicted : *camera;
+    q->width = v->width;
+    q->height = v->height;
+    q->count = count;
+    for (uint32_t i = 0; i < count; i++)
+        proto_request_pixel_put(v->request_pixels, i, pixels[i].x, pixels[i].y);
+    q->pixels = v->request_pixels;
+    size_t bytes = proto_bound(&m);
+    uint32_t buffer = bytes ? pool_take(&v->out_pool, LWS_PRE + bytes) : UINT32_MAX;
+    fxc_result r = FXC_ERR_NOMEM;
+    if (buffer == UINT32_MAX || proto_encode(&m, v->out_pool.bytes[buffer] + LWS_PRE,
+                                             v->out_pool.cap[buffer] - LWS_PRE, &r) != bytes) {
+        viewer_fail(v, "cannot make a sample request of %u pixels: %s", count, fxc_strerror(r));
+        viewer_stop(v, "client cannot make sample requests");
+        return;
+    }
+    v->next_request++;
+    v->last_request_us = now;
+    d->requests_dropped += all - count;
+    v->out[(v->out_head + v->out_count) % v->out_capacity] = (queued_message){
+        .send_us = now + latency_us(v), .buffer = buffer, .bytes = (uint32_t)bytes, .pixels = count};
+    v->out_count++;
+    if (request_due(v, now))
+        lws_callback_on_writable(v->wsi);
+    else
+        viewer_schedule(v, now);
 }
 
-/* A samples message shown: nothing can send one before the message pair is in proto. */
+/* Sends the oldest queued sample request. Returns 0, or -1 (after recording the failure). */
+static int viewer_send_request(view_viewer *v)
+{
+    queued_message q = v->out[v->out_head];
+    v->out_head = (v->out_head + 1) % v->out_capacity;
+    v->out_count--;
+    int written = lws_write(v->wsi, v->out_pool.bytes[q.buffer] + LWS_PRE, q.bytes, LWS_WRITE_BINARY);
+    pool_give(&v->out_pool, q.buffer);
+    if (written < (int)q.bytes) {
+        viewer_fail(v, "the connection broke while sending a sample-request message");
+        return -1;
+    }
+    v->stats->display.request_messages++;
+    v->stats->display.request_pixels += q.pixels;
+    return 0;
+}
+
+/* A samples message shown: its samples inserted into the render cache with the camera the server says it
+ * rendered them for. */
 static void viewer_use_samples(view_viewer *v, const proto_msg *msg)
 {
-    (void)v, (void)msg;
+    const proto_samples *answer = &msg->u.samples;
+    view_display_stats *d = &v->stats->display;
+    if (answer->count > v->samples_cap) {
+        view_rc_sample *grown = realloc(v->samples, (size_t)answer->count * sizeof *grown);
+        if (!grown) {
+            d->insert_errors++;
+            return;
+        }
+        v->samples = grown;
+        v->samples_cap = answer->count;
+    }
+    for (uint32_t i = 0; i < answer->count; i++) {
+        proto_sample sample;
+        proto_sample_get(answer->samples, i, &sample);
+        v->samples[i] = (view_rc_sample){.x = sample.x, .y = sample.y, .depth = sample.depth};
+        memcpy(v->samples[i].rgb, sample.rgb, 3);
+    }
+    view_rc_camera cam = rc_camera(&answer->camera);
+    if (view_rc_insert_samples(v->rc, &cam, answer->width, answer->height, v->samples, answer->count) !=
+        FXC_OK) {
+        d->insert_errors++;
+        return;
+    }
+    d->answers++;
+    d->samples_received += answer->count;
 }
 
 static void viewer_display_tick(lws_sorted_usec_list_t *sul)
@@ -763,10 +862,10 @@ static bool viewer_rings(view_viewer *v)
     const view_options *o = v->client->options;
     double delay_s = o->latency_ms / 1000.0;
     double camera_rate = v->trace ? 1000.0 : v->fps; /* a trace's lines may be dense: --fps's upper bound */
-    double requests = o->reproject ? 2 * o->display_fps * REQUEST_MESSAGES : 0;
-    double pending = ceil(camera_rate * delay_s) + 4, held = ceil((2 * v->welcome.fps + requests) * delay_s) +
-                                                             64 + (o->reproject ? 4 * REQUEST_MESSAGES : 0);
-    double out = ceil(requests * delay_s) + 4 * REQUEST_MESSAGES;
+    double requests = o->reproject ? o->display_fps : 0; /* at most one sample request a display frame */
+    double pending = ceil(camera_rate * delay_s) + 4,
+           held = ceil((2 * v->welcome.fps + requests) * delay_s) + 64;
+    double out = ceil(requests * delay_s) + 8;
     v->pending_capacity = pending > 65536 ? 65536 : (uint32_t)pending;
     v->held_capacity = held > 65536 ? 65536 : (uint32_t)held;
     v->out_capacity = out > 65536 ? 65536 : (uint32_t)out;
@@ -809,6 +908,11 @@ static bool viewer_display_setup(view_viewer *v)
         desc.capacity = pixels * RC_CAPACITY_FRAMES; /* <= 4 * 8192^2 < 2^32 */
         if (o->sample_budget_given && o->sample_budget > 0)
             desc.sample_budget = o->sample_budget < pixels ? o->sample_budget : pixels;
+        v->request_pixels = malloc((size_t)REQUEST_MAX_PIXELS * PROTO_REQUEST_PIXEL_BYTES);
+        if (!v->request_pixels) {
+            viewer_fail(v, "out of memory");
+            return false;
+        }
         fxc_result r = view_rc_create(&desc, &v->rc);
         if (r != FXC_OK) {
             viewer_fail(v, "cannot create a %ux%u render cache: %s", v->width, v->height, fxc_strerror(r));
@@ -908,6 +1012,13 @@ static int viewer_message(view_viewer *v, lws_usec_t now)
             return 0; /* frames still in flight after our bye */
         if (v->state != VIEWER_STREAMING)
             break;
+        viewer_take_message(v, &msg, now);
+        return 0;
+    case PROTO_SAMPLES:
+        if (v->state == VIEWER_CLOSING)
+            return 0; /* answers still in flight after our bye */
+        if (v->state != VIEWER_STREAMING || !v->rc)
+            break; /* never asked for */
         viewer_take_message(v, &msg, now);
         return 0;
     case PROTO_STATS:
@@ -1027,7 +1138,7 @@ static int viewer_send_hello(view_viewer *v)
     h->jpeg_quality = o->codec == PROTO_CODEC_JPEG ? o->quality : 0;
     h->depth = o->depth;
     snprintf(h->token, sizeof h->token, "%s", o->token);
-    snprintf(h->strategy, sizeof h->strategy, "%s", view_strategy_name(o->strategy));
+    snprintf(h->strategy, sizeof h->strategy, "%s", proto_strategy_name(o->strategy));
     return viewer_send(v, &m);
 }
 
@@ -1046,7 +1157,7 @@ static int viewer_send_camera(view_viewer *v, lws_usec_t now)
     m.u.camera.sequence = v->next_sequence;
     m.u.camera.time = (double)(cam.generated_us - v->client->start_us) / 1e6;
     m.u.camera.pose = cam.pose;
-    if (v->client->options->strategy == VIEW_STRATEGY_PREDICTIVE) {
+    if (v->client->options->strategy == PROTO_STRATEGY_PREDICTIVE) {
         /* Where the camera will be when the frame rendered for it is shown: extrapolated from the previous
          * camera sent by the measured round trip. */
         double rtt_s = viewer_rtt_ms(v) / 1000.0;
@@ -1100,7 +1211,12 @@ static int viewer_writeable(view_viewer *v, lws_usec_t now)
     if (v->state == VIEWER_STREAMING && camera_due(v, now)) {
         if (viewer_send_camera(v, now) != 0)
             return -1;
-        if (camera_due(v, now))
+    } else if (v->state == VIEWER_STREAMING && request_due(v, now)) {
+        if (viewer_send_request(v) != 0)
+            return -1;
+    }
+    if (v->state == VIEWER_STREAMING) {
+        if (camera_due(v, now) || request_due(v, now))
             lws_callback_on_writable(v->wsi);
         viewer_schedule(v, now);
     }
@@ -1119,7 +1235,7 @@ static void viewer_tick(lws_sorted_usec_list_t *sul)
     if (v->state != VIEWER_STREAMING)
         return;
     viewer_generate(v, now);
-    if (camera_due(v, now))
+    if (camera_due(v, now) || request_due(v, now))
         lws_callback_on_writable(v->wsi);
     viewer_schedule(v, now);
 }
@@ -1382,6 +1498,7 @@ int view_client_run(const view_options *o, const proto_trace *traces, view_viewe
         pool_free(&v->out_pool);
         free(v->display_rgb);
         free(v->samples);
+        free(v->request_pixels);
         view_rc_destroy(v->rc);
         if (v->display_trace && fclose(v->display_trace) != 0)
             viewer_fail(v, "cannot write the display's trace");

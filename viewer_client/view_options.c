@@ -346,20 +346,13 @@ static bool option_sample_budget(view_options *o, const char *name, const char *
     return true;
 }
 
-static const char *const strategy_names[VIEW_STRATEGY_COUNT] = {"basic", "fan", "predictive"};
-
-const char *view_strategy_name(uint32_t strategy)
-{
-    return strategy < VIEW_STRATEGY_COUNT ? strategy_names[strategy] : "unknown";
-}
-
 static bool option_strategy(view_options *o, const char *name, const char *value, char *err, size_t cap)
 {
-    for (uint32_t k = 0; k < VIEW_STRATEGY_COUNT; k++)
-        if (strcmp(value, strategy_names[k]) == 0) {
-            o->strategy = (uint8_t)k;
-            return true;
-        }
+    proto_strategy strategy;
+    if (value[0] && proto_strategy_parse(value, &strategy)) {
+        o->strategy = (uint8_t)strategy;
+        return true;
+    }
     REFUSE("%s %s: must be basic, fan or predictive", name, value);
 }
 
@@ -462,7 +455,7 @@ static bool check_together(view_options *o, bool viewers_given, char *err, size_
             REFUSE("%s: only with --reproject (it switches a stage of the render cache)", rc_only[k].name);
     if (!o->reproject && o->rc_threads)
         REFUSE("--rc-threads %u: only with --reproject (the render cache's threads)", o->rc_threads);
-    if (!o->reproject && o->strategy == VIEW_STRATEGY_FAN)
+    if (!o->reproject && o->strategy == PROTO_STRATEGY_FAN)
         REFUSE("--strategy fan: only with --reproject (a wider, smaller frame is shown through the render "
                "cache)");
     if (o->reproject && o->depth_given && o->depth == PROTO_DEPTH_NONE)

@@ -17,18 +17,6 @@ enum {
     VIEW_MAX_RC_THREADS = 64,    /* --rc-threads upper bound (rcache.h's VIEW_RC_MAX_THREADS) */
 };
 
-/* Reference-frame strategies (Baxter 1999), named in the hello: which camera the server renders whole frames
- * for. */
-typedef enum view_strategy {
-    VIEW_STRATEGY_BASIC,      /* the camera the viewer reports */
-    VIEW_STRATEGY_FAN,        /* a wider field of view at a lower resolution */
-    VIEW_STRATEGY_PREDICTIVE, /* the camera extrapolated by the measured latency (camera.has_predicted) */
-    VIEW_STRATEGY_COUNT
-} view_strategy;
-
-/* The strategy's name on the wire ("unknown" outside the table). */
-const char *view_strategy_name(uint32_t strategy);
-
 #define VIEW_DEFAULT_URL "ws://127.0.0.1:7681"
 
 typedef struct view_options {
@@ -68,7 +56,7 @@ typedef struct view_options {
     uint32_t sample_budget; /* pixels requested per display frame (0: the render cache's default, width *
                                height / 32); 0 with --sample-budget 0: no sample requests */
     bool sample_budget_given;
-    uint8_t strategy; /* view_strategy (default basic) */
+    uint8_t strategy; /* proto_strategy sent in hello (default basic) */
 } view_options;
 
 typedef enum view_parse_result {
