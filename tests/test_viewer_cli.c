@@ -220,6 +220,8 @@ static void test_bad_options(void **state)
         {{"--rc-threads", "2"}, "--rc-threads 2: only with --reproject"},
         {{"--reproject", "--depth", "none"}, "--depth none: --reproject needs depth"},
         {{"--reproject=yes"}, "--reproject=yes: takes no value"},
+        {{"--time-scale", "0.5"}, "--time-scale 0.5: must be a number from 1 to 1000"},
+        {{"--time-scale", "1001"}, "--time-scale 1001:"},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         viewer_run r;
@@ -322,6 +324,7 @@ static void test_help(void **state)
         "--rc-threads N",
         "--sample-budget N",
         "--strategy basic|fan|predictive",
+        "--time-scale S",
         "--help",
         "ws://127.0.0.1:7681",
         "640x360",

@@ -42,13 +42,13 @@ static double now_s(void)
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
-/* Starts `fxcache serve --port 0 --quiet --fps 30` (the embedded default scene) and returns its port. */
-static int server_start(pid_t *pid, const char *name)
+/* Starts `fxcache serve --port 0 --quiet --fps FPS` (the embedded default scene) and returns its port. */
+static int server_start_at(pid_t *pid, const char *name, const char *fps)
 {
     char out[512], err[512];
     snprintf(out, sizeof out, "%s.out", fxt_tmp_path(name));
     snprintf(err, sizeof err, "%s.err", fxt_tmp_path(name));
-    const char *argv[] = {FXC_BIN, "serve", "--port", "0", "--quiet", "--fps", "30", NULL};
+    const char *argv[] = {FXC_BIN, "serve", "--port", "0", "--quiet", "--fps", fps, NULL};
     posix_spawn_file_actions_t fa;
     posix_spawn_file_actions_init(&fa);
     posix_spawn_file_actions_addopen(&fa, 1, out, O_WRONLY | O_CREAT | O_TRUNC, 0644);
@@ -75,6 +75,11 @@ static int server_start(pid_t *pid, const char *name)
     }
     assert_true(port > 0);
     return port;
+}
+
+static int server_start(pid_t *pid, const char *name)
+{
+    return server_start_at(pid, name, "30");
 }
 
 /* SIGTERM, and the exit status (0 expected: under the sanitizer build a leak makes it non-zero). */
@@ -309,12 +314,13 @@ static double uncovered_fraction(double hfov, double lag)
                            : (edge - tan(hfov / 2 - lag)) / (2 * edge);
 }
 
-/* A camera turning in place at 20 degrees a second with 50 ms of latency each way: the render cache shows
- * every frame's points turned to the display's camera, so only the strip the newest frame never saw is empty.
- * A pure turn has no parallax, so each display frame's empty fraction is bounded by the closed form of that
- * strip for its lag (the turn from the newest frame's camera, its time from the CSV, to the display's
- * camera), plus one column for the pixel grid. The filters fill up to three pixels into the strip, so the
- * bound is not tight. */
+/* A camera turning in place at 20 degrees a second with 50 ms of latency each way, the session at half speed
+ * (--time-scale 2, the server at 15 frames a second: times in the display's CSV are the session's): the
+ * render cache shows every frame's points turned to the display's camera, so only the strip the newest frame
+ * never saw is empty. A pure turn has no parallax, so each display frame's empty fraction is bounded by the
+ * closed form of that strip for its lag (the turn from the newest frame's camera, its time from the CSV, to
+ * the display's camera), plus one column for the pixel grid. The filters fill up to three pixels into the
+ * strip, so the bound is not tight. */
 static void test_turning_camera(void **state)
 {
     (void)state;
@@ -336,16 +342,16 @@ static void test_turning_camera(void **state)
     snprintf(trace, sizeof trace, "%s", fxt_write_file("turn.trace", text));
     free(text);
     pid_t server;
-    int port = server_start(&server, "turning");
+    int port = server_start_at(&server, "turning", "15"); /* 30 a second of the session's time */
     char url[64], display[512], stats[512];
     snprintf(url, sizeof url, "ws://127.0.0.1:%d", port);
     snprintf(display, sizeof display, "%s", fxt_tmp_path("turning_display"));
     snprintf(stats, sizeof stats, "%s", fxt_tmp_path("turning_stats.json"));
     remove_tree(display);
-    const char *args[] = {
-        "--connect", url,       "--trace",         trace,     "--res", "96x54",         "--latency",
-        "50",        "--quiet", "--reproject",     "--stats", stats,   "--display-out", display,
-        "--timeout", "120",     "--sample-budget", "0",       NULL};
+    const char *args[] = {"--connect",     url,     "--trace",   trace,         "--res",           "96x54",
+                          "--latency",     "50",    "--quiet",   "--reproject", "--stats",         stats,
+                          "--display-out", display, "--timeout", "120",         "--sample-budget", "0",
+                          "--time-scale",  "2",     NULL};
     assert_int_equal(run_viewer(args, "turning"), 0);
     assert_int_equal(server_stop(server), 0);
     json_error_t error;

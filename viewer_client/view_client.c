@@ -273,9 +273,28 @@ static void viewer_fail(view_viewer *v, const char *fmt, ...)
 
 /* ---- timing ------------------------------------------------------------------------------------------- */
 
+/* --time-scale: every duration of the session (trace times, camera and display rates, --latency) runs this
+ * many times slower on the wall clock; "scene" times are the session's own. */
+static double time_scale(const view_viewer *v)
+{
+    return v->client->options->time_scale;
+}
+
+/* The wall-clock moment of scene time t (seconds after the welcome). */
+static lws_usec_t wall_us(const view_viewer *v, double t)
+{
+    return v->welcome_us + (lws_usec_t)ceil(t * 1e6 * time_scale(v));
+}
+
+/* Scene seconds after the welcome at wall-clock moment now. */
+static double scene_s(const view_viewer *v, lws_usec_t now)
+{
+    return (double)(now - v->welcome_us) / 1e6 / time_scale(v);
+}
+
 static lws_usec_t latency_us(const view_viewer *v)
 {
-    return (lws_usec_t)v->client->options->latency_ms * 1000;
+    return (lws_usec_t)llround(v->client->options->latency_ms * 1000.0 * time_scale(v));
 }
 
 /* The next moment the viewer's timer must wake it: the next camera to generate, the next pending camera not
@@ -367,7 +386,7 @@ static void viewer_generate(view_viewer *v, lws_usec_t now)
     const view_options *o = v->client->options;
     if (!v->next_generate_us || now < v->next_generate_us)
         return;
-    double elapsed = (double)(now - v->welcome_us) / 1e6;
+    double elapsed = scene_s(v, now);
     uint32_t due;
     if (v->trace) {
         due = view_trace_due(v->trace, v->client->trace_origin, elapsed);
@@ -385,14 +404,12 @@ static void viewer_generate(view_viewer *v, lws_usec_t now)
         cam.pose = view_camera_from_trace(v->trace, index, o->fov_deg);
         cam.camera_s = v->trace->times[index] - v->client->trace_origin;
         v->next_generate_us =
-            due < v->trace->count
-                ? v->welcome_us + (lws_usec_t)ceil((v->trace->times[due] - v->client->trace_origin) * 1e6)
-                : 0;
+            due < v->trace->count ? wall_us(v, v->trace->times[due] - v->client->trace_origin) : 0;
     } else {
         cam.pose =
             view_camera_generate(o->camera, &v->welcome, v->index, v->client->count, index, o->fov_deg);
         cam.camera_s = (double)index / v->fps;
-        v->next_generate_us = v->welcome_us + (lws_usec_t)ceil((double)due / v->fps * 1e6);
+        v->next_generate_us = wall_us(v, (double)due / v->fps);
     }
     if (v->pending_count == v->pending_capacity) { /* the oldest waiting camera gives way */
         v->pending_head = (v->pending_head + 1) % v->pending_capacity;
@@ -541,7 +558,7 @@ static void viewer_show_frames(view_viewer *v, lws_usec_t until)
         if (!going)
             return;
         if (f.camera_us) {
-            double ms = (double)(f.shown_us - f.camera_us) / 1000.0;
+            double ms = (double)(f.shown_us - f.camera_us) / 1000.0 / time_scale(v); /* scene ms */
             /* The round trip the prediction uses: smoothed as TCP smooths its RTT (gain 1/8). */
             v->rtt_ms = v->rtt_measured ? v->rtt_ms + (ms - v->rtt_ms) / 8 : ms;
             v->rtt_measured = true;
@@ -627,7 +644,7 @@ static double viewer_rtt_ms(const view_viewer *v)
 {
     if (v->rtt_measured)
         return v->rtt_ms;
-    return 2.0 * v->client->options->latency_ms + 1000.0 / v->welcome.fps;
+    return 2.0 * v->client->options->latency_ms + 1000.0 / (v->welcome.fps * time_scale(v));
 }
 
 static void viewer_send_requests(view_viewer *v, const view_rc_frame *frame, const proto_pose *camera,
@@ -671,14 +688,14 @@ static void viewer_display(view_viewer *v, lws_usec_t now)
     const view_options *o = v->client->options;
     view_display_stats *d = &v->stats->display;
     double fps = o->display_fps;
-    uint64_t due = (uint64_t)floor((double)(now - v->welcome_us) * fps / 1e6);
+    uint64_t due = (uint64_t)floor(scene_s(v, now) * fps);
     if (due > v->display_index) {
         d->skipped += due - v->display_index;
         v->display_index = due;
     }
     uint64_t index = v->display_index;
     double time_s = (double)index / fps;
-    lws_usec_t at = v->welcome_us + (lws_usec_t)ceil(time_s * 1e6);
+    lws_usec_t at = wall_us(v, time_s);
     viewer_show_frames(v, at);
     if (v->state != VIEWER_STREAMING)
         return;
@@ -729,7 +746,7 @@ static void viewer_display(view_viewer *v, lws_usec_t now)
     v->display_previous_s = time_s;
     v->display_has_previous = true;
     v->display_index = index + 1;
-    lws_usec_t next = v->welcome_us + (lws_usec_t)ceil((double)v->display_index / fps * 1e6);
+    lws_usec_t next = wall_us(v, (double)v->display_index / fps);
     lws_sul_schedule(v->client->context, 0, &v->display_tick, viewer_display_tick,
                      next > now ? next - now : 1);
 }
@@ -860,7 +877,8 @@ static void viewer_display_tick(lws_sorted_usec_list_t *sul)
 static bool viewer_rings(view_viewer *v)
 {
     const view_options *o = v->client->options;
-    double delay_s = o->latency_ms / 1000.0;
+    double delay_s = o->latency_ms / 1000.0 * o->time_scale; /* wall seconds; the rates below are scene
+                                                                 rates, at least the wall ones */
     double camera_rate = v->trace ? 1000.0 : v->fps; /* a trace's lines may be dense: --fps's upper bound */
     double requests = o->reproject ? o->display_fps : 0; /* at most one sample request a display frame */
     double pending = ceil(camera_rate * delay_s) + 4,
@@ -951,13 +969,13 @@ static void viewer_welcomed(view_viewer *v, const proto_welcome *welcome, lws_us
     v->welcome_us = now;
     /* --fps, else the server's own rate, at most 1000 a second (--fps's bound) even when the server names
      * more. */
-    v->fps = o->fps > 0 ? o->fps : welcome->fps > 1000 ? 1000 : welcome->fps;
+    v->fps = o->fps > 0 ? o->fps : welcome->fps * o->time_scale > 1000 ? 1000 : welcome->fps * o->time_scale;
     if (!(v->fps > 0)) { /* the decoder refuses this; a camera clock cannot run on it */
         viewer_fail(v, "the welcome names %g frames a second", welcome->fps);
         viewer_stop(v, "bad welcome");
         return;
     }
-    if (!v->trace && welcome->max_camera_rate && v->fps > welcome->max_camera_rate) {
+    if (!v->trace && welcome->max_camera_rate && v->fps / o->time_scale > welcome->max_camera_rate) {
         if (!c->rate_warned && !o->quiet) {
             clear_progress(c);
             fprintf(stderr,
@@ -966,7 +984,7 @@ static void viewer_welcomed(view_viewer *v, const proto_welcome *welcome, lws_us
                     v->fps, welcome->max_camera_rate, welcome->max_camera_rate);
         }
         c->rate_warned = true;
-        v->fps = welcome->max_camera_rate;
+        v->fps = welcome->max_camera_rate * o->time_scale;
     }
     file_name_part(welcome->name, v->file_name, sizeof v->file_name);
     if (!viewer_rings(v)) {
@@ -981,7 +999,7 @@ static void viewer_welcomed(view_viewer *v, const proto_welcome *welcome, lws_us
     v->state = VIEWER_STREAMING;
     v->next_generate_us = now;
     if (v->trace) /* the first line is due at its time after the traces' common origin */
-        v->next_generate_us = now + (lws_usec_t)ceil((v->trace->times[0] - c->trace_origin) * 1e6);
+        v->next_generate_us = wall_us(v, v->trace->times[0] - c->trace_origin);
     viewer_generate(v, now);
     if (camera_due(v, now))
         lws_callback_on_writable(v->wsi);
@@ -1155,7 +1173,7 @@ static int viewer_send_camera(view_viewer *v, lws_usec_t now)
     v->pending_count--;
     proto_msg m = {.type = PROTO_CAMERA};
     m.u.camera.sequence = v->next_sequence;
-    m.u.camera.time = (double)(cam.generated_us - v->client->start_us) / 1e6;
+    m.u.camera.time = (double)(cam.generated_us - v->client->start_us) / 1e6 / time_scale(v);
     m.u.camera.pose = cam.pose;
     if (v->client->options->strategy == PROTO_STRATEGY_PREDICTIVE) {
         /* Where the camera will be when the frame rendered for it is shown: extrapolated from the previous
@@ -1166,7 +1184,8 @@ static int viewer_send_camera(view_viewer *v, lws_usec_t now)
         m.u.camera.predicted =
             v->last_sent_generated_us
                 ? view_pose_extrapolate(&v->last_sent_pose,
-                                        (double)(v->last_sent_generated_us - v->client->start_us) / 1e6,
+                                        (double)(v->last_sent_generated_us - v->client->start_us) / 1e6 /
+                                            time_scale(v),
                                         &cam.pose, m.u.camera.time, m.u.camera.predicted_time)
                 : cam.pose;
     }

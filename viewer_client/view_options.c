@@ -325,6 +325,15 @@ static bool option_display_out(view_options *o, const char *name, const char *va
     return true;
 }
 
+static bool option_time_scale(view_options *o, const char *name, const char *value, char *err, size_t cap)
+{
+    double v;
+    if (!parse_decimal(value, &v) || !(v >= 1 && v <= 1000))
+        REFUSE("%s %s: must be a number from 1 to 1000", name, value);
+    o->time_scale = v;
+    return true;
+}
+
 static bool option_rc_threads(view_options *o, const char *name, const char *value, char *err, size_t cap)
 {
     uint64_t v;
@@ -399,6 +408,7 @@ static const struct option_entry {
     {"--rc-threads", true, option_rc_threads},
     {"--sample-budget", true, option_sample_budget},
     {"--strategy", true, option_strategy},
+    {"--time-scale", true, option_time_scale},
 };
 
 static bool option_flag(view_options *o, const char *name, const char *value, char *err, size_t cap)
@@ -490,6 +500,7 @@ view_parse_result view_options_parse(int argc, char *const argv[], const char *e
     o->quality = 85;
     o->depth = PROTO_DEPTH_NONE;
     o->display_fps = 30;
+    o->time_scale = 1;
     o->timeout_s = 60; /* the first frame of 16 viewers on Sponza took 13 s here: everything is new */
     if (env_token && !option_token(o, "FXCACHE_TOKEN", env_token, err, cap))
         return VIEW_PARSE_ERROR;
@@ -619,6 +630,12 @@ const char *view_options_help(void)
            "                           only; predictive: each camera message also carries the camera\n"
            "                           extrapolated by the measured latency)\n"
            "The --no-* switches, --rc-threads and --sample-budget need --reproject.\n"
+           "  --time-scale S           run the whole session S times slower, 1..1000 (default 1): trace\n"
+           "                           times, --fps, --display-fps and --latency are the session's own "
+           "time;\n"
+           "                           a server at --fps F/S then stands for one at F on a machine S times\n"
+           "                           faster. Latency figures are in session time; fps and seconds on the\n"
+           "                           wall clock\n"
            "\n"
            "Latency is, per camera, from the moment it was generated to the moment the first frame rendered\n"
            "for it (or for a newer camera) counts as shown, both --latency delays included. A summary in "

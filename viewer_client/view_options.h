@@ -56,7 +56,8 @@ typedef struct view_options {
     uint32_t sample_budget; /* pixels requested per display frame (0: the render cache's default, width *
                                height / 32); 0 with --sample-budget 0: no sample requests */
     bool sample_budget_given;
-    uint8_t strategy; /* proto_strategy sent in hello (default basic) */
+    uint8_t strategy;  /* proto_strategy sent in hello (default basic) */
+    double time_scale; /* --time-scale: the session's durations run this many times slower, [1, 1000] (1) */
 } view_options;
 
 typedef enum view_parse_result {
