@@ -38,8 +38,11 @@ static const char serve_usage[] =
     "Serves composed frames to viewers over WebSockets (see docs/PROTOCOL.md; the client is\n"
     "fxcache-viewer). Viewers join and leave at any time, each with its own resolution and codec, and\n"
     "get frames for their latest camera at --fps; a slow viewer gets the newest frame (older ones are\n"
-    "dropped and counted). Runs until SIGINT or SIGTERM (or --frames), then says bye to every viewer,\n"
-    "writes the statistics and prints a summary.\n"
+    "dropped and counted). hello's strategy picks the camera rendered: basic (the reported one), fan\n"
+    "(tan(fov/2) x 1.5, same pixels) or predictive (the camera message's predicted pose, else a linear\n"
+    "extrapolation); every frame carries the camera rendered. Sample requests (a client's render cache)\n"
+    "are answered with exactly the pixels asked for, rendered through the same caches. Runs until SIGINT\n"
+    "or SIGTERM (or --frames), then says bye to every viewer, writes the statistics and prints a summary.\n"
     "\n"
     "  --bind ADDR          address to listen on (default 127.0.0.1; beyond loopback needs --token)\n"
     "  --port P             TCP port, 0..65535; 0 = any free port (default 7681). The address is\n"
@@ -51,7 +54,11 @@ static const char serve_usage[] =
     "  --max-viewers N      viewers at once, 1..64 (default 16)\n"
     "  --max-res WxH        largest resolution a viewer may ask for, sides 1..8192 (default 3840x2160)\n"
     "  --max-message B      largest message a viewer may send, bytes, 1024..16777216 (default 65536)\n"
-    "  --camera-rate N      camera messages per second a viewer may send, 1..100000 (default 240)\n"
+    "  --camera-rate N      camera messages per second a viewer may send, 1..100000 (default 240);\n"
+    "                       sample requests have a bucket of their own at the same rate\n"
+    "  --max-samples N      pixels one sample request may ask for, 1..1048576 (default 65536); such a\n"
+    "                       message may be 56 + 4 N bytes whatever --max-message says. The latest request\n"
+    "                       is rendered in the next frame and answered with those pixels (docs/PROTOCOL.md)\n"
     "  --record DIR         write every viewer's rendered cameras as DIR/viewer_NN.trace with frame\n"
     "                       times; 'fxcache sim --trace ... --fps F' replays the session\n"
     "  --stats FILE         one JSON line of statistics per frame\n"
@@ -66,7 +73,7 @@ static bool is_loopback(const char *address)
 static int parse_options(int argc, char **argv, serve_options *o)
 {
     enum { O_BIND = SRV_CLI_O_COMMAND, O_PORT, O_TOKEN, O_FPS, O_FRAMES, O_MAXV, O_MAXRES, O_MAXMSG, O_RATE,
-           O_RECORD, O_STATS, O_SUMMARY, O_QUIET };
+           O_RECORD, O_STATS, O_SUMMARY, O_QUIET, O_MAXSAMPLES };
     static const struct option own[] = {
         {"bind", required_argument, NULL, O_BIND},          {"port", required_argument, NULL, O_PORT},
         {"token", required_argument, NULL, O_TOKEN},        {"fps", required_argument, NULL, O_FPS},
@@ -75,6 +82,7 @@ static int parse_options(int argc, char **argv, serve_options *o)
         {"camera-rate", required_argument, NULL, O_RATE},   {"record", required_argument, NULL, O_RECORD},
         {"stats", required_argument, NULL, O_STATS},        {"summary", required_argument, NULL, O_SUMMARY},
         {"quiet", no_argument, NULL, O_QUIET},              {"help", no_argument, NULL, 'h'},
+        {"max-samples", required_argument, NULL, O_MAXSAMPLES},
     };
     struct option options[sizeof own / sizeof own[0] + 32];
     srv_cli_merge_options(own, sizeof own / sizeof own[0], options, sizeof options / sizeof options[0]);
@@ -101,6 +109,9 @@ static int parse_options(int argc, char **argv, serve_options *o)
             break;
         case O_MAXMSG: ok = srv_cli_u32("serve", "--max-message", optarg, 1024, 16777216, &o->net.max_message); break;
         case O_RATE: ok = srv_cli_u32("serve", "--camera-rate", optarg, 1, 100000, &o->net.camera_rate); break;
+        case O_MAXSAMPLES:
+            ok = srv_cli_u32("serve", "--max-samples", optarg, 1, PROTO_MAX_SAMPLES, &o->net.max_samples);
+            break;
         case O_RECORD: o->net.record_dir = optarg; break;
         case O_STATS: o->stats_path = optarg; break;
         case O_SUMMARY: o->summary_path = optarg; break;
@@ -158,6 +169,10 @@ static json_t *net_json(const serve_options *o, const srv_net *net, const srv_ne
                          "frames_dropped", (json_int_t)t->frames_dropped, "bytes_sent", (json_int_t)t->bytes_sent,
                          "cameras_received", (json_int_t)t->cameras_received, "encode_ms", t->encode_ms,
                          "buffer_bytes_peak", (json_int_t)t->buffer_bytes_peak);
+    json_object_set_new(j, "sample_requests", json_integer((json_int_t)t->sample_requests));
+    json_object_set_new(j, "sample_requests_dropped", json_integer((json_int_t)t->sample_requests_dropped));
+    json_object_set_new(j, "samples_sent", json_integer((json_int_t)t->samples_sent));
+    json_object_set_new(j, "samples_pixels", json_integer((json_int_t)t->samples_pixels));
     return j;
 }
 
@@ -216,6 +231,10 @@ int srv_cmd_serve(int argc, char **argv)
                (unsigned long long)totals.refused, (unsigned long long)totals.frames_sent, totals.bytes_sent / 1e6,
                (unsigned long long)totals.frames_dropped,
                totals.frames_sent ? totals.encode_ms / (double)totals.frames_sent : 0.0);
+        if (totals.sample_requests)
+            printf("samples:    %llu sample requests, %llu answered (%llu pixels), %llu dropped for newer ones\n",
+                   (unsigned long long)totals.sample_requests, (unsigned long long)totals.samples_sent,
+                   (unsigned long long)totals.samples_pixels, (unsigned long long)totals.sample_requests_dropped);
     }
     exit_code = r == FXC_OK && written ? 0 : 1;
 done:

@@ -5,7 +5,8 @@
  * a run of pixels from the taps its cache kind gathers (bilinear reads at the level the pixel requested,
  * texels without data left out and the weights renormalised). A pixel for which some cached effect has no
  * data at all keeps that effect's neutral term and is counted as missing. In no-cache mode each effect's
- * eval callback traces its rays at the pixel with the sample counts the cache converges to. */
+ * eval callback traces its rays at the pixel with the sample counts the cache converges to. A sparse viewer
+ * goes through the same gather and shading, over runs of its pixel list instead of a tile's rows. */
 #include "engine_internal.h"
 #include "fxc_hot.h"
 
@@ -173,118 +174,260 @@ typedef struct compose_task {
     atomic_uint_fast64_t rays[SRV_MAX_EFFECTS];
 } compose_task;
 
-/* Gathers the visible pixels of one run (rows y0..y1, columns x0..x1, at most SRV_RUN pixels): their points,
- * albedo and cache pixels (with position and distance only when `positions`: a cache kind asks for them);
- * misses get the sky. Returns how many are visible. */
-FXC_HOT_INLINE uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32_t x1, uint32_t y0,
-                           uint32_t y1, compose_scratch *cs, const float sky[3], float log2_density,
-                           bool positions)
+/* What neighbouring pixels share when they see the same triangle, looked up once. */
+typedef struct gather_memo {
+    uint32_t tri, island; /* SRV_MISS: none yet */
+    float corner[3][3], normal[3], island_uv[6];
+} gather_memo;
+
+/* Pixel (x, y) of the viewer's frame, held at buffer entry p (y * width + x, or a sparse viewer's list
+ * position): a miss gets the sky; a visible pixel is appended to the run (its point, albedo arguments and
+ * cache pixel, with position and distance only when `positions`: a cache kind asks for them). */
+FXC_HOT_INLINE void gather_pixel(srv_loop *loop, srv_viewer *view, uint32_t x, uint32_t y, size_t p,
+                                 compose_scratch *cs, uint32_t *count, const float sky[3], float log2_density,
+                                 bool positions, gather_memo *memo)
 {
     const scene *s = loop->s;
     const srv_camera_frame *f = &view->frame;
-    bool no_cache = loop->desc.no_cache;
-    const float scale_x = 2.0f * f->tan_half_x / (float)f->width,
-                scale_y = 2.0f * f->tan_half_y / (float)f->height;
-    /* What neighbouring pixels share when they see the same triangle, looked up once. */
-    uint32_t memo_tri = SRV_MISS, memo_island = 0;
-    float corner[3][3], normal[3], island_uv[6];
+    uint32_t tri = view->tri[p];
+    if (tri == SRV_MISS) {
+        memcpy(view->radiance + 3 * p, sky, 3 * sizeof(float));
+        if (view->views[SRV_VIEW_AO]) {
+            view->views[SRV_VIEW_AO][p] = 1.0f;
+            view->views[SRV_VIEW_SHADOW][p] = 1.0f;
+            view->views[SRV_VIEW_SHARING][p] = 0.0f;
+        }
+        return;
+    }
+    const float scale_x = 2.0f * f->tan_half_x / (float)f->width, scale_y = 2.0f * f->tan_half_y / (float)f->height;
+    uint32_t i = (*count)++;
+    cs->index[i] = p;
+    fx_point *pt = &cs->points[i];
+    float u = view->bary_u[p], v = view->bary_v[p], dir[3];
+    if (tri != memo->tri) {
+        memo->tri = tri;
+        const uint32_t *idx = s->indices + 3 * (size_t)tri;
+        for (int c = 0; c < 3; c++)
+            memcpy(memo->corner[c], s->positions + 3 * (size_t)idx[c], sizeof memo->corner[c]);
+        memcpy(memo->normal, s->tri_normal + 3 * (size_t)tri, sizeof memo->normal);
+        memcpy(memo->island_uv, s->tri_island_uv + 6 * (size_t)tri, sizeof memo->island_uv);
+        memo->island = s->tri_island[tri];
+    }
+    float w = 1.0f - u - v;
+    for (int k = 0; k < 3; k++) {
+        pt->position[k] = w * memo->corner[0][k] + u * memo->corner[1][k] + v * memo->corner[2][k];
+        pt->normal[k] = memo->normal[k];
+    }
+    /* The ray's direction, not normalised: only its side of the surface matters here. */
+    float sx = ((float)x + 0.5f) * scale_x - f->tan_half_x, sy = f->tan_half_y - ((float)y + 0.5f) * scale_y;
+    for (int k = 0; k < 3; k++)
+        dir[k] = f->forward[k] + sx * f->right[k] + sy * f->up[k];
+    float facing = pt->normal[0] * dir[0] + pt->normal[1] * dir[1] + pt->normal[2] * dir[2];
+    for (int k = 0; k < 3; k++) /* seen from behind: light the side the viewer sees */
+        pt->view_normal[k] = cs->shade_normal[i][k] = facing > 0 ? -pt->normal[k] : pt->normal[k];
+    /* The pixel's footprint in metres: level-0 texels per pixel over texels per metre. The albedo is
+     * sampled after the loop, for the whole run. */
+    cs->triangle[i] = tri;
+    cs->bary_u[i] = u;
+    cs->bary_v[i] = v;
+    cs->albedo_footprint[i] = view->footprint[p] - log2_density;
+    pt->triangle = tri;
+    pt->u = u;
+    pt->v = v;
+    pt->pixel_id = (uint64_t)y * f->width + x; /* the image position, whatever buffer entry holds it */
+    if (loop->desc.no_cache) {
+        srv_camera_ray(f, (float)x + 0.5f, (float)y + 0.5f, dir);
+        srv__pixel_differentials(f, dir, view->depth[p], pt->normal, pt->dpdx, pt->dpdy);
+    }
+    srv_pixel *px = &cs->pixels[i];
+    px->triangle = tri;
+    px->island = memo->island;
+    px->footprint = view->footprint[p];
+    px->island_u = w * memo->island_uv[0] + u * memo->island_uv[2] + v * memo->island_uv[4];
+    px->island_v = w * memo->island_uv[1] + u * memo->island_uv[3] + v * memo->island_uv[5];
+    if (positions) {
+        memcpy(px->position, pt->position, sizeof px->position);
+        px->distance = view->depth[p];
+    }
+}
+
+/* Gathers the visible pixels of one run (rows y0..y1, columns x0..x1, at most SRV_RUN pixels). Returns how
+ * many are visible. */
+FXC_HOT_INLINE uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32_t x1, uint32_t y0,
+                                   uint32_t y1, compose_scratch *cs, const float sky[3], float log2_density,
+                                   bool positions)
+{
+    gather_memo memo = {.tri = SRV_MISS};
     uint32_t count = 0;
     for (uint32_t y = y0; y < y1; y++)
-        for (uint32_t x = x0; x < x1; x++) {
-            size_t p = (size_t)y * f->width + x;
-            uint32_t tri = view->tri[p];
-            if (tri == SRV_MISS) {
-                memcpy(view->radiance + 3 * p, sky, 3 * sizeof(float));
-                if (view->views[SRV_VIEW_AO]) {
-                    view->views[SRV_VIEW_AO][p] = 1.0f;
-                    view->views[SRV_VIEW_SHADOW][p] = 1.0f;
-                    view->views[SRV_VIEW_SHARING][p] = 0.0f;
-                }
+        for (uint32_t x = x0; x < x1; x++)
+            gather_pixel(loop, view, x, y, (size_t)y * view->frame.width + x, cs, &count, sky, log2_density,
+                         positions, &memo);
+    scene_albedo_run(loop->s, cs->triangle, cs->bary_u, cs->bary_v, cs->albedo_footprint, count, cs->albedo);
+    return count;
+}
+
+/* A sparse viewer's run: list entries first..end-1 (at most SRV_RUN). */
+static uint32_t gather_list(srv_loop *loop, srv_viewer *view, size_t first, size_t end, compose_scratch *cs,
+                            const float sky[3], float log2_density, bool positions)
+{
+    gather_memo memo = {.tri = SRV_MISS};
+    uint32_t count = 0;
+    for (size_t p = first; p < end; p++)
+        gather_pixel(loop, view, view->list[p] & 0xFFFFu, view->list[p] >> 16, p, cs, &count, sky, log2_density,
+                     positions, &memo);
+    scene_albedo_run(loop->s, cs->triangle, cs->bary_u, cs->bary_v, cs->albedo_footprint, count, cs->albedo);
+    return count;
+}
+
+enum { CONSTANT_LIGHTS = 8 }; /* directional lights whose direction and irradiance are computed once */
+
+/* What every run of a compose task uses, computed once per task. */
+typedef struct compose_setup {
+    float sky[3];
+    float log2_density;
+    bool positions; /* some shading cache kind reads the pixels' positions */
+    uint32_t lights, stride;
+    float light_dir[CONSTANT_LIGHTS][3], light_rgb[CONSTANT_LIGHTS][3]; /* the same for every pixel */
+} compose_setup;
+
+static void compose_setup_init(const srv_loop *loop, compose_setup *cu)
+{
+    const scene *s = loop->s;
+    cu->lights = s->light_count;
+    cu->stride = cu->lights ? cu->lights : 1;
+    for (int k = 0; k < 3; k++)
+        cu->sky[k] = s->sky_color[k] * s->sky_intensity;
+    cu->log2_density = log2f(s->texel_density);
+    cu->positions = false;
+    for (uint32_t e = 0; e < loop->effect_count; e++)
+        cu->positions |= loop->effect_shading[e] && loop->kinds[loop->effect_kind[e]]->needs_position;
+    for (uint32_t l = 0; l < cu->lights && l < CONSTANT_LIGHTS; l++) {
+        float dist;
+        fx_light_direction(&s->lights[l], (const float[3]){0, 0, 0}, cu->light_dir[l], &dist);
+        for (int k = 0; k < 3; k++)
+            cu->light_rgb[l][k] = s->lights[l].intensity * s->lights[l].color[k];
+    }
+}
+
+/* Shades the count gathered pixels of a run into the viewer's radiance (and kept views): the effects' terms
+ * from the caches (or per pixel in no-cache mode), then the formula. */
+FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch *cs, uint32_t count,
+                              const compose_setup *cu, uint32_t thread_index, uint64_t *missing, uint64_t *rays)
+{
+    const scene *s = loop->s;
+    const uint32_t lights = cu->lights, stride = cu->stride;
+    for (uint32_t i = 0; i < count * stride; i++)
+        cs->light_visibility[i] = 1.0f;
+    for (uint32_t i = 0; i < count; i++) {
+        cs->sky_visibility[i] = 1.0f;
+        cs->indirect[3 * i] = cs->indirect[3 * i + 1] = cs->indirect[3 * i + 2] = 0.0f;
+        cs->missing[i] = 0;
+        cs->sharing[i] = 0.0f;
+    }
+    if (loop->desc.no_cache) {
+        for (uint32_t i = 0; i < count; i++) {
+            fx_shade_point sp = {.light_visibility = cs->light_visibility + (size_t)i * stride,
+                                 .sky_visibility = &cs->sky_visibility[i],
+                                 .indirect = &cs->indirect[3 * i]};
+            for (uint32_t e = 0; e < loop->effect_count; e++)
+                if (loop->effect_on[e] && loop->effects[e]->eval)
+                    rays[e] += loop->effects[e]->eval(&loop->fx, &cs->points[i], &sp);
+        }
+    } else if (count) {
+        fx_shade_run run = {.count = count,
+                            .light_count = lights,
+                            .taps = cs->taps,
+                            .points = cs->points,
+                            .light_visibility = cs->light_visibility,
+                            .sky_visibility = cs->sky_visibility,
+                            .indirect = cs->indirect};
+        for (uint32_t e = 0; e < loop->effect_count; e++) {
+            if (!loop->effect_shading[e])
                 continue;
-            }
-            uint32_t i = count++;
-            cs->index[i] = p;
-            fx_point *pt = &cs->points[i];
-            float u = view->bary_u[p], v = view->bary_v[p], dir[3];
-            if (tri != memo_tri) {
-                memo_tri = tri;
-                const uint32_t *idx = s->indices + 3 * (size_t)tri;
-                for (int c = 0; c < 3; c++)
-                    memcpy(corner[c], s->positions + 3 * (size_t)idx[c], sizeof corner[c]);
-                memcpy(normal, s->tri_normal + 3 * (size_t)tri, sizeof normal);
-                memcpy(island_uv, s->tri_island_uv + 6 * (size_t)tri, sizeof island_uv);
-                memo_island = s->tri_island[tri];
-            }
-            float w = 1.0f - u - v;
-            for (int k = 0; k < 3; k++) {
-                pt->position[k] = w * corner[0][k] + u * corner[1][k] + v * corner[2][k];
-                pt->normal[k] = normal[k];
-            }
-            /* The ray's direction, not normalised: only its side of the surface matters here. */
-            float sx = ((float)x + 0.5f) * scale_x - f->tan_half_x,
-                  sy = f->tan_half_y - ((float)y + 0.5f) * scale_y;
-            for (int k = 0; k < 3; k++)
-                dir[k] = f->forward[k] + sx * f->right[k] + sy * f->up[k];
-            float facing = pt->normal[0] * dir[0] + pt->normal[1] * dir[1] + pt->normal[2] * dir[2];
-            for (int k = 0; k < 3; k++) /* seen from behind: light the side the viewer sees */
-                pt->view_normal[k] = cs->shade_normal[i][k] = facing > 0 ? -pt->normal[k] : pt->normal[k];
-            /* The pixel's footprint in metres: level-0 texels per pixel over texels per metre. The albedo is
-             * sampled after the loop, for the whole run. */
-            cs->triangle[i] = tri;
-            cs->bary_u[i] = u;
-            cs->bary_v[i] = v;
-            cs->albedo_footprint[i] = view->footprint[p] - log2_density;
-            pt->triangle = tri;
-            pt->u = u;
-            pt->v = v;
-            pt->pixel_id = p;
-            if (no_cache) {
-                srv_camera_ray(f, (float)x + 0.5f, (float)y + 0.5f, dir);
-                srv__pixel_differentials(f, dir, view->depth[p], pt->normal, pt->dpdx, pt->dpdy);
-            }
-            srv_pixel *px = &cs->pixels[i];
-            px->triangle = tri;
-            px->island = memo_island;
-            px->footprint = view->footprint[p];
-            px->island_u = w * island_uv[0] + u * island_uv[2] + v * island_uv[4];
-            px->island_v = w * island_uv[1] + u * island_uv[3] + v * island_uv[5];
-            if (positions) {
-                memcpy(px->position, pt->position, sizeof px->position);
-                px->distance = view->depth[p];
+            uint32_t k = loop->effect_kind[e];
+            const uint64_t *bits = loop->viewer_bits[e];
+            loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers), thread_index, cs->pixels,
+                                       count, e, loop->bias[e], cs->taps, bits ? cs->blocks : NULL);
+            loop->effects[e]->shade(&loop->fx, &run);
+            for (uint32_t i = 0; i < count; i++) {
+                cs->missing[i] |= cs->taps[i].count == 0;
+                if (bits && cs->blocks[i] != SRV_NONE)
+                    cs->sharing[i] = fmaxf(cs->sharing[i], (float)__builtin_popcountll(bits[cs->blocks[i]]));
             }
         }
-    scene_albedo_run(s, cs->triangle, cs->bary_u, cs->bary_v, cs->albedo_footprint, count, cs->albedo);
-    return count;
+    }
+    for (uint32_t i = 0; i < count; i++) {
+        size_t p = cs->index[i];
+        const float *sn = cs->shade_normal[i];
+        const float *pos = cs->points[i].position;
+        const float *visibility = cs->light_visibility + (size_t)i * stride;
+        float irradiance[3] = {0, 0, 0};
+        for (uint32_t l = 0; l < lights; l++) {
+            const scene_light *light = &s->lights[l];
+            if (light->type == SCENE_LIGHT_DIRECTIONAL && l < CONSTANT_LIGHTS) {
+                const float *ldir = cu->light_dir[l];
+                float cosine = sn[0] * ldir[0] + sn[1] * ldir[1] + sn[2] * ldir[2];
+                if (cosine > 0)
+                    for (int k = 0; k < 3; k++)
+                        irradiance[k] += cosine * visibility[l] * cu->light_rgb[l][k];
+                continue;
+            }
+            float ldir[3], dist;
+            fx_light_direction(light, pos, ldir, &dist);
+            float cosine = sn[0] * ldir[0] + sn[1] * ldir[1] + sn[2] * ldir[2];
+            if (!(cosine > 0))
+                continue;
+            float falloff = light->type == SCENE_LIGHT_POINT ? 1.0f / fmaxf(dist * dist, 1e-8f) : 1.0f;
+            float scale = light->intensity * cosine * visibility[l] * falloff;
+            for (int k = 0; k < 3; k++)
+                irradiance[k] += scale * light->color[k];
+        }
+        /* Saturate, never overflow to infinity (extreme light intensities): DESIGN.md, robustness. */
+        float *rad = view->radiance + 3 * p;
+        for (int k = 0; k < 3; k++) {
+            float irr = saturate_max(irradiance[k]) + saturate_max(cu->sky[k] * cs->sky_visibility[i]) +
+                        saturate_max(cs->indirect[3 * i + k]);
+            float value = cs->albedo[i][k] * saturate_max(irr);
+            rad[k] = value <= FLT_MAX ? value : (value > 0 ? FLT_MAX : 0.0f);
+        }
+        *missing += cs->missing[i];
+        if (view->views[SRV_VIEW_AO]) {
+            view->views[SRV_VIEW_AO][p] = cs->sky_visibility[i];
+            view->views[SRV_VIEW_SHADOW][p] = lights ? visibility[0] : 1.0f;
+            view->views[SRV_VIEW_SHARING][p] = cs->sharing[i];
+        }
+    }
+}
+
+/* The sRGB bytes of buffer entry p. */
+FXC_HOT_INLINE void tone_map_entry(srv_viewer *view, size_t p)
+{
+    const float *rad = view->radiance + 3 * p;
+    uint8_t *px = view->image + 3 * p;
+    for (int k = 0; k < 3; k++)
+        px[k] = tone_map_srgb8(rad[k]);
+}
+
+static void compose_done(compose_task *task, const srv_loop *loop, uint64_t missing, const uint64_t *rays)
+{
+    atomic_fetch_add(&task->missing, missing);
+    for (uint32_t e = 0; e < loop->effect_count; e++)
+        if (rays[e])
+            atomic_fetch_add(&task->rays[e], rays[e]);
 }
 
 FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_t thread_index)
 {
     compose_task *task = user;
     srv_loop *loop = task->loop;
-    const scene *s = loop->s;
     srv_viewer *view = task->view;
     const srv_camera_frame *f = &view->frame;
     compose_scratch *cs = (compose_scratch *)((uint8_t *)loop->compose_scratch +
                                               (size_t)thread_index * loop->compose_scratch_bytes);
-    const uint32_t lights = s->light_count, stride = lights ? lights : 1;
-    bool no_cache = loop->desc.no_cache;
     uint64_t missing = 0, rays[SRV_MAX_EFFECTS] = {0};
-    float sky[3];
-    for (int k = 0; k < 3; k++)
-        sky[k] = s->sky_color[k] * s->sky_intensity;
-    const float log2_density = log2f(s->texel_density);
-    bool positions = false; /* some shading cache kind reads the pixels' positions */
-    for (uint32_t e = 0; e < loop->effect_count; e++)
-        positions |= loop->effect_shading[e] && loop->kinds[loop->effect_kind[e]]->needs_position;
-    /* Directional lights: the same direction and irradiance for every pixel, computed once. */
-    enum { CONSTANT_LIGHTS = 8 };
-    float light_dir[CONSTANT_LIGHTS][3], light_rgb[CONSTANT_LIGHTS][3];
-    for (uint32_t l = 0; l < lights && l < CONSTANT_LIGHTS; l++) {
-        float dist;
-        fx_light_direction(&s->lights[l], (const float[3]){0, 0, 0}, light_dir[l], &dist);
-        for (int k = 0; k < 3; k++)
-            light_rgb[l][k] = s->lights[l].intensity * s->lights[l].color[k];
-    }
+    compose_setup cu;
+    compose_setup_init(loop, &cu);
     /* A 16 x 16 tile in runs of 4 rows x 16 columns: neighbouring pixels read the same blocks and texels. */
     uint32_t tiles_x = (f->width + SRV_TILE - 1) / SRV_TILE;
     uint32_t tx0 = (task_index % tiles_x) * SRV_TILE, ty0 = (task_index / tiles_x) * SRV_TILE;
@@ -292,102 +435,44 @@ FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_
     uint32_t ty1 = ty0 + SRV_TILE < f->height ? ty0 + SRV_TILE : f->height;
     for (uint32_t ry = ty0; ry < ty1; ry += SRV_RUN / SRV_TILE) {
         uint32_t ry1 = ry + SRV_RUN / SRV_TILE < ty1 ? ry + SRV_RUN / SRV_TILE : ty1;
-        uint32_t count = gather_run(loop, view, tx0, tx1, ry, ry1, cs, sky, log2_density, positions);
-        for (uint32_t i = 0; i < count * stride; i++)
-            cs->light_visibility[i] = 1.0f;
-        for (uint32_t i = 0; i < count; i++) {
-            cs->sky_visibility[i] = 1.0f;
-            cs->indirect[3 * i] = cs->indirect[3 * i + 1] = cs->indirect[3 * i + 2] = 0.0f;
-            cs->missing[i] = 0;
-            cs->sharing[i] = 0.0f;
-        }
-        if (no_cache) {
-            for (uint32_t i = 0; i < count; i++) {
-                fx_shade_point sp = {.light_visibility = cs->light_visibility + (size_t)i * stride,
-                                     .sky_visibility = &cs->sky_visibility[i],
-                                     .indirect = &cs->indirect[3 * i]};
-                for (uint32_t e = 0; e < loop->effect_count; e++)
-                    if (loop->effect_on[e] && loop->effects[e]->eval)
-                        rays[e] += loop->effects[e]->eval(&loop->fx, &cs->points[i], &sp);
-            }
-        } else if (count) {
-            fx_shade_run run = {.count = count,
-                                .light_count = lights,
-                                .taps = cs->taps,
-                                .points = cs->points,
-                                .light_visibility = cs->light_visibility,
-                                .sky_visibility = cs->sky_visibility,
-                                .indirect = cs->indirect};
-            for (uint32_t e = 0; e < loop->effect_count; e++) {
-                if (!loop->effect_shading[e])
-                    continue;
-                uint32_t k = loop->effect_kind[e];
-                const uint64_t *bits = loop->viewer_bits[e];
-                loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers), thread_index,
-                                           cs->pixels, count, e, loop->bias[e], cs->taps, bits ? cs->blocks : NULL);
-                loop->effects[e]->shade(&loop->fx, &run);
-                for (uint32_t i = 0; i < count; i++) {
-                    cs->missing[i] |= cs->taps[i].count == 0;
-                    if (bits && cs->blocks[i] != SRV_NONE)
-                        cs->sharing[i] =
-                            fmaxf(cs->sharing[i], (float)__builtin_popcountll(bits[cs->blocks[i]]));
-                }
-            }
-        }
-        for (uint32_t i = 0; i < count; i++) {
-            size_t p = cs->index[i];
-            const float *sn = cs->shade_normal[i];
-            const float *pos = cs->points[i].position;
-            const float *visibility = cs->light_visibility + (size_t)i * stride;
-            float irradiance[3] = {0, 0, 0};
-            for (uint32_t l = 0; l < lights; l++) {
-                const scene_light *light = &s->lights[l];
-                if (light->type == SCENE_LIGHT_DIRECTIONAL && l < CONSTANT_LIGHTS) {
-                    const float *ldir = light_dir[l];
-                    float cosine = sn[0] * ldir[0] + sn[1] * ldir[1] + sn[2] * ldir[2];
-                    if (cosine > 0)
-                        for (int k = 0; k < 3; k++)
-                            irradiance[k] += cosine * visibility[l] * light_rgb[l][k];
-                    continue;
-                }
-                float ldir[3], dist;
-                fx_light_direction(light, pos, ldir, &dist);
-                float cosine = sn[0] * ldir[0] + sn[1] * ldir[1] + sn[2] * ldir[2];
-                if (!(cosine > 0))
-                    continue;
-                float falloff = light->type == SCENE_LIGHT_POINT ? 1.0f / fmaxf(dist * dist, 1e-8f) : 1.0f;
-                float scale = light->intensity * cosine * visibility[l] * falloff;
-                for (int k = 0; k < 3; k++)
-                    irradiance[k] += scale * light->color[k];
-            }
-            /* Saturate, never overflow to infinity (extreme light intensities): DESIGN.md, robustness. */
-            float *rad = view->radiance + 3 * p;
-            for (int k = 0; k < 3; k++) {
-                float irr = saturate_max(irradiance[k]) + saturate_max(sky[k] * cs->sky_visibility[i]) +
-                            saturate_max(cs->indirect[3 * i + k]);
-                float value = cs->albedo[i][k] * saturate_max(irr);
-                rad[k] = value <= FLT_MAX ? value : (value > 0 ? FLT_MAX : 0.0f);
-            }
-            missing += cs->missing[i];
-            if (view->views[SRV_VIEW_AO]) {
-                view->views[SRV_VIEW_AO][p] = cs->sky_visibility[i];
-                view->views[SRV_VIEW_SHADOW][p] = lights ? visibility[0] : 1.0f;
-                view->views[SRV_VIEW_SHARING][p] = cs->sharing[i];
-            }
-        }
+        uint32_t count = gather_run(loop, view, tx0, tx1, ry, ry1, cs, cu.sky, cu.log2_density, cu.positions);
+        shade_run(loop, view, cs, count, &cu, thread_index, &missing, rays);
         for (uint32_t y = ry; y < ry1; y++)
-            for (uint32_t x = tx0; x < tx1; x++) {
-                size_t p = (size_t)y * f->width + x;
-                const float *rad = view->radiance + 3 * p;
-                uint8_t *px = view->image + 3 * p;
-                for (int k = 0; k < 3; k++)
-                    px[k] = tone_map_srgb8(rad[k]);
-            }
+            for (uint32_t x = tx0; x < tx1; x++)
+                tone_map_entry(view, (size_t)y * f->width + x);
     }
-    atomic_fetch_add(&task->missing, missing);
-    for (uint32_t e = 0; e < loop->effect_count; e++)
-        if (rays[e])
-            atomic_fetch_add(&task->rays[e], rays[e]);
+    compose_done(task, loop, missing, rays);
+}
+
+enum { LIST_RUNS = 4 }; /* runs of SRV_RUN list entries per compose task of a sparse viewer */
+
+/* A sparse viewer: LIST_RUNS runs of its list, the same shading as a tile's runs (and the same clone, so the
+ * same arithmetic as a whole frame's). */
+FXC_HOT_CLONES static void compose_list_task(void *user, uint32_t task_index, uint32_t thread_index)
+{
+    compose_task *task = user;
+    srv_loop *loop = task->loop;
+    srv_viewer *view = task->view;
+    compose_scratch *cs = (compose_scratch *)((uint8_t *)loop->compose_scratch +
+                                              (size_t)thread_index * loop->compose_scratch_bytes);
+    uint64_t missing = 0, rays[SRV_MAX_EFFECTS] = {0};
+    compose_setup cu;
+    compose_setup_init(loop, &cu);
+    size_t first = (size_t)task_index * LIST_RUNS * SRV_RUN, end = first + (size_t)LIST_RUNS * SRV_RUN;
+    if (end > view->list_count)
+        end = view->list_count;
+    uint32_t tiles_x = (view->frame.width + SRV_TILE - 1) / SRV_TILE;
+    for (size_t run = first, run_end; run < end; run = run_end) {
+        /* The entries of one whole-frame run (srv__run_key's order keeps them together). */
+        uint32_t run_index = srv__run_key(view->list[run], tiles_x) >> 6;
+        for (run_end = run + 1; run_end < end && srv__run_key(view->list[run_end], tiles_x) >> 6 == run_index;)
+            run_end++;
+        uint32_t count = gather_list(loop, view, run, run_end, cs, cu.sky, cu.log2_density, cu.positions);
+        shade_run(loop, view, cs, count, &cu, thread_index, &missing, rays);
+        for (size_t p = run; p < run_end; p++)
+            tone_map_entry(view, p);
+    }
+    compose_done(task, loop, missing, rays);
 }
 
 void srv__compose(srv_loop *loop, uint32_t slot, srv_frame_stats *st)
@@ -398,9 +483,14 @@ void srv__compose(srv_loop *loop, uint32_t slot, srv_frame_stats *st)
     atomic_init(&task.missing, 0);
     for (uint32_t e = 0; e < SRV_MAX_EFFECTS; e++)
         atomic_init(&task.rays[e], 0);
-    uint32_t tiles =
-        ((view->frame.width + SRV_TILE - 1) / SRV_TILE) * ((view->frame.height + SRV_TILE - 1) / SRV_TILE);
-    srv_pool_run(loop->pool, tiles, compose_tile, &task);
+    if (view->sparse) {
+        uint32_t per_task = LIST_RUNS * SRV_RUN;
+        srv_pool_run(loop->pool, (view->list_count + per_task - 1) / per_task, compose_list_task, &task);
+    } else {
+        uint32_t tiles =
+            ((view->frame.width + SRV_TILE - 1) / SRV_TILE) * ((view->frame.height + SRV_TILE - 1) / SRV_TILE);
+        srv_pool_run(loop->pool, tiles, compose_tile, &task);
+    }
     view->stats.pixels_missing = atomic_load(&task.missing);
     for (uint32_t e = 0; e < loop->effect_count; e++)
         st->rays[e] += atomic_load(&task.rays[e]);

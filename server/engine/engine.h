@@ -5,6 +5,9 @@
  *   srv_viewer_add/remove  viewers join and leave at any frame, each with its own resolution and field of
  *                          view; ids carry a generation, so a removed or stale id is refused
  *   srv_viewer_set_camera  the camera a viewer's next frame is rendered for (stage 1)
+ *   srv_viewer_set_pixels  a sparse viewer's next frame: a camera, an image size and a list of its pixels;
+ *                          only those pixels are traced, request texels and are composed (the render
+ *                          cache's sample requests, issue 11)
  *   srv_loop_add_sink      where finished frames go (files, a connection, an error accumulator)
  *   srv_loop_frame         one frame for the viewers present, stages in a fixed order, each timed:
  *                          visibility, requests, queues, lookup, effects, compose, (sinks), housekeeping;
@@ -28,6 +31,7 @@ enum {
     SRV_MAX_VIEWERS = 64,          /* viewer slots */
     SRV_MAX_EFFECTS = FX_MAX_EFFECTS,
     SRV_MAX_SIDE = 8192,           /* largest image side */
+    SRV_MAX_PIXEL_LIST = 1 << 20,  /* most pixels a sparse viewer may list (max_pixels) */
 };
 
 /* Stages timed per frame, in the order they run. */
@@ -115,8 +119,13 @@ typedef struct srv_viewer_id {
 
 /* A viewer's shape; zero fields take the defaults beside them. */
 typedef struct srv_viewer_desc {
-    uint32_t width, height; /* pixels, 1..SRV_MAX_SIDE (default 640 x 360) */
+    uint32_t width, height; /* pixels, 1..SRV_MAX_SIDE (default 640 x 360); a sparse viewer's come with each
+                               pixel list instead (ignored here) */
     char name[32];          /* for statistics and file names (default "viewer_SLOT") */
+    uint32_t max_pixels;    /* 0: a viewer of whole frames. 1..SRV_MAX_PIXEL_LIST: a sparse viewer, whose
+                               frames render only the pixels of a list (srv_viewer_set_pixels), at most this
+                               many; its buffers hold max_pixels entries (SRV_VIEWER_BYTES_PER_PIXEL each, plus
+                               SRV_LIST_BYTES_PER_ENTRY), whatever the image size */
 } srv_viewer_desc;
 
 /* Bytes srv_viewer_add allocates per pixel: triangle, barycentric u and v, footprint, depth (4 each), linear
@@ -124,6 +133,8 @@ typedef struct srv_viewer_desc {
  * anything is created; tests/test_engine.c checks them against the counted allocations. */
 #define SRV_VIEWER_BYTES_PER_PIXEL 35u
 #define SRV_VIEWS_BYTES_PER_PIXEL 12u
+/* A sparse viewer's list and its sorting scratch, per entry (4 each). */
+#define SRV_LIST_BYTES_PER_ENTRY 8u
 
 /* One viewer's figures in a frame. */
 typedef struct srv_viewer_stats {
@@ -133,6 +144,7 @@ typedef struct srv_viewer_stats {
     uint64_t requested_cells;  /* world-space cells (probes), deduplicated within the viewer */
     uint64_t pixels_visible;
     uint64_t pixels_missing;   /* visible pixels composed without cached data */
+    uint64_t pixels_rendered;  /* primary rays: width*height, or a sparse viewer's distinct listed pixels */
 } srv_viewer_stats;
 
 /* The world-space cache's figures in a frame (all zero when no world-space effect runs). Requested and
@@ -185,7 +197,8 @@ typedef struct srv_memory {
     uint64_t total;                           /* everything above (reserved pools counted whole) */
 } srv_memory;
 
-/* What a sink receives for each viewer after compose. Pointers are valid during the call only. */
+/* What a sink receives for each viewer after compose (sparse viewers excepted: their pixels are read with
+ * srv_viewer_pixels and the accessors below). Pointers are valid during the call only. */
 typedef struct srv_viewer_frame {
     srv_viewer_id id;
     const char *name;
@@ -223,8 +236,32 @@ fxc_result srv_viewer_add(srv_loop *loop, const srv_viewer_desc *desc, srv_viewe
 fxc_result srv_viewer_remove(srv_loop *loop, srv_viewer_id id);
 
 /* Sets the camera the viewer's next frames are rendered for. FXC_ERR_CAMERA for a degenerate camera,
- * FXC_ERR_STALE_ID for a removed viewer. */
+ * FXC_ERR_STALE_ID for a removed viewer, FXC_ERR_INVALID for a sparse viewer (srv_viewer_set_pixels). */
 fxc_result srv_viewer_set_camera(srv_loop *loop, srv_viewer_id id, const srv_camera *camera);
+
+/* A sparse viewer's next frame (desc.max_pixels > 0): the pixels of the width x height image camera sees,
+ * each packed as y << 16 | x (SRV_PIXEL_XY), in any order. The list is copied, sorted in a whole frame's
+ * compose order (16 x 16 tiles in row order, 4-row runs inside each, rows inside each run) and
+ * deduplicated: a pixel listed twice is traced once (*unique, may be NULL, receives the distinct count).
+ * Listed pixels of one whole-frame run are composed together, so an effect that shades a run's pixels
+ * jointly (the probes) sees the same neighbours when the whole run is listed.
+ * The next srv_loop_frame renders exactly those pixels through the shared caches: visibility traces one
+ * primary ray each, requests and compose visit only them (cost proportional to the list, not the image);
+ * then the list is spent, and the viewer renders nothing more until the next call. Results, until then:
+ * srv_viewer_pixels (the sorted distinct list) and srv_viewer_image / radiance / depth / view, indexed by
+ * position in that list (srv_viewer_pixel_index). A list replaces one not yet rendered.
+ * FXC_ERR_STALE_ID; FXC_ERR_INVALID (not a sparse viewer, a NULL list, sides outside 1..SRV_MAX_SIDE);
+ * FXC_ERR_RANGE (count 0 or above max_pixels, or an entry outside the image: nothing is changed);
+ * FXC_ERR_CAMERA. */
+fxc_result srv_viewer_set_pixels(srv_loop *loop, srv_viewer_id id, const srv_camera *camera, uint32_t width,
+                                 uint32_t height, const uint32_t *pixels, uint32_t count, uint32_t *unique);
+#define SRV_PIXEL_XY(x, y) ((uint32_t)(y) << 16 | (uint32_t)(x))
+
+/* A sparse viewer's last rendered list (distinct, in that compose order), *count entries; NULL for a stale id,
+ * a whole-frame viewer, or before its first frame. */
+const uint32_t *srv_viewer_pixels(const srv_loop *loop, srv_viewer_id id, uint32_t *count);
+/* The position of pixel (x, y) in that list (binary search), or UINT32_MAX when it is not listed. */
+uint32_t srv_viewer_pixel_index(const srv_loop *loop, srv_viewer_id id, uint32_t x, uint32_t y);
 
 /* FXC_OK when id names a present viewer. */
 fxc_result srv_viewer_check(const srv_loop *loop, srv_viewer_id id);
@@ -233,7 +270,8 @@ fxc_result srv_viewer_check(const srv_loop *loop, srv_viewer_id id);
 uint32_t srv_loop_viewers(const srv_loop *loop, srv_viewer_id *ids, uint32_t cap);
 
 /* A viewer's last frame: sRGB image, linear radiance, depth, or a kept view; NULL for a stale id or before
- * its first frame. *width / *height (may be NULL) receive its size. */
+ * its first frame. *width / *height (may be NULL) receive its size. A sparse viewer's arrays hold one entry
+ * per listed pixel (srv_viewer_pixels), and its size is its last list's image. */
 const uint8_t *srv_viewer_image(const srv_loop *loop, srv_viewer_id id);
 const float *srv_viewer_radiance(const srv_loop *loop, srv_viewer_id id);
 const float *srv_viewer_depth(const srv_loop *loop, srv_viewer_id id);

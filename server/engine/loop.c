@@ -316,6 +316,9 @@ static void viewer_free_buffers(srv_loop *loop, srv_viewer *view)
     srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->image, 3 * n, 0, 1);
     for (int w = 0; w < SRV_VIEW_COUNT; w++)
         srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->views[w], view->views[w] ? n : 0, 0, sizeof(float));
+    srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->list, view->list ? n : 0, 0, sizeof *view->list);
+    srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->list_scratch, view->list_scratch ? n : 0, 0,
+                sizeof *view->list_scratch);
     srv__request_list_free(loop, SRV_MEM_VIEWERS, &view->requests);
 }
 
@@ -382,6 +385,10 @@ fxc_result srv_viewer_add(srv_loop *loop, const srv_viewer_desc *desc, srv_viewe
 {
     out->id = 0;
     srv_viewer_desc d = desc ? *desc : (srv_viewer_desc){0};
+    if (d.max_pixels > SRV_MAX_PIXEL_LIST)
+        return FXC_ERR_INVALID;
+    if (d.max_pixels) /* a sparse viewer: each list brings its image size */
+        d.width = d.height = 1;
     if (!d.width && !d.height)
         d.width = 640, d.height = 360;
     if (d.width < 1 || d.height < 1 || d.width > SRV_MAX_SIDE || d.height > SRV_MAX_SIDE)
@@ -400,7 +407,8 @@ fxc_result srv_viewer_add(srv_loop *loop, const srv_viewer_desc *desc, srv_viewe
     view->desc = d;
     if (!view->desc.name[0])
         snprintf(view->desc.name, sizeof view->desc.name, "viewer_%02u", slot);
-    size_t n = (size_t)d.width * d.height;
+    view->sparse = d.max_pixels > 0;
+    size_t n = view->sparse ? d.max_pixels : (size_t)d.width * d.height;
     bool ok = srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->tri, 0, n, sizeof *view->tri);
     view->pixels = n; /* from here on viewer_free_buffers frees what was allocated */
     ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->bary_u, 0, n, sizeof(float));
@@ -409,6 +417,10 @@ fxc_result srv_viewer_add(srv_loop *loop, const srv_viewer_desc *desc, srv_viewe
     ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->depth, 0, n, sizeof(float));
     ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->radiance, 0, 3 * n, sizeof(float));
     ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->image, 0, 3 * n, 1);
+    if (view->sparse) {
+        ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->list, 0, n, sizeof *view->list);
+        ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->list_scratch, 0, n, sizeof *view->list_scratch);
+    }
     for (int w = 0; ok && loop->desc.keep_views && w < SRV_VIEW_COUNT; w++) {
         ok = srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->views[w], 0, n, sizeof(float));
         if (ok)
@@ -444,6 +456,8 @@ fxc_result srv_viewer_set_camera(srv_loop *loop, srv_viewer_id id, const srv_cam
     srv_viewer *view = viewer_of(loop, id);
     if (!view)
         return FXC_ERR_STALE_ID;
+    if (view->sparse)
+        return FXC_ERR_INVALID;
     srv_camera_frame frame;
     if (!camera || !srv_camera_setup(camera, view->desc.width, view->desc.height, &frame))
         return FXC_ERR_CAMERA;
@@ -451,6 +465,103 @@ fxc_result srv_viewer_set_camera(srv_loop *loop, srv_viewer_id id, const srv_cam
     view->frame = frame;
     view->has_camera = true;
     return FXC_OK;
+}
+
+/* Sorts n keys (below 2^32) in place, least significant byte first (four counting
+ * passes, O(n), no comparison sort), through scratch; passes whose byte is the same for every entry are
+ * skipped. */
+static void sort_pixels(uint32_t *keys, uint32_t *scratch, uint32_t n)
+{
+    uint32_t *from = keys, *to = scratch;
+    for (uint32_t shift = 0; shift < 32; shift += 8) {
+        uint32_t counts[256] = {0};
+        for (uint32_t i = 0; i < n; i++)
+            counts[(from[i] >> shift) & 0xFFu]++;
+        if (counts[(from[0] >> shift) & 0xFFu] == n)
+            continue;
+        uint32_t sum = 0;
+        for (uint32_t b = 0; b < 256; b++) {
+            uint32_t c = counts[b];
+            counts[b] = sum;
+            sum += c;
+        }
+        for (uint32_t i = 0; i < n; i++)
+            to[counts[(from[i] >> shift) & 0xFFu]++] = from[i];
+        uint32_t *swap = from;
+        from = to;
+        to = swap;
+    }
+    if (from != keys)
+        memcpy(keys, from, (size_t)n * sizeof *keys);
+}
+
+fxc_result srv_viewer_set_pixels(srv_loop *loop, srv_viewer_id id, const srv_camera *camera, uint32_t width,
+                                 uint32_t height, const uint32_t *pixels, uint32_t count, uint32_t *unique)
+{
+    srv_viewer *view = viewer_of(loop, id);
+    if (!view)
+        return FXC_ERR_STALE_ID;
+    if (!view->sparse || !pixels || width < 1 || height < 1 || width > SRV_MAX_SIDE || height > SRV_MAX_SIDE)
+        return FXC_ERR_INVALID;
+    if (count == 0 || count > view->desc.max_pixels)
+        return FXC_ERR_RANGE;
+    for (uint32_t i = 0; i < count; i++)
+        if ((pixels[i] & 0xFFFFu) >= width || (pixels[i] >> 16) >= height)
+            return FXC_ERR_RANGE;
+    srv_camera_frame frame;
+    if (!camera || !srv_camera_setup(camera, width, height, &frame))
+        return FXC_ERR_CAMERA;
+    uint32_t tiles_x = (width + SRV_TILE - 1) / SRV_TILE;
+    for (uint32_t i = 0; i < count; i++)
+        view->list[i] = srv__run_key(pixels[i], tiles_x);
+    sort_pixels(view->list, view->list_scratch, count);
+    uint32_t distinct = 1;
+    for (uint32_t i = 1; i < count; i++)
+        if (view->list[i] != view->list[distinct - 1])
+            view->list[distinct++] = view->list[i];
+    for (uint32_t i = 0; i < distinct; i++)
+        view->list[i] = srv__run_key_pixel(view->list[i], tiles_x);
+    view->list_count = distinct;
+    view->desc.width = width;
+    view->desc.height = height;
+    view->camera = *camera;
+    view->frame = frame;
+    view->has_camera = true;
+    view->rendered = false; /* the buffers now belong to this list */
+    if (unique)
+        *unique = distinct;
+    return FXC_OK;
+}
+
+const uint32_t *srv_viewer_pixels(const srv_loop *loop, srv_viewer_id id, uint32_t *count)
+{
+    const srv_viewer *view = viewer_of(loop, id);
+    if (!view || !view->sparse || !view->rendered) {
+        if (count)
+            *count = 0;
+        return NULL;
+    }
+    if (count)
+        *count = view->list_count;
+    return view->list;
+}
+
+uint32_t srv_viewer_pixel_index(const srv_loop *loop, srv_viewer_id id, uint32_t x, uint32_t y)
+{
+    uint32_t count;
+    const uint32_t *list = srv_viewer_pixels(loop, id, &count);
+    if (!list || x >= SRV_MAX_SIDE || y >= SRV_MAX_SIDE)
+        return UINT32_MAX;
+    uint32_t tiles_x = (viewer_of(loop, id)->frame.width + SRV_TILE - 1) / SRV_TILE;
+    uint32_t want = SRV_PIXEL_XY(x, y), want_key = srv__run_key(want, tiles_x), lo = 0, hi = count;
+    while (lo < hi) {
+        uint32_t mid = lo + (hi - lo) / 2;
+        if (srv__run_key(list[mid], tiles_x) < want_key)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo < count && list[lo] == want ? lo : UINT32_MAX;
 }
 
 uint32_t srv_loop_viewers(const srv_loop *loop, srv_viewer_id *ids, uint32_t cap)
@@ -537,9 +648,11 @@ fxc_result srv_loop_frame(srv_loop *loop, srv_frame_stats *st)
         view->stats.id = (srv_viewer_id){view->generation << 8 | slots[i]};
         view->stats.width = view->desc.width;
         view->stats.height = view->desc.height;
-        for (size_t p = 0; p < view->pixels; p++)
+        size_t pixels = srv__viewer_pixel_count(view);
+        for (size_t p = 0; p < pixels; p++)
             view->stats.pixels_visible += view->tri[p] != SRV_MISS;
-        st->visibility_rays += view->pixels;
+        view->stats.pixels_rendered = pixels;
+        st->visibility_rays += pixels;
         st->pixels_visible += view->stats.pixels_visible;
     }
 
@@ -596,6 +709,8 @@ fxc_result srv_loop_frame(srv_loop *loop, srv_frame_stats *st)
     for (uint32_t i = 0; i < active; i++) {
         srv_viewer *view = &loop->viewers[slots[i]];
         view->rendered = true;
+        if (view->sparse)
+            view->has_camera = false; /* its list is spent: nothing more until the next one */
         st->viewers[i] = view->stats;
         st->pixels_missing += view->stats.pixels_missing;
     }
@@ -608,6 +723,8 @@ fxc_result srv_loop_frame(srv_loop *loop, srv_frame_stats *st)
             continue;
         for (uint32_t i = 0; i < active; i++) {
             srv_viewer *view = &loop->viewers[slots[i]];
+            if (view->sparse)
+                continue; /* no whole image: read with srv_viewer_pixels */
             srv_viewer_frame vf = {.id = st->viewers[i].id, .name = view->desc.name, .frame = st->frame,
                                    .width = view->desc.width, .height = view->desc.height, .srgb = view->image,
                                    .radiance = view->radiance, .depth = view->depth, .camera = view->camera,

@@ -3,7 +3,7 @@
  * depends on (the triangle lookup). The keys come from the effect's cache kind, a run of pixels at a time.
  * Tiles run on the thread pool; each folds neighbouring pixels' requests for the same block in a small
  * direct-mapped buffer before appending them to its thread's list. The lists of all threads then go to the
- * kind's batch request, which sorts and merges them, so the cache comes out identical whatever the thread
+ * kind's batch request (a sparse viewer: runs of 256 entries of its list instead of tiles), which sorts and merges them, so the cache comes out identical whatever the thread
  * interleaving. Requests of all viewers meet in the same tables: this is where sharing happens. */
 #include "engine_internal.h"
 
@@ -53,55 +53,52 @@ static bool fold_add(srv_loop *loop, fold_buffer *fold, uint64_t key, uint64_t m
     return ok;
 }
 
-static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
+/* What neighbouring pixels share when they see the same triangle, looked up once. */
+typedef struct pixel_memo {
+    uint32_t tri, island; /* the last triangle (SRV_MISS: none yet) and its island */
+    float uv[6], corner[3][3];
+} pixel_memo;
+
+/* The cache pixel of buffer entry p of a viewer (visible: tri[p] != SRV_MISS). */
+static inline void fill_pixel(const scene *s, const srv_viewer *view, size_t p, bool positions, pixel_memo *memo,
+                              srv_pixel *px)
 {
-    request_task *task = user;
+    uint32_t tri = view->tri[p];
+    if (tri != memo->tri) {
+        memo->tri = tri;
+        memo->island = s->tri_island[tri];
+        memcpy(memo->uv, s->tri_island_uv + 6 * (size_t)tri, sizeof memo->uv);
+        if (positions) {
+            const uint32_t *idx = s->indices + 3 * (size_t)tri;
+            for (int c = 0; c < 3; c++)
+                memcpy(memo->corner[c], s->positions + 3 * (size_t)idx[c], sizeof memo->corner[c]);
+        }
+    }
+    px->triangle = tri;
+    px->island = memo->island;
+    px->footprint = view->footprint[p];
+    float u = view->bary_u[p], v = view->bary_v[p], w = 1.0f - u - v;
+    if (!positions) { /* a kind reads island UVs or positions, never both (needs_position) */
+        px->island_u = w * memo->uv[0] + u * memo->uv[2] + v * memo->uv[4];
+        px->island_v = w * memo->uv[1] + u * memo->uv[3] + v * memo->uv[5];
+    } else {
+        for (int k = 0; k < 3; k++)
+            px->position[k] = w * memo->corner[0][k] + u * memo->corner[1][k] + v * memo->corner[2][k];
+        px->distance = view->depth[p];
+    }
+}
+
+/* The keys of up to SRV_TILE * SRV_TILE pixels, folded, onto the thread's list. */
+static void request_pixels(request_task *task, uint32_t thread_index, const srv_pixel *pixels, uint32_t count)
+{
     srv_loop *loop = task->loop;
-    const scene *s = loop->s;
     const srv_viewer *view = task->view;
     const srv_cache_kind *kind = loop->kinds[task->kind];
     const void *cache = loop->caches[task->kind];
-    const bool positions = kind->needs_position;
     const uint32_t viewer_slot = (uint32_t)(view - loop->viewers);
     srv_request_list *out = &loop->thread_requests[thread_index];
-    uint32_t width = view->frame.width, height = view->frame.height;
-    uint32_t x0 = (task_index % task->tiles_x) * SRV_TILE, y0 = (task_index / task->tiles_x) * SRV_TILE;
     fold_buffer fold;
     memset(fold.keys, 0xFF, sizeof fold.keys);
-    srv_pixel pixels[SRV_TILE * SRV_TILE];
-    uint32_t count = 0;
-    uint32_t memo_tri = SRV_MISS, memo_island = 0; /* the last triangle's island and island UVs */
-    float uv[6] = {0, 0, 0, 0, 0, 0}, corner[3][3] = {{0}};
-    for (uint32_t y = y0; y < y0 + SRV_TILE && y < height; y++)
-        for (uint32_t x = x0; x < x0 + SRV_TILE && x < width; x++) {
-            size_t p = (size_t)y * width + x;
-            uint32_t tri = view->tri[p];
-            if (tri == SRV_MISS)
-                continue;
-            if (tri != memo_tri) {
-                memo_tri = tri;
-                memo_island = s->tri_island[tri];
-                memcpy(uv, s->tri_island_uv + 6 * (size_t)tri, sizeof uv);
-                if (positions) {
-                    const uint32_t *idx = s->indices + 3 * (size_t)tri;
-                    for (int c = 0; c < 3; c++)
-                        memcpy(corner[c], s->positions + 3 * (size_t)idx[c], sizeof corner[c]);
-                }
-            }
-            srv_pixel *px = &pixels[count++];
-            px->triangle = tri;
-            px->island = memo_island;
-            px->footprint = view->footprint[p];
-            float u = view->bary_u[p], v = view->bary_v[p], w = 1.0f - u - v;
-            if (!positions) { /* a kind reads island UVs or positions, never both (needs_position) */
-                px->island_u = w * uv[0] + u * uv[2] + v * uv[4];
-                px->island_v = w * uv[1] + u * uv[3] + v * uv[5];
-            } else {
-                for (int k = 0; k < 3; k++)
-                    px->position[k] = w * corner[0][k] + u * corner[1][k] + v * corner[2][k];
-                px->distance = view->depth[p];
-            }
-        }
     bool ok = true;
     /* The whole tile in one call, so the kind can skip pixels that repeat one above or beside them. */
     uint64_t keys[SRV_TILE * SRV_TILE * SRV_KEYS_PER_PIXEL], masks[SRV_TILE * SRV_TILE * SRV_KEYS_PER_PIXEL];
@@ -118,6 +115,43 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
         ok &= fold_flush_slot(loop, &fold, f, out);
     if (!ok)
         atomic_store(&task->failed, true);
+}
+
+static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
+{
+    request_task *task = user;
+    const srv_viewer *view = task->view;
+    const bool positions = task->loop->kinds[task->kind]->needs_position;
+    uint32_t width = view->frame.width, height = view->frame.height;
+    uint32_t x0 = (task_index % task->tiles_x) * SRV_TILE, y0 = (task_index / task->tiles_x) * SRV_TILE;
+    srv_pixel pixels[SRV_TILE * SRV_TILE];
+    uint32_t count = 0;
+    pixel_memo memo = {.tri = SRV_MISS};
+    for (uint32_t y = y0; y < y0 + SRV_TILE && y < height; y++)
+        for (uint32_t x = x0; x < x0 + SRV_TILE && x < width; x++) {
+            size_t p = (size_t)y * width + x;
+            if (view->tri[p] != SRV_MISS)
+                fill_pixel(task->loop->s, view, p, positions, &memo, &pixels[count++]);
+        }
+    request_pixels(task, thread_index, pixels, count);
+}
+
+/* A sparse viewer: SRV_TILE * SRV_TILE consecutive entries of its (row-sorted) list per task. */
+static void request_list_task(void *user, uint32_t task_index, uint32_t thread_index)
+{
+    request_task *task = user;
+    const srv_viewer *view = task->view;
+    const bool positions = task->loop->kinds[task->kind]->needs_position;
+    size_t first = (size_t)task_index * SRV_TILE * SRV_TILE, end = first + SRV_TILE * SRV_TILE;
+    if (end > view->list_count)
+        end = view->list_count;
+    srv_pixel pixels[SRV_TILE * SRV_TILE];
+    uint32_t count = 0;
+    pixel_memo memo = {.tri = SRV_MISS};
+    for (size_t p = first; p < end; p++)
+        if (view->tri[p] != SRV_MISS)
+            fill_pixel(task->loop->s, view, p, positions, &memo, &pixels[count++]);
+    request_pixels(task, thread_index, pixels, count);
 }
 
 /* One pass of one viewer over one kind (and one effect when the kind's keys do not name it): gather on the
@@ -137,7 +171,11 @@ static uint64_t request_pass(srv_loop *loop, uint32_t slot, uint32_t k, uint32_t
                          .tiles_x = (view->frame.width + SRV_TILE - 1) / SRV_TILE};
     atomic_init(&task.failed, false);
     uint32_t tiles_y = (view->frame.height + SRV_TILE - 1) / SRV_TILE;
-    srv_pool_run(loop->pool, task.tiles_x * tiles_y, request_tile, &task);
+    if (view->sparse)
+        srv_pool_run(loop->pool, (view->list_count + SRV_TILE * SRV_TILE - 1) / (SRV_TILE * SRV_TILE),
+                     request_list_task, &task);
+    else
+        srv_pool_run(loop->pool, task.tiles_x * tiles_y, request_tile, &task);
 
     /* Gather the threads' lists (order does not matter: the batch sorts). */
     size_t total = 0;

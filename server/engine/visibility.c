@@ -1,5 +1,6 @@
 /* Stage 2, visibility: one primary ray per pixel through Embree's 16-wide packets (4 x 4 pixels), in
- * 16 x 16-pixel tiles spread over the thread pool. Per pixel it keeps the triangle, the barycentrics and
+ * 16 x 16-pixel tiles spread over the thread pool (a sparse viewer: packets of 16 consecutive entries of its
+ * sorted list, 256 entries per task). Per pixel it keeps the triangle, the barycentrics and
  * the footprint: the pixel's size on the surface from ray differentials (the neighbouring pixels' rays
  * intersected with the hit triangle's plane), in level-0 texels, as log2 - the level an unbiased effect
  * reads. */
@@ -53,68 +54,101 @@ static float pixel_footprint(const srv_camera_frame *f, const float dir[3], floa
     return texels2 > 1e-30f ? 0.5f * log2f(texels2) : -100.0f;
 }
 
-void srv__visibility_tile(const scene *s, scene_rt *rt, const srv_camera_frame *f, uint32_t tile_x,
-                          uint32_t tile_y, uint32_t *tri, float *bary_u, float *bary_v, float *depth,
-                          float *footprint)
+/* One packet of up to 16 primary rays: lane i is pixel (x[i], y[i]) of frame f when valid_lane[i], its
+ * results written at index[i] of the output arrays. The direction formula is srv_camera_ray's, inlined, so a
+ * pixel traced in a tile or from a list gets the same ray. */
+static void trace_packet(const scene *s, RTCScene rtc, const srv_camera_frame *f, const uint32_t x[16],
+                         const uint32_t y[16], const size_t index[16], const int valid_lane[16], uint32_t *tri,
+                         float *bary_u, float *bary_v, float *depth, float *footprint)
 {
-    RTCScene rtc = scene_rt_handle(rt);
     _Alignas(64) struct RTCRayHit16 packet;
     _Alignas(64) int valid[16];
     float dirs[16][3];
     struct RTCIntersectContext ctx;
     /* The image plane per pixel: dir = forward + sx * right + sy * up, normalised (srv_camera_ray, inlined). */
     const float scale_x = 2.0f * f->tan_half_x / (float)f->width, scale_y = 2.0f * f->tan_half_y / (float)f->height;
+    for (int i = 0; i < 16; i++) {
+        valid[i] = valid_lane[i] ? -1 : 0;
+        float sx = ((float)x[i] + 0.5f) * scale_x - f->tan_half_x;
+        float sy = f->tan_half_y - ((float)y[i] + 0.5f) * scale_y;
+        float d[3], len2 = 0;
+        for (int k = 0; k < 3; k++) {
+            d[k] = f->forward[k] + sx * f->right[k] + sy * f->up[k];
+            len2 += d[k] * d[k];
+        }
+        float inv = 1.0f / sqrtf(len2);
+        for (int k = 0; k < 3; k++)
+            dirs[i][k] = d[k] * inv;
+        packet.ray.org_x[i] = f->origin[0];
+        packet.ray.org_y[i] = f->origin[1];
+        packet.ray.org_z[i] = f->origin[2];
+        packet.ray.dir_x[i] = dirs[i][0];
+        packet.ray.dir_y[i] = dirs[i][1];
+        packet.ray.dir_z[i] = dirs[i][2];
+        packet.ray.tnear[i] = 0.0f;
+        packet.ray.tfar[i] = INFINITY;
+        packet.ray.mask[i] = 0xFFFFFFFFu;
+        packet.ray.time[i] = 0.0f;
+        packet.ray.flags[i] = 0;
+        packet.ray.id[i] = 0;
+        packet.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+        packet.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+    }
+    rtcInitIntersectContext(&ctx);
+    rtcIntersect16(valid, rtc, &ctx, &packet);
+    for (int i = 0; i < 16; i++) {
+        if (!valid[i])
+            continue;
+        size_t p = index[i];
+        if (packet.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) {
+            tri[p] = SRV_MISS;
+            depth[p] = INFINITY;
+            continue;
+        }
+        uint32_t hit = packet.hit.primID[i];
+        tri[p] = hit;
+        bary_u[p] = packet.hit.u[i];
+        bary_v[p] = packet.hit.v[i];
+        depth[p] = packet.ray.tfar[i];
+        footprint[p] =
+            pixel_footprint(f, dirs[i], packet.ray.tfar[i], s->tri_normal + 3 * (size_t)hit, s->texel_density);
+    }
+}
+
+void srv__visibility_tile(const scene *s, scene_rt *rt, const srv_camera_frame *f, uint32_t tile_x,
+                          uint32_t tile_y, uint32_t *tri, float *bary_u, float *bary_v, float *depth,
+                          float *footprint)
+{
+    RTCScene rtc = scene_rt_handle(rt);
+    uint32_t xs[16], ys[16];
+    size_t index[16];
+    int valid[16];
     for (uint32_t py = tile_y; py < tile_y + SRV_TILE && py < f->height; py += 4)
         for (uint32_t px = tile_x; px < tile_x + SRV_TILE && px < f->width; px += 4) {
             for (int i = 0; i < 16; i++) {
-                uint32_t x = px + (uint32_t)(i & 3), y = py + (uint32_t)(i >> 2);
-                valid[i] = x < f->width && y < f->height ? -1 : 0;
-                float sx = ((float)x + 0.5f) * scale_x - f->tan_half_x;
-                float sy = f->tan_half_y - ((float)y + 0.5f) * scale_y;
-                float d[3], len2 = 0;
-                for (int k = 0; k < 3; k++) {
-                    d[k] = f->forward[k] + sx * f->right[k] + sy * f->up[k];
-                    len2 += d[k] * d[k];
-                }
-                float inv = 1.0f / sqrtf(len2);
-                for (int k = 0; k < 3; k++)
-                    dirs[i][k] = d[k] * inv;
-                packet.ray.org_x[i] = f->origin[0];
-                packet.ray.org_y[i] = f->origin[1];
-                packet.ray.org_z[i] = f->origin[2];
-                packet.ray.dir_x[i] = dirs[i][0];
-                packet.ray.dir_y[i] = dirs[i][1];
-                packet.ray.dir_z[i] = dirs[i][2];
-                packet.ray.tnear[i] = 0.0f;
-                packet.ray.tfar[i] = INFINITY;
-                packet.ray.mask[i] = 0xFFFFFFFFu;
-                packet.ray.time[i] = 0.0f;
-                packet.ray.flags[i] = 0;
-                packet.ray.id[i] = 0;
-                packet.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
-                packet.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+                xs[i] = px + (uint32_t)(i & 3);
+                ys[i] = py + (uint32_t)(i >> 2);
+                valid[i] = xs[i] < f->width && ys[i] < f->height;
+                index[i] = valid[i] ? (size_t)ys[i] * f->width + xs[i] : 0;
             }
-            rtcInitIntersectContext(&ctx);
-            rtcIntersect16(valid, rtc, &ctx, &packet);
-            for (int i = 0; i < 16; i++) {
-                if (!valid[i])
-                    continue;
-                uint32_t x = px + (uint32_t)(i & 3), y = py + (uint32_t)(i >> 2);
-                size_t p = (size_t)y * f->width + x;
-                if (packet.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) {
-                    tri[p] = SRV_MISS;
-                    depth[p] = INFINITY;
-                    continue;
-                }
-                uint32_t hit = packet.hit.primID[i];
-                tri[p] = hit;
-                bary_u[p] = packet.hit.u[i];
-                bary_v[p] = packet.hit.v[i];
-                depth[p] = packet.ray.tfar[i];
-                footprint[p] = pixel_footprint(f, dirs[i], packet.ray.tfar[i], s->tri_normal + 3 * (size_t)hit,
-                                               s->texel_density);
-            }
+            trace_packet(s, rtc, f, xs, ys, index, valid, tri, bary_u, bary_v, depth, footprint);
         }
+}
+
+void srv__visibility_list(const scene *s, scene_rt *rt, const srv_camera_frame *f, const uint32_t *list,
+                          uint32_t first, uint32_t count, uint32_t *tri, float *bary_u, float *bary_v, float *depth,
+                          float *footprint)
+{
+    uint32_t xs[16] = {0}, ys[16] = {0};
+    size_t index[16] = {0};
+    int valid[16] = {0};
+    for (uint32_t i = 0; i < 16 && i < count; i++) {
+        xs[i] = list[first + i] & 0xFFFFu;
+        ys[i] = list[first + i] >> 16;
+        index[i] = first + i;
+        valid[i] = 1;
+    }
+    trace_packet(s, scene_rt_handle(rt), f, xs, ys, index, valid, tri, bary_u, bary_v, depth, footprint);
 }
 
 typedef struct visibility_task {
@@ -134,9 +168,30 @@ static void visibility_tile(void *user, uint32_t task_index, uint32_t thread_ind
                          view->footprint);
 }
 
+enum { LIST_TASK = 256 }; /* listed pixels per visibility task: 16 packets */
+
+/* LIST_TASK entries of a sparse viewer's list. */
+static void visibility_list_task(void *user, uint32_t task_index, uint32_t thread_index)
+{
+    (void)thread_index;
+    visibility_task *task = user;
+    srv_viewer *view = task->view;
+    uint32_t first = task_index * LIST_TASK, end = first + LIST_TASK;
+    if (end > view->list_count)
+        end = view->list_count;
+    for (uint32_t at = first; at < end; at += 16)
+        srv__visibility_list(task->loop->s, task->loop->rt, &view->frame, view->list, at, end - at, view->tri,
+                             view->bary_u, view->bary_v, view->depth, view->footprint);
+}
+
 void srv__visibility(srv_loop *loop, srv_viewer *view)
 {
     const srv_camera_frame *f = &view->frame;
+    if (view->sparse) {
+        visibility_task task = {.loop = loop, .view = view};
+        srv_pool_run(loop->pool, (view->list_count + LIST_TASK - 1) / LIST_TASK, visibility_list_task, &task);
+        return;
+    }
     visibility_task task = {.loop = loop, .view = view, .tiles_x = (f->width + SRV_TILE - 1) / SRV_TILE};
     uint32_t tiles_y = (f->height + SRV_TILE - 1) / SRV_TILE;
     srv_pool_run(loop->pool, task.tiles_x * tiles_y, visibility_tile, &task);

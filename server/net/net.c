@@ -6,6 +6,7 @@
 #include "trace.h"
 
 #include <errno.h>
+#include <float.h>
 #include <libwebsockets.h>
 #include <math.h>
 #include <pthread.h>
@@ -30,10 +31,31 @@ typedef struct net_viewer {
     uint32_t index;                 /* join number: the name is viewer_NN */
     char name[PROTO_NAME_MAX + 1];
     proto_hello hello;
-    /* The latest camera (network thread writes, frame thread reads). */
+    proto_strategy strategy;        /* hello's reference-frame strategy */
+    /* The latest camera (network thread writes, frame thread reads): the one rendered, after the strategy. */
     bool has_camera;
     srv_camera camera;
     uint32_t camera_sequence;
+    /* The last camera message (network thread only): predictive extrapolates from it to the next. */
+    bool has_previous;
+    double previous_time;
+    proto_pose previous_pose;
+    /* Sample requests (issue 11). The network thread writes the pending one; the frame thread hands it to
+     * the viewer's sparse engine viewer (added at its first request), renders it, and stages the answer. */
+    uint32_t *req_pixels[2];        /* request order, packed y << 16 | x: [req_pending_index] pending, the
+                                       other the one being rendered (max_samples each) */
+    int req_pending_index;
+    bool req_pending, req_rendering;
+    uint32_t req_id[2], req_count[2], req_width[2], req_height[2];
+    srv_camera req_camera[2];
+    srv_viewer_id sample_id;        /* the sparse engine viewer, 0 until the first request */
+    /* The answer outbox: as frames, two buffers (frame thread fills ans_index, network thread takes it). */
+    uint8_t *ans[2];                /* count x PROTO_SAMPLE_BYTES */
+    int ans_index;
+    bool ans_ready;
+    uint32_t ans_request, ans_frame, ans_count, ans_width, ans_height;
+    srv_camera ans_camera;
+    uint64_t requests_dropped;
     /* In the loop (frame thread). */
     srv_viewer_id id;
     uint32_t frame_sequence;        /* the camera sequence of the frame being rendered */
@@ -73,6 +95,7 @@ typedef struct net_session {
     char error_reason[PROTO_REASON_MAX + 1];
     bool bye_pending, closing;
     double tokens, tokens_time;     /* the camera-rate bucket */
+    double sample_tokens, sample_tokens_time; /* the sample requests' bucket (the same rate) */
     bool counted;                   /* counted among pending (pre-hello) connections */
 } net_session;
 
@@ -94,6 +117,7 @@ struct srv_net {
     double origin[3];
     srv_net_totals totals;          /* under lock */
     uint64_t buffer_bytes;          /* under lock */
+    double frame_ms;                /* the last frame's time (under lock): predictive's latency */
     fxc_result frame_error;
     char frame_error_text[256];
     volatile sig_atomic_t no_signal; /* the stop flag when the description gives none */
@@ -242,6 +266,38 @@ static bool take_frame(srv_net *net, net_session *ss)
     return true;
 }
 
+/* Takes the viewer's ready sample answer (if any) and encodes it into the send buffer. */
+static bool take_answer(srv_net *net, net_session *ss)
+{
+    net_viewer *v = ss->viewer;
+    pthread_mutex_lock(&net->lock);
+    if (!v->ans_ready) {
+        pthread_mutex_unlock(&net->lock);
+        return false;
+    }
+    int buffer = v->ans_index;
+    v->ans_index ^= 1;
+    v->ans_ready = false;
+    proto_msg m = {.type = PROTO_SAMPLES};
+    proto_samples *a = &m.u.samples;
+    a->request = v->ans_request;
+    a->frame = v->ans_frame;
+    a->camera = pose_of(net, &v->ans_camera);
+    a->width = v->ans_width;
+    a->height = v->ans_height;
+    a->count = v->ans_count;
+    a->samples = v->ans[buffer]; /* the frame thread now writes the other buffer */
+    pthread_mutex_unlock(&net->lock);
+    if (!tx_message(ss, &m))
+        return false;
+    pthread_mutex_lock(&net->lock);
+    net->totals.samples_sent++;
+    net->totals.samples_pixels += a->count;
+    net->totals.bytes_sent += ss->tx_len;
+    pthread_mutex_unlock(&net->lock);
+    return true;
+}
+
 /* Writes the next fragment of the message in the send buffer. Returns -1 to close the connection. */
 static int send_fragment(net_session *ss)
 {
@@ -315,7 +371,8 @@ static int on_writeable(srv_net *net, net_session *ss)
     int fail = v->fail_code;
     pthread_mutex_unlock(&net->lock);
     if (fail) {
-        session_fail(net, ss, fail, "the server could not add this viewer: %s", fxc_strerror(fail));
+        session_fail(net, ss, fail, "the server could not add this viewer (or its sample viewer): %s",
+                     fxc_strerror(fail));
         return 0;
     }
     if (json) {
@@ -326,6 +383,10 @@ static int on_writeable(srv_net *net, net_session *ss)
         free(json);
         if (!ok)
             return -1;
+        return send_fragment(ss);
+    }
+    if (take_answer(net, ss)) {
+        lws_callback_on_writable(ss->wsi); /* a frame may be waiting too */
         return send_fragment(ss);
     }
     if (take_frame(net, ss))
@@ -353,6 +414,11 @@ static void on_hello(srv_net *net, net_session *ss, const proto_hello *h)
     }
     if (net->d.token && net->d.token[0] && !printable_token_equal(h->token, net->d.token)) {
         session_fail(net, ss, FXC_ERR_UNAUTHORIZED, "hello without the server's access token");
+        return;
+    }
+    proto_strategy strategy;
+    if (!proto_strategy_parse(h->strategy, &strategy)) {
+        session_fail(net, ss, FXC_ERR_RANGE, "unknown strategy '%s' (basic, fan or predictive)", h->strategy);
         return;
     }
     if (h->width > net->d.max_width || h->height > net->d.max_height) {
@@ -395,6 +461,7 @@ static void on_hello(srv_net *net, net_session *ss, const proto_hello *h)
     count_buffers(net, (int64_t)bytes);
     v->state = VS_JOINING;
     v->hello = *h;
+    v->strategy = strategy;
     v->index = net->next_index++;
     snprintf(v->name, sizeof v->name, "viewer_%02u", v->index);
     net->totals.viewers_joined++;
@@ -406,9 +473,52 @@ static void on_hello(srv_net *net, net_session *ss, const proto_hello *h)
     }
     lws_set_timeout(ss->wsi, NO_PENDING_TIMEOUT, 0);
     ss->welcome_pending = true;
-    ss->tokens = net->d.camera_rate;
-    ss->tokens_time = now_s();
+    ss->tokens = ss->sample_tokens = net->d.camera_rate;
+    ss->tokens_time = ss->sample_tokens_time = now_s();
     lws_callback_on_writable(ss->wsi);
+}
+
+static const double PI = 3.14159265358979323846;
+
+proto_pose srv_net_strategy_pose(uint32_t strategy, const proto_camera *c, const proto_pose *previous,
+                                 double previous_time, double latency_s)
+{
+    proto_pose pose = c->pose;
+    if (strategy == PROTO_STRATEGY_FAN) {
+        double widened = 360.0 / PI * atan(SRV_FAN_TAN_FACTOR * tan((double)pose.fov_deg * PI / 360.0));
+        pose.fov_deg = (float)fmin(widened, SRV_FAN_MAX_FOV);
+    } else if (strategy == PROTO_STRATEGY_PREDICTIVE) {
+        if (c->has_predicted)
+            return c->predicted;
+        double dt = previous ? c->time - previous_time : 0.0;
+        if (!(dt > 0.0)) /* no earlier camera, or no time between them: nothing to extrapolate from */
+            return pose;
+        double ahead = latency_s / dt;
+        /* Unit directions, so that a client that changes a direction's length does not look like a turn. */
+        double len0 = 0, len1 = 0, moved[3], turned[3], len = 0;
+        for (int k = 0; k < 3; k++) {
+            len0 += (double)previous->direction[k] * previous->direction[k];
+            len1 += (double)pose.direction[k] * pose.direction[k];
+        }
+        len0 = sqrt(len0);
+        len1 = sqrt(len1);
+        for (int k = 0; k < 3; k++) {
+            moved[k] = pose.position[k] + (pose.position[k] - previous->position[k]) * ahead;
+            double d1 = pose.direction[k] / len1;
+            turned[k] = d1 + (d1 - previous->direction[k] / len0) * ahead;
+            len += turned[k] * turned[k];
+        }
+        bool ok = len > 1e-12 && isfinite(len);
+        for (int k = 0; k < 3; k++)
+            ok = ok && isfinite(moved[k]);
+        if (!ok)
+            return pose;
+        for (int k = 0; k < 3; k++) {
+            pose.position[k] = moved[k];
+            pose.direction[k] = (float)(turned[k] / sqrt(len));
+        }
+    }
+    return pose;
 }
 
 static void on_camera(srv_net *net, net_session *ss, const proto_camera *c)
@@ -433,11 +543,104 @@ static void on_camera(srv_net *net, net_session *ss, const proto_camera *c)
         session_fail(net, ss, FXC_ERR_CAMERA, "camera %u: %s", c->sequence, fxc_strerror(FXC_ERR_CAMERA));
         return;
     }
+    net_viewer *v = ss->viewer;
     pthread_mutex_lock(&net->lock);
-    ss->viewer->camera = cam;
-    ss->viewer->camera_sequence = c->sequence;
-    ss->viewer->has_camera = true;
+    /* Predictive's latency: from a camera's arrival to its frame, at most a tick's wait plus the last frame's
+     * time (at most a second). */
+    double latency = fmin(1.0, 1.0 / net->d.fps + 1e-3 * net->frame_ms);
+    pthread_mutex_unlock(&net->lock);
+    proto_pose rendered_pose = srv_net_strategy_pose(v->strategy, c, v->has_previous ? &v->previous_pose : NULL,
+                                                     v->previous_time, latency);
+    double rendered_direction[3] = {rendered_pose.direction[0], rendered_pose.direction[1], rendered_pose.direction[2]};
+    srv_camera rendered = srv_trace_camera_world(net->d.s, rendered_pose.position, rendered_direction,
+                                                 rendered_pose.fov_deg);
+    if (!srv_camera_setup(&rendered, v->hello.width, v->hello.height, &check))
+        rendered = cam; /* a prediction the renderer cannot use: the reported camera */
+    v->has_previous = true;
+    v->previous_pose = c->pose;
+    v->previous_time = c->time;
+    pthread_mutex_lock(&net->lock);
+    v->camera = rendered;
+    v->camera_sequence = c->sequence;
+    v->has_camera = true;
     net->totals.cameras_received++;
+    pthread_mutex_unlock(&net->lock);
+}
+
+/* A sample request: checked against the limits, converted into the viewer's pending list (replacing one not
+ * yet rendered), rendered by the frame thread at its next frame. */
+static void on_sample_request(srv_net *net, net_session *ss, const proto_sample_request *q)
+{
+    net_viewer *v = ss->viewer;
+    if (!v) {
+        session_fail(net, ss, FXC_ERR_PROTOCOL, "a sample request before hello");
+        return;
+    }
+    double t = now_s();
+    ss->sample_tokens =
+        fmin((double)net->d.camera_rate, ss->sample_tokens + (t - ss->sample_tokens_time) * net->d.camera_rate);
+    ss->sample_tokens_time = t;
+    if (ss->sample_tokens < 1) {
+        session_fail(net, ss, FXC_ERR_LIMIT, "more than %u sample requests per second", net->d.camera_rate);
+        return;
+    }
+    ss->sample_tokens -= 1;
+    if (q->count > net->d.max_samples) {
+        session_fail(net, ss, FXC_ERR_LIMIT, "sample request %u: %u pixels, over the server's limit of %u",
+                     q->request, q->count, net->d.max_samples);
+        return;
+    }
+    if (q->width > net->d.max_width || q->height > net->d.max_height) {
+        session_fail(net, ss, FXC_ERR_LIMIT, "sample request %u: image %ux%u is above the server's limit %ux%u",
+                     q->request, q->width, q->height, net->d.max_width, net->d.max_height);
+        return;
+    }
+    double direction[3] = {q->camera.direction[0], q->camera.direction[1], q->camera.direction[2]};
+    srv_camera cam = srv_trace_camera_world(net->d.s, q->camera.position, direction, q->camera.fov_deg);
+    srv_camera_frame check;
+    if (!srv_camera_setup(&cam, q->width, q->height, &check)) {
+        session_fail(net, ss, FXC_ERR_CAMERA, "sample request %u: %s", q->request, fxc_strerror(FXC_ERR_CAMERA));
+        return;
+    }
+    pthread_mutex_lock(&net->lock);
+    net->totals.sample_requests++;
+    if (!v->req_pixels[0]) { /* the first request: its buffers (counted) */
+        size_t n = net->d.max_samples;
+        for (int k = 0; k < 2; k++) {
+            v->req_pixels[k] = malloc(n * sizeof *v->req_pixels[k]);
+            v->ans[k] = malloc(n * PROTO_SAMPLE_BYTES);
+        }
+        if (!v->req_pixels[0] || !v->req_pixels[1] || !v->ans[0] || !v->ans[1]) {
+            for (int k = 0; k < 2; k++) {
+                free(v->req_pixels[k]);
+                free(v->ans[k]);
+                v->req_pixels[k] = NULL;
+                v->ans[k] = NULL;
+            }
+            pthread_mutex_unlock(&net->lock);
+            session_fail(net, ss, FXC_ERR_NOMEM, "no memory for sample requests");
+            return;
+        }
+        size_t bytes = 2 * n * (sizeof *v->req_pixels[0] + PROTO_SAMPLE_BYTES);
+        v->buffer_bytes += bytes;
+        count_buffers(net, (int64_t)bytes);
+    }
+    if (v->req_pending) { /* the newest request wins */
+        v->requests_dropped++;
+        net->totals.sample_requests_dropped++;
+    }
+    int b = v->req_pending_index;
+    for (uint32_t i = 0; i < q->count; i++) {
+        uint16_t x, y;
+        proto_request_pixel_get(q->pixels, i, &x, &y);
+        v->req_pixels[b][i] = SRV_PIXEL_XY(x, y);
+    }
+    v->req_id[b] = q->request;
+    v->req_count[b] = q->count;
+    v->req_width[b] = q->width;
+    v->req_height[b] = q->height;
+    v->req_camera[b] = cam;
+    v->req_pending = true;
     pthread_mutex_unlock(&net->lock);
 }
 
@@ -453,6 +656,7 @@ static void on_message(srv_net *net, net_session *ss, const uint8_t *bytes, size
     switch (m.type) {
     case PROTO_HELLO: on_hello(net, ss, &m.u.hello); break;
     case PROTO_CAMERA: on_camera(net, ss, &m.u.camera); break;
+    case PROTO_SAMPLE_REQUEST: on_sample_request(net, ss, &m.u.sample_request); break;
     case PROTO_STATS_REQUEST:
         if (!ss->viewer) {
             session_fail(net, ss, FXC_ERR_PROTOCOL, "a stats request before hello");
@@ -473,6 +677,17 @@ static void on_message(srv_net *net, net_session *ss, const uint8_t *bytes, size
     }
 }
 
+/* The largest message the session may be receiving: a sample request's own limit once its header says
+ * that is what it is; before the header, the larger of the two. */
+static size_t message_limit(const srv_net *net, const net_session *ss)
+{
+    size_t samples = PROTO_HEADER_BYTES + 56 + (size_t)PROTO_REQUEST_PIXEL_BYTES * net->d.max_samples;
+    size_t larger = samples > net->d.max_message ? samples : net->d.max_message;
+    if (ss->rx_len < PROTO_HEADER_BYTES)
+        return larger;
+    return proto_get_u16le(ss->rx + 6) == PROTO_SAMPLE_REQUEST ? larger : net->d.max_message;
+}
+
 static void on_receive(srv_net *net, net_session *ss, const uint8_t *in, size_t len)
 {
     if (ss->closing || ss->error_code)
@@ -481,16 +696,17 @@ static void on_receive(srv_net *net, net_session *ss, const uint8_t *in, size_t 
         session_fail(net, ss, FXC_ERR_PROTOCOL, "a text message (messages are binary)");
         return;
     }
-    if (len > net->d.max_message - ss->rx_len) {
-        session_fail(net, ss, FXC_ERR_TOO_LARGE, "a message over the server's limit of %u bytes", net->d.max_message);
+    size_t limit = message_limit(net, ss);
+    if (len > limit - ss->rx_len) {
+        session_fail(net, ss, FXC_ERR_TOO_LARGE, "a message over the server's limit of %zu bytes", limit);
         return;
     }
     if (ss->rx_len + len > ss->rx_cap) {
         size_t cap = ss->rx_cap ? ss->rx_cap : 256;
         while (cap < ss->rx_len + len)
             cap *= 2;
-        if (cap > net->d.max_message)
-            cap = net->d.max_message;
+        if (cap > limit)
+            cap = limit;
         uint8_t *p = realloc(ss->rx, cap);
         if (!p) {
             session_fail(net, ss, FXC_ERR_NOMEM, "no memory for a message");
@@ -509,9 +725,10 @@ static void on_receive(srv_net *net, net_session *ss, const uint8_t *in, size_t 
             session_fail(net, ss, r, "message refused: %s", fxc_strerror(r));
             return;
         }
-        if (h.length > net->d.max_message - PROTO_HEADER_BYTES) {
-            session_fail(net, ss, FXC_ERR_TOO_LARGE, "a message of %u bytes is over the server's limit of %u",
-                         h.length, net->d.max_message);
+        limit = message_limit(net, ss);
+        if (h.length > limit - PROTO_HEADER_BYTES) {
+            session_fail(net, ss, FXC_ERR_TOO_LARGE, "a message of %u bytes is over the server's limit of %zu",
+                         h.length, limit);
             return;
         }
     }
@@ -559,7 +776,7 @@ static void on_wake(srv_net *net)
         if (!ss->viewer)
             continue;
         pthread_mutex_lock(&net->lock);
-        bool work = ss->viewer->ready || ss->viewer->stats_json || ss->viewer->fail_code;
+        bool work = ss->viewer->ready || ss->viewer->ans_ready || ss->viewer->stats_json || ss->viewer->fail_code;
         pthread_mutex_unlock(&net->lock);
         if (work)
             lws_callback_on_writable(ss->wsi);
@@ -632,6 +849,8 @@ static void free_viewer(srv_net *net, net_viewer *v)
     for (int k = 0; k < 2; k++) {
         free(v->rgb[k]);
         free(v->depth[k]);
+        free(v->req_pixels[k]);
+        free(v->ans[k]);
     }
     free(v->stats_json);
     count_buffers(net, -(int64_t)v->buffer_bytes);
@@ -685,6 +904,30 @@ static int net_frame_done(void *user, const srv_frame_stats *stats)
     return 0;
 }
 
+/* Hands a viewer's pending sample request to its sparse engine viewer (added at the first request) for the
+ * next frame. Under the lock. */
+static void take_request(srv_net *net, net_viewer *v)
+{
+    int b = v->req_pending_index;
+    v->req_pending = false;
+    if (!v->sample_id.id) {
+        srv_viewer_desc vd = {.max_pixels = net->d.max_samples};
+        snprintf(vd.name, sizeof vd.name, "%.20s.samples", v->name);
+        fxc_result r = srv_viewer_add(net->d.loop, &vd, &v->sample_id);
+        if (r != FXC_OK) {
+            v->sample_id.id = 0;
+            v->fail_code = r == FXC_ERR_NO_SLOT ? FXC_ERR_LIMIT : r;
+            return;
+        }
+    }
+    /* Checked when it arrived (sizes, pixels, camera): a refusal here would be a bug, and drops the request. */
+    if (srv_viewer_set_pixels(net->d.loop, v->sample_id, &v->req_camera[b], v->req_width[b], v->req_height[b],
+                              v->req_pixels[b], v->req_count[b], NULL) != FXC_OK)
+        return;
+    v->req_rendering = true;
+    v->req_pending_index ^= 1; /* the network thread writes the next request into the other buffer */
+}
+
 /* Stage 1 for the network's viewers: leaves, joins (in join order, as a replay adds them), cameras. */
 static void take_viewers(srv_net *net)
 {
@@ -697,6 +940,8 @@ static void take_viewers(srv_net *net)
             srv_viewer_remove(net->d.loop, v->id);
             net->by_slot[v->id.id & 0xFFu] = NULL;
         }
+        if (v->sample_id.id)
+            srv_viewer_remove(net->d.loop, v->sample_id);
         if (v->trace && srv_trace_writer_close(v->trace) != 0 && !net->frame_error) {
             net->frame_error = FXC_ERR_IO;
             snprintf(net->frame_error_text, sizeof net->frame_error_text, "writing %s's trace failed", v->name);
@@ -739,6 +984,51 @@ static void take_viewers(srv_net *net)
         srv_viewer_set_camera(net->d.loop, v->id, &v->camera); /* checked when it arrived */
         v->frame_sequence = v->camera_sequence;
         net->clock_started = true;
+        if (v->req_pending)
+            take_request(net, v);
+    }
+    pthread_mutex_unlock(&net->lock);
+}
+
+/* After a frame: each rendered request's answer, one sample per requested entry in the request's order, into
+ * the viewer's answer outbox (a newer answer replaces one not yet sent). Under the lock. */
+static void stage_answers(srv_net *net, uint32_t frame)
+{
+    pthread_mutex_lock(&net->lock);
+    for (uint32_t i = 0; i < SRV_MAX_VIEWERS; i++) {
+        net_viewer *v = &net->viewers[i];
+        if (v->state != VS_ACTIVE || !v->req_rendering)
+            continue;
+        v->req_rendering = false;
+        int r = v->req_pending_index ^ 1; /* the request rendered */
+        const uint8_t *image = srv_viewer_image(net->d.loop, v->sample_id);
+        const float *depth = srv_viewer_depth(net->d.loop, v->sample_id);
+        if (!image || !depth)
+            continue;
+        if (v->ans_ready) {
+            v->requests_dropped++;
+            net->totals.sample_requests_dropped++;
+        }
+        uint8_t *out = v->ans[v->ans_index];
+        for (uint32_t k = 0; k < v->req_count[r]; k++) {
+            uint32_t xy = v->req_pixels[r][k];
+            proto_sample sample = {.x = (uint16_t)(xy & 0xFFFFu), .y = (uint16_t)(xy >> 16)};
+            uint32_t at = srv_viewer_pixel_index(net->d.loop, v->sample_id, sample.x, sample.y);
+            float d = INFINITY;
+            if (at != UINT32_MAX) { /* always: every requested pixel was listed */
+                memcpy(sample.rgb, image + 3 * (size_t)at, 3);
+                d = depth[at];
+            }
+            sample.depth = d > 0.0f ? d : FLT_MIN; /* the wire wants > 0 (a hit at the eye, were it possible) */
+            proto_sample_put(out, k, &sample);
+        }
+        v->ans_request = v->req_id[r];
+        v->ans_frame = frame;
+        v->ans_count = v->req_count[r];
+        v->ans_width = v->req_width[r];
+        v->ans_height = v->req_height[r];
+        v->ans_camera = v->req_camera[r];
+        v->ans_ready = true;
     }
     pthread_mutex_unlock(&net->lock);
 }
@@ -790,6 +1080,10 @@ static void *frame_thread(void *arg)
                 net->frame_error = FXC_ERR_IO; /* a sink could not write: it said why */
                 snprintf(net->frame_error_text, sizeof net->frame_error_text, "a frame's output could not be written");
             }
+            stage_answers(net, st.frame);
+            pthread_mutex_lock(&net->lock);
+            net->frame_ms = st.frame_ms;
+            pthread_mutex_unlock(&net->lock);
             net->frame++;
             if (net->d.progress)
                 fprintf(stderr, "\rframe %u  %u viewers  %.1f ms   ", net->frame, st.viewer_count, st.frame_ms);
@@ -844,6 +1138,10 @@ fxc_result srv_net_create(const srv_net_desc *desc, srv_net **out, char *err, si
         net->d.max_message = 1024;
     if (!net->d.camera_rate)
         net->d.camera_rate = 240;
+    if (!net->d.max_samples)
+        net->d.max_samples = 65536;
+    if (net->d.max_samples > PROTO_MAX_SAMPLES)
+        net->d.max_samples = PROTO_MAX_SAMPLES;
     if (!net->d.hello_timeout_s)
         net->d.hello_timeout_s = 10;
     for (int k = 0; k < 3; k++)

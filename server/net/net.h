@@ -13,6 +13,17 @@
  * replaced one is counted as dropped. Frames are encoded on the network thread when they are sent, so a
  * dropped frame costs only its copy.
  *
+ * Reference-frame strategies (hello's strategy, docs/PROTOCOL.md): the network thread turns each camera
+ * message into the camera to render: the reported one (basic), with tan(fov/2) times SRV_FAN_TAN_FACTOR (fan),
+ * or the predicted pose / a linear extrapolation (predictive). Frames, traces and the frame message carry the
+ * camera rendered.
+ *
+ * Sample requests (the client render cache's, issue 11): each viewer that sends one gets a second, sparse
+ * engine viewer (srv_viewer_set_pixels) of --max-samples entries, added at its first request. The latest
+ * request is rendered in the next frame through the shared caches; the answer (one sample per requested
+ * entry, in the request's order) waits in an outbox like frames, the newest winning. A session without
+ * sample requests renders and sends exactly what it did before.
+ *
  * The frame clock starts (frame 0) at the first tick at which some viewer has a camera, and from then on runs
  * a frame at every tick, also with no viewer present, as `fxcache sim` does on a trace's clock. Frame f has
  * time f / fps seconds: the time --record writes, so `fxcache sim --trace DIR/viewer_*.trace --fps F` replays
@@ -21,12 +32,25 @@
 #define FXC_SERVER_NET_H
 
 #include "engine.h"
+#include "proto.h"
 #include "report.h"
 
 #include <signal.h>
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
+
+/* The fan strategy's widening: tan(fov/2) multiplied by this (Baxter's wider reference frame at the same pixel
+ * count), the result capped at SRV_FAN_MAX_FOV degrees. */
+#define SRV_FAN_TAN_FACTOR 1.5
+#define SRV_FAN_MAX_FOV 170.0
+
+/* The camera rendered for a camera message under a strategy: basic the reported pose; fan that pose widened;
+ * predictive the message's predicted pose when it has one, else the reported pose extrapolated linearly from
+ * the previous message (previous may be NULL) by latency_s seconds of client time. World coordinates. A
+ * helper of the network thread, public for tests. */
+proto_pose srv_net_strategy_pose(uint32_t strategy, const proto_camera *c, const proto_pose *previous,
+                                 double previous_time, double latency_s);
 
 /* Configuration; zero fields take the defaults beside them. */
 typedef struct srv_net_desc {
@@ -41,7 +65,10 @@ typedef struct srv_net_desc {
     uint32_t max_width, max_height; /* largest resolution a viewer may ask for (default 3840 x 2160) */
     uint32_t max_message;       /* largest message a client may send, bytes (default 65536) */
     uint32_t camera_rate;       /* camera messages per second per viewer (default 240; a burst of one second's
-                                   worth is allowed) */
+                                   worth is allowed); sample requests have a bucket of their own at this rate */
+    uint32_t max_samples;       /* pixels one sample request may ask for (default 65536, at most
+                                   PROTO_MAX_SAMPLES); its message may be 56 + 4 x max_samples bytes whatever
+                                   max_message says */
     uint32_t hello_timeout_s;   /* seconds a connection may take to send hello (default 10) */
     const char *record_dir;     /* write every viewer's rendered cameras as DIR/NAME.trace (NULL: none) */
     uint32_t frames;            /* stop after this many frames of the clock (0: until stopped) */
@@ -57,6 +84,11 @@ typedef struct srv_net_totals {
     uint64_t refused_by_code[32]; /* by -code (fxc_result), for codes up to 31 */
     uint64_t frames_sent, frames_dropped, bytes_sent;
     uint64_t cameras_received;
+    uint64_t sample_requests;   /* sample requests received */
+    uint64_t sample_requests_dropped; /* replaced by a newer one before being rendered, or answered but replaced
+                                         before being sent */
+    uint64_t samples_sent;      /* answers sent */
+    uint64_t samples_pixels;    /* samples in the answers sent */
     double encode_ms;           /* time spent encoding frames */
     uint32_t frames;            /* frames of the clock */
     uint64_t buffer_bytes_peak; /* per-viewer frame and message buffers, at most at once */

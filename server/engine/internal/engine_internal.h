@@ -51,14 +51,20 @@ typedef struct srv_pixel {
     float distance;
 } srv_pixel;
 
-/* A viewer slot. */
+/* A viewer slot. A sparse viewer's per-pixel buffers are indexed by position in its list, not by y * width
+ * + x; the stages visit list entries instead of tiles (visibility, requests, compose). */
 typedef struct srv_viewer {
     uint32_t generation;       /* id = generation << 8 | slot; bumped at remove */
     bool present, has_camera, rendered;
+    bool sparse;               /* desc.max_pixels > 0 */
     srv_viewer_desc desc;
     srv_camera camera;
     srv_camera_frame frame;
-    size_t pixels;
+    size_t pixels;             /* entries of the per-pixel buffers (width*height, or max_pixels) */
+    uint32_t *list;            /* sparse: the distinct listed pixels, y << 16 | x, in srv__run_key order
+                                  (max_pixels) */
+    uint32_t *list_scratch;    /* sparse: the radix sort's other buffer (max_pixels) */
+    uint32_t list_count;       /* sparse: entries of list */
     uint32_t *tri;             /* hit triangle per pixel, SRV_MISS for none */
     float *bary_u, *bary_v;
     float *footprint;          /* log2 of the pixel's footprint in level-0 texels (ray differentials) */
@@ -211,6 +217,33 @@ bool srv__grow(srv_loop *loop, srv_mem_category category, void **array, size_t *
 bool srv__request_reserve(srv_loop *loop, srv_mem_category category, srv_request_list *list, size_t n);
 void srv__request_list_free(srv_loop *loop, srv_mem_category category, srv_request_list *list);
 
+/* A sparse viewer's list order: the compose run a pixel (packed y << 16 | x) belongs to in a whole frame of
+ * tiles_x tiles per row (16 x 16 tiles in row order, runs of SRV_RUN / SRV_TILE = 4 rows inside), shifted
+ * left by 6, then its place in that run. Listed pixels of one whole-frame run are then consecutive, and
+ * compose shades them together, as a whole frame does (effects that shade a run's pixels jointly, such as
+ * the probes, then see the same neighbours). Below 2^26 for sides up to 8192. */
+_Static_assert(SRV_RUN == 4 * SRV_TILE, "a compose run is 4 rows of a tile");
+static inline uint32_t srv__run_key(uint32_t xy, uint32_t tiles_x)
+{
+    uint32_t x = xy & 0xFFFFu, y = xy >> 16;
+    uint32_t run = ((y / SRV_TILE) * tiles_x + x / SRV_TILE) * (SRV_TILE / 4) + (y % SRV_TILE) / 4;
+    return run << 6 | (y % 4) << 4 | (x % SRV_TILE);
+}
+
+/* The packed pixel of a run key (the inverse of srv__run_key). */
+static inline uint32_t srv__run_key_pixel(uint32_t key, uint32_t tiles_x)
+{
+    uint32_t run = key >> 6, tile = run / (SRV_TILE / 4), band = run % (SRV_TILE / 4);
+    uint32_t x = (tile % tiles_x) * SRV_TILE + (key & 15u), y = (tile / tiles_x) * SRV_TILE + band * 4 + ((key >> 4) & 3u);
+    return y << 16 | x;
+}
+
+/* Pixels a viewer's frame visits: width*height, or a sparse viewer's list. */
+static inline size_t srv__viewer_pixel_count(const srv_viewer *view)
+{
+    return view->sparse ? view->list_count : (size_t)view->frame.width * view->frame.height;
+}
+
 /* Stage 2: visibility of one viewer into its buffers. */
 void srv__visibility(srv_loop *loop, srv_viewer *view);
 
@@ -220,6 +253,12 @@ void srv__visibility(srv_loop *loop, srv_viewer *view);
  * viewer's buffers; the reference renderer uses it so it sees the same surface at every pixel. */
 void srv__visibility_tile(const scene *s, scene_rt *rt, const srv_camera_frame *f, uint32_t tile_x,
                           uint32_t tile_y, uint32_t *tri, float *bary_u, float *bary_v, float *depth,
+                          float *footprint);
+
+/* The primary rays of up to 16 listed pixels (packed y << 16 | x of frame f), one packet: what
+ * srv__visibility_tile computes for those pixels, written at their list positions first..first+count-1. */
+void srv__visibility_list(const scene *s, scene_rt *rt, const srv_camera_frame *f, const uint32_t *list,
+                          uint32_t first, uint32_t count, uint32_t *tri, float *bary_u, float *bary_v, float *depth,
                           float *footprint);
 
 /* Differentials of the hit position at distance t along unit ray dir on the plane of normal n: the offsets
