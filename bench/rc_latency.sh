@@ -67,7 +67,7 @@ run() { # run NAME OPTIONS...: a fresh server, the viewer on the trace, the serv
 for latency in $latencies; do
     run "last_$latency" --latency "$latency"
     run "reproject_$latency" --latency "$latency" --reproject --no-prediction "$@"
-    run "predict_$latency" --latency "$latency" --reproject "$@"
+    run "predict_$latency" --latency "$latency" --reproject --strategy predictive "$@"
 done
 
 # The true view: the display cameras are the trace at k / 30 s in every run (only how long each ran

@@ -4,12 +4,12 @@
  *     viewer received before it (the frame's PNG from --out), with and without --reproject. With --reproject
  *     the frame went through depth (binary16 on the wire), its 3-D points and the render cache's projection
  *     back to the same camera; the tolerance is exact colours, as tests/test_rcache.c proves for the cache
- *     alone (depth quantization moves a point along its own ray only, so it lands on its own pixel);
- * Both runs against the server send no sample requests (--sample-budget 0): the static comparison is with the
- * frames alone, and the server does not answer them yet.
- *   - a camera turning in place with 50 ms of simulated latency each way: the render cache's displayed
- *     frames have at most the empty fraction the closed form gives for the turn during the measured latency
- *     (a pure turn has no parallax: only the strip no frame saw yet is empty);
+ *     alone (depth quantization moves a point along its own ray only, so it lands on its own pixel). These
+ *     runs send no sample requests (--sample-budget 0): an answer rendered later may differ from the frame;
+ *   - a camera turning in place with 50 ms of simulated latency each way, sample requests on: the server
+ *     answers them, and the render cache's displayed frames have at most the empty fraction the closed form
+ *     gives for the turn since the newest frame's camera (a pure turn has no parallax: only the strip no
+ * frame saw yet can be empty; the samples fill some of it);
  *   - --stats carries the display's and the render cache's figures, consistent with the display's CSV.
  *   - sample requests against a fake server (tests/peer_rc_server.js) that answers them and sends no frames.
  * The program is built only with the wire format's implementation in the tree; until then every test skips.
@@ -258,7 +258,9 @@ static void test_static_camera(void **state)
         long differ = 0;
         uint32_t pixels = 0;
         for (size_t i = 0; i < count; i++) {
-            if (rows[i].frame < 10)
+            /* The first display frame of each frame received (a slow server, as under the sanitizer, shows
+             * one frame on many display frames: they are the same image). */
+            if (rows[i].frame < 10 || (i > 0 && rows[i - 1].frame == rows[i].frame))
                 continue;
             char shown[1024], received[1024];
             snprintf(shown, sizeof shown, "%s/display_%05ld_%s.png", display, rows[i].index, name);
@@ -272,7 +274,7 @@ static void test_static_camera(void **state)
         print_message("%s: %d display frames compared with the frame received before them: %ld of %ld pixels "
                       "differ\n",
                       reproject ? "--reproject" : "last frame", compared, differ, (long)compared * pixels);
-        assert_true(compared >= 10);
+        assert_true(compared >= 20);
         assert_int_equal(differ, 0);
         /* Display times are k / 30 s. */
         for (size_t i = 0; i < count; i++)
@@ -348,10 +350,10 @@ static void test_turning_camera(void **state)
     snprintf(display, sizeof display, "%s", fxt_tmp_path("turning_display"));
     snprintf(stats, sizeof stats, "%s", fxt_tmp_path("turning_stats.json"));
     remove_tree(display);
-    const char *args[] = {"--connect",     url,     "--trace",   trace,         "--res",           "96x54",
-                          "--latency",     "50",    "--quiet",   "--reproject", "--stats",         stats,
-                          "--display-out", display, "--timeout", "120",         "--sample-budget", "0",
-                          "--time-scale",  "2",     NULL};
+    const char *args[] = {
+        "--connect", url,       "--trace",      trace,     "--res", "96x54",         "--latency",
+        "50",        "--quiet", "--reproject",  "--stats", stats,   "--display-out", display,
+        "--timeout", "120",     "--time-scale", "2",       NULL};
     assert_int_equal(run_viewer(args, "turning"), 0);
     assert_int_equal(server_stop(server), 0);
     json_error_t error;
@@ -362,6 +364,16 @@ static void test_turning_camera(void **state)
     json_t *rc = json_object_get(v, "render_cache");
     /* The prediction's round trip: at least both delays. */
     assert_true(json_real_value(json_object_get(rc, "rtt_ms")) >= 100);
+    /* Sample requests went out and the server answered some (it renders the latest request a frame), and
+     * every answer was inserted. */
+    json_int_t sent = json_integer_value(json_object_get(rc, "requests_sent"));
+    json_int_t answered = json_integer_value(json_object_get(rc, "requests_answered"));
+    print_message("sample requests: %lld sent, %lld answered with %lld samples\n", (long long)sent,
+                  (long long)answered,
+                  (long long)json_integer_value(json_object_get(rc, "samples_received")));
+    assert_true(sent >= 30 && answered >= 5 && answered <= sent);
+    assert_true(json_integer_value(json_object_get(rc, "samples_received")) >= answered);
+    assert_int_equal(json_integer_value(json_object_get(rc, "insert_errors")), 0);
     json_decref(root);
     double hfov = 2 * atan(tan(30 * 3.14159265358979323846 / 180) * 96 / 54);
     size_t count;
