@@ -17,6 +17,7 @@
 
 #include <arpa/inet.h>
 #include <errno.h>
+#include <jansson.h>
 #include <fcntl.h>
 #include <math.h>
 #include <netinet/in.h>
@@ -377,8 +378,11 @@ static void test_sample_answers(void **state)
 {
     (void)state;
     server sv;
-    const char *args[] = {"--fps",         "20",   "--effects", "shadow,ao", "--max-samples", "1000",
-                          "--max-message", "1024", NULL};
+    char summary_path[512];
+    snprintf(summary_path, sizeof summary_path, "%s", fxt_tmp_path("samples_summary.json"));
+    const char *args[] = {
+        "--fps", "20",        "--effects",  "shadow,ao", "--max-samples", "1000", "--max-message",
+        "1024",  "--summary", summary_path, NULL};
     server_start(&sv, "samples", args);
     int fd = ws_connect(sv.port);
     assert_true(fd >= 0);
@@ -492,6 +496,19 @@ static void test_sample_answers(void **state)
     assert_true(expect_error(fd, FXC_ERR_LIMIT));
     close(fd);
     assert_int_equal(server_stop(&sv), 0);
+    /* The summary counts them: every answer received was a request received and an answer sent. */
+    json_error_t jerr;
+    json_t *sum = json_load_file(summary_path, 0, &jerr);
+    assert_non_null(sum);
+    json_t *serve = json_object_get(sum, "serve");
+    json_int_t requests = json_integer_value(json_object_get(serve, "sample_requests"));
+    json_int_t answers_sent = json_integer_value(json_object_get(serve, "samples_sent"));
+    json_int_t sent_pixels = json_integer_value(json_object_get(serve, "samples_pixels"));
+    print_message("summary: %lld sample requests, %lld answers sent (%lld samples)\n", (long long)requests,
+                  (long long)answers_sent, (long long)sent_pixels);
+    assert_true(requests >= answers && answers_sent >= answers && answers_sent <= requests);
+    assert_true(sent_pixels >= (json_int_t)answers * LIST);
+    json_decref(sum);
 }
 
 /* The frame camera the server renders for one camera message under a strategy (from the second frame on, so

@@ -550,9 +550,12 @@ uint32_t srv_viewer_pixel_index(const srv_loop *loop, srv_viewer_id id, uint32_t
 {
     uint32_t count;
     const uint32_t *list = srv_viewer_pixels(loop, id, &count);
-    if (!list || x >= SRV_MAX_SIDE || y >= SRV_MAX_SIDE)
+    if (!list)
         return UINT32_MAX;
-    uint32_t tiles_x = (viewer_of(loop, id)->frame.width + SRV_TILE - 1) / SRV_TILE;
+    const srv_camera_frame *f = &viewer_of(loop, id)->frame;
+    if (x >= f->width || y >= f->height)
+        return UINT32_MAX;
+    uint32_t tiles_x = (f->width + SRV_TILE - 1) / SRV_TILE;
     uint32_t want = SRV_PIXEL_XY(x, y), want_key = srv__run_key(want, tiles_x), lo = 0, hi = count;
     while (lo < hi) {
         uint32_t mid = lo + (hi - lo) / 2;
