@@ -156,13 +156,58 @@ static void test_stats_json(void **state)
     assert_int_equal(json_integer_value(json_object_get(total, "bytes_received")), 36000);
     json_decref(root);
 
-    /* No latency samples: null, not 0. */
+    /* The display and the render cache's figures: means over display frames. */
+    view_viewer_stats rc = {.index = 0};
+    rc.display = (view_display_stats){.frames = 4,
+                                      .skipped = 1,
+                                      .fps = 30,
+                                      .empty_fraction_sum = 0.5,
+                                      .reproject = true,
+                                      .points_sum = 400,
+                                      .points_last = 120,
+                                      .request_messages = 8,
+                                      .request_pixels = 800,
+                                      .answers = 6,
+                                      .samples_received = 600,
+                                      .frames_inserted = 3,
+                                      .total_ms_sum = 10,
+                                      .total_ms_max = 4,
+                                      .rtt_ms = 75};
+    rc.display.kind_fraction_sum[VIEW_RC_EMPTY] = 0.5;
+    rc.display.kind_fraction_sum[VIEW_RC_POINT] = 3.0;
+    rc.display.stage_ms_sum[VIEW_RC_STAGE_ZBUFFER] = 2;
+    assert_int_equal(view_stats_write_json(path, &rc, 1, "ws://h:1", 1, err, sizeof err), 0);
+    root = json_load_file(path, 0, &error);
+    if (!root)
+        fail_msg("%s:%d: %s", path, error.line, error.text);
+    json_t *v = json_array_get(json_object_get(root, "viewers"), 0);
+    json_t *display = json_object_get(v, "display"), *cache = json_object_get(v, "render_cache");
+    assert_int_equal(json_integer_value(json_object_get(display, "frames")), 4);
+    assert_int_equal(json_integer_value(json_object_get(display, "skipped")), 1);
+    assert_true(json_real_value(json_object_get(display, "empty_fraction")) == 0.125);
+    json_t *fractions = json_object_get(cache, "pixel_fractions");
+    assert_true(json_real_value(json_object_get(fractions, "empty")) == 0.125);
+    assert_true(json_real_value(json_object_get(fractions, "point")) == 0.75);
+    assert_int_equal(json_integer_value(json_object_get(cache, "points")), 120);
+    assert_true(json_real_value(json_object_get(cache, "points_mean")) == 100);
+    assert_int_equal(json_integer_value(json_object_get(cache, "requests_sent")), 8);
+    assert_int_equal(json_integer_value(json_object_get(cache, "requests_answered")), 6);
+    assert_int_equal(json_integer_value(json_object_get(cache, "samples_received")), 600);
+    assert_true(json_real_value(json_object_get(json_object_get(cache, "stage_ms"), "z-buffer tiles")) ==
+                0.5);
+    assert_true(json_real_value(json_object_get(json_object_get(cache, "total_ms"), "mean")) == 2.5);
+    assert_true(json_real_value(json_object_get(cache, "rtt_ms")) == 75);
+    json_decref(root);
+
+    /* No latency samples: null, not 0; no render cache: null. */
     view_viewer_stats empty = {.index = 0};
     assert_int_equal(view_stats_write_json(path, &empty, 1, "ws://h:1", 0, err, sizeof err), 0);
     root = json_load_file(path, 0, &error);
     assert_non_null(root);
     assert_true(json_is_null(json_object_get(
         json_object_get(json_array_get(json_object_get(root, "viewers"), 0), "latency_ms"), "median")));
+    assert_true(
+        json_is_null(json_object_get(json_array_get(json_object_get(root, "viewers"), 0), "render_cache")));
     json_decref(root);
     /* A file that cannot be created: one line. */
     assert_int_equal(view_stats_write_json(fxt_tmp_path("no/such/folder/s.json"), &empty, 1, "ws://h:1", 0,
@@ -290,6 +335,75 @@ static void test_trace_schedule(void **state)
     proto_trace_release(&t);
 }
 
+/* The display clock's cameras: the orbit between two generated cameras, a trace between two lines. */
+static void test_display_cameras(void **state)
+{
+    (void)state;
+    proto_welcome w = room_welcome();
+    const double start = atan2(4.0, 3.0);
+    for (uint32_t index = 0; index < 500; index += 13) {
+        /* A whole index is the generated camera, bit for bit; a fractional one lies on the circle at its
+         * angle (closed form), between its neighbours. */
+        proto_pose whole = view_camera_generate(VIEW_CAMERA_ORBIT, &w, 1, 3, index, 0);
+        proto_pose at = view_camera_generate_at(VIEW_CAMERA_ORBIT, &w, 1, 3, (double)(index % 240), 0);
+        assert_true(memcmp(&whole, &at, sizeof at) == 0);
+        double fractional = index + 0.37;
+        at = view_camera_generate_at(VIEW_CAMERA_ORBIT, &w, 1, 3, fractional, 0);
+        double angle = start + 2 * PI * (1.0 / 3 + fmod(fractional, 240) / 240.0);
+        assert_true(fabs(at.position[0] - 5 * cos(angle)) < 1e-9 &&
+                    fabs(at.position[2] - 5 * sin(angle)) < 1e-9);
+    }
+    /* A trace: at a line's time that line; between two lines mixed linearly; before the first the first,
+     * after the last the last. Line 1 to 2 turns 90 degrees (-z to +x) and moves 2 m in 1 s. */
+    const char *text = "fxcache-trace 1\n5 0 0 0 0 0 -1 60\n6 0 0 0 0 0 -3 60\n7 2 0 0 5 0 0 40\n";
+    proto_trace t;
+    char err[256];
+    assert_int_equal(proto_trace_parse(text, strlen(text), "d.trace", &t, err, sizeof err), FXC_OK);
+    proto_pose p = view_camera_trace_at(&t, 5, 1, 0), line = view_camera_from_trace(&t, 1, 0);
+    assert_true(memcmp(&p, &line, sizeof p) == 0);
+    p = view_camera_trace_at(&t, 5, -3, 0);
+    assert_true(p.position[0] == 0 && p.direction[2] == -1.0f);
+    p = view_camera_trace_at(&t, 5, 9, 0);
+    assert_true(p.position[0] == 2 && p.direction[0] == 5.0f && p.fov_deg == 40.0f);
+    p = view_camera_trace_at(&t, 5, 1.5, 0); /* half way: (1, 0, 0), direction (0.5, 0, -0.5) normalised */
+    assert_true(fabs(p.position[0] - 1) < 1e-12);
+    assert_true(fabs(p.direction[0] - sqrt(0.5)) < 1e-6 && fabs(p.direction[2] + sqrt(0.5)) < 1e-6);
+    assert_true(fabs(p.fov_deg - 50) < 1e-5);
+    assert_true(view_camera_trace_at(&t, 5, 1.25, 33).fov_deg == 33.0f);
+    proto_trace_release(&t);
+}
+
+/* Extrapolation: a steady turn at a steady pitch and a straight move are extrapolated exactly (closed form),
+ * also across yaw +-180 degrees; times that do not increase give the current camera. */
+static void test_extrapolate(void **state)
+{
+    (void)state;
+    static const struct {
+        double yaw0, yaw1, pitch0, pitch1; /* degrees */
+    } cases[] = {{0, 10, 0, 0}, {170, -175, 5, 10}, {-120, -150, -20, -30}, {45, 45, 0, 0}};
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        proto_pose a = {.position = {1, 2, 3}, .fov_deg = 60}, b = {.position = {1.5, 2, 2}, .fov_deg = 60};
+        double r = PI / 180;
+        double y0 = cases[i].yaw0 * r, y1 = cases[i].yaw1 * r, p0 = cases[i].pitch0 * r,
+               p1 = cases[i].pitch1 * r;
+        a.direction[0] = (float)(cos(p0) * sin(y0)), a.direction[1] = (float)sin(p0);
+        a.direction[2] = (float)(-cos(p0) * cos(y0));
+        b.direction[0] = (float)(2 * cos(p1) * sin(y1)), b.direction[1] = (float)(2 * sin(p1)); /* not unit */
+        b.direction[2] = (float)(-2 * cos(p1) * cos(y1));
+        /* previous at 10 s, current at 10.1 s, target 10.35 s: 2.5 steps on. */
+        proto_pose e = view_pose_extrapolate(&a, 10, &b, 10.1, 10.35);
+        double turn = remainder(y1 - y0, 2 * PI), yaw = y1 + 2.5 * turn, pitch = p1 + 2.5 * (p1 - p0);
+        double expected[3] = {cos(pitch) * sin(yaw), sin(pitch), -cos(pitch) * cos(yaw)};
+        for (int k = 0; k < 3; k++)
+            if (fabs(e.direction[k] - expected[k]) > 1e-5)
+                fail_msg("case %zu: direction[%d] %g, expected %g", i, k, e.direction[k], expected[k]);
+        assert_true(fabs(e.position[0] - 2.75) < 1e-12 && fabs(e.position[2] - -0.5) < 1e-12);
+        assert_true(e.position[1] == 2 && e.fov_deg == 60.0f);
+        proto_pose same = view_pose_extrapolate(&a, 10.1, &b, 10.1, 11);
+        assert_true(memcmp(&same, &b, sizeof b) == 0);
+    }
+}
+
 /* ---- images ------------------------------------------------------------------------------------------- */
 
 /* Reads a whole file into a malloc'd buffer. */
@@ -362,6 +476,8 @@ int main(void)
         cmocka_unit_test(test_orbit),
         cmocka_unit_test(test_static_and_kinds),
         cmocka_unit_test(test_trace_schedule),
+        cmocka_unit_test(test_display_cameras),
+        cmocka_unit_test(test_extrapolate),
         cmocka_unit_test(test_png_same_as_server),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -37,8 +37,8 @@ typedef struct run_how {
     const char *token_env; /* $FXCACHE_TOKEN for the program (NULL: unset) */
     double signal_after_s; /* send `signal_number` after this long (0: never) */
     int signal_number;
-    int ready_fd;          /* > 0: and not before this listening socket has a connection waiting (the program
-                              is past its start, its signal handlers in place, even on a loaded machine) */
+    int ready_fd; /* > 0: and not before this listening socket has a connection waiting (the program
+                     is past its start, its signal handlers in place, even on a loaded machine) */
 } run_how;
 
 #ifdef FXC_VIEWER_BIN
@@ -201,6 +201,27 @@ static void test_bad_options(void **state)
         {{"--trace", "a.trace", "--fps", "30"},
          "--fps 30: cameras from --trace are sent at the trace's own times"},
         {{"--viewers", "3", "--trace", "a.trace", "--trace", "b.trace"}, "--viewers 3: 2 traces given"},
+        /* The display clock and the render cache. */
+        {{"--display-fps", "0"}, "--display-fps 0: must be a number above 0, at most 1000"},
+        {{"--display-fps", "1000.5"}, "--display-fps 1000.5:"},
+        {{"--display-out", ""}, "--display-out '': needs a folder"},
+        {{"--reproject", "--rc-threads", "0"}, "--rc-threads 0: must be a whole number in 1..64"},
+        {{"--reproject", "--rc-threads", "65"}, "--rc-threads 65:"},
+        {{"--reproject", "--sample-budget", "-1"}, "--sample-budget -1: must be a whole number of pixels"},
+        {{"--reproject", "--res", "64x32", "--sample-budget", "2049"},
+         "--sample-budget 2049: more than the 64x32 image's 2048 pixels"},
+        {{"--strategy", "ahead"}, "--strategy ahead: must be basic, fan or predictive"},
+        {{"--strategy", "fan"}, "--strategy fan: only with --reproject"},
+        {{"--no-prefilter"}, "--no-prefilter: only with --reproject"},
+        {{"--no-prediction"}, "--no-prediction: only with --reproject"},
+        {{"--no-eviction"}, "--no-eviction: only with --reproject"},
+        {{"--no-tiling"}, "--no-tiling: only with --reproject"},
+        {{"--sample-budget", "10"}, "--sample-budget: only with --reproject"},
+        {{"--rc-threads", "2"}, "--rc-threads 2: only with --reproject"},
+        {{"--reproject", "--depth", "none"}, "--depth none: --reproject needs depth"},
+        {{"--reproject=yes"}, "--reproject=yes: takes no value"},
+        {{"--time-scale", "0.5"}, "--time-scale 0.5: must be a number from 1 to 1000"},
+        {{"--time-scale", "1001"}, "--time-scale 1001:"},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         viewer_run r;
@@ -291,6 +312,19 @@ static void test_help(void **state)
         "--stats FILE",
         "--timeout S",
         "--quiet",
+        "--display-fps F",
+        "default 30",
+        "--display-out DIR",
+        "display_NNNNN_NAME.png",
+        "--reproject",
+        "--no-prediction",
+        "--no-prefilter",
+        "--no-eviction",
+        "--no-tiling",
+        "--rc-threads N",
+        "--sample-budget N",
+        "--strategy basic|fan|predictive",
+        "--time-scale S",
         "--help",
         "ws://127.0.0.1:7681",
         "640x360",

@@ -118,6 +118,11 @@ int main(int argc, char **argv)
                 strerror(errno));
         status = 2;
     }
+    if (status == 0 && options.display_out && !make_folder(options.display_out)) {
+        fprintf(stderr, "fxcache-viewer: --display-out %s: cannot create the folder: %s\n",
+                options.display_out, strerror(errno));
+        status = 2;
+    }
     if (status == 0 && options.stats_path) {
         FILE *probe = fopen(options.stats_path, "ab");
         if (!probe) {

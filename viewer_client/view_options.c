@@ -5,6 +5,7 @@
 #include <errno.h>
 #include <math.h>
 #include <stdio.h>
+#include <stddef.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -251,6 +252,7 @@ static bool option_depth(view_options *o, const char *name, const char *value, c
         o->depth = PROTO_DEPTH_FLOAT;
     else
         REFUSE("%s %s: must be none, 16 or 32", name, value);
+    o->depth_given = true;
     return true;
 }
 
@@ -306,6 +308,66 @@ static bool option_timeout(view_options *o, const char *name, const char *value,
     return true;
 }
 
+static bool option_display_fps(view_options *o, const char *name, const char *value, char *err, size_t cap)
+{
+    double v;
+    if (!parse_decimal(value, &v) || !(v > 0 && v <= 1000))
+        REFUSE("%s %s: must be a number above 0, at most 1000", name, value);
+    o->display_fps = v;
+    return true;
+}
+
+static bool option_display_out(view_options *o, const char *name, const char *value, char *err, size_t cap)
+{
+    if (!value[0])
+        REFUSE("%s '': needs a folder", name);
+    o->display_out = value;
+    return true;
+}
+
+static bool option_time_scale(view_options *o, const char *name, const char *value, char *err, size_t cap)
+{
+    double v;
+    if (!parse_decimal(value, &v) || !(v >= 1 && v <= 1000))
+        REFUSE("%s %s: must be a number from 1 to 1000", name, value);
+    o->time_scale = v;
+    return true;
+}
+
+static bool option_rc_threads(view_options *o, const char *name, const char *value, char *err, size_t cap)
+{
+    uint64_t v;
+    if (!parse_whole(value, 1, VIEW_MAX_RC_THREADS, &v))
+        REFUSE("%s %s: must be a whole number in 1..%d", name, value, VIEW_MAX_RC_THREADS);
+    o->rc_threads = (uint32_t)v;
+    return true;
+}
+
+static bool option_sample_budget(view_options *o, const char *name, const char *value, char *err, size_t cap)
+{
+    uint64_t v;
+    /* The upper bound is the image's pixel count, checked with --res in check_together. */
+    if (!parse_whole(value, 0, (uint64_t)PROTO_MAX_SIDE * PROTO_MAX_SIDE, &v))
+        REFUSE("%s %s: must be a whole number of pixels, 0 (no sample requests) up to the image's pixels",
+               name, value);
+    o->sample_budget = (uint32_t)v;
+    o->sample_budget_given = true;
+    return true;
+}
+
+static bool option_strategy(view_options *o, const char *name, const char *value, char *err, size_t cap)
+{
+    proto_strategy strategy;
+    if (value[0] && proto_strategy_parse(value, &strategy)) {
+        o->strategy = (uint8_t)strategy;
+        return true;
+    }
+    REFUSE("%s %s: must be basic, fan or predictive", name, value);
+}
+
+/* The flags: each sets one bool of view_options (found by its offset). */
+static bool option_flag(view_options *o, const char *name, const char *value, char *err, size_t cap);
+
 static bool option_quiet(view_options *o, const char *name, const char *value, char *err, size_t cap)
 {
     (void)name, (void)value, (void)err, (void)cap;
@@ -318,16 +380,57 @@ static const struct option_entry {
     bool takes_value;
     option_fn apply;
 } option_table[] = {
-    {"--connect", true, option_connect}, {"--viewers", true, option_viewers},
-    {"--frames", true, option_frames},   {"--trace", true, option_trace},
-    {"--camera", true, option_camera},   {"--fps", true, option_fps},
-    {"--res", true, option_res},         {"--fov", true, option_fov},
-    {"--codec", true, option_codec},     {"--quality", true, option_quality},
-    {"--depth", true, option_depth},     {"--token", true, option_token},
-    {"--name", true, option_name},       {"--out", true, option_out},
-    {"--latency", true, option_latency}, {"--stats", true, option_stats},
-    {"--timeout", true, option_timeout}, {"--quiet", false, option_quiet},
+    {"--connect", true, option_connect},
+    {"--viewers", true, option_viewers},
+    {"--frames", true, option_frames},
+    {"--trace", true, option_trace},
+    {"--camera", true, option_camera},
+    {"--fps", true, option_fps},
+    {"--res", true, option_res},
+    {"--fov", true, option_fov},
+    {"--codec", true, option_codec},
+    {"--quality", true, option_quality},
+    {"--depth", true, option_depth},
+    {"--token", true, option_token},
+    {"--name", true, option_name},
+    {"--out", true, option_out},
+    {"--latency", true, option_latency},
+    {"--stats", true, option_stats},
+    {"--timeout", true, option_timeout},
+    {"--quiet", false, option_quiet},
+    {"--display-fps", true, option_display_fps},
+    {"--display-out", true, option_display_out},
+    {"--reproject", false, option_flag},
+    {"--no-prediction", false, option_flag},
+    {"--no-prefilter", false, option_flag},
+    {"--no-eviction", false, option_flag},
+    {"--no-tiling", false, option_flag},
+    {"--rc-threads", true, option_rc_threads},
+    {"--sample-budget", true, option_sample_budget},
+    {"--strategy", true, option_strategy},
+    {"--time-scale", true, option_time_scale},
 };
+
+static bool option_flag(view_options *o, const char *name, const char *value, char *err, size_t cap)
+{
+    (void)value, (void)err, (void)cap;
+    static const struct {
+        const char *name;
+        size_t offset;
+    } flags[] = {
+        {"--reproject", offsetof(view_options, reproject)},
+        {"--no-prediction", offsetof(view_options, no_prediction)},
+        {"--no-prefilter", offsetof(view_options, no_prefilter)},
+        {"--no-eviction", offsetof(view_options, no_eviction)},
+        {"--no-tiling", offsetof(view_options, no_tiling)},
+    };
+    for (size_t k = 0; k < sizeof flags / sizeof flags[0]; k++)
+        if (strcmp(name, flags[k].name) == 0) {
+            *(bool *)((char *)o + flags[k].offset) = true;
+            return true;
+        }
+    return false; /* not reached: every flag of the table is in this list */
+}
 
 /* The checks between options, once all are read. */
 static bool check_together(view_options *o, bool viewers_given, char *err, size_t cap)
@@ -346,6 +449,32 @@ static bool check_together(view_options *o, bool viewers_given, char *err, size_
     if (o->quality_given && o->codec != PROTO_CODEC_JPEG)
         REFUSE("--quality %u: only --codec jpeg has a quality (the codec is %s)", o->quality,
                proto_codec_name(o->codec));
+    /* The render cache's options need it; it needs depth. */
+    static const struct {
+        const char *name;
+        size_t offset;
+    } rc_only[] = {
+        {"--no-prediction", offsetof(view_options, no_prediction)},
+        {"--no-prefilter", offsetof(view_options, no_prefilter)},
+        {"--no-eviction", offsetof(view_options, no_eviction)},
+        {"--no-tiling", offsetof(view_options, no_tiling)},
+        {"--sample-budget", offsetof(view_options, sample_budget_given)},
+    };
+    for (size_t k = 0; k < sizeof rc_only / sizeof rc_only[0]; k++)
+        if (!o->reproject && *(const bool *)((const char *)o + rc_only[k].offset))
+            REFUSE("%s: only with --reproject (it switches a stage of the render cache)", rc_only[k].name);
+    if (!o->reproject && o->rc_threads)
+        REFUSE("--rc-threads %u: only with --reproject (the render cache's threads)", o->rc_threads);
+    if (!o->reproject && o->strategy == PROTO_STRATEGY_FAN)
+        REFUSE("--strategy fan: only with --reproject (a wider, smaller frame is shown through the render "
+               "cache)");
+    if (o->reproject && o->depth_given && o->depth == PROTO_DEPTH_NONE)
+        REFUSE("--depth none: --reproject needs depth (16 or 32; default 16 with --reproject)");
+    if (o->reproject && !o->depth_given)
+        o->depth = PROTO_DEPTH_HALF;
+    if (o->sample_budget_given && o->res_given && o->sample_budget > o->width * o->height)
+        REFUSE("--sample-budget %u: more than the %ux%u image's %u pixels", o->sample_budget, o->width,
+               o->height, o->width * o->height);
     if (o->name_prefix[0]) {
         char longest[64];
         snprintf(longest, sizeof longest, "%s_%u", o->name_prefix, o->viewers - 1);
@@ -370,6 +499,8 @@ view_parse_result view_options_parse(int argc, char *const argv[], const char *e
     o->codec = PROTO_CODEC_ZSTD;
     o->quality = 85;
     o->depth = PROTO_DEPTH_NONE;
+    o->display_fps = 30;
+    o->time_scale = 1;
     o->timeout_s = 60; /* the first frame of 16 viewers on Sponza took 13 s here: everything is new */
     if (env_token && !option_token(o, "FXCACHE_TOKEN", env_token, err, cap))
         return VIEW_PARSE_ERROR;
@@ -465,12 +596,49 @@ const char *view_options_help(void)
            "                           before they are sent, frames MS before they count as shown\n"
            "  --stats FILE             at the end, JSON: per viewer and in total frames, fps, latency "
            "median\n"
-           "                           and 95th percentile, bytes received, bytes per frame, decode errors\n"
+           "                           and 95th percentile, bytes received, bytes per frame, decode errors;\n"
+           "                           per viewer the display's frames and empty pixels and, with\n"
+           "                           --reproject, the render cache's (pixels by kind, points, requests\n"
+           "                           sent and answered, samples, time per stage)\n"
            "  --timeout S              give up on a viewer that has no connection, no welcome, or no frame\n"
            "                           for S seconds (default 60: a first frame of many viewers on a large\n"
            "                           scene can take over 10 s)\n"
            "  --quiet                  no summary and no warnings (errors are still printed)\n"
            "  --help                   this text\n"
+           "\n"
+           "The display: each viewer runs its own display clock at --display-fps. A display frame shows, "
+           "for\n"
+           "the viewer's camera at that moment (its trace's cameras interpolated, or the generator between\n"
+           "two of its cameras), the last frame received (default) or, with --reproject, what the render\n"
+           "cache reprojects from every frame and sample received so far.\n"
+           "  --display-fps F          display frames per second, above 0, at most 1000 (default 30)\n"
+           "  --display-out DIR        write every display frame as DIR/display_NNNNN_NAME.png, its camera\n"
+           "                           as DIR/display_NAME.trace (time = NNNNN / F: fxcache sim --trace at\n"
+           "                           --fps F renders the same cameras) and its figures as\n"
+           "                           DIR/display_NAME.csv; DIR is created\n"
+           "  --reproject              show the render cache's frames: frames are inserted as they arrive\n"
+           "                           (they need depth: --depth defaults to 16), the cache renders each\n"
+           "                           display frame and its requests go to the server as sample requests\n"
+           "  --no-prediction          no predicted camera (display time + the measured latency) for the\n"
+           "                           render cache's predicted requests\n"
+           "  --no-prefilter           no 7x7 prefilter in the render cache\n"
+           "  --no-eviction            no eviction by age in the render cache\n"
+           "  --no-tiling              no tiled z-buffer (one pass over the whole image, one thread)\n"
+           "  --rc-threads N           the render cache's threads per viewer, 1..64 (default 1)\n"
+           "  --sample-budget N        pixels requested per display frame, 0 (no sample requests) up to the\n"
+           "                           image's pixels (default: width * height / 32)\n"
+           "  --strategy basic|fan|predictive\n"
+           "                           reference frames asked for in the hello (default basic: the camera\n"
+           "                           sent; fan: a wider field of view at a lower resolution, --reproject\n"
+           "                           only; predictive: each camera message also carries the camera\n"
+           "                           extrapolated by the measured latency)\n"
+           "The --no-* switches, --rc-threads and --sample-budget need --reproject.\n"
+           "  --time-scale S           run the whole session S times slower, 1..1000 (default 1): trace\n"
+           "                           times, --fps, --display-fps and --latency are the session's own "
+           "time;\n"
+           "                           a server at --fps F/S then stands for one at F on a machine S times\n"
+           "                           faster. Latency figures are in session time; fps and seconds on the\n"
+           "                           wall clock\n"
            "\n"
            "Latency is, per camera, from the moment it was generated to the moment the first frame rendered\n"
            "for it (or for a newer camera) counts as shown, both --latency delays included. A summary in "

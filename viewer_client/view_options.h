@@ -12,8 +12,9 @@
 #include <stdint.h>
 
 enum {
-    VIEW_MAX_VIEWERS = 64,      /* --viewers upper bound */
-    VIEW_MAX_LATENCY_MS = 10000 /* --latency upper bound */
+    VIEW_MAX_VIEWERS = 64,       /* --viewers upper bound */
+    VIEW_MAX_LATENCY_MS = 10000, /* --latency upper bound */
+    VIEW_MAX_RC_THREADS = 64,    /* --rc-threads upper bound (rcache.h's VIEW_RC_MAX_THREADS) */
 };
 
 #define VIEW_DEFAULT_URL "ws://127.0.0.1:7681"
@@ -45,6 +46,18 @@ typedef struct view_options {
     const char *stats_path;               /* --stats (NULL = none) */
     double timeout_s;                     /* (0, 86400], default 10 */
     bool quiet;
+    /* The display clock and the render cache (--reproject): */
+    double display_fps;      /* display frames per second per viewer, (0, 1000] (default 30) */
+    const char *display_out; /* --display-out DIR: every display frame as PNG, its camera as a trace */
+    bool reproject;          /* the display shows the render cache's frame (else the last frame received) */
+    bool depth_given;
+    bool no_prediction, no_prefilter, no_eviction, no_tiling; /* view_rc_desc's stage switches */
+    uint32_t rc_threads;    /* the render cache's threads, 1..64 (default 1) */
+    uint32_t sample_budget; /* pixels requested per display frame (0: the render cache's default, width *
+                               height / 32); 0 with --sample-budget 0: no sample requests */
+    bool sample_budget_given;
+    uint8_t strategy;  /* proto_strategy sent in hello (default basic) */
+    double time_scale; /* --time-scale: the session's durations run this many times slower, [1, 1000] (1) */
 } view_options;
 
 typedef enum view_parse_result {

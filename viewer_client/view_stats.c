@@ -132,6 +132,10 @@ void view_stats_print_summary(FILE *out, const view_viewer_stats *viewers, uint3
             continue;
         }
         print_figures(out, &f);
+        if (v->display.frames)
+            fprintf(out, ", %llu display frames (%.1f %% of pixels empty)",
+                    (unsigned long long)v->display.frames,
+                    100.0 * v->display.empty_fraction_sum / (double)v->display.frames);
         if (v->failed)
             fprintf(out, "; failed: %s", v->error);
         fprintf(out, "\n");
@@ -177,6 +181,43 @@ static void json_figures(FILE *f, const view_figures *fig, const char *indent)
     fprintf(f, "%s\"decode_errors\": %llu", indent, (unsigned long long)fig->decode_errors);
 }
 
+/* A viewer's display and render cache figures (members "display" and "render_cache", no trailing comma). */
+static void json_display(FILE *f, const view_display_stats *d)
+{
+    double frames = d->frames ? (double)d->frames : 1;
+    fprintf(f,
+            "      \"display\": {\"frames\": %llu, \"skipped\": %llu, \"fps\": %.3f, \"empty_fraction\": "
+            "%.6f},\n",
+            (unsigned long long)d->frames, (unsigned long long)d->skipped, d->fps,
+            d->empty_fraction_sum / frames);
+    if (!d->reproject) {
+        fprintf(f, "      \"render_cache\": null");
+        return;
+    }
+    static const char *const kinds[VIEW_RC_PIXEL_KINDS] = {"empty", "point", "interpolated", "prefiltered"};
+    fprintf(f, "      \"render_cache\": {\n        \"pixel_fractions\": {");
+    for (int k = 0; k < VIEW_RC_PIXEL_KINDS; k++)
+        fprintf(f, "%s\"%s\": %.6f", k ? ", " : "", kinds[k], d->kind_fraction_sum[k] / frames);
+    fprintf(f, "},\n        \"points\": %u, \"points_mean\": %.1f,\n", d->points_last,
+            (double)d->points_sum / frames);
+    fprintf(f,
+            "        \"requests_sent\": %llu, \"request_pixels\": %llu, \"request_pixels_not_sent\": %llu,\n"
+            "        \"requests_answered\": %llu, \"samples_received\": %llu,\n"
+            "        \"frames_inserted\": %llu, \"insert_errors\": %llu, \"rtt_ms\": %.3f,\n",
+            (unsigned long long)d->request_messages, (unsigned long long)d->request_pixels,
+            (unsigned long long)d->requests_dropped, (unsigned long long)d->answers,
+            (unsigned long long)d->samples_received, (unsigned long long)d->frames_inserted,
+            (unsigned long long)d->insert_errors, d->rtt_ms);
+    fprintf(f, "        \"stage_ms\": {");
+    for (int k = 0; k < VIEW_RC_STAGE_COUNT; k++) {
+        fprintf(f, "%s", k ? ", " : "");
+        json_string(f, view_rc_stage_name(k));
+        fprintf(f, ": %.4f", d->stage_ms_sum[k] / frames);
+    }
+    fprintf(f, "},\n        \"total_ms\": {\"mean\": %.4f, \"max\": %.4f}\n      }", d->total_ms_sum / frames,
+            d->total_ms_max);
+}
+
 int view_stats_write_json(const char *path, const view_viewer_stats *viewers, uint32_t n, const char *url,
                           double seconds, char *err, size_t cap)
 {
@@ -207,11 +248,12 @@ int view_stats_write_json(const char *path, const view_viewer_stats *viewers, ui
             fprintf(f, "null");
         fprintf(f, ",\n");
         json_figures(f, &fig, "      ");
-        fprintf(f,
-                ",\n      \"cameras_sent\": %llu,\n      \"cameras_skipped\": %llu,\n      \"seconds\": "
-                "%.3f\n    }%s\n",
-                (unsigned long long)v->cameras_sent, (unsigned long long)v->cameras_skipped, v->seconds,
-                i + 1 < n ? "," : "");
+        fprintf(
+            f,
+            ",\n      \"cameras_sent\": %llu,\n      \"cameras_skipped\": %llu,\n      \"seconds\": %.3f,\n",
+            (unsigned long long)v->cameras_sent, (unsigned long long)v->cameras_skipped, v->seconds);
+        json_display(f, &v->display);
+        fprintf(f, "\n    }%s\n", i + 1 < n ? "," : "");
     }
     view_figures total;
     ok = ok && view_figures_of(viewers, n, &total);

@@ -5,6 +5,7 @@
 #define FXC_VIEW_STATS_H
 
 #include "proto.h"
+#include "rcache.h"
 
 #include <stdbool.h>
 #include <stddef.h>
@@ -31,6 +32,31 @@ double view_percentile(const double *sorted, size_t n, double p);
 /* Sorts n values ascending. */
 void view_sort(double *values, size_t n);
 
+/* The display clock's figures (every display frame), and the render cache's with --reproject. Sums are over
+ * display frames; the JSON gives their means. */
+typedef struct view_display_stats {
+    uint64_t frames;           /* display frames made */
+    uint64_t skipped;          /* display frames not made because the clock fell behind */
+    double fps;                /* the display clock's rate (--display-fps) */
+    double empty_fraction_sum; /* pixels showing nothing (no frame yet; the cache's empty pixels) */
+    bool reproject;            /* the render cache's figures below are valid */
+    double kind_fraction_sum[VIEW_RC_PIXEL_KINDS]; /* pixels by view_rc_pixel_kind, fractions */
+    uint64_t points_sum;                           /* the cache's live points after each frame */
+    uint32_t points_last;
+    uint64_t request_messages; /* sample-request messages sent */
+    uint64_t request_pixels;   /* pixels in them */
+    uint64_t requests_dropped; /* requested pixels not sent (no sample requests: the server side lacks
+                                  them, or --sample-budget 0) */
+    uint64_t answers;          /* samples messages inserted */
+    uint64_t samples_received; /* samples in them */
+    uint64_t frames_inserted;  /* frames inserted into the cache */
+    uint64_t insert_errors;    /* frames or answers the cache refused (no depth, too large) */
+    double stage_ms_sum[VIEW_RC_STAGE_COUNT]; /* view_rc_stats.stage_ms */
+    double total_ms_sum;                      /* view_rc_stats.total_ms */
+    double total_ms_max;
+    double rtt_ms; /* the round trip the prediction used last (camera to frame shown) */
+} view_display_stats;
+
 /* One viewer's figures, kept by the client while it runs. */
 typedef struct view_viewer_stats {
     uint32_t index;                /* the viewer's number in this run, from 0 */
@@ -45,6 +71,7 @@ typedef struct view_viewer_stats {
     uint64_t cameras_skipped;      /* cameras not sent because a newer one was due (a stalled loop) */
     double seconds;                /* from the welcome to the last frame shown (0 without frames) */
     view_latency latency;          /* per camera, the first frame that showed it or a newer one */
+    view_display_stats display;    /* the display clock's frames */
 } view_viewer_stats;
 
 /* The figures of one line of the summary: a viewer's, or the total over several (frames, bytes and fps
