@@ -405,8 +405,11 @@ static void test_turning_camera(void **state)
         "of their lags %.4f; lag at most %.0f ms)\n",
         frames, frames ? empty / frames : 0, frames ? bound_sum / frames : 0, worst_lag * 1000);
     assert_true(frames >= 60);
-    /* Not vacuous: the turn leaves a strip empty on average. */
-    assert_true(empty / frames > 0.005);
+    /* Not vacuous: the turn uncovers a strip the received frames alone do not cover (the bound above has
+     * teeth). How much of it stays empty depends on how fast the answers to the sample requests come back:
+     * on an idle machine they fill all of it (measured 0.0000 empty against a strip of 0.065), on a loaded
+     * one about a quarter stays empty (0.016 against 0.083). */
+    assert_true(bound_sum / frames > 0.02);
 #endif
 }
 
