@@ -11,6 +11,7 @@
  * no well-behaved library would. Under the sanitizer build the server runs instrumented and must exit 0 on
  * SIGTERM (a leak or an error makes it exit non-zero). */
 #include "proto.h"
+#include "fxt_serve.h"
 #include "test_util.h"
 
 #include <arpa/inet.h>
@@ -35,283 +36,6 @@
 
 extern char **environ;
 
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
-/* ---- the server process ---------------------------------------------------------------------------------- */
-
-typedef struct server {
-    pid_t pid;
-    int port;
-    char out[512], err[512];
-} server;
-
-/* Starts `fxcache serve --port 0 ARGS...` with stdout and stderr in files; waits for its address line. */
-static void server_start(server *sv, const char *name, const char *const *args)
-{
-    snprintf(sv->out, sizeof sv->out, "%s", fxt_tmp_path(name));
-    strncat(sv->out, ".out", sizeof sv->out - strlen(sv->out) - 1);
-    snprintf(sv->err, sizeof sv->err, "%s", fxt_tmp_path(name));
-    strncat(sv->err, ".err", sizeof sv->err - strlen(sv->err) - 1);
-    const char *argv[64] = {FXC_BIN, "serve", "--port", "0", "--quiet"};
-    int n = 5;
-    for (int i = 0; args[i] && n < 62; i++)
-        argv[n++] = args[i];
-    argv[n] = NULL;
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_addopen(&fa, 1, sv->out, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_addopen(&fa, 2, sv->err, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
-    assert_int_equal(posix_spawn(&sv->pid, FXC_BIN, &fa, NULL, (char *const *)argv, environ), 0);
-    posix_spawn_file_actions_destroy(&fa);
-    sv->port = 0;
-    for (double t0 = now_s(); now_s() - t0 < 120 && !sv->port;) {
-        FILE *f = fopen(sv->out, "r");
-        char line[256];
-        while (f && fgets(line, sizeof line, f)) {
-            const char *at = strstr(line, "listening on ws://127.0.0.1:");
-            if (at)
-                sv->port = atoi(at + strlen("listening on ws://127.0.0.1:"));
-        }
-        if (f)
-            fclose(f);
-        int status;
-        if (!sv->port && waitpid(sv->pid, &status, WNOHANG) == sv->pid)
-            fail_msg("fxcache serve exited before listening (see %s)", sv->err);
-        if (!sv->port)
-            usleep(20000);
-    }
-    assert_true(sv->port > 0);
-}
-
-/* True while the server process runs. */
-static bool server_alive(server *sv)
-{
-    int status;
-    return waitpid(sv->pid, &status, WNOHANG) == 0;
-}
-
-/* Sends SIGTERM and returns the exit status (fails the test when it does not exit within 60 s). */
-static int server_stop(server *sv)
-{
-    kill(sv->pid, SIGTERM);
-    for (double t0 = now_s(); now_s() - t0 < 60;) {
-        int status;
-        if (waitpid(sv->pid, &status, WNOHANG) == sv->pid)
-            return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-        usleep(20000);
-    }
-    kill(sv->pid, SIGKILL);
-    fail_msg("fxcache serve did not stop within 60 s of SIGTERM");
-    return -1;
-}
-
-/* ---- WebSocket by hand ---------------------------------------------------------------------------------- */
-
-static int tcp_connect(int port)
-{
-    int fd = socket(AF_INET, SOCK_STREAM, 0);
-    struct sockaddr_in a = {.sin_family = AF_INET, .sin_port = htons((uint16_t)port)};
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    if (fd < 0 || connect(fd, (struct sockaddr *)&a, sizeof a) != 0) {
-        if (fd >= 0)
-            close(fd);
-        return -1;
-    }
-    int one = 1;
-    setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
-    return fd;
-}
-
-static bool write_all(int fd, const void *data, size_t len)
-{
-    const uint8_t *p = data;
-    while (len) {
-        ssize_t n = send(fd, p, len, MSG_NOSIGNAL);
-        if (n <= 0)
-            return false;
-        p += n;
-        len -= (size_t)n;
-    }
-    return true;
-}
-
-/* Reads exactly len bytes within timeout seconds. */
-static bool read_exact(int fd, void *data, size_t len, double timeout)
-{
-    uint8_t *p = data;
-    double t0 = now_s();
-    while (len) {
-        struct pollfd pfd = {.fd = fd, .events = POLLIN};
-        int left_ms = (int)((timeout - (now_s() - t0)) * 1000);
-        if (left_ms <= 0 || poll(&pfd, 1, left_ms) <= 0)
-            return false;
-        ssize_t n = recv(fd, p, len, 0);
-        if (n <= 0)
-            return false;
-        p += n;
-        len -= (size_t)n;
-    }
-    return true;
-}
-
-/* Connects and completes the opening handshake; -1 on failure. */
-static int ws_connect(int port)
-{
-    int fd = tcp_connect(port);
-    if (fd < 0)
-        return -1;
-    static const char request[] = "GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-                                  "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n";
-    char reply[2048];
-    size_t len = 0;
-    if (!write_all(fd, request, sizeof request - 1))
-        goto fail;
-    while (len < sizeof reply - 1) {
-        if (!read_exact(fd, reply + len, 1, 10))
-            goto fail;
-        len++;
-        reply[len] = 0;
-        if (len >= 4 && memcmp(reply + len - 4, "\r\n\r\n", 4) == 0)
-            break;
-    }
-    if (!strstr(reply, " 101 "))
-        goto fail;
-    return fd;
-fail:
-    close(fd);
-    return -1;
-}
-
-/* Sends one binary message as a masked client frame. */
-static bool ws_send(int fd, const uint8_t *payload, size_t len)
-{
-    uint8_t head[14];
-    size_t h = 0;
-    head[h++] = 0x82;
-    if (len < 126) {
-        head[h++] = (uint8_t)(0x80 | len);
-    } else if (len < 65536) {
-        head[h++] = 0x80 | 126;
-        head[h++] = (uint8_t)(len >> 8);
-        head[h++] = (uint8_t)len;
-    } else {
-        head[h++] = 0x80 | 127;
-        for (int k = 7; k >= 0; k--)
-            head[h++] = (uint8_t)((uint64_t)len >> (8 * k));
-    }
-    static const uint8_t mask[4] = {0x12, 0x34, 0x56, 0x78};
-    memcpy(head + h, mask, 4);
-    h += 4;
-    uint8_t *masked = malloc(len ? len : 1);
-    for (size_t i = 0; i < len; i++)
-        masked[i] = payload[i] ^ mask[i & 3];
-    bool ok = write_all(fd, head, h) && write_all(fd, masked, len);
-    free(masked);
-    return ok;
-}
-
-static bool ws_send_msg(int fd, const proto_msg *m)
-{
-    uint8_t buf[1024];
-    size_t n = proto_encode(m, buf, sizeof buf, NULL);
-    return n > 0 && ws_send(fd, buf, n);
-}
-
-/* Receives one whole message (fragments joined, control frames skipped) into *out (malloc'd, caller frees).
- * Returns its length, or -1 on close, error or timeout. */
-static long ws_recv(int fd, uint8_t **out, double timeout)
-{
-    uint8_t *msg = NULL;
-    size_t len = 0;
-    for (;;) {
-        uint8_t h[2];
-        if (!read_exact(fd, h, 2, timeout))
-            break;
-        uint64_t n = h[1] & 0x7f;
-        if (n == 126 || n == 127) {
-            uint8_t ext[8];
-            size_t e = n == 126 ? 2 : 8;
-            if (!read_exact(fd, ext, e, timeout))
-                break;
-            n = 0;
-            for (size_t k = 0; k < e; k++)
-                n = n << 8 | ext[k];
-        }
-        int opcode = h[0] & 0x0f;
-        if (n > (64u << 20))
-            break;
-        uint8_t *p = realloc(msg, len + n + 1);
-        if (!p)
-            break;
-        msg = p;
-        if (!read_exact(fd, msg + len, n, timeout))
-            break;
-        if (opcode == 8)
-            break; /* close */
-        if (opcode >= 8)
-            continue; /* ping, pong */
-        len += n;
-        if (h[0] & 0x80) {
-            *out = msg;
-            return (long)len;
-        }
-    }
-    free(msg);
-    return -1;
-}
-
-/* Waits for the server's error message and the close: true when one came with this code (0: any code). */
-static bool expect_error(int fd, int code)
-{
-    for (;;) {
-        uint8_t *msg = NULL;
-        long n = ws_recv(fd, &msg, 20);
-        if (n < 0)
-            return false;
-        proto_msg m;
-        fxc_result r = proto_decode(msg, (size_t)n, &m);
-        free(msg);
-        if (r != FXC_OK)
-            return false;
-        if (m.type == PROTO_ERROR) {
-            if (code && m.u.error.code != code)
-                print_message("error %d (%s), expected %d\n", m.u.error.code, m.u.error.reason, code);
-            return !code || m.u.error.code == code;
-        }
-    }
-}
-
-static proto_msg hello_msg(uint32_t width, uint32_t height, uint8_t codec)
-{
-    proto_msg m = {.type = PROTO_HELLO};
-    m.u.hello.width = width;
-    m.u.hello.height = height;
-    m.u.hello.fov_deg = 60;
-    m.u.hello.codec = codec;
-    return m;
-}
-
-/* Reads the welcome; its default camera is the camera the viewer then sends. */
-static bool read_welcome(int fd, proto_welcome *out)
-{
-    uint8_t *msg = NULL;
-    long n = ws_recv(fd, &msg, 60);
-    if (n < 0)
-        return false;
-    proto_msg m;
-    bool ok = proto_decode(msg, (size_t)n, &m) == FXC_OK && m.type == PROTO_WELCOME;
-    if (ok)
-        *out = m.u.welcome;
-    free(msg);
-    return ok;
-}
-
 static proto_msg camera_msg(const proto_welcome *w, uint32_t sequence)
 {
     proto_msg m = {.type = PROTO_CAMERA};
@@ -335,10 +59,10 @@ typedef struct good_viewer {
 static void *good_viewer_run(void *arg)
 {
     good_viewer *g = arg;
-    int fd = ws_connect(g->port);
+    int fd = fxt_ws_connect(g->port);
     proto_welcome w;
-    proto_msg hello = hello_msg(64, 36, PROTO_CODEC_ZSTD);
-    if (fd < 0 || !ws_send_msg(fd, &hello) || !read_welcome(fd, &w)) {
+    proto_msg hello = fxt_hello_msg(64, 36, PROTO_CODEC_ZSTD);
+    if (fd < 0 || !fxt_ws_send_msg(fd, &hello) || !fxt_read_welcome(fd, &w)) {
         g->failed = true;
         if (fd >= 0)
             close(fd);
@@ -348,19 +72,19 @@ static void *good_viewer_run(void *arg)
     double next_camera = 0;
     uint8_t rgb[64 * 36 * 3];
     while (!atomic_load(&g->stop)) {
-        if (now_s() >= next_camera) {
+        if (fxt_now_s() >= next_camera) {
             proto_msg cam = camera_msg(&w, sequence++);
-            if (!ws_send_msg(fd, &cam)) {
+            if (!fxt_ws_send_msg(fd, &cam)) {
                 g->failed = true;
                 break;
             }
-            next_camera = now_s() + 1.0 / 30;
+            next_camera = fxt_now_s() + 1.0 / 30;
         }
         uint8_t *msg = NULL;
         struct pollfd pfd = {.fd = fd, .events = POLLIN};
         if (poll(&pfd, 1, 10) <= 0)
             continue;
-        long n = ws_recv(fd, &msg, 10);
+        long n = fxt_ws_recv(fd, &msg, 10);
         proto_msg m;
         if (n < 0 || proto_decode(msg, (size_t)n, &m) != FXC_OK || m.type != PROTO_FRAME ||
             proto_color_decode(m.u.frame.codec, m.u.frame.color, m.u.frame.color_bytes, 64, 36, rgb) != FXC_OK) {
@@ -371,7 +95,7 @@ static void *good_viewer_run(void *arg)
         free(msg);
         int k = atomic_load(&g->frames);
         if (k < 20000) {
-            g->times[k] = now_s();
+            g->times[k] = fxt_now_s();
             atomic_store(&g->frames, k + 1);
         }
     }
@@ -399,86 +123,86 @@ static void *never_reader(void *arg)
 {
     /* Joins with a big raw frame, sends one camera, and then never reads: its socket buffers fill. */
     int *port = arg;
-    int fd = ws_connect(*port);
+    int fd = fxt_ws_connect(*port);
     if (fd < 0)
         return (void *)(intptr_t)-1;
     int small = 4096;
     setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &small, sizeof small);
-    proto_msg hello = hello_msg(160, 90, PROTO_CODEC_RAW);
-    ws_send_msg(fd, &hello);
+    proto_msg hello = fxt_hello_msg(160, 90, PROTO_CODEC_RAW);
+    fxt_ws_send_msg(fd, &hello);
     usleep(200000);
     proto_msg cam = {.type = PROTO_CAMERA};
     cam.u.camera.pose = (proto_pose){.position = {4.3, 2.2, 3.5}, .direction = {-1, -0.3, -1}, .fov_deg = 60};
-    ws_send_msg(fd, &cam);
+    fxt_ws_send_msg(fd, &cam);
     return (void *)(intptr_t)fd;
 }
 
 static void misbehave(int port, misbehaviour_result *r)
 {
     /* Garbage before any handshake. */
-    int fd = tcp_connect(port);
+    int fd = fxt_tcp_connect(port);
     if (fd >= 0) {
         uint8_t junk[4096];
         for (size_t i = 0; i < sizeof junk; i++)
             junk[i] = (uint8_t)(i * 2654435761u >> 13);
-        write_all(fd, junk, sizeof junk);
+        fxt_write_all(fd, junk, sizeof junk);
         close(fd);
     }
     /* A garbage message after the handshake. */
-    fd = ws_connect(port);
+    fd = fxt_ws_connect(port);
     if (fd >= 0) {
         uint8_t junk[300];
         for (size_t i = 0; i < sizeof junk; i++)
             junk[i] = (uint8_t)(i * 40503u >> 3);
-        ws_send(fd, junk, sizeof junk);
-        r->bad_message_refused = expect_error(fd, FXC_ERR_BAD_MAGIC);
+        fxt_ws_send(fd, junk, sizeof junk);
+        r->bad_message_refused = fxt_expect_error(fd, FXC_ERR_BAD_MAGIC);
         close(fd);
     }
     r->garbage_refused = true; /* the raw garbage has no answer to check: the server must simply survive */
     /* A hello with an absurd resolution: out of the format's range, so the bytes are written by hand. */
-    fd = ws_connect(port);
+    fd = fxt_ws_connect(port);
     if (fd >= 0) {
-        proto_msg hello = hello_msg(64, 36, PROTO_CODEC_ZSTD);
+        proto_msg hello = fxt_hello_msg(64, 36, PROTO_CODEC_ZSTD);
         uint8_t buf[256];
         size_t n = proto_encode(&hello, buf, sizeof buf, NULL);
         proto_put_u32le(buf + PROTO_HEADER_BYTES + 1, 1000000); /* width, after the empty name's length byte */
-        ws_send(fd, buf, n);
-        r->absurd_hello_refused = expect_error(fd, FXC_ERR_RANGE);
+        fxt_ws_send(fd, buf, n);
+        r->absurd_hello_refused = fxt_expect_error(fd, FXC_ERR_RANGE);
         close(fd);
     }
     /* A text message. */
-    fd = ws_connect(port);
+    fd = fxt_ws_connect(port);
     if (fd >= 0) {
         uint8_t frame[] = {0x81, 0x80 | 5, 0, 0, 0, 0, 'h', 'e', 'l', 'l', 'o'};
-        write_all(fd, frame, sizeof frame);
-        r->text_refused = expect_error(fd, FXC_ERR_PROTOCOL);
+        fxt_write_all(fd, frame, sizeof frame);
+        r->text_refused = fxt_expect_error(fd, FXC_ERR_PROTOCOL);
         close(fd);
     }
     /* A flood of cameras. */
-    fd = ws_connect(port);
+    fd = fxt_ws_connect(port);
     if (fd >= 0) {
-        proto_msg hello = hello_msg(32, 18, PROTO_CODEC_ZSTD);
+        proto_msg hello = fxt_hello_msg(32, 18, PROTO_CODEC_ZSTD);
         proto_welcome w;
-        if (ws_send_msg(fd, &hello) && read_welcome(fd, &w)) {
+        if (fxt_ws_send_msg(fd, &hello) && fxt_read_welcome(fd, &w)) {
             for (uint32_t i = 0; i < 2000; i++) {
                 proto_msg cam = camera_msg(&w, i);
-                if (!ws_send_msg(fd, &cam))
+                if (!fxt_ws_send_msg(fd, &cam))
                     break;
             }
-            r->flood_refused = expect_error(fd, FXC_ERR_LIMIT);
+            r->flood_refused = fxt_expect_error(fd, FXC_ERR_LIMIT);
         }
         close(fd);
     }
     /* A disconnect in the middle of a frame: join, ask for frames, read a few bytes of one, reset. */
-    fd = ws_connect(port);
+    fd = fxt_ws_connect(port);
     if (fd >= 0) {
-        proto_msg hello = hello_msg(96, 54, PROTO_CODEC_RAW);
+        proto_msg hello = fxt_hello_msg(96, 54, PROTO_CODEC_RAW);
         proto_welcome w;
-        if (ws_send_msg(fd, &hello) && read_welcome(fd, &w)) {
+        if (fxt_ws_send_msg(fd, &hello) && fxt_read_welcome(fd, &w)) {
             proto_msg cam = camera_msg(&w, 0);
-            ws_send_msg(fd, &cam);
+            fxt_ws_send_msg(fd, &cam);
             uint8_t part[100];
-            read_exact(fd, part, sizeof part, 20);
+            fxt_read_exact(fd, part, sizeof part, 20);
         }
         struct linger lg = {1, 0}; /* close with a reset */
         setsockopt(fd, SOL_SOCKET, SO_LINGER, &lg, sizeof lg);
@@ -486,12 +210,12 @@ static void misbehave(int port, misbehaviour_result *r)
     }
     /* 200 connect/disconnect cycles, every other one with a hello. */
     for (int i = 0; i < 200; i++) {
-        fd = ws_connect(port);
+        fd = fxt_ws_connect(port);
         if (fd < 0)
             continue;
         if (i % 2) {
-            proto_msg hello = hello_msg(32, 18, PROTO_CODEC_ZSTD);
-            ws_send_msg(fd, &hello);
+            proto_msg hello = fxt_hello_msg(32, 18, PROTO_CODEC_ZSTD);
+            fxt_ws_send_msg(fd, &hello);
         }
         close(fd);
         r->cycles_done++;
@@ -501,11 +225,11 @@ static void misbehave(int port, misbehaviour_result *r)
 static void test_misbehaving_clients(void **state)
 {
     (void)state;
-    server sv;
+    fxt_server sv;
     /* A frame rate the server keeps with room to spare (cheap effects), so that a slowdown would be the
      * network's doing, not the extra viewers' rendering. */
     const char *args[] = {"--fps", "10", "--effects", "shadow", "--max-viewers", "8", NULL};
-    server_start(&sv, "abuse", args);
+    fxt_server_start(&sv, "abuse", args);
     good_viewer *good = calloc(2, sizeof *good);
     for (int i = 0; i < 2; i++) {
         good[i].port = sv.port;
@@ -513,22 +237,22 @@ static void test_misbehaving_clients(void **state)
     }
     /* Warm-up, then the rate without misbehaviour. */
     sleep(2);
-    double a0 = now_s();
+    double a0 = fxt_now_s();
     sleep(3);
-    double a1 = now_s();
+    double a1 = fxt_now_s();
     pthread_t never;
     int port = sv.port;
     pthread_create(&never, NULL, never_reader, &port);
     misbehaviour_result r = {0};
-    double b0 = now_s();
+    double b0 = fxt_now_s();
     misbehave(sv.port, &r);
     void *never_fd;
     pthread_join(never, &never_fd);
-    double spent = now_s() - b0;
+    double spent = fxt_now_s() - b0;
     if (spent < 3)
         usleep((useconds_t)((3 - spent) * 1e6));
-    double b1 = now_s();
-    assert_true(server_alive(&sv));
+    double b1 = fxt_now_s();
+    assert_true(fxt_server_alive(&sv));
     for (int i = 0; i < 2; i++) {
         atomic_store(&good[i].stop, true);
         pthread_join(good[i].thread, NULL);
@@ -548,7 +272,7 @@ static void test_misbehaving_clients(void **state)
     assert_int_equal(r.cycles_done, 200);
     if ((intptr_t)never_fd >= 0)
         close((int)(intptr_t)never_fd);
-    assert_int_equal(server_stop(&sv), 0);
+    assert_int_equal(fxt_server_stop(&sv), 0);
     free(good);
 }
 
@@ -556,52 +280,52 @@ static void test_misbehaving_clients(void **state)
 static void test_limits_and_token(void **state)
 {
     (void)state;
-    server sv;
+    fxt_server sv;
     const char *args[] = {"--fps", "10", "--max-viewers", "2", "--max-res", "320x240", "--token", "s3cret", NULL};
-    server_start(&sv, "limits", args);
+    fxt_server_start(&sv, "limits", args);
     /* No token, a wrong token. */
-    int fd = ws_connect(sv.port);
-    proto_msg hello = hello_msg(64, 36, PROTO_CODEC_ZSTD);
-    assert_true(ws_send_msg(fd, &hello));
-    assert_true(expect_error(fd, FXC_ERR_UNAUTHORIZED));
+    int fd = fxt_ws_connect(sv.port);
+    proto_msg hello = fxt_hello_msg(64, 36, PROTO_CODEC_ZSTD);
+    assert_true(fxt_ws_send_msg(fd, &hello));
+    assert_true(fxt_expect_error(fd, FXC_ERR_UNAUTHORIZED));
     close(fd);
-    fd = ws_connect(sv.port);
+    fd = fxt_ws_connect(sv.port);
     snprintf(hello.u.hello.token, sizeof hello.u.hello.token, "s3cres");
-    assert_true(ws_send_msg(fd, &hello));
-    assert_true(expect_error(fd, FXC_ERR_UNAUTHORIZED));
+    assert_true(fxt_ws_send_msg(fd, &hello));
+    assert_true(fxt_expect_error(fd, FXC_ERR_UNAUTHORIZED));
     close(fd);
     /* Over the resolution limit. */
     snprintf(hello.u.hello.token, sizeof hello.u.hello.token, "s3cret");
-    fd = ws_connect(sv.port);
+    fd = fxt_ws_connect(sv.port);
     proto_msg big = hello;
     big.u.hello.width = 640;
-    assert_true(ws_send_msg(fd, &big));
-    assert_true(expect_error(fd, FXC_ERR_LIMIT));
+    assert_true(fxt_ws_send_msg(fd, &big));
+    assert_true(fxt_expect_error(fd, FXC_ERR_LIMIT));
     close(fd);
     /* Two viewers fit, the third does not. */
     int keep[2];
     proto_welcome w;
     for (int i = 0; i < 2; i++) {
-        keep[i] = ws_connect(sv.port);
-        assert_true(ws_send_msg(keep[i], &hello));
-        assert_true(read_welcome(keep[i], &w));
+        keep[i] = fxt_ws_connect(sv.port);
+        assert_true(fxt_ws_send_msg(keep[i], &hello));
+        assert_true(fxt_read_welcome(keep[i], &w));
         assert_string_equal(w.name, i == 0 ? "viewer_00" : "viewer_01");
     }
-    fd = ws_connect(sv.port);
-    assert_true(ws_send_msg(fd, &hello));
-    assert_true(expect_error(fd, FXC_ERR_LIMIT));
+    fd = fxt_ws_connect(sv.port);
+    assert_true(fxt_ws_send_msg(fd, &hello));
+    assert_true(fxt_expect_error(fd, FXC_ERR_LIMIT));
     close(fd);
     /* A camera before hello, and a frame message (not for the server). */
-    fd = ws_connect(sv.port);
+    fd = fxt_ws_connect(sv.port);
     proto_msg cam = camera_msg(&w, 0);
-    assert_true(ws_send_msg(fd, &cam));
-    assert_true(expect_error(fd, FXC_ERR_PROTOCOL));
+    assert_true(fxt_ws_send_msg(fd, &cam));
+    assert_true(fxt_expect_error(fd, FXC_ERR_PROTOCOL));
     close(fd);
     /* The joined viewers still get frames. */
     for (int i = 0; i < 2; i++) {
-        assert_true(ws_send_msg(keep[i], &cam));
+        assert_true(fxt_ws_send_msg(keep[i], &cam));
         uint8_t *msg = NULL;
-        long n = ws_recv(keep[i], &msg, 60);
+        long n = fxt_ws_recv(keep[i], &msg, 60);
         proto_msg m;
         assert_true(n > 0);
         assert_int_equal(proto_decode(msg, (size_t)n, &m), FXC_OK);
@@ -611,11 +335,11 @@ static void test_limits_and_token(void **state)
     }
     /* Stats on request: the run report as JSON text. */
     proto_msg request = {.type = PROTO_STATS_REQUEST};
-    assert_true(ws_send_msg(keep[0], &request));
+    assert_true(fxt_ws_send_msg(keep[0], &request));
     bool stats = false;
     for (int i = 0; i < 200 && !stats; i++) {
         uint8_t *msg = NULL;
-        long n = ws_recv(keep[0], &msg, 60);
+        long n = fxt_ws_recv(keep[0], &msg, 60);
         proto_msg m;
         assert_true(n > 0);
         assert_int_equal(proto_decode(msg, (size_t)n, &m), FXC_OK);
@@ -635,7 +359,7 @@ static void test_limits_and_token(void **state)
         bool bye = false;
         for (;;) {
             uint8_t *msg = NULL;
-            long n = ws_recv(keep[i], &msg, 30);
+            long n = fxt_ws_recv(keep[i], &msg, 30);
             proto_msg m;
             if (n < 0)
                 break;
@@ -646,7 +370,7 @@ static void test_limits_and_token(void **state)
         assert_true(bye);
         close(keep[i]);
     }
-    assert_int_equal(server_stop(&sv), 0);
+    assert_int_equal(fxt_server_stop(&sv), 0);
 }
 
 /* A token is required beyond loopback; bad option values are refused with one line. */
@@ -682,22 +406,22 @@ static void test_node_peer(void **state)
         print_message("node or zstd is missing (./install-deps.sh installs them): skipped\n");
         skip();
     }
-    server sv;
+    fxt_server sv;
     const char *args[] = {"--fps", "30", NULL};
-    server_start(&sv, "node", args);
+    fxt_server_start(&sv, "node", args);
     char cmd[1024];
     snprintf(cmd, sizeof cmd, "NODE_PATH=/usr/share/nodejs node '%s/tests/peer_ws.js' ws://127.0.0.1:%d 15 96 54",
              FXC_SOURCE_DIR, sv.port);
     int rc = system(cmd);
     int code = WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
     if (code == 77) {
-        server_stop(&sv);
+        fxt_server_stop(&sv);
         print_message("Node's ws module is missing (Debian's node-ws): skipped\n");
         skip();
     }
     assert_int_equal(code, 0);
-    assert_true(server_alive(&sv));
-    assert_int_equal(server_stop(&sv), 0);
+    assert_true(fxt_server_alive(&sv));
+    assert_int_equal(fxt_server_stop(&sv), 0);
 }
 
 /* Counts the PNG files in a folder. */
@@ -714,7 +438,7 @@ static int count_png(const char *dir)
     return n;
 }
 
-/* End to end: 4 fxcache-viewers (zstd, lossless) until SIGTERM stops the server; then `fxcache sim` replays
+/* End to end: 4 fxcache-viewers (zstd, lossless) until SIGTERM stops the fxt_server; then `fxcache sim` replays
  * the traces the server recorded, and every frame a viewer received is the same PNG, byte for byte, as the
  * one sim writes for that frame and viewer. The statistics have one line per frame of the clock. */
 static void test_replay_bit_identical(void **state)
@@ -733,9 +457,9 @@ static void test_replay_bit_identical(void **state)
     char clean[2048];
     snprintf(clean, sizeof clean, "rm -rf '%s' '%s' '%s'", rec, client, simdir);
     assert_int_equal(system(clean), 0);
-    server sv;
+    fxt_server sv;
     const char *args[] = {"--fps", "30", "--record", rec, "--stats", stats, "--summary", summary, NULL};
-    server_start(&sv, "replay", args);
+    fxt_server_start(&sv, "replay", args);
     char url[64];
     snprintf(url, sizeof url, "ws://127.0.0.1:%d", sv.port);
     const char *argv[] = {FXC_VIEWER_BIN, "--connect", url, "--viewers", "4", "--res", "96x54", "--out", client,
@@ -743,10 +467,10 @@ static void test_replay_bit_identical(void **state)
     pid_t viewer;
     assert_int_equal(posix_spawn(&viewer, FXC_VIEWER_BIN, NULL, NULL, (char *const *)argv, environ), 0);
     /* Until every viewer has about 20 frames, then SIGTERM in the middle of the session. */
-    for (double t0 = now_s(); count_png(client) < 80 && now_s() - t0 < 300;)
+    for (double t0 = fxt_now_s(); count_png(client) < 80 && fxt_now_s() - t0 < 300;)
         usleep(50000);
     assert_true(count_png(client) >= 80);
-    assert_int_equal(server_stop(&sv), 0);
+    assert_int_equal(fxt_server_stop(&sv), 0);
     int status = 0;
     assert_int_equal(waitpid(viewer, &status, 0), viewer);
     assert_true(WIFEXITED(status));
