@@ -6,6 +6,7 @@
  * kind's batch request (a sparse viewer: runs of 256 entries of its list instead of tiles), which sorts and merges them, so the cache comes out identical whatever the thread
  * interleaving. Requests of all viewers meet in the same tables: this is where sharing happens. */
 #include "engine_internal.h"
+#include "fxc_hot.h"
 
 #include <stdatomic.h>
 #include <string.h>
@@ -60,7 +61,7 @@ typedef struct pixel_memo {
 } pixel_memo;
 
 /* The cache pixel of buffer entry p of a viewer (visible: tri[p] != SRV_MISS). */
-static inline void fill_pixel(const scene *s, const srv_viewer *view, size_t p, bool positions, pixel_memo *memo,
+FXC_HOT_INLINE void fill_pixel(const scene *s, const srv_viewer *view, size_t p, bool positions, pixel_memo *memo,
                               srv_pixel *px)
 {
     uint32_t tri = view->tri[p];
@@ -89,7 +90,7 @@ static inline void fill_pixel(const scene *s, const srv_viewer *view, size_t p, 
 }
 
 /* The keys of up to SRV_TILE * SRV_TILE pixels, folded, onto the thread's list. */
-static void request_pixels(request_task *task, uint32_t thread_index, const srv_pixel *pixels, uint32_t count)
+FXC_HOT_INLINE void request_pixels(request_task *task, uint32_t thread_index, const srv_pixel *pixels, uint32_t count)
 {
     srv_loop *loop = task->loop;
     const srv_viewer *view = task->view;
