@@ -137,7 +137,7 @@ typedef struct proto_camera {
     uint32_t sequence;         /* the client's number for this camera (echoed in the frames rendered for it) */
     double time;               /* the client's clock, seconds, finite */
     proto_pose pose;
-    bool has_predicted;        /* an optional predicted pose, for later use */
+    bool has_predicted;        /* an optional predicted pose (the predictive strategy renders it) */
     double predicted_time;
     proto_pose predicted;
 } proto_camera;
