@@ -126,3 +126,20 @@ scene *srv_cli_load_scene(const char *cmd, const char *path, float texel_density
         fprintf(stderr, "fxcache %s: warning: %s\n", cmd, s->precision_warning);
     return s;
 }
+
+int srv_cli_getopt_error(const char *cmd, int c, char **argv)
+{
+    if (c == ':')
+        fprintf(stderr, "fxcache %s: %s needs a value\n", cmd, argv[optind - 1]);
+    else
+        fprintf(stderr, "fxcache %s: unknown option '%s' (try --help)\n", cmd, argv[optind - 1]);
+    return 2;
+}
+
+bool srv_cli_no_operands(const char *cmd, int argc, char **argv)
+{
+    if (optind >= argc)
+        return true;
+    fprintf(stderr, "fxcache %s: unexpected argument '%s' (the scene is given with --scene)\n", cmd, argv[optind]);
+    return false;
+}

@@ -27,6 +27,12 @@ bool srv_cli_vec3(const char *cmd, const char *option, const char *text, double 
 /* The machine's physical memory in bytes (sysconf(_SC_PHYS_PAGES) times the page size), 0 if unknown. */
 uint64_t srv_cli_physical_memory(void);
 
+/* The error for getopt_long's ':' (a missing value) or '?' (an unknown option), c being what it returned;
+ * prints one line and returns the exit status 2. The option string must start with ':'. */
+int srv_cli_getopt_error(const char *cmd, int c, char **argv);
+/* False, after one line naming the first, if arguments remain after the options (the scene is given with
+ * --scene). */
+bool srv_cli_no_operands(const char *cmd, int argc, char **argv);
 /* Checks, before anything is loaded, that the block pools (pool_mb MiB; 0 when no cache runs) and the
  * per-pixel buffers of `viewers` viewers with `pixels` pixels in all (SRV_VIEWER_BYTES_PER_PIXEL each, and
  * SRV_VIEWS_BYTES_PER_PIXEL more with views) fit in physical memory; otherwise prints one line with both figures and the

@@ -196,16 +196,13 @@ static int parse_options(int argc, char **argv, ref_options *o)
             printf(ref_usage, srv_camgen_list(), names);
             return 0;
         }
-        case ':': fprintf(stderr, "fxcache ref: %s needs a value\n", argv[optind - 1]); return 2;
-        default: fprintf(stderr, "fxcache ref: unknown option '%s' (try --help)\n", argv[optind - 1]); return 2;
+        default: return srv_cli_getopt_error("ref", c, argv);
         }
         if (!ok)
             return 2;
     }
-    if (optind < argc) {
-        fprintf(stderr, "fxcache ref: unexpected argument '%s' (the scene is given with --scene)\n", argv[optind]);
+    if (!srv_cli_no_operands("ref", argc, argv))
         return 2;
-    }
     if (!o->out_dir) {
         fprintf(stderr, "fxcache ref: --out DIR is required (where the images and ref.json go)\n");
         return 2;

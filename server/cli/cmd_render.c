@@ -100,12 +100,7 @@ int srv_cmd_render(int argc, char **argv)
         case 'f': ok = srv_cli_double("render", "--fov", optarg, 1, 179, &fov); break;
         case 'd': ok = srv_cli_double("render", "--density", optarg, 1e-6, 1e6, &density); break;
         case 'h': fputs(render_usage, stdout); return 0;
-        case ':':
-            fprintf(stderr, "fxcache render: %s needs a value\n", argv[optind - 1]);
-            return 2;
-        default:
-            fprintf(stderr, "fxcache render: unknown option '%s' (try --help)\n", argv[optind - 1]);
-            return 2;
+        default: return srv_cli_getopt_error("render", c, argv);
         }
         if (!ok)
             return 2;

@@ -231,16 +231,13 @@ static int parse_options(int argc, char **argv, report_options *o)
                    "is added. Exit status: 0 done or interrupted, 1 a failure, 2 bad options.\n");
             return 0;
         }
-        case ':': fprintf(stderr, "fxcache report: %s needs a value\n", argv[optind - 1]); return 2;
-        default: fprintf(stderr, "fxcache report: unknown option '%s' (try --help)\n", argv[optind - 1]); return 2;
+        default: return srv_cli_getopt_error("report", c, argv);
         }
         if (!ok)
             return 2;
     }
-    if (optind < argc) {
-        fprintf(stderr, "fxcache report: unexpected argument '%s' (the scene is given with --scene)\n", argv[optind]);
+    if (!srv_cli_no_operands("report", argc, argv))
         return 2;
-    }
     if (!o->out_dir) {
         fprintf(stderr, "fxcache report: --out DIR is required (where the report goes)\n");
         return 2;

@@ -263,12 +263,7 @@ int srv_cmd_scene_info(int argc, char **argv)
         case 'h':
             fputs(scene_info_usage, stdout);
             return 0;
-        case ':':
-            fprintf(stderr, "fxcache scene-info: %s needs a value\n", argv[optind - 1]);
-            return 2;
-        default:
-            fprintf(stderr, "fxcache scene-info: unknown option '%s' (try --help)\n", argv[optind - 1]);
-            return 2;
+        default: return srv_cli_getopt_error("scene-info", c, argv);
         }
     }
     if (argc - optind > 1) {

@@ -124,16 +124,13 @@ static int parse_options(int argc, char **argv, serve_options *o)
             printf("  -h, --help           this text\n");
             return 0;
         }
-        case ':': fprintf(stderr, "fxcache serve: %s needs a value\n", argv[optind - 1]); return 2;
-        default: fprintf(stderr, "fxcache serve: unknown option '%s' (try --help)\n", argv[optind - 1]); return 2;
+        default: return srv_cli_getopt_error("serve", c, argv);
         }
         if (!ok)
             return 2;
     }
-    if (optind < argc) {
-        fprintf(stderr, "fxcache serve: unexpected argument '%s' (the scene is given with --scene)\n", argv[optind]);
+    if (!srv_cli_no_operands("serve", argc, argv))
         return 2;
-    }
     if (!o->net.token) {
         const char *env = getenv("FXCACHE_TOKEN");
         o->net.token = env && env[0] ? env : NULL;

@@ -127,16 +127,13 @@ static int parse_options(int argc, char **argv, sim_options *o)
             printf("  -h, --help           this text\n");
             return 0;
         }
-        case ':': fprintf(stderr, "fxcache sim: %s needs a value\n", argv[optind - 1]); return 2;
-        default: fprintf(stderr, "fxcache sim: unknown option '%s' (try --help)\n", argv[optind - 1]); return 2;
+        default: return srv_cli_getopt_error("sim", c, argv);
         }
         if (!ok)
             return 2;
     }
-    if (optind < argc) {
-        fprintf(stderr, "fxcache sim: unexpected argument '%s' (the scene is given with --scene)\n", argv[optind]);
+    if (!srv_cli_no_operands("sim", argc, argv))
         return 2;
-    }
     if (!srv_cli_check_cameras("sim", o->trace_count, o->viewers_set, o->viewers, o->camera_set))
         return 2;
     if (o->views && !o->out_dir) {
