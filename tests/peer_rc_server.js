@@ -11,46 +11,17 @@
 // and exits 0.
 'use strict';
 
-function load_ws() {
-    for (const where of ['ws', '/usr/share/nodejs/ws', '/usr/lib/nodejs/ws']) {
-        try { return require(where); } catch (e) { /* next */ }
-    }
-    console.error('peer_rc_server: the ws module is missing (Debian package node-ws)');
-    process.exit(77);
-}
-const WebSocket = load_ws();
+const { load_ws, TYPE, header, text8, pose } = require('./peer_wire.js');
+const WebSocket = load_ws('peer_rc_server');
 const fs = require('fs');
 
 const report_path = process.argv[2];
-const TYPE = { hello: 1, welcome: 2, camera: 3, frame: 4, error: 7, bye: 8, sample_request: 9, samples: 10 };
 const report = { requests: 0, pixels: 0, errors: [], cameras: [] };
 setTimeout(() => { report.errors.push('timed out'); finish(); }, 120000).unref();
 
 function finish() {
     fs.writeFileSync(report_path, JSON.stringify(report));
     process.exit(0);
-}
-
-function header(type, payload) {
-    const h = Buffer.alloc(12);
-    h.write('FXCP', 0, 'latin1');
-    h.writeUInt16LE(1, 4);
-    h.writeUInt16LE(type, 6);
-    h.writeUInt32LE(payload.length, 8);
-    return Buffer.concat([h, payload]);
-}
-
-function text8(s) {
-    const b = Buffer.from(s, 'latin1');
-    return Buffer.concat([Buffer.from([b.length]), b]);
-}
-
-function pose(position, direction, fov) {
-    const b = Buffer.alloc(40);
-    for (let k = 0; k < 3; k++) b.writeDoubleLE(position[k], 8 * k);
-    for (let k = 0; k < 3; k++) b.writeFloatLE(direction[k], 24 + 4 * k);
-    b.writeFloatLE(fov, 36);
-    return b;
 }
 
 // The welcome: viewer 1, "fake_00", 30 fps, the room of the default scene, a camera at (0, 1.6, 3) looking -z.

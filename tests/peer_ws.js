@@ -9,14 +9,8 @@
 // with some lit pixels, then says bye. Exit 0 on success, 1 with one line on stderr on any failure.
 'use strict';
 
-function load_ws() {
-    for (const where of ['ws', '/usr/share/nodejs/ws', '/usr/lib/nodejs/ws']) {
-        try { return require(where); } catch (e) { /* next */ }
-    }
-    console.error('peer_ws: the ws module is missing (Debian package node-ws)');
-    process.exit(77);
-}
-const WebSocket = load_ws();
+const { load_ws, TYPE, header, text8, pose, read_pose } = require('./peer_wire.js');
+const WebSocket = load_ws('peer_ws');
 const { execFileSync } = require('child_process');
 
 const [url, frames_arg, width_arg, height_arg] = process.argv.slice(2);
@@ -28,22 +22,6 @@ function fail(msg) {
 }
 setTimeout(() => fail('timed out'), 120000).unref();
 
-const TYPE = { hello: 1, welcome: 2, camera: 3, frame: 4, error: 7, bye: 8 };
-
-function header(type, payload) {
-    const h = Buffer.alloc(12);
-    h.write('FXCP', 0, 'latin1');
-    h.writeUInt16LE(1, 4);
-    h.writeUInt16LE(type, 6);
-    h.writeUInt32LE(payload.length, 8);
-    return Buffer.concat([h, payload]);
-}
-
-function text8(s) {
-    const b = Buffer.from(s, 'latin1');
-    return Buffer.concat([Buffer.from([b.length]), b]);
-}
-
 function hello() {
     const fixed = Buffer.alloc(15);
     fixed.writeUInt32LE(width, 0);
@@ -53,20 +31,6 @@ function hello() {
     fixed.writeUInt8(0, 13); // no jpeg quality
     fixed.writeUInt8(0, 14); // no depth
     return header(TYPE.hello, Buffer.concat([text8('node-peer'), fixed, text8(''), text8('')]));
-}
-
-function pose(position, direction, fov) {
-    const b = Buffer.alloc(40);
-    for (let k = 0; k < 3; k++) b.writeDoubleLE(position[k], 8 * k);
-    for (let k = 0; k < 3; k++) b.writeFloatLE(direction[k], 24 + 4 * k);
-    b.writeFloatLE(fov, 36);
-    return b;
-}
-
-function read_pose(b, at) {
-    const position = [0, 1, 2].map(k => b.readDoubleLE(at + 8 * k));
-    const direction = [0, 1, 2].map(k => b.readFloatLE(at + 24 + 4 * k));
-    return { position, direction, fov: b.readFloatLE(at + 36), end: at + 40 };
 }
 
 function camera(sequence, time, p) {
