@@ -170,8 +170,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_chunk_hist = take(&l, (size_t)rc->chunk_count * 256, sizeof(uint32_t));
     size_t o_chunk_quota = take(&l, rc->chunk_count, sizeof(uint32_t));
     size_t o_chunk_stat = take(&l, rc->chunk_count, sizeof(rc_chunk_stat));
-    /* + the sort's sink and the z-buffer's "no point" */
-    size_t o_entries = take(&l, (size_t)rc->slots + 2, sizeof(rc_entry));
+    size_t o_entries = take(&l, (size_t)rc->slots + 1, sizeof(rc_entry)); /* + the sort's sink */
     size_t o_tile_start = take(&l, rc->tile_count + 1, sizeof(uint32_t));
     size_t o_zbuf = take(&l, rc->pixels, sizeof(float));
     size_t o_win = take(&l, rc->pixels, sizeof(uint32_t));
@@ -197,7 +196,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_workers = take(&l, d.threads, sizeof(rc_worker));
     size_t o_occupied[VIEW_RC_MAX_THREADS], o_low[VIEW_RC_MAX_THREADS], o_err[VIEW_RC_MAX_THREADS];
     size_t o_planes[VIEW_RC_MAX_THREADS], o_box[VIEW_RC_MAX_THREADS], o_spare[VIEW_RC_MAX_THREADS];
-    size_t o_zt[VIEW_RC_MAX_THREADS], o_wt[VIEW_RC_MAX_THREADS];
+    size_t o_zt[VIEW_RC_MAX_THREADS], o_wt[VIEW_RC_MAX_THREADS], o_ct[VIEW_RC_MAX_THREADS];
     rc->local_z = rc->tile <= RC_LOCAL_TILE;
     size_t local = rc->local_z ? (size_t)rc->tile * rc->tile : 0;
     for (uint32_t t = 0; t < d.threads; t++) {
@@ -209,6 +208,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
         o_box[t] = take(&l, view_rc__prefilter_scratch(span), sizeof(uint16_t));
         o_zt[t] = take(&l, local, sizeof(float));
         o_wt[t] = take(&l, local, sizeof(uint32_t));
+        o_ct[t] = take(&l, local, sizeof(uint32_t));
     }
     if (l.overflow) {
         free(rc);
@@ -241,8 +241,6 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     rc->chunk_stat = (rc_chunk_stat *)(block + o_chunk_stat);
     rc->entries = (rc_entry *)(block + o_entries);
     rc->tile_start = (uint32_t *)(block + o_tile_start);
-    rc->entries[rc->slots + 1] =
-        (rc_entry){.pix = RC_NO_PIXEL, .depth = INFINITY, .rgba = RC_EMPTY_PT, .slot = RC_NO_POINT};
     rc->zbuf = (float *)(block + o_zbuf);
     rc->win = (uint32_t *)(block + o_win);
     rc->pre = (uint32_t *)(block + o_pre);
@@ -274,6 +272,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
         rc->workers[t].box = (uint16_t *)(block + o_box[t]);
         rc->workers[t].zt = (float *)(block + o_zt[t]);
         rc->workers[t].wt = (uint32_t *)(block + o_wt[t]);
+        rc->workers[t].ct = (uint32_t *)(block + o_ct[t]);
     }
 
     /* Every slot free; the stack hands out slot 0 first. */

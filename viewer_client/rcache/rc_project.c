@@ -279,32 +279,30 @@ static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
      * load, minimum and store a point; entries split in 8 bytes for the test and 8 for the winners: 1.6
      * against 1.2 ms, and the sort 0.3 ms slower). */
     if (rc->local_z) {
-        /* In the tile's own buffer (L1), then copied out: slot and colour from the winning entry, which the
-         * loop has just read (L2). */
-        uint32_t side = rc->tile, n = side * side, nothing = rc->slots + 1; /* an entry of no point */
-        float *zt = rc->workers[worker].zt;
-        uint32_t *wt = rc->workers[worker].wt;
+        /* In the tile's own buffers (contiguous: 48 KiB for a tile of 64, in L1 and L2 without conflicts),
+         * then copied out row by row (vectorised copies). */
+        uint32_t side = rc->tile, n = side * side;
+        float *restrict zt = rc->workers[worker].zt;
+        uint32_t *restrict wt = rc->workers[worker].wt, *restrict ct = rc->workers[worker].ct;
         for (uint32_t k = 0; k < n; k++) {
             zt[k] = INFINITY;
-            wt[k] = nothing;
+            wt[k] = RC_NO_POINT;
+            ct[k] = RC_EMPTY_PT;
         }
         for (uint32_t e = first; e < last; e++) {
             uint32_t p = entries[e].pix;
             float z = entries[e].depth;
             if (z < zt[p]) {
                 zt[p] = z;
-                wt[p] = e;
+                wt[p] = entries[e].slot;
+                ct[p] = entries[e].rgba;
             }
         }
         for (uint32_t y = y0; y < y1; y++) {
-            const float *zr = zt + (size_t)(y - y0) * side;
-            const uint32_t *wr = wt + (size_t)(y - y0) * side;
-            for (uint32_t x = x0; x < x1; x++) {
-                const rc_entry *e = &entries[wr[x - x0]];
-                zbuf[y * w + x] = zr[x - x0];
-                win[y * w + x] = e->slot;
-                pre[y * w + x] = e->rgba;
-            }
+            size_t at = (size_t)(y - y0) * side;
+            memcpy(zbuf + y * w + x0, zt + at, (x1 - x0) * sizeof(float));
+            memcpy(win + y * w + x0, wt + at, (x1 - x0) * sizeof(uint32_t));
+            memcpy(pre + y * w + x0, ct + at, (x1 - x0) * sizeof(uint32_t));
         }
         return;
     }

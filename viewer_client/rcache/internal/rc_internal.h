@@ -105,7 +105,8 @@ typedef struct rc_worker {
     uint16_t *planes;  /* interpolation: view_rc__interp_scratch(width) values */
     uint16_t *box;     /* prefilter: view_rc__prefilter_scratch(tile side) values */
     float *zt;         /* z-buffer: one tile's depths, tile x tile, row after row (local_z only) */
-    uint32_t *wt;      /* ... and the entry that won each pixel (RC_NO_POINT: none) */
+    uint32_t *wt;      /* ... the slot that won each pixel (RC_NO_POINT: none) */
+    uint32_t *ct;      /* ... and its rgba (RC_EMPTY_PT: none) */
 } rc_worker;
 
 /* Points being inserted, a batch at a time (rc_cache.c): their positions computed in one loop without
