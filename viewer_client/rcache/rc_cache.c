@@ -161,7 +161,6 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_pix = take(&l, rc->slots, sizeof(uint32_t));
     size_t o_dep = take(&l, rc->slots, sizeof(float));
     size_t o_dest = take(&l, rc->slots, sizeof(uint16_t));
-    size_t o_loc = take(&l, rc->slots, sizeof(uint16_t));
     size_t o_mark = take(&l, (size_t)rc->slots + 1, 1); /* + a sink byte */
     size_t o_free_slots = take(&l, rc->slots, sizeof(uint32_t));
     size_t o_free_list = take(&l, (size_t)rc->chunk_count * chunk, sizeof(uint32_t));
@@ -229,7 +228,6 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     rc->pix = (uint32_t *)(block + o_pix);
     rc->dep = (float *)(block + o_dep);
     rc->dest = (uint16_t *)(block + o_dest);
-    rc->loc = (uint16_t *)(block + o_loc);
     rc->mark = (uint8_t *)(block + o_mark);
     memset(rc->mark, 0, (size_t)rc->slots + 1);
     rc->free_slots = (uint32_t *)(block + o_free_slots);

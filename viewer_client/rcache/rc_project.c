@@ -53,14 +53,15 @@ static void chunk_range(const view_rc *rc, uint32_t c, uint32_t *begin, uint32_t
 /* ---- projection without branches ----------------------------------------------------------------------- */
 
 /* The pixel of every slot in [begin, end) for view v (RC_NO_PIXEL for free slots, points behind the camera or
- * outside the image), its view depth, and its list: the tile (two shifts of the pixel's coordinates), or
+ * outside the image; `local`: row * tile + column within its tile, else the image's index), its view depth,
+ * and its list: the tile (two shifts of the pixel's coordinates), or
  * `outside`, or `dead` for a free slot. rc_project's arithmetic; the conversion to integers happens only on
  * coordinates known to be inside. */
 FXC_HOT_CLONES static void project_span(const rc_view *v, const float *restrict px, const float *restrict py,
                                         const float *restrict pz, const uint32_t *restrict rgba,
                                         uint32_t *restrict pix, float *restrict dep, uint16_t *restrict dest,
-                                        uint16_t *restrict loc, uint32_t begin, uint32_t end, uint32_t shift,
-                                        uint32_t tiles_x, uint16_t outside, uint16_t dead)
+                                        uint32_t begin, uint32_t end, uint32_t shift, uint32_t tiles_x,
+                                        bool local, uint16_t outside, uint16_t dead)
 {
     const float cx = v->rel[0], cy = v->rel[1], cz = v->rel[2];
     const float fx = v->forward[0], fy = v->forward[1], fz = v->forward[2];
@@ -82,10 +83,10 @@ FXC_HOT_CLONES static void project_span(const rc_view *v, const float *restrict 
         uint32_t ix = (uint32_t)(int32_t)(inside ? sx : 0.0f);
         uint32_t iy = (uint32_t)(int32_t)(inside ? sy : 0.0f);
         uint32_t tile = (iy >> shift) * tiles_x + (ix >> shift);
-        pix[i] = inside ? iy * width + ix : RC_NO_PIXEL;
+        uint32_t in_tile = ((iy & m) << shift) | (ix & m);
+        pix[i] = inside ? (local ? in_tile : iy * width + ix) : RC_NO_PIXEL;
         dep[i] = zc;
         dest[i] = (uint16_t)(inside ? tile : live ? outside : dead);
-        loc[i] = (uint16_t)(((iy & m) << shift) | (ix & m)); /* (meaningful for tiles up to 256) */
     }
 }
 
@@ -170,8 +171,10 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
     uint32_t begin, end;
     chunk_range(rc, c, &begin, &end);
     uint16_t outside = rc->list_outside, dead = rc->list_dead;
-    project_span(&rc->view, rc->px, rc->py, rc->pz, rc->rgba, rc->pix, rc->dep, rc->dest, rc->loc, begin,
-                 end, rc->tile_shift, rc->tiles_x, outside, dead);
+    /* The tiled z-buffer in its own buffers takes the pixel within the tile; the 1999 one, the image's. */
+    bool local = rc->local_z && !rc->d.no_tiling;
+    project_span(&rc->view, rc->px, rc->py, rc->pz, rc->rgba, rc->pix, rc->dep, rc->dest, begin, end,
+                 rc->tile_shift, rc->tiles_x, local, outside, dead);
     rc_chunk_stat stat = {0};
     /* The drop plan: points older than drop_age, and the chunk's quota of that age, in slot order. */
     if (rc->drop_age != RC_AGE_NO_DROP) {
@@ -224,8 +227,6 @@ static void sort_task(void *user, uint32_t c, uint32_t worker)
     uint32_t *offset = rc->counts + (size_t)c * (rc->tile_count + 2);
     const uint16_t *dest = rc->dest;
     const uint32_t *pix = rc->pix, *rgba = rc->rgba;
-    const uint16_t *loc = rc->loc;
-    bool local = rc->local_z;
     const float *dep = rc->dep;
     rc_entry *entries = rc->entries;
     uint32_t tiles = rc->tile_count;
@@ -236,7 +237,7 @@ static void sort_task(void *user, uint32_t c, uint32_t worker)
         uint32_t d = dest[i], o = offset[d];
         offset[d] = o + (d < tiles);
         rc_entry *e = &entries[o];
-        e->pix = local ? loc[i] : pix[i];
+        e->pix = pix[i];
         e->depth = dep[i];
         e->rgba = rgba[i];
         e->slot = i;

@@ -147,10 +147,10 @@ struct view_rc {
     float *px, *py, *pz;
     uint32_t *rgba;
     uint16_t *tile_of;    /* the list a point was in last frame (list_new: inserted since) */
-    uint32_t *pix;        /* this frame: pixel (RC_NO_PIXEL outside) */
+    uint32_t *pix;        /* this frame: pixel (RC_NO_PIXEL outside); in its tile (row * tile + column) when
+                           * local_z and tiling, else in the image */
     float *dep;           /* this frame: view depth */
     uint16_t *dest;       /* this frame: tile, list_outside or list_dead */
-    uint16_t *loc;        /* this frame: pixel in its tile, row * tile + column (local_z) */
     uint8_t *mark;        /* this frame: shown in a pixel (slots + 1: the last is a sink) */
     uint32_t *free_slots; /* stack of free slots: the next insert takes free_slots[free_count - 1] */
     uint32_t free_count;
