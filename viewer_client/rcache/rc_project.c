@@ -283,7 +283,7 @@ static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
      * load, minimum and store a point; entries split in 8 bytes for the test and 8 for the winners: 1.6
      * against 1.2 ms, and the sort 0.3 ms slower). */
     if (rc->local_z) {
-        /* In the tile's own buffers (contiguous: 48 KiB for a tile of 64, in L1 and L2 without conflicts),
+        /* In the tile's own buffers (contiguous: 48 KiB for a tile of 64, no set conflicts in L1 or L2),
          * then copied out row by row (vectorised copies). */
         uint32_t side = rc->tile, n = side * side;
         float *restrict zt = rc->workers[worker].zt;
