@@ -35,7 +35,7 @@
 #define RC_AGE_NO_DROP 255u        /* drop plan: no age is old enough */
 #define RC_EMPTY_PT    0xFF000000u /* a pixel without a point: colour 0, age 255 */
 #define RC_NEAR        1.0e-4f     /* points nearer than this (metres along the view axis) are behind */
-#define RC_LOCAL_TILE  256u        /* the largest tile side the z-buffer works on in its own buffer */
+#define RC_LOCAL_TILE  256u        /* the largest tile side the z-buffer works on in its own buffers */
 
 static inline uint32_t rc_age(uint32_t rgba)
 {
@@ -137,9 +137,9 @@ struct view_rc {
     /* Tiles: square, a power of two on a side (the tile of a pixel is two shifts). */
     uint32_t tile, tile_shift, tiles_x, tiles_y, tile_count;
     uint16_t list_outside, list_dead, list_new; /* tile_count, + 1, + 2: the other values of dest / tile_of */
-    /* The z-buffer works in a tile of its own (tiles up to RC_LOCAL_TILE on a side): the tile's depths and
-     * winners contiguous, in L1, instead of 64 rows of the image 4 * width bytes apart (which all fall in a
-     * few of L1's sets), then copied out row by row. */
+    /* The z-buffer works in buffers of its own (tiles up to RC_LOCAL_TILE on a side): the tile's depths,
+     * winners and colours contiguous (48 KiB at tiles of 64), instead of 64 rows of the image 4 * width bytes
+     * apart (which all fall in a few of L1's sets), then copied out row by row. */
     bool local_z;
 
     /* The point store (structure of arrays over slots). */
