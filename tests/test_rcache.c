@@ -987,8 +987,9 @@ static void test_threads_bit_identical(void **state)
 /* ---- tiles --------------------------------------------------------------------------------------------- */
 
 /* Tiles organise the work; they must not change the picture: the same sparse points (a pattern dense here,
- * sparse there, so that both ways of the prefilter run) through tiles of 8, 16, 64 and 256 pixels, and
- * through the one-pass z-buffer of no_tiling, give the same image, depths, kinds and priorities. */
+ * sparse there, so that both ways of the prefilter run) through tiles of 8, 16, 64 and 256 pixels (the
+ * z-buffer in buffers of the tile's own), of 512 (above 256: straight into the image), and through
+ * the one-pass z-buffer of no_tiling, give the same image, depths, kinds and priorities. */
 static void test_tiles_do_not_change_the_image(void **state)
 {
     (void)state;
@@ -1013,7 +1014,7 @@ static void test_tiles_do_not_change_the_image(void **state)
         }
     view_rc_camera moved = look(0.2, 0.6, -0.3, 0.1, 0, -5, 60);
     walk_log reference = {0};
-    const uint32_t tiles[] = {64, 8, 16, 256, 64};
+    const uint32_t tiles[] = {64, 8, 16, 256, 512, 64};
     for (size_t t = 0; t < sizeof tiles / sizeof tiles[0]; t++) {
         bool direct = t + 1 == sizeof tiles / sizeof tiles[0];
         view_rc *rc =

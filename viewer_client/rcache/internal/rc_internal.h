@@ -35,6 +35,7 @@
 #define RC_AGE_NO_DROP 255u        /* drop plan: no age is old enough */
 #define RC_EMPTY_PT    0xFF000000u /* a pixel without a point: colour 0, age 255 */
 #define RC_NEAR        1.0e-4f     /* points nearer than this (metres along the view axis) are behind */
+#define RC_LOCAL_TILE  256u        /* the largest tile side the z-buffer works on in its own buffers */
 
 static inline uint32_t rc_age(uint32_t rgba)
 {
@@ -43,7 +44,7 @@ static inline uint32_t rc_age(uint32_t rgba)
 
 /* A projected point in its tile's list. */
 typedef struct rc_entry {
-    uint32_t pix;  /* pixel index */
+    uint32_t pix;  /* pixel index: in its tile (row * tile + column) when local_z, else in the image */
     float depth;   /* view depth, metres along the camera's forward axis */
     uint32_t rgba; /* colour and age */
     uint32_t slot; /* where the point lives */
@@ -103,6 +104,9 @@ typedef struct rc_worker {
     uint8_t *spare;    /* dither: a row of choices for spare lanes */
     uint16_t *planes;  /* interpolation: view_rc__interp_scratch(width) values */
     uint16_t *box;     /* prefilter: view_rc__prefilter_scratch(tile side) values */
+    float *zt;         /* z-buffer: one tile's depths, tile x tile, row after row (local_z only) */
+    uint32_t *wt;      /* ... the slot that won each pixel (RC_NO_POINT: none) */
+    uint32_t *ct;      /* ... and its rgba (RC_EMPTY_PT: none) */
 } rc_worker;
 
 /* Points being inserted, a batch at a time (rc_cache.c): their positions computed in one loop without
@@ -133,13 +137,18 @@ struct view_rc {
     /* Tiles: square, a power of two on a side (the tile of a pixel is two shifts). */
     uint32_t tile, tile_shift, tiles_x, tiles_y, tile_count;
     uint16_t list_outside, list_dead, list_new; /* tile_count, + 1, + 2: the other values of dest / tile_of */
+    /* The z-buffer works in buffers of its own (tiles up to RC_LOCAL_TILE on a side): the tile's depths,
+     * winners and colours contiguous (48 KiB at tiles of 64), instead of 64 rows of the image 4 * width bytes
+     * apart (which all fall in a few of L1's sets), then copied out row by row. */
+    bool local_z;
 
     /* The point store (structure of arrays over slots). */
     uint32_t slots; /* capacity + insert_reserve */
     float *px, *py, *pz;
     uint32_t *rgba;
     uint16_t *tile_of;    /* the list a point was in last frame (list_new: inserted since) */
-    uint32_t *pix;        /* this frame: pixel (RC_NO_PIXEL outside) */
+    uint32_t *pix;        /* this frame: pixel (RC_NO_PIXEL outside); in its tile (row * tile + column) when
+                           * local_z and tiling, else in the image */
     float *dep;           /* this frame: view depth */
     uint16_t *dest;       /* this frame: tile, list_outside or list_dead */
     uint8_t *mark;        /* this frame: shown in a pixel (slots + 1: the last is a sink) */
