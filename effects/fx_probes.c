@@ -55,6 +55,7 @@
  * from (seed, key, update count): any thread split or job order gives the same bytes. The caller must have
  * called scene_tracing_thread_init() in the tracing thread. */
 #include "fx_probes_internal.h"
+#include "fxc_hot.h"
 
 /* A value >= 0 to half, rounded up with probability equal to its position between the two neighbouring
  * halves (u in [0, 1)), so the rounding is unbiased; saturates at the largest half (65504), never infinity.
@@ -186,21 +187,108 @@ typedef struct gather_sums {
     float m1[FX_PROBE_TEXELS], m2[FX_PROBE_TEXELS], mw[FX_PROBE_TEXELS];
 } gather_sums;
 
+/* The rays of an update and their weights in the 64 texels. One rotation serves every probe updated in a
+ * frame (RTXGI rotates its whole volume's rays once per update the same way): the directions, each ray's
+ * cosine weight max(0, d_t.d_i) and moment lobe weight max(0, d_t.d_i)^FX_PROBE_DEPTH_POWER in every texel,
+ * and their sums over the rays, are then computed once per frame and thread instead of once per probe; the
+ * gather is left with the weighted sums of the probe's radiance and distances. Up to PROBE_TABLE_RAYS rays
+ * the weights are kept for the frame; beyond that (probe_rays above the default) each chunk's rows are
+ * computed again per probe into the first rows of the table, the same numbers. */
+enum { PROBE_TABLE_RAYS = 256 };
+_Static_assert((int)PROBE_TABLE_RAYS >= (int)PROBE_CHUNK && (int)PROBE_TABLE_RAYS % (int)PROBE_CHUNK == 0, "table rows");
+
+typedef struct probe_directions {
+    uint64_t rotation_key; /* the hash the rotation came from (valid when rays != 0) */
+    uint32_t rays;         /* 0: none yet */
+    float dir[FX_PROBE_MAX_RAYS][3];
+    _Alignas(64) float cosine[PROBE_TABLE_RAYS][FX_PROBE_TEXELS];
+    _Alignas(64) float lobe[PROBE_TABLE_RAYS][FX_PROBE_TEXELS];
+    float cosine_sum[FX_PROBE_TEXELS], lobe_sum[FX_PROBE_TEXELS]; /* over all rays (table or not) */
+} probe_directions;
+
+/* Rows [first, first + n) of the weights into rows [row, row + n) of the table; adds them to the sums when
+ * `sum`. Each texel's sum runs in ray order. */
+FXC_HOT_CLONES static void direction_weights(probe_directions *restrict pd, uint32_t first, uint32_t n, uint32_t row,
+                                             bool sum)
+{
+    float dirs[FX_PROBE_TEXELS][3], dir_x[FX_PROBE_TEXELS], dir_y[FX_PROBE_TEXELS], dir_z[FX_PROBE_TEXELS];
+    fx__probe_texel_dirs(dirs);
+    for (uint32_t tx = 0; tx < FX_PROBE_TEXELS; tx++)
+        dir_x[tx] = dirs[tx][0], dir_y[tx] = dirs[tx][1], dir_z[tx] = dirs[tx][2];
+    for (uint32_t r = 0; r < n; r++) {
+        float rx = pd->dir[first + r][0], ry = pd->dir[first + r][1], rz = pd->dir[first + r][2];
+        float *restrict cosine = pd->cosine[row + r], *restrict lobe = pd->lobe[row + r];
+        for (uint32_t tx = 0; tx < FX_PROBE_TEXELS; tx++) {
+            float c = dir_x[tx] * rx + dir_y[tx] * ry + dir_z[tx] * rz;
+            /* max(c, 0) on the bits (negative floats have the sign bit: cleared to +0), so it vectorises */
+            uint32_t bits;
+            memcpy(&bits, &c, sizeof bits);
+            bits &= (bits >> 31) - 1u; /* sign set: mask 0; clear: all ones */
+            memcpy(&c, &bits, sizeof c);
+            float c2 = c * c, c4 = c2 * c2, c8 = c4 * c4, c16 = c8 * c8, c32 = c16 * c16; /* c^64 below */
+            cosine[tx] = c;
+            lobe[tx] = c32 * c32;
+        }
+        if (sum)
+            for (uint32_t tx = 0; tx < FX_PROBE_TEXELS; tx++) {
+                pd->cosine_sum[tx] += cosine[tx];
+                pd->lobe_sum[tx] += lobe[tx];
+            }
+    }
+}
+
+/* The frame's rays for `rays` rays per probe (rotation from rotation_key), unless the table holds them. */
+static void directions_prepare(probe_directions *pd, uint64_t rotation_key, uint32_t rays, uint64_t h1, uint64_t h2)
+{
+    if (pd->rays == rays && pd->rotation_key == rotation_key)
+        return;
+    float rotation[9];
+    random_rotation(h1, h2, rotation);
+    for (uint32_t i = 0; i < rays; i++) {
+        float fib[3];
+        fx_probe_fibonacci(i, rays, fib);
+        for (int k = 0; k < 3; k++)
+            pd->dir[i][k] = rotation[3 * k] * fib[0] + rotation[3 * k + 1] * fib[1] + rotation[3 * k + 2] * fib[2];
+    }
+    memset(pd->cosine_sum, 0, sizeof pd->cosine_sum);
+    memset(pd->lobe_sum, 0, sizeof pd->lobe_sum);
+    for (uint32_t first = 0; first < rays; first += PROBE_CHUNK) {
+        uint32_t n = rays - first < PROBE_CHUNK ? rays - first : PROBE_CHUNK;
+        /* Beyond the table only the sums are kept (the rows land in the first chunk's, overwritten). */
+        direction_weights(pd, first, n, rays <= PROBE_TABLE_RAYS ? first : 0, true);
+    }
+    pd->rays = rays;
+    pd->rotation_key = rotation_key;
+}
+
+/* The weighted sums of a chunk of n rays (radiance RGB, distance and squared distance in cells, per ray)
+ * into the texels: every ray adds its weight row times its values, in ray order. */
+FXC_HOT_CLONES static void gather_chunk(const probe_directions *restrict pd, uint32_t row, uint32_t n,
+                                        const float (*restrict values)[5], gather_sums *restrict acc)
+{
+    for (uint32_t r = 0; r < n; r++) {
+        const float *restrict cosine = pd->cosine[row + r], *restrict lobe = pd->lobe[row + r];
+        float lr = values[r][0], lg = values[r][1], lb = values[r][2], d = values[r][3], dd = values[r][4];
+        for (uint32_t tx = 0; tx < FX_PROBE_TEXELS; tx++) {
+            float c = cosine[tx], w = lobe[tx];
+            acc->r[tx] += c * lr;
+            acc->g[tx] += c * lg;
+            acc->b[tx] += c * lb;
+            acc->m1[tx] += w * d;
+            acc->m2[tx] += w * dd;
+        }
+    }
+}
+
 /* Per-thread working memory of update, commit and eval (each uses it within one call only). */
 static _Thread_local hit_shading thread_hit_shading;
 static _Thread_local probe_scratch thread_scratch;
+static _Thread_local probe_directions thread_directions; /* 180 KB: the frame's rays and weights */
 
 uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count)
 {
     const scene *s = ctx->s;
     const uint32_t rays = ray_count(ctx);
-    float dirs[FX_PROBE_TEXELS][3];
-    fx__probe_texel_dirs(dirs);
-    /* The gather below runs over the 64 texels for every ray: structure of arrays, no branch, so the
-     * compiler vectorises it; each texel adds its rays in ray order, whatever the thread split. */
-    float dir_x[FX_PROBE_TEXELS], dir_y[FX_PROBE_TEXELS], dir_z[FX_PROBE_TEXELS];
-    for (uint32_t tx = 0; tx < FX_PROBE_TEXELS; tx++)
-        dir_x[tx] = dirs[tx][0], dir_y[tx] = dirs[tx][1], dir_z[tx] = dirs[tx][2];
     gather_sums sums, *acc = &sums;
     float sky[3];
     for (int k = 0; k < 3; k++)
@@ -209,8 +297,11 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
     rtcInitIntersectContext(&context);
     RTCScene rtc = (RTCScene)scene_rt_handle(ctx->rt);
     _Alignas(64) struct RTCRayHit hits[PROBE_CHUNK];
+    float values[PROBE_CHUNK][5]; /* per ray: radiance RGB, distance and its square (cells) */
     hit_shading *hs = &thread_hit_shading; /* 20 KB: off the (pool thread) stack, never allocated */
     probe_scratch *out = &thread_scratch;
+    probe_directions *pd = &thread_directions;
+    const bool table = rays <= PROBE_TABLE_RAYS;
     uint64_t traced = 0;
 
     for (uint32_t j = 0; j < count; j++) {
@@ -227,9 +318,12 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
                 offset[k] = 0;
             }
         }
-        float rotation[9];
-        random_rotation(fx__hash(ctx->seed, job->key, 0, updates, FX_STREAM_PROBE_ROTATION),
-                        fx__hash(ctx->seed, job->key, 1, updates, FX_STREAM_PROBE_ROTATION), rotation);
+        /* The frame's rotation (every probe of the frame shares it); without a frame number (ctx->frame 0),
+         * one per update count, so successive updates of a probe still turn. */
+        uint64_t rotation_key = ctx->frame ? ((uint64_t)1 << 63) | ctx->frame : updates;
+        directions_prepare(pd, rotation_key, rays,
+                           fx__hash(ctx->seed, rotation_key, 0, 0, FX_STREAM_PROBE_ROTATION),
+                           fx__hash(ctx->seed, rotation_key, 1, 0, FX_STREAM_PROBE_ROTATION));
         memset(out, 0, sizeof *out);
         memset(acc, 0, sizeof *acc);
         uint32_t backfaces = 0;
@@ -239,12 +333,8 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
         for (uint32_t first = 0; first < rays; first += PROBE_CHUNK) {
             uint32_t n = rays - first < PROBE_CHUNK ? rays - first : PROBE_CHUNK;
             for (uint32_t r = 0; r < n; r++) {
-                float fib[3], dir[3];
-                fx_probe_fibonacci(first + r, rays, fib);
-                for (int k = 0; k < 3; k++)
-                    dir[k] = rotation[3 * k] * fib[0] + rotation[3 * k + 1] * fib[1] + rotation[3 * k + 2] * fib[2];
                 struct RTCRayHit *rh = &hits[r];
-                fx__set_ray(&rh->ray, origin, dir, INFINITY, r);
+                fx__set_ray(&rh->ray, origin, pd->dir[first + r], INFINITY, r);
                 rh->hit.geomID = RTC_INVALID_GEOMETRY_ID;
                 rh->hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
             }
@@ -262,7 +352,7 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
                 if (rh->hit.geomID == RTC_INVALID_GEOMETRY_ID || rh->hit.primID >= s->triangle_count)
                     continue;
                 const float *normal = s->tri_normal + 3 * (size_t)rh->hit.primID;
-                float dir[3] = {rh->ray.dir_x, rh->ray.dir_y, rh->ray.dir_z};
+                const float *dir = pd->dir[first + r];
                 if (!(fx__dot(dir, normal) < 0))
                     continue; /* back face */
                 float p[3];
@@ -273,10 +363,11 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
             }
             shadow_flush(ctx, hs);
 
-            /* Radiance and distance of every ray, accumulated into the texels. */
+            /* Radiance and distance of every ray. */
             for (uint32_t r = 0; r < n; r++) {
                 const struct RTCRayHit *rh = &hits[r];
-                float dir[3] = {rh->ray.dir_x, rh->ray.dir_y, rh->ray.dir_z}, radiance[3], distance;
+                const float *dir = pd->dir[first + r];
+                float radiance[3], distance;
                 if (rh->hit.geomID == RTC_INVALID_GEOMETRY_ID || rh->hit.primID >= s->triangle_count) {
                     memcpy(radiance, sky, sizeof radiance);
                     distance = max_distance;
@@ -302,34 +393,26 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
                     }
                     distance = fminf(distance, max_distance);
                 }
-                float d = distance / cell, dd = d * d;
-                float rx = dir[0], ry = dir[1], rz = dir[2], lr = radiance[0], lg = radiance[1], lb = radiance[2];
-                for (uint32_t tx = 0; tx < FX_PROBE_TEXELS; tx++) {
-                    float c = dir_x[tx] * rx + dir_y[tx] * ry + dir_z[tx] * rz;
-                    /* max(c, 0) on the bits (negative floats have the sign bit: cleared to +0), so it vectorises */
-                    uint32_t bits;
-                    memcpy(&bits, &c, sizeof bits);
-                    bits &= (bits >> 31) - 1u; /* sign set: mask 0; clear: all ones */
-                    memcpy(&c, &bits, sizeof c);
-                    acc->r[tx] += c * lr;
-                    acc->g[tx] += c * lg;
-                    acc->b[tx] += c * lb;
-                    acc->w[tx] += c;
-                    float c2 = c * c, c4 = c2 * c2, c8 = c4 * c4, c16 = c8 * c8, c32 = c16 * c16, w = c32 * c32; /* c^64 */
-                    acc->m1[tx] += w * d;
-                    acc->m2[tx] += w * dd;
-                    acc->mw[tx] += w;
-                }
+                float d = distance / cell;
+                values[r][0] = radiance[0];
+                values[r][1] = radiance[1];
+                values[r][2] = radiance[2];
+                values[r][3] = d;
+                values[r][4] = d * d;
             }
+            /* Into the texels (file comment): the weight rows of these rays, from the table or computed. */
+            if (!table)
+                direction_weights(pd, first, n, 0, false);
+            gather_chunk(pd, table ? first : 0, n, (const float(*)[5])values, acc);
         }
         for (uint32_t tx = 0; tx < FX_PROBE_TEXELS; tx++) {
             out->irradiance[tx][0] = acc->r[tx];
             out->irradiance[tx][1] = acc->g[tx];
             out->irradiance[tx][2] = acc->b[tx];
-            out->irradiance_weight[tx] = acc->w[tx];
+            out->irradiance_weight[tx] = pd->cosine_sum[tx];
             out->moments[tx][0] = acc->m1[tx];
             out->moments[tx][1] = acc->m2[tx];
-            out->moment_weight[tx] = acc->mw[tx];
+            out->moment_weight[tx] = pd->lobe_sum[tx];
         }
         for (uint32_t tx = 0; tx < FX_PROBE_TEXELS; tx++) {
             if (out->irradiance_weight[tx] > 0)
