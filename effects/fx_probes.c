@@ -163,14 +163,247 @@ static uint32_t queue_shadow_rays(const fx_context *ctx, hit_shading *hs, uint32
     return queued;
 }
 
+/* ---- the bounce at hits: the committed probes around a hit, per cell ------------------------------------
+ * The shading filter of fx__probe_filter_memo (trilinear x wrap x Chebyshev, renormalised) at a hit, with the
+ * cell's 8 corners found once per frame and thread instead of once per hit: hits of neighbouring probes land
+ * in the same cells again and again. A cell keeps its corners' payloads, which of them hold data and are on,
+ * their positions and cells (the header read once), and the corners' irradiance towards the last normal
+ * asked (hits of one wall share it; exact: the same sums fx_probe_irradiance takes). Per hit only the
+ * trilinear weights, the wrap and the Chebyshev weight (its moments towards the hit) are left. The entries
+ * hold pointers into the cache: they are kept while ctx->epoch and ctx->frame stay the same (payloads do not
+ * change within a frame's updates), else only within one update call. */
+enum { HIT_CELLS = 512 };
+
+typedef struct hit_cell {
+    uint64_t generation; /* the thread's generation it was filled in (0: empty) */
+    float centre[3];     /* the cell's centre as the update computed it (compared bit for bit) */
+    uint32_t level, effect;
+    uint32_t active; /* bit c: corner c holds a probe with data, not off */
+    const uint8_t *texel[8];
+    float position[8][3], cell[8];
+    bool normal_set; /* e holds the active corners' irradiance towards `normal` (compared bit for bit) */
+    float normal[3];
+    float e[8][3];
+} hit_cell;
+
+static _Thread_local hit_cell thread_hit_cells[HIT_CELLS]; /* 170 KB */
+static _Thread_local uint64_t thread_hit_generation, thread_hit_epoch;
+static _Thread_local uint32_t thread_hit_frame;
+
+/* At the start of an update call: keep the cells while the loop and frame are the same, else forget them. */
+static void hit_cells_begin(const fx_context *ctx)
+{
+    if (ctx->epoch && ctx->frame && ctx->epoch == thread_hit_epoch && ctx->frame == thread_hit_frame)
+        return;
+    thread_hit_generation++;
+    thread_hit_epoch = ctx->epoch;
+    thread_hit_frame = ctx->frame;
+}
+
+/* The cell around `centre` (a cell's centre: the same cell gives the same bits from any probe of a grid
+ * whose coordinates are exact in float, as powers-of-two cells are; otherwise a cell may take two entries). */
+static hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t level, const float centre[3])
+{
+    uint32_t bits[3];
+    memcpy(bits, centre, sizeof bits);
+    uint64_t h = (uint64_t)bits[0] * 0x9E3779B97F4A7C15ull ^ (uint64_t)bits[1] * 0xC2B2AE3D27D4EB4Full ^
+                 (uint64_t)bits[2] * 0x165667B19E3779F9ull ^ ((uint64_t)level << 40) ^ ((uint64_t)effect << 48);
+    h ^= h >> 31;
+    h *= 0xD6E8FEB86659FD93ull;
+    hit_cell *e = &thread_hit_cells[h >> 55]; /* 9 bits: HIT_CELLS */
+    if (e->generation == thread_hit_generation && memcmp(e->centre, centre, sizeof e->centre) == 0 &&
+        e->level == level && e->effect == effect)
+        return e;
+    const void *texel[8];
+    if (!ctx->world_cell(ctx->world_user, effect, level, centre, texel))
+        memset(texel, 0, sizeof texel);
+    e->generation = thread_hit_generation;
+    memcpy(e->centre, centre, sizeof e->centre);
+    e->level = level;
+    e->effect = effect;
+    e->active = 0;
+    e->normal_set = false;
+    for (int c = 0; c < 8; c++) {
+        const uint8_t *p = texel[c];
+        e->texel[c] = p;
+        if (!p)
+            continue;
+        uint32_t flags = get_u32(p + 16);
+        if (!(flags & FX_PROBE_HAS_DATA) || (flags & FX_PROBE_OFF))
+            continue;
+        e->active |= 1u << c;
+        for (int k = 0; k < 3; k++)
+            e->position[c][k] = get_f32(p + 4 * k);
+        e->cell[c] = get_f32(p + 12);
+    }
+    return e;
+}
+
+/* A half (finite, >= 0: moments and stored irradiance) to float, exactly, subnormals included: its bits
+ * shifted into a float's place and rescaled by 2^112 (the exponent biases' difference), so it vectorises. */
+static inline float half_bits_to_float(uint32_t h)
+{
+    uint32_t bits = (h & 0x7fffu) << 13;
+    float f;
+    memcpy(&f, &bits, sizeof f);
+    return f * 0x1p112f;
+}
+
+/* probe_weight (fx_probes_map.c) with visibility for the 8 corners of a cell at once, times the trilinear
+ * weights `tap` (0 for corners that are missing, off or without data): the same IEEE operations per corner,
+ * written lane by lane without branches (the octahedral fold and border wrap as selects, the moments' four
+ * texels loaded per corner), so the AVX2 copy runs the 8 corners as one vector. */
+FXC_HOT_CLONES static void hit_weights(const hit_cell *restrict e, const float position[3], const float normal[3],
+                                       const float tap[8], float out[8])
+{
+    static const uint8_t zero_payload[FX_PROBE_BYTES]; /* read in place of missing corners, never used */
+    const float px = position[0], py = position[1], pz = position[2];
+    const float nx = normal[0], ny = normal[1], nz = normal[2];
+    int32_t texel[4][8];
+    float bilinear[4][8], weight[8], distance[8], cell[8];
+    for (int c = 0; c < 8; c++) {
+        cell[c] = e->cell[c];
+        const float *probe = e->position[c];
+        float tx = probe[0] - px, ty = probe[1] - py, tz = probe[2] - pz;
+        float bx = probe[0] - (px + nx * FX_PROBE_NORMAL_BIAS * cell[c]);
+        float by = probe[1] - (py + ny * FX_PROBE_NORMAL_BIAS * cell[c]);
+        float bz = probe[2] - (pz + nz * FX_PROBE_NORMAL_BIAS * cell[c]);
+        float len2 = tx * tx + ty * ty + tz * tz, biased_len2 = bx * bx + by * by + bz * bz;
+        float len = sqrtf(len2);
+        float wrap = len > 0 ? ((tx * nx + ty * ny + tz * nz) / len + 1.0f) * 0.5f : 1.0f;
+        weight[c] = wrap * wrap + 0.2f;
+        float d = sqrtf(biased_len2);
+        distance[c] = d;
+        /* fx_probe_oct_encode of the direction from the probe to the biased point */
+        float safe = d > 0 ? d : 1.0f;
+        float x = -bx / safe, y = -by / safe, z = -bz / safe;
+        float l1 = fabsf(x) + fabsf(y) + fabsf(z);
+        float ox = l1 > 0 ? x / (l1 > 0 ? l1 : 1.0f) : 0.0f, oy = l1 > 0 ? y / (l1 > 0 ? l1 : 1.0f) : 0.0f;
+        float fold_x = (1.0f - fabsf(oy)) * (ox >= 0 ? 1.0f : -1.0f), fold_y = (1.0f - fabsf(ox)) * (oy >= 0 ? 1.0f : -1.0f);
+        float u = z < 0 ? fold_x : ox, v = z < 0 ? fold_y : oy;
+        /* oct_bilinear (fx_probes_map.c) */
+        float fx = (u + 1.0f) * 4.0f - 0.5f, fy = (v + 1.0f) * 4.0f - 0.5f;
+        float x0 = floorf(fx), y0 = floorf(fy);
+        float wx = fx - x0, wy = fy - y0;
+        int32_t ix0 = (int32_t)x0, iy0 = (int32_t)y0;
+        /* the four texels, unrolled (a loop here would keep the corners' loop from vectorising) */
+#define HIT_TEXEL(i)                                                                                           \
+    do {                                                                                                       \
+        int32_t xi = ix0 + ((i) & 1), yi = iy0 + ((i) >> 1);                                                   \
+        int32_t y_out = yi < 0 || yi > 7;                                                                      \
+        int32_t x1 = y_out ? 7 - xi : xi, y1 = y_out ? (yi < 0 ? 0 : 7) : yi;                                  \
+        int32_t x_out = x1 < 0 || x1 > 7;                                                                      \
+        int32_t x2 = x_out ? (x1 < 0 ? 0 : 7) : x1, y2 = x_out ? 7 - y1 : y1;                                  \
+        x2 = x2 < 0 ? 0 : (x2 > 7 ? 7 : x2);                                                                   \
+        y2 = y2 < 0 ? 0 : (y2 > 7 ? 7 : y2);                                                                   \
+        texel[i][c] = y2 * FX_PROBE_MAP + x2;                                                                  \
+        bilinear[i][c] = (((i) & 1) ? wx : 1.0f - wx) * (((i) >> 1) ? wy : 1.0f - wy);                         \
+    } while (0)
+        HIT_TEXEL(0);
+        HIT_TEXEL(1);
+        HIT_TEXEL(2);
+        HIT_TEXEL(3);
+#undef HIT_TEXEL
+    }
+    uint32_t word[4][8]; /* each texel's two moments: mean distance (low half), mean squared distance */
+    for (int c = 0; c < 8; c++) {
+        const uint8_t *p = (e->active >> c & 1) ? e->texel[c] : zero_payload;
+        for (int i = 0; i < 4; i++)
+            word[i][c] = get_u32(p + PROBE_MOMENTS + 4 * texel[i][c]);
+    }
+    for (int c = 0; c < 8; c++) {
+        float m1 = 0, m2 = 0; /* in texel order, as probe_moments sums */
+        m1 += bilinear[0][c] * half_bits_to_float(word[0][c] & 0xffffu);
+        m2 += bilinear[0][c] * half_bits_to_float(word[0][c] >> 16);
+        m1 += bilinear[1][c] * half_bits_to_float(word[1][c] & 0xffffu);
+        m2 += bilinear[1][c] * half_bits_to_float(word[1][c] >> 16);
+        m1 += bilinear[2][c] * half_bits_to_float(word[2][c] & 0xffffu);
+        m2 += bilinear[2][c] * half_bits_to_float(word[2][c] >> 16);
+        m1 += bilinear[3][c] * half_bits_to_float(word[3][c] & 0xffffu);
+        m2 += bilinear[3][c] * half_bits_to_float(word[3][c] >> 16);
+        float mean = m1 * cell[c], mean2 = m2 * cell[c] * cell[c];
+        float variance = fabsf(mean2 - mean * mean), excess = distance[c] - mean;
+        float chebyshev = variance / (variance + excess * excess);
+        chebyshev = distance[c] > mean ? chebyshev * chebyshev * chebyshev : 1.0f;
+        chebyshev = chebyshev > 0.05f ? chebyshev : 0.05f; /* fmaxf(0.05f, chebyshev), NaN included */
+        float w = distance[c] > 0 ? weight[c] * chebyshev : weight[c];
+        w = w > 1e-6f ? w : 1e-6f;
+        w = w < 0.2f ? w * (w * w / (0.2f * 0.2f)) : w;
+        out[c] = (e->active >> c & 1) ? w * tap[c] : 0.0f;
+    }
+}
+
+/* The filter at a hit on the grid of `grid_point` (any grid point of the level, e.g. the job's) and `cell`
+ * (metres): E of the probes around it, or false (and 0) when none contributes. */
+static bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, const float grid_point[3], float cell,
+                       const float position[3], const float normal[3], float out[3])
+{
+    out[0] = out[1] = out[2] = 0;
+    float centre[3];
+    double t[3];
+    for (int k = 0; k < 3; k++) { /* the cell and the position in it (wsc_corners' rule, from the grid point) */
+        double q = ((double)position[k] - (double)grid_point[k]) / (double)cell, f = floor(q);
+        if (!(fabs(f) < 1e9))
+            return false;
+        centre[k] = (float)((double)grid_point[k] + (f + 0.5) * (double)cell);
+        t[k] = q - f;
+        t[k] = t[k] < 0.0 ? 0.0 : (t[k] > 1.0 ? 1.0 : t[k]);
+    }
+    hit_cell *e = hit_cell_find(ctx, effect, level, centre);
+    if (!e->active)
+        return false;
+    if (!(e->normal_set && memcmp(e->normal, normal, sizeof e->normal) == 0)) {
+        uint32_t texel[4];
+        float w[4];
+        fx__probe_oct_bilinear(normal, texel, w);
+        for (int c = 0; c < 8; c++) {
+            if (!(e->active >> c & 1))
+                continue;
+            const uint8_t *p = e->texel[c];
+            float scale = get_f32(p + 24), sum[3] = {0, 0, 0};
+            for (int i = 0; i < 4; i++)
+                for (int k = 0; k < 3; k++)
+                    sum[k] += w[i] * half_bits_to_float(fx__get_u16(p + PROBE_IRRADIANCE + 6 * texel[i] + 2 * k));
+            for (int k = 0; k < 3; k++)
+                e->e[c][k] = sum[k] * scale;
+        }
+        memcpy(e->normal, normal, sizeof e->normal);
+        e->normal_set = true;
+    }
+    float tap[8], weight[8];
+    for (int c = 0; c < 8; c++) {
+        double trilinear = 1.0;
+        for (int k = 0; k < 3; k++)
+            trilinear *= (c >> k & 1) ? t[k] : 1.0 - t[k];
+        tap[c] = (float)trilinear;
+    }
+    hit_weights(e, position, normal, tap, weight);
+    float sum[3] = {0, 0, 0}, total = 0;
+    for (int c = 0; c < 8; c++) {
+        if (!(weight[c] > 0)) /* off, missing, or a trilinear weight of 0 */
+            continue;
+        for (int k = 0; k < 3; k++)
+            sum[k] += weight[c] * e->e[c][k];
+        total += weight[c];
+    }
+    if (!(total > 0))
+        return false;
+    for (int k = 0; k < 3; k++)
+        out[k] = fminf(sum[k] / total, FLT_MAX);
+    return true;
+}
+
 /* Radiance leaving a front-face hit, given its direct light (compose units) and the probes around it. */
-static void hit_radiance(const fx_context *ctx, uint32_t effect, uint32_t level, uint32_t tri, float u, float v, float t,
+static void hit_radiance(const fx_context *ctx, const fx_block_job *job, uint32_t tri, float u, float v, float t,
                          const float position[3], const float normal[3], const float direct[3], float out[3])
 {
     float albedo[3], bounce[3] = {0, 0, 0};
     /* The albedo over the ray's footprint there (144 rays: about 0.3 rad apart). */
     scene_albedo_filtered(ctx->s, tri, u, v, log2f(fmaxf(t * 0.3f, 1e-30f)), albedo);
-    if (ctx->world_taps) {
+    uint32_t effect = job->effect, level = job->level;
+    if (ctx->world_cell) {
+        hit_bounce(ctx, effect, level, job->origin, job->cell, position, normal, bounce);
+    } else if (ctx->world_taps) {
         fx_taps taps;
         memset(&taps, 0, sizeof taps);
         ctx->world_taps(ctx->world_user, effect, position, level, &taps);
@@ -303,6 +536,8 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
     probe_directions *pd = &thread_directions;
     const bool table = rays <= PROBE_TABLE_RAYS;
     uint64_t traced = 0;
+    if (ctx->world_cell)
+        hit_cells_begin(ctx);
 
     for (uint32_t j = 0; j < count; j++) {
         const fx_block_job *job = &jobs[j];
@@ -383,7 +618,7 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
                             memcpy(back_dir, dir, sizeof back_dir);
                         }
                     } else {
-                        hit_radiance(ctx, job->effect, job->level, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r], normal,
+                        hit_radiance(ctx, job, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r], normal,
                                      hs->direct[r], radiance);
                         distance = t;
                         if (t < closest_front) {
