@@ -57,6 +57,16 @@
 #include "fx_probes_internal.h"
 #include "fxc_hot.h"
 
+/* A half (finite, >= 0: moments and stored irradiance) to float, exactly, subnormals included: its bits
+ * shifted into a float's place and rescaled by 2^112 (the exponent biases' difference), so it vectorises. */
+static inline float half_bits_to_float(uint32_t h)
+{
+    uint32_t bits = (h & 0x7fffu) << 13;
+    float f;
+    memcpy(&f, &bits, sizeof f);
+    return f * 0x1p112f;
+}
+
 /* A value >= 0 to half, rounded up with probability equal to its position between the two neighbouring
  * halves (u in [0, 1)), so the rounding is unbiased; saturates at the largest half (65504), never infinity.
  * Negative values and NaN become 0 (irradiance and distances are never negative). */
@@ -75,10 +85,10 @@ static uint16_t half_stochastic(float x, float u)
         int exponent = (int)((bits >> 23) & 0xffu) - 127;
         lo = (uint16_t)(((uint32_t)(exponent + 15) << 10) | ((bits & 0x7fffffu) >> 13));
     }
-    float below = half_to_float(lo);
+    float below = half_bits_to_float(lo); /* lo <= 0x7bff: finite, >= 0 */
     if (below == x || lo == 0x7bffu)
         return lo;
-    float above = half_to_float((uint16_t)(lo + 1));
+    float above = half_bits_to_float((uint16_t)(lo + 1));
     return u * (above - below) < x - below ? (uint16_t)(lo + 1) : lo;
 }
 
@@ -172,7 +182,7 @@ static uint32_t queue_shadow_rays(const fx_context *ctx, hit_shading *hs, uint32
  * trilinear weights, the wrap and the Chebyshev weight (its moments towards the hit) are left. The entries
  * hold pointers into the cache: they are kept while ctx->epoch and ctx->frame stay the same (payloads do not
  * change within a frame's updates), else only within one update call. */
-enum { HIT_CELLS = 512 };
+enum { HIT_CELLS = 2048 };
 
 typedef struct hit_cell {
     uint64_t generation; /* the thread's generation it was filled in (0: empty) */
@@ -186,7 +196,7 @@ typedef struct hit_cell {
     float e[8][3];
 } hit_cell;
 
-static _Thread_local hit_cell thread_hit_cells[HIT_CELLS]; /* 170 KB */
+static _Thread_local hit_cell thread_hit_cells[HIT_CELLS]; /* 680 KB */
 static _Thread_local uint64_t thread_hit_generation, thread_hit_epoch;
 static _Thread_local uint32_t thread_hit_frame;
 
@@ -210,7 +220,7 @@ static hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t 
                  (uint64_t)bits[2] * 0x165667B19E3779F9ull ^ ((uint64_t)level << 40) ^ ((uint64_t)effect << 48);
     h ^= h >> 31;
     h *= 0xD6E8FEB86659FD93ull;
-    hit_cell *e = &thread_hit_cells[h >> 55]; /* 9 bits: HIT_CELLS */
+    hit_cell *e = &thread_hit_cells[h >> 53]; /* 11 bits: HIT_CELLS */
     if (e->generation == thread_hit_generation && memcmp(e->centre, centre, sizeof e->centre) == 0 &&
         e->level == level && e->effect == effect)
         return e;
@@ -237,16 +247,6 @@ static hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t 
         e->cell[c] = get_f32(p + 12);
     }
     return e;
-}
-
-/* A half (finite, >= 0: moments and stored irradiance) to float, exactly, subnormals included: its bits
- * shifted into a float's place and rescaled by 2^112 (the exponent biases' difference), so it vectorises. */
-static inline float half_bits_to_float(uint32_t h)
-{
-    uint32_t bits = (h & 0x7fffu) << 13;
-    float f;
-    memcpy(&f, &bits, sizeof f);
-    return f * 0x1p112f;
 }
 
 /* probe_weight (fx_probes_map.c) with visibility for the 8 corners of a cell at once, times the trilinear
@@ -725,7 +725,8 @@ void fx_probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
               moments[FX_PROBE_TEXELS][2], scale = 0;
         for (uint32_t t = 0; t < FX_PROBE_TEXELS; t++) {
             for (int k = 0; k < 3; k++) {
-                float old = old_scale * half_to_float(fx__get_u16(p + PROBE_IRRADIANCE + 6 * t + 2 * k));
+                /* payload halves are half_stochastic's: finite and >= 0 */
+                float old = old_scale * half_bits_to_float(fx__get_u16(p + PROBE_IRRADIANCE + 6 * t + 2 * k));
                 float value = old;
                 if (in->irradiance_weight[t] > 0)
                     value = fresh ? in->irradiance[t][k] : h * old + (1.0f - h) * in->irradiance[t][k];
@@ -733,7 +734,7 @@ void fx_probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
                 scale = fmaxf(scale, irradiance[t][k]);
             }
             for (int k = 0; k < 2; k++) {
-                float old = fresh ? 0.0f : half_to_float(fx__get_u16(p + PROBE_MOMENTS + 4 * t + 2 * k));
+                float old = fresh ? 0.0f : half_bits_to_float(fx__get_u16(p + PROBE_MOMENTS + 4 * t + 2 * k));
                 float value = old;
                 if (in->moment_weight[t] > 0)
                     value = fresh ? in->moments[t][k] : h * old + (1.0f - h) * in->moments[t][k];
