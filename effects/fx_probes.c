@@ -15,10 +15,14 @@
  * readers and compose's shade.
  *
  * Update of one probe (a job, brick size 1): probe_rays rays in a spherical Fibonacci set, rotated by a
- * uniform random rotation from hash(seed, key, update count), from the probe's (relocated) position:
+ * uniform random rotation from hash(seed, frame) shared by every probe of the frame (RTXGI rotates a volume's
+ * rays once per update the same way; without a frame number, ctx->frame 0, from hash(seed, update count)),
+ * from the probe's (relocated) position:
  *   - front-face hit: radiance = albedo x (direct light at the hit, shadow rays to every light, as compose
- *     lights it + E_probes / pi), E_probes the committed probes around the hit at the job's level through
- *     ctx->world_taps with the shade filter (fx__probe_filter_memo): light bounces once more every frame;
+ *     lights it + E_probes / pi), E_probes the committed probes around the hit at the job's level with the
+ *     shade filter (fx__probe_filter_memo's weights), the hit's cell read through ctx->world_cell and kept
+ *     per thread for the frame (hit_bounce; through ctx->world_taps per hit when world_cell is NULL): light
+ *     bounces once more every frame;
  *   - back-face hit: radiance 0, counted, distance shortened to 0.2 t (RTXGI), so the visibility moments see
  *     the wall as near;
  *   - miss: the sky's radiance, distance the maximum.
@@ -51,8 +55,9 @@
  * from a hash): with nearest rounding a 3 % step is below half a unit in the last place within 0.8 % of the
  * target, and the blend would stall there; stochastic rounding keeps the blend's mean exact.
  *
- * Determinism: update reads only committed payloads (its own and world_taps'); all randomness is hashed
- * from (seed, key, update count): any thread split or job order gives the same bytes. The caller must have
+ * Determinism: update reads only committed payloads (its own and world_taps' / world_cell's); all
+ * randomness is hashed from (seed, frame or update count) for the rays and (seed, key, texel, update count)
+ * for the rounding: any thread split or job order gives the same bytes. The caller must have
  * called scene_tracing_thread_init() in the tracing thread. */
 #include "fx_probes_internal.h"
 #include "fxc_hot.h"
