@@ -76,7 +76,16 @@ typedef struct fx_context {
      * the order updates run in. NULL: the loop has no world-space cache. */
     uint32_t (*world_taps)(const void *user, uint32_t effect, const float position[3], uint32_t level,
                            struct fx_taps *taps);
+    /* Optional, beside world_taps (NULL: update hits use world_taps): the committed texels of the 8 corners
+     * of the cell of `level` around `centre` (the caller passes a cell's centre, well inside it; corner c at
+     * the cell's lowest grid point + cell size x (c & 1, c >> 1 & 1, c >> 2 & 1)), NULL where a corner holds
+     * none. False (all NULL) outside the grid's range. The same contract as world_taps otherwise: committed
+     * data only, read-only, any thread. Probe updates keep what it returns per thread for the frame (see
+     * epoch), so a cell's 8 corners are looked up once, not once per ray that hits it. */
+    bool (*world_cell)(const void *user, uint32_t effect, uint32_t level, const float centre[3], const void *texel[8]);
     const void *world_user;
+    uint64_t epoch; /* unique per loop within the process (0: unknown). With frame it names the payloads'
+                       state: memos that keep pointers into the cache are kept only while both are the same */
     uint32_t probe_rays;    /* rays per probe update (default 144, DDGI's) */
     uint32_t frame;         /* the frame being run, + 1 (0: unknown). Cache payloads change only between
                                frames, so what is derived from them can be kept within one frame. */

@@ -15,10 +15,14 @@
  * readers and compose's shade.
  *
  * Update of one probe (a job, brick size 1): probe_rays rays in a spherical Fibonacci set, rotated by a
- * uniform random rotation from hash(seed, key, update count), from the probe's (relocated) position:
+ * uniform random rotation from hash(seed, frame) shared by every probe of the frame (RTXGI rotates a volume's
+ * rays once per update the same way; without a frame number, ctx->frame 0, from hash(seed, update count)),
+ * from the probe's (relocated) position:
  *   - front-face hit: radiance = albedo x (direct light at the hit, shadow rays to every light, as compose
- *     lights it + E_probes / pi), E_probes the committed probes around the hit at the job's level through
- *     ctx->world_taps with the shade filter (fx__probe_filter_memo): light bounces once more every frame;
+ *     lights it + E_probes / pi), E_probes the committed probes around the hit at the job's level with the
+ *     shade filter (fx__probe_filter_memo's weights), the hit's cell read through ctx->world_cell and kept
+ *     per thread for the frame (hit_bounce; through ctx->world_taps per hit when world_cell is NULL): light
+ *     bounces once more every frame;
  *   - back-face hit: radiance 0, counted, distance shortened to 0.2 t (RTXGI), so the visibility moments see
  *     the wall as near;
  *   - miss: the sky's radiance, distance the maximum.
@@ -51,10 +55,22 @@
  * from a hash): with nearest rounding a 3 % step is below half a unit in the last place within 0.8 % of the
  * target, and the blend would stall there; stochastic rounding keeps the blend's mean exact.
  *
- * Determinism: update reads only committed payloads (its own and world_taps'); all randomness is hashed
- * from (seed, key, update count): any thread split or job order gives the same bytes. The caller must have
+ * Determinism: update reads only committed payloads (its own and world_taps' / world_cell's); all
+ * randomness is hashed from (seed, frame or update count) for the rays and (seed, key, texel, update count)
+ * for the rounding: any thread split or job order gives the same bytes. The caller must have
  * called scene_tracing_thread_init() in the tracing thread. */
 #include "fx_probes_internal.h"
+#include "fxc_hot.h"
+
+/* A half (finite, >= 0: moments and stored irradiance) to float, exactly, subnormals included: its bits
+ * shifted into a float's place and rescaled by 2^112 (the exponent biases' difference), so it vectorises. */
+static inline float half_bits_to_float(uint32_t h)
+{
+    uint32_t bits = (h & 0x7fffu) << 13;
+    float f;
+    memcpy(&f, &bits, sizeof f);
+    return f * 0x1p112f;
+}
 
 /* A value >= 0 to half, rounded up with probability equal to its position between the two neighbouring
  * halves (u in [0, 1)), so the rounding is unbiased; saturates at the largest half (65504), never infinity.
@@ -74,10 +90,10 @@ static uint16_t half_stochastic(float x, float u)
         int exponent = (int)((bits >> 23) & 0xffu) - 127;
         lo = (uint16_t)(((uint32_t)(exponent + 15) << 10) | ((bits & 0x7fffffu) >> 13));
     }
-    float below = half_to_float(lo);
+    float below = half_bits_to_float(lo); /* lo <= 0x7bff: finite, >= 0 */
     if (below == x || lo == 0x7bffu)
         return lo;
-    float above = half_to_float((uint16_t)(lo + 1));
+    float above = half_bits_to_float((uint16_t)(lo + 1));
     return u * (above - below) < x - below ? (uint16_t)(lo + 1) : lo;
 }
 
@@ -162,14 +178,237 @@ static uint32_t queue_shadow_rays(const fx_context *ctx, hit_shading *hs, uint32
     return queued;
 }
 
+/* ---- the bounce at hits: the committed probes around a hit, per cell ------------------------------------
+ * The shading filter of fx__probe_filter_memo (trilinear x wrap x Chebyshev, renormalised) at a hit, with the
+ * cell's 8 corners found once per frame and thread instead of once per hit: hits of neighbouring probes land
+ * in the same cells again and again. A cell keeps its corners' payloads, which of them hold data and are on,
+ * their positions and cells (the header read once), and the corners' irradiance towards the last normal
+ * asked (hits of one wall share it; exact: the same sums fx_probe_irradiance takes). Per hit only the
+ * trilinear weights, the wrap and the Chebyshev weight (its moments towards the hit) are left. The entries
+ * hold pointers into the cache: they are kept while ctx->epoch and ctx->frame stay the same (payloads do not
+ * change within a frame's updates), else only within one update call. */
+enum { HIT_CELLS = 2048 };
+
+typedef struct hit_cell {
+    uint64_t generation; /* the thread's generation it was filled in (0: empty) */
+    float centre[3];     /* the cell's centre as the update computed it (compared bit for bit) */
+    uint32_t level, effect;
+    uint32_t active; /* bit c: corner c holds a probe with data, not off */
+    const uint8_t *texel[8];
+    float position[8][3], cell[8];
+    bool normal_set; /* e holds the active corners' irradiance towards `normal` (compared bit for bit) */
+    float normal[3];
+    float e[8][3];
+} hit_cell;
+
+static _Thread_local hit_cell thread_hit_cells[HIT_CELLS]; /* 680 KB */
+static _Thread_local uint64_t thread_hit_generation, thread_hit_epoch;
+static _Thread_local uint32_t thread_hit_frame;
+
+/* At the start of an update call: keep the cells while the loop and frame are the same, else forget them. */
+static void hit_cells_begin(const fx_context *ctx)
+{
+    if (ctx->epoch && ctx->frame && ctx->epoch == thread_hit_epoch && ctx->frame == thread_hit_frame)
+        return;
+    thread_hit_generation++;
+    thread_hit_epoch = ctx->epoch;
+    thread_hit_frame = ctx->frame;
+}
+
+/* The cell around `centre` (a cell's centre: the same cell gives the same bits from any probe of a grid
+ * whose coordinates are exact in float, as powers-of-two cells are; otherwise a cell may take two entries). */
+static hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t level, const float centre[3])
+{
+    uint32_t bits[3];
+    memcpy(bits, centre, sizeof bits);
+    uint64_t h = (uint64_t)bits[0] * 0x9E3779B97F4A7C15ull ^ (uint64_t)bits[1] * 0xC2B2AE3D27D4EB4Full ^
+                 (uint64_t)bits[2] * 0x165667B19E3779F9ull ^ ((uint64_t)level << 40) ^ ((uint64_t)effect << 48);
+    h ^= h >> 31;
+    h *= 0xD6E8FEB86659FD93ull;
+    hit_cell *e = &thread_hit_cells[h >> 53]; /* 11 bits: HIT_CELLS */
+    if (e->generation == thread_hit_generation && memcmp(e->centre, centre, sizeof e->centre) == 0 &&
+        e->level == level && e->effect == effect)
+        return e;
+    const void *texel[8];
+    if (!ctx->world_cell(ctx->world_user, effect, level, centre, texel))
+        memset(texel, 0, sizeof texel);
+    e->generation = thread_hit_generation;
+    memcpy(e->centre, centre, sizeof e->centre);
+    e->level = level;
+    e->effect = effect;
+    e->active = 0;
+    e->normal_set = false;
+    for (int c = 0; c < 8; c++) {
+        const uint8_t *p = texel[c];
+        e->texel[c] = p;
+        if (!p)
+            continue;
+        uint32_t flags = get_u32(p + 16);
+        if (!(flags & FX_PROBE_HAS_DATA) || (flags & FX_PROBE_OFF))
+            continue;
+        e->active |= 1u << c;
+        for (int k = 0; k < 3; k++)
+            e->position[c][k] = get_f32(p + 4 * k);
+        e->cell[c] = get_f32(p + 12);
+    }
+    return e;
+}
+
+/* probe_weight (fx_probes_map.c) with visibility for the 8 corners of a cell at once, times the trilinear
+ * weights `tap` (0 for corners that are missing, off or without data): the same IEEE operations per corner,
+ * written lane by lane without branches (the octahedral fold and border wrap as selects, the moments' four
+ * texels loaded per corner), so the AVX2 copy runs the 8 corners as one vector. */
+FXC_HOT_CLONES static void hit_weights(const hit_cell *restrict e, const float position[3], const float normal[3],
+                                       const float tap[8], float out[8])
+{
+    static const uint8_t zero_payload[FX_PROBE_BYTES]; /* read in place of missing corners, never used */
+    const float px = position[0], py = position[1], pz = position[2];
+    const float nx = normal[0], ny = normal[1], nz = normal[2];
+    int32_t texel[4][8];
+    float bilinear[4][8], weight[8], distance[8], cell[8];
+    for (int c = 0; c < 8; c++) {
+        cell[c] = e->cell[c];
+        const float *probe = e->position[c];
+        float tx = probe[0] - px, ty = probe[1] - py, tz = probe[2] - pz;
+        float bx = probe[0] - (px + nx * FX_PROBE_NORMAL_BIAS * cell[c]);
+        float by = probe[1] - (py + ny * FX_PROBE_NORMAL_BIAS * cell[c]);
+        float bz = probe[2] - (pz + nz * FX_PROBE_NORMAL_BIAS * cell[c]);
+        float len2 = tx * tx + ty * ty + tz * tz, biased_len2 = bx * bx + by * by + bz * bz;
+        float len = sqrtf(len2);
+        float wrap = len > 0 ? ((tx * nx + ty * ny + tz * nz) / len + 1.0f) * 0.5f : 1.0f;
+        weight[c] = wrap * wrap + 0.2f;
+        float d = sqrtf(biased_len2);
+        distance[c] = d;
+        /* fx_probe_oct_encode of the direction from the probe to the biased point */
+        float safe = d > 0 ? d : 1.0f;
+        float x = -bx / safe, y = -by / safe, z = -bz / safe;
+        float l1 = fabsf(x) + fabsf(y) + fabsf(z);
+        float ox = l1 > 0 ? x / (l1 > 0 ? l1 : 1.0f) : 0.0f, oy = l1 > 0 ? y / (l1 > 0 ? l1 : 1.0f) : 0.0f;
+        float fold_x = (1.0f - fabsf(oy)) * (ox >= 0 ? 1.0f : -1.0f), fold_y = (1.0f - fabsf(ox)) * (oy >= 0 ? 1.0f : -1.0f);
+        float u = z < 0 ? fold_x : ox, v = z < 0 ? fold_y : oy;
+        /* oct_bilinear (fx_probes_map.c) */
+        float fx = (u + 1.0f) * 4.0f - 0.5f, fy = (v + 1.0f) * 4.0f - 0.5f;
+        float x0 = floorf(fx), y0 = floorf(fy);
+        float wx = fx - x0, wy = fy - y0;
+        int32_t ix0 = (int32_t)x0, iy0 = (int32_t)y0;
+        /* the four texels, unrolled (a loop here would keep the corners' loop from vectorising) */
+#define HIT_TEXEL(i)                                                                                           \
+    do {                                                                                                       \
+        int32_t xi = ix0 + ((i) & 1), yi = iy0 + ((i) >> 1);                                                   \
+        int32_t y_out = yi < 0 || yi > 7;                                                                      \
+        int32_t x1 = y_out ? 7 - xi : xi, y1 = y_out ? (yi < 0 ? 0 : 7) : yi;                                  \
+        int32_t x_out = x1 < 0 || x1 > 7;                                                                      \
+        int32_t x2 = x_out ? (x1 < 0 ? 0 : 7) : x1, y2 = x_out ? 7 - y1 : y1;                                  \
+        x2 = x2 < 0 ? 0 : (x2 > 7 ? 7 : x2);                                                                   \
+        y2 = y2 < 0 ? 0 : (y2 > 7 ? 7 : y2);                                                                   \
+        texel[i][c] = y2 * FX_PROBE_MAP + x2;                                                                  \
+        bilinear[i][c] = (((i) & 1) ? wx : 1.0f - wx) * (((i) >> 1) ? wy : 1.0f - wy);                         \
+    } while (0)
+        HIT_TEXEL(0);
+        HIT_TEXEL(1);
+        HIT_TEXEL(2);
+        HIT_TEXEL(3);
+#undef HIT_TEXEL
+    }
+    uint32_t word[4][8]; /* each texel's two moments: mean distance (low half), mean squared distance */
+    for (int c = 0; c < 8; c++) {
+        const uint8_t *p = (e->active >> c & 1) ? e->texel[c] : zero_payload;
+        for (int i = 0; i < 4; i++)
+            word[i][c] = get_u32(p + PROBE_MOMENTS + 4 * texel[i][c]);
+    }
+    for (int c = 0; c < 8; c++) {
+        float m1 = 0, m2 = 0; /* in texel order, as probe_moments sums */
+        m1 += bilinear[0][c] * half_bits_to_float(word[0][c] & 0xffffu);
+        m2 += bilinear[0][c] * half_bits_to_float(word[0][c] >> 16);
+        m1 += bilinear[1][c] * half_bits_to_float(word[1][c] & 0xffffu);
+        m2 += bilinear[1][c] * half_bits_to_float(word[1][c] >> 16);
+        m1 += bilinear[2][c] * half_bits_to_float(word[2][c] & 0xffffu);
+        m2 += bilinear[2][c] * half_bits_to_float(word[2][c] >> 16);
+        m1 += bilinear[3][c] * half_bits_to_float(word[3][c] & 0xffffu);
+        m2 += bilinear[3][c] * half_bits_to_float(word[3][c] >> 16);
+        float mean = m1 * cell[c], mean2 = m2 * cell[c] * cell[c];
+        float variance = fabsf(mean2 - mean * mean), excess = distance[c] - mean;
+        float chebyshev = variance / (variance + excess * excess);
+        chebyshev = distance[c] > mean ? chebyshev * chebyshev * chebyshev : 1.0f;
+        chebyshev = chebyshev > 0.05f ? chebyshev : 0.05f; /* fmaxf(0.05f, chebyshev), NaN included */
+        float w = distance[c] > 0 ? weight[c] * chebyshev : weight[c];
+        w = w > 1e-6f ? w : 1e-6f;
+        w = w < 0.2f ? w * (w * w / (0.2f * 0.2f)) : w;
+        out[c] = (e->active >> c & 1) ? w * tap[c] : 0.0f;
+    }
+}
+
+/* The filter at a hit on the grid of `grid_point` (any grid point of the level, e.g. the job's) and `cell`
+ * (metres): E of the probes around it, or false (and 0) when none contributes. */
+static bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, const float grid_point[3], float cell,
+                       const float position[3], const float normal[3], float out[3])
+{
+    out[0] = out[1] = out[2] = 0;
+    float centre[3];
+    double t[3];
+    for (int k = 0; k < 3; k++) { /* the cell and the position in it (wsc_corners' rule, from the grid point) */
+        double q = ((double)position[k] - (double)grid_point[k]) / (double)cell, f = floor(q);
+        if (!(fabs(f) < 1e9))
+            return false;
+        centre[k] = (float)((double)grid_point[k] + (f + 0.5) * (double)cell);
+        t[k] = q - f;
+        t[k] = t[k] < 0.0 ? 0.0 : (t[k] > 1.0 ? 1.0 : t[k]);
+    }
+    hit_cell *e = hit_cell_find(ctx, effect, level, centre);
+    if (!e->active)
+        return false;
+    if (!(e->normal_set && memcmp(e->normal, normal, sizeof e->normal) == 0)) {
+        uint32_t texel[4];
+        float w[4];
+        fx__probe_oct_bilinear(normal, texel, w);
+        for (int c = 0; c < 8; c++) {
+            if (!(e->active >> c & 1))
+                continue;
+            const uint8_t *p = e->texel[c];
+            float scale = get_f32(p + 24), sum[3] = {0, 0, 0};
+            for (int i = 0; i < 4; i++)
+                for (int k = 0; k < 3; k++)
+                    sum[k] += w[i] * half_bits_to_float(fx__get_u16(p + PROBE_IRRADIANCE + 6 * texel[i] + 2 * k));
+            for (int k = 0; k < 3; k++)
+                e->e[c][k] = sum[k] * scale;
+        }
+        memcpy(e->normal, normal, sizeof e->normal);
+        e->normal_set = true;
+    }
+    float tap[8], weight[8];
+    for (int c = 0; c < 8; c++) {
+        double trilinear = 1.0;
+        for (int k = 0; k < 3; k++)
+            trilinear *= (c >> k & 1) ? t[k] : 1.0 - t[k];
+        tap[c] = (float)trilinear;
+    }
+    hit_weights(e, position, normal, tap, weight);
+    float sum[3] = {0, 0, 0}, total = 0;
+    for (int c = 0; c < 8; c++) {
+        if (!(weight[c] > 0)) /* off, missing, or a trilinear weight of 0 */
+            continue;
+        for (int k = 0; k < 3; k++)
+            sum[k] += weight[c] * e->e[c][k];
+        total += weight[c];
+    }
+    if (!(total > 0))
+        return false;
+    for (int k = 0; k < 3; k++)
+        out[k] = fminf(sum[k] / total, FLT_MAX);
+    return true;
+}
+
 /* Radiance leaving a front-face hit, given its direct light (compose units) and the probes around it. */
-static void hit_radiance(const fx_context *ctx, uint32_t effect, uint32_t level, uint32_t tri, float u, float v, float t,
+static void hit_radiance(const fx_context *ctx, const fx_block_job *job, uint32_t tri, float u, float v, float t,
                          const float position[3], const float normal[3], const float direct[3], float out[3])
 {
     float albedo[3], bounce[3] = {0, 0, 0};
     /* The albedo over the ray's footprint there (144 rays: about 0.3 rad apart). */
     scene_albedo_filtered(ctx->s, tri, u, v, log2f(fmaxf(t * 0.3f, 1e-30f)), albedo);
-    if (ctx->world_taps) {
+    uint32_t effect = job->effect, level = job->level;
+    if (ctx->world_cell) {
+        hit_bounce(ctx, effect, level, job->origin, job->cell, position, normal, bounce);
+    } else if (ctx->world_taps) {
         fx_taps taps;
         memset(&taps, 0, sizeof taps);
         ctx->world_taps(ctx->world_user, effect, position, level, &taps);
@@ -186,21 +425,108 @@ typedef struct gather_sums {
     float m1[FX_PROBE_TEXELS], m2[FX_PROBE_TEXELS], mw[FX_PROBE_TEXELS];
 } gather_sums;
 
+/* The rays of an update and their weights in the 64 texels. One rotation serves every probe updated in a
+ * frame (RTXGI rotates its whole volume's rays once per update the same way): the directions, each ray's
+ * cosine weight max(0, d_t.d_i) and moment lobe weight max(0, d_t.d_i)^FX_PROBE_DEPTH_POWER in every texel,
+ * and their sums over the rays, are then computed once per frame and thread instead of once per probe; the
+ * gather is left with the weighted sums of the probe's radiance and distances. Up to PROBE_TABLE_RAYS rays
+ * the weights are kept for the frame; beyond that (probe_rays above the default) each chunk's rows are
+ * computed again per probe into the first rows of the table, the same numbers. */
+enum { PROBE_TABLE_RAYS = 256 };
+_Static_assert((int)PROBE_TABLE_RAYS >= (int)PROBE_CHUNK && (int)PROBE_TABLE_RAYS % (int)PROBE_CHUNK == 0, "table rows");
+
+typedef struct probe_directions {
+    uint64_t rotation_key; /* the hash the rotation came from (valid when rays != 0) */
+    uint32_t rays;         /* 0: none yet */
+    float dir[FX_PROBE_MAX_RAYS][3];
+    _Alignas(64) float cosine[PROBE_TABLE_RAYS][FX_PROBE_TEXELS];
+    _Alignas(64) float lobe[PROBE_TABLE_RAYS][FX_PROBE_TEXELS];
+    float cosine_sum[FX_PROBE_TEXELS], lobe_sum[FX_PROBE_TEXELS]; /* over all rays (table or not) */
+} probe_directions;
+
+/* Rows [first, first + n) of the weights into rows [row, row + n) of the table; adds them to the sums when
+ * `sum`. Each texel's sum runs in ray order. */
+FXC_HOT_CLONES static void direction_weights(probe_directions *restrict pd, uint32_t first, uint32_t n, uint32_t row,
+                                             bool sum)
+{
+    float dirs[FX_PROBE_TEXELS][3], dir_x[FX_PROBE_TEXELS], dir_y[FX_PROBE_TEXELS], dir_z[FX_PROBE_TEXELS];
+    fx__probe_texel_dirs(dirs);
+    for (uint32_t tx = 0; tx < FX_PROBE_TEXELS; tx++)
+        dir_x[tx] = dirs[tx][0], dir_y[tx] = dirs[tx][1], dir_z[tx] = dirs[tx][2];
+    for (uint32_t r = 0; r < n; r++) {
+        float rx = pd->dir[first + r][0], ry = pd->dir[first + r][1], rz = pd->dir[first + r][2];
+        float *restrict cosine = pd->cosine[row + r], *restrict lobe = pd->lobe[row + r];
+        for (uint32_t tx = 0; tx < FX_PROBE_TEXELS; tx++) {
+            float c = dir_x[tx] * rx + dir_y[tx] * ry + dir_z[tx] * rz;
+            /* max(c, 0) on the bits (negative floats have the sign bit: cleared to +0), so it vectorises */
+            uint32_t bits;
+            memcpy(&bits, &c, sizeof bits);
+            bits &= (bits >> 31) - 1u; /* sign set: mask 0; clear: all ones */
+            memcpy(&c, &bits, sizeof c);
+            float c2 = c * c, c4 = c2 * c2, c8 = c4 * c4, c16 = c8 * c8, c32 = c16 * c16; /* c^64 below */
+            cosine[tx] = c;
+            lobe[tx] = c32 * c32;
+        }
+        if (sum)
+            for (uint32_t tx = 0; tx < FX_PROBE_TEXELS; tx++) {
+                pd->cosine_sum[tx] += cosine[tx];
+                pd->lobe_sum[tx] += lobe[tx];
+            }
+    }
+}
+
+/* The frame's rays for `rays` rays per probe (rotation from rotation_key), unless the table holds them. */
+static void directions_prepare(probe_directions *pd, uint64_t rotation_key, uint32_t rays, uint64_t h1, uint64_t h2)
+{
+    if (pd->rays == rays && pd->rotation_key == rotation_key)
+        return;
+    float rotation[9];
+    random_rotation(h1, h2, rotation);
+    for (uint32_t i = 0; i < rays; i++) {
+        float fib[3];
+        fx_probe_fibonacci(i, rays, fib);
+        for (int k = 0; k < 3; k++)
+            pd->dir[i][k] = rotation[3 * k] * fib[0] + rotation[3 * k + 1] * fib[1] + rotation[3 * k + 2] * fib[2];
+    }
+    memset(pd->cosine_sum, 0, sizeof pd->cosine_sum);
+    memset(pd->lobe_sum, 0, sizeof pd->lobe_sum);
+    for (uint32_t first = 0; first < rays; first += PROBE_CHUNK) {
+        uint32_t n = rays - first < PROBE_CHUNK ? rays - first : PROBE_CHUNK;
+        /* Beyond the table only the sums are kept (the rows land in the first chunk's, overwritten). */
+        direction_weights(pd, first, n, rays <= PROBE_TABLE_RAYS ? first : 0, true);
+    }
+    pd->rays = rays;
+    pd->rotation_key = rotation_key;
+}
+
+/* The weighted sums of a chunk of n rays (radiance RGB, distance and squared distance in cells, per ray)
+ * into the texels: every ray adds its weight row times its values, in ray order. */
+FXC_HOT_CLONES static void gather_chunk(const probe_directions *restrict pd, uint32_t row, uint32_t n,
+                                        const float (*restrict values)[5], gather_sums *restrict acc)
+{
+    for (uint32_t r = 0; r < n; r++) {
+        const float *restrict cosine = pd->cosine[row + r], *restrict lobe = pd->lobe[row + r];
+        float lr = values[r][0], lg = values[r][1], lb = values[r][2], d = values[r][3], dd = values[r][4];
+        for (uint32_t tx = 0; tx < FX_PROBE_TEXELS; tx++) {
+            float c = cosine[tx], w = lobe[tx];
+            acc->r[tx] += c * lr;
+            acc->g[tx] += c * lg;
+            acc->b[tx] += c * lb;
+            acc->m1[tx] += w * d;
+            acc->m2[tx] += w * dd;
+        }
+    }
+}
+
 /* Per-thread working memory of update, commit and eval (each uses it within one call only). */
 static _Thread_local hit_shading thread_hit_shading;
 static _Thread_local probe_scratch thread_scratch;
+static _Thread_local probe_directions thread_directions; /* 180 KB: the frame's rays and weights */
 
 uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count)
 {
     const scene *s = ctx->s;
     const uint32_t rays = ray_count(ctx);
-    float dirs[FX_PROBE_TEXELS][3];
-    fx__probe_texel_dirs(dirs);
-    /* The gather below runs over the 64 texels for every ray: structure of arrays, no branch, so the
-     * compiler vectorises it; each texel adds its rays in ray order, whatever the thread split. */
-    float dir_x[FX_PROBE_TEXELS], dir_y[FX_PROBE_TEXELS], dir_z[FX_PROBE_TEXELS];
-    for (uint32_t tx = 0; tx < FX_PROBE_TEXELS; tx++)
-        dir_x[tx] = dirs[tx][0], dir_y[tx] = dirs[tx][1], dir_z[tx] = dirs[tx][2];
     gather_sums sums, *acc = &sums;
     float sky[3];
     for (int k = 0; k < 3; k++)
@@ -209,9 +535,14 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
     rtcInitIntersectContext(&context);
     RTCScene rtc = (RTCScene)scene_rt_handle(ctx->rt);
     _Alignas(64) struct RTCRayHit hits[PROBE_CHUNK];
+    float values[PROBE_CHUNK][5]; /* per ray: radiance RGB, distance and its square (cells) */
     hit_shading *hs = &thread_hit_shading; /* 20 KB: off the (pool thread) stack, never allocated */
     probe_scratch *out = &thread_scratch;
+    probe_directions *pd = &thread_directions;
+    const bool table = rays <= PROBE_TABLE_RAYS;
     uint64_t traced = 0;
+    if (ctx->world_cell)
+        hit_cells_begin(ctx);
 
     for (uint32_t j = 0; j < count; j++) {
         const fx_block_job *job = &jobs[j];
@@ -227,9 +558,12 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
                 offset[k] = 0;
             }
         }
-        float rotation[9];
-        random_rotation(fx__hash(ctx->seed, job->key, 0, updates, FX_STREAM_PROBE_ROTATION),
-                        fx__hash(ctx->seed, job->key, 1, updates, FX_STREAM_PROBE_ROTATION), rotation);
+        /* The frame's rotation (every probe of the frame shares it); without a frame number (ctx->frame 0),
+         * one per update count, so successive updates of a probe still turn. */
+        uint64_t rotation_key = ctx->frame ? ((uint64_t)1 << 63) | ctx->frame : updates;
+        directions_prepare(pd, rotation_key, rays,
+                           fx__hash(ctx->seed, rotation_key, 0, 0, FX_STREAM_PROBE_ROTATION),
+                           fx__hash(ctx->seed, rotation_key, 1, 0, FX_STREAM_PROBE_ROTATION));
         memset(out, 0, sizeof *out);
         memset(acc, 0, sizeof *acc);
         uint32_t backfaces = 0;
@@ -239,12 +573,8 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
         for (uint32_t first = 0; first < rays; first += PROBE_CHUNK) {
             uint32_t n = rays - first < PROBE_CHUNK ? rays - first : PROBE_CHUNK;
             for (uint32_t r = 0; r < n; r++) {
-                float fib[3], dir[3];
-                fx_probe_fibonacci(first + r, rays, fib);
-                for (int k = 0; k < 3; k++)
-                    dir[k] = rotation[3 * k] * fib[0] + rotation[3 * k + 1] * fib[1] + rotation[3 * k + 2] * fib[2];
                 struct RTCRayHit *rh = &hits[r];
-                fx__set_ray(&rh->ray, origin, dir, INFINITY, r);
+                fx__set_ray(&rh->ray, origin, pd->dir[first + r], INFINITY, r);
                 rh->hit.geomID = RTC_INVALID_GEOMETRY_ID;
                 rh->hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
             }
@@ -262,7 +592,7 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
                 if (rh->hit.geomID == RTC_INVALID_GEOMETRY_ID || rh->hit.primID >= s->triangle_count)
                     continue;
                 const float *normal = s->tri_normal + 3 * (size_t)rh->hit.primID;
-                float dir[3] = {rh->ray.dir_x, rh->ray.dir_y, rh->ray.dir_z};
+                const float *dir = pd->dir[first + r];
                 if (!(fx__dot(dir, normal) < 0))
                     continue; /* back face */
                 float p[3];
@@ -273,10 +603,11 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
             }
             shadow_flush(ctx, hs);
 
-            /* Radiance and distance of every ray, accumulated into the texels. */
+            /* Radiance and distance of every ray. */
             for (uint32_t r = 0; r < n; r++) {
                 const struct RTCRayHit *rh = &hits[r];
-                float dir[3] = {rh->ray.dir_x, rh->ray.dir_y, rh->ray.dir_z}, radiance[3], distance;
+                const float *dir = pd->dir[first + r];
+                float radiance[3], distance;
                 if (rh->hit.geomID == RTC_INVALID_GEOMETRY_ID || rh->hit.primID >= s->triangle_count) {
                     memcpy(radiance, sky, sizeof radiance);
                     distance = max_distance;
@@ -292,7 +623,7 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
                             memcpy(back_dir, dir, sizeof back_dir);
                         }
                     } else {
-                        hit_radiance(ctx, job->effect, job->level, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r], normal,
+                        hit_radiance(ctx, job, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r], normal,
                                      hs->direct[r], radiance);
                         distance = t;
                         if (t < closest_front) {
@@ -302,34 +633,26 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
                     }
                     distance = fminf(distance, max_distance);
                 }
-                float d = distance / cell, dd = d * d;
-                float rx = dir[0], ry = dir[1], rz = dir[2], lr = radiance[0], lg = radiance[1], lb = radiance[2];
-                for (uint32_t tx = 0; tx < FX_PROBE_TEXELS; tx++) {
-                    float c = dir_x[tx] * rx + dir_y[tx] * ry + dir_z[tx] * rz;
-                    /* max(c, 0) on the bits (negative floats have the sign bit: cleared to +0), so it vectorises */
-                    uint32_t bits;
-                    memcpy(&bits, &c, sizeof bits);
-                    bits &= (bits >> 31) - 1u; /* sign set: mask 0; clear: all ones */
-                    memcpy(&c, &bits, sizeof c);
-                    acc->r[tx] += c * lr;
-                    acc->g[tx] += c * lg;
-                    acc->b[tx] += c * lb;
-                    acc->w[tx] += c;
-                    float c2 = c * c, c4 = c2 * c2, c8 = c4 * c4, c16 = c8 * c8, c32 = c16 * c16, w = c32 * c32; /* c^64 */
-                    acc->m1[tx] += w * d;
-                    acc->m2[tx] += w * dd;
-                    acc->mw[tx] += w;
-                }
+                float d = distance / cell;
+                values[r][0] = radiance[0];
+                values[r][1] = radiance[1];
+                values[r][2] = radiance[2];
+                values[r][3] = d;
+                values[r][4] = d * d;
             }
+            /* Into the texels (file comment): the weight rows of these rays, from the table or computed. */
+            if (!table)
+                direction_weights(pd, first, n, 0, false);
+            gather_chunk(pd, table ? first : 0, n, (const float(*)[5])values, acc);
         }
         for (uint32_t tx = 0; tx < FX_PROBE_TEXELS; tx++) {
             out->irradiance[tx][0] = acc->r[tx];
             out->irradiance[tx][1] = acc->g[tx];
             out->irradiance[tx][2] = acc->b[tx];
-            out->irradiance_weight[tx] = acc->w[tx];
+            out->irradiance_weight[tx] = pd->cosine_sum[tx];
             out->moments[tx][0] = acc->m1[tx];
             out->moments[tx][1] = acc->m2[tx];
-            out->moment_weight[tx] = acc->mw[tx];
+            out->moment_weight[tx] = pd->lobe_sum[tx];
         }
         for (uint32_t tx = 0; tx < FX_PROBE_TEXELS; tx++) {
             if (out->irradiance_weight[tx] > 0)
@@ -407,7 +730,8 @@ void fx_probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
               moments[FX_PROBE_TEXELS][2], scale = 0;
         for (uint32_t t = 0; t < FX_PROBE_TEXELS; t++) {
             for (int k = 0; k < 3; k++) {
-                float old = old_scale * half_to_float(fx__get_u16(p + PROBE_IRRADIANCE + 6 * t + 2 * k));
+                /* payload halves are half_stochastic's: finite and >= 0 */
+                float old = old_scale * half_bits_to_float(fx__get_u16(p + PROBE_IRRADIANCE + 6 * t + 2 * k));
                 float value = old;
                 if (in->irradiance_weight[t] > 0)
                     value = fresh ? in->irradiance[t][k] : h * old + (1.0f - h) * in->irradiance[t][k];
@@ -415,7 +739,7 @@ void fx_probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
                 scale = fmaxf(scale, irradiance[t][k]);
             }
             for (int k = 0; k < 2; k++) {
-                float old = fresh ? 0.0f : half_to_float(fx__get_u16(p + PROBE_MOMENTS + 4 * t + 2 * k));
+                float old = fresh ? 0.0f : half_bits_to_float(fx__get_u16(p + PROBE_MOMENTS + 4 * t + 2 * k));
                 float value = old;
                 if (in->moment_weight[t] > 0)
                     value = fresh ? in->moments[t][k] : h * old + (1.0f - h) * in->moments[t][k];

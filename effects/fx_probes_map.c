@@ -88,6 +88,11 @@ static void oct_bilinear(const float dir[3], uint32_t texel[4], float weight[4])
     }
 }
 
+void fx__probe_oct_bilinear(const float dir[3], uint32_t texel[4], float weight[4])
+{
+    oct_bilinear(dir, texel, weight);
+}
+
 /* ---- reading payloads -------------------------------------------------------------------------------- */
 
 void fx_probe_info_read(const void *payload, fx_probe_info *out)

@@ -83,6 +83,9 @@ static inline float half_to_float(uint16_t h)
     return value;
 }
 
+/* The four texels of direction dir in the 8 x 8 map and their bilinear weights (DDGI's border wrap). */
+void fx__probe_oct_bilinear(const float dir[3], uint32_t texel[4], float weight[4]);
+
 /* The 64 texels' directions (their octahedral centres). */
 void fx__probe_texel_dirs(float dirs[FX_PROBE_TEXELS][3]);
 

@@ -566,6 +566,27 @@ uint32_t srv__wsc_world_taps(const void *user, uint32_t effect, const float posi
     return taps->count;
 }
 
+bool srv__wsc_world_cell(const void *user, uint32_t effect, uint32_t level, const float centre[3], const void *texel[8])
+{
+    kind_wsc *k = (kind_wsc *)user; /* read-only, as srv__wsc_world_taps */
+    for (int c = 0; c < 8; c++)
+        texel[c] = NULL;
+    if (effect >= SRV_MAX_EFFECTS || !k->brick_size[effect] || level > WSC_MAX_LEVEL)
+        return false;
+    double world[3] = {(double)centre[0], (double)centre[1], (double)centre[2]};
+    int32_t g[3];
+    /* wsc_corners' range: g and the far corner g + 1 inside the grid */
+    if (!wsc_grid_point(world, level, k->c0, g) || g[0] >= WSC_XZ_MAX || g[2] >= WSC_XZ_MAX || g[1] >= WSC_Y_MAX)
+        return false;
+    cell_memo m = {.level = level};
+    memcpy(m.g, g, sizeof m.g);
+    cell_taps ct;
+    find_cell_taps(k, NULL, effect, &m, &ct);
+    for (uint32_t i = 0; i < ct.count; i++)
+        texel[ct.corner[i]] = ct.texel[i];
+    return true;
+}
+
 static void wsc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
                                 uint32_t count, uint32_t effect, int32_t bias, fx_taps *taps, uint32_t *blocks)
 {

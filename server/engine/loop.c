@@ -180,6 +180,10 @@ static fxc_result resolve_effects(srv_loop *loop, char *err, size_t err_cap)
     return FXC_OK;
 }
 
+/* Loops created so far in the process: each loop's fx_context.epoch (per-thread memos in the effects tell
+ * one loop's frame from another's, even when a loop is freed and the next one reuses its addresses). */
+static _Atomic uint64_t loop_epochs;
+
 fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err, size_t err_cap)
 {
     *out = NULL;
@@ -241,7 +245,8 @@ fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err,
                             .probe_rays = loop->desc.probe_rays,
                             .probe_hysteresis = loop->desc.probe_hysteresis,
                             .ao_samples = loop->desc.ao_samples,
-                            .shadow_rays = shadow_rays};
+                            .shadow_rays = shadow_rays,
+                            .epoch = atomic_fetch_add(&loop_epochs, 1) + 1};
     if (loop->desc.no_cache) { /* the baseline's counts per pixel: the converged ones, scaled */
         double scale = loop->desc.no_cache_samples;
         double ao = fmax(1.0, floor(loop->desc.ao_samples * scale + 0.5));
@@ -278,6 +283,7 @@ fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err,
         }
         if (cache && k == SCENE_CACHE_WORLD_SPACE) {
             loop->fx.world_taps = srv__wsc_world_taps;
+            loop->fx.world_cell = srv__wsc_world_cell;
             loop->fx.world_user = cache;
         }
     }

@@ -316,6 +316,8 @@ void srv__hit_point(const scene *s, uint32_t tri, float u, float v, float pos[3]
 extern const srv_cache_kind srv__kind_osc, srv__kind_wsc;
 
 /* The world-space kind's read for effects (fx_context.world_taps; user: the kind's cache). */
+/* The same kind's whole-cell read (fx_context.world_cell). */
+bool srv__wsc_world_cell(const void *user, uint32_t effect, uint32_t level, const float centre[3], const void *texel[8]);
 uint32_t srv__wsc_world_taps(const void *user, uint32_t effect, const float position[3], uint32_t level,
                              fx_taps *taps);
 
