@@ -22,6 +22,8 @@
  * Usage: bench_probes [--scene PATH (default ../shared/scenes/sponza/sponza.3ds)] [--res WxH (640x360)]
  *                     [--warmup N (10)] [--frames N (20)] [--camera GEN (group)]
  *                     [--part rays|viewers|overhead|memory|image|all] [--out FILE (image)]
+ *                     [--indirect-block 1|2|4 (the loops with probes in overhead and image; default the
+ *                     engine's)]
  */
 #include "bench_engine.h"
 #include "scene.h"
@@ -45,6 +47,7 @@ typedef struct options {
     srv_camgen_kind gen;
     const char *part;
     const char *out; /* --part image: where the radiance goes */
+    uint32_t indirect_block; /* the loops' srv_loop_desc.indirect_block (0: the default) */
 } options;
 
 static int32_t effect_index(const char *name)
@@ -288,10 +291,10 @@ static void part_viewers(const options *o, scene *s, scene_rt *rt)
 static void part_overhead(const options *o, scene *s, scene_rt *rt)
 {
     srv_viewer_id with_ids[1], without_ids[1];
-    srv_loop *with = bench_make_loop_desc("bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .threads = 1},
+    srv_loop *with = bench_make_loop_desc("bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .threads = 1, .indirect_block = o->indirect_block},
                                           NULL, 1, o->w, o->h, with_ids);
     srv_loop *without = bench_make_loop_desc(
-        "bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .threads = 1}, "probes", 1, o->w, o->h, without_ids);
+        "bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .threads = 1, .indirect_block = o->indirect_block}, "probes", 1, o->w, o->h, without_ids);
     double added[BENCH_MAX_SAMPLES], req_added[BENCH_MAX_SAMPLES], comp_added[BENCH_MAX_SAMPLES];
     for (uint32_t f = 0; f < o->warmup + o->frames; f++) {
         srv_frame_stats a, b;
@@ -331,10 +334,10 @@ static int part_image(const options *o, scene *s, scene_rt *rt)
         return 1;
     }
     srv_viewer_id with_ids[1], without_ids[1];
-    srv_loop *with = bench_make_loop_desc("bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .threads = 1},
+    srv_loop *with = bench_make_loop_desc("bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .threads = 1, .indirect_block = o->indirect_block},
                                           NULL, 1, o->w, o->h, with_ids);
     srv_loop *without = bench_make_loop_desc(
-        "bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .threads = 1}, "probes", 1, o->w, o->h, without_ids);
+        "bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .threads = 1, .indirect_block = o->indirect_block}, "probes", 1, o->w, o->h, without_ids);
     size_t n = (size_t)o->w * o->h * 3;
     for (uint32_t frame = 0; frame < o->warmup + o->frames; frame++) {
         srv_frame_stats a, b;
@@ -408,9 +411,12 @@ int main(int argc, char **argv)
             o.part = v, i++;
         else if (!strcmp(a, "--out") && v)
             o.out = v, i++;
+        else if (!strcmp(a, "--indirect-block") && v)
+            o.indirect_block = (uint32_t)atoi(v), i++;
         else {
             fprintf(stderr, "usage: bench_probes [--scene PATH] [--res WxH] [--warmup N] [--frames N] [--camera GEN] "
-                            "[--part rays|viewers|overhead|memory|image|all] [--out FILE (image)]\n");
+                            "[--part rays|viewers|overhead|memory|image|all] [--out FILE (image)] "
+                            "[--indirect-block 1|2|4]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }
     }

@@ -351,6 +351,11 @@ typedef struct fx_effect {
     /* Compose: multiplies or adds this effect's term for a run of pixels from their taps. NULL: the
      * effect shades nothing itself (the triangle lookup). */
     void (*shade)(const fx_context *ctx, const fx_shade_run *run);
+    /* The term is low-frequency (indirect light): compose may evaluate shade once per block of pixels of a
+     * whole frame and upsample it (srv_loop_desc.indirect_block). Such a shade must only add to `indirect`
+     * and scale `sky_visibility`, both linearly in the sky_visibility it is given, and read neither
+     * light_visibility nor light_count (it is called with NULL and 0). World-space effects only. */
+    bool low_frequency;
     /* The no-cache baseline: the same term evaluated at one visible point with the sample counts the cache
      * converges to; returns the rays traced. */
     uint64_t (*eval)(const fx_context *ctx, const fx_point *point, fx_shade_point *out);

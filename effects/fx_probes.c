@@ -937,6 +937,7 @@ const fx_effect fx_effect_probes = {
     .scratch_bytes = probes_scratch_bytes,
     .commit = probes_commit,
     .shade = fx__probes_shade,
+    .low_frequency = true,
     .eval = probes_eval,
     .reference = probes_reference,
     .reference_samples = 256, /* paths per pixel: see docs/ARCHITECTURE.md, "The reference renderer" */

@@ -17,6 +17,10 @@
 
 typedef fxt_scene_fixture fixture;
 
+/* test_blocks_close_to_every_pixel: measured RMS 0.0171 and 99th percentile 0.0611 of the mean radiance */
+#define RMS_BOUND 0.035
+#define P99_BOUND 0.12
+
 static srv_loop_desc probe_desc(const fixture *f, bool direct)
 {
     srv_loop_desc d = {.s = f->s, .rt = f->rt, .seed = 11, .pool_bytes = 64u << 20, .probe_budget = 100000};
@@ -403,6 +407,71 @@ static void test_levels_blend_without_seams(void **state)
     srv_loop_free(loop);
 }
 
+/* Indirect light evaluated once per 4 x 4 block (the default, srv_loop_desc.indirect_block) against every
+ * pixel (indirect_block 1), the same frames of the walk camera at 20 degrees, shadows and probes (no AO: the probes' term
+ * goes in whole). Figures against the mean radiance:
+ * RMS of the difference and its 99th percentile per value (printed); bounds about twice what was measured. A
+ * wrong upsample (a rep's term handed to a pixel on another surface, a tile edge without its neighbours'
+ * reps) shows in the tail, not the mean. The blocks request fewer probes (272 against 290 cells here: cells
+ * only non-rep pixels touched, which no pixel then reads), so the probes also differ by which were updated. */
+static int compare_floats(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
+/* run_frames with the walk camera's field of view narrowed to 20 degrees: at 192 x 108 the narrowest probe
+ * cell then spans 19 pixels, so the viewer uses 4 x 4 blocks (srv_loop_desc.indirect_block). */
+static float *run_narrow_frames(const fixture *f, const srv_loop_desc *d, uint32_t w, uint32_t h, uint32_t frames,
+                                srv_frame_stats *last)
+{
+    srv_viewer_id id;
+    srv_loop *loop = fxt_loop(d, 1, w, h, &id);
+    for (uint32_t frame = 0; frame < frames; frame++) {
+        srv_camera cam = srv_camgen_camera(SRV_CAMGEN_WALK, f->s, 0, 1, frame, 1);
+        cam.fov_deg = 20.0f;
+        fxt_frame(loop, &id, 1, &cam, last);
+    }
+    float *copy = malloc((size_t)w * h * 3 * sizeof(float));
+    assert_non_null(copy);
+    memcpy(copy, srv_viewer_radiance(loop, id), (size_t)w * h * 3 * sizeof(float));
+    srv_loop_free(loop);
+    return copy;
+}
+
+static void test_blocks_close_to_every_pixel(void **state)
+{
+    fixture *f = *state;
+    enum { BW = 192, BH = 108 };
+    srv_frame_stats st_block, st_pixel;
+    srv_loop_desc d = probe_desc(f, true);
+    float *block = run_narrow_frames(f, &d, BW, BH, 12, &st_block);
+    d.indirect_block = 1;
+    float *pixel = run_narrow_frames(f, &d, BW, BH, 12, &st_pixel);
+    size_t n = (size_t)BW * BH * 3;
+    double mean = 0, squares = 0;
+    float *diff = malloc(n * sizeof *diff);
+    assert_non_null(diff);
+    for (size_t i = 0; i < n; i++) {
+        mean += pixel[i];
+        diff[i] = fabsf(block[i] - pixel[i]);
+        squares += (double)diff[i] * diff[i];
+    }
+    mean /= (double)n;
+    qsort(diff, n, sizeof *diff, compare_floats);
+    double rms = sqrt(squares / (double)n) / mean, p99 = diff[n * 99 / 100] / mean, worst = diff[n - 1] / mean;
+    print_message("4x4 blocks against every pixel: mean radiance %.4f, RMS %.4f, 99th percentile %.4f, max %.4f "
+                  "(of the mean); probes requested %llu against %llu\n",
+                  mean, rms, p99, worst, (unsigned long long)st_block.world.requested_cells,
+                  (unsigned long long)st_pixel.world.requested_cells);
+    assert_true(mean > 0.01);
+    assert_true(rms < RMS_BOUND);
+    assert_true(p99 < P99_BOUND);
+    free(diff);
+    free(block);
+    free(pixel);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -414,6 +483,7 @@ int main(void)
         cmocka_unit_test(test_out_of_range_refused),
         cmocka_unit_test(test_volumetric_4x4x4_effect),
         cmocka_unit_test(test_levels_blend_without_seams),
+        cmocka_unit_test(test_blocks_close_to_every_pixel),
     };
     return cmocka_run_group_tests(tests, fxt_default_scene_setup, fxt_default_scene_teardown);
 }

@@ -34,6 +34,18 @@ typedef struct compose_scratch {
     float sharing[SRV_RUN];
     float sky_visibility[SRV_RUN];
     float indirect[SRV_RUN * 3];
+    /* The low-frequency effect per block (loop->coarse_effect): its term at the tile's reps (sky visibility
+     * 1 in: the term is linear in it), and the run's pixels no rep stands in for, gathered for one call. */
+    float rep_indirect[SRV_COARSE_REPS][3];
+    float rep_sky[SRV_COARSE_REPS]; /* the sky visibility shade left (0 where the probes replaced the sky) */
+    float rep_sharing[SRV_COARSE_REPS];
+    uint8_t rep_ok[SRV_COARSE_REPS]; /* visible and with taps */
+    uint8_t rep_slot[SRV_RUN];       /* prepass: the rep of gathered pixel i */
+    uint8_t own_index[SRV_RUN]; /* the run's pixels evaluated themselves */
+    srv_pixel own_pixels[SRV_RUN];
+    fx_point own_points[SRV_RUN];
+    float own_sky[SRV_RUN];
+    float own_indirect[SRV_RUN * 3];
     float light_visibility[]; /* SRV_RUN * max(light_count, 1) */
 } compose_scratch;
 
@@ -299,6 +311,7 @@ typedef struct compose_setup {
     float log2_density;
     bool positions; /* some shading cache kind reads the pixels' positions */
     bool points;    /* the visible points (fx_point) are gathered: someone reads them */
+    bool positions_other, points_other; /* the same leaving out loop->coarse_effect: a coarse tile's runs */
     uint32_t lights, stride;
     float light_dir[CONSTANT_LIGHTS][3], light_rgb[CONSTANT_LIGHTS][3]; /* the same for every pixel */
 } compose_setup;
@@ -311,9 +324,12 @@ static void compose_setup_init(const srv_loop *loop, compose_setup *cu)
     for (int k = 0; k < 3; k++)
         cu->sky[k] = s->sky_color[k] * s->sky_intensity;
     cu->log2_density = log2f(s->texel_density);
-    cu->positions = false;
-    for (uint32_t e = 0; e < loop->effect_count; e++)
-        cu->positions |= loop->effect_shading[e] && loop->kinds[loop->effect_kind[e]]->needs_position;
+    cu->positions = cu->positions_other = false;
+    for (uint32_t e = 0; e < loop->effect_count; e++) {
+        bool needs = loop->effect_shading[e] && loop->kinds[loop->effect_kind[e]]->needs_position;
+        cu->positions |= needs;
+        cu->positions_other |= needs && e != loop->coarse_effect;
+    }
     for (uint32_t l = 0; l < cu->lights && l < CONSTANT_LIGHTS; l++) {
         float dist;
         fx_light_direction(&s->lights[l], (const float[3]){0, 0, 0}, cu->light_dir[l], &dist);
@@ -323,15 +339,141 @@ static void compose_setup_init(const srv_loop *loop, compose_setup *cu)
     /* The visible points (fx_point) are gathered only for whoever reads them: the no-cache evaluation, a
      * shading cache kind that needs positions (its shade callback reads them), and lights whose direction
      * depends on the position. */
-    cu->points = loop->desc.no_cache || cu->positions;
+    cu->points_other = loop->desc.no_cache || cu->positions_other;
     for (uint32_t l = 0; l < cu->lights; l++)
-        cu->points |= !(s->lights[l].type == SCENE_LIGHT_DIRECTIONAL && l < CONSTANT_LIGHTS);
+        cu->points_other |= !(s->lights[l].type == SCENE_LIGHT_DIRECTIONAL && l < CONSTANT_LIGHTS);
+    cu->points = cu->points_other || cu->positions;
 }
 
 /* Shades the count gathered pixels of a run into the viewer's radiance (and kept views): the effects' terms
  * from the caches (or per pixel in no-cache mode), then the formula. */
+/* The pixels of a run of a whole frame (rows y0..y1, columns x0..x1 of the tile of grid g): compose's
+ * coarse evaluation of loop->coarse_effect (engine_internal.h, srv__coarse_samples). */
+typedef struct coarse_run {
+    const srv_coarse_grid *g;
+    uint32_t x0, x1, y0, y1;
+} coarse_run;
+
+/* The coarse effect over a gathered run: each pixel blends the terms of the reps that stand in for it (an
+ * indirect term and a sky factor, both linear in the pixel's own sky visibility), the others are gathered
+ * and go through the kind's taps and the effect's shade as one smaller run. */
+FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scratch *cs, uint32_t e,
+                         const coarse_run *cr, const compose_setup *cu, uint32_t thread_index)
+{
+    const uint64_t *bits = loop->viewer_bits[e];
+    uint32_t own = 0, i = 0;
+    gather_memo memo = {.tri = SRV_MISS};
+    for (uint32_t y = cr->y0; y < cr->y1; y++)
+        for (uint32_t x = cr->x0; x < cr->x1; x++) {
+            size_t p = (size_t)y * view->frame.width + x;
+            if (view->tri[p] == SRV_MISS)
+                continue;
+            uint32_t rep[4];
+            float weight[4], sum[4] = {0, 0, 0, 0}, total = 0, sharing = 0;
+            uint32_t n = srv__coarse_samples(loop->s, view, loop->coarse_depth_scale, cr->g, x, y, 1.0f, false,
+                                             rep, weight);
+            for (uint32_t c = 0; c < n; c++) {
+                uint32_t r = rep[c];
+                if (!cs->rep_ok[r])
+                    continue;
+                float w = weight[c];
+                sum[0] += w * cs->rep_indirect[r][0];
+                sum[1] += w * cs->rep_indirect[r][1];
+                sum[2] += w * cs->rep_indirect[r][2];
+                sum[3] += w * cs->rep_sky[r];
+                total += w;
+                if (bits)
+                    sharing = cs->rep_sharing[r] > sharing ? cs->rep_sharing[r] : sharing;
+            }
+            if (total > 0) {
+                float open = cs->sky_visibility[i] / total;
+                for (int k = 0; k < 3; k++) { /* fminf(x, FLT_MAX) as shade has it: NaN gives FLT_MAX */
+                    float term = sum[k] * open;
+                    cs->indirect[3 * i + k] += term < FLT_MAX ? term : FLT_MAX;
+                }
+                cs->sky_visibility[i] *= sum[3] / total;
+                if (bits)
+                    cs->sharing[i] = sharing > cs->sharing[i] ? sharing : cs->sharing[i];
+            } else {
+                if (!cu->points) { /* the run was gathered without positions: this pixel's, now */
+                    uint32_t again = i;
+                    gather_pixel(loop, view, x, y, p, cs, &again, cu->sky, cu->log2_density, true, true, &memo);
+                }
+                cs->own_index[own] = (uint8_t)i;
+                cs->own_pixels[own] = cs->pixels[i];
+                cs->own_points[own] = cs->points[i];
+                cs->own_sky[own] = cs->sky_visibility[i];
+                memcpy(cs->own_indirect + 3 * own, cs->indirect + 3 * i, 3 * sizeof(float));
+                own++;
+            }
+            i++;
+        }
+    if (!own)
+        return;
+    uint32_t k = loop->effect_kind[e];
+    loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers), thread_index, cs->own_pixels, own,
+                               e, loop->bias[e], cs->taps, bits ? cs->blocks : NULL);
+    fx_shade_run run = {.count = own, .taps = cs->taps, .points = cs->own_points, .sky_visibility = cs->own_sky,
+                        .indirect = cs->own_indirect};
+    loop->effects[e]->shade(&loop->fx, &run);
+    for (uint32_t j = 0; j < own; j++) {
+        uint32_t at = cs->own_index[j];
+        cs->sky_visibility[at] = cs->own_sky[j];
+        memcpy(cs->indirect + 3 * at, cs->own_indirect + 3 * j, 3 * sizeof(float));
+        cs->missing[at] |= cs->taps[j].count == 0;
+        if (bits && cs->blocks[j] != SRV_NONE)
+            cs->sharing[at] = fmaxf(cs->sharing[at], (float)__builtin_popcountll(bits[cs->blocks[j]]));
+    }
+}
+
+/* The coarse effect at the reps a tile uses (before its runs, with the runs' scratch): gathered in runs of
+ * at most SRV_RUN, shaded with sky visibility 1, kept per rep. Reps in the next tile's first column or row
+ * are evaluated again there (the same value: a rep's term depends on nothing else of the tile). */
+static void coarse_prepass(srv_loop *loop, srv_viewer *view, compose_scratch *cs, const srv_coarse_grid *g,
+                           const compose_setup *cu, uint32_t thread_index)
+{
+    uint32_t e = loop->coarse_effect, width = view->frame.width, reps = g->nx * g->ny;
+    const uint64_t *bits = loop->viewer_bits[e];
+    uint32_t k = loop->effect_kind[e];
+    gather_memo memo = {.tri = SRV_MISS};
+    for (uint32_t first = 0; first < reps;) {
+        uint32_t count = 0;
+        for (; first < reps && count < SRV_RUN; first++) {
+            uint32_t x = g->x0 + (first % g->nx) * g->block, y = g->y0 + (first / g->nx) * g->block;
+            cs->rep_ok[first] = 0;
+            if (view->tri[(size_t)y * width + x] == SRV_MISS)
+                continue; /* (gather_pixel would write the sky there: another tile's pixel, maybe) */
+            uint32_t before = count;
+            gather_pixel(loop, view, x, y, (size_t)y * width + x, cs, &count, cu->sky, cu->log2_density,
+                         cu->positions, cu->points, &memo);
+            if (count != before)
+                cs->rep_slot[before] = (uint8_t)first;
+        }
+        if (!count)
+            continue;
+        loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers), thread_index, cs->pixels,
+                                   count, e, loop->bias[e], cs->taps, bits ? cs->blocks : NULL);
+        for (uint32_t i = 0; i < count; i++) {
+            cs->sky_visibility[i] = 1.0f;
+            cs->indirect[3 * i] = cs->indirect[3 * i + 1] = cs->indirect[3 * i + 2] = 0.0f;
+        }
+        fx_shade_run run = {.count = count, .taps = cs->taps, .points = cs->points,
+                            .sky_visibility = cs->sky_visibility, .indirect = cs->indirect};
+        loop->effects[e]->shade(&loop->fx, &run);
+        for (uint32_t i = 0; i < count; i++) {
+            uint32_t slot = cs->rep_slot[i];
+            cs->rep_ok[slot] = cs->taps[i].count > 0;
+            memcpy(cs->rep_indirect[slot], cs->indirect + 3 * i, sizeof cs->rep_indirect[slot]);
+            cs->rep_sky[slot] = cs->sky_visibility[i];
+            cs->rep_sharing[slot] =
+                bits && cs->blocks[i] != SRV_NONE ? (float)__builtin_popcountll(bits[cs->blocks[i]]) : 0.0f;
+        }
+    }
+}
+
 FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch *cs, uint32_t count,
-                              const compose_setup *cu, uint32_t thread_index, uint64_t *missing, uint64_t *rays)
+                              const compose_setup *cu, uint32_t thread_index, uint64_t *missing, uint64_t *rays,
+                              const coarse_run *cr)
 {
     const scene *s = loop->s;
     const uint32_t lights = cu->lights, stride = cu->stride;
@@ -363,6 +505,10 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
         for (uint32_t e = 0; e < loop->effect_count; e++) {
             if (!loop->effect_shading[e])
                 continue;
+            if (cr && e == loop->coarse_effect) {
+                coarse_shade(loop, view, cs, e, cr, cu, thread_index);
+                continue;
+            }
             uint32_t k = loop->effect_kind[e];
             const uint64_t *bits = loop->viewer_bits[e];
             loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers), thread_index, cs->pixels,
@@ -464,11 +610,26 @@ FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_
     uint32_t tx0 = (task_index % tiles_x) * SRV_TILE, ty0 = (task_index / tiles_x) * SRV_TILE;
     uint32_t tx1 = tx0 + SRV_TILE < f->width ? tx0 + SRV_TILE : f->width;
     uint32_t ty1 = ty0 + SRV_TILE < f->height ? ty0 + SRV_TILE : f->height;
+    srv_coarse_grid grid;
+    uint32_t block = srv__coarse_block(loop, view);
+    bool coarse = block > 1;
+    if (coarse) {
+        srv__coarse_grid(block, tx0, ty0, f->width, f->height, &grid);
+        coarse_prepass(loop, view, cs, &grid, &cu, thread_index);
+    }
+    /* A coarse tile's runs gather positions only for the other effects (the pixels evaluated themselves get
+     * theirs in coarse_shade). */
+    compose_setup run_setup = cu;
+    if (coarse) {
+        run_setup.positions = cu.positions_other;
+        run_setup.points = cu.points_other;
+    }
     for (uint32_t ry = ty0; ry < ty1; ry += SRV_RUN / SRV_TILE) {
         uint32_t ry1 = ry + SRV_RUN / SRV_TILE < ty1 ? ry + SRV_RUN / SRV_TILE : ty1;
-        uint32_t count = gather_run(loop, view, tx0, tx1, ry, ry1, cs, cu.sky, cu.log2_density, cu.positions,
-                                    cu.points);
-        shade_run(loop, view, cs, count, &cu, thread_index, &missing, rays);
+        uint32_t count = gather_run(loop, view, tx0, tx1, ry, ry1, cs, cu.sky, cu.log2_density, run_setup.positions,
+                                    run_setup.points);
+        coarse_run cr = {.g = &grid, .x0 = tx0, .x1 = tx1, .y0 = ry, .y1 = ry1};
+        shade_run(loop, view, cs, count, &run_setup, thread_index, &missing, rays, coarse ? &cr : NULL);
         for (uint32_t y = ry; y < ry1; y++)
             for (uint32_t x = tx0; x < tx1; x++)
                 tone_map_entry(view, (size_t)y * f->width + x);
@@ -501,7 +662,7 @@ FXC_HOT_CLONES static void compose_list_task(void *user, uint32_t task_index, ui
             run_end++;
         uint32_t count = gather_list(loop, view, run, run_end, cs, cu.sky, cu.log2_density, cu.positions,
                                     cu.points);
-        shade_run(loop, view, cs, count, &cu, thread_index, &missing, rays);
+        shade_run(loop, view, cs, count, &cu, thread_index, &missing, rays, NULL);
         for (size_t p = run; p < run_end; p++)
             tone_map_entry(view, p);
     }

@@ -106,6 +106,14 @@ typedef struct srv_loop_desc {
                                               command line's 0 does) */
     uint32_t probe_budget;                 /* cells (probes) updated per frame at most, new ones first, then
                                               the longest unrefreshed (default 1024; shares the ray budget) */
+    uint32_t indirect_block;               /* low-frequency effects (probes) in whole frames: evaluated once
+                                              per block of B x B pixels, then a depth- and normal-aware
+                                              upsample; pixels no block sample matches are evaluated
+                                              themselves. The largest B: 1 = every pixel (sparse viewers
+                                              always), 2 or 4 (default 4); a viewer uses at most a quarter of
+                                              the narrowest probe cell in its pixels (640 x 360 at 60
+                                              degrees: 4; at 60 degrees, 2 from 148 to 295 pixels high, 1
+                                              below) */
     bool no_local_table;                   /* benchmarks: compose finds probes through the hash table only,
                                               not the viewers' local lookup tables */
     srv_allocator allocator;               /* default: libc */

@@ -214,6 +214,13 @@ fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err,
         loop->desc.ao_samples = FX_AO_MAX_SAMPLES;
     if (!loop->desc.shadow_rays)
         loop->desc.shadow_rays = FX_SHADOW_RAYS;
+    if (!loop->desc.indirect_block)
+        loop->desc.indirect_block = 4;
+    if (loop->desc.indirect_block != 1 && loop->desc.indirect_block != 2 && loop->desc.indirect_block != 4) {
+        snprintf(err, err_cap, "frame loop: the indirect block must be 1, 2 or 4 pixels");
+        srv_loop_free(loop);
+        return FXC_ERR_INVALID;
+    }
     if (!(loop->desc.no_cache_samples > 0))
         loop->desc.no_cache_samples = 1.0f;
     /* The probes' commit clamps its weight to 0.999 (fx_probes.c): a larger one, a negative one or NaN was
@@ -285,6 +292,18 @@ fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err,
             loop->fx.world_taps = srv__wsc_world_taps;
             loop->fx.world_cell = srv__wsc_world_cell;
             loop->fx.world_user = cache;
+        }
+    }
+    /* The effect whole frames evaluate per block (engine_internal.h, srv__coarse_samples): the first shading,
+     * low-frequency one of a kind that batches per effect and reads positions (the world-space kind). */
+    loop->coarse_effect = SRV_NO_EFFECT;
+    loop->coarse_depth_scale = 3.0f / loop->s->texel_density;
+    for (uint32_t e = 0; e < loop->effect_count && loop->desc.indirect_block > 1; e++) {
+        const srv_cache_kind *kind = loop->kinds[loop->effect_kind[e]];
+        if (loop->effect_shading[e] && loop->effects[e]->low_frequency && kind && !kind->keys_carry_effect &&
+            kind->needs_position) {
+            loop->coarse_effect = e;
+            break;
         }
     }
     uint32_t threads = srv_pool_threads(loop->pool);

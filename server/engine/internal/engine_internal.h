@@ -12,7 +12,9 @@
 #include "engine.h"
 #include "pool.h"
 
+#include <math.h>
 #include <stdatomic.h>
+#include <string.h>
 
 enum {
     SRV_TILE = 16,                /* visibility and request tiles are 16 x 16 pixels */
@@ -194,6 +196,10 @@ struct srv_loop {
     srv_request_list *thread_requests;      /* one per pool thread */
     srv_effect_queue queues[SRV_MAX_EFFECTS];
     uint64_t *viewer_bits[SRV_MAX_EFFECTS]; /* per block: which viewer slots requested it (keep_views) */
+    uint32_t coarse_effect;                 /* the low-frequency effect whole frames evaluate once per block of
+                                               desc.indirect_block pixels (compose, requests), or SRV_NO_EFFECT */
+    float coarse_depth_scale;               /* the coarse match's depth tolerance per pixel apart and per metre
+                                               of footprint: 3 / texel_density (srv__coarse_match) */
     void *compose_scratch;                  /* per thread: runs of pixels (compose.c) */
     size_t compose_scratch_bytes;           /* per thread */
     /* Memory counted by category through desc.allocator (request lists grow on pool threads). */
@@ -236,6 +242,138 @@ static inline uint32_t srv__run_key_pixel(uint32_t key, uint32_t tiles_x)
     uint32_t run = key >> 6, tile = run / (SRV_TILE / 4), band = run % (SRV_TILE / 4);
     uint32_t x = (tile % tiles_x) * SRV_TILE + (key & 15u), y = (tile / tiles_x) * SRV_TILE + band * 4 + ((key >> 4) & 3u);
     return y << 16 | x;
+}
+
+/* Coarse evaluation of a low-frequency effect (srv_loop_desc.indirect_block = B > 1; whole frames only, a
+ * sparse viewer's pixels have no neighbours and are evaluated one by one). The pixels (B i, B j) of the
+ * frame are the block samples ("reps"): compose evaluates the effect there. A tile uses its own reps and
+ * those of the next column and row of reps (its right and lower neighbours' first ones: (16 / B + 1)^2 at
+ * most), so interpolation runs across tile borders without a seam. Every other pixel takes the up to 4 reps
+ * around it (bilinear weights, at least 1/16 each) whose surface matches its own (joint bilateral), or, when
+ * none matches, is evaluated itself, and requests then ask for its own keys. The match reads only what
+ * visibility wrote (triangle, depth, footprint) and the scene's face normals, so requests and compose decide
+ * on the same bits; requests use a stricter tolerance (strictness 0.75 against compose's 1), so every pixel
+ * compose evaluates itself had its keys requested, even if float contraction differed between them. */
+enum { SRV_COARSE_REPS = (SRV_TILE / 2 + 1) * (SRV_TILE / 2 + 1) }; /* reps of a tile at most (B = 2) */
+
+typedef struct srv_coarse_grid {
+    uint32_t block, shift; /* B = 1 << shift */
+    uint32_t x0, y0;       /* the tile's first pixel (a multiple of B: tiles are 16-aligned) */
+    uint32_t nx, ny;       /* reps per row and column the tile uses (its own and the next, within the frame) */
+    float inv_block;       /* 1 / B */
+} srv_coarse_grid;
+
+static inline void srv__coarse_grid(uint32_t block, uint32_t x0, uint32_t y0, uint32_t width, uint32_t height,
+                                    srv_coarse_grid *g)
+{
+    g->block = block;
+    g->shift = (uint32_t)__builtin_ctz(block);
+    g->inv_block = 1.0f / (float)block;
+    g->x0 = x0;
+    g->y0 = y0;
+    uint32_t most = SRV_TILE / block + 1;
+    g->nx = (width - x0 + block - 1) / block;
+    g->ny = (height - y0 + block - 1) / block;
+    g->nx = g->nx < most ? g->nx : most;
+    g->ny = g->ny < most ? g->ny : most;
+}
+
+/* The block a viewer's whole frame uses: the largest power of two up to desc.indirect_block that is at most
+ * a quarter of the narrowest probe cell in its pixels; 1 (every pixel) for a sparse viewer or without a
+ * coarse effect. Cells are at least d / 16 wide at distance d (wsc_level), a pixel 2 d tan_half_y / height:
+ * the narrowest cell spans height / (32 tan_half_y) pixels (640 x 360 at 60 degrees: 19.5, so 4; 64 x 36:
+ * 1.9, so 1). Within a block the probes' trilinear field then changes by at most a quarter of a cell. */
+static inline uint32_t srv__coarse_block(const srv_loop *loop, const srv_viewer *v)
+{
+    if (loop->coarse_effect == SRV_NO_EFFECT || v->sparse)
+        return 1;
+    float cell_pixels = (float)v->frame.height / (32.0f * v->frame.tan_half_y);
+    uint32_t block = loop->desc.indirect_block;
+    while (block > 1 && 4.0f * (float)block > cell_pixels)
+        block /= 2;
+    return block;
+}
+
+/* 2^floor(x), x clamped to [-60, 60], from the bits (no libm: the same in every clone). */
+static inline float srv__pow2_floor(float x)
+{
+    x = x > -60.0f ? (x < 60.0f ? x : 60.0f) : -60.0f; /* also NaN -> -60 */
+    int e = (int)floorf(x);
+    uint32_t bits = (uint32_t)(e + 127) << 23;
+    float f;
+    memcpy(&f, &bits, sizeof f);
+    return f;
+}
+
+/* Whether rep pixel r may stand in for visible pixel p, `apart` pixels away (the larger axis): the same
+ * triangle, or a face normal within 0.05 per component (3 degrees) and a depth difference within
+ * 3 x apart x the larger footprint (metres, rounded down to a power of two: 1.5 to 3 times what a plane
+ * gives between pixels that far apart), both scaled by strictness. No sum of products: nothing to contract. */
+static inline bool srv__coarse_match(const scene *s, const srv_viewer *v, float depth_scale, size_t p, size_t r,
+                                     float apart, float strictness)
+{
+    uint32_t tr = v->tri[r], tp = v->tri[p];
+    if (tr == tp)
+        return true;
+    if (tr == SRV_MISS)
+        return false;
+    const float *nr = s->tri_normal + 3 * (size_t)tr, *np = s->tri_normal + 3 * (size_t)tp;
+    float limit = 0.05f * strictness;
+    if (!(fabsf(nr[0] - np[0]) <= limit && fabsf(nr[1] - np[1]) <= limit && fabsf(nr[2] - np[2]) <= limit))
+        return false;
+    float footprint = v->footprint[p] > v->footprint[r] ? v->footprint[p] : v->footprint[r];
+    float tolerance = srv__pow2_floor(footprint) * (apart * strictness * depth_scale);
+    return fabsf(v->depth[p] - v->depth[r]) <= tolerance;
+}
+
+/* Whether frame pixel (x, y) is a rep. */
+static inline bool srv__coarse_is_rep(uint32_t block, uint32_t x, uint32_t y)
+{
+    return (x | y) % block == 0;
+}
+
+/* The reps standing in for visible pixel (x, y) of the tile of grid g (frame coordinates): writes up to 4
+ * rep indices (j * nx + i, relative to the tile's first rep) and their bilinear weights (at least 1 / B^2:
+ * never 0), returns how many (0: the pixel is evaluated itself). A rep is its own only sample. With `any`,
+ * returns at the first match (requests: only whether one exists). Reps on the pixel's own triangle are the
+ * common case and need no test beyond that. */
+static inline uint32_t srv__coarse_samples(const scene *s, const srv_viewer *v, float depth_scale,
+                                           const srv_coarse_grid *g, uint32_t x, uint32_t y, float strictness,
+                                           bool any, uint32_t rep[4], float weight[4])
+{
+    uint32_t lx = x - g->x0, ly = y - g->y0, mask = g->block - 1;
+    uint32_t ix = lx >> g->shift, iy = ly >> g->shift, fx = lx & mask, fy = ly & mask;
+    uint32_t first = iy * g->nx + ix;
+    if (!(fx | fy)) {
+        rep[0] = first;
+        weight[0] = 1.0f;
+        return 1;
+    }
+    /* The second rep along an axis, if the frame has it; else the first alone (weight 1 on that axis). */
+    bool two_x = fx && ix + 1 < g->nx, two_y = fy && iy + 1 < g->ny;
+    float wx = two_x ? (float)fx * g->inv_block : 0.0f, wy = two_y ? (float)fy * g->inv_block : 0.0f;
+    size_t width = v->frame.width, p = (size_t)y * width + x;
+    size_t r0 = (size_t)(g->y0 + (iy << g->shift)) * width + g->x0 + (ix << g->shift);
+    const size_t pixel_of[4] = {r0, r0 + g->block, r0 + g->block * width, r0 + g->block * width + g->block};
+    const uint32_t index_of[4] = {first, first + 1, first + g->nx, first + g->nx + 1};
+    const float weight_of[4] = {(1.0f - wx) * (1.0f - wy), wx * (1.0f - wy), (1.0f - wx) * wy, wx * wy};
+    const bool exists[4] = {true, two_x, two_y, two_x && two_y};
+    uint32_t tp = v->tri[p], n = 0;
+    for (uint32_t c = 0; c < 4; c++) {
+        if (!exists[c])
+            continue;
+        size_t r = pixel_of[c];
+        if (v->tri[r] != tp) {
+            uint32_t dx = (c & 1) ? g->block - fx : fx, dy = (c & 2) ? g->block - fy : fy;
+            if (!srv__coarse_match(s, v, depth_scale, p, r, (float)(dx > dy ? dx : dy), strictness))
+                continue;
+        }
+        rep[n] = index_of[c];
+        weight[n++] = weight_of[c];
+        if (any)
+            return n;
+    }
+    return n;
 }
 
 /* Pixels a viewer's frame visits: width*height, or a sparse viewer's list. */
