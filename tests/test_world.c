@@ -17,9 +17,14 @@
 
 typedef fxt_scene_fixture fixture;
 
-/* test_blocks_close_to_every_pixel: measured RMS 0.0171 and 99th percentile 0.0611 of the mean radiance */
-#define RMS_BOUND 0.035
-#define P99_BOUND 0.12
+/* test_blocks_close_to_every_pixel: 4x4 blocks against every pixel, as fractions of the same difference
+ * between two seeds of the per-pixel path (the probes' own Monte Carlo noise). Measured (with one ray
+ * rotation per frame shared by all probes): RMS 0.067 against 0.294 (0.23), 99th percentile 0.333 against
+ * 0.976 (0.34); with a rotation per probe, before that change, the blocks' RMS was 0.017. Blocks request
+ * fewer probes (272 against 290 here), so some probes start on another frame's rotation: the difference is
+ * that of the probe state, not of the blend alone. */
+#define RMS_OF_SEEDS 0.5
+#define P99_OF_SEEDS 0.6
 
 static srv_loop_desc probe_desc(const fixture *f, bool direct)
 {
@@ -439,35 +444,50 @@ static float *run_narrow_frames(const fixture *f, const srv_loop_desc *d, uint32
     return copy;
 }
 
-static void test_blocks_close_to_every_pixel(void **state)
+/* RMS and 99th percentile of |a - b| over n floats, as fractions of b's mean. */
+static void difference_of_mean(const float *a, const float *b, size_t n, double *rms, double *p99, double *mean_b)
 {
-    fixture *f = *state;
-    enum { BW = 192, BH = 108 };
-    srv_frame_stats st_block, st_pixel;
-    srv_loop_desc d = probe_desc(f, true);
-    float *block = run_narrow_frames(f, &d, BW, BH, 12, &st_block);
-    d.indirect_block = 1;
-    float *pixel = run_narrow_frames(f, &d, BW, BH, 12, &st_pixel);
-    size_t n = (size_t)BW * BH * 3;
     double mean = 0, squares = 0;
     float *diff = malloc(n * sizeof *diff);
     assert_non_null(diff);
     for (size_t i = 0; i < n; i++) {
-        mean += pixel[i];
-        diff[i] = fabsf(block[i] - pixel[i]);
+        mean += b[i];
+        diff[i] = fabsf(a[i] - b[i]);
         squares += (double)diff[i] * diff[i];
     }
     mean /= (double)n;
     qsort(diff, n, sizeof *diff, compare_floats);
-    double rms = sqrt(squares / (double)n) / mean, p99 = diff[n * 99 / 100] / mean, worst = diff[n - 1] / mean;
-    print_message("4x4 blocks against every pixel: mean radiance %.4f, RMS %.4f, 99th percentile %.4f, max %.4f "
-                  "(of the mean); probes requested %llu against %llu\n",
-                  mean, rms, p99, worst, (unsigned long long)st_block.world.requested_cells,
+    *rms = sqrt(squares / (double)n) / mean;
+    *p99 = diff[n * 99 / 100] / mean;
+    *mean_b = mean;
+    free(diff);
+}
+
+static void test_blocks_close_to_every_pixel(void **state)
+{
+    fixture *f = *state;
+    enum { BW = 192, BH = 108 };
+    srv_frame_stats st_block, st_pixel, st_seed;
+    srv_loop_desc d = probe_desc(f, true);
+    float *block = run_narrow_frames(f, &d, BW, BH, 12, &st_block);
+    d.indirect_block = 1;
+    float *pixel = run_narrow_frames(f, &d, BW, BH, 12, &st_pixel);
+    d.seed++;
+    float *other_seed = run_narrow_frames(f, &d, BW, BH, 12, &st_seed);
+    size_t n = (size_t)BW * BH * 3;
+    double rms, p99, mean, seed_rms, seed_p99, seed_mean;
+    difference_of_mean(block, pixel, n, &rms, &p99, &mean);
+    difference_of_mean(other_seed, pixel, n, &seed_rms, &seed_p99, &seed_mean);
+    print_message("4x4 blocks against every pixel: mean radiance %.4f, RMS %.4f, 99th percentile %.4f (of the "
+                  "mean); another seed per pixel: RMS %.4f, 99th percentile %.4f; probes requested %llu "
+                  "against %llu\n",
+                  mean, rms, p99, seed_rms, seed_p99, (unsigned long long)st_block.world.requested_cells,
                   (unsigned long long)st_pixel.world.requested_cells);
     assert_true(mean > 0.01);
-    assert_true(rms < RMS_BOUND);
-    assert_true(p99 < P99_BOUND);
-    free(diff);
+    assert_true(seed_rms > 0.05); /* the yardstick is the probes' noise, not zero */
+    assert_true(rms < RMS_OF_SEEDS * seed_rms);
+    assert_true(p99 < P99_OF_SEEDS * seed_p99);
+    free(other_seed);
     free(block);
     free(pixel);
 }
