@@ -418,6 +418,32 @@ FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot,
                     reuse = true, reuse_x0 = x0, reuse_y0 = y0, reuse_block = memo.block[m0];
                     found = true;
                 }
+            } else if (!found) {
+                /* The footprint straddles a block edge: each tap's block from the memo. When all four
+                 * texels hold data the general path below keeps all four taps, in this order, with the
+                 * lanes' weights and positions (its total starts from 0 + w00 = w00). */
+                const uint8_t *texel[4];
+                uint32_t block0 = OSC_NONE;
+                bool all = true;
+#pragma GCC unroll 4
+                for (int t = 0; t < 4 && all; t++) {
+                    long xi = x0 + (t & 1), yi = y0 + (t >> 1);
+                    uint32_t m = memo_lookup(osc, &memo, effect,
+                                             base | ((uint64_t)(yi >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
+                                                 ((uint64_t)(xi >> 3) << OSC_KEY_BLOCK_X_SHIFT));
+                    uint32_t tx = ((uint32_t)yi & 7) * 8 + ((uint32_t)xi & 7);
+                    all = memo.block[m] != OSC_NONE && (memo.valid[m] >> tx & 1);
+                    if (all) {
+                        texel[t] = memo.payload[m] + tx * texel_bytes;
+                        block0 = t == 0 ? memo.block[m] : block0;
+                    }
+                }
+                if (all) {
+                    for (int t = 0; t < 4; t++)
+                        reuse_texel[t] = texel[t];
+                    reuse = true, reuse_x0 = x0, reuse_y0 = y0, reuse_block = block0;
+                    found = true;
+                }
             }
             if (found) {
                 out->texel[0] = reuse_texel[0];
