@@ -10,11 +10,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* 2^-level for the 16 levels: a multiply per pixel instead of a division. */
-static const float inverse_power_of_two[16] = {
-    1.0f,        0.5f,         0.25f,         0.125f,         0.0625f,  0.03125f, 0.015625f, 0.0078125f,
-    0.00390625f, 0.001953125f, 0.0009765625f, 0.00048828125f, 0x1p-12f, 0x1p-13f, 0x1p-14f,  0x1p-15f};
-
 typedef struct kind_osc {
     osc_cache *osc;
     const scene *s;
@@ -78,6 +73,38 @@ static void osc_kind_begin_frame(void *cache, uint32_t frame)
     osc_begin_frame(((kind_osc *)cache)->osc, frame);
 }
 
+/* What the request pass computes per pixel before its dedup and keys, for a run at once over SRV_RUN lanes
+ * (vectorised as taps_lanes_fill, the same operations in the same order): the level, the position in texels
+ * of that level, whether it lies in [0, 32768)^2 and, there, the stencil corner floor(x - 0.5) + 1. */
+typedef struct request_lanes {
+    float u[SRV_RUN], v[SRV_RUN], footprint[SRV_RUN]; /* input; lanes past the run are 0 */
+    int32_t level[SRV_RUN], inside[SRV_RUN], cx[SRV_RUN], cy[SRV_RUN];
+    float x[SRV_RUN], y[SRV_RUN];
+} request_lanes;
+
+FXC_HOT_LANES static void request_lanes_fill(request_lanes *L, int32_t bias)
+{
+    const float fbias = (float)bias;
+    for (int i = 0; i < SRV_RUN; i++) {
+        float l = L->footprint[i] + fbias;
+        float above = l > 0.0f ? l : 0.0f; /* srv__level: NaN and l <= 0 give 0 */
+        float clamped = above < 15.0f ? above : 15.0f;
+        int32_t level = (int32_t)(clamped + 0.5f);
+        level = level > 15 ? 15 : level;
+        int32_t scale_bits = (127 - level) << 23;
+        float scale;
+        memcpy(&scale, &scale_bits, sizeof scale);
+        float x = L->u[i] * scale, y = L->v[i] * scale;
+        int32_t inside = (x >= 0.0f) & (y >= 0.0f) & (x < 32768.0f) & (y < 32768.0f); /* also 0 for NaN */
+        float xc = inside ? x : 0.0f, yc = inside ? y : 0.0f; /* converted only where it fits */
+        L->level[i] = level;
+        L->inside[i] = inside;
+        L->cx[i] = (int32_t)(xc + 0.5f);
+        L->cy[i] = (int32_t)(yc + 0.5f);
+        L->x[i] = x, L->y[i] = y;
+    }
+}
+
 static uint32_t osc_kind_pixel_requests(const void *cache, uint32_t slot, const srv_pixel *pixels, uint32_t count,
                                         uint32_t effect, int32_t bias, uint64_t *keys, uint64_t *masks)
 {
@@ -92,29 +119,39 @@ static uint32_t osc_kind_pixel_requests(const void *cache, uint32_t slot, const 
     uint64_t seen[SEEN];
     memset(seen, 0xFF, sizeof seen);
     uint32_t memo_island = UINT32_MAX, width0 = 0, height0 = 0; /* the last island's size */
-    for (uint32_t i = 0; i < count; i++) {
-        const srv_pixel *px = &pixels[i];
-        uint32_t level = srv__level(px->footprint, bias);
-        float scale = inverse_power_of_two[level];
-        float x = px->island_u * scale, y = px->island_v * scale;
-        if (x >= 0.0f && y >= 0.0f && x < 32768.0f && y < 32768.0f) { /* also false for NaN */
-            /* floor(x - 0.5) + 1, 16 bits each: island 28 bits, level 4 (islands beyond 2^28 are not deduped)
-             */
-            uint64_t cx = (uint64_t)(x + 0.5f), cy = (uint64_t)(y + 0.5f);
-            uint64_t signature = (uint64_t)px->island << 36 | (uint64_t)level << 32 | cy << 16 | cx;
-            uint32_t seen_slot = (uint32_t)((signature * 0x9E3779B97F4A7C15ull) >> 58); /* 6 bits: SEEN */
-            if (px->island < (1u << 28)) {
-                if (seen[seen_slot] == signature)
-                    continue;
-                seen[seen_slot] = signature;
+    request_lanes L;
+    for (uint32_t first = 0; first < count; first += SRV_RUN) {
+        uint32_t lanes = count - first < SRV_RUN ? count - first : SRV_RUN, i = 0;
+        for (; i < lanes; i++) {
+            L.u[i] = pixels[first + i].island_u;
+            L.v[i] = pixels[first + i].island_v;
+            L.footprint[i] = pixels[first + i].footprint;
+        }
+        for (; i < SRV_RUN; i++)
+            L.u[i] = L.v[i] = L.footprint[i] = 0.0f;
+        request_lanes_fill(&L, bias);
+        for (i = 0; i < lanes; i++) {
+            const srv_pixel *px = &pixels[first + i];
+            uint32_t level = (uint32_t)L.level[i];
+            if (L.inside[i]) {
+                /* floor(x - 0.5) + 1, 16 bits each: island 28 bits, level 4 (islands beyond 2^28 are not
+                 * deduped) */
+                uint64_t cx = (uint64_t)L.cx[i], cy = (uint64_t)L.cy[i];
+                uint64_t signature = (uint64_t)px->island << 36 | (uint64_t)level << 32 | cy << 16 | cx;
+                uint32_t seen_slot = (uint32_t)((signature * 0x9E3779B97F4A7C15ull) >> 58); /* 6 bits: SEEN */
+                if (px->island < (1u << 28)) {
+                    if (seen[seen_slot] == signature)
+                        continue;
+                    seen[seen_slot] = signature;
+                }
             }
+            if (px->island != memo_island) {
+                memo_island = px->island;
+                width0 = islands[memo_island].width;
+                height0 = islands[memo_island].height;
+            }
+            n += osc_bilinear_keys(effect, px->island, width0, height0, level, L.x[i], L.y[i], keys + n, masks + n);
         }
-        if (px->island != memo_island) {
-            memo_island = px->island;
-            width0 = islands[memo_island].width;
-            height0 = islands[memo_island].height;
-        }
-        n += osc_bilinear_keys(effect, px->island, width0, height0, level, x, y, keys + n, masks + n);
     }
     return n;
 }
