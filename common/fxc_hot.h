@@ -12,6 +12,18 @@
 #define FXC_HOT_CLONES
 #endif
 
+/* FXC_HOT_LANES: a hot loop over lanes (structure of arrays, a fixed trip count) that GCC should vectorise:
+ * cloned as above and compiled without -ftrapping-math, since GCC will not turn a float compare-and-select
+ * into a vector select while compares may trap. That flag changes no value (only whether FP exception flags
+ * may be raised speculatively; nothing here reads them). */
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__linux__) && !defined(FXC_NO_CLONES)
+#define FXC_HOT_LANES __attribute__((noinline, target_clones("arch=x86-64-v3", "default"), optimize("no-trapping-math")))
+#elif defined(__GNUC__) && !defined(__clang__)
+#define FXC_HOT_LANES __attribute__((noinline, optimize("no-trapping-math")))
+#else
+#define FXC_HOT_LANES
+#endif
+
 /* FXC_HOT_INLINE: a static helper of such a function, always inlined into it, so that it is compiled for
  * each copy (a helper left as a call would run the baseline code from both). */
 #if defined(__GNUC__)

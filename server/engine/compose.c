@@ -46,6 +46,7 @@ typedef struct compose_scratch {
     fx_point own_points[SRV_RUN];
     float own_sky[SRV_RUN];
     float own_indirect[SRV_RUN * 3];
+    float radiance[SRV_RUN][3]; /* the formula's result, before it is stored in the viewer's buffer */
     float light_visibility[]; /* SRV_RUN * max(light_count, 1) */
 } compose_scratch;
 
@@ -345,6 +346,25 @@ static void compose_setup_init(const srv_loop *loop, compose_setup *cu)
     cu->points = cu->points_other || cu->positions;
 }
 
+/* The formula over a run's SRV_RUN lanes (vectorised: FXC_HOT_LANES), each value as one pixel at a time gave
+ * it. Saturate, never overflow to infinity (extreme light intensities): DESIGN.md, robustness. */
+FXC_HOT_LANES static void radiance_lanes(compose_scratch *cs, const float sky[3])
+{
+    const float sky0 = sky[0], sky1 = sky[1], sky2 = sky[2];
+    for (int i = 0; i < SRV_RUN; i++) {
+        float sv = cs->sky_visibility[i];
+#pragma GCC unroll 3
+        for (int k = 0; k < 3; k++) {
+            /* saturate_max() written out: a helper is not inlined into a function of other options */
+            float sk = k == 0 ? sky0 : (k == 1 ? sky1 : sky2);
+            float a = cs->irradiance[i][k], b = sk * sv, c = cs->indirect[3 * i + k];
+            float irr = (a > FLT_MAX ? FLT_MAX : a) + (b > FLT_MAX ? FLT_MAX : b) + (c > FLT_MAX ? FLT_MAX : c);
+            float value = cs->albedo[i][k] * (irr > FLT_MAX ? FLT_MAX : irr);
+            cs->radiance[i][k] = value <= FLT_MAX ? value : (value > 0 ? FLT_MAX : 0.0f);
+        }
+    }
+}
+
 /* Shades the count gathered pixels of a run into the viewer's radiance (and kept views): the effects' terms
  * from the caches (or per pixel in no-cache mode), then the formula. */
 /* The pixels of a run of a whole frame (rows y0..y1, columns x0..x1 of the tile of grid g): compose's
@@ -554,19 +574,16 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
                 cs->irradiance[i][k] += scale * light->color[k];
         }
     }
+    for (uint32_t i = count; i < SRV_RUN; i++) { /* the lanes past the run: defined values */
+        cs->sky_visibility[i] = 0.0f;
+        for (int k = 0; k < 3; k++)
+            cs->irradiance[i][k] = cs->indirect[3 * i + k] = cs->albedo[i][k] = 0.0f;
+    }
+    radiance_lanes(cs, cu->sky);
     for (uint32_t i = 0; i < count; i++) {
         size_t p = cs->index[i];
         const float *visibility = cs->light_visibility + (size_t)i * stride;
-        const float *irradiance = cs->irradiance[i];
-        /* Saturate, never overflow to infinity (extreme light intensities): DESIGN.md, robustness. */
-        float *rad = view->radiance + 3 * p;
-#pragma GCC unroll 3
-        for (int k = 0; k < 3; k++) {
-            float irr = saturate_max(irradiance[k]) + saturate_max(cu->sky[k] * cs->sky_visibility[i]) +
-                        saturate_max(cs->indirect[3 * i + k]);
-            float value = cs->albedo[i][k] * saturate_max(irr);
-            rad[k] = value <= FLT_MAX ? value : (value > 0 ? FLT_MAX : 0.0f);
-        }
+        memcpy(view->radiance + 3 * p, cs->radiance[i], sizeof cs->radiance[i]);
         *missing += cs->missing[i];
         if (view->views[SRV_VIEW_AO]) {
             view->views[SRV_VIEW_AO][p] = cs->sky_visibility[i];
