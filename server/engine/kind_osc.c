@@ -73,6 +73,21 @@ static void osc_kind_begin_frame(void *cache, uint32_t frame)
     osc_begin_frame(((kind_osc *)cache)->osc, frame);
 }
 
+/* A lane's level (srv__level of l: NaN and l <= 0 give 0, at most 15) and 2^-level, as the per-pixel code
+ * computes them. A macro, not a function: a helper is not inlined into FXC_HOT_LANES functions (other
+ * options), and the loops must stay free of calls to vectorise. */
+#define LANE_LEVEL(l_in, level_out, scale_out)                                                                  \
+    do {                                                                                                       \
+        float l_ = (l_in);                                                                                     \
+        float above_ = l_ > 0.0f ? l_ : 0.0f;                                                                  \
+        float clamped_ = above_ < 15.0f ? above_ : 15.0f;                                                      \
+        int32_t level_ = (int32_t)(clamped_ + 0.5f);                                                           \
+        level_ = level_ > 15 ? 15 : level_;                                                                    \
+        int32_t scale_bits_ = (127 - level_) << 23;                                                            \
+        memcpy(&(scale_out), &scale_bits_, sizeof(scale_out));                                                 \
+        (level_out) = level_;                                                                                  \
+    } while (0)
+
 /* What the request pass computes per pixel before its dedup and keys, for a run at once over SRV_RUN lanes
  * (vectorised as taps_lanes_fill, the same operations in the same order): the level, the position in texels
  * of that level, whether it lies in [0, 32768)^2 and, there, the stencil corner floor(x - 0.5) + 1. */
@@ -86,14 +101,9 @@ FXC_HOT_LANES static void request_lanes_fill(request_lanes *L, int32_t bias)
 {
     const float fbias = (float)bias;
     for (int i = 0; i < SRV_RUN; i++) {
-        float l = L->footprint[i] + fbias;
-        float above = l > 0.0f ? l : 0.0f; /* srv__level: NaN and l <= 0 give 0 */
-        float clamped = above < 15.0f ? above : 15.0f;
-        int32_t level = (int32_t)(clamped + 0.5f);
-        level = level > 15 ? 15 : level;
-        int32_t scale_bits = (127 - level) << 23;
+        int32_t level;
         float scale;
-        memcpy(&scale, &scale_bits, sizeof scale);
+        LANE_LEVEL(L->footprint[i] + fbias, level, scale);
         float x = L->u[i] * scale, y = L->v[i] * scale;
         int32_t inside = (x >= 0.0f) & (y >= 0.0f) & (x < 32768.0f) & (y < 32768.0f); /* also 0 for NaN */
         float xc = inside ? x : 0.0f, yc = inside ? y : 0.0f; /* converted only where it fits */
@@ -349,14 +359,9 @@ FXC_HOT_LANES static void taps_lanes_fill(taps_lanes *L, int32_t bias)
 {
     const float fbias = (float)bias;
     for (int i = 0; i < SRV_RUN; i++) {
-        float l = L->footprint[i] + fbias;
-        float above = l > 0.0f ? l : 0.0f; /* srv__level: NaN and l <= 0 give 0 */
-        float clamped = above < 15.0f ? above : 15.0f;
-        int32_t level = (int32_t)(clamped + 0.5f);
-        level = level > 15 ? 15 : level;
-        int32_t scale_bits = (127 - level) << 23;
+        int32_t level;
         float scale;
-        memcpy(&scale, &scale_bits, sizeof scale);
+        LANE_LEVEL(L->footprint[i] + fbias, level, scale);
         float x = L->u[i] * scale - 0.5f, y = L->v[i] * scale - 0.5f;
         float fx0 = floorf(x), fy0 = floorf(y);
         float ax = x - fx0, ay = y - fy0;
