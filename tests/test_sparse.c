@@ -166,6 +166,26 @@ static void test_sparse_equals_whole_frame(void **state)
     srv_loop_free(loop);
 }
 
+/* sRGB differences between pixels of two images, accumulated: the worst channel, the sum over channels,
+ * pixels differing and pixels compared. */
+typedef struct srgb_difference {
+    int worst;
+    uint64_t total, differing, compared;
+} srgb_difference;
+
+static void srgb_difference_add(srgb_difference *d, const uint8_t a[3], const uint8_t b[3])
+{
+    bool differs = false;
+    for (int k = 0; k < 3; k++) {
+        int diff = abs((int)a[k] - (int)b[k]);
+        d->worst = diff > d->worst ? diff : d->worst;
+        d->total += (uint64_t)diff;
+        differs |= diff != 0;
+    }
+    d->differing += differs;
+    d->compared++;
+}
+
 /* With the world-space probes on, a pixel's indirect term is not a function of the pixel alone: probe shading
  * (effects/fx_probes_map.c) weighs the pixels of a run that share probes and normal at their mean position,
  * and a sparse list holds only some of a whole-frame run's pixels (a lone pixel is weighed at its own
@@ -187,8 +207,7 @@ static void test_probes_within_tolerance(void **state)
     srv_camera cam = srv_camgen_camera(SRV_CAMGEN_STATIC, f->s, 0, 1, 0, 1);
     uint32_t list[600];
     srv_frame_stats st;
-    int worst = 0;
-    uint64_t differing = 0, compared = 0, total_difference = 0;
+    srgb_difference dif = {0};
     for (int frame = 0; frame < 10; frame++) {
         make_list(list, 600, 0x777u + (uint32_t)frame);
         assert_int_equal(srv_viewer_set_pixels(loop, sparse, &cam, W, H, list, 600, NULL), FXC_OK);
@@ -200,23 +219,15 @@ static void test_probes_within_tolerance(void **state)
                      at = srv_viewer_pixel_index(loop, sparse, x, y);
             size_t p = (size_t)y * W + x;
             assert_memory_equal(depth + p, sparse_depth + at, sizeof(float));
-            bool differs = false;
-            for (int k = 0; k < 3; k++) {
-                int diff = abs((int)image[3 * p + k] - (int)sparse_image[3 * (size_t)at + k]);
-                worst = diff > worst ? diff : worst;
-                total_difference += (uint64_t)diff;
-                differs |= diff != 0;
-            }
-            differing += differs;
-            compared++;
+            srgb_difference_add(&dif, image + 3 * p, sparse_image + 3 * (size_t)at);
         }
     }
-    double mean = (double)total_difference / (3.0 * (double)compared);
+    double mean = (double)dif.total / (3.0 * (double)dif.compared);
     print_message(
         "probes on: %llu of %llu listed pixels differ from the whole frame, by at most %d sRGB levels, "
         "%.3f on average per channel\n",
-        (unsigned long long)differing, (unsigned long long)compared, worst, mean);
-    assert_true(worst <= PROBE_TOLERANCE);
+        (unsigned long long)dif.differing, (unsigned long long)dif.compared, dif.worst, mean);
+    assert_true(dif.worst <= PROBE_TOLERANCE);
     assert_true(mean <= PROBE_MEAN_TOLERANCE);
     srv_loop_free(loop);
 }
@@ -243,8 +254,7 @@ static void test_probe_blocks_within_tolerance(void **state)
     cam.fov_deg = 20.0f;
     static uint32_t list[LISTED];
     srv_frame_stats st;
-    int worst = 0;
-    uint64_t differing = 0, compared = 0, total_difference = 0;
+    srgb_difference dif = {0};
     for (int frame = 0; frame < 10; frame++) {
         uint32_t seed = 0x999u + (uint32_t)frame;
         for (uint32_t i = 0; i < LISTED; i++)
@@ -258,23 +268,15 @@ static void test_probe_blocks_within_tolerance(void **state)
         const uint32_t *pixels = srv_viewer_pixels(loop, sparse, &count);
         for (uint32_t i = 0; i < count; i++) {
             size_t p = (size_t)(pixels[i] >> 16) * BW + (pixels[i] & 0xFFFFu);
-            bool differs = false;
-            for (int k = 0; k < 3; k++) {
-                int diff = abs((int)image[3 * p + k] - (int)sparse_image[3 * (size_t)i + k]);
-                worst = diff > worst ? diff : worst;
-                total_difference += (uint64_t)diff;
-                differs |= diff != 0;
-            }
-            differing += differs;
-            compared++;
+            srgb_difference_add(&dif, image + 3 * p, sparse_image + 3 * (size_t)i);
         }
     }
-    double mean = (double)total_difference / (3.0 * (double)compared);
+    double mean = (double)dif.total / (3.0 * (double)dif.compared);
     print_message("4x4 blocks: %llu of %llu listed pixels differ from the whole frame, by at most %d sRGB levels, "
                   "%.3f on average per channel\n",
-                  (unsigned long long)differing, (unsigned long long)compared, worst, mean);
-    assert_true(compared > 2000);
-    assert_true(worst <= BLOCK_TOLERANCE);
+                  (unsigned long long)dif.differing, (unsigned long long)dif.compared, dif.worst, mean);
+    assert_true(dif.compared > 2000);
+    assert_true(dif.worst <= BLOCK_TOLERANCE);
     assert_true(mean <= BLOCK_MEAN_TOLERANCE);
     srv_loop_free(loop);
 }
