@@ -63,6 +63,23 @@ static void grid_free(grid *g)
     free(g->jobs);
 }
 
+/* The payload of the grid probe at corner c (bit k: + 1 cell along axis k) of the cell whose lowest grid
+ * point is base, if it is inside the grid and holds committed data; else NULL. */
+static const uint8_t *grid_corner(const grid *g, const int base[3], int c)
+{
+    int at[3];
+    for (int k = 0; k < 3; k++) {
+        at[k] = base[k] + ((c >> k) & 1);
+        if (at[k] < 0 || at[k] >= (int)g->n[k])
+            return NULL;
+    }
+    const uint8_t *p = g->payload + (size_t)(((uint32_t)at[2] * g->n[1] + (uint32_t)at[1]) * g->n[0] +
+                                             (uint32_t)at[0]) * FX_PROBE_BYTES;
+    fx_probe_info info;
+    fx_probe_info_read(p, &info);
+    return (info.flags & FX_PROBE_HAS_DATA) ? p : NULL;
+}
+
 /* world_taps over the grid: corners of the cell around pos with committed data, trilinear weights. */
 static uint32_t grid_taps(const void *user, uint32_t effect, const float pos[3], uint32_t level, fx_taps *taps)
 {
@@ -78,23 +95,12 @@ static uint32_t grid_taps(const void *user, uint32_t effect, const float pos[3],
         frac[k] = f - (float)base[k];
     }
     for (int c = 0; c < 8; c++) {
-        int at[3];
+        const uint8_t *p = grid_corner(g, base, c);
+        if (!p)
+            continue;
         float w = 1;
-        bool inside = true;
-        for (int k = 0; k < 3; k++) {
-            int bit = (c >> k) & 1;
-            at[k] = base[k] + bit;
-            w *= bit ? frac[k] : 1.0f - frac[k];
-            inside &= at[k] >= 0 && at[k] < (int)g->n[k];
-        }
-        if (!inside)
-            continue;
-        const uint8_t *p = g->payload + (size_t)(((uint32_t)at[2] * g->n[1] + (uint32_t)at[1]) * g->n[0] +
-                                                 (uint32_t)at[0]) * FX_PROBE_BYTES;
-        fx_probe_info info;
-        fx_probe_info_read(p, &info);
-        if (!(info.flags & FX_PROBE_HAS_DATA))
-            continue;
+        for (int k = 0; k < 3; k++)
+            w *= ((c >> k) & 1) ? frac[k] : 1.0f - frac[k];
         taps->texel[taps->count] = p;
         taps->weight[taps->count] = w;
         taps->count++;
@@ -112,23 +118,8 @@ static bool grid_cell(const void *user, uint32_t effect, uint32_t level, const f
     int base[3];
     for (int k = 0; k < 3; k++)
         base[k] = (int)floorf((centre[k] - g->origin[k]) / g->cell);
-    for (int c = 0; c < 8; c++) {
-        texel[c] = NULL;
-        int at[3];
-        bool inside = true;
-        for (int k = 0; k < 3; k++) {
-            at[k] = base[k] + ((c >> k) & 1);
-            inside &= at[k] >= 0 && at[k] < (int)g->n[k];
-        }
-        if (!inside)
-            continue;
-        const uint8_t *p = g->payload + (size_t)(((uint32_t)at[2] * g->n[1] + (uint32_t)at[1]) * g->n[0] +
-                                                 (uint32_t)at[0]) * FX_PROBE_BYTES;
-        fx_probe_info info;
-        fx_probe_info_read(p, &info);
-        if (info.flags & FX_PROBE_HAS_DATA)
-            texel[c] = p;
-    }
+    for (int c = 0; c < 8; c++)
+        texel[c] = grid_corner(g, base, c);
     return true;
 }
 
