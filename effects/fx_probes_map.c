@@ -186,6 +186,7 @@ static float probe_weight(const uint8_t *p, const float position[3], const float
 enum { IRRADIANCE_MEMO = 256 };
 typedef struct irradiance_memo {
     const void *probe;
+    uint64_t epoch; /* ctx->epoch: a later loop's payload may sit at a freed one's address, on the same frame */
     uint32_t frame;
     float normal[3];
     float e[3];
@@ -206,13 +207,14 @@ static void probe_irradiance_memo(const fx_context *ctx, bool committed, const v
     uint64_t h = (uint64_t)(uintptr_t)probe * 0x9E3779B97F4A7C15ull ^ (bits[0] * 0x85EBCA6Bu) ^ (bits[1] * 0xC2B2AE35u) ^
                  ((uint64_t)bits[2] << 17);
     irradiance_memo *m = &irradiance_memo_table[(h ^ (h >> 29)) & (IRRADIANCE_MEMO - 1)];
-    if (m->probe == probe && m->frame == generation && m->normal[0] == normal[0] && m->normal[1] == normal[1] &&
+    if (m->probe == probe && m->epoch == ctx->epoch && m->frame == generation && m->normal[0] == normal[0] && m->normal[1] == normal[1] &&
         m->normal[2] == normal[2]) {
         memcpy(e, m->e, sizeof m->e);
         return;
     }
     fx_probe_irradiance(probe, normal, e);
     m->probe = probe;
+    m->epoch = ctx->epoch;
     m->frame = generation;
     memcpy(m->normal, normal, sizeof m->normal);
     memcpy(m->e, e, sizeof m->e);

@@ -290,11 +290,7 @@ fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err,
         }
         if (cache && k == SCENE_CACHE_WORLD_SPACE) {
             loop->fx.world_taps = srv__wsc_world_taps;
-            /* Not loop->fx.world_cell = srv__wsc_world_cell: the update's per-thread cell memo (fx_probes.c,
-             * hit_bounce) made images depend on the thread split (tests/stability/stab_light's exact
-             * 2^k linearity failed in 6 of 10 runs with 2 threads, 0 of 10 without it), cause not yet found;
-             * until it is, hits read their probes through world_taps (tests/test_probes.c still checks the
-             * memo against it). */
+            loop->fx.world_cell = srv__wsc_world_cell;
             loop->fx.world_user = cache;
         }
     }
