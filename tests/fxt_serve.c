@@ -53,15 +53,7 @@ void fxt_server_start(fxt_server *sv, const char *name, const char *const *args)
     posix_spawn_file_actions_destroy(&fa);
     sv->port = 0;
     for (double t0 = fxt_now_s(); fxt_now_s() - t0 < 120 && !sv->port;) {
-        FILE *f = fopen(sv->out, "r");
-        char line[256];
-        while (f && fgets(line, sizeof line, f)) {
-            const char *at = strstr(line, "listening on ws://127.0.0.1:");
-            if (at)
-                sv->port = atoi(at + strlen("listening on ws://127.0.0.1:"));
-        }
-        if (f)
-            fclose(f);
+        sv->port = fxt_listening_port(sv->out);
         int status;
         if (!sv->port && waitpid(sv->pid, &status, WNOHANG) == sv->pid)
             fail_msg("fxcache serve exited before listening (see %s)", sv->err);
@@ -69,6 +61,33 @@ void fxt_server_start(fxt_server *sv, const char *name, const char *const *args)
             usleep(20000);
     }
     assert_true(sv->port > 0);
+}
+
+int fxt_listening_port(const char *path)
+{
+    int port = 0;
+    FILE *f = fopen(path, "r");
+    char line[256];
+    while (f && fgets(line, sizeof line, f)) {
+        const char *at = strstr(line, "listening on ws://127.0.0.1:");
+        if (at)
+            port = atoi(at + strlen("listening on ws://127.0.0.1:"));
+    }
+    if (f)
+        fclose(f);
+    return port;
+}
+
+bool fxt_file_contains(const char *path, const char *text)
+{
+    bool found = false;
+    FILE *f = fopen(path, "r");
+    char line[256];
+    while (f && !found && fgets(line, sizeof line, f))
+        found = strstr(line, text) != NULL;
+    if (f)
+        fclose(f);
+    return found;
 }
 
 /* True while the server process runs. */

@@ -23,6 +23,12 @@ double fxt_now_s(void);
 /* Starts `fxcache serve --port 0 ARGS...` with stdout and stderr in files; waits for its address line. */
 void fxt_server_start(fxt_server *sv, const char *name, const char *const *args);
 
+/* The port of the last "listening on ws://127.0.0.1:PORT" line in the file at path; 0 when none (yet). */
+int fxt_listening_port(const char *path);
+
+/* True when a line of the file at path contains text (false when the file is absent). */
+bool fxt_file_contains(const char *path, const char *text);
+
 /* True while the server process runs. */
 bool fxt_server_alive(fxt_server *sv);
 

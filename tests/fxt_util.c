@@ -19,6 +19,15 @@ const char *fxt_shared_scene(const char *rel)
     return path;
 }
 
+uint32_t fxt_random(uint32_t *state)
+{
+    uint32_t x = *state;
+    x ^= x << 13;
+    x ^= x >> 17;
+    x ^= x << 5;
+    return *state = x;
+}
+
 const char *fxt_tmp_path(const char *name)
 {
     static char path[1024];

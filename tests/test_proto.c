@@ -22,16 +22,6 @@
 #include <string.h>
 #include <zstd.h>
 
-/* A small deterministic generator for test data (xorshift32). */
-static uint32_t next_random(uint32_t *state)
-{
-    uint32_t x = *state;
-    x ^= x << 13;
-    x ^= x >> 17;
-    x ^= x << 5;
-    return *state = x;
-}
-
 static float float_from_bits(uint32_t bits)
 {
     float v;
@@ -1099,15 +1089,15 @@ static void test_mutations(void **state)
         proto_msg m = sample(iteration % SAMPLE_COUNT);
         size_t len;
         uint8_t *buf = encode_alloc(&m, &len);
-        int edits = 1 + (int)(next_random(&rng) % 3);
+        int edits = 1 + (int)(fxt_random(&rng) % 3);
         for (int e = 0; e < edits; e++) {
-            size_t at = next_random(&rng) % len;
-            switch (next_random(&rng) % 4) {
+            size_t at = fxt_random(&rng) % len;
+            switch (fxt_random(&rng) % 4) {
             case 0:
-                buf[at] = (uint8_t)next_random(&rng);
+                buf[at] = (uint8_t)fxt_random(&rng);
                 break;
             case 1:
-                buf[at] ^= (uint8_t)(1u << (next_random(&rng) % 8));
+                buf[at] ^= (uint8_t)(1u << (fxt_random(&rng) % 8));
                 break;
             case 2:
                 buf[at] = (uint8_t)(buf[at] + 1);
@@ -1117,7 +1107,7 @@ static void test_mutations(void **state)
                 break;
             }
         }
-        if (next_random(&rng) % 2) /* keep the header's length consistent, so payload faults are reached */
+        if (fxt_random(&rng) % 2) /* keep the header's length consistent, so payload faults are reached */
             proto_put_u32le(buf + 8, (uint32_t)(len - PROTO_HEADER_BYTES));
         proto_msg out;
         fxc_result result = decode_copy(buf, len, &out);
@@ -1164,7 +1154,7 @@ static uint8_t *make_image(uint32_t w, uint32_t h, bool noisy, uint32_t seed)
             p[2] = (uint8_t)(128 + 100 * sin(0.05 * x + 0.03 * y));
             if (noisy)
                 for (int c = 0; c < 3; c++)
-                    p[c] ^= (uint8_t)(next_random(&seed) & 0x1f);
+                    p[c] ^= (uint8_t)(fxt_random(&seed) & 0x1f);
         }
     return rgb;
 }
@@ -1360,7 +1350,7 @@ static void test_color_corrupt(void **state)
         uint8_t *copy = malloc(jpeg_bytes);
         assert_non_null(copy);
         memcpy(copy, jpeg, jpeg_bytes);
-        copy[next_random(&rng) % jpeg_bytes] ^= (uint8_t)(1 + next_random(&rng) % 255);
+        copy[fxt_random(&rng) % jpeg_bytes] ^= (uint8_t)(1 + fxt_random(&rng) % 255);
         fxc_result result;
         uint8_t *back = color_decode_alloc(PROTO_CODEC_JPEG, copy, jpeg_bytes, w, h, &result);
         /* Some flips land in the image data and decode to another image; either outcome is allowed. */
@@ -1370,11 +1360,11 @@ static void test_color_corrupt(void **state)
     }
     /* Random bytes. */
     for (int trial = 0; trial < 200; trial++) {
-        size_t bytes = 1 + next_random(&rng) % 600;
+        size_t bytes = 1 + fxt_random(&rng) % 600;
         uint8_t *noise = malloc(bytes);
         assert_non_null(noise);
         for (size_t i = 0; i < bytes; i++)
-            noise[i] = (uint8_t)next_random(&rng);
+            noise[i] = (uint8_t)fxt_random(&rng);
         if (trial % 2) { /* sometimes behind a plausible magic */
             static const uint8_t zstd_magic[4] = {0x28, 0xb5, 0x2f, 0xfd}, jpeg_magic[4] = {0xff, 0xd8, 0xff, 0xdb};
             memcpy(noise, trial % 4 == 1 ? zstd_magic : jpeg_magic, bytes < 4 ? bytes : 4);
@@ -1527,7 +1517,7 @@ static void test_depth_float_exact(void **state)
     assert_non_null(values);
     uint32_t rng = 7;
     for (size_t i = 0; i < (size_t)w * h; i++)
-        values[i] = float_from_bits(next_random(&rng));
+        values[i] = float_from_bits(fxt_random(&rng));
     values[0] = INFINITY;
     values[1] = 0.0f;
     values[2] = -0.0f;
@@ -1641,7 +1631,7 @@ static void test_depth_half_sweep(void **state)
         double t = (double)i / (double)(count - 1);
         float v = (float)exp(lo + (hi - lo) * t);
         if (i % 3 == 1) /* and a random float of the same binade */
-            v = float_from_bits((bits_from_float(v) & 0xff800000u) | (next_random(&rng) & 0x7fffffu));
+            v = float_from_bits((bits_from_float(v) & 0xff800000u) | (fxt_random(&rng) & 0x7fffffu));
         if (v > 65504.0f)
             v = 65504.0f;
         values[i] = (i % 2) ? -v : v;
@@ -1683,7 +1673,7 @@ static void test_depth_errors(void **state)
     float values[40 * 30];
     uint32_t rng = 5;
     for (size_t i = 0; i < w * h; i++)
-        values[i] = (float)(next_random(&rng) % 100000) / 100.0f;
+        values[i] = (float)(fxt_random(&rng) % 100000) / 100.0f;
     for (uint32_t depth = PROTO_DEPTH_HALF; depth <= PROTO_DEPTH_FLOAT; depth += 16) {
         size_t bound = proto_depth_bound(depth, w, h);
         assert_true(bound >= w * h * (depth / 8));
@@ -1707,7 +1697,7 @@ static void test_depth_errors(void **state)
         assert_int_equal(proto_depth_decode(depth, NULL, 0, w, h, back), FXC_ERR_CODEC);
         for (int trial = 0; trial < 100; trial++) {
             for (size_t i = 4; i < bytes; i++)
-                payload[i] = (uint8_t)next_random(&rng);
+                payload[i] = (uint8_t)fxt_random(&rng);
             assert_int_equal(proto_depth_decode(depth, payload, bytes, w, h, back), FXC_ERR_CODEC);
         }
         /* Too small a buffer. */
@@ -1721,7 +1711,7 @@ static void test_depth_errors(void **state)
     float *noise = malloc((size_t)big_w * big_h * sizeof(float));
     assert_non_null(noise);
     for (size_t i = 0; i < (size_t)big_w * big_h; i++)
-        noise[i] = float_from_bits(next_random(&rng) & 0x7f7fffffu);
+        noise[i] = float_from_bits(fxt_random(&rng) & 0x7f7fffffu);
     for (uint32_t depth = PROTO_DEPTH_HALF; depth <= PROTO_DEPTH_FLOAT; depth += 16) {
         float *back = depth_round_trip(depth, noise, big_w, big_h);
         if (depth == PROTO_DEPTH_FLOAT)

@@ -27,15 +27,6 @@ typedef fxt_scene_fixture fixture;
 
 enum { W = 64, H = 36 };
 
-static uint32_t next_random(uint32_t *state)
-{
-    uint32_t x = *state;
-    x ^= x << 13;
-    x ^= x >> 17;
-    x ^= x << 5;
-    return *state = x;
-}
-
 static int compare_u32(const void *a, const void *b)
 {
     uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
@@ -50,7 +41,7 @@ static void make_list(uint32_t *list, uint32_t n, uint32_t seed)
         if (i < 4)
             list[i] = SRV_PIXEL_XY(corners[i][0], corners[i][1]);
         else
-            list[i] = SRV_PIXEL_XY(next_random(&seed) % W, next_random(&seed) % H);
+            list[i] = SRV_PIXEL_XY(fxt_random(&seed) % W, fxt_random(&seed) % H);
     }
 }
 
@@ -258,7 +249,7 @@ static void test_probe_blocks_within_tolerance(void **state)
     for (int frame = 0; frame < 10; frame++) {
         uint32_t seed = 0x999u + (uint32_t)frame;
         for (uint32_t i = 0; i < LISTED; i++)
-            list[i] = SRV_PIXEL_XY(next_random(&seed) % BW, next_random(&seed) % BH);
+            list[i] = SRV_PIXEL_XY(fxt_random(&seed) % BW, fxt_random(&seed) % BH);
         assert_int_equal(srv_viewer_set_pixels(loop, sparse, &cam, BW, BH, list, LISTED, NULL), FXC_OK);
         fxt_frame(loop, &full, 1, &cam, &st);
         if (frame < 5) /* the probes settle first: compare the same converged cache */
@@ -304,7 +295,7 @@ static void run_alone(fixture *f, bool sparse, int frames, srv_frame_stats *st, 
             for (uint32_t i = 0; i < 2 * W * H; i++)
                 list[i] = SRV_PIXEL_XY(i % W, (i / W) % H);
             for (uint32_t i = 2 * W * H - 1; i > 0; i--) {
-                uint32_t j = next_random(&rng) % (i + 1), t = list[i];
+                uint32_t j = fxt_random(&rng) % (i + 1), t = list[i];
                 list[i] = list[j];
                 list[j] = t;
             }

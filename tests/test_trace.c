@@ -98,20 +98,10 @@ static bool same_camera(const srv_camera *a, const srv_camera *b)
            memcmp(a->target, b->target, sizeof a->target) == 0 && a->fov_deg == b->fov_deg;
 }
 
-/* A small deterministic generator for test data (xorshift32). */
-static uint32_t next_random(uint32_t *state)
-{
-    uint32_t x = *state;
-    x ^= x << 13;
-    x ^= x >> 17;
-    x ^= x << 5;
-    return *state = x;
-}
-
 /* A float in [lo, hi) from the generator. */
 static float random_float(uint32_t *state, float lo, float hi)
 {
-    return lo + (hi - lo) * (float)(next_random(state) >> 8) / 16777216.0f;
+    return lo + (hi - lo) * (float)(fxt_random(state) >> 8) / 16777216.0f;
 }
 
 /* ---- traces ------------------------------------------------------------------------------------------ */
@@ -486,25 +476,25 @@ static void test_fuzz(void **state)
         size_t len;
         int mode = iteration % 3;
         if (mode == 0) { /* raw random bytes, sometimes after a valid header */
-            len = next_random(&rng) % sizeof buf;
+            len = fxt_random(&rng) % sizeof buf;
             for (size_t i = 0; i < len; i++)
-                buf[i] = (char)next_random(&rng);
-            if (next_random(&rng) & 1 && len > 16)
+                buf[i] = (char)fxt_random(&rng);
+            if (fxt_random(&rng) & 1 && len > 16)
                 memcpy(buf, "fxcache-trace 1\n", 16);
         } else if (mode == 1) { /* text from a number-like alphabet after a header */
-            len = 16 + next_random(&rng) % (sizeof buf - 16);
+            len = 16 + fxt_random(&rng) % (sizeof buf - 16);
             memcpy(buf, "fxcache-trace 1\n", 16);
             for (size_t i = 16; i < len; i++)
-                buf[i] = alphabet[next_random(&rng) % (sizeof alphabet - 1)];
+                buf[i] = alphabet[fxt_random(&rng) % (sizeof alphabet - 1)];
         } else { /* a valid trace with a few bytes changed, inserted or cut */
             len = valid_len;
             memcpy(buf, valid, len);
-            int edits = 1 + (int)(next_random(&rng) % 4);
+            int edits = 1 + (int)(fxt_random(&rng) % 4);
             for (int e = 0; e < edits; e++) {
-                size_t at = next_random(&rng) % len;
-                char c = (next_random(&rng) & 1) ? alphabet[next_random(&rng) % (sizeof alphabet - 1)]
-                                                 : (char)next_random(&rng);
-                switch (next_random(&rng) % 3) {
+                size_t at = fxt_random(&rng) % len;
+                char c = (fxt_random(&rng) & 1) ? alphabet[fxt_random(&rng) % (sizeof alphabet - 1)]
+                                                 : (char)fxt_random(&rng);
+                switch (fxt_random(&rng) % 3) {
                 case 0:
                     buf[at] = c;
                     break;

@@ -24,6 +24,10 @@ const char *fxt_tmp_path(const char *name);
  * be NULL) and returns the exit status (or -1 when it did not exit normally). */
 int fxt_run_cli(const char *args, char *out, size_t out_cap, char *err, size_t err_cap);
 
+/* A small deterministic generator for test data (xorshift32): the next value of *state (never 0 if the seed
+ * is not 0), stored back into *state. */
+uint32_t fxt_random(uint32_t *state);
+
 /* A counting allocator for the caches' allocator hooks (osc_allocator): live bytes and allocations, and an
  * optional failure of the n-th allocation. free checks it never frees more than is live. */
 typedef struct fxt_counting_allocator {

@@ -15,6 +15,7 @@
  * The program is built only with the wire format's implementation in the tree; until then every test skips.
  */
 #include "image.h"
+#include "fxt_serve.h"
 #include "test_util.h"
 
 #include <fcntl.h>
@@ -35,68 +36,6 @@
 extern char **environ;
 
 #ifdef FXC_VIEWER_BIN
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
-/* Starts `fxcache serve --port 0 --quiet --fps FPS` (the embedded default scene) and returns its port. */
-static int server_start_at(pid_t *pid, const char *name, const char *fps)
-{
-    char out[512], err[512];
-    snprintf(out, sizeof out, "%s.out", fxt_tmp_path(name));
-    snprintf(err, sizeof err, "%s.err", fxt_tmp_path(name));
-    const char *argv[] = {FXC_BIN, "serve", "--port", "0", "--quiet", "--fps", fps, NULL};
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_addopen(&fa, 1, out, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_addopen(&fa, 2, err, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
-    assert_int_equal(posix_spawn(pid, FXC_BIN, &fa, NULL, (char *const *)argv, environ), 0);
-    posix_spawn_file_actions_destroy(&fa);
-    int port = 0;
-    for (double t0 = now_s(); now_s() - t0 < 120 && !port;) {
-        FILE *f = fopen(out, "r");
-        char line[256];
-        while (f && fgets(line, sizeof line, f)) {
-            const char *at = strstr(line, "listening on ws://127.0.0.1:");
-            if (at)
-                port = atoi(at + strlen("listening on ws://127.0.0.1:"));
-        }
-        if (f)
-            fclose(f);
-        int status;
-        if (!port && waitpid(*pid, &status, WNOHANG) == *pid)
-            fail_msg("fxcache serve exited before listening (see %s)", err);
-        if (!port)
-            usleep(20000);
-    }
-    assert_true(port > 0);
-    return port;
-}
-
-static int server_start(pid_t *pid, const char *name)
-{
-    return server_start_at(pid, name, "30");
-}
-
-/* SIGTERM, and the exit status (0 expected: under the sanitizer build a leak makes it non-zero). */
-static int server_stop(pid_t pid)
-{
-    kill(pid, SIGTERM);
-    for (double t0 = now_s(); now_s() - t0 < 60;) {
-        int status;
-        if (waitpid(pid, &status, WNOHANG) == pid)
-            return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-        usleep(20000);
-    }
-    kill(pid, SIGKILL);
-    fail_msg("fxcache serve did not stop within 60 s of SIGTERM");
-    return -1;
-}
-
 /* The display PNGs a --display-out run has written to dir so far. */
 static size_t display_pngs(const char *dir)
 {
@@ -130,8 +69,8 @@ static int run_viewer_for(const char *const *args, const char *name, const char 
     assert_int_equal(posix_spawn(&pid, FXC_VIEWER_BIN, &fa, NULL, (char *const *)argv, environ), 0);
     posix_spawn_file_actions_destroy(&fa);
     bool signalled = false;
-    for (double t0 = now_s(); now_s() - t0 < 300;) {
-        if (term_dir && !signalled && (display_pngs(term_dir) >= term_pngs || now_s() - t0 > 120)) {
+    for (double t0 = fxt_now_s(); fxt_now_s() - t0 < 300;) {
+        if (term_dir && !signalled && (display_pngs(term_dir) >= term_pngs || fxt_now_s() - t0 > 120)) {
             kill(pid, SIGTERM);
             signalled = true;
         }
@@ -244,8 +183,9 @@ static void test_static_camera(void **state)
     print_message("SKIP: fxcache-viewer is not built\n");
     skip();
 #else
-    pid_t server;
-    int port = server_start(&server, "static");
+    fxt_server server;
+    fxt_server_start(&server, "static", (const char *const[]){"--fps", "30", NULL});
+    int port = server.port;
     char url[64];
     snprintf(url, sizeof url, "ws://127.0.0.1:%d", port);
     for (int reproject = 0; reproject < 2; reproject++) {
@@ -315,7 +255,7 @@ static void test_static_camera(void **state)
         }
         json_decref(root);
     }
-    assert_int_equal(server_stop(server), 0);
+    assert_int_equal(fxt_server_stop(&server), 0);
 #endif
 }
 
@@ -355,8 +295,9 @@ static void test_turning_camera(void **state)
     char trace[512];
     snprintf(trace, sizeof trace, "%s", fxt_write_file("turn.trace", text));
     free(text);
-    pid_t server;
-    int port = server_start_at(&server, "turning", "15"); /* 30 a second of the session's time */
+    fxt_server server;
+    fxt_server_start(&server, "turning", (const char *const[]){"--fps", "15", NULL}); /* 30 a second of the session's time */
+    int port = server.port;
     char url[64], display[512], stats[512];
     snprintf(url, sizeof url, "ws://127.0.0.1:%d", port);
     snprintf(display, sizeof display, "%s", fxt_tmp_path("turning_display"));
@@ -367,7 +308,7 @@ static void test_turning_camera(void **state)
         "50",        "--quiet", "--reproject",  "--stats", stats,   "--display-out", display,
         "--timeout", "120",     "--time-scale", "2",       NULL};
     assert_int_equal(run_viewer(args, "turning"), 0);
-    assert_int_equal(server_stop(server), 0);
+    assert_int_equal(fxt_server_stop(&server), 0);
     json_error_t error;
     json_t *root = json_load_file(stats, 0, &error);
     if (!root)
@@ -456,22 +397,13 @@ static void test_sample_requests(void **state)
     const char *sh[] = {"/bin/sh", "-c", cmd, NULL};
     assert_int_equal(posix_spawn(&fake, "/bin/sh", NULL, NULL, (char *const *)sh, environ), 0);
     int port = 0;
-    for (double t0 = now_s(); now_s() - t0 < 30 && !port;) {
-        FILE *f = fopen(out, "r");
-        char line[256];
-        while (f && fgets(line, sizeof line, f)) {
-            const char *at = strstr(line, "listening on ws://127.0.0.1:");
-            if (at)
-                port = atoi(at + strlen("listening on ws://127.0.0.1:"));
-            if (strstr(line, "ws module is missing")) {
-                fclose(f);
-                waitpid(fake, NULL, 0);
-                print_message("Node's ws module is missing (Debian's node-ws): skipped\n");
-                skip();
-            }
+    for (double t0 = fxt_now_s(); fxt_now_s() - t0 < 30 && !port;) {
+        port = fxt_listening_port(out);
+        if (!port && fxt_file_contains(out, "ws module is missing")) {
+            waitpid(fake, NULL, 0);
+            print_message("Node's ws module is missing (Debian's node-ws): skipped\n");
+            skip();
         }
-        if (f)
-            fclose(f);
         if (!port)
             usleep(20000);
     }
@@ -484,7 +416,7 @@ static void test_sample_requests(void **state)
         "--timeout", "60",      NULL};
     assert_int_equal(run_viewer_for(args, "fake", display, 60), 0); /* about 2 s at 30 display frames a second */
     int status = 0;
-    for (double t0 = now_s(); now_s() - t0 < 30;) {
+    for (double t0 = fxt_now_s(); fxt_now_s() - t0 < 30;) {
         if (waitpid(fake, &status, WNOHANG) == fake)
             break;
         usleep(20000);
