@@ -168,10 +168,6 @@ typedef struct run_result {
     double points, migrated, projected, culled, dropped, evicted, predicted, empty; /* medians */
     double interp, prefiltered;                                                     /* medians */
     double cpu_ms;                    /* median of the frame's process CPU time (render + inserts) */
-    double stage_mean[VIEW_RC_STAGE_COUNT], cpu_mean; /* means over the measured frames: the re-sort of the
-                                                         tile-ordered store runs in some frames only, which
-                                                         a median can leave out */
-    double resorted;                                  /* share of the frames that re-sorted the store */
     double mean_abs_error, bad_share; /* quality (when asked) */
 } run_result;
 
@@ -233,8 +229,8 @@ static void run(const bench_opts *o, uint32_t res, const view_rc_desc *switches,
     view_rc_pixel *req = malloc(sizeof *req * pixels), *pred = malloc(sizeof *pred * pixels);
     view_rc_sample *buf = malloc(sizeof *buf * 2 * pixels);
     int total = o->warmup + o->frames;
-    double *series[VIEW_RC_STAGE_COUNT + 13];
-    for (int s = 0; s < VIEW_RC_STAGE_COUNT + 13; s++)
+    double *series[VIEW_RC_STAGE_COUNT + 12];
+    for (int s = 0; s < VIEW_RC_STAGE_COUNT + 12; s++)
         series[s] = calloc((size_t)o->frames, sizeof(double));
     double err_sum = 0, bad_sum = 0;
     int quality_frames = 0;
@@ -277,7 +273,6 @@ static void run(const bench_opts *o, uint32_t res, const view_rc_desc *switches,
             series[VIEW_RC_STAGE_COUNT + 9][i] = fr.stats.pixels[VIEW_RC_INTERP];
             series[VIEW_RC_STAGE_COUNT + 10][i] = fr.stats.pixels[VIEW_RC_PREFILTER];
             series[VIEW_RC_STAGE_COUNT + 11][i] = cpu;
-            series[VIEW_RC_STAGE_COUNT + 12][i] = fr.stats.resorted;
             if (quality && i % 10 == 0) {
                 double err = 0;
                 size_t bad = 0;
@@ -314,20 +309,9 @@ static void run(const bench_opts *o, uint32_t res, const view_rc_desc *switches,
                       &out->interp,  &out->prefiltered, &out->cpu_ms};
     for (int k = 0; k < 11; k++)
         *figs[k] = median_of(series[VIEW_RC_STAGE_COUNT + 1 + k], o->frames);
-    for (int s = 0; s < VIEW_RC_STAGE_COUNT + 13; s++) {
-        double sum = 0;
-        for (int i = 0; i < o->frames; i++)
-            sum += series[s][i];
-        if (s < VIEW_RC_STAGE_COUNT)
-            out->stage_mean[s] = sum / o->frames;
-        else if (s == VIEW_RC_STAGE_COUNT + 11)
-            out->cpu_mean = sum / o->frames;
-        else if (s == VIEW_RC_STAGE_COUNT + 12)
-            out->resorted = sum / o->frames;
-    }
     out->mean_abs_error = quality_frames ? err_sum / quality_frames : 0;
     out->bad_share = quality_frames ? bad_sum / quality_frames : 0;
-    for (int s = 0; s < VIEW_RC_STAGE_COUNT + 13; s++)
+    for (int s = 0; s < VIEW_RC_STAGE_COUNT + 12; s++)
         free(series[s]);
     free(rgb);
     free(depth);
@@ -349,50 +333,38 @@ static void range_of(const double *v, int n, double *lo, double *mid, double *hi
 static void section_table(const bench_opts *o, uint32_t res)
 {
     double per[VIEW_RC_STAGE_COUNT][MAX_REPS], frame[MAX_REPS], sums[MAX_REPS], cpu[MAX_REPS];
-    double per_mean[VIEW_RC_STAGE_COUNT][MAX_REPS], mean_sums[MAX_REPS], cpu_mean[MAX_REPS];
     run_result last = {0};
     for (int r = 0; r < o->reps; r++) {
         run(o, res, &(view_rc_desc){0}, 1, false, &last);
-        sums[r] = mean_sums[r] = 0;
+        sums[r] = 0;
         for (int s = 0; s < VIEW_RC_STAGE_COUNT; s++) {
             per[s][r] = last.stage_ms[s];
             sums[r] += last.stage_ms[s];
-            per_mean[s][r] = last.stage_mean[s];
-            mean_sums[r] += last.stage_mean[s];
         }
         frame[r] = last.frame_ms;
         cpu[r] = last.cpu_ms;
-        cpu_mean[r] = last.cpu_mean;
     }
     double lo, mid, hi, sum_mid;
     range_of(sums, o->reps, &lo, &sum_mid, &hi);
     printf("\n%ux%u, 1 thread: median of %d repetitions (each the median of %d frames after %d of warm-up)\n",
            res, res, o->reps, o->frames, o->warmup);
-    printf("| stage | ms | range | %% of the sum | mean over frames, ms |\n|---|---|---|---|---|\n");
+    printf("| stage | ms | range | %% of the sum |\n|---|---|---|---|\n");
     for (int s = 0; s < VIEW_RC_STAGE_COUNT; s++) {
         range_of(per[s], o->reps, &lo, &mid, &hi);
-        double mlo, mmid, mhi;
-        range_of(per_mean[s], o->reps, &mlo, &mmid, &mhi);
-        printf("| %s | %.3f | %.3f-%.3f | %.1f | %.3f |\n", view_rc_stage_name(s), mid, lo, hi,
-               100 * mid / sum_mid, mmid);
+        printf("| %s | %.3f | %.3f-%.3f | %.1f |\n", view_rc_stage_name(s), mid, lo, hi, 100 * mid / sum_mid);
     }
     range_of(sums, o->reps, &lo, &mid, &hi);
-    double mlo, mmid, mhi;
-    range_of(mean_sums, o->reps, &mlo, &mmid, &mhi);
-    printf("| **sum of the stage medians** | **%.3f** | %.3f-%.3f | | %.3f (%.3f-%.3f) |\n", mid, lo, hi, mmid,
-           mlo, mhi);
+    printf("| **sum of the stage medians** | **%.3f** | %.3f-%.3f | |\n", mid, lo, hi);
     range_of(cpu, o->reps, &lo, &mid, &hi);
-    range_of(cpu_mean, o->reps, &mlo, &mmid, &mhi);
-    printf("| frame, process CPU time | %.3f | %.3f-%.3f | | %.3f (%.3f-%.3f) |\n", mid, lo, hi, mmid, mlo,
-           mhi);
+    printf("| frame, process CPU time | %.3f | %.3f-%.3f | |\n", mid, lo, hi);
     range_of(frame, o->reps, &lo, &mid, &hi);
     printf("| frame, wall (median of per-frame totals) | %.3f | %.3f-%.3f | |\n", mid, lo, hi);
     printf(
         "per frame (last repetition, medians): %.0f points, %.0f projected, %.0f migrated, %.0f culled, "
         "%.0f dropped, %.0f evicted, %.0f predicted requests; pixels: %.0f interpolated, %.0f prefiltered, "
-        "%.0f empty; the store re-sorted in %.0f %% of the frames\n",
+        "%.0f empty\n",
         last.points, last.projected, last.migrated, last.culled, last.dropped, last.evicted, last.predicted,
-        last.interp, last.prefiltered, last.empty, 100 * last.resorted);
+        last.interp, last.prefiltered, last.empty);
 }
 
 /* The sum of a run's stage medians: each stage is short, so its median over the frames leaves out the frames

@@ -171,23 +171,6 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_chunk_stat = take(&l, rc->chunk_count, sizeof(rc_chunk_stat));
     size_t o_entries = take(&l, (size_t)rc->slots + 1, sizeof(rc_entry)); /* + the sort's sink */
     size_t o_tile_start = take(&l, rc->tile_count + 1, sizeof(uint32_t));
-    rc->local_z = rc->tile <= RC_LOCAL_TILE;
-    rc->fused = rc->local_z && !d.no_tiling;
-    /* The fused path's second copy of the store (the re-sort) and its per-task figures. */
-    size_t fused_slots = rc->fused ? rc->slots : 0, tasks = rc->fused ? rc->tile_count + rc->chunk_count : 0;
-    size_t o_px2 = take(&l, fused_slots, sizeof(float));
-    size_t o_py2 = take(&l, fused_slots, sizeof(float));
-    size_t o_pz2 = take(&l, fused_slots, sizeof(float));
-    size_t o_rgba2 = take(&l, fused_slots, sizeof(uint32_t));
-    size_t o_tile_of2 = take(&l, fused_slots, sizeof(uint16_t));
-    size_t o_mark2 = take(&l, fused_slots + 1, 1);
-    size_t tiled_px = rc->fused ? (size_t)rc->tile_count * rc->tile * rc->tile : 0;
-    size_t o_ztile = take(&l, tiled_px, sizeof(float));
-    size_t o_wtile = take(&l, tiled_px, sizeof(uint32_t));
-    size_t o_ctile = take(&l, tiled_px, sizeof(uint32_t));
-    size_t o_home_start = take(&l, rc->tile_count + 1, sizeof(uint32_t));
-    size_t o_task_counts = take(&l, tasks * lists, sizeof(uint32_t));
-    size_t o_task_stat = take(&l, tasks, sizeof(rc_chunk_stat));
     size_t o_zbuf = take(&l, rc->pixels, sizeof(float));
     size_t o_win = take(&l, rc->pixels, sizeof(uint32_t));
     size_t o_pre = take(&l, rc->pixels, sizeof(uint32_t));
@@ -213,7 +196,8 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_occupied[VIEW_RC_MAX_THREADS], o_low[VIEW_RC_MAX_THREADS], o_err[VIEW_RC_MAX_THREADS];
     size_t o_planes[VIEW_RC_MAX_THREADS], o_box[VIEW_RC_MAX_THREADS], o_spare[VIEW_RC_MAX_THREADS];
     size_t o_zt[VIEW_RC_MAX_THREADS], o_wt[VIEW_RC_MAX_THREADS], o_ct[VIEW_RC_MAX_THREADS];
-    size_t local = rc->local_z && !rc->fused ? (size_t)rc->tile * rc->tile : 0;
+    rc->local_z = rc->tile <= RC_LOCAL_TILE;
+    size_t local = rc->local_z ? (size_t)rc->tile * rc->tile : 0;
     for (uint32_t t = 0; t < d.threads; t++) {
         o_occupied[t] = take(&l, (size_t)rc->low_w * rc->low_h + 1, 1); /* + a sink byte */
         o_low[t] = take(&l, chunk, sizeof(uint32_t));
@@ -255,20 +239,6 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     rc->chunk_stat = (rc_chunk_stat *)(block + o_chunk_stat);
     rc->entries = (rc_entry *)(block + o_entries);
     rc->tile_start = (uint32_t *)(block + o_tile_start);
-    rc->px2 = (float *)(block + o_px2);
-    rc->py2 = (float *)(block + o_py2);
-    rc->pz2 = (float *)(block + o_pz2);
-    rc->rgba2 = (uint32_t *)(block + o_rgba2);
-    rc->tile_of2 = (uint16_t *)(block + o_tile_of2);
-    rc->mark2 = (uint8_t *)(block + o_mark2);
-    memset(rc->mark2, 0, fused_slots + 1);
-    rc->ztile = (float *)(block + o_ztile);
-    rc->wtile = (uint32_t *)(block + o_wtile);
-    rc->ctile = (uint32_t *)(block + o_ctile);
-    rc->home_start = (uint32_t *)(block + o_home_start);
-    memset(rc->home_start, 0, (rc->tile_count + 1) * sizeof(uint32_t)); /* no tile owns a slot yet */
-    rc->task_counts = (uint32_t *)(block + o_task_counts);
-    rc->task_stat = (rc_chunk_stat *)(block + o_task_stat);
     rc->zbuf = (float *)(block + o_zbuf);
     rc->win = (uint32_t *)(block + o_win);
     rc->pre = (uint32_t *)(block + o_pre);

@@ -151,55 +151,6 @@ void view_rc__predict_project(view_rc *rc)
     }
 }
 
-/* ---- the drop plan applied (before the projection) ------------------------------------------------------ */
-
-/* Whether any of 64 points is live and at least drop_age old (vectorised). */
-FXC_HOT_CLONES static bool any_candidate(const uint32_t *restrict rgba, uint32_t drop_age)
-{
-    uint32_t any = 0;
-    for (uint32_t k = 0; k < 64; k++) {
-        uint32_t age = rgba[k] >> 24;
-        any |= (age >= drop_age) & (age != RC_AGE_DEAD);
-    }
-    return any != 0;
-}
-
-/* Points older than drop_age, and the chunk's quota of that age, in slot order. */
-static void drop_task(void *user, uint32_t c, uint32_t worker)
-{
-    (void)worker;
-    view_rc *rc = user;
-    uint32_t begin, end;
-    chunk_range(rc, c, &begin, &end);
-    rc_chunk_stat stat = {0};
-    uint32_t quota = rc->chunk_quota[c], drop_age = rc->drop_age;
-    for (uint32_t i = begin; i < end; i++) {
-        /* Most blocks of 64 hold no candidate (the drops are the oldest few): one test without branches. */
-        if ((i & 63) == 0 && i + 64 <= end && !any_candidate(rc->rgba + i, drop_age)) {
-            i += 63;
-            continue;
-        }
-        uint32_t age = rc_age(rc->rgba[i]);
-        if (age == RC_AGE_DEAD || age < drop_age || (age == drop_age && quota == 0))
-            continue;
-        if (age == drop_age)
-            quota--;
-        stat.dropped++;
-        stat.dropped_age_sum += age;
-        rc->rgba[i] = (rc->rgba[i] & 0x00FFFFFFu) | (RC_AGE_DEAD << 24);
-    }
-    rc->chunk_stat[c] = stat;
-}
-
-void view_rc__drop(view_rc *rc)
-{
-    if (rc->drop_age == RC_AGE_NO_DROP) {
-        memset(rc->chunk_stat, 0, rc->chunk_count * sizeof(rc_chunk_stat));
-        return;
-    }
-    fxc_pool_run(rc->pool, rc->chunk_count, drop_task, rc);
-}
-
 /* ---- project and tile sort ----------------------------------------------------------------------------- */
 
 /* Migrations (a projected or outside point whose list changed; new points not counted), and the lists
@@ -228,8 +179,22 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
     project_span(&rc->view, rc->px, rc->py, rc->pz, rc->rgba, rc->pix, rc->dep, rc->dest, begin, end,
                  rc->tile_shift, rc->tiles_x, local, outside, dead);
     rc_chunk_stat stat = {0};
-    stat.dropped = rc->chunk_stat[c].dropped; /* the drop pass's (view_rc__drop) */
-    stat.dropped_age_sum = rc->chunk_stat[c].dropped_age_sum;
+    /* The drop plan: points older than drop_age, and the chunk's quota of that age, in slot order. */
+    if (rc->drop_age != RC_AGE_NO_DROP) {
+        uint32_t quota = rc->chunk_quota[c], drop_age = rc->drop_age;
+        for (uint32_t i = begin; i < end; i++) {
+            uint32_t age = rc_age(rc->rgba[i]);
+            if (age == RC_AGE_DEAD || age < drop_age || (age == drop_age && quota == 0))
+                continue;
+            if (age == drop_age)
+                quota--;
+            stat.dropped++;
+            stat.dropped_age_sum += age;
+            rc->rgba[i] = (rc->rgba[i] & 0x00FFFFFFu) | (RC_AGE_DEAD << 24);
+            rc->pix[i] = RC_NO_PIXEL;
+            rc->dest[i] = dead;
+        }
+    }
     stat.migrated = migrate_span(rc->dest, rc->tile_of, begin, end, dead, rc->list_new);
     /* Counts per list, in four interleaved sets (consecutive points mostly go to the same tile). */
     uint32_t lists = rc->tile_count + 2;
@@ -454,262 +419,4 @@ void view_rc__age(view_rc *rc)
                rc->chunk_free[c] * sizeof(uint32_t));
         rc->free_count += rc->chunk_free[c];
     }
-}
-
-/* ---- the fused path: each tile projects its own points into its z-buffer (Reinhard 2001) ---------------- */
-
-/* Task k's slots: tile k's home range, or (k >= tile_count) a chunk of the rest. */
-static void task_range(const view_rc *rc, uint32_t k, uint32_t *begin, uint32_t *end)
-{
-    uint32_t tiles = rc->tile_count;
-    if (k < tiles) {
-        *begin = rc->home_start[k];
-        *end = rc->home_start[k + 1];
-        return;
-    }
-    uint32_t rest = rc->home_start[tiles];
-    *begin = rest + (k - tiles) * rc->chunk_size;
-    *end = *begin + rc->chunk_size < rc->slots ? *begin + rc->chunk_size : rc->slots;
-}
-
-/* Tile k (or a chunk of the rest): its slots projected a block at a time (project_span, vectorised), the
- * points that land in the tile depth-tested at once into the worker's tile buffers while the block is in L1,
- * the others counted per destination list (their dest stays; the home points' dest becomes list_outside, so
- * that the hand-over below skips them), and the buffers copied into the image. Home points come in slot
- * order and win ties by the strict test, the same rule as the sorted lists: nearest, then lowest slot. */
-static void fused_task(void *user, uint32_t k, uint32_t worker)
-{
-    view_rc *rc = user;
-    uint32_t begin, end;
-    task_range(rc, k, &begin, &end);
-    uint32_t tiles = rc->tile_count, lists = tiles + 2;
-    uint16_t outside = rc->list_outside, dead = rc->list_dead;
-    uint32_t *count = rc->task_counts + (size_t)k * lists;
-    memset(count, 0, lists * sizeof(uint32_t));
-    rc_chunk_stat stat = {0};
-    uint32_t own = k < tiles ? k : UINT32_MAX, side = rc->tile, n = side * side, home = 0, away = 0;
-    uint32_t *restrict away_slot = rc->free_list + begin; /* the migrants' slots, for the hand-over */
-    (void)worker;
-    size_t at = own != UINT32_MAX ? (size_t)own * n : 0;
-    float *restrict zt = rc->ztile + at;
-    uint32_t *restrict wt = rc->wtile + at, *restrict ct = rc->ctile + at;
-    if (own != UINT32_MAX)
-        for (uint32_t q = 0; q < n; q++) {
-            zt[q] = INFINITY;
-            wt[q] = RC_NO_POINT;
-            ct[q] = RC_EMPTY_PT;
-        }
-    uint32_t *restrict pix = rc->pix;
-    float *restrict dep = rc->dep;
-    uint16_t *restrict dest = rc->dest;
-    const uint32_t *restrict rgba = rc->rgba;
-    for (uint32_t b0 = begin; b0 < end; b0 += RC_BLOCK) {
-        uint32_t b1 = end - b0 > RC_BLOCK ? b0 + RC_BLOCK : end;
-        project_span(&rc->view, rc->px, rc->py, rc->pz, rc->rgba, pix, dep, dest, b0, b1, rc->tile_shift,
-                     rc->tiles_x, true, outside, dead);
-        stat.migrated += migrate_span(dest, rc->tile_of, b0, b1, dead, rc->list_new);
-        for (uint32_t i = b0; i < b1; i++) {
-            uint32_t d = dest[i];
-            if (d == own) {
-                uint32_t p = pix[i];
-                float z = dep[i];
-                if (z < zt[p]) {
-                    zt[p] = z;
-                    wt[p] = i;
-                    ct[p] = rgba[i];
-                }
-                dest[i] = outside;
-                home++;
-            } else {
-                count[d]++;
-                away_slot[away] = i; /* kept only when it landed in a tile */
-                away += d < tiles;
-            }
-        }
-    }
-    stat.projected = home + away;
-    stat.away = away;
-    rc->task_stat[k] = stat;
-}
-
-/* The migrants of task k (their slots listed by fused_task in free_list, which only the ageing uses) written
- * as entries into their new tiles' lists: the sort of the sorted path, for these points only. */
-static void handover_task(void *user, uint32_t k, uint32_t worker)
-{
-    (void)worker;
-    view_rc *rc = user;
-    uint32_t away = rc->task_stat[k].away;
-    if (away == 0)
-        return;
-    uint32_t begin, end;
-    task_range(rc, k, &begin, &end);
-    uint32_t *offset = rc->task_counts + (size_t)k * (rc->tile_count + 2);
-    const uint32_t *away_slot = rc->free_list + begin;
-    const uint16_t *dest = rc->dest;
-    const uint32_t *pix = rc->pix, *rgba = rc->rgba;
-    const float *dep = rc->dep;
-    rc_entry *entries = rc->entries;
-    for (uint32_t j = 0; j < away; j++) {
-        uint32_t i = away_slot[j];
-        rc_entry *e = &entries[offset[dest[i]]++];
-        e->pix = pix[i];
-        e->depth = dep[i];
-        e->rgba = rgba[i];
-        e->slot = i;
-    }
-}
-
-void view_rc__project_fused(view_rc *rc)
-{
-    uint32_t tiles = rc->tile_count, rest = rc->slots - rc->home_start[tiles];
-    rc->task_count = tiles + (rest + rc->chunk_size - 1) / rc->chunk_size;
-    fxc_pool_run(rc->pool, rc->task_count, fused_task, rc);
-    /* Offsets of the migrants: tile by tile, task by task within a tile. */
-    uint32_t lists = tiles + 2, run = 0;
-    for (uint32_t t = 0; t < tiles; t++) {
-        rc->tile_start[t] = run;
-        for (uint32_t k = 0; k < rc->task_count; k++) {
-            uint32_t *slot = rc->task_counts + (size_t)k * lists + t;
-            uint32_t n = *slot;
-            *slot = run;
-            run += n;
-        }
-    }
-    rc->tile_start[tiles] = run;
-    rc->frame_migrants = run;
-    fxc_pool_run(rc->pool, rc->task_count, handover_task, rc);
-    /* The frame's figures: the drop pass's per chunk, the projection's on chunk 0 (added up in order). */
-    for (uint32_t k = 0; k < rc->task_count; k++) {
-        rc->chunk_stat[0].projected += rc->task_stat[k].projected;
-        rc->chunk_stat[0].migrated += rc->task_stat[k].migrated;
-    }
-}
-
-/* Tile t's migrants into the tile's buffers (contiguous, like the home pass's): the nearest wins, between
- * equal depths the lowest slot, as in the home pass; then the tile copied into the image row by row. */
-static void migrant_task(void *user, uint32_t tile, uint32_t worker)
-{
-    (void)worker;
-    view_rc *rc = user;
-    uint32_t side = rc->tile;
-    size_t n = (size_t)side * side;
-    float *restrict zt = rc->ztile + tile * n;
-    uint32_t *restrict wt = rc->wtile + tile * n, *restrict ct = rc->ctile + tile * n;
-    const rc_entry *entries = rc->entries;
-    for (uint32_t e = rc->tile_start[tile], last = rc->tile_start[tile + 1]; e < last; e++) {
-        uint32_t p = entries[e].pix;
-        float z = entries[e].depth, old = zt[p];
-        uint32_t slot = entries[e].slot;
-        if (z < old || (z == old && slot < wt[p])) {
-            zt[p] = z;
-            wt[p] = slot;
-            ct[p] = entries[e].rgba;
-        }
-    }
-    size_t w = rc->width;
-    uint32_t x0 = (tile % rc->tiles_x) << rc->tile_shift, y0 = (tile / rc->tiles_x) << rc->tile_shift;
-    uint32_t x1 = x0 + side < rc->width ? x0 + side : rc->width;
-    uint32_t y1 = y0 + side < rc->height ? y0 + side : rc->height;
-    for (uint32_t y = y0; y < y1; y++) {
-        size_t at = (size_t)(y - y0) * side;
-        memcpy(rc->zbuf + y * w + x0, zt + at, (x1 - x0) * sizeof(float));
-        memcpy(rc->win + y * w + x0, wt + at, (x1 - x0) * sizeof(uint32_t));
-        memcpy(rc->pre + y * w + x0, ct + at, (x1 - x0) * sizeof(uint32_t));
-    }
-}
-
-void view_rc__zbuffer_migrants(view_rc *rc)
-{
-    fxc_pool_run(rc->pool, rc->tile_count, migrant_task, rc);
-}
-
-/* ---- the fused path's re-sort ------------------------------------------------------------------------- */
-
-bool view_rc__resort_due(const view_rc *rc)
-{
-    uint32_t projected = 0;
-    for (uint32_t k = 0; k < rc->task_count; k++)
-        projected += rc->task_stat[k].projected;
-    return (float)rc->frame_migrants > RC_RESORT_FRACTION * (float)projected;
-}
-
-/* Per chunk of slots: how many go to each list (this frame's tile, outside, free), from tile_of (which the
- * projection set to this frame's list for every slot). */
-static void resort_count_task(void *user, uint32_t c, uint32_t worker)
-{
-    (void)worker;
-    view_rc *rc = user;
-    uint32_t begin, end;
-    chunk_range(rc, c, &begin, &end);
-    uint32_t lists = rc->tile_count + 2;
-    uint32_t *count = rc->counts + (size_t)c * lists;
-    memset(count, 0, lists * sizeof(uint32_t));
-    for (uint32_t i = begin; i < end; i++)
-        count[rc->tile_of[i]]++;
-}
-
-/* Per chunk: every slot copied to its place in the second store (stable: chunk, then slot order), and its new
- * number in pix (for the winners). */
-static void resort_move_task(void *user, uint32_t c, uint32_t worker)
-{
-    (void)worker;
-    view_rc *rc = user;
-    uint32_t begin, end;
-    chunk_range(rc, c, &begin, &end);
-    uint32_t *offset = rc->counts + (size_t)c * (rc->tile_count + 2);
-    for (uint32_t i = begin; i < end; i++) {
-        uint32_t d = rc->tile_of[i], o = offset[d]++;
-        rc->px2[o] = rc->px[i];
-        rc->py2[o] = rc->py[i];
-        rc->pz2[o] = rc->pz[i];
-        rc->rgba2[o] = rc->rgba[i];
-        rc->tile_of2[o] = (uint16_t)d;
-        rc->mark2[o] = rc->mark[i];
-        rc->pix[i] = o;
-    }
-}
-
-/* Per band of rows: the winners renamed (the inserts until the next frame find points through them). */
-static void resort_winners_task(void *user, uint32_t band, uint32_t worker)
-{
-    (void)worker;
-    view_rc *rc = user;
-    size_t y0 = (size_t)band << rc->tile_shift, y1 = y0 + rc->tile < rc->height ? y0 + rc->tile : rc->height;
-    const uint32_t *renamed = rc->pix;
-    for (size_t p = y0 * rc->width; p < y1 * rc->width; p++) {
-        uint32_t s = rc->win[p];
-        rc->win[p] = s == RC_NO_POINT ? s : renamed[s];
-    }
-}
-
-#define RC_SWAP(type, a, b)                                                                                  \
-    do {                                                                                                     \
-        type swap_ = (a);                                                                                    \
-        (a) = (b);                                                                                           \
-        (b) = swap_;                                                                                         \
-    } while (0)
-
-void view_rc__resort(view_rc *rc)
-{
-    fxc_pool_run(rc->pool, rc->chunk_count, resort_count_task, rc);
-    /* Offsets: list by list (tiles, then outside, then the free slots), chunk by chunk. */
-    uint32_t lists = rc->tile_count + 2, run = 0;
-    for (uint32_t l = 0; l < lists; l++) {
-        if (l <= rc->tile_count)
-            rc->home_start[l] = run;
-        for (uint32_t c = 0; c < rc->chunk_count; c++) {
-            uint32_t *slot = rc->counts + (size_t)c * lists + l;
-            uint32_t n = *slot;
-            *slot = run;
-            run += n;
-        }
-    }
-    fxc_pool_run(rc->pool, rc->chunk_count, resort_move_task, rc);
-    fxc_pool_run(rc->pool, rc->tiles_y, resort_winners_task, rc);
-    RC_SWAP(float *, rc->px, rc->px2);
-    RC_SWAP(float *, rc->py, rc->py2);
-    RC_SWAP(float *, rc->pz, rc->pz2);
-    RC_SWAP(uint32_t *, rc->rgba, rc->rgba2);
-    RC_SWAP(uint16_t *, rc->tile_of, rc->tile_of2);
-    RC_SWAP(uint8_t *, rc->mark, rc->mark2);
 }

@@ -59,11 +59,8 @@ fxc_result view_rc_render(view_rc *rc, const view_rc_camera *cam, const view_rc_
         t = t_next;
     }
 
-    view_rc__drop(rc);
     if (rc->d.no_tiling)
         view_rc__project_direct(rc);
-    else if (rc->fused)
-        view_rc__project_fused(rc);
     else
         view_rc__project_sort(rc);
     for (uint32_t c = 0; c < rc->chunk_count; c++) {
@@ -78,8 +75,6 @@ fxc_result view_rc_render(view_rc *rc, const view_rc_camera *cam, const view_rc_
 
     if (rc->d.no_tiling)
         view_rc__zbuffer_direct(rc);
-    else if (rc->fused)
-        view_rc__zbuffer_migrants(rc);
     else
         view_rc__zbuffer(rc);
     t_next = view_rc__now_ms();
@@ -112,17 +107,6 @@ fxc_result view_rc_render(view_rc *rc, const view_rc_camera *cam, const view_rc_
     t_next = view_rc__now_ms();
     stats.stage_ms[VIEW_RC_STAGE_SAMPLE] = t_next - t;
     t = t_next;
-
-    /* The fused path's re-sort, when the store has decayed (after the depth cull's marks, before the ageing
-     * lists the free slots): part of the tile sort. */
-    rc->resorted = rc->fused && view_rc__resort_due(rc);
-    if (rc->resorted) {
-        view_rc__resort(rc);
-        t_next = view_rc__now_ms();
-        stats.stage_ms[VIEW_RC_STAGE_PROJECT_SORT] += t_next - t;
-        t = t_next;
-    }
-    stats.resorted = rc->resorted;
 
     view_rc__age(rc);
     for (uint32_t c = 0; c < rc->chunk_count; c++)

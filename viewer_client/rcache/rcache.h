@@ -156,8 +156,6 @@ typedef struct view_rc_stats {
     uint32_t projected;       /* points that landed in the image */
     uint32_t migrated;        /* points that moved to another tile's list (new points not counted) */
     uint32_t culled;          /* pixels whose point the depth cull removed */
-    uint32_t resorted;        /* 1 when this frame put the point store back in tile order (tiles of at most
-                                 256 pixels), else 0 */
     uint32_t pixels[VIEW_RC_PIXEL_KINDS]; /* pixels by kind */
     uint32_t age_step;                    /* the age added to visible points in this frame */
     uint32_t hidden_age_step;             /* ... and to points not visible */

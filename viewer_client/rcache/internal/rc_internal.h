@@ -36,8 +36,6 @@
 #define RC_EMPTY_PT    0xFF000000u /* a pixel without a point: colour 0, age 255 */
 #define RC_NEAR        1.0e-4f     /* points nearer than this (metres along the view axis) are behind */
 #define RC_LOCAL_TILE  256u        /* the largest tile side the z-buffer works on in its own buffers */
-#define RC_RESORT_FRACTION 0.75f  /* fused: re-sort when more of the projected points than this migrated */
-#define RC_BLOCK 512u              /* fused: points projected at a time before their depth tests */
 
 static inline uint32_t rc_age(uint32_t rgba)
 {
@@ -126,7 +124,6 @@ typedef struct rc_batch {
 /* Per-chunk figures of the passes over the store, added up in chunk order. */
 typedef struct rc_chunk_stat {
     uint32_t projected, migrated, evicted, dropped;
-    uint32_t away; /* fused path, per task: points that landed in another tile than their home */
     uint64_t dropped_age_sum;
 } rc_chunk_stat;
 
@@ -144,26 +141,6 @@ struct view_rc {
      * winners and colours contiguous (48 KiB at tiles of 64), instead of 64 rows of the image 4 * width bytes
      * apart (which all fall in a few of L1's sets), then copied out row by row. */
     bool local_z;
-    /* The fused path (local_z and tiling): the store kept in tile order between re-sorts (Reinhard 2001's
-     * layout). Tile t owns the slots [home_start[t], home_start[t + 1]) (the points that were in it at the last
-     * re-sort); the rest, [home_start[tile_count], slots), holds the points outside the image at the last
-     * re-sort, then the free slots. Each tile's task projects its own slots straight into its z-buffer; the
-     * points that land elsewhere (migrants, and new points) are sorted into the other tiles' lists and
-     * z-tested in a short second pass. The store is re-sorted when migrants pass RC_RESORT_FRACTION of the
-     * projected points (and at the first frame). */
-    bool fused;
-    uint32_t *home_start;        /* tile_count + 1 */
-    uint32_t task_count;         /* this frame: tile_count tiles, then chunks of the rest */
-    uint32_t *task_counts;       /* (tile_count + chunk_count) x (tile_count + 2): migrants per list, offsets */
-    rc_chunk_stat *task_stat;    /* tile_count + chunk_count */
-    uint32_t frame_migrants;     /* this frame: points z-tested outside their home tile */
-    bool resorted;               /* this frame re-sorted the store */
-    float *px2, *py2, *pz2;      /* the re-sort's second copy of the store, swapped with the first */
-    uint32_t *rgba2;
-    uint16_t *tile_of2;
-    uint8_t *mark2;
-    float *ztile;                /* the z-buffer tile by tile (tile_count x tile x tile): tile t's depths, */
-    uint32_t *wtile, *ctile;     /* winners and colours contiguous, where both passes test; then copied out */
 
     /* The point store (structure of arrays over slots). */
     uint32_t slots; /* capacity + insert_reserve */
@@ -261,11 +238,6 @@ void view_rc__zbuffer(view_rc *rc);         /* parallel over tiles */
 void view_rc__project_direct(view_rc *rc);  /* no_tiling: the projection without the sort (parallel) */
 void view_rc__zbuffer_direct(view_rc *rc);  /* no_tiling: one z-buffer pass in slot order (serial) */
 void view_rc__age(view_rc *rc);             /* parallel over chunks, then the free stack (serial) */
-void view_rc__drop(view_rc *rc);            /* parallel over chunks: this frame's drop plan applied */
-void view_rc__project_fused(view_rc *rc);   /* fused: each tile projects its own points into its z-buffer */
-void view_rc__zbuffer_migrants(view_rc *rc); /* fused: the migrants z-tested in their new tiles */
-bool view_rc__resort_due(const view_rc *rc); /* fused: whether the store is re-sorted this frame */
-void view_rc__resort(view_rc *rc);          /* fused: the store in tile order again (before the ageing) */
 
 /* rc_image.c: the pixel passes, parallel over bands of rows. */
 size_t view_rc__interp_scratch(uint32_t width);   /* 16-bit values of a worker's interpolation scratch */
