@@ -2,6 +2,10 @@
  * (2002 3.2; the tile lists of Reinhard 2001 section 3), the tiled z-buffer (2002 3.2), the one-pass z-buffer
  * of the 1999 render cache (no_tiling), and ageing with eviction (2002 3.4).
  *
+ * The predicted projection is computed in the projection pass: each block of 1024 points is projected to the
+ * current camera, then to the predicted one while its positions are still in L1 (a pass of its own read the
+ * store, 16 bytes a point, from memory a second time).
+ *
  * Project and tile sort, per chunk of slots (parallel): every live point is projected once, in a loop without
  * branches (vectorised); the chunk counts how many of its points go to each tile. One serial step turns the
  * counts into offsets, tile by tile and chunk by chunk within a tile, and the bucket sort (parallel again)
