@@ -142,7 +142,17 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
                 size_t p = (size_t)y * width + x;
                 if (view->tri[p] == SRV_MISS)
                     continue;
-                uint32_t mask = srv__coarse_mask(loop->s, view, loop->coarse_depth_scale, &g, x, y);
+                /* The common case without the general test: the pixel and its block's 4 corner reps (those
+                 * the frame has) on one triangle; all 4 candidates then match (srv__coarse_mask). */
+                uint32_t lx = x - x0, ly = y - y0, low = block - 1, ix = lx >> g.shift, iy = ly >> g.shift;
+                uint32_t fx = lx & low, fy = ly & low, mask;
+                size_t r0 = (size_t)(y0 + (iy << g.shift)) * width + x0 + (ix << g.shift);
+                if ((fx | fy) && ix + 1 < g.nx && iy + 1 < g.ny && view->tri[r0] == view->tri[p] &&
+                    view->tri[r0 + block] == view->tri[p] && view->tri[r0 + block * width] == view->tri[p] &&
+                    view->tri[r0 + block * width + block] == view->tri[p])
+                    mask = (fx ? 2u : 0u) | (fy ? 4u : 0u) | (fx && fy ? 9u : 1u);
+                else
+                    mask = srv__coarse_mask(loop->s, view, loop->coarse_depth_scale, &g, x, y);
                 coarse[p] = (uint8_t)mask;
                 if (mask == 0 || srv__coarse_is_rep(g.block, x, y))
                     fill_pixel(loop->s, view, p, positions, &memo, &pixels[count++]);

@@ -263,6 +263,8 @@ typedef struct srv_coarse_grid {
     uint32_t x0, y0;       /* the tile's first pixel (a multiple of B: tiles are 16-aligned) */
     uint32_t nx, ny;       /* reps per row and column the tile uses (its own and the next, within the frame) */
     float inv_block;       /* 1 / B */
+    float weight[16][4];   /* the 4 candidates' bilinear weights at block position fy * B + fx, both axes with
+                              a second rep (srv__coarse_weights' values there) */
 } srv_coarse_grid;
 
 static inline void srv__coarse_grid(uint32_t block, uint32_t x0, uint32_t y0, uint32_t width, uint32_t height,
@@ -278,6 +280,14 @@ static inline void srv__coarse_grid(uint32_t block, uint32_t x0, uint32_t y0, ui
     g->ny = (height - y0 + block - 1) / block;
     g->nx = g->nx < most ? g->nx : most;
     g->ny = g->ny < most ? g->ny : most;
+    for (uint32_t fy = 0; fy < block && block <= 4; fy++)
+        for (uint32_t fx = 0; fx < block; fx++) {
+            float wx = (float)fx * g->inv_block, wy = (float)fy * g->inv_block, *w = g->weight[fy * block + fx];
+            w[0] = (1.0f - wx) * (1.0f - wy);
+            w[1] = wx * (1.0f - wy);
+            w[2] = (1.0f - wx) * wy;
+            w[3] = wx * wy;
+        }
 }
 
 /* The block a viewer's whole frame uses: the largest power of two up to desc.indirect_block that is at most
