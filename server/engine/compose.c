@@ -368,7 +368,7 @@ FXC_HOT_LANES static void radiance_lanes(compose_scratch *cs, const float sky[3]
 /* Shades the count gathered pixels of a run into the viewer's radiance (and kept views): the effects' terms
  * from the caches (or per pixel in no-cache mode), then the formula. */
 /* The pixels of a run of a whole frame (rows y0..y1, columns x0..x1 of the tile of grid g): compose's
- * coarse evaluation of loop->coarse_effect (engine_internal.h, srv__coarse_samples). */
+ * coarse evaluation of loop->coarse_effect (engine_internal.h, srv__coarse_mask). */
 typedef struct coarse_run {
     const srv_coarse_grid *g;
     uint32_t x0, x1, y0, y1;

@@ -294,7 +294,7 @@ fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err,
             loop->fx.world_user = cache;
         }
     }
-    /* The effect whole frames evaluate per block (engine_internal.h, srv__coarse_samples): the first shading,
+    /* The effect whole frames evaluate per block (engine_internal.h, srv__coarse_mask): the first shading,
      * low-frequency one of a kind that batches per effect and reads positions (the world-space kind). */
     loop->coarse_effect = SRV_NO_EFFECT;
     loop->coarse_depth_scale = 3.0f / loop->s->texel_density;
