@@ -176,6 +176,66 @@ static void test_subcommand_help(void **state)
     assert_contains(out_buf, "--no-cache");
 }
 
+/* --indirect-block: in both commands' --help; in sim, the block a frame uses is the largest of 1, 2, 4 up
+ * to N within the rule (a quarter of the narrowest probe cell in pixels). At 320 x 180 and 60 degrees the
+ * rule allows 2: the default (4) and 2 give the same bytes, 1 (every pixel) other bytes, and the summary
+ * reports the option as resolved. */
+static void sim_frame(const char *name, const char *block_option, char *image, size_t image_cap, long long *block)
+{
+    char out[1024], summary[1024];
+    tmp_path(out, sizeof out, name);
+    snprintf(summary, sizeof summary, "%s/summary.json", out);
+    assert_int_equal(run("sim --res 320x180 --viewers 1 --frames 3 --threads 1 --camera walk %s --out '%s' --summary '%s' --quiet",
+                         block_option, out, summary),
+                     0);
+    json_t *sum = load_json_file(summary);
+    *block = jint(sum, "probes.indirect_block");
+    json_decref(sum);
+    int n = snprintf(image, image_cap, "%s/frame_0002_viewer_00.png", out);
+    assert_true(n > 0 && (size_t)n < image_cap);
+}
+
+static unsigned char *read_all(const char *path, size_t *size)
+{
+    FILE *f = fopen(path, "rb");
+    assert_non_null(f);
+    assert_int_equal(fseek(f, 0, SEEK_END), 0);
+    long len = ftell(f);
+    assert_true(len > 0);
+    rewind(f);
+    unsigned char *bytes = malloc((size_t)len);
+    assert_non_null(bytes);
+    assert_int_equal(fread(bytes, 1, (size_t)len, f), (size_t)len);
+    fclose(f);
+    *size = (size_t)len;
+    return bytes;
+}
+
+static void test_indirect_block_option(void **state)
+{
+    (void)state;
+    assert_int_equal(run("sim --help"), 0);
+    assert_contains(out_buf, "--indirect-block N");
+    assert_int_equal(run("serve --help"), 0);
+    assert_contains(out_buf, "--indirect-block N");
+    char image_default[1200], image_2[1200], image_1[1200];
+    long long block_default, block_2, block_1;
+    sim_frame("iblock_default", "", image_default, sizeof image_default, &block_default);
+    sim_frame("iblock_2", "--indirect-block 2", image_2, sizeof image_2, &block_2);
+    sim_frame("iblock_1", "--indirect-block 1", image_1, sizeof image_1, &block_1);
+    assert_int_equal(block_default, 4);
+    assert_int_equal(block_2, 2);
+    assert_int_equal(block_1, 1);
+    size_t size_default, size_2, size_1;
+    unsigned char *a = read_all(image_default, &size_default), *b = read_all(image_2, &size_2),
+                  *c = read_all(image_1, &size_1);
+    assert_true(size_default == size_2 && memcmp(a, b, size_2) == 0);
+    assert_true(size_1 != size_default || memcmp(a, c, size_1) != 0);
+    free(a);
+    free(b);
+    free(c);
+}
+
 /* ---------------------------------------------------------------------------------------------------------
  * scene-info --json */
 
@@ -362,6 +422,10 @@ static void test_err_res(void **state)
     expect_error(2, "sim --probe-cell nan", "--probe-cell", "'nan'", NULL);
     expect_error(2, "sim --probe-hysteresis 1", "--probe-hysteresis", "'1'", NULL);
     expect_error(2, "sim --probe-budget 0", "--probe-budget", "'0'", NULL);
+    expect_error(2, "sim --indirect-block 0", "--indirect-block", "'0'", NULL);
+    expect_error(2, "sim --indirect-block 3", "--indirect-block", "'3'", "1, 2 or 4", NULL);
+    expect_error(2, "sim --indirect-block 8", "--indirect-block", "'8'", NULL);
+    expect_error(2, "serve --indirect-block x", "--indirect-block", "'x'", NULL);
 }
 
 static void test_err_fov(void **state)
@@ -929,6 +993,7 @@ int main(void)
         cmocka_unit_test(test_help_lists_commands),
         cmocka_unit_test(test_unknown_command),
         cmocka_unit_test(test_subcommand_help),
+        cmocka_unit_test(test_indirect_block_option),
         cmocka_unit_test(test_scene_info_default),
         cmocka_unit_test(test_scene_info_bunny),
         cmocka_unit_test(test_scene_info_no_lights_no_sky),

@@ -31,6 +31,11 @@ const char srv_cli_engine_usage[] =
     "  --probe-rays N       rays per probe update, 1..4096 (default 144, DDGI's)\n"
     "  --probe-hysteresis H weight of a probe's old irradiance per update, [0, 0.999] (default 0.97)\n"
     "  --probe-budget N     probes updated per frame at most, 1..1000000 (default 1024)\n"
+    "  --indirect-block N   probes evaluated once per NxN block of pixels, then a depth- and normal-aware\n"
+    "                       upsample; 1 = every pixel, 2 or 4 at most (default 4); a viewer uses the\n"
+    "                       largest of 1, 2, 4 up to N that is at most a quarter of the narrowest probe\n"
+    "                       cell in pixels (60 degrees: 4 from 296 pixels high, 2 from 148); sparse\n"
+    "                       viewers always 1\n"
     "  --no-local-table     compose finds probes through the hash table only (for measuring the\n"
     "                       viewers' local lookup tables)\n"
     "  --no-cache           the baseline: every effect per pixel per frame at the converged sample counts\n"
@@ -52,6 +57,7 @@ const struct option srv_cli_engine_options[] = {
     {"probe-rays", required_argument, NULL, SRV_CLI_O_PRAYS},
     {"probe-hysteresis", required_argument, NULL, SRV_CLI_O_PHYST},
     {"probe-budget", required_argument, NULL, SRV_CLI_O_PBUDGET},
+    {"indirect-block", required_argument, NULL, SRV_CLI_O_IBLOCK},
     {"no-local-table", no_argument, NULL, SRV_CLI_O_NOLOCAL},
     {"no-cache", no_argument, NULL, SRV_CLI_O_NOCACHE},
     {"seed", required_argument, NULL, SRV_CLI_O_SEED},
@@ -171,6 +177,21 @@ static bool parse_shadow_rays(const char *cmd, const char *arg, srv_cli_engine *
     return true;
 }
 
+/* Parses --indirect-block: 1, 2 or 4 (srv_loop_desc.indirect_block). */
+static bool parse_indirect_block(const char *cmd, const char *arg, srv_cli_engine *e)
+{
+    uint32_t n;
+    if (!srv_cli_u32(cmd, "--indirect-block", arg, 1, 4, &n))
+        return false;
+    if (n == 3) {
+        fprintf(stderr, "fxcache %s: --indirect-block: '%s' must be 1, 2 or 4 (pixels per side of a block)\n", cmd,
+                arg);
+        return false;
+    }
+    e->indirect_block = n;
+    return true;
+}
+
 /* Parses --no-cache-samples: a power of two in [1/64, 16], as a decimal or as 1/N. */
 static bool parse_no_cache_samples(const char *cmd, const char *arg, srv_cli_engine *e)
 {
@@ -220,6 +241,7 @@ int srv_cli_engine_option(const char *cmd, int code, const char *arg, srv_cli_en
             e->probe_hysteresis = 1e-9; /* 0 means "default" in the loop's description */
         return 1;
     case SRV_CLI_O_PBUDGET: return srv_cli_u32(cmd, "--probe-budget", arg, 1, 1000000, &e->probe_budget);
+    case SRV_CLI_O_IBLOCK: return parse_indirect_block(cmd, arg, e);
     case SRV_CLI_O_NOLOCAL: e->no_local_table = true; return 1;
     case SRV_CLI_O_NOCACHE: e->no_cache = true; return 1;
     case SRV_CLI_O_SEED: return srv_cli_u32(cmd, "--seed", arg, 0, UINT32_MAX, &e->seed);
@@ -308,7 +330,7 @@ int srv_cli_run_open(const char *cmd, const srv_cli_engine *e, bool keep_views, 
                           .no_cache = e->no_cache, .seed = e->seed, .threads = e->threads, .keep_views = keep_views,
                           .probe_cell = (float)e->probe_cell, .probe_rays = e->probe_rays,
                           .probe_hysteresis = (float)e->probe_hysteresis, .probe_budget = e->probe_budget,
-                          .no_local_table = e->no_local_table, .ao_samples = e->ao_samples,
+                          .indirect_block = e->indirect_block, .no_local_table = e->no_local_table, .ao_samples = e->ao_samples,
                           .shadow_rays = e->shadow_rays, .no_cache_samples = (float)e->no_cache_samples};
     if (!srv_cli_choose_effects(cmd, run->s, e->effects, desc.effect_on, run->reasons, run->left_out_extra))
         return 2;
@@ -399,10 +421,11 @@ json_t *srv_cli_summary_json(const srv_cli_run *run, const srv_cli_engine *e)
         json_object_set_new(sum, "no_cache_samples", json_real(resolved->no_cache_samples));
     if (srv_loop_probe_cell(loop) > 0)
         json_object_set_new(sum, "probes",
-                            json_pack("{s:f,s:I,s:f,s:I,s:b}", "cell_m", (double)srv_loop_probe_cell(loop), "rays",
+                            json_pack("{s:f,s:I,s:f,s:I,s:I,s:b}", "cell_m", (double)srv_loop_probe_cell(loop), "rays",
                                       (json_int_t)srv_loop_desc_of(loop)->probe_rays, "hysteresis",
                                       (double)srv_loop_desc_of(loop)->probe_hysteresis, "budget",
-                                      (json_int_t)srv_loop_desc_of(loop)->probe_budget, "local_tables",
+                                      (json_int_t)srv_loop_desc_of(loop)->probe_budget, "indirect_block",
+                                      (json_int_t)srv_loop_desc_of(loop)->indirect_block, "local_tables",
                                       !e->no_local_table));
     else
         json_object_set_new(sum, "world_space_cache",

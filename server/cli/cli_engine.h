@@ -20,6 +20,7 @@ typedef struct srv_cli_engine {
     bool bias_set[SRV_MAX_EFFECTS];
     double pool_mb, ray_budget, density, probe_cell, probe_hysteresis;
     uint32_t seed, threads, ao_step, probe_rays, probe_budget;
+    uint32_t indirect_block;          /* srv_loop_desc.indirect_block: 1, 2 or 4 (0: the loop's default, 4) */
     uint32_t ao_samples, shadow_rays; /* converged sample counts (0: the loop's defaults, 64 and 16) */
     double no_cache_samples;          /* --no-cache: the baseline's counts as a multiple of those (0: 1) */
     bool no_cache, no_local_table;
@@ -30,7 +31,7 @@ enum {
     SRV_CLI_O_SCENE = 256, SRV_CLI_O_EFFECTS, SRV_CLI_O_BIAS, SRV_CLI_O_POOL, SRV_CLI_O_BUDGET, SRV_CLI_O_AOSTEP,
     SRV_CLI_O_PCELL, SRV_CLI_O_PRAYS, SRV_CLI_O_PHYST, SRV_CLI_O_PBUDGET, SRV_CLI_O_NOLOCAL, SRV_CLI_O_NOCACHE,
     SRV_CLI_O_SEED, SRV_CLI_O_THREADS, SRV_CLI_O_DENSITY, SRV_CLI_O_AOSAMPLES, SRV_CLI_O_SHADOWRAYS,
-    SRV_CLI_O_NCSAMPLES,
+    SRV_CLI_O_NCSAMPLES, SRV_CLI_O_IBLOCK,
     SRV_CLI_O_COMMAND = 320
 };
 

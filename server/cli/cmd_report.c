@@ -598,7 +598,7 @@ static int run_config(report_config *c, const report_context *ctx, const srv_cli
                           .no_cache = e->no_cache, .seed = e->seed, .threads = e->threads, .keep_views = true,
                           .probe_cell = (float)e->probe_cell, .probe_rays = e->probe_rays,
                           .probe_hysteresis = (float)e->probe_hysteresis, .probe_budget = e->probe_budget,
-                          .no_local_table = e->no_local_table, .ao_samples = e->ao_samples,
+                          .indirect_block = e->indirect_block, .no_local_table = e->no_local_table, .ao_samples = e->ao_samples,
                           .shadow_rays = e->shadow_rays, .no_cache_samples = (float)e->no_cache_samples};
     memcpy(desc.effect_on, effect_on, sizeof desc.effect_on);
     memcpy(desc.bias, e->bias, sizeof desc.bias);

@@ -368,7 +368,7 @@ FXC_HOT_LANES static void radiance_lanes(compose_scratch *cs, const float sky[3]
 /* Shades the count gathered pixels of a run into the viewer's radiance (and kept views): the effects' terms
  * from the caches (or per pixel in no-cache mode), then the formula. */
 /* The pixels of a run of a whole frame (rows y0..y1, columns x0..x1 of the tile of grid g): compose's
- * coarse evaluation of loop->coarse_effect (engine_internal.h, srv__coarse_samples). */
+ * coarse evaluation of loop->coarse_effect (engine_internal.h, srv__coarse_mask). */
 typedef struct coarse_run {
     const srv_coarse_grid *g;
     uint32_t x0, x1, y0, y1;
@@ -381,6 +381,7 @@ FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scrat
                          const coarse_run *cr, const compose_setup *cu, uint32_t thread_index)
 {
     const uint64_t *bits = loop->viewer_bits[e];
+    const srv_coarse_grid *g = cr->g;
     uint32_t own = 0, i = 0;
     gather_memo memo = {.tri = SRV_MISS};
     for (uint32_t y = cr->y0; y < cr->y1; y++)
@@ -388,22 +389,45 @@ FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scrat
             size_t p = (size_t)y * view->frame.width + x;
             if (view->tri[p] == SRV_MISS)
                 continue;
-            uint32_t rep[4];
-            float weight[4], sum[4] = {0, 0, 0, 0}, total = 0, sharing = 0;
-            uint32_t n = srv__coarse_samples(loop->s, view, loop->coarse_depth_scale, cr->g, x, y, 1.0f, false,
-                                             rep, weight);
-            for (uint32_t c = 0; c < n; c++) {
-                uint32_t r = rep[c];
-                if (!cs->rep_ok[r])
-                    continue;
-                float w = weight[c];
-                sum[0] += w * cs->rep_indirect[r][0];
-                sum[1] += w * cs->rep_indirect[r][1];
-                sum[2] += w * cs->rep_indirect[r][2];
-                sum[3] += w * cs->rep_sky[r];
-                total += w;
-                if (bits)
-                    sharing = cs->rep_sharing[r] > sharing ? cs->rep_sharing[r] : sharing;
+            /* Requests' sample choice (srv__coarse_mask), blended in its candidate order. */
+            uint32_t mask = view->coarse[p];
+            float sum[4] = {0, 0, 0, 0}, total = 0, sharing = 0;
+            uint32_t lx = x - g->x0, ly = y - g->y0, low = g->block - 1;
+            uint32_t first = (ly >> g->shift) * g->nx + (lx >> g->shift);
+            if (mask == 0xF && cs->rep_ok[first] & cs->rep_ok[first + 1] & cs->rep_ok[first + g->nx] &
+                                   cs->rep_ok[first + g->nx + 1]) {
+                /* The common case: all 4 reps match and have data; tabulated weights (the same values and
+                 * order of operations as below). */
+                const float *weight = g->weight[((ly & low) << g->shift) | (lx & low)];
+                const uint32_t index_of[4] = {first, first + 1, first + g->nx, first + g->nx + 1};
+                for (uint32_t c = 0; c < 4; c++) {
+                    uint32_t r = index_of[c];
+                    float w = weight[c];
+                    sum[0] += w * cs->rep_indirect[r][0];
+                    sum[1] += w * cs->rep_indirect[r][1];
+                    sum[2] += w * cs->rep_indirect[r][2];
+                    sum[3] += w * cs->rep_sky[r];
+                    total += w;
+                    if (bits)
+                        sharing = cs->rep_sharing[r] > sharing ? cs->rep_sharing[r] : sharing;
+                }
+            } else if (mask) {
+                float weight[4];
+                srv__coarse_weights(g, x, y, weight);
+                const uint32_t index_of[4] = {first, first + 1, first + g->nx, first + g->nx + 1};
+                for (uint32_t c = 0; c < 4; c++) {
+                    uint32_t r = index_of[c];
+                    if (!(mask >> c & 1) || !cs->rep_ok[r])
+                        continue;
+                    float w = weight[c];
+                    sum[0] += w * cs->rep_indirect[r][0];
+                    sum[1] += w * cs->rep_indirect[r][1];
+                    sum[2] += w * cs->rep_indirect[r][2];
+                    sum[3] += w * cs->rep_sky[r];
+                    total += w;
+                    if (bits)
+                        sharing = cs->rep_sharing[r] > sharing ? cs->rep_sharing[r] : sharing;
+                }
             }
             if (total > 0) {
                 float open = cs->sky_visibility[i] / total;

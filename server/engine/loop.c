@@ -294,7 +294,7 @@ fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err,
             loop->fx.world_user = cache;
         }
     }
-    /* The effect whole frames evaluate per block (engine_internal.h, srv__coarse_samples): the first shading,
+    /* The effect whole frames evaluate per block (engine_internal.h, srv__coarse_mask): the first shading,
      * low-frequency one of a kind that batches per effect and reads positions (the world-space kind). */
     loop->coarse_effect = SRV_NO_EFFECT;
     loop->coarse_depth_scale = 3.0f / loop->s->texel_density;
@@ -337,6 +337,7 @@ static void viewer_free_buffers(srv_loop *loop, srv_viewer *view)
     srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->bary_v, n, 0, sizeof(float));
     srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->footprint, n, 0, sizeof(float));
     srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->depth, n, 0, sizeof(float));
+    srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->coarse, view->coarse ? n : 0, 0, 1);
     srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->radiance, 3 * n, 0, sizeof(float));
     srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->image, 3 * n, 0, 1);
     for (int w = 0; w < SRV_VIEW_COUNT; w++)
@@ -440,6 +441,8 @@ fxc_result srv_viewer_add(srv_loop *loop, const srv_viewer_desc *desc, srv_viewe
     ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->bary_v, 0, n, sizeof(float));
     ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->footprint, 0, n, sizeof(float));
     ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->depth, 0, n, sizeof(float));
+    if (!view->sparse && loop->coarse_effect != SRV_NO_EFFECT) /* requests' sample choice for compose */
+        ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->coarse, 0, n, 1);
     ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->radiance, 0, 3 * n, sizeof(float));
     ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->image, 0, 3 * n, 1);
     if (view->sparse) {

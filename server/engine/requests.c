@@ -132,20 +132,29 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
     uint32_t block =
         task->effect != SRV_NO_EFFECT && task->effect == loop->coarse_effect ? srv__coarse_block(loop, view) : 1;
     if (block > 1) {
-        /* Evaluated per block in compose: the reps, and the pixels no rep stands in for (strictness 0.75 <
-         * compose's 1: engine_internal.h). */
+        /* Evaluated per block in compose: the reps, and the pixels no rep stands in for. The sample choice is
+         * made here, once, and kept for compose (view->coarse; engine_internal.h, srv__coarse_mask). */
         srv_coarse_grid g;
         srv__coarse_grid(block, x0, y0, width, height, &g);
+        uint8_t *coarse = view->coarse;
         for (uint32_t y = y0; y < y0 + SRV_TILE && y < height; y++)
             for (uint32_t x = x0; x < x0 + SRV_TILE && x < width; x++) {
                 size_t p = (size_t)y * width + x;
-                uint32_t rep[4];
-                float weight[4];
                 if (view->tri[p] == SRV_MISS)
                     continue;
-                if (srv__coarse_is_rep(g.block, x, y) ||
-                    !srv__coarse_samples(loop->s, view, loop->coarse_depth_scale, &g, x, y, 0.75f, true, rep,
-                                         weight))
+                /* The common case without the general test: the pixel and its block's 4 corner reps (those
+                 * the frame has) on one triangle; all 4 candidates then match (srv__coarse_mask). */
+                uint32_t lx = x - x0, ly = y - y0, low = block - 1, ix = lx >> g.shift, iy = ly >> g.shift;
+                uint32_t fx = lx & low, fy = ly & low, mask;
+                size_t r0 = (size_t)(y0 + (iy << g.shift)) * width + x0 + (ix << g.shift);
+                if ((fx | fy) && ix + 1 < g.nx && iy + 1 < g.ny && view->tri[r0] == view->tri[p] &&
+                    view->tri[r0 + block] == view->tri[p] && view->tri[r0 + block * width] == view->tri[p] &&
+                    view->tri[r0 + block * width + block] == view->tri[p])
+                    mask = (fx ? 2u : 0u) | (fy ? 4u : 0u) | (fx && fy ? 9u : 1u);
+                else
+                    mask = srv__coarse_mask(loop->s, view, loop->coarse_depth_scale, &g, x, y);
+                coarse[p] = (uint8_t)mask;
+                if (mask == 0 || srv__coarse_is_rep(g.block, x, y))
                     fill_pixel(loop->s, view, p, positions, &memo, &pixels[count++]);
             }
         request_pixels(task, thread_index, pixels, count);

@@ -71,6 +71,8 @@ typedef struct srv_viewer {
     float *bary_u, *bary_v;
     float *footprint;          /* log2 of the pixel's footprint in level-0 texels (ray differentials) */
     float *depth;              /* distance along the primary ray, INFINITY for none */
+    uint8_t *coarse;           /* whole frames with a coarse effect: per pixel, this frame's srv__coarse_mask
+                                  (written by requests, read by compose); NULL otherwise */
     float *radiance;           /* linear RGB */
     uint8_t *image;            /* sRGB 8-bit RGB */
     float *views[SRV_VIEW_COUNT];
@@ -251,9 +253,9 @@ static inline uint32_t srv__run_key_pixel(uint32_t key, uint32_t tiles_x)
  * most), so interpolation runs across tile borders without a seam. Every other pixel takes the up to 4 reps
  * around it (bilinear weights, at least 1/16 each) whose surface matches its own (joint bilateral), or, when
  * none matches, is evaluated itself, and requests then ask for its own keys. The match reads only what
- * visibility wrote (triangle, depth, footprint) and the scene's face normals, so requests and compose decide
- * on the same bits; requests use a stricter tolerance (strictness 0.75 against compose's 1), so every pixel
- * compose evaluates itself had its keys requested, even if float contraction differed between them. */
+ * visibility wrote (triangle, depth, footprint) and the scene's face normals; requests decide it once per
+ * frame and pixel and keep it for compose (one byte a pixel, view->coarse), so the pixels compose evaluates
+ * itself are exactly those whose keys requests asked for. */
 enum { SRV_COARSE_REPS = (SRV_TILE / 2 + 1) * (SRV_TILE / 2 + 1) }; /* reps of a tile at most (B = 2) */
 
 typedef struct srv_coarse_grid {
@@ -261,6 +263,8 @@ typedef struct srv_coarse_grid {
     uint32_t x0, y0;       /* the tile's first pixel (a multiple of B: tiles are 16-aligned) */
     uint32_t nx, ny;       /* reps per row and column the tile uses (its own and the next, within the frame) */
     float inv_block;       /* 1 / B */
+    float weight[16][4];   /* the 4 candidates' bilinear weights at block position fy * B + fx, both axes with
+                              a second rep (srv__coarse_weights' values there) */
 } srv_coarse_grid;
 
 static inline void srv__coarse_grid(uint32_t block, uint32_t x0, uint32_t y0, uint32_t width, uint32_t height,
@@ -276,6 +280,14 @@ static inline void srv__coarse_grid(uint32_t block, uint32_t x0, uint32_t y0, ui
     g->ny = (height - y0 + block - 1) / block;
     g->nx = g->nx < most ? g->nx : most;
     g->ny = g->ny < most ? g->ny : most;
+    for (uint32_t fy = 0; fy < block && block <= 4; fy++)
+        for (uint32_t fx = 0; fx < block; fx++) {
+            float wx = (float)fx * g->inv_block, wy = (float)fy * g->inv_block, *w = g->weight[fy * block + fx];
+            w[0] = (1.0f - wx) * (1.0f - wy);
+            w[1] = wx * (1.0f - wy);
+            w[2] = (1.0f - wx) * wy;
+            w[3] = wx * wy;
+        }
 }
 
 /* The block a viewer's whole frame uses: the largest power of two up to desc.indirect_block that is at most
@@ -332,48 +344,53 @@ static inline bool srv__coarse_is_rep(uint32_t block, uint32_t x, uint32_t y)
     return (x | y) % block == 0;
 }
 
-/* The reps standing in for visible pixel (x, y) of the tile of grid g (frame coordinates): writes up to 4
- * rep indices (j * nx + i, relative to the tile's first rep) and their bilinear weights (at least 1 / B^2:
- * never 0), returns how many (0: the pixel is evaluated itself). A rep is its own only sample. With `any`,
- * returns at the first match (requests: only whether one exists). Reps on the pixel's own triangle are the
- * common case and need no test beyond that. */
-static inline uint32_t srv__coarse_samples(const scene *s, const srv_viewer *v, float depth_scale,
-                                           const srv_coarse_grid *g, uint32_t x, uint32_t y, float strictness,
-                                           bool any, uint32_t rep[4], float weight[4])
+/* The reps that may stand in for visible pixel (x, y) of the tile of grid g (frame coordinates), as a mask:
+ * bit c for candidate c (0: the rep of the pixel's block, 1: the next to the right, 2: the next below, 3: the
+ * diagonal one) when it exists in the frame and matches (srv__coarse_match, strictness 1); a rep: bit 0
+ * alone; 0: the pixel is evaluated itself. Requests decide it once per frame and keep it in view->coarse for
+ * compose (srv__coarse_weights), so what compose evaluates itself is exactly what requests asked keys for.
+ * Reps on the pixel's own triangle are the common case and need no test beyond that. */
+static inline uint32_t srv__coarse_mask(const scene *s, const srv_viewer *v, float depth_scale,
+                                        const srv_coarse_grid *g, uint32_t x, uint32_t y)
 {
-    uint32_t lx = x - g->x0, ly = y - g->y0, mask = g->block - 1;
-    uint32_t ix = lx >> g->shift, iy = ly >> g->shift, fx = lx & mask, fy = ly & mask;
-    uint32_t first = iy * g->nx + ix;
-    if (!(fx | fy)) {
-        rep[0] = first;
-        weight[0] = 1.0f;
+    uint32_t lx = x - g->x0, ly = y - g->y0, low = g->block - 1;
+    uint32_t ix = lx >> g->shift, iy = ly >> g->shift, fx = lx & low, fy = ly & low;
+    if (!(fx | fy))
         return 1;
-    }
-    /* The second rep along an axis, if the frame has it; else the first alone (weight 1 on that axis). */
     bool two_x = fx && ix + 1 < g->nx, two_y = fy && iy + 1 < g->ny;
-    float wx = two_x ? (float)fx * g->inv_block : 0.0f, wy = two_y ? (float)fy * g->inv_block : 0.0f;
     size_t width = v->frame.width, p = (size_t)y * width + x;
     size_t r0 = (size_t)(g->y0 + (iy << g->shift)) * width + g->x0 + (ix << g->shift);
     const size_t pixel_of[4] = {r0, r0 + g->block, r0 + g->block * width, r0 + g->block * width + g->block};
-    const uint32_t index_of[4] = {first, first + 1, first + g->nx, first + g->nx + 1};
-    const float weight_of[4] = {(1.0f - wx) * (1.0f - wy), wx * (1.0f - wy), (1.0f - wx) * wy, wx * wy};
-    const bool exists[4] = {true, two_x, two_y, two_x && two_y};
-    uint32_t tp = v->tri[p], n = 0;
+    const uint32_t exists = 1u | (two_x ? 2u : 0u) | (two_y ? 4u : 0u) | (two_x && two_y ? 8u : 0u);
+    uint32_t tp = v->tri[p], mask = 0;
     for (uint32_t c = 0; c < 4; c++) {
-        if (!exists[c])
+        if (!(exists >> c & 1))
             continue;
         size_t r = pixel_of[c];
         if (v->tri[r] != tp) {
             uint32_t dx = (c & 1) ? g->block - fx : fx, dy = (c & 2) ? g->block - fy : fy;
-            if (!srv__coarse_match(s, v, depth_scale, p, r, (float)(dx > dy ? dx : dy), strictness))
+            if (!srv__coarse_match(s, v, depth_scale, p, r, (float)(dx > dy ? dx : dy), 1.0f))
                 continue;
         }
-        rep[n] = index_of[c];
-        weight[n++] = weight_of[c];
-        if (any)
-            return n;
+        mask |= 1u << c;
     }
-    return n;
+    return mask;
+}
+
+/* The bilinear weights of the 4 candidate reps of pixel (x, y) (srv__coarse_mask's order; at least 1 / B^2
+ * for a candidate that exists, 0 along an axis the frame has no second rep for) and the first candidate's
+ * index (j * nx + i, relative to the tile's first rep; the others are +1, +nx, +nx+1). */
+static inline uint32_t srv__coarse_weights(const srv_coarse_grid *g, uint32_t x, uint32_t y, float weight[4])
+{
+    uint32_t lx = x - g->x0, ly = y - g->y0, low = g->block - 1;
+    uint32_t ix = lx >> g->shift, iy = ly >> g->shift, fx = lx & low, fy = ly & low;
+    bool two_x = fx && ix + 1 < g->nx, two_y = fy && iy + 1 < g->ny;
+    float wx = two_x ? (float)fx * g->inv_block : 0.0f, wy = two_y ? (float)fy * g->inv_block : 0.0f;
+    weight[0] = (1.0f - wx) * (1.0f - wy);
+    weight[1] = wx * (1.0f - wy);
+    weight[2] = (1.0f - wx) * wy;
+    weight[3] = wx * wy;
+    return iy * g->nx + ix;
 }
 
 /* Pixels a viewer's frame visits: width*height, or a sparse viewer's list. */
