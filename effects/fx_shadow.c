@@ -376,8 +376,17 @@ FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_ru
         if (taps->footprint_log2 >= 0.0f) { /* as large as a texel: the texels' lit fractions */
             for (uint32_t l = 0; l < lights; l++) {
                 float lit = 0;
-                for (uint32_t t = 0; t < taps->count; t++)
-                    lit += taps->weight[t] * lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
+                if (taps->count == 4) { /* most pixels: the loop below written out (same sum, same order) */
+                    const size_t at = 2u * l;
+                    lit = lit + taps->weight[0] * lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[0] + at)) +
+                          taps->weight[1] * lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[1] + at)) +
+                          taps->weight[2] * lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[2] + at)) +
+                          taps->weight[3] * lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[3] + at));
+                } else {
+                    for (uint32_t t = 0; t < taps->count; t++)
+                        lit += taps->weight[t] *
+                               lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
+                }
                 visibility[l] *= fx__min1(lit);
             }
             continue;
