@@ -184,6 +184,13 @@ static inline float lit_fraction(uint32_t mask)
     return (float)popcount16(mask) * (1.0f / FX_SHADOW_RAYS);
 }
 
+/* lit_fraction inside the cloned shade: __builtin_popcount is one POPCNT in the x86-64-v3 copy (the one this
+ * machine runs) and libgcc's table code in the baseline copy; the same count either way. */
+static inline __attribute__((always_inline)) float lit_fraction_hot(uint32_t mask)
+{
+    return (float)__builtin_popcount(mask) * (1.0f / FX_SHADOW_RAYS);
+}
+
 float fx_shadow_sample(const void *payload, uint32_t texel, uint32_t light_count, uint32_t light)
 {
     FX_ASSERT(texel < 64 && light < light_count);
@@ -369,8 +376,17 @@ FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_ru
         if (taps->footprint_log2 >= 0.0f) { /* as large as a texel: the texels' lit fractions */
             for (uint32_t l = 0; l < lights; l++) {
                 float lit = 0;
-                for (uint32_t t = 0; t < taps->count; t++)
-                    lit += taps->weight[t] * lit_fraction(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
+                if (taps->count == 4) { /* most pixels: the loop below written out (same sum, same order) */
+                    const size_t at = 2u * l;
+                    lit = lit + taps->weight[0] * lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[0] + at)) +
+                          taps->weight[1] * lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[1] + at)) +
+                          taps->weight[2] * lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[2] + at)) +
+                          taps->weight[3] * lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[3] + at));
+                } else {
+                    for (uint32_t t = 0; t < taps->count; t++)
+                        lit += taps->weight[t] *
+                               lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
+                }
                 visibility[l] *= fx__min1(lit);
             }
             continue;
@@ -403,7 +419,7 @@ FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_ru
                 uint32_t mask = fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l);
                 any_lit |= mask;
                 all_lit &= mask;
-                average += taps->weight[t] * lit_fraction(mask);
+                average += taps->weight[t] * lit_fraction_hot(mask);
             }
             if (!(coarse > 0))
                 average = 0;

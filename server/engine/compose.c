@@ -18,12 +18,24 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* The effects of one cache kind whose taps one call gathers for a run (kind->pixel_taps). */
+enum { TAPS_GROUP = 4 };
+
+/* One effect's taps of a run through the kind's call for several. */
+FXC_HOT_INLINE void kind_taps(srv_loop *loop, const srv_viewer *view, uint32_t thread_index, const srv_pixel *pixels,
+                              uint32_t count, uint32_t e, fx_taps *taps, uint32_t *blocks)
+{
+    uint32_t k = loop->effect_kind[e];
+    loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers), thread_index, pixels, count, 1, &e,
+                               loop->bias[e], &taps, &blocks);
+}
+
 /* Per-thread scratch for one run of pixels along a row. */
 typedef struct compose_scratch {
     srv_pixel pixels[SRV_RUN];
     fx_point points[SRV_RUN];
-    fx_taps taps[SRV_RUN];
-    uint32_t blocks[SRV_RUN];
+    fx_taps taps[TAPS_GROUP * SRV_RUN];  /* effect j of a group of one kind's effects: from j * SRV_RUN */
+    uint32_t blocks[TAPS_GROUP * SRV_RUN];
     size_t index[SRV_RUN]; /* pixel index of each visible pixel of the run */
     float albedo[SRV_RUN][3];
     uint32_t triangle[SRV_RUN];                      /* the albedo's arguments, one array each */
@@ -454,9 +466,7 @@ FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scrat
         }
     if (!own)
         return;
-    uint32_t k = loop->effect_kind[e];
-    loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers), thread_index, cs->own_pixels, own,
-                               e, loop->bias[e], cs->taps, bits ? cs->blocks : NULL);
+    kind_taps(loop, view, thread_index, cs->own_pixels, own, e, cs->taps, bits ? cs->blocks : NULL);
     fx_shade_run run = {.count = own, .taps = cs->taps, .points = cs->own_points, .sky_visibility = cs->own_sky,
                         .indirect = cs->own_indirect};
     loop->effects[e]->shade(&loop->fx, &run);
@@ -478,7 +488,6 @@ static void coarse_prepass(srv_loop *loop, srv_viewer *view, compose_scratch *cs
 {
     uint32_t e = loop->coarse_effect, width = view->frame.width, reps = g->nx * g->ny;
     const uint64_t *bits = loop->viewer_bits[e];
-    uint32_t k = loop->effect_kind[e];
     gather_memo memo = {.tri = SRV_MISS};
     for (uint32_t first = 0; first < reps;) {
         uint32_t count = 0;
@@ -495,8 +504,7 @@ static void coarse_prepass(srv_loop *loop, srv_viewer *view, compose_scratch *cs
         }
         if (!count)
             continue;
-        loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers), thread_index, cs->pixels,
-                                   count, e, loop->bias[e], cs->taps, bits ? cs->blocks : NULL);
+        kind_taps(loop, view, thread_index, cs->pixels, count, e, cs->taps, bits ? cs->blocks : NULL);
         for (uint32_t i = 0; i < count; i++) {
             cs->sky_visibility[i] = 1.0f;
             cs->indirect[3 * i] = cs->indirect[3 * i + 1] = cs->indirect[3 * i + 2] = 0.0f;
@@ -553,16 +561,39 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
                 coarse_shade(loop, view, cs, e, cr, cu, thread_index);
                 continue;
             }
-            uint32_t k = loop->effect_kind[e];
-            const uint64_t *bits = loop->viewer_bits[e];
-            loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers), thread_index, cs->pixels,
-                                       count, e, loop->bias[e], cs->taps, bits ? cs->blocks : NULL);
-            loop->effects[e]->shade(&loop->fx, &run);
-            for (uint32_t i = 0; i < count; i++) {
-                cs->missing[i] |= cs->taps[i].count == 0;
-                if (bits && cs->blocks[i] != SRV_NONE)
-                    cs->sharing[i] = fmaxf(cs->sharing[i], (float)__builtin_popcountll(bits[cs->blocks[i]]));
+            /* This effect and the next ones that shade through the same kind at the same bias (up to the
+             * coarse effect): their taps in one call, which does their shared per-pixel work once; then each
+             * shades in the effects' order, as one at a time. */
+            uint32_t k = loop->effect_kind[e], group[TAPS_GROUP], n = 0, last = e;
+            fx_taps *group_taps[TAPS_GROUP];
+            uint32_t *group_blocks[TAPS_GROUP];
+            for (uint32_t f = e; f < loop->effect_count && n < TAPS_GROUP; f++) {
+                if (!loop->effect_shading[f])
+                    continue;
+                if ((cr && f == loop->coarse_effect) || loop->effect_kind[f] != k || loop->bias[f] != loop->bias[e])
+                    break;
+                group[n] = f;
+                group_taps[n] = cs->taps + (size_t)n * SRV_RUN;
+                group_blocks[n] = loop->viewer_bits[f] ? cs->blocks + (size_t)n * SRV_RUN : NULL;
+                n++;
+                last = f;
             }
+            loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers), thread_index, cs->pixels,
+                                       count, n, group, loop->bias[e], group_taps, group_blocks);
+            for (uint32_t j = 0; j < n; j++) {
+                uint32_t g = group[j];
+                const uint64_t *bits = loop->viewer_bits[g];
+                const fx_taps *taps = group_taps[j];
+                const uint32_t *blocks = group_blocks[j];
+                run.taps = taps;
+                loop->effects[g]->shade(&loop->fx, &run);
+                for (uint32_t i = 0; i < count; i++) {
+                    cs->missing[i] |= taps[i].count == 0;
+                    if (bits && blocks[i] != SRV_NONE)
+                        cs->sharing[i] = fmaxf(cs->sharing[i], (float)__builtin_popcountll(bits[blocks[i]]));
+                }
+            }
+            e = last;
         }
     }
     /* The lights' irradiance, light by light over the run (each pixel sums its lights in the same order as

@@ -384,16 +384,15 @@ FXC_HOT_LANES static void taps_lanes_fill(taps_lanes *L, int32_t bias)
     }
 }
 
-/* Per pixel the bilinear taps at its level, in the order (x0, y0), (x0 + 1, y0), (x0, y0 + 1),
+/* One effect's taps of a run from the lanes (taps_lanes_fill at the call's bias): per pixel the bilinear taps
+ * at its level, in the order (x0, y0), (x0 + 1, y0), (x0, y0 + 1),
  * (x0 + 1, y0 + 1) with texels clamped to the island, leaving out taps whose block is absent, whose texel
  * holds no data or whose weight is 0; the weights renormalised. The four texels lie in one block unless the
  * footprint straddles a block edge, so the block of a tap is looked up only where its block coordinates
  * differ from the first tap's. */
-FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
-                                uint32_t count, uint32_t effect, int32_t bias, fx_taps *taps, uint32_t *blocks)
+FXC_HOT_INLINE void taps_of_effect(const kind_osc *k, const taps_lanes *L, const srv_pixel *pixels,
+                                   uint32_t count, uint32_t effect, fx_taps *taps, uint32_t *blocks)
 {
-    (void)slot, (void)thread;
-    const kind_osc *k = cache;
     const osc_cache *osc = k->osc;
     const scene_island *islands = k->s->islands;
     const size_t texel_bytes = osc_pool_texel_bytes(osc, effect);
@@ -410,20 +409,10 @@ FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot,
     const uint8_t *reuse_texel[4] = {NULL, NULL, NULL, NULL};
     uint32_t reuse_block = 0;
     bool small = false; /* the island's size at this level below 2^24: a column or row is exact in a float */
-    taps_lanes L;
-    uint32_t i = 0;
-    for (; i < count; i++) {
-        L.u[i] = pixels[i].island_u;
-        L.v[i] = pixels[i].island_v;
-        L.footprint[i] = pixels[i].footprint;
-    }
-    for (; i < SRV_RUN; i++)
-        L.u[i] = L.v[i] = L.footprint[i] = 0.0f;
-    taps_lanes_fill(&L, bias);
-    for (i = 0; i < count; i++) {
+    for (uint32_t i = 0; i < count; i++) {
         const srv_pixel *px = &pixels[i];
         fx_taps *out = &taps[i];
-        uint32_t level = (uint32_t)L.level[i];
+        uint32_t level = (uint32_t)L->level[i];
         if (px->island != memo_island || level != memo_level) { /* the island's size at this level */
             memo_island = px->island;
             memo_level = level;
@@ -435,9 +424,9 @@ FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot,
                    ((uint64_t)level << OSC_KEY_LEVEL_SHIFT);
             reuse = false;
         }
-        float x = L.x[i], y = L.y[i], ax = L.ax[i], ay = L.ay[i];
-        long x0 = (long)L.fx0[i], y0 = (long)L.fy0[i];
-        if (small && L.positive[i] && x0 >= 0 && x0 + 1 < w && y0 >= 0 && y0 + 1 < h) {
+        float x = L->x[i], y = L->y[i], ax = L->ax[i], ay = L->ay[i];
+        long x0 = (long)L->fx0[i], y0 = (long)L->fy0[i];
+        if (small && L->positive[i] && x0 >= 0 && x0 + 1 < w && y0 >= 0 && y0 + 1 < h) {
             /* The usual case: columns and rows inside the island (not clamped), no weight 0. When the four
              * texels lie in one block and hold data, the taps are the lanes' values: what the paths below
              * give, value for value. Otherwise those paths decide. */
@@ -492,14 +481,14 @@ FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot,
                 out->texel[1] = reuse_texel[1];
                 out->texel[2] = reuse_texel[2];
                 out->texel[3] = reuse_texel[3];
-                out->weight[0] = L.weight[0][i];
-                out->weight[1] = L.weight[1][i];
-                out->weight[2] = L.weight[2][i];
-                out->weight[3] = L.weight[3][i];
-                float at_x0 = L.at_x0[i], at_x1 = L.at_x1[i], at_y0 = L.at_y0[i], at_y1 = L.at_y1[i];
+                out->weight[0] = L->weight[0][i];
+                out->weight[1] = L->weight[1][i];
+                out->weight[2] = L->weight[2][i];
+                out->weight[3] = L->weight[3][i];
+                float at_x0 = L->at_x0[i], at_x1 = L->at_x1[i], at_y0 = L->at_y0[i], at_y1 = L->at_y1[i];
                 out->at_x[0] = at_x0, out->at_x[1] = at_x1, out->at_x[2] = at_x0, out->at_x[3] = at_x1;
                 out->at_y[0] = at_y0, out->at_y[1] = at_y0, out->at_y[2] = at_y1, out->at_y[3] = at_y1;
-                out->footprint_log2 = L.footprint_log2[i];
+                out->footprint_log2 = L->footprint_log2[i];
                 out->count = 4;
                 if (blocks)
                     blocks[i] = reuse_block;
@@ -598,6 +587,30 @@ FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot,
         for (uint32_t t = 0; t < n; t++)
             out->weight[t] *= inv;
     }
+}
+
+/* The kind interface's taps: the lanes once for all the call's effects (they share the bias, so the level,
+ * weights and positions), then each effect's lookups as above (its own memo, in a loop of its own: state
+ * shared across effects in one loop was slower, kept in memory instead of registers). */
+FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread,
+                                               const srv_pixel *pixels, uint32_t count, uint32_t effect_count,
+                                               const uint32_t *effects, int32_t bias, fx_taps *const *taps,
+                                               uint32_t *const *blocks)
+{
+    (void)slot, (void)thread;
+    const kind_osc *k = cache;
+    taps_lanes L;
+    uint32_t i = 0;
+    for (; i < count; i++) {
+        L.u[i] = pixels[i].island_u;
+        L.v[i] = pixels[i].island_v;
+        L.footprint[i] = pixels[i].footprint;
+    }
+    for (; i < SRV_RUN; i++)
+        L.u[i] = L.v[i] = L.footprint[i] = 0.0f;
+    taps_lanes_fill(&L, bias);
+    for (uint32_t j = 0; j < effect_count; j++)
+        taps_of_effect(k, &L, pixels, count, effects[j], taps[j], blocks ? blocks[j] : NULL);
 }
 
 static uint32_t osc_kind_pool_capacity(const void *cache, uint32_t effect)

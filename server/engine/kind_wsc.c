@@ -587,8 +587,8 @@ bool srv__wsc_world_cell(const void *user, uint32_t effect, uint32_t level, cons
     return true;
 }
 
-static void wsc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
-                                uint32_t count, uint32_t effect, int32_t bias, fx_taps *taps, uint32_t *blocks)
+static void wsc_kind_pixel_taps_one(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
+                                    uint32_t count, uint32_t effect, int32_t bias, fx_taps *taps, uint32_t *blocks)
 {
     kind_wsc *k = (kind_wsc *)cache; /* writes only this (viewer, thread)'s local table and counters */
     wsc_local *local = NULL;
@@ -712,6 +712,16 @@ static void wsc_kind_memory(const void *cache, srv_memory *out)
     }
     out->world_local += local;
     out->total += m.total_bytes + sizeof *k + local;
+}
+
+/* The interface's several effects: one after the other (their lookups share nothing). */
+static void wsc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
+                                uint32_t count, uint32_t effect_count, const uint32_t *effects, int32_t bias,
+                                fx_taps *const *taps, uint32_t *const *blocks)
+{
+    for (uint32_t j = 0; j < effect_count; j++)
+        wsc_kind_pixel_taps_one(cache, slot, thread, pixels, count, effects[j], bias, taps[j],
+                                blocks ? blocks[j] : NULL);
 }
 
 const srv_cache_kind srv__kind_wsc = {

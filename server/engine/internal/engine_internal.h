@@ -150,11 +150,15 @@ typedef struct srv_cache_kind {
      * returns the texels whose four are all there. NULL: the kind does not resample. */
     uint64_t (*finer_texels)(void *cache, uint32_t effect, uint32_t block, uint64_t need,
                              const void *finer[64][4]);
-    /* Stage 7: the filtered taps of `count` pixels for `effect` at level footprint + bias; blocks (may be
-     * NULL) receives the block of each pixel's first tap or SRV_NONE. Called from several threads at once;
-     * `thread` is the calling pool thread (per-thread state of a kind, such as local lookup tables). */
+    /* Stage 7: the filtered taps of `count` pixels for each of `effect_count` effects of this kind (at most
+     * SRV_MAX_EFFECTS), all at level footprint + bias: taps[j][i] for pixel i and effects[j]; blocks (may be
+     * NULL, and so may each blocks[j]) receives the block of each pixel's first tap or SRV_NONE. Each effect's
+     * taps are those of a call for it alone; a kind computes what they share (level, footprint, weights)
+     * once per pixel. Called from several threads at once; `thread` is the calling pool thread (per-thread
+     * state of a kind, such as local lookup tables). */
     void (*pixel_taps)(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
-                       uint32_t count, uint32_t effect, int32_t bias, fx_taps *taps, uint32_t *blocks);
+                       uint32_t count, uint32_t effect_count, const uint32_t *effects, int32_t bias,
+                       fx_taps *const *taps, uint32_t *const *blocks);
     uint32_t (*pool_capacity)(const void *cache, uint32_t effect);
     /* Stage 9 and figures. */
     void (*housekeeping)(void *cache);
