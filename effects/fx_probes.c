@@ -72,6 +72,13 @@ static inline float half_bits_to_float(uint32_t h)
     return f * 0x1p112f;
 }
 
+/* fminf(x, m) for m > 0 (not NaN), inline: NaN and x >= m give m, as fminf does (libm's fminf is a call
+ * here: without -ffinite-math-only the compiler does not inline it). */
+static inline float min_of(float x, float m)
+{
+    return x < m ? x : m;
+}
+
 /* Values >= 0 to halves, each rounded up with probability equal to its position between the two neighbouring
  * halves (u in [0, 1)), so the rounding is unbiased; saturates at the largest half (65504), never infinity;
  * negative values and NaN become 0 (irradiance and distances are never negative). Written without branches
@@ -82,13 +89,18 @@ static inline float half_bits_to_float(uint32_t h)
 FXC_HOT_CLONES static void halves_stochastic(const float *restrict x, const float *restrict u, uint32_t n,
                                              uint16_t *restrict out)
 {
-    for (uint32_t i = 0; i < n; i++) {
-        float v = x[i] > 0 ? (x[i] < 65504.0f ? x[i] : 65504.0f) : 0.0f;
+    for (uint32_t i = 0; i < n; i++) { /* selects only: && or a bool mixed into integers stop the vectoriser */
+        float xi = x[i];
+        float v = xi > 0 ? xi : 0.0f;
+        v = v < 65504.0f ? v : 65504.0f;
         uint32_t bits;
         memcpy(&bits, &v, sizeof bits);
-        uint32_t lo = v < 0x1p-14f ? (uint32_t)(v * 0x1p24f) : (bits >> 13) - (112u << 10);
+        uint32_t sub = (uint32_t)(int32_t)(v * 0x1p24f), norm = (bits >> 13) - (112u << 10);
+        uint32_t lo = v < 0x1p-14f ? sub : norm;
         float below = half_bits_to_float(lo), above = half_bits_to_float(lo + 1);
-        uint32_t up = below != v && lo != 0x7bffu && u[i] * (above - below) < v - below;
+        uint32_t up = u[i] * (above - below) < v - below ? 1u : 0u;
+        up = below != v ? up : 0u;
+        up = lo != 0x7bffu ? up : 0u;
         out[i] = (uint16_t)(lo + up);
     }
 }
@@ -167,7 +179,7 @@ static uint32_t queue_shadow_rays(const fx_context *ctx, hit_shading *hs, uint32
                     hs->count);
         hs->owner[hs->count] = (uint16_t)i;
         for (int k = 0; k < 3; k++)
-            hs->light[hs->count][k] = fminf(scale * light->color[k], FLT_MAX);
+            hs->light[hs->count][k] = min_of(scale * light->color[k], FLT_MAX);
         hs->count++;
         queued++;
     }
@@ -387,7 +399,7 @@ static bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, c
     if (!(total > 0))
         return false;
     for (int k = 0; k < 3; k++)
-        out[k] = fminf(sum[k] / total, FLT_MAX);
+        out[k] = min_of(sum[k] / total, FLT_MAX);
     return true;
 }
 
@@ -397,7 +409,8 @@ static void hit_radiance(const fx_context *ctx, const fx_block_job *job, uint32_
 {
     float albedo[3], bounce[3] = {0, 0, 0};
     /* The albedo over the ray's footprint there (144 rays: about 0.3 rad apart). */
-    scene_albedo_filtered(ctx->s, tri, u, v, log2f(fmaxf(t * 0.3f, 1e-30f)), albedo);
+    float footprint = t * 0.3f;
+    scene_albedo_filtered(ctx->s, tri, u, v, log2f(footprint > 1e-30f ? footprint : 1e-30f), albedo); /* fmaxf */
     uint32_t effect = job->effect, level = job->level;
     if (ctx->world_cell) {
         hit_bounce(ctx, effect, level, job->origin, job->cell, position, normal, bounce);
@@ -624,7 +637,7 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
                             memcpy(front_dir, dir, sizeof front_dir);
                         }
                     }
-                    distance = fminf(distance, max_distance);
+                    distance = min_of(distance, max_distance);
                 }
                 float d = distance / cell;
                 values[r][0] = radiance[0];
@@ -651,7 +664,7 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
             if (out->irradiance_weight[tx] > 0)
                 for (int k = 0; k < 3; k++)
                     out->irradiance[tx][k] =
-                        fminf(FX_PROBE_PI * out->irradiance[tx][k] / out->irradiance_weight[tx], FLT_MAX);
+                        min_of(FX_PROBE_PI * out->irradiance[tx][k] / out->irradiance_weight[tx], FLT_MAX);
             if (out->moment_weight[tx] > 0) {
                 out->moments[tx][0] /= out->moment_weight[tx];
                 out->moments[tx][1] /= out->moment_weight[tx];
@@ -729,7 +742,7 @@ void fx_probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
                 if (in->irradiance_weight[t] > 0)
                     value = fresh ? in->irradiance[t][k] : h * old + (1.0f - h) * in->irradiance[t][k];
                 irradiance[t][k] = isfinite(value) && value > 0 ? value : (value > 0 ? FLT_MAX : 0.0f);
-                scale = fmaxf(scale, irradiance[t][k]);
+                scale = irradiance[t][k] > scale ? irradiance[t][k] : scale; /* fmaxf: neither is NaN */
             }
             for (int k = 0; k < 2; k++) {
                 float old = fresh ? 0.0f : half_bits_to_float(fx__get_u16(p + PROBE_MOMENTS + 4 * t + 2 * k));
@@ -756,7 +769,7 @@ void fx_probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
                     u_moments[t][k - 3] = u;
             }
             for (int k = 0; k < 3; k++)
-                relative[t][k] = fminf(irradiance[t][k] * inv, 1.0f);
+                relative[t][k] = min_of(irradiance[t][k] * inv, 1.0f);
         }
         halves_stochastic(&relative[0][0], &u_irradiance[0][0], 3 * FX_PROBE_TEXELS, &halves_irradiance[0][0]);
         halves_stochastic(&moments[0][0], &u_moments[0][0], 2 * FX_PROBE_TEXELS, &halves_moments[0][0]);

@@ -15,7 +15,6 @@
  * chunk and summed in order, and valid masks are set after the chunks, on one thread. */
 #include "engine_internal.h"
 
-#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -272,45 +271,6 @@ void srv__queues(srv_loop *loop, srv_frame_stats *st)
     }
 }
 
-/* World-space jobs in space order. A probe update's hits read the cells around them through a per-thread
- * memo (fx_probes.c); neighbouring probes see the same walls, so jobs of one chunk (one thread) that lie
- * close together find their cells there far more often than jobs in queue order. The order changes no result
- * (an update reads only committed payloads; its random numbers come from its own key). Key: the level, then
- * the grid point's coordinates (the low 20 bits of each, offset to be non-negative) interleaved (Morton);
- * ties (coordinates beyond 2^20 cells apart) by the block key, so the order is a function of the queue. */
-static uint64_t spread_bits(uint64_t x)
-{
-    x &= 0xfffffull;
-    x = (x | x << 32) & 0x1f00000000ffffull;
-    x = (x | x << 16) & 0x1f0000ff0000ffull;
-    x = (x | x << 8) & 0x100f00f00f00f00full;
-    x = (x | x << 4) & 0x10c30c30c30c30c3ull;
-    x = (x | x << 2) & 0x1249249249249249ull;
-    return x;
-}
-
-static uint64_t space_key(const fx_block_job *j)
-{
-    uint64_t m = 0;
-    for (int k = 0; k < 3; k++) {
-        double g = floor((double)j->origin[k] / (double)j->cell + 0.5);
-        int64_t i = isfinite(g) && fabs(g) < 1e15 ? (int64_t)g : 0;
-        m |= spread_bits((uint64_t)(i + (1 << 19))) << k;
-    }
-    return (uint64_t)j->level << 60 | m;
-}
-
-/* qsort's order of fx_block_job (in place: no memory; the keys are recomputed per comparison, some 10,000
- * comparisons for 1,024 probes, nothing beside their updates). */
-static int space_compare(const void *a, const void *b)
-{
-    const fx_block_job *x = a, *y = b;
-    uint64_t kx = space_key(x), ky = space_key(y);
-    if (kx != ky)
-        return kx < ky ? -1 : 1;
-    return x->key < y->key ? -1 : (x->key > y->key);
-}
-
 typedef struct effect_task {
     srv_loop *loop;
     const fx_effect *effect;
@@ -371,8 +331,6 @@ void srv__updates(srv_loop *loop, bool lookup, srv_frame_stats *st)
             fj->lookup = dep == SRV_NO_EFFECT ? NULL : kind->block_payload(cache, dep, job->dependency_block);
             fj->payload = kind->block_payload(cache, e, job->block);
         }
-        if (fx->cache == SCENE_CACHE_WORLD_SPACE && count > 1)
-            qsort(q->fx_jobs, count, sizeof *q->fx_jobs, space_compare);
         effect_task task = {.loop = loop, .effect = loop->effects[e], .jobs = q->fx_jobs, .count = (uint32_t)count,
                             .samples = loop->samples[e], .rays = q->chunk_rays};
         srv_pool_run(loop->pool, chunks, effect_chunk, &task);
