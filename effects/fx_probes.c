@@ -354,8 +354,15 @@ static bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, c
     out[0] = out[1] = out[2] = 0;
     float centre[3];
     double t[3];
+    /* A power-of-two cell (the grid's: the finest cell is one and levels double it) has an exact inverse, and
+     * multiplying by it rounds as the division does: three divisions fewer per hit. */
+    uint32_t cell_bits;
+    memcpy(&cell_bits, &cell, sizeof cell_bits);
+    const bool exact_inverse = (cell_bits & 0x7fffffu) == 0 && cell > 0x1p-100f && cell < 0x1p100f;
+    const double inverse = 1.0 / (double)cell;
     for (int k = 0; k < 3; k++) { /* the cell and the position in it (wsc_corners' rule, from the grid point) */
-        double q = ((double)position[k] - (double)grid_point[k]) / (double)cell, f = floor(q);
+        double delta = (double)position[k] - (double)grid_point[k];
+        double q = exact_inverse ? delta * inverse : delta / (double)cell, f = floor(q);
         if (!(fabs(f) < 1e9))
             return false;
         centre[k] = (float)((double)grid_point[k] + (f + 0.5) * (double)cell);
