@@ -810,15 +810,15 @@ static void test_cell_reads_match_taps(void **state)
 }
 
 /* ---- 6. per-thread memos across loops ----------------------------------------------------------------------
- * The per-thread memos (the irradiance memo of fx_probes_map.c, the update's cell memo) keep pointers into
- * payloads. A loop freed and a new one whose payloads sit at the same addresses, run for the same frame
- * numbers, must not read the first loop's values (BENCHMARKS, "a latent bug the memo exposed": stab_light's
- * 2^k linearity failed in 6 of 10 runs). Deterministic here: both loops use one payload buffer (the same
- * addresses by construction), the thin-wall scene with a light 1 then 3 times as bright, 4 frames each with
- * frame numbers 1..4, hits read through world_taps (the irradiance memo) or world_cell, compose's shade read
- * with the context after the last frame (the memo again). The second loop's payload bytes and shaded values must equal those of
- * the same loop run alone in a fresh thread (fresh memos: what a fresh process computes), bit for bit; with
- * epochs 0 (a harness that gives none) and with unique epochs. */
+ * The per-thread memos (the irradiance memo of fx_probes_map.c, the update's cell memo) keep pointers into payloads.
+ * A loop freed and a new one whose payloads sit at the same addresses, run for the same frame numbers, must not read
+ * the first loop's values (BENCHMARKS, "a latent bug the memo exposed": stab_light's 2^k linearity failed in 6 of 10
+ * runs). Deterministic here: both loops use one payload buffer (the same addresses by construction), the thin-wall
+ * scene with a light 1 then 3 times as bright, 4 frames each with frame numbers 1..4, hits read through world_taps
+ * (the irradiance memo) or world_cell, compose's shade read with the context after the last frame (the memo again).
+ * The second loop's payload bytes and shaded values must equal those of the same loop run alone in a fresh thread
+ * (fresh memos: what a fresh process computes), bit for bit; with epochs 0 (a harness that gives none) and with
+ * unique epochs. */
 typedef struct memo_sequence {
     grid *g;
     scene *s;
@@ -858,7 +858,8 @@ static void *memo_sequence_run(void *arg)
 {
     memo_sequence *m = arg;
     scene_tracing_thread_init();
-    static const float points[4][3] = {{0.35f, 1.0f, 0.1f}, {-1.0f, 0.0f, 0.2f}, {1.0f, 2.0f, -0.3f}, {-0.5f, 1.0f, -1.0f}};
+    static const float points[4][3] = {
+        {0.35f, 1.0f, 0.1f}, {-1.0f, 0.0f, 0.2f}, {1.0f, 2.0f, -0.3f}, {-0.5f, 1.0f, -1.0f}};
     /* Tilted normals (no wall's): the updates' hits never ask for them, so only shade writes their memo
      * entries, once per loop, at the last frame: the second loop's read finds what the first loop left. */
     static const float normals[4][3] = {{-0.8f, 0.6f, 0}, {0, 0.6f, 0.8f}, {0.6f, -0.8f, 0}, {0.8f, 0, 0.6f}};
