@@ -72,29 +72,37 @@ static inline float half_bits_to_float(uint32_t h)
     return f * 0x1p112f;
 }
 
-/* A value >= 0 to half, rounded up with probability equal to its position between the two neighbouring
- * halves (u in [0, 1)), so the rounding is unbiased; saturates at the largest half (65504), never infinity.
- * Negative values and NaN become 0 (irradiance and distances are never negative). */
-static uint16_t half_stochastic(float x, float u)
+/* fminf(x, m) for m > 0 (not NaN), inline: NaN and x >= m give m, as fminf does (libm's fminf is a call
+ * here: without -ffinite-math-only the compiler does not inline it). */
+static inline float min_of(float x, float m)
 {
-    if (!(x > 0))
-        return 0;
-    if (x >= 65504.0f)
-        return 0x7bffu;
-    uint16_t lo;
-    if (x < 0x1p-14f) {
-        lo = (uint16_t)(x * 0x1p24f); /* subnormal: truncated multiple of 2^-24 */
-    } else {
+    return x < m ? x : m;
+}
+
+/* Values >= 0 to halves, each rounded up with probability equal to its position between the two neighbouring
+ * halves (u in [0, 1)), so the rounding is unbiased; saturates at the largest half (65504), never infinity;
+ * negative values and NaN become 0 (irradiance and distances are never negative). Written without branches
+ * so the AVX2 copy runs 8 at a time (x clamped to [0, 65504] first, NaN to 0; a normal half's bits are the
+ * float's shifted, less the exponent biases' difference; below 2^-14 a truncated multiple of 2^-24). The
+ * same halves as the scalar version it replaced, checked over 42 million inputs (every half, the midpoints
+ * between halves, random floats of every exponent, 0, -0, NaN, infinities). */
+FXC_HOT_CLONES static void halves_stochastic(const float *restrict x, const float *restrict u, uint32_t n,
+                                             uint16_t *restrict out)
+{
+    for (uint32_t i = 0; i < n; i++) { /* selects only: && or a bool mixed into integers stop the vectoriser */
+        float xi = x[i];
+        float v = xi > 0 ? xi : 0.0f;
+        v = v < 65504.0f ? v : 65504.0f;
         uint32_t bits;
-        memcpy(&bits, &x, sizeof bits);
-        int exponent = (int)((bits >> 23) & 0xffu) - 127;
-        lo = (uint16_t)(((uint32_t)(exponent + 15) << 10) | ((bits & 0x7fffffu) >> 13));
+        memcpy(&bits, &v, sizeof bits);
+        uint32_t sub = (uint32_t)(int32_t)(v * 0x1p24f), norm = (bits >> 13) - (112u << 10);
+        uint32_t lo = v < 0x1p-14f ? sub : norm;
+        float below = half_bits_to_float(lo), above = half_bits_to_float(lo + 1);
+        uint32_t up = u[i] * (above - below) < v - below ? 1u : 0u;
+        up = below != v ? up : 0u;
+        up = lo != 0x7bffu ? up : 0u;
+        out[i] = (uint16_t)(lo + up);
     }
-    float below = half_bits_to_float(lo); /* lo <= 0x7bff: finite, >= 0 */
-    if (below == x || lo == 0x7bffu)
-        return lo;
-    float above = half_bits_to_float((uint16_t)(lo + 1));
-    return u * (above - below) < x - below ? (uint16_t)(lo + 1) : lo;
 }
 
 /* ---- update ---------------------------------------------------------------------------------------- */
@@ -171,7 +179,7 @@ static uint32_t queue_shadow_rays(const fx_context *ctx, hit_shading *hs, uint32
                     hs->count);
         hs->owner[hs->count] = (uint16_t)i;
         for (int k = 0; k < 3; k++)
-            hs->light[hs->count][k] = fminf(scale * light->color[k], FLT_MAX);
+            hs->light[hs->count][k] = min_of(scale * light->color[k], FLT_MAX);
         hs->count++;
         queued++;
     }
@@ -346,8 +354,15 @@ static bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, c
     out[0] = out[1] = out[2] = 0;
     float centre[3];
     double t[3];
+    /* A power-of-two cell (the grid's: the finest cell is one and levels double it) has an exact inverse, and
+     * multiplying by it rounds as the division does: three divisions fewer per hit. */
+    uint32_t cell_bits;
+    memcpy(&cell_bits, &cell, sizeof cell_bits);
+    const bool exact_inverse = (cell_bits & 0x7fffffu) == 0 && cell > 0x1p-100f && cell < 0x1p100f;
+    const double inverse = 1.0 / (double)cell;
     for (int k = 0; k < 3; k++) { /* the cell and the position in it (wsc_corners' rule, from the grid point) */
-        double q = ((double)position[k] - (double)grid_point[k]) / (double)cell, f = floor(q);
+        double delta = (double)position[k] - (double)grid_point[k];
+        double q = exact_inverse ? delta * inverse : delta / (double)cell, f = floor(q);
         if (!(fabs(f) < 1e9))
             return false;
         centre[k] = (float)((double)grid_point[k] + (f + 0.5) * (double)cell);
@@ -376,12 +391,9 @@ static bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, c
         e->normal_set = true;
     }
     float tap[8], weight[8];
-    for (int c = 0; c < 8; c++) {
-        double trilinear = 1.0;
-        for (int k = 0; k < 3; k++)
-            trilinear *= (c >> k & 1) ? t[k] : 1.0 - t[k];
-        tap[c] = (float)trilinear;
-    }
+    double wx[2] = {1.0 - t[0], t[0]}, wy[2] = {1.0 - t[1], t[1]}, wz[2] = {1.0 - t[2], t[2]};
+    for (int c = 0; c < 8; c++) /* ((1 x wx) x wy) x wz in double, as before: 1 x wx is exact */
+        tap[c] = (float)(wx[c & 1] * wy[c >> 1 & 1] * wz[c >> 2]);
     hit_weights(e, position, normal, tap, weight);
     float sum[3] = {0, 0, 0}, total = 0;
     for (int c = 0; c < 8; c++) {
@@ -394,7 +406,7 @@ static bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, c
     if (!(total > 0))
         return false;
     for (int k = 0; k < 3; k++)
-        out[k] = fminf(sum[k] / total, FLT_MAX);
+        out[k] = min_of(sum[k] / total, FLT_MAX);
     return true;
 }
 
@@ -404,7 +416,8 @@ static void hit_radiance(const fx_context *ctx, const fx_block_job *job, uint32_
 {
     float albedo[3], bounce[3] = {0, 0, 0};
     /* The albedo over the ray's footprint there (144 rays: about 0.3 rad apart). */
-    scene_albedo_filtered(ctx->s, tri, u, v, log2f(fmaxf(t * 0.3f, 1e-30f)), albedo);
+    float footprint = t * 0.3f;
+    scene_albedo_filtered(ctx->s, tri, u, v, log2f(footprint > 1e-30f ? footprint : 1e-30f), albedo); /* fmaxf */
     uint32_t effect = job->effect, level = job->level;
     if (ctx->world_cell) {
         hit_bounce(ctx, effect, level, job->origin, job->cell, position, normal, bounce);
@@ -631,7 +644,7 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
                             memcpy(front_dir, dir, sizeof front_dir);
                         }
                     }
-                    distance = fminf(distance, max_distance);
+                    distance = min_of(distance, max_distance);
                 }
                 float d = distance / cell;
                 values[r][0] = radiance[0];
@@ -658,7 +671,7 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
             if (out->irradiance_weight[tx] > 0)
                 for (int k = 0; k < 3; k++)
                     out->irradiance[tx][k] =
-                        fminf(FX_PROBE_PI * out->irradiance[tx][k] / out->irradiance_weight[tx], FLT_MAX);
+                        min_of(FX_PROBE_PI * out->irradiance[tx][k] / out->irradiance_weight[tx], FLT_MAX);
             if (out->moment_weight[tx] > 0) {
                 out->moments[tx][0] /= out->moment_weight[tx];
                 out->moments[tx][1] /= out->moment_weight[tx];
@@ -730,13 +743,13 @@ void fx_probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
               moments[FX_PROBE_TEXELS][2], scale = 0;
         for (uint32_t t = 0; t < FX_PROBE_TEXELS; t++) {
             for (int k = 0; k < 3; k++) {
-                /* payload halves are half_stochastic's: finite and >= 0 */
+                /* payload halves are halves_stochastic's: finite and >= 0 */
                 float old = old_scale * half_bits_to_float(fx__get_u16(p + PROBE_IRRADIANCE + 6 * t + 2 * k));
                 float value = old;
                 if (in->irradiance_weight[t] > 0)
                     value = fresh ? in->irradiance[t][k] : h * old + (1.0f - h) * in->irradiance[t][k];
                 irradiance[t][k] = isfinite(value) && value > 0 ? value : (value > 0 ? FLT_MAX : 0.0f);
-                scale = fmaxf(scale, irradiance[t][k]);
+                scale = irradiance[t][k] > scale ? irradiance[t][k] : scale; /* fmaxf: neither is NaN */
             }
             for (int k = 0; k < 2; k++) {
                 float old = fresh ? 0.0f : half_bits_to_float(fx__get_u16(p + PROBE_MOMENTS + 4 * t + 2 * k));
@@ -750,16 +763,28 @@ void fx_probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
         }
         put_f32(p + 24, scale);
         float inv = scale > 0 ? 1.0f / scale : 0.0f;
+        /* Per texel one hash, 12 bits of it per half (RGB, then the two moments), as halves_stochastic's u. */
+        float relative[FX_PROBE_TEXELS][3], u_irradiance[FX_PROBE_TEXELS][3], u_moments[FX_PROBE_TEXELS][2];
+        uint16_t halves_irradiance[FX_PROBE_TEXELS][3], halves_moments[FX_PROBE_TEXELS][2];
         for (uint32_t t = 0; t < FX_PROBE_TEXELS; t++) {
             uint64_t bits = fx__hash(ctx->seed, job->key, t, updates, FX_STREAM_PROBE_ROUNDING);
             for (int k = 0; k < 5; k++) {
                 float u = (float)((bits >> (12 * k)) & 0xfffu) * (1.0f / 4096.0f);
                 if (k < 3)
-                    fx__put_u16(p + PROBE_IRRADIANCE + 6 * t + 2 * k,
-                                half_stochastic(fminf(irradiance[t][k] * inv, 1.0f), u));
+                    u_irradiance[t][k] = u;
                 else
-                    fx__put_u16(p + PROBE_MOMENTS + 4 * t + 2 * (k - 3), half_stochastic(moments[t][k - 3], u));
+                    u_moments[t][k - 3] = u;
             }
+            for (int k = 0; k < 3; k++)
+                relative[t][k] = min_of(irradiance[t][k] * inv, 1.0f);
+        }
+        halves_stochastic(&relative[0][0], &u_irradiance[0][0], 3 * FX_PROBE_TEXELS, &halves_irradiance[0][0]);
+        halves_stochastic(&moments[0][0], &u_moments[0][0], 2 * FX_PROBE_TEXELS, &halves_moments[0][0]);
+        for (uint32_t t = 0; t < FX_PROBE_TEXELS; t++) {
+            for (int k = 0; k < 3; k++)
+                fx__put_u16(p + PROBE_IRRADIANCE + 6 * t + 2 * k, halves_irradiance[t][k]);
+            for (int k = 0; k < 2; k++)
+                fx__put_u16(p + PROBE_MOMENTS + 4 * t + 2 * k, halves_moments[t][k]);
         }
         put_u32(p + 16, FX_PROBE_HAS_DATA);
         put_u32(p + 20, updates < UINT32_MAX ? updates + 1 : UINT32_MAX);

@@ -809,6 +809,122 @@ static void test_cell_reads_match_taps(void **state)
     scene_free(s);
 }
 
+/* ---- 6. per-thread memos across loops ----------------------------------------------------------------------
+ * The per-thread memos (the irradiance memo of fx_probes_map.c, the update's cell memo) keep pointers into payloads.
+ * A loop freed and a new one whose payloads sit at the same addresses, run for the same frame numbers, must not read
+ * the first loop's values (BENCHMARKS, "a latent bug the memo exposed": stab_light's 2^k linearity failed in 6 of 10
+ * runs). Deterministic here: both loops use one payload buffer (the same addresses by construction), the thin-wall
+ * scene with a light 1 then 3 times as bright, 4 frames each with frame numbers 1..4, hits read through world_taps
+ * (the irradiance memo) or world_cell, compose's shade read with the context after the last frame (the memo again).
+ * The second loop's payload bytes and shaded values must equal those of the same loop run alone in a fresh thread
+ * (fresh memos: what a fresh process computes), bit for bit; with epochs 0 (a harness that gives none) and with
+ * unique epochs. */
+typedef struct memo_sequence {
+    grid *g;
+    scene *s;
+    scene_rt *rt;
+    const float *intensity; /* per loop */
+    const uint64_t *epoch;  /* per loop */
+    uint32_t loops;
+    bool cells;                  /* hits through world_cell (else world_taps) */
+    uint8_t *payload;            /* out: the last loop's payload bytes */
+    float shaded[4][3];          /* out: the last loop's shade at 4 points */
+} memo_sequence;
+
+static void shade_with(const fx_context *ctx, const grid *g, const float pos[3], const float normal[3],
+                       float indirect[3])
+{
+    fx_taps taps;
+    memset(&taps, 0, sizeof taps);
+    grid_taps(g, FX_PROBES, pos, g->level, &taps);
+    fx_point point;
+    memset(&point, 0, sizeof point);
+    memcpy(point.position, pos, sizeof point.position);
+    for (int k = 0; k < 3; k++)
+        point.normal[k] = point.view_normal[k] = normal[k];
+    float visibility = 1, sky_visibility = 1;
+    indirect[0] = indirect[1] = indirect[2] = 0;
+    fx_shade_run run = {.count = 1,
+                        .light_count = 0,
+                        .taps = &taps,
+                        .points = &point,
+                        .light_visibility = &visibility,
+                        .sky_visibility = &sky_visibility,
+                        .indirect = indirect};
+    fx_effect_probes.shade(ctx, &run);
+}
+
+static void *memo_sequence_run(void *arg)
+{
+    memo_sequence *m = arg;
+    scene_tracing_thread_init();
+    static const float points[4][3] = {
+        {0.35f, 1.0f, 0.1f}, {-1.0f, 0.0f, 0.2f}, {1.0f, 2.0f, -0.3f}, {-0.5f, 1.0f, -1.0f}};
+    /* Tilted normals (no wall's): the updates' hits never ask for them, so only shade writes their memo
+     * entries, once per loop, at the last frame: the second loop's read finds what the first loop left. */
+    static const float normals[4][3] = {{-0.8f, 0.6f, 0}, {0, 0.6f, 0.8f}, {0.6f, -0.8f, 0}, {0.8f, 0, 0.6f}};
+    for (uint32_t l = 0; l < m->loops; l++) {
+        m->s->lights[0].intensity = m->intensity[l];
+        memset(m->g->payload, 0, (size_t)m->g->count * FX_PROBE_BYTES);
+        memset(m->g->scratch, 0, (size_t)m->g->count * m->g->scratch_bytes);
+        fx_context ctx = grid_context(m->s, m->rt, m->g, 0.9f);
+        if (!m->cells)
+            ctx.world_cell = NULL;
+        ctx.epoch = m->epoch[l];
+        for (uint32_t f = 1; f <= 4; f++) {
+            ctx.frame = f;
+            grid_frame(m->g, &ctx);
+        }
+        for (int p = 0; p < 4; p++)
+            shade_with(&ctx, m->g, points[p], normals[p], m->shaded[p]);
+    }
+    memcpy(m->payload, m->g->payload, (size_t)m->g->count * FX_PROBE_BYTES);
+    return NULL;
+}
+
+static void test_memo_across_loops(void **state)
+{
+    (void)state;
+    scene *s = fxt_new_scene();
+    add_box(s, "lit", (double[3]){-2, 0, -1}, (double[3]){0.35, 2, 1}, true, 4);
+    add_box(s, "dark", (double[3]){0.45, 0, -1}, (double[3]){2.1, 2, 1}, true, 4);
+    add_point_light(s, -1.2f, 1.0f, 0.0f, 1.0f);
+    scene_rt *rt = fxt_finish_scene(s, 4.0f, 1.0f);
+    grid g;
+    grid_init(&g, s, (float[3]){-1.5f, 0.5f, -0.5f}, 1.0f, 4, 2, 2);
+    size_t bytes = (size_t)g.count * FX_PROBE_BYTES;
+    static const float one[1] = {3.0f}, two[2] = {1.0f, 3.0f};
+    static const uint64_t no_epoch[2] = {0, 0}, epochs[2] = {101, 102};
+    for (int variant = 0; variant < 4; variant++) {
+        bool cells = variant & 1;
+        const uint64_t *epoch = variant & 2 ? epochs : no_epoch;
+        memo_sequence fresh = {.g = &g, .s = s, .rt = rt, .intensity = one, .epoch = epoch + 1, .loops = 1,
+                               .cells = cells, .payload = malloc(bytes)};
+        memo_sequence again = {.g = &g, .s = s, .rt = rt, .intensity = two, .epoch = epoch, .loops = 2,
+                               .cells = cells, .payload = malloc(bytes)};
+        assert_true(fresh.payload && again.payload);
+        pthread_t tid;
+        assert_int_equal(pthread_create(&tid, NULL, memo_sequence_run, &fresh), 0);
+        pthread_join(tid, NULL);
+        assert_int_equal(pthread_create(&tid, NULL, memo_sequence_run, &again), 0);
+        pthread_join(tid, NULL);
+        uint32_t differ = 0;
+        for (size_t i = 0; i < bytes; i++)
+            differ += fresh.payload[i] != again.payload[i];
+        printf("memo across loops (%s, %s): %u payload bytes differ, shade %.6g against %.6g\n",
+               cells ? "world_cell" : "world_taps", epoch[0] ? "unique epochs" : "epoch 0", differ,
+               (double)again.shaded[0][0], (double)fresh.shaded[0][0]);
+        assert_true(fresh.shaded[0][0] > 0); /* the lit wall sees light */
+        assert_int_equal(differ, 0);
+        assert_memory_equal(fresh.shaded, again.shaded, sizeof fresh.shaded);
+        free(fresh.payload);
+        free(again.payload);
+    }
+    grid_free(&g);
+    scene_rt_free(rt);
+    scene_free(s);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -821,6 +937,7 @@ int main(void)
         cmocka_unit_test(test_thin_wall_leak),
         cmocka_unit_test(test_thread_split_determinism),
         cmocka_unit_test(test_cell_reads_match_taps),
+        cmocka_unit_test(test_memo_across_loops),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
