@@ -126,36 +126,33 @@ FXC_HOT_CLONES static void predict_span(const rc_view *v, const float *restrict 
     }
 }
 
-/* No z-buffer and a quarter of the resolution in each direction: only whether any point lands in a pixel.
- * The projection itself runs in the projection pass (project_task), block by block beside the current
- * camera's; before it, each worker's occupancy is cleared, after it they are combined. */
-void view_rc__predict_clear(view_rc *rc)
+/* No z-buffer and a quarter of the resolution in each direction: only whether any point lands in a pixel. */
+static void predict_task(void *user, uint32_t c, uint32_t worker)
+{
+    view_rc *rc = user;
+    uint32_t begin, end;
+    chunk_range(rc, c, &begin, &end);
+    uint32_t *low = rc->workers[worker].low;
+    uint8_t *occupied = rc->workers[worker].occupied;
+    predict_span(&rc->predicted, rc->px, rc->py, rc->pz, rc->rgba, low, begin, end, rc->low_w);
+    /* Without a branch: points that land nowhere mark the byte after the image. */
+    uint32_t sink = rc->low_w * rc->low_h;
+    for (uint32_t k = 0; k < end - begin; k++)
+        occupied[low[k] == RC_NO_PIXEL ? sink : low[k]] = 1;
+}
+
+void view_rc__predict_project(view_rc *rc)
 {
     size_t low = (size_t)rc->low_w * rc->low_h;
     for (uint32_t t = 0; t < rc->thread_count; t++)
         memset(rc->workers[t].occupied, 0, low);
-}
-
-void view_rc__predict_combine(view_rc *rc)
-{
-    size_t low = (size_t)rc->low_w * rc->low_h;
+    fxc_pool_run(rc->pool, rc->chunk_count, predict_task, rc);
     uint8_t *all = rc->workers[0].occupied;
     for (uint32_t t = 1; t < rc->thread_count; t++) {
         const uint8_t *mine = rc->workers[t].occupied;
         for (size_t p = 0; p < low; p++)
             all[p] |= mine[p];
     }
-}
-
-/* Whether any of 64 points is live and at least drop_age old (vectorised). */
-FXC_HOT_CLONES static bool any_candidate(const uint32_t *restrict rgba, uint32_t drop_age)
-{
-    uint32_t any = 0;
-    for (uint32_t k = 0; k < 64; k++) {
-        uint32_t age = rgba[k] >> 24;
-        any |= (uint32_t)(age >= drop_age) & (uint32_t)(age != RC_AGE_DEAD);
-    }
-    return any != 0;
 }
 
 /* ---- project and tile sort ----------------------------------------------------------------------------- */
@@ -176,38 +173,20 @@ FXC_HOT_CLONES static uint32_t migrate_span(const uint16_t *restrict dest, uint1
 
 static void project_task(void *user, uint32_t c, uint32_t worker)
 {
+    (void)worker;
     view_rc *rc = user;
     uint32_t begin, end;
     chunk_range(rc, c, &begin, &end);
     uint16_t outside = rc->list_outside, dead = rc->list_dead;
     /* The tiled z-buffer in its own buffers takes the pixel within the tile; the 1999 one, the image's. */
     bool local = rc->local_z && !rc->d.no_tiling;
-    /* A block at a time, both cameras: the predicted projection (2002 3.1) reads the same positions while
-     * they are in L1 (alone, it read the store from memory a second time). */
-    uint32_t *low = rc->workers[worker].low;
-    uint8_t *occupied = rc->workers[worker].occupied;
-    uint32_t sink = rc->low_w * rc->low_h;
-    for (uint32_t b0 = begin; b0 < end; b0 += RC_BLOCK) {
-        uint32_t b1 = end - b0 > RC_BLOCK ? b0 + RC_BLOCK : end;
-        project_span(&rc->view, rc->px, rc->py, rc->pz, rc->rgba, rc->pix, rc->dep, rc->dest, b0, b1,
-                     rc->tile_shift, rc->tiles_x, local, outside, dead);
-        if (!rc->predict)
-            continue;
-        predict_span(&rc->predicted, rc->px, rc->py, rc->pz, rc->rgba, low, b0, b1, rc->low_w);
-        /* Without a branch: points that land nowhere mark the byte after the image. */
-        for (uint32_t k = 0; k < b1 - b0; k++)
-            occupied[low[k] == RC_NO_PIXEL ? sink : low[k]] = 1;
-    }
+    project_span(&rc->view, rc->px, rc->py, rc->pz, rc->rgba, rc->pix, rc->dep, rc->dest, begin, end,
+                 rc->tile_shift, rc->tiles_x, local, outside, dead);
     rc_chunk_stat stat = {0};
     /* The drop plan: points older than drop_age, and the chunk's quota of that age, in slot order. */
     if (rc->drop_age != RC_AGE_NO_DROP) {
         uint32_t quota = rc->chunk_quota[c], drop_age = rc->drop_age;
         for (uint32_t i = begin; i < end; i++) {
-            /* Most blocks of 64 hold none (the drops are the oldest few): one test without branches. */
-            if ((i & 63) == 0 && end - i >= 64 && !any_candidate(rc->rgba + i, drop_age)) {
-                i += 63;
-                continue;
-            }
             uint32_t age = rc_age(rc->rgba[i]);
             if (age == RC_AGE_DEAD || age < drop_age || (age == drop_age && quota == 0))
                 continue;

@@ -51,11 +51,9 @@ fxc_result view_rc_render(view_rc *rc, const view_rc_camera *cam, const view_rc_
 
     view_rc__plan_drops(rc);
 
-    /* The predicted projection's arithmetic runs in the projection pass (both cameras a block at a time);
-     * its stage is the occupancy's clearing and combining only. */
     double t = view_rc__now_ms(), t_next;
     if (rc->predict) {
-        view_rc__predict_clear(rc);
+        view_rc__predict_project(rc);
         t_next = view_rc__now_ms();
         stats.stage_ms[VIEW_RC_STAGE_PREDICT_PROJECT] = t_next - t;
         t = t_next;
@@ -65,21 +63,15 @@ fxc_result view_rc_render(view_rc *rc, const view_rc_camera *cam, const view_rc_
         view_rc__project_direct(rc);
     else
         view_rc__project_sort(rc);
-    t_next = view_rc__now_ms();
-    stats.stage_ms[VIEW_RC_STAGE_PROJECT_SORT] = t_next - t;
-    t = t_next;
-    if (rc->predict) {
-        view_rc__predict_combine(rc);
-        t_next = view_rc__now_ms();
-        stats.stage_ms[VIEW_RC_STAGE_PREDICT_PROJECT] += t_next - t;
-        t = t_next;
-    }
     for (uint32_t c = 0; c < rc->chunk_count; c++) {
         stats.projected += rc->chunk_stat[c].projected;
         stats.migrated += rc->chunk_stat[c].migrated;
         stats.dropped += rc->chunk_stat[c].dropped;
         stats.dropped_age_sum += rc->chunk_stat[c].dropped_age_sum;
     }
+    t_next = view_rc__now_ms();
+    stats.stage_ms[VIEW_RC_STAGE_PROJECT_SORT] = t_next - t;
+    t = t_next;
 
     if (rc->d.no_tiling)
         view_rc__zbuffer_direct(rc);

@@ -36,7 +36,6 @@
 #define RC_EMPTY_PT    0xFF000000u /* a pixel without a point: colour 0, age 255 */
 #define RC_NEAR        1.0e-4f     /* points nearer than this (metres along the view axis) are behind */
 #define RC_LOCAL_TILE  256u        /* the largest tile side the z-buffer works on in its own buffers */
-#define RC_BLOCK       1024u       /* the projection pass: points projected to both cameras at a time */
 
 static inline uint32_t rc_age(uint32_t rgba)
 {
@@ -100,7 +99,7 @@ typedef fxc_pool rc_pool;
 /* Per-thread scratch. */
 typedef struct rc_worker {
     uint8_t *occupied; /* predicted occupancy at quarter resolution, low_w x low_h */
-    uint32_t *low;     /* predicted projection: quarter-resolution pixel per slot of a block */
+    uint32_t *low;     /* predicted projection: quarter-resolution pixel per slot of a chunk */
     float *err;        /* dither: 2 x RC_DITHER_LANES x two rows of width + 2 errors */
     uint8_t *spare;    /* dither: a row of choices for spare lanes */
     uint16_t *planes;  /* interpolation: view_rc__interp_scratch(width) values */
@@ -233,8 +232,7 @@ void view_rc__recount_ages(view_rc *rc);
 
 /* rc_project.c: the point passes of a frame. */
 void view_rc__plan_drops(view_rc *rc);      /* serial: this frame's drop plan from the chunk histograms */
-void view_rc__predict_clear(view_rc *rc);   /* the workers' quarter-resolution occupancy cleared */
-void view_rc__predict_combine(view_rc *rc); /* ... and combined after the projection pass filled it */
+void view_rc__predict_project(view_rc *rc); /* parallel: quarter-resolution occupancy per worker */
 void view_rc__project_sort(view_rc *rc);    /* parallel projection + serial offsets + parallel bucket sort */
 void view_rc__zbuffer(view_rc *rc);         /* parallel over tiles */
 void view_rc__project_direct(view_rc *rc);  /* no_tiling: the projection without the sort (parallel) */
