@@ -145,8 +145,10 @@ static uint64_t grid_frame(grid *g, const fx_context *ctx)
     return rays;
 }
 
-/* The indirect term shade adds at a point (E / pi) and what it leaves of sky visibility. */
-static void shade_at(const grid *g, const float pos[3], const float normal[3], float indirect[3], float *sky)
+/* The indirect term shade adds at a point (E / pi) and what it leaves of sky visibility (sky may be NULL), with
+ * the context ctx (NULL: none). */
+static void shade_ctx(const fx_context *ctx, const grid *g, const float pos[3], const float normal[3],
+                      float indirect[3], float *sky)
 {
     fx_taps taps;
     memset(&taps, 0, sizeof taps);
@@ -166,9 +168,14 @@ static void shade_at(const grid *g, const float pos[3], const float normal[3], f
                         .light_visibility = &visibility,
                         .sky_visibility = &sky_visibility,
                         .indirect = indirect};
-    fx_effect_probes.shade(NULL, &run);
+    fx_effect_probes.shade(ctx, &run);
     if (sky)
         *sky = sky_visibility;
+}
+
+static void shade_at(const grid *g, const float pos[3], const float normal[3], float indirect[3], float *sky)
+{
+    shade_ctx(NULL, g, pos, normal, indirect, sky);
 }
 
 /* A closed axis-aligned box [lo, hi] of 6 quads of cells x cells, normals inward (inward = true: a room seen
@@ -831,29 +838,6 @@ typedef struct memo_sequence {
     float shaded[4][3];          /* out: the last loop's shade at 4 points */
 } memo_sequence;
 
-static void shade_with(const fx_context *ctx, const grid *g, const float pos[3], const float normal[3],
-                       float indirect[3])
-{
-    fx_taps taps;
-    memset(&taps, 0, sizeof taps);
-    grid_taps(g, FX_PROBES, pos, g->level, &taps);
-    fx_point point;
-    memset(&point, 0, sizeof point);
-    memcpy(point.position, pos, sizeof point.position);
-    for (int k = 0; k < 3; k++)
-        point.normal[k] = point.view_normal[k] = normal[k];
-    float visibility = 1, sky_visibility = 1;
-    indirect[0] = indirect[1] = indirect[2] = 0;
-    fx_shade_run run = {.count = 1,
-                        .light_count = 0,
-                        .taps = &taps,
-                        .points = &point,
-                        .light_visibility = &visibility,
-                        .sky_visibility = &sky_visibility,
-                        .indirect = indirect};
-    fx_effect_probes.shade(ctx, &run);
-}
-
 static void *memo_sequence_run(void *arg)
 {
     memo_sequence *m = arg;
@@ -876,7 +860,7 @@ static void *memo_sequence_run(void *arg)
             grid_frame(m->g, &ctx);
         }
         for (int p = 0; p < 4; p++)
-            shade_with(&ctx, m->g, points[p], normals[p], m->shaded[p]);
+            shade_ctx(&ctx, m->g, points[p], normals[p], m->shaded[p], NULL);
     }
     memcpy(m->payload, m->g->payload, (size_t)m->g->count * FX_PROBE_BYTES);
     return NULL;

@@ -406,40 +406,27 @@ FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scrat
             float sum[4] = {0, 0, 0, 0}, total = 0, sharing = 0;
             uint32_t lx = x - g->x0, ly = y - g->y0, low = g->block - 1;
             uint32_t first = (ly >> g->shift) * g->nx + (lx >> g->shift);
+            float computed[4];
+            const float *weight = computed;
             if (mask == 0xF && cs->rep_ok[first] & cs->rep_ok[first + 1] & cs->rep_ok[first + g->nx] &
-                                   cs->rep_ok[first + g->nx + 1]) {
-                /* The common case: all 4 reps match and have data; tabulated weights (the same values and
-                 * order of operations as below). */
-                const float *weight = g->weight[((ly & low) << g->shift) | (lx & low)];
-                const uint32_t index_of[4] = {first, first + 1, first + g->nx, first + g->nx + 1};
-                for (uint32_t c = 0; c < 4; c++) {
-                    uint32_t r = index_of[c];
-                    float w = weight[c];
-                    sum[0] += w * cs->rep_indirect[r][0];
-                    sum[1] += w * cs->rep_indirect[r][1];
-                    sum[2] += w * cs->rep_indirect[r][2];
-                    sum[3] += w * cs->rep_sky[r];
-                    total += w;
-                    if (bits)
-                        sharing = cs->rep_sharing[r] > sharing ? cs->rep_sharing[r] : sharing;
-                }
-            } else if (mask) {
-                float weight[4];
-                srv__coarse_weights(g, x, y, weight);
-                const uint32_t index_of[4] = {first, first + 1, first + g->nx, first + g->nx + 1};
-                for (uint32_t c = 0; c < 4; c++) {
-                    uint32_t r = index_of[c];
-                    if (!(mask >> c & 1) || !cs->rep_ok[r])
-                        continue;
-                    float w = weight[c];
-                    sum[0] += w * cs->rep_indirect[r][0];
-                    sum[1] += w * cs->rep_indirect[r][1];
-                    sum[2] += w * cs->rep_indirect[r][2];
-                    sum[3] += w * cs->rep_sky[r];
-                    total += w;
-                    if (bits)
-                        sharing = cs->rep_sharing[r] > sharing ? cs->rep_sharing[r] : sharing;
-                }
+                                   cs->rep_ok[first + g->nx + 1])
+                /* The common case: all 4 reps match and have data; tabulated weights (the same values). */
+                weight = g->weight[((ly & low) << g->shift) | (lx & low)];
+            else if (mask)
+                srv__coarse_weights(g, x, y, computed);
+            const uint32_t index_of[4] = {first, first + 1, first + g->nx, first + g->nx + 1};
+            for (uint32_t c = 0; mask && c < 4; c++) {
+                uint32_t r = index_of[c];
+                if (!(mask >> c & 1) || !cs->rep_ok[r])
+                    continue;
+                float w = weight[c];
+                sum[0] += w * cs->rep_indirect[r][0];
+                sum[1] += w * cs->rep_indirect[r][1];
+                sum[2] += w * cs->rep_indirect[r][2];
+                sum[3] += w * cs->rep_sky[r];
+                total += w;
+                if (bits)
+                    sharing = cs->rep_sharing[r] > sharing ? cs->rep_sharing[r] : sharing;
             }
             if (total > 0) {
                 float open = cs->sky_visibility[i] / total;
