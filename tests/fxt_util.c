@@ -46,6 +46,23 @@ const char *fxt_write_file(const char *name, const char *text)
     return path;
 }
 
+void *fxt_read_file(const char *path, size_t *size)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        fail_msg("cannot open %s", path);
+    assert_int_equal(fseek(f, 0, SEEK_END), 0);
+    long len = ftell(f);
+    assert_true(len >= 0);
+    rewind(f);
+    unsigned char *bytes = malloc(len > 0 ? (size_t)len : 1);
+    assert_non_null(bytes);
+    assert_int_equal(fread(bytes, 1, (size_t)len, f), (size_t)len);
+    fclose(f);
+    *size = (size_t)len;
+    return bytes;
+}
+
 static void slurp(const char *path, char *buf, size_t cap)
 {
     if (!buf || cap == 0)

@@ -195,22 +195,6 @@ static void sim_frame(const char *name, const char *block_option, char *image, s
     assert_true(n > 0 && (size_t)n < image_cap);
 }
 
-static unsigned char *read_all(const char *path, size_t *size)
-{
-    FILE *f = fopen(path, "rb");
-    assert_non_null(f);
-    assert_int_equal(fseek(f, 0, SEEK_END), 0);
-    long len = ftell(f);
-    assert_true(len > 0);
-    rewind(f);
-    unsigned char *bytes = malloc((size_t)len);
-    assert_non_null(bytes);
-    assert_int_equal(fread(bytes, 1, (size_t)len, f), (size_t)len);
-    fclose(f);
-    *size = (size_t)len;
-    return bytes;
-}
-
 static void test_indirect_block_option(void **state)
 {
     (void)state;
@@ -227,8 +211,9 @@ static void test_indirect_block_option(void **state)
     assert_int_equal(block_2, 2);
     assert_int_equal(block_1, 1);
     size_t size_default, size_2, size_1;
-    unsigned char *a = read_all(image_default, &size_default), *b = read_all(image_2, &size_2),
-                  *c = read_all(image_1, &size_1);
+    unsigned char *a = fxt_read_file(image_default, &size_default), *b = fxt_read_file(image_2, &size_2),
+                  *c = fxt_read_file(image_1, &size_1);
+    assert_true(size_default > 0);
     assert_true(size_default == size_2 && memcmp(a, b, size_2) == 0);
     assert_true(size_1 != size_default || memcmp(a, c, size_1) != 0);
     free(a);

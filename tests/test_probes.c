@@ -645,17 +645,26 @@ static void test_probe_inside_box(void **state)
  * planes (mid-way, and 0.05 cell from either probe plane: probes there are relocated). DDGI's Chebyshev
  * test with its cubed weight and crushing keeps the leak under 2 % of the lit side (measured: at most 0.8 %,
  * on the floor beside a wall 0.05 cell from the lit probes' plane; 0.05 % on the wall itself). */
+/* The thin-wall scene: a lit room x in [-2, w] with a point light at (-1.2, 1, 0), a wall 0.1 thick, and a
+ * dark room beyond it to x = 2.1 (both rooms 2 high, z in [-1, 1], 4 x 4 quads a face). */
+static scene_rt *thin_wall_scene(double w, scene **out)
+{
+    scene *s = fxt_new_scene();
+    add_box(s, "lit", (double[3]){-2, 0, -1}, (double[3]){w, 2, 1}, true, 4);
+    add_box(s, "dark", (double[3]){w + 0.1, 0, -1}, (double[3]){2.1, 2, 1}, true, 4);
+    add_point_light(s, -1.2f, 1.0f, 0.0f, 1.0f);
+    *out = s;
+    return fxt_finish_scene(s, 4.0f, 1.0f);
+}
+
 static void test_thin_wall_leak(void **state)
 {
     (void)state;
     const float offsets[3] = {-0.05f, 0.35f, -0.45f}; /* the wall is [w, w + 0.1], probe planes at -0.5, 0.5 */
     for (int c = 0; c < 3; c++) {
         double w = offsets[c];
-        scene *s = fxt_new_scene();
-        add_box(s, "lit", (double[3]){-2, 0, -1}, (double[3]){w, 2, 1}, true, 4);
-        add_box(s, "dark", (double[3]){w + 0.1, 0, -1}, (double[3]){2.1, 2, 1}, true, 4);
-        add_point_light(s, -1.2f, 1.0f, 0.0f, 1.0f);
-        scene_rt *rt = fxt_finish_scene(s, 4.0f, 1.0f);
+        scene *s;
+        scene_rt *rt = thin_wall_scene(w, &s);
         grid g;
         grid_init(&g, s, (float[3]){-1.5f, 0.5f, -0.5f}, 1.0f, 4, 2, 2);
         fx_context ctx = grid_context(s, rt, &g, 0.0f);
@@ -726,11 +735,8 @@ static void split_frame(grid *g, const fx_context *ctx, const uint32_t *order, u
 static void test_thread_split_determinism(void **state)
 {
     (void)state;
-    scene *s = fxt_new_scene();
-    add_box(s, "lit", (double[3]){-2, 0, -1}, (double[3]){0.35, 2, 1}, true, 4);
-    add_box(s, "dark", (double[3]){0.45, 0, -1}, (double[3]){2.1, 2, 1}, true, 4);
-    add_point_light(s, -1.2f, 1.0f, 0.0f, 1.0f);
-    scene_rt *rt = fxt_finish_scene(s, 4.0f, 1.0f);
+    scene *s;
+    scene_rt *rt = thin_wall_scene(0.35, &s);
     uint8_t *reference = NULL;
     for (int variant = 0; variant < 3; variant++) {
         grid g;
@@ -767,11 +773,8 @@ static void test_thread_split_determinism(void **state)
 static void test_cell_reads_match_taps(void **state)
 {
     (void)state;
-    scene *s = fxt_new_scene();
-    add_box(s, "lit", (double[3]){-2, 0, -1}, (double[3]){0.35, 2, 1}, true, 4);
-    add_box(s, "dark", (double[3]){0.45, 0, -1}, (double[3]){2.1, 2, 1}, true, 4);
-    add_point_light(s, -1.2f, 1.0f, 0.0f, 1.0f);
-    scene_rt *rt = fxt_finish_scene(s, 4.0f, 1.0f);
+    scene *s;
+    scene_rt *rt = thin_wall_scene(0.35, &s);
     grid a, b;
     grid_init(&a, s, (float[3]){-1.5f, 0.5f, -0.5f}, 1.0f, 4, 2, 2);
     grid_init(&b, s, (float[3]){-1.5f, 0.5f, -0.5f}, 1.0f, 4, 2, 2);
@@ -869,11 +872,8 @@ static void *memo_sequence_run(void *arg)
 static void test_memo_across_loops(void **state)
 {
     (void)state;
-    scene *s = fxt_new_scene();
-    add_box(s, "lit", (double[3]){-2, 0, -1}, (double[3]){0.35, 2, 1}, true, 4);
-    add_box(s, "dark", (double[3]){0.45, 0, -1}, (double[3]){2.1, 2, 1}, true, 4);
-    add_point_light(s, -1.2f, 1.0f, 0.0f, 1.0f);
-    scene_rt *rt = fxt_finish_scene(s, 4.0f, 1.0f);
+    scene *s;
+    scene_rt *rt = thin_wall_scene(0.35, &s);
     grid g;
     grid_init(&g, s, (float[3]){-1.5f, 0.5f, -0.5f}, 1.0f, 4, 2, 2);
     size_t bytes = (size_t)g.count * FX_PROBE_BYTES;

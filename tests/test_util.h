@@ -17,6 +17,10 @@ const char *fxt_shared_scene(const char *rel);
  * buffer, valid until the next call). */
 const char *fxt_write_file(const char *name, const char *text);
 
+/* The whole file at path in a malloc'd buffer (the caller frees it), its length in *size; fails the test when
+ * it cannot be read. */
+void *fxt_read_file(const char *path, size_t *size);
+
 /* A scratch path for name in this test's temporary folder (static buffer). */
 const char *fxt_tmp_path(const char *name);
 

@@ -406,23 +406,6 @@ static void test_extrapolate(void **state)
 
 /* ---- images ------------------------------------------------------------------------------------------- */
 
-/* Reads a whole file into a malloc'd buffer. */
-static uint8_t *read_all(const char *path, size_t *len)
-{
-    FILE *f = fopen(path, "rb");
-    assert_non_null(f);
-    assert_int_equal(fseek(f, 0, SEEK_END), 0);
-    long size = ftell(f);
-    assert_true(size > 0);
-    rewind(f);
-    uint8_t *data = malloc((size_t)size);
-    assert_non_null(data);
-    assert_int_equal(fread(data, 1, (size_t)size, f), (size_t)size);
-    fclose(f);
-    *len = (size_t)size;
-    return data;
-}
-
 /* The client's PNG and the server's PNG of the same pixels are the same bytes, and read back as those pixels.
  */
 static void test_png_same_as_server(void **state)
@@ -442,7 +425,7 @@ static void test_png_same_as_server(void **state)
     assert_int_equal(view_image_write_png(client_path, width, height, rgb, msg, sizeof msg), 0);
     assert_int_equal(scene_image_write_u8(server_path, width, height, 3, rgb, msg, sizeof msg), 0);
     size_t client_len, server_len;
-    uint8_t *client = read_all(client_path, &client_len), *server = read_all(server_path, &server_len);
+    uint8_t *client = fxt_read_file(client_path, &client_len), *server = fxt_read_file(server_path, &server_len);
     assert_int_equal(client_len, server_len);
     assert_memory_equal(client, server, client_len);
     assert_memory_equal(client, "\x89PNG\r\n\x1a\n", 8);
