@@ -18,30 +18,6 @@
 /* Auto texel density aims at this many level-0 texels over the whole surface (4096 x 4096). */
 #define SCENE_AUTO_TEXELS (4096.0 * 4096.0)
 
-const char *scene_strerror(scene_result code)
-{
-    switch (code) {
-#define FXC_X(name, value, str)                                                                              \
-    case name:                                                                                               \
-        return str;
-        SCENE_RESULTS(FXC_X)
-#undef FXC_X
-    }
-    return "unknown error";
-}
-
-scene_result scene__fail(scene_error *err, scene_result code, const char *fmt, ...)
-{
-    if (err) {
-        va_list ap;
-        va_start(ap, fmt);
-        err->code = code;
-        vsnprintf(err->msg, sizeof err->msg, fmt, ap);
-        va_end(ap);
-    }
-    return code;
-}
-
 double scene__now_ms(void)
 {
     struct timespec ts;
