@@ -763,6 +763,35 @@ static void assess_precision(scene *s)
     }
 }
 
+/* Largest |coordinate| of a point. */
+static double reach_of(const float p[3])
+{
+    return fmax(fabs((double)p[0]), fmax(fabs((double)p[1]), fabs((double)p[2])));
+}
+
+/* Refuses geometry, point lights or the scene's camera farther than SCENE_MAX_REACH from the local origin
+ * (after the frame is settled and the bounds are known). */
+static scene_result check_reach(const scene *s, scene_error *err)
+{
+    double reach = fmax(reach_of(s->bounds_min), reach_of(s->bounds_max));
+    if (!(reach <= SCENE_MAX_REACH))
+        return scene__fail(err, SCENE_ERR_RANGE,
+                           "%s: the geometry spans %.4g m from its centre; fxcache handles at most %.0e m (squared "
+                           "distances must fit a float): scale the scene down or split it",
+                           s->source, reach, SCENE_MAX_REACH);
+    for (uint32_t i = 0; i < s->light_count; i++)
+        if (s->lights[i].type == SCENE_LIGHT_POINT && !(reach_of(s->lights[i].position) <= SCENE_MAX_REACH))
+            return scene__fail(err, SCENE_ERR_RANGE,
+                               "%s: lights[%u] (point) lies %.4g m from the scene's centre; at most %.0e m (squared "
+                               "distances must fit a float): use a directional light for a far source",
+                               s->source, i, reach_of(s->lights[i].position), SCENE_MAX_REACH);
+    if (s->has_camera && !(fmax(reach_of(s->camera_pos), reach_of(s->camera_target)) <= SCENE_MAX_REACH))
+        return scene__fail(err, SCENE_ERR_RANGE,
+                           "%s: the camera lies %.4g m from the scene's centre; at most %.0e m", s->source,
+                           fmax(reach_of(s->camera_pos), reach_of(s->camera_target)), SCENE_MAX_REACH);
+    return SCENE_OK;
+}
+
 scene_result scene__finalize(scene *s, const scene_load_desc *desc, scene_error *err)
 {
     scene_result settled = settle_frame(s, err);
@@ -775,6 +804,8 @@ scene_result scene__finalize(scene *s, const scene_load_desc *desc, scene_error 
                            (unsigned long long)s->repairs.duplicate_skipped);
     double t0 = scene__now_ms();
     scene_result rc = compute_normals_and_bounds(s, err);
+    if (rc == SCENE_OK)
+        rc = check_reach(s, err);
     if (rc != SCENE_OK)
         return rc;
     if (desc && desc->texel_density != 0) {

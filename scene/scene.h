@@ -190,6 +190,13 @@ typedef struct scene {
 /* Positions quantized more coarsely than this fraction of a level-0 texel get a precision_warning. */
 #define SCENE_PRECISION_TEXEL_FRACTION (1.0 / 16.0)
 
+/* How far from the local origin geometry, point lights and the scene's camera may lie, metres. The per-pixel
+ * and effect code works in float and squares distances (dot products, Chebyshev moments, 1/d^2): at 1e12 m a
+ * squared distance across the scene is about 1e25, far inside float's range (3.4e38), while at 1e19 m it
+ * overflows to infinity. The local frame is centred on a scene far from the world origin, so this limits the
+ * scene's extent, not where it lies in the world. */
+#define SCENE_MAX_REACH 1e12
+
 /* Options for loading. All-zero means defaults. */
 typedef struct scene_load_desc {
     float texel_density; /* level-0 texels per metre; 0 = from the file, else auto */

@@ -487,6 +487,25 @@ static void test_err_trace_newer_version(void **state)
     expect_error(1, args, "newer.trace:1:", "99", NULL);
 }
 
+/* A trace camera 1e30 m out (valid as a trace: the format has no scene) is refused against the scene, naming
+ * the file and the camera, by every command that replays traces; it aborted inside Embree before (its rays
+ * overflowed). The second camera of a trace that starts fine is named as such. */
+static void test_err_trace_camera_beyond_reach(void **state)
+{
+    (void)state;
+    char path[1100], out[1100], args[2400];
+    write_file(path, sizeof path, "far.trace",
+               "fxcache-trace 1\n0 0 1 3 0 0 -1 60\n0.5 1e30 2 3 -1e29 0 0 60\n");
+    tmp_path(out, sizeof out, "far_out");
+    const char *cmds[] = {"sim", "ref", "report"};
+    for (int i = 0; i < 3; i++) {
+        snprintf(args, sizeof args, "%s --trace '%s' --res 8x8 --quiet --out '%s'", cmds[i], path, out);
+        if (i == 0)
+            snprintf(args, sizeof args, "sim --trace '%s' --res 8x8 --quiet", path);
+        expect_error(1, args, "far.trace: camera 2", "1e+30 m", "1e+12", NULL);
+    }
+}
+
 static void test_err_traces_and_viewers_disagree(void **state)
 {
     (void)state;
@@ -1000,6 +1019,7 @@ int main(void)
         cmocka_unit_test(test_err_unknown_option),
         cmocka_unit_test(test_err_trace_bad_line),
         cmocka_unit_test(test_err_trace_newer_version),
+        cmocka_unit_test(test_err_trace_camera_beyond_reach),
         cmocka_unit_test(test_err_traces_and_viewers_disagree),
         cmocka_unit_test(test_err_memory_beyond_physical),
         cmocka_unit_test(test_render_png),

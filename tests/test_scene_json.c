@@ -35,6 +35,7 @@ static scene *load_json_text(const char *name, const char *text, scene_error *er
     snprintf(path_copy, sizeof path_copy, "%s", path);
     scene *s = scene__alloc();
     assert_non_null(s);
+    snprintf(s->source, sizeof s->source, "%s", path_copy); /* as scene_load() names it */
     memset(err, 0, sizeof *err);
     scene_result r = scene__load_json(s, path_copy, err);
     if (r == SCENE_OK) /* settles the local frame: positions, lights and camera relative to s->origin */
@@ -805,6 +806,41 @@ static void test_error_transform_overflow(void **state)
                  SCENE_ERR_INVALID, "meshes[0]", "vertex");
 }
 
+/* SCENE_MAX_REACH (1e12 m from the local centre) bounds the scene's extent, not where it lies: two quads 2e13 m
+ * apart (the far one scaled up, else float spacing there makes it degenerate, refused as such), a point light or the camera that far out are refused by name (they crashed inside Embree: squared
+ * distances overflowed and rays became invalid), while the same quad alone at 2e13 m from the world origin
+ * loads (its local frame is centred on it), and so do a quad (1,000 km wide) 1e11 m beside another and a light 1e11 m out. */
+static void test_error_beyond_reach(void **state)
+{
+    (void)state;
+    expect_error("reach_geometry.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"},"
+                 " {\"file\": \"quad.obj\", \"transform\": {\"scale\": 1e12, \"translate\": [2e13, 0, 0]}}]}",
+                 SCENE_ERR_RANGE, "geometry spans", "1e+12");
+    expect_error("reach_light.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}],"
+                 " \"lights\": [{\"type\": \"point\", \"position\": [0, -3e12, 0], \"intensity\": 1}]}",
+                 SCENE_ERR_RANGE, "lights[0] (point)", "directional");
+    expect_error("reach_camera.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}],"
+                 " \"camera\": {\"position\": [0, 0, 5e12], \"target\": [0, 0, 0]}}",
+                 SCENE_ERR_RANGE, "camera lies", "1e+12");
+    const char *fine[] = {
+        "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"transform\": {\"translate\": [2e13, 0, -2e13]}}],"
+        " \"camera\": {\"position\": [2e13, 0, -1.99e13], \"target\": [2e13, 0, -2e13]}}",
+        "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"},"
+        " {\"file\": \"quad.obj\", \"transform\": {\"scale\": 1e6, \"translate\": [1e11, 0, 0]}}],"
+        " \"lights\": [{\"type\": \"point\", \"position\": [0, 1e11, 0], \"intensity\": 1e22}]}",
+    };
+    for (size_t i = 0; i < sizeof fine / sizeof fine[0]; i++) {
+        scene_error err;
+        scene *sc = load_json_text("reach_fine.json", fine[i], &err);
+        if (!sc)
+            fail_msg("description %zu: %s", i, err.msg);
+        scene_free(sc);
+    }
+}
+
 /* A face index past the vertex list: Assimp's OBJ reader refuses the file. */
 static void test_error_obj_index_out_of_range(void **state)
 {
@@ -836,6 +872,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_valid_full_description),
+        cmocka_unit_test(test_error_beyond_reach),
         cmocka_unit_test(test_valid_no_lights_no_sky),
         cmocka_unit_test(test_valid_transforms),
         cmocka_unit_test(test_valid_auto_density_and_subfolder),

@@ -2,10 +2,10 @@
  * port, and peers connect over loopback.
  *
  *   - a WebSocket peer not written here (Node's ws, tests/peer_ws.js, with zstd decoded by the zstd tool);
- *   - misbehaving clients (garbage bytes, a garbage message, an absurd hello, a camera flood, a client that
- *     never reads, a disconnect in the middle of a frame, 200 connect/disconnect cycles) while two good
- *     viewers measure their frame rate: the server stays up, refuses each rule-breaker with an error
- *     message, and the good viewers' rate stays within 20 % of their rate before;
+ *   - misbehaving clients (garbage bytes, a garbage message, an absurd hello, a camera flood, a camera 1e30 m
+ *     out, a client that never reads, a disconnect in the middle of a frame, 200 connect/disconnect cycles)
+ *     while two good viewers measure their frame rate: the server stays up, refuses each rule-breaker with an
+ *     error message, and the good viewers' rate stays within 20 % of their rate before;
  *   - limits and the token: a hello over the resolution limit, beyond the viewer limit, without the token.
  * The misbehaving peers speak WebSocket by hand (RFC 6455 framing, a few lines) because they must send what
  * no well-behaved library would. Under the sanitizer build the server runs instrumented and must exit 0 on
@@ -115,7 +115,7 @@ static double rate_in(const good_viewer *g, double t0, double t1)
 /* ---- misbehaving peers ----------------------------------------------------------------------------------- */
 
 typedef struct misbehaviour_result {
-    bool garbage_refused, bad_message_refused, absurd_hello_refused, flood_refused, text_refused;
+    bool garbage_refused, bad_message_refused, absurd_hello_refused, flood_refused, text_refused, far_refused;
     int cycles_done;
 } misbehaviour_result;
 
@@ -190,6 +190,20 @@ static void misbehave(int port, misbehaviour_result *r)
                     break;
             }
             r->flood_refused = fxt_expect_error(fd, FXC_ERR_LIMIT);
+        }
+        close(fd);
+    }
+    /* A camera 1e30 m out, looking back: finite, so the format carries it, but its rays overflow (it aborted
+     * the whole server inside Embree); refused as an invalid camera, that session closed. */
+    fd = fxt_ws_connect(port);
+    if (fd >= 0) {
+        proto_msg hello = fxt_hello_msg(32, 18, PROTO_CODEC_ZSTD);
+        proto_welcome w;
+        if (fxt_ws_send_msg(fd, &hello) && fxt_read_welcome(fd, &w)) {
+            proto_msg cam = {.type = PROTO_CAMERA};
+            cam.u.camera.pose = (proto_pose){.position = {1e30, 2, 3}, .direction = {-1e29, 0, 0}, .fov_deg = 60};
+            fxt_ws_send_msg(fd, &cam);
+            r->far_refused = fxt_expect_error(fd, FXC_ERR_CAMERA);
         }
         close(fd);
     }
@@ -269,6 +283,7 @@ static void test_misbehaving_clients(void **state)
     assert_true(r.absurd_hello_refused);
     assert_true(r.text_refused);
     assert_true(r.flood_refused);
+    assert_true(r.far_refused);
     assert_int_equal(r.cycles_done, 200);
     if ((intptr_t)never_fd >= 0)
         close((int)(intptr_t)never_fd);

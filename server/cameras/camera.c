@@ -28,7 +28,8 @@ bool srv_camera_setup(const srv_camera *cam, uint32_t width, uint32_t height, sr
     if (up_hint[0] == 0 && up_hint[1] == 0 && up_hint[2] == 0)
         up_hint[1] = 1;
     for (int k = 0; k < 3; k++) {
-        if (!isfinite(cam->position[k]) || !isfinite(cam->target[k]) || !isfinite(up_hint[k]))
+        if (!isfinite(cam->position[k]) || !isfinite(cam->target[k]) || !isfinite(up_hint[k]) ||
+            !(fabsf(cam->position[k]) <= SCENE_MAX_REACH) || !(fabsf(cam->target[k]) <= SCENE_MAX_REACH))
             return false;
         out->origin[k] = cam->position[k];
         out->forward[k] = cam->target[k] - cam->position[k];

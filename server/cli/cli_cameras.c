@@ -49,6 +49,7 @@ bool srv_cli_cameras_load(const char *cmd, srv_cli_cameras *c, const char *const
             fprintf(stderr, "fxcache %s: %s\n", cmd, err);
             return false;
         }
+        c->trace_paths[i] = paths[i];
         c->trace_count = i + 1;
         first = fmin(first, srv_trace_first_time(c->traces[i]));
         last = fmax(last, srv_trace_last_time(c->traces[i]));
@@ -56,6 +57,32 @@ bool srv_cli_cameras_load(const char *cmd, srv_cli_cameras *c, const char *const
     c->viewers = c->trace_count;
     c->start_time = first;
     c->last_time = last;
+    return true;
+}
+
+bool srv_cli_cameras_check(const char *cmd, const srv_cli_cameras *c, const scene *s)
+{
+    for (uint32_t v = 0; v < c->trace_count; v++) {
+        const srv_trace *t = c->traces[v];
+        for (uint32_t i = 0; t && i < srv_trace_count(t); i++) {
+            srv_camera cam = srv_trace_camera(t, s, i);
+            srv_camera_frame frame;
+            if (srv_camera_setup(&cam, 1, 1, &frame))
+                continue;
+            double reach = 0;
+            for (int k = 0; k < 3; k++)
+                reach = fmax(reach, fmax(fabs((double)cam.position[k]), fabs((double)cam.target[k])));
+            if (!(reach <= SCENE_MAX_REACH))
+                fprintf(stderr, "fxcache %s: %s: camera %u (time %.9g s) lies %.3g m from the scene's centre; cameras "
+                                "may be at most %.0e m from it\n",
+                        cmd, c->trace_paths[v], i + 1, srv_trace_time(t, i), reach, SCENE_MAX_REACH);
+            else
+                fprintf(stderr, "fxcache %s: %s: camera %u (time %.9g s): its position and target coincide in the "
+                                "scene's float coordinates (move the target farther away)\n",
+                        cmd, c->trace_paths[v], i + 1, srv_trace_time(t, i));
+            return false;
+        }
+    }
     return true;
 }
 

@@ -26,6 +26,7 @@ typedef struct srv_cli_cameras {
     bool res_set;              /* --res given: it wins over a trace's own resolution */
     /* Set by srv_cli_cameras_load. */
     srv_trace *traces[SRV_CLI_MAX_TRACES]; /* by viewer; NULL: a generator's viewer */
+    const char *trace_paths[SRV_CLI_MAX_TRACES]; /* the paths given (for messages) */
     uint32_t trace_count;
     double start_time, last_time; /* frame 0's time and the last trace's end (0 without traces) */
 } srv_cli_cameras;
@@ -46,6 +47,11 @@ bool srv_cli_check_cameras(const char *cmd, uint32_t trace_count, bool viewers_s
 /* Reads the traces (count may be 0: the generator drives every viewer). False with a one-line error naming
  * the file and the problem; what was read is freed by srv_cli_cameras_free either way. */
 bool srv_cli_cameras_load(const char *cmd, srv_cli_cameras *c, const char *const *paths, uint32_t count);
+
+/* Checks every trace camera against the loaded scene: each must give a usable camera in the scene's local
+ * frame (srv_camera_setup: within SCENE_MAX_REACH of the scene's centre, position and target apart in float).
+ * False with "fxcache CMD: PATH: camera N (time T s) ..." naming the first that does not. */
+bool srv_cli_cameras_check(const char *cmd, const srv_cli_cameras *c, const scene *s);
 
 /* Frames from start until the last trace ends (1..1000000); 0 without traces. */
 uint32_t srv_cli_cameras_frames(const srv_cli_cameras *c);

@@ -359,7 +359,7 @@ int srv_cmd_ref(int argc, char **argv)
         exit_code = srv_cli_interrupted("ref", stop_requested, "while loading the scene");
         goto done;
     }
-    if (!s)
+    if (!s || !srv_cli_cameras_check("ref", &cams, s))
         goto done;
     scene_error serr = {0};
     rt = scene_rt_create(s, NULL, &serr);

@@ -916,7 +916,7 @@ int srv_cmd_report(int argc, char **argv)
         exit_code = srv_cli_interrupted("report", stop_requested, "while loading the scene");
         goto done;
     }
-    if (!s)
+    if (!s || !srv_cli_cameras_check("report", &cams, s))
         goto done;
     scene_error serr = {0};
     rt = scene_rt_create(s, NULL, &serr);

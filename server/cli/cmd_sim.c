@@ -280,6 +280,8 @@ int srv_cmd_sim(int argc, char **argv)
         goto done;
     exit_code = 1;
     const scene *s = run.s;
+    if (!srv_cli_cameras_check("sim", &cams, s))
+        goto done;
     srv_loop *loop = run.loop;
     srv_report *report = run.report;
     fxc_result r;
