@@ -25,7 +25,7 @@
     X(FXC_ERR_STALE_ID, -14, "no such viewer: the id is stale, was removed or never existed")              \
     X(FXC_ERR_NO_SLOT, -15, "every viewer slot is taken")                                                    \
     X(FXC_ERR_CAMERA, -16,                                                                                   \
-      "invalid camera (non-finite, position equals target, fov outside (0, 180), or beyond 1e12 m)")        \
+      "invalid camera (non-finite, position equals target, fov outside (0, 180), or beyond 1e13 m)")        \
     X(FXC_ERR_EFFECTS, -17, "invalid effect list (unknown dependency, too many effects, or a bad table)")   \
     X(FXC_ERR_THREADS, -18, "cannot start threads")                                                          \
     X(FXC_ERR_BAD_MAGIC, -19, "not an fxcache message (bad magic)")                                          \

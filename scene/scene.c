@@ -769,8 +769,8 @@ static double reach_of(const float p[3])
     return fmax(fabs((double)p[0]), fmax(fabs((double)p[1]), fabs((double)p[2])));
 }
 
-/* Refuses geometry, point lights or the scene's camera farther than SCENE_MAX_REACH from the local origin
- * (after the frame is settled and the bounds are known). */
+/* Refuses geometry or point lights farther than SCENE_MAX_REACH from the local origin, or the scene's camera
+ * farther than SCENE_MAX_CAMERA_REACH (after the frame is settled and the bounds are known). */
 static scene_result check_reach(const scene *s, scene_error *err)
 {
     double reach = fmax(reach_of(s->bounds_min), reach_of(s->bounds_max));
@@ -785,10 +785,10 @@ static scene_result check_reach(const scene *s, scene_error *err)
                                "%s: lights[%u] (point) lies %.4g m from the scene's centre; at most %.0e m (squared "
                                "distances must fit a float): use a directional light for a far source",
                                s->source, i, reach_of(s->lights[i].position), SCENE_MAX_REACH);
-    if (s->has_camera && !(fmax(reach_of(s->camera_pos), reach_of(s->camera_target)) <= SCENE_MAX_REACH))
+    if (s->has_camera && !(fmax(reach_of(s->camera_pos), reach_of(s->camera_target)) <= SCENE_MAX_CAMERA_REACH))
         return scene__fail(err, SCENE_ERR_RANGE,
                            "%s: the camera lies %.4g m from the scene's centre; at most %.0e m", s->source,
-                           fmax(reach_of(s->camera_pos), reach_of(s->camera_target)), SCENE_MAX_REACH);
+                           fmax(reach_of(s->camera_pos), reach_of(s->camera_target)), SCENE_MAX_CAMERA_REACH);
     return SCENE_OK;
 }
 

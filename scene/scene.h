@@ -196,6 +196,10 @@ typedef struct scene {
  * overflows to infinity. The local frame is centred on a scene far from the world origin, so this limits the
  * scene's extent, not where it lies in the world. */
 #define SCENE_MAX_REACH 1e12
+/* How far cameras may stand from the local origin, metres: ten times SCENE_MAX_REACH, so that the camera
+ * generators' viewers around the largest scene (an orbit at 1.5 times its half diagonal) are within it; squared
+ * distances from there (about 1e26) still fit a float. */
+#define SCENE_MAX_CAMERA_REACH 1e13
 
 /* Options for loading. All-zero means defaults. */
 typedef struct scene_load_desc {

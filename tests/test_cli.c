@@ -502,7 +502,7 @@ static void test_err_trace_camera_beyond_reach(void **state)
         snprintf(args, sizeof args, "%s --trace '%s' --res 8x8 --quiet --out '%s'", cmds[i], path, out);
         if (i == 0)
             snprintf(args, sizeof args, "sim --trace '%s' --res 8x8 --quiet", path);
-        expect_error(1, args, "far.trace: camera 2", "1e+30 m", "1e+12", NULL);
+        expect_error(1, args, "far.trace: camera 2", "1e+30 m", "1e+13", NULL);
     }
 }
 

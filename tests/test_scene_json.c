@@ -806,10 +806,12 @@ static void test_error_transform_overflow(void **state)
                  SCENE_ERR_INVALID, "meshes[0]", "vertex");
 }
 
-/* SCENE_MAX_REACH (1e12 m from the local centre) bounds the scene's extent, not where it lies: two quads 2e13 m
- * apart (the far one scaled up, else float spacing there makes it degenerate, refused as such), a point light or the camera that far out are refused by name (they crashed inside Embree: squared
- * distances overflowed and rays became invalid), while the same quad alone at 2e13 m from the world origin
- * loads (its local frame is centred on it), and so do a quad (1,000 km wide) 1e11 m beside another and a light 1e11 m out. */
+/* SCENE_MAX_REACH (1e12 m from the local centre; cameras SCENE_MAX_CAMERA_REACH, 1e13 m) bounds the scene's
+ * extent, not where it lies. Two quads 2e13 m apart (the far one scaled up: unscaled, float spacing there makes
+ * it degenerate, refused as such), a point light 3e12 m out or the camera 5e13 m out are refused by name (they
+ * crashed inside Embree: squared distances overflowed and rays became invalid); the same quad alone at 2e13 m
+ * from the world origin loads (its local frame is centred on it), and so do a quad 1,000 km wide 1e11 m beside
+ * another and a light 1e11 m out. */
 static void test_error_beyond_reach(void **state)
 {
     (void)state;
@@ -823,8 +825,8 @@ static void test_error_beyond_reach(void **state)
                  SCENE_ERR_RANGE, "lights[0] (point)", "directional");
     expect_error("reach_camera.json",
                  "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}],"
-                 " \"camera\": {\"position\": [0, 0, 5e12], \"target\": [0, 0, 0]}}",
-                 SCENE_ERR_RANGE, "camera lies", "1e+12");
+                 " \"camera\": {\"position\": [0, 0, 5e13], \"target\": [0, 0, 0]}}",
+                 SCENE_ERR_RANGE, "camera lies", "1e+13");
     const char *fine[] = {
         "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"transform\": {\"translate\": [2e13, 0, -2e13]}}],"
         " \"camera\": {\"position\": [2e13, 0, -1.99e13], \"target\": [2e13, 0, -2e13]}}",

@@ -29,7 +29,7 @@ bool srv_camera_setup(const srv_camera *cam, uint32_t width, uint32_t height, sr
         up_hint[1] = 1;
     for (int k = 0; k < 3; k++) {
         if (!isfinite(cam->position[k]) || !isfinite(cam->target[k]) || !isfinite(up_hint[k]) ||
-            !(fabsf(cam->position[k]) <= SCENE_MAX_REACH) || !(fabsf(cam->target[k]) <= SCENE_MAX_REACH))
+            !(fabsf(cam->position[k]) <= SCENE_MAX_CAMERA_REACH) || !(fabsf(cam->target[k]) <= SCENE_MAX_CAMERA_REACH))
             return false;
         out->origin[k] = cam->position[k];
         out->forward[k] = cam->target[k] - cam->position[k];

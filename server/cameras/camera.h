@@ -23,8 +23,8 @@ typedef struct srv_camera_frame {
 
 /* Precomputes the frame for an image of width x height pixels. Returns false when the camera is
  * degenerate (position equals target, non-finite values, field of view outside (0, 180)) or its position or
- * target lies farther than SCENE_MAX_REACH from the scene's local origin (rays from there overflow: Embree
- * refuses them). */
+ * target lies farther than SCENE_MAX_CAMERA_REACH from the scene's local origin (rays from there overflow:
+ * Embree refuses them). */
 bool srv_camera_setup(const srv_camera *cam, uint32_t width, uint32_t height, srv_camera_frame *out);
 
 /* The unit direction of the ray through image position (px, py) (pixel centres at +0.5, y down). Inline:

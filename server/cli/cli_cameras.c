@@ -72,10 +72,10 @@ bool srv_cli_cameras_check(const char *cmd, const srv_cli_cameras *c, const scen
             double reach = 0;
             for (int k = 0; k < 3; k++)
                 reach = fmax(reach, fmax(fabs((double)cam.position[k]), fabs((double)cam.target[k])));
-            if (!(reach <= SCENE_MAX_REACH))
+            if (!(reach <= SCENE_MAX_CAMERA_REACH))
                 fprintf(stderr, "fxcache %s: %s: camera %u (time %.9g s) lies %.3g m from the scene's centre; cameras "
                                 "may be at most %.0e m from it\n",
-                        cmd, c->trace_paths[v], i + 1, srv_trace_time(t, i), reach, SCENE_MAX_REACH);
+                        cmd, c->trace_paths[v], i + 1, srv_trace_time(t, i), reach, SCENE_MAX_CAMERA_REACH);
             else
                 fprintf(stderr, "fxcache %s: %s: camera %u (time %.9g s): its position and target coincide in the "
                                 "scene's float coordinates (move the target farther away)\n",

@@ -49,7 +49,7 @@ bool srv_cli_check_cameras(const char *cmd, uint32_t trace_count, bool viewers_s
 bool srv_cli_cameras_load(const char *cmd, srv_cli_cameras *c, const char *const *paths, uint32_t count);
 
 /* Checks every trace camera against the loaded scene: each must give a usable camera in the scene's local
- * frame (srv_camera_setup: within SCENE_MAX_REACH of the scene's centre, position and target apart in float).
+ * frame (srv_camera_setup: within SCENE_MAX_CAMERA_REACH of the scene's centre, position and target apart in float).
  * False with "fxcache CMD: PATH: camera N (time T s) ..." naming the first that does not. */
 bool srv_cli_cameras_check(const char *cmd, const srv_cli_cameras *c, const scene *s);
 
