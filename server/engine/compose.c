@@ -48,10 +48,13 @@ typedef struct compose_scratch {
     float indirect[SRV_RUN * 3];
     /* The low-frequency effect per block (loop->coarse_effect): its term at the tile's reps (sky visibility
      * 1 in: the term is linear in it), and the run's pixels no rep stands in for, gathered for one call. */
-    float rep_indirect[SRV_COARSE_REPS][3];
+    float rep_indirect[3][SRV_COARSE_REPS]; /* per channel (lanes gather them) */
     float rep_sky[SRV_COARSE_REPS]; /* the sky visibility shade left (0 where the probes replaced the sky) */
     float rep_sharing[SRV_COARSE_REPS];
-    uint8_t rep_ok[SRV_COARSE_REPS]; /* visible and with taps */
+    int32_t rep_ok[SRV_COARSE_REPS]; /* visible and with taps */
+    /* coarse_shade's blend over the run's lanes (blend_lanes): each visible pixel's sample choice
+     * (view->coarse) and buffer offset from the run's first pixel in; whether no sample stands in out. */
+    int32_t blend_mask[SRV_RUN], blend_offset[SRV_RUN], blend_own[SRV_RUN];
     uint8_t rep_slot[SRV_RUN];       /* prepass: the rep of gathered pixel i */
     uint8_t own_index[SRV_RUN]; /* the run's pixels evaluated themselves */
     srv_pixel own_pixels[SRV_RUN];
@@ -386,71 +389,117 @@ typedef struct coarse_run {
     uint32_t x0, x1, y0, y1;
 } coarse_run;
 
+/* The blend of coarse_shade over a run's SRV_RUN lanes (vectorised: FXC_HOT_LANES), each value as one pixel at a
+ * time gave it: lane i (a visible pixel of the run, blend_offset[i] = its buffer index less `base`, the run's
+ * first pixel; rows of `width`, the run's first row `row0` rows below the tile's) takes the reps of its sample
+ * choice (blend_mask[i], srv__coarse_mask's candidate order) that have data, with srv__coarse_weights'
+ * bilinear weights, and adds their indirect term times its own sky visibility over the weights' total, and
+ * scales its sky visibility likewise; with no such rep, blend_own[i] is set and the lane left as it was.
+ * The candidates left out add exact zeros to the sums (which start at +0, so never -0): the same values in the
+ * same order as summing only those taken. Lanes past the run carry mask 0 and offset 0. */
+/* The reps' values are separate parameters, and the results go to local arrays first: GCC 12 gathers only
+ * through pointers it can tell apart from every store of the loop (not from an array member of a struct, and
+ * not past a store through another restrict pointer). */
+FXC_HOT_LANES static void blend_lanes(const int32_t *lane_mask, const int32_t *lane_offset, const float *rep0,
+                                      const float *rep1, const float *rep2, const float *rep_sky,
+                                      const float *rep_sharing, const int32_t *rep_ok, float *indirect,
+                                      float *sky_visibility, float *lane_sharing, int32_t *lane_own,
+                                      const srv_coarse_grid *g, int32_t width, int32_t row0, int32_t sharing_on)
+{
+    const int32_t shift = (int32_t)g->shift, low = (int32_t)g->block - 1, nx = (int32_t)g->nx, ny = (int32_t)g->ny;
+    const float inv_block = g->inv_block;
+    float out0[SRV_RUN], out1[SRV_RUN], out2[SRV_RUN], out_sky[SRV_RUN], out_sharing[SRV_RUN];
+    int32_t out_own[SRV_RUN];
+    for (int i = 0; i < SRV_RUN; i++) {
+        int32_t offset = lane_offset[i], mask = lane_mask[i];
+        int32_t row = (offset >= width) + (offset >= 2 * width) + (offset >= 3 * width);
+        int32_t lx = offset - row * width, ly = row0 + row;
+        int32_t ix = lx >> shift, iy = ly >> shift, fx = lx & low, fy = ly & low;
+        int32_t first = iy * nx + ix;
+        float wx = ((fx != 0) & (ix + 1 < nx)) ? (float)fx * inv_block : 0.0f;
+        float wy = ((fy != 0) & (iy + 1 < ny)) ? (float)fy * inv_block : 0.0f;
+        float weight[4] = {(1.0f - wx) * (1.0f - wy), wx * (1.0f - wy), (1.0f - wx) * wy, wx * wy};
+        int32_t step[4] = {0, 1, nx, nx + 1};
+        float sum0 = 0, sum1 = 0, sum2 = 0, sum3 = 0, total = 0, sharing = 0;
+#pragma GCC unroll 4
+        for (int c = 0; c < 4; c++) {
+            int32_t bit = (mask >> c) & 1;
+            /* A rep the tile has, taken or not: every lane loads all its values (GCC 12 emulates gathers, and
+             * not masked ones), and one left out adds w = 0 times a finite value (coarse_prepass), an exact
+             * zero, to each sum. */
+            int32_t r = first + (step[c] & -bit);
+            float taken = (float)(rep_ok[r] & bit), w = weight[c] * taken; /* (no select: GCC would mask loads) */
+            sum0 += w * rep0[r];
+            sum1 += w * rep1[r];
+            sum2 += w * rep2[r];
+            sum3 += w * rep_sky[r];
+            total += w;
+            float s = rep_sharing[r] * taken; /* (finite popcounts, at least 0) */
+            sharing = s > sharing ? s : sharing;
+        }
+        int32_t blended = total > 0;
+        float divisor = blended ? total : 1.0f;
+        float sky = sky_visibility[i], open = sky / divisor;
+        float e0 = sum0 * open, e1 = sum1 * open, e2 = sum2 * open; /* fminf(x, FLT_MAX): NaN gives FLT_MAX */
+        e0 = e0 < FLT_MAX ? e0 : FLT_MAX;
+        e1 = e1 < FLT_MAX ? e1 : FLT_MAX;
+        e2 = e2 < FLT_MAX ? e2 : FLT_MAX;
+        float in0 = indirect[3 * i], in1 = indirect[3 * i + 1], in2 = indirect[3 * i + 2];
+        out0[i] = blended ? in0 + e0 : in0;
+        out1[i] = blended ? in1 + e1 : in1;
+        out2[i] = blended ? in2 + e2 : in2;
+        /* Not blended: sum3 = 0 and the factor 1. No select on sum3 (GCC would mask the loads feeding it), and
+         * sum3 + 0 = sum3 (sums start at +0). */
+        out_sky[i] = sky * ((sum3 + (blended ? 0.0f : 1.0f)) / divisor);
+        float own_sharing = lane_sharing[i];
+        out_sharing[i] = blended & sharing_on & (sharing > own_sharing) ? sharing : own_sharing;
+        out_own[i] = !blended;
+    }
+    for (int i = 0; i < SRV_RUN; i++) {
+        indirect[3 * i] = out0[i];
+        indirect[3 * i + 1] = out1[i];
+        indirect[3 * i + 2] = out2[i];
+        sky_visibility[i] = out_sky[i];
+        lane_sharing[i] = out_sharing[i];
+        lane_own[i] = out_own[i];
+    }
+}
+
 /* The coarse effect over a gathered run: each pixel blends the terms of the reps that stand in for it (an
- * indirect term and a sky factor, both linear in the pixel's own sky visibility), the others are gathered
- * and go through the kind's taps and the effect's shade as one smaller run. */
+ * indirect term and a sky factor, both linear in the pixel's own sky visibility: blend_lanes), the others are
+ * gathered and go through the kind's taps and the effect's shade as one smaller run. */
 FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scratch *cs, uint32_t e,
-                         const coarse_run *cr, const compose_setup *cu, uint32_t thread_index)
+                                 const coarse_run *cr, const compose_setup *cu, uint32_t thread_index, uint32_t count)
 {
     const uint64_t *bits = loop->viewer_bits[e];
-    const srv_coarse_grid *g = cr->g;
-    uint32_t own = 0, i = 0;
+    const size_t width = view->frame.width, base = (size_t)cr->y0 * width + cr->x0;
+    for (uint32_t i = 0; i < count; i++) {
+        size_t p = cs->index[i];
+        cs->blend_mask[i] = view->coarse[p]; /* requests' sample choice (srv__coarse_mask) */
+        cs->blend_offset[i] = (int32_t)(p - base);
+    }
+    for (uint32_t i = count; i < SRV_RUN; i++)
+        cs->blend_mask[i] = cs->blend_offset[i] = 0;
+    blend_lanes(cs->blend_mask, cs->blend_offset, cs->rep_indirect[0], cs->rep_indirect[1], cs->rep_indirect[2],
+                cs->rep_sky, cs->rep_sharing, cs->rep_ok, cs->indirect, cs->sky_visibility, cs->sharing, cs->blend_own,
+                cr->g, (int32_t)width, (int32_t)(cr->y0 - cr->g->y0), bits != NULL);
+    uint32_t own = 0;
     gather_memo memo = {.tri = SRV_MISS};
-    for (uint32_t y = cr->y0; y < cr->y1; y++)
-        for (uint32_t x = cr->x0; x < cr->x1; x++) {
-            size_t p = (size_t)y * view->frame.width + x;
-            if (view->tri[p] == SRV_MISS)
-                continue;
-            /* Requests' sample choice (srv__coarse_mask), blended in its candidate order. */
-            uint32_t mask = view->coarse[p];
-            float sum[4] = {0, 0, 0, 0}, total = 0, sharing = 0;
-            uint32_t lx = x - g->x0, ly = y - g->y0, low = g->block - 1;
-            uint32_t first = (ly >> g->shift) * g->nx + (lx >> g->shift);
-            float computed[4];
-            const float *weight = computed;
-            if (mask == 0xF && cs->rep_ok[first] & cs->rep_ok[first + 1] & cs->rep_ok[first + g->nx] &
-                                   cs->rep_ok[first + g->nx + 1])
-                /* The common case: all 4 reps match and have data; tabulated weights (the same values). */
-                weight = g->weight[((ly & low) << g->shift) | (lx & low)];
-            else if (mask)
-                srv__coarse_weights(g, x, y, computed);
-            const uint32_t index_of[4] = {first, first + 1, first + g->nx, first + g->nx + 1};
-            for (uint32_t c = 0; mask && c < 4; c++) {
-                uint32_t r = index_of[c];
-                if (!(mask >> c & 1) || !cs->rep_ok[r])
-                    continue;
-                float w = weight[c];
-                sum[0] += w * cs->rep_indirect[r][0];
-                sum[1] += w * cs->rep_indirect[r][1];
-                sum[2] += w * cs->rep_indirect[r][2];
-                sum[3] += w * cs->rep_sky[r];
-                total += w;
-                if (bits)
-                    sharing = cs->rep_sharing[r] > sharing ? cs->rep_sharing[r] : sharing;
-            }
-            if (total > 0) {
-                float open = cs->sky_visibility[i] / total;
-                for (int k = 0; k < 3; k++) { /* fminf(x, FLT_MAX) as shade has it: NaN gives FLT_MAX */
-                    float term = sum[k] * open;
-                    cs->indirect[3 * i + k] += term < FLT_MAX ? term : FLT_MAX;
-                }
-                cs->sky_visibility[i] *= sum[3] / total;
-                if (bits)
-                    cs->sharing[i] = sharing > cs->sharing[i] ? sharing : cs->sharing[i];
-            } else {
-                if (!cu->points) { /* the run was gathered without positions: this pixel's, now */
-                    uint32_t again = i;
-                    gather_pixel(loop, view, x, y, p, cs, &again, cu->sky, cu->log2_density, true, true, &memo);
-                }
-                cs->own_index[own] = (uint8_t)i;
-                cs->own_pixels[own] = cs->pixels[i];
-                cs->own_points[own] = cs->points[i];
-                cs->own_sky[own] = cs->sky_visibility[i];
-                memcpy(cs->own_indirect + 3 * own, cs->indirect + 3 * i, 3 * sizeof(float));
-                own++;
-            }
-            i++;
+    for (uint32_t i = 0; i < count; i++) {
+        if (!cs->blend_own[i])
+            continue;
+        if (!cu->points) { /* the run was gathered without positions: this pixel's, now */
+            size_t p = cs->index[i];
+            uint32_t again = i, x = (uint32_t)(p % width), y = (uint32_t)(p / width);
+            gather_pixel(loop, view, x, y, p, cs, &again, cu->sky, cu->log2_density, true, true, &memo);
         }
+        cs->own_index[own] = (uint8_t)i;
+        cs->own_pixels[own] = cs->pixels[i];
+        cs->own_points[own] = cs->points[i];
+        cs->own_sky[own] = cs->sky_visibility[i];
+        memcpy(cs->own_indirect + 3 * own, cs->indirect + 3 * i, 3 * sizeof(float));
+        own++;
+    }
     if (!own)
         return;
     kind_taps(loop, view, thread_index, cs->own_pixels, own, e, cs->taps, bits ? cs->blocks : NULL);
@@ -480,7 +529,9 @@ static void coarse_prepass(srv_loop *loop, srv_viewer *view, compose_scratch *cs
         uint32_t count = 0;
         for (; first < reps && count < SRV_RUN; first++) {
             uint32_t x = g->x0 + (first % g->nx) * g->block, y = g->y0 + (first / g->nx) * g->block;
-            cs->rep_ok[first] = 0;
+            cs->rep_ok[first] = 0; /* and finite values: blend_lanes multiplies them by 0 */
+            cs->rep_indirect[0][first] = cs->rep_indirect[1][first] = cs->rep_indirect[2][first] = 0.0f;
+            cs->rep_sky[first] = cs->rep_sharing[first] = 0.0f;
             if (view->tri[(size_t)y * width + x] == SRV_MISS)
                 continue; /* (gather_pixel would write the sky there: another tile's pixel, maybe) */
             uint32_t before = count;
@@ -502,7 +553,8 @@ static void coarse_prepass(srv_loop *loop, srv_viewer *view, compose_scratch *cs
         for (uint32_t i = 0; i < count; i++) {
             uint32_t slot = cs->rep_slot[i];
             cs->rep_ok[slot] = cs->taps[i].count > 0;
-            memcpy(cs->rep_indirect[slot], cs->indirect + 3 * i, sizeof cs->rep_indirect[slot]);
+            for (int k = 0; k < 3; k++)
+                cs->rep_indirect[k][slot] = cs->indirect[3 * i + k];
             cs->rep_sky[slot] = cs->sky_visibility[i];
             cs->rep_sharing[slot] =
                 bits && cs->blocks[i] != SRV_NONE ? (float)__builtin_popcountll(bits[cs->blocks[i]]) : 0.0f;
@@ -545,7 +597,7 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
             if (!loop->effect_shading[e])
                 continue;
             if (cr && e == loop->coarse_effect) {
-                coarse_shade(loop, view, cs, e, cr, cu, thread_index);
+                coarse_shade(loop, view, cs, e, cr, cu, thread_index, count);
                 continue;
             }
             /* This effect and the next ones that shade through the same kind at the same bias (up to the

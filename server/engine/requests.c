@@ -118,6 +118,42 @@ FXC_HOT_INLINE void request_pixels(request_task *task, uint32_t thread_index, co
         atomic_store(&task->failed, true);
 }
 
+/* The common case of srv__coarse_mask for one row of a tile (vectorised: FXC_HOT_LANES), lane j for pixel
+ * (x0 + j, y) of a tile of grid g, buffer index row + j: 1 for a rep; the full mask of its candidates when the
+ * pixel and its block's 4 corner reps (those the frame has) lie on one triangle (all 4 candidates then match);
+ * else -1: the general test (srv__coarse_mask) decides. Lanes from `lanes` on (past the frame's right edge)
+ * read lane 0's pixels and are not used. `rep_row` is the buffer index of the tile's first rep column in the
+ * row of reps above or at y. */
+FXC_HOT_LANES static void coarse_row_lanes(const uint32_t *tri, int32_t row, int32_t rep_row, int32_t lanes,
+                                           int32_t ly, const srv_coarse_grid *g, int32_t width, int32_t *out)
+{
+    const int32_t shift = (int32_t)g->shift, block = (int32_t)g->block, low = block - 1, nx = (int32_t)g->nx;
+    const int32_t fy = ly & low, two_y = ((ly >> shift) + 1 < (int32_t)g->ny) & (fy != 0);
+    const int32_t down = block * width & -two_y;
+    int32_t result[SRV_TILE]; /* (stores to a local array: GCC 12 gathers only past stores it can tell apart) */
+    /* Integer arithmetic only, no compare mixed into it (GCC 12 left such a loop scalar): for small
+     * non-negative a and b, (a - b) >> 31 & 1 is a < b, and (-a) >> 31 & 1 is a != 0. */
+    for (int32_t j = 0; j < SRV_TILE; j++) {
+        int32_t lane = j & (((j - lanes) >> 31)); /* j < lanes ? j : 0 */
+        int32_t ix = lane >> shift, fx = lane & low;
+        int32_t two_x = ((ix + 1 - nx) >> 31 & 1) & ((-fx) >> 31 & 1);
+        int32_t right = block & -two_x, r0 = rep_row + (ix << shift);
+        uint32_t tp = tri[row + lane];
+        uint32_t differ = (tri[r0] ^ tp) | (tri[r0 + right] ^ tp) | (tri[r0 + down] ^ tp) |
+                          (tri[r0 + right + down] ^ tp);
+        int32_t same = 1 - (int32_t)((-(int64_t)differ) >> 63 & 1); /* differ == 0 */
+        /* srv__coarse_mask's bits: candidate 0 always, 1 with a second column, 2 with a second row, 3 both */
+        int32_t full = 1 | (two_x << 1) | (two_y << 2) | ((two_x & two_y) << 3);
+        /* every candidate the pixel's block position has must exist: at an edge of the frame the general test */
+        int32_t fx_zero = 1 - ((-fx) >> 31 & 1), fy_zero = fy == 0;
+        int32_t common = same & (two_x | fx_zero) & (two_y | fy_zero);
+        int32_t rep = fx_zero & fy_zero, decided = common * (full + 1) - 1; /* common ? full : -1 */
+        result[j] = decided + rep * (1 - decided);                          /* rep ? 1 : decided */
+    }
+    for (int32_t j = 0; j < SRV_TILE; j++)
+        out[j] = result[j];
+}
+
 static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
 {
     request_task *task = user;
@@ -137,26 +173,25 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
         srv_coarse_grid g;
         srv__coarse_grid(block, x0, y0, width, height, &g);
         uint8_t *coarse = view->coarse;
-        for (uint32_t y = y0; y < y0 + SRV_TILE && y < height; y++)
-            for (uint32_t x = x0; x < x0 + SRV_TILE && x < width; x++) {
-                size_t p = (size_t)y * width + x;
+        int32_t lanes = (int32_t)(width - x0 < SRV_TILE ? width - x0 : SRV_TILE), row_mask[SRV_TILE];
+        for (uint32_t y = y0; y < y0 + SRV_TILE && y < height; y++) {
+            uint32_t ly = y - y0;
+            size_t row = (size_t)y * width + x0;
+            size_t rep_row = (size_t)(y0 + ((ly >> g.shift) << g.shift)) * width + x0;
+            coarse_row_lanes(view->tri, (int32_t)row, (int32_t)rep_row, lanes, (int32_t)ly, &g, (int32_t)width,
+                             row_mask);
+            for (uint32_t j = 0; j < (uint32_t)lanes; j++) {
+                size_t p = row + j;
                 if (view->tri[p] == SRV_MISS)
                     continue;
-                /* The common case without the general test: the pixel and its block's 4 corner reps (those
-                 * the frame has) on one triangle; all 4 candidates then match (srv__coarse_mask). */
-                uint32_t lx = x - x0, ly = y - y0, low = block - 1, ix = lx >> g.shift, iy = ly >> g.shift;
-                uint32_t fx = lx & low, fy = ly & low, mask;
-                size_t r0 = (size_t)(y0 + (iy << g.shift)) * width + x0 + (ix << g.shift);
-                if ((fx | fy) && ix + 1 < g.nx && iy + 1 < g.ny && view->tri[r0] == view->tri[p] &&
-                    view->tri[r0 + block] == view->tri[p] && view->tri[r0 + block * width] == view->tri[p] &&
-                    view->tri[r0 + block * width + block] == view->tri[p])
-                    mask = (fx ? 2u : 0u) | (fy ? 4u : 0u) | (fx && fy ? 9u : 1u);
-                else
-                    mask = srv__coarse_mask(loop->s, view, loop->coarse_depth_scale, &g, x, y);
+                int32_t mask = row_mask[j];
+                if (mask < 0)
+                    mask = (int32_t)srv__coarse_mask(loop->s, view, loop->coarse_depth_scale, &g, x0 + j, y);
                 coarse[p] = (uint8_t)mask;
-                if (mask == 0 || srv__coarse_is_rep(g.block, x, y))
+                if (mask == 0 || srv__coarse_is_rep(g.block, x0 + j, y))
                     fill_pixel(loop->s, view, p, positions, &memo, &pixels[count++]);
             }
+        }
         request_pixels(task, thread_index, pixels, count);
         return;
     }
