@@ -170,15 +170,16 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_chunk_hist = take(&l, (size_t)rc->chunk_count * 256, sizeof(uint32_t));
     size_t o_chunk_quota = take(&l, rc->chunk_count, sizeof(uint32_t));
     size_t o_chunk_stat = take(&l, rc->chunk_count, sizeof(rc_chunk_stat));
-    /* Entries: one per slot, up to 3 of padding per list (tile and part), the sort's sink. */
+    /* Entries: one per slot, up to 3 of padding per list (tile and part), then the sort's sinks (one per
+     * thread, a line each). */
     rc->parts = d.threads;
     size_t lists_parts = (size_t)rc->tile_count * rc->parts;
-    if ((size_t)rc->slots + 4 * lists_parts + 4 > UINT32_MAX) {
+    if ((size_t)rc->slots + 4 * lists_parts + 4 * (size_t)rc->parts > UINT32_MAX) {
         free(rc);
         return FXC_ERR_INVALID;
     }
-    rc->entry_sink = (uint32_t)((size_t)rc->slots + 4 * lists_parts + 3);
-    size_t o_entries = take(&l, (size_t)rc->entry_sink + 1, sizeof(rc_entry));
+    rc->entry_sink = (uint32_t)(((size_t)rc->slots + 4 * lists_parts + 3) & ~(size_t)3);
+    size_t o_entries = take(&l, (size_t)rc->entry_sink + 4 * (size_t)rc->parts, sizeof(rc_entry));
     size_t o_list_start = take(&l, lists_parts, sizeof(uint32_t));
     size_t o_list_end = take(&l, lists_parts, sizeof(uint32_t));
     size_t o_zbuf = take(&l, rc->pixels, sizeof(float));

@@ -252,7 +252,6 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
 
 static void sort_task(void *user, uint32_t c, uint32_t worker)
 {
-    (void)worker;
     view_rc *rc = user;
     uint32_t begin, end;
     chunk_range(rc, c, &begin, &end);
@@ -263,8 +262,9 @@ static void sort_task(void *user, uint32_t c, uint32_t worker)
     rc_entry *entries = rc->entries;
     uint32_t tiles = rc->tile_count;
     /* Without a branch (slots are in no order once points come and go): points that land outside, and free
-     * slots, go to the sink entry after the lists, whose cursor does not move. */
-    offset[tiles] = offset[tiles + 1] = rc->entry_sink;
+     * slots, go to this thread's sink entry after the lists, whose cursor does not move. (One sink for all
+     * threads was a data race, written by every thread: the thread sanitizer saw it.) */
+    offset[tiles] = offset[tiles + 1] = rc->entry_sink + 4 * worker;
     for (uint32_t i = begin; i < end; i++) {
         uint32_t d = dest[i], o = offset[d];
         offset[d] = o + (d < tiles);

@@ -175,9 +175,10 @@ struct view_rc {
      * in chunk then slot order; every such list starts on a cache line of its own (entries padded to 4, 64
      * bytes), so no line of entries is written by two threads. The z-buffer reads a tile's parts in part
      * order: chunk order, the same with any thread count. */
-    rc_entry *entries;    /* entry_sink + 1 entries, 64-byte aligned */
+    rc_entry *entries;    /* entry_sink + 4 x parts entries, 64-byte aligned */
     uint32_t parts;       /* the pool's threads */
-    uint32_t entry_sink;  /* the entry the sort writes points outside the image and free slots to */
+    uint32_t entry_sink;  /* the sort writes points outside the image and free slots to entry_sink + 4 x its
+                           * thread: a line per thread, so no two threads write one entry */
     uint32_t *list_start; /* tile_count x parts */
     uint32_t *list_end;   /* tile_count x parts */
 
