@@ -60,6 +60,16 @@ void view_rc__plan_drops(view_rc *rc)
     }
 }
 
+/* A pass over every chunk: statically split (each thread on the same chunks in every pass, stealing from the
+ * others' ends when done), or, with dynamic_points, handed out by the pool's counter. */
+static void run_chunks(view_rc *rc, fxc_pool_task task)
+{
+    if (rc->d.dynamic_points)
+        fxc_pool_run(rc->pool, rc->chunk_count, task, rc);
+    else
+        fxc_pool_run_static(rc->pool, rc->chunk_count, task, rc, true);
+}
+
 static void chunk_range(const view_rc *rc, uint32_t c, uint32_t *begin, uint32_t *end)
 {
     *begin = c * rc->chunk_size;
@@ -155,7 +165,7 @@ void view_rc__predict_project(view_rc *rc)
     size_t low = (size_t)rc->low_w * rc->low_h;
     for (uint32_t t = 0; t < rc->thread_count; t++)
         memset(rc->workers[t].occupied, 0, low);
-    fxc_pool_run_static(rc->pool, rc->chunk_count, predict_task, rc, true);
+    run_chunks(rc, predict_task);
     uint8_t *all = rc->workers[0].occupied;
     for (uint32_t t = 1; t < rc->thread_count; t++) {
         const uint8_t *mine = rc->workers[t].occupied;
@@ -278,7 +288,7 @@ static void sort_task(void *user, uint32_t c, uint32_t worker)
 
 void view_rc__project_sort(view_rc *rc)
 {
-    fxc_pool_run_static(rc->pool, rc->chunk_count, project_task, rc, true);
+    run_chunks(rc, project_task);
     /* Offsets: tile by tile, part by part (each list on a line of its own: 4 entries), chunk by chunk. */
     uint32_t lists = rc->tile_count + 2, run = 0, parts = rc->parts;
     for (uint32_t t = 0; t < rc->tile_count; t++)
@@ -294,7 +304,7 @@ void view_rc__project_sort(view_rc *rc)
             }
             rc->list_end[t * parts + p] = run;
         }
-    fxc_pool_run_static(rc->pool, rc->chunk_count, sort_task, rc, true);
+    run_chunks(rc, sort_task);
 }
 
 /* ---- z-buffer tiles (2002 3.2) ------------------------------------------------------------------------- */
@@ -375,7 +385,7 @@ void view_rc__zbuffer(view_rc *rc)
  * avoid. */
 void view_rc__project_direct(view_rc *rc)
 {
-    fxc_pool_run_static(rc->pool, rc->chunk_count, project_task, rc, true);
+    run_chunks(rc, project_task);
 }
 
 void view_rc__zbuffer_direct(view_rc *rc)
@@ -459,7 +469,7 @@ static void age_task(void *user, uint32_t c, uint32_t worker)
 
 void view_rc__age(view_rc *rc)
 {
-    fxc_pool_run_static(rc->pool, rc->chunk_count, age_task, rc, true);
+    run_chunks(rc, age_task);
     /* The free stack: chunks from the last to the first, so that the lowest free slot is on top. */
     rc->free_count = 0;
     for (uint32_t c = rc->chunk_count; c-- > 0;) {
