@@ -23,7 +23,7 @@
  * camera (mean absolute error over channels, and the share of pixels off by more than 32 in a channel).
  *
  * Usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] [--lead 2] [--tile 64]
- *        [--capacity F] [--pin CPU] [--only table|scaling|threads|switches|quality] (default: all, in that
+ *        [--capacity F] [--pin CPU] [--only table|scaling|threads|split|switches|quality] (default: all, in that
  * order) Each table also gives the process CPU time of a frame: on a machine shared with other jobs the wall
  * time includes the time the process waited for a core. */
 #define _GNU_SOURCE
@@ -409,7 +409,7 @@ static void section_scaling(const bench_opts *o)
 static void section_threads(const bench_opts *o)
 {
     double t1[MAX_REPS], t2[MAX_REPS], speedup[MAX_REPS], sum1[MAX_REPS], sum2[MAX_REPS],
-        sum_speedup[MAX_REPS];
+        sum_speedup[MAX_REPS], cpu1[MAX_REPS], cpu2[MAX_REPS];
     double s1[VIEW_RC_STAGE_COUNT][MAX_REPS], s2[VIEW_RC_STAGE_COUNT][MAX_REPS];
     for (int r = 0; r < o->reps; r++) {
         run_result a, b;
@@ -420,6 +420,7 @@ static void section_threads(const bench_opts *o)
         speedup[r] = a.frame_ms / b.frame_ms;
         sum1[r] = stage_sum(&a), sum2[r] = stage_sum(&b);
         sum_speedup[r] = sum1[r] / sum2[r];
+        cpu1[r] = a.cpu_ms, cpu2[r] = b.cpu_ms;
         for (int s = 0; s < VIEW_RC_STAGE_COUNT; s++)
             s1[s][r] = a.stage_ms[s], s2[s][r] = b.stage_ms[s];
     }
@@ -435,11 +436,49 @@ static void section_threads(const bench_opts *o)
     printf("| frame, 2 threads | | %.3f (%.3f-%.3f) |\n", mid, lo, hi);
     printf("| sum of the stage medians | %.3f | %.3f |\n", bench_quantile(sum1, o->reps, 0.5),
            bench_quantile(sum2, o->reps, 0.5));
+    /* Both threads' CPU time, the pool's spinning between stages included: above 1 thread's by the work that
+     * sharing adds (lines moving between the cores) and the spinning. */
+    printf("| frame, process CPU time (all threads) | %.3f | %.3f |\n", bench_quantile(cpu1, o->reps, 0.5),
+           bench_quantile(cpu2, o->reps, 0.5));
     range_of(speedup, o->reps, &lo, &mid, &hi);
     printf("speed-up (per-repetition ratio 1 thread / 2 threads), frames: median %.3f, range %.3f-%.3f\n",
            mid, lo, hi);
     range_of(sum_speedup, o->reps, &lo, &mid, &hi);
     printf("speed-up, sums of the stage medians: median %.3f, range %.3f-%.3f\n", mid, lo, hi);
+}
+
+/* The static split of the point passes against the dynamic hand-out (view_rc_desc.dynamic_points), both on 2
+ * threads, alternating: what keeping each chunk on one core does. */
+static void section_split(const bench_opts *o)
+{
+    double ts[MAX_REPS], td[MAX_REPS], ratio[MAX_REPS], sum_s[MAX_REPS], sum_d[MAX_REPS], sum_ratio[MAX_REPS];
+    double ss[VIEW_RC_STAGE_COUNT][MAX_REPS], sd[VIEW_RC_STAGE_COUNT][MAX_REPS];
+    for (int r = 0; r < o->reps; r++) {
+        run_result a, b;
+        run(o, o->res, &(view_rc_desc){.dynamic_points = true}, 2, false, &a);
+        run(o, o->res, &(view_rc_desc){0}, 2, false, &b);
+        td[r] = a.frame_ms, ts[r] = b.frame_ms;
+        ratio[r] = a.frame_ms / b.frame_ms;
+        sum_d[r] = stage_sum(&a), sum_s[r] = stage_sum(&b);
+        sum_ratio[r] = sum_d[r] / sum_s[r];
+        for (int s = 0; s < VIEW_RC_STAGE_COUNT; s++)
+            sd[s][r] = a.stage_ms[s], ss[s][r] = b.stage_ms[s];
+    }
+    double lo, mid, hi;
+    printf("\n%ux%u, 2 threads, point passes dynamic against static, %d repetitions alternating\n", o->res,
+           o->res, o->reps);
+    printf("| stage | dynamic ms | static ms |\n|---|---|---|\n");
+    for (int s = 0; s < VIEW_RC_STAGE_COUNT; s++)
+        printf("| %s | %.3f | %.3f |\n", view_rc_stage_name(s), bench_quantile(sd[s], o->reps, 0.5),
+               bench_quantile(ss[s], o->reps, 0.5));
+    range_of(td, o->reps, &lo, &mid, &hi);
+    printf("| frame, dynamic | %.3f (%.3f-%.3f) | |\n", mid, lo, hi);
+    range_of(ts, o->reps, &lo, &mid, &hi);
+    printf("| frame, static | | %.3f (%.3f-%.3f) |\n", mid, lo, hi);
+    range_of(ratio, o->reps, &lo, &mid, &hi);
+    printf("dynamic / static (per-repetition ratio), frames: median %.3f, range %.3f-%.3f\n", mid, lo, hi);
+    range_of(sum_ratio, o->reps, &lo, &mid, &hi);
+    printf("dynamic / static, sums of the stage medians: median %.3f, range %.3f-%.3f\n", mid, lo, hi);
 }
 
 typedef struct variant {
@@ -545,7 +584,7 @@ int main(int argc, char **argv)
             fprintf(stderr,
                     "usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] "
                     "[--lead 2] [--tile 64] [--capacity F] [--pin CPU] "
-                    "[--only table|scaling|threads|switches|quality]\n");
+                    "[--only table|scaling|threads|split|switches|quality]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }
     }
@@ -571,6 +610,8 @@ int main(int argc, char **argv)
         section_scaling(&o);
     if (!only || !strcmp(only, "threads"))
         section_threads(&o);
+    if (!only || !strcmp(only, "split"))
+        section_split(&o);
     if (!only || !strcmp(only, "switches"))
         section_switches(&o);
     if (!only || !strcmp(only, "quality"))

@@ -15,8 +15,9 @@
  *   - ageing steps of 128 k / N with the fraction carried, hidden points twice as fast, eviction at 255 (and
  *     none with no_eviction), a full cache dropping its oldest points at age 128, a colour change ageing the
  *     neighbours, a new frame replacing what it saw;
- *   - 1, 2 and 4 threads give bit-identical frames, requests and caches over a moving sequence, and tiles of
- * any size (or none) the same image;
+ *   - 1, 2 and 4 threads give bit-identical frames, requests and caches over a moving sequence (the point
+ * passes split statically, the default, or handed out dynamically), and tiles of any size (or none) the same
+ * image;
  *   - descriptions and cameras out of range are refused;
  *   - the library needs nothing but libc, libm and pthreads (nm; the same check refuses fxc_proto). */
 #include "test_util.h"
@@ -914,12 +915,16 @@ static void answer(view_rc *rc, const view_rc_camera *cam, uint32_t w, uint32_t 
     free(s);
 }
 
-static walk_log walk(uint32_t threads, uint32_t tile)
+static walk_log walk(uint32_t threads, uint32_t tile, bool dynamic_points)
 {
     const uint32_t w = 83, h = 57;
     walk_log log = {0};
-    view_rc *rc = make(&(view_rc_desc){
-        .width = w, .height = h, .threads = threads, .tile_size = tile, .capacity = w * h * 3 / 2});
+    view_rc *rc = make(&(view_rc_desc){.width = w,
+                                       .height = h,
+                                       .threads = threads,
+                                       .tile_size = tile,
+                                       .capacity = w * h * 3 / 2,
+                                       .dynamic_points = dynamic_points});
     uint8_t *rgb = malloc(w * h * 3);
     float *depth = malloc(w * h * sizeof(float));
     view_rc_pixel *req = malloc(sizeof *req * w * h), *pred = malloc(sizeof *pred * w * h);
@@ -972,10 +977,11 @@ static void test_threads_bit_identical(void **state)
     (void)state;
     const uint32_t tiles[] = {16, 13, 64};
     for (size_t t = 0; t < sizeof tiles / sizeof tiles[0]; t++) {
-        walk_log one = walk(1, tiles[t]);
-        const uint32_t threads[] = {2, 4};
-        for (size_t k = 0; k < 2; k++) {
-            walk_log many = walk(threads[k], tiles[t]);
+        walk_log one = walk(1, tiles[t], false);
+        /* 2 and 4 threads, the point passes split statically (the default) and handed out dynamically. */
+        const uint32_t threads[] = {2, 4, 2, 4};
+        for (size_t k = 0; k < 4; k++) {
+            walk_log many = walk(threads[k], tiles[t], k >= 2);
             assert_int_equal(many.used, one.used);
             assert_memory_equal(many.bytes, one.bytes, one.used);
             free(many.bytes);

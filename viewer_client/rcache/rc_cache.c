@@ -161,7 +161,8 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_pix = take(&l, rc->slots, sizeof(uint32_t));
     size_t o_dep = take(&l, rc->slots, sizeof(float));
     size_t o_dest = take(&l, rc->slots, sizeof(uint16_t));
-    size_t o_mark = take(&l, (size_t)rc->slots + 1, 1); /* + a sink byte */
+    rc->mark_stride = ((size_t)rc->slots + 1 + 63) & ~(size_t)63; /* + a sink byte, a line apart */
+    size_t o_mark = take(&l, rc->mark_stride * d.threads, 1);
     size_t o_free_slots = take(&l, rc->slots, sizeof(uint32_t));
     size_t o_free_list = take(&l, (size_t)rc->chunk_count * chunk, sizeof(uint32_t));
     size_t o_chunk_free = take(&l, rc->chunk_count, sizeof(uint32_t));
@@ -169,8 +170,18 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_chunk_hist = take(&l, (size_t)rc->chunk_count * 256, sizeof(uint32_t));
     size_t o_chunk_quota = take(&l, rc->chunk_count, sizeof(uint32_t));
     size_t o_chunk_stat = take(&l, rc->chunk_count, sizeof(rc_chunk_stat));
-    size_t o_entries = take(&l, (size_t)rc->slots + 1, sizeof(rc_entry)); /* + the sort's sink */
-    size_t o_tile_start = take(&l, rc->tile_count + 1, sizeof(uint32_t));
+    /* Entries: one per slot, up to 3 of padding per list (tile and part), then the sort's sinks (one per
+     * thread, a line each). */
+    rc->parts = d.threads;
+    size_t lists_parts = (size_t)rc->tile_count * rc->parts;
+    if ((size_t)rc->slots + 4 * lists_parts + 4 * (size_t)rc->parts > UINT32_MAX) {
+        free(rc);
+        return FXC_ERR_INVALID;
+    }
+    rc->entry_sink = (uint32_t)(((size_t)rc->slots + 4 * lists_parts + 3) & ~(size_t)3);
+    size_t o_entries = take(&l, (size_t)rc->entry_sink + 4 * (size_t)rc->parts, sizeof(rc_entry));
+    size_t o_list_start = take(&l, lists_parts, sizeof(uint32_t));
+    size_t o_list_end = take(&l, lists_parts, sizeof(uint32_t));
     size_t o_zbuf = take(&l, rc->pixels, sizeof(float));
     size_t o_win = take(&l, rc->pixels, sizeof(uint32_t));
     size_t o_pre = take(&l, rc->pixels, sizeof(uint32_t));
@@ -229,7 +240,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     rc->dep = (float *)(block + o_dep);
     rc->dest = (uint16_t *)(block + o_dest);
     rc->mark = (uint8_t *)(block + o_mark);
-    memset(rc->mark, 0, (size_t)rc->slots + 1);
+    memset(rc->mark, 0, rc->mark_stride * d.threads);
     rc->free_slots = (uint32_t *)(block + o_free_slots);
     rc->free_list = (uint32_t *)(block + o_free_list);
     rc->chunk_free = (uint32_t *)(block + o_chunk_free);
@@ -238,7 +249,8 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     rc->chunk_quota = (uint32_t *)(block + o_chunk_quota);
     rc->chunk_stat = (rc_chunk_stat *)(block + o_chunk_stat);
     rc->entries = (rc_entry *)(block + o_entries);
-    rc->tile_start = (uint32_t *)(block + o_tile_start);
+    rc->list_start = (uint32_t *)(block + o_list_start);
+    rc->list_end = (uint32_t *)(block + o_list_end);
     rc->zbuf = (float *)(block + o_zbuf);
     rc->win = (uint32_t *)(block + o_win);
     rc->pre = (uint32_t *)(block + o_pre);

@@ -8,9 +8,18 @@
  *
  * Project and tile sort, per chunk of slots (parallel): every live point is projected once, in a loop without
  * branches (vectorised); the chunk counts how many of its points go to each tile. One serial step turns the
- * counts into offsets, tile by tile and chunk by chunk within a tile, and the bucket sort (parallel again)
- * writes each projected point as a 16-byte entry at its offset: tile after tile, the tiles' point lists. The
- * order within a list (chunk, then slot) does not depend on the thread count.
+ * counts into offsets, tile by tile, part by part within a tile (a part: the chunks one thread owns) and chunk
+ * by chunk within a part, each (tile, part) list starting on a cache line of its own; the bucket sort
+ * (parallel again) writes each projected point as a 16-byte entry at its offset. The order within a tile
+ * (part, then chunk, then slot: chunk then slot) does not depend on the thread count.
+ *
+ * Every pass over chunks of slots (predicted projection, projection, sort, ageing) is a static run of the
+ * pool (fxc_pool_run_static): thread k takes the same range of chunks in each, so the slots' positions,
+ * colours, pixels, depths and lists stay in its core's cache from pass to pass and frame to frame, and the
+ * (tile, part) lists mean no line of entries is written by two cores. (With the pool's dynamic hand-out a
+ * chunk went to whichever thread asked first, differently in every pass: on 2 threads the point passes got
+ * slower than on one.) A thread that has finished its range takes chunks from the end of another's; such a
+ * chunk still writes its own part's list, so the result is the same.
  *
  * The z-buffer then reads one tile's list (parallel over tiles) into buffers of the tile's own (tiles up to
  * 256 on a side): 64 x 64 pixels of depth, winner and colour, 48 KiB contiguous, which stay in cache while the
@@ -49,6 +58,16 @@ void view_rc__plan_drops(view_rc *rc)
         rc->chunk_quota[c] = n < take ? n : (uint32_t)take;
         take -= rc->chunk_quota[c];
     }
+}
+
+/* A pass over every chunk: statically split (each thread on the same chunks in every pass, stealing from the
+ * others' ends when done), or, with dynamic_points, handed out by the pool's counter. */
+static void run_chunks(view_rc *rc, fxc_pool_task task)
+{
+    if (rc->d.dynamic_points)
+        fxc_pool_run(rc->pool, rc->chunk_count, task, rc);
+    else
+        fxc_pool_run_static(rc->pool, rc->chunk_count, task, rc, true);
 }
 
 static void chunk_range(const view_rc *rc, uint32_t c, uint32_t *begin, uint32_t *end)
@@ -146,13 +165,24 @@ void view_rc__predict_project(view_rc *rc)
     size_t low = (size_t)rc->low_w * rc->low_h;
     for (uint32_t t = 0; t < rc->thread_count; t++)
         memset(rc->workers[t].occupied, 0, low);
-    fxc_pool_run(rc->pool, rc->chunk_count, predict_task, rc);
+    run_chunks(rc, predict_task);
     uint8_t *all = rc->workers[0].occupied;
     for (uint32_t t = 1; t < rc->thread_count; t++) {
         const uint8_t *mine = rc->workers[t].occupied;
         for (size_t p = 0; p < low; p++)
             all[p] |= mine[p];
     }
+}
+
+/* Whether any of 64 points is live and at least drop_age old (vectorised). */
+FXC_HOT_CLONES static bool any_candidate(const uint32_t *restrict rgba, uint32_t drop_age)
+{
+    uint32_t any = 0;
+    for (uint32_t k = 0; k < 64; k++) {
+        uint32_t age = rgba[k] >> 24;
+        any |= (uint32_t)(age >= drop_age) & (uint32_t)(age != RC_AGE_DEAD);
+    }
+    return any != 0;
 }
 
 /* ---- project and tile sort ----------------------------------------------------------------------------- */
@@ -187,6 +217,11 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
     if (rc->drop_age != RC_AGE_NO_DROP) {
         uint32_t quota = rc->chunk_quota[c], drop_age = rc->drop_age;
         for (uint32_t i = begin; i < end; i++) {
+            /* Most blocks of 64 hold none (the drops are the oldest few): one test without branches. */
+            if ((i & 63) == 0 && end - i >= 64 && !any_candidate(rc->rgba + i, drop_age)) {
+                i += 63;
+                continue;
+            }
             uint32_t age = rc_age(rc->rgba[i]);
             if (age == RC_AGE_DEAD || age < drop_age || (age == drop_age && quota == 0))
                 continue;
@@ -227,7 +262,6 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
 
 static void sort_task(void *user, uint32_t c, uint32_t worker)
 {
-    (void)worker;
     view_rc *rc = user;
     uint32_t begin, end;
     chunk_range(rc, c, &begin, &end);
@@ -238,8 +272,9 @@ static void sort_task(void *user, uint32_t c, uint32_t worker)
     rc_entry *entries = rc->entries;
     uint32_t tiles = rc->tile_count;
     /* Without a branch (slots are in no order once points come and go): points that land outside, and free
-     * slots, go to the entry after the last, whose cursor does not move. */
-    offset[tiles] = offset[tiles + 1] = rc->slots;
+     * slots, go to this thread's sink entry after the lists, whose cursor does not move. (One sink for all
+     * threads was a data race, written by every thread: the thread sanitizer saw it.) */
+    offset[tiles] = offset[tiles + 1] = rc->entry_sink + 4 * worker;
     for (uint32_t i = begin; i < end; i++) {
         uint32_t d = dest[i], o = offset[d];
         offset[d] = o + (d < tiles);
@@ -253,20 +288,23 @@ static void sort_task(void *user, uint32_t c, uint32_t worker)
 
 void view_rc__project_sort(view_rc *rc)
 {
-    fxc_pool_run(rc->pool, rc->chunk_count, project_task, rc);
-    /* Offsets: tile by tile, chunk by chunk. */
-    uint32_t lists = rc->tile_count + 2, run = 0;
-    for (uint32_t t = 0; t < rc->tile_count; t++) {
-        rc->tile_start[t] = run;
-        for (uint32_t c = 0; c < rc->chunk_count; c++) {
-            uint32_t *slot = rc->counts + (size_t)c * lists + t;
-            uint32_t n = *slot;
-            *slot = run;
-            run += n;
+    run_chunks(rc, project_task);
+    /* Offsets: tile by tile, part by part (each list on a line of its own: 4 entries), chunk by chunk. */
+    uint32_t lists = rc->tile_count + 2, run = 0, parts = rc->parts;
+    for (uint32_t t = 0; t < rc->tile_count; t++)
+        for (uint32_t p = 0; p < parts; p++) {
+            run = (run + 3u) & ~3u;
+            rc->list_start[t * parts + p] = run;
+            uint32_t c1 = fxc_pool_static_begin(rc->chunk_count, parts, p + 1);
+            for (uint32_t c = fxc_pool_static_begin(rc->chunk_count, parts, p); c < c1; c++) {
+                uint32_t *slot = rc->counts + (size_t)c * lists + t;
+                uint32_t n = *slot;
+                *slot = run;
+                run += n;
+            }
+            rc->list_end[t * parts + p] = run;
         }
-    }
-    rc->tile_start[rc->tile_count] = run;
-    fxc_pool_run(rc->pool, rc->chunk_count, sort_task, rc);
+    run_chunks(rc, sort_task);
 }
 
 /* ---- z-buffer tiles (2002 3.2) ------------------------------------------------------------------------- */
@@ -281,7 +319,9 @@ static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
     float *zbuf = rc->zbuf;
     uint32_t *win = rc->win, *pre = rc->pre;
     const rc_entry *entries = rc->entries;
-    uint32_t first = rc->tile_start[tile], last = rc->tile_start[tile + 1];
+    const uint32_t *list_start = rc->list_start + (size_t)tile * rc->parts;
+    const uint32_t *list_end = rc->list_end + (size_t)tile * rc->parts;
+    uint32_t parts = rc->parts;
     /* Depth and entry of the nearest; between equal depths, the first in the list. Tried and slower in
      * bench_rcache: the same without the branch (2.2 against 1.9 ms), and 64-bit keys of depth and entry (one
      * load, minimum and store a point; entries split in 8 bytes for the test and 8 for the winners: 1.6
@@ -297,15 +337,16 @@ static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
             wt[k] = RC_NO_POINT;
             ct[k] = RC_EMPTY_PT;
         }
-        for (uint32_t e = first; e < last; e++) {
-            uint32_t p = entries[e].pix;
-            float z = entries[e].depth;
-            if (z < zt[p]) {
-                zt[p] = z;
-                wt[p] = entries[e].slot;
-                ct[p] = entries[e].rgba;
+        for (uint32_t part = 0; part < parts; part++)
+            for (uint32_t e = list_start[part], e1 = list_end[part]; e < e1; e++) {
+                uint32_t p = entries[e].pix;
+                float z = entries[e].depth;
+                if (z < zt[p]) {
+                    zt[p] = z;
+                    wt[p] = entries[e].slot;
+                    ct[p] = entries[e].rgba;
+                }
             }
-        }
         for (uint32_t y = y0; y < y1; y++) {
             size_t at = (size_t)(y - y0) * side;
             memcpy(zbuf + y * w + x0, zt + at, (x1 - x0) * sizeof(float));
@@ -320,15 +361,16 @@ static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
             win[y * w + x] = RC_NO_POINT;
             pre[y * w + x] = RC_EMPTY_PT;
         }
-    for (uint32_t e = first; e < last; e++) {
-        uint32_t p = entries[e].pix;
-        float z = entries[e].depth, old = zbuf[p];
-        if (z < old) {
-            zbuf[p] = z;
-            win[p] = entries[e].slot;
-            pre[p] = entries[e].rgba;
+    for (uint32_t part = 0; part < parts; part++)
+        for (uint32_t e = list_start[part], e1 = list_end[part]; e < e1; e++) {
+            uint32_t p = entries[e].pix;
+            float z = entries[e].depth, old = zbuf[p];
+            if (z < old) {
+                zbuf[p] = z;
+                win[p] = entries[e].slot;
+                pre[p] = entries[e].rgba;
+            }
         }
-    }
 }
 
 void view_rc__zbuffer(view_rc *rc)
@@ -343,7 +385,7 @@ void view_rc__zbuffer(view_rc *rc)
  * avoid. */
 void view_rc__project_direct(view_rc *rc)
 {
-    fxc_pool_run(rc->pool, rc->chunk_count, project_task, rc);
+    run_chunks(rc, project_task);
 }
 
 void view_rc__zbuffer_direct(view_rc *rc)
@@ -389,6 +431,16 @@ FXC_HOT_CLONES static uint32_t age_span(uint32_t *restrict rgba, uint8_t *restri
     return evicted;
 }
 
+/* The marks of threads 1.. ORed into thread 0's array over [begin, end), and cleared. */
+FXC_HOT_CLONES static void gather_marks(uint8_t *restrict mark, uint8_t *restrict other, uint32_t begin,
+                                        uint32_t end)
+{
+    for (uint32_t i = begin; i < end; i++) {
+        mark[i] |= other[i];
+        other[i] = 0;
+    }
+}
+
 static void age_task(void *user, uint32_t c, uint32_t worker)
 {
     (void)worker;
@@ -396,6 +448,8 @@ static void age_task(void *user, uint32_t c, uint32_t worker)
     uint32_t begin, end;
     chunk_range(rc, c, &begin, &end);
     uint32_t top = rc->d.no_eviction ? 254 : 255;
+    for (uint32_t t = 1; t < rc->parts; t++)
+        gather_marks(rc->mark, rc->mark + t * rc->mark_stride, begin, end);
     rc->chunk_stat[c].evicted =
         age_span(rc->rgba, rc->mark, begin, end, rc->step_visible, rc->step_hidden, top);
     /* The chunk's age histogram and its free slots, in descending order. */
@@ -415,7 +469,7 @@ static void age_task(void *user, uint32_t c, uint32_t worker)
 
 void view_rc__age(view_rc *rc)
 {
-    fxc_pool_run(rc->pool, rc->chunk_count, age_task, rc);
+    run_chunks(rc, age_task);
     /* The free stack: chunks from the last to the first, so that the lowest free slot is on top. */
     rc->free_count = 0;
     for (uint32_t c = rc->chunk_count; c-- > 0;) {

@@ -96,6 +96,10 @@ typedef struct view_rc_desc {
     bool no_tiling;     /* no tile sort: the z-buffer takes the points in cache order straight into the whole
                            image, on one thread (the 1999 render cache); the other stages are unchanged */
     bool no_depth_cull; /* no depth cull */
+    /* Not a stage switch: the same image either way. */
+    bool dynamic_points; /* the passes over the point store handed out to threads dynamically (as before they
+                            ran on a static split, each thread on the same chunks in every pass), to measure
+                            what the split does (bench_rcache --only split) */
 } view_rc_desc;
 
 typedef struct view_rc view_rc;

@@ -10,8 +10,8 @@
  * (CONVENTIONS 6: the projection reads 16 bytes a point, ageing 5).
  *
  * Tile lists (2002 3.2, Reinhard 2001 section 3): every frame the projected points are bucket-sorted by tile
- * (counting sort, per chunk of slots) into one array of 16-byte entries, tile after tile: each tile's point
- * list for this frame. A point that lands in another tile than in the last frame moves to that tile's list
+ * (counting sort, per chunk of slots) into one array of 16-byte entries, tile after tile and within a tile by
+ * part (the chunks one thread owns in the static split): each tile's point list for this frame. A point that lands in another tile than in the last frame moves to that tile's list
  * (tile_of[] remembers the list; the move is counted as a migration). The z-buffer then reads one tile's list
  * into that tile's part of the image, which stays in cache.
  *
@@ -151,7 +151,10 @@ struct view_rc {
                            * local_z and tiling, else in the image */
     float *dep;           /* this frame: view depth */
     uint16_t *dest;       /* this frame: tile, list_outside or list_dead */
-    uint8_t *mark;        /* this frame: shown in a pixel (slots + 1: the last is a sink) */
+    uint8_t *mark;        /* this frame: shown in a pixel, one array per thread, mark_stride bytes apart (each
+                           * slots + 1: the last is a sink). The depth cull's thread w writes only array w (no
+                           * line written by two cores at once); the ageing ORs them over its chunks. */
+    size_t mark_stride;   /* slots + 1, rounded up to 64 */
     uint32_t *free_slots; /* stack of free slots: the next insert takes free_slots[free_count - 1] */
     uint32_t free_count;
     uint32_t
@@ -166,9 +169,18 @@ struct view_rc {
     rc_chunk_stat *chunk_stat;
     uint32_t drop_age; /* this frame's drop plan: drop ages above it and chunk_quota of it (255: none) */
 
-    /* The tile lists of this frame: entries of tile t are [tile_start[t], tile_start[t + 1]). */
-    rc_entry *entries;    /* slots entries */
-    uint32_t *tile_start; /* tile_count + 1 */
+    /* The tile lists of this frame, one per tile and part. The passes over chunks run statically split
+     * (fxc_pool_run_static): part p is the chunks thread p runs, [fxc_pool_static_begin(chunk_count, parts,
+     * p), the same for p + 1). Tile t's entries from part p are [list_start[t * parts + p], list_end[...]),
+     * in chunk then slot order; every such list starts on a cache line of its own (entries padded to 4, 64
+     * bytes), so no line of entries is written by two threads. The z-buffer reads a tile's parts in part
+     * order: chunk order, the same with any thread count. */
+    rc_entry *entries;    /* entry_sink + 4 x parts entries, 64-byte aligned */
+    uint32_t parts;       /* the pool's threads */
+    uint32_t entry_sink;  /* the sort writes points outside the image and free slots to entry_sink + 4 x its
+                           * thread: a line per thread, so no two threads write one entry */
+    uint32_t *list_start; /* tile_count x parts */
+    uint32_t *list_end;   /* tile_count x parts */
 
     /* Ageing (2002 3.4). */
     double age_carry, hidden_carry; /* fractional parts carried to the next frame */
