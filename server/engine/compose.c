@@ -177,8 +177,9 @@ static inline uint8_t tone_map_srgb8(float c)
     return (uint8_t)(tone_cell_byte[cell] + (c >= tone_cell_next[cell]));
 }
 
-/* tone_map_srgb8 of n consecutive floats (the channels of a row of a run's pixels) in lanes (FXC_HOT_LANES: the
- * table reads become gathers in the x86-64-v3 copy); the same bytes. */
+/* tone_map_srgb8 of n consecutive floats (the channels of a row of a run's pixels), one call per row instead of
+ * one inlined call per channel; the same bytes (tests/test_engine.c). Written for lanes (FXC_HOT_LANES), but
+ * GCC 12 leaves the loop scalar ("no vectype" for its loads; not resolved: a gather version is still to do). */
 FXC_HOT_LANES static void tone_map_lanes(const float *radiance, uint8_t *image, uint32_t n)
 {
     for (uint32_t j = 0; j < n; j++) {
