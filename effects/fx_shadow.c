@@ -411,7 +411,16 @@ FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_ru
         bool cells_found = false;
         const uint8_t *cell_texel[4];
         uint32_t cell_bit[4];
-        float coarse = exp2f(taps->footprint_log2); /* weight of the texel average: the pixel's size, < 1 */
+        /* The weight of the texel average: the pixel's size, < 1. Found only for a light where it changes the
+         * result: where the average equals the fine sum (both 0 under a wholly shadowed texel, most shadowed
+         * pixels) fine + coarse x (average - fine) is the fine sum for every finite coarse, and coarse =
+         * 2^footprint_log2 is finite unless footprint_log2 is NaN (then it is found, as before). */
+        float coarse = 0.0f;
+        bool coarse_found = false;
+        if (taps->footprint_log2 != taps->footprint_log2) {
+            coarse = exp2f(taps->footprint_log2);
+            coarse_found = true;
+        }
         for (uint32_t l = 0; l < lights; l++) {
             float fine = 0, average = 0;
             uint32_t any_lit = 0, all_lit = 0xFFFFu;
@@ -421,8 +430,6 @@ FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_ru
                 all_lit &= mask;
                 average += taps->weight[t] * lit_fraction_hot(mask);
             }
-            if (!(coarse > 0))
-                average = 0;
             /* Every cell reads a bit of some tap's mask: when the taps' masks are all 0 or all 0xFFFF (most
              * texels: wholly shadowed or wholly lit), every bit read is 0, or 1, and the sum below is the sum
              * of the cell weights times 0 or 1, the same floats without finding the cells. */
@@ -451,6 +458,16 @@ FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_ru
                     fine += cell_weight[c] * (float)((mask >> cell_bit[c]) & 1u);
                 }
             }
+            if (average == fine && fine - fine == 0.0f && !coarse_found) { /* fine finite */
+                visibility[l] *= fx__min1(fine);
+                continue;
+            }
+            if (!coarse_found) {
+                coarse = exp2f(taps->footprint_log2);
+                coarse_found = true;
+            }
+            if (!(coarse > 0))
+                average = 0;
             visibility[l] *= fx__min1(fine + coarse * (average - fine));
         }
     }

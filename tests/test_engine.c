@@ -17,6 +17,7 @@
 #include "scene.h"
 #include "trace.h"
 
+#include <float.h>
 #include <jansson.h>
 #include <math.h>
 #include <stdatomic.h>
@@ -725,6 +726,73 @@ static void test_tone_map_thresholds(void **state)
     assert_int_equal(srv__tone_map(-INFINITY), 0);
 }
 
+/* The tone map over lanes (compose's rows, 48 channels at most, vectorised) equals the definition with expf:
+ * over every 9973rd bit pattern of all 2^32 (both signs, NaNs and infinities) and every 61st from 2^-9 to 1
+ * (where most bytes change), in calls of 1 to 48 floats so the vector body and its remainder both run. */
+static void test_tone_map_lanes(void **state)
+{
+    (void)state;
+    enum { N = 48 };
+    const struct {
+        uint64_t first, end, step;
+    } spans[] = {{0, 0x100000000ull, 9973}, {0x3b000000u, 0x3f800000u, 61}};
+    uint64_t checked = 0;
+    for (size_t r = 0; r < sizeof spans / sizeof spans[0]; r++) {
+        uint32_t n = 1;
+        for (uint64_t bits = spans[r].first; bits < spans[r].end; n = n % N + 1) {
+            float c[N];
+            uint8_t got[N];
+            uint32_t count = 0;
+            for (; count < n && bits < spans[r].end; count++, bits += spans[r].step) {
+                uint32_t b = (uint32_t)bits;
+                memcpy(&c[count], &b, sizeof b);
+            }
+            srv__tone_map_lanes(c, got, count);
+            for (uint32_t j = 0; j < count; j++) {
+                uint8_t want = srv__tone_map_reference(c[j]);
+                if (got[j] != want) {
+                    uint32_t b;
+                    memcpy(&b, &c[j], sizeof b);
+                    fail_msg("tone map lanes of %.9g (0x%08x): %u, definition %u", (double)c[j], b, got[j], want);
+                }
+            }
+            checked += count;
+        }
+    }
+    assert_true(checked > 1500000);
+    /* Every bit pattern of each interval of 61 where the byte changes: the thresholds themselves. */
+    uint32_t changes = 0;
+    for (uint32_t bits = 0x3b000000u; bits + 61 <= 0x3f800000u; bits += 61) {
+        float lo, hi;
+        uint32_t end = bits + 61;
+        memcpy(&lo, &bits, sizeof lo);
+        memcpy(&hi, &end, sizeof hi);
+        if (srv__tone_map_reference(lo) == srv__tone_map_reference(hi))
+            continue;
+        changes++;
+        for (uint32_t first = bits; first <= end; first += N) {
+            float c[N];
+            uint8_t got[N];
+            uint32_t count = 0;
+            for (; count < N && first + count <= end; count++) {
+                uint32_t b = first + count;
+                memcpy(&c[count], &b, sizeof b);
+            }
+            srv__tone_map_lanes(c, got, count);
+            for (uint32_t j = 0; j < count; j++)
+                if (got[j] != srv__tone_map_reference(c[j]))
+                    fail_msg("tone map lanes at a threshold, %.9g: %u, definition %u", (double)c[j], got[j],
+                             srv__tone_map_reference(c[j]));
+        }
+    }
+    assert_true(changes > 200);
+    const float special[] = {NAN, INFINITY, -INFINITY, 0.0f, -0.0f, 20.0f, 0x1p-20f, FLT_MAX, -FLT_MAX};
+    uint8_t got[9];
+    srv__tone_map_lanes(special, got, 9);
+    const uint8_t want[] = {0, 255, 0, 0, 0, 255, srv__tone_map_reference(0x1p-20f), 255, 0};
+    assert_memory_equal(got, want, sizeof want);
+}
+
 /* A test run with the embedded default scene as its state. */
 #define SCENE_TEST(test) cmocka_unit_test_setup_teardown(test, fxt_default_scene_setup, fxt_default_scene_teardown)
 
@@ -741,6 +809,7 @@ int main(void)
         SCENE_TEST(test_replay_matches_api),
         cmocka_unit_test(test_result_codes),
         cmocka_unit_test(test_tone_map_thresholds),
+        cmocka_unit_test(test_tone_map_lanes),
         SCENE_TEST(test_allocation_failures_counted),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -117,6 +117,7 @@ enum {
     TONE_CELLS = (TONE_EXP_HI - TONE_EXP_LO) << 8,
 };
 static uint8_t tone_cell_byte[TONE_CELLS];
+static int32_t tone_cell_byte32[TONE_CELLS]; /* the same, 32 bits wide for the lanes' gathers */
 static float tone_cell_next[TONE_CELLS];
 static pthread_once_t tone_lut_once = PTHREAD_ONCE_INIT;
 
@@ -150,6 +151,7 @@ static void tone_lut_init(void)
         uint8_t lo_byte = tone_map_reference(float_of_bits(first)), hi_byte = tone_map_reference(float_of_bits(last));
         FX_CHECK(hi_byte - lo_byte <= 1); /* one change at most: the table's premise */
         tone_cell_byte[cell] = lo_byte;
+        tone_cell_byte32[cell] = lo_byte;
         tone_cell_next[cell] = INFINITY;
         if (hi_byte == lo_byte)
             continue;
@@ -178,10 +180,34 @@ static inline uint8_t tone_map_srgb8(float c)
     return (uint8_t)(tone_cell_byte[cell] + (c >= tone_cell_next[cell]));
 }
 
+/* tone_map_srgb8 of n consecutive floats (the channels of a row of a run's pixels), one call per row instead of
+ * one inlined call per channel; the same bytes (tests/test_engine.c). Written for lanes (FXC_HOT_LANES), but
+ * GCC 12 leaves it scalar: at -O2 its cheap cost model refuses a loop of variable length, and a fixed-length
+ * version (48 lanes, branch-free) vectorised with emulated gathers (element inserts and extracts, no vgather
+ * under the generic tuning), longer than the scalar loop, so it was not kept. */
+FXC_HOT_LANES static void tone_map_lanes(const float *radiance, uint8_t *image, uint32_t n)
+{
+    for (uint32_t j = 0; j < n; j++) {
+        float c = radiance[j];
+        uint32_t bits;
+        memcpy(&bits, &c, sizeof bits);
+        int low = !(c >= 0x1p-20f), high = c >= 20.0f; /* low: also NaN and every c <= 0 */
+        uint32_t cell = (low | high) ? 0 : (bits >> 15) - ((uint32_t)TONE_EXP_LO << 8);
+        int32_t byte = tone_cell_byte32[cell] + (c >= tone_cell_next[cell]);
+        image[j] = (uint8_t)(low ? 0 : (high ? 255 : byte));
+    }
+}
+
 uint8_t srv__tone_map(float c)
 {
     pthread_once(&tone_lut_once, tone_lut_init);
     return tone_map_srgb8(c);
+}
+
+void srv__tone_map_lanes(const float *radiance, uint8_t *image, uint32_t n)
+{
+    pthread_once(&tone_lut_once, tone_lut_init);
+    tone_map_lanes(radiance, image, n);
 }
 
 uint8_t srv__tone_map_reference(float c)
@@ -203,11 +229,27 @@ typedef struct compose_task {
     atomic_uint_fast64_t rays[SRV_MAX_EFFECTS];
 } compose_task;
 
-/* What neighbouring pixels share when they see the same triangle, looked up once. */
+/* What neighbouring pixels share when they see the same triangle, looked up once; and the camera's frame,
+ * copied once per run (read through the viewer, it was loaded again for every pixel: the scratch's stores
+ * might alias it). */
 typedef struct gather_memo {
     uint32_t tri, island; /* SRV_MISS: none yet */
     float corner[3][3], normal[3], island_uv[6];
+    float scale_x, scale_y, tan_half_x, tan_half_y, forward[3], right[3], up[3];
 } gather_memo;
+
+/* A memo with no triangle yet, for viewer view's frame. */
+FXC_HOT_INLINE gather_memo gather_memo_start(const srv_viewer *view)
+{
+    const srv_camera_frame *f = &view->frame;
+    gather_memo memo = {.tri = SRV_MISS, .tan_half_x = f->tan_half_x, .tan_half_y = f->tan_half_y};
+    memo.scale_x = 2.0f * f->tan_half_x / (float)f->width;
+    memo.scale_y = 2.0f * f->tan_half_y / (float)f->height;
+    memcpy(memo.forward, f->forward, sizeof memo.forward);
+    memcpy(memo.right, f->right, sizeof memo.right);
+    memcpy(memo.up, f->up, sizeof memo.up);
+    return memo;
+}
 
 /* Pixel (x, y) of the viewer's frame, held at buffer entry p (y * width + x, or a sparse viewer's list
  * position): a miss gets the sky; a visible pixel is appended to the run (its shading normal, albedo arguments
@@ -230,7 +272,6 @@ FXC_HOT_INLINE void gather_pixel(srv_loop *loop, srv_viewer *view, uint32_t x, u
         }
         return;
     }
-    const float scale_x = 2.0f * f->tan_half_x / (float)f->width, scale_y = 2.0f * f->tan_half_y / (float)f->height;
     uint32_t i = (*count)++;
     cs->index[i] = p;
     float u = view->bary_u[p], v = view->bary_v[p], dir[3];
@@ -247,10 +288,12 @@ FXC_HOT_INLINE void gather_pixel(srv_loop *loop, srv_viewer *view, uint32_t x, u
     float w = 1.0f - u - v;
     /* The ray's direction, not normalised: only its side of the surface matters here. The loops over the
      * three axes are written out (at -O2 they stayed loops). */
-    float sx = ((float)x + 0.5f) * scale_x - f->tan_half_x, sy = f->tan_half_y - ((float)y + 0.5f) * scale_y;
-    dir[0] = f->forward[0] + sx * f->right[0] + sy * f->up[0];
-    dir[1] = f->forward[1] + sx * f->right[1] + sy * f->up[1];
-    dir[2] = f->forward[2] + sx * f->right[2] + sy * f->up[2];
+    float sx = ((float)x + 0.5f) * memo->scale_x - memo->tan_half_x;
+    float sy = memo->tan_half_y - ((float)y + 0.5f) * memo->scale_y;
+    const float *forward = memo->forward, *right = memo->right, *up = memo->up;
+    dir[0] = forward[0] + sx * right[0] + sy * up[0];
+    dir[1] = forward[1] + sx * right[1] + sy * up[1];
+    dir[2] = forward[2] + sx * right[2] + sy * up[2];
     float facing = normal[0] * dir[0] + normal[1] * dir[1] + normal[2] * dir[2];
     float *sn = cs->shade_normal[i]; /* seen from behind: light the side the viewer sees */
     sn[0] = facing > 0 ? -normal[0] : normal[0];
@@ -296,7 +339,7 @@ FXC_HOT_INLINE uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0
                                    uint32_t y1, compose_scratch *cs, const float sky[3], float log2_density,
                                    bool positions, bool points)
 {
-    gather_memo memo = {.tri = SRV_MISS};
+    gather_memo memo = gather_memo_start(view);
     uint32_t count = 0;
     for (uint32_t y = y0; y < y1; y++)
         for (uint32_t x = x0; x < x1; x++)
@@ -310,7 +353,7 @@ FXC_HOT_INLINE uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0
 static uint32_t gather_list(srv_loop *loop, srv_viewer *view, size_t first, size_t end, compose_scratch *cs,
                             const float sky[3], float log2_density, bool positions, bool points)
 {
-    gather_memo memo = {.tri = SRV_MISS};
+    gather_memo memo = gather_memo_start(view);
     uint32_t count = 0;
     for (size_t p = first; p < end; p++)
         gather_pixel(loop, view, view->list[p] & 0xFFFFu, view->list[p] >> 16, p, cs, &count, sky, log2_density,
@@ -484,7 +527,7 @@ FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scrat
                 cs->rep_sky, cs->rep_sharing, cs->rep_ok, cs->indirect, cs->sky_visibility, cs->sharing, cs->blend_own,
                 cr->g, (int32_t)width, (int32_t)(cr->y0 - cr->g->y0), bits != NULL);
     uint32_t own = 0;
-    gather_memo memo = {.tri = SRV_MISS};
+    gather_memo memo = gather_memo_start(view);
     for (uint32_t i = 0; i < count; i++) {
         if (!cs->blend_own[i])
             continue;
@@ -524,7 +567,7 @@ static void coarse_prepass(srv_loop *loop, srv_viewer *view, compose_scratch *cs
 {
     uint32_t e = loop->coarse_effect, width = view->frame.width, reps = g->nx * g->ny;
     const uint64_t *bits = loop->viewer_bits[e];
-    gather_memo memo = {.tri = SRV_MISS};
+    gather_memo memo = gather_memo_start(view);
     for (uint32_t first = 0; first < reps;) {
         uint32_t count = 0;
         for (; first < reps && count < SRV_RUN; first++) {
@@ -741,9 +784,10 @@ FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_
                                     run_setup.points);
         coarse_run cr = {.g = &grid, .x0 = tx0, .x1 = tx1, .y0 = ry, .y1 = ry1};
         shade_run(loop, view, cs, count, &run_setup, thread_index, &missing, rays, coarse ? &cr : NULL);
-        for (uint32_t y = ry; y < ry1; y++)
-            for (uint32_t x = tx0; x < tx1; x++)
-                tone_map_entry(view, (size_t)y * f->width + x);
+        for (uint32_t y = ry; y < ry1; y++) {
+            size_t p = (size_t)y * f->width + tx0;
+            tone_map_lanes(view->radiance + 3 * p, view->image + 3 * p, 3 * (tx1 - tx0));
+        }
     }
     compose_done(task, loop, missing, rays);
 }

@@ -444,6 +444,8 @@ void srv__compose(srv_loop *loop, uint32_t slot, srv_frame_stats *st);
  * float (white-box tests compare them). */
 uint8_t srv__tone_map(float c);
 uint8_t srv__tone_map_reference(float c);
+/* The tone map of n consecutive floats into n bytes as compose's rows take it (in lanes): srv__tone_map of each. */
+void srv__tone_map_lanes(const float *radiance, uint8_t *image, uint32_t n);
 
 /* Per-thread compose scratch size for this loop (bytes), known at creation. */
 size_t srv__compose_scratch_bytes(const srv_loop *loop);
