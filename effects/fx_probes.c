@@ -411,19 +411,21 @@ FXC_HOT_CLONES static void hit_filter(const hit_cell *restrict e, const float po
         w = w < 0.2f ? w * (w * w / (0.2f * 0.2f)) : w;
         out[c] = (e->active >> c & 1) ? w * tap[c] : 0.0f;
     }
-    float term[4][8];
+    /* Per corner (R, G, B, weight): four lanes added corner after corner, the sums' order. */
+    float term[8][4];
     for (int c = 0; c < 8; c++) {
-        float w = out[c];
-        bool keep = w > 0;
-        term[0][c] = keep ? w * e->e[c][0] : 0.0f;
-        term[1][c] = keep ? w * e->e[c][1] : 0.0f;
-        term[2][c] = keep ? w * e->e[c][2] : 0.0f;
-        term[3][c] = keep ? w : 0.0f;
+        /* out[c] is never NaN (w is clamped, tap is finite) and e->e finite and >= 0 (a half times the
+         * probe's finite scale; 0 for inactive corners), so a skipped corner's 0 x e is +0 */
+        float w = out[c] > 0 ? out[c] : 0.0f;
+        term[c][0] = w * e->e[c][0];
+        term[c][1] = w * e->e[c][1];
+        term[c][2] = w * e->e[c][2];
+        term[c][3] = w;
     }
     float sum[4] = {0, 0, 0, 0};
     for (int c = 0; c < 8; c++)
         for (int k = 0; k < 4; k++)
-            sum[k] += term[k][c];
+            sum[k] += term[c][k];
     memcpy(acc, sum, sizeof sum);
 }
 
