@@ -495,14 +495,12 @@ static bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, c
     return true;
 }
 
-/* Radiance leaving a front-face hit, given its direct light (compose units) and the probes around it. */
-static void hit_radiance(const fx_context *ctx, const fx_block_job *job, uint32_t tri, float u, float v, float t,
+/* Radiance leaving a front-face hit, given its albedo, its direct light (compose units) and the probes around
+ * it. */
+static void hit_radiance(const fx_context *ctx, const fx_block_job *job, const float albedo[3],
                          const float position[3], const float normal[3], const float direct[3], float out[3])
 {
-    float albedo[3], bounce[3] = {0, 0, 0};
-    /* The albedo over the ray's footprint there (144 rays: about 0.3 rad apart). */
-    float footprint = t * 0.3f;
-    scene_albedo_filtered(ctx->s, tri, u, v, log2f(footprint > 1e-30f ? footprint : 1e-30f), albedo); /* fmaxf */
+    float bounce[3] = {0, 0, 0};
     uint32_t effect = job->effect, level = job->level;
     if (ctx->world_cell) {
         hit_bounce(ctx, effect, level, job->origin, job->cell, position, normal, bounce);
@@ -681,9 +679,13 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
             rtcIntersect1M(rtc, &context, hits, n, sizeof(struct RTCRayHit));
             traced += n;
 
-            /* Shadow rays of the front-face hits. */
+            /* Shadow rays of the front-face hits, and their albedo over the ray's footprint there (144 rays:
+             * about 0.3 rad apart), looked up together (scene_albedo_run: the cloned copy of
+             * scene_albedo_filtered's lookup, the same floats). */
             hs->count = 0;
-            float hit_pos[PROBE_CHUNK][3];
+            float hit_pos[PROBE_CHUNK][3], albedo_u[PROBE_CHUNK], albedo_v[PROBE_CHUNK],
+                albedo_lod[PROBE_CHUNK], albedo[PROBE_CHUNK][3];
+            uint32_t albedo_tri[PROBE_CHUNK], albedo_of[PROBE_CHUNK], fronts = 0;
             for (uint32_t r = 0; r < n; r++) {
                 hs->direct[r][0] = hs->direct[r][1] = hs->direct[r][2] = 0;
                 const struct RTCRayHit *rh = &hits[r];
@@ -698,8 +700,16 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
                     p[k] = origin[k] + rh->ray.tfar * dir[k];
                 scene_offset_ray_origin(p, normal, s->ray_offset_scale, hit_pos[r]);
                 traced += queue_shadow_rays(ctx, hs, r, hit_pos[r], normal);
+                float footprint = rh->ray.tfar * 0.3f;
+                albedo_of[r] = fronts;
+                albedo_tri[fronts] = rh->hit.primID;
+                albedo_u[fronts] = rh->hit.u;
+                albedo_v[fronts] = rh->hit.v;
+                albedo_lod[fronts] = log2f(footprint > 1e-30f ? footprint : 1e-30f); /* fmaxf */
+                fronts++;
             }
             shadow_flush(ctx, hs);
+            scene_albedo_run(s, albedo_tri, albedo_u, albedo_v, albedo_lod, fronts, albedo);
 
             /* Radiance and distance of every ray. */
             for (uint32_t r = 0; r < n; r++) {
@@ -721,8 +731,7 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
                             memcpy(back_dir, dir, sizeof back_dir);
                         }
                     } else {
-                        hit_radiance(ctx, job, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r], normal,
-                                     hs->direct[r], radiance);
+                        hit_radiance(ctx, job, albedo[albedo_of[r]], hit_pos[r], normal, hs->direct[r], radiance);
                         distance = t;
                         if (t < closest_front) {
                             closest_front = t;
