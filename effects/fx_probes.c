@@ -318,6 +318,49 @@ static hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t 
     return e;
 }
 
+/* A payload's little-endian 32-bit word at p: one load on a little-endian host (memcpy, which the vectoriser
+ * turns into a gather), byte by byte elsewhere. The irradiance halves are read through it, low half: the
+ * word's upper half lies inside the payload for every irradiance half (the moments follow them). */
+static inline uint32_t load_u32_le(const uint8_t *p)
+{
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+    uint32_t v;
+    memcpy(&v, p, sizeof v);
+    return v;
+#else
+    return get_u32(p);
+#endif
+}
+
+/* The active corners' irradiance towards a normal (its octahedral texels and bilinear weights) into e->e, 0
+ * for the others (hit_filter reads their lanes and discards them): per corner, channel by channel, the four
+ * texels summed in order from 0, times the probe's scale, the same operations as fx_probe_irradiance. Lanes
+ * are corners (the loads one by one: each corner has its own payload; the arithmetic in one vector). */
+FXC_HOT_CLONES static void corner_irradiance(hit_cell *restrict e, const uint32_t texel[4], const float w[4])
+{
+    static const uint8_t zero_payload[FX_PROBE_BYTES];
+    const uint8_t *p[8];
+    float scale[8], sum[3][8];
+    for (int c = 0; c < 8; c++) {
+        p[c] = (e->active >> c & 1) ? e->texel[c] : zero_payload;
+        scale[c] = get_f32(p[c] + 24);
+        sum[0][c] = sum[1][c] = sum[2][c] = 0;
+    }
+    for (int i = 0; i < 4; i++) {
+        const float wi = w[i];
+        for (int k = 0; k < 3; k++) {
+            const size_t offset = PROBE_IRRADIANCE + 6 * (size_t)texel[i] + 2 * (size_t)k;
+            for (int c = 0; c < 8; c++)
+                sum[k][c] += wi * half_bits_to_float(load_u32_le(p[c] + offset) & 0xffffu);
+        }
+    }
+    for (int c = 0; c < 8; c++) {
+        bool active = e->active >> c & 1;
+        for (int k = 0; k < 3; k++)
+            e->e[c][k] = active ? sum[k][c] * scale[c] : 0.0f;
+    }
+}
+
 /* The filter at a hit for the 8 corners of its cell at once: the trilinear weights from the position in the
  * cell `t` ((1 x wx) x wy) x wz in double, 1 x wx exact), probe_weight (fx_probes_map.c) with visibility, and
  * the weighted sums of the corners' irradiance towards the normal (e->e) in corner order, skipping weights
@@ -470,19 +513,7 @@ static bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, c
         uint32_t texel[4];
         float w[4];
         fx__probe_oct_bilinear(normal, texel, w);
-        for (int c = 0; c < 8; c++) {
-            if (!(e->active >> c & 1)) {
-                e->e[c][0] = e->e[c][1] = e->e[c][2] = 0; /* read by hit_filter's discarded lanes */
-                continue;
-            }
-            const uint8_t *p = e->texel[c];
-            float scale = get_f32(p + 24), sum[3] = {0, 0, 0};
-            for (int i = 0; i < 4; i++)
-                for (int k = 0; k < 3; k++)
-                    sum[k] += w[i] * half_bits_to_float(fx__get_u16(p + PROBE_IRRADIANCE + 6 * texel[i] + 2 * k));
-            for (int k = 0; k < 3; k++)
-                e->e[c][k] = sum[k] * scale;
-        }
+        corner_irradiance(e, texel, w);
         memcpy(e->normal, normal, sizeof e->normal);
         e->normal_set = true;
     }
