@@ -335,7 +335,8 @@ static inline uint32_t load_u32_le(const uint8_t *p)
 /* The active corners' irradiance towards a normal (its octahedral texels and bilinear weights) into e->e, 0
  * for the others (hit_filter reads their lanes and discards them): per corner, channel by channel, the four
  * texels summed in order from 0, times the probe's scale, the same operations as fx_probe_irradiance. Lanes
- * are corners (the loads one by one: each corner has its own payload; the arithmetic in one vector). */
+ * are corners: each has its own payload, so the AVX2 copy gathers the halves by address (vpgatherqd) and
+ * runs the arithmetic as one vector. */
 FXC_HOT_CLONES static void corner_irradiance(hit_cell *restrict e, const uint32_t texel[4], const float w[4])
 {
     static const uint8_t zero_payload[FX_PROBE_BYTES];
