@@ -62,9 +62,6 @@
 #include "fx_probes_internal.h"
 #include "fxc_hot.h"
 
-#include <pthread.h>
-#include <stdlib.h>
-
 /* A half (finite, >= 0: moments and stored irradiance) to float, exactly, subnormals included: its bits
  * shifted into a float's place and rescaled by 2^112 (the exponent biases' difference), so it vectorises. */
 static inline float half_bits_to_float(uint32_t h)
@@ -210,59 +207,15 @@ typedef struct hit_cell {
     bool normal_set; /* e holds the active corners' irradiance towards `normal` (compared bit for bit) */
     float normal[3];
     float e[8][3];
-    /* The corners' moments maps, corner after corner (word c x 64 + texel: mean distance in the low half,
-     * mean squared distance in the high half, as in the payload), so hit_filter reads a hit's 32 texels with
-     * gathers from one base. Points into the thread's heap slab; inactive corners' words are left as an
-     * earlier fill wrote them (or 0): hit_filter computes their lanes and discards them. */
-    const uint32_t *moments;
 } hit_cell;
 
-enum { HIT_CELL_WORDS = 8 * FX_PROBE_TEXELS };
-
-static _Thread_local hit_cell thread_hit_cells[HIT_CELLS]; /* 690 KB */
+static _Thread_local hit_cell thread_hit_cells[HIT_CELLS]; /* 680 KB */
 static _Thread_local uint64_t thread_hit_generation, thread_hit_epoch;
 static _Thread_local uint32_t thread_hit_frame;
-/* The cells' moments copies, HIT_CELLS x 2 KB = 4 MB a thread: too large for thread-local storage (static TLS
- * beyond a few hundred KB makes pthread_create fail), so on the heap, allocated at a thread's first update
- * (zeroed, so every word read is defined) and freed when the thread ends (a pthread key's destructor). Without
- * it (allocation failed) every hit fills a one-cell fallback: slower, the same numbers. */
-static _Thread_local uint32_t *thread_hit_moments;
-static _Thread_local bool thread_hit_moments_tried;
-static _Thread_local uint32_t thread_hit_fallback[HIT_CELL_WORDS];
-static pthread_key_t hit_moments_key;
-static pthread_once_t hit_moments_once = PTHREAD_ONCE_INIT;
-static bool hit_moments_key_ok;
-
-static void hit_moments_free(void *p)
-{
-    free(p);
-}
-
-static void hit_moments_key_create(void)
-{
-    hit_moments_key_ok = pthread_key_create(&hit_moments_key, hit_moments_free) == 0;
-}
-
-static uint32_t *hit_moments_slab(void)
-{
-    if (!thread_hit_moments_tried) {
-        thread_hit_moments_tried = true;
-        pthread_once(&hit_moments_once, hit_moments_key_create);
-        if (hit_moments_key_ok) {
-            uint32_t *slab = calloc((size_t)HIT_CELLS * HIT_CELL_WORDS, sizeof *slab);
-            if (slab && pthread_setspecific(hit_moments_key, slab) == 0)
-                thread_hit_moments = slab;
-            else
-                free(slab);
-        }
-    }
-    return thread_hit_moments;
-}
 
 /* At the start of an update call: keep the cells while the loop and frame are the same, else forget them. */
 static void hit_cells_begin(const fx_context *ctx)
 {
-    (void)hit_moments_slab();
     if (ctx->epoch && ctx->frame && ctx->epoch == thread_hit_epoch && ctx->frame == thread_hit_frame)
         return;
     thread_hit_generation++;
@@ -280,13 +233,10 @@ static hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t 
                  (uint64_t)bits[2] * 0x165667B19E3779F9ull ^ ((uint64_t)level << 40) ^ ((uint64_t)effect << 48);
     h ^= h >> 31;
     h *= 0xD6E8FEB86659FD93ull;
-    uint32_t slot = (uint32_t)(h >> 53); /* 11 bits: HIT_CELLS */
-    hit_cell *e = &thread_hit_cells[slot];
-    uint32_t *slab = thread_hit_moments; /* hit_cells_begin allocated it */
-    if (slab && e->generation == thread_hit_generation && memcmp(e->centre, centre, sizeof e->centre) == 0 &&
+    hit_cell *e = &thread_hit_cells[h >> 53]; /* 11 bits: HIT_CELLS */
+    if (e->generation == thread_hit_generation && memcmp(e->centre, centre, sizeof e->centre) == 0 &&
         e->level == level && e->effect == effect)
         return e;
-    uint32_t *moments = slab ? slab + (size_t)slot * HIT_CELL_WORDS : thread_hit_fallback;
     const void *texel[8];
     if (!ctx->world_cell(ctx->world_user, effect, level, centre, texel))
         memset(texel, 0, sizeof texel);
@@ -296,20 +246,14 @@ static hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t 
     e->effect = effect;
     e->active = 0;
     e->normal_set = false;
-    e->moments = moments;
     for (int c = 0; c < 8; c++) {
         const uint8_t *p = texel[c];
         e->texel[c] = p;
-        uint32_t *m = moments + c * FX_PROBE_TEXELS;
-        uint32_t flags = p ? get_u32(p + 16) : 0;
-        if (!p || !(flags & FX_PROBE_HAS_DATA) || (flags & FX_PROBE_OFF))
+        if (!p)
             continue;
-#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
-        memcpy(m, p + PROBE_MOMENTS, FX_PROBE_TEXELS * sizeof *m); /* the payload's little-endian words */
-#else
-        for (int t = 0; t < FX_PROBE_TEXELS; t++)
-            m[t] = get_u32(p + PROBE_MOMENTS + 4 * t);
-#endif
+        uint32_t flags = get_u32(p + 16);
+        if (!(flags & FX_PROBE_HAS_DATA) || (flags & FX_PROBE_OFF))
+            continue;
         e->active |= 1u << c;
         for (int k = 0; k < 3; k++)
             e->position[c][k] = get_f32(p + 4 * k);
@@ -318,70 +262,14 @@ static hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t 
     return e;
 }
 
-/* A payload's little-endian 32-bit word at p: one load on a little-endian host (memcpy, which the vectoriser
- * turns into a gather), byte by byte elsewhere. The irradiance halves are read through it, low half: the
- * word's upper half lies inside the payload for every irradiance half (the moments follow them). */
-static inline uint32_t load_u32_le(const uint8_t *p)
+/* probe_weight (fx_probes_map.c) with visibility for the 8 corners of a cell at once, times the trilinear
+ * weights `tap` (0 for corners that are missing, off or without data): the same IEEE operations per corner,
+ * written lane by lane without branches (the octahedral fold and border wrap as selects, the moments' four
+ * texels loaded per corner), so the AVX2 copy runs the 8 corners as one vector. */
+FXC_HOT_CLONES static void hit_weights(const hit_cell *restrict e, const float position[3], const float normal[3],
+                                       const float tap[8], float out[8])
 {
-#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
-    uint32_t v;
-    memcpy(&v, p, sizeof v);
-    return v;
-#else
-    return get_u32(p);
-#endif
-}
-
-/* The active corners' irradiance towards a normal (its octahedral texels and bilinear weights) into e->e, 0
- * for the others (hit_filter reads their lanes and discards them): per corner, channel by channel, the four
- * texels summed in order from 0, times the probe's scale, the same operations as fx_probe_irradiance. Lanes
- * are corners: each has its own payload, so the AVX2 copy gathers the halves by address (vpgatherqd) and
- * runs the arithmetic as one vector. */
-FXC_HOT_CLONES static void corner_irradiance(hit_cell *restrict e, const uint32_t texel[4], const float w[4])
-{
-    static const uint8_t zero_payload[FX_PROBE_BYTES];
-    const uint8_t *p[8];
-    float scale[8], sum[3][8];
-    for (int c = 0; c < 8; c++) {
-        p[c] = (e->active >> c & 1) ? e->texel[c] : zero_payload;
-        scale[c] = get_f32(p[c] + 24);
-        sum[0][c] = sum[1][c] = sum[2][c] = 0;
-    }
-    for (int i = 0; i < 4; i++) {
-        const float wi = w[i];
-        for (int k = 0; k < 3; k++) {
-            const size_t offset = PROBE_IRRADIANCE + 6 * (size_t)texel[i] + 2 * (size_t)k;
-            for (int c = 0; c < 8; c++)
-                sum[k][c] += wi * half_bits_to_float(load_u32_le(p[c] + offset) & 0xffffu);
-        }
-    }
-    for (int c = 0; c < 8; c++) {
-        bool active = e->active >> c & 1;
-        for (int k = 0; k < 3; k++)
-            e->e[c][k] = active ? sum[k][c] * scale[c] : 0.0f;
-    }
-}
-
-/* The filter at a hit for the 8 corners of its cell at once: the trilinear weights from the position in the
- * cell `t` ((1 x wx) x wy) x wz in double, 1 x wx exact), probe_weight (fx_probes_map.c) with visibility, and
- * the weighted sums of the corners' irradiance towards the normal (e->e) in corner order, skipping weights
- * that are not > 0 (corners missing, off, without data, or a trilinear weight of 0): acc = (sum R, G, B, sum
- * of weights). The same IEEE operations per corner as one corner at a time, written lane by lane without
- * branches (the octahedral fold and border wrap as selects, the moments' four texels gathered per corner,
- * a skipped corner's terms as +0, which leaves a sum of non-negative terms as it was), so the AVX2 copy runs
- * the 8 corners as one vector. */
-FXC_HOT_CLONES static void hit_filter(const hit_cell *restrict e, const float position[3], const float normal[3],
-                                      const double t[3], float acc[4])
-{
-    float tap[8], out[8];
-    {
-        const double wx0 = 1.0 - t[0], wx1 = t[0], wy0 = 1.0 - t[1], wy1 = t[1], wz0 = 1.0 - t[2], wz1 = t[2];
-        const double pxy[4] = {wx0 * wy0, wx1 * wy0, wx0 * wy1, wx1 * wy1};
-        for (int c = 0; c < 4; c++) {
-            tap[c] = (float)(pxy[c] * wz0);
-            tap[c + 4] = (float)(pxy[c] * wz1);
-        }
-    }
+    static const uint8_t zero_payload[FX_PROBE_BYTES]; /* read in place of missing corners, never used */
     const float px = position[0], py = position[1], pz = position[2];
     const float nx = normal[0], ny = normal[1], nz = normal[2];
     int32_t texel[4][8];
@@ -431,10 +319,11 @@ FXC_HOT_CLONES static void hit_filter(const hit_cell *restrict e, const float po
 #undef HIT_TEXEL
     }
     uint32_t word[4][8]; /* each texel's two moments: mean distance (low half), mean squared distance */
-    const uint32_t *restrict moments = e->moments;
-    for (int i = 0; i < 4; i++) /* 32-bit indices from one base: the AVX2 copy loads each row with a gather */
-        for (int c = 0; c < 8; c++)
-            word[i][c] = moments[c * FX_PROBE_TEXELS + texel[i][c]];
+    for (int c = 0; c < 8; c++) {
+        const uint8_t *p = (e->active >> c & 1) ? e->texel[c] : zero_payload;
+        for (int i = 0; i < 4; i++)
+            word[i][c] = get_u32(p + PROBE_MOMENTS + 4 * texel[i][c]);
+    }
     for (int c = 0; c < 8; c++) {
         float m1 = 0, m2 = 0; /* in texel order, as probe_moments sums */
         m1 += bilinear[0][c] * half_bits_to_float(word[0][c] & 0xffffu);
@@ -455,30 +344,16 @@ FXC_HOT_CLONES static void hit_filter(const hit_cell *restrict e, const float po
         w = w < 0.2f ? w * (w * w / (0.2f * 0.2f)) : w;
         out[c] = (e->active >> c & 1) ? w * tap[c] : 0.0f;
     }
-    /* Per corner (R, G, B, weight): four lanes added corner after corner, the sums' order. */
-    float term[8][4];
-    for (int c = 0; c < 8; c++) {
-        /* out[c] is never NaN (w is clamped, tap is finite) and e->e finite and >= 0 (a half times the
-         * probe's finite scale; 0 for inactive corners), so a skipped corner's 0 x e is +0 */
-        float w = out[c] > 0 ? out[c] : 0.0f;
-        term[c][0] = w * e->e[c][0];
-        term[c][1] = w * e->e[c][1];
-        term[c][2] = w * e->e[c][2];
-        term[c][3] = w;
-    }
-    float sum[4] = {0, 0, 0, 0};
-    for (int c = 0; c < 8; c++)
-        for (int k = 0; k < 4; k++)
-            sum[k] += term[c][k];
-    memcpy(acc, sum, sizeof sum);
 }
 
-/* The cell of `position` on the grid of `grid_point` and `cell` (its centre) and the position in it (t, each in
- * [0, 1]); false when it lies beyond the grid's range. Cloned: the AVX2 copy's floor is one instruction
- * (roundsd) where baseline x86-64 has a compare-and-convert sequence; the same doubles either way. */
-FXC_HOT_CLONES static bool hit_cell_position(const float grid_point[3], float cell, const float position[3],
-                                             float centre[3], double t[3])
+/* The filter at a hit on the grid of `grid_point` (any grid point of the level, e.g. the job's) and `cell`
+ * (metres): E of the probes around it, or false (and 0) when none contributes. */
+static bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, const float grid_point[3], float cell,
+                       const float position[3], const float normal[3], float out[3])
 {
+    out[0] = out[1] = out[2] = 0;
+    float centre[3];
+    double t[3];
     /* A power-of-two cell (the grid's: the finest cell is one and levels double it) has an exact inverse, and
      * multiplying by it rounds as the division does: three divisions fewer per hit. */
     uint32_t cell_bits;
@@ -494,19 +369,6 @@ FXC_HOT_CLONES static bool hit_cell_position(const float grid_point[3], float ce
         t[k] = q - f;
         t[k] = t[k] < 0.0 ? 0.0 : (t[k] > 1.0 ? 1.0 : t[k]);
     }
-    return true;
-}
-
-/* The filter at a hit on the grid of `grid_point` (any grid point of the level, e.g. the job's) and `cell`
- * (metres): E of the probes around it, or false (and 0) when none contributes. */
-static bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, const float grid_point[3], float cell,
-                       const float position[3], const float normal[3], float out[3])
-{
-    out[0] = out[1] = out[2] = 0;
-    float centre[3];
-    double t[3];
-    if (!hit_cell_position(grid_point, cell, position, centre, t))
-        return false;
     hit_cell *e = hit_cell_find(ctx, effect, level, centre);
     if (!e->active)
         return false;
@@ -514,25 +376,48 @@ static bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, c
         uint32_t texel[4];
         float w[4];
         fx__probe_oct_bilinear(normal, texel, w);
-        corner_irradiance(e, texel, w);
+        for (int c = 0; c < 8; c++) {
+            if (!(e->active >> c & 1))
+                continue;
+            const uint8_t *p = e->texel[c];
+            float scale = get_f32(p + 24), sum[3] = {0, 0, 0};
+            for (int i = 0; i < 4; i++)
+                for (int k = 0; k < 3; k++)
+                    sum[k] += w[i] * half_bits_to_float(fx__get_u16(p + PROBE_IRRADIANCE + 6 * texel[i] + 2 * k));
+            for (int k = 0; k < 3; k++)
+                e->e[c][k] = sum[k] * scale;
+        }
         memcpy(e->normal, normal, sizeof e->normal);
         e->normal_set = true;
     }
-    float acc[4];
-    hit_filter(e, position, normal, t, acc);
-    if (!(acc[3] > 0))
+    float tap[8], weight[8];
+    double wx[2] = {1.0 - t[0], t[0]}, wy[2] = {1.0 - t[1], t[1]}, wz[2] = {1.0 - t[2], t[2]};
+    for (int c = 0; c < 8; c++) /* ((1 x wx) x wy) x wz in double, as before: 1 x wx is exact */
+        tap[c] = (float)(wx[c & 1] * wy[c >> 1 & 1] * wz[c >> 2]);
+    hit_weights(e, position, normal, tap, weight);
+    float sum[3] = {0, 0, 0}, total = 0;
+    for (int c = 0; c < 8; c++) {
+        if (!(weight[c] > 0)) /* off, missing, or a trilinear weight of 0 */
+            continue;
+        for (int k = 0; k < 3; k++)
+            sum[k] += weight[c] * e->e[c][k];
+        total += weight[c];
+    }
+    if (!(total > 0))
         return false;
     for (int k = 0; k < 3; k++)
-        out[k] = min_of(acc[k] / acc[3], FLT_MAX);
+        out[k] = min_of(sum[k] / total, FLT_MAX);
     return true;
 }
 
-/* Radiance leaving a front-face hit, given its albedo, its direct light (compose units) and the probes around
- * it. */
-static void hit_radiance(const fx_context *ctx, const fx_block_job *job, const float albedo[3],
+/* Radiance leaving a front-face hit, given its direct light (compose units) and the probes around it. */
+static void hit_radiance(const fx_context *ctx, const fx_block_job *job, uint32_t tri, float u, float v, float t,
                          const float position[3], const float normal[3], const float direct[3], float out[3])
 {
-    float bounce[3] = {0, 0, 0};
+    float albedo[3], bounce[3] = {0, 0, 0};
+    /* The albedo over the ray's footprint there (144 rays: about 0.3 rad apart). */
+    float footprint = t * 0.3f;
+    scene_albedo_filtered(ctx->s, tri, u, v, log2f(footprint > 1e-30f ? footprint : 1e-30f), albedo); /* fmaxf */
     uint32_t effect = job->effect, level = job->level;
     if (ctx->world_cell) {
         hit_bounce(ctx, effect, level, job->origin, job->cell, position, normal, bounce);
@@ -711,13 +596,9 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
             rtcIntersect1M(rtc, &context, hits, n, sizeof(struct RTCRayHit));
             traced += n;
 
-            /* Shadow rays of the front-face hits, and their albedo over the ray's footprint there (144 rays:
-             * about 0.3 rad apart), looked up together (scene_albedo_run: the cloned copy of
-             * scene_albedo_filtered's lookup, the same floats). */
+            /* Shadow rays of the front-face hits. */
             hs->count = 0;
-            float hit_pos[PROBE_CHUNK][3], albedo_u[PROBE_CHUNK], albedo_v[PROBE_CHUNK],
-                albedo_lod[PROBE_CHUNK], albedo[PROBE_CHUNK][3];
-            uint32_t albedo_tri[PROBE_CHUNK], albedo_of[PROBE_CHUNK], fronts = 0;
+            float hit_pos[PROBE_CHUNK][3];
             for (uint32_t r = 0; r < n; r++) {
                 hs->direct[r][0] = hs->direct[r][1] = hs->direct[r][2] = 0;
                 const struct RTCRayHit *rh = &hits[r];
@@ -732,16 +613,8 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
                     p[k] = origin[k] + rh->ray.tfar * dir[k];
                 scene_offset_ray_origin(p, normal, s->ray_offset_scale, hit_pos[r]);
                 traced += queue_shadow_rays(ctx, hs, r, hit_pos[r], normal);
-                float footprint = rh->ray.tfar * 0.3f;
-                albedo_of[r] = fronts;
-                albedo_tri[fronts] = rh->hit.primID;
-                albedo_u[fronts] = rh->hit.u;
-                albedo_v[fronts] = rh->hit.v;
-                albedo_lod[fronts] = log2f(footprint > 1e-30f ? footprint : 1e-30f); /* fmaxf */
-                fronts++;
             }
             shadow_flush(ctx, hs);
-            scene_albedo_run(s, albedo_tri, albedo_u, albedo_v, albedo_lod, fronts, albedo);
 
             /* Radiance and distance of every ray. */
             for (uint32_t r = 0; r < n; r++) {
@@ -763,7 +636,8 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
                             memcpy(back_dir, dir, sizeof back_dir);
                         }
                     } else {
-                        hit_radiance(ctx, job, albedo[albedo_of[r]], hit_pos[r], normal, hs->direct[r], radiance);
+                        hit_radiance(ctx, job, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r], normal,
+                                     hs->direct[r], radiance);
                         distance = t;
                         if (t < closest_front) {
                             closest_front = t;
