@@ -406,79 +406,68 @@ static void section_scaling(const bench_opts *o)
     }
 }
 
-static void section_threads(const bench_opts *o)
+/* Two configurations of one run (a: a_threads, b: b_threads), alternating per repetition: the per-stage medians,
+ * each side's frame, the sums and both sides' process CPU time, and the per-repetition ratio a / b. The labels
+ * name the sides ("1 thread", "dynamic") and the ratio ("speed-up (per-repetition ratio 1 thread / 2 threads)"
+ * for frames, "speed-up" for the sums). */
+typedef struct ab_labels {
+    const char *title, *a, *b, *ratio_frames, *ratio_sums;
+} ab_labels;
+
+static void section_ab(const bench_opts *o, view_rc_desc da, int a_threads, view_rc_desc db, int b_threads,
+                       const ab_labels *l)
 {
-    double t1[MAX_REPS], t2[MAX_REPS], speedup[MAX_REPS], sum1[MAX_REPS], sum2[MAX_REPS],
-        sum_speedup[MAX_REPS], cpu1[MAX_REPS], cpu2[MAX_REPS];
-    double s1[VIEW_RC_STAGE_COUNT][MAX_REPS], s2[VIEW_RC_STAGE_COUNT][MAX_REPS];
+    double ta[MAX_REPS], tb[MAX_REPS], ratio[MAX_REPS], sum_a[MAX_REPS], sum_b[MAX_REPS], sum_ratio[MAX_REPS],
+        cpu_a[MAX_REPS], cpu_b[MAX_REPS];
+    double sa[VIEW_RC_STAGE_COUNT][MAX_REPS], sb[VIEW_RC_STAGE_COUNT][MAX_REPS];
     for (int r = 0; r < o->reps; r++) {
         run_result a, b;
-        run(o, o->res, &(view_rc_desc){0}, 1, false, &a);
-        run(o, o->res, &(view_rc_desc){0}, 2, false, &b);
-        t1[r] = a.frame_ms;
-        t2[r] = b.frame_ms;
-        speedup[r] = a.frame_ms / b.frame_ms;
-        sum1[r] = stage_sum(&a), sum2[r] = stage_sum(&b);
-        sum_speedup[r] = sum1[r] / sum2[r];
-        cpu1[r] = a.cpu_ms, cpu2[r] = b.cpu_ms;
+        run(o, o->res, &da, a_threads, false, &a);
+        run(o, o->res, &db, b_threads, false, &b);
+        ta[r] = a.frame_ms, tb[r] = b.frame_ms;
+        ratio[r] = a.frame_ms / b.frame_ms;
+        sum_a[r] = stage_sum(&a), sum_b[r] = stage_sum(&b);
+        sum_ratio[r] = sum_a[r] / sum_b[r];
+        cpu_a[r] = a.cpu_ms, cpu_b[r] = b.cpu_ms;
         for (int s = 0; s < VIEW_RC_STAGE_COUNT; s++)
-            s1[s][r] = a.stage_ms[s], s2[s][r] = b.stage_ms[s];
+            sa[s][r] = a.stage_ms[s], sb[s][r] = b.stage_ms[s];
     }
     double lo, mid, hi;
-    printf("\n%ux%u, 1 against 2 threads, %d repetitions alternating\n", o->res, o->res, o->reps);
-    printf("| stage | 1 thread ms | 2 threads ms |\n|---|---|---|\n");
+    printf("\n%ux%u, %s, %d repetitions alternating\n", o->res, o->res, l->title, o->reps);
+    printf("| stage | %s ms | %s ms |\n|---|---|---|\n", l->a, l->b);
     for (int s = 0; s < VIEW_RC_STAGE_COUNT; s++)
-        printf("| %s | %.3f | %.3f |\n", view_rc_stage_name(s), bench_quantile(s1[s], o->reps, 0.5),
-               bench_quantile(s2[s], o->reps, 0.5));
-    range_of(t1, o->reps, &lo, &mid, &hi);
-    printf("| frame, 1 thread | %.3f (%.3f-%.3f) | |\n", mid, lo, hi);
-    range_of(t2, o->reps, &lo, &mid, &hi);
-    printf("| frame, 2 threads | | %.3f (%.3f-%.3f) |\n", mid, lo, hi);
-    printf("| sum of the stage medians | %.3f | %.3f |\n", bench_quantile(sum1, o->reps, 0.5),
-           bench_quantile(sum2, o->reps, 0.5));
-    /* Both threads' CPU time, the pool's spinning between stages included: above 1 thread's by the work that
+        printf("| %s | %.3f | %.3f |\n", view_rc_stage_name(s), bench_quantile(sa[s], o->reps, 0.5),
+               bench_quantile(sb[s], o->reps, 0.5));
+    range_of(ta, o->reps, &lo, &mid, &hi);
+    printf("| frame, %s | %.3f (%.3f-%.3f) | |\n", l->a, mid, lo, hi);
+    range_of(tb, o->reps, &lo, &mid, &hi);
+    printf("| frame, %s | | %.3f (%.3f-%.3f) |\n", l->b, mid, lo, hi);
+    printf("| sum of the stage medians | %.3f | %.3f |\n", bench_quantile(sum_a, o->reps, 0.5),
+           bench_quantile(sum_b, o->reps, 0.5));
+    /* All threads' CPU time, the pool's spinning between stages included: above 1 thread's by the work that
      * sharing adds (lines moving between the cores) and the spinning. */
-    printf("| frame, process CPU time (all threads) | %.3f | %.3f |\n", bench_quantile(cpu1, o->reps, 0.5),
-           bench_quantile(cpu2, o->reps, 0.5));
-    range_of(speedup, o->reps, &lo, &mid, &hi);
-    printf("speed-up (per-repetition ratio 1 thread / 2 threads), frames: median %.3f, range %.3f-%.3f\n",
-           mid, lo, hi);
-    range_of(sum_speedup, o->reps, &lo, &mid, &hi);
-    printf("speed-up, sums of the stage medians: median %.3f, range %.3f-%.3f\n", mid, lo, hi);
+    printf("| frame, process CPU time (all threads) | %.3f | %.3f |\n", bench_quantile(cpu_a, o->reps, 0.5),
+           bench_quantile(cpu_b, o->reps, 0.5));
+    range_of(ratio, o->reps, &lo, &mid, &hi);
+    printf("%s, frames: median %.3f, range %.3f-%.3f\n", l->ratio_frames, mid, lo, hi);
+    range_of(sum_ratio, o->reps, &lo, &mid, &hi);
+    printf("%s, sums of the stage medians: median %.3f, range %.3f-%.3f\n", l->ratio_sums, mid, lo, hi);
+}
+
+static void section_threads(const bench_opts *o)
+{
+    section_ab(o, (view_rc_desc){0}, 1, (view_rc_desc){0}, 2,
+               &(ab_labels){"1 against 2 threads", "1 thread", "2 threads",
+                            "speed-up (per-repetition ratio 1 thread / 2 threads)", "speed-up"});
 }
 
 /* The static split of the point passes against the dynamic hand-out (view_rc_desc.dynamic_points), both on 2
  * threads, alternating: what keeping each chunk on one core does. */
 static void section_split(const bench_opts *o)
 {
-    double ts[MAX_REPS], td[MAX_REPS], ratio[MAX_REPS], sum_s[MAX_REPS], sum_d[MAX_REPS], sum_ratio[MAX_REPS];
-    double ss[VIEW_RC_STAGE_COUNT][MAX_REPS], sd[VIEW_RC_STAGE_COUNT][MAX_REPS];
-    for (int r = 0; r < o->reps; r++) {
-        run_result a, b;
-        run(o, o->res, &(view_rc_desc){.dynamic_points = true}, 2, false, &a);
-        run(o, o->res, &(view_rc_desc){0}, 2, false, &b);
-        td[r] = a.frame_ms, ts[r] = b.frame_ms;
-        ratio[r] = a.frame_ms / b.frame_ms;
-        sum_d[r] = stage_sum(&a), sum_s[r] = stage_sum(&b);
-        sum_ratio[r] = sum_d[r] / sum_s[r];
-        for (int s = 0; s < VIEW_RC_STAGE_COUNT; s++)
-            sd[s][r] = a.stage_ms[s], ss[s][r] = b.stage_ms[s];
-    }
-    double lo, mid, hi;
-    printf("\n%ux%u, 2 threads, point passes dynamic against static, %d repetitions alternating\n", o->res,
-           o->res, o->reps);
-    printf("| stage | dynamic ms | static ms |\n|---|---|---|\n");
-    for (int s = 0; s < VIEW_RC_STAGE_COUNT; s++)
-        printf("| %s | %.3f | %.3f |\n", view_rc_stage_name(s), bench_quantile(sd[s], o->reps, 0.5),
-               bench_quantile(ss[s], o->reps, 0.5));
-    range_of(td, o->reps, &lo, &mid, &hi);
-    printf("| frame, dynamic | %.3f (%.3f-%.3f) | |\n", mid, lo, hi);
-    range_of(ts, o->reps, &lo, &mid, &hi);
-    printf("| frame, static | | %.3f (%.3f-%.3f) |\n", mid, lo, hi);
-    range_of(ratio, o->reps, &lo, &mid, &hi);
-    printf("dynamic / static (per-repetition ratio), frames: median %.3f, range %.3f-%.3f\n", mid, lo, hi);
-    range_of(sum_ratio, o->reps, &lo, &mid, &hi);
-    printf("dynamic / static, sums of the stage medians: median %.3f, range %.3f-%.3f\n", mid, lo, hi);
+    section_ab(o, (view_rc_desc){.dynamic_points = true}, 2, (view_rc_desc){0}, 2,
+               &(ab_labels){"2 threads, point passes dynamic against static", "dynamic", "static",
+                            "dynamic / static (per-repetition ratio)", "dynamic / static"});
 }
 
 typedef struct variant {

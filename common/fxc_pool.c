@@ -311,17 +311,23 @@ static void wait_finished(fxc_pool *pool, bool counted)
     }
 }
 
-void fxc_pool_run(fxc_pool *pool, uint32_t count, fxc_pool_task task, void *user)
+/* The start of every run of count > 0 tasks: the caller's thread_init, then the whole run on the caller when
+ * there is one thread or one task (without waking the workers). True when the run is done. */
+static bool run_on_caller(fxc_pool *pool, uint32_t count, fxc_pool_task task, void *user)
 {
-    if (count == 0)
-        return;
     if (pool->thread_init)
         pool->thread_init();
-    if (pool->thread_count == 1 || count == 1) {
-        for (uint32_t i = 0; i < count; i++)
-            task(user, i, 0);
+    if (pool->thread_count > 1 && count > 1)
+        return false;
+    for (uint32_t i = 0; i < count; i++)
+        task(user, i, 0);
+    return true;
+}
+
+void fxc_pool_run(fxc_pool *pool, uint32_t count, fxc_pool_task task, void *user)
+{
+    if (count == 0 || run_on_caller(pool, count, task, user))
         return;
-    }
     uint32_t g = prepare(pool, count, task, user, RUN_DYNAMIC);
     publish(pool, (uint64_t)g << 32);
     drain(pool, g, 0);
@@ -334,15 +340,8 @@ void fxc_pool_run_static(fxc_pool *pool, uint32_t count, fxc_pool_task task, voi
         fxc_pool_run(pool, count, task, user);
         return;
     }
-    if (count == 0)
+    if (count == 0 || run_on_caller(pool, count, task, user))
         return;
-    if (pool->thread_init)
-        pool->thread_init();
-    if (pool->thread_count == 1 || count == 1) {
-        for (uint32_t i = 0; i < count; i++)
-            task(user, i, 0);
-        return;
-    }
     uint32_t g = prepare(pool, count, task, user, steal ? RUN_STATIC_STEAL : RUN_STATIC);
     uint32_t threads = pool->thread_count;
     atomic_store_explicit(&pool->remaining, count, memory_order_relaxed);
