@@ -184,6 +184,35 @@ static fxc_result resolve_effects(srv_loop *loop, char *err, size_t err_cap)
  * one loop's frame from another's, even when a loop is freed and the next one reuses its addresses). */
 static _Atomic uint64_t loop_epochs;
 
+/* What probes have stored depends on the lights and the sky: a hash of every field that changes their light
+ * (FNV-1a over the fields' bytes), compared at each frame's start so that a light switched or dimmed between
+ * frames lets converged probes refresh at once (update.c). Positions and directions are in it too, though the
+ * shadow texels do not follow a light that moves. */
+static uint64_t light_signature(const scene *s)
+{
+    uint64_t h = 14695981039346656037u;
+    const void *parts[3];
+    size_t sizes[3];
+    for (uint32_t l = 0; l <= s->light_count; l++) {
+        size_t n = 0;
+        if (l < s->light_count) {
+            const scene_light *light = &s->lights[l];
+            parts[n] = &light->type, sizes[n++] = sizeof light->type;
+            parts[n] = light->direction, sizes[n++] = sizeof light->direction + sizeof light->position +
+                                                     sizeof light->color;
+            parts[n] = &light->intensity, sizes[n++] = sizeof light->intensity;
+        } else {
+            parts[n] = s->sky_color, sizes[n++] = sizeof s->sky_color;
+            parts[n] = &s->sky_intensity, sizes[n++] = sizeof s->sky_intensity;
+            parts[n] = &s->light_count, sizes[n++] = sizeof s->light_count;
+        }
+        for (size_t k = 0; k < n; k++)
+            for (size_t b = 0; b < sizes[k]; b++)
+                h = (h ^ ((const unsigned char *)parts[k])[b]) * 1099511628211u;
+    }
+    return h;
+}
+
 fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err, size_t err_cap)
 {
     *out = NULL;
@@ -254,6 +283,10 @@ fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err,
                             .ao_samples = loop->desc.ao_samples,
                             .shadow_rays = shadow_rays,
                             .epoch = atomic_fetch_add(&loop_epochs, 1) + 1};
+    /* After a change of the lights, converged probes refresh every frame until the old light's weight in
+     * them, h^k after k blended updates, is below 1 % (7 frames at h = 0.5, 152 at the default 0.97). */
+    loop->light_signature = light_signature(desc->s);
+    loop->light_settle_frames = (uint32_t)ceil(log(0.01) / log((double)loop->desc.probe_hysteresis));
     if (loop->desc.no_cache) { /* the baseline's counts per pixel: the converged ones, scaled */
         double scale = loop->desc.no_cache_samples;
         double ao = fmax(1.0, floor(loop->desc.ao_samples * scale + 0.5));
@@ -660,6 +693,12 @@ fxc_result srv_loop_frame(srv_loop *loop, srv_frame_stats *st)
     memset(st, 0, sizeof *st);
     st->frame = loop->frame_number;
     double frame_start = srv__now_ms();
+    uint64_t lights = light_signature(loop->s);
+    if (lights != loop->light_signature) {
+        loop->light_signature = lights;
+        loop->light_change_frame = loop->frame_number;
+        loop->light_changed = true;
+    }
     uint32_t slots[SRV_MAX_VIEWERS], active = 0;
     for (uint32_t v = 0; v < SRV_MAX_VIEWERS; v++)
         if (loop->viewers[v].present && loop->viewers[v].has_camera)

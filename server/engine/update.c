@@ -118,7 +118,8 @@ static void take_within_budget(srv_loop *loop, uint32_t e, srv_effect_queue *q, 
  * neighbours' does (the bounces) and when lights change. Each frame at most desc.probe_budget cells of
  * such an effect update (sharing the ray budget): first the requested cells that hold no data yet, then
  * the ones whose last update is oldest; a cell the effect calls converged (texel_samples >= max_samples,
- * max_samples > 0) waits at least CONVERGED_REFRESH frames between updates. The order is a sort on (age,
+ * max_samples > 0) waits at least CONVERGED_REFRESH frames between updates, except for light_settle_frames
+ * frames after the lights or the sky changed (loop.c). The order is a sort on (age,
  * frame-list position), so it depends only on the cache's state, never on timing or threads. */
 enum { CONVERGED_REFRESH = 8 };
 
@@ -139,13 +140,15 @@ static void continuous_order(srv_loop *loop, uint32_t e, srv_effect_queue *q, co
                    sizeof *q->order))
         return; /* no refresh this frame: only cells without data are taken */
     uint32_t stamp = loop->frame_number + 1;
+    /* Shortly after the lights changed, what a converged probe holds is out of date: no refresh waits. */
+    bool settling = loop->light_changed && loop->frame_number - loop->light_change_frame < loop->light_settle_frames;
     for (uint32_t i = 0; i < count; i++) {
         uint64_t have = q->refine[i] = kind->block_requested(cache, e, blocks[i]) & kind->block_valid(cache, e, blocks[i]);
         if (!have)
             continue;
         uint32_t *word = kind->block_word ? kind->block_word(cache, e, blocks[i]) : NULL;
         uint32_t age = word && *word ? stamp - *word : UINT32_MAX / 2;
-        if (fx->texel_samples && loop->max_samples[e] > 0 && age < CONVERGED_REFRESH) { /* 0: never converged */
+        if (!settling && fx->texel_samples && loop->max_samples[e] > 0 && age < CONVERGED_REFRESH) {
             const uint8_t *payload = kind->block_payload(cache, e, blocks[i]);
             bool converged = true;
             for (uint64_t m = have; m && converged; m &= m - 1)

@@ -277,9 +277,11 @@ static void test_light_inside_geometry(void **state)
  * frame it goes off. The wall's light comes through the probes: with hysteresis h = 0.5 each update blends
  * half of the new estimate, so after k updates the wall holds V (1 - h^k) going on (from probes holding 0)
  * and V h^k going off, V the steady value. The engine updates a probe every frame until it has 64 blended
- * updates (converged), then every 8 frames (update.c): so the wall is within 5 % of V 5 updates after the
- * switch (0.5^5 = 3 %), that is 5 frames going on from fresh probes and 40 frames going off from converged
- * ones. Checked every frame against the closed form at the probes' own update count k (read from their
+ * updates (converged), then every 8 frames (update.c), except for ceil(ln 0.01 / ln h) = 7 frames after the
+ * lights change, when converged probes refresh every frame too: so the wall is within 5 % of V 5 updates after
+ * the switch (0.5^5 = 3 %), 5 frames going on from fresh probes and going off from converged ones (before
+ * the lights were watched, 40 frames going off), and converged probes are back to one refresh in 8 frames
+ * once the 7 frames are over. Checked every frame against the closed form at the probes' own update count k (read from their
  * payloads; every probe of the view runs on the same schedule), within 4 % of V plus 4 x the steady
  * frame-to-frame spread (the probes' noise), and no overshoot beyond the same bound. */
 static void test_light_switched_on_and_off(void **state)
@@ -333,7 +335,11 @@ static void test_light_switched_on_and_off(void **state)
     double start = wall;
     int settled_off = -1;
     worst = 0;
+    stab_probe_counts *late = malloc(sizeof *late);
+    assert_non_null(late);
     for (int k = 1; k <= 48; k++) {
+        if (k == 33) /* long after the 7 frames: converged probes wait for their refresh again */
+            stab_probe_snapshot(loop, late);
         stab_bounce_frame(loop, id, &wall, &floor);
         assert_true(stab_probe_updates_since(loop, then, &least, &most) > then->count / 2);
         double low = start * pow(h, (double)most), high = start * pow(h, (double)least);
@@ -348,7 +354,12 @@ static void test_light_switched_on_and_off(void **state)
                   "V h^k %.5f\n",
                   settled_off, least, most, worst);
     assert_true(worst <= bound);
-    assert_true(settled_off > 0 && settled_off <= 40);
+    assert_true(settled_off > 0 && settled_off <= 5);
+    uint32_t late_least, late_most;
+    assert_true(stab_probe_updates_since(loop, late, &late_least, &late_most) > late->count / 2);
+    print_message("off, frames 33 to 48: each probe refreshed %u..%u times\n", late_least, late_most);
+    assert_true(late_least >= 1 && late_most <= 2); /* every 8 frames: 2 in 16, not 16 */
+    free(late);
     free(then);
     srv_loop_free(loop);
     scene_rt_free(rt);

@@ -195,6 +195,11 @@ struct srv_loop {
     uint32_t effect_kind[SRV_MAX_EFFECTS];  /* scene_cache_kind of each effect */
     /* Viewers and sinks. */
     uint32_t frame_number;
+    /* The lights and sky as the last frame saw them (srv__light_signature), the frame they last changed on
+     * and for how many frames after a change converged probes refresh every frame (update.c). */
+    uint64_t light_signature;
+    uint32_t light_change_frame, light_settle_frames;
+    bool light_changed;
     srv_viewer viewers[SRV_MAX_VIEWERS];
     srv_sink sinks[SRV_MAX_SINKS];
     uint32_t sink_count;
