@@ -341,14 +341,25 @@ static void sort3(uint32_t v[3])
     if (v[0] > v[1]) { t = v[0]; v[0] = v[1]; v[1] = t; }
 }
 
-/* Twice the area of triangle (a, b, c), in double, and whether it is too thin to carry a normal. */
-static bool triangle_degenerate(const float *a, const float *b, const float *c)
+void scene__precision_lost(const scene_repairs *r, uint64_t before, char *out, size_t cap)
+{
+    uint64_t n = r->precision_skipped - before;
+    if (n)
+        snprintf(out, cap, "; %llu of the degenerate ones have an area but collapse at float precision %.4g m "
+                           "from the local origin, where floats are %.3g m apart",
+                 (unsigned long long)n, r->precision_reach, float_spacing(r->precision_reach));
+    else if (cap)
+        out[0] = 0;
+}
+
+/* Whether triangle (a, b, c) is too thin to carry a normal, judged in double. */
+static bool triangle_degenerate_d(const double a[3], const double b[3], const double c[3])
 {
     double e1[3], e2[3], e3[3];
     for (int k = 0; k < 3; k++) {
-        e1[k] = (double)b[k] - a[k];
-        e2[k] = (double)c[k] - a[k];
-        e3[k] = (double)c[k] - b[k];
+        e1[k] = b[k] - a[k];
+        e2[k] = c[k] - a[k];
+        e3[k] = c[k] - b[k];
     }
     double cx = e1[1] * e2[2] - e1[2] * e2[1];
     double cy = e1[2] * e2[0] - e1[0] * e2[2];
@@ -360,6 +371,32 @@ static bool triangle_degenerate(const float *a, const float *b, const float *c)
     double longest2 = fmax(l1, fmax(l2, l3));
     /* The sine of the smallest angle scaled: below 1e-9 the float normal is noise. */
     return !(area2 > 1e-9 * longest2) || !(longest2 > 0);
+}
+
+/* The same for float corners. */
+static bool triangle_degenerate(const float *a, const float *b, const float *c)
+{
+    double p[3][3];
+    for (int k = 0; k < 3; k++) {
+        p[0][k] = a[k];
+        p[1][k] = b[k];
+        p[2][k] = c[k];
+    }
+    return triangle_degenerate_d(p[0], p[1], p[2]);
+}
+
+/* Whether the triangle with these corners (world positions, double) keeps its shape when moved by -origin in
+ * double: a triangle degenerate only once rounded to float lies too far from the frame's origin for its size.
+ * Its farthest corner from the origin goes into *reach. */
+static bool triangle_fine_in_double(const double *world, const uint32_t *tri, const double origin[3], double *reach)
+{
+    double p[3][3];
+    for (int c = 0; c < 3; c++)
+        for (int k = 0; k < 3; k++) {
+            p[c][k] = world[3 * (size_t)tri[c] + k] - origin[k];
+            *reach = fmax(*reach, fabs(p[c][k]));
+        }
+    return !triangle_degenerate_d(p[0], p[1], p[2]);
 }
 
 /* Welds, cleans and appends one staged mesh, its positions moved into the frame with the given origin:
@@ -427,6 +464,11 @@ static scene_result commit_mesh(scene *s, const staged_mesh *m, const double ori
                                               world + 3 * (size_t)tri[2]);
         if (degenerate) {
             s->repairs.degenerate_skipped++;
+            double reach = 0;
+            if (triangle_fine_in_double(m->world, tri, origin, &reach)) {
+                s->repairs.precision_skipped++;
+                s->repairs.precision_reach = fmax(s->repairs.precision_reach, reach);
+            }
             keys[t].v[0] = keys[t].v[1] = keys[t].v[2] = UINT32_MAX;
         }
     }
@@ -681,6 +723,8 @@ static scene_result settle_frame(scene *s, scene_error *err)
         s->meshes = NULL;
         s->vertex_count = s->triangle_count = s->mesh_count = 0;
         s->repairs.vertices_welded = s->repairs.degenerate_skipped = s->repairs.duplicate_skipped = 0;
+        s->repairs.precision_skipped = 0;
+        s->repairs.precision_reach = 0;
         scene_result rc = SCENE_OK;
         for (uint32_t i = 0; i < b->mesh_count && rc == SCENE_OK; i++) {
             staged_mesh *m = &b->meshes[i];
@@ -740,6 +784,15 @@ static void assess_precision(scene *s)
     double input_step = b ? b->input_step : 0;
     s->position_step = fmax(local_step, input_step);
     s->precision_warning[0] = 0;
+    if (s->repairs.precision_skipped) {
+        snprintf(s->precision_warning, sizeof s->precision_warning,
+                 "%s: %llu triangle(s) with an area dropped as degenerate: they collapse at float precision up "
+                 "to %.4g m from the local origin, where floats are %.3g m apart; keep distant parts in a scene "
+                 "of their own, or scale the scene down",
+                 s->source, (unsigned long long)s->repairs.precision_skipped, s->repairs.precision_reach,
+                 float_spacing(s->repairs.precision_reach));
+        return;
+    }
     double texel = 1.0 / (double)s->texel_density;
     if (!(s->position_step > SCENE_PRECISION_TEXEL_FRACTION * texel))
         return;
@@ -797,11 +850,14 @@ scene_result scene__finalize(scene *s, const scene_load_desc *desc, scene_error 
     scene_result settled = settle_frame(s, err);
     if (settled != SCENE_OK)
         return settled;
-    if (s->triangle_count == 0)
-        return scene__fail(err, SCENE_ERR_EMPTY, "%s: the scene has no triangles (%llu degenerate, %llu "
-                                                  "duplicate skipped)",
-                           s->source, (unsigned long long)s->repairs.degenerate_skipped,
-                           (unsigned long long)s->repairs.duplicate_skipped);
+    if (s->triangle_count == 0) {
+        char lost[160];
+        scene__precision_lost(&s->repairs, 0, lost, sizeof lost);
+        return scene__fail(err, SCENE_ERR_EMPTY, "%s: the scene has no triangles (%llu duplicate and %llu "
+                                                  "degenerate skipped%s)",
+                           s->source, (unsigned long long)s->repairs.duplicate_skipped,
+                           (unsigned long long)s->repairs.degenerate_skipped, lost);
+    }
     double t0 = scene__now_ms();
     scene_result rc = compute_normals_and_bounds(s, err);
     if (rc == SCENE_OK)

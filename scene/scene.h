@@ -107,6 +107,9 @@ enum {
 /* Counts of input the importer repaired or skipped, never silently. */
 typedef struct scene_repairs {
     uint64_t degenerate_skipped;   /* zero-area or repeated-vertex triangles dropped */
+    uint64_t precision_skipped;    /* of those, triangles with an area in double that collapsed in float in the
+                                      local frame (too far from the scene's centre for their size) */
+    double precision_reach;        /* the farthest such triangle's corner from the local origin, metres */
     uint64_t duplicate_skipped;    /* triangles with the same three welded vertices as an earlier one */
     uint64_t nonmanifold_split;    /* triangles split off from the half-edge mesh (non-manifold edges) */
     uint64_t vertices_welded;      /* vertices merged into an earlier one with the same position */

@@ -396,15 +396,18 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
                                                                 : material_map[0]; /* this file's first */
         rc = import_mesh(s, mesh, i, material, xform, path, err);
     }
-    if (rc == SCENE_OK && s->triangle_count == before)
+    if (rc == SCENE_OK && s->triangle_count == before) {
+        char lost[160];
+        scene__precision_lost(&s->repairs, repairs_before.precision_skipped, lost, sizeof lost);
         rc = scene__fail(
             err, SCENE_ERR_EMPTY,
-            "%s: no usable triangles in the file (%llu points and lines dropped, %llu degenerate and "
-            "%llu duplicate triangles skipped)",
+            "%s: no usable triangles in the file (%llu points and lines dropped, %llu duplicate and %llu "
+            "degenerate triangles skipped%s)",
             path,
             (unsigned long long)(s->repairs.non_triangles_dropped - repairs_before.non_triangles_dropped),
-            (unsigned long long)(s->repairs.degenerate_skipped - repairs_before.degenerate_skipped),
-            (unsigned long long)(s->repairs.duplicate_skipped - repairs_before.duplicate_skipped));
+            (unsigned long long)(s->repairs.duplicate_skipped - repairs_before.duplicate_skipped),
+            (unsigned long long)(s->repairs.degenerate_skipped - repairs_before.degenerate_skipped), lost);
+    }
     free(material_map);
     aiReleaseImport(ai);
     return rc;

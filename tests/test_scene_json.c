@@ -843,6 +843,34 @@ static void test_error_beyond_reach(void **state)
     }
 }
 
+/* Triangles that have an area but collapse when rounded to float far from the local origin are named as
+ * such: a mesh of nothing else is refused saying so, a scene that keeps other triangles loads with the count
+ * and a precision warning (before, both read as plain "degenerate"). */
+static void test_precision_collapse_named(void **state)
+{
+    (void)state;
+    fxt_write_file("unit_tri.obj", "o t\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    expect_error("collapse.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"transform\": {\"scale\": 1000}},"
+                 " {\"file\": \"unit_tri.obj\", \"transform\": {\"translate\": [1e9, 0, 0]}}]}",
+                 SCENE_ERR_EMPTY, "unit_tri.obj", "collapse at float precision");
+    /* One triangle of 1e5 m and one of 1 m, 1e9 m out: floats are 64 m apart there. */
+    fxt_write_file("mixed_tri.obj", "o m\nv 0 0 0\nv 100000 0 0\nv 0 0 100000\nv 5 0 5\nv 6 0 5\nv 5 0 6\n"
+                                    "f 1 3 2\nf 4 6 5\n");
+    scene_error err;
+    scene *sc = load_json_text("mixed.json",
+                               "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"},"
+                               " {\"file\": \"mixed_tri.obj\", \"transform\": {\"translate\": [1e9, 0, 0]}}]}",
+                               &err);
+    if (!sc)
+        fail_msg("%s", err.msg);
+    assert_int_equal(sc->repairs.precision_skipped, 1);
+    assert_true(sc->repairs.degenerate_skipped >= 1);
+    assert_true(sc->repairs.precision_reach > 4e8 && sc->repairs.precision_reach < 1.1e9);
+    assert_non_null(strstr(sc->precision_warning, "collapse at float precision"));
+    scene_free(sc);
+}
+
 /* A face index past the vertex list: Assimp's OBJ reader refuses the file. */
 static void test_error_obj_index_out_of_range(void **state)
 {
@@ -875,6 +903,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_valid_full_description),
         cmocka_unit_test(test_error_beyond_reach),
+        cmocka_unit_test(test_precision_collapse_named),
         cmocka_unit_test(test_valid_no_lights_no_sky),
         cmocka_unit_test(test_valid_transforms),
         cmocka_unit_test(test_valid_auto_density_and_subfolder),

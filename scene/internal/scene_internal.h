@@ -7,6 +7,11 @@
 
 #include <stdarg.h>
 
+/* "; N of the degenerate ones have an area but collapse at float precision D m from the local origin, ..." for the
+ * triangles of r->precision_skipped beyond `before`, or "" when there are none; for messages about dropped
+ * triangles. */
+void scene__precision_lost(const scene_repairs *r, uint64_t before, char *out, size_t cap);
+
 /* Fills err with code and a printf-style message; returns code so callers can `return scene__fail(...)`. */
 scene_result scene__fail(scene_error *err, scene_result code, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));

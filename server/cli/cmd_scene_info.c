@@ -114,8 +114,9 @@ static json_t *scene_info_json(const scene *s, const island_summary *is, const s
 
     const scene_repairs *r = &s->repairs;
     json_object_set_new(root, "repairs",
-                        json_pack("{s:I,s:I,s:I,s:I,s:I,s:I}", "degenerate_skipped",
-                                  (json_int_t)r->degenerate_skipped, "duplicate_skipped",
+                        json_pack("{s:I,s:I,s:I,s:I,s:I,s:I,s:I}", "degenerate_skipped",
+                                  (json_int_t)r->degenerate_skipped, "precision_skipped",
+                                  (json_int_t)r->precision_skipped, "duplicate_skipped",
                                   (json_int_t)r->duplicate_skipped, "nonmanifold_split",
                                   (json_int_t)r->nonmanifold_split, "vertices_welded",
                                   (json_int_t)r->vertices_welded, "non_triangles_dropped",
@@ -153,9 +154,14 @@ static void print_text(const scene *s, const island_summary *is, const scene_nee
     printf("scene:          %s\n", s->source);
     printf("triangles:      %u (vertices %u after welding %llu)\n", s->triangle_count, s->vertex_count,
            (unsigned long long)r->vertices_welded);
-    printf("repairs:        %llu degenerate and %llu duplicate triangles skipped, %llu split off at "
+    char lost[160] = "";
+    if (r->precision_skipped)
+        snprintf(lost, sizeof lost, " (%llu of them with an area, collapsed at float precision up to %.4g m from "
+                                    "the local origin)",
+                 (unsigned long long)r->precision_skipped, r->precision_reach);
+    printf("repairs:        %llu degenerate%s and %llu duplicate triangles skipped, %llu split off at "
            "non-manifold edges, %llu points/lines dropped, %llu textures missing\n",
-           (unsigned long long)r->degenerate_skipped, (unsigned long long)r->duplicate_skipped,
+           (unsigned long long)r->degenerate_skipped, lost, (unsigned long long)r->duplicate_skipped,
            (unsigned long long)r->nonmanifold_split, (unsigned long long)r->non_triangles_dropped,
            (unsigned long long)r->textures_missing);
     printf("meshes:         %u (materials %u, textures %u)\n", s->mesh_count, s->material_count, s->texture_count);
