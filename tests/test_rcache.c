@@ -915,7 +915,7 @@ static void answer(view_rc *rc, const view_rc_camera *cam, uint32_t w, uint32_t 
     free(s);
 }
 
-static walk_log walk(uint32_t threads, uint32_t tile, bool dynamic_points)
+static walk_log walk(uint32_t threads, uint32_t tile, bool dynamic)
 {
     const uint32_t w = 83, h = 57;
     walk_log log = {0};
@@ -924,7 +924,8 @@ static walk_log walk(uint32_t threads, uint32_t tile, bool dynamic_points)
                                        .threads = threads,
                                        .tile_size = tile,
                                        .capacity = w * h * 3 / 2,
-                                       .dynamic_points = dynamic_points});
+                                       .dynamic_points = dynamic,
+                                       .dynamic_pixels = dynamic});
     uint8_t *rgb = malloc(w * h * 3);
     float *depth = malloc(w * h * sizeof(float));
     view_rc_pixel *req = malloc(sizeof *req * w * h), *pred = malloc(sizeof *pred * w * h);
@@ -978,7 +979,8 @@ static void test_threads_bit_identical(void **state)
     const uint32_t tiles[] = {16, 13, 64};
     for (size_t t = 0; t < sizeof tiles / sizeof tiles[0]; t++) {
         walk_log one = walk(1, tiles[t], false);
-        /* 2 and 4 threads, the point passes split statically (the default) and handed out dynamically. */
+        /* 2 and 4 threads, the point and pixel passes split statically (the default) and handed out
+         * dynamically. */
         const uint32_t threads[] = {2, 4, 2, 4};
         for (size_t k = 0; k < 4; k++) {
             walk_log many = walk(threads[k], tiles[t], k >= 2);

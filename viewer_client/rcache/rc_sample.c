@@ -380,7 +380,8 @@ void view_rc__sampling(view_rc *rc)
         run += rc->band_quota[b];
     }
     rc->request_count = run;
-    fxc_pool_run(rc->pool, (rc->tiles_y + RC_DITHER_LANES - 1) / RC_DITHER_LANES, dither_task, rc);
+    rc_run_pixels(rc->pool, rc->d.dynamic_pixels, (rc->tiles_y + RC_DITHER_LANES - 1) / RC_DITHER_LANES,
+                  dither_task, rc);
 }
 
 /* ---- the dither on its own ----------------------------------------------------------------------------- */
