@@ -158,12 +158,9 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_pz = take(&l, rc->slots, sizeof(float));
     size_t o_rgba = take(&l, rc->slots, sizeof(uint32_t));
     size_t o_tile_of = take(&l, rc->slots, sizeof(uint16_t));
-    /* The whole store's pixels, depths and lists only for the 1999 z-buffer (no_tiling); the tiled path keeps
-     * one chunk's in each worker's scratch. */
-    size_t direct = d.no_tiling ? rc->slots : 0;
-    size_t o_pix = take(&l, direct, sizeof(uint32_t));
-    size_t o_dep = take(&l, direct, sizeof(float));
-    size_t o_dest = take(&l, direct, sizeof(uint16_t));
+    size_t o_pix = take(&l, rc->slots, sizeof(uint32_t));
+    size_t o_dep = take(&l, rc->slots, sizeof(float));
+    size_t o_dest = take(&l, rc->slots, sizeof(uint16_t));
     rc->mark_stride = ((size_t)rc->slots + 1 + 63) & ~(size_t)63; /* + a sink byte, a line apart */
     size_t o_mark = take(&l, rc->mark_stride * d.threads, 1);
     size_t o_free_slots = take(&l, rc->slots, sizeof(uint32_t));
@@ -173,14 +170,18 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_chunk_hist = take(&l, (size_t)rc->chunk_count * 256, sizeof(uint32_t));
     size_t o_chunk_quota = take(&l, rc->chunk_count, sizeof(uint32_t));
     size_t o_chunk_stat = take(&l, rc->chunk_count, sizeof(rc_chunk_stat));
-    /* Entries: a region of chunk_size per chunk (a chunk's projected points, sorted by tile), then the
-     * sort's sinks (one per thread, a line each). */
-    if ((size_t)rc->chunk_count * chunk + 4 * (size_t)d.threads > UINT32_MAX) {
+    /* Entries: one per slot, up to 3 of padding per list (tile and part), then the sort's sinks (one per
+     * thread, a line each). */
+    rc->parts = d.threads;
+    size_t lists_parts = (size_t)rc->tile_count * rc->parts;
+    if ((size_t)rc->slots + 4 * lists_parts + 4 * (size_t)rc->parts > UINT32_MAX) {
         free(rc);
         return FXC_ERR_INVALID;
     }
-    rc->entry_sink = rc->chunk_count * chunk;
-    size_t o_entries = take(&l, (size_t)rc->entry_sink + 4 * (size_t)d.threads, sizeof(rc_entry));
+    rc->entry_sink = (uint32_t)(((size_t)rc->slots + 4 * lists_parts + 3) & ~(size_t)3);
+    size_t o_entries = take(&l, (size_t)rc->entry_sink + 4 * (size_t)rc->parts, sizeof(rc_entry));
+    size_t o_list_start = take(&l, lists_parts, sizeof(uint32_t));
+    size_t o_list_end = take(&l, lists_parts, sizeof(uint32_t));
     size_t o_zbuf = take(&l, rc->pixels, sizeof(float));
     size_t o_win = take(&l, rc->pixels, sizeof(uint32_t));
     size_t o_pre = take(&l, rc->pixels, sizeof(uint32_t));
@@ -206,7 +207,6 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_occupied[VIEW_RC_MAX_THREADS], o_low[VIEW_RC_MAX_THREADS], o_err[VIEW_RC_MAX_THREADS];
     size_t o_planes[VIEW_RC_MAX_THREADS], o_box[VIEW_RC_MAX_THREADS], o_spare[VIEW_RC_MAX_THREADS];
     size_t o_zt[VIEW_RC_MAX_THREADS], o_wt[VIEW_RC_MAX_THREADS], o_ct[VIEW_RC_MAX_THREADS];
-    size_t o_cpix[VIEW_RC_MAX_THREADS], o_cdep[VIEW_RC_MAX_THREADS], o_cdest[VIEW_RC_MAX_THREADS];
     rc->local_z = rc->tile <= RC_LOCAL_TILE;
     size_t local = rc->local_z ? (size_t)rc->tile * rc->tile : 0;
     for (uint32_t t = 0; t < d.threads; t++) {
@@ -219,9 +219,6 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
         o_zt[t] = take(&l, local, sizeof(float));
         o_wt[t] = take(&l, local, sizeof(uint32_t));
         o_ct[t] = take(&l, local, sizeof(uint32_t));
-        o_cpix[t] = take(&l, chunk, sizeof(uint32_t));
-        o_cdep[t] = take(&l, chunk, sizeof(float));
-        o_cdest[t] = take(&l, chunk, sizeof(uint16_t));
     }
     if (l.overflow) {
         free(rc);
@@ -252,6 +249,8 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     rc->chunk_quota = (uint32_t *)(block + o_chunk_quota);
     rc->chunk_stat = (rc_chunk_stat *)(block + o_chunk_stat);
     rc->entries = (rc_entry *)(block + o_entries);
+    rc->list_start = (uint32_t *)(block + o_list_start);
+    rc->list_end = (uint32_t *)(block + o_list_end);
     rc->zbuf = (float *)(block + o_zbuf);
     rc->win = (uint32_t *)(block + o_win);
     rc->pre = (uint32_t *)(block + o_pre);
@@ -284,9 +283,6 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
         rc->workers[t].zt = (float *)(block + o_zt[t]);
         rc->workers[t].wt = (uint32_t *)(block + o_wt[t]);
         rc->workers[t].ct = (uint32_t *)(block + o_ct[t]);
-        rc->workers[t].cpix = (uint32_t *)(block + o_cpix[t]);
-        rc->workers[t].cdep = (float *)(block + o_cdep[t]);
-        rc->workers[t].cdest = (uint16_t *)(block + o_cdest[t]);
     }
 
     /* Every slot free; the stack hands out slot 0 first. */

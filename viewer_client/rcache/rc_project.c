@@ -2,34 +2,31 @@
  * (2002 3.2; the tile lists of Reinhard 2001 section 3), the tiled z-buffer (2002 3.2), the one-pass z-buffer
  * of the 1999 render cache (no_tiling), and ageing with eviction (2002 3.4).
  *
- * The predicted projection is a pass of its own over the store (inside the projection pass, a block of 1024
- * points to each camera in turn, it had fewer cache misses but took 1.32 times as long idle: reverted
- * ca8dd1f).
+ * The predicted projection is computed in the projection pass: each block of 1024 points is projected to the
+ * current camera, then to the predicted one while its positions are still in L1 (a pass of its own read the
+ * store, 16 bytes a point, from memory a second time).
  *
- * Project and tile sort, one task per chunk of slots (parallel): every live point is projected once, in a
- * loop without branches (vectorised), into the worker's scratch (pixel, depth and list of the chunk's 4096
- * slots, 40 KiB); the chunk counts how many of its points go to each tile, turns the counts into starts
- * within its own region of the entry array (chunk_size entries from c x chunk_size) and bucket-sorts its
- * points there as 16-byte entries, while the scratch is still in cache. Tile t's list is the chunk regions'
- * ranges for t in chunk order, then slot order within a chunk: the same order with any thread count. (Before,
- * the projection wrote pixel, depth and list for the whole store, 10 bytes a slot and 3 MB at 512 x 512, and
- * after a serial step of offsets over all chunks a second pass read them back from memory to sort into one
- * list per tile.)
+ * Project and tile sort, per chunk of slots (parallel): every live point is projected once, in a loop without
+ * branches (vectorised); the chunk counts how many of its points go to each tile. One serial step turns the
+ * counts into offsets, tile by tile, part by part within a tile (a part: the chunks one thread owns) and chunk
+ * by chunk within a part, each (tile, part) list starting on a cache line of its own; the bucket sort
+ * (parallel again) writes each projected point as a 16-byte entry at its offset. The order within a tile
+ * (part, then chunk, then slot: chunk then slot) does not depend on the thread count.
  *
  * Every pass over chunks of slots (predicted projection, projection, sort, ageing) is a static run of the
  * pool (fxc_pool_run_static): thread k takes the same range of chunks in each, so the slots' positions,
- * colours and lists stay in its core's cache from pass to pass and frame to frame, and a chunk's region of
- * entries is written by one core. (With the pool's dynamic hand-out a
+ * colours, pixels, depths and lists stay in its core's cache from pass to pass and frame to frame, and the
+ * (tile, part) lists mean no line of entries is written by two cores. (With the pool's dynamic hand-out a
  * chunk went to whichever thread asked first, differently in every pass: on 2 threads the point passes got
  * slower than on one.) A thread that has finished its range takes chunks from the end of another's; such a
- * chunk still writes its own region, so the result is the same.
+ * chunk still writes its own part's list, so the result is the same.
  *
  * The z-buffer then reads one tile's list (parallel over tiles) into buffers of the tile's own (tiles up to
- * 256 on a side): 64 x 64 pixels of depth, winner and colour, 48 KiB contiguous, which stay in cache while
- * the tile's entries stream past, then copied into the image row by row. (Written straight into the image,
- * the tile's 64 rows lie 4 x width bytes apart and fall into a few of L1's sets: cachegrind counted an L1
- * miss for nearly every z-buffer write.) The nearer view depth wins; between equal depths, the entry first in
- * the list. */
+ * 256 on a side): 64 x 64 pixels of depth, winner and colour, 48 KiB contiguous, which stay in cache while the
+ * tile's entries stream past, then copied into the image row by row. (Written straight into the image, the
+ * tile's 64 rows lie 4 x width bytes apart and fall into a few of L1's sets: cachegrind counted an L1 miss for
+ * nearly every z-buffer write.) The nearer view depth wins; between equal depths, the entry first in the
+ * list. */
 #include "rc_internal.h"
 
 #include <math.h>
@@ -81,16 +78,16 @@ static void chunk_range(const view_rc *rc, uint32_t c, uint32_t *begin, uint32_t
 
 /* ---- projection without branches ----------------------------------------------------------------------- */
 
-/* The pixel of the n slots from px, py, pz, rgba for view v (RC_NO_PIXEL for free slots, points behind the
- * camera or outside the image; `local`: row * tile + column within its tile, else the image's index), its
- * view depth, and its list: the tile (two shifts of the pixel's coordinates), or `outside`, or `dead` for a
- * free slot; written to pix, dep and dest from index 0. rc_project's arithmetic; the conversion to integers
- * happens only on coordinates known to be inside. */
+/* The pixel of every slot in [begin, end) for view v (RC_NO_PIXEL for free slots, points behind the camera or
+ * outside the image; `local`: row * tile + column within its tile, else the image's index), its view depth,
+ * and its list: the tile (two shifts of the pixel's coordinates), or
+ * `outside`, or `dead` for a free slot. rc_project's arithmetic; the conversion to integers happens only on
+ * coordinates known to be inside. */
 FXC_HOT_CLONES static void project_span(const rc_view *v, const float *restrict px, const float *restrict py,
                                         const float *restrict pz, const uint32_t *restrict rgba,
                                         uint32_t *restrict pix, float *restrict dep, uint16_t *restrict dest,
-                                        uint32_t n, uint32_t shift, uint32_t tiles_x, bool local,
-                                        uint16_t outside, uint16_t dead)
+                                        uint32_t begin, uint32_t end, uint32_t shift, uint32_t tiles_x,
+                                        bool local, uint16_t outside, uint16_t dead)
 {
     const float cx = v->rel[0], cy = v->rel[1], cz = v->rel[2];
     const float fx = v->forward[0], fy = v->forward[1], fz = v->forward[2];
@@ -99,7 +96,7 @@ FXC_HOT_CLONES static void project_span(const rc_view *v, const float *restrict 
     const float hw = v->half_w, hh = v->half_h, kx = v->kx, ky = v->ky;
     const float w = (float)v->width, h = (float)v->height;
     const uint32_t width = v->width, m = (1u << shift) - 1;
-    for (uint32_t i = 0; i < n; i++) {
+    for (uint32_t i = begin; i < end; i++) {
         float vx = px[i] - cx, vy = py[i] - cy, vz = pz[i] - cz;
         float zc = vx * fx + vy * fy + vz * fz;
         float xc = vx * rx + vy * ry + vz * rz;
@@ -191,12 +188,12 @@ FXC_HOT_CLONES static bool any_candidate(const uint32_t *restrict rgba, uint32_t
 /* ---- project and tile sort ----------------------------------------------------------------------------- */
 
 /* Migrations (a projected or outside point whose list changed; new points not counted), and the lists
- * remembered for the next frame: n slots, dest from index 0. */
+ * remembered for the next frame. */
 FXC_HOT_CLONES static uint32_t migrate_span(const uint16_t *restrict dest, uint16_t *restrict tile_of,
-                                            uint32_t n, uint16_t dead, uint16_t fresh)
+                                            uint32_t begin, uint32_t end, uint16_t dead, uint16_t fresh)
 {
     uint32_t migrated = 0;
-    for (uint32_t i = 0; i < n; i++) {
+    for (uint32_t i = begin; i < end; i++) {
         uint16_t d = dest[i], t = tile_of[i];
         migrated += (d != dead) & (t != fresh) & (t != d);
         tile_of[i] = d;
@@ -204,26 +201,17 @@ FXC_HOT_CLONES static uint32_t migrate_span(const uint16_t *restrict dest, uint1
     return migrated;
 }
 
-/* One chunk: projection, the drop plan's drops, migrations, counts per list and (tiled) the bucket sort into
- * the chunk's own region of entries. Tiled, the chunk's pixels, depths and lists go to the worker's scratch
- * (40 KiB at chunks of 4096, still in L1 or L2 when the sort reads them back); no_tiling, to the store-wide
- * arrays the 1999 z-buffer reads. */
 static void project_task(void *user, uint32_t c, uint32_t worker)
 {
+    (void)worker;
     view_rc *rc = user;
     uint32_t begin, end;
     chunk_range(rc, c, &begin, &end);
-    uint32_t n = end - begin;
     uint16_t outside = rc->list_outside, dead = rc->list_dead;
-    bool tiled = !rc->d.no_tiling;
-    rc_worker *wk = &rc->workers[worker];
-    uint32_t *pix = tiled ? wk->cpix : rc->pix + begin;
-    float *dep = tiled ? wk->cdep : rc->dep + begin;
-    uint16_t *dest = tiled ? wk->cdest : rc->dest + begin;
     /* The tiled z-buffer in its own buffers takes the pixel within the tile; the 1999 one, the image's. */
-    bool local = rc->local_z && tiled;
-    project_span(&rc->view, rc->px + begin, rc->py + begin, rc->pz + begin, rc->rgba + begin, pix, dep, dest,
-                 n, rc->tile_shift, rc->tiles_x, local, outside, dead);
+    bool local = rc->local_z && !rc->d.no_tiling;
+    project_span(&rc->view, rc->px, rc->py, rc->pz, rc->rgba, rc->pix, rc->dep, rc->dest, begin, end,
+                 rc->tile_shift, rc->tiles_x, local, outside, dead);
     rc_chunk_stat stat = {0};
     /* The drop plan: points older than drop_age, and the chunk's quota of that age, in slot order. */
     if (rc->drop_age != RC_AGE_NO_DROP) {
@@ -242,66 +230,81 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
             stat.dropped++;
             stat.dropped_age_sum += age;
             rc->rgba[i] = (rc->rgba[i] & 0x00FFFFFFu) | (RC_AGE_DEAD << 24);
-            pix[i - begin] = RC_NO_PIXEL;
-            dest[i - begin] = dead;
+            rc->pix[i] = RC_NO_PIXEL;
+            rc->dest[i] = dead;
         }
     }
-    stat.migrated = migrate_span(dest, rc->tile_of + begin, n, dead, rc->list_new);
+    stat.migrated = migrate_span(rc->dest, rc->tile_of, begin, end, dead, rc->list_new);
     /* Counts per list, in four interleaved sets (consecutive points mostly go to the same tile). */
-    uint32_t lists = rc->tile_count + 2, tiles = rc->tile_count;
-    uint32_t count[VIEW_RC_MAX_TILES + 2];
+    uint32_t lists = rc->tile_count + 2;
+    uint32_t *count = rc->counts + (size_t)c * lists;
     memset(count, 0, lists * sizeof(uint32_t));
     uint32_t part[3][VIEW_RC_MAX_TILES + 2];
     for (int k = 0; k < 3; k++)
         memset(part[k], 0, lists * sizeof(uint32_t));
-    uint32_t i = 0;
-    for (; i + 4 <= n; i += 4) {
+    const uint16_t *dest = rc->dest;
+    uint32_t i = begin;
+    for (; i + 4 <= end; i += 4) {
         count[dest[i]]++;
         part[0][dest[i + 1]]++;
         part[1][dest[i + 2]]++;
         part[2][dest[i + 3]]++;
     }
-    for (; i < n; i++)
+    for (; i < end; i++)
         count[dest[i]]++;
     for (uint32_t l = 0; l < lists; l++)
         count[l] += part[0][l] + part[1][l] + part[2][l];
     stat.projected = 0;
-    for (uint32_t t = 0; t < tiles; t++)
+    for (uint32_t t = 0; t < rc->tile_count; t++)
         stat.projected += count[t];
     rc->chunk_stat[c] = stat;
-    if (!tiled)
-        return;
+}
 
-    /* The bucket sort into this chunk's region, tile after tile; its starts stay in counts for the z-buffer
-     * (the value at tile_count: the end of the last tile). Without a branch (slots are in no order once
-     * points come and go): points that land outside, and free slots, go to this thread's sink entry after the
-     * regions, whose cursor does not move. (One sink for all threads was a data race, written by every
-     * thread: the thread sanitizer saw it.) */
-    uint32_t *starts = rc->counts + (size_t)c * lists;
-    uint32_t *cursor = part[0];
-    uint32_t run = c * rc->chunk_size;
-    for (uint32_t t = 0; t < tiles; t++) {
-        starts[t] = cursor[t] = run;
-        run += count[t];
-    }
-    starts[tiles] = run;
-    cursor[tiles] = cursor[tiles + 1] = rc->entry_sink + 4 * worker;
-    const uint32_t *rgba = rc->rgba + begin;
+static void sort_task(void *user, uint32_t c, uint32_t worker)
+{
+    view_rc *rc = user;
+    uint32_t begin, end;
+    chunk_range(rc, c, &begin, &end);
+    uint32_t *offset = rc->counts + (size_t)c * (rc->tile_count + 2);
+    const uint16_t *dest = rc->dest;
+    const uint32_t *pix = rc->pix, *rgba = rc->rgba;
+    const float *dep = rc->dep;
     rc_entry *entries = rc->entries;
-    for (uint32_t k = 0; k < n; k++) {
-        uint32_t d = dest[k], o = cursor[d];
-        cursor[d] = o + (d < tiles);
+    uint32_t tiles = rc->tile_count;
+    /* Without a branch (slots are in no order once points come and go): points that land outside, and free
+     * slots, go to this thread's sink entry after the lists, whose cursor does not move. (One sink for all
+     * threads was a data race, written by every thread: the thread sanitizer saw it.) */
+    offset[tiles] = offset[tiles + 1] = rc->entry_sink + 4 * worker;
+    for (uint32_t i = begin; i < end; i++) {
+        uint32_t d = dest[i], o = offset[d];
+        offset[d] = o + (d < tiles);
         rc_entry *e = &entries[o];
-        e->pix = pix[k];
-        e->depth = dep[k];
-        e->rgba = rgba[k];
-        e->slot = begin + k;
+        e->pix = pix[i];
+        e->depth = dep[i];
+        e->rgba = rgba[i];
+        e->slot = i;
     }
 }
 
 void view_rc__project_sort(view_rc *rc)
 {
     run_chunks(rc, project_task);
+    /* Offsets: tile by tile, part by part (each list on a line of its own: 4 entries), chunk by chunk. */
+    uint32_t lists = rc->tile_count + 2, run = 0, parts = rc->parts;
+    for (uint32_t t = 0; t < rc->tile_count; t++)
+        for (uint32_t p = 0; p < parts; p++) {
+            run = (run + 3u) & ~3u;
+            rc->list_start[t * parts + p] = run;
+            uint32_t c1 = fxc_pool_static_begin(rc->chunk_count, parts, p + 1);
+            for (uint32_t c = fxc_pool_static_begin(rc->chunk_count, parts, p); c < c1; c++) {
+                uint32_t *slot = rc->counts + (size_t)c * lists + t;
+                uint32_t n = *slot;
+                *slot = run;
+                run += n;
+            }
+            rc->list_end[t * parts + p] = run;
+        }
+    run_chunks(rc, sort_task);
 }
 
 /* ---- z-buffer tiles (2002 3.2) ------------------------------------------------------------------------- */
@@ -316,9 +319,9 @@ static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
     float *zbuf = rc->zbuf;
     uint32_t *win = rc->win, *pre = rc->pre;
     const rc_entry *entries = rc->entries;
-    /* The tile's range in chunk c: [starts[c * lists], starts[c * lists + 1]). */
-    const uint32_t *starts = rc->counts + tile;
-    uint32_t chunks = rc->chunk_count, lists = rc->tile_count + 2;
+    const uint32_t *list_start = rc->list_start + (size_t)tile * rc->parts;
+    const uint32_t *list_end = rc->list_end + (size_t)tile * rc->parts;
+    uint32_t parts = rc->parts;
     /* Depth and entry of the nearest; between equal depths, the first in the list. Tried and slower in
      * bench_rcache: the same without the branch (2.2 against 1.9 ms), and 64-bit keys of depth and entry (one
      * load, minimum and store a point; entries split in 8 bytes for the test and 8 for the winners: 1.6
@@ -334,15 +337,8 @@ static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
             wt[k] = RC_NO_POINT;
             ct[k] = RC_EMPTY_PT;
         }
-        for (uint32_t c = 0; c < chunks; c++) {
-            /* A tile's list is one short range per chunk (about 40 entries at 512 x 512): too short for the
-             * hardware's stream detection, so the range two chunks on is fetched ahead, a line at a time. */
-            if (c + 2 < chunks)
-                for (uint32_t e = starts[(size_t)(c + 2) * lists] & ~3u,
-                              e1 = starts[(size_t)(c + 2) * lists + 1];
-                     e < e1; e += 4)
-                    __builtin_prefetch(&entries[e]);
-            for (uint32_t e = starts[(size_t)c * lists], e1 = starts[(size_t)c * lists + 1]; e < e1; e++) {
+        for (uint32_t part = 0; part < parts; part++)
+            for (uint32_t e = list_start[part], e1 = list_end[part]; e < e1; e++) {
                 uint32_t p = entries[e].pix;
                 float z = entries[e].depth;
                 if (z < zt[p]) {
@@ -351,7 +347,6 @@ static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
                     ct[p] = entries[e].rgba;
                 }
             }
-        }
         for (uint32_t y = y0; y < y1; y++) {
             size_t at = (size_t)(y - y0) * side;
             memcpy(zbuf + y * w + x0, zt + at, (x1 - x0) * sizeof(float));
@@ -366,8 +361,8 @@ static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
             win[y * w + x] = RC_NO_POINT;
             pre[y * w + x] = RC_EMPTY_PT;
         }
-    for (uint32_t c = 0; c < chunks; c++)
-        for (uint32_t e = starts[(size_t)c * lists], e1 = starts[(size_t)c * lists + 1]; e < e1; e++) {
+    for (uint32_t part = 0; part < parts; part++)
+        for (uint32_t e = list_start[part], e1 = list_end[part]; e < e1; e++) {
             uint32_t p = entries[e].pix;
             float z = entries[e].depth, old = zbuf[p];
             if (z < old) {
@@ -385,9 +380,9 @@ void view_rc__zbuffer(view_rc *rc)
 
 /* ---- the 1999 render cache: one z-buffer in slot order ------------------------------------------------- */
 
-/* The projection as above into the store-wide pix, dep, dest (without the sort), then every point straight
- * into the whole image in slot order, one thread: about 2 MiB of depth and winners at 512 x 512, touched at
- * random, which the 2002 paper's tiles avoid. */
+/* The projection as above (without the sort), then every point straight into the whole image in slot order,
+ * one thread: about 2 MiB of depth and winners at 512 x 512, touched at random, which the 2002 paper's tiles
+ * avoid. */
 void view_rc__project_direct(view_rc *rc)
 {
     run_chunks(rc, project_task);
@@ -453,7 +448,7 @@ static void age_task(void *user, uint32_t c, uint32_t worker)
     uint32_t begin, end;
     chunk_range(rc, c, &begin, &end);
     uint32_t top = rc->d.no_eviction ? 254 : 255;
-    for (uint32_t t = 1; t < rc->thread_count; t++)
+    for (uint32_t t = 1; t < rc->parts; t++)
         gather_marks(rc->mark, rc->mark + t * rc->mark_stride, begin, end);
     rc->chunk_stat[c].evicted =
         age_span(rc->rgba, rc->mark, begin, end, rc->step_visible, rc->step_hidden, top);

@@ -10,12 +10,10 @@
  * (CONVENTIONS 6: the projection reads 16 bytes a point, ageing 5).
  *
  * Tile lists (2002 3.2, Reinhard 2001 section 3): every frame the projected points are bucket-sorted by tile
- * (counting sort, per chunk of slots, right after the chunk's projection while its pixels and depths are
- * still in cache) into 16-byte entries: chunk c's entries fill its own region of the entry array (chunk_size
- * entries from c x chunk_size), tile after tile. Tile t's point list for this frame is the concatenation over
- * the chunks, in chunk order, of chunk c's range for t. A point that lands in another tile than in the last
- * frame moves to that tile's list (tile_of[] remembers the list; the move is counted as a migration). The
- * z-buffer then reads one tile's ranges into that tile's part of the image, which stays in cache.
+ * (counting sort, per chunk of slots) into one array of 16-byte entries, tile after tile and within a tile by
+ * part (the chunks one thread owns in the static split): each tile's point list for this frame. A point that lands in another tile than in the last frame moves to that tile's list
+ * (tile_of[] remembers the list; the move is counted as a migration). The z-buffer then reads one tile's list
+ * into that tile's part of the image, which stays in cache.
  *
  * Determinism: every parallel pass writes per-chunk, per-tile or per-band outputs, and the serial steps
  * between them combine those in a fixed order, so the result does not depend on which thread ran what. Hot
@@ -94,8 +92,8 @@ FXC_HOT_INLINE bool rc_project(const rc_view *v, float x, float y, float z, uint
 
 /* The frame's threads: common/fxc_pool.h, a pool that runs task 0..count-1 of a function, the caller included
  * (Reinhard 2001 section 3: tiles processed by several threads). Each pass is a count of tasks (chunks of the
- * point store, tiles or bands); every task writes only its own outputs, so which thread ran it does not
- * change the result. */
+ * point store, tiles or bands); every task writes only its own outputs, so which thread ran it does not change
+ * the result. */
 typedef fxc_pool rc_pool;
 
 /* A pass over the image: tiles (row-major) or bands of rows, `count` of them in row order. Run statically
@@ -121,9 +119,6 @@ typedef struct rc_worker {
     float *zt;         /* z-buffer: one tile's depths, tile x tile, row after row (local_z only) */
     uint32_t *wt;      /* ... the slot that won each pixel (RC_NO_POINT: none) */
     uint32_t *ct;      /* ... and its rgba (RC_EMPTY_PT: none) */
-    uint32_t *cpix;    /* projection of one chunk (tiled): pixel within its tile per slot, chunk_size */
-    float *cdep;       /* ... view depth */
-    uint16_t *cdest;   /* ... tile, list_outside or list_dead */
 } rc_worker;
 
 /* Points being inserted, a batch at a time (rc_cache.c): their positions computed in one loop without
@@ -164,10 +159,10 @@ struct view_rc {
     float *px, *py, *pz;
     uint32_t *rgba;
     uint16_t *tile_of;    /* the list a point was in last frame (list_new: inserted since) */
-    uint32_t *pix;        /* no_tiling only: this frame's pixel in the image (RC_NO_PIXEL outside) */
-    float *dep;           /* no_tiling only: this frame's view depth */
-    uint16_t *dest;       /* no_tiling only: tile, list_outside or list_dead (tiled, they live in the
-                           * worker's chunk scratch: cpix, cdep, cdest) */
+    uint32_t *pix;        /* this frame: pixel (RC_NO_PIXEL outside); in its tile (row * tile + column) when
+                           * local_z and tiling, else in the image */
+    float *dep;           /* this frame: view depth */
+    uint16_t *dest;       /* this frame: tile, list_outside or list_dead */
     uint8_t *mark;        /* this frame: shown in a pixel, one array per thread, mark_stride bytes apart (each
                            * slots + 1: the last is a sink). The depth cull's thread w writes only array w (no
                            * line written by two cores at once); the ageing ORs them over its chunks. */
@@ -186,14 +181,18 @@ struct view_rc {
     rc_chunk_stat *chunk_stat;
     uint32_t drop_age; /* this frame's drop plan: drop ages above it and chunk_quota of it (255: none) */
 
-    /* The tile lists of this frame. Chunk c's entries are its own region of `entries`, [c x chunk_size, ...):
-     * tile t's range in it is [counts[c x (tile_count + 2) + t], the same at t + 1) (the sort leaves each
-     * chunk's starts in `counts`; the value at tile_count is the end of its last tile). A chunk's task is the
-     * only writer of its region (regions are 64 KiB, 64-byte aligned), whichever thread runs it. The z-buffer
-     * reads a tile's ranges in chunk order: the same order with any thread count. */
-    rc_entry *entries;   /* entry_sink + 4 x threads entries, 64-byte aligned */
-    uint32_t entry_sink; /* the sort writes points outside the image and free slots to entry_sink + 4 x its
-                          * thread: a line per thread, so no two threads write one entry */
+    /* The tile lists of this frame, one per tile and part. The passes over chunks run statically split
+     * (fxc_pool_run_static): part p is the chunks thread p runs, [fxc_pool_static_begin(chunk_count, parts,
+     * p), the same for p + 1). Tile t's entries from part p are [list_start[t * parts + p], list_end[...]),
+     * in chunk then slot order; every such list starts on a cache line of its own (entries padded to 4, 64
+     * bytes), so no line of entries is written by two threads. The z-buffer reads a tile's parts in part
+     * order: chunk order, the same with any thread count. */
+    rc_entry *entries;    /* entry_sink + 4 x parts entries, 64-byte aligned */
+    uint32_t parts;       /* the pool's threads */
+    uint32_t entry_sink;  /* the sort writes points outside the image and free slots to entry_sink + 4 x its
+                           * thread: a line per thread, so no two threads write one entry */
+    uint32_t *list_start; /* tile_count x parts */
+    uint32_t *list_end;   /* tile_count x parts */
 
     /* Ageing (2002 3.4). */
     double age_carry, hidden_carry; /* fractional parts carried to the next frame */
