@@ -8,8 +8,8 @@
  *
  * Project and tile sort, per chunk of slots (parallel): every live point is projected once, in a loop without
  * branches (vectorised); the chunk counts how many of its points go to each tile. One serial step turns the
- * counts into offsets, tile by tile, part by part within a tile (a part: the chunks one thread owns) and chunk
- * by chunk within a part, each (tile, part) list starting on a cache line of its own; the bucket sort
+ * counts into offsets, tile by tile, part by part within a tile (a part: the chunks one thread owns) and
+ * chunk by chunk within a part, each (tile, part) list starting on a cache line of its own; the bucket sort
  * (parallel again) writes each projected point as a 16-byte entry at its offset. The order within a tile
  * (part, then chunk, then slot: chunk then slot) does not depend on the thread count.
  *
@@ -22,11 +22,11 @@
  * chunk still writes its own part's list, so the result is the same.
  *
  * The z-buffer then reads one tile's list (parallel over tiles) into buffers of the tile's own (tiles up to
- * 256 on a side): 64 x 64 pixels of depth, winner and colour, 48 KiB contiguous, which stay in cache while the
- * tile's entries stream past, then copied into the image row by row. (Written straight into the image, the
- * tile's 64 rows lie 4 x width bytes apart and fall into a few of L1's sets: cachegrind counted an L1 miss for
- * nearly every z-buffer write.) The nearer view depth wins; between equal depths, the entry first in the
- * list. */
+ * 256 on a side): 64 x 64 pixels of depth, winner and colour, 48 KiB contiguous, which stay in cache while
+ * the tile's entries stream past, then copied into the image row by row. (Written straight into the image,
+ * the tile's 64 rows lie 4 x width bytes apart and fall into a few of L1's sets: cachegrind counted an L1
+ * miss for nearly every z-buffer write.) The nearer view depth wins; between equal depths, the entry first in
+ * the list. */
 #include "rc_internal.h"
 
 #include <math.h>
@@ -452,18 +452,42 @@ static void age_task(void *user, uint32_t c, uint32_t worker)
         gather_marks(rc->mark, rc->mark + t * rc->mark_stride, begin, end);
     rc->chunk_stat[c].evicted =
         age_span(rc->rgba, rc->mark, begin, end, rc->step_visible, rc->step_hidden, top);
-    /* The chunk's age histogram and its free slots, in descending order. */
+    /* The chunk's age histogram and its free slots, in descending order. Neighbouring slots mostly hold
+     * points of one age (inserted in the same frame), so with one histogram every increment waited for the
+     * last one's store to the same counter (perf: the increment held 72 % of the pass's samples); four
+     * histograms, slot i going to i mod 4, make four independent chains. Free slots (age 255) are counted in
+     * bin 255 and listed without a branch. */
     uint32_t *hist = rc->chunk_hist + (size_t)c * 256,
              *free_list = rc->free_list + (size_t)c * rc->chunk_size;
-    memset(hist, 0, 256 * sizeof(uint32_t));
-    uint32_t n = 0;
-    for (uint32_t i = end; i-- > begin;) {
-        uint32_t age = rc_age(rc->rgba[i]);
-        if (age == RC_AGE_DEAD)
-            free_list[n++] = i;
-        else
-            hist[age]++;
+    uint32_t h[4][256];
+    memset(h, 0, sizeof h);
+    const uint32_t *rgba = rc->rgba;
+    uint32_t n = 0, i = end;
+    while (i > begin && (i - begin) % 4 != 0) {
+        i--;
+        h[0][rc_age(rgba[i])]++;
+        free_list[n] = i;
+        n += rc_age(rgba[i]) == RC_AGE_DEAD;
     }
+    for (; i > begin; i -= 4) {
+        uint32_t a3 = rc_age(rgba[i - 1]), a2 = rc_age(rgba[i - 2]), a1 = rc_age(rgba[i - 3]),
+                 a0 = rc_age(rgba[i - 4]);
+        h[3][a3]++;
+        h[2][a2]++;
+        h[1][a1]++;
+        h[0][a0]++;
+        free_list[n] = i - 1;
+        n += a3 == RC_AGE_DEAD;
+        free_list[n] = i - 2;
+        n += a2 == RC_AGE_DEAD;
+        free_list[n] = i - 3;
+        n += a1 == RC_AGE_DEAD;
+        free_list[n] = i - 4;
+        n += a0 == RC_AGE_DEAD;
+    }
+    for (uint32_t a = 0; a < 255; a++)
+        hist[a] = h[0][a] + h[1][a] + h[2][a] + h[3][a];
+    hist[255] = 0;
     rc->chunk_free[c] = n;
 }
 
