@@ -187,6 +187,35 @@ FXC_HOT_CLONES static bool any_candidate(const uint32_t *restrict rgba, uint32_t
 
 /* ---- project and tile sort ----------------------------------------------------------------------------- */
 
+/* Live points of exactly `age` among n (vectorised). */
+FXC_HOT_CLONES static uint32_t count_age(const uint32_t *restrict rgba, uint32_t n, uint32_t age)
+{
+    uint32_t same = 0;
+    for (uint32_t k = 0; k < n; k++)
+        same += (rgba[k] >> 24) == age; /* age < 255: a free slot never matches */
+    return same;
+}
+
+/* Drops every live point at least drop_age old among n, without branches (vectorised): the slot is freed and
+ * leaves this frame's lists. */
+FXC_HOT_CLONES static void drop_block(uint32_t *restrict rgba, uint32_t *restrict pix,
+                                      uint16_t *restrict dest, uint32_t n, uint32_t drop_age, uint16_t dead,
+                                      rc_chunk_stat *stat)
+{
+    uint32_t dropped = 0, age_sum = 0;
+    for (uint32_t k = 0; k < n; k++) {
+        uint32_t v = rgba[k], age = v >> 24;
+        uint32_t drop = (age != RC_AGE_DEAD) & (age >= drop_age), mask = 0u - drop;
+        dropped += drop;
+        age_sum += age & mask;
+        rgba[k] = v | (0xFF000000u & mask);
+        pix[k] = pix[k] | mask; /* RC_NO_PIXEL is all ones */
+        dest[k] = (uint16_t)((dest[k] & ~mask) | (dead & mask));
+    }
+    stat->dropped += dropped;
+    stat->dropped_age_sum += age_sum;
+}
+
 /* Migrations (a projected or outside point whose list changed; new points not counted), and the lists
  * remembered for the next frame. */
 FXC_HOT_CLONES static uint32_t migrate_span(const uint16_t *restrict dest, uint16_t *restrict tile_of,
@@ -213,25 +242,34 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
     project_span(&rc->view, rc->px, rc->py, rc->pz, rc->rgba, rc->pix, rc->dep, rc->dest, begin, end,
                  rc->tile_shift, rc->tiles_x, local, outside, dead);
     rc_chunk_stat stat = {0};
-    /* The drop plan: points older than drop_age, and the chunk's quota of that age, in slot order. */
+    /* The drop plan: points older than drop_age, and the chunk's quota of that age, in slot order. A block of
+     * 64 slots without a candidate is skipped after one test; a block whose points of drop_age all fit in
+     * what is left of the quota drops without branches (drop_block); only the block where the quota runs out
+     * goes slot by slot. */
     if (rc->drop_age != RC_AGE_NO_DROP) {
         uint32_t quota = rc->chunk_quota[c], drop_age = rc->drop_age;
-        for (uint32_t i = begin; i < end; i++) {
-            /* Most blocks of 64 hold none (the drops are the oldest few): one test without branches. */
-            if ((i & 63) == 0 && end - i >= 64 && !any_candidate(rc->rgba + i, drop_age)) {
-                i += 63;
+        for (uint32_t b0 = begin; b0 < end; b0 += 64) {
+            uint32_t b1 = end - b0 >= 64 ? b0 + 64 : end;
+            if (b1 - b0 == 64 && !any_candidate(rc->rgba + b0, drop_age))
+                continue;
+            uint32_t same = count_age(rc->rgba + b0, b1 - b0, drop_age);
+            if (same <= quota) {
+                quota -= same;
+                drop_block(rc->rgba + b0, rc->pix + b0, rc->dest + b0, b1 - b0, drop_age, dead, &stat);
                 continue;
             }
-            uint32_t age = rc_age(rc->rgba[i]);
-            if (age == RC_AGE_DEAD || age < drop_age || (age == drop_age && quota == 0))
-                continue;
-            if (age == drop_age)
-                quota--;
-            stat.dropped++;
-            stat.dropped_age_sum += age;
-            rc->rgba[i] = (rc->rgba[i] & 0x00FFFFFFu) | (RC_AGE_DEAD << 24);
-            rc->pix[i] = RC_NO_PIXEL;
-            rc->dest[i] = dead;
+            for (uint32_t i = b0; i < b1; i++) {
+                uint32_t age = rc_age(rc->rgba[i]);
+                if (age == RC_AGE_DEAD || age < drop_age || (age == drop_age && quota == 0))
+                    continue;
+                if (age == drop_age)
+                    quota--;
+                stat.dropped++;
+                stat.dropped_age_sum += age;
+                rc->rgba[i] = (rc->rgba[i] & 0x00FFFFFFu) | (RC_AGE_DEAD << 24);
+                rc->pix[i] = RC_NO_PIXEL;
+                rc->dest[i] = dead;
+            }
         }
     }
     stat.migrated = migrate_span(rc->dest, rc->tile_of, begin, end, dead, rc->list_new);
