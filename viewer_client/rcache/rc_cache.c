@@ -206,7 +206,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_workers = take(&l, d.threads, sizeof(rc_worker));
     size_t o_occupied[VIEW_RC_MAX_THREADS], o_low[VIEW_RC_MAX_THREADS], o_err[VIEW_RC_MAX_THREADS];
     size_t o_planes[VIEW_RC_MAX_THREADS], o_box[VIEW_RC_MAX_THREADS], o_spare[VIEW_RC_MAX_THREADS];
-    size_t o_cells[VIEW_RC_MAX_THREADS];
+    size_t o_zt[VIEW_RC_MAX_THREADS], o_wt[VIEW_RC_MAX_THREADS], o_ct[VIEW_RC_MAX_THREADS];
     rc->local_z = rc->tile <= RC_LOCAL_TILE;
     size_t local = rc->local_z ? (size_t)rc->tile * rc->tile : 0;
     for (uint32_t t = 0; t < d.threads; t++) {
@@ -216,7 +216,9 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
         o_spare[t] = take(&l, d.width, 1);
         o_planes[t] = take(&l, view_rc__interp_scratch(d.width), sizeof(uint16_t));
         o_box[t] = take(&l, view_rc__prefilter_scratch(span), sizeof(uint16_t));
-        o_cells[t] = take(&l, local, sizeof(rc_zcell));
+        o_zt[t] = take(&l, local, sizeof(float));
+        o_wt[t] = take(&l, local, sizeof(uint32_t));
+        o_ct[t] = take(&l, local, sizeof(uint32_t));
     }
     if (l.overflow) {
         free(rc);
@@ -278,7 +280,9 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
         rc->workers[t].spare = (uint8_t *)(block + o_spare[t]);
         rc->workers[t].planes = (uint16_t *)(block + o_planes[t]);
         rc->workers[t].box = (uint16_t *)(block + o_box[t]);
-        rc->workers[t].cells = (rc_zcell *)(block + o_cells[t]);
+        rc->workers[t].zt = (float *)(block + o_zt[t]);
+        rc->workers[t].wt = (uint32_t *)(block + o_wt[t]);
+        rc->workers[t].ct = (uint32_t *)(block + o_ct[t]);
     }
 
     /* Every slot free; the stack hands out slot 0 first. */

@@ -323,15 +323,10 @@ static rc_rect tile_rect(const view_rc *rc, uint32_t tile)
 
 /* ---- prefilter ----------------------------------------------------------------------------------------- */
 
-/* The rounded mean (acc[c] + n / 2) / n of n = acc[3] points (1..49), each channel at most 255 n: through the
- * float reciprocal, exact over that whole range (every numerator checked for every n; an integer division per
- * channel was a fifth of the prefilter's samples in perf). */
 static void fill_from(uint8_t *rgb, const uint32_t acc[4])
 {
-    float inv = 1.0f / (float)acc[3];
-    uint32_t half = acc[3] / 2;
     for (int c = 0; c < 3; c++)
-        rgb[c] = (uint8_t)(int32_t)((float)(acc[c] + half) * inv + (1.0f / 128));
+        rgb[c] = (uint8_t)((acc[c] + acc[3] / 2) / acc[3]);
 }
 
 /* Tiles with few pixels to fill: each one's 7x7 window summed directly. */

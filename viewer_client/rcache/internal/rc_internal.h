@@ -11,10 +11,9 @@
  *
  * Tile lists (2002 3.2, Reinhard 2001 section 3): every frame the projected points are bucket-sorted by tile
  * (counting sort, per chunk of slots) into one array of 16-byte entries, tile after tile and within a tile by
- * part (the chunks one thread owns in the static split): each tile's point list for this frame. A point that
- * lands in another tile than in the last frame moves to that tile's list (tile_of[] remembers the list; the
- * move is counted as a migration). The z-buffer then reads one tile's list into that tile's part of the
- * image, which stays in cache.
+ * part (the chunks one thread owns in the static split): each tile's point list for this frame. A point that lands in another tile than in the last frame moves to that tile's list
+ * (tile_of[] remembers the list; the move is counted as a migration). The z-buffer then reads one tile's list
+ * into that tile's part of the image, which stays in cache.
  *
  * Determinism: every parallel pass writes per-chunk, per-tile or per-band outputs, and the serial steps
  * between them combine those in a fixed order, so the result does not depend on which thread ran what. Hot
@@ -93,8 +92,8 @@ FXC_HOT_INLINE bool rc_project(const rc_view *v, float x, float y, float z, uint
 
 /* The frame's threads: common/fxc_pool.h, a pool that runs task 0..count-1 of a function, the caller included
  * (Reinhard 2001 section 3: tiles processed by several threads). Each pass is a count of tasks (chunks of the
- * point store, tiles or bands); every task writes only its own outputs, so which thread ran it does not
- * change the result. */
+ * point store, tiles or bands); every task writes only its own outputs, so which thread ran it does not change
+ * the result. */
 typedef fxc_pool rc_pool;
 
 /* A pass over the image: tiles (row-major) or bands of rows, `count` of them in row order. Run statically
@@ -109,24 +108,17 @@ static inline void rc_run_pixels(fxc_pool *pool, bool dynamic, uint32_t count, f
         fxc_pool_run_static(pool, count, task, user, true);
 }
 
-/* A pixel of the tile z-buffer's own buffer: the three values a depth test reads or writes, on one cache line
- * (as three arrays, 48 KiB at tiles of 64, a winning point touched three lines, and the arrays did not fit
- * in L1 together). */
-typedef struct rc_zcell {
-    float depth;   /* nearest view depth (+inf: none) */
-    uint32_t slot; /* its slot (RC_NO_POINT: none) */
-    uint32_t rgba; /* its rgba (RC_EMPTY_PT: none) */
-} rc_zcell;
-
 /* Per-thread scratch. */
 typedef struct rc_worker {
-    uint8_t *occupied;      /* predicted occupancy at quarter resolution, low_w x low_h */
-    uint32_t *low;          /* predicted projection: quarter-resolution pixel per slot of a chunk */
-    float *err;             /* dither: 2 x RC_DITHER_LANES x two rows of width + 2 errors */
-    uint8_t *spare;         /* dither: a row of choices for spare lanes */
-    uint16_t *planes;       /* interpolation: view_rc__interp_scratch(width) values */
-    uint16_t *box;          /* prefilter: view_rc__prefilter_scratch(tile side) values */
-    struct rc_zcell *cells; /* z-buffer: one tile's pixels, tile x tile, row after row (local_z only) */
+    uint8_t *occupied; /* predicted occupancy at quarter resolution, low_w x low_h */
+    uint32_t *low;     /* predicted projection: quarter-resolution pixel per slot of a chunk */
+    float *err;        /* dither: 2 x RC_DITHER_LANES x two rows of width + 2 errors */
+    uint8_t *spare;    /* dither: a row of choices for spare lanes */
+    uint16_t *planes;  /* interpolation: view_rc__interp_scratch(width) values */
+    uint16_t *box;     /* prefilter: view_rc__prefilter_scratch(tile side) values */
+    float *zt;         /* z-buffer: one tile's depths, tile x tile, row after row (local_z only) */
+    uint32_t *wt;      /* ... the slot that won each pixel (RC_NO_POINT: none) */
+    uint32_t *ct;      /* ... and its rgba (RC_EMPTY_PT: none) */
 } rc_worker;
 
 /* Points being inserted, a batch at a time (rc_cache.c): their positions computed in one loop without
