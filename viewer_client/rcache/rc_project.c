@@ -160,12 +160,16 @@ static void predict_task(void *user, uint32_t c, uint32_t worker)
         occupied[low[k] == RC_NO_PIXEL ? sink : low[k]] = 1;
 }
 
-void view_rc__predict_project(view_rc *rc)
+void view_rc__predict_clear(view_rc *rc)
 {
     size_t low = (size_t)rc->low_w * rc->low_h;
     for (uint32_t t = 0; t < rc->thread_count; t++)
         memset(rc->workers[t].occupied, 0, low);
-    run_chunks(rc, predict_task);
+}
+
+void view_rc__predict_combine(view_rc *rc)
+{
+    size_t low = (size_t)rc->low_w * rc->low_h;
     uint8_t *all = rc->workers[0].occupied;
     for (uint32_t t = 1; t < rc->thread_count; t++) {
         const uint8_t *mine = rc->workers[t].occupied;
@@ -232,8 +236,11 @@ FXC_HOT_CLONES static uint32_t migrate_span(const uint16_t *restrict dest, uint1
 
 static void project_task(void *user, uint32_t c, uint32_t worker)
 {
-    (void)worker;
     view_rc *rc = user;
+    /* The predicted projection first, over the same chunk (before this frame's drops, as a pass of its own
+     * was): the projection below then reads the chunk's positions from L2, 64 KiB, not from memory. */
+    if (rc->predict)
+        predict_task(user, c, worker);
     uint32_t begin, end;
     chunk_range(rc, c, &begin, &end);
     uint16_t outside = rc->list_outside, dead = rc->list_dead;
