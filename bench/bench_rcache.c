@@ -23,9 +23,9 @@
  * camera (mean absolute error over channels, and the share of pixels off by more than 32 in a channel).
  *
  * Usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] [--lead 2] [--tile 64]
- *        [--capacity F] [--pin CPU] [--only table|scaling|threads|split|switches|quality] (default: all, in that
- * order) Each table also gives the process CPU time of a frame: on a machine shared with other jobs the wall
- * time includes the time the process waited for a core. */
+ *        [--capacity F] [--pin CPU] [--only table|scaling|threads|split|split-pixels|switches|quality]
+ *        (default: all, in that order). Each table also gives the process CPU time of a frame: on a machine
+ * shared with other jobs the wall time includes the time the process waited for a core. */
 #define _GNU_SOURCE
 #include "rcache.h"
 
@@ -406,10 +406,10 @@ static void section_scaling(const bench_opts *o)
     }
 }
 
-/* Two configurations of one run (a: a_threads, b: b_threads), alternating per repetition: the per-stage medians,
- * each side's frame, the sums and both sides' process CPU time, and the per-repetition ratio a / b. The labels
- * name the sides ("1 thread", "dynamic") and the ratio ("speed-up (per-repetition ratio 1 thread / 2 threads)"
- * for frames, "speed-up" for the sums). */
+/* Two configurations of one run (a: a_threads, b: b_threads), alternating per repetition: the per-stage
+ * medians, each side's frame, the sums and both sides' process CPU time, and the per-repetition ratio a / b.
+ * The labels name the sides ("1 thread", "dynamic") and the ratio ("speed-up (per-repetition ratio 1 thread /
+ * 2 threads)" for frames, "speed-up" for the sums). */
 typedef struct ab_labels {
     const char *title, *a, *b, *ratio_frames, *ratio_sums;
 } ab_labels;
@@ -467,6 +467,15 @@ static void section_split(const bench_opts *o)
 {
     section_ab(o, (view_rc_desc){.dynamic_points = true}, 2, (view_rc_desc){0}, 2,
                &(ab_labels){"2 threads, point passes dynamic against static", "dynamic", "static",
+                            "dynamic / static (per-repetition ratio)", "dynamic / static"});
+}
+
+/* The same for the passes over the image (view_rc_desc.dynamic_pixels: z-buffer tiles, depth cull,
+ * interpolation, prefilter, dither), the point passes static in both. */
+static void section_split_pixels(const bench_opts *o)
+{
+    section_ab(o, (view_rc_desc){.dynamic_pixels = true}, 2, (view_rc_desc){0}, 2,
+               &(ab_labels){"2 threads, pixel passes dynamic against static", "dynamic", "static",
                             "dynamic / static (per-repetition ratio)", "dynamic / static"});
 }
 
@@ -573,7 +582,7 @@ int main(int argc, char **argv)
             fprintf(stderr,
                     "usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] "
                     "[--lead 2] [--tile 64] [--capacity F] [--pin CPU] "
-                    "[--only table|scaling|threads|split|switches|quality]\n");
+                    "[--only table|scaling|threads|split|split-pixels|switches|quality]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }
     }
@@ -601,6 +610,8 @@ int main(int argc, char **argv)
         section_threads(&o);
     if (!only || !strcmp(only, "split"))
         section_split(&o);
+    if (!only || !strcmp(only, "split-pixels"))
+        section_split_pixels(&o);
     if (!only || !strcmp(only, "switches"))
         section_switches(&o);
     if (!only || !strcmp(only, "quality"))

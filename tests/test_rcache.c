@@ -809,6 +809,53 @@ static void test_full_cache_drops_oldest_at_128(void **state)
     view_rc_destroy(rc);
 }
 
+/* When only some points of the oldest age must go, the first ones in slot order go: 4096 points inserted
+ * together into an empty cache of 4096 take slots 0..4095 and age alike (all visible, 128 after a frame); 100
+ * more then drop exactly the first 100 of them (a block of 64 dropped whole, then 36 of the next one by one,
+ * the rest of that block kept). */
+static void test_drops_first_in_slot_order(void **state)
+{
+    (void)state;
+    const uint32_t w = 128, h = 128, n = 4096, more = 100;
+    view_rc *rc = make(&(view_rc_desc){.width = w, .height = h, .capacity = n});
+    view_rc_camera cam = look(0, 0, 0, 0, 0, -1, 60);
+    view_rc_sample *s = malloc(sizeof *s * n);
+    for (uint32_t p = 0; p < n; p++)
+        s[p] = (view_rc_sample){.x = (uint16_t)(p % w),
+                                .y = (uint16_t)(p / w),
+                                .depth = 5,
+                                .rgb = {(uint8_t)(p & 255), (uint8_t)(p >> 8), 1}};
+    assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, s, n), FXC_OK);
+    view_rc_frame f;
+    render(rc, &cam, NULL, &f);
+    assert_int_equal(f.stats.points, n);
+    for (uint32_t i = 0; i < more; i++)
+        s[i] = (view_rc_sample){
+            .x = (uint16_t)((n + i) % w), .y = (uint16_t)((n + i) / w), .depth = 5, .rgb = {(uint8_t)i, 0, 2}};
+    assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, s, more), FXC_OK);
+    render(rc, &cam, NULL, &f);
+    assert_int_equal(f.stats.dropped, more);
+    assert_int_equal(f.stats.dropped_age_sum, (uint64_t)more * 128);
+    uint32_t count = view_rc_point_count(rc);
+    assert_int_equal(count, n);
+    view_rc_point *pts = malloc(sizeof *pts * count);
+    assert_int_equal(view_rc_points(rc, 0, count, pts), count);
+    uint8_t *present = calloc(n, 1);
+    uint32_t fresh = 0;
+    for (uint32_t i = 0; i < count; i++)
+        if (pts[i].rgb[2] == 1)
+            present[pts[i].rgb[0] | (uint32_t)pts[i].rgb[1] << 8] = 1;
+        else
+            fresh++;
+    assert_int_equal(fresh, more);
+    for (uint32_t p = 0; p < n; p++)
+        assert_int_equal(present[p], p >= more);
+    free(present);
+    free(pts);
+    free(s);
+    view_rc_destroy(rc);
+}
+
 /* A sample whose colour differs from the point it replaces ages that pixel's 8 neighbours by the penalty; a
  * similar one does not. */
 static void test_colour_change_penalty(void **state)
@@ -915,7 +962,7 @@ static void answer(view_rc *rc, const view_rc_camera *cam, uint32_t w, uint32_t 
     free(s);
 }
 
-static walk_log walk(uint32_t threads, uint32_t tile, bool dynamic_points)
+static walk_log walk(uint32_t threads, uint32_t tile, bool dynamic)
 {
     const uint32_t w = 83, h = 57;
     walk_log log = {0};
@@ -924,7 +971,8 @@ static walk_log walk(uint32_t threads, uint32_t tile, bool dynamic_points)
                                        .threads = threads,
                                        .tile_size = tile,
                                        .capacity = w * h * 3 / 2,
-                                       .dynamic_points = dynamic_points});
+                                       .dynamic_points = dynamic,
+                                       .dynamic_pixels = dynamic});
     uint8_t *rgb = malloc(w * h * 3);
     float *depth = malloc(w * h * sizeof(float));
     view_rc_pixel *req = malloc(sizeof *req * w * h), *pred = malloc(sizeof *pred * w * h);
@@ -978,7 +1026,8 @@ static void test_threads_bit_identical(void **state)
     const uint32_t tiles[] = {16, 13, 64};
     for (size_t t = 0; t < sizeof tiles / sizeof tiles[0]; t++) {
         walk_log one = walk(1, tiles[t], false);
-        /* 2 and 4 threads, the point passes split statically (the default) and handed out dynamically. */
+        /* 2 and 4 threads, the point and pixel passes split statically (the default) and handed out
+         * dynamically. */
         const uint32_t threads[] = {2, 4, 2, 4};
         for (size_t k = 0; k < 4; k++) {
             walk_log many = walk(threads[k], tiles[t], k >= 2);
@@ -1130,6 +1179,7 @@ int main(void)
         cmocka_unit_test(test_predicted_requests),
         cmocka_unit_test(test_ageing_and_eviction),
         cmocka_unit_test(test_full_cache_drops_oldest_at_128),
+        cmocka_unit_test(test_drops_first_in_slot_order),
         cmocka_unit_test(test_colour_change_penalty),
         cmocka_unit_test(test_frame_replaces_what_it_saw),
         cmocka_unit_test(test_threads_bit_identical),

@@ -147,7 +147,7 @@ void view_rc__depth_cull(view_rc *rc)
         float sy = (1.0f - 2.0f * ((float)y + 0.5f) / (float)v->height) * v->tan_half_y;
         rc->stretch_y2[y] = sy * sy;
     }
-    fxc_pool_run(rc->pool, rc->tiles_y, cull_task, rc);
+    rc_run_pixels(rc->pool, rc->d.dynamic_pixels, rc->tiles_y, cull_task, rc);
 }
 
 /* ---- interpolation and priority ----------------------------------------------------------------------- */
@@ -304,7 +304,7 @@ static void interpolate_task(void *user, uint32_t band, uint32_t worker)
 
 void view_rc__interpolate(view_rc *rc)
 {
-    fxc_pool_run(rc->pool, rc->tiles_y, interpolate_task, rc);
+    rc_run_pixels(rc->pool, rc->d.dynamic_pixels, rc->tiles_y, interpolate_task, rc);
 }
 
 typedef struct rc_rect {
@@ -450,7 +450,7 @@ static void prefilter_task(void *user, uint32_t tile, uint32_t worker)
 void view_rc__prefilter(view_rc *rc)
 {
     memset(rc->tile_filled, 0, rc->tile_count * sizeof(uint32_t));
-    fxc_pool_run(rc->pool, rc->tile_count, prefilter_task, rc);
+    rc_run_pixels(rc->pool, rc->d.dynamic_pixels, rc->tile_count, prefilter_task, rc);
     for (uint32_t tile = 0; tile < rc->tile_count; tile++) {
         uint32_t *kinds = rc->band_kind + (size_t)(tile / rc->tiles_x) * VIEW_RC_PIXEL_KINDS;
         kinds[VIEW_RC_EMPTY] -= rc->tile_filled[tile];

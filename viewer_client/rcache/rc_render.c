@@ -51,9 +51,12 @@ fxc_result view_rc_render(view_rc *rc, const view_rc_camera *cam, const view_rc_
 
     view_rc__plan_drops(rc);
 
+    /* The predicted projection runs inside the projection pass, chunk by chunk (rc_project.c): its row of the
+     * stage table keeps only the clearing and combining of the occupancy images, and "project and tile sort"
+     * holds both projections (the 2002 paper's predicted projection and its projection and tile sort). */
     double t = view_rc__now_ms(), t_next;
     if (rc->predict) {
-        view_rc__predict_project(rc);
+        view_rc__predict_clear(rc);
         t_next = view_rc__now_ms();
         stats.stage_ms[VIEW_RC_STAGE_PREDICT_PROJECT] = t_next - t;
         t = t_next;
@@ -72,6 +75,12 @@ fxc_result view_rc_render(view_rc *rc, const view_rc_camera *cam, const view_rc_
     t_next = view_rc__now_ms();
     stats.stage_ms[VIEW_RC_STAGE_PROJECT_SORT] = t_next - t;
     t = t_next;
+    if (rc->predict) {
+        view_rc__predict_combine(rc);
+        t_next = view_rc__now_ms();
+        stats.stage_ms[VIEW_RC_STAGE_PREDICT_PROJECT] += t_next - t;
+        t = t_next;
+    }
 
     if (rc->d.no_tiling)
         view_rc__zbuffer_direct(rc);

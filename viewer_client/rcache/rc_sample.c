@@ -272,20 +272,30 @@ static void settle_band(const uint8_t *priority, uint32_t width, uint32_t y0, ui
                 chosen[p] = add;
         }
     }
-    /* The chosen pixels in scanline order (a few in a hundred: eight bytes at a time past the others). */
+    /* The chosen pixels in scanline order (a few in a hundred), row by row so that no pixel index is divided
+     * by the width (a division per chosen pixel held a fifth of this function's perf samples), eight bytes at
+     * a time: the chosen ones among them found by their lowest set bits (a choice is 0 or 1 a byte). */
     uint32_t written = 0;
-    for (size_t p = first; p < end && written < quota;) {
-        uint64_t eight;
-        if (end - p >= 8 && (memcpy(&eight, chosen + p, 8), eight == 0)) {
-            p += 8;
-            continue;
+    for (uint32_t y = y0; y < y1 && written < quota; y++) {
+        const uint8_t *row = chosen + (size_t)y * width;
+        uint32_t x = 0;
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+        for (; x + 8 <= width; x += 8) {
+            uint64_t eight;
+            memcpy(&eight, row + x, 8);
+            for (; eight != 0 && written < quota; eight &= eight - 1) {
+                out[written].x = (uint16_t)(x + ((uint32_t)__builtin_ctzll(eight) >> 3));
+                out[written].y = (uint16_t)y;
+                written++;
+            }
         }
-        if (chosen[p]) {
-            out[written].x = (uint16_t)(p % width);
-            out[written].y = (uint16_t)(p / width);
-            written++;
-        }
-        p++;
+#endif
+        for (; x < width && written < quota; x++)
+            if (row[x]) {
+                out[written].x = (uint16_t)x;
+                out[written].y = (uint16_t)y;
+                written++;
+            }
     }
 }
 
@@ -380,7 +390,8 @@ void view_rc__sampling(view_rc *rc)
         run += rc->band_quota[b];
     }
     rc->request_count = run;
-    fxc_pool_run(rc->pool, (rc->tiles_y + RC_DITHER_LANES - 1) / RC_DITHER_LANES, dither_task, rc);
+    rc_run_pixels(rc->pool, rc->d.dynamic_pixels, (rc->tiles_y + RC_DITHER_LANES - 1) / RC_DITHER_LANES,
+                  dither_task, rc);
 }
 
 /* ---- the dither on its own ----------------------------------------------------------------------------- */

@@ -100,6 +100,10 @@ typedef struct view_rc_desc {
     bool dynamic_points; /* the passes over the point store handed out to threads dynamically (as before they
                             ran on a static split, each thread on the same chunks in every pass), to measure
                             what the split does (bench_rcache --only split) */
+    bool dynamic_pixels; /* the passes over the image (z-buffer tiles, depth cull, interpolation, prefilter,
+                            dither) handed out dynamically (as before they ran statically, thread k on the
+                            same k-th range of rows in each), to measure the split (bench_rcache --only
+                            split-pixels) */
 } view_rc_desc;
 
 typedef struct view_rc view_rc;

@@ -11,9 +11,10 @@
  *
  * Tile lists (2002 3.2, Reinhard 2001 section 3): every frame the projected points are bucket-sorted by tile
  * (counting sort, per chunk of slots) into one array of 16-byte entries, tile after tile and within a tile by
- * part (the chunks one thread owns in the static split): each tile's point list for this frame. A point that lands in another tile than in the last frame moves to that tile's list
- * (tile_of[] remembers the list; the move is counted as a migration). The z-buffer then reads one tile's list
- * into that tile's part of the image, which stays in cache.
+ * part (the chunks one thread owns in the static split): each tile's point list for this frame. A point that
+ * lands in another tile than in the last frame moves to that tile's list (tile_of[] remembers the list; the
+ * move is counted as a migration). The z-buffer then reads one tile's list into that tile's part of the
+ * image, which stays in cache.
  *
  * Determinism: every parallel pass writes per-chunk, per-tile or per-band outputs, and the serial steps
  * between them combine those in a fixed order, so the result does not depend on which thread ran what. Hot
@@ -92,9 +93,21 @@ FXC_HOT_INLINE bool rc_project(const rc_view *v, float x, float y, float z, uint
 
 /* The frame's threads: common/fxc_pool.h, a pool that runs task 0..count-1 of a function, the caller included
  * (Reinhard 2001 section 3: tiles processed by several threads). Each pass is a count of tasks (chunks of the
- * point store, tiles or bands); every task writes only its own outputs, so which thread ran it does not change
- * the result. */
+ * point store, tiles or bands); every task writes only its own outputs, so which thread ran it does not
+ * change the result. */
 typedef fxc_pool rc_pool;
+
+/* A pass over the image: tiles (row-major) or bands of rows, `count` of them in row order. Run statically
+ * (thread k takes the k-th contiguous range, and steals from the others' ends when done), so on 2 threads
+ * the top half of the image stays on the caller's core from the z-buffer through the dither; with
+ * dynamic_pixels, handed out by the pool's counter. Which thread runs a task never changes its output. */
+static inline void rc_run_pixels(fxc_pool *pool, bool dynamic, uint32_t count, fxc_pool_task task, void *user)
+{
+    if (dynamic)
+        fxc_pool_run(pool, count, task, user);
+    else
+        fxc_pool_run_static(pool, count, task, user, true);
+}
 
 /* Per-thread scratch. */
 typedef struct rc_worker {
@@ -244,12 +257,14 @@ void view_rc__recount_ages(view_rc *rc);
 
 /* rc_project.c: the point passes of a frame. */
 void view_rc__plan_drops(view_rc *rc);      /* serial: this frame's drop plan from the chunk histograms */
-void view_rc__predict_project(view_rc *rc); /* parallel: quarter-resolution occupancy per worker */
-void view_rc__project_sort(view_rc *rc);    /* parallel projection + serial offsets + parallel bucket sort */
-void view_rc__zbuffer(view_rc *rc);         /* parallel over tiles */
-void view_rc__project_direct(view_rc *rc);  /* no_tiling: the projection without the sort (parallel) */
-void view_rc__zbuffer_direct(view_rc *rc);  /* no_tiling: one z-buffer pass in slot order (serial) */
-void view_rc__age(view_rc *rc);             /* parallel over chunks, then the free stack (serial) */
+void view_rc__predict_clear(view_rc *rc);   /* the workers' quarter-resolution occupancy cleared */
+void view_rc__predict_combine(view_rc *rc); /* ... and ORed into worker 0's (the projection fills them) */
+void view_rc__project_sort(view_rc *rc); /* parallel projections (predicted, if predict, and current) + serial
+                                          * offsets + parallel bucket sort */
+void view_rc__zbuffer(view_rc *rc);      /* parallel over tiles */
+void view_rc__project_direct(view_rc *rc); /* no_tiling: the projection without the sort (parallel) */
+void view_rc__zbuffer_direct(view_rc *rc); /* no_tiling: one z-buffer pass in slot order (serial) */
+void view_rc__age(view_rc *rc);            /* parallel over chunks, then the free stack (serial) */
 
 /* rc_image.c: the pixel passes, parallel over bands of rows. */
 size_t view_rc__interp_scratch(uint32_t width);   /* 16-bit values of a worker's interpolation scratch */
