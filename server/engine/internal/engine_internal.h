@@ -73,6 +73,11 @@ typedef struct srv_viewer {
     float *depth;              /* distance along the primary ray, INFINITY for none */
     uint8_t *coarse;           /* whole frames with a coarse effect: per pixel, this frame's srv__coarse_mask
                                   (written by requests, read by compose); NULL otherwise */
+    float *samples;            /* whole frames with a coarse effect: the frame's block samples' terms, evaluated
+                                  once per frame before compose's tiles (SRV_SAMPLE_VALUES arrays of
+                                  sample_capacity entries, sample (i, j) at j * ceil(width / B) + i); NULL
+                                  otherwise */
+    size_t sample_capacity;    /* entries of each array: enough for the smallest block, 2 */
     float *radiance;           /* linear RGB */
     uint8_t *image;            /* sRGB 8-bit RGB */
     float *views[SRV_VIEW_COUNT];
@@ -261,6 +266,18 @@ static inline uint32_t srv__run_key_pixel(uint32_t key, uint32_t tiles_x)
  * frame and pixel and keep it for compose (one byte a pixel, view->coarse), so the pixels compose evaluates
  * itself are exactly those whose keys requests asked for. */
 enum { SRV_COARSE_REPS = (SRV_TILE / 2 + 1) * (SRV_TILE / 2 + 1) }; /* reps of a tile at most (B = 2) */
+
+/* The frame-wide sample image (srv_viewer.samples): per sample its indirect term (3 arrays, sky visibility 1
+ * in), the sky visibility shade left, the sharing count for the stats view, and 1 where it is visible and has
+ * taps (else 0, and finite zeros everywhere: the blend multiplies them by 0). */
+enum { SRV_SAMPLE_R, SRV_SAMPLE_G, SRV_SAMPLE_B, SRV_SAMPLE_SKY, SRV_SAMPLE_SHARING, SRV_SAMPLE_OK,
+       SRV_SAMPLE_VALUES };
+
+/* Samples per row of a frame `width` pixels wide at block B (the pixels 0, B, 2 B, ...). */
+static inline uint32_t srv__sample_stride(uint32_t width, uint32_t block)
+{
+    return (width + block - 1) / block;
+}
 
 typedef struct srv_coarse_grid {
     uint32_t block, shift; /* B = 1 << shift */
