@@ -51,11 +51,10 @@ typedef struct compose_scratch {
     float indirect[SRV_RUN * 3];
     /* The low-frequency effect per block (loop->coarse_effect): its term at the tile's reps (sky visibility
      * 1 in: the term is linear in it), and the run's pixels no rep stands in for, gathered for one call. */
-    float rep[SRV_SAMPLE_VALUES][SRV_COARSE_REPS]; /* the tile's reps, as the frame-wide sample image */
     /* coarse_shade's blend (blend_row): the run's block row of samples and the next, expanded per column. */
     float expand[2][SRV_SAMPLE_VALUES][SRV_TILE + SRV_BLEND_MAX_BLOCK];
     int32_t blend_own[SRV_RUN]; /* per lane: no sample stands in, the pixel is evaluated itself */
-    uint8_t rep_slot[SRV_RUN];       /* prepass: the rep of gathered pixel i */
+    uint32_t sample_slot[SRV_RUN];   /* sample pass: the sample image entry of gathered pixel i */
     uint8_t own_index[SRV_RUN]; /* the run's pixels evaluated themselves */
     srv_pixel own_pixels[SRV_RUN];
     fx_point own_points[SRV_RUN];
@@ -592,28 +591,51 @@ FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scrat
     }
 }
 
-/* The coarse effect at the reps a tile uses (before its runs, with the runs' scratch): gathered in runs of
- * at most SRV_RUN, shaded with sky visibility 1, kept per rep. Reps in the next tile's first column or row
- * are evaluated again there (the same value: a rep's term depends on nothing else of the tile). */
-static void coarse_prepass(srv_loop *loop, srv_viewer *view, compose_scratch *cs, const srv_coarse_grid *g,
-                           const compose_setup *cu, uint32_t thread_index)
+/* The frame-wide pass over the block samples (before compose's tiles): every sample of the frame evaluated
+ * once, in patches of SAMPLE_PATCH_TILES x 1 tiles' samples (each patch's samples in runs of at most SRV_RUN, row
+ * by row), shaded with sky visibility 1 and kept in the viewer's sample image (srv_viewer.samples). A patch
+ * is what one run of the effect's shade sees: its groups (pixels reading the same probes with one normal)
+ * form within it. */
+enum { SAMPLE_PATCH_TILES = 1 };
+
+typedef struct sample_task {
+    srv_loop *loop;
+    srv_viewer *view;
+    uint32_t block, stride, rows, patches_x;
+} sample_task;
+
+FXC_HOT_CLONES static void sample_patch(void *user, uint32_t task_index, uint32_t thread_index)
 {
-    uint32_t e = loop->coarse_effect, width = view->frame.width, reps = g->nx * g->ny;
+    const sample_task *task = user;
+    srv_loop *loop = task->loop;
+    srv_viewer *view = task->view;
+    compose_scratch *cs = (compose_scratch *)((uint8_t *)loop->compose_scratch +
+                                              (size_t)thread_index * loop->compose_scratch_bytes);
+    compose_setup cu;
+    compose_setup_init(loop, &cu);
+    const uint32_t e = loop->coarse_effect, width = view->frame.width, block = task->block;
+    const uint32_t per_tile = SRV_TILE / block, patch_w = per_tile * SAMPLE_PATCH_TILES, patch_h = per_tile;
+    uint32_t gx0 = (task_index % task->patches_x) * patch_w, gy0 = (task_index / task->patches_x) * patch_h;
+    uint32_t gx1 = gx0 + patch_w < task->stride ? gx0 + patch_w : task->stride;
+    uint32_t gy1 = gy0 + patch_h < task->rows ? gy0 + patch_h : task->rows;
+    float *values = view->samples;
+    const size_t value_stride = view->sample_capacity;
     const uint64_t *bits = loop->viewer_bits[e];
     gather_memo memo = gather_memo_start(view);
-    for (uint32_t first = 0; first < reps;) {
+    const uint32_t across = gx1 - gx0, n = across * (gy1 - gy0);
+    for (uint32_t first = 0; first < n;) {
         uint32_t count = 0;
-        for (; first < reps && count < SRV_RUN; first++) {
-            uint32_t x = g->x0 + (first % g->nx) * g->block, y = g->y0 + (first / g->nx) * g->block;
+        for (; first < n && count < SRV_RUN; first++) {
+            uint32_t gx = gx0 + first % across, gy = gy0 + first / across;
+            size_t sample = (size_t)gy * task->stride + gx;
             for (uint32_t v = 0; v < SRV_SAMPLE_VALUES; v++)
-                cs->rep[v][first] = 0.0f; /* and finite values: blend_row multiplies them by 0 */
-            if (view->tri[(size_t)y * width + x] == SRV_MISS)
-                continue; /* (gather_pixel would write the sky there: another tile's pixel, maybe) */
-            uint32_t before = count;
-            gather_pixel(loop, view, x, y, (size_t)y * width + x, cs, &count, cu->sky, cu->log2_density,
-                         cu->positions, cu->points, &memo);
-            if (count != before)
-                cs->rep_slot[before] = (uint8_t)first;
+                values[v * value_stride + sample] = 0.0f; /* and finite values: blend_row multiplies them by 0 */
+            uint32_t x = gx * block, y = gy * block;
+            size_t p = (size_t)y * width + x;
+            if (view->tri[p] == SRV_MISS)
+                continue;
+            cs->sample_slot[count] = (uint32_t)sample;
+            gather_pixel(loop, view, x, y, p, cs, &count, cu.sky, cu.log2_density, cu.positions, cu.points, &memo);
         }
         if (!count)
             continue;
@@ -626,12 +648,12 @@ static void coarse_prepass(srv_loop *loop, srv_viewer *view, compose_scratch *cs
                             .sky_visibility = cs->sky_visibility, .indirect = cs->indirect};
         loop->effects[e]->shade(&loop->fx, &run);
         for (uint32_t i = 0; i < count; i++) {
-            uint32_t slot = cs->rep_slot[i];
-            cs->rep[SRV_SAMPLE_OK][slot] = cs->taps[i].count > 0 ? 1.0f : 0.0f;
-            for (int k = 0; k < 3; k++)
-                cs->rep[SRV_SAMPLE_R + k][slot] = cs->indirect[3 * i + k];
-            cs->rep[SRV_SAMPLE_SKY][slot] = cs->sky_visibility[i];
-            cs->rep[SRV_SAMPLE_SHARING][slot] =
+            size_t sample = cs->sample_slot[i];
+            values[SRV_SAMPLE_OK * value_stride + sample] = cs->taps[i].count > 0 ? 1.0f : 0.0f;
+            for (uint32_t k = 0; k < 3; k++)
+                values[(SRV_SAMPLE_R + k) * value_stride + sample] = cs->indirect[3 * i + k];
+            values[SRV_SAMPLE_SKY * value_stride + sample] = cs->sky_visibility[i];
+            values[SRV_SAMPLE_SHARING * value_stride + sample] =
                 bits && cs->blocks[i] != SRV_NONE ? (float)__builtin_popcountll(bits[cs->blocks[i]]) : 0.0f;
         }
     }
@@ -799,10 +821,9 @@ FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_
     srv_coarse_grid grid;
     uint32_t block = srv__coarse_block(loop, view);
     bool coarse = block > 1;
-    if (coarse) {
+    size_t sample_stride = srv__sample_stride(f->width, block);
+    if (coarse)
         srv__coarse_grid(block, tx0, ty0, f->width, f->height, &grid);
-        coarse_prepass(loop, view, cs, &grid, &cu, thread_index);
-    }
     /* A coarse tile's runs gather positions only for the other effects (the pixels evaluated themselves get
      * theirs in coarse_shade). */
     compose_setup run_setup = cu;
@@ -814,8 +835,9 @@ FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_
         uint32_t ry1 = ry + SRV_RUN / SRV_TILE < ty1 ? ry + SRV_RUN / SRV_TILE : ty1;
         uint32_t count = gather_run(loop, view, tx0, tx1, ry, ry1, cs, cu.sky, cu.log2_density, run_setup.positions,
                                     run_setup.points);
-        coarse_run cr = {.g = &grid, .x0 = tx0, .x1 = tx1, .y0 = ry, .y1 = ry1, .values = cs->rep[0],
-                         .value_stride = SRV_COARSE_REPS, .stride = grid.nx, .first = 0};
+        coarse_run cr = {.g = &grid, .x0 = tx0, .x1 = tx1, .y0 = ry, .y1 = ry1, .values = view->samples,
+                         .value_stride = view->sample_capacity, .stride = sample_stride,
+                         .first = (size_t)(ty0 / block) * sample_stride + tx0 / block};
         shade_run(loop, view, cs, count, &run_setup, thread_index, &missing, rays, coarse ? &cr : NULL);
         for (uint32_t y = ry; y < ry1; y++) {
             size_t p = (size_t)y * f->width + tx0;
@@ -871,6 +893,16 @@ void srv__compose(srv_loop *loop, uint32_t slot, srv_frame_stats *st)
     } else {
         uint32_t tiles =
             ((view->frame.width + SRV_TILE - 1) / SRV_TILE) * ((view->frame.height + SRV_TILE - 1) / SRV_TILE);
+        uint32_t block = srv__coarse_block(loop, view);
+        if (block > 1) { /* the block samples, once per frame, before the tiles blend them */
+            sample_task samples = {.loop = loop, .view = view, .block = block,
+                                   .stride = srv__sample_stride(view->frame.width, block),
+                                   .rows = srv__sample_stride(view->frame.height, block)};
+            uint32_t patch_w = SRV_TILE / block * SAMPLE_PATCH_TILES, patch_h = SRV_TILE / block;
+            samples.patches_x = (samples.stride + patch_w - 1) / patch_w;
+            srv_pool_run(loop->pool, samples.patches_x * ((samples.rows + patch_h - 1) / patch_h), sample_patch,
+                         &samples);
+        }
         srv_pool_run(loop->pool, tiles, compose_tile, &task);
     }
     view->stats.pixels_missing = atomic_load(&task.missing);
