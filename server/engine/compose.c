@@ -438,21 +438,30 @@ typedef struct coarse_run {
  * row, value v; zeros past the last sample): a pixel in column c of the tile reads its block's samples at c and
  * c + B, with contiguous loads (gathers are slow on the machines we measure on). `values` is sample image
  * value 0 (the others every `value_stride` floats on), `row` the index of the row's first sample. */
+FXC_HOT_INLINE void blend_expand_row_of(const float *values, size_t value_stride, size_t row, uint32_t nx,
+                                        uint32_t block, float out[SRV_SAMPLE_VALUES][SRV_TILE + SRV_BLEND_MAX_BLOCK])
+{
+    const uint32_t columns = SRV_TILE + SRV_BLEND_MAX_BLOCK, samples = columns / block;
+    for (uint32_t v = 0; v < SRV_SAMPLE_VALUES; v++) {
+        const float *from = values + v * value_stride + row;
+        for (uint32_t i = 0; i < samples; i++) { /* block is a constant here: B stores of one value */
+            float value = i < nx ? from[i] : 0.0f;
+            for (uint32_t f = 0; f < block; f++)
+                out[v][i * block + f] = value;
+        }
+    }
+}
+
+/* blend_expand_row_of with the block a constant in each call (2 or 4: srv__coarse_block's choices). */
 FXC_HOT_INLINE void blend_expand_row(const float *values, size_t value_stride, size_t row, uint32_t nx,
                                      uint32_t block, float out[SRV_SAMPLE_VALUES][SRV_TILE + SRV_BLEND_MAX_BLOCK])
 {
-    const uint32_t columns = SRV_TILE + SRV_BLEND_MAX_BLOCK;
-    for (uint32_t v = 0; v < SRV_SAMPLE_VALUES; v++) {
-        const float *from = values + v * value_stride + row;
-        uint32_t c = 0;
-        for (uint32_t i = 0; i < nx && c < columns; i++) {
-            float value = from[i];
-            for (uint32_t f = 0; f < block && c < columns; f++)
-                out[v][c++] = value;
-        }
-        for (; c < columns; c++)
-            out[v][c] = 0.0f;
-    }
+    if (block == 4)
+        blend_expand_row_of(values, value_stride, row, nx, 4, out);
+    else if (block == 2)
+        blend_expand_row_of(values, value_stride, row, nx, 2, out);
+    else
+        blend_expand_row_of(values, value_stride, row, nx, 8, out);
 }
 
 /* The blend of coarse_shade for one row of a run, every column of the tile as a lane (vectorised:
@@ -529,9 +538,11 @@ FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scrat
         }
         float wy = two_y ? (float)fy * g->inv_block : 0.0f;
         size_t row = (size_t)y * width + cr->x0;
+        uint8_t bytes[SRV_TILE] = {0};
+        memcpy(bytes, view->coarse + row, columns); /* requests' sample choice (srv__coarse_mask) */
         int32_t mask[SRV_TILE];
         for (uint32_t j = 0; j < SRV_TILE; j++)
-            mask[j] = j < columns ? view->coarse[row + j] : 0; /* requests' sample choice (srv__coarse_mask) */
+            mask[j] = bytes[j];
         float o[6][SRV_TILE];
         blend_row(mask, wx, wy, (int32_t)g->block, (const float (*)[SRV_TILE + SRV_BLEND_MAX_BLOCK])cs->expand[0],
                   (const float (*)[SRV_TILE + SRV_BLEND_MAX_BLOCK])cs->expand[1], o);
