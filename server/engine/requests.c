@@ -174,29 +174,40 @@ FXC_HOT_LANES static void coarse_mask_lanes(const mask_row *in, int32_t block, i
         out[j] = result[j];
 }
 
-/* Row `sample_row` of a tile's samples (buffer index of its first) expanded per column into in's row `to`. */
+/* Row `sample_row` of a tile's samples (buffer index of its first) expanded per column into in's row `to`;
+ * block is a constant in each copy (mask_expand): B stores of one value. Columns past the last sample are
+ * never taken (their candidates do not exist) and hold a miss. */
+FXC_HOT_INLINE void mask_expand_of(const scene *s, const srv_viewer *view, size_t sample_row, uint32_t nx,
+                                   uint32_t block, mask_row *in, int to)
+{
+    static const float none[3] = {0, 0, 0};
+    for (uint32_t i = 0; i < MASK_COLUMNS / block; i++) {
+        size_t r = sample_row + (size_t)i * block;
+        uint32_t tri = i < nx ? view->tri[r] : SRV_MISS;
+        const float *n = tri != SRV_MISS ? s->tri_normal + 3 * (size_t)tri : none;
+        float depth = i < nx ? view->depth[r] : 0.0f, footprint = i < nx ? view->footprint[r] : 0.0f;
+        float n0 = n[0], n1 = n[1], n2 = n[2];
+        for (uint32_t f = 0; f < block; f++) {
+            uint32_t c = i * block + f;
+            in->sample_tri[to][c] = tri;
+            in->sample_normal[to][0][c] = n0;
+            in->sample_normal[to][1][c] = n1;
+            in->sample_normal[to][2][c] = n2;
+            in->sample_depth[to][c] = depth;
+            in->sample_footprint[to][c] = footprint;
+        }
+    }
+}
+
 static void mask_expand(const scene *s, const srv_viewer *view, size_t sample_row, uint32_t nx, uint32_t block,
                         mask_row *in, int to)
 {
-    uint32_t c = 0;
-    for (uint32_t i = 0; i < nx && c < MASK_COLUMNS; i++) {
-        size_t r = sample_row + (size_t)i * block;
-        uint32_t tri = view->tri[r];
-        const float *n = tri != SRV_MISS ? s->tri_normal + 3 * (size_t)tri : (const float[3]){0, 0, 0};
-        for (uint32_t f = 0; f < block && c < MASK_COLUMNS; f++, c++) {
-            in->sample_tri[to][c] = tri;
-            for (int k = 0; k < 3; k++)
-                in->sample_normal[to][k][c] = n[k];
-            in->sample_depth[to][c] = view->depth[r];
-            in->sample_footprint[to][c] = view->footprint[r];
-        }
-    }
-    for (; c < MASK_COLUMNS; c++) { /* columns past the last sample: never taken (their candidates do not exist) */
-        in->sample_tri[to][c] = SRV_MISS;
-        for (int k = 0; k < 3; k++)
-            in->sample_normal[to][k][c] = 0.0f;
-        in->sample_depth[to][c] = in->sample_footprint[to][c] = 0.0f;
-    }
+    if (block == 4)
+        mask_expand_of(s, view, sample_row, nx, 4, in, to);
+    else if (block == 2)
+        mask_expand_of(s, view, sample_row, nx, 2, in, to);
+    else
+        mask_expand_of(s, view, sample_row, nx, 8, in, to);
 }
 
 static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
