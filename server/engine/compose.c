@@ -49,8 +49,9 @@ typedef struct compose_scratch {
     float sharing[SRV_RUN];
     float sky_visibility[SRV_RUN];
     float indirect[SRV_RUN * 3];
-    /* The low-frequency effect per block (loop->coarse_effect): its term at the tile's reps (sky visibility
-     * 1 in: the term is linear in it), and the run's pixels no rep stands in for, gathered for one call. */
+    /* The low-frequency effect per block (loop->coarse_effect): the samples' terms come from the viewer's
+     * sample image (sample_patch, sky visibility 1 in: the term is linear in it); the run's pixels no sample
+     * stands in for are gathered for one call (own_*). */
     /* coarse_shade's blend (blend_row): the run's block row of samples and the next, expanded per column. */
     float expand[2][SRV_SAMPLE_VALUES][SRV_TILE + SRV_BLEND_MAX_BLOCK];
     int32_t blend_own[SRV_RUN]; /* per lane: no sample stands in, the pixel is evaluated itself */
@@ -434,8 +435,8 @@ typedef struct coarse_run {
     size_t stride, first;      /* samples a row; the tile's first sample */
 } coarse_run;
 
-/* Row j of a tile's samples, expanded per pixel column (out[v][c]: sample min(c >> shift, nx - 1) of the
- * row, value v; zeros past the last sample): a pixel in column c of the tile reads its block's samples at c and
+/* A row of a tile's samples, expanded per pixel column (out[v][c]: sample c / B of the row, value v; zeros
+ * from sample nx on): a pixel in column c of the tile reads its block's samples at c and
  * c + B, with contiguous loads (gathers are slow on the machines we measure on). `values` is sample image
  * value 0 (the others every `value_stride` floats on), `row` the index of the row's first sample. */
 FXC_HOT_INLINE void blend_expand_row_of(const float *values, size_t value_stride, size_t row, uint32_t nx,

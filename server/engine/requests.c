@@ -122,7 +122,7 @@ FXC_HOT_INLINE void request_pixels(request_task *task, uint32_t thread_index, co
 /* srv__coarse_mask for one row of a tile, lane j for pixel (x0 + j, y) (vectorised: FXC_HOT_LANES; contiguous
  * loads only, gathers are slow on the machines we measure on): the row's pixels (triangle, face normal, depth,
  * footprint) and, expanded per column, the samples of the row of blocks the row lies in and of the next one
- * (column c holds sample min(c >> shift, nx - 1) of its row; a pixel in column j reads its candidates at j and
+ * (column c holds sample c / B of its row, a miss from sample nx on; a pixel in column j reads its candidates at j and
  * j + B). The same compares and the same float operations as srv__coarse_mask and srv__coarse_match, so the
  * same mask for every visible pixel. */
 enum { MASK_COLUMNS = SRV_TILE + 8 }; /* blocks of up to 8 */
