@@ -243,14 +243,15 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
                             g.block, &in, 1);
                 expanded = iy;
             }
+            static const float none[3] = {0, 0, 0}; /* a miss's lanes: not used */
             uint32_t memo_tri = SRV_MISS;
-            const float *n = (const float[3]){0, 0, 0};
+            const float *n = none;
             for (uint32_t j = 0; j < SRV_TILE; j++) {
                 size_t p = row + (j < lanes ? j : 0); /* lanes past the frame's edge: lane 0's pixel, not used */
                 uint32_t tri = view->tri[p];
                 if (tri != memo_tri) {
                     memo_tri = tri;
-                    n = tri != SRV_MISS ? sc->tri_normal + 3 * (size_t)tri : (const float[3]){0, 0, 0};
+                    n = tri != SRV_MISS ? sc->tri_normal + 3 * (size_t)tri : none;
                 }
                 in.tri[j] = tri;
                 for (int k = 0; k < 3; k++)
