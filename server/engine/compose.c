@@ -21,6 +21,9 @@
 /* The effects of one cache kind whose taps one call gathers for a run (kind->pixel_taps). */
 enum { TAPS_GROUP = 4 };
 
+/* The largest block compose's blend expands for (srv__coarse_block gives at most desc.indirect_block). */
+enum { SRV_BLEND_MAX_BLOCK = 8 };
+
 /* One effect's taps of a run through the kind's call for several. */
 FXC_HOT_INLINE void kind_taps(srv_loop *loop, const srv_viewer *view, uint32_t thread_index, const srv_pixel *pixels,
                               uint32_t count, uint32_t e, fx_taps *taps, uint32_t *blocks)
@@ -46,16 +49,13 @@ typedef struct compose_scratch {
     float sharing[SRV_RUN];
     float sky_visibility[SRV_RUN];
     float indirect[SRV_RUN * 3];
-    /* The low-frequency effect per block (loop->coarse_effect): its term at the tile's reps (sky visibility
-     * 1 in: the term is linear in it), and the run's pixels no rep stands in for, gathered for one call. */
-    float rep_indirect[3][SRV_COARSE_REPS]; /* per channel (lanes gather them) */
-    float rep_sky[SRV_COARSE_REPS]; /* the sky visibility shade left (0 where the probes replaced the sky) */
-    float rep_sharing[SRV_COARSE_REPS];
-    int32_t rep_ok[SRV_COARSE_REPS]; /* visible and with taps */
-    /* coarse_shade's blend over the run's lanes (blend_lanes): each visible pixel's sample choice
-     * (view->coarse) and buffer offset from the run's first pixel in; whether no sample stands in out. */
-    int32_t blend_mask[SRV_RUN], blend_offset[SRV_RUN], blend_own[SRV_RUN];
-    uint8_t rep_slot[SRV_RUN];       /* prepass: the rep of gathered pixel i */
+    /* The low-frequency effect per block (loop->coarse_effect): the samples' terms come from the viewer's
+     * sample image (sample_patch, sky visibility 1 in: the term is linear in it); the run's pixels no sample
+     * stands in for are gathered for one call (own_*). */
+    /* coarse_shade's blend (blend_row): the run's block row of samples and the next, expanded per column. */
+    float expand[2][SRV_SAMPLE_VALUES][SRV_TILE + SRV_BLEND_MAX_BLOCK];
+    int32_t blend_own[SRV_RUN]; /* per lane: no sample stands in, the pixel is evaluated itself */
+    uint32_t sample_slot[SRV_RUN];   /* sample pass: the sample image entry of gathered pixel i */
     uint8_t own_index[SRV_RUN]; /* the run's pixels evaluated themselves */
     srv_pixel own_pixels[SRV_RUN];
     fx_point own_points[SRV_RUN];
@@ -430,102 +430,146 @@ FXC_HOT_LANES static void radiance_lanes(compose_scratch *cs, const float sky[3]
 typedef struct coarse_run {
     const srv_coarse_grid *g;
     uint32_t x0, x1, y0, y1;
+    const float *values;       /* the sample image's first value (coarse_shade) */
+    size_t value_stride;       /* floats from one value of the image to the next */
+    size_t stride, first;      /* samples a row; the tile's first sample */
 } coarse_run;
 
-/* The blend of coarse_shade over a run's SRV_RUN lanes (vectorised: FXC_HOT_LANES), each value as one pixel at a
- * time gave it: lane i (a visible pixel of the run, blend_offset[i] = its buffer index less `base`, the run's
- * first pixel; rows of `width`, the run's first row `row0` rows below the tile's) takes the reps of its sample
- * choice (blend_mask[i], srv__coarse_mask's candidate order) that have data, with srv__coarse_weights'
- * bilinear weights, and adds their indirect term times its own sky visibility over the weights' total, and
- * scales its sky visibility likewise; with no such rep, blend_own[i] is set and the lane left as it was.
- * The candidates left out add exact zeros to the sums (which start at +0, so never -0): the same values in the
- * same order as summing only those taken. Lanes past the run carry mask 0 and offset 0. */
-/* The reps' values are separate parameters, and the results go to local arrays first: GCC 12 gathers only
- * through pointers it can tell apart from every store of the loop (not from an array member of a struct, and
- * not past a store through another restrict pointer). */
-FXC_HOT_LANES static void blend_lanes(const int32_t *lane_mask, const int32_t *lane_offset, const float *rep0,
-                                      const float *rep1, const float *rep2, const float *rep_sky,
-                                      const float *rep_sharing, const int32_t *rep_ok, float *indirect,
-                                      float *sky_visibility, float *lane_sharing, int32_t *lane_own,
-                                      const srv_coarse_grid *g, int32_t width, int32_t row0, int32_t sharing_on)
+/* A row of a tile's samples, expanded per pixel column (out[v][c]: sample c / B of the row, value v; zeros
+ * from sample nx on): a pixel in column c of the tile reads its block's samples at c and
+ * c + B, with contiguous loads (gathers are slow on the machines we measure on). `values` is sample image
+ * value 0 (the others every `value_stride` floats on), `row` the index of the row's first sample. */
+FXC_HOT_INLINE void blend_expand_row_of(const float *values, size_t value_stride, size_t row, uint32_t nx,
+                                        uint32_t block, float out[SRV_SAMPLE_VALUES][SRV_TILE + SRV_BLEND_MAX_BLOCK])
 {
-    const int32_t shift = (int32_t)g->shift, low = (int32_t)g->block - 1, nx = (int32_t)g->nx, ny = (int32_t)g->ny;
-    const float inv_block = g->inv_block;
-    float out0[SRV_RUN], out1[SRV_RUN], out2[SRV_RUN], out_sky[SRV_RUN], out_sharing[SRV_RUN];
-    int32_t out_own[SRV_RUN];
-    for (int i = 0; i < SRV_RUN; i++) {
-        int32_t offset = lane_offset[i], mask = lane_mask[i];
-        int32_t row = (offset >= width) + (offset >= 2 * width) + (offset >= 3 * width);
-        int32_t lx = offset - row * width, ly = row0 + row;
-        int32_t ix = lx >> shift, iy = ly >> shift, fx = lx & low, fy = ly & low;
-        int32_t first = iy * nx + ix;
-        float wx = ((fx != 0) & (ix + 1 < nx)) ? (float)fx * inv_block : 0.0f;
-        float wy = ((fy != 0) & (iy + 1 < ny)) ? (float)fy * inv_block : 0.0f;
-        float weight[4] = {(1.0f - wx) * (1.0f - wy), wx * (1.0f - wy), (1.0f - wx) * wy, wx * wy};
-        int32_t step[4] = {0, 1, nx, nx + 1};
-        float sum0 = 0, sum1 = 0, sum2 = 0, sum3 = 0, total = 0, sharing = 0;
-#pragma GCC unroll 4
-        for (int c = 0; c < 4; c++) {
-            int32_t bit = (mask >> c) & 1;
-            /* A rep the tile has, taken or not: every lane loads all its values (GCC 12 emulates gathers, and
-             * not masked ones), and one left out adds w = 0 times a finite value (coarse_prepass), an exact
-             * zero, to each sum. */
-            int32_t r = first + (step[c] & -bit);
-            float taken = (float)(rep_ok[r] & bit), w = weight[c] * taken; /* (no select: GCC would mask loads) */
-            sum0 += w * rep0[r];
-            sum1 += w * rep1[r];
-            sum2 += w * rep2[r];
-            sum3 += w * rep_sky[r];
-            total += w;
-            float s = rep_sharing[r] * taken; /* (finite popcounts, at least 0) */
-            sharing = s > sharing ? s : sharing;
+    const uint32_t columns = SRV_TILE + SRV_BLEND_MAX_BLOCK, samples = columns / block;
+    for (uint32_t v = 0; v < SRV_SAMPLE_VALUES; v++) {
+        const float *from = values + v * value_stride + row;
+        for (uint32_t i = 0; i < samples; i++) { /* block is a constant here: B stores of one value */
+            float value = i < nx ? from[i] : 0.0f;
+            for (uint32_t f = 0; f < block; f++)
+                out[v][i * block + f] = value;
         }
-        int32_t blended = total > 0;
-        float divisor = blended ? total : 1.0f;
-        float sky = sky_visibility[i], open = sky / divisor;
-        float e0 = sum0 * open, e1 = sum1 * open, e2 = sum2 * open; /* fminf(x, FLT_MAX): NaN gives FLT_MAX */
-        e0 = e0 < FLT_MAX ? e0 : FLT_MAX;
-        e1 = e1 < FLT_MAX ? e1 : FLT_MAX;
-        e2 = e2 < FLT_MAX ? e2 : FLT_MAX;
-        float in0 = indirect[3 * i], in1 = indirect[3 * i + 1], in2 = indirect[3 * i + 2];
-        out0[i] = blended ? in0 + e0 : in0;
-        out1[i] = blended ? in1 + e1 : in1;
-        out2[i] = blended ? in2 + e2 : in2;
-        /* Not blended: sum3 = 0 and the factor 1. No select on sum3 (GCC would mask the loads feeding it), and
-         * sum3 + 0 = sum3 (sums start at +0). */
-        out_sky[i] = sky * ((sum3 + (blended ? 0.0f : 1.0f)) / divisor);
-        float own_sharing = lane_sharing[i];
-        out_sharing[i] = blended & sharing_on & (sharing > own_sharing) ? sharing : own_sharing;
-        out_own[i] = !blended;
-    }
-    for (int i = 0; i < SRV_RUN; i++) {
-        indirect[3 * i] = out0[i];
-        indirect[3 * i + 1] = out1[i];
-        indirect[3 * i + 2] = out2[i];
-        sky_visibility[i] = out_sky[i];
-        lane_sharing[i] = out_sharing[i];
-        lane_own[i] = out_own[i];
     }
 }
 
-/* The coarse effect over a gathered run: each pixel blends the terms of the reps that stand in for it (an
- * indirect term and a sky factor, both linear in the pixel's own sky visibility: blend_lanes), the others are
- * gathered and go through the kind's taps and the effect's shade as one smaller run. */
+/* blend_expand_row_of with the block a constant in each call (2 or 4: srv__coarse_block's choices). */
+FXC_HOT_INLINE void blend_expand_row(const float *values, size_t value_stride, size_t row, uint32_t nx,
+                                     uint32_t block, float out[SRV_SAMPLE_VALUES][SRV_TILE + SRV_BLEND_MAX_BLOCK])
+{
+    if (block == 4)
+        blend_expand_row_of(values, value_stride, row, nx, 4, out);
+    else if (block == 2)
+        blend_expand_row_of(values, value_stride, row, nx, 2, out);
+    else
+        blend_expand_row_of(values, value_stride, row, nx, 8, out);
+}
+
+/* The blend of coarse_shade for one row of a run, every column of the tile as a lane (vectorised:
+ * FXC_HOT_LANES, contiguous loads only): column j takes the candidates of its sample choice (mask[j],
+ * srv__coarse_mask's order: top[.][j], top[.][j + B], bottom[.][j], bottom[.][j + B]) that have data, with the
+ * bilinear weights from wx[j] and wy (srv__coarse_weights' values), into the weighted sums of the 3 indirect
+ * values and the sky factor, their weights' total and the largest sharing count taken (out, per column). The
+ * candidates left out add exact zeros to the sums (which start at +0, so never -0): the same values in the
+ * same order as summing only those taken. */
+FXC_HOT_LANES static void blend_row(const int32_t *mask, const float *wx, float wy, int32_t block,
+                                    const float (*top)[SRV_TILE + SRV_BLEND_MAX_BLOCK],
+                                    const float (*bottom)[SRV_TILE + SRV_BLEND_MAX_BLOCK],
+                                    float (*out)[SRV_TILE])
+{
+    float o[6][SRV_TILE];
+    for (int j = 0; j < SRV_TILE; j++) {
+        int32_t m = mask[j];
+        float x = wx[j];
+        float weight[4] = {(1.0f - x) * (1.0f - wy), x * (1.0f - wy), (1.0f - x) * wy, x * wy};
+        float sum0 = 0, sum1 = 0, sum2 = 0, sum3 = 0, total = 0, sharing = 0;
+#pragma GCC unroll 4
+        for (int c = 0; c < 4; c++) {
+            const float (*src)[SRV_TILE + SRV_BLEND_MAX_BLOCK] = (c & 2) ? bottom : top;
+            int32_t at = j + ((c & 1) ? block : 0);
+            float taken = src[SRV_SAMPLE_OK][at] * (float)((m >> c) & 1), w = weight[c] * taken;
+            sum0 += w * src[SRV_SAMPLE_R][at];
+            sum1 += w * src[SRV_SAMPLE_G][at];
+            sum2 += w * src[SRV_SAMPLE_B][at];
+            sum3 += w * src[SRV_SAMPLE_SKY][at];
+            total += w;
+            float s = src[SRV_SAMPLE_SHARING][at] * taken; /* (finite popcounts, at least 0) */
+            sharing = s > sharing ? s : sharing;
+        }
+        o[0][j] = sum0;
+        o[1][j] = sum1;
+        o[2][j] = sum2;
+        o[3][j] = sum3;
+        o[4][j] = total;
+        o[5][j] = sharing;
+    }
+    for (int v = 0; v < 6; v++)
+        for (int j = 0; j < SRV_TILE; j++)
+            out[v][j] = o[v][j];
+}
+
+/* The coarse effect over a gathered run: each pixel blends the terms of the samples that stand in for it (an
+ * indirect term and a sky factor, both linear in the pixel's own sky visibility: blend_row), the others are
+ * gathered and go through the kind's taps and the effect's shade as one smaller run. The samples are those of
+ * the sample image `values` (value_stride floats from one value to the next, `stride` samples a row, the
+ * tile's first at `first`). */
 FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scratch *cs, uint32_t e,
                                  const coarse_run *cr, const compose_setup *cu, uint32_t thread_index, uint32_t count)
 {
     const uint64_t *bits = loop->viewer_bits[e];
-    const size_t width = view->frame.width, base = (size_t)cr->y0 * width + cr->x0;
-    for (uint32_t i = 0; i < count; i++) {
-        size_t p = cs->index[i];
-        cs->blend_mask[i] = view->coarse[p]; /* requests' sample choice (srv__coarse_mask) */
-        cs->blend_offset[i] = (int32_t)(p - base);
+    const srv_coarse_grid *g = cr->g;
+    const size_t width = view->frame.width;
+    const uint32_t shift = g->shift, low = g->block - 1, columns = cr->x1 - cr->x0;
+    float wx[SRV_TILE];
+    for (uint32_t j = 0; j < SRV_TILE; j++) {
+        uint32_t ix = j >> shift, fx = j & low;
+        wx[j] = fx && ix + 1 < g->nx ? (float)fx * g->inv_block : 0.0f;
     }
-    for (uint32_t i = count; i < SRV_RUN; i++)
-        cs->blend_mask[i] = cs->blend_offset[i] = 0;
-    blend_lanes(cs->blend_mask, cs->blend_offset, cs->rep_indirect[0], cs->rep_indirect[1], cs->rep_indirect[2],
-                cs->rep_sky, cs->rep_sharing, cs->rep_ok, cs->indirect, cs->sky_visibility, cs->sharing, cs->blend_own,
-                cr->g, (int32_t)width, (int32_t)(cr->y0 - cr->g->y0), bits != NULL);
+    uint32_t expanded = UINT32_MAX; /* the block row in cs->expand */
+    uint32_t lane = 0;              /* the lane of the next visible pixel (gather_run's order) */
+    for (uint32_t y = cr->y0; y < cr->y1; y++) {
+        uint32_t ly = y - g->y0, iy = ly >> shift, fy = ly & low;
+        bool two_y = fy && iy + 1 < g->ny;
+        if (iy != expanded) {
+            blend_expand_row(cr->values, cr->value_stride, cr->first + (size_t)iy * cr->stride, g->nx, g->block,
+                             cs->expand[0]);
+            blend_expand_row(cr->values, cr->value_stride, cr->first + (size_t)(iy + 1 < g->ny ? iy + 1 : iy) * cr->stride,
+                             g->nx, g->block, cs->expand[1]);
+            expanded = iy;
+        }
+        float wy = two_y ? (float)fy * g->inv_block : 0.0f;
+        size_t row = (size_t)y * width + cr->x0;
+        uint8_t bytes[SRV_TILE] = {0};
+        memcpy(bytes, view->coarse + row, columns); /* requests' sample choice (srv__coarse_mask) */
+        int32_t mask[SRV_TILE];
+        for (uint32_t j = 0; j < SRV_TILE; j++)
+            mask[j] = bytes[j];
+        float o[6][SRV_TILE];
+        blend_row(mask, wx, wy, (int32_t)g->block, (const float (*)[SRV_TILE + SRV_BLEND_MAX_BLOCK])cs->expand[0],
+                  (const float (*)[SRV_TILE + SRV_BLEND_MAX_BLOCK])cs->expand[1], o);
+        for (uint32_t j = 0; j < columns; j++) {
+            if (view->tri[row + j] == SRV_MISS)
+                continue;
+            float total = o[4][j];
+            bool blended = total > 0;
+            float divisor = blended ? total : 1.0f;
+            float sky = cs->sky_visibility[lane], open = sky / divisor;
+            float e0 = o[0][j] * open, e1 = o[1][j] * open, e2 = o[2][j] * open; /* fminf(x, FLT_MAX) */
+            e0 = e0 < FLT_MAX ? e0 : FLT_MAX;
+            e1 = e1 < FLT_MAX ? e1 : FLT_MAX;
+            e2 = e2 < FLT_MAX ? e2 : FLT_MAX;
+            if (blended) {
+                cs->indirect[3 * lane] += e0;
+                cs->indirect[3 * lane + 1] += e1;
+                cs->indirect[3 * lane + 2] += e2;
+                cs->sky_visibility[lane] = sky * (o[3][j] / divisor);
+                if (bits && o[5][j] > cs->sharing[lane])
+                    cs->sharing[lane] = o[5][j];
+            }
+            cs->blend_own[lane] = !blended;
+            lane++;
+        }
+    }
     uint32_t own = 0;
     gather_memo memo = gather_memo_start(view);
     for (uint32_t i = 0; i < count; i++) {
@@ -559,29 +603,51 @@ FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scrat
     }
 }
 
-/* The coarse effect at the reps a tile uses (before its runs, with the runs' scratch): gathered in runs of
- * at most SRV_RUN, shaded with sky visibility 1, kept per rep. Reps in the next tile's first column or row
- * are evaluated again there (the same value: a rep's term depends on nothing else of the tile). */
-static void coarse_prepass(srv_loop *loop, srv_viewer *view, compose_scratch *cs, const srv_coarse_grid *g,
-                           const compose_setup *cu, uint32_t thread_index)
+/* The frame-wide pass over the block samples (before compose's tiles): every sample of the frame evaluated
+ * once, in patches of SAMPLE_PATCH_TILES x 1 tiles' samples (each patch's samples in runs of at most SRV_RUN, row
+ * by row), shaded with sky visibility 1 and kept in the viewer's sample image (srv_viewer.samples). A patch
+ * is what one run of the effect's shade sees: its groups (pixels reading the same probes with one normal)
+ * form within it. */
+enum { SAMPLE_PATCH_TILES = 1 };
+
+typedef struct sample_task {
+    srv_loop *loop;
+    srv_viewer *view;
+    uint32_t block, stride, rows, patches_x;
+} sample_task;
+
+FXC_HOT_CLONES static void sample_patch(void *user, uint32_t task_index, uint32_t thread_index)
 {
-    uint32_t e = loop->coarse_effect, width = view->frame.width, reps = g->nx * g->ny;
+    const sample_task *task = user;
+    srv_loop *loop = task->loop;
+    srv_viewer *view = task->view;
+    compose_scratch *cs = (compose_scratch *)((uint8_t *)loop->compose_scratch +
+                                              (size_t)thread_index * loop->compose_scratch_bytes);
+    compose_setup cu;
+    compose_setup_init(loop, &cu);
+    const uint32_t e = loop->coarse_effect, width = view->frame.width, block = task->block;
+    const uint32_t per_tile = SRV_TILE / block, patch_w = per_tile * SAMPLE_PATCH_TILES, patch_h = per_tile;
+    uint32_t gx0 = (task_index % task->patches_x) * patch_w, gy0 = (task_index / task->patches_x) * patch_h;
+    uint32_t gx1 = gx0 + patch_w < task->stride ? gx0 + patch_w : task->stride;
+    uint32_t gy1 = gy0 + patch_h < task->rows ? gy0 + patch_h : task->rows;
+    float *values = view->samples;
+    const size_t value_stride = view->sample_capacity;
     const uint64_t *bits = loop->viewer_bits[e];
     gather_memo memo = gather_memo_start(view);
-    for (uint32_t first = 0; first < reps;) {
+    const uint32_t across = gx1 - gx0, n = across * (gy1 - gy0);
+    for (uint32_t first = 0; first < n;) {
         uint32_t count = 0;
-        for (; first < reps && count < SRV_RUN; first++) {
-            uint32_t x = g->x0 + (first % g->nx) * g->block, y = g->y0 + (first / g->nx) * g->block;
-            cs->rep_ok[first] = 0; /* and finite values: blend_lanes multiplies them by 0 */
-            cs->rep_indirect[0][first] = cs->rep_indirect[1][first] = cs->rep_indirect[2][first] = 0.0f;
-            cs->rep_sky[first] = cs->rep_sharing[first] = 0.0f;
-            if (view->tri[(size_t)y * width + x] == SRV_MISS)
-                continue; /* (gather_pixel would write the sky there: another tile's pixel, maybe) */
-            uint32_t before = count;
-            gather_pixel(loop, view, x, y, (size_t)y * width + x, cs, &count, cu->sky, cu->log2_density,
-                         cu->positions, cu->points, &memo);
-            if (count != before)
-                cs->rep_slot[before] = (uint8_t)first;
+        for (; first < n && count < SRV_RUN; first++) {
+            uint32_t gx = gx0 + first % across, gy = gy0 + first / across;
+            size_t sample = (size_t)gy * task->stride + gx;
+            for (uint32_t v = 0; v < SRV_SAMPLE_VALUES; v++)
+                values[v * value_stride + sample] = 0.0f; /* and finite values: blend_row multiplies them by 0 */
+            uint32_t x = gx * block, y = gy * block;
+            size_t p = (size_t)y * width + x;
+            if (view->tri[p] == SRV_MISS)
+                continue;
+            cs->sample_slot[count] = (uint32_t)sample;
+            gather_pixel(loop, view, x, y, p, cs, &count, cu.sky, cu.log2_density, cu.positions, cu.points, &memo);
         }
         if (!count)
             continue;
@@ -594,12 +660,12 @@ static void coarse_prepass(srv_loop *loop, srv_viewer *view, compose_scratch *cs
                             .sky_visibility = cs->sky_visibility, .indirect = cs->indirect};
         loop->effects[e]->shade(&loop->fx, &run);
         for (uint32_t i = 0; i < count; i++) {
-            uint32_t slot = cs->rep_slot[i];
-            cs->rep_ok[slot] = cs->taps[i].count > 0;
-            for (int k = 0; k < 3; k++)
-                cs->rep_indirect[k][slot] = cs->indirect[3 * i + k];
-            cs->rep_sky[slot] = cs->sky_visibility[i];
-            cs->rep_sharing[slot] =
+            size_t sample = cs->sample_slot[i];
+            values[SRV_SAMPLE_OK * value_stride + sample] = cs->taps[i].count > 0 ? 1.0f : 0.0f;
+            for (uint32_t k = 0; k < 3; k++)
+                values[(SRV_SAMPLE_R + k) * value_stride + sample] = cs->indirect[3 * i + k];
+            values[SRV_SAMPLE_SKY * value_stride + sample] = cs->sky_visibility[i];
+            values[SRV_SAMPLE_SHARING * value_stride + sample] =
                 bits && cs->blocks[i] != SRV_NONE ? (float)__builtin_popcountll(bits[cs->blocks[i]]) : 0.0f;
         }
     }
@@ -767,10 +833,9 @@ FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_
     srv_coarse_grid grid;
     uint32_t block = srv__coarse_block(loop, view);
     bool coarse = block > 1;
-    if (coarse) {
+    size_t sample_stride = srv__sample_stride(f->width, block);
+    if (coarse)
         srv__coarse_grid(block, tx0, ty0, f->width, f->height, &grid);
-        coarse_prepass(loop, view, cs, &grid, &cu, thread_index);
-    }
     /* A coarse tile's runs gather positions only for the other effects (the pixels evaluated themselves get
      * theirs in coarse_shade). */
     compose_setup run_setup = cu;
@@ -782,7 +847,9 @@ FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_
         uint32_t ry1 = ry + SRV_RUN / SRV_TILE < ty1 ? ry + SRV_RUN / SRV_TILE : ty1;
         uint32_t count = gather_run(loop, view, tx0, tx1, ry, ry1, cs, cu.sky, cu.log2_density, run_setup.positions,
                                     run_setup.points);
-        coarse_run cr = {.g = &grid, .x0 = tx0, .x1 = tx1, .y0 = ry, .y1 = ry1};
+        coarse_run cr = {.g = &grid, .x0 = tx0, .x1 = tx1, .y0 = ry, .y1 = ry1, .values = view->samples,
+                         .value_stride = view->sample_capacity, .stride = sample_stride,
+                         .first = (size_t)(ty0 / block) * sample_stride + tx0 / block};
         shade_run(loop, view, cs, count, &run_setup, thread_index, &missing, rays, coarse ? &cr : NULL);
         for (uint32_t y = ry; y < ry1; y++) {
             size_t p = (size_t)y * f->width + tx0;
@@ -838,6 +905,16 @@ void srv__compose(srv_loop *loop, uint32_t slot, srv_frame_stats *st)
     } else {
         uint32_t tiles =
             ((view->frame.width + SRV_TILE - 1) / SRV_TILE) * ((view->frame.height + SRV_TILE - 1) / SRV_TILE);
+        uint32_t block = srv__coarse_block(loop, view);
+        if (block > 1) { /* the block samples, once per frame, before the tiles blend them */
+            sample_task samples = {.loop = loop, .view = view, .block = block,
+                                   .stride = srv__sample_stride(view->frame.width, block),
+                                   .rows = srv__sample_stride(view->frame.height, block)};
+            uint32_t patch_w = SRV_TILE / block * SAMPLE_PATCH_TILES, patch_h = SRV_TILE / block;
+            samples.patches_x = (samples.stride + patch_w - 1) / patch_w;
+            srv_pool_run(loop->pool, samples.patches_x * ((samples.rows + patch_h - 1) / patch_h), sample_patch,
+                         &samples);
+        }
         srv_pool_run(loop->pool, tiles, compose_tile, &task);
     }
     view->stats.pixels_missing = atomic_load(&task.missing);

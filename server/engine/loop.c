@@ -371,6 +371,9 @@ static void viewer_free_buffers(srv_loop *loop, srv_viewer *view)
     srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->footprint, n, 0, sizeof(float));
     srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->depth, n, 0, sizeof(float));
     srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->coarse, view->coarse ? n : 0, 0, 1);
+    srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->samples,
+                view->samples ? SRV_SAMPLE_VALUES * view->sample_capacity : 0, 0, sizeof(float));
+    view->sample_capacity = 0;
     srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->radiance, 3 * n, 0, sizeof(float));
     srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->image, 3 * n, 0, 1);
     for (int w = 0; w < SRV_VIEW_COUNT; w++)
@@ -474,8 +477,15 @@ fxc_result srv_viewer_add(srv_loop *loop, const srv_viewer_desc *desc, srv_viewe
     ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->bary_v, 0, n, sizeof(float));
     ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->footprint, 0, n, sizeof(float));
     ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->depth, 0, n, sizeof(float));
-    if (!view->sparse && loop->coarse_effect != SRV_NO_EFFECT) /* requests' sample choice for compose */
+    if (!view->sparse && loop->coarse_effect != SRV_NO_EFFECT) { /* requests' sample choice for compose */
         ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->coarse, 0, n, 1);
+        /* the frame-wide sample image, sized for the smallest block (2) */
+        size_t samples = (size_t)srv__sample_stride(d.width, 2) * srv__sample_stride(d.height, 2);
+        ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->samples, 0, SRV_SAMPLE_VALUES * samples,
+                               sizeof(float));
+        if (ok)
+            view->sample_capacity = samples;
+    }
     ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->radiance, 0, 3 * n, sizeof(float));
     ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->image, 0, 3 * n, 1);
     if (view->sparse) {

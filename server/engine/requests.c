@@ -8,6 +8,7 @@
 #include "engine_internal.h"
 #include "fxc_hot.h"
 
+#include <math.h>
 #include <stdatomic.h>
 #include <string.h>
 
@@ -118,40 +119,95 @@ FXC_HOT_INLINE void request_pixels(request_task *task, uint32_t thread_index, co
         atomic_store(&task->failed, true);
 }
 
-/* The common case of srv__coarse_mask for one row of a tile (vectorised: FXC_HOT_LANES), lane j for pixel
- * (x0 + j, y) of a tile of grid g, buffer index row + j: 1 for a rep; the full mask of its candidates when the
- * pixel and its block's 4 corner reps (those the frame has) lie on one triangle (all 4 candidates then match);
- * else -1: the general test (srv__coarse_mask) decides. Lanes from `lanes` on (past the frame's right edge)
- * read lane 0's pixels and are not used. `rep_row` is the buffer index of the tile's first rep column in the
- * row of reps above or at y. */
-FXC_HOT_LANES static void coarse_row_lanes(const uint32_t *tri, int32_t row, int32_t rep_row, int32_t lanes,
-                                           int32_t ly, const srv_coarse_grid *g, int32_t width, int32_t *out)
+/* srv__coarse_mask for one row of a tile, lane j for pixel (x0 + j, y) (vectorised: FXC_HOT_LANES; contiguous
+ * loads only, gathers are slow on the machines we measure on): the row's pixels (triangle, face normal, depth,
+ * footprint) and, expanded per column, the samples of the row of blocks the row lies in and of the next one
+ * (column c holds sample c / B of its row, a miss from sample nx on; a pixel in column j reads its candidates at j and
+ * j + B). The same compares and the same float operations as srv__coarse_mask and srv__coarse_match, so the
+ * same mask for every visible pixel. */
+enum { MASK_COLUMNS = SRV_TILE + 8 }; /* blocks of up to 8 */
+
+typedef struct mask_row {
+    uint32_t tri[SRV_TILE];
+    float normal[3][SRV_TILE], depth[SRV_TILE], footprint[SRV_TILE];
+    uint32_t sample_tri[2][MASK_COLUMNS];
+    float sample_normal[2][3][MASK_COLUMNS], sample_depth[2][MASK_COLUMNS], sample_footprint[2][MASK_COLUMNS];
+} mask_row;
+
+FXC_HOT_LANES static void coarse_mask_lanes(const mask_row *in, int32_t block, int32_t nx, int32_t fy,
+                                            int32_t two_y, float depth_scale, int32_t *out)
 {
-    const int32_t shift = (int32_t)g->shift, block = (int32_t)g->block, low = block - 1, nx = (int32_t)g->nx;
-    const int32_t fy = ly & low, two_y = ((ly >> shift) + 1 < (int32_t)g->ny) & (fy != 0);
-    const int32_t down = block * width & -two_y;
-    int32_t result[SRV_TILE]; /* (stores to a local array: GCC 12 gathers only past stores it can tell apart) */
-    /* Integer arithmetic only, no compare mixed into it (GCC 12 left such a loop scalar): for small
-     * non-negative a and b, (a - b) >> 31 & 1 is a < b, and (-a) >> 31 & 1 is a != 0. */
+    const int32_t shift = __builtin_ctz((uint32_t)block), low = block - 1;
+    int32_t result[SRV_TILE]; /* (stores to a local array, then out) */
     for (int32_t j = 0; j < SRV_TILE; j++) {
-        int32_t lane = j & (((j - lanes) >> 31)); /* j < lanes ? j : 0 */
-        int32_t ix = lane >> shift, fx = lane & low;
-        int32_t two_x = ((ix + 1 - nx) >> 31 & 1) & ((-fx) >> 31 & 1);
-        int32_t right = block & -two_x, r0 = rep_row + (ix << shift);
-        uint32_t tp = tri[row + lane];
-        uint32_t differ = (tri[r0] ^ tp) | (tri[r0 + right] ^ tp) | (tri[r0 + down] ^ tp) |
-                          (tri[r0 + right + down] ^ tp);
-        int32_t same = 1 - (int32_t)((-(int64_t)differ) >> 63 & 1); /* differ == 0 */
-        /* srv__coarse_mask's bits: candidate 0 always, 1 with a second column, 2 with a second row, 3 both */
-        int32_t full = 1 | (two_x << 1) | (two_y << 2) | ((two_x & two_y) << 3);
-        /* every candidate the pixel's block position has must exist: at an edge of the frame the general test */
-        int32_t fx_zero = 1 - ((-fx) >> 31 & 1), fy_zero = fy == 0;
-        int32_t common = same & (two_x | fx_zero) & (two_y | fy_zero);
-        int32_t rep = fx_zero & fy_zero, decided = common * (full + 1) - 1; /* common ? full : -1 */
-        result[j] = decided + rep * (1 - decided);                          /* rep ? 1 : decided */
+        int32_t ix = j >> shift, fx = j & low;
+        int32_t two_x = (fx != 0) & (ix + 1 < nx);
+        uint32_t tp = in->tri[j];
+        float n0 = in->normal[0][j], n1 = in->normal[1][j], n2 = in->normal[2][j];
+        float dp = in->depth[j], fp = in->footprint[j];
+        int32_t mask = 0;
+#pragma GCC unroll 4
+        for (int32_t c = 0; c < 4; c++) {
+            int32_t rowc = c >> 1, at = j + ((c & 1) ? block : 0);
+            int32_t exists = ((c & 1) ? two_x : 1) & ((c & 2) ? two_y : 1);
+            uint32_t tr = in->sample_tri[rowc][at];
+            float d0 = in->sample_normal[rowc][0][at] - n0, d1 = in->sample_normal[rowc][1][at] - n1,
+                  d2 = in->sample_normal[rowc][2][at] - n2;
+            int32_t normal_ok = (fabsf(d0) <= 0.05f) & (fabsf(d1) <= 0.05f) & (fabsf(d2) <= 0.05f);
+            /* srv__pow2_floor of the larger footprint (clamped to [-60, 60], NaN to -60), from the bits */
+            float fr = in->sample_footprint[rowc][at], x = fp > fr ? fp : fr;
+            x = x > -60.0f ? (x < 60.0f ? x : 60.0f) : -60.0f;
+            int32_t e = (int32_t)floorf(x); /* (roundps in the AVX2 copy; floor by hand kept GCC from vectorising) */
+            uint32_t bits = (uint32_t)(e + 127) << 23;
+            float pow2;
+            memcpy(&pow2, &bits, sizeof pow2);
+            int32_t dx = (c & 1) ? block - fx : fx, dy = (c & 2) ? block - fy : fy;
+            float apart = (float)(dx > dy ? dx : dy);
+            float tolerance = pow2 * (apart * 1.0f * depth_scale);
+            int32_t depth_ok = fabsf(dp - in->sample_depth[rowc][at]) <= tolerance;
+            int32_t match = (tr == tp) | ((tr != SRV_MISS) & normal_ok & depth_ok);
+            mask |= (exists & match) << c;
+        }
+        result[j] = ((fx | fy) == 0) ? 1 : mask;
     }
     for (int32_t j = 0; j < SRV_TILE; j++)
         out[j] = result[j];
+}
+
+/* Row `sample_row` of a tile's samples (buffer index of its first) expanded per column into in's row `to`;
+ * block is a constant in each copy (mask_expand): B stores of one value. Columns past the last sample are
+ * never taken (their candidates do not exist) and hold a miss. */
+FXC_HOT_INLINE void mask_expand_of(const scene *s, const srv_viewer *view, size_t sample_row, uint32_t nx,
+                                   uint32_t block, mask_row *in, int to)
+{
+    static const float none[3] = {0, 0, 0};
+    for (uint32_t i = 0; i < MASK_COLUMNS / block; i++) {
+        size_t r = sample_row + (size_t)i * block;
+        uint32_t tri = i < nx ? view->tri[r] : SRV_MISS;
+        const float *n = tri != SRV_MISS ? s->tri_normal + 3 * (size_t)tri : none;
+        float depth = i < nx ? view->depth[r] : 0.0f, footprint = i < nx ? view->footprint[r] : 0.0f;
+        float n0 = n[0], n1 = n[1], n2 = n[2];
+        for (uint32_t f = 0; f < block; f++) {
+            uint32_t c = i * block + f;
+            in->sample_tri[to][c] = tri;
+            in->sample_normal[to][0][c] = n0;
+            in->sample_normal[to][1][c] = n1;
+            in->sample_normal[to][2][c] = n2;
+            in->sample_depth[to][c] = depth;
+            in->sample_footprint[to][c] = footprint;
+        }
+    }
+}
+
+static void mask_expand(const scene *s, const srv_viewer *view, size_t sample_row, uint32_t nx, uint32_t block,
+                        mask_row *in, int to)
+{
+    if (block == 4)
+        mask_expand_of(s, view, sample_row, nx, 4, in, to);
+    else if (block == 2)
+        mask_expand_of(s, view, sample_row, nx, 2, in, to);
+    else
+        mask_expand_of(s, view, sample_row, nx, 8, in, to);
 }
 
 static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
@@ -173,20 +229,43 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
         srv_coarse_grid g;
         srv__coarse_grid(block, x0, y0, width, height, &g);
         uint8_t *coarse = view->coarse;
-        int32_t lanes = (int32_t)(width - x0 < SRV_TILE ? width - x0 : SRV_TILE), row_mask[SRV_TILE];
+        const scene *sc = loop->s;
+        uint32_t lanes = width - x0 < SRV_TILE ? width - x0 : SRV_TILE, expanded = UINT32_MAX;
+        mask_row in;
+        int32_t row_mask[SRV_TILE];
         for (uint32_t y = y0; y < y0 + SRV_TILE && y < height; y++) {
-            uint32_t ly = y - y0;
+            uint32_t ly = y - y0, iy = ly >> g.shift, fy = ly & (g.block - 1);
             size_t row = (size_t)y * width + x0;
-            size_t rep_row = (size_t)(y0 + ((ly >> g.shift) << g.shift)) * width + x0;
-            coarse_row_lanes(view->tri, (int32_t)row, (int32_t)rep_row, lanes, (int32_t)ly, &g, (int32_t)width,
-                             row_mask);
-            for (uint32_t j = 0; j < (uint32_t)lanes; j++) {
+            if (iy != expanded) {
+                size_t sample_row = (size_t)(y0 + (iy << g.shift)) * width + x0;
+                mask_expand(sc, view, sample_row, g.nx, g.block, &in, 0);
+                mask_expand(sc, view, iy + 1 < g.ny ? sample_row + (size_t)g.block * width : sample_row, g.nx,
+                            g.block, &in, 1);
+                expanded = iy;
+            }
+            static const float none[3] = {0, 0, 0}; /* a miss's lanes: not used */
+            uint32_t memo_tri = SRV_MISS;
+            const float *n = none;
+            for (uint32_t j = 0; j < SRV_TILE; j++) {
+                size_t p = row + (j < lanes ? j : 0); /* lanes past the frame's edge: lane 0's pixel, not used */
+                uint32_t tri = view->tri[p];
+                if (tri != memo_tri) {
+                    memo_tri = tri;
+                    n = tri != SRV_MISS ? sc->tri_normal + 3 * (size_t)tri : none;
+                }
+                in.tri[j] = tri;
+                for (int k = 0; k < 3; k++)
+                    in.normal[k][j] = n[k];
+                in.depth[j] = view->depth[p];
+                in.footprint[j] = view->footprint[p];
+            }
+            coarse_mask_lanes(&in, (int32_t)g.block, (int32_t)g.nx, (int32_t)fy,
+                              (int32_t)(fy != 0 && iy + 1 < g.ny), loop->coarse_depth_scale, row_mask);
+            for (uint32_t j = 0; j < lanes; j++) {
                 size_t p = row + j;
                 if (view->tri[p] == SRV_MISS)
                     continue;
                 int32_t mask = row_mask[j];
-                if (mask < 0)
-                    mask = (int32_t)srv__coarse_mask(loop->s, view, loop->coarse_depth_scale, &g, x0 + j, y);
                 coarse[p] = (uint8_t)mask;
                 if (mask == 0 || srv__coarse_is_rep(g.block, x0 + j, y))
                     fill_pixel(loop->s, view, p, positions, &memo, &pixels[count++]);

@@ -73,6 +73,11 @@ typedef struct srv_viewer {
     float *depth;              /* distance along the primary ray, INFINITY for none */
     uint8_t *coarse;           /* whole frames with a coarse effect: per pixel, this frame's srv__coarse_mask
                                   (written by requests, read by compose); NULL otherwise */
+    float *samples;            /* whole frames with a coarse effect: the frame's block samples' terms, evaluated
+                                  once per frame before compose's tiles (SRV_SAMPLE_VALUES arrays of
+                                  sample_capacity entries, sample (i, j) at j * ceil(width / B) + i); NULL
+                                  otherwise */
+    size_t sample_capacity;    /* entries of each array: enough for the smallest block, 2 */
     float *radiance;           /* linear RGB */
     uint8_t *image;            /* sRGB 8-bit RGB */
     float *views[SRV_VIEW_COUNT];
@@ -264,16 +269,29 @@ static inline uint32_t srv__run_key_pixel(uint32_t key, uint32_t tiles_x)
  * none matches, is evaluated itself, and requests then ask for its own keys. The match reads only what
  * visibility wrote (triangle, depth, footprint) and the scene's face normals; requests decide it once per
  * frame and pixel and keep it for compose (one byte a pixel, view->coarse), so the pixels compose evaluates
- * itself are exactly those whose keys requests asked for. */
-enum { SRV_COARSE_REPS = (SRV_TILE / 2 + 1) * (SRV_TILE / 2 + 1) }; /* reps of a tile at most (B = 2) */
+ * itself are exactly those whose keys requests asked for. Compose evaluates every sample of the frame once,
+ * before its tiles, into the viewer's sample image (srv_viewer.samples); the tiles blend from it.
+ * srv__coarse_mask and srv__coarse_weights below are the definitions: requests compute the mask a tile row
+ * at a time in lanes (requests.c, coarse_mask_lanes) and compose the weights likewise (compose.c, blend_row),
+ * with the same operations. */
+
+/* The frame-wide sample image (srv_viewer.samples): per sample its indirect term (3 arrays, sky visibility 1
+ * in), the sky visibility shade left, the sharing count for the stats view, and 1 where it is visible and has
+ * taps (else 0, and finite zeros everywhere: the blend multiplies them by 0). */
+enum { SRV_SAMPLE_R, SRV_SAMPLE_G, SRV_SAMPLE_B, SRV_SAMPLE_SKY, SRV_SAMPLE_SHARING, SRV_SAMPLE_OK,
+       SRV_SAMPLE_VALUES };
+
+/* Samples per row of a frame `width` pixels wide at block B (the pixels 0, B, 2 B, ...). */
+static inline uint32_t srv__sample_stride(uint32_t width, uint32_t block)
+{
+    return (width + block - 1) / block;
+}
 
 typedef struct srv_coarse_grid {
     uint32_t block, shift; /* B = 1 << shift */
     uint32_t x0, y0;       /* the tile's first pixel (a multiple of B: tiles are 16-aligned) */
     uint32_t nx, ny;       /* reps per row and column the tile uses (its own and the next, within the frame) */
     float inv_block;       /* 1 / B */
-    float weight[16][4];   /* the 4 candidates' bilinear weights at block position fy * B + fx, both axes with
-                              a second rep (srv__coarse_weights' values there) */
 } srv_coarse_grid;
 
 static inline void srv__coarse_grid(uint32_t block, uint32_t x0, uint32_t y0, uint32_t width, uint32_t height,
@@ -289,14 +307,6 @@ static inline void srv__coarse_grid(uint32_t block, uint32_t x0, uint32_t y0, ui
     g->ny = (height - y0 + block - 1) / block;
     g->nx = g->nx < most ? g->nx : most;
     g->ny = g->ny < most ? g->ny : most;
-    for (uint32_t fy = 0; fy < block && block <= 4; fy++)
-        for (uint32_t fx = 0; fx < block; fx++) {
-            float wx = (float)fx * g->inv_block, wy = (float)fy * g->inv_block, *w = g->weight[fy * block + fx];
-            w[0] = (1.0f - wx) * (1.0f - wy);
-            w[1] = wx * (1.0f - wy);
-            w[2] = (1.0f - wx) * wy;
-            w[3] = wx * wy;
-        }
 }
 
 /* The block a viewer's whole frame uses: the largest power of two up to desc.indirect_block that is at most
