@@ -394,7 +394,8 @@ FXC_HOT_LANES static void taps_lanes_fill(taps_lanes *L, int32_t bias)
         L->at_x[i][0] = at_x0, L->at_x[i][1] = at_x1, L->at_x[i][2] = at_x0, L->at_x[i][3] = at_x1;
         L->at_y[i][0] = at_y0, L->at_y[i][1] = at_y0, L->at_y[i][2] = at_y1, L->at_y[i][3] = at_y1;
         L->footprint_log2[i] = L->footprint[i] - (float)level;
-        int32_t fast = L->positive[i] & (fx0 >= 0.0f) & (fy0 >= 0.0f) & (fx0 < 16777216.0f) & (fy0 < 16777216.0f);
+        int32_t fast =
+            L->positive[i] & (fx0 >= 0.0f) & (fy0 >= 0.0f) & (fx0 < 16777216.0f) & (fy0 < 16777216.0f);
         float fxc = fast ? fx0 : -1.0f, fyc = fast ? fy0 : -1.0f; /* converted only where it fits */
         L->fast_x0[i] = (int32_t)fxc;
         L->fast_y0[i] = (int32_t)fyc;
@@ -415,7 +416,8 @@ FXC_HOT_LANES static void taps_lanes_fast(taps_lanes *L)
         L->cell[i] = (y0 & 7) * 8 + (x0 & 7);
     }
     for (int i = 0; i < SRV_RUN; i++)
-        L->key[i] = ((uint64_t)L->island[i] << OSC_KEY_ISLAND_SHIFT) | ((uint64_t)(uint32_t)L->level[i] << OSC_KEY_LEVEL_SHIFT) |
+        L->key[i] = ((uint64_t)L->island[i] << OSC_KEY_ISLAND_SHIFT) |
+                    ((uint64_t)(uint32_t)L->level[i] << OSC_KEY_LEVEL_SHIFT) |
                     ((uint64_t)(uint32_t)(L->fast_y0[i] >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
                     ((uint64_t)(uint32_t)(L->fast_x0[i] >> 3) << OSC_KEY_BLOCK_X_SHIFT);
 }
@@ -454,15 +456,16 @@ FXC_HOT_INLINE void taps_state_island(taps_state *st, uint32_t island, uint32_t 
     bool small = st->w > 0 && st->h > 0 && st->w < (1l << 24) && st->h < (1l << 24);
     st->fast_w = small ? (uint32_t)st->w - 1u : 0u;
     st->fast_h = small ? (uint32_t)st->h - 1u : 0u;
-    st->base = st->effect_field | ((uint64_t)island << OSC_KEY_ISLAND_SHIFT) | ((uint64_t)level << OSC_KEY_LEVEL_SHIFT);
+    st->base = st->effect_field | ((uint64_t)island << OSC_KEY_ISLAND_SHIFT) |
+               ((uint64_t)level << OSC_KEY_LEVEL_SHIFT);
     st->reuse = false;
 }
 
 /* Pixel i's taps when the usual case's quick paths (taps_of_effect) did not give them: columns or rows
  * clamped at the island's edge, a weight 0, a footprint straddling a block edge, texels without data. The
  * island and level of st are the pixel's. */
-static void taps_pixel_rest(taps_state *st, const taps_lanes *L, const srv_pixel *px, uint32_t i, fx_taps *out,
-                            uint32_t *blocks)
+static void taps_pixel_rest(taps_state *st, const taps_lanes *L, const srv_pixel *px, uint32_t i,
+                            fx_taps *out, uint32_t *blocks)
 {
     const osc_cache *osc = st->osc;
     const size_t texel_bytes = st->texel_bytes;
@@ -642,11 +645,13 @@ static void taps_pixel_rest(taps_state *st, const taps_lanes *L, const srv_pixel
 
 /* The usual case's four texels when they straddle a block edge (x0, y0 inside the island, key the corner
  * texel's block with the effect field): each tap's block from the memo; false when a block is absent or a
- * texel holds no data. *block receives the first tap's block. */
+ * texel holds no data. *block receives the first tap's block. (Looking up only the two or four distinct
+ * blocks, with branches, was more instructions.) */
 static bool taps_straddle(taps_state *st, int32_t x0, int32_t y0, uint64_t key, const uint8_t *texel[4],
                           uint32_t *block)
 {
-    const uint64_t base = key & ~(((uint64_t)0xFFF << OSC_KEY_BLOCK_Y_SHIFT) | ((uint64_t)0xFFF << OSC_KEY_BLOCK_X_SHIFT));
+    const uint64_t base =
+        key & ~(((uint64_t)0xFFF << OSC_KEY_BLOCK_Y_SHIFT) | ((uint64_t)0xFFF << OSC_KEY_BLOCK_X_SHIFT));
     for (int t = 0; t < 4; t++) {
         uint32_t xi = (uint32_t)x0 + (uint32_t)(t & 1), yi = (uint32_t)y0 + (uint32_t)(t >> 1);
         uint32_t m = memo_lookup(st->osc, &st->memo, st->effect,
@@ -669,10 +674,13 @@ static bool taps_straddle(taps_state *st, int32_t x0, int32_t y0, uint64_t key, 
  * footprint straddles a block edge, so the block of a tap is looked up only where its block coordinates
  * differ from the first tap's.
  *
- * The usual case (columns and rows inside the island, no weight 0, the four texels in one block and holding
- * data) is this loop's, with the state it needs in locals: the taps are then the lanes' values, what the
- * general path of taps_pixel_rest gives, value for value. Every other pixel goes through taps_pixel_rest
- * (not inlined: its state kept in registers here made the usual case spill to the stack). */
+ * The usual case (columns and rows inside the island, no weight 0, the four texels holding data; in one
+ * block or, through taps_straddle, straddling a block edge) is this loop's, decided by the lanes up to the
+ * blocks' contents (taps_lanes_fast), with the few variables it needs in locals: the previous pixel's key,
+ * corner texel and four texels (a pixel with the same ones gets the same taps without the memo). Its taps are
+ * the lanes' values, what the general path of taps_pixel_rest gives, value for value. Every other pixel goes
+ * through taps_pixel_rest, the general loop body with its state in a struct, not inlined: in one function
+ * with the usual case, their state together outnumbered the registers and the usual case ran from the stack. */
 FXC_HOT_INLINE void taps_of_effect(const kind_osc *k, const taps_lanes *L, const srv_pixel *pixels,
                                    uint32_t count, uint32_t effect, fx_taps *taps, uint32_t *blocks)
 {
@@ -682,7 +690,7 @@ FXC_HOT_INLINE void taps_of_effect(const kind_osc *k, const taps_lanes *L, const
     st.texel_bytes = osc_pool_texel_bytes(st.osc, effect);
     st.effect = effect;
     st.effect_field = (uint64_t)effect << OSC_KEY_EFFECT_SHIFT;
-    memset(st.memo.key, 0xFF, sizeof st.memo.key); /* no key has every bit set: its effect field would be 15 */
+    memset(st.memo.key, 0xFF, sizeof st.memo.key); /* no key has every bit set (effect field 15) */
     st.memo_island = st.memo_level = UINT32_MAX;
     st.w = st.h = 0;
     st.base = 0;
@@ -714,7 +722,7 @@ FXC_HOT_INLINE void taps_of_effect(const kind_osc *k, const taps_lanes *L, const
                     uint64_t need = (uint64_t)3 << cell | (uint64_t)3 << (cell + 8);
                     if (!(st.memo.block[m0] != OSC_NONE && (st.memo.valid[m0] & need) == need))
                         goto rest;
-                    /* The texels (x0, y0), (x0 + 1, y0), (x0, y0 + 1), (x0 + 1, y0 + 1) of the block's 8 x 8. */
+                    /* The texels (x0, y0), (x0 + 1, y0), (x0, y0 + 1), (x0 + 1, y0 + 1) of the block. */
                     const uint8_t *corner = st.memo.payload[m0] + (size_t)cell * texel_bytes;
                     t0 = corner, t1 = corner + texel_bytes, t2 = corner + 8 * texel_bytes;
                     t3 = corner + 9 * texel_bytes;
