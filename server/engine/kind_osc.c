@@ -350,9 +350,22 @@ typedef struct taps_lanes {
     float u[SRV_RUN], v[SRV_RUN], footprint[SRV_RUN]; /* input, from the pixels; lanes past the run are 0 */
     int32_t level[SRV_RUN], positive[SRV_RUN];         /* positive: all four weights > 0 */
     float x[SRV_RUN], y[SRV_RUN], fx0[SRV_RUN], fy0[SRV_RUN], ax[SRV_RUN], ay[SRV_RUN];
-    float weight[4][SRV_RUN]; /* renormalised, for positive lanes */
-    float at_x0[SRV_RUN], at_x1[SRV_RUN], at_y0[SRV_RUN], at_y1[SRV_RUN];
+    /* The usual case's values in the order fx_taps holds them, per lane, so that a pixel copies them with a
+     * few wide moves: the renormalised weights (for positive lanes), at_x and at_y of the four taps. */
+    float weight[SRV_RUN][4];
+    float at_x[SRV_RUN][4], at_y[SRV_RUN][4];
     float footprint_log2[SRV_RUN];
+    /* floor(x), floor(y) where the usual case may apply (all four weights > 0, both in [0, 2^24)), else -1:
+     * one unsigned compare per axis against the island's size then decides whether the columns and rows
+     * lie inside it. */
+    int32_t fast_x0[SRV_RUN], fast_y0[SRV_RUN];
+    /* Input: each pixel's island and its size at level 0. Out: whether the pixel is the usual case up to the
+     * blocks' contents (fast_x0 above, columns and rows inside the island at its level, the island's size
+     * there below 2^24), whether its four texels straddle a block edge (x0 mod 8 or y0 mod 8 is 7), the
+     * corner texel's block key without the effect field and the corner texel's index in that block. */
+    uint32_t island[SRV_RUN], width0[SRV_RUN], height0[SRV_RUN];
+    int32_t fast[SRV_RUN], straddle[SRV_RUN], cell[SRV_RUN];
+    uint64_t key[SRV_RUN];
 } taps_lanes;
 
 FXC_HOT_LANES static void taps_lanes_fill(taps_lanes *L, int32_t bias)
@@ -372,16 +385,286 @@ FXC_HOT_LANES static void taps_lanes_fill(taps_lanes *L, int32_t bias)
         L->level[i] = level;
         L->positive[i] = (w00 > 0) & (w10 > 0) & (w01 > 0) & (w11 > 0);
         L->x[i] = x, L->y[i] = y, L->fx0[i] = fx0, L->fy0[i] = fy0, L->ax[i] = ax, L->ay[i] = ay;
-        L->weight[0][i] = w00 * inv;
-        L->weight[1][i] = w10 * inv;
-        L->weight[2][i] = w01 * inv;
-        L->weight[3][i] = w11 * inv;
-        L->at_x0[i] = x + 0.5f - fx0;
-        L->at_x1[i] = x + 0.5f - (fx0 + 1.0f);
-        L->at_y0[i] = y + 0.5f - fy0;
-        L->at_y1[i] = y + 0.5f - (fy0 + 1.0f);
+        L->weight[i][0] = w00 * inv;
+        L->weight[i][1] = w10 * inv;
+        L->weight[i][2] = w01 * inv;
+        L->weight[i][3] = w11 * inv;
+        float at_x0 = x + 0.5f - fx0, at_x1 = x + 0.5f - (fx0 + 1.0f);
+        float at_y0 = y + 0.5f - fy0, at_y1 = y + 0.5f - (fy0 + 1.0f);
+        L->at_x[i][0] = at_x0, L->at_x[i][1] = at_x1, L->at_x[i][2] = at_x0, L->at_x[i][3] = at_x1;
+        L->at_y[i][0] = at_y0, L->at_y[i][1] = at_y0, L->at_y[i][2] = at_y1, L->at_y[i][3] = at_y1;
         L->footprint_log2[i] = L->footprint[i] - (float)level;
+        int32_t fast =
+            L->positive[i] & (fx0 >= 0.0f) & (fy0 >= 0.0f) & (fx0 < 16777216.0f) & (fy0 < 16777216.0f);
+        float fxc = fast ? fx0 : -1.0f, fyc = fast ? fy0 : -1.0f; /* converted only where it fits */
+        L->fast_x0[i] = (int32_t)fxc;
+        L->fast_y0[i] = (int32_t)fyc;
     }
+}
+
+/* After taps_lanes_fill: fast, cell and key (in loops of their own, which GCC vectorises). */
+FXC_HOT_LANES static void taps_lanes_fast(taps_lanes *L)
+{
+    for (int i = 0; i < SRV_RUN; i++) {
+        int32_t x0 = L->fast_x0[i], y0 = L->fast_y0[i], level = L->level[i];
+        int32_t round = (1 << level) - 1;
+        int32_t w = (int32_t)((L->width0[i] + (uint32_t)round) >> level);
+        int32_t h = (int32_t)((L->height0[i] + (uint32_t)round) >> level);
+        int32_t small = (w > 0) & (h > 0) & (w < (1 << 24)) & (h < (1 << 24));
+        L->fast[i] = (x0 >= 0) & small & (x0 + 1 < w) & (y0 + 1 < h);
+        L->straddle[i] = ((x0 & 7) == 7) | ((y0 & 7) == 7);
+        L->cell[i] = (y0 & 7) * 8 + (x0 & 7);
+    }
+    for (int i = 0; i < SRV_RUN; i++)
+        L->key[i] = ((uint64_t)L->island[i] << OSC_KEY_ISLAND_SHIFT) |
+                    ((uint64_t)(uint32_t)L->level[i] << OSC_KEY_LEVEL_SHIFT) |
+                    ((uint64_t)(uint32_t)(L->fast_y0[i] >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
+                    ((uint64_t)(uint32_t)(L->fast_x0[i] >> 3) << OSC_KEY_BLOCK_X_SHIFT);
+}
+
+/* One effect's lookup state across the pixels of a call: its memo of blocks, the island and level of the
+ * previous pixel (their size and key fields), and the four texels of the last pixel that took the common
+ * path (its corner texel and block). */
+typedef struct taps_state {
+    const osc_cache *osc;
+    const scene_island *islands;
+    size_t texel_bytes;
+    uint32_t effect;
+    uint64_t effect_field;
+    uint32_t memo_island, memo_level;
+    long w, h;
+    uint64_t base;
+    /* The usual case's bounds: w - 1 and h - 1 when the island's size at this level is below 2^24 (a column
+     * or row is exact in a float), else 0 (never the usual case). */
+    uint32_t fast_w, fast_h;
+    uint32_t last_slot; /* the memo slot of the previous pixel's first block */
+    bool reuse;
+    long reuse_x0, reuse_y0;
+    const uint8_t *reuse_texel[4];
+    uint32_t reuse_block;
+    tap_memo memo;
+} taps_state;
+
+/* A new island or level: its size at the level and the keys' fields. */
+FXC_HOT_INLINE void taps_state_island(taps_state *st, uint32_t island, uint32_t level)
+{
+    st->memo_island = island;
+    st->memo_level = level;
+    const scene_island *is = &st->islands[island];
+    st->w = (long)((is->width + (1u << level) - 1u) >> level);
+    st->h = (long)((is->height + (1u << level) - 1u) >> level);
+    bool small = st->w > 0 && st->h > 0 && st->w < (1l << 24) && st->h < (1l << 24);
+    st->fast_w = small ? (uint32_t)st->w - 1u : 0u;
+    st->fast_h = small ? (uint32_t)st->h - 1u : 0u;
+    st->base = st->effect_field | ((uint64_t)island << OSC_KEY_ISLAND_SHIFT) |
+               ((uint64_t)level << OSC_KEY_LEVEL_SHIFT);
+    st->reuse = false;
+}
+
+/* Pixel i's taps when the usual case's quick paths (taps_of_effect) did not give them: columns or rows
+ * clamped at the island's edge, a weight 0, a footprint straddling a block edge, texels without data. The
+ * island and level of st are the pixel's. */
+static void taps_pixel_rest(taps_state *st, const taps_lanes *L, const srv_pixel *px, uint32_t i,
+                            fx_taps *out, uint32_t *blocks)
+{
+    const osc_cache *osc = st->osc;
+    const size_t texel_bytes = st->texel_bytes;
+    const uint32_t effect = st->effect;
+    tap_memo *memo = &st->memo;
+    if (px->island != st->memo_island || (uint32_t)L->level[i] != st->memo_level)
+        taps_state_island(st, px->island, (uint32_t)L->level[i]);
+    const long w = st->w, h = st->h;
+    const uint64_t base = st->base;
+    uint32_t level = st->memo_level;
+    float x = L->x[i], y = L->y[i], ax = L->ax[i], ay = L->ay[i];
+    long x0 = (long)L->fx0[i], y0 = (long)L->fy0[i];
+    uint32_t fast_x0 = (uint32_t)L->fast_x0[i], fast_y0 = (uint32_t)L->fast_y0[i];
+    bool found = false;
+    if (fast_x0 < st->fast_w && fast_y0 < st->fast_h) {
+        /* The usual case, columns and rows inside the island, no weight 0. When the four texels lie in one
+         * block and hold data, the taps are the lanes' values: what the paths below give, value for value. */
+        found = st->reuse && x0 == st->reuse_x0 && y0 == st->reuse_y0;
+        if (!found && (x0 & 7) != 7 && (y0 & 7) != 7) {
+            uint64_t key0 = base | ((uint64_t)(y0 >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
+                            ((uint64_t)(x0 >> 3) << OSC_KEY_BLOCK_X_SHIFT);
+            if (memo->key[st->last_slot] != key0)
+                st->last_slot = memo_lookup(osc, memo, effect, key0);
+            uint32_t m0 = st->last_slot;
+            uint32_t row0 = ((uint32_t)y0 & 7) * 8, row1 = row0 + 8;
+            uint32_t col0 = (uint32_t)x0 & 7, col1 = col0 + 1;
+            uint64_t need = (uint64_t)3 << (row0 + col0) | (uint64_t)3 << (row1 + col0);
+            if (memo->block[m0] != OSC_NONE && (memo->valid[m0] & need) == need) {
+                const uint8_t *payload = memo->payload[m0];
+                st->reuse_texel[0] = payload + (row0 + col0) * texel_bytes;
+                st->reuse_texel[1] = payload + (row0 + col1) * texel_bytes;
+                st->reuse_texel[2] = payload + (row1 + col0) * texel_bytes;
+                st->reuse_texel[3] = payload + (row1 + col1) * texel_bytes;
+                st->reuse = true, st->reuse_x0 = x0, st->reuse_y0 = y0, st->reuse_block = memo->block[m0];
+                found = true;
+            }
+        }
+    }
+    if (found) {
+        memcpy(out->texel, st->reuse_texel, sizeof st->reuse_texel);
+        memcpy(out->weight, L->weight[i], sizeof L->weight[i]);
+        memcpy(out->at_x, L->at_x[i], sizeof L->at_x[i]);
+        memcpy(out->at_y, L->at_y[i], sizeof L->at_y[i]);
+        out->footprint_log2 = L->footprint_log2[i];
+        out->count = 4;
+        if (blocks)
+            blocks[i] = st->reuse_block;
+        return;
+    }
+    if (fast_x0 < st->fast_w && fast_y0 < st->fast_h && !((x0 & 7) != 7 && (y0 & 7) != 7)) {
+        /* The usual case, the footprint straddling a block edge: each tap's block from the memo. When all
+         * four texels hold data the general path below keeps all four taps, in this order, with the lanes'
+         * weights and positions (its total starts from 0 + w00 = w00). */
+        const uint8_t *texel[4];
+        uint32_t block0 = OSC_NONE;
+        bool all = true;
+#pragma GCC unroll 4
+        for (int t = 0; t < 4 && all; t++) {
+            long xi = x0 + (t & 1), yi = y0 + (t >> 1);
+            uint32_t m = memo_lookup(osc, memo, effect,
+                                     base | ((uint64_t)(yi >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
+                                         ((uint64_t)(xi >> 3) << OSC_KEY_BLOCK_X_SHIFT));
+            uint32_t tx = ((uint32_t)yi & 7) * 8 + ((uint32_t)xi & 7);
+            all = memo->block[m] != OSC_NONE && (memo->valid[m] >> tx & 1);
+            if (all) {
+                texel[t] = memo->payload[m] + tx * texel_bytes;
+                block0 = t == 0 ? memo->block[m] : block0;
+            }
+        }
+        if (all) {
+            for (int t = 0; t < 4; t++)
+                st->reuse_texel[t] = texel[t];
+            st->reuse = true, st->reuse_x0 = x0, st->reuse_y0 = y0, st->reuse_block = block0;
+            memcpy(out->texel, st->reuse_texel, sizeof st->reuse_texel);
+            memcpy(out->weight, L->weight[i], sizeof L->weight[i]);
+            memcpy(out->at_x, L->at_x[i], sizeof L->at_x[i]);
+            memcpy(out->at_y, L->at_y[i], sizeof L->at_y[i]);
+            out->footprint_log2 = L->footprint_log2[i];
+            out->count = 4;
+            if (blocks)
+                blocks[i] = block0;
+            return;
+        }
+    }
+    /* The two columns and rows, clamped to the island (one test each for the usual case, inside it), in
+     * scalars: arrays indexed by the tap are built only for the general path below. */
+    long tx0 = x0, tx1 = x0 + 1, ty0 = y0, ty1 = y0 + 1;
+    if (!(x0 >= 0 && x0 + 1 < w)) {
+        tx0 = tx0 < 0 ? 0 : (tx0 >= w ? w - 1 : tx0);
+        tx1 = tx1 < 0 ? 0 : (tx1 >= w ? w - 1 : tx1);
+    }
+    if (!(y0 >= 0 && y0 + 1 < h)) {
+        ty0 = ty0 < 0 ? 0 : (ty0 >= h ? h - 1 : ty0);
+        ty1 = ty1 < 0 ? 0 : (ty1 >= h ? h - 1 : ty1);
+    }
+    float wx0 = 1 - ax, wx1 = ax, wy0 = 1 - ay, wy1 = ay;
+    out->footprint_log2 = px->footprint - (float)level;
+    float w00 = wx0 * wy0, w10 = wx1 * wy0, w01 = wx0 * wy1, w11 = wx1 * wy1;
+    bool positive = w00 > 0 && w10 > 0 && w01 > 0 && w11 > 0;
+    if (st->reuse && x0 == st->reuse_x0 && y0 == st->reuse_y0 && positive) {
+        /* The previous pixel's four texels (same island, level and corner texel, and it took the common
+         * path below): the same block, texels and data, known without the key and the memo. */
+        four_taps(out, st->reuse_texel, w00, w10, w01, w11, x, y, tx0, tx1, ty0, ty1);
+        if (blocks)
+            blocks[i] = st->reuse_block;
+        return;
+    }
+    st->reuse = false;
+    uint32_t tap_memo_slot[4];
+    uint64_t key0 = base | ((uint64_t)(ty0 >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
+                    ((uint64_t)(tx0 >> 3) << OSC_KEY_BLOCK_X_SHIFT);
+    if (memo->key[st->last_slot] != key0) /* the slot may since hold another block */
+        st->last_slot = memo_lookup(osc, memo, effect, key0);
+    tap_memo_slot[0] = st->last_slot;
+    bool same_x = (tx0 >> 3) == (tx1 >> 3), same_y = (ty0 >> 3) == (ty1 >> 3);
+    uint32_t m0 = tap_memo_slot[0];
+    if (same_x && same_y && memo->block[m0] != OSC_NONE) {
+        /* The common case, straight-line: four texels of one block, all holding data, no weight 0. What
+         * the general path below gives for it, operation for operation. */
+        uint32_t row0 = ((uint32_t)ty0 & 7) * 8, row1 = ((uint32_t)ty1 & 7) * 8;
+        uint32_t col0 = (uint32_t)tx0 & 7, col1 = (uint32_t)tx1 & 7;
+        uint64_t need = (uint64_t)1 << (row0 + col0) | (uint64_t)1 << (row0 + col1) |
+                        (uint64_t)1 << (row1 + col0) | (uint64_t)1 << (row1 + col1);
+        if ((memo->valid[m0] & need) == need && positive) {
+            const uint8_t *payload = memo->payload[m0];
+            st->reuse_texel[0] = payload + (row0 + col0) * texel_bytes;
+            st->reuse_texel[1] = payload + (row0 + col1) * texel_bytes;
+            st->reuse_texel[2] = payload + (row1 + col0) * texel_bytes;
+            st->reuse_texel[3] = payload + (row1 + col1) * texel_bytes;
+            st->reuse = true, st->reuse_x0 = x0, st->reuse_y0 = y0, st->reuse_block = memo->block[m0];
+            four_taps(out, st->reuse_texel, w00, w10, w01, w11, x, y, tx0, tx1, ty0, ty1);
+            if (blocks)
+                blocks[i] = st->reuse_block;
+            return;
+        }
+    }
+    const long tx[2] = {tx0, tx1}, ty[2] = {ty0, ty1};
+    const float wx[2] = {wx0, wx1}, wy[2] = {wy0, wy1};
+#pragma GCC unroll 4
+    for (int t = 1; t < 4; t++) {
+        long xi = tx[t & 1], yi = ty[t >> 1];
+        bool same = ((t & 1) == 0 || same_x) && ((t >> 1) == 0 || same_y);
+        tap_memo_slot[t] = same ? tap_memo_slot[0]
+                                : memo_lookup(osc, memo, effect,
+                                              base | ((uint64_t)(yi >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
+                                                  ((uint64_t)(xi >> 3) << OSC_KEY_BLOCK_X_SHIFT));
+    }
+    float total = 0;
+    uint32_t n = 0;
+    uint32_t first_block = SRV_NONE;
+#pragma GCC unroll 4
+    for (int t = 0; t < 4; t++) {
+        uint32_t m = tap_memo_slot[t];
+        if (memo->block[m] == OSC_NONE)
+            continue;
+        if (first_block == SRV_NONE)
+            first_block = memo->block[m];
+        long xi = tx[t & 1], yi = ty[t >> 1];
+        uint32_t texel = ((uint32_t)yi & 7) * 8 + ((uint32_t)xi & 7);
+        float weight = wx[t & 1] * wy[t >> 1];
+        /* Written always, kept only when the texel holds data and the weight is not 0 (no branch). */
+        bool keep = (memo->valid[m] >> texel & 1) && !(weight <= 0);
+        out->texel[n] = memo->payload[m] + texel * texel_bytes;
+        out->weight[n] = weight;
+        out->at_x[n] = x + 0.5f - (float)xi;
+        out->at_y[n] = y + 0.5f - (float)yi;
+        total += keep ? weight : 0.0f;
+        n += keep;
+    }
+    out->count = n;
+    if (blocks)
+        blocks[i] = first_block;
+    float inv = n ? 1.0f / total : 0.0f;
+    for (uint32_t t = 0; t < n; t++)
+        out->weight[t] *= inv;
+}
+
+/* The usual case's four texels when they straddle a block edge (x0, y0 inside the island, key the corner
+ * texel's block with the effect field): each tap's block from the memo; false when a block is absent or a
+ * texel holds no data. *block receives the first tap's block. (Looking up only the two or four distinct
+ * blocks, with branches, was more instructions.) */
+static bool taps_straddle(taps_state *st, int32_t x0, int32_t y0, uint64_t key, const uint8_t *texel[4],
+                          uint32_t *block)
+{
+    const uint64_t base =
+        key & ~(((uint64_t)0xFFF << OSC_KEY_BLOCK_Y_SHIFT) | ((uint64_t)0xFFF << OSC_KEY_BLOCK_X_SHIFT));
+    for (int t = 0; t < 4; t++) {
+        uint32_t xi = (uint32_t)x0 + (uint32_t)(t & 1), yi = (uint32_t)y0 + (uint32_t)(t >> 1);
+        uint32_t m = memo_lookup(st->osc, &st->memo, st->effect,
+                                 base | ((uint64_t)(yi >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
+                                     ((uint64_t)(xi >> 3) << OSC_KEY_BLOCK_X_SHIFT));
+        uint32_t tx = (yi & 7) * 8 + (xi & 7);
+        if (st->memo.block[m] == OSC_NONE || !(st->memo.valid[m] >> tx & 1))
+            return false;
+        texel[t] = st->memo.payload[m] + tx * st->texel_bytes;
+        if (t == 0)
+            *block = st->memo.block[m];
+    }
+    return true;
 }
 
 /* One effect's taps of a run from the lanes (taps_lanes_fill at the call's bias): per pixel the bilinear taps
@@ -389,203 +672,86 @@ FXC_HOT_LANES static void taps_lanes_fill(taps_lanes *L, int32_t bias)
  * (x0 + 1, y0 + 1) with texels clamped to the island, leaving out taps whose block is absent, whose texel
  * holds no data or whose weight is 0; the weights renormalised. The four texels lie in one block unless the
  * footprint straddles a block edge, so the block of a tap is looked up only where its block coordinates
- * differ from the first tap's. */
+ * differ from the first tap's.
+ *
+ * The usual case (columns and rows inside the island, no weight 0, the four texels holding data; in one
+ * block or, through taps_straddle, straddling a block edge) is this loop's, decided by the lanes up to the
+ * blocks' contents (taps_lanes_fast), with the few variables it needs in locals: the previous pixel's key,
+ * corner texel and four texels (a pixel with the same ones gets the same taps without the memo). Its taps are
+ * the lanes' values, what the general path of taps_pixel_rest gives, value for value. Every other pixel goes
+ * through taps_pixel_rest, the general loop body with its state in a struct, not inlined: in one function
+ * with the usual case, their state together outnumbered the registers and the usual case ran from the stack. */
 FXC_HOT_INLINE void taps_of_effect(const kind_osc *k, const taps_lanes *L, const srv_pixel *pixels,
                                    uint32_t count, uint32_t effect, fx_taps *taps, uint32_t *blocks)
 {
-    const osc_cache *osc = k->osc;
-    const scene_island *islands = k->s->islands;
-    const size_t texel_bytes = osc_pool_texel_bytes(osc, effect);
-    tap_memo memo;
-    memset(memo.key, 0xFF, sizeof memo.key); /* no key has every bit set: its effect field would be 15 */
-    const uint64_t effect_field = (uint64_t)effect << OSC_KEY_EFFECT_SHIFT;
-    uint32_t memo_island = UINT32_MAX, memo_level = UINT32_MAX;
-    long w = 0, h = 0;
-    uint64_t base = 0;
-    uint32_t last_slot = 0; /* the memo slot of the previous pixel's first block */
-    /* The four texels of the last pixel that took the common path, its corner texel and block. */
-    bool reuse = false;
-    long reuse_x0 = 0, reuse_y0 = 0;
-    const uint8_t *reuse_texel[4] = {NULL, NULL, NULL, NULL};
-    uint32_t reuse_block = 0;
-    bool small = false; /* the island's size at this level below 2^24: a column or row is exact in a float */
+    taps_state st;
+    st.osc = k->osc;
+    st.islands = k->s->islands;
+    st.texel_bytes = osc_pool_texel_bytes(st.osc, effect);
+    st.effect = effect;
+    st.effect_field = (uint64_t)effect << OSC_KEY_EFFECT_SHIFT;
+    memset(st.memo.key, 0xFF, sizeof st.memo.key); /* no key has every bit set (effect field 15) */
+    st.memo_island = st.memo_level = UINT32_MAX;
+    st.w = st.h = 0;
+    st.base = 0;
+    st.fast_w = st.fast_h = 0;
+    st.last_slot = 0;
+    st.reuse = false;
+    st.reuse_x0 = st.reuse_y0 = 0;
+    for (int t = 0; t < 4; t++)
+        st.reuse_texel[t] = NULL;
+    st.reuse_block = 0;
+    const osc_cache *osc = st.osc;
+    const size_t texel_bytes = st.texel_bytes;
+    const uint64_t effect_field = st.effect_field;
+    /* The usual case's last block and corner texel (its key with the effect field, UINT64_MAX: none). */
+    uint64_t reuse_key = UINT64_MAX;
+    int32_t reuse_cell = -1;
+    const uint8_t *t0 = NULL, *t1 = NULL, *t2 = NULL, *t3 = NULL; /* its four texels */
+    uint32_t reuse_block = 0, last_slot = 0;
     for (uint32_t i = 0; i < count; i++) {
-        const srv_pixel *px = &pixels[i];
         fx_taps *out = &taps[i];
-        uint32_t level = (uint32_t)L->level[i];
-        if (px->island != memo_island || level != memo_level) { /* the island's size at this level */
-            memo_island = px->island;
-            memo_level = level;
-            const scene_island *is = &islands[px->island];
-            w = (long)((is->width + (1u << level) - 1u) >> level);
-            h = (long)((is->height + (1u << level) - 1u) >> level);
-            small = w < (1l << 24) && h < (1l << 24);
-            base = effect_field | ((uint64_t)px->island << OSC_KEY_ISLAND_SHIFT) |
-                   ((uint64_t)level << OSC_KEY_LEVEL_SHIFT);
-            reuse = false;
-        }
-        float x = L->x[i], y = L->y[i], ax = L->ax[i], ay = L->ay[i];
-        long x0 = (long)L->fx0[i], y0 = (long)L->fy0[i];
-        if (small && L->positive[i] && x0 >= 0 && x0 + 1 < w && y0 >= 0 && y0 + 1 < h) {
-            /* The usual case: columns and rows inside the island (not clamped), no weight 0. When the four
-             * texels lie in one block and hold data, the taps are the lanes' values: what the paths below
-             * give, value for value. Otherwise those paths decide. */
-            bool found = reuse && x0 == reuse_x0 && y0 == reuse_y0;
-            if (!found && (x0 & 7) != 7 && (y0 & 7) != 7) {
-                uint64_t key0 = base | ((uint64_t)(y0 >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
-                                ((uint64_t)(x0 >> 3) << OSC_KEY_BLOCK_X_SHIFT);
-                if (memo.key[last_slot] != key0)
-                    last_slot = memo_lookup(osc, &memo, effect, key0);
-                uint32_t m0 = last_slot;
-                uint32_t row0 = ((uint32_t)y0 & 7) * 8, row1 = row0 + 8;
-                uint32_t col0 = (uint32_t)x0 & 7, col1 = col0 + 1;
-                uint64_t need = (uint64_t)3 << (row0 + col0) | (uint64_t)3 << (row1 + col0);
-                if (memo.block[m0] != OSC_NONE && (memo.valid[m0] & need) == need) {
-                    const uint8_t *payload = memo.payload[m0];
-                    reuse_texel[0] = payload + (row0 + col0) * texel_bytes;
-                    reuse_texel[1] = payload + (row0 + col1) * texel_bytes;
-                    reuse_texel[2] = payload + (row1 + col0) * texel_bytes;
-                    reuse_texel[3] = payload + (row1 + col1) * texel_bytes;
-                    reuse = true, reuse_x0 = x0, reuse_y0 = y0, reuse_block = memo.block[m0];
-                    found = true;
+        if (L->fast[i]) {
+            uint64_t key = L->key[i] | effect_field;
+            int32_t cell = L->cell[i];
+            if (key != reuse_key || cell != reuse_cell) {
+                if (!L->straddle[i]) {
+                    if (st.memo.key[last_slot] != key)
+                        last_slot = memo_lookup(osc, &st.memo, effect, key);
+                    uint32_t m0 = last_slot;
+                    uint64_t need = (uint64_t)3 << cell | (uint64_t)3 << (cell + 8);
+                    if (!(st.memo.block[m0] != OSC_NONE && (st.memo.valid[m0] & need) == need))
+                        goto rest;
+                    /* The texels (x0, y0), (x0 + 1, y0), (x0, y0 + 1), (x0 + 1, y0 + 1) of the block. */
+                    const uint8_t *corner = st.memo.payload[m0] + (size_t)cell * texel_bytes;
+                    t0 = corner, t1 = corner + texel_bytes, t2 = corner + 8 * texel_bytes;
+                    t3 = corner + 9 * texel_bytes;
+                    reuse_block = st.memo.block[m0];
+                } else {
+                    const uint8_t *t[4];
+                    if (!taps_straddle(&st, L->fast_x0[i], L->fast_y0[i], key, t, &reuse_block))
+                        goto rest;
+                    t0 = t[0], t1 = t[1], t2 = t[2], t3 = t[3];
                 }
-            } else if (!found) {
-                /* The footprint straddles a block edge: each tap's block from the memo. When all four
-                 * texels hold data the general path below keeps all four taps, in this order, with the
-                 * lanes' weights and positions (its total starts from 0 + w00 = w00). */
-                const uint8_t *texel[4];
-                uint32_t block0 = OSC_NONE;
-                bool all = true;
-#pragma GCC unroll 4
-                for (int t = 0; t < 4 && all; t++) {
-                    long xi = x0 + (t & 1), yi = y0 + (t >> 1);
-                    uint32_t m = memo_lookup(osc, &memo, effect,
-                                             base | ((uint64_t)(yi >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
-                                                 ((uint64_t)(xi >> 3) << OSC_KEY_BLOCK_X_SHIFT));
-                    uint32_t tx = ((uint32_t)yi & 7) * 8 + ((uint32_t)xi & 7);
-                    all = memo.block[m] != OSC_NONE && (memo.valid[m] >> tx & 1);
-                    if (all) {
-                        texel[t] = memo.payload[m] + tx * texel_bytes;
-                        block0 = t == 0 ? memo.block[m] : block0;
-                    }
-                }
-                if (all) {
-                    for (int t = 0; t < 4; t++)
-                        reuse_texel[t] = texel[t];
-                    reuse = true, reuse_x0 = x0, reuse_y0 = y0, reuse_block = block0;
-                    found = true;
-                }
+                reuse_key = key, reuse_cell = cell;
             }
-            if (found) {
-                out->texel[0] = reuse_texel[0];
-                out->texel[1] = reuse_texel[1];
-                out->texel[2] = reuse_texel[2];
-                out->texel[3] = reuse_texel[3];
-                out->weight[0] = L->weight[0][i];
-                out->weight[1] = L->weight[1][i];
-                out->weight[2] = L->weight[2][i];
-                out->weight[3] = L->weight[3][i];
-                float at_x0 = L->at_x0[i], at_x1 = L->at_x1[i], at_y0 = L->at_y0[i], at_y1 = L->at_y1[i];
-                out->at_x[0] = at_x0, out->at_x[1] = at_x1, out->at_x[2] = at_x0, out->at_x[3] = at_x1;
-                out->at_y[0] = at_y0, out->at_y[1] = at_y0, out->at_y[2] = at_y1, out->at_y[3] = at_y1;
-                out->footprint_log2 = L->footprint_log2[i];
-                out->count = 4;
-                if (blocks)
-                    blocks[i] = reuse_block;
-                continue;
-            }
-        }
-        /* The two columns and rows, clamped to the island (one test each for the usual case, inside it), in
-         * scalars: arrays indexed by the tap are built only for the general path below. */
-        long tx0 = x0, tx1 = x0 + 1, ty0 = y0, ty1 = y0 + 1;
-        if (!(x0 >= 0 && x0 + 1 < w)) {
-            tx0 = tx0 < 0 ? 0 : (tx0 >= w ? w - 1 : tx0);
-            tx1 = tx1 < 0 ? 0 : (tx1 >= w ? w - 1 : tx1);
-        }
-        if (!(y0 >= 0 && y0 + 1 < h)) {
-            ty0 = ty0 < 0 ? 0 : (ty0 >= h ? h - 1 : ty0);
-            ty1 = ty1 < 0 ? 0 : (ty1 >= h ? h - 1 : ty1);
-        }
-        float wx0 = 1 - ax, wx1 = ax, wy0 = 1 - ay, wy1 = ay;
-        out->footprint_log2 = px->footprint - (float)level;
-        float w00 = wx0 * wy0, w10 = wx1 * wy0, w01 = wx0 * wy1, w11 = wx1 * wy1;
-        bool positive = w00 > 0 && w10 > 0 && w01 > 0 && w11 > 0;
-        if (reuse && x0 == reuse_x0 && y0 == reuse_y0 && positive) {
-            /* The previous pixel's four texels (same island, level and corner texel, and it took the common
-             * path below): the same block, texels and data, known without the key and the memo. */
-            four_taps(out, reuse_texel, w00, w10, w01, w11, x, y, tx0, tx1, ty0, ty1);
+            out->texel[0] = t0;
+            out->texel[1] = t1;
+            out->texel[2] = t2;
+            out->texel[3] = t3;
+            memcpy(out->weight, L->weight[i], sizeof L->weight[i]);
+            memcpy(out->at_x, L->at_x[i], sizeof L->at_x[i]);
+            memcpy(out->at_y, L->at_y[i], sizeof L->at_y[i]);
+            out->footprint_log2 = L->footprint_log2[i];
+            out->count = 4;
             if (blocks)
                 blocks[i] = reuse_block;
             continue;
         }
-        reuse = false;
-        uint32_t tap_memo_slot[4];
-        uint64_t key0 = base | ((uint64_t)(ty0 >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
-                        ((uint64_t)(tx0 >> 3) << OSC_KEY_BLOCK_X_SHIFT);
-        if (memo.key[last_slot] != key0) /* the slot may since hold another block */
-            last_slot = memo_lookup(osc, &memo, effect, key0);
-        tap_memo_slot[0] = last_slot;
-        bool same_x = (tx0 >> 3) == (tx1 >> 3), same_y = (ty0 >> 3) == (ty1 >> 3);
-        uint32_t m0 = tap_memo_slot[0];
-        if (same_x && same_y && memo.block[m0] != OSC_NONE) {
-            /* The common case, straight-line: four texels of one block, all holding data, no weight 0. What
-             * the general path below gives for it, operation for operation. */
-            uint32_t row0 = ((uint32_t)ty0 & 7) * 8, row1 = ((uint32_t)ty1 & 7) * 8;
-            uint32_t col0 = (uint32_t)tx0 & 7, col1 = (uint32_t)tx1 & 7;
-            uint64_t need = (uint64_t)1 << (row0 + col0) | (uint64_t)1 << (row0 + col1) |
-                            (uint64_t)1 << (row1 + col0) | (uint64_t)1 << (row1 + col1);
-            if ((memo.valid[m0] & need) == need && positive) {
-                const uint8_t *payload = memo.payload[m0];
-                reuse_texel[0] = payload + (row0 + col0) * texel_bytes;
-                reuse_texel[1] = payload + (row0 + col1) * texel_bytes;
-                reuse_texel[2] = payload + (row1 + col0) * texel_bytes;
-                reuse_texel[3] = payload + (row1 + col1) * texel_bytes;
-                reuse = true, reuse_x0 = x0, reuse_y0 = y0, reuse_block = memo.block[m0];
-                four_taps(out, reuse_texel, w00, w10, w01, w11, x, y, tx0, tx1, ty0, ty1);
-                if (blocks)
-                    blocks[i] = reuse_block;
-                continue;
-            }
-        }
-        const long tx[2] = {tx0, tx1}, ty[2] = {ty0, ty1};
-        const float wx[2] = {wx0, wx1}, wy[2] = {wy0, wy1};
-#pragma GCC unroll 4
-        for (int t = 1; t < 4; t++) {
-            long xi = tx[t & 1], yi = ty[t >> 1];
-            bool same = ((t & 1) == 0 || same_x) && ((t >> 1) == 0 || same_y);
-            tap_memo_slot[t] = same ? tap_memo_slot[0]
-                                    : memo_lookup(osc, &memo, effect,
-                                                  base | ((uint64_t)(yi >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
-                                                      ((uint64_t)(xi >> 3) << OSC_KEY_BLOCK_X_SHIFT));
-        }
-        float total = 0;
-        uint32_t n = 0;
-        uint32_t first_block = SRV_NONE;
-#pragma GCC unroll 4
-        for (int t = 0; t < 4; t++) {
-            uint32_t m = tap_memo_slot[t];
-            if (memo.block[m] == OSC_NONE)
-                continue;
-            if (first_block == SRV_NONE)
-                first_block = memo.block[m];
-            long xi = tx[t & 1], yi = ty[t >> 1];
-            uint32_t texel = ((uint32_t)yi & 7) * 8 + ((uint32_t)xi & 7);
-            float weight = wx[t & 1] * wy[t >> 1];
-            /* Written always, kept only when the texel holds data and the weight is not 0 (no branch). */
-            bool keep = (memo.valid[m] >> texel & 1) && !(weight <= 0);
-            out->texel[n] = memo.payload[m] + texel * texel_bytes;
-            out->weight[n] = weight;
-            out->at_x[n] = x + 0.5f - (float)xi;
-            out->at_y[n] = y + 0.5f - (float)yi;
-            total += keep ? weight : 0.0f;
-            n += keep;
-        }
-        out->count = n;
-        if (blocks)
-            blocks[i] = first_block;
-        float inv = n ? 1.0f / total : 0.0f;
-        for (uint32_t t = 0; t < n; t++)
-            out->weight[t] *= inv;
+    rest:
+        st.last_slot = last_slot;
+        taps_pixel_rest(&st, L, &pixels[i], i, out, blocks);
+        last_slot = st.last_slot;
     }
 }
 
@@ -601,14 +767,22 @@ FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot,
     const kind_osc *k = cache;
     taps_lanes L;
     uint32_t i = 0;
+    const scene_island *islands = k->s->islands;
     for (; i < count; i++) {
         L.u[i] = pixels[i].island_u;
         L.v[i] = pixels[i].island_v;
         L.footprint[i] = pixels[i].footprint;
+        uint32_t island = pixels[i].island;
+        L.island[i] = island;
+        L.width0[i] = islands[island].width;
+        L.height0[i] = islands[island].height;
     }
-    for (; i < SRV_RUN; i++)
+    for (; i < SRV_RUN; i++) {
         L.u[i] = L.v[i] = L.footprint[i] = 0.0f;
+        L.island[i] = L.width0[i] = L.height0[i] = 0;
+    }
     taps_lanes_fill(&L, bias);
+    taps_lanes_fast(&L);
     for (uint32_t j = 0; j < effect_count; j++)
         taps_of_effect(k, &L, pixels, count, effects[j], taps[j], blocks ? blocks[j] : NULL);
 }
