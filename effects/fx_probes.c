@@ -20,9 +20,9 @@
  * from the probe's (relocated) position:
  *   - front-face hit: radiance = albedo x (direct light at the hit, shadow rays to every light, as compose
  *     lights it + E_probes / pi), E_probes the committed probes around the hit at the job's level with the
- *     shade filter (fx__probe_filter_memo's weights), the hit's cell read through ctx->world_cell and kept
- *     per thread for the frame (hit_bounce; through ctx->world_taps per hit when world_cell is NULL): light
- *     bounces once more every frame;
+ *     update's filter (below, "The bounce at hits"), the hit's cell read through ctx->world_cell and kept
+ *     per thread for the frame (hit_bounce; through ctx->world_taps per hit when world_cell is NULL, the same
+ *     filter): light bounces once more every frame; the albedo is the triangle's mean (below);
  *   - back-face hit: radiance 0, counted, distance shortened to 0.2 t (RTXGI), so the visibility moments see
  *     the wall as near;
  *   - miss: the sky's radiance, distance the maximum.
@@ -54,6 +54,25 @@
  * (scale-free: a scene of 1e-4 m keeps them normal halves). Rounding to half is stochastic (probability
  * from a hash): with nearest rounding a 3 % step is below half a unit in the last place within 0.8 % of the
  * target, and the blend would stall there; stochastic rounding keeps the blend's mean exact.
+ *
+ * Albedo at hits: scene_albedo_mean, the triangle's texture mean (one load; computed when the scene is
+ * finalised) times its material's colour, instead of the texture filtered at the ray's footprint (a mip
+ * level from log2f, a bilinear fetch). What a texel of the irradiance map integrates is a cosine lobe over
+ * many hits, and the light leaving a hit is low-frequency indirect light: the triangle's mean differs from
+ * the footprint's mean only where a triangle is larger than a ray's footprint (near hits on big textured
+ * triangles), and then by the texture's variation within the triangle. Untextured materials: the same floats
+ * as before (diffuse x 1). BENCHMARKS, branch probe-upd, measures the image change against the seed noise.
+ *
+ * The bounce at hits (hit_weights): DDGI's filter (trilinear x wrap x Chebyshev, renormalised, crushing below
+ * 0.2) as compose's shade has it, with two departures for the update only: (1) the Chebyshev test reads the
+ * moments of the one octahedral texel the direction from the probe falls in, not the bilinear mix of four
+ * (a quarter of the scattered loads and of the texel arithmetic); (2) a plane test: a corner behind the plane
+ * of the surface it would light gets weight 0 (it cannot see that side) as long as one corner with a
+ * trilinear weight lies in front; when none does, all corners keep their filter weights as before (a surface
+ * near a cell face with every corner behind it would otherwise get no bounce at all). The plane test only
+ * removes light from behind a surface (what the Chebyshev test let through at its floor of 0.05 and the wrap
+ * at 0.2), which is what the thin-wall test measures; the nearest texel coarsens the visibility to the map's
+ * 8x8 resolution, which the same test bounds (tests/test_probes.c, unchanged tolerances).
  *
  * Determinism: update reads only committed payloads (its own and world_taps' / world_cell's); all
  * randomness is hashed from (seed, frame or update count) for the rays and (seed, key, texel, update count)
