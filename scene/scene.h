@@ -265,7 +265,7 @@ void scene_albedo_run(const scene *s, const uint32_t *tri, const float *u, const
  * coarsest level, the texture's mean, for triangles over a whole repeat). One load per call, no filtering:
  * for estimators of low-frequency light (the probe update's hits), not for pixels. The diffuse colour is read
  * at the call (a material changed after finalisation counts); a scene without the table (never finalised)
- * gives scene_albedo_filtered at the centroid with the same mip level. */
+ * gives the same value, computed at the call. */
 void scene_albedo_mean(const scene *s, uint32_t tri, float out_rgb[3]);
 
 /* ---- what the scene needs ---------------------------------------------------------------------------- */
