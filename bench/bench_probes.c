@@ -49,6 +49,7 @@ typedef struct options {
     srv_camgen_kind gen;
     const char *part;
     const char *out; /* --part image: where the radiance goes */
+    uint64_t seed;   /* --part image: the loops' seed (1 unless --seed; another seed measures the noise) */
     uint32_t indirect_block; /* the loops' srv_loop_desc.indirect_block (0: the default) */
 } options;
 
@@ -355,10 +356,10 @@ static int part_image(const options *o, scene *s, scene_rt *rt)
         return 1;
     }
     srv_viewer_id with_ids[1], without_ids[1];
-    srv_loop *with = bench_make_loop_desc("bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .threads = 1, .indirect_block = o->indirect_block},
+    srv_loop *with = bench_make_loop_desc("bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = o->seed, .threads = 1, .indirect_block = o->indirect_block},
                                           NULL, 1, o->w, o->h, with_ids);
     srv_loop *without = bench_make_loop_desc(
-        "bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .threads = 1, .indirect_block = o->indirect_block}, "probes", 1, o->w, o->h, without_ids);
+        "bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = o->seed, .threads = 1, .indirect_block = o->indirect_block}, "probes", 1, o->w, o->h, without_ids);
     size_t n = (size_t)o->w * o->h * 3;
     for (uint32_t frame = 0; frame < o->warmup + o->frames; frame++) {
         srv_frame_stats a, b;
@@ -415,7 +416,7 @@ static void part_memory(const options *o, scene *s, scene_rt *rt)
 int main(int argc, char **argv)
 {
     options o = {.path = "../shared/scenes/sponza/sponza.3ds", .w = 640, .h = 360, .warmup = 10, .frames = 20,
-                 .gen = SRV_CAMGEN_GROUP, .part = "all"};
+                 .gen = SRV_CAMGEN_GROUP, .part = "all", .seed = 1};
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
         if (!strcmp(a, "--scene") && v)
@@ -432,11 +433,13 @@ int main(int argc, char **argv)
             o.part = v, i++;
         else if (!strcmp(a, "--out") && v)
             o.out = v, i++;
+        else if (!strcmp(a, "--seed") && v)
+            o.seed = strtoull(v, NULL, 10), i++;
         else if (!strcmp(a, "--indirect-block") && v)
             o.indirect_block = (uint32_t)atoi(v), i++;
         else {
             fprintf(stderr, "usage: bench_probes [--scene PATH] [--res WxH] [--warmup N] [--frames N] [--camera GEN] "
-                            "[--part rays|viewers|overhead|memory|image|all] [--out FILE (image)] "
+                            "[--part rays|viewers|overhead|memory|image|all] [--out FILE (image)] [--seed N (image)] "
                             "[--indirect-block 1|2|4]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }

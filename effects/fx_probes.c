@@ -20,9 +20,9 @@
  * from the probe's (relocated) position:
  *   - front-face hit: radiance = albedo x (direct light at the hit, shadow rays to every light, as compose
  *     lights it + E_probes / pi), E_probes the committed probes around the hit at the job's level with the
- *     shade filter (fx__probe_filter_memo's weights), the hit's cell read through ctx->world_cell and kept
- *     per thread for the frame (hit_bounce; through ctx->world_taps per hit when world_cell is NULL): light
- *     bounces once more every frame;
+ *     update's filter (below, "The bounce at hits"), the hit's cell read through ctx->world_cell and kept
+ *     per thread for the frame (hit_bounce; through ctx->world_taps per hit when world_cell is NULL, the same
+ *     filter): light bounces once more every frame; the albedo is the triangle's mean (below);
  *   - back-face hit: radiance 0, counted, distance shortened to 0.2 t (RTXGI), so the visibility moments see
  *     the wall as near;
  *   - miss: the sky's radiance, distance the maximum.
@@ -54,6 +54,25 @@
  * (scale-free: a scene of 1e-4 m keeps them normal halves). Rounding to half is stochastic (probability
  * from a hash): with nearest rounding a 3 % step is below half a unit in the last place within 0.8 % of the
  * target, and the blend would stall there; stochastic rounding keeps the blend's mean exact.
+ *
+ * Albedo at hits: scene_albedo_mean, the triangle's texture mean (one load; computed when the scene is
+ * finalised) times its material's colour, instead of the texture filtered at the ray's footprint (a mip
+ * level from log2f, a bilinear fetch). What a texel of the irradiance map integrates is a cosine lobe over
+ * many hits, and the light leaving a hit is low-frequency indirect light: the triangle's mean differs from
+ * the footprint's mean only where a triangle is larger than a ray's footprint (near hits on big textured
+ * triangles), and then by the texture's variation within the triangle. Untextured materials: the same floats
+ * as before (diffuse x 1). BENCHMARKS, branch probe-upd, measures the image change against the seed noise.
+ *
+ * The bounce at hits (hit_weights): DDGI's filter (trilinear x wrap x Chebyshev, renormalised, crushing below
+ * 0.2) as compose's shade has it, with two departures for the update only: (1) the Chebyshev test reads the
+ * moments of the one octahedral texel the direction from the probe falls in, not the bilinear mix of four
+ * (a quarter of the scattered loads and of the texel arithmetic); (2) a plane test: a corner behind the plane
+ * of the surface it would light gets weight 0 (it cannot see that side) as long as one corner with a
+ * trilinear weight lies in front; when none does, all corners keep their filter weights as before (a surface
+ * near a cell face with every corner behind it would otherwise get no bounce at all). The plane test only
+ * removes light from behind a surface (what the Chebyshev test let through at its floor of 0.05 and the wrap
+ * at 0.2), which is what the thin-wall test measures; the nearest texel coarsens the visibility to the map's
+ * 8x8 resolution, which the same test bounds (tests/test_probes.c, unchanged tolerances).
  *
  * Determinism: update reads only committed payloads (its own and world_taps' / world_cell's); all
  * randomness is hashed from (seed, frame or update count) for the rays and (seed, key, texel, update count)
@@ -263,17 +282,20 @@ static hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t 
 }
 
 /* probe_weight (fx_probes_map.c) with visibility for the 8 corners of a cell at once, times the trilinear
- * weights `tap` (0 for corners that are missing, off or without data): the same IEEE operations per corner,
- * written lane by lane without branches (the octahedral fold and border wrap as selects, the moments' four
- * texels loaded per corner), so the AVX2 copy runs the 8 corners as one vector. */
+ * weights `tap` (0 for corners that are missing, off or without data), with two departures (file comment,
+ * "The bounce at hits"): the moments are read from the one texel of the octahedral map the direction falls in
+ * (nearest, not bilinear: one load per corner instead of four), and a corner behind the plane of the hit's
+ * surface gets weight 0 when some corner lies in front of it (plane_mask: the corners in front, with a
+ * trilinear weight). Written lane by lane without branches, so the AVX2 copy runs the 8 corners as one
+ * vector. */
 FXC_HOT_CLONES static void hit_weights(const hit_cell *restrict e, const float position[3], const float normal[3],
                                        const float tap[8], float out[8])
 {
     static const uint8_t zero_payload[FX_PROBE_BYTES]; /* read in place of missing corners, never used */
     const float px = position[0], py = position[1], pz = position[2];
     const float nx = normal[0], ny = normal[1], nz = normal[2];
-    int32_t texel[4][8];
-    float bilinear[4][8], weight[8], distance[8], cell[8];
+    int32_t texel[8];
+    float weight[8], distance[8], cell[8], along[8];
     for (int c = 0; c < 8; c++) {
         cell[c] = e->cell[c];
         const float *probe = e->position[c];
@@ -283,7 +305,8 @@ FXC_HOT_CLONES static void hit_weights(const hit_cell *restrict e, const float p
         float bz = probe[2] - (pz + nz * FX_PROBE_NORMAL_BIAS * cell[c]);
         float len2 = tx * tx + ty * ty + tz * tz, biased_len2 = bx * bx + by * by + bz * bz;
         float len = sqrtf(len2);
-        float wrap = len > 0 ? ((tx * nx + ty * ny + tz * nz) / len + 1.0f) * 0.5f : 1.0f;
+        along[c] = tx * nx + ty * ny + tz * nz;
+        float wrap = len > 0 ? (along[c] / len + 1.0f) * 0.5f : 1.0f;
         weight[c] = wrap * wrap + 0.2f;
         float d = sqrtf(biased_len2);
         distance[c] = d;
@@ -294,46 +317,22 @@ FXC_HOT_CLONES static void hit_weights(const hit_cell *restrict e, const float p
         float ox = l1 > 0 ? x / (l1 > 0 ? l1 : 1.0f) : 0.0f, oy = l1 > 0 ? y / (l1 > 0 ? l1 : 1.0f) : 0.0f;
         float fold_x = (1.0f - fabsf(oy)) * (ox >= 0 ? 1.0f : -1.0f), fold_y = (1.0f - fabsf(ox)) * (oy >= 0 ? 1.0f : -1.0f);
         float u = z < 0 ? fold_x : ox, v = z < 0 ? fold_y : oy;
-        /* oct_bilinear (fx_probes_map.c) */
-        float fx = (u + 1.0f) * 4.0f - 0.5f, fy = (v + 1.0f) * 4.0f - 0.5f;
-        float x0 = floorf(fx), y0 = floorf(fy);
-        float wx = fx - x0, wy = fy - y0;
-        int32_t ix0 = (int32_t)x0, iy0 = (int32_t)y0;
-        /* the four texels, unrolled (a loop here would keep the corners' loop from vectorising) */
-#define HIT_TEXEL(i)                                                                                           \
-    do {                                                                                                       \
-        int32_t xi = ix0 + ((i) & 1), yi = iy0 + ((i) >> 1);                                                   \
-        int32_t y_out = yi < 0 || yi > 7;                                                                      \
-        int32_t x1 = y_out ? 7 - xi : xi, y1 = y_out ? (yi < 0 ? 0 : 7) : yi;                                  \
-        int32_t x_out = x1 < 0 || x1 > 7;                                                                      \
-        int32_t x2 = x_out ? (x1 < 0 ? 0 : 7) : x1, y2 = x_out ? 7 - y1 : y1;                                  \
-        x2 = x2 < 0 ? 0 : (x2 > 7 ? 7 : x2);                                                                   \
-        y2 = y2 < 0 ? 0 : (y2 > 7 ? 7 : y2);                                                                   \
-        texel[i][c] = y2 * FX_PROBE_MAP + x2;                                                                  \
-        bilinear[i][c] = (((i) & 1) ? wx : 1.0f - wx) * (((i) >> 1) ? wy : 1.0f - wy);                         \
-    } while (0)
-        HIT_TEXEL(0);
-        HIT_TEXEL(1);
-        HIT_TEXEL(2);
-        HIT_TEXEL(3);
-#undef HIT_TEXEL
+        /* the texel the direction falls in (u, v in [-1, 1]: texel (u + 1) x 4, clamped at the edge) */
+        int32_t ix = (int32_t)((u + 1.0f) * 4.0f), iy = (int32_t)((v + 1.0f) * 4.0f);
+        ix = ix < 0 ? 0 : (ix > 7 ? 7 : ix);
+        iy = iy < 0 ? 0 : (iy > 7 ? 7 : iy);
+        texel[c] = iy * FX_PROBE_MAP + ix;
     }
-    uint32_t word[4][8]; /* each texel's two moments: mean distance (low half), mean squared distance */
+    uint32_t word[8]; /* the texel's two moments: mean distance (low half), mean squared distance */
     for (int c = 0; c < 8; c++) {
         const uint8_t *p = (e->active >> c & 1) ? e->texel[c] : zero_payload;
-        for (int i = 0; i < 4; i++)
-            word[i][c] = get_u32(p + PROBE_MOMENTS + 4 * texel[i][c]);
+        word[c] = get_u32(p + PROBE_MOMENTS + 4 * texel[c]);
     }
+    uint32_t front = 0; /* corners in front of the surface's plane with a trilinear weight */
+    for (int c = 0; c < 8; c++)
+        front |= ((e->active >> c & 1) && along[c] >= 0 && tap[c] > 0 ? 1u : 0u) << c;
     for (int c = 0; c < 8; c++) {
-        float m1 = 0, m2 = 0; /* in texel order, as probe_moments sums */
-        m1 += bilinear[0][c] * half_bits_to_float(word[0][c] & 0xffffu);
-        m2 += bilinear[0][c] * half_bits_to_float(word[0][c] >> 16);
-        m1 += bilinear[1][c] * half_bits_to_float(word[1][c] & 0xffffu);
-        m2 += bilinear[1][c] * half_bits_to_float(word[1][c] >> 16);
-        m1 += bilinear[2][c] * half_bits_to_float(word[2][c] & 0xffffu);
-        m2 += bilinear[2][c] * half_bits_to_float(word[2][c] >> 16);
-        m1 += bilinear[3][c] * half_bits_to_float(word[3][c] & 0xffffu);
-        m2 += bilinear[3][c] * half_bits_to_float(word[3][c] >> 16);
+        float m1 = half_bits_to_float(word[c] & 0xffffu), m2 = half_bits_to_float(word[c] >> 16);
         float mean = m1 * cell[c], mean2 = m2 * cell[c] * cell[c];
         float variance = fabsf(mean2 - mean * mean), excess = distance[c] - mean;
         float chebyshev = variance / (variance + excess * excess);
@@ -342,9 +341,12 @@ FXC_HOT_CLONES static void hit_weights(const hit_cell *restrict e, const float p
         float w = distance[c] > 0 ? weight[c] * chebyshev : weight[c];
         w = w > 1e-6f ? w : 1e-6f;
         w = w < 0.2f ? w * (w * w / (0.2f * 0.2f)) : w;
-        out[c] = (e->active >> c & 1) ? w * tap[c] : 0.0f;
+        uint32_t keep = front ? (front >> c & 1) : (e->active >> c & 1);
+        out[c] = keep ? w * tap[c] : 0.0f;
     }
 }
+
+static bool cell_filter(hit_cell *e, const float tap[8], const float position[3], const float normal[3], float out[3]);
 
 /* The filter at a hit on the grid of `grid_point` (any grid point of the level, e.g. the job's) and `cell`
  * (metres): E of the probes around it, or false (and 0) when none contributes. */
@@ -372,6 +374,17 @@ static bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, c
     hit_cell *e = hit_cell_find(ctx, effect, level, centre);
     if (!e->active)
         return false;
+    float tap[8];
+    double wx[2] = {1.0 - t[0], t[0]}, wy[2] = {1.0 - t[1], t[1]}, wz[2] = {1.0 - t[2], t[2]};
+    for (int c = 0; c < 8; c++) /* ((1 x wx) x wy) x wz in double, as before: 1 x wx is exact */
+        tap[c] = (float)(wx[c & 1] * wy[c >> 1 & 1] * wz[c >> 2]);
+    return cell_filter(e, tap, position, normal, out);
+}
+
+/* The filter over a cell's corners with trilinear weights `tap`: E of the probes around the hit, or false
+ * (out untouched: 0) when none contributes. */
+static bool cell_filter(hit_cell *e, const float tap[8], const float position[3], const float normal[3], float out[3])
+{
     if (!(e->normal_set && memcmp(e->normal, normal, sizeof e->normal) == 0)) {
         uint32_t texel[4];
         float w[4];
@@ -390,10 +403,7 @@ static bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, c
         memcpy(e->normal, normal, sizeof e->normal);
         e->normal_set = true;
     }
-    float tap[8], weight[8];
-    double wx[2] = {1.0 - t[0], t[0]}, wy[2] = {1.0 - t[1], t[1]}, wz[2] = {1.0 - t[2], t[2]};
-    for (int c = 0; c < 8; c++) /* ((1 x wx) x wy) x wz in double, as before: 1 x wx is exact */
-        tap[c] = (float)(wx[c & 1] * wy[c >> 1 & 1] * wz[c >> 2]);
+    float weight[8];
     hit_weights(e, position, normal, tap, weight);
     float sum[3] = {0, 0, 0}, total = 0;
     for (int c = 0; c < 8; c++) {
@@ -410,14 +420,40 @@ static bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, c
     return true;
 }
 
+/* hit_bounce's filter from taps (ctx->world_taps, when world_cell is NULL): the taps as the corners of a
+ * cell (up to 8; an update's taps are one level's 8 corners), then the same cell_filter. */
+static void taps_bounce(const fx_taps *taps, const float position[3], const float normal[3], float out[3])
+{
+    hit_cell e;
+    memset(&e, 0, sizeof e);
+    float tap[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    uint32_t n = taps->count < 8 ? taps->count : 8;
+    for (uint32_t c = 0; c < n; c++) {
+        const uint8_t *p = taps->texel[c];
+        e.texel[c] = p;
+        if (!p || !(taps->weight[c] > 0))
+            continue;
+        uint32_t flags = get_u32(p + 16);
+        if (!(flags & FX_PROBE_HAS_DATA) || (flags & FX_PROBE_OFF))
+            continue;
+        e.active |= 1u << c;
+        for (int k = 0; k < 3; k++)
+            e.position[c][k] = get_f32(p + 4 * k);
+        e.cell[c] = get_f32(p + 12);
+        tap[c] = taps->weight[c];
+    }
+    if (e.active)
+        cell_filter(&e, tap, position, normal, out);
+}
+
 /* Radiance leaving a front-face hit, given its direct light (compose units) and the probes around it. */
 static void hit_radiance(const fx_context *ctx, const fx_block_job *job, uint32_t tri, float u, float v, float t,
                          const float position[3], const float normal[3], const float direct[3], float out[3])
 {
     float albedo[3], bounce[3] = {0, 0, 0};
-    /* The albedo over the ray's footprint there (144 rays: about 0.3 rad apart). */
-    float footprint = t * 0.3f;
-    scene_albedo_filtered(ctx->s, tri, u, v, log2f(footprint > 1e-30f ? footprint : 1e-30f), albedo); /* fmaxf */
+    /* The triangle's mean albedo (one load; file comment, "Albedo at hits"). */
+    (void)u, (void)v, (void)t;
+    scene_albedo_mean(ctx->s, tri, albedo);
     uint32_t effect = job->effect, level = job->level;
     if (ctx->world_cell) {
         hit_bounce(ctx, effect, level, job->origin, job->cell, position, normal, bounce);
@@ -426,7 +462,7 @@ static void hit_radiance(const fx_context *ctx, const fx_block_job *job, uint32_
         memset(&taps, 0, sizeof taps);
         ctx->world_taps(ctx->world_user, effect, position, level, &taps);
         if (taps.count > 0)
-            fx__probe_filter_memo(ctx, false, &taps, position, normal, bounce);
+            taps_bounce(&taps, position, normal, bounce);
     }
     for (int k = 0; k < 3; k++)
         out[k] = albedo[k] * (direct[k] + bounce[k] * (1.0f / FX_PROBE_PI));

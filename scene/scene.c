@@ -195,6 +195,7 @@ void scene_free(scene *s)
             free(s->textures[i].mip_rgb[l]);
     }
     free(s->tri_texture_lod);
+    free(s->tri_texture_mean);
     free(s->textures);
     free(s->lights);
     free(s->islands);
@@ -884,6 +885,9 @@ scene_result scene__finalize(scene *s, const scene_load_desc *desc, scene_error 
             s->ao_radius = 1.0f;
     }
     rc = scene__compute_texture_lods(s, err);
+    if (rc != SCENE_OK)
+        return rc;
+    rc = scene__compute_texture_means(s, err);
     if (rc != SCENE_OK)
         return rc;
     assess_precision(s);

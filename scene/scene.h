@@ -137,6 +137,8 @@ typedef struct scene {
     uint32_t *tri_mesh;    /* triangle_count: mesh index */
     float *tri_normal;     /* triangle_count * 3: unit geometric normal */
     float *tri_texture_lod; /* triangle_count: log2 of its texture's texels per metre on it (-1000: none) */
+    float *tri_texture_mean; /* triangle_count * 3: its texture's mean over it (1, 1, 1: none); see
+                              * scene_albedo_mean */
 
     uint32_t mesh_count;
     scene_mesh *meshes;
@@ -259,6 +261,15 @@ void scene_albedo_sample(const scene_albedo_triangle *t, float u, float v, float
  * the caller keeps its registers across the run (one call, not one per pixel). */
 void scene_albedo_run(const scene *s, const uint32_t *tri, const float *u, const float *v,
                       const float *footprint_log2, uint32_t count, float (*out_rgb)[3]);
+
+/* The albedo of triangle tri averaged over the triangle: its material's diffuse colour times its texture's
+ * mean over it, the texture read once when the scene was finalised, bilinearly at the triangle's UV centroid
+ * in the mip level whose texels are as large as the triangle (the square root of its UV area in texels; the
+ * coarsest level, the texture's mean, for triangles over a whole repeat). One load per call, no filtering:
+ * for estimators of low-frequency light (the probe update's hits), not for pixels. The diffuse colour is read
+ * at the call (a material changed after finalisation counts); a scene without the table (never finalised)
+ * gives the same value, computed at the call. */
+void scene_albedo_mean(const scene *s, uint32_t tri, float out_rgb[3]);
 
 /* ---- what the scene needs ---------------------------------------------------------------------------- */
 

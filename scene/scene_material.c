@@ -236,3 +236,61 @@ void scene_albedo_filtered(const scene *s, uint32_t tri, float u, float v, float
     scene_albedo_prepare(s, tri, &t);
     scene_albedo_sample(&t, u, v, footprint_log2, out_rgb);
 }
+
+/* The mip level whose texels are as large as the triangle: half the log2 of its UV area in texels (level 0
+ * texels), rounded, within the chain. */
+static uint32_t mean_level(const scene_texture *tex, const float uv[6])
+{
+    double uv_area = 0.5 * fabs(((double)uv[2] - uv[0]) * ((double)uv[5] - uv[1]) -
+                                ((double)uv[4] - uv[0]) * ((double)uv[3] - uv[1])) *
+                     (double)tex->width * (double)tex->height;
+    if (tex->levels <= 1 || !(uv_area > 1.0))
+        return 0;
+    double level = 0.5 * log2(uv_area);
+    if (!(level < (double)(tex->levels - 1)))
+        return tex->levels - 1;
+    return (uint32_t)(level + 0.5);
+}
+
+scene_result scene__compute_texture_means(scene *s, scene_error *err)
+{
+    free(s->tri_texture_mean);
+    s->tri_texture_mean = malloc(sizeof(float) * 3 * (size_t)s->triangle_count);
+    if (!s->tri_texture_mean)
+        return scene__fail(err, SCENE_ERR_NOMEM, "out of memory computing texture means");
+    for (uint32_t t = 0; t < s->triangle_count; t++) {
+        const scene_material *m = &s->materials[s->meshes[s->tri_mesh[t]].material];
+        float *out = s->tri_texture_mean + 3 * (size_t)t;
+        out[0] = out[1] = out[2] = 1.0f;
+        if (m->texture < 0 || (uint32_t)m->texture >= s->texture_count)
+            continue;
+        const scene_texture *tex = &s->textures[m->texture];
+        const float *uv = s->corner_uv + 6 * (size_t)t;
+        float cu = (uv[0] + uv[2] + uv[4]) * (1.0f / 3.0f), cv = (uv[1] + uv[3] + uv[5]) * (1.0f / 3.0f);
+        texture_sample(tex, mean_level(tex, uv), cu, cv, out);
+    }
+    return SCENE_OK;
+}
+
+void scene_albedo_mean(const scene *s, uint32_t tri, float out_rgb[3])
+{
+    const scene_material *m = &s->materials[s->meshes[s->tri_mesh[tri]].material];
+    if (s->tri_texture_mean) {
+        const float *mean = s->tri_texture_mean + 3 * (size_t)tri;
+        out_rgb[0] = m->diffuse[0] * mean[0];
+        out_rgb[1] = m->diffuse[1] * mean[1];
+        out_rgb[2] = m->diffuse[2] * mean[2];
+        return;
+    }
+    if (m->texture < 0 || (uint32_t)m->texture >= s->texture_count) {
+        memcpy(out_rgb, m->diffuse, 3 * sizeof(float));
+        return;
+    }
+    const scene_texture *tex = &s->textures[m->texture];
+    const float *uv = s->corner_uv + 6 * (size_t)tri;
+    float texel[3];
+    texture_sample(tex, mean_level(tex, uv), (uv[0] + uv[2] + uv[4]) * (1.0f / 3.0f),
+                   (uv[1] + uv[3] + uv[5]) * (1.0f / 3.0f), texel);
+    for (int k = 0; k < 3; k++)
+        out_rgb[k] = texel[k] * m->diffuse[k];
+}

@@ -82,6 +82,9 @@ bool scene__grow(void **array, size_t count, size_t size);
 /* The log2 of texture texels per metre of every textured triangle (scene_material.c), for mip selection. */
 scene_result scene__compute_texture_lods(scene *s, scene_error *err);
 
+/* Every triangle's texture mean over it (scene_material.c; scene_albedo_mean), after the texture levels. */
+scene_result scene__compute_texture_means(scene *s, scene_error *err);
+
 /* Checks that path names a regular file that can be opened for reading, before any reader opens it: a
  * directory named like a model ("x.obj"), a FIFO or a device is refused with a message saying what it is. */
 scene_result scene__check_file(const char *path, scene_error *err);
