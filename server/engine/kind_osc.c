@@ -368,6 +368,17 @@ typedef struct taps_lanes {
     uint64_t key[SRV_RUN];
 } taps_lanes;
 
+/* A pixel's four taps' weights, positions and footprint as the lanes computed them (its texels are the
+ * caller's). */
+static inline void taps_from_lanes(fx_taps *out, const taps_lanes *L, size_t i)
+{
+    memcpy(out->weight, L->weight[i], sizeof L->weight[i]);
+    memcpy(out->at_x, L->at_x[i], sizeof L->at_x[i]);
+    memcpy(out->at_y, L->at_y[i], sizeof L->at_y[i]);
+    out->footprint_log2 = L->footprint_log2[i];
+    out->count = 4;
+}
+
 FXC_HOT_LANES static void taps_lanes_fill(taps_lanes *L, int32_t bias)
 {
     const float fbias = (float)bias;
@@ -506,11 +517,7 @@ static void taps_pixel_rest(taps_state *st, const taps_lanes *L, const srv_pixel
     }
     if (found) {
         memcpy(out->texel, st->reuse_texel, sizeof st->reuse_texel);
-        memcpy(out->weight, L->weight[i], sizeof L->weight[i]);
-        memcpy(out->at_x, L->at_x[i], sizeof L->at_x[i]);
-        memcpy(out->at_y, L->at_y[i], sizeof L->at_y[i]);
-        out->footprint_log2 = L->footprint_log2[i];
-        out->count = 4;
+        taps_from_lanes(out, L, i);
         if (blocks)
             blocks[i] = st->reuse_block;
         return;
@@ -540,11 +547,7 @@ static void taps_pixel_rest(taps_state *st, const taps_lanes *L, const srv_pixel
                 st->reuse_texel[t] = texel[t];
             st->reuse = true, st->reuse_x0 = x0, st->reuse_y0 = y0, st->reuse_block = block0;
             memcpy(out->texel, st->reuse_texel, sizeof st->reuse_texel);
-            memcpy(out->weight, L->weight[i], sizeof L->weight[i]);
-            memcpy(out->at_x, L->at_x[i], sizeof L->at_x[i]);
-            memcpy(out->at_y, L->at_y[i], sizeof L->at_y[i]);
-            out->footprint_log2 = L->footprint_log2[i];
-            out->count = 4;
+            taps_from_lanes(out, L, i);
             if (blocks)
                 blocks[i] = block0;
             return;
@@ -739,11 +742,7 @@ FXC_HOT_INLINE void taps_of_effect(const kind_osc *k, const taps_lanes *L, const
             out->texel[1] = t1;
             out->texel[2] = t2;
             out->texel[3] = t3;
-            memcpy(out->weight, L->weight[i], sizeof L->weight[i]);
-            memcpy(out->at_x, L->at_x[i], sizeof L->at_x[i]);
-            memcpy(out->at_y, L->at_y[i], sizeof L->at_y[i]);
-            out->footprint_log2 = L->footprint_log2[i];
-            out->count = 4;
+            taps_from_lanes(out, L, i);
             if (blocks)
                 blocks[i] = reuse_block;
             continue;
