@@ -456,6 +456,18 @@ typedef struct taps_state {
     tap_memo memo;
 } taps_state;
 
+/* Remembers the four texels (rows row0/row1, columns col0/col1, as offsets within the block) of one block's
+ * payload for the pixel whose footprint corner is (x0, y0): the next pixel with the same corner reuses them. */
+static inline void reuse_block_texels(taps_state *st, const uint8_t *payload, uint32_t block, size_t texel_bytes,
+                                      uint32_t row0, uint32_t row1, uint32_t col0, uint32_t col1, long x0, long y0)
+{
+    st->reuse_texel[0] = payload + (row0 + col0) * texel_bytes;
+    st->reuse_texel[1] = payload + (row0 + col1) * texel_bytes;
+    st->reuse_texel[2] = payload + (row1 + col0) * texel_bytes;
+    st->reuse_texel[3] = payload + (row1 + col1) * texel_bytes;
+    st->reuse = true, st->reuse_x0 = x0, st->reuse_y0 = y0, st->reuse_block = block;
+}
+
 /* A new island or level: its size at the level and the keys' fields. */
 FXC_HOT_INLINE void taps_state_island(taps_state *st, uint32_t island, uint32_t level)
 {
@@ -505,12 +517,8 @@ static void taps_pixel_rest(taps_state *st, const taps_lanes *L, const srv_pixel
             uint32_t col0 = (uint32_t)x0 & 7, col1 = col0 + 1;
             uint64_t need = (uint64_t)3 << (row0 + col0) | (uint64_t)3 << (row1 + col0);
             if (memo->block[m0] != OSC_NONE && (memo->valid[m0] & need) == need) {
-                const uint8_t *payload = memo->payload[m0];
-                st->reuse_texel[0] = payload + (row0 + col0) * texel_bytes;
-                st->reuse_texel[1] = payload + (row0 + col1) * texel_bytes;
-                st->reuse_texel[2] = payload + (row1 + col0) * texel_bytes;
-                st->reuse_texel[3] = payload + (row1 + col1) * texel_bytes;
-                st->reuse = true, st->reuse_x0 = x0, st->reuse_y0 = y0, st->reuse_block = memo->block[m0];
+                reuse_block_texels(st, memo->payload[m0], memo->block[m0], texel_bytes, row0, row1, col0, col1,
+                                   x0, y0);
                 found = true;
             }
         }
@@ -593,12 +601,7 @@ static void taps_pixel_rest(taps_state *st, const taps_lanes *L, const srv_pixel
         uint64_t need = (uint64_t)1 << (row0 + col0) | (uint64_t)1 << (row0 + col1) |
                         (uint64_t)1 << (row1 + col0) | (uint64_t)1 << (row1 + col1);
         if ((memo->valid[m0] & need) == need && positive) {
-            const uint8_t *payload = memo->payload[m0];
-            st->reuse_texel[0] = payload + (row0 + col0) * texel_bytes;
-            st->reuse_texel[1] = payload + (row0 + col1) * texel_bytes;
-            st->reuse_texel[2] = payload + (row1 + col0) * texel_bytes;
-            st->reuse_texel[3] = payload + (row1 + col1) * texel_bytes;
-            st->reuse = true, st->reuse_x0 = x0, st->reuse_y0 = y0, st->reuse_block = memo->block[m0];
+            reuse_block_texels(st, memo->payload[m0], memo->block[m0], texel_bytes, row0, row1, col0, col1, x0, y0);
             four_taps(out, st->reuse_texel, w00, w10, w01, w11, x, y, tx0, tx1, ty0, ty1);
             if (blocks)
                 blocks[i] = st->reuse_block;
