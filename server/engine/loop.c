@@ -191,15 +191,16 @@ static _Atomic uint64_t loop_epochs;
 static uint64_t light_signature(const scene *s)
 {
     uint64_t h = 14695981039346656037u;
-    const void *parts[3];
-    size_t sizes[3];
+    const void *parts[5];
+    size_t sizes[5];
     for (uint32_t l = 0; l <= s->light_count; l++) {
         size_t n = 0;
         if (l < s->light_count) {
             const scene_light *light = &s->lights[l];
             parts[n] = &light->type, sizes[n++] = sizeof light->type;
-            parts[n] = light->direction, sizes[n++] = sizeof light->direction + sizeof light->position +
-                                                     sizeof light->color;
+            parts[n] = light->direction, sizes[n++] = sizeof light->direction;
+            parts[n] = light->position, sizes[n++] = sizeof light->position;
+            parts[n] = light->color, sizes[n++] = sizeof light->color;
             parts[n] = &light->intensity, sizes[n++] = sizeof light->intensity;
         } else {
             parts[n] = s->sky_color, sizes[n++] = sizeof s->sky_color;
