@@ -175,7 +175,9 @@ void fx_light_direction(const scene_light *light, const float pos[3], float dir[
 /* One probe's payload, FX_PROBE_BYTES, little-endian, written byte by byte:
  *   0  float32 x3  position, scene-local metres (the grid point plus its relocation offset)
  *  12  float32     cell size of its level, metres (shade has no other way to know it)
- *  16  uint32      flags: FX_PROBE_HAS_DATA (committed at least once), FX_PROBE_OFF (inside geometry)
+ *  16  uint32      flags: FX_PROBE_HAS_DATA (committed at least once), FX_PROBE_OFF (inside geometry),
+ *                  FX_PROBE_MOVED_OUT (relocated out of geometry once: it no longer returns to its grid point),
+ *                  FX_PROBE_SEEN_FRONT (some update saw a front face within reach from this position)
  *  20  uint32      blended updates since it was created or last switched on (0: the next takes its value
  *                  fully); texel_samples returns it
  *  24  float32     irradiance scale: the largest irradiance component of the map (0: all zero)
@@ -192,6 +194,8 @@ enum {
     FX_PROBE_MAX_RAYS = 4096,       /* probe_rays is clamped to this */
     FX_PROBE_HAS_DATA = 1u,
     FX_PROBE_OFF = 2u,
+    FX_PROBE_MOVED_OUT = 4u,
+    FX_PROBE_SEEN_FRONT = 8u,
 };
 #define FX_PROBE_HYSTERESIS 0.97f /* default weight of the old value in a blend (RTXGI's) */
 

@@ -36,17 +36,27 @@
  *
  * Probes inside geometry are switched off (shade and the update filter skip them; the update count is reset):
  * more than FX_PROBE_BACKFACE_OFF (RTXGI's 25 %) of the rays hit back faces, or some back face lies within
- * the cell diagonal sqrt(3) cell and no front face does (a probe just outside a closed room sees only the
- * room's back faces near it, under 25 % of its rays, and would otherwise pass its darkness to the wall
- * points of its cells; RTXGI's classification also switches off probes with no front face in their cell).
+ * the cell diagonal sqrt(3) cell and no front face does (none this update, and none in an earlier update from
+ * the same position: FX_PROBE_SEEN_FRONT, cleared when the probe moves; geometry is static, so a face once seen
+ * is there, and a sliver of front face that only some rotations of the rays find does not switch the probe
+ * on and off). A probe just outside a closed room sees only the room's back faces near it, under 25 % of its
+ * rays, and would otherwise pass its darkness to the wall points of its cells; RTXGI's classification also
+ * switches off probes with no front face in their cell.
  * Relocation, every update, from the same rays (offset = position - grid point, m = FX_PROBE_MIN_FRONT cell):
  *   1. off (the tests above): move through the closest back face, offset += dir_b (t_b + m / 2)
  *      (RTXGI: towards the closest back face, which is the way out of the geometry);
  *   2. else a front face closer than m: move straight away from it by what is missing, offset -= dir_f (m -
  *      t_f) (a probe in a corner walks out of it over a few updates);
- *   3. else: back towards the grid point by min(t_f - m, |offset|) (RTXGI), t_f the closest front face.
+ *   3. else: back towards the grid point by min(t_f - m, |offset|) (RTXGI), t_f the closest front face;
+ *      not for a probe that once moved out of geometry (FX_PROBE_MOVED_OUT): it holds its place.
  * Each component of the offset is clamped to +-0.45 cell (RTXGI checks per axis too), so a probe never
- * passes half way to its neighbour and the trilinear cell stays right.
+ * passes half way to its neighbour and the trilinear cell stays right. A move out (1.) that the clamp would
+ * stop short of the face (less than m / 8 beyond it along the ray) is not made: the probe stays off where it
+ * is, rather than sit on the surface. Both departures from RTXGI keep a probe near the edge of a
+ * single-sided surface from cycling: behind the edge it is off, moves out through the face, walks back
+ * towards its grid point round the edge (t_f sees no face on that path) and is off again, restarting from
+ * one update's rays each time; a probe moved part way sat on the face and was on or off with the rays'
+ * rotation (tests/test_probes.c, test_wall_edge_stable).
  *
  * Storage: half floats (the 1024-byte texel limit; floats would take 1,280 bytes for the maps alone). The
  * irradiance is stored relative to a per-probe float scale, so any light intensity keeps 11 bits of
@@ -135,6 +145,8 @@ typedef struct probe_scratch {
     float position[3];                    /* relocated position for the next update */
     float backface_fraction;
     uint32_t off;
+    uint32_t moved_out;  /* FX_PROBE_MOVED_OUT for the payload */
+    uint32_t seen_front; /* FX_PROBE_SEEN_FRONT for the payload */
     uint32_t valid; /* 1 once update wrote it */
 } probe_scratch;
 
@@ -485,7 +497,7 @@ enum { PROBE_TABLE_RAYS = 256 };
 _Static_assert((int)PROBE_TABLE_RAYS >= (int)PROBE_CHUNK && (int)PROBE_TABLE_RAYS % (int)PROBE_CHUNK == 0, "table rows");
 
 typedef struct probe_directions {
-    uint64_t rotation_key; /* the hash the rotation came from (valid when rays != 0) */
+    uint64_t h1, h2; /* the hashes the rotation came from, seed included (valid when rays != 0) */
     uint32_t rays;         /* 0: none yet */
     float dir[FX_PROBE_MAX_RAYS][3];
     _Alignas(64) float cosine[PROBE_TABLE_RAYS][FX_PROBE_TEXELS];
@@ -524,10 +536,13 @@ FXC_HOT_CLONES static void direction_weights(probe_directions *restrict pd, uint
     }
 }
 
-/* The frame's rays for `rays` rays per probe (rotation from rotation_key), unless the table holds them. */
-static void directions_prepare(probe_directions *pd, uint64_t rotation_key, uint32_t rays, uint64_t h1, uint64_t h2)
+/* The frame's rays for `rays` rays per probe (the rotation from the hashes h1, h2 of the seed and the rotation
+ * key), unless the table holds them. The table is kept per thread: it is keyed by the hashes, not the rotation
+ * key alone, so a loop with another seed on the same thread (the stability suite's seed pairs, the tests)
+ * never reads another seed's rays. */
+static void directions_prepare(probe_directions *pd, uint32_t rays, uint64_t h1, uint64_t h2)
 {
-    if (pd->rays == rays && pd->rotation_key == rotation_key)
+    if (pd->rays == rays && pd->h1 == h1 && pd->h2 == h2)
         return;
     float rotation[9];
     random_rotation(h1, h2, rotation);
@@ -545,7 +560,8 @@ static void directions_prepare(probe_directions *pd, uint64_t rotation_key, uint
         direction_weights(pd, first, n, rays <= PROBE_TABLE_RAYS ? first : 0, true);
     }
     pd->rays = rays;
-    pd->rotation_key = rotation_key;
+    pd->h1 = h1;
+    pd->h2 = h2;
 }
 
 /* The weighted sums of a chunk of n rays (radiance RGB, distance and squared distance in cells, per ray)
@@ -610,7 +626,7 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
         /* The frame's rotation (every probe of the frame shares it); without a frame number (ctx->frame 0),
          * one per update count, so successive updates of a probe still turn. */
         uint64_t rotation_key = ctx->frame ? ((uint64_t)1 << 63) | ctx->frame : updates;
-        directions_prepare(pd, rotation_key, rays,
+        directions_prepare(pd, rays,
                            fx__hash(ctx->seed, rotation_key, 0, 0, FX_STREAM_PROBE_ROTATION),
                            fx__hash(ctx->seed, rotation_key, 1, 0, FX_STREAM_PROBE_ROTATION));
         memset(out, 0, sizeof *out);
@@ -719,28 +735,40 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
         /* Inside: too many back faces, or back faces within reach of its cells (the cell diagonal) and no
          * front face there: every surface it could light is seen from behind (outside a closed room). */
         float reach = 1.7320508f * cell;
-        out->off = out->backface_fraction > FX_PROBE_BACKFACE_OFF ||
-                   (closest_back <= reach && !(closest_front <= reach));
-        float min_front = FX_PROBE_MIN_FRONT * cell, next[3];
+        bool seen_front = closest_front <= reach || (flags & FX_PROBE_SEEN_FRONT);
+        out->off = out->backface_fraction > FX_PROBE_BACKFACE_OFF || (closest_back <= reach && !seen_front);
+        float min_front = FX_PROBE_MIN_FRONT * cell, limit = FX_PROBE_MAX_OFFSET * cell, next[3];
         memcpy(next, offset, sizeof next);
+        out->moved_out = (flags & FX_PROBE_MOVED_OUT) ? 1u : 0u;
         if (out->off && isfinite(closest_back)) {
-            for (int k = 0; k < 3; k++)
-                next[k] += back_dir[k] * (closest_back + 0.5f * min_front);
+            float moved = 0;
+            for (int k = 0; k < 3; k++) {
+                next[k] = fminf(fmaxf(next[k] + back_dir[k] * (closest_back + 0.5f * min_front), -limit), limit);
+                moved += (next[k] - offset[k]) * back_dir[k];
+            }
+            /* Through the face only if the clamp leaves it at least a quarter of the margin beyond it; else it
+             * stays where it is, off (moved part way it would sit on the surface, on and off at random). */
+            if (moved >= closest_back + 0.25f * min_front)
+                out->moved_out = 1;
+            else
+                memcpy(next, offset, sizeof next);
         } else if (closest_front < min_front) {
             for (int k = 0; k < 3; k++)
                 next[k] -= front_dir[k] * (min_front - closest_front);
-        } else {
+        } else if (!out->moved_out) {
             float length = sqrtf(fx__dot(offset, offset));
             float back = fminf(closest_front - min_front, length);
             if (length > 0 && back > 0)
                 for (int k = 0; k < 3; k++)
                     next[k] -= offset[k] / length * back;
         }
+        bool moved = false;
         for (int k = 0; k < 3; k++) {
-            float limit = FX_PROBE_MAX_OFFSET * cell;
             next[k] = fminf(fmaxf(next[k], -limit), limit);
             out->position[k] = job->origin[k] + next[k];
+            moved |= out->position[k] != origin[k];
         }
+        out->seen_front = seen_front && !moved;
         out->valid = 1;
         memcpy(job->scratch, out, sizeof *out);
     }
@@ -771,7 +799,8 @@ void fx_probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
         if (in->off) { /* the maps stay as they were; the next update after it is on again starts afresh */
             if (!(flags & FX_PROBE_HAS_DATA))
                 put_f32(p + 24, 0.0f);
-            put_u32(p + 16, FX_PROBE_HAS_DATA | FX_PROBE_OFF);
+            put_u32(p + 16, FX_PROBE_HAS_DATA | FX_PROBE_OFF | (in->moved_out ? FX_PROBE_MOVED_OUT : 0u) |
+                                (in->seen_front ? FX_PROBE_SEEN_FRONT : 0u));
             put_u32(p + 20, 0);
             continue;
         }
@@ -822,7 +851,8 @@ void fx_probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
             for (int k = 0; k < 2; k++)
                 fx__put_u16(p + PROBE_MOMENTS + 4 * t + 2 * k, halves_moments[t][k]);
         }
-        put_u32(p + 16, FX_PROBE_HAS_DATA);
+        put_u32(p + 16, FX_PROBE_HAS_DATA | (in->moved_out ? FX_PROBE_MOVED_OUT : 0u) |
+                            (in->seen_front ? FX_PROBE_SEEN_FRONT : 0u));
         put_u32(p + 20, updates < UINT32_MAX ? updates + 1 : UINT32_MAX);
     }
 }

@@ -137,7 +137,8 @@ static void check_probe(srv_loop *loop, uint32_t e, uint32_t block, uint64_t key
     if (!(isfinite(cell) && cell > 0 && fabsf(cell - job.cell) <= 1e-6f * job.cell))
         fail_msg("probe %016llx: cell %g (its level's cell %g)", (unsigned long long)key, (double)cell,
                  (double)job.cell);
-    if (!(flags & FX_PROBE_HAS_DATA) || (flags & ~(uint32_t)(FX_PROBE_HAS_DATA | FX_PROBE_OFF)))
+    if (!(flags & FX_PROBE_HAS_DATA) ||
+        (flags & ~(uint32_t)(FX_PROBE_HAS_DATA | FX_PROBE_OFF | FX_PROBE_MOVED_OUT | FX_PROBE_SEEN_FRONT)))
         fail_msg("probe %016llx: flags %x", (unsigned long long)key, flags);
     if (!(isfinite(scale) && scale >= 0) || !(backface >= 0 && backface <= 1))
         fail_msg("probe %016llx: irradiance scale %g, back-face fraction %g", (unsigned long long)key,
