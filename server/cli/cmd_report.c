@@ -86,19 +86,21 @@ static const char report_usage[] =
     "  viewers      the base settings with 2, 4, 8 viewers (the same cameras: the first N viewers)\n"
     "  no_cache     the no-cache baseline at sample scales 1/64, 1/16, 1/4, 1, 4 with one viewer and\n"
     "               1/64, 1/16, 1/4, 1 with the most viewers: the curve the equal-time comparison reads\n"
-    "--quick keeps fewer points (bias 2, AO 16 and 256, shadow rays 4, probe rays 36, budget 25000, the\n"
-    "viewer counts 1 and the most, no cache at 1/64, 1/16, 1/4 and 1).\n"
+    "--quick keeps fewer points (bias 2, AO 16 and 256, shadow rays 4, no probe cell, probe rays 36,\n"
+    "budget 25000, the viewer counts 1 and the most, no cache at 1/64, 1/16, 1/4 and 1).\n"
     "\n"
     "Cameras (as sim):\n"
     "  --trace FILE         a viewer trace (repeat once per viewer); frame f at time start + f / fps\n"
     "  --fps F              frames per second of trace time, (0, 1000] (default 30)\n"
-    "  --camera GEN         generator when no --trace is given (default group): %s\n"
+    "  --camera GEN         generator when no --trace is given (default group):\n"
+    "                       %s\n"
     "  --viewers N          the most viewers, 1..64 (default 8, or the number of traces): the generator's\n"
     "                       cameras are those of N viewers, and fewer viewers take the first ones\n"
     "Frames:\n"
     "  --frames F           frames per configuration, 2..100000 (default 60; --quick 30)\n"
-    "  --warmup W           frames before the steady state, 0..F-1 (default 10, DESIGN.md's): compared\n"
-    "                       and in frames.csv, not in the configuration's figures\n"
+    "  --warmup W           frames before the steady state, 0..F-1 (default 10, DESIGN.md's; F/2 when F\n"
+    "                       is 10 or less): compared and in frames.csv, not in the configuration's\n"
+    "                       figures\n"
     "  --every K            compare frames 0, K, 2K, ... and the last, 1..100000 (default 10; --quick 6);\n"
     "                       the no-cache baseline keeps nothing between frames and renders only those\n"
     "  --res WxH            resolution, sides 1..8192 (default 320x180; --quick 160x90; a version 2\n"
@@ -118,7 +120,8 @@ static const char report_usage[] =
     "                       the CSV has both. A rerun on a finished folder only rewrites the outputs\n"
     "  --quick              the short report (under 5 minutes on the embedded scene here)\n"
     "  --quiet              no summary on stdout\n"
-    "Engine options (the base settings; --effects also sets the reference's terms):\n";
+    "Engine options (the base settings; --effects also sets the reference's terms; --no-cache and\n"
+    "--no-cache-samples are refused: the no_cache sweep sets them):\n";
 
 /* Parses a power of two given as a decimal or as 1/N, within [lo, hi]. */
 static bool parse_power_of_two(const char *option, const char *arg, double lo, double hi, double *out)

@@ -46,7 +46,7 @@ static const char serve_usage[] =
     "\n"
     "  --bind ADDR          address to listen on (default 127.0.0.1; beyond loopback needs --token)\n"
     "  --port P             TCP port, 0..65535; 0 = any free port (default 7681). The address is\n"
-    "                       printed on stdout as 'listening on ws://ADDR:PORT'\n"
+    "                       printed on stdout as 'fxcache serve: listening on ws://ADDR:PORT'\n"
     "  --token T            access token every hello must carry (default: $FXCACHE_TOKEN, else none)\n"
     "  --fps F              frames per second, (0, 1000] (default 30)\n"
     "  --frames N           stop after N frames, 1..100000000 (default: until stopped); the clock\n"

@@ -25,7 +25,8 @@ static const char usage[] =
     "\n"
     "SCENE is a JSON scene description (*.json), any mesh file Assimp reads (optionally .gz), or\n"
     "'default' (the embedded scene, also used when SCENE is omitted).\n"
-    "'fxcache COMMAND --help' tells the options of each command.\n";
+    "'fxcache COMMAND --help' tells the options of each command; 'fxcache --version' prints the\n"
+    "version.\n";
 
 int main(int argc, char **argv)
 {
