@@ -706,12 +706,16 @@ static void test_sim_record_replay(void **state)
     assert_int_equal(run("sim --camera orbit --viewers 2 --frames 3 --res 64x36 --record '%s' --summary '%s' --quiet",
                          dir, a),
                      0);
-    assert_int_equal(run("sim --trace '%s/viewer_00.trace' --trace '%s/viewer_01.trace' --res 64x36 --summary '%s' "
-                         "--quiet",
-                         dir, dir, b),
+    /* No --res: the recorded traces (version 2) carry 64x36, and the summary says what the viewers rendered. */
+    assert_int_equal(run("sim --trace '%s/viewer_00.trace' --trace '%s/viewer_01.trace' --summary '%s' --quiet", dir,
+                         dir, b),
                      0);
     json_t *ja = load_json_file(a), *jb = load_json_file(b);
     assert_int_equal(jint(jb, "viewers"), 2);
+    assert_string_equal(json_string_value(jget(jb, "resolution")), "64x36");
+    assert_int_equal(json_array_size(jget(jb, "resolutions")), 2);
+    assert_string_equal(json_string_value(json_array_get(jget(jb, "resolutions"), 1)), "64x36");
+    assert_int_equal(jint(jb, "rays.visibility"), 3 * 2 * 64 * 36);
     assert_int_equal(jint(jb, "frames"), 3); /* default: the longest trace */
     assert_true(jint(ja, "unique_texels") > 0);
     assert_int_equal(jint(ja, "requested_texels"), jint(jb, "requested_texels"));

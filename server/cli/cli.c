@@ -9,6 +9,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 bool srv_cli_double(const char *cmd, const char *option, const char *text, double min, double max,
@@ -142,4 +143,46 @@ bool srv_cli_no_operands(const char *cmd, int argc, char **argv)
         return true;
     fprintf(stderr, "fxcache %s: unexpected argument '%s' (the scene is given with --scene)\n", cmd, argv[optind]);
     return false;
+}
+
+char *srv_cli_dir_arg(char *dir)
+{
+    size_t n = strlen(dir);
+    while (n > 1 && dir[n - 1] == '/')
+        dir[--n] = '\0';
+    return dir;
+}
+
+bool srv_cli_output_file_ok(const char *cmd, const char *option, const char *path)
+{
+    struct stat st;
+    const char *why = NULL;
+    if (!*path)
+        why = "empty path";
+    else if (stat(path, &st) == 0 && S_ISDIR(st.st_mode))
+        why = "is a directory";
+    else {
+        char folder[4096];
+        const char *slash = strrchr(path, '/');
+        size_t n = slash ? (size_t)(slash - path) : 0;
+        if (n >= sizeof folder)
+            why = "path too long";
+        else {
+            if (!slash)
+                strcpy(folder, ".");
+            else if (n == 0)
+                strcpy(folder, "/");
+            else {
+                memcpy(folder, path, n);
+                folder[n] = '\0';
+            }
+            if (stat(folder, &st) != 0 || !S_ISDIR(st.st_mode))
+                why = "its folder does not exist";
+            else if (access(folder, W_OK | X_OK) != 0)
+                why = strerror(errno);
+        }
+    }
+    if (why)
+        fprintf(stderr, "fxcache %s: cannot write %s (%s): %s\n", cmd, path, option, why);
+    return why == NULL;
 }

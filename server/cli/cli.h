@@ -45,6 +45,15 @@ bool srv_cli_check_memory(const char *cmd, double pool_mb, uint32_t viewers, uin
  * (130 for SIGINT, 143 for SIGTERM). */
 int srv_cli_interrupted(const char *cmd, int sig, const char *when);
 
+/* A directory argument without its trailing slashes ("out/" -> "out", "/" stays): the paths built from it
+ * read "out/index.html", not "out//index.html". Returns dir, changed in place (an argv string). */
+char *srv_cli_dir_arg(char *dir);
+
+/* Whether an output file named by option (--stats, --summary) can be written, checked before the scene
+ * loads: not a directory, its folder exists and is writable. Prints "fxcache CMD: cannot write PATH (OPTION):
+ * why" and returns false otherwise (the file itself is opened later, when the run needs it). */
+bool srv_cli_output_file_ok(const char *cmd, const char *option, const char *path);
+
 /* Loads the scene at path ("default" or NULL: the embedded scene); prints the error on failure, and the
  * scene's precision warning (if any) as "fxcache CMD: warning: ..." on stderr. */
 scene *srv_cli_load_scene(const char *cmd, const char *path, float texel_density);

@@ -1,6 +1,8 @@
 /* The cameras of a run, shared by sim, ref and report (cli_cameras.h). */
 #include "cli_cameras.h"
 
+#include <jansson.h>
+
 #include <math.h>
 #include <stdio.h>
 
@@ -116,6 +118,29 @@ void srv_cli_cameras_size(const srv_cli_cameras *c, uint32_t v, uint32_t *width,
     const srv_trace *t = v < SRV_CLI_MAX_TRACES ? c->traces[v] : NULL;
     if (t && !c->res_set)
         srv_trace_resolution(t, width, height);
+}
+
+void srv_cli_cameras_summary_resolution(const srv_cli_cameras *c, uint32_t viewers, json_t *obj)
+{
+    json_t *list = json_array();
+    char res[32] = "";
+    bool same = true;
+    uint32_t w0 = 0, h0 = 0;
+    for (uint32_t v = 0; v < viewers; v++) {
+        uint32_t w, h;
+        srv_cli_cameras_size(c, v, &w, &h);
+        if (v == 0)
+            w0 = w, h0 = h;
+        same = same && w == w0 && h == h0;
+        snprintf(res, sizeof res, "%ux%u", w, h);
+        json_array_append_new(list, json_string(res));
+    }
+    if (viewers == 0)
+        snprintf(res, sizeof res, "%ux%u", c->width, c->height);
+    else if (same)
+        snprintf(res, sizeof res, "%ux%u", w0, h0);
+    json_object_set_new(obj, "resolution", json_string(same ? res : "mixed"));
+    json_object_set_new(obj, "resolutions", list);
 }
 
 bool srv_cli_cameras_get(const srv_cli_cameras *c, const scene *s, uint32_t frame, uint32_t v, srv_camera *camera,

@@ -14,6 +14,8 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+struct json_t;
+
 enum { SRV_CLI_MAX_TRACES = SRV_MAX_VIEWERS };
 
 typedef struct srv_cli_cameras {
@@ -64,6 +66,10 @@ bool srv_cli_cameras_present(const srv_cli_cameras *c, uint32_t v, uint32_t fram
 
 /* Viewer v's resolution: its trace's own unless --res was given or the trace records none. */
 void srv_cli_cameras_size(const srv_cli_cameras *c, uint32_t v, uint32_t *width, uint32_t *height);
+
+/* Sets the run's resolution in a summary object: "resolution", "WxH" when every one of the viewers renders at
+ * it, else "mixed" (traces of other resolutions), and "resolutions", each viewer's "WxH". */
+void srv_cli_cameras_summary_resolution(const srv_cli_cameras *c, uint32_t viewers, struct json_t *obj);
 
 /* Viewer v's camera (scene-local) and resolution in frame f; false when it is not present then. */
 bool srv_cli_cameras_get(const srv_cli_cameras *c, const scene *s, uint32_t frame, uint32_t v, srv_camera *camera,

@@ -171,7 +171,7 @@ static int parse_options(int argc, char **argv, ref_options *o)
         case O_VIEWERS: ok = srv_cli_u32("ref", "--viewers", optarg, 1, SRV_MAX_VIEWERS, &o->viewers); o->viewers_set = true; break;
         case O_FRAMES: ok = srv_cli_u32("ref", "--frames", optarg, 1, 1000000, &o->frames); o->frames_set = true; break;
         case O_RES: ok = srv_cli_resolution("ref", "--res", optarg, SRV_MAX_SIDE, &o->width, &o->height); o->res_set = true; break;
-        case O_OUT: o->out_dir = optarg; break;
+        case O_OUT: o->out_dir = srv_cli_dir_arg(optarg); break;
         case O_EVERY: ok = srv_cli_u32("ref", "--every", optarg, 0, 1000000, &o->every); break;
         case O_VIEWS: o->views = true; break;
         case O_QUIET: o->quiet = true; break;
@@ -405,9 +405,7 @@ int srv_cmd_ref(int argc, char **argv)
     json_object_set_new(root, "every", json_integer(o.every));
     json_object_set_new(root, "fps", json_real(o.fps));
     json_object_set_new(root, "start_time_s", json_real(cams.start_time));
-    char res[32];
-    snprintf(res, sizeof res, "%ux%u", o.width, o.height);
-    json_object_set_new(root, "resolution", json_string(res));
+    srv_cli_cameras_summary_resolution(&cams, o.viewers, root);
     json_t *on = json_object(), *off = json_object(), *samples = json_object();
     for (uint32_t e = 0; e < effect_count; e++) {
         if (!effects[e]->shade)

@@ -202,7 +202,7 @@ static int parse_options(int argc, char **argv, report_options *o)
         case O_WARMUP: ok = srv_cli_u32("report", "--warmup", optarg, 0, 99999, &o->warmup); o->warmup_set = true; break;
         case O_EVERY: ok = srv_cli_u32("report", "--every", optarg, 1, 100000, &o->every); o->every_set = true; break;
         case O_RES: ok = srv_cli_resolution("report", "--res", optarg, SRV_MAX_SIDE, &o->width, &o->height); o->res_set = true; break;
-        case O_OUT: o->out_dir = optarg; break;
+        case O_OUT: o->out_dir = srv_cli_dir_arg(optarg); break;
         case O_QUICK: o->quick = true; break;
         case O_QUIET: o->quiet = true; break;
         case O_CAMERA:

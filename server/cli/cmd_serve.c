@@ -112,7 +112,7 @@ static int parse_options(int argc, char **argv, serve_options *o)
         case O_MAXSAMPLES:
             ok = srv_cli_u32("serve", "--max-samples", optarg, 1, PROTO_MAX_SAMPLES, &o->net.max_samples);
             break;
-        case O_RECORD: o->net.record_dir = optarg; break;
+        case O_RECORD: o->net.record_dir = srv_cli_dir_arg(optarg); break;
         case O_STATS: o->stats_path = optarg; break;
         case O_SUMMARY: o->summary_path = optarg; break;
         case O_QUIET: o->quiet = true; break;
@@ -182,6 +182,9 @@ int srv_cmd_serve(int argc, char **argv)
         return rc;
     if (!srv_cli_check_memory("serve", o.engine.no_cache ? 0 : o.engine.pool_mb, 0, 0, false))
         return 2;
+    if ((o.stats_path && !srv_cli_output_file_ok("serve", "--stats", o.stats_path)) ||
+        (o.summary_path && !srv_cli_output_file_ok("serve", "--summary", o.summary_path)))
+        return 1;
     if (o.net.record_dir && mkdir(o.net.record_dir, 0755) != 0 && errno != EEXIST) {
         fprintf(stderr, "fxcache serve: cannot create folder %s: %s\n", o.net.record_dir, strerror(errno));
         return 1;

@@ -107,7 +107,7 @@ static int parse_options(int argc, char **argv, sim_options *o)
         case O_VIEWERS: ok = srv_cli_u32("sim", "--viewers", optarg, 1, SRV_MAX_VIEWERS, &o->viewers); o->viewers_set = true; break;
         case O_FRAMES: ok = srv_cli_u32("sim", "--frames", optarg, 1, 1000000, &o->frames); o->frames_set = true; break;
         case O_RES: ok = srv_cli_resolution("sim", "--res", optarg, SRV_MAX_SIDE, &o->width, &o->height); o->res_set = true; break;
-        case O_OUT: o->out_dir = optarg; break;
+        case O_OUT: o->out_dir = srv_cli_dir_arg(optarg); break;
         case O_SAVE: ok = srv_cli_u32("sim", "--save-every", optarg, 0, 1000000, &o->save_every); break;
         case O_VIEWS: o->views = true; break;
         case O_STATS: o->stats_path = optarg; break;
@@ -117,7 +117,7 @@ static int parse_options(int argc, char **argv, sim_options *o)
             ok = srv_cli_camera_option("sim", optarg, &o->camera);
             break;
         case O_TRACE: ok = srv_cli_add_trace("sim", o->traces, &o->trace_count, optarg); break;
-        case O_RECORD: o->record_dir = optarg; break;
+        case O_RECORD: o->record_dir = srv_cli_dir_arg(optarg); break;
         case O_QUIET: o->quiet = true; break;
         case O_FPS: ok = srv_cli_double("sim", "--fps", optarg, 0.001, 1000, &o->fps); break;
         case 'h': {
@@ -270,6 +270,9 @@ int srv_cmd_sim(int argc, char **argv)
         srv_cli_cameras_size(&cams, v, &w, &h);
         pixels += (uint64_t)w * h;
     }
+    if ((o.stats_path && !srv_cli_output_file_ok("sim", "--stats", o.stats_path)) ||
+        (o.summary_path && !srv_cli_output_file_ok("sim", "--summary", o.summary_path)))
+        goto done;
     if (!srv_cli_check_memory("sim", o.engine.no_cache ? 0 : o.engine.pool_mb, o.viewers, pixels, o.views)) {
         exit_code = 2;
         goto done;
@@ -387,9 +390,7 @@ int srv_cmd_sim(int argc, char **argv)
     json_object_set_new(sum, "viewers", json_integer(o.viewers));
     json_object_set_new(sum, "frames_requested", json_integer(o.frames));
     json_object_set_new(sum, "interrupted", json_boolean(stop_requested));
-    char res[32];
-    snprintf(res, sizeof res, "%ux%u", o.width, o.height);
-    json_object_set_new(sum, "resolution", json_string(res));
+    srv_cli_cameras_summary_resolution(&cams, o.viewers, sum);
     json_object_set_new(sum, "camera", json_string(o.trace_count ? "trace" : srv_camgen_name(o.camera)));
     if (o.trace_count)
         json_object_set_new(sum, "fps", json_real(o.fps));
