@@ -23,7 +23,7 @@
  * camera (mean absolute error over channels, and the share of pixels off by more than 32 in a channel).
  *
  * Usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] [--lead 2] [--tile 64]
- *        [--capacity F] [--pin CPU] [--only table|scaling|threads|split|split-pixels|switches|quality]
+ *        [--capacity F] [--pin CPU] [--only table|scaling|threads|split|split-pixels|fuse|switches|quality]
  *        (default: all, in that order). Each table also gives the process CPU time of a frame: on a machine
  * shared with other jobs the wall time includes the time the process waited for a core. */
 #define _GNU_SOURCE
@@ -461,6 +461,18 @@ static void section_threads(const bench_opts *o)
                             "speed-up (per-repetition ratio 1 thread / 2 threads)", "speed-up"});
 }
 
+/* The pixel passes as three runs over the image (view_rc_desc.separate_pixel_passes, each stage timed alone)
+ * against fused by bands (the default), on 1 and then on 2 threads, alternating. */
+static void section_fuse(const bench_opts *o)
+{
+    for (int threads = 1; threads <= 2; threads++)
+        section_ab(o, (view_rc_desc){.separate_pixel_passes = true}, threads, (view_rc_desc){0}, threads,
+                   &(ab_labels){threads == 1 ? "1 thread, pixel passes separate against fused"
+                                             : "2 threads, pixel passes separate against fused",
+                                "separate", "fused", "separate / fused (per-repetition ratio)",
+                                "separate / fused"});
+}
+
 /* The static split of the point passes against the dynamic hand-out (view_rc_desc.dynamic_points), both on 2
  * threads, alternating: what keeping each chunk on one core does. */
 static void section_split(const bench_opts *o)
@@ -582,7 +594,7 @@ int main(int argc, char **argv)
             fprintf(stderr,
                     "usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] "
                     "[--lead 2] [--tile 64] [--capacity F] [--pin CPU] "
-                    "[--only table|scaling|threads|split|split-pixels|switches|quality]\n");
+                    "[--only table|scaling|threads|split|split-pixels|fuse|switches|quality]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }
     }
@@ -612,6 +624,8 @@ int main(int argc, char **argv)
         section_split(&o);
     if (!only || !strcmp(only, "split-pixels"))
         section_split_pixels(&o);
+    if (!only || !strcmp(only, "fuse"))
+        section_fuse(&o);
     if (!only || !strcmp(only, "switches"))
         section_switches(&o);
     if (!only || !strcmp(only, "quality"))

@@ -962,7 +962,7 @@ static void answer(view_rc *rc, const view_rc_camera *cam, uint32_t w, uint32_t 
     free(s);
 }
 
-static walk_log walk(uint32_t threads, uint32_t tile, bool dynamic)
+static walk_log walk(uint32_t threads, uint32_t tile, bool dynamic, bool separate)
 {
     const uint32_t w = 83, h = 57;
     walk_log log = {0};
@@ -972,7 +972,8 @@ static walk_log walk(uint32_t threads, uint32_t tile, bool dynamic)
                                        .tile_size = tile,
                                        .capacity = w * h * 3 / 2,
                                        .dynamic_points = dynamic,
-                                       .dynamic_pixels = dynamic});
+                                       .dynamic_pixels = dynamic,
+                                       .separate_pixel_passes = separate});
     uint8_t *rgb = malloc(w * h * 3);
     float *depth = malloc(w * h * sizeof(float));
     view_rc_pixel *req = malloc(sizeof *req * w * h), *pred = malloc(sizeof *pred * w * h);
@@ -1025,12 +1026,13 @@ static void test_threads_bit_identical(void **state)
     (void)state;
     const uint32_t tiles[] = {16, 13, 64};
     for (size_t t = 0; t < sizeof tiles / sizeof tiles[0]; t++) {
-        walk_log one = walk(1, tiles[t], false);
+        walk_log one = walk(1, tiles[t], false, false);
         /* 2 and 4 threads, the point and pixel passes split statically (the default) and handed out
-         * dynamically. */
-        const uint32_t threads[] = {2, 4, 2, 4};
-        for (size_t k = 0; k < 4; k++) {
-            walk_log many = walk(threads[k], tiles[t], k >= 2);
+         * dynamically; then the cull, interpolation and prefilter as separate passes over the image instead
+         * of fused by bands (whose halo rows are culled twice), on 1 and 2 threads. */
+        const uint32_t threads[] = {2, 4, 2, 4, 1, 2};
+        for (size_t k = 0; k < 6; k++) {
+            walk_log many = walk(threads[k], tiles[t], k >= 2 && k < 4, k >= 4);
             assert_int_equal(many.used, one.used);
             assert_memory_equal(many.bytes, one.bytes, one.used);
             free(many.bytes);

@@ -117,6 +117,7 @@ typedef struct rc_worker {
     uint8_t *spare;    /* dither: a row of choices for spare lanes */
     uint16_t *planes;  /* interpolation: view_rc__interp_scratch(width) values */
     uint16_t *box;     /* prefilter: view_rc__prefilter_scratch(tile side) values */
+    uint32_t *halo;    /* fused pixel passes: six rows of shown points around a band, then a row of depths */
     float *zt;         /* z-buffer: one tile's depths, tile x tile, row after row (local_z only) */
     uint32_t *wt;      /* ... the slot that won each pixel (RC_NO_POINT: none) */
     uint32_t *ct;      /* ... and its rgba (RC_EMPTY_PT: none) */
@@ -232,7 +233,6 @@ struct view_rc {
     uint32_t *band_need;   /* per band (tiles_y of them, tile_size rows each): pixels to fill */
     uint32_t *band_culled; /* per band: pixels the depth cull emptied */
     uint32_t *band_kind;   /* per band: pixels by kind (x VIEW_RC_PIXEL_KINDS) */
-    uint32_t *tile_filled; /* per tile: pixels the prefilter filled */
     uint64_t *band_weight; /* per band: sum of priority + 1 */
     uint32_t *band_quota, *band_offset;
 
@@ -266,9 +266,11 @@ void view_rc__project_direct(view_rc *rc); /* no_tiling: the projection without 
 void view_rc__zbuffer_direct(view_rc *rc); /* no_tiling: one z-buffer pass in slot order (serial) */
 void view_rc__age(view_rc *rc);            /* parallel over chunks, then the free stack (serial) */
 
-/* rc_image.c: the pixel passes, parallel over bands of rows. */
+/* rc_image.c: the pixel passes, parallel over bands of rows: fused (view_rc__pixels: each band through the
+ * cull, the interpolation and the prefilter in one task) or, with separate_pixel_passes, one run each. */
 size_t view_rc__interp_scratch(uint32_t width);   /* 16-bit values of a worker's interpolation scratch */
 size_t view_rc__prefilter_scratch(uint32_t tile); /* ... and prefilter scratch (tiles of that side) */
+void view_rc__pixels(view_rc *rc);
 void view_rc__depth_cull(view_rc *rc);
 void view_rc__interpolate(view_rc *rc);
 void view_rc__prefilter(view_rc *rc);
