@@ -212,7 +212,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     for (uint32_t t = 0; t < d.threads; t++) {
         o_occupied[t] = take(&l, (size_t)rc->low_w * rc->low_h + 1, 1); /* + a sink byte */
         o_low[t] = take(&l, chunk, sizeof(uint32_t));
-        o_err[t] = take(&l, 2 * RC_DITHER_LANES * 2 * ((size_t)d.width + 2), sizeof(float));
+        o_err[t] = take(&l, 2 * RC_DITHER_LANES * ((size_t)d.width + 2), sizeof(float));
         o_spare[t] = take(&l, d.width, 1);
         o_planes[t] = take(&l, view_rc__interp_scratch(d.width), sizeof(uint16_t));
         o_box[t] = take(&l, view_rc__prefilter_scratch(span), sizeof(uint16_t));
