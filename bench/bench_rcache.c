@@ -23,9 +23,12 @@
  * camera (mean absolute error over channels, and the share of pixels off by more than 32 in a channel).
  *
  * Usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] [--lead 2] [--tile 64]
- *        [--capacity F] [--pin CPU] [--only table|scaling|threads|split|split-pixels|fuse|switches|quality]
- *        (default: all, in that order). Each table also gives the process CPU time of a frame: on a machine
- * shared with other jobs the wall time includes the time the process waited for a core. */
+ *        [--capacity F] [--pin CPU] [--separate-pixels]
+ *        [--only table|scaling|threads|split|split-pixels|fuse|switches|quality]
+ *        (default: all, in that order; --separate-pixels: the table with the depth cull, interpolation and
+ *        prefilter as separate passes, each in its own row, instead of fused). Each table also gives the
+ * process CPU time of a frame: on a machine shared with other jobs the wall time includes the time the
+ * process waited for a core. */
 #define _GNU_SOURCE
 #include "rcache.h"
 
@@ -160,6 +163,7 @@ typedef struct bench_opts {
     double capacity; /* points per pixel (0: the default) */
     int reps, warmup, frames, lead;
     double deg;
+    bool separate; /* --separate-pixels: the table with the pixel passes separate (each stage timed alone) */
 } bench_opts;
 
 typedef struct run_result {
@@ -335,7 +339,7 @@ static void section_table(const bench_opts *o, uint32_t res)
     double per[VIEW_RC_STAGE_COUNT][MAX_REPS], frame[MAX_REPS], sums[MAX_REPS], cpu[MAX_REPS];
     run_result last = {0};
     for (int r = 0; r < o->reps; r++) {
-        run(o, res, &(view_rc_desc){0}, 1, false, &last);
+        run(o, res, &(view_rc_desc){.separate_pixel_passes = o->separate}, 1, false, &last);
         sums[r] = 0;
         for (int s = 0; s < VIEW_RC_STAGE_COUNT; s++) {
             per[s][r] = last.stage_ms[s];
@@ -590,10 +594,12 @@ int main(int argc, char **argv)
             pin = atoi(argv[++i]);
         else if (!strcmp(a, "--only") && next)
             only = argv[++i];
+        else if (!strcmp(a, "--separate-pixels"))
+            o.separate = true;
         else {
             fprintf(stderr,
                     "usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] "
-                    "[--lead 2] [--tile 64] [--capacity F] [--pin CPU] "
+                    "[--lead 2] [--tile 64] [--capacity F] [--pin CPU] [--separate-pixels] "
                     "[--only table|scaling|threads|split|split-pixels|fuse|switches|quality]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }
