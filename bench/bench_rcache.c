@@ -23,9 +23,12 @@
  * camera (mean absolute error over channels, and the share of pixels off by more than 32 in a channel).
  *
  * Usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] [--lead 2] [--tile 64]
- *        [--capacity F] [--pin CPU] [--only table|scaling|threads|split|split-pixels|switches|quality]
- *        (default: all, in that order). Each table also gives the process CPU time of a frame: on a machine
- * shared with other jobs the wall time includes the time the process waited for a core. */
+ *        [--capacity F] [--pin CPU] [--separate-pixels]
+ *        [--only table|scaling|threads|split|split-pixels|fuse|switches|quality]
+ *        (default: all, in that order; --separate-pixels: the table with the depth cull, interpolation and
+ *        prefilter as separate passes, each in its own row, instead of fused). Each table also gives the
+ * process CPU time of a frame: on a machine shared with other jobs the wall time includes the time the
+ * process waited for a core. */
 #define _GNU_SOURCE
 #include "rcache.h"
 
@@ -160,6 +163,7 @@ typedef struct bench_opts {
     double capacity; /* points per pixel (0: the default) */
     int reps, warmup, frames, lead;
     double deg;
+    bool separate; /* --separate-pixels: the table with the pixel passes separate (each stage timed alone) */
 } bench_opts;
 
 typedef struct run_result {
@@ -335,7 +339,7 @@ static void section_table(const bench_opts *o, uint32_t res)
     double per[VIEW_RC_STAGE_COUNT][MAX_REPS], frame[MAX_REPS], sums[MAX_REPS], cpu[MAX_REPS];
     run_result last = {0};
     for (int r = 0; r < o->reps; r++) {
-        run(o, res, &(view_rc_desc){0}, 1, false, &last);
+        run(o, res, &(view_rc_desc){.separate_pixel_passes = o->separate}, 1, false, &last);
         sums[r] = 0;
         for (int s = 0; s < VIEW_RC_STAGE_COUNT; s++) {
             per[s][r] = last.stage_ms[s];
@@ -461,6 +465,18 @@ static void section_threads(const bench_opts *o)
                             "speed-up (per-repetition ratio 1 thread / 2 threads)", "speed-up"});
 }
 
+/* The pixel passes as three runs over the image (view_rc_desc.separate_pixel_passes, each stage timed alone)
+ * against fused by bands (the default), on 1 and then on 2 threads, alternating. */
+static void section_fuse(const bench_opts *o)
+{
+    for (int threads = 1; threads <= 2; threads++)
+        section_ab(o, (view_rc_desc){.separate_pixel_passes = true}, threads, (view_rc_desc){0}, threads,
+                   &(ab_labels){threads == 1 ? "1 thread, pixel passes separate against fused"
+                                             : "2 threads, pixel passes separate against fused",
+                                "separate", "fused", "separate / fused (per-repetition ratio)",
+                                "separate / fused"});
+}
+
 /* The static split of the point passes against the dynamic hand-out (view_rc_desc.dynamic_points), both on 2
  * threads, alternating: what keeping each chunk on one core does. */
 static void section_split(const bench_opts *o)
@@ -578,11 +594,13 @@ int main(int argc, char **argv)
             pin = atoi(argv[++i]);
         else if (!strcmp(a, "--only") && next)
             only = argv[++i];
+        else if (!strcmp(a, "--separate-pixels"))
+            o.separate = true;
         else {
             fprintf(stderr,
                     "usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] "
-                    "[--lead 2] [--tile 64] [--capacity F] [--pin CPU] "
-                    "[--only table|scaling|threads|split|split-pixels|switches|quality]\n");
+                    "[--lead 2] [--tile 64] [--capacity F] [--pin CPU] [--separate-pixels] "
+                    "[--only table|scaling|threads|split|split-pixels|fuse|switches|quality]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }
     }
@@ -612,6 +630,8 @@ int main(int argc, char **argv)
         section_split(&o);
     if (!only || !strcmp(only, "split-pixels"))
         section_split_pixels(&o);
+    if (!only || !strcmp(only, "fuse"))
+        section_fuse(&o);
     if (!only || !strcmp(only, "switches"))
         section_switches(&o);
     if (!only || !strcmp(only, "quality"))

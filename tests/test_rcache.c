@@ -633,6 +633,44 @@ static void test_dither(void **state)
     for (int i = 0; i < 200; i++)
         hot += prio[out[i].y * w + out[i].x] == 255;
     assert_true(hot >= 190);
+    /* Many bands (12 of 4 rows; 10 of 5 rows, the last 3): more than one group of lanes, and spare lanes.
+     * Every row has the same weights, so each band gets 300 in proportion to its rows, 201 / 212 of it on the
+     * left: 284.4 in all, each band within a rounding of its own share. */
+    for (uint32_t y = 0; y < h; y++)
+        for (uint32_t x = 0; x < w; x++)
+            prio[y * w + x] = x < w / 2 ? 200 : 10;
+    for (uint32_t band = 4; band <= 5; band++) {
+        assert_int_equal(view_rc_dither(prio, w, h, band, 300, out, scratch, scratch_bytes), FXC_OK);
+        check_distinct(out, 300, w, h);
+        uint32_t left = 0;
+        for (int i = 0; i < 300; i++)
+            left += out[i].x < w / 2;
+        assert_true(left >= 272 && left <= 296);
+    }
+    /* The seam rule keeps bands independent: each band of a 12-band run, dithered alone with the count it got
+     * there, chooses the same pixels (in the run one lane of eight, alone one beside spare lanes). */
+    for (size_t p = 0; p < sizeof prio; p++)
+        prio[p] = (uint8_t)((p * 7919) % 251);
+    assert_int_equal(view_rc_dither(prio, w, h, 4, 500, out, scratch, scratch_bytes), FXC_OK);
+    view_rc_pixel alone[64 * 4];
+    uint32_t at = 0;
+    for (uint32_t band = 0; band < h / 4; band++) {
+        uint32_t n = 0;
+        while (at + n < 500 && out[at + n].y / 4 == band)
+            n++;
+        assert_true(n > 0);
+        void *scratch2 = malloc(view_rc_dither_scratch_bytes(w, 4));
+        assert_int_equal(view_rc_dither(prio + (size_t)band * 4 * w, w, 4, 0, n, alone, scratch2,
+                                        view_rc_dither_scratch_bytes(w, 4)),
+                         FXC_OK);
+        free(scratch2);
+        for (uint32_t i = 0; i < n; i++) {
+            assert_int_equal(alone[i].x, out[at + i].x);
+            assert_int_equal(alone[i].y + band * 4, out[at + i].y);
+        }
+        at += n;
+    }
+    assert_int_equal(at, 500);
     /* Refusals. */
     assert_int_equal(view_rc_dither(prio, w, h, 0, w * h + 1, out, scratch, scratch_bytes), FXC_ERR_INVALID);
     assert_int_equal(view_rc_dither(prio, w, h, 0, 10, out, scratch, scratch_bytes - 1), FXC_ERR_INVALID);
@@ -830,8 +868,10 @@ static void test_drops_first_in_slot_order(void **state)
     render(rc, &cam, NULL, &f);
     assert_int_equal(f.stats.points, n);
     for (uint32_t i = 0; i < more; i++)
-        s[i] = (view_rc_sample){
-            .x = (uint16_t)((n + i) % w), .y = (uint16_t)((n + i) / w), .depth = 5, .rgb = {(uint8_t)i, 0, 2}};
+        s[i] = (view_rc_sample){.x = (uint16_t)((n + i) % w),
+                                .y = (uint16_t)((n + i) / w),
+                                .depth = 5,
+                                .rgb = {(uint8_t)i, 0, 2}};
     assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, s, more), FXC_OK);
     render(rc, &cam, NULL, &f);
     assert_int_equal(f.stats.dropped, more);
@@ -962,7 +1002,7 @@ static void answer(view_rc *rc, const view_rc_camera *cam, uint32_t w, uint32_t 
     free(s);
 }
 
-static walk_log walk(uint32_t threads, uint32_t tile, bool dynamic)
+static walk_log walk(uint32_t threads, uint32_t tile, bool dynamic, bool separate)
 {
     const uint32_t w = 83, h = 57;
     walk_log log = {0};
@@ -972,7 +1012,8 @@ static walk_log walk(uint32_t threads, uint32_t tile, bool dynamic)
                                        .tile_size = tile,
                                        .capacity = w * h * 3 / 2,
                                        .dynamic_points = dynamic,
-                                       .dynamic_pixels = dynamic});
+                                       .dynamic_pixels = dynamic,
+                                       .separate_pixel_passes = separate});
     uint8_t *rgb = malloc(w * h * 3);
     float *depth = malloc(w * h * sizeof(float));
     view_rc_pixel *req = malloc(sizeof *req * w * h), *pred = malloc(sizeof *pred * w * h);
@@ -1025,12 +1066,13 @@ static void test_threads_bit_identical(void **state)
     (void)state;
     const uint32_t tiles[] = {16, 13, 64};
     for (size_t t = 0; t < sizeof tiles / sizeof tiles[0]; t++) {
-        walk_log one = walk(1, tiles[t], false);
+        walk_log one = walk(1, tiles[t], false, false);
         /* 2 and 4 threads, the point and pixel passes split statically (the default) and handed out
-         * dynamically. */
-        const uint32_t threads[] = {2, 4, 2, 4};
-        for (size_t k = 0; k < 4; k++) {
-            walk_log many = walk(threads[k], tiles[t], k >= 2);
+         * dynamically; then the cull, interpolation and prefilter as separate passes over the image instead
+         * of fused by bands (whose halo rows are culled twice), on 1 and 2 threads. */
+        const uint32_t threads[] = {2, 4, 2, 4, 1, 2};
+        for (size_t k = 0; k < 6; k++) {
+            walk_log many = walk(threads[k], tiles[t], k >= 2 && k < 4, k >= 4);
             assert_int_equal(many.used, one.used);
             assert_memory_equal(many.bytes, one.bytes, one.used);
             free(many.bytes);
@@ -1103,11 +1145,23 @@ static void test_tiles_do_not_change_the_image(void **state)
  * `names`. -1 when nm cannot run. */
 static int foreign_symbols(const char *archive, char *names, size_t cap)
 {
-    static const char *const allowed[] = {
-        "aligned_alloc", "calloc", "malloc",        "realloc",
-        "free",          "memcpy", "memmove",       "memset",
-        "memcmp",        "abs",    "clock_gettime", "sqrtf",
-        "tanf",          "floor",  "floorf",        "sysconf", "_GLOBAL_OFFSET_TABLE_"};
+    static const char *const allowed[] = {"aligned_alloc",
+                                          "calloc",
+                                          "malloc",
+                                          "realloc",
+                                          "free",
+                                          "memcpy",
+                                          "memmove",
+                                          "memset",
+                                          "memcmp",
+                                          "abs",
+                                          "clock_gettime",
+                                          "sqrtf",
+                                          "tanf",
+                                          "floor",
+                                          "floorf",
+                                          "sysconf",
+                                          "_GLOBAL_OFFSET_TABLE_"};
     char command[1200];
     snprintf(command, sizeof command, "nm -u '%s' 2>/dev/null", archive);
     FILE *pipe = popen(command, "r");
@@ -1121,8 +1175,8 @@ static int foreign_symbols(const char *archive, char *names, size_t cap)
         if (sscanf(line, " %7s %399s", kind, symbol) != 2 || strlen(kind) != 1)
             continue;
         lines++;
-        if (!strncmp(symbol, "view_rc_", 8) || !strncmp(symbol, "fxc_pool_", 9) || !strncmp(symbol, "pthread_", 8) ||
-            !strncmp(symbol, "__", 2))
+        if (!strncmp(symbol, "view_rc_", 8) || !strncmp(symbol, "fxc_pool_", 9) ||
+            !strncmp(symbol, "pthread_", 8) || !strncmp(symbol, "__", 2))
             continue;
         bool ok = false;
         for (size_t i = 0; i < sizeof allowed / sizeof allowed[0]; i++)
@@ -1139,7 +1193,8 @@ static int foreign_symbols(const char *archive, char *names, size_t cap)
 }
 
 /* libfxc_rcache.a needs nothing but libc, libm, pthreads and the shared thread pool (libfxc_pool.a, itself
- * libc and pthreads only); the check refuses fxc_proto (zstd, libturbojpeg). The archives are found from this test's scratch folder, <build>/tests/tmp_test_rcache. */
+ * libc and pthreads only); the check refuses fxc_proto (zstd, libturbojpeg). The archives are found from this
+ * test's scratch folder, <build>/tests/tmp_test_rcache. */
 static void test_links_only_libc_libm_pthreads(void **state)
 {
     (void)state;

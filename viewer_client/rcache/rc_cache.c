@@ -197,7 +197,6 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_band_need = take(&l, rc->tiles_y, sizeof(uint32_t));
     size_t o_band_culled = take(&l, rc->tiles_y, sizeof(uint32_t));
     size_t o_band_kind = take(&l, (size_t)rc->tiles_y * VIEW_RC_PIXEL_KINDS, sizeof(uint32_t));
-    size_t o_tile_filled = take(&l, rc->tile_count, sizeof(uint32_t));
     size_t o_band_weight = take(&l, rc->tiles_y, sizeof(uint64_t));
     size_t o_band_quota = take(&l, rc->tiles_y, sizeof(uint32_t));
     size_t o_band_offset = take(&l, rc->tiles_y, sizeof(uint32_t));
@@ -207,15 +206,17 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_occupied[VIEW_RC_MAX_THREADS], o_low[VIEW_RC_MAX_THREADS], o_err[VIEW_RC_MAX_THREADS];
     size_t o_planes[VIEW_RC_MAX_THREADS], o_box[VIEW_RC_MAX_THREADS], o_spare[VIEW_RC_MAX_THREADS];
     size_t o_zt[VIEW_RC_MAX_THREADS], o_wt[VIEW_RC_MAX_THREADS], o_ct[VIEW_RC_MAX_THREADS];
+    size_t o_halo[VIEW_RC_MAX_THREADS];
     rc->local_z = rc->tile <= RC_LOCAL_TILE;
     size_t local = rc->local_z ? (size_t)rc->tile * rc->tile : 0;
     for (uint32_t t = 0; t < d.threads; t++) {
         o_occupied[t] = take(&l, (size_t)rc->low_w * rc->low_h + 1, 1); /* + a sink byte */
         o_low[t] = take(&l, chunk, sizeof(uint32_t));
-        o_err[t] = take(&l, 2 * RC_DITHER_LANES * 2 * ((size_t)d.width + 2), sizeof(float));
+        o_err[t] = take(&l, 2 * RC_DITHER_LANES * ((size_t)d.width + 2), sizeof(float));
         o_spare[t] = take(&l, d.width, 1);
         o_planes[t] = take(&l, view_rc__interp_scratch(d.width), sizeof(uint16_t));
         o_box[t] = take(&l, view_rc__prefilter_scratch(span), sizeof(uint16_t));
+        o_halo[t] = take(&l, 7 * (size_t)d.width, sizeof(uint32_t)); /* six rows of points, one of depths */
         o_zt[t] = take(&l, local, sizeof(float));
         o_wt[t] = take(&l, local, sizeof(uint32_t));
         o_ct[t] = take(&l, local, sizeof(uint32_t));
@@ -266,7 +267,6 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     rc->band_need = (uint32_t *)(block + o_band_need);
     rc->band_culled = (uint32_t *)(block + o_band_culled);
     rc->band_kind = (uint32_t *)(block + o_band_kind);
-    rc->tile_filled = (uint32_t *)(block + o_tile_filled);
     rc->band_weight = (uint64_t *)(block + o_band_weight);
     rc->band_quota = (uint32_t *)(block + o_band_quota);
     rc->band_offset = (uint32_t *)(block + o_band_offset);
@@ -280,6 +280,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
         rc->workers[t].spare = (uint8_t *)(block + o_spare[t]);
         rc->workers[t].planes = (uint16_t *)(block + o_planes[t]);
         rc->workers[t].box = (uint16_t *)(block + o_box[t]);
+        rc->workers[t].halo = (uint32_t *)(block + o_halo[t]);
         rc->workers[t].zt = (float *)(block + o_zt[t]);
         rc->workers[t].wt = (uint32_t *)(block + o_wt[t]);
         rc->workers[t].ct = (uint32_t *)(block + o_ct[t]);

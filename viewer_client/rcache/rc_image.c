@@ -79,8 +79,10 @@ FXC_HOT_CLONES static uint32_t cull_span(const float *zu, const float *zc, const
     return culled;
 }
 
-/* The same for one pixel anywhere (the image's border rows and columns): neighbours outside are +inf. */
-static uint32_t cull_pixel(view_rc *rc, uint32_t x, uint32_t y, float nearer, float sky)
+/* The same for one pixel anywhere (the image's border rows and columns): neighbours outside are +inf. Writes
+ * pixel x of the output rows pt_row and depth_row. */
+static uint32_t cull_pixel(const view_rc *rc, uint32_t x, uint32_t y, uint32_t *pt_row, float *depth_row,
+                           float nearer, float sky)
 {
     size_t w = rc->width, p = y * w + x;
     uint32_t h = rc->height;
@@ -94,48 +96,119 @@ static uint32_t cull_pixel(view_rc *rc, uint32_t x, uint32_t y, float nearer, fl
         pair_in_front(r && u ? zbuf[p - w + 1] : INFINITY, l && d ? zbuf[p + w - 1] : INFINITY, z, t);
     uint32_t v = rc->pre[p];
     bool occupied = v != RC_EMPTY_PT, cull = behind & occupied;
-    rc->pt[p] = cull ? RC_EMPTY_PT : v;
+    pt_row[x] = cull ? RC_EMPTY_PT : v;
     float depth = z >= sky ? INFINITY : z * sqrtf(1.0f + rc->stretch_x2[x] + rc->stretch_y2[y]);
-    rc->depth[p] = occupied && !cull ? depth : NAN;
+    depth_row[x] = occupied && !cull ? depth : NAN;
     return cull;
 }
 
-static void cull_task(void *user, uint32_t band, uint32_t worker)
+/* Row y of the depth cull into the output rows pt_row and depth_row (the image's rows, or a halo row of a
+ * band's scratch); returns the pixels culled. It reads only the z-buffer and the winners' colours, which the
+ * z-buffer pass has finished for the whole image, so any row can be culled at any time, and twice alike. */
+static uint32_t cull_row(const view_rc *rc, uint32_t y, uint32_t *pt_row, float *depth_row)
 {
-    view_rc *rc = user;
-    uint32_t y0, y1;
-    band_rows(rc, band, &y0, &y1);
     size_t w = rc->width;
     uint32_t h = rc->height, culled = 0;
     float nearer = rc->d.no_depth_cull ? 0.0f : 1.0f / (1.0f + rc->d.cull_ratio);
     float sky = (float)(0.5 * VIEW_RC_SKY_DISTANCE);
-    for (uint32_t y = y0; y < y1; y++) {
-        if (y == 0 || y + 1 >= h || w < 3) {
-            for (uint32_t x = 0; x < w; x++)
-                culled += cull_pixel(rc, x, y, nearer, sky);
-            continue;
-        }
-        size_t row = y * w;
-        culled += cull_pixel(rc, 0, y, nearer, sky);
-        culled +=
-            cull_span(rc->zbuf + row - w, rc->zbuf + row, rc->zbuf + row + w, rc->pre + row, rc->pt + row,
-                      rc->depth + row, rc->stretch_x2, rc->stretch_y2[y], nearer, sky, 1, (uint32_t)w - 1);
-        culled += cull_pixel(rc, (uint32_t)w - 1, y, nearer, sky);
+    if (y == 0 || y + 1 >= h || w < 3) {
+        for (uint32_t x = 0; x < w; x++)
+            culled += cull_pixel(rc, x, y, pt_row, depth_row, nearer, sky);
+        return culled;
     }
-    /* The points shown: visible for the ageing (no branch: a pixel without one marks the byte after the last
-     * slot). Marking entries instead (tile-local writes) and reading them back through each slot's entry in
-     * the ageing was slower: 0.8 against 0.3 ms for the ageing, the cull unchanged. */
-    const uint32_t *pt = rc->pt, *win = rc->win;
-    uint8_t *mark = rc->mark + worker * rc->mark_stride; /* this thread's marks */
+    size_t row = y * w;
+    culled += cull_pixel(rc, 0, y, pt_row, depth_row, nearer, sky);
+    culled += cull_span(rc->zbuf + row - w, rc->zbuf + row, rc->zbuf + row + w, rc->pre + row, pt_row,
+                        depth_row, rc->stretch_x2, rc->stretch_y2[y], nearer, sky, 1, (uint32_t)w - 1);
+    culled += cull_pixel(rc, (uint32_t)w - 1, y, pt_row, depth_row, nearer, sky);
+    return culled;
+}
+
+/* The points shown in row y: visible for the ageing (no branch: a pixel without one marks the byte after the
+ * last slot), in this thread's marks. Marking entries instead (tile-local writes) and reading them back
+ * through each slot's entry in the ageing was slower: 0.8 against 0.3 ms for the ageing, the cull unchanged.
+ */
+static void mark_row(const view_rc *rc, uint32_t y, uint32_t worker)
+{
+    size_t w = rc->width;
+    const uint32_t *pt = rc->pt + y * w, *win = rc->win + y * w;
+    uint8_t *mark = rc->mark + worker * rc->mark_stride;
     uint32_t sink = rc->slots;
-    for (size_t p = y0 * w; p < y1 * w; p++) {
-        uint32_t none = 0u - (uint32_t)(pt[p] == RC_EMPTY_PT);
-        mark[(win[p] & ~none) | (sink & none)] = 1;
+    for (size_t x = 0; x < w; x++) {
+        uint32_t none = 0u - (uint32_t)(pt[x] == RC_EMPTY_PT);
+        mark[(win[x] & ~none) | (sink & none)] = 1;
     }
+}
+
+/* ---- bands --------------------------------------------------------------------------------------------- */
+
+/* One band of rows [y0, y1) going through the pixel passes. Fused (the default), one task takes its band
+ * through the cull, the interpolation and the prefilter, row by row where it can (each row culled just
+ * before the interpolation reads it, so the shown points are read back from L1, not from memory), and the
+ * rows its filters read across its borders (one above and below for the 3x3, three for the 7x7) are culled
+ * again into scratch of its own: the band never waits for its neighbours, one pool run and barrier instead of
+ * three. The cull of a row reads only the finished z-buffer, so a halo row's points are exactly those its own
+ * band writes. Separate (separate_pixel_passes), each pass is a run over all bands and reads its neighbours'
+ * rows from the image, which the previous pass finished. */
+typedef struct rc_band {
+    view_rc *rc;
+    uint32_t y0, y1;
+    bool fused;
+    uint32_t *halo;    /* fused: rows y0 - 3 .. y0 - 1 as halo rows 0..2, y1 .. y1 + 2 as 3..5 */
+    float *halo_depth; /* a row the halo rows' depths go to (not used) */
+    uint8_t halo_done; /* bit k: halo row k culled */
+} rc_band;
+
+/* The band's view of the shown points' row y (inside the image). */
+static const uint32_t *band_pt(const rc_band *b, uint32_t y)
+{
+    if (!b->fused || (y >= b->y0 && y < b->y1))
+        return b->rc->pt + (size_t)y * b->rc->width;
+    uint32_t k = y < b->y0 ? 3 - (b->y0 - y) : 3 + (y - b->y1);
+    return b->halo + (size_t)k * b->rc->width;
+}
+
+/* Fused: culls the halo rows within `reach` rows of the band (those inside the image, once each). */
+static void band_halo(rc_band *b, uint32_t reach)
+{
+    if (!b->fused)
+        return;
+    for (uint32_t k = 0; k < 6; k++) {
+        uint32_t d = k < 3 ? 3 - k : k - 2; /* distance from the band */
+        if (d > reach || (b->halo_done >> k & 1))
+            continue;
+        int64_t y = k < 3 ? (int64_t)b->y0 - d : (int64_t)b->y1 + d - 1;
+        if (y < 0 || y >= b->rc->height)
+            continue;
+        cull_row(b->rc, (uint32_t)y, b->halo + (size_t)k * b->rc->width, b->halo_depth);
+        b->halo_done |= (uint8_t)(1u << k);
+    }
+}
+
+static rc_band band_of(view_rc *rc, uint32_t band, uint32_t worker, bool fused)
+{
+    rc_band b = {.rc = rc, .fused = fused};
+    band_rows(rc, band, &b.y0, &b.y1);
+    b.halo = rc->workers[worker].halo;
+    b.halo_depth = (float *)(b.halo + 6 * (size_t)rc->width);
+    return b;
+}
+
+/* Separate: the band's rows culled and marked. */
+static void cull_task(void *user, uint32_t band, uint32_t worker)
+{
+    view_rc *rc = user;
+    uint32_t y0, y1, culled = 0;
+    band_rows(rc, band, &y0, &y1);
+    size_t w = rc->width;
+    for (uint32_t y = y0; y < y1; y++)
+        culled += cull_row(rc, y, rc->pt + y * w, rc->depth + y * w);
+    for (uint32_t y = y0; y < y1; y++)
+        mark_row(rc, y, worker);
     rc->band_culled[band] = culled;
 }
 
-void view_rc__depth_cull(view_rc *rc)
+static void set_stretch(view_rc *rc)
 {
     /* The squared image-plane coordinates of the pixel centres (srv_camera_ray's sx, sy). */
     const rc_view *v = &rc->view;
@@ -147,6 +220,11 @@ void view_rc__depth_cull(view_rc *rc)
         float sy = (1.0f - 2.0f * ((float)y + 0.5f) / (float)v->height) * v->tan_half_y;
         rc->stretch_y2[y] = sy * sy;
     }
+}
+
+void view_rc__depth_cull(view_rc *rc)
+{
+    set_stretch(rc);
     rc_run_pixels(rc->pool, rc->d.dynamic_pixels, rc->tiles_y, cull_task, rc);
 }
 
@@ -251,14 +329,14 @@ FXC_HOT_CLONES static uint64_t finish_row(const uint16_t *restrict up, const uin
     return weight;
 }
 
-/* Row y of the shown points as row sums into `sums` (five planes, `plane` apart) and its occupied pixels into
- * `occupied` (width + 2, zero at both ends); zeros for a row outside the image. */
-static void interp_row(const view_rc *rc, int64_t y, uint16_t *sums, size_t plane, uint16_t *occupied,
+/* Row y of the shown points (as the band sees them) as row sums into `sums` (five planes, `plane` apart) and
+ * its occupied pixels into `occupied` (width + 2, zero at both ends); zeros for a row outside the image. */
+static void interp_row(const rc_band *band, int64_t y, uint16_t *sums, size_t plane, uint16_t *occupied,
                        uint16_t *unpacked)
 {
-    uint32_t w = rc->width;
+    uint32_t w = band->rc->width;
     size_t s = (size_t)w + 2;
-    if (y < 0 || y >= rc->height) {
+    if (y < 0 || y >= band->rc->height) {
         memset(sums, 0, 5 * plane * sizeof(uint16_t));
         memset(occupied, 0, s * sizeof(uint16_t));
         return;
@@ -266,16 +344,41 @@ static void interp_row(const view_rc *rc, int64_t y, uint16_t *sums, size_t plan
     uint16_t *r = unpacked, *g = r + s, *b = g + s;
     r[0] = g[0] = b[0] = occupied[0] = 0;
     r[s - 1] = g[s - 1] = b[s - 1] = occupied[s - 1] = 0;
-    unpack_span(rc->pt + (size_t)y * w, r + 1, g + 1, b + 1, occupied + 1, w);
+    unpack_span(band_pt(band, (uint32_t)y), r + 1, g + 1, b + 1, occupied + 1, w);
     row_sums(r, g, b, occupied, sums, sums + plane, sums + 2 * plane, sums + 3 * plane, sums + 4 * plane, w);
 }
 
-/* Rows of a band, each from the row sums of the rows above, itself and below (three kept, one new a row). */
-static void interpolate_task(void *user, uint32_t band, uint32_t worker)
+/* Fused: the band's rows are culled RC_CULL_ROWS at a time, just before the interpolation reaches them, and
+ * their shown points marked at once (the batch's rows still in L1): the cull's rows (three of depth, the
+ * colours, the outputs) and the interpolation's (row sums, planes) do not fit in L1 together, so each runs
+ * over a batch alone. Row by row, the interpolation's rows left L1 between rows (D1 misses 76.4 -> 91.5 M in
+ * 80 frames, the marks' random stores most of it). */
+enum { RC_CULL_ROWS = 8 };
+
+/* Fused: makes sure row y is culled (the band's own rows a batch at a time into the image, with their marks;
+ * the row below the band into the halo). */
+static void fused_cull(rc_band *b, uint32_t y, uint32_t worker, uint32_t *culled_to, uint32_t *culled)
 {
-    view_rc *rc = user;
-    uint32_t y0, y1;
-    band_rows(rc, band, &y0, &y1);
+    if (!b->fused || y >= b->rc->height || y < *culled_to)
+        return;
+    if (y >= b->y1) {
+        band_halo(b, 1);
+        return;
+    }
+    view_rc *rc = b->rc;
+    size_t w = rc->width;
+    uint32_t end = y + RC_CULL_ROWS < b->y1 ? y + RC_CULL_ROWS : b->y1;
+    for (uint32_t r = y; r < end; r++)
+        *culled += cull_row(rc, r, rc->pt + r * w, rc->depth + r * w);
+    for (uint32_t r = y; r < end; r++)
+        mark_row(rc, r, worker);
+    *culled_to = end;
+}
+
+/* Rows of a band, each from the row sums of the rows above, itself and below (three kept, one new a row). */
+static void band_interpolate(view_rc *rc, rc_band *b, uint32_t band, uint32_t worker)
+{
+    uint32_t y0 = b->y0, y1 = b->y1, culled = 0, culled_to = y0;
     uint32_t w = rc->width;
     size_t plane = w, s = (size_t)w + 2;
     uint16_t *scratch = rc->workers[worker].planes;
@@ -283,12 +386,16 @@ static void interpolate_task(void *user, uint32_t band, uint32_t worker)
     uint16_t *occupied[3] = {scratch + 15 * plane, scratch + 15 * plane + s, scratch + 15 * plane + 2 * s};
     uint16_t *unpacked = scratch + 15 * plane + 3 * s;
     uint8_t *out_r = (uint8_t *)(unpacked + 4 * s), *out_g = out_r + w, *out_b = out_g + w;
-    interp_row(rc, (int64_t)y0 - 1, sums[(y0 + 2) % 3], plane, occupied[(y0 + 2) % 3], unpacked);
-    interp_row(rc, y0, sums[y0 % 3], plane, occupied[y0 % 3], unpacked);
+    if (b->fused && y0 > 0)
+        band_halo(b, 1);
+    fused_cull(b, y0, worker, &culled_to, &culled);
+    interp_row(b, (int64_t)y0 - 1, sums[(y0 + 2) % 3], plane, occupied[(y0 + 2) % 3], unpacked);
+    interp_row(b, y0, sums[y0 % 3], plane, occupied[y0 % 3], unpacked);
     uint32_t kinds[VIEW_RC_PIXEL_KINDS] = {0};
     uint64_t weight = 0;
     for (uint32_t y = y0; y < y1; y++) {
-        interp_row(rc, (int64_t)y + 1, sums[(y + 1) % 3], plane, occupied[(y + 1) % 3], unpacked);
+        fused_cull(b, y + 1, worker, &culled_to, &culled);
+        interp_row(b, (int64_t)y + 1, sums[(y + 1) % 3], plane, occupied[(y + 1) % 3], unpacked);
         size_t p = (size_t)y * w;
         uint32_t before = kinds[VIEW_RC_EMPTY];
         weight += finish_row(sums[(y + 2) % 3], sums[y % 3], sums[(y + 1) % 3], plane, occupied[y % 3] + 1,
@@ -297,9 +404,18 @@ static void interpolate_task(void *user, uint32_t band, uint32_t worker)
         rc->row_need[y] = kinds[VIEW_RC_EMPTY] - before;
         interleave(out_r, out_g, out_b, rc->rgb + 3 * p, w);
     }
+    if (b->fused)
+        rc->band_culled[band] = culled;
     memcpy(rc->band_kind + (size_t)band * VIEW_RC_PIXEL_KINDS, kinds, sizeof kinds);
     rc->band_need[band] = rc->d.no_prefilter ? 0 : kinds[VIEW_RC_EMPTY];
     rc->band_weight[band] = weight;
+}
+
+static void interpolate_task(void *user, uint32_t band, uint32_t worker)
+{
+    view_rc *rc = user;
+    rc_band b = band_of(rc, band, worker, false);
+    band_interpolate(rc, &b, band, worker);
 }
 
 void view_rc__interpolate(view_rc *rc)
@@ -330,7 +446,7 @@ static void fill_from(uint8_t *rgb, const uint32_t acc[4])
 }
 
 /* Tiles with few pixels to fill: each one's 7x7 window summed directly. */
-static uint32_t prefilter_direct(view_rc *rc, rc_rect r)
+static uint32_t prefilter_direct(view_rc *rc, const rc_band *b, rc_rect r)
 {
     uint32_t w = rc->width, h = rc->height, filled = 0;
     for (uint32_t y = r.y0; y < r.y1; y++)
@@ -341,14 +457,16 @@ static uint32_t prefilter_direct(view_rc *rc, rc_rect r)
             uint32_t acc[4] = {0, 0, 0, 0};
             uint32_t ya = y >= 3 ? y - 3 : 0, yb = y + 4 < h ? y + 4 : h;
             uint32_t xa = x >= 3 ? x - 3 : 0, xb = x + 4 < w ? x + 4 : w;
-            for (uint32_t yy = ya; yy < yb; yy++)
+            for (uint32_t yy = ya; yy < yb; yy++) {
+                const uint32_t *row = band_pt(b, yy);
                 for (uint32_t xx = xa; xx < xb; xx++) {
-                    uint32_t v = rc->pt[(size_t)yy * w + xx];
+                    uint32_t v = row[xx];
                     if (v == RC_EMPTY_PT)
                         continue;
                     acc[0] += v & 0xFF, acc[1] += (v >> 8) & 0xFF, acc[2] += (v >> 16) & 0xFF;
                     acc[3]++;
                 }
+            }
             if (acc[3] > 0) {
                 fill_from(rc->rgb + 3 * p, acc);
                 rc->kind[p] = VIEW_RC_PREFILTER;
@@ -386,7 +504,7 @@ FXC_HOT_CLONES static void sums7_down(const uint16_t *restrict src, size_t strid
 
 /* Tiles with many: the box filter separated, rows then columns, on 16-bit planes (the loops vectorise; the
  * largest sum, 49 x 255, fits). */
-static uint32_t prefilter_planes(view_rc *rc, rc_rect r, uint16_t *scratch)
+static uint32_t prefilter_planes(view_rc *rc, const rc_band *b, rc_rect r, uint16_t *scratch)
 {
     uint32_t w = rc->width, h = rc->height, tw = r.x1 - r.x0, th = r.y1 - r.y0, filled = 0;
     uint32_t s = tw + 6;
@@ -402,7 +520,7 @@ static uint32_t prefilter_planes(view_rc *rc, rc_rect r, uint16_t *scratch)
         /* Columns x0 - 3 .. x1 + 2, those inside the image. */
         int64_t xa = (int64_t)r.x0 - 3 < 0 ? 0 : (int64_t)r.x0 - 3, xb = r.x1 + 3 < w ? r.x1 + 3 : w;
         size_t i0 = (size_t)(xa - ((int64_t)r.x0 - 3));
-        unpack_span(rc->pt + (size_t)y * w + xa, planes + q + i0, planes + plane + q + i0,
+        unpack_span(band_pt(b, (uint32_t)y) + xa, planes + q + i0, planes + plane + q + i0,
                     planes + 2 * plane + q + i0, planes + 3 * plane + q + i0, (uint32_t)(xb - xa));
     }
     for (int c = 0; c < 4; c++)
@@ -425,35 +543,60 @@ static uint32_t prefilter_planes(view_rc *rc, rc_rect r, uint16_t *scratch)
     return filled;
 }
 
-static void prefilter_task(void *user, uint32_t tile, uint32_t worker)
+/* The band's tiles that have pixels to fill (fused: once the halo's three rows each side are culled). */
+static void band_prefilter(view_rc *rc, rc_band *b, uint32_t band, uint32_t worker)
+{
+    if (rc->band_need[band] == 0)
+        return;
+    uint32_t filled = 0;
+    for (uint32_t tile = band * rc->tiles_x; tile < (band + 1) * rc->tiles_x; tile++) {
+        rc_rect r = tile_rect(rc, tile);
+        uint32_t need = 0;
+        for (uint32_t y = r.y0; y < r.y1; y++)
+            if (rc->row_need[y] > 0)
+                for (uint32_t x = r.x0; x < r.x1; x++)
+                    need += rc->kind[(size_t)y * rc->width + x] == VIEW_RC_EMPTY;
+        if (need == 0)
+            continue;
+        band_halo(b, 3);
+        /* 49 reads a pixel, against the planes' few vector operations per pixel of the tile (about 25 pixels
+         * to fill in a 64 x 64 tile cost as much either way). */
+        uint64_t tile_pixels = (uint64_t)(r.x1 - r.x0) * (r.y1 - r.y0);
+        filled += (uint64_t)need * 49 * 4 < tile_pixels * 1
+                      ? prefilter_direct(rc, b, r)
+                      : prefilter_planes(rc, b, r, rc->workers[worker].box);
+    }
+    uint32_t *kinds = rc->band_kind + (size_t)band * VIEW_RC_PIXEL_KINDS;
+    kinds[VIEW_RC_EMPTY] -= filled;
+    kinds[VIEW_RC_PREFILTER] += filled;
+}
+
+static void prefilter_task(void *user, uint32_t band, uint32_t worker)
 {
     view_rc *rc = user;
-    if (rc->band_need[tile / rc->tiles_x] == 0)
-        return;
-    rc_rect r = tile_rect(rc, tile);
-    uint32_t need = 0;
-    for (uint32_t y = r.y0; y < r.y1; y++)
-        if (rc->row_need[y] > 0)
-            for (uint32_t x = r.x0; x < r.x1; x++)
-                need += rc->kind[(size_t)y * rc->width + x] == VIEW_RC_EMPTY;
-    if (need == 0)
-        return;
-    /* 49 reads a pixel, against the planes' few vector operations per pixel of the tile (about 25 pixels to
-     * fill in a 64 x 64 tile cost as much either way). */
-    uint64_t tile_pixels = (uint64_t)(r.x1 - r.x0) * (r.y1 - r.y0);
-    uint32_t filled = (uint64_t)need * 49 * 4 < tile_pixels * 1
-                          ? prefilter_direct(rc, r)
-                          : prefilter_planes(rc, r, rc->workers[worker].box);
-    rc->tile_filled[tile] = filled;
+    rc_band b = band_of(rc, band, worker, false);
+    band_prefilter(rc, &b, band, worker);
 }
 
 void view_rc__prefilter(view_rc *rc)
 {
-    memset(rc->tile_filled, 0, rc->tile_count * sizeof(uint32_t));
-    rc_run_pixels(rc->pool, rc->d.dynamic_pixels, rc->tile_count, prefilter_task, rc);
-    for (uint32_t tile = 0; tile < rc->tile_count; tile++) {
-        uint32_t *kinds = rc->band_kind + (size_t)(tile / rc->tiles_x) * VIEW_RC_PIXEL_KINDS;
-        kinds[VIEW_RC_EMPTY] -= rc->tile_filled[tile];
-        kinds[VIEW_RC_PREFILTER] += rc->tile_filled[tile];
-    }
+    rc_run_pixels(rc->pool, rc->d.dynamic_pixels, rc->tiles_y, prefilter_task, rc);
+}
+
+/* ---- the three fused ------------------------------------------------------------------------------------
+ */
+
+static void pixels_task(void *user, uint32_t band, uint32_t worker)
+{
+    view_rc *rc = user;
+    rc_band b = band_of(rc, band, worker, true);
+    band_interpolate(rc, &b, band, worker);
+    if (!rc->d.no_prefilter)
+        band_prefilter(rc, &b, band, worker);
+}
+
+void view_rc__pixels(view_rc *rc)
+{
+    set_stretch(rc);
+    rc_run_pixels(rc->pool, rc->d.dynamic_pixels, rc->tiles_y, pixels_task, rc);
 }

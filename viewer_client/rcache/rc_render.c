@@ -90,20 +90,28 @@ fxc_result view_rc_render(view_rc *rc, const view_rc_camera *cam, const view_rc_
     stats.stage_ms[VIEW_RC_STAGE_ZBUFFER] = t_next - t;
     t = t_next;
 
-    view_rc__depth_cull(rc);
-    t_next = view_rc__now_ms();
-    stats.stage_ms[VIEW_RC_STAGE_DEPTH_CULL] = t_next - t;
-    t = t_next;
-
-    view_rc__interpolate(rc);
-    t_next = view_rc__now_ms();
-    stats.stage_ms[VIEW_RC_STAGE_INTERPOLATE] = t_next - t;
-    t = t_next;
-
-    if (!rc->d.no_prefilter) {
-        view_rc__prefilter(rc);
+    if (rc->d.separate_pixel_passes) {
+        view_rc__depth_cull(rc);
         t_next = view_rc__now_ms();
-        stats.stage_ms[VIEW_RC_STAGE_PREFILTER] = t_next - t;
+        stats.stage_ms[VIEW_RC_STAGE_DEPTH_CULL] = t_next - t;
+        t = t_next;
+
+        view_rc__interpolate(rc);
+        t_next = view_rc__now_ms();
+        stats.stage_ms[VIEW_RC_STAGE_INTERPOLATE] = t_next - t;
+        t = t_next;
+
+        if (!rc->d.no_prefilter) {
+            view_rc__prefilter(rc);
+            t_next = view_rc__now_ms();
+            stats.stage_ms[VIEW_RC_STAGE_PREFILTER] = t_next - t;
+            t = t_next;
+        }
+    } else {
+        /* The 2002 paper's depth cull, interpolate and prefilter, one band of rows at a time: one row. */
+        view_rc__pixels(rc);
+        t_next = view_rc__now_ms();
+        stats.stage_ms[VIEW_RC_STAGE_PIXELS] = t_next - t;
         t = t_next;
     }
 

@@ -105,135 +105,160 @@ void view_rc__band_quotas(const uint64_t *weight, const uint32_t *pixels, uint32
 
 /* ---- one band's dither --------------------------------------------------------------------------------- */
 
-/* Pixel x's value plus the error it received; chooses it when that reaches 1/2 (no branch: the choice is as
- * likely as not) and returns what is left to pass on. */
-FXC_HOT_INLINE float pick(const uint8_t *line, uint8_t *mark, const float *here, uint32_t x, float scale,
-                          uint32_t *picked)
+/* Up to RC_DITHER_LANES (8) bands run through the error diffusion together, one lane each: the bands are
+ * independent, and their chains of error (each pixel's value waits for the error of the pixel before) overlap
+ * in the processor. The lanes' errors are interleaved, err[x * 8 + k] for lane k, so one row of
+ * Floyd-Steinberg takes the eight lanes' pixel x in two 4-wide vectors: the arithmetic of eight pixels in a
+ * few vector instructions (it was four lanes of scalar code, about 2.6 ns a pixel). The choices come out as a
+ * byte of eight bits per pixel (bit k: lane k), spread into the lanes' rows afterwards. The floats are those
+ * of the plain loop per pixel (the same operations in the same order, -ffp-contract=off), so the choices do
+ * not depend on which lanes run together.
+ *
+ * Seam rule (the bands' edges): no error crosses a band's edge. At a row's ends, the shares that would leave
+ * the band go to those that stay in proportion (first pixel of a row 7 + 5 + 1 = 13, last 3 + 5 = 8); a
+ * band's last row passes everything ahead (nothing goes below). Each band gets its count from the band
+ * quotas, so the count is exact whatever the seams do to the pattern near them. */
+
+/* One row of the lanes: errors in `here` (read), into `below` (written), width * 8 each; lane k reads line[k]
+ * (its priorities) with scale[k]; bit k of bits[x] is lane k's choice. Not a band's last row. */
+typedef struct rc_lanes {
+    const uint8_t *line[RC_DITHER_LANES];
+    float scale[RC_DITHER_LANES];
+} rc_lanes;
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+
+/* Pixel x of the eight lanes as two vectors: (line + 1) * scale + (here + ahead), the choice, the error e. */
+#define RC_PICK8(x)                                                                                          \
+    __m128i la = _mm_setr_epi32(l->line[0][x], l->line[1][x], l->line[2][x], l->line[3][x]);                 \
+    __m128i lb = _mm_setr_epi32(l->line[4][x], l->line[5][x], l->line[6][x], l->line[7][x]);                 \
+    __m128 va = _mm_add_ps(_mm_mul_ps(_mm_cvtepi32_ps(_mm_add_epi32(la, one_i)), scale_a),                   \
+                           _mm_add_ps(_mm_loadu_ps(here + 8 * (size_t)(x)), ahead_a));                       \
+    __m128 vb = _mm_add_ps(_mm_mul_ps(_mm_cvtepi32_ps(_mm_add_epi32(lb, one_i)), scale_b),                   \
+                           _mm_add_ps(_mm_loadu_ps(here + 8 * (size_t)(x) + 4), ahead_b));                   \
+    __m128 ca = _mm_cmpge_ps(va, half), cb = _mm_cmpge_ps(vb, half);                                         \
+    bits[x] = (uint8_t)(_mm_movemask_ps(ca) | _mm_movemask_ps(cb) << 4);                                     \
+    __m128 ea = _mm_sub_ps(va, _mm_and_ps(ca, one)), eb = _mm_sub_ps(vb, _mm_and_ps(cb, one));
+#define RC_SPLAT(v) _mm_set1_ps(v)
+
+FXC_HOT_CLONES static void diffuse_rows(const rc_lanes *l, const float *restrict here, float *restrict below,
+                                        uint8_t *restrict bits, uint32_t width, bool forward)
 {
-    float value = (float)(line[x] + 1) * scale + here[x];
-    uint32_t chosen = value >= 0.5f;
-    mark[x] = (uint8_t)chosen;
-    *picked += chosen;
-    return value - (float)chosen;
-}
-
-/* One band's row being diffused. */
-typedef struct rc_lane {
-    const uint8_t *line; /* the row's priorities */
-    uint8_t *mark;       /* the row's choices */
-    float *here, *below; /* errors into this row (read) and into the next (written), width + 2 each */
-    float scale;         /* (priority + 1) * scale sums to the band's quota */
-    uint32_t picked;
-} rc_lane;
-
-/* One row of Floyd-Steinberg in four bands at once (the bands are independent: their chains of error
- * interleave in the processor; eight at once was slower, 1.1 against 0.7 ms: the lanes' state no longer fits
- * in registers), left to right (forward) or right to left: 7/16 of the error ahead, 3/16 below behind, 5/16
- * below, 1/16 below ahead; at the row's ends the shares that would leave the band go to the others in
- * proportion. Not a band's last row (diffuse_last_row). The error ahead and the three errors below that are
- * not final yet stay in registers (the additions happen in the same order as into memory, so the floats are
- * those of the plain loop); each lane's state is local, out of reach of the byte stores of the choices. */
-#define RC_LANE_VARS(k)                                                                                      \
-    const uint8_t *line##k = lanes[k].line;                                                                  \
-    uint8_t *mark##k = lanes[k].mark;                                                                        \
-    const float *here##k = lanes[k].here;                                                                    \
-    float *below##k = lanes[k].below;                                                                        \
-    float scale##k = lanes[k].scale, ahead##k = 0, near##k = 0, far##k = 0;                                  \
-    uint32_t picked##k = 0;
-/* Pixel x of lane k: its value and choice; e is what it passes on. */
-#define RC_LANE_PICK(k, x)                                                                                   \
-    float value##k = (float)(line##k[x] + 1) * scale##k + (here##k[x] + ahead##k);                           \
-    uint32_t chosen##k = value##k >= 0.5f;                                                                   \
-    mark##k[x] = (uint8_t)chosen##k;                                                                         \
-    picked##k += chosen##k;                                                                                  \
-    float e##k = value##k - (value##k >= 0.5f ? 1.0f : 0.0f); /* a compare and a mask: no int-to-float */
-/* Interior pixel x, moving by step (+1 or -1): below[x - step] is final with 3/16 of e; below[x] gets 5/16
- * (after 1/16 from the pixel before), below[x + step] starts with 1/16. */
-#define RC_LANE_STEP(k, x, step)                                                                             \
-    {                                                                                                        \
-        RC_LANE_PICK(k, x)                                                                                   \
-        below##k[(x) - (step)] = near##k + e##k * b3;                                                        \
-        near##k = far##k + e##k * b5;                                                                        \
-        far##k = e##k * b1;                                                                                  \
-        ahead##k = e##k * a7;                                                                                \
-    }
-#define RC_LANES(macro, ...)                                                                                 \
-    macro(0, __VA_ARGS__) macro(1, __VA_ARGS__) macro(2, __VA_ARGS__) macro(3, __VA_ARGS__)
-#define RC_EACH(macro) macro(0) macro(1) macro(2) macro(3)
-
-FXC_HOT_CLONES static void diffuse_rows(rc_lane *lanes, uint32_t width, bool forward)
-{
-    const float a7 = 7.0f / 16, b3 = 3.0f / 16, b5 = 5.0f / 16, b1 = 1.0f / 16;
-    RC_EACH(RC_LANE_VARS)
+    const __m128i one_i = _mm_set1_epi32(1);
+    const __m128 one = RC_SPLAT(1.0f), half = RC_SPLAT(0.5f), a7 = RC_SPLAT(7.0f / 16),
+                 b3 = RC_SPLAT(3.0f / 16), b5 = RC_SPLAT(5.0f / 16), b1 = RC_SPLAT(1.0f / 16);
+    const __m128 scale_a = _mm_loadu_ps(l->scale), scale_b = _mm_loadu_ps(l->scale + 4);
+    __m128 ahead_a = _mm_setzero_ps(), ahead_b = ahead_a, near_a = ahead_a, near_b = ahead_a, far_a = ahead_a,
+           far_b = ahead_a;
     if (width == 1) {
-#define RC_ONLY(k)                                                                                           \
-    {                                                                                                        \
-        RC_LANE_PICK(k, 0)                                                                                   \
-        below##k[0] = e##k; /* only below is left */                                                         \
+        RC_PICK8(0)
+        _mm_storeu_ps(below, ea); /* only below is left */
+        _mm_storeu_ps(below + 4, eb);
+        return;
     }
-        RC_EACH(RC_ONLY)
-#undef RC_ONLY
-    } else if (forward) {
+    uint32_t first = forward ? 0 : width - 1, last = forward ? width - 1 : 0;
+    {
         /* First: no pixel behind, 7 + 5 + 1 = 13. */
-#define RC_FIRST(k)                                                                                          \
-    {                                                                                                        \
-        RC_LANE_PICK(k, 0)                                                                                   \
-        ahead##k = e##k * (7.0f / 13), near##k = e##k * (5.0f / 13), far##k = e##k * (1.0f / 13);            \
+        RC_PICK8(first)
+        ahead_a = _mm_mul_ps(ea, RC_SPLAT(7.0f / 13)), ahead_b = _mm_mul_ps(eb, RC_SPLAT(7.0f / 13));
+        near_a = _mm_mul_ps(ea, RC_SPLAT(5.0f / 13)), near_b = _mm_mul_ps(eb, RC_SPLAT(5.0f / 13));
+        far_a = _mm_mul_ps(ea, RC_SPLAT(1.0f / 13)), far_b = _mm_mul_ps(eb, RC_SPLAT(1.0f / 13));
     }
-        RC_EACH(RC_FIRST)
-#undef RC_FIRST
-        for (uint32_t x = 1; x + 1 < width; x++) {
-            RC_LANES(RC_LANE_STEP, x, 1)
+    /* Interior pixel x, moving by step: below[x - step] is final with 3/16 of e; below[x] gets 5/16 (after
+     * 1/16 from the pixel before), below[x + step] starts with 1/16. */
+#define RC_STEP8(x, step)                                                                                    \
+    {                                                                                                        \
+        RC_PICK8(x)                                                                                          \
+        float *b = below + 8 * (size_t)((x) - (step));                                                       \
+        _mm_storeu_ps(b, _mm_add_ps(near_a, _mm_mul_ps(ea, b3)));                                            \
+        _mm_storeu_ps(b + 4, _mm_add_ps(near_b, _mm_mul_ps(eb, b3)));                                        \
+        near_a = _mm_add_ps(far_a, _mm_mul_ps(ea, b5)), near_b = _mm_add_ps(far_b, _mm_mul_ps(eb, b5));      \
+        far_a = _mm_mul_ps(ea, b1), far_b = _mm_mul_ps(eb, b1);                                              \
+        ahead_a = _mm_mul_ps(ea, a7), ahead_b = _mm_mul_ps(eb, a7);                                          \
+    }
+    if (forward)
+        for (uint32_t x = 1; x + 1 < width; x++)
+            RC_STEP8(x, 1)
+    else
+        for (uint32_t x = width - 2; x > 0; x--)
+            RC_STEP8(x, -1)
+#undef RC_STEP8
+            {
+                /* Last: nothing ahead, 3 + 5 = 8. */
+                RC_PICK8(last)
+                int32_t back = forward ? -1 : 1;
+                float *b = below + 8 * (size_t)((int64_t)last + back), *c = below + 8 * (size_t)last;
+                _mm_storeu_ps(b, _mm_add_ps(near_a, _mm_mul_ps(ea, RC_SPLAT(3.0f / 8))));
+                _mm_storeu_ps(b + 4, _mm_add_ps(near_b, _mm_mul_ps(eb, RC_SPLAT(3.0f / 8))));
+                _mm_storeu_ps(c, _mm_add_ps(far_a, _mm_mul_ps(ea, RC_SPLAT(5.0f / 8))));
+                _mm_storeu_ps(c + 4, _mm_add_ps(far_b, _mm_mul_ps(eb, RC_SPLAT(5.0f / 8))));
+            }
+}
+#undef RC_PICK8
+#undef RC_SPLAT
+#else
+/* Without SSE2: the same arithmetic lane by lane. */
+static void diffuse_rows(const rc_lanes *l, const float *restrict here, float *restrict below,
+                         uint8_t *restrict bits, uint32_t width, bool forward)
+{
+    memset(bits, 0, width);
+    for (uint32_t k = 0; k < RC_DITHER_LANES; k++) {
+        const uint8_t *line = l->line[k];
+        float scale = l->scale[k], ahead = 0, near = 0, far = 0;
+        for (uint32_t i = 0; i < width; i++) {
+            uint32_t x = forward ? i : width - 1 - i;
+            float value = (float)(line[x] + 1) * scale + (here[8 * (size_t)x + k] + ahead);
+            uint32_t chosen = value >= 0.5f;
+            bits[x] |= (uint8_t)(chosen << k);
+            float e = value - (chosen ? 1.0f : 0.0f);
+            if (width == 1) {
+                below[k] = e;
+            } else if (i == 0) {
+                ahead = e * (7.0f / 13), near = e * (5.0f / 13), far = e * (1.0f / 13);
+            } else if (i + 1 < width) {
+                below[8 * (size_t)(forward ? x - 1 : x + 1) + k] = near + e * (3.0f / 16);
+                near = far + e * (5.0f / 16);
+                far = e * (1.0f / 16);
+                ahead = e * (7.0f / 16);
+            } else {
+                below[8 * (size_t)(forward ? x - 1 : x + 1) + k] = near + e * (3.0f / 8);
+                below[8 * (size_t)x + k] = far + e * (5.0f / 8);
+            }
         }
-        /* Last: nothing ahead, 3 + 5 = 8. */
-#define RC_LAST(k)                                                                                           \
-    {                                                                                                        \
-        RC_LANE_PICK(k, width - 1)                                                                           \
-        below##k[width - 2] = near##k + e##k * (3.0f / 8);                                                   \
-        below##k[width - 1] = far##k + e##k * (5.0f / 8);                                                    \
     }
-        RC_EACH(RC_LAST)
-#undef RC_LAST
-    } else {
-#define RC_FIRST(k)                                                                                          \
-    {                                                                                                        \
-        RC_LANE_PICK(k, width - 1)                                                                           \
-        ahead##k = e##k * (7.0f / 13), near##k = e##k * (5.0f / 13), far##k = e##k * (1.0f / 13);            \
+}
+#endif
+
+/* Lane k's choices from the row's bits into its row of `chosen`; returns how many. */
+FXC_HOT_CLONES static uint32_t spread_bits(const uint8_t *restrict bits, uint32_t k, uint8_t *restrict mark,
+                                           uint32_t width)
+{
+    uint32_t picked = 0;
+    for (size_t x = 0; x < width; x++) {
+        uint8_t c = (uint8_t)((bits[x] >> k) & 1u);
+        mark[x] = c;
+        picked += c;
     }
-        RC_EACH(RC_FIRST)
-#undef RC_FIRST
-        for (uint32_t x = width - 2; x > 0; x--) {
-            RC_LANES(RC_LANE_STEP, x, -1)
-        }
-#define RC_LAST(k)                                                                                           \
-    {                                                                                                        \
-        RC_LANE_PICK(k, 0)                                                                                   \
-        below##k[1] = near##k + e##k * (3.0f / 8);                                                           \
-        below##k[0] = far##k + e##k * (5.0f / 8);                                                            \
-    }
-        RC_EACH(RC_LAST)
-#undef RC_LAST
-    }
-#define RC_SAVE(k) lanes[k].picked += picked##k;
-    RC_EACH(RC_SAVE)
-#undef RC_SAVE
+    return picked;
 }
 
-/* A band's last row: everything goes ahead (nothing may leave the band). */
-static void diffuse_last_row(rc_lane *l, uint32_t width, bool forward)
+/* A band's last row, lane k of the interleaved errors: everything goes ahead (nothing may leave the band). */
+static uint32_t diffuse_last_row(const uint8_t *line, uint8_t *mark, float *here, uint32_t k, float scale,
+                                 uint32_t width, bool forward)
 {
-    if (forward)
-        for (uint32_t x = 0; x < width; x++) {
-            float e = pick(l->line, l->mark, l->here, x, l->scale, &l->picked);
-            if (x + 1 < width)
-                l->here[x + 1] += e;
-        }
-    else
-        for (uint32_t x = width; x-- > 0;) {
-            float e = pick(l->line, l->mark, l->here, x, l->scale, &l->picked);
-            if (x > 0)
-                l->here[x - 1] += e;
-        }
+    uint32_t picked = 0;
+    for (uint32_t i = 0; i < width; i++) {
+        uint32_t x = forward ? i : width - 1 - i;
+        float value = (float)(line[x] + 1) * scale + here[8 * (size_t)x + k];
+        uint32_t chosen = value >= 0.5f;
+        mark[x] = (uint8_t)chosen;
+        picked += chosen;
+        float e = value - (float)chosen;
+        if (i + 1 < width)
+            here[8 * (size_t)(forward ? x + 1 : x - 1) + k] += e;
+    }
+    return picked;
 }
 
 /* Exactly quota in rows [y0, y1): tops up by highest priority, or trims by lowest (in scanline order within a
@@ -301,68 +326,71 @@ static void settle_band(const uint8_t *priority, uint32_t width, uint32_t y0, ui
 
 void view_rc__dither_bands(const uint8_t *priority, uint32_t width, const uint32_t *y0, const uint32_t *y1,
                            const uint64_t *weight, const uint32_t *quota, uint32_t bands, uint8_t *chosen,
-                           float *err, uint8_t *spare, view_rc_pixel *const *out)
+                           float *err, uint8_t *bits, view_rc_pixel *const *out)
 {
-    rc_lane lanes[RC_DITHER_LANES];
-    uint32_t rows = 0;
-    for (uint32_t k = 0; k < bands; k++) {
+    float *here = err, *below = err + (size_t)RC_DITHER_LANES * (width + 2);
+    memset(here, 0, (size_t)RC_DITHER_LANES * width * sizeof(float));
+    rc_lanes lanes;
+    uint32_t picked[RC_DITHER_LANES] = {0}, rows = 0;
+    for (uint32_t k = 0; k < RC_DITHER_LANES; k++) {
+        /* Spare lanes (fewer bands, a band without a quota, or one done) read the first row with scale 0;
+         * their choices are not spread and their errors not read. */
+        lanes.line[k] = priority;
+        lanes.scale[k] = 0.0f;
+        if (k >= bands)
+            continue;
         memset(chosen + (size_t)y0[k] * width, 0, (size_t)(y1[k] - y0[k]) * width);
-        lanes[k].here = err + (size_t)k * 2 * (width + 2);
-        lanes[k].below = lanes[k].here + width + 2;
-        memset(lanes[k].here, 0, (width + 2) * sizeof(float));
-        lanes[k].scale = (float)((double)quota[k] / (double)weight[k]);
-        lanes[k].picked = 0;
+        if (quota[k] > 0)
+            lanes.scale[k] = (float)((double)quota[k] / (double)weight[k]);
         rows = y1[k] - y0[k] > rows ? y1[k] - y0[k] : rows;
     }
-    /* Spare lanes (fewer bands, or bands done) run on the spare rows after the real ones: line 0 of band 0
-     * read again, choices into `spare`. */
-    float *spare_err = err + (size_t)RC_DITHER_LANES * 2 * (width + 2);
+    float scale[RC_DITHER_LANES];
+    memcpy(scale, lanes.scale, sizeof scale);
     for (uint32_t j = 0; j < rows; j++) {
-        bool forward = (j & 1) == 0;
-        rc_lane run[RC_DITHER_LANES];
-        uint32_t n = 0, index[RC_DITHER_LANES];
-        for (uint32_t k = 0; k < bands; k++) {
-            if (quota[k] == 0 || j >= y1[k] - y0[k])
-                continue;
-            lanes[k].line = priority + (size_t)(y0[k] + j) * width;
-            lanes[k].mark = chosen + (size_t)(y0[k] + j) * width;
-            if (j + 1 == y1[k] - y0[k]) {
-                diffuse_last_row(&lanes[k], width, forward);
-                continue;
+        bool forward = (j & 1) == 0, live[RC_DITHER_LANES], any = false;
+        /* Lanes on their last row go ahead alone (scalar); the rest together. */
+        for (uint32_t k = 0; k < RC_DITHER_LANES; k++) {
+            live[k] = k < bands && quota[k] > 0 && j < y1[k] - y0[k];
+            if (live[k] && j + 1 == y1[k] - y0[k]) {
+                picked[k] +=
+                    diffuse_last_row(priority + (size_t)(y0[k] + j) * width,
+                                     chosen + (size_t)(y0[k] + j) * width, here, k, scale[k], width, forward);
+                live[k] = false;
             }
-            index[n] = k;
-            run[n++] = lanes[k];
+            lanes.line[k] = live[k] ? priority + (size_t)(y0[k] + j) * width : priority;
+            lanes.scale[k] = live[k] ? scale[k] : 0.0f;
+            any |= live[k];
         }
-        if (n == 0)
+        if (!any)
             continue;
-        for (uint32_t m = n; m < RC_DITHER_LANES; m++) {
-            run[m] = run[0];
-            run[m].here = spare_err + (m - n) * 2 * (size_t)(width + 2);
-            run[m].below = run[m].here + width + 2;
-            run[m].mark = spare;
-        }
-        for (uint32_t m = 0; m < RC_DITHER_LANES; m++)
-            run[m].picked = 0;
-        diffuse_rows(run, width, forward);
-        for (uint32_t m = 0; m < n; m++) {
-            rc_lane *l = &lanes[index[m]];
-            l->picked += run[m].picked;
-            l->here = run[m].below; /* the next row's incoming errors */
-            l->below = run[m].here;
-        }
+        diffuse_rows(&lanes, here, below, bits, width, forward);
+        for (uint32_t k = 0; k < RC_DITHER_LANES; k++)
+            if (live[k])
+                picked[k] += spread_bits(bits, k, chosen + (size_t)(y0[k] + j) * width, width);
+        float *t = here;
+        here = below; /* the next row's incoming errors */
+        below = t;
     }
     for (uint32_t k = 0; k < bands; k++)
         if (quota[k] > 0)
-            settle_band(priority, width, y0[k], y1[k], lanes[k].picked, quota[k], chosen, out[k]);
+            settle_band(priority, width, y0[k], y1[k], picked[k], quota[k], chosen, out[k]);
 }
 
 /* ---- the frame's sampling ------------------------------------------------------------------------------ */
 
-static void dither_task(void *user, uint32_t group, uint32_t worker)
+/* Bands per dither task: up to RC_DITHER_LANES, fewer when that leaves a thread without a task (8 bands on 2
+ * threads: two tasks of 4). Which bands run together does not change a choice. */
+static uint32_t dither_group(const view_rc *rc)
+{
+    uint32_t group = (rc->tiles_y + rc->thread_count - 1) / rc->thread_count;
+    return group < 1 ? 1 : group > RC_DITHER_LANES ? RC_DITHER_LANES : group;
+}
+
+static void dither_task(void *user, uint32_t task, uint32_t worker)
 {
     view_rc *rc = user;
-    uint32_t first = group * RC_DITHER_LANES, bands = rc->tiles_y - first;
-    bands = bands < RC_DITHER_LANES ? bands : RC_DITHER_LANES;
+    uint32_t group = dither_group(rc), first = task * group, bands = rc->tiles_y - first;
+    bands = bands < group ? bands : group;
     uint32_t y0[RC_DITHER_LANES], y1[RC_DITHER_LANES];
     view_rc_pixel *out[RC_DITHER_LANES];
     for (uint32_t k = 0; k < bands; k++) {
@@ -390,8 +418,8 @@ void view_rc__sampling(view_rc *rc)
         run += rc->band_quota[b];
     }
     rc->request_count = run;
-    rc_run_pixels(rc->pool, rc->d.dynamic_pixels, (rc->tiles_y + RC_DITHER_LANES - 1) / RC_DITHER_LANES,
-                  dither_task, rc);
+    uint32_t group = dither_group(rc);
+    rc_run_pixels(rc->pool, rc->d.dynamic_pixels, (rc->tiles_y + group - 1) / group, dither_task, rc);
 }
 
 /* ---- the dither on its own ----------------------------------------------------------------------------- */
@@ -399,7 +427,7 @@ void view_rc__sampling(view_rc *rc)
 size_t view_rc_dither_scratch_bytes(uint32_t width, uint32_t height)
 {
     return (size_t)width * height + (size_t)width +
-           2 * RC_DITHER_LANES * 2 * ((size_t)width + 2) * sizeof(float) + 16;
+           2 * RC_DITHER_LANES * ((size_t)width + 2) * sizeof(float) + 16;
 }
 
 fxc_result view_rc_dither(const uint8_t *priority, uint32_t width, uint32_t height, uint32_t band_height,

@@ -104,6 +104,11 @@ typedef struct view_rc_desc {
                             dither) handed out dynamically (as before they ran statically, thread k on the
                             same k-th range of rows in each), to measure the split (bench_rcache --only
                             split-pixels) */
+    bool separate_pixel_passes; /* the depth cull, interpolation and prefilter as three passes over the
+                                   whole image, each timed in its own stage (as before they ran fused, one
+                                   band of rows through all three while its rows are in cache, timed
+                                   together as VIEW_RC_STAGE_PIXELS), to measure the fusion
+                                   (bench_rcache --only fuse) */
 } view_rc_desc;
 
 typedef struct view_rc view_rc;
@@ -137,6 +142,7 @@ typedef struct view_rc_sample {
     X(VIEW_RC_STAGE_PREDICT_SAMPLE, "predicted sampling")                                                    \
     X(VIEW_RC_STAGE_PROJECT_SORT, "project and tile sort") /* no_tiling: projection only */                  \
     X(VIEW_RC_STAGE_ZBUFFER, "z-buffer tiles")                                                               \
+    X(VIEW_RC_STAGE_PIXELS, "cull + interpolate + prefilter (fused)") /* the next three, by bands */         \
     X(VIEW_RC_STAGE_DEPTH_CULL, "depth cull")                                                                \
     X(VIEW_RC_STAGE_INTERPOLATE, "interpolate / smooth") /* and the priority image */                        \
     X(VIEW_RC_STAGE_PREFILTER, "prefilter")                                                                  \

@@ -113,10 +113,11 @@ static inline void rc_run_pixels(fxc_pool *pool, bool dynamic, uint32_t count, f
 typedef struct rc_worker {
     uint8_t *occupied; /* predicted occupancy at quarter resolution, low_w x low_h */
     uint32_t *low;     /* predicted projection: quarter-resolution pixel per slot of a chunk */
-    float *err;        /* dither: 2 x RC_DITHER_LANES x two rows of width + 2 errors */
-    uint8_t *spare;    /* dither: a row of choices for spare lanes */
+    float *err;        /* dither: two rows of RC_DITHER_LANES x (width + 2) errors, the lanes interleaved */
+    uint8_t *spare;    /* dither: a row of choices, a bit per lane */
     uint16_t *planes;  /* interpolation: view_rc__interp_scratch(width) values */
     uint16_t *box;     /* prefilter: view_rc__prefilter_scratch(tile side) values */
+    uint32_t *halo;    /* fused pixel passes: six rows of shown points around a band, then a row of depths */
     float *zt;         /* z-buffer: one tile's depths, tile x tile, row after row (local_z only) */
     uint32_t *wt;      /* ... the slot that won each pixel (RC_NO_POINT: none) */
     uint32_t *ct;      /* ... and its rgba (RC_EMPTY_PT: none) */
@@ -232,7 +233,6 @@ struct view_rc {
     uint32_t *band_need;   /* per band (tiles_y of them, tile_size rows each): pixels to fill */
     uint32_t *band_culled; /* per band: pixels the depth cull emptied */
     uint32_t *band_kind;   /* per band: pixels by kind (x VIEW_RC_PIXEL_KINDS) */
-    uint32_t *tile_filled; /* per tile: pixels the prefilter filled */
     uint64_t *band_weight; /* per band: sum of priority + 1 */
     uint32_t *band_quota, *band_offset;
 
@@ -266,9 +266,11 @@ void view_rc__project_direct(view_rc *rc); /* no_tiling: the projection without 
 void view_rc__zbuffer_direct(view_rc *rc); /* no_tiling: one z-buffer pass in slot order (serial) */
 void view_rc__age(view_rc *rc);            /* parallel over chunks, then the free stack (serial) */
 
-/* rc_image.c: the pixel passes, parallel over bands of rows. */
+/* rc_image.c: the pixel passes, parallel over bands of rows: fused (view_rc__pixels: each band through the
+ * cull, the interpolation and the prefilter in one task) or, with separate_pixel_passes, one run each. */
 size_t view_rc__interp_scratch(uint32_t width);   /* 16-bit values of a worker's interpolation scratch */
 size_t view_rc__prefilter_scratch(uint32_t tile); /* ... and prefilter scratch (tiles of that side) */
+void view_rc__pixels(view_rc *rc);
 void view_rc__depth_cull(view_rc *rc);
 void view_rc__interpolate(view_rc *rc);
 void view_rc__prefilter(view_rc *rc);
@@ -279,11 +281,11 @@ void view_rc__sampling(view_rc *rc);           /* serial quotas, parallel bands 
 /* Splits count over bands by weight (largest remainder, each band at most its pixels). */
 void view_rc__band_quotas(const uint64_t *weight, const uint32_t *pixels, uint32_t bands, uint32_t count,
                           uint32_t *quota);
-/* Dithers up to RC_DITHER_LANES bands at once (each independent, the same result as alone): band k is rows
- * [y0[k], y1[k]) of a width-wide priority image, gets exactly quota[k] pixels (at most its pixels), marked in
- * chosen and written to out[k] in scanline order. err: 2 * RC_DITHER_LANES * 2 * (width + 2) floats (the
- * band's rows, then spare lanes'); spare: width bytes. */
-#define RC_DITHER_LANES 4
+/* Dithers up to RC_DITHER_LANES bands at once (each independent, the same result as alone or with others):
+ * band k is rows [y0[k], y1[k]) of a width-wide priority image, gets exactly quota[k] pixels (at most its
+ * pixels), marked in chosen and written to out[k] in scanline order. err: 2 * RC_DITHER_LANES * (width + 2)
+ * floats; spare: width bytes. */
+#define RC_DITHER_LANES 8
 void view_rc__dither_bands(const uint8_t *priority, uint32_t width, const uint32_t *y0, const uint32_t *y1,
                            const uint64_t *weight, const uint32_t *quota, uint32_t bands, uint8_t *chosen,
                            float *err, uint8_t *spare, view_rc_pixel *const *out);
