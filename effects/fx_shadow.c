@@ -356,6 +356,32 @@ static inline int shadow_tap_at(const fx_taps *taps, int from, int ox, int oy)
     return -1;
 }
 
+/* For shadow_shade's fine path: the tap whose texel holds the pixel (the one with the largest weight if none
+ * does exactly), the first of the four fine cells around the pixel (cx0, cy0, in cells of that texel) and
+ * their bilinear weights, cell c at (c & 1, c >> 1) from the first. */
+static inline __attribute__((always_inline)) void shadow_fine_cells(const fx_taps *taps, int *home_out, float *cx0_out,
+                                                                    float *cy0_out, float cell_weight[4])
+{
+    int home = 0;
+    for (uint32_t t = 0; t < taps->count; t++) {
+        if (taps->at_x[t] >= 0 && taps->at_x[t] < 1 && taps->at_y[t] >= 0 && taps->at_y[t] < 1) {
+            home = (int)t;
+            break;
+        }
+        if (taps->weight[t] > taps->weight[home])
+            home = (int)t;
+    }
+    float fx = taps->at_x[home] * 4.0f - 0.5f, fy = taps->at_y[home] * 4.0f - 0.5f;
+    float cx0 = floorf(fx), cy0 = floorf(fy);
+    float wx = fx - cx0, wy = fy - cy0;
+    /* Written out (a loop of four stayed a loop at -O2). */
+    cell_weight[0] = (1 - wx) * (1 - wy);
+    cell_weight[1] = wx * (1 - wy);
+    cell_weight[2] = (1 - wx) * wy;
+    cell_weight[3] = wx * wy;
+    *home_out = home, *cx0_out = cx0, *cy0_out = cy0;
+}
+
 /* Each light's visibility at the pixel. Bit i of a texel's mask is the ray from cell (i & 3, i >> 2) of its
  * 4 x 4 stratified cells, so the masks of the taps form a sample grid four times finer than the texels.
  * A pixel much smaller than a texel (the finest level, seen from close) reads that grid bilinearly at its
@@ -391,22 +417,12 @@ FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_ru
             }
             continue;
         }
-        /* The tap whose texel holds the pixel (the one with the largest weight if none does exactly). */
+        /* The tap whose texel holds the pixel and the four fine cells around the pixel with their bilinear
+         * weights: found only for a light where some tap's mask has a lit cell (shadow_fine_cells); under
+         * wholly shadowed texels (a common case) the fine sum is 0 whatever the cells. */
+        bool weights_found = false;
         int home = 0;
-        for (uint32_t t = 0; t < taps->count; t++) {
-            if (taps->at_x[t] >= 0 && taps->at_x[t] < 1 && taps->at_y[t] >= 0 && taps->at_y[t] < 1) {
-                home = (int)t;
-                break;
-            }
-            if (taps->weight[t] > taps->weight[home])
-                home = (int)t;
-        }
-        /* The four fine cells around the pixel and their bilinear weights. */
-        float fx = taps->at_x[home] * 4.0f - 0.5f, fy = taps->at_y[home] * 4.0f - 0.5f;
-        float cx0 = floorf(fx), cy0 = floorf(fy);
-        float wx = fx - cx0, wy = fy - cy0;
-        /* Cell c at (c & 1, c >> 1) from the first; written out (a loop of four stayed a loop at -O2). */
-        const float cell_weight[4] = {(1 - wx) * (1 - wy), wx * (1 - wy), (1 - wx) * wy, wx * wy};
+        float cx0 = 0.0f, cy0 = 0.0f, cell_weight[4] = {0.0f, 0.0f, 0.0f, 0.0f};
         /* Which texel and bit each cell reads, found only for a light whose taps' masks differ (below). */
         bool cells_found = false;
         const uint8_t *cell_texel[4];
@@ -433,6 +449,10 @@ FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_ru
             /* Every cell reads a bit of some tap's mask: when the taps' masks are all 0 or all 0xFFFF (most
              * texels: wholly shadowed or wholly lit), every bit read is 0, or 1, and the sum below is the sum
              * of the cell weights times 0 or 1, the same floats without finding the cells. */
+            if (any_lit != 0 && !weights_found) {
+                weights_found = true;
+                shadow_fine_cells(taps, &home, &cx0, &cy0, cell_weight);
+            }
             if (all_lit == 0xFFFFu) {
                 fine = fine + cell_weight[0] * 1.0f + cell_weight[1] * 1.0f + cell_weight[2] * 1.0f +
                        cell_weight[3] * 1.0f;

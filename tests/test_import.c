@@ -149,6 +149,66 @@ static void test_texture_mip_levels(void **state)
     scene_free(s);
 }
 
+/* The albedo of a run of hits (scene_albedo_run: stretches of one triangle in lanes) equals each hit's
+ * scene_albedo_filtered bit for bit: a 64 x 64 texture of random texels (7 mip levels) on a quad and an
+ * untextured triangle, hits in stretches of 1 to 150 on one triangle (longer than a lanes call), footprints
+ * from far below a texel to above the whole texture (levels changing inside a stretch), UVs inside, beyond
+ * the texture (wrapped) and not finite. */
+static void test_albedo_run_equals_filtered(void **state)
+{
+    (void)state;
+    enum { SIDE = 64, HITS = 4096 };
+    static uint8_t noise[SIDE * SIDE * 3];
+    uint64_t rng = 777;
+    for (int i = 0; i < SIDE * SIDE * 3; i++) {
+        rng = rng * 6364136223846793005ull + 1442695040888963407ull;
+        noise[i] = (uint8_t)(rng >> 56);
+    }
+    char msg[256];
+    assert_int_equal(scene_image_write_u8(fxt_tmp_path("noise64.png"), SIDE, SIDE, 3, noise, msg, sizeof msg), 0);
+    fxt_write_file("run.mtl", "newmtl t\nKd 0.9 0.7 0.5\nmap_Kd noise64.png\nnewmtl plain\nKd 0.3 0.6 0.2\n");
+    const char *obj = fxt_write_file("run.obj", "mtllib run.mtl\nusemtl t\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+                                                "v 3 0 0\nv 4 0 0\nv 3 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+                                                "f 1/1 2/2 3/3\nf 1/1 3/3 4/4\nusemtl plain\nf 5 6 7\n");
+    scene *s = load_ok(obj);
+    assert_int_equal(s->texture_count, 1);
+    assert_int_equal(s->textures[0].levels, 7);
+    static uint32_t tri[HITS];
+    static float u[HITS], v[HITS], footprint[HITS], run[HITS][3];
+    uint32_t n = 0, textured = 0;
+    while (n < HITS) {
+        rng = rng * 6364136223846793005ull + 1442695040888963407ull;
+        uint32_t length = 1 + (uint32_t)(rng >> 33) % 150, t = (uint32_t)(rng >> 20) % 3;
+        float level_base = (float)((rng >> 40) % 20) - 14.0f; /* -14 .. 5: a stretch's footprint */
+        for (uint32_t i = 0; i < length && n < HITS; i++, n++) {
+            rng = rng * 6364136223846793005ull + 1442695040888963407ull;
+            tri[n] = t;
+            u[n] = (float)((double)(rng >> 11) * 0x1p-53 * 3.0 - 1.0);
+            rng = rng * 6364136223846793005ull + 1442695040888963407ull;
+            v[n] = (float)((double)(rng >> 11) * 0x1p-53 * 3.0 - 1.0);
+            footprint[n] = level_base + (float)((double)(rng >> 40) * 0x1p-24 * 1.5); /* a level or two apart */
+            if (rng % 97 == 0)
+                u[n] = rng % 2 ? NAN : INFINITY;
+            textured += t < 2;
+        }
+    }
+    for (uint32_t count = 1; count <= 200; count += 67) /* calls of several lengths over the same hits */
+        for (uint32_t first = 0; first < HITS; first += count) {
+            uint32_t c = HITS - first < count ? HITS - first : count;
+            scene_albedo_run(s, tri + first, u + first, v + first, footprint + first, c, run + first);
+        }
+    for (uint32_t i = 0; i < HITS; i++) {
+        float expected[3];
+        scene_albedo_filtered(s, tri[i], u[i], v[i], footprint[i], expected);
+        if (memcmp(expected, run[i], sizeof expected) != 0)
+            fail_msg("hit %u (triangle %u, uv %.9g %.9g, footprint %.9g): %.9g %.9g %.9g, expected %.9g %.9g %.9g", i,
+                     tri[i], (double)u[i], (double)v[i], (double)footprint[i], (double)run[i][0], (double)run[i][1],
+                     (double)run[i][2], (double)expected[0], (double)expected[1], (double)expected[2]);
+    }
+    assert_true(textured > HITS / 2);
+    scene_free(s);
+}
+
 /* Bilinear texture lookup with wrap-around, against the same lookup in double: a 5 x 3 texture of distinct
  * texels, read at level 0 at random texture coordinates (negative, beyond 1, and on the texels next to each
  * edge, where the lookup wraps) and at every texel centre (the texel itself). */
@@ -663,6 +723,7 @@ int main(void)
         cmocka_unit_test(test_obj_texture_and_non_triangles),
         cmocka_unit_test(test_texture_mip_levels),
         cmocka_unit_test(test_texture_bilinear_wrap),
+        cmocka_unit_test(test_albedo_run_equals_filtered),
         cmocka_unit_test(test_missing_texture_counted),
         cmocka_unit_test(test_builder_cleaning),
         cmocka_unit_test(test_mirrored_transform_keeps_winding),
