@@ -243,7 +243,7 @@ typedef struct hit_cell {
     float e[HIT_CELL_NORMALS][8][3];
 } hit_cell;
 
-static _Thread_local hit_cell thread_hit_fallback[1 << HIT_CELLS_FALLBACK_LOG2]; /* 85 KB */
+static _Thread_local hit_cell thread_hit_fallback[1 << HIT_CELLS_FALLBACK_LOG2]; /* 115 KB */
 static _Thread_local hit_cell *thread_hit_cells;
 static _Thread_local uint32_t thread_hit_shift; /* 64 - log2(entries) */
 static _Thread_local uint64_t thread_hit_generation, thread_hit_epoch;
