@@ -91,6 +91,9 @@
 #include "fx_probes_internal.h"
 #include "fxc_hot.h"
 
+#include <pthread.h>
+#include <stdlib.h>
+
 /* A half (finite, >= 0: moments and stored irradiance) to float, exactly, subnormals included: its bits
  * shifted into a float's place and rescaled by 2^112 (the exponent biases' difference), so it vectorises. */
 static inline float half_bits_to_float(uint32_t h)
@@ -221,12 +224,22 @@ static uint32_t queue_shadow_rays(const fx_context *ctx, hit_shading *hs, uint32
  * The shading filter of fx__probe_filter_memo (trilinear x wrap x Chebyshev, renormalised) at a hit, with the
  * cell's 8 corners found once per frame and thread instead of once per hit: hits of neighbouring probes land
  * in the same cells again and again. A cell keeps its corners' payloads, which of them hold data and are on,
- * their positions and cells (the header read once), and the corners' irradiance towards the last normal
- * asked (hits of one wall share it; exact: the same sums fx_probe_irradiance takes). Per hit only the
- * trilinear weights, the wrap and the Chebyshev weight (its moments towards the hit) are left. The entries
- * hold pointers into the cache: they are kept while ctx->epoch and ctx->frame stay the same (payloads do not
- * change within a frame's updates), else only within one update call. */
-enum { HIT_CELLS = 2048 };
+ * their positions and cells (the header read once), and the corners' irradiance towards the last
+ * HIT_CELL_NORMALS normals asked (hits of one wall share one; exact: the same sums fx_probe_irradiance takes).
+ * Per hit only the trilinear weights, the wrap and the Chebyshev weight (its moments towards the hit) are
+ * left. The entries hold pointers into the cache: they are kept while ctx->epoch and ctx->frame stay the same
+ * (payloads do not change within a frame's updates), else only within one update call.
+ *
+ * The memo: HIT_CELLS entries of 448 bytes (0.9 MB a thread), direct-mapped, two normals a cell. On Sponza
+ * (bench_probes --part rays, 5 frames; BENCHMARKS, branch probe-upd2) one normal a cell recomputed the corners'
+ * irradiance 107,443 times; more entries cut the fills (106,118 with 2,048 entries, 47,132 with 16,384,
+ * 39,015 with 65,536: about the distinct cells) but not the time: with 16,384 entries (11 MB) the entries'
+ * first loads missed the caches, and perf put more time there than the fills had taken (the fills' 8 hash
+ * lookups are about 0.5 % of the run's samples). On the heap (with more normals or entries it would not fit
+ * in thread-local storage: static TLS beyond a few hundred KB makes pthread_create fail), allocated at a
+ * thread's first update and freed when the thread ends (a pthread key's destructor); if that fails, a small
+ * thread-local table serves: more fills, the same numbers. */
+enum { HIT_CELLS_LOG2 = 11, HIT_CELLS = 1 << HIT_CELLS_LOG2, HIT_CELLS_FALLBACK_LOG2 = 8, HIT_CELL_NORMALS = 2 };
 
 typedef struct hit_cell {
     uint64_t generation; /* the thread's generation it was filled in (0: empty) */
@@ -235,18 +248,53 @@ typedef struct hit_cell {
     uint32_t active; /* bit c: corner c holds a probe with data, not off */
     const uint8_t *texel[8];
     float position[8][3], cell[8];
-    bool normal_set; /* e holds the active corners' irradiance towards `normal` (compared bit for bit) */
-    float normal[3];
-    float e[8][3];
+    /* e[s] holds the active corners' irradiance towards normal[s] (compared bit for bit) when bit s of
+     * normal_set is set; a new normal replaces slot normal_next (round robin: the oldest) */
+    uint32_t normal_set, normal_next;
+    float normal[HIT_CELL_NORMALS][3];
+    float e[HIT_CELL_NORMALS][8][3];
 } hit_cell;
 
-static _Thread_local hit_cell thread_hit_cells[HIT_CELLS]; /* 680 KB */
+static _Thread_local hit_cell thread_hit_fallback[1 << HIT_CELLS_FALLBACK_LOG2]; /* 115 KB */
+static _Thread_local hit_cell *thread_hit_cells;
+static _Thread_local uint32_t thread_hit_shift; /* 64 - log2(entries) */
 static _Thread_local uint64_t thread_hit_generation, thread_hit_epoch;
 static _Thread_local uint32_t thread_hit_frame;
+static pthread_key_t hit_cells_key;
+static pthread_once_t hit_cells_once = PTHREAD_ONCE_INIT;
+static bool hit_cells_key_ok;
+
+static void hit_cells_free(void *p)
+{
+    free(p);
+}
+
+static void hit_cells_key_create(void)
+{
+    hit_cells_key_ok = pthread_key_create(&hit_cells_key, hit_cells_free) == 0;
+}
+
+/* The thread's table: the heap one (zeroed: generation 0, empty), else the fallback. */
+static void hit_cells_table(void)
+{
+    if (thread_hit_cells)
+        return;
+    pthread_once(&hit_cells_once, hit_cells_key_create);
+    hit_cell *table = hit_cells_key_ok ? calloc(HIT_CELLS, sizeof *table) : NULL;
+    if (table && pthread_setspecific(hit_cells_key, table) == 0) {
+        thread_hit_cells = table;
+        thread_hit_shift = 64 - HIT_CELLS_LOG2;
+    } else {
+        free(table);
+        thread_hit_cells = thread_hit_fallback;
+        thread_hit_shift = 64 - HIT_CELLS_FALLBACK_LOG2;
+    }
+}
 
 /* At the start of an update call: keep the cells while the loop and frame are the same, else forget them. */
 static void hit_cells_begin(const fx_context *ctx)
 {
+    hit_cells_table();
     if (ctx->epoch && ctx->frame && ctx->epoch == thread_hit_epoch && ctx->frame == thread_hit_frame)
         return;
     thread_hit_generation++;
@@ -264,7 +312,7 @@ static hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t 
                  (uint64_t)bits[2] * 0x165667B19E3779F9ull ^ ((uint64_t)level << 40) ^ ((uint64_t)effect << 48);
     h ^= h >> 31;
     h *= 0xD6E8FEB86659FD93ull;
-    hit_cell *e = &thread_hit_cells[h >> 53]; /* 11 bits: HIT_CELLS */
+    hit_cell *e = &thread_hit_cells[h >> thread_hit_shift];
     if (e->generation == thread_hit_generation && memcmp(e->centre, centre, sizeof e->centre) == 0 &&
         e->level == level && e->effect == effect)
         return e;
@@ -276,7 +324,8 @@ static hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t 
     e->level = level;
     e->effect = effect;
     e->active = 0;
-    e->normal_set = false;
+    e->normal_set = 0;
+    e->normal_next = 0;
     for (int c = 0; c < 8; c++) {
         const uint8_t *p = texel[c];
         e->texel[c] = p;
@@ -397,7 +446,15 @@ static bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, c
  * (out untouched: 0) when none contributes. */
 static bool cell_filter(hit_cell *e, const float tap[8], const float position[3], const float normal[3], float out[3])
 {
-    if (!(e->normal_set && memcmp(e->normal, normal, sizeof e->normal) == 0)) {
+    uint32_t slot = HIT_CELL_NORMALS;
+    for (uint32_t n = 0; n < HIT_CELL_NORMALS; n++)
+        if ((e->normal_set >> n & 1) && memcmp(e->normal[n], normal, sizeof e->normal[n]) == 0) {
+            slot = n;
+            break;
+        }
+    if (slot == HIT_CELL_NORMALS) {
+        slot = e->normal_next;
+        e->normal_next = (slot + 1) % HIT_CELL_NORMALS;
         uint32_t texel[4];
         float w[4];
         fx__probe_oct_bilinear(normal, texel, w);
@@ -410,10 +467,10 @@ static bool cell_filter(hit_cell *e, const float tap[8], const float position[3]
                 for (int k = 0; k < 3; k++)
                     sum[k] += w[i] * half_bits_to_float(fx__get_u16(p + PROBE_IRRADIANCE + 6 * texel[i] + 2 * k));
             for (int k = 0; k < 3; k++)
-                e->e[c][k] = sum[k] * scale;
+                e->e[slot][c][k] = sum[k] * scale;
         }
-        memcpy(e->normal, normal, sizeof e->normal);
-        e->normal_set = true;
+        memcpy(e->normal[slot], normal, sizeof e->normal[slot]);
+        e->normal_set |= 1u << slot;
     }
     float weight[8];
     hit_weights(e, position, normal, tap, weight);
@@ -422,7 +479,7 @@ static bool cell_filter(hit_cell *e, const float tap[8], const float position[3]
         if (!(weight[c] > 0)) /* off, missing, or a trilinear weight of 0 */
             continue;
         for (int k = 0; k < 3; k++)
-            sum[k] += weight[c] * e->e[c][k];
+            sum[k] += weight[c] * e->e[slot][c][k];
         total += weight[c];
     }
     if (!(total > 0))
