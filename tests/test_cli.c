@@ -534,6 +534,27 @@ static unsigned long long meminfo_total_mib(void)
 /* Memory options beyond the machine's physical memory are refused before anything is loaded or allocated,
  * with the figures: --pool-mb 65536 and 64 viewers of 8192x8192 (140 GiB of per-pixel buffers) were accepted
  * and tried to allocate them. A case is skipped on a machine that has the memory. */
+/* An output file that cannot be written is refused before the scene loads: one line naming the path and
+ * the option, exit 1; a --summary inside --out's folder (created by the run) is fine. */
+static void test_err_output_paths_checked_first(void **state)
+{
+    (void)state;
+    char dir[1100], args[2400], summary[1200];
+    tmp_path(dir, sizeof dir, "no_such_folder_for_stats");
+    snprintf(args, sizeof args, "sim --frames 1 --res 8x8 --viewers 1 --quiet --stats '%s/s.jsonl'", dir);
+    expect_error(1, args, "--stats", "its folder does not exist", NULL);
+    tmp_path(dir, sizeof dir, "");
+    snprintf(args, sizeof args, "serve --summary '%s' --port 0", dir);
+    expect_error(1, args, "--summary", "is a directory", NULL);
+    tmp_path(dir, sizeof dir, "paths_out");
+    snprintf(summary, sizeof summary, "%s/inside/summary.json", dir);
+    snprintf(args, sizeof args, "sim --frames 1 --res 8x8 --viewers 1 --quiet --out '%s/inside/' --summary '%s'", dir,
+             summary);
+    mkdir(dir, 0755);
+    assert_int_equal(run("%s", args), 0);
+    assert_int_equal(access(summary, F_OK), 0);
+}
+
 static void test_err_memory_beyond_physical(void **state)
 {
     (void)state;
@@ -1026,6 +1047,7 @@ int main(void)
         cmocka_unit_test(test_err_trace_camera_beyond_reach),
         cmocka_unit_test(test_err_traces_and_viewers_disagree),
         cmocka_unit_test(test_err_memory_beyond_physical),
+        cmocka_unit_test(test_err_output_paths_checked_first),
         cmocka_unit_test(test_render_png),
         cmocka_unit_test(test_sim_identical_summary_and_stats),
         cmocka_unit_test(test_sim_indirect_off),

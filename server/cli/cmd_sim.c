@@ -270,13 +270,17 @@ int srv_cmd_sim(int argc, char **argv)
         srv_cli_cameras_size(&cams, v, &w, &h);
         pixels += (uint64_t)w * h;
     }
-    if ((o.stats_path && !srv_cli_output_file_ok("sim", "--stats", o.stats_path)) ||
-        (o.summary_path && !srv_cli_output_file_ok("sim", "--summary", o.summary_path)))
-        goto done;
     if (!srv_cli_check_memory("sim", o.engine.no_cache ? 0 : o.engine.pool_mb, o.viewers, pixels, o.views)) {
         exit_code = 2;
         goto done;
     }
+    /* Output folders (after the memory check: a refused run creates none; a --summary or --stats path may
+     * lie in them), then the files' folders: a path that cannot be written is found before the scene loads. */
+    if ((o.out_dir && !make_dir(o.out_dir)) || (o.record_dir && !make_dir(o.record_dir)))
+        goto done;
+    if ((o.stats_path && !srv_cli_output_file_ok("sim", "--stats", o.stats_path)) ||
+        (o.summary_path && !srv_cli_output_file_ok("sim", "--summary", o.summary_path)))
+        goto done;
     signal(SIGINT, on_signal); /* from here on: a signal during the load ends the run after it */
     signal(SIGTERM, on_signal);
     exit_code = srv_cli_run_open("sim", &o.engine, o.views, &run, &stop_requested);
@@ -289,16 +293,12 @@ int srv_cmd_sim(int argc, char **argv)
     srv_loop *loop = run.loop;
     srv_report *report = run.report;
     fxc_result r;
-    if (o.out_dir && !make_dir(o.out_dir))
-        goto done;
     image_sink images = {.o = &o, .last_frame = o.frames - 1};
     if (o.out_dir)
         srv_loop_add_sink(loop, &(srv_sink){.viewer_frame = image_sink_frame, .user = &images});
     if (o.stats_path && !srv_cli_stats_open(&stats, &run, o.stats_path))
         goto done;
     if (o.record_dir) {
-        if (!make_dir(o.record_dir))
-            goto done;
         recorder.index_of_slot = index_of_slot;
         srv_loop_add_sink(loop, &(srv_sink){.viewer_frame = record_sink_frame, .user = &recorder});
     }
