@@ -17,6 +17,7 @@
 
 #include "camgen.h"
 #include "engine.h"
+#include "report.h"
 #include "scene.h"
 
 #include <math.h>
@@ -94,6 +95,9 @@ static void test_sparse_equals_whole_frame(void **state)
     counting_sink sink_counts = {0};
     srv_sink sink = {.viewer_frame = count_viewer_frame, .user = &sink_counts};
     assert_int_equal(srv_loop_add_sink(loop, &sink), FXC_OK);
+    srv_report *report = srv_report_create(loop);
+    srv_sink rs = srv_report_sink(report);
+    assert_int_equal(srv_loop_add_sink(loop, &rs), FXC_OK);
     srv_viewer_id sparse;
     assert_int_equal(srv_viewer_add(loop, &(srv_viewer_desc){.max_pixels = 600}, &sparse), FXC_OK);
     srv_camera cam = srv_camgen_camera(SRV_CAMGEN_STATIC, f->s, 0, 1, 0, 1);
@@ -145,6 +149,8 @@ static void test_sparse_equals_whole_frame(void **state)
         assert_int_equal(vs->pixels_rendered, distinct);
         assert_int_equal(vs->width, W);
         assert_int_equal(vs->height, H);
+        assert_true(vs->sparse);
+        assert_false((vs == &st.viewers[0] ? &st.viewers[1] : &st.viewers[0])->sparse);
     }
     assert_true(visible_listed > 100);               /* the camera sees the scene, not only sky */
     assert_int_equal(sink_counts.viewer_frames, 10); /* the whole-frame viewer only */
@@ -154,6 +160,15 @@ static void test_sparse_equals_whole_frame(void **state)
     assert_int_equal(st.viewer_count, 1);
     assert_int_equal(st.visibility_rays, (uint64_t)W * H);
     assert_non_null(srv_viewer_pixels(loop, sparse, NULL));
+    /* The summary counts the sparse viewer apart from the whole-frame viewers (11 frames, 10 with a list). */
+    const srv_report_totals *t = srv_report_get_totals(report);
+    assert_int_equal(t->frames, 11);
+    assert_int_equal(t->viewers_seen, 1);
+    assert_int_equal(t->max_viewers, 1);
+    assert_int_equal(t->viewer_frames, 11);
+    assert_int_equal(t->sample_viewers_seen, 1);
+    assert_int_equal(t->sample_viewer_frames, 10);
+    srv_report_free(report);
     srv_loop_free(loop);
 }
 

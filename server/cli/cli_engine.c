@@ -474,6 +474,10 @@ void srv_cli_print_summary(const srv_cli_run *run, bool no_cache, bool interrupt
     printf("%u viewer%s (%llu viewer-frames), %u frames on %s%s%s\n", t->viewers_seen, t->viewers_seen == 1 ? "" : "s",
            (unsigned long long)t->viewer_frames, t->frames, run->s->source, no_cache ? " (no cache)" : "",
            interrupted ? " (interrupted)" : "");
+    if (t->sample_viewers_seen)
+        printf("           and %u sample viewer%s (clients' sample requests, %llu viewer-frames; their texels count in "
+               "the sharing)\n", t->sample_viewers_seen, t->sample_viewers_seen == 1 ? "" : "s",
+               (unsigned long long)t->sample_viewer_frames);
     printf("effects:   ");
     for (uint32_t e = 0; e < srv_loop_effect_count(loop); e++)
         if (srv_loop_effect(loop, e)->shade)

@@ -153,6 +153,7 @@ typedef struct srv_viewer_stats {
     uint64_t pixels_visible;
     uint64_t pixels_missing;   /* visible pixels composed without cached data */
     uint64_t pixels_rendered;  /* primary rays: width*height, or a sparse viewer's distinct listed pixels */
+    bool sparse;               /* a sparse viewer (a client's sample requests), not a whole-frame viewer */
 } srv_viewer_stats;
 
 /* The world-space cache's figures in a frame (all zero when no world-space effect runs). Requested and

@@ -733,6 +733,7 @@ fxc_result srv_loop_frame(srv_loop *loop, srv_frame_stats *st)
         for (size_t p = 0; p < pixels; p++)
             view->stats.pixels_visible += view->tri[p] != SRV_MISS;
         view->stats.pixels_rendered = pixels;
+        view->stats.sparse = view->sparse;
         st->visibility_rays += pixels;
         st->pixels_visible += view->stats.pixels_visible;
     }

@@ -28,16 +28,23 @@ void srv_report_add(srv_report *r, const srv_frame_stats *st, const srv_memory *
 {
     srv_report_totals *t = &r->totals;
     t->frames++;
-    t->viewer_frames += st->viewer_count;
-    if (st->viewer_count > t->max_viewers)
-        t->max_viewers = st->viewer_count;
+    uint32_t whole = 0;
     for (uint32_t i = 0; i < st->viewer_count; i++) {
+        bool sparse = st->viewers[i].sparse;
+        whole += !sparse;
+        t->sample_viewer_frames += sparse;
         uint32_t id = st->viewers[i].id.id, slot = id & 0xFFu;
         if (slot < SRV_MAX_VIEWERS && r->seen_generation[slot] != id) {
             r->seen_generation[slot] = id;
-            t->viewers_seen++;
+            if (sparse)
+                t->sample_viewers_seen++;
+            else
+                t->viewers_seen++;
         }
     }
+    t->viewer_frames += whole;
+    if (whole > t->max_viewers)
+        t->max_viewers = whole;
     t->requested += st->requested_texels;
     t->unique += st->unique_texels;
     t->visibility_rays += st->visibility_rays;
@@ -179,12 +186,12 @@ json_t *srv_report_frame_json(const srv_report *report, const srv_frame_stats *s
     json_t *viewers = json_array();
     for (uint32_t i = 0; i < st->viewer_count; i++) {
         const srv_viewer_stats *v = &st->viewers[i];
-        json_array_append_new(viewers, json_pack("{s:I,s:I,s:I,s:I,s:I,s:I,s:I}", "id", (json_int_t)v->id.id, "slot",
-                                                 (json_int_t)(v->id.id & 0xFFu), "width", (json_int_t)v->width,
+        json_array_append_new(viewers, json_pack("{s:I,s:I,s:I,s:I,s:I,s:I,s:I,s:b}", "id", (json_int_t)v->id.id,
+                                                 "slot", (json_int_t)(v->id.id & 0xFFu), "width", (json_int_t)v->width,
                                                  "height", (json_int_t)v->height, "requested_texels",
                                                  (json_int_t)v->requested_texels, "requested_cells",
                                                  (json_int_t)v->requested_cells, "pixels_missing",
-                                                 (json_int_t)v->pixels_missing));
+                                                 (json_int_t)v->pixels_missing, "sparse", (int)v->sparse));
     }
     json_t *o = json_object();
     json_object_set_new(o, "frame", json_integer(st->frame));
@@ -225,6 +232,8 @@ json_t *srv_report_json(const srv_report *report)
     json_object_set_new(o, "viewer_frames", json_integer((json_int_t)t->viewer_frames));
     json_object_set_new(o, "viewers_seen", json_integer(t->viewers_seen));
     json_object_set_new(o, "max_viewers", json_integer(t->max_viewers));
+    json_object_set_new(o, "sample_viewers_seen", json_integer(t->sample_viewers_seen));
+    json_object_set_new(o, "sample_viewer_frames", json_integer((json_int_t)t->sample_viewer_frames));
     json_object_set_new(o, "requested_texels", json_integer((json_int_t)t->requested));
     json_object_set_new(o, "unique_texels", json_integer((json_int_t)t->unique));
     /* No cache, or nothing visible: nothing is requested, so there is no ratio (null, not 0). */

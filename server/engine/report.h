@@ -23,6 +23,10 @@ typedef struct srv_report_totals {
     uint64_t viewer_frames;        /* sum over frames of the viewers rendered */
     uint32_t viewers_seen;         /* distinct viewer ids */
     uint32_t max_viewers;          /* most viewers in one frame */
+    /* The three above count whole-frame viewers; sparse viewers (the server's answers to a client's sample
+     * requests, one per client that asks) are counted apart. Both kinds' requests are in the sharing. */
+    uint64_t sample_viewer_frames;
+    uint32_t sample_viewers_seen;
     uint64_t requested, unique, visibility_rays, pixels_visible, pixels_missing;
     uint64_t rays[SRV_MAX_EFFECTS], texels_updated[SRV_MAX_EFFECTS], resampled[SRV_MAX_EFFECTS],
         deferred[SRV_MAX_EFFECTS];
