@@ -349,14 +349,25 @@ FXC_HOT_INLINE hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, u
  * surface gets weight 0 when some corner lies in front of it (plane_mask: the corners in front, with a
  * trilinear weight). Written lane by lane without branches, so the AVX2 copy runs the 8 corners as one
  * vector. */
-FXC_HOT_INLINE void hit_weights(const hit_cell *restrict e, const float position[3], const float normal[3],
-                                       const float tap[8], float out[8])
-{
-    static const uint8_t zero_payload[FX_PROBE_BYTES]; /* read in place of missing corners, never used */
-    const float px = position[0], py = position[1], pz = position[2];
-    const float nx = normal[0], ny = normal[1], nz = normal[2];
+/* A hit's filter in two steps, kept between them per hit: the cell and the trilinear weights, then what
+ * hit_weights computes before its moment loads. The update prepares a chunk's hits first and prefetches their
+ * moments (hit_prepare), so the scattered loads of the payloads overlap other work instead of stalling the
+ * filter one hit at a time; the same operations on the same values: the same floats. */
+typedef struct hit_prep {
+    float centre[3];
+    uint32_t ready; /* 1: a cell with some active corner, prepared; 0: no bounce */
+    float tap[8];
     int32_t texel[8];
     float weight[8], distance[8], cell[8], along[8];
+} hit_prep;
+
+FXC_HOT_INLINE void hit_weights_prepare(const hit_cell *restrict e, const float position[3], const float normal[3],
+                                        hit_prep *restrict hp)
+{
+    const float px = position[0], py = position[1], pz = position[2];
+    const float nx = normal[0], ny = normal[1], nz = normal[2];
+    int32_t *texel = hp->texel;
+    float *weight = hp->weight, *distance = hp->distance, *cell = hp->cell, *along = hp->along;
     for (int c = 0; c < 8; c++) {
         cell[c] = e->cell[c];
         const float *probe = e->position[c];
@@ -384,6 +395,13 @@ FXC_HOT_INLINE void hit_weights(const hit_cell *restrict e, const float position
         iy = iy < 0 ? 0 : (iy > 7 ? 7 : iy);
         texel[c] = iy * FX_PROBE_MAP + ix;
     }
+}
+
+FXC_HOT_INLINE void hit_weights_finish(const hit_cell *restrict e, const hit_prep *restrict hp, float out[8])
+{
+    static const uint8_t zero_payload[FX_PROBE_BYTES]; /* read in place of missing corners, never used */
+    const int32_t *texel = hp->texel;
+    const float *weight = hp->weight, *distance = hp->distance, *cell = hp->cell, *along = hp->along, *tap = hp->tap;
     uint32_t word[8]; /* the texel's two moments: mean distance (low half), mean squared distance */
     for (int c = 0; c < 8; c++) {
         const uint8_t *p = (e->active >> c & 1) ? e->texel[c] : zero_payload;
@@ -407,15 +425,21 @@ FXC_HOT_INLINE void hit_weights(const hit_cell *restrict e, const float position
     }
 }
 
-FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float position[3], const float normal[3], float out[3]);
+FXC_HOT_INLINE bool cell_filter(hit_cell *e, const hit_prep *hp, const float normal[3], float out[3]);
 
-/* The filter at a hit on the grid of `grid_point` (any grid point of the level, e.g. the job's) and `cell`
- * (metres): E of the probes around it, or false (and 0) when none contributes. */
-FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, const float grid_point[3], float cell,
-                       const float position[3], const float normal[3], float out[3])
+#if defined(__GNUC__)
+#define HIT_PREFETCH(p) __builtin_prefetch(p)
+#else
+#define HIT_PREFETCH(p) ((void)(p))
+#endif
+
+/* The first step of the filter at a hit on the grid of `grid_point` (any grid point of the level, e.g. the
+ * job's) and `cell` (metres): the hit's cell (filled into the memo if new), the trilinear weights and the
+ * corners' directions, the corners' moment texels prefetched; hp->ready 0 when no probe can contribute. */
+FXC_HOT_INLINE void hit_prepare(const fx_context *ctx, uint32_t effect, uint32_t level, const float grid_point[3],
+                                float cell, const float position[3], const float normal[3], hit_prep *hp)
 {
-    out[0] = out[1] = out[2] = 0;
-    float centre[3];
+    hp->ready = 0;
     double t[3];
     /* A power-of-two cell (the grid's: the finest cell is one and levels double it) has an exact inverse, and
      * multiplying by it rounds as the division does: three divisions fewer per hit. */
@@ -427,24 +451,40 @@ FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t 
         double delta = (double)position[k] - (double)grid_point[k];
         double q = exact_inverse ? delta * inverse : delta / (double)cell, f = floor(q);
         if (!(fabs(f) < 1e9))
-            return false;
-        centre[k] = (float)((double)grid_point[k] + (f + 0.5) * (double)cell);
+            return;
+        hp->centre[k] = (float)((double)grid_point[k] + (f + 0.5) * (double)cell);
         t[k] = q - f;
         t[k] = t[k] < 0.0 ? 0.0 : (t[k] > 1.0 ? 1.0 : t[k]);
     }
-    hit_cell *e = hit_cell_find(ctx, effect, level, centre);
+    const hit_cell *e = hit_cell_find(ctx, effect, level, hp->centre);
     if (!e->active)
-        return false;
-    float tap[8];
+        return;
     double wx[2] = {1.0 - t[0], t[0]}, wy[2] = {1.0 - t[1], t[1]}, wz[2] = {1.0 - t[2], t[2]};
     for (int c = 0; c < 8; c++) /* ((1 x wx) x wy) x wz in double, as before: 1 x wx is exact */
-        tap[c] = (float)(wx[c & 1] * wy[c >> 1 & 1] * wz[c >> 2]);
-    return cell_filter(e, tap, position, normal, out);
+        hp->tap[c] = (float)(wx[c & 1] * wy[c >> 1 & 1] * wz[c >> 2]);
+    hit_weights_prepare(e, position, normal, hp);
+    for (int c = 0; c < 8; c++)
+        if (e->active >> c & 1)
+            HIT_PREFETCH(e->texel[c] + PROBE_MOMENTS + 4 * hp->texel[c]);
+    hp->ready = 1;
 }
 
-/* The filter over a cell's corners with trilinear weights `tap`: E of the probes around the hit, or false
- * (out untouched: 0) when none contributes. */
-FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float position[3], const float normal[3], float out[3])
+/* The second step: E of the probes around the hit, or false (and 0) when none contributes. The cell is looked
+ * up again (another hit of the chunk may have taken its memo entry since; a cell's fill is the same every
+ * time within the frame). */
+FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, const hit_prep *hp,
+                               const float normal[3], float out[3])
+{
+    out[0] = out[1] = out[2] = 0;
+    if (!hp->ready)
+        return false;
+    hit_cell *e = hit_cell_find(ctx, effect, level, hp->centre);
+    return cell_filter(e, hp, normal, out);
+}
+
+/* The filter over a cell's corners with trilinear weights hp->tap, hp prepared for the hit (hit_prep): E of
+ * the probes around the hit, or false (out untouched: 0) when none contributes. */
+FXC_HOT_INLINE bool cell_filter(hit_cell *e, const hit_prep *hp, const float normal[3], float out[3])
 {
     uint32_t slot = HIT_CELL_NORMALS;
     for (uint32_t n = 0; n < HIT_CELL_NORMALS; n++)
@@ -473,7 +513,7 @@ FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float pos
         e->normal_set |= 1u << slot;
     }
     float weight[8];
-    hit_weights(e, position, normal, tap, weight);
+    hit_weights_finish(e, hp, weight);
     float sum[3] = {0, 0, 0}, total = 0;
     for (int c = 0; c < 8; c++) {
         if (!(weight[c] > 0)) /* off, missing, or a trilinear weight of 0 */
@@ -495,7 +535,9 @@ static void taps_bounce(const fx_taps *taps, const float position[3], const floa
 {
     hit_cell e;
     memset(&e, 0, sizeof e);
-    float tap[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    hit_prep hp;
+    memset(&hp, 0, sizeof hp);
+    float *tap = hp.tap;
     uint32_t n = taps->count < 8 ? taps->count : 8;
     for (uint32_t c = 0; c < n; c++) {
         const uint8_t *p = taps->texel[c];
@@ -511,13 +553,16 @@ static void taps_bounce(const fx_taps *taps, const float position[3], const floa
         e.cell[c] = get_f32(p + 12);
         tap[c] = taps->weight[c];
     }
-    if (e.active)
-        cell_filter(&e, tap, position, normal, out);
+    if (e.active) {
+        hit_weights_prepare(&e, position, normal, &hp);
+        cell_filter(&e, &hp, normal, out);
+    }
 }
 
 /* Radiance leaving a front-face hit, given its direct light (compose units) and the probes around it. */
 FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job, uint32_t tri, float u, float v, float t,
-                         const float position[3], const float normal[3], const float direct[3], float out[3])
+                                 const float position[3], const float normal[3], const hit_prep *hp,
+                                 const float direct[3], float out[3])
 {
     float albedo[3], bounce[3] = {0, 0, 0};
     /* The triangle's mean albedo (one load; file comment, "Albedo at hits"). */
@@ -525,7 +570,7 @@ FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job,
     scene_albedo_mean(ctx->s, tri, albedo);
     uint32_t effect = job->effect, level = job->level;
     if (ctx->world_cell) {
-        hit_bounce(ctx, effect, level, job->origin, job->cell, position, normal, bounce);
+        hit_bounce(ctx, effect, level, hp, normal, bounce);
     } else if (ctx->world_taps) {
         fx_taps taps;
         memset(&taps, 0, sizeof taps);
@@ -684,6 +729,7 @@ _Static_assert(FX_PROBE_TEXELS % 16 == 0, "gather blocks");
 
 /* Per-thread working memory of update, commit and eval (each uses it within one call only). */
 static _Thread_local hit_shading thread_hit_shading;
+static _Thread_local hit_prep thread_hit_prep[PROBE_CHUNK]; /* 27 KB: a chunk's hits between the two steps */
 static _Thread_local probe_scratch thread_scratch;
 static _Thread_local probe_directions thread_directions; /* 180 KB: the frame's rays and weights */
 
@@ -701,6 +747,7 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
     _Alignas(64) struct RTCRayHit hits[PROBE_CHUNK];
     float values[PROBE_CHUNK][5]; /* per ray: radiance RGB, distance and its square (cells) */
     hit_shading *hs = &thread_hit_shading; /* 20 KB: off the (pool thread) stack, never allocated */
+    hit_prep *prep = thread_hit_prep;
     probe_scratch *out = &thread_scratch;
     probe_directions *pd = &thread_directions;
     const bool table = rays <= PROBE_TABLE_RAYS;
@@ -765,6 +812,19 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
                 scene_offset_ray_origin(p, normal, s->ray_offset_scale, hit_pos[r]);
                 traced += queue_shadow_rays(ctx, hs, r, hit_pos[r], normal);
             }
+            /* The bounce's first step for every front-face hit (hit_prep): its prefetches overlap the shadow
+             * rays' traversal. */
+            if (ctx->world_cell)
+                for (uint32_t r = 0; r < n; r++) {
+                    const struct RTCRayHit *rh = &hits[r];
+                    prep[r].ready = 0;
+                    if (rh->hit.geomID == RTC_INVALID_GEOMETRY_ID || rh->hit.primID >= s->triangle_count)
+                        continue;
+                    const float *normal = s->tri_normal + 3 * (size_t)rh->hit.primID;
+                    if (!(fx__dot(pd->dir[first + r], normal) < 0))
+                        continue;
+                    hit_prepare(ctx, job->effect, job->level, job->origin, job->cell, hit_pos[r], normal, &prep[r]);
+                }
             shadow_flush(ctx, hs);
 
             /* Radiance and distance of every ray. */
@@ -788,7 +848,7 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
                         }
                     } else {
                         hit_radiance(ctx, job, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r], normal,
-                                     hs->direct[r], radiance);
+                                     &prep[r], hs->direct[r], radiance);
                         distance = t;
                         if (t < closest_front) {
                             closest_front = t;
