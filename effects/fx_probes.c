@@ -304,7 +304,7 @@ static void hit_cells_begin(const fx_context *ctx)
 
 /* The cell around `centre` (a cell's centre: the same cell gives the same bits from any probe of a grid
  * whose coordinates are exact in float, as powers-of-two cells are; otherwise a cell may take two entries). */
-FXC_HOT_INLINE hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t level, const float centre[3])
+FXC_HOT_INLINE hit_cell *hit_cell_slot(uint32_t effect, uint32_t level, const float centre[3])
 {
     uint32_t bits[3];
     memcpy(bits, centre, sizeof bits);
@@ -312,7 +312,12 @@ FXC_HOT_INLINE hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, u
                  (uint64_t)bits[2] * 0x165667B19E3779F9ull ^ ((uint64_t)level << 40) ^ ((uint64_t)effect << 48);
     h ^= h >> 31;
     h *= 0xD6E8FEB86659FD93ull;
-    hit_cell *e = &thread_hit_cells[h >> thread_hit_shift];
+    return &thread_hit_cells[h >> thread_hit_shift];
+}
+
+FXC_HOT_INLINE hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t level, const float centre[3])
+{
+    hit_cell *e = hit_cell_slot(effect, level, centre);
     if (e->generation == thread_hit_generation && memcmp(e->centre, centre, sizeof e->centre) == 0 &&
         e->level == level && e->effect == effect)
         return e;
@@ -355,7 +360,8 @@ FXC_HOT_INLINE hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, u
  * filter one hit at a time; the same operations on the same values: the same floats. */
 typedef struct hit_prep {
     float centre[3];
-    uint32_t ready; /* 1: a cell with some active corner, prepared; 0: no bounce */
+    uint32_t ready; /* hit_locate: 1, a cell; hit_prepare: 1, a cell with some active corner; 0: no bounce */
+    double t[3];    /* the position in the cell */
     float tap[8];
     int32_t texel[8];
     float weight[8], distance[8], cell[8], along[8];
@@ -434,13 +440,13 @@ FXC_HOT_INLINE bool cell_filter(hit_cell *e, const hit_prep *hp, const float nor
 #endif
 
 /* The first step of the filter at a hit on the grid of `grid_point` (any grid point of the level, e.g. the
- * job's) and `cell` (metres): the hit's cell (filled into the memo if new), the trilinear weights and the
- * corners' directions, the corners' moment texels prefetched; hp->ready 0 when no probe can contribute. */
-FXC_HOT_INLINE void hit_prepare(const fx_context *ctx, uint32_t effect, uint32_t level, const float grid_point[3],
-                                float cell, const float position[3], const float normal[3], hit_prep *hp)
+ * job's) and `cell` (metres): the hit's cell and its memo entry prefetched; hp->ready 0 when outside the
+ * grid's range. */
+FXC_HOT_INLINE void hit_locate(uint32_t effect, uint32_t level, const float grid_point[3], float cell,
+                               const float position[3], hit_prep *hp)
 {
     hp->ready = 0;
-    double t[3];
+    double *t = hp->t;
     /* A power-of-two cell (the grid's: the finest cell is one and levels double it) has an exact inverse, and
      * multiplying by it rounds as the division does: three divisions fewer per hit. */
     uint32_t cell_bits;
@@ -456,6 +462,21 @@ FXC_HOT_INLINE void hit_prepare(const fx_context *ctx, uint32_t effect, uint32_t
         t[k] = q - f;
         t[k] = t[k] < 0.0 ? 0.0 : (t[k] > 1.0 ? 1.0 : t[k]);
     }
+    const char *entry = (const char *)hit_cell_slot(effect, level, hp->centre);
+    for (size_t line = 0; line < sizeof(hit_cell); line += 64)
+        HIT_PREFETCH(entry + line);
+    hp->ready = 1;
+}
+
+/* The second step, after hit_locate: the cell filled into the memo if new, the trilinear weights and the
+ * corners' directions, the corners' moment texels prefetched; hp->ready 0 when no probe can contribute. */
+FXC_HOT_INLINE void hit_prepare(const fx_context *ctx, uint32_t effect, uint32_t level, const float position[3],
+                                const float normal[3], hit_prep *hp)
+{
+    if (!hp->ready)
+        return;
+    hp->ready = 0;
+    const double *t = hp->t;
     const hit_cell *e = hit_cell_find(ctx, effect, level, hp->centre);
     if (!e->active)
         return;
@@ -469,7 +490,7 @@ FXC_HOT_INLINE void hit_prepare(const fx_context *ctx, uint32_t effect, uint32_t
     hp->ready = 1;
 }
 
-/* The second step: E of the probes around the hit, or false (and 0) when none contributes. The cell is looked
+/* The last step: E of the probes around the hit, or false (and 0) when none contributes. The cell is looked
  * up again (another hit of the chunk may have taken its memo entry since; a cell's fill is the same every
  * time within the frame). */
 FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, const hit_prep *hp,
@@ -794,6 +815,17 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
             rtcIntersect1M(rtc, &context, hits, n, sizeof(struct RTCRayHit));
             traced += n;
 
+            /* The hit triangles' normals, albedo means and meshes, prefetched for the loops below. */
+            for (uint32_t r = 0; r < n; r++) {
+                uint32_t tri = hits[r].hit.primID;
+                if (hits[r].hit.geomID == RTC_INVALID_GEOMETRY_ID || tri >= s->triangle_count)
+                    continue;
+                HIT_PREFETCH(s->tri_normal + 3 * (size_t)tri);
+                HIT_PREFETCH(s->tri_mesh + tri);
+                if (s->tri_texture_mean)
+                    HIT_PREFETCH(s->tri_texture_mean + 3 * (size_t)tri);
+            }
+
             /* Shadow rays of the front-face hits. */
             hs->count = 0;
             float hit_pos[PROBE_CHUNK][3];
@@ -812,9 +844,9 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
                 scene_offset_ray_origin(p, normal, s->ray_offset_scale, hit_pos[r]);
                 traced += queue_shadow_rays(ctx, hs, r, hit_pos[r], normal);
             }
-            /* The bounce's first step for every front-face hit (hit_prep): its prefetches overlap the shadow
-             * rays' traversal. */
-            if (ctx->world_cell)
+            /* The bounce's first two steps for every front-face hit (hit_prep): their prefetches overlap the
+             * next hits' work and the shadow rays' traversal. */
+            if (ctx->world_cell) {
                 for (uint32_t r = 0; r < n; r++) {
                     const struct RTCRayHit *rh = &hits[r];
                     prep[r].ready = 0;
@@ -823,8 +855,13 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
                     const float *normal = s->tri_normal + 3 * (size_t)rh->hit.primID;
                     if (!(fx__dot(pd->dir[first + r], normal) < 0))
                         continue;
-                    hit_prepare(ctx, job->effect, job->level, job->origin, job->cell, hit_pos[r], normal, &prep[r]);
+                    hit_locate(job->effect, job->level, job->origin, job->cell, hit_pos[r], &prep[r]);
                 }
+                for (uint32_t r = 0; r < n; r++)
+                    if (prep[r].ready)
+                        hit_prepare(ctx, job->effect, job->level, hit_pos[r],
+                                    s->tri_normal + 3 * (size_t)hits[r].hit.primID, &prep[r]);
+            }
             shadow_flush(ctx, hs);
 
             /* Radiance and distance of every ray. */
