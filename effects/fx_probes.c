@@ -73,7 +73,7 @@
  * triangles), and then by the texture's variation within the triangle. Untextured materials: the same floats
  * as before (diffuse x 1). BENCHMARKS, branch probe-upd, measures the image change against the seed noise.
  *
- * The bounce at hits (hit_weights): DDGI's filter (trilinear x wrap x Chebyshev, renormalised, crushing below
+ * The bounce at hits (hit_weights_prepare and hit_weights_finish): DDGI's filter (trilinear x wrap x Chebyshev, renormalised, crushing below
  * 0.2) as compose's shade has it, with two departures for the update only: (1) the Chebyshev test reads the
  * moments of the one octahedral texel the direction from the probe falls in, not the bilinear mix of four
  * (a quarter of the scattered loads and of the texel arithmetic); (2) a plane test: a corner behind the plane
@@ -354,10 +354,13 @@ FXC_HOT_INLINE hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, u
  * surface gets weight 0 when some corner lies in front of it (plane_mask: the corners in front, with a
  * trilinear weight). Written lane by lane without branches, so the AVX2 copy runs the 8 corners as one
  * vector. */
-/* A hit's filter in two steps, kept between them per hit: the cell and the trilinear weights, then what
- * hit_weights computes before its moment loads. The update prepares a chunk's hits first and prefetches their
- * moments (hit_prepare), so the scattered loads of the payloads overlap other work instead of stalling the
- * filter one hit at a time; the same operations on the same values: the same floats. */
+/* What a hit keeps between the steps of its filter (hit_locate, hit_prepare, hit_bounce): its cell, the
+ * trilinear weights, and what hit_weights_prepare computes before the moment loads of hit_weights_finish (the
+ * two were one function, hit_weights). The update runs each step over a chunk's front-face hits before the
+ * next and prefetches what the next step reads (the memo entries, then the corners' moment texels), so the
+ * scattered loads of the memo and the payloads overlap other hits' work instead of stalling the filter one
+ * hit at a time (perf had the memo entry's first load and the moment loads as the update's largest stalls;
+ * BENCHMARKS, branch probe-upd3); the same operations on the same values: the same floats. */
 typedef struct hit_prep {
     float centre[3];
     uint32_t ready; /* hit_locate: 1, a cell; hit_prepare: 1, a cell with some active corner; 0: no bounce */
