@@ -356,11 +356,12 @@ FXC_HOT_INLINE hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, u
  * vector. */
 /* What a hit keeps between the steps of its filter (hit_locate, hit_prepare, hit_bounce): its cell, the
  * trilinear weights, and what hit_weights_prepare computes before the moment loads of hit_weights_finish (the
- * two were one function, hit_weights). The update runs each step over a chunk's front-face hits before the
- * next and prefetches what the next step reads (the memo entries, then the corners' moment texels), so the
- * scattered loads of the memo and the payloads overlap other hits' work instead of stalling the filter one
- * hit at a time (perf had the memo entry's first load and the moment loads as the update's largest stalls;
- * BENCHMARKS, branch probe-upd3); the same operations on the same values: the same floats. */
+ * two were one function, hit_weights). The update locates a chunk's front-face hits in a pass of their own and
+ * prefetches their memo entries, so those scattered loads overlap other hits' work and the shadow rays'
+ * traversal instead of stalling the filter one hit at a time (perf had the memo entry's first load as the
+ * update's largest stall); then prepare and filter run per hit. A pass that also prepared every hit and
+ * prefetched the corners' moment texels cost 6 % more instructions and showed no gain under load (BENCHMARKS,
+ * branch probe-upd3). The same operations on the same values: the same floats. */
 typedef struct hit_prep {
     float centre[3];
     uint32_t ready; /* hit_locate: 1, a cell; hit_prepare: 1, a cell with some active corner; 0: no bounce */
@@ -472,7 +473,7 @@ FXC_HOT_INLINE void hit_locate(uint32_t effect, uint32_t level, const float grid
 }
 
 /* The second step, after hit_locate: the cell filled into the memo if new, the trilinear weights and the
- * corners' directions, the corners' moment texels prefetched; hp->ready 0 when no probe can contribute. */
+ * corners' directions; hp->ready 0 when no probe can contribute. */
 FXC_HOT_INLINE void hit_prepare(const fx_context *ctx, uint32_t effect, uint32_t level, const float position[3],
                                 const float normal[3], hit_prep *hp)
 {
@@ -487,15 +488,11 @@ FXC_HOT_INLINE void hit_prepare(const fx_context *ctx, uint32_t effect, uint32_t
     for (int c = 0; c < 8; c++) /* ((1 x wx) x wy) x wz in double, as before: 1 x wx is exact */
         hp->tap[c] = (float)(wx[c & 1] * wy[c >> 1 & 1] * wz[c >> 2]);
     hit_weights_prepare(e, position, normal, hp);
-    for (int c = 0; c < 8; c++)
-        if (e->active >> c & 1)
-            HIT_PREFETCH(e->texel[c] + PROBE_MOMENTS + 4 * hp->texel[c]);
     hp->ready = 1;
 }
 
-/* The last step: E of the probes around the hit, or false (and 0) when none contributes. The cell is looked
- * up again (another hit of the chunk may have taken its memo entry since; a cell's fill is the same every
- * time within the frame). */
+/* The last step, right after hit_prepare: E of the probes around the hit, or false (and 0) when none
+ * contributes. */
 FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, const hit_prep *hp,
                                const float normal[3], float out[3])
 {
@@ -847,8 +844,8 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
                 scene_offset_ray_origin(p, normal, s->ray_offset_scale, hit_pos[r]);
                 traced += queue_shadow_rays(ctx, hs, r, hit_pos[r], normal);
             }
-            /* The bounce's first two steps for every front-face hit (hit_prep): their prefetches overlap the
-             * next hits' work and the shadow rays' traversal. */
+            /* The bounce's first step for every front-face hit (hit_prep): the memo entries' prefetches overlap
+             * the next hits' work and the shadow rays' traversal. */
             if (ctx->world_cell) {
                 for (uint32_t r = 0; r < n; r++) {
                     const struct RTCRayHit *rh = &hits[r];
@@ -860,10 +857,6 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
                         continue;
                     hit_locate(job->effect, job->level, job->origin, job->cell, hit_pos[r], &prep[r]);
                 }
-                for (uint32_t r = 0; r < n; r++)
-                    if (prep[r].ready)
-                        hit_prepare(ctx, job->effect, job->level, hit_pos[r],
-                                    s->tri_normal + 3 * (size_t)hits[r].hit.primID, &prep[r]);
             }
             shadow_flush(ctx, hs);
 
@@ -887,6 +880,8 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
                             memcpy(back_dir, dir, sizeof back_dir);
                         }
                     } else {
+                        if (ctx->world_cell)
+                            hit_prepare(ctx, job->effect, job->level, hit_pos[r], normal, &prep[r]);
                         hit_radiance(ctx, job, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r], normal,
                                      &prep[r], hs->direct[r], radiance);
                         distance = t;
