@@ -73,7 +73,7 @@
  * triangles), and then by the texture's variation within the triangle. Untextured materials: the same floats
  * as before (diffuse x 1). BENCHMARKS, branch probe-upd, measures the image change against the seed noise.
  *
- * The bounce at hits (hit_weights_prepare and hit_weights_finish): DDGI's filter (trilinear x wrap x Chebyshev, renormalised, crushing below
+ * The bounce at hits (hit_weights): DDGI's filter (trilinear x wrap x Chebyshev, renormalised, crushing below
  * 0.2) as compose's shade has it, with two departures for the update only: (1) the Chebyshev test reads the
  * moments of the one octahedral texel the direction from the probe falls in, not the bilinear mix of four
  * (a quarter of the scattered loads and of the texel arithmetic); (2) a plane test: a corner behind the plane
@@ -304,7 +304,7 @@ static void hit_cells_begin(const fx_context *ctx)
 
 /* The cell around `centre` (a cell's centre: the same cell gives the same bits from any probe of a grid
  * whose coordinates are exact in float, as powers-of-two cells are; otherwise a cell may take two entries). */
-FXC_HOT_INLINE hit_cell *hit_cell_slot(uint32_t effect, uint32_t level, const float centre[3])
+FXC_HOT_INLINE hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t level, const float centre[3])
 {
     uint32_t bits[3];
     memcpy(bits, centre, sizeof bits);
@@ -312,12 +312,7 @@ FXC_HOT_INLINE hit_cell *hit_cell_slot(uint32_t effect, uint32_t level, const fl
                  (uint64_t)bits[2] * 0x165667B19E3779F9ull ^ ((uint64_t)level << 40) ^ ((uint64_t)effect << 48);
     h ^= h >> 31;
     h *= 0xD6E8FEB86659FD93ull;
-    return &thread_hit_cells[h >> thread_hit_shift];
-}
-
-FXC_HOT_INLINE hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t level, const float centre[3])
-{
-    hit_cell *e = hit_cell_slot(effect, level, centre);
+    hit_cell *e = &thread_hit_cells[h >> thread_hit_shift];
     if (e->generation == thread_hit_generation && memcmp(e->centre, centre, sizeof e->centre) == 0 &&
         e->level == level && e->effect == effect)
         return e;
@@ -354,30 +349,14 @@ FXC_HOT_INLINE hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, u
  * surface gets weight 0 when some corner lies in front of it (plane_mask: the corners in front, with a
  * trilinear weight). Written lane by lane without branches, so the AVX2 copy runs the 8 corners as one
  * vector. */
-/* What a hit keeps between the steps of its filter (hit_locate, hit_prepare, hit_bounce): its cell, the
- * trilinear weights, and what hit_weights_prepare computes before the moment loads of hit_weights_finish (the
- * two were one function, hit_weights). The update locates a chunk's front-face hits in a pass of their own and
- * prefetches their memo entries, so those scattered loads overlap other hits' work and the shadow rays'
- * traversal instead of stalling the filter one hit at a time (perf had the memo entry's first load as the
- * update's largest stall); then prepare and filter run per hit. A pass that also prepared every hit and
- * prefetched the corners' moment texels cost 6 % more instructions and showed no gain under load (BENCHMARKS,
- * branch probe-upd3). The same operations on the same values: the same floats. */
-typedef struct hit_prep {
-    float centre[3];
-    uint32_t ready; /* hit_locate: 1, a cell; hit_prepare: 1, a cell with some active corner; 0: no bounce */
-    double t[3];    /* the position in the cell */
-    float tap[8];
-    int32_t texel[8];
-    float weight[8], distance[8], cell[8], along[8];
-} hit_prep;
-
-FXC_HOT_INLINE void hit_weights_prepare(const hit_cell *restrict e, const float position[3], const float normal[3],
-                                        hit_prep *restrict hp)
+FXC_HOT_INLINE void hit_weights(const hit_cell *restrict e, const float position[3], const float normal[3],
+                                       const float tap[8], float out[8])
 {
+    static const uint8_t zero_payload[FX_PROBE_BYTES]; /* read in place of missing corners, never used */
     const float px = position[0], py = position[1], pz = position[2];
     const float nx = normal[0], ny = normal[1], nz = normal[2];
-    int32_t *texel = hp->texel;
-    float *weight = hp->weight, *distance = hp->distance, *cell = hp->cell, *along = hp->along;
+    int32_t texel[8];
+    float weight[8], distance[8], cell[8], along[8];
     for (int c = 0; c < 8; c++) {
         cell[c] = e->cell[c];
         const float *probe = e->position[c];
@@ -405,13 +384,6 @@ FXC_HOT_INLINE void hit_weights_prepare(const hit_cell *restrict e, const float 
         iy = iy < 0 ? 0 : (iy > 7 ? 7 : iy);
         texel[c] = iy * FX_PROBE_MAP + ix;
     }
-}
-
-FXC_HOT_INLINE void hit_weights_finish(const hit_cell *restrict e, const hit_prep *restrict hp, float out[8])
-{
-    static const uint8_t zero_payload[FX_PROBE_BYTES]; /* read in place of missing corners, never used */
-    const int32_t *texel = hp->texel;
-    const float *weight = hp->weight, *distance = hp->distance, *cell = hp->cell, *along = hp->along, *tap = hp->tap;
     uint32_t word[8]; /* the texel's two moments: mean distance (low half), mean squared distance */
     for (int c = 0; c < 8; c++) {
         const uint8_t *p = (e->active >> c & 1) ? e->texel[c] : zero_payload;
@@ -435,22 +407,16 @@ FXC_HOT_INLINE void hit_weights_finish(const hit_cell *restrict e, const hit_pre
     }
 }
 
-FXC_HOT_INLINE bool cell_filter(hit_cell *e, const hit_prep *hp, const float normal[3], float out[3]);
+FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float position[3], const float normal[3], float out[3]);
 
-#if defined(__GNUC__)
-#define HIT_PREFETCH(p) __builtin_prefetch(p)
-#else
-#define HIT_PREFETCH(p) ((void)(p))
-#endif
-
-/* The first step of the filter at a hit on the grid of `grid_point` (any grid point of the level, e.g. the
- * job's) and `cell` (metres): the hit's cell and its memo entry prefetched; hp->ready 0 when outside the
- * grid's range. */
-FXC_HOT_INLINE void hit_locate(uint32_t effect, uint32_t level, const float grid_point[3], float cell,
-                               const float position[3], hit_prep *hp)
+/* The filter at a hit on the grid of `grid_point` (any grid point of the level, e.g. the job's) and `cell`
+ * (metres): E of the probes around it, or false (and 0) when none contributes. */
+FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, const float grid_point[3], float cell,
+                       const float position[3], const float normal[3], float out[3])
 {
-    hp->ready = 0;
-    double *t = hp->t;
+    out[0] = out[1] = out[2] = 0;
+    float centre[3];
+    double t[3];
     /* A power-of-two cell (the grid's: the finest cell is one and levels double it) has an exact inverse, and
      * multiplying by it rounds as the division does: three divisions fewer per hit. */
     uint32_t cell_bits;
@@ -461,51 +427,24 @@ FXC_HOT_INLINE void hit_locate(uint32_t effect, uint32_t level, const float grid
         double delta = (double)position[k] - (double)grid_point[k];
         double q = exact_inverse ? delta * inverse : delta / (double)cell, f = floor(q);
         if (!(fabs(f) < 1e9))
-            return;
-        hp->centre[k] = (float)((double)grid_point[k] + (f + 0.5) * (double)cell);
+            return false;
+        centre[k] = (float)((double)grid_point[k] + (f + 0.5) * (double)cell);
         t[k] = q - f;
         t[k] = t[k] < 0.0 ? 0.0 : (t[k] > 1.0 ? 1.0 : t[k]);
     }
-    const char *entry = (const char *)hit_cell_slot(effect, level, hp->centre);
-    for (size_t line = 0; line < sizeof(hit_cell); line += 64)
-        HIT_PREFETCH(entry + line);
-    hp->ready = 1;
-}
-
-/* The second step, after hit_locate: the cell filled into the memo if new, the trilinear weights and the
- * corners' directions; hp->ready 0 when no probe can contribute. */
-FXC_HOT_INLINE void hit_prepare(const fx_context *ctx, uint32_t effect, uint32_t level, const float position[3],
-                                const float normal[3], hit_prep *hp)
-{
-    if (!hp->ready)
-        return;
-    hp->ready = 0;
-    const double *t = hp->t;
-    const hit_cell *e = hit_cell_find(ctx, effect, level, hp->centre);
+    hit_cell *e = hit_cell_find(ctx, effect, level, centre);
     if (!e->active)
-        return;
+        return false;
+    float tap[8];
     double wx[2] = {1.0 - t[0], t[0]}, wy[2] = {1.0 - t[1], t[1]}, wz[2] = {1.0 - t[2], t[2]};
     for (int c = 0; c < 8; c++) /* ((1 x wx) x wy) x wz in double, as before: 1 x wx is exact */
-        hp->tap[c] = (float)(wx[c & 1] * wy[c >> 1 & 1] * wz[c >> 2]);
-    hit_weights_prepare(e, position, normal, hp);
-    hp->ready = 1;
+        tap[c] = (float)(wx[c & 1] * wy[c >> 1 & 1] * wz[c >> 2]);
+    return cell_filter(e, tap, position, normal, out);
 }
 
-/* The last step, right after hit_prepare: E of the probes around the hit, or false (and 0) when none
- * contributes. */
-FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, const hit_prep *hp,
-                               const float normal[3], float out[3])
-{
-    out[0] = out[1] = out[2] = 0;
-    if (!hp->ready)
-        return false;
-    hit_cell *e = hit_cell_find(ctx, effect, level, hp->centre);
-    return cell_filter(e, hp, normal, out);
-}
-
-/* The filter over a cell's corners with trilinear weights hp->tap, hp prepared for the hit (hit_prep): E of
- * the probes around the hit, or false (out untouched: 0) when none contributes. */
-FXC_HOT_INLINE bool cell_filter(hit_cell *e, const hit_prep *hp, const float normal[3], float out[3])
+/* The filter over a cell's corners with trilinear weights `tap`: E of the probes around the hit, or false
+ * (out untouched: 0) when none contributes. */
+FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float position[3], const float normal[3], float out[3])
 {
     uint32_t slot = HIT_CELL_NORMALS;
     for (uint32_t n = 0; n < HIT_CELL_NORMALS; n++)
@@ -534,7 +473,7 @@ FXC_HOT_INLINE bool cell_filter(hit_cell *e, const hit_prep *hp, const float nor
         e->normal_set |= 1u << slot;
     }
     float weight[8];
-    hit_weights_finish(e, hp, weight);
+    hit_weights(e, position, normal, tap, weight);
     float sum[3] = {0, 0, 0}, total = 0;
     for (int c = 0; c < 8; c++) {
         if (!(weight[c] > 0)) /* off, missing, or a trilinear weight of 0 */
@@ -556,9 +495,7 @@ static void taps_bounce(const fx_taps *taps, const float position[3], const floa
 {
     hit_cell e;
     memset(&e, 0, sizeof e);
-    hit_prep hp;
-    memset(&hp, 0, sizeof hp);
-    float *tap = hp.tap;
+    float tap[8] = {0, 0, 0, 0, 0, 0, 0, 0};
     uint32_t n = taps->count < 8 ? taps->count : 8;
     for (uint32_t c = 0; c < n; c++) {
         const uint8_t *p = taps->texel[c];
@@ -574,16 +511,13 @@ static void taps_bounce(const fx_taps *taps, const float position[3], const floa
         e.cell[c] = get_f32(p + 12);
         tap[c] = taps->weight[c];
     }
-    if (e.active) {
-        hit_weights_prepare(&e, position, normal, &hp);
-        cell_filter(&e, &hp, normal, out);
-    }
+    if (e.active)
+        cell_filter(&e, tap, position, normal, out);
 }
 
 /* Radiance leaving a front-face hit, given its direct light (compose units) and the probes around it. */
 FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job, uint32_t tri, float u, float v, float t,
-                                 const float position[3], const float normal[3], const hit_prep *hp,
-                                 const float direct[3], float out[3])
+                         const float position[3], const float normal[3], const float direct[3], float out[3])
 {
     float albedo[3], bounce[3] = {0, 0, 0};
     /* The triangle's mean albedo (one load; file comment, "Albedo at hits"). */
@@ -591,7 +525,7 @@ FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job,
     scene_albedo_mean(ctx->s, tri, albedo);
     uint32_t effect = job->effect, level = job->level;
     if (ctx->world_cell) {
-        hit_bounce(ctx, effect, level, hp, normal, bounce);
+        hit_bounce(ctx, effect, level, job->origin, job->cell, position, normal, bounce);
     } else if (ctx->world_taps) {
         fx_taps taps;
         memset(&taps, 0, sizeof taps);
@@ -750,7 +684,6 @@ _Static_assert(FX_PROBE_TEXELS % 16 == 0, "gather blocks");
 
 /* Per-thread working memory of update, commit and eval (each uses it within one call only). */
 static _Thread_local hit_shading thread_hit_shading;
-static _Thread_local hit_prep thread_hit_prep[PROBE_CHUNK]; /* 27 KB: a chunk's hits between the two steps */
 static _Thread_local probe_scratch thread_scratch;
 static _Thread_local probe_directions thread_directions; /* 180 KB: the frame's rays and weights */
 
@@ -768,7 +701,6 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
     _Alignas(64) struct RTCRayHit hits[PROBE_CHUNK];
     float values[PROBE_CHUNK][5]; /* per ray: radiance RGB, distance and its square (cells) */
     hit_shading *hs = &thread_hit_shading; /* 20 KB: off the (pool thread) stack, never allocated */
-    hit_prep *prep = thread_hit_prep;
     probe_scratch *out = &thread_scratch;
     probe_directions *pd = &thread_directions;
     const bool table = rays <= PROBE_TABLE_RAYS;
@@ -815,17 +747,6 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
             rtcIntersect1M(rtc, &context, hits, n, sizeof(struct RTCRayHit));
             traced += n;
 
-            /* The hit triangles' normals, albedo means and meshes, prefetched for the loops below. */
-            for (uint32_t r = 0; r < n; r++) {
-                uint32_t tri = hits[r].hit.primID;
-                if (hits[r].hit.geomID == RTC_INVALID_GEOMETRY_ID || tri >= s->triangle_count)
-                    continue;
-                HIT_PREFETCH(s->tri_normal + 3 * (size_t)tri);
-                HIT_PREFETCH(s->tri_mesh + tri);
-                if (s->tri_texture_mean)
-                    HIT_PREFETCH(s->tri_texture_mean + 3 * (size_t)tri);
-            }
-
             /* Shadow rays of the front-face hits. */
             hs->count = 0;
             float hit_pos[PROBE_CHUNK][3];
@@ -843,20 +764,6 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
                     p[k] = origin[k] + rh->ray.tfar * dir[k];
                 scene_offset_ray_origin(p, normal, s->ray_offset_scale, hit_pos[r]);
                 traced += queue_shadow_rays(ctx, hs, r, hit_pos[r], normal);
-            }
-            /* The bounce's first step for every front-face hit (hit_prep): the memo entries' prefetches overlap
-             * the next hits' work and the shadow rays' traversal. */
-            if (ctx->world_cell) {
-                for (uint32_t r = 0; r < n; r++) {
-                    const struct RTCRayHit *rh = &hits[r];
-                    prep[r].ready = 0;
-                    if (rh->hit.geomID == RTC_INVALID_GEOMETRY_ID || rh->hit.primID >= s->triangle_count)
-                        continue;
-                    const float *normal = s->tri_normal + 3 * (size_t)rh->hit.primID;
-                    if (!(fx__dot(pd->dir[first + r], normal) < 0))
-                        continue;
-                    hit_locate(job->effect, job->level, job->origin, job->cell, hit_pos[r], &prep[r]);
-                }
             }
             shadow_flush(ctx, hs);
 
@@ -880,10 +787,8 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
                             memcpy(back_dir, dir, sizeof back_dir);
                         }
                     } else {
-                        if (ctx->world_cell)
-                            hit_prepare(ctx, job->effect, job->level, hit_pos[r], normal, &prep[r]);
                         hit_radiance(ctx, job, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r], normal,
-                                     &prep[r], hs->direct[r], radiance);
+                                     hs->direct[r], radiance);
                         distance = t;
                         if (t < closest_front) {
                             closest_front = t;
