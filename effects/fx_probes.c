@@ -197,8 +197,8 @@ FXC_HOT_INLINE void shadow_flush(const fx_context *ctx, hit_shading *hs)
 
 /* Queues the shadow rays of a front-face hit (origin already offset, unit front normal) for chunk slot i;
  * returns the rays queued. Contributions are compose's: intensity x colour x cos (/ d^2 for point lights). */
-FXC_HOT_INLINE uint32_t queue_shadow_rays(const fx_context *ctx, hit_shading *hs, uint32_t i, const float origin[3],
-                                  const float normal[3])
+FXC_HOT_INLINE uint32_t queue_shadow_rays(const fx_context *ctx, hit_shading *hs, uint32_t i,
+                                          const float origin[3], const float normal[3])
 {
     const scene *s = ctx->s;
     uint32_t queued = 0;
@@ -350,7 +350,7 @@ FXC_HOT_INLINE hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, u
  * trilinear weight). Written lane by lane without branches, so the AVX2 copy runs the 8 corners as one
  * vector. */
 FXC_HOT_INLINE void hit_weights(const hit_cell *restrict e, const float position[3], const float normal[3],
-                                       const float tap[8], float out[8])
+                                const float tap[8], float out[8])
 {
     static const uint8_t zero_payload[FX_PROBE_BYTES]; /* read in place of missing corners, never used */
     const float px = position[0], py = position[1], pz = position[2];
@@ -407,12 +407,13 @@ FXC_HOT_INLINE void hit_weights(const hit_cell *restrict e, const float position
     }
 }
 
-FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float position[3], const float normal[3], float out[3]);
+FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float position[3], const float normal[3],
+                                float out[3]);
 
 /* The filter at a hit on the grid of `grid_point` (any grid point of the level, e.g. the job's) and `cell`
  * (metres): E of the probes around it, or false (and 0) when none contributes. */
-FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, const float grid_point[3], float cell,
-                       const float position[3], const float normal[3], float out[3])
+FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, const float grid_point[3],
+                               float cell, const float position[3], const float normal[3], float out[3])
 {
     out[0] = out[1] = out[2] = 0;
     float centre[3];
@@ -444,7 +445,8 @@ FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t 
 
 /* The filter over a cell's corners with trilinear weights `tap`: E of the probes around the hit, or false
  * (out untouched: 0) when none contributes. */
-FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float position[3], const float normal[3], float out[3])
+FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float position[3], const float normal[3],
+                                float out[3])
 {
     uint32_t slot = HIT_CELL_NORMALS;
     for (uint32_t n = 0; n < HIT_CELL_NORMALS; n++)
@@ -516,8 +518,9 @@ static void taps_bounce(const fx_taps *taps, const float position[3], const floa
 }
 
 /* Radiance leaving a front-face hit, given its direct light (compose units) and the probes around it. */
-FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job, uint32_t tri, float u, float v, float t,
-                         const float position[3], const float normal[3], const float direct[3], float out[3])
+FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job, uint32_t tri, float u, float v,
+                                 float t, const float position[3], const float normal[3], const float direct[3],
+                                 float out[3])
 {
     float albedo[3], bounce[3] = {0, 0, 0};
     /* The triangle's mean albedo (one load; file comment, "Albedo at hits"). */
