@@ -185,7 +185,7 @@ typedef struct hit_shading {
     float direct[PROBE_CHUNK][3]; /* compose units (irradiance / pi) */
 } hit_shading;
 
-static void shadow_flush(const fx_context *ctx, hit_shading *hs)
+FXC_HOT_INLINE void shadow_flush(const fx_context *ctx, hit_shading *hs)
 {
     fx__occluded(ctx, hs->shadow, hs->count);
     for (uint32_t r = 0; r < hs->count; r++)
@@ -197,8 +197,8 @@ static void shadow_flush(const fx_context *ctx, hit_shading *hs)
 
 /* Queues the shadow rays of a front-face hit (origin already offset, unit front normal) for chunk slot i;
  * returns the rays queued. Contributions are compose's: intensity x colour x cos (/ d^2 for point lights). */
-static uint32_t queue_shadow_rays(const fx_context *ctx, hit_shading *hs, uint32_t i, const float origin[3],
-                                  const float normal[3])
+FXC_HOT_INLINE uint32_t queue_shadow_rays(const fx_context *ctx, hit_shading *hs, uint32_t i,
+                                          const float origin[3], const float normal[3])
 {
     const scene *s = ctx->s;
     uint32_t queued = 0;
@@ -304,7 +304,7 @@ static void hit_cells_begin(const fx_context *ctx)
 
 /* The cell around `centre` (a cell's centre: the same cell gives the same bits from any probe of a grid
  * whose coordinates are exact in float, as powers-of-two cells are; otherwise a cell may take two entries). */
-static hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t level, const float centre[3])
+FXC_HOT_INLINE hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t level, const float centre[3])
 {
     uint32_t bits[3];
     memcpy(bits, centre, sizeof bits);
@@ -349,8 +349,8 @@ static hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t 
  * surface gets weight 0 when some corner lies in front of it (plane_mask: the corners in front, with a
  * trilinear weight). Written lane by lane without branches, so the AVX2 copy runs the 8 corners as one
  * vector. */
-FXC_HOT_CLONES static void hit_weights(const hit_cell *restrict e, const float position[3], const float normal[3],
-                                       const float tap[8], float out[8])
+FXC_HOT_INLINE void hit_weights(const hit_cell *restrict e, const float position[3], const float normal[3],
+                                const float tap[8], float out[8])
 {
     static const uint8_t zero_payload[FX_PROBE_BYTES]; /* read in place of missing corners, never used */
     const float px = position[0], py = position[1], pz = position[2];
@@ -407,12 +407,13 @@ FXC_HOT_CLONES static void hit_weights(const hit_cell *restrict e, const float p
     }
 }
 
-static bool cell_filter(hit_cell *e, const float tap[8], const float position[3], const float normal[3], float out[3]);
+FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float position[3], const float normal[3],
+                                float out[3]);
 
 /* The filter at a hit on the grid of `grid_point` (any grid point of the level, e.g. the job's) and `cell`
  * (metres): E of the probes around it, or false (and 0) when none contributes. */
-static bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, const float grid_point[3], float cell,
-                       const float position[3], const float normal[3], float out[3])
+FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, const float grid_point[3],
+                               float cell, const float position[3], const float normal[3], float out[3])
 {
     out[0] = out[1] = out[2] = 0;
     float centre[3];
@@ -444,7 +445,8 @@ static bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, c
 
 /* The filter over a cell's corners with trilinear weights `tap`: E of the probes around the hit, or false
  * (out untouched: 0) when none contributes. */
-static bool cell_filter(hit_cell *e, const float tap[8], const float position[3], const float normal[3], float out[3])
+FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float position[3], const float normal[3],
+                                float out[3])
 {
     uint32_t slot = HIT_CELL_NORMALS;
     for (uint32_t n = 0; n < HIT_CELL_NORMALS; n++)
@@ -516,8 +518,9 @@ static void taps_bounce(const fx_taps *taps, const float position[3], const floa
 }
 
 /* Radiance leaving a front-face hit, given its direct light (compose units) and the probes around it. */
-static void hit_radiance(const fx_context *ctx, const fx_block_job *job, uint32_t tri, float u, float v, float t,
-                         const float position[3], const float normal[3], const float direct[3], float out[3])
+FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job, uint32_t tri, float u, float v,
+                                 float t, const float position[3], const float normal[3], const float direct[3],
+                                 float out[3])
 {
     float albedo[3], bounce[3] = {0, 0, 0};
     /* The triangle's mean albedo (one load; file comment, "Albedo at hits"). */
@@ -622,9 +625,49 @@ static void directions_prepare(probe_directions *pd, uint32_t rays, uint64_t h1,
 }
 
 /* The weighted sums of a chunk of n rays (radiance RGB, distance and squared distance in cells, per ray)
- * into the texels: every ray adds its weight row times its values, in ray order. */
+ * into the texels: every ray adds its weight row times its values, in ray order. With GCC's vector types the
+ * texels go in blocks of 16, the rays inside: a block's five sums (10 AVX2 registers) stay in registers over
+ * the chunk's rays instead of being loaded and stored once per ray (64 texels x 5 sums do not fit the 16
+ * registers; written as plain arrays GCC keeps them on the stack). The same products and sums in the same
+ * order per texel: the same floats. */
+#if defined(__GNUC__)
+typedef float gather_v8 __attribute__((vector_size(32)));
+
+/* A vector of 8 floats from p (any alignment); a macro: a function returning an AVX vector changes the ABI. */
+#define GATHER_LOAD(v, p) memcpy(&(v), (p), sizeof(v))
+
 FXC_HOT_CLONES static void gather_chunk(const probe_directions *restrict pd, uint32_t row, uint32_t n,
                                         const float (*restrict values)[5], gather_sums *restrict acc)
+{
+    for (uint32_t t0 = 0; t0 < FX_PROBE_TEXELS; t0 += 16) {
+        gather_v8 r0, r1, g0, g1, b0, b1, m0, m1, q0, q1;
+        GATHER_LOAD(r0, acc->r + t0), GATHER_LOAD(r1, acc->r + t0 + 8);
+        GATHER_LOAD(g0, acc->g + t0), GATHER_LOAD(g1, acc->g + t0 + 8);
+        GATHER_LOAD(b0, acc->b + t0), GATHER_LOAD(b1, acc->b + t0 + 8);
+        GATHER_LOAD(m0, acc->m1 + t0), GATHER_LOAD(m1, acc->m1 + t0 + 8);
+        GATHER_LOAD(q0, acc->m2 + t0), GATHER_LOAD(q1, acc->m2 + t0 + 8);
+        for (uint32_t ray = 0; ray < n; ray++) {
+            const float *cosine = pd->cosine[row + ray] + t0, *lobe = pd->lobe[row + ray] + t0;
+            const float *v = values[ray];
+            gather_v8 c0, c1, w0, w1;
+            GATHER_LOAD(c0, cosine), GATHER_LOAD(c1, cosine + 8);
+            r0 += c0 * v[0], r1 += c1 * v[0];
+            g0 += c0 * v[1], g1 += c1 * v[1];
+            b0 += c0 * v[2], b1 += c1 * v[2];
+            GATHER_LOAD(w0, lobe), GATHER_LOAD(w1, lobe + 8);
+            m0 += w0 * v[3], m1 += w1 * v[3];
+            q0 += w0 * v[4], q1 += w1 * v[4];
+        }
+        memcpy(acc->r + t0, &r0, sizeof r0), memcpy(acc->r + t0 + 8, &r1, sizeof r1);
+        memcpy(acc->g + t0, &g0, sizeof g0), memcpy(acc->g + t0 + 8, &g1, sizeof g1);
+        memcpy(acc->b + t0, &b0, sizeof b0), memcpy(acc->b + t0 + 8, &b1, sizeof b1);
+        memcpy(acc->m1 + t0, &m0, sizeof m0), memcpy(acc->m1 + t0 + 8, &m1, sizeof m1);
+        memcpy(acc->m2 + t0, &q0, sizeof q0), memcpy(acc->m2 + t0 + 8, &q1, sizeof q1);
+    }
+}
+#else
+static void gather_chunk(const probe_directions *restrict pd, uint32_t row, uint32_t n,
+                         const float (*restrict values)[5], gather_sums *restrict acc)
 {
     for (uint32_t r = 0; r < n; r++) {
         const float *restrict cosine = pd->cosine[row + r], *restrict lobe = pd->lobe[row + r];
@@ -639,13 +682,15 @@ FXC_HOT_CLONES static void gather_chunk(const probe_directions *restrict pd, uin
         }
     }
 }
+#endif
+_Static_assert(FX_PROBE_TEXELS % 16 == 0, "gather blocks");
 
 /* Per-thread working memory of update, commit and eval (each uses it within one call only). */
 static _Thread_local hit_shading thread_hit_shading;
 static _Thread_local probe_scratch thread_scratch;
 static _Thread_local probe_directions thread_directions; /* 180 KB: the frame's rays and weights */
 
-uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count)
+FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count)
 {
     const scene *s = ctx->s;
     const uint32_t rays = ray_count(ctx);
@@ -833,7 +878,7 @@ uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint3
     return traced;
 }
 
-void fx_probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint32_t count)
+FXC_HOT_CLONES void fx_probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint32_t count)
 {
     float h = ctx->probe_hysteresis;
     if (h == 0.0f)
