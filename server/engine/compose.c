@@ -18,6 +18,15 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* The tone map's rows with AVX2 gathers (tone_map_avx2) where the compiler and the CPU have them. */
+#if defined(__x86_64__) && defined(__GNUC__) && defined(__linux__) && !defined(FXC_NO_CLONES)
+#include <immintrin.h>
+#define TONE_MAP_AVX2 1
+#else
+#define TONE_MAP_AVX2 0
+#endif
+static bool tone_use_avx2; /* set once with the table */
+
 /* The effects of one cache kind whose taps one call gathers for a run (kind->pixel_taps). */
 enum { TAPS_GROUP = 4 };
 
@@ -212,9 +221,7 @@ FXC_HOT_LANES static void tone_map_lanes(const float *radiance, uint8_t *image, 
  * path in tests/test_engine.c on such a CPU). GCC does not emit these gathers itself under the generic tuning
  * (it emulates them with element inserts), so they are written with intrinsics. The tail goes through
  * tone_map_lanes. */
-#if defined(__x86_64__) && defined(__GNUC__) && defined(__linux__) && !defined(FXC_NO_CLONES)
-#include <immintrin.h>
-#define TONE_MAP_AVX2 1
+#if TONE_MAP_AVX2
 __attribute__((target("avx2"))) static void tone_map_avx2(const float *radiance, uint8_t *image, uint32_t n)
 {
     const __m256 lowest = _mm256_set1_ps(0x1p-20f), highest = _mm256_set1_ps(20.0f);
@@ -241,11 +248,7 @@ __attribute__((target("avx2"))) static void tone_map_avx2(const float *radiance,
     if (j < n)
         tone_map_lanes(radiance + j, image + j, n - j);
 }
-#else
-#define TONE_MAP_AVX2 0
 #endif
-
-static bool tone_use_avx2; /* set once with the table */
 
 /* A row of n floats to bytes: tone_map_avx2 where the CPU has AVX2, else tone_map_lanes. */
 static inline void tone_map_row(const float *radiance, uint8_t *image, uint32_t n)
