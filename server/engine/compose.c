@@ -929,8 +929,9 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
                 n++;
                 last = f;
             }
-            loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers), thread_index, cs->pixels,
-                                       count, n, group, loop->bias[e], group_taps, group_blocks);
+            uint32_t empty = loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers),
+                                                        thread_index, cs->pixels, count, n, group, loop->bias[e],
+                                                        group_taps, group_blocks);
             for (uint32_t j = 0; j < n; j++) {
                 uint32_t g = group[j];
                 const uint64_t *bits = loop->viewer_bits[g];
@@ -944,7 +945,7 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
                         if (blocks[i] != SRV_NONE)
                             cs->sharing[i] = fmaxf(cs->sharing[i], (float)__builtin_popcountll(bits[blocks[i]]));
                     }
-                } else {
+                } else if (empty) { /* else every pixel has taps: nothing is missing */
                     for (uint32_t i = 0; i < count; i++)
                         cs->missing[i] |= taps[i].count == 0;
                 }
