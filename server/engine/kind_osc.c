@@ -773,20 +773,14 @@ FXC_HOT_CLONES static uint32_t osc_kind_pixel_taps(const void *cache, uint32_t s
     taps_lanes L;
     uint32_t i = 0;
     const scene_island *islands = k->s->islands;
-    uint32_t last_island = UINT32_MAX, width0 = 0, height0 = 0; /* neighbours mostly share their island */
     for (; i < count; i++) {
         L.u[i] = pixels[i].island_u;
         L.v[i] = pixels[i].island_v;
         L.footprint[i] = pixels[i].footprint;
         uint32_t island = pixels[i].island;
-        if (island != last_island) {
-            last_island = island;
-            width0 = islands[island].width;
-            height0 = islands[island].height;
-        }
         L.island[i] = island;
-        L.width0[i] = width0;
-        L.height0[i] = height0;
+        L.width0[i] = islands[island].width;
+        L.height0[i] = islands[island].height;
     }
     for (; i < SRV_RUN; i++) {
         L.u[i] = L.v[i] = L.footprint[i] = 0.0f;
