@@ -440,8 +440,9 @@ FXC_HOT_LANES static void gather_lanes(compose_scratch *cs, const gather_memo *m
         cs->shade_normal[1][i] = facing > 0 ? -n1 : n1;
         cs->shade_normal[2][i] = facing > 0 ? -n2 : n2;
         cs->albedo_footprint[i] = cs->lane_footprint[i] - log2_density;
-        cs->lane_island_u[i] = w * cs->lane_island_uv[0][i] + u * cs->lane_island_uv[2][i] + v * cs->lane_island_uv[4][i];
-        cs->lane_island_v[i] = w * cs->lane_island_uv[1][i] + u * cs->lane_island_uv[3][i] + v * cs->lane_island_uv[5][i];
+        float (*uv)[SRV_RUN] = cs->lane_island_uv;
+        cs->lane_island_u[i] = w * uv[0][i] + u * uv[2][i] + v * uv[4][i];
+        cs->lane_island_v[i] = w * uv[1][i] + u * uv[3][i] + v * uv[5][i];
     }
 }
 
