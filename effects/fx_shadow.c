@@ -444,7 +444,16 @@ FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_ru
                 uint32_t mask = fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l);
                 any_lit |= mask;
                 all_lit &= mask;
-                average += taps->weight[t] * lit_fraction_hot(mask);
+            }
+            /* The texel average: under wholly shadowed texels (every mask 0, the common case here) each lit
+             * fraction is 0, so the same sum without the popcounts. */
+            if (any_lit == 0) {
+                for (uint32_t t = 0; t < taps->count; t++)
+                    average += taps->weight[t] * 0.0f;
+            } else {
+                for (uint32_t t = 0; t < taps->count; t++)
+                    average += taps->weight[t] *
+                               lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
             }
             /* Every cell reads a bit of some tap's mask: when the taps' masks are all 0 or all 0xFFFF (most
              * texels: wholly shadowed or wholly lit), every bit read is 0, or 1, and the sum below is the sum

@@ -359,7 +359,7 @@ static void test_osc_taps_run_equals_single(void **state)
     static fx_taps run_taps[SRV_MAX_EFFECTS][SRV_RUN];
     fx_taps one;
     uint32_t run_blocks[SRV_MAX_EFFECTS][SRV_RUN], one_block;
-    uint64_t compared = 0, four = 0;
+    uint64_t compared = 0, four = 0, empty_total = 0;
     for (uint32_t e = 0; e < loop->effect_count; e++) {
         if (!loop->effect_shading[e] || loop->effect_kind[e] != SCENE_CACHE_ON_SURFACE)
             continue;
@@ -393,7 +393,9 @@ static void test_osc_taps_run_equals_single(void **state)
                         px->footprint = view->footprint[p];
                         srv__island_uv(f->s, tri, view->bary_u[p], view->bary_v[p], &px->island_u, &px->island_v);
                     }
-                    kind->pixel_taps(cache, 0, 0, pixels, n, n_group, group, bias, group_taps, group_blocks);
+                    uint32_t empty = kind->pixel_taps(cache, 0, 0, pixels, n, n_group, group, bias, group_taps,
+                                                      group_blocks);
+                    uint32_t empty_found = 0; /* the taps with count 0 the call says it gave */
                     for (uint32_t i = 0; i < n * n_group; i++) {
                         uint32_t j = i / n, at = i % n;
                         fx_taps *one_taps = &one;
@@ -401,6 +403,7 @@ static void test_osc_taps_run_equals_single(void **state)
                         kind->pixel_taps(cache, 0, 0, &pixels[at], 1, 1, &group[j], bias, &one_taps, &one_blocks);
                         const fx_taps *a = &run_taps[j][at];
                         assert_int_equal(a->count, one.count);
+                        empty_found += a->count == 0;
                         assert_int_equal(run_blocks[j][at], one_block);
                         assert_memory_equal(&a->footprint_log2, &one.footprint_log2, sizeof(float));
                         assert_memory_equal(a->texel, one.texel, one.count * sizeof one.texel[0]);
@@ -410,9 +413,12 @@ static void test_osc_taps_run_equals_single(void **state)
                         compared += j == 0; /* effect e at its own levels (the other one may have no data) */
                         four += j == 0 && one.count == 4;
                     }
+                    assert_int_equal(empty, empty_found);
+                    empty_total += empty;
                 }
     }
     assert_true(compared > 4 * W * H / 2 && four > compared / 2); /* most pixels, most of them four taps */
+    assert_true(empty_total > 0); /* some pixel without data, so the count was checked where it is not 0 */
     srv_loop_free(loop);
 }
 

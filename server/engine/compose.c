@@ -18,6 +18,15 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* The tone map's rows with AVX2 gathers (tone_map_avx2) where the compiler and the CPU have them. */
+#if defined(__x86_64__) && defined(__GNUC__) && defined(__linux__) && !defined(FXC_NO_CLONES)
+#include <immintrin.h>
+#define TONE_MAP_AVX2 1
+#else
+#define TONE_MAP_AVX2 0
+#endif
+static bool tone_use_avx2; /* set once with the table */
+
 /* The effects of one cache kind whose taps one call gathers for a run (kind->pixel_taps). */
 enum { TAPS_GROUP = 4 };
 
@@ -43,7 +52,13 @@ typedef struct compose_scratch {
     float albedo[SRV_RUN][3];
     uint32_t triangle[SRV_RUN];                      /* the albedo's arguments, one array each */
     float bary_u[SRV_RUN], bary_v[SRV_RUN], albedo_footprint[SRV_RUN];
-    float shade_normal[SRV_RUN][3];
+    float shade_normal[3][SRV_RUN]; /* axis k of gathered pixel i at [k][i] */
+    /* A tile's run gathered in lanes (gather_tile_run): per gathered pixel its column and row, footprint, its
+     * triangle's island, normal and island UVs (inputs of gather_lanes), its island texel position (output). */
+    float lane_x[SRV_RUN], lane_y[SRV_RUN], lane_footprint[SRV_RUN];
+    uint32_t lane_island[SRV_RUN];
+    float lane_normal[3][SRV_RUN], lane_island_uv[6][SRV_RUN];
+    float lane_island_u[SRV_RUN], lane_island_v[SRV_RUN];
     float irradiance[SRV_RUN][3]; /* from the lights, summed light by light */
     uint8_t missing[SRV_RUN];
     float sharing[SRV_RUN];
@@ -165,6 +180,9 @@ static void tone_lut_init(void)
         }
         tone_cell_next[cell] = float_of_bits(hi);
     }
+#if TONE_MAP_AVX2
+    tone_use_avx2 = __builtin_cpu_supports("avx2");
+#endif
 }
 
 /* Linear radiance to an sRGB byte, equal to tone_map_reference() for every float (tests/test_engine.c). */
@@ -198,6 +216,52 @@ FXC_HOT_LANES static void tone_map_lanes(const float *radiance, uint8_t *image, 
     }
 }
 
+/* The tone map with AVX2's gathers, 8 floats at a time, where the CPU has them: the same bytes as
+ * tone_map_lanes (the same cell, the same table entries and the same compares; srv__tone_map_lanes takes this
+ * path in tests/test_engine.c on such a CPU). GCC does not emit these gathers itself under the generic tuning
+ * (it emulates them with element inserts), so they are written with intrinsics. The tail goes through
+ * tone_map_lanes. */
+#if TONE_MAP_AVX2
+__attribute__((target("avx2"))) static void tone_map_avx2(const float *radiance, uint8_t *image, uint32_t n)
+{
+    const __m256 lowest = _mm256_set1_ps(0x1p-20f), highest = _mm256_set1_ps(20.0f);
+    const __m256i first_cell = _mm256_set1_epi32(TONE_EXP_LO << 8), all_ones = _mm256_set1_epi32(255);
+    uint32_t j = 0;
+    for (; j + 8 <= n; j += 8) {
+        __m256 c = _mm256_loadu_ps(radiance + j);
+        __m256i low = _mm256_castps_si256(_mm256_cmp_ps(c, lowest, _CMP_NGE_UQ)); /* !(c >= 2^-20), NaN too */
+        __m256i high = _mm256_castps_si256(_mm256_cmp_ps(c, highest, _CMP_GE_OQ));
+        __m256i outside = _mm256_or_si256(low, high);
+        __m256i cell = _mm256_sub_epi32(_mm256_srli_epi32(_mm256_castps_si256(c), 15), first_cell);
+        cell = _mm256_andnot_si256(outside, cell); /* cell 0 outside, as in tone_map_lanes */
+        __m256i byte = _mm256_i32gather_epi32(tone_cell_byte32, cell, 4);
+        __m256 next = _mm256_i32gather_ps(tone_cell_next, cell, 4);
+        byte = _mm256_sub_epi32(byte, _mm256_castps_si256(_mm256_cmp_ps(c, next, _CMP_GE_OQ))); /* + 1 */
+        byte = _mm256_or_si256(_mm256_andnot_si256(outside, byte), _mm256_and_si256(high, all_ones));
+        __m256i words = _mm256_packus_epi32(byte, byte);   /* per 128-bit half: its 4 values, twice */
+        __m256i bytes = _mm256_packus_epi16(words, words); /* the same as bytes */
+        uint32_t lo4 = (uint32_t)_mm_cvtsi128_si32(_mm256_castsi256_si128(bytes));
+        uint32_t hi4 = (uint32_t)_mm_cvtsi128_si32(_mm256_extracti128_si256(bytes, 1));
+        memcpy(image + j, &lo4, 4);
+        memcpy(image + j + 4, &hi4, 4);
+    }
+    if (j < n)
+        tone_map_lanes(radiance + j, image + j, n - j);
+}
+#endif
+
+/* A row of n floats to bytes: tone_map_avx2 where the CPU has AVX2, else tone_map_lanes. */
+static inline void tone_map_row(const float *radiance, uint8_t *image, uint32_t n)
+{
+#if TONE_MAP_AVX2
+    if (tone_use_avx2) {
+        tone_map_avx2(radiance, image, n);
+        return;
+    }
+#endif
+    tone_map_lanes(radiance, image, n);
+}
+
 uint8_t srv__tone_map(float c)
 {
     pthread_once(&tone_lut_once, tone_lut_init);
@@ -207,7 +271,7 @@ uint8_t srv__tone_map(float c)
 void srv__tone_map_lanes(const float *radiance, uint8_t *image, uint32_t n)
 {
     pthread_once(&tone_lut_once, tone_lut_init);
-    tone_map_lanes(radiance, image, n);
+    tone_map_row(radiance, image, n);
 }
 
 uint8_t srv__tone_map_reference(float c)
@@ -295,10 +359,13 @@ FXC_HOT_INLINE void gather_pixel(srv_loop *loop, srv_viewer *view, uint32_t x, u
     dir[1] = forward[1] + sx * right[1] + sy * up[1];
     dir[2] = forward[2] + sx * right[2] + sy * up[2];
     float facing = normal[0] * dir[0] + normal[1] * dir[1] + normal[2] * dir[2];
-    float *sn = cs->shade_normal[i]; /* seen from behind: light the side the viewer sees */
+    float sn[3]; /* seen from behind: light the side the viewer sees */
     sn[0] = facing > 0 ? -normal[0] : normal[0];
     sn[1] = facing > 0 ? -normal[1] : normal[1];
     sn[2] = facing > 0 ? -normal[2] : normal[2];
+    cs->shade_normal[0][i] = sn[0];
+    cs->shade_normal[1][i] = sn[1];
+    cs->shade_normal[2][i] = sn[2];
     /* The pixel's footprint in metres: level-0 texels per pixel over texels per metre. The albedo is
      * sampled after the loop, for the whole run. */
     cs->triangle[i] = tri;
@@ -346,6 +413,112 @@ FXC_HOT_INLINE uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0
             gather_pixel(loop, view, x, y, (size_t)y * view->frame.width + x, cs, &count, sky, log2_density,
                          positions, points, &memo);
     scene_albedo_run(loop->s, cs->triangle, cs->bary_u, cs->bary_v, cs->albedo_footprint, count, cs->albedo);
+    return count;
+}
+
+/* gather_pixel's arithmetic for the SRV_RUN lanes of a tile's run gathered by gather_tile_run (vectorised:
+ * FXC_HOT_LANES): the ray's side of the surface and the shading normal, the albedo's footprint and the island
+ * texel position, from each lane's column, row, barycentrics, footprint and its triangle's normal and island
+ * UVs. The same operations in the same order as gather_pixel (ISO C, no contraction), so the same floats;
+ * the lanes past the run compute on zeros and are not read. */
+FXC_HOT_LANES static void gather_lanes(compose_scratch *cs, const gather_memo *memo, float log2_density)
+{
+    const float scale_x = memo->scale_x, scale_y = memo->scale_y, tan_half_x = memo->tan_half_x,
+                tan_half_y = memo->tan_half_y;
+    const float f0 = memo->forward[0], f1 = memo->forward[1], f2 = memo->forward[2];
+    const float r0 = memo->right[0], r1 = memo->right[1], r2 = memo->right[2];
+    const float u0 = memo->up[0], u1 = memo->up[1], u2 = memo->up[2];
+    for (int i = 0; i < SRV_RUN; i++) {
+        float u = cs->bary_u[i], v = cs->bary_v[i];
+        float w = 1.0f - u - v;
+        float sx = (cs->lane_x[i] + 0.5f) * scale_x - tan_half_x;
+        float sy = tan_half_y - (cs->lane_y[i] + 0.5f) * scale_y;
+        float d0 = f0 + sx * r0 + sy * u0, d1 = f1 + sx * r1 + sy * u1, d2 = f2 + sx * r2 + sy * u2;
+        float n0 = cs->lane_normal[0][i], n1 = cs->lane_normal[1][i], n2 = cs->lane_normal[2][i];
+        float facing = n0 * d0 + n1 * d1 + n2 * d2;
+        cs->shade_normal[0][i] = facing > 0 ? -n0 : n0;
+        cs->shade_normal[1][i] = facing > 0 ? -n1 : n1;
+        cs->shade_normal[2][i] = facing > 0 ? -n2 : n2;
+        cs->albedo_footprint[i] = cs->lane_footprint[i] - log2_density;
+        float (*uv)[SRV_RUN] = cs->lane_island_uv;
+        cs->lane_island_u[i] = w * uv[0][i] + u * uv[2][i] + v * uv[4][i];
+        cs->lane_island_v[i] = w * uv[1][i] + u * uv[3][i] + v * uv[5][i];
+    }
+}
+
+/* gather_run for a tile's run when no visible points are gathered (points false, so positions false too):
+ * the same values in three passes instead of one per pixel: the visible pixels and their triangles' data
+ * into lanes (a miss gets the sky, as in gather_pixel), their arithmetic in lanes (gather_lanes), then the
+ * cache pixels. */
+FXC_HOT_INLINE uint32_t gather_tile_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32_t x1, uint32_t y0,
+                                        uint32_t y1, compose_scratch *cs, const float sky[3], float log2_density)
+{
+    const scene *s = loop->s;
+    const size_t width = view->frame.width;
+    const uint32_t *tris = view->tri;
+    const float *bary_u = view->bary_u, *bary_v = view->bary_v, *footprint = view->footprint;
+    float *views_ao = view->views[SRV_VIEW_AO], *views_shadow = view->views[SRV_VIEW_SHADOW],
+          *views_sharing = view->views[SRV_VIEW_SHARING], *radiance = view->radiance;
+    uint32_t count = 0, last = SRV_MISS, island = 0;
+    float n0 = 0, n1 = 0, n2 = 0, uv0 = 0, uv1 = 0, uv2 = 0, uv3 = 0, uv4 = 0, uv5 = 0;
+    for (uint32_t y = y0; y < y1; y++) {
+        for (uint32_t x = x0; x < x1; x++) {
+            size_t p = (size_t)y * width + x;
+            uint32_t tri = tris[p];
+            if (tri == SRV_MISS) {
+                memcpy(radiance + 3 * p, sky, 3 * sizeof(float));
+                if (views_ao) {
+                    views_ao[p] = 1.0f;
+                    views_shadow[p] = 1.0f;
+                    views_sharing[p] = 0.0f;
+                }
+                continue;
+            }
+            if (tri != last) {
+                last = tri;
+                const float *normal = s->tri_normal + 3 * (size_t)tri, *uv = s->tri_island_uv + 6 * (size_t)tri;
+                n0 = normal[0], n1 = normal[1], n2 = normal[2];
+                uv0 = uv[0], uv1 = uv[1], uv2 = uv[2], uv3 = uv[3], uv4 = uv[4], uv5 = uv[5];
+                island = s->tri_island[tri];
+            }
+            uint32_t i = count++;
+            cs->index[i] = p;
+            cs->triangle[i] = tri;
+            cs->bary_u[i] = bary_u[p];
+            cs->bary_v[i] = bary_v[p];
+            cs->lane_footprint[i] = footprint[p];
+            cs->lane_x[i] = (float)x;
+            cs->lane_y[i] = (float)y;
+            cs->lane_island[i] = island;
+            cs->lane_normal[0][i] = n0;
+            cs->lane_normal[1][i] = n1;
+            cs->lane_normal[2][i] = n2;
+            cs->lane_island_uv[0][i] = uv0;
+            cs->lane_island_uv[1][i] = uv1;
+            cs->lane_island_uv[2][i] = uv2;
+            cs->lane_island_uv[3][i] = uv3;
+            cs->lane_island_uv[4][i] = uv4;
+            cs->lane_island_uv[5][i] = uv5;
+        }
+    }
+    for (uint32_t i = count; i < SRV_RUN; i++) { /* defined inputs for the lanes past the run */
+        cs->bary_u[i] = cs->bary_v[i] = cs->lane_footprint[i] = cs->lane_x[i] = cs->lane_y[i] = 0.0f;
+        for (int k = 0; k < 3; k++)
+            cs->lane_normal[k][i] = 0.0f;
+        for (int k = 0; k < 6; k++)
+            cs->lane_island_uv[k][i] = 0.0f;
+    }
+    gather_memo memo = gather_memo_start(view);
+    gather_lanes(cs, &memo, log2_density);
+    for (uint32_t i = 0; i < count; i++) {
+        srv_pixel *px = &cs->pixels[i];
+        px->triangle = cs->triangle[i];
+        px->island = cs->lane_island[i];
+        px->footprint = cs->lane_footprint[i];
+        px->island_u = cs->lane_island_u[i];
+        px->island_v = cs->lane_island_v[i];
+    }
+    scene_albedo_run(s, cs->triangle, cs->bary_u, cs->bary_v, cs->albedo_footprint, count, cs->albedo);
     return count;
 }
 
@@ -420,6 +593,35 @@ FXC_HOT_LANES static void radiance_lanes(compose_scratch *cs, const float sky[3]
             float value = cs->albedo[i][k] * (irr > FLT_MAX ? FLT_MAX : irr);
             cs->radiance[i][k] = value <= FLT_MAX ? value : (value > 0 ? FLT_MAX : 0.0f);
         }
+    }
+}
+
+/* A constant directional light's irradiance (direction ldir, colour times intensity rgb, light l of stride) added
+ * to every lane of a run (vectorised: FXC_HOT_LANES). A lane that faces away adds +0 where one pixel at a
+ * time added nothing: the same sums, since a sum that starts at +0 is never -0 and x + 0 = x for every other
+ * x, infinities and NaN included. */
+FXC_HOT_LANES static void directional_lanes(compose_scratch *cs, const float ldir[3], const float rgb[3],
+                                            uint32_t stride, uint32_t l)
+{
+    const float l0 = ldir[0], l1 = ldir[1], l2 = ldir[2], c0 = rgb[0], c1 = rgb[1], c2 = rgb[2];
+    if (stride == 1) { /* one light: its visibility contiguous (the loop below, vectorised without gathers) */
+        for (int i = 0; i < SRV_RUN; i++) {
+            float cosine = cs->shade_normal[0][i] * l0 + cs->shade_normal[1][i] * l1 + cs->shade_normal[2][i] * l2;
+            float visibility = cs->light_visibility[i];
+            bool lit = cosine > 0;
+            cs->irradiance[i][0] += lit ? cosine * visibility * c0 : 0.0f;
+            cs->irradiance[i][1] += lit ? cosine * visibility * c1 : 0.0f;
+            cs->irradiance[i][2] += lit ? cosine * visibility * c2 : 0.0f;
+        }
+        return;
+    }
+    for (int i = 0; i < SRV_RUN; i++) {
+        float cosine = cs->shade_normal[0][i] * l0 + cs->shade_normal[1][i] * l1 + cs->shade_normal[2][i] * l2;
+        float visibility = cs->light_visibility[(size_t)i * stride + l];
+        bool lit = cosine > 0;
+        cs->irradiance[i][0] += lit ? cosine * visibility * c0 : 0.0f;
+        cs->irradiance[i][1] += lit ? cosine * visibility * c1 : 0.0f;
+        cs->irradiance[i][2] += lit ? cosine * visibility * c2 : 0.0f;
     }
 }
 
@@ -677,14 +879,16 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
 {
     const scene *s = loop->s;
     const uint32_t lights = cu->lights, stride = cu->stride;
-    for (uint32_t i = 0; i < count * stride; i++)
+    /* Every lane, also past the run (directional_lanes reads them): loops of a constant length. */
+    for (uint32_t i = 0; i < SRV_RUN * stride; i++)
         cs->light_visibility[i] = 1.0f;
-    for (uint32_t i = 0; i < count; i++) {
+    for (uint32_t i = 0; i < SRV_RUN; i++) {
         cs->sky_visibility[i] = 1.0f;
-        cs->indirect[3 * i] = cs->indirect[3 * i + 1] = cs->indirect[3 * i + 2] = 0.0f;
         cs->missing[i] = 0;
         cs->sharing[i] = 0.0f;
     }
+    for (uint32_t i = 0; i < 3 * SRV_RUN; i++)
+        cs->indirect[i] = 0.0f;
     if (loop->desc.no_cache) {
         for (uint32_t i = 0; i < count; i++) {
             fx_shade_point sp = {.light_visibility = cs->light_visibility + (size_t)i * stride,
@@ -726,8 +930,9 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
                 n++;
                 last = f;
             }
-            loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers), thread_index, cs->pixels,
-                                       count, n, group, loop->bias[e], group_taps, group_blocks);
+            uint32_t empty = loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers),
+                                                        thread_index, cs->pixels, count, n, group, loop->bias[e],
+                                                        group_taps, group_blocks);
             for (uint32_t j = 0; j < n; j++) {
                 uint32_t g = group[j];
                 const uint64_t *bits = loop->viewer_bits[g];
@@ -735,10 +940,15 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
                 const uint32_t *blocks = group_blocks[j];
                 run.taps = taps;
                 loop->effects[g]->shade(&loop->fx, &run);
-                for (uint32_t i = 0; i < count; i++) {
-                    cs->missing[i] |= taps[i].count == 0;
-                    if (bits && blocks[i] != SRV_NONE)
-                        cs->sharing[i] = fmaxf(cs->sharing[i], (float)__builtin_popcountll(bits[blocks[i]]));
+                if (bits) {
+                    for (uint32_t i = 0; i < count; i++) {
+                        cs->missing[i] |= taps[i].count == 0;
+                        if (blocks[i] != SRV_NONE)
+                            cs->sharing[i] = fmaxf(cs->sharing[i], (float)__builtin_popcountll(bits[blocks[i]]));
+                    }
+                } else if (empty) { /* else every pixel has taps: nothing is missing */
+                    for (uint32_t i = 0; i < count; i++)
+                        cs->missing[i] |= taps[i].count == 0;
                 }
             }
             e = last;
@@ -746,29 +956,19 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
     }
     /* The lights' irradiance, light by light over the run (each pixel sums its lights in the same order as
      * before): the constant directional ones in a loop of plain arithmetic. */
-    for (uint32_t i = 0; i < count; i++)
+    for (uint32_t i = 0; i < SRV_RUN; i++)
         cs->irradiance[i][0] = cs->irradiance[i][1] = cs->irradiance[i][2] = 0.0f;
     for (uint32_t l = 0; l < lights; l++) {
         const scene_light *light = &s->lights[l];
         if (light->type == SCENE_LIGHT_DIRECTIONAL && l < CONSTANT_LIGHTS) {
-            const float *ldir = cu->light_dir[l], *rgb = cu->light_rgb[l];
-            for (uint32_t i = 0; i < count; i++) {
-                const float *sn = cs->shade_normal[i];
-                float cosine = sn[0] * ldir[0] + sn[1] * ldir[1] + sn[2] * ldir[2];
-                float visibility = cs->light_visibility[(size_t)i * stride + l];
-                if (cosine > 0) {
-                    cs->irradiance[i][0] += cosine * visibility * rgb[0];
-                    cs->irradiance[i][1] += cosine * visibility * rgb[1];
-                    cs->irradiance[i][2] += cosine * visibility * rgb[2];
-                }
-            }
+            directional_lanes(cs, cu->light_dir[l], cu->light_rgb[l], stride, l);
             continue;
         }
         for (uint32_t i = 0; i < count; i++) {
-            const float *sn = cs->shade_normal[i];
             float ldir[3], dist;
             fx_light_direction(light, cs->points[i].position, ldir, &dist); /* cu->points holds them */
-            float cosine = sn[0] * ldir[0] + sn[1] * ldir[1] + sn[2] * ldir[2];
+            float cosine =
+                cs->shade_normal[0][i] * ldir[0] + cs->shade_normal[1][i] * ldir[1] + cs->shade_normal[2][i] * ldir[2];
             if (!(cosine > 0))
                 continue;
             float falloff = light->type == SCENE_LIGHT_POINT ? 1.0f / fmaxf(dist * dist, 1e-8f) : 1.0f;
@@ -783,15 +983,21 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
             cs->irradiance[i][k] = cs->indirect[3 * i + k] = cs->albedo[i][k] = 0.0f;
     }
     radiance_lanes(cs, cu->sky);
+    float *radiance = view->radiance; /* the stores below cannot change the viewer's pointers: loaded once */
+    uint64_t missed = 0;
     for (uint32_t i = 0; i < count; i++) {
-        size_t p = cs->index[i];
-        const float *visibility = cs->light_visibility + (size_t)i * stride;
-        memcpy(view->radiance + 3 * p, cs->radiance[i], sizeof cs->radiance[i]);
-        *missing += cs->missing[i];
-        if (view->views[SRV_VIEW_AO]) {
-            view->views[SRV_VIEW_AO][p] = cs->sky_visibility[i];
-            view->views[SRV_VIEW_SHADOW][p] = lights ? visibility[0] : 1.0f;
-            view->views[SRV_VIEW_SHARING][p] = cs->sharing[i];
+        memcpy(radiance + 3 * cs->index[i], cs->radiance[i], sizeof cs->radiance[i]);
+        missed += cs->missing[i];
+    }
+    *missing += missed;
+    float *views_ao = view->views[SRV_VIEW_AO], *views_shadow = view->views[SRV_VIEW_SHADOW],
+          *views_sharing = view->views[SRV_VIEW_SHARING];
+    if (views_ao) {
+        for (uint32_t i = 0; i < count; i++) {
+            size_t p = cs->index[i];
+            views_ao[p] = cs->sky_visibility[i];
+            views_shadow[p] = lights ? cs->light_visibility[(size_t)i * stride] : 1.0f;
+            views_sharing[p] = cs->sharing[i];
         }
     }
 }
@@ -845,15 +1051,16 @@ FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_
     }
     for (uint32_t ry = ty0; ry < ty1; ry += SRV_RUN / SRV_TILE) {
         uint32_t ry1 = ry + SRV_RUN / SRV_TILE < ty1 ? ry + SRV_RUN / SRV_TILE : ty1;
-        uint32_t count = gather_run(loop, view, tx0, tx1, ry, ry1, cs, cu.sky, cu.log2_density, run_setup.positions,
-                                    run_setup.points);
+        uint32_t count = run_setup.points ? gather_run(loop, view, tx0, tx1, ry, ry1, cs, cu.sky, cu.log2_density,
+                                                       run_setup.positions, run_setup.points)
+                                          : gather_tile_run(loop, view, tx0, tx1, ry, ry1, cs, cu.sky, cu.log2_density);
         coarse_run cr = {.g = &grid, .x0 = tx0, .x1 = tx1, .y0 = ry, .y1 = ry1, .values = view->samples,
                          .value_stride = view->sample_capacity, .stride = sample_stride,
                          .first = (size_t)(ty0 / block) * sample_stride + tx0 / block};
         shade_run(loop, view, cs, count, &run_setup, thread_index, &missing, rays, coarse ? &cr : NULL);
         for (uint32_t y = ry; y < ry1; y++) {
             size_t p = (size_t)y * f->width + tx0;
-            tone_map_lanes(view->radiance + 3 * p, view->image + 3 * p, 3 * (tx1 - tx0));
+            tone_map_row(view->radiance + 3 * p, view->image + 3 * p, 3 * (tx1 - tx0));
         }
     }
     compose_done(task, loop, missing, rays);
@@ -915,7 +1122,11 @@ void srv__compose(srv_loop *loop, uint32_t slot, srv_frame_stats *st)
             srv_pool_run(loop->pool, samples.patches_x * ((samples.rows + patch_h - 1) / patch_h), sample_patch,
                          &samples);
         }
-        srv_pool_run(loop->pool, tiles, compose_tile, &task);
+        /* Each thread a contiguous half of the tiles (in order), then the other's last tiles: tiles handed out
+         * one by one alternated between the threads, which then wrote neighbouring tiles' rows of the image
+         * (48 bytes of a 64-byte line) and of the radiance at the same time, and each read half of the texel
+         * blocks its neighbours had just read. */
+        srv_pool_run_static(loop->pool, tiles, compose_tile, &task, true);
     }
     view->stats.pixels_missing = atomic_load(&task.missing);
     for (uint32_t e = 0; e < loop->effect_count; e++)

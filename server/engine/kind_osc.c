@@ -687,9 +687,10 @@ static bool taps_straddle(taps_state *st, int32_t x0, int32_t y0, uint64_t key, 
  * the lanes' values, what the general path of taps_pixel_rest gives, value for value. Every other pixel goes
  * through taps_pixel_rest, the general loop body with its state in a struct, not inlined: in one function
  * with the usual case, their state together outnumbered the registers and the usual case ran from the stack. */
-FXC_HOT_INLINE void taps_of_effect(const kind_osc *k, const taps_lanes *L, const srv_pixel *pixels,
-                                   uint32_t count, uint32_t effect, fx_taps *taps, uint32_t *blocks)
+FXC_HOT_INLINE uint32_t taps_of_effect(const kind_osc *k, const taps_lanes *L, const srv_pixel *pixels,
+                                       uint32_t count, uint32_t effect, fx_taps *taps, uint32_t *blocks)
 {
+    uint32_t empty = 0; /* taps with count 0: only the general path gives them */
     taps_state st;
     st.osc = k->osc;
     st.islands = k->s->islands;
@@ -754,13 +755,15 @@ FXC_HOT_INLINE void taps_of_effect(const kind_osc *k, const taps_lanes *L, const
         st.last_slot = last_slot;
         taps_pixel_rest(&st, L, &pixels[i], i, out, blocks);
         last_slot = st.last_slot;
+        empty += out->count == 0;
     }
+    return empty;
 }
 
 /* The kind interface's taps: the lanes once for all the call's effects (they share the bias, so the level,
  * weights and positions), then each effect's lookups as above (its own memo, in a loop of its own: state
  * shared across effects in one loop was slower, kept in memory instead of registers). */
-FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread,
+FXC_HOT_CLONES static uint32_t osc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread,
                                                const srv_pixel *pixels, uint32_t count, uint32_t effect_count,
                                                const uint32_t *effects, int32_t bias, fx_taps *const *taps,
                                                uint32_t *const *blocks)
@@ -785,8 +788,10 @@ FXC_HOT_CLONES static void osc_kind_pixel_taps(const void *cache, uint32_t slot,
     }
     taps_lanes_fill(&L, bias);
     taps_lanes_fast(&L);
+    uint32_t empty = 0;
     for (uint32_t j = 0; j < effect_count; j++)
-        taps_of_effect(k, &L, pixels, count, effects[j], taps[j], blocks ? blocks[j] : NULL);
+        empty += taps_of_effect(k, &L, pixels, count, effects[j], taps[j], blocks ? blocks[j] : NULL);
+    return empty;
 }
 
 static uint32_t osc_kind_pool_capacity(const void *cache, uint32_t effect)

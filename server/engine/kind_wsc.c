@@ -715,13 +715,18 @@ static void wsc_kind_memory(const void *cache, srv_memory *out)
 }
 
 /* The interface's several effects: one after the other (their lookups share nothing). */
-static void wsc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
-                                uint32_t count, uint32_t effect_count, const uint32_t *effects, int32_t bias,
-                                fx_taps *const *taps, uint32_t *const *blocks)
+static uint32_t wsc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
+                                    uint32_t count, uint32_t effect_count, const uint32_t *effects, int32_t bias,
+                                    fx_taps *const *taps, uint32_t *const *blocks)
 {
-    for (uint32_t j = 0; j < effect_count; j++)
+    uint32_t empty = 0;
+    for (uint32_t j = 0; j < effect_count; j++) {
         wsc_kind_pixel_taps_one(cache, slot, thread, pixels, count, effects[j], bias, taps[j],
                                 blocks ? blocks[j] : NULL);
+        for (uint32_t i = 0; i < count; i++)
+            empty += taps[j][i].count == 0;
+    }
+    return empty;
 }
 
 const srv_cache_kind srv__kind_wsc = {

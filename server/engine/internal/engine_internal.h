@@ -160,8 +160,9 @@ typedef struct srv_cache_kind {
      * NULL, and so may each blocks[j]) receives the block of each pixel's first tap or SRV_NONE. Each effect's
      * taps are those of a call for it alone; a kind computes what they share (level, footprint, weights)
      * once per pixel. Called from several threads at once; `thread` is the calling pool thread (per-thread
-     * state of a kind, such as local lookup tables). */
-    void (*pixel_taps)(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
+     * state of a kind, such as local lookup tables). Returns how many of the count x effect_count taps have
+     * count 0 (no data), so that a caller can skip looking for them when there are none. */
+    uint32_t (*pixel_taps)(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
                        uint32_t count, uint32_t effect_count, const uint32_t *effects, int32_t bias,
                        fx_taps *const *taps, uint32_t *const *blocks);
     uint32_t (*pool_capacity)(const void *cache, uint32_t effect);
