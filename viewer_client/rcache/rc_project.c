@@ -486,10 +486,8 @@ FXC_HOT_CLONES static void gather_marks(uint8_t *restrict mark, uint8_t *restric
     }
 }
 
-static void age_task(void *user, uint32_t c, uint32_t worker)
+void view_rc__age_chunk(view_rc *rc, uint32_t c)
 {
-    (void)worker;
-    view_rc *rc = user;
     uint32_t begin, end;
     chunk_range(rc, c, &begin, &end);
     uint32_t top = rc->d.no_eviction ? 254 : 255;
@@ -536,9 +534,20 @@ static void age_task(void *user, uint32_t c, uint32_t worker)
     rc->chunk_free[c] = n;
 }
 
+static void age_task(void *user, uint32_t c, uint32_t worker)
+{
+    (void)worker;
+    view_rc__age_chunk(user, c);
+}
+
 void view_rc__age(view_rc *rc)
 {
     run_chunks(rc, age_task);
+    view_rc__free_stack(rc);
+}
+
+void view_rc__free_stack(view_rc *rc)
+{
     /* The free stack: chunks from the last to the first, so that the lowest free slot is on top. */
     rc->free_count = 0;
     for (uint32_t c = rc->chunk_count; c-- > 0;) {

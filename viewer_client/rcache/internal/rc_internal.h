@@ -265,6 +265,8 @@ void view_rc__zbuffer(view_rc *rc);      /* parallel over tiles */
 void view_rc__project_direct(view_rc *rc); /* no_tiling: the projection without the sort (parallel) */
 void view_rc__zbuffer_direct(view_rc *rc); /* no_tiling: one z-buffer pass in slot order (serial) */
 void view_rc__age(view_rc *rc);            /* parallel over chunks, then the free stack (serial) */
+void view_rc__age_chunk(view_rc *rc, uint32_t chunk); /* one chunk of view_rc__age's parallel part */
+void view_rc__free_stack(view_rc *rc);                /* ... and its serial part */
 
 /* rc_image.c: the pixel passes, parallel over bands of rows: fused (view_rc__pixels: each band through the
  * cull, the interpolation and the prefilter in one task) or, with separate_pixel_passes, one run each. */
@@ -277,7 +279,10 @@ void view_rc__prefilter(view_rc *rc);
 
 /* rc_sample.c */
 void view_rc__predicted_sampling(view_rc *rc); /* serial */
-void view_rc__sampling(view_rc *rc);           /* serial quotas, parallel bands */
+void view_rc__sampling_quotas(view_rc *rc);    /* serial: each band's share of the budget */
+void view_rc__sampling(view_rc *rc);           /* parallel: the bands dithered, in groups */
+/* Dithers bands [task * group, task * group + group) (group at most RC_DITHER_LANES) with worker's scratch. */
+void view_rc__dither_group(view_rc *rc, uint32_t task, uint32_t group, uint32_t worker);
 /* Splits count over bands by weight (largest remainder, each band at most its pixels). */
 void view_rc__band_quotas(const uint64_t *weight, const uint32_t *pixels, uint32_t bands, uint32_t count,
                           uint32_t *quota);
