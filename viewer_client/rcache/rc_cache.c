@@ -143,6 +143,12 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     uint32_t chunk_shift = 12;
     while ((uint64_t)rc->slots > (uint64_t)512 << chunk_shift)
         chunk_shift++;
+    /* An entry's key holds the pixel within the tile and the slot within the chunk: where the two would need
+     * more than 32 bits (tiles above 1024 pixels a side, or tens of millions of slots with tiles above 64),
+     * chunks get smaller, and more. */
+    rc->pix_bits = 2 * shift;
+    if (chunk_shift + rc->pix_bits > 32)
+        chunk_shift = 32 - rc->pix_bits;
     uint32_t chunk = 1u << chunk_shift;
     rc->chunk_shift = chunk_shift;
     rc->chunk_size = chunk;
@@ -156,10 +162,9 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_px = take(&l, rc->slots, sizeof(float));
     size_t o_py = take(&l, rc->slots, sizeof(float));
     size_t o_pz = take(&l, rc->slots, sizeof(float));
-    size_t o_rgba = take(&l, rc->slots, sizeof(uint32_t));
+    size_t o_rgba = take(&l, (size_t)rc->slots + 1, sizeof(uint32_t));
     size_t o_tile_of = take(&l, rc->slots, sizeof(uint16_t));
-    size_t o_pix = take(&l, rc->slots, sizeof(uint32_t));
-    size_t o_dep = take(&l, rc->slots, sizeof(float));
+    size_t o_proj = take(&l, rc->slots, sizeof(rc_entry));
     size_t o_dest = take(&l, rc->slots, sizeof(uint16_t));
     rc->mark_stride = ((size_t)rc->slots + 1 + 63) & ~(size_t)63; /* + a sink byte, a line apart */
     size_t o_mark = take(&l, rc->mark_stride * d.threads, 1);
@@ -170,16 +175,16 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_chunk_hist = take(&l, (size_t)rc->chunk_count * 256, sizeof(uint32_t));
     size_t o_chunk_quota = take(&l, rc->chunk_count, sizeof(uint32_t));
     size_t o_chunk_stat = take(&l, rc->chunk_count, sizeof(rc_chunk_stat));
-    /* Entries: one per slot, up to 3 of padding per list (tile and part), then the sort's sinks (one per
-     * thread, a line each). */
+    /* Entries: one per slot, up to RC_ENTRY_LINE - 1 of padding per list (tile and part), then the sort's sinks
+     * (one per thread, a line each). */
     rc->parts = d.threads;
-    size_t lists_parts = (size_t)rc->tile_count * rc->parts;
-    if ((size_t)rc->slots + 4 * lists_parts + 4 * (size_t)rc->parts > UINT32_MAX) {
+    size_t lists_parts = (size_t)rc->tile_count * rc->parts, line = RC_ENTRY_LINE;
+    if ((size_t)rc->slots + line * lists_parts + line * (size_t)rc->parts > UINT32_MAX) {
         free(rc);
         return FXC_ERR_INVALID;
     }
-    rc->entry_sink = (uint32_t)(((size_t)rc->slots + 4 * lists_parts + 3) & ~(size_t)3);
-    size_t o_entries = take(&l, (size_t)rc->entry_sink + 4 * (size_t)rc->parts, sizeof(rc_entry));
+    rc->entry_sink = (uint32_t)(((size_t)rc->slots + line * lists_parts + line - 1) & ~(line - 1));
+    size_t o_entries = take(&l, (size_t)rc->entry_sink + line * (size_t)rc->parts, sizeof(rc_entry));
     size_t o_list_start = take(&l, lists_parts, sizeof(uint32_t));
     size_t o_list_end = take(&l, lists_parts, sizeof(uint32_t));
     size_t o_zbuf = take(&l, rc->pixels, sizeof(float));
@@ -205,7 +210,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_workers = take(&l, d.threads, sizeof(rc_worker));
     size_t o_occupied[VIEW_RC_MAX_THREADS], o_low[VIEW_RC_MAX_THREADS], o_err[VIEW_RC_MAX_THREADS];
     size_t o_planes[VIEW_RC_MAX_THREADS], o_box[VIEW_RC_MAX_THREADS], o_spare[VIEW_RC_MAX_THREADS];
-    size_t o_zt[VIEW_RC_MAX_THREADS], o_wt[VIEW_RC_MAX_THREADS], o_ct[VIEW_RC_MAX_THREADS];
+    size_t o_zt[VIEW_RC_MAX_THREADS], o_wt[VIEW_RC_MAX_THREADS];
     size_t o_halo[VIEW_RC_MAX_THREADS];
     rc->local_z = rc->tile <= RC_LOCAL_TILE;
     size_t local = rc->local_z ? (size_t)rc->tile * rc->tile : 0;
@@ -219,7 +224,6 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
         o_halo[t] = take(&l, 7 * (size_t)d.width, sizeof(uint32_t)); /* six rows of points, one of depths */
         o_zt[t] = take(&l, local, sizeof(float));
         o_wt[t] = take(&l, local, sizeof(uint32_t));
-        o_ct[t] = take(&l, local, sizeof(uint32_t));
     }
     if (l.overflow) {
         free(rc);
@@ -237,8 +241,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     rc->pz = (float *)(block + o_pz);
     rc->rgba = (uint32_t *)(block + o_rgba);
     rc->tile_of = (uint16_t *)(block + o_tile_of);
-    rc->pix = (uint32_t *)(block + o_pix);
-    rc->dep = (float *)(block + o_dep);
+    rc->proj = (rc_entry *)(block + o_proj);
     rc->dest = (uint16_t *)(block + o_dest);
     rc->mark = (uint8_t *)(block + o_mark);
     memset(rc->mark, 0, rc->mark_stride * d.threads);
@@ -283,7 +286,6 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
         rc->workers[t].halo = (uint32_t *)(block + o_halo[t]);
         rc->workers[t].zt = (float *)(block + o_zt[t]);
         rc->workers[t].wt = (uint32_t *)(block + o_wt[t]);
-        rc->workers[t].ct = (uint32_t *)(block + o_ct[t]);
     }
 
     /* Every slot free; the stack hands out slot 0 first. */
@@ -294,6 +296,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
         rc->free_slots[i] = rc->slots - 1 - i;
     }
     rc->free_count = rc->slots;
+    rc->rgba[rc->slots] = RC_EMPTY_PT;
     memset(rc->chunk_hist, 0, (size_t)rc->chunk_count * 256 * sizeof(uint32_t));
     memset(rc->win, 0xFF, rc->pixels * sizeof(uint32_t));
     for (size_t p = 0; p < rc->pixels; p++)

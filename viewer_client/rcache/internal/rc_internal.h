@@ -43,13 +43,18 @@ static inline uint32_t rc_age(uint32_t rgba)
     return rgba >> 24;
 }
 
-/* A projected point in its tile's list. */
+/* A projected point in its tile's list: 8 bytes. The key packs the pixel within the tile (row * tile + column,
+ * pix_bits of them) and the slot within its chunk above it: the z-buffer reads a tile's list chunk by chunk (each
+ * chunk's range of it is known from the sort's offsets), so the slot is the chunk's first plus that. The colour is
+ * not in the entry: the z-buffer's copy-out reads the winners' from the store. (Entries of 16 bytes, pixel, depth,
+ * colour and slot, made the sort write and the z-buffer read twice the bytes.) In the per-slot array the
+ * projection writes (view_rc.proj), the no_tiling path keeps the image's pixel index in key instead
+ * (RC_NO_PIXEL: none). */
 typedef struct rc_entry {
-    uint32_t pix;  /* pixel index: in its tile (row * tile + column) when local_z, else in the image */
-    float depth;   /* view depth, metres along the camera's forward axis */
-    uint32_t rgba; /* colour and age */
-    uint32_t slot; /* where the point lives */
+    uint32_t key; /* (slot - chunk's first) << pix_bits | pixel within the tile */
+    float depth;  /* view depth, metres along the camera's forward axis */
 } rc_entry;
+#define RC_ENTRY_LINE 8u /* entries in a cache line: every (tile, part) list starts on a line of its own */
 
 /* A camera set up for an image: the server's frame (srv_camera_setup) and the projection that inverts
  * srv_camera_ray. rel is the camera position relative to the cache origin, in float, for the hot loops. */
@@ -120,7 +125,6 @@ typedef struct rc_worker {
     uint32_t *halo;    /* fused pixel passes: six rows of shown points around a band, then a row of depths */
     float *zt;         /* z-buffer: one tile's depths, tile x tile, row after row (local_z only) */
     uint32_t *wt;      /* ... the slot that won each pixel (RC_NO_POINT: none) */
-    uint32_t *ct;      /* ... and its rgba (RC_EMPTY_PT: none) */
 } rc_worker;
 
 /* Points being inserted, a batch at a time (rc_cache.c): their positions computed in one loop without
@@ -150,6 +154,7 @@ struct view_rc {
 
     /* Tiles: square, a power of two on a side (the tile of a pixel is two shifts). */
     uint32_t tile, tile_shift, tiles_x, tiles_y, tile_count;
+    uint32_t pix_bits; /* 2 tile_shift: an entry key's bits of the pixel; + chunk_shift at most 32 */
     uint16_t list_outside, list_dead, list_new; /* tile_count, + 1, + 2: the other values of dest / tile_of */
     /* The z-buffer works in buffers of its own (tiles up to RC_LOCAL_TILE on a side): the tile's depths,
      * winners and colours contiguous (48 KiB at tiles of 64), instead of 64 rows of the image 4 * width bytes
@@ -159,11 +164,11 @@ struct view_rc {
     /* The point store (structure of arrays over slots). */
     uint32_t slots; /* capacity + insert_reserve */
     float *px, *py, *pz;
-    uint32_t *rgba;
+    uint32_t *rgba;       /* slots + 1: the last, never a point, holds RC_EMPTY_PT (the z-buffer's copy-out reads
+                           * it for a pixel no point won, so its gather needs no branch) */
     uint16_t *tile_of;    /* the list a point was in last frame (list_new: inserted since) */
-    uint32_t *pix;        /* this frame: pixel (RC_NO_PIXEL outside); in its tile (row * tile + column) when
-                           * local_z and tiling, else in the image */
-    float *dep;           /* this frame: view depth */
+    rc_entry *proj;       /* this frame, per slot: the entry the sort copies into its tile's list (with
+                           * no_tiling: key = the image's pixel index, RC_NO_PIXEL outside) */
     uint16_t *dest;       /* this frame: tile, list_outside or list_dead */
     uint8_t *mark;        /* this frame: shown in a pixel, one array per thread, mark_stride bytes apart (each
                            * slots + 1: the last is a sink). The depth cull's thread w writes only array w (no
@@ -176,7 +181,8 @@ struct view_rc {
     uint32_t *free_list; /* slots: per chunk, its free slots in descending order */
 
     /* Chunks of slots: the unit of the parallel passes over points. */
-    uint32_t chunk_size, chunk_shift, chunk_count; /* chunk_size = 1 << chunk_shift */
+    uint32_t chunk_size, chunk_shift, chunk_count; /* chunk_size = 1 << chunk_shift (pix_bits + chunk_shift
+                                                    * <= 32, so an entry's key holds both) */
     uint32_t *counts;      /* chunk_count x (tile_count + 2): points going to each list, then offsets */
     uint32_t *chunk_hist;  /* chunk_count x 256: ages of the live points per chunk */
     uint32_t *chunk_quota; /* per chunk: points of age drop_age to drop this frame */
@@ -186,12 +192,13 @@ struct view_rc {
     /* The tile lists of this frame, one per tile and part. The passes over chunks run statically split
      * (fxc_pool_run_static): part p is the chunks thread p runs, [fxc_pool_static_begin(chunk_count, parts,
      * p), the same for p + 1). Tile t's entries from part p are [list_start[t * parts + p], list_end[...]),
-     * in chunk then slot order; every such list starts on a cache line of its own (entries padded to 4, 64
-     * bytes), so no line of entries is written by two threads. The z-buffer reads a tile's parts in part
-     * order: chunk order, the same with any thread count. */
-    rc_entry *entries;    /* entry_sink + 4 x parts entries, 64-byte aligned */
+     * in chunk then slot order (chunk c's: up to counts[c * (tile_count + 2) + t] after the sort); every such
+     * list starts on a cache line of its own (entries padded to RC_ENTRY_LINE, 64 bytes), so no line of
+     * entries is written by two threads. The z-buffer reads a tile's parts in part order: chunk order, the
+     * same with any thread count. */
+    rc_entry *entries;    /* entry_sink + RC_ENTRY_LINE x parts entries, 64-byte aligned */
     uint32_t parts;       /* the pool's threads */
-    uint32_t entry_sink;  /* the sort writes points outside the image and free slots to entry_sink + 4 x its
+    uint32_t entry_sink;  /* the sort writes points outside the image and free slots to entry_sink + 8 x its
                            * thread: a line per thread, so no two threads write one entry */
     uint32_t *list_start; /* tile_count x parts */
     uint32_t *list_end;   /* tile_count x parts */
