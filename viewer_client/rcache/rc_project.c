@@ -85,7 +85,7 @@ static void chunk_range(const view_rc *rc, uint32_t c, uint32_t *begin, uint32_t
  * conversion to integers happens only on coordinates known to be inside. */
 FXC_HOT_CLONES static void project_span(const rc_view *v, const float *restrict px, const float *restrict py,
                                         const float *restrict pz, const uint32_t *restrict rgba,
-                                        rc_entry *restrict proj, uint16_t *restrict dest, uint32_t begin,
+                                        uint64_t *restrict proj, uint16_t *restrict dest, uint32_t begin,
                                         uint32_t end, uint32_t shift, uint32_t tiles_x, uint32_t pix_bits,
                                         bool direct, uint16_t outside, uint16_t dead)
 {
@@ -109,9 +109,10 @@ FXC_HOT_CLONES static void project_span(const rc_view *v, const float *restrict 
         uint32_t ix = (uint32_t)(int32_t)(inside ? sx : 0.0f);
         uint32_t iy = (uint32_t)(int32_t)(inside ? sy : 0.0f);
         uint32_t tile = (iy >> shift) * tiles_x + (ix >> shift);
-        uint32_t key = ((i - begin) << pix_bits) | ((iy & m) << shift) | (ix & m);
-        proj[i].key = direct ? (inside ? iy * width + ix : RC_NO_PIXEL) : key;
-        proj[i].depth = zc;
+        uint32_t key = ((i - begin) << pix_bits) | ((iy & m) << shift) | (ix & m), depth_bits;
+        key = direct ? (inside ? iy * width + ix : RC_NO_PIXEL) : key;
+        memcpy(&depth_bits, &zc, sizeof depth_bits);
+        proj[i] = rc_entry_bits(key, depth_bits); /* one 8-byte store: the loop stays vectorised */
         dest[i] = (uint16_t)(inside ? tile : live ? outside : dead);
     }
 }
@@ -245,7 +246,7 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
     chunk_range(rc, c, &begin, &end);
     uint16_t outside = rc->list_outside, dead = rc->list_dead;
     /* The tiled z-buffer takes the pixel within the tile; the 1999 one, the image's. */
-    project_span(&rc->view, rc->px, rc->py, rc->pz, rc->rgba, rc->proj, rc->dest, begin, end, rc->tile_shift,
+    project_span(&rc->view, rc->px, rc->py, rc->pz, rc->rgba, (uint64_t *)rc->proj, rc->dest, begin, end, rc->tile_shift,
                  rc->tiles_x, rc->pix_bits, rc->d.no_tiling, outside, dead);
     rc_chunk_stat stat = {0};
     /* The drop plan: points older than drop_age, and the chunk's quota of that age, in slot order. A block of
@@ -369,14 +370,20 @@ void view_rc__project_sort(view_rc *rc)
     } while (0)
 
 /* The winners' colours of n pixels, from the store (slot RC_NO_POINT: the store's last word, RC_EMPTY_PT),
- * vectorised where the compiler gathers. */
-FXC_HOT_CLONES static void winner_colours(const uint32_t *restrict win, const uint32_t *restrict rgba,
-                                          uint32_t none, uint32_t *restrict pre, uint32_t n)
+ * four at a time (GCC's cost model does not vectorise the gather; without a branch, four independent loads). */
+static void winner_colours(const uint32_t *restrict win, const uint32_t *restrict rgba, uint32_t none,
+                           uint32_t *restrict pre, uint32_t n)
 {
-    for (uint32_t k = 0; k < n; k++) {
-        uint32_t w = win[k];
-        pre[k] = rgba[w < none ? w : none];
+    uint32_t k = 0;
+    for (; k + 4 <= n; k += 4) {
+        uint32_t w0 = win[k], w1 = win[k + 1], w2 = win[k + 2], w3 = win[k + 3];
+        pre[k] = rgba[w0 < none ? w0 : none];
+        pre[k + 1] = rgba[w1 < none ? w1 : none];
+        pre[k + 2] = rgba[w2 < none ? w2 : none];
+        pre[k + 3] = rgba[w3 < none ? w3 : none];
     }
+    for (; k < n; k++)
+        pre[k] = rgba[win[k] < none ? win[k] : none];
 }
 
 static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)

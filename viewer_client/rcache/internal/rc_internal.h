@@ -54,6 +54,11 @@ typedef struct rc_entry {
     uint32_t key; /* (slot - chunk's first) << pix_bits | pixel within the tile */
     float depth;  /* view depth, metres along the camera's forward axis */
 } rc_entry;
+/* An entry as the 8 bytes it is in memory (key first), for loops that write it in one store. */
+static inline uint64_t rc_entry_bits(uint32_t key, uint32_t depth_bits)
+{
+    return (uint64_t)key | (uint64_t)depth_bits << 32;
+}
 #define RC_ENTRY_LINE 8u /* entries in a cache line: every (tile, part) list starts on a line of its own */
 
 /* A camera set up for an image: the server's frame (srv_camera_setup) and the projection that inverts
