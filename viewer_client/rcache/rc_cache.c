@@ -175,8 +175,8 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_chunk_hist = take(&l, (size_t)rc->chunk_count * 256, sizeof(uint32_t));
     size_t o_chunk_quota = take(&l, rc->chunk_count, sizeof(uint32_t));
     size_t o_chunk_stat = take(&l, rc->chunk_count, sizeof(rc_chunk_stat));
-    /* Entries: one per slot, up to RC_ENTRY_LINE - 1 of padding per list (tile and part), then the sort's sinks
-     * (one per thread, a line each). */
+    /* Entries: one per slot, up to RC_ENTRY_LINE - 1 of padding per list (tile and part), then the sort's
+     * sinks (one per thread, a line each). */
     rc->parts = d.threads;
     size_t lists_parts = (size_t)rc->tile_count * rc->parts, line = RC_ENTRY_LINE;
     if ((size_t)rc->slots + line * lists_parts + line * (size_t)rc->parts > UINT32_MAX) {

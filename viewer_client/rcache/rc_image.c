@@ -125,8 +125,8 @@ static uint32_t cull_row(const view_rc *rc, uint32_t y, uint32_t *pt_row, float 
 }
 
 /* Where each of n pixels marks: its shown point's slot, or `sink` when it shows none (vectorised). */
-FXC_HOT_CLONES static void mark_targets(const uint32_t *restrict pt, const uint32_t *restrict win, uint32_t sink,
-                                        uint32_t *restrict at, uint32_t n)
+FXC_HOT_CLONES static void mark_targets(const uint32_t *restrict pt, const uint32_t *restrict win,
+                                        uint32_t sink, uint32_t *restrict at, uint32_t n)
 {
     for (uint32_t x = 0; x < n; x++)
         at[x] = pt[x] == RC_EMPTY_PT ? sink : win[x];
@@ -460,7 +460,9 @@ static void fill_from(uint8_t *rgb, const uint32_t acc[4])
 static uint32_t prefilter_direct(view_rc *rc, const rc_band *b, rc_rect r)
 {
     uint32_t w = rc->width, h = rc->height, filled = 0;
-    for (uint32_t y = r.y0; y < r.y1; y++)
+    for (uint32_t y = r.y0; y < r.y1; y++) {
+        if (rc->row_need[y] == 0)
+            continue; /* no pixel of the row to fill */
         for (uint32_t x = r.x0; x < r.x1; x++) {
             size_t p = (size_t)y * w + x;
             if (rc->kind[p] != VIEW_RC_EMPTY)
@@ -484,6 +486,7 @@ static uint32_t prefilter_direct(view_rc *rc, const rc_band *b, rc_rect r)
                 filled++;
             }
         }
+    }
     return filled;
 }
 
@@ -539,6 +542,8 @@ static uint32_t prefilter_planes(view_rc *rc, const rc_band *b, rc_rect r, uint1
             sums7(planes + c * plane + (size_t)j * s, hsum + c * rows + (size_t)j * tw, tw);
     for (uint32_t j = 0; j < th; j++) {
         size_t p = (size_t)(r.y0 + j) * w + r.x0;
+        if (rc->row_need[r.y0 + j] == 0)
+            continue; /* no pixel of the row to fill */
         for (int c = 0; c < 4; c++)
             sums7_down(hsum + c * rows + (size_t)j * tw, tw, vsum + (size_t)c * tw, tw);
         for (uint32_t x = 0; x < tw; x++) {

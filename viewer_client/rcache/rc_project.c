@@ -246,8 +246,8 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
     chunk_range(rc, c, &begin, &end);
     uint16_t outside = rc->list_outside, dead = rc->list_dead;
     /* The tiled z-buffer takes the pixel within the tile; the 1999 one, the image's. */
-    project_span(&rc->view, rc->px, rc->py, rc->pz, rc->rgba, (uint64_t *)rc->proj, rc->dest, begin, end, rc->tile_shift,
-                 rc->tiles_x, rc->pix_bits, rc->d.no_tiling, outside, dead);
+    project_span(&rc->view, rc->px, rc->py, rc->pz, rc->rgba, (uint64_t *)rc->proj, rc->dest, begin, end,
+                 rc->tile_shift, rc->tiles_x, rc->pix_bits, rc->d.no_tiling, outside, dead);
     rc_chunk_stat stat = {0};
     /* The drop plan: points older than drop_age, and the chunk's quota of that age, in slot order. A block of
      * 64 slots without a candidate is skipped after one test; a block whose points of drop_age all fit in
@@ -357,20 +357,21 @@ void view_rc__project_sort(view_rc *rc)
         uint32_t parts_ = (rc)->parts, lists_ = (rc)->tile_count + 2, bits_ = (rc)->pix_bits;                \
         uint32_t mask_ = (1u << bits_) - 1;                                                                  \
         for (uint32_t part_ = 0; part_ < parts_; part_++) {                                                  \
-            uint32_t e_ = (rc)->list_start[(size_t)(tile) * parts_ + part_];                                 \
+            uint32_t e_ = (rc)->list_start[(size_t)(tile)*parts_ + part_];                                   \
             uint32_t c1_ = fxc_pool_static_begin((rc)->chunk_count, parts_, part_ + 1);                      \
             for (uint32_t c_ = fxc_pool_static_begin((rc)->chunk_count, parts_, part_); c_ < c1_; c_++) {    \
                 uint32_t end_ = (rc)->counts[(size_t)c_ * lists_ + (tile)], base_ = c_ << (rc)->chunk_shift; \
                 for (; e_ < end_; e_++) {                                                                    \
                     uint32_t key_ = entries_[e_].key;                                                        \
-                    test(key_ & mask_, entries_[e_].depth, base_ + (key_ >> bits_));                         \
+                    test(key_ &mask_, entries_[e_].depth, base_ + (key_ >> bits_));                          \
                 }                                                                                            \
             }                                                                                                \
         }                                                                                                    \
     } while (0)
 
 /* The winners' colours of n pixels, from the store (slot RC_NO_POINT: the store's last word, RC_EMPTY_PT),
- * four at a time (GCC's cost model does not vectorise the gather; without a branch, four independent loads). */
+ * four at a time (GCC's cost model does not vectorise the gather; without a branch, four independent loads).
+ */
 static void winner_colours(const uint32_t *restrict win, const uint32_t *restrict rgba, uint32_t none,
                            uint32_t *restrict pre, uint32_t n)
 {
@@ -430,12 +431,13 @@ static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
             win[y * w + x] = RC_NO_POINT;
             pre[y * w + x] = RC_EMPTY_PT;
         }
-    /* Tiles above RC_LOCAL_TILE: straight into the image (the pixel within the tile turned into the image's). */
+    /* Tiles above RC_LOCAL_TILE: straight into the image (the pixel within the tile turned into the image's).
+     */
     uint32_t shift = rc->tile_shift, m = rc->tile - 1;
     size_t origin = (size_t)y0 * w + x0;
 #define RC_TEST_IMAGE(p_tile, z, slot)                                                                       \
     {                                                                                                        \
-        size_t p = origin + ((p_tile) >> shift) * w + ((p_tile) & m);                                        \
+        size_t p = origin + ((p_tile) >> shift) * w + ((p_tile)&m);                                          \
         if ((z) < zbuf[p]) {                                                                                 \
             zbuf[p] = (z);                                                                                   \
             win[p] = (slot);                                                                                 \

@@ -43,13 +43,13 @@ static inline uint32_t rc_age(uint32_t rgba)
     return rgba >> 24;
 }
 
-/* A projected point in its tile's list: 8 bytes. The key packs the pixel within the tile (row * tile + column,
- * pix_bits of them) and the slot within its chunk above it: the z-buffer reads a tile's list chunk by chunk (each
- * chunk's range of it is known from the sort's offsets), so the slot is the chunk's first plus that. The colour is
- * not in the entry: the z-buffer's copy-out reads the winners' from the store. (Entries of 16 bytes, pixel, depth,
- * colour and slot, made the sort write and the z-buffer read twice the bytes.) In the per-slot array the
- * projection writes (view_rc.proj), the no_tiling path keeps the image's pixel index in key instead
- * (RC_NO_PIXEL: none). */
+/* A projected point in its tile's list: 8 bytes. The key packs the pixel within the tile (row * tile +
+ * column, pix_bits of them) and the slot within its chunk above it: the z-buffer reads a tile's list chunk by
+ * chunk (each chunk's range of it is known from the sort's offsets), so the slot is the chunk's first plus
+ * that. The colour is not in the entry: the z-buffer's copy-out reads the winners' from the store. (Entries
+ * of 16 bytes, pixel, depth, colour and slot, made the sort write and the z-buffer read twice the bytes.) In
+ * the per-slot array the projection writes (view_rc.proj), the no_tiling path keeps the image's pixel index
+ * in key instead (RC_NO_PIXEL: none). */
 typedef struct rc_entry {
     uint32_t key; /* (slot - chunk's first) << pix_bits | pixel within the tile */
     float depth;  /* view depth, metres along the camera's forward axis */
@@ -169,15 +169,15 @@ struct view_rc {
     /* The point store (structure of arrays over slots). */
     uint32_t slots; /* capacity + insert_reserve */
     float *px, *py, *pz;
-    uint32_t *rgba;       /* slots + 1: the last, never a point, holds RC_EMPTY_PT (the z-buffer's copy-out reads
-                           * it for a pixel no point won, so its gather needs no branch) */
-    uint16_t *tile_of;    /* the list a point was in last frame (list_new: inserted since) */
-    rc_entry *proj;       /* this frame, per slot: the entry the sort copies into its tile's list (with
-                           * no_tiling: key = the image's pixel index, RC_NO_PIXEL outside) */
-    uint16_t *dest;       /* this frame: tile, list_outside or list_dead */
-    uint8_t *mark;        /* this frame: shown in a pixel, one array per thread, mark_stride bytes apart (each
-                           * slots + 1: the last is a sink). The depth cull's thread w writes only array w (no
-                           * line written by two cores at once); the ageing ORs them over its chunks. */
+    uint32_t *rgba;    /* slots + 1: the last, never a point, holds RC_EMPTY_PT (the z-buffer's copy-out reads
+                        * it for a pixel no point won, so its gather needs no branch) */
+    uint16_t *tile_of; /* the list a point was in last frame (list_new: inserted since) */
+    rc_entry *proj;    /* this frame, per slot: the entry the sort copies into its tile's list (with
+                        * no_tiling: key = the image's pixel index, RC_NO_PIXEL outside) */
+    uint16_t *dest;    /* this frame: tile, list_outside or list_dead */
+    uint8_t *mark;     /* this frame: shown in a pixel, one array per thread, mark_stride bytes apart (each
+                        * slots + 1: the last is a sink). The depth cull's thread w writes only array w (no
+                        * line written by two cores at once); the ageing ORs them over its chunks. */
     size_t mark_stride;   /* slots + 1, rounded up to 64 */
     uint32_t *free_slots; /* stack of free slots: the next insert takes free_slots[free_count - 1] */
     uint32_t free_count;
@@ -293,7 +293,8 @@ void view_rc__prefilter(view_rc *rc);
 void view_rc__predicted_sampling(view_rc *rc); /* serial */
 void view_rc__sampling_quotas(view_rc *rc);    /* serial: each band's share of the budget */
 void view_rc__sampling(view_rc *rc);           /* parallel: the bands dithered, in groups */
-/* Dithers bands [task * group, task * group + group) (group at most RC_DITHER_LANES) with worker's scratch. */
+/* Dithers bands [task * group, task * group + group) (group at most RC_DITHER_LANES) with worker's scratch.
+ */
 void view_rc__dither_group(view_rc *rc, uint32_t task, uint32_t group, uint32_t worker);
 /* Splits count over bands by weight (largest remainder, each band at most its pixels). */
 void view_rc__band_quotas(const uint64_t *weight, const uint32_t *pixels, uint32_t bands, uint32_t count,
