@@ -164,7 +164,8 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_pz = take(&l, rc->slots, sizeof(float));
     size_t o_rgba = take(&l, (size_t)rc->slots + 1, sizeof(uint32_t));
     size_t o_tile_of = take(&l, rc->slots, sizeof(uint16_t));
-    size_t o_proj = take(&l, rc->slots, sizeof(rc_entry));
+    size_t o_key = take(&l, rc->slots, sizeof(uint32_t));
+    size_t o_dep = take(&l, rc->slots, sizeof(float));
     size_t o_dest = take(&l, rc->slots, sizeof(uint16_t));
     rc->mark_stride = ((size_t)rc->slots + 1 + 63) & ~(size_t)63; /* + a sink byte, a line apart */
     size_t o_mark = take(&l, rc->mark_stride * d.threads, 1);
@@ -241,7 +242,8 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     rc->pz = (float *)(block + o_pz);
     rc->rgba = (uint32_t *)(block + o_rgba);
     rc->tile_of = (uint16_t *)(block + o_tile_of);
-    rc->proj = (rc_entry *)(block + o_proj);
+    rc->key = (uint32_t *)(block + o_key);
+    rc->dep = (float *)(block + o_dep);
     rc->dest = (uint16_t *)(block + o_dest);
     rc->mark = (uint8_t *)(block + o_mark);
     memset(rc->mark, 0, rc->mark_stride * d.threads);

@@ -85,9 +85,9 @@ static void chunk_range(const view_rc *rc, uint32_t c, uint32_t *begin, uint32_t
  * conversion to integers happens only on coordinates known to be inside. */
 FXC_HOT_CLONES static void project_span(const rc_view *v, const float *restrict px, const float *restrict py,
                                         const float *restrict pz, const uint32_t *restrict rgba,
-                                        uint64_t *restrict proj, uint16_t *restrict dest, uint32_t begin,
-                                        uint32_t end, uint32_t shift, uint32_t tiles_x, uint32_t pix_bits,
-                                        bool direct, uint16_t outside, uint16_t dead)
+                                        uint32_t *restrict key, float *restrict dep, uint16_t *restrict dest,
+                                        uint32_t begin, uint32_t end, uint32_t shift, uint32_t tiles_x,
+                                        uint32_t pix_bits, bool direct, uint16_t outside, uint16_t dead)
 {
     const float cx = v->rel[0], cy = v->rel[1], cz = v->rel[2];
     const float fx = v->forward[0], fy = v->forward[1], fz = v->forward[2];
@@ -109,10 +109,9 @@ FXC_HOT_CLONES static void project_span(const rc_view *v, const float *restrict 
         uint32_t ix = (uint32_t)(int32_t)(inside ? sx : 0.0f);
         uint32_t iy = (uint32_t)(int32_t)(inside ? sy : 0.0f);
         uint32_t tile = (iy >> shift) * tiles_x + (ix >> shift);
-        uint32_t key = ((i - begin) << pix_bits) | ((iy & m) << shift) | (ix & m), depth_bits;
-        key = direct ? (inside ? iy * width + ix : RC_NO_PIXEL) : key;
-        memcpy(&depth_bits, &zc, sizeof depth_bits);
-        proj[i] = rc_entry_bits(key, depth_bits); /* one 8-byte store: the loop stays vectorised */
+        uint32_t in_tile = ((i - begin) << pix_bits) | ((iy & m) << shift) | (ix & m);
+        key[i] = direct ? (inside ? iy * width + ix : RC_NO_PIXEL) : in_tile;
+        dep[i] = zc;
         dest[i] = (uint16_t)(inside ? tile : live ? outside : dead);
     }
 }
@@ -203,7 +202,7 @@ FXC_HOT_CLONES static uint32_t count_age(const uint32_t *restrict rgba, uint32_t
 
 /* Drops every live point at least drop_age old among n, without branches (vectorised): the slot is freed and
  * leaves this frame's lists (and no_tiling's image: its key RC_NO_PIXEL). */
-FXC_HOT_CLONES static void drop_block(uint32_t *restrict rgba, rc_entry *restrict proj,
+FXC_HOT_CLONES static void drop_block(uint32_t *restrict rgba, uint32_t *restrict key,
                                       uint16_t *restrict dest, uint32_t n, uint32_t drop_age, uint16_t dead,
                                       rc_chunk_stat *stat)
 {
@@ -214,7 +213,7 @@ FXC_HOT_CLONES static void drop_block(uint32_t *restrict rgba, rc_entry *restric
         dropped += drop;
         age_sum += age & mask;
         rgba[k] = v | (0xFF000000u & mask);
-        proj[k].key = proj[k].key | mask; /* RC_NO_PIXEL is all ones */
+        key[k] = key[k] | mask; /* RC_NO_PIXEL is all ones */
         dest[k] = (uint16_t)((dest[k] & ~mask) | (dead & mask));
     }
     stat->dropped += dropped;
@@ -246,7 +245,7 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
     chunk_range(rc, c, &begin, &end);
     uint16_t outside = rc->list_outside, dead = rc->list_dead;
     /* The tiled z-buffer takes the pixel within the tile; the 1999 one, the image's. */
-    project_span(&rc->view, rc->px, rc->py, rc->pz, rc->rgba, (uint64_t *)rc->proj, rc->dest, begin, end,
+    project_span(&rc->view, rc->px, rc->py, rc->pz, rc->rgba, rc->key, rc->dep, rc->dest, begin, end,
                  rc->tile_shift, rc->tiles_x, rc->pix_bits, rc->d.no_tiling, outside, dead);
     rc_chunk_stat stat = {0};
     /* The drop plan: points older than drop_age, and the chunk's quota of that age, in slot order. A block of
@@ -262,7 +261,7 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
             uint32_t same = count_age(rc->rgba + b0, b1 - b0, drop_age);
             if (same <= quota) {
                 quota -= same;
-                drop_block(rc->rgba + b0, rc->proj + b0, rc->dest + b0, b1 - b0, drop_age, dead, &stat);
+                drop_block(rc->rgba + b0, rc->key + b0, rc->dest + b0, b1 - b0, drop_age, dead, &stat);
                 continue;
             }
             for (uint32_t i = b0; i < b1; i++) {
@@ -274,7 +273,7 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
                 stat.dropped++;
                 stat.dropped_age_sum += age;
                 rc->rgba[i] = (rc->rgba[i] & 0x00FFFFFFu) | (RC_AGE_DEAD << 24);
-                rc->proj[i].key = RC_NO_PIXEL;
+                rc->key[i] = RC_NO_PIXEL;
                 rc->dest[i] = dead;
             }
         }
@@ -312,7 +311,8 @@ static void sort_task(void *user, uint32_t c, uint32_t worker)
     chunk_range(rc, c, &begin, &end);
     uint32_t *offset = rc->counts + (size_t)c * (rc->tile_count + 2);
     const uint16_t *dest = rc->dest;
-    const rc_entry *proj = rc->proj;
+    const uint32_t *key = rc->key;
+    const float *dep = rc->dep;
     rc_entry *entries = rc->entries;
     uint32_t tiles = rc->tile_count;
     /* Without a branch (slots are in no order once points come and go): points that land outside, and free
@@ -322,7 +322,8 @@ static void sort_task(void *user, uint32_t c, uint32_t worker)
     for (uint32_t i = begin; i < end; i++) {
         uint32_t d = dest[i], o = offset[d];
         offset[d] = o + (d < tiles);
-        entries[o] = proj[i];
+        entries[o].key = key[i];
+        entries[o].depth = dep[i];
     }
 }
 
@@ -471,11 +472,12 @@ void view_rc__zbuffer_direct(view_rc *rc)
         zbuf[p] = INFINITY;
         win[p] = RC_NO_POINT;
     }
-    const rc_entry *proj = rc->proj;
+    const uint32_t *key = rc->key;
+    const float *dep = rc->dep;
     for (uint32_t i = 0; i < rc->slots; i++) {
-        uint32_t p = proj[i].key;
-        if (p != RC_NO_PIXEL && proj[i].depth < zbuf[p]) {
-            zbuf[p] = proj[i].depth;
+        uint32_t p = key[i];
+        if (p != RC_NO_PIXEL && dep[i] < zbuf[p]) {
+            zbuf[p] = dep[i];
             win[p] = i;
         }
     }

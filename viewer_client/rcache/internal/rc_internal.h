@@ -47,18 +47,11 @@ static inline uint32_t rc_age(uint32_t rgba)
  * column, pix_bits of them) and the slot within its chunk above it: the z-buffer reads a tile's list chunk by
  * chunk (each chunk's range of it is known from the sort's offsets), so the slot is the chunk's first plus
  * that. The colour is not in the entry: the z-buffer's copy-out reads the winners' from the store. (Entries
- * of 16 bytes, pixel, depth, colour and slot, made the sort write and the z-buffer read twice the bytes.) In
- * the per-slot array the projection writes (view_rc.proj), the no_tiling path keeps the image's pixel index
- * in key instead (RC_NO_PIXEL: none). */
+ * of 16 bytes, pixel, depth, colour and slot, made the sort write and the z-buffer read twice the bytes.) */
 typedef struct rc_entry {
     uint32_t key; /* (slot - chunk's first) << pix_bits | pixel within the tile */
     float depth;  /* view depth, metres along the camera's forward axis */
 } rc_entry;
-/* An entry as the 8 bytes it is in memory (key first), for loops that write it in one store. */
-static inline uint64_t rc_entry_bits(uint32_t key, uint32_t depth_bits)
-{
-    return (uint64_t)key | (uint64_t)depth_bits << 32;
-}
 #define RC_ENTRY_LINE 8u /* entries in a cache line: every (tile, part) list starts on a line of its own */
 
 /* A camera set up for an image: the server's frame (srv_camera_setup) and the projection that inverts
@@ -172,8 +165,9 @@ struct view_rc {
     uint32_t *rgba;    /* slots + 1: the last, never a point, holds RC_EMPTY_PT (the z-buffer's copy-out reads
                         * it for a pixel no point won, so its gather needs no branch) */
     uint16_t *tile_of; /* the list a point was in last frame (list_new: inserted since) */
-    rc_entry *proj;    /* this frame, per slot: the entry the sort copies into its tile's list (with
-                        * no_tiling: key = the image's pixel index, RC_NO_PIXEL outside) */
+    uint32_t *key;     /* this frame, per slot: its entry's key, which the sort copies into its tile's list
+                        * (with no_tiling: the image's pixel index, RC_NO_PIXEL outside) */
+    float *dep;        /* this frame: view depth */
     uint16_t *dest;    /* this frame: tile, list_outside or list_dead */
     uint8_t *mark;     /* this frame: shown in a pixel, one array per thread, mark_stride bytes apart (each
                         * slots + 1: the last is a sink). The depth cull's thread w writes only array w (no
