@@ -167,7 +167,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_px = take(&l, rc->slots, sizeof(float));
     size_t o_py = take(&l, rc->slots, sizeof(float));
     size_t o_pz = take(&l, rc->slots, sizeof(float));
-    size_t o_rgba = take(&l, (size_t)rc->slots + 1, sizeof(uint32_t));
+    size_t o_rgba = take(&l, rc->slots, sizeof(uint32_t));
     size_t o_tile_of = take(&l, rc->slots, sizeof(uint16_t));
     size_t o_key = take(&l, rc->slots, sizeof(uint32_t));
     size_t o_dep = take(&l, rc->slots, sizeof(float));
@@ -216,7 +216,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_workers = take(&l, d.threads, sizeof(rc_worker));
     size_t o_occupied[VIEW_RC_MAX_THREADS], o_low[VIEW_RC_MAX_THREADS], o_err[VIEW_RC_MAX_THREADS];
     size_t o_planes[VIEW_RC_MAX_THREADS], o_box[VIEW_RC_MAX_THREADS], o_spare[VIEW_RC_MAX_THREADS];
-    size_t o_zt[VIEW_RC_MAX_THREADS], o_wt[VIEW_RC_MAX_THREADS];
+    size_t o_zt[VIEW_RC_MAX_THREADS], o_wt[VIEW_RC_MAX_THREADS], o_ct[VIEW_RC_MAX_THREADS];
     size_t o_halo[VIEW_RC_MAX_THREADS];
     rc->local_z = rc->tile <= RC_LOCAL_TILE;
     size_t local = rc->local_z ? (size_t)rc->tile * rc->tile : 0;
@@ -230,6 +230,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
         o_halo[t] = take(&l, 7 * (size_t)d.width, sizeof(uint32_t)); /* six rows of points, one of depths */
         o_zt[t] = take(&l, local, sizeof(float));
         o_wt[t] = take(&l, local, sizeof(uint32_t));
+        o_ct[t] = take(&l, local, sizeof(uint32_t));
     }
     if (l.overflow) {
         free(rc);
@@ -307,6 +308,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
         rc->workers[t].halo = (uint32_t *)(block + o_halo[t]);
         rc->workers[t].zt = (float *)(block + o_zt[t]);
         rc->workers[t].wt = (uint32_t *)(block + o_wt[t]);
+        rc->workers[t].ct = (uint32_t *)(block + o_ct[t]);
     }
 
     /* Every slot free; the stack hands out slot 0 first. */
@@ -317,7 +319,6 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
         rc->free_slots[i] = rc->slots - 1 - i;
     }
     rc->free_count = rc->slots;
-    rc->rgba[rc->slots] = RC_EMPTY_PT;
     memset(rc->chunk_hist, 0, (size_t)rc->chunk_count * 256 * sizeof(uint32_t));
     memset(rc->win, 0xFF, rc->pixels * sizeof(uint32_t));
     for (size_t p = 0; p < rc->pixels; p++)

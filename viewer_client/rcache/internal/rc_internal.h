@@ -46,7 +46,7 @@ static inline uint32_t rc_age(uint32_t rgba)
 /* A projected point in its tile's list: 8 bytes. The key packs the pixel within the tile (row * tile +
  * column, pix_bits of them) and the slot within its chunk above it: the z-buffer reads a tile's list chunk by
  * chunk (each chunk's range of it is known from the sort's offsets), so the slot is the chunk's first plus
- * that. The colour is not in the entry: the z-buffer's copy-out reads the winners' from the store. (Entries
+ * that. The colour is not in the entry: the z-buffer reads a winner's from the store. (Entries
  * of 16 bytes, pixel, depth, colour and slot, made the sort write and the z-buffer read twice the bytes.) */
 typedef struct rc_entry {
     uint32_t key; /* (slot - chunk's first) << pix_bits | pixel within the tile */
@@ -123,6 +123,7 @@ typedef struct rc_worker {
     uint32_t *halo;    /* fused pixel passes: six rows of shown points around a band, then a row of depths */
     float *zt;         /* z-buffer: one tile's depths, tile x tile, row after row (local_z only) */
     uint32_t *wt;      /* ... the slot that won each pixel (RC_NO_POINT: none) */
+    uint32_t *ct;      /* ... and its rgba (RC_EMPTY_PT: none) */
 } rc_worker;
 
 /* Points being inserted, a batch at a time (rc_cache.c): their positions computed in one loop without
@@ -162,16 +163,15 @@ struct view_rc {
     /* The point store (structure of arrays over slots). */
     uint32_t slots; /* capacity + insert_reserve */
     float *px, *py, *pz;
-    uint32_t *rgba;    /* slots + 1: the last, never a point, holds RC_EMPTY_PT (the z-buffer's copy-out reads
-                        * it for a pixel no point won, so its gather needs no branch) */
-    uint16_t *tile_of; /* the list a point was in last frame (list_new: inserted since) */
-    uint32_t *key;     /* this frame, per slot: its entry's key, which the sort copies into its tile's list
-                        * (with no_tiling: the image's pixel index, RC_NO_PIXEL outside) */
-    float *dep;        /* this frame: view depth */
-    uint16_t *dest;    /* this frame: tile, list_outside or list_dead */
-    uint8_t *mark;     /* this frame: shown in a pixel, one array per thread, mark_stride bytes apart (each
-                        * slots + 1: the last is a sink). The depth cull's thread w writes only array w (no
-                        * line written by two cores at once); the ageing ORs them over its chunks. */
+    uint32_t *rgba;
+    uint16_t *tile_of;    /* the list a point was in last frame (list_new: inserted since) */
+    uint32_t *key;        /* this frame, per slot: its entry's key, which the sort copies into its tile's list
+                           * (with no_tiling: the image's pixel index, RC_NO_PIXEL outside) */
+    float *dep;           /* this frame: view depth */
+    uint16_t *dest;       /* this frame: tile, list_outside or list_dead */
+    uint8_t *mark;        /* this frame: shown in a pixel, one array per thread, mark_stride bytes apart (each
+                           * slots + 1: the last is a sink). The depth cull's thread w writes only array w (no
+                           * line written by two cores at once); the ageing ORs them over its chunks. */
     size_t mark_stride;   /* slots + 1, rounded up to 64 */
     uint32_t *free_slots; /* stack of free slots: the next insert takes free_slots[free_count - 1] */
     uint32_t free_count;
