@@ -118,10 +118,12 @@ FXC_HOT_CLONES static void project_span(const rc_view *v, const float *restrict 
 
 /* ---- predicted projection (2002 3.1) ------------------------------------------------------------------- */
 
-/* The quarter-resolution pixel of every slot in [begin, end) for view v (RC_NO_PIXEL when none). */
+/* The quarter-resolution pixel of every slot in [begin, end) for view v (`none` when none: the byte after the
+ * occupancy image, so the marking loop is a load and a store a point). */
 FXC_HOT_CLONES static void predict_span(const rc_view *v, const float *restrict px, const float *restrict py,
                                         const float *restrict pz, const uint32_t *restrict rgba,
-                                        uint32_t *restrict low, uint32_t begin, uint32_t end, uint32_t low_w)
+                                        uint32_t *restrict low, uint32_t begin, uint32_t end, uint32_t low_w,
+                                        uint32_t none)
 {
     const float cx = v->rel[0], cy = v->rel[1], cz = v->rel[2];
     const float fx = v->forward[0], fy = v->forward[1], fz = v->forward[2];
@@ -141,7 +143,7 @@ FXC_HOT_CLONES static void predict_span(const rc_view *v, const float *restrict 
         bool inside = live & (zc > RC_NEAR) & (sx >= 0.0f) & (sx < w) & (sy >= 0.0f) & (sy < h);
         uint32_t ix = (uint32_t)(int32_t)(inside ? sx : 0.0f) >> 2;
         uint32_t iy = (uint32_t)(int32_t)(inside ? sy : 0.0f) >> 2;
-        low[i - begin] = inside ? iy * low_w + ix : RC_NO_PIXEL;
+        low[i - begin] = inside ? iy * low_w + ix : none;
     }
 }
 
@@ -153,11 +155,11 @@ static void predict_task(void *user, uint32_t c, uint32_t worker)
     chunk_range(rc, c, &begin, &end);
     uint32_t *low = rc->workers[worker].low;
     uint8_t *occupied = rc->workers[worker].occupied;
-    predict_span(&rc->predicted, rc->px, rc->py, rc->pz, rc->rgba, low, begin, end, rc->low_w);
     /* Without a branch: points that land nowhere mark the byte after the image. */
     uint32_t sink = rc->low_w * rc->low_h;
+    predict_span(&rc->predicted, rc->px, rc->py, rc->pz, rc->rgba, low, begin, end, rc->low_w, sink);
     for (uint32_t k = 0; k < end - begin; k++)
-        occupied[low[k] == RC_NO_PIXEL ? sink : low[k]] = 1;
+        occupied[low[k]] = 1;
 }
 
 void view_rc__predict_clear(view_rc *rc)
