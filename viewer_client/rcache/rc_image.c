@@ -125,8 +125,8 @@ static uint32_t cull_row(const view_rc *rc, uint32_t y, uint32_t *pt_row, float 
 }
 
 /* Where each of n pixels marks: its shown point's slot, or `sink` when it shows none (vectorised). */
-FXC_HOT_CLONES static void mark_targets(const uint32_t *restrict pt, const uint32_t *restrict win,
-                                        uint32_t sink, uint32_t *restrict at, uint32_t n)
+FXC_HOT_INLINE void mark_targets(const uint32_t *restrict pt, const uint32_t *restrict win, uint32_t sink,
+                                 uint32_t *restrict at, uint32_t n)
 {
     for (uint32_t x = 0; x < n; x++)
         at[x] = pt[x] == RC_EMPTY_PT ? sink : win[x];
@@ -137,7 +137,7 @@ FXC_HOT_CLONES static void mark_targets(const uint32_t *restrict pt, const uint3
  * loop is a load and a store a pixel (it was 13 instructions a pixel, the select and the mask in it).
  * Marking entries instead (tile-local writes) and reading them back through each slot's entry in the ageing
  * was slower: 0.8 against 0.3 ms for the ageing, the cull unchanged. */
-static void mark_row(const view_rc *rc, uint32_t y, uint32_t worker)
+FXC_HOT_CLONES static void mark_row(const view_rc *rc, uint32_t y, uint32_t worker)
 {
     uint32_t w = rc->width;
     const uint32_t *pt = rc->pt + (size_t)y * w, *win = rc->win + (size_t)y * w;
