@@ -128,8 +128,10 @@ static uint32_t cull_row(const view_rc *rc, uint32_t y, uint32_t *pt_row, float 
 FXC_HOT_INLINE void mark_targets(const uint32_t *restrict pt, const uint32_t *restrict win, uint32_t sink,
                                  uint32_t *restrict at, uint32_t n)
 {
-    for (uint32_t x = 0; x < n; x++)
-        at[x] = pt[x] == RC_EMPTY_PT ? sink : win[x];
+    for (uint32_t x = 0; x < n; x++) {
+        uint32_t shown = win[x]; /* read unconditionally: a plain vector load, not a masked one */
+        at[x] = pt[x] == RC_EMPTY_PT ? sink : shown;
+    }
 }
 
 /* The points shown in row y: visible for the ageing (no branch: a pixel without one marks the byte after the
