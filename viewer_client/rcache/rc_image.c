@@ -458,13 +458,22 @@ static void fill_from(uint8_t *rgb, const uint32_t acc[4])
         rgb[c] = (uint8_t)((acc[c] + acc[3] / 2) / acc[3]);
 }
 
+/* Pixels of kind VIEW_RC_EMPTY among n (vectorised). */
+FXC_HOT_CLONES static uint32_t count_empty(const uint8_t *restrict kind, uint32_t n)
+{
+    uint32_t empty = 0;
+    for (uint32_t x = 0; x < n; x++)
+        empty += kind[x] == VIEW_RC_EMPTY;
+    return empty;
+}
+
 /* Tiles with few pixels to fill: each one's 7x7 window summed directly. */
 static uint32_t prefilter_direct(view_rc *rc, const rc_band *b, rc_rect r)
 {
     uint32_t w = rc->width, h = rc->height, filled = 0;
     for (uint32_t y = r.y0; y < r.y1; y++) {
-        if (rc->row_need[y] == 0)
-            continue; /* no pixel of the row to fill */
+        if (rc->row_need[y] == 0 || count_empty(rc->kind + (size_t)y * w + r.x0, r.x1 - r.x0) == 0)
+            continue; /* no pixel of the tile's row to fill */
         for (uint32_t x = r.x0; x < r.x1; x++) {
             size_t p = (size_t)y * w + x;
             if (rc->kind[p] != VIEW_RC_EMPTY)
@@ -544,8 +553,8 @@ static uint32_t prefilter_planes(view_rc *rc, const rc_band *b, rc_rect r, uint1
             sums7(planes + c * plane + (size_t)j * s, hsum + c * rows + (size_t)j * tw, tw);
     for (uint32_t j = 0; j < th; j++) {
         size_t p = (size_t)(r.y0 + j) * w + r.x0;
-        if (rc->row_need[r.y0 + j] == 0)
-            continue; /* no pixel of the row to fill */
+        if (rc->row_need[r.y0 + j] == 0 || count_empty(rc->kind + p, tw) == 0)
+            continue; /* no pixel of the tile's row to fill */
         for (int c = 0; c < 4; c++)
             sums7_down(hsum + c * rows + (size_t)j * tw, tw, vsum + (size_t)c * tw, tw);
         for (uint32_t x = 0; x < tw; x++) {
@@ -559,15 +568,6 @@ static uint32_t prefilter_planes(view_rc *rc, const rc_band *b, rc_rect r, uint1
         }
     }
     return filled;
-}
-
-/* Pixels of kind VIEW_RC_EMPTY among n (vectorised). */
-FXC_HOT_CLONES static uint32_t count_empty(const uint8_t *restrict kind, uint32_t n)
-{
-    uint32_t empty = 0;
-    for (uint32_t x = 0; x < n; x++)
-        empty += kind[x] == VIEW_RC_EMPTY;
-    return empty;
 }
 
 /* The band's tiles that have pixels to fill (fused: once the halo's three rows each side are culled). */
