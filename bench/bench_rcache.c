@@ -24,7 +24,7 @@
  *
  * Usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] [--lead 2] [--tile 64]
  *        [--capacity F] [--pin CPU] [--separate-pixels]
- *        [--only table|scaling|threads|split|split-pixels|fuse|switches|quality]
+ *        [--only table|scaling|threads|split|split-pixels|fuse|share|switches|quality]
  *        (default: all, in that order; --separate-pixels: the table with the depth cull, interpolation and
  *        prefilter as separate passes, each in its own row, instead of fused). Each table also gives the
  * process CPU time of a frame: on a machine shared with other jobs the wall time includes the time the
@@ -495,6 +495,15 @@ static void section_split_pixels(const bench_opts *o)
                             "dynamic / static (per-repetition ratio)", "dynamic / static"});
 }
 
+/* The dither and the ageing as two pool runs (view_rc_desc.separate_sample_age) against one shared run (the
+ * default on 2+ threads), both on 2 threads, alternating. */
+static void section_share(const bench_opts *o)
+{
+    section_ab(o, (view_rc_desc){.separate_sample_age = true}, 2, (view_rc_desc){0}, 2,
+               &(ab_labels){"2 threads, dither and ageing in two runs against one", "two runs", "one run",
+                            "two runs / one run (per-repetition ratio)", "two runs / one run"});
+}
+
 typedef struct variant {
     const char *name;
     view_rc_desc d;
@@ -600,7 +609,7 @@ int main(int argc, char **argv)
             fprintf(stderr,
                     "usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] "
                     "[--lead 2] [--tile 64] [--capacity F] [--pin CPU] [--separate-pixels] "
-                    "[--only table|scaling|threads|split|split-pixels|fuse|switches|quality]\n");
+                    "[--only table|scaling|threads|split|split-pixels|fuse|share|switches|quality]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }
     }
@@ -632,6 +641,8 @@ int main(int argc, char **argv)
         section_split_pixels(&o);
     if (!only || !strcmp(only, "fuse"))
         section_fuse(&o);
+    if (!only || !strcmp(only, "share"))
+        section_share(&o);
     if (!only || !strcmp(only, "switches"))
         section_switches(&o);
     if (!only || !strcmp(only, "quality"))

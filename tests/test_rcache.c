@@ -1146,6 +1146,7 @@ static void test_tiles_do_not_change_the_image(void **state)
 static int foreign_symbols(const char *archive, char *names, size_t cap)
 {
     static const char *const allowed[] = {"aligned_alloc",
+                                          "madvise",
                                           "calloc",
                                           "malloc",
                                           "realloc",

@@ -20,6 +20,11 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
+
+#define RC_HUGE_PAGE ((size_t)2 << 20) /* bytes of a transparent huge page on x86-64 */
 
 double view_rc__now_ms(void)
 {
@@ -143,6 +148,12 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     uint32_t chunk_shift = 12;
     while ((uint64_t)rc->slots > (uint64_t)512 << chunk_shift)
         chunk_shift++;
+    /* An entry's key holds the pixel within the tile and the slot within the chunk: where the two would need
+     * more than 32 bits (tiles above 1024 pixels a side, or tens of millions of slots with tiles above 64),
+     * chunks get smaller, and more. */
+    rc->pix_bits = 2 * shift;
+    if (chunk_shift + rc->pix_bits > 32)
+        chunk_shift = 32 - rc->pix_bits;
     uint32_t chunk = 1u << chunk_shift;
     rc->chunk_shift = chunk_shift;
     rc->chunk_size = chunk;
@@ -158,7 +169,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_pz = take(&l, rc->slots, sizeof(float));
     size_t o_rgba = take(&l, rc->slots, sizeof(uint32_t));
     size_t o_tile_of = take(&l, rc->slots, sizeof(uint16_t));
-    size_t o_pix = take(&l, rc->slots, sizeof(uint32_t));
+    size_t o_key = take(&l, rc->slots, sizeof(uint32_t));
     size_t o_dep = take(&l, rc->slots, sizeof(float));
     size_t o_dest = take(&l, rc->slots, sizeof(uint16_t));
     rc->mark_stride = ((size_t)rc->slots + 1 + 63) & ~(size_t)63; /* + a sink byte, a line apart */
@@ -170,16 +181,16 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_chunk_hist = take(&l, (size_t)rc->chunk_count * 256, sizeof(uint32_t));
     size_t o_chunk_quota = take(&l, rc->chunk_count, sizeof(uint32_t));
     size_t o_chunk_stat = take(&l, rc->chunk_count, sizeof(rc_chunk_stat));
-    /* Entries: one per slot, up to 3 of padding per list (tile and part), then the sort's sinks (one per
-     * thread, a line each). */
+    /* Entries: one per slot, up to RC_ENTRY_LINE - 1 of padding per list (tile and part), then the sort's
+     * sinks (one per thread, a line each). */
     rc->parts = d.threads;
-    size_t lists_parts = (size_t)rc->tile_count * rc->parts;
-    if ((size_t)rc->slots + 4 * lists_parts + 4 * (size_t)rc->parts > UINT32_MAX) {
+    size_t lists_parts = (size_t)rc->tile_count * rc->parts, line = RC_ENTRY_LINE;
+    if ((size_t)rc->slots + line * lists_parts + line * (size_t)rc->parts > UINT32_MAX) {
         free(rc);
         return FXC_ERR_INVALID;
     }
-    rc->entry_sink = (uint32_t)(((size_t)rc->slots + 4 * lists_parts + 3) & ~(size_t)3);
-    size_t o_entries = take(&l, (size_t)rc->entry_sink + 4 * (size_t)rc->parts, sizeof(rc_entry));
+    rc->entry_sink = (uint32_t)(((size_t)rc->slots + line * lists_parts + line - 1) & ~(line - 1));
+    size_t o_entries = take(&l, (size_t)rc->entry_sink + line * (size_t)rc->parts, sizeof(rc_entry));
     size_t o_list_start = take(&l, lists_parts, sizeof(uint32_t));
     size_t o_list_end = take(&l, lists_parts, sizeof(uint32_t));
     size_t o_zbuf = take(&l, rc->pixels, sizeof(float));
@@ -225,19 +236,33 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
         free(rc);
         return FXC_ERR_INVALID;
     }
-    char *block = aligned_alloc(64, (l.bytes + 63) & ~(size_t)63);
+    /* Blocks of 2 MiB and more: aligned to 2 MiB and, on Linux, offered transparent huge pages (with
+     * "madvise", the usual setting, a block gets 4 KiB pages unless asked): the point store, the tile lists
+     * and the images are tens of MiB at 1024 x 1024, read and written at random (the sort's 256 lists, the
+     * winners' colours, the marks), more than the TLB reaches with 4 KiB pages. Without them (another system,
+     * or the kernel refusing) nothing changes but speed. */
+    size_t align = 64, bytes = (l.bytes + 63) & ~(size_t)63;
+    if (bytes >= RC_HUGE_PAGE) {
+        align = RC_HUGE_PAGE;
+        bytes = (bytes + RC_HUGE_PAGE - 1) & ~(size_t)(RC_HUGE_PAGE - 1);
+    }
+    char *block = aligned_alloc(align, bytes);
     if (!block) {
         free(rc);
         return FXC_ERR_NOMEM;
     }
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+    if (align == RC_HUGE_PAGE)
+        (void)madvise(block, bytes, MADV_HUGEPAGE);
+#endif
     rc->block = block;
-    rc->memory_bytes = l.bytes + sizeof *rc;
+    rc->memory_bytes = bytes + sizeof *rc;
     rc->px = (float *)(block + o_px);
     rc->py = (float *)(block + o_py);
     rc->pz = (float *)(block + o_pz);
     rc->rgba = (uint32_t *)(block + o_rgba);
     rc->tile_of = (uint16_t *)(block + o_tile_of);
-    rc->pix = (uint32_t *)(block + o_pix);
+    rc->key = (uint32_t *)(block + o_key);
     rc->dep = (float *)(block + o_dep);
     rc->dest = (uint16_t *)(block + o_dest);
     rc->mark = (uint8_t *)(block + o_mark);

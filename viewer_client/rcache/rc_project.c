@@ -80,12 +80,12 @@ static void chunk_range(const view_rc *rc, uint32_t c, uint32_t *begin, uint32_t
 
 /* The pixel of every slot in [begin, end) for view v (RC_NO_PIXEL for free slots, points behind the camera or
  * outside the image; `local`: row * tile + column within its tile, else the image's index), its view depth,
- * and its list: the tile (two shifts of the pixel's coordinates), or
- * `outside`, or `dead` for a free slot. rc_project's arithmetic; the conversion to integers happens only on
- * coordinates known to be inside. */
+ * and its list: the tile (two shifts of the pixel's coordinates), or `outside`, or `dead` for a free slot.
+ * rc_project's arithmetic; the conversion to integers happens only on coordinates known to be inside. (The
+ * slot within the chunk is added to the key by the sort: in this loop it cost 1.2 M instructions a frame.) */
 FXC_HOT_CLONES static void project_span(const rc_view *v, const float *restrict px, const float *restrict py,
                                         const float *restrict pz, const uint32_t *restrict rgba,
-                                        uint32_t *restrict pix, float *restrict dep, uint16_t *restrict dest,
+                                        uint32_t *restrict key, float *restrict dep, uint16_t *restrict dest,
                                         uint32_t begin, uint32_t end, uint32_t shift, uint32_t tiles_x,
                                         bool local, uint16_t outside, uint16_t dead)
 {
@@ -110,7 +110,7 @@ FXC_HOT_CLONES static void project_span(const rc_view *v, const float *restrict 
         uint32_t iy = (uint32_t)(int32_t)(inside ? sy : 0.0f);
         uint32_t tile = (iy >> shift) * tiles_x + (ix >> shift);
         uint32_t in_tile = ((iy & m) << shift) | (ix & m);
-        pix[i] = inside ? (local ? in_tile : iy * width + ix) : RC_NO_PIXEL;
+        key[i] = inside ? (local ? in_tile : iy * width + ix) : RC_NO_PIXEL;
         dep[i] = zc;
         dest[i] = (uint16_t)(inside ? tile : live ? outside : dead);
     }
@@ -118,10 +118,12 @@ FXC_HOT_CLONES static void project_span(const rc_view *v, const float *restrict 
 
 /* ---- predicted projection (2002 3.1) ------------------------------------------------------------------- */
 
-/* The quarter-resolution pixel of every slot in [begin, end) for view v (RC_NO_PIXEL when none). */
+/* The quarter-resolution pixel of every slot in [begin, end) for view v (`none` when none: the byte after the
+ * occupancy image, so the marking loop is a load and a store a point). */
 FXC_HOT_CLONES static void predict_span(const rc_view *v, const float *restrict px, const float *restrict py,
                                         const float *restrict pz, const uint32_t *restrict rgba,
-                                        uint32_t *restrict low, uint32_t begin, uint32_t end, uint32_t low_w)
+                                        uint32_t *restrict low, uint32_t begin, uint32_t end, uint32_t low_w,
+                                        uint32_t none)
 {
     const float cx = v->rel[0], cy = v->rel[1], cz = v->rel[2];
     const float fx = v->forward[0], fy = v->forward[1], fz = v->forward[2];
@@ -141,7 +143,7 @@ FXC_HOT_CLONES static void predict_span(const rc_view *v, const float *restrict 
         bool inside = live & (zc > RC_NEAR) & (sx >= 0.0f) & (sx < w) & (sy >= 0.0f) & (sy < h);
         uint32_t ix = (uint32_t)(int32_t)(inside ? sx : 0.0f) >> 2;
         uint32_t iy = (uint32_t)(int32_t)(inside ? sy : 0.0f) >> 2;
-        low[i - begin] = inside ? iy * low_w + ix : RC_NO_PIXEL;
+        low[i - begin] = inside ? iy * low_w + ix : none;
     }
 }
 
@@ -153,11 +155,11 @@ static void predict_task(void *user, uint32_t c, uint32_t worker)
     chunk_range(rc, c, &begin, &end);
     uint32_t *low = rc->workers[worker].low;
     uint8_t *occupied = rc->workers[worker].occupied;
-    predict_span(&rc->predicted, rc->px, rc->py, rc->pz, rc->rgba, low, begin, end, rc->low_w);
     /* Without a branch: points that land nowhere mark the byte after the image. */
     uint32_t sink = rc->low_w * rc->low_h;
+    predict_span(&rc->predicted, rc->px, rc->py, rc->pz, rc->rgba, low, begin, end, rc->low_w, sink);
     for (uint32_t k = 0; k < end - begin; k++)
-        occupied[low[k] == RC_NO_PIXEL ? sink : low[k]] = 1;
+        occupied[low[k]] = 1;
 }
 
 void view_rc__predict_clear(view_rc *rc)
@@ -201,8 +203,8 @@ FXC_HOT_CLONES static uint32_t count_age(const uint32_t *restrict rgba, uint32_t
 }
 
 /* Drops every live point at least drop_age old among n, without branches (vectorised): the slot is freed and
- * leaves this frame's lists. */
-FXC_HOT_CLONES static void drop_block(uint32_t *restrict rgba, uint32_t *restrict pix,
+ * leaves this frame's lists (and no_tiling's image: its key RC_NO_PIXEL). */
+FXC_HOT_CLONES static void drop_block(uint32_t *restrict rgba, uint32_t *restrict key,
                                       uint16_t *restrict dest, uint32_t n, uint32_t drop_age, uint16_t dead,
                                       rc_chunk_stat *stat)
 {
@@ -213,7 +215,7 @@ FXC_HOT_CLONES static void drop_block(uint32_t *restrict rgba, uint32_t *restric
         dropped += drop;
         age_sum += age & mask;
         rgba[k] = v | (0xFF000000u & mask);
-        pix[k] = pix[k] | mask; /* RC_NO_PIXEL is all ones */
+        key[k] = key[k] | mask; /* RC_NO_PIXEL is all ones */
         dest[k] = (uint16_t)((dest[k] & ~mask) | (dead & mask));
     }
     stat->dropped += dropped;
@@ -244,10 +246,9 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
     uint32_t begin, end;
     chunk_range(rc, c, &begin, &end);
     uint16_t outside = rc->list_outside, dead = rc->list_dead;
-    /* The tiled z-buffer in its own buffers takes the pixel within the tile; the 1999 one, the image's. */
-    bool local = rc->local_z && !rc->d.no_tiling;
-    project_span(&rc->view, rc->px, rc->py, rc->pz, rc->rgba, rc->pix, rc->dep, rc->dest, begin, end,
-                 rc->tile_shift, rc->tiles_x, local, outside, dead);
+    /* The tiled z-buffer takes the pixel within the tile; the 1999 one, the image's. */
+    project_span(&rc->view, rc->px, rc->py, rc->pz, rc->rgba, rc->key, rc->dep, rc->dest, begin, end,
+                 rc->tile_shift, rc->tiles_x, !rc->d.no_tiling, outside, dead);
     rc_chunk_stat stat = {0};
     /* The drop plan: points older than drop_age, and the chunk's quota of that age, in slot order. A block of
      * 64 slots without a candidate is skipped after one test; a block whose points of drop_age all fit in
@@ -262,7 +263,7 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
             uint32_t same = count_age(rc->rgba + b0, b1 - b0, drop_age);
             if (same <= quota) {
                 quota -= same;
-                drop_block(rc->rgba + b0, rc->pix + b0, rc->dest + b0, b1 - b0, drop_age, dead, &stat);
+                drop_block(rc->rgba + b0, rc->key + b0, rc->dest + b0, b1 - b0, drop_age, dead, &stat);
                 continue;
             }
             for (uint32_t i = b0; i < b1; i++) {
@@ -274,7 +275,7 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
                 stat.dropped++;
                 stat.dropped_age_sum += age;
                 rc->rgba[i] = (rc->rgba[i] & 0x00FFFFFFu) | (RC_AGE_DEAD << 24);
-                rc->pix[i] = RC_NO_PIXEL;
+                rc->key[i] = RC_NO_PIXEL;
                 rc->dest[i] = dead;
             }
         }
@@ -312,33 +313,30 @@ static void sort_task(void *user, uint32_t c, uint32_t worker)
     chunk_range(rc, c, &begin, &end);
     uint32_t *offset = rc->counts + (size_t)c * (rc->tile_count + 2);
     const uint16_t *dest = rc->dest;
-    const uint32_t *pix = rc->pix, *rgba = rc->rgba;
+    const uint32_t *key = rc->key;
     const float *dep = rc->dep;
     rc_entry *entries = rc->entries;
-    uint32_t tiles = rc->tile_count;
+    uint32_t tiles = rc->tile_count, bits = rc->pix_bits;
     /* Without a branch (slots are in no order once points come and go): points that land outside, and free
      * slots, go to this thread's sink entry after the lists, whose cursor does not move. (One sink for all
      * threads was a data race, written by every thread: the thread sanitizer saw it.) */
-    offset[tiles] = offset[tiles + 1] = rc->entry_sink + 4 * worker;
+    offset[tiles] = offset[tiles + 1] = rc->entry_sink + RC_ENTRY_LINE * worker;
     for (uint32_t i = begin; i < end; i++) {
         uint32_t d = dest[i], o = offset[d];
         offset[d] = o + (d < tiles);
-        rc_entry *e = &entries[o];
-        e->pix = pix[i];
-        e->depth = dep[i];
-        e->rgba = rgba[i];
-        e->slot = i;
+        entries[o].key = key[i] | (i - begin) << bits; /* the slot within the chunk above the pixel */
+        entries[o].depth = dep[i];
     }
 }
 
 void view_rc__project_sort(view_rc *rc)
 {
     run_chunks(rc, project_task);
-    /* Offsets: tile by tile, part by part (each list on a line of its own: 4 entries), chunk by chunk. */
+    /* Offsets: tile by tile, part by part (each list on a line of its own), chunk by chunk. */
     uint32_t lists = rc->tile_count + 2, run = 0, parts = rc->parts;
     for (uint32_t t = 0; t < rc->tile_count; t++)
         for (uint32_t p = 0; p < parts; p++) {
-            run = (run + 3u) & ~3u;
+            run = (run + RC_ENTRY_LINE - 1) & ~(RC_ENTRY_LINE - 1);
             rc->list_start[t * parts + p] = run;
             uint32_t c1 = fxc_pool_static_begin(rc->chunk_count, parts, p + 1);
             for (uint32_t c = fxc_pool_static_begin(rc->chunk_count, parts, p); c < c1; c++) {
@@ -354,6 +352,26 @@ void view_rc__project_sort(view_rc *rc)
 
 /* ---- z-buffer tiles (2002 3.2) ------------------------------------------------------------------------- */
 
+/* The chunk-by-chunk walk of one tile's list, entry by entry: test(p, depth, slot) for each, in list order
+ * (part, then chunk, then slot). */
+#define RC_FOR_TILE_ENTRIES(rc, tile, test)                                                                  \
+    do {                                                                                                     \
+        const rc_entry *entries_ = (rc)->entries;                                                            \
+        uint32_t parts_ = (rc)->parts, lists_ = (rc)->tile_count + 2, bits_ = (rc)->pix_bits;                \
+        uint32_t mask_ = (1u << bits_) - 1;                                                                  \
+        for (uint32_t part_ = 0; part_ < parts_; part_++) {                                                  \
+            uint32_t e_ = (rc)->list_start[(size_t)(tile)*parts_ + part_];                                   \
+            uint32_t c1_ = fxc_pool_static_begin((rc)->chunk_count, parts_, part_ + 1);                      \
+            for (uint32_t c_ = fxc_pool_static_begin((rc)->chunk_count, parts_, part_); c_ < c1_; c_++) {    \
+                uint32_t end_ = (rc)->counts[(size_t)c_ * lists_ + (tile)], base_ = c_ << (rc)->chunk_shift; \
+                for (; e_ < end_; e_++) {                                                                    \
+                    uint32_t key_ = entries_[e_].key;                                                        \
+                    test(key_ &mask_, entries_[e_].depth, base_ + (key_ >> bits_));                          \
+                }                                                                                            \
+            }                                                                                                \
+        }                                                                                                    \
+    } while (0)
+
 static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
 {
     view_rc *rc = user;
@@ -363,35 +381,32 @@ static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
     uint32_t y1 = y0 + rc->tile < rc->height ? y0 + rc->tile : rc->height;
     float *zbuf = rc->zbuf;
     uint32_t *win = rc->win, *pre = rc->pre;
-    const rc_entry *entries = rc->entries;
-    const uint32_t *list_start = rc->list_start + (size_t)tile * rc->parts;
-    const uint32_t *list_end = rc->list_end + (size_t)tile * rc->parts;
-    uint32_t parts = rc->parts;
-    /* Depth and entry of the nearest; between equal depths, the first in the list. Tried and slower in
+    /* Depth and slot of the nearest; between equal depths, the first in the list. Tried and slower in
      * bench_rcache: the same without the branch (2.2 against 1.9 ms), and 64-bit keys of depth and entry (one
      * load, minimum and store a point; entries split in 8 bytes for the test and 8 for the winners: 1.6
      * against 1.2 ms, and the sort 0.3 ms slower). */
     if (rc->local_z) {
         /* In the tile's own buffers (contiguous: 48 KiB for a tile of 64, no set conflicts in L1 or L2),
-         * then copied out row by row (vectorised copies). */
+         * then copied out row by row (vectorised copies). A winner's colour is read from the store when it
+         * wins (reading every pixel's winner's colour at the copy-out instead cost 2.5 M instructions a
+         * frame at 512 x 512, a gather the compiler does not vectorise). */
         uint32_t side = rc->tile, n = side * side;
         float *restrict zt = rc->workers[worker].zt;
         uint32_t *restrict wt = rc->workers[worker].wt, *restrict ct = rc->workers[worker].ct;
+        const uint32_t *rgba = rc->rgba;
         for (uint32_t k = 0; k < n; k++) {
             zt[k] = INFINITY;
             wt[k] = RC_NO_POINT;
             ct[k] = RC_EMPTY_PT;
         }
-        for (uint32_t part = 0; part < parts; part++)
-            for (uint32_t e = list_start[part], e1 = list_end[part]; e < e1; e++) {
-                uint32_t p = entries[e].pix;
-                float z = entries[e].depth;
-                if (z < zt[p]) {
-                    zt[p] = z;
-                    wt[p] = entries[e].slot;
-                    ct[p] = entries[e].rgba;
-                }
-            }
+#define RC_TEST_LOCAL(p, z, slot)                                                                            \
+    if ((z) < zt[p]) {                                                                                       \
+        zt[p] = (z);                                                                                         \
+        wt[p] = (slot);                                                                                      \
+        ct[p] = rgba[slot];                                                                                  \
+    }
+        RC_FOR_TILE_ENTRIES(rc, tile, RC_TEST_LOCAL);
+#undef RC_TEST_LOCAL
         for (uint32_t y = y0; y < y1; y++) {
             size_t at = (size_t)(y - y0) * side;
             memcpy(zbuf + y * w + x0, zt + at, (x1 - x0) * sizeof(float));
@@ -406,16 +421,21 @@ static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
             win[y * w + x] = RC_NO_POINT;
             pre[y * w + x] = RC_EMPTY_PT;
         }
-    for (uint32_t part = 0; part < parts; part++)
-        for (uint32_t e = list_start[part], e1 = list_end[part]; e < e1; e++) {
-            uint32_t p = entries[e].pix;
-            float z = entries[e].depth, old = zbuf[p];
-            if (z < old) {
-                zbuf[p] = z;
-                win[p] = entries[e].slot;
-                pre[p] = entries[e].rgba;
-            }
-        }
+    /* Tiles above RC_LOCAL_TILE: straight into the image (the pixel within the tile turned into the image's).
+     */
+    uint32_t shift = rc->tile_shift, m = rc->tile - 1;
+    size_t origin = (size_t)y0 * w + x0;
+#define RC_TEST_IMAGE(p_tile, z, slot)                                                                       \
+    {                                                                                                        \
+        size_t p = origin + ((p_tile) >> shift) * w + ((p_tile)&m);                                          \
+        if ((z) < zbuf[p]) {                                                                                 \
+            zbuf[p] = (z);                                                                                   \
+            win[p] = (slot);                                                                                 \
+            pre[p] = rc->rgba[slot];                                                                         \
+        }                                                                                                    \
+    }
+    RC_FOR_TILE_ENTRIES(rc, tile, RC_TEST_IMAGE);
+#undef RC_TEST_IMAGE
 }
 
 void view_rc__zbuffer(view_rc *rc)
@@ -441,10 +461,10 @@ void view_rc__zbuffer_direct(view_rc *rc)
         zbuf[p] = INFINITY;
         win[p] = RC_NO_POINT;
     }
-    const uint32_t *pix = rc->pix;
+    const uint32_t *key = rc->key;
     const float *dep = rc->dep;
     for (uint32_t i = 0; i < rc->slots; i++) {
-        uint32_t p = pix[i];
+        uint32_t p = key[i];
         if (p != RC_NO_PIXEL && dep[i] < zbuf[p]) {
             zbuf[p] = dep[i];
             win[p] = i;
@@ -486,10 +506,8 @@ FXC_HOT_CLONES static void gather_marks(uint8_t *restrict mark, uint8_t *restric
     }
 }
 
-static void age_task(void *user, uint32_t c, uint32_t worker)
+void view_rc__age_chunk(view_rc *rc, uint32_t c)
 {
-    (void)worker;
-    view_rc *rc = user;
     uint32_t begin, end;
     chunk_range(rc, c, &begin, &end);
     uint32_t top = rc->d.no_eviction ? 254 : 255;
@@ -536,9 +554,20 @@ static void age_task(void *user, uint32_t c, uint32_t worker)
     rc->chunk_free[c] = n;
 }
 
+static void age_task(void *user, uint32_t c, uint32_t worker)
+{
+    (void)worker;
+    view_rc__age_chunk(user, c);
+}
+
 void view_rc__age(view_rc *rc)
 {
     run_chunks(rc, age_task);
+    view_rc__free_stack(rc);
+}
+
+void view_rc__free_stack(view_rc *rc)
+{
     /* The free stack: chunks from the last to the first, so that the lowest free slot is on top. */
     rc->free_count = 0;
     for (uint32_t c = rc->chunk_count; c-- > 0;) {

@@ -386,10 +386,9 @@ static uint32_t dither_group(const view_rc *rc)
     return group < 1 ? 1 : group > RC_DITHER_LANES ? RC_DITHER_LANES : group;
 }
 
-static void dither_task(void *user, uint32_t task, uint32_t worker)
+void view_rc__dither_group(view_rc *rc, uint32_t task, uint32_t group, uint32_t worker)
 {
-    view_rc *rc = user;
-    uint32_t group = dither_group(rc), first = task * group, bands = rc->tiles_y - first;
+    uint32_t first = task * group, bands = rc->tiles_y - first;
     bands = bands < group ? bands : group;
     uint32_t y0[RC_DITHER_LANES], y1[RC_DITHER_LANES];
     view_rc_pixel *out[RC_DITHER_LANES];
@@ -403,7 +402,13 @@ static void dither_task(void *user, uint32_t task, uint32_t worker)
                           bands, rc->chosen, rc->workers[worker].err, rc->workers[worker].spare, out);
 }
 
-void view_rc__sampling(view_rc *rc)
+static void dither_task(void *user, uint32_t task, uint32_t worker)
+{
+    view_rc *rc = user;
+    view_rc__dither_group(rc, task, dither_group(rc), worker);
+}
+
+void view_rc__sampling_quotas(view_rc *rc)
 {
     uint32_t pixels[VIEW_RC_MAX_TILES];
     for (uint32_t b = 0; b < rc->tiles_y; b++) {
@@ -418,6 +423,10 @@ void view_rc__sampling(view_rc *rc)
         run += rc->band_quota[b];
     }
     rc->request_count = run;
+}
+
+void view_rc__sampling(view_rc *rc)
+{
     uint32_t group = dither_group(rc);
     rc_run_pixels(rc->pool, rc->d.dynamic_pixels, (rc->tiles_y + group - 1) / group, dither_task, rc);
 }

@@ -109,6 +109,9 @@ typedef struct view_rc_desc {
                                    band of rows through all three while its rows are in cache, timed
                                    together as VIEW_RC_STAGE_PIXELS), to measure the fusion
                                    (bench_rcache --only fuse) */
+    bool separate_sample_age;   /* the dither and the ageing as two pool runs on 2+ threads, each timed in its
+                                   own stage (by default they share one run there, timed as
+                                   VIEW_RC_STAGE_SAMPLE_AGE), to measure it (bench_rcache --only share) */
 } view_rc_desc;
 
 typedef struct view_rc view_rc;
@@ -147,7 +150,8 @@ typedef struct view_rc_sample {
     X(VIEW_RC_STAGE_INTERPOLATE, "interpolate / smooth") /* and the priority image */                        \
     X(VIEW_RC_STAGE_PREFILTER, "prefilter")                                                                  \
     X(VIEW_RC_STAGE_SAMPLE, "sampling")                                                                      \
-    X(VIEW_RC_STAGE_AGE, "age and evict")
+    X(VIEW_RC_STAGE_AGE, "age and evict")                                                                    \
+    X(VIEW_RC_STAGE_SAMPLE_AGE, "sampling + age (one run)") /* 2+ threads: both above in one pool run */
 
 typedef enum view_rc_stage {
 #define VIEW_RC_STAGE_ENUM(name, text) name,

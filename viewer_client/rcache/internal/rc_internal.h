@@ -43,13 +43,16 @@ static inline uint32_t rc_age(uint32_t rgba)
     return rgba >> 24;
 }
 
-/* A projected point in its tile's list. */
+/* A projected point in its tile's list: 8 bytes. The key packs the pixel within the tile (row * tile +
+ * column, pix_bits of them) and the slot within its chunk above it: the z-buffer reads a tile's list chunk by
+ * chunk (each chunk's range of it is known from the sort's offsets), so the slot is the chunk's first plus
+ * that. The colour is not in the entry: the z-buffer reads a winner's from the store. (Entries
+ * of 16 bytes, pixel, depth, colour and slot, made the sort write and the z-buffer read twice the bytes.) */
 typedef struct rc_entry {
-    uint32_t pix;  /* pixel index: in its tile (row * tile + column) when local_z, else in the image */
-    float depth;   /* view depth, metres along the camera's forward axis */
-    uint32_t rgba; /* colour and age */
-    uint32_t slot; /* where the point lives */
+    uint32_t key; /* (slot - chunk's first) << pix_bits | pixel within the tile */
+    float depth;  /* view depth, metres along the camera's forward axis */
 } rc_entry;
+#define RC_ENTRY_LINE 8u /* entries in a cache line: every (tile, part) list starts on a line of its own */
 
 /* A camera set up for an image: the server's frame (srv_camera_setup) and the projection that inverts
  * srv_camera_ray. rel is the camera position relative to the cache origin, in float, for the hot loops. */
@@ -150,6 +153,7 @@ struct view_rc {
 
     /* Tiles: square, a power of two on a side (the tile of a pixel is two shifts). */
     uint32_t tile, tile_shift, tiles_x, tiles_y, tile_count;
+    uint32_t pix_bits; /* 2 tile_shift: an entry key's bits of the pixel; + chunk_shift at most 32 */
     uint16_t list_outside, list_dead, list_new; /* tile_count, + 1, + 2: the other values of dest / tile_of */
     /* The z-buffer works in buffers of its own (tiles up to RC_LOCAL_TILE on a side): the tile's depths,
      * winners and colours contiguous (48 KiB at tiles of 64), instead of 64 rows of the image 4 * width bytes
@@ -161,8 +165,8 @@ struct view_rc {
     float *px, *py, *pz;
     uint32_t *rgba;
     uint16_t *tile_of;    /* the list a point was in last frame (list_new: inserted since) */
-    uint32_t *pix;        /* this frame: pixel (RC_NO_PIXEL outside); in its tile (row * tile + column) when
-                           * local_z and tiling, else in the image */
+    uint32_t *key;        /* this frame, per slot: its entry's key, which the sort copies into its tile's list
+                           * (with no_tiling: the image's pixel index, RC_NO_PIXEL outside) */
     float *dep;           /* this frame: view depth */
     uint16_t *dest;       /* this frame: tile, list_outside or list_dead */
     uint8_t *mark;        /* this frame: shown in a pixel, one array per thread, mark_stride bytes apart (each
@@ -176,7 +180,8 @@ struct view_rc {
     uint32_t *free_list; /* slots: per chunk, its free slots in descending order */
 
     /* Chunks of slots: the unit of the parallel passes over points. */
-    uint32_t chunk_size, chunk_shift, chunk_count; /* chunk_size = 1 << chunk_shift */
+    uint32_t chunk_size, chunk_shift, chunk_count; /* chunk_size = 1 << chunk_shift (pix_bits + chunk_shift
+                                                    * <= 32, so an entry's key holds both) */
     uint32_t *counts;      /* chunk_count x (tile_count + 2): points going to each list, then offsets */
     uint32_t *chunk_hist;  /* chunk_count x 256: ages of the live points per chunk */
     uint32_t *chunk_quota; /* per chunk: points of age drop_age to drop this frame */
@@ -186,12 +191,13 @@ struct view_rc {
     /* The tile lists of this frame, one per tile and part. The passes over chunks run statically split
      * (fxc_pool_run_static): part p is the chunks thread p runs, [fxc_pool_static_begin(chunk_count, parts,
      * p), the same for p + 1). Tile t's entries from part p are [list_start[t * parts + p], list_end[...]),
-     * in chunk then slot order; every such list starts on a cache line of its own (entries padded to 4, 64
-     * bytes), so no line of entries is written by two threads. The z-buffer reads a tile's parts in part
-     * order: chunk order, the same with any thread count. */
-    rc_entry *entries;    /* entry_sink + 4 x parts entries, 64-byte aligned */
+     * in chunk then slot order (chunk c's: up to counts[c * (tile_count + 2) + t] after the sort); every such
+     * list starts on a cache line of its own (entries padded to RC_ENTRY_LINE, 64 bytes), so no line of
+     * entries is written by two threads. The z-buffer reads a tile's parts in part order: chunk order, the
+     * same with any thread count. */
+    rc_entry *entries;    /* entry_sink + RC_ENTRY_LINE x parts entries, 64-byte aligned */
     uint32_t parts;       /* the pool's threads */
-    uint32_t entry_sink;  /* the sort writes points outside the image and free slots to entry_sink + 4 x its
+    uint32_t entry_sink;  /* the sort writes points outside the image and free slots to entry_sink + 8 x its
                            * thread: a line per thread, so no two threads write one entry */
     uint32_t *list_start; /* tile_count x parts */
     uint32_t *list_end;   /* tile_count x parts */
@@ -265,6 +271,8 @@ void view_rc__zbuffer(view_rc *rc);      /* parallel over tiles */
 void view_rc__project_direct(view_rc *rc); /* no_tiling: the projection without the sort (parallel) */
 void view_rc__zbuffer_direct(view_rc *rc); /* no_tiling: one z-buffer pass in slot order (serial) */
 void view_rc__age(view_rc *rc);            /* parallel over chunks, then the free stack (serial) */
+void view_rc__age_chunk(view_rc *rc, uint32_t chunk); /* one chunk of view_rc__age's parallel part */
+void view_rc__free_stack(view_rc *rc);                /* ... and its serial part */
 
 /* rc_image.c: the pixel passes, parallel over bands of rows: fused (view_rc__pixels: each band through the
  * cull, the interpolation and the prefilter in one task) or, with separate_pixel_passes, one run each. */
@@ -277,7 +285,11 @@ void view_rc__prefilter(view_rc *rc);
 
 /* rc_sample.c */
 void view_rc__predicted_sampling(view_rc *rc); /* serial */
-void view_rc__sampling(view_rc *rc);           /* serial quotas, parallel bands */
+void view_rc__sampling_quotas(view_rc *rc);    /* serial: each band's share of the budget */
+void view_rc__sampling(view_rc *rc);           /* parallel: the bands dithered, in groups */
+/* Dithers bands [task * group, task * group + group) (group at most RC_DITHER_LANES) with worker's scratch.
+ */
+void view_rc__dither_group(view_rc *rc, uint32_t task, uint32_t group, uint32_t worker);
 /* Splits count over bands by weight (largest remainder, each band at most its pixels). */
 void view_rc__band_quotas(const uint64_t *weight, const uint32_t *pixels, uint32_t bands, uint32_t count,
                           uint32_t *quota);
