@@ -299,19 +299,22 @@ static bool same_group(const shade_group *g, const fx_taps *taps, const float no
     return memcmp(g->texel + 1, taps->texel + 1, (taps->count - 1) * sizeof taps->texel[0]) == 0;
 }
 
-/* probe_weight with visibility for up to PROBE_LANES probes at one point and normal (a shade group's taps),
- * lane by lane without branches so that the AVX2 copy runs the probes as one vector: the same operations on
- * the same floats as probe_weight, so the same weights (the wrap, the biased point's distance, the direction's
- * octahedral bilinear texels, the Chebyshev bound, the crush of small weights). The moments' loads are the
- * only scalar part. Lanes at and beyond n, and probes without data or off, give 0. */
+/* Pass 2 of compose's shade for one group's taps, PROBE_LANES probes at a time: each probe's weight (probe_weight
+ * with visibility at the group's mean position and normal) times its irradiance towards the normal
+ * (fx_probe_irradiance, the normal's four texels and weights `texel`, `bilinear` found once for the group), and
+ * the weight, into out[0..2][l] (RGB) and out[3][l]. Lane by lane without branches so that the AVX2 copy runs the
+ * probes as one vector: the same operations on the same floats as those two functions, so the same results
+ * (the stored halves are >= 0, where half_bits_to_float is half_to_float). The payload loads are the only
+ * scalar part. Lanes at and beyond n, and probes without data or off, give 0. */
 enum { PROBE_LANES = 8 };
 
-FXC_HOT_LANES static void probe_weight_lanes(const void *const *probe, uint32_t n, const float position[3],
-                                             const float normal[3], float out[PROBE_LANES])
+FXC_HOT_CLONES static void group_weights_lanes(const void *const *probe, uint32_t n, const float position[3],
+                                               const float normal[3], const uint32_t texel_n[4],
+                                               const float bilinear_n[4], float out[4][PROBE_LANES])
 {
     const float px = position[0], py = position[1], pz = position[2];
     const float nx = normal[0], ny = normal[1], nz = normal[2];
-    float qx[PROBE_LANES], qy[PROBE_LANES], qz[PROBE_LANES], cell[PROBE_LANES];
+    float qx[PROBE_LANES], qy[PROBE_LANES], qz[PROBE_LANES], cell[PROBE_LANES], scale[PROBE_LANES];
     int32_t live[PROBE_LANES];
     for (uint32_t l = 0; l < PROBE_LANES; l++) {
         const uint8_t *p = probe[l < n ? l : 0];
@@ -321,6 +324,7 @@ FXC_HOT_LANES static void probe_weight_lanes(const void *const *probe, uint32_t 
         qy[l] = get_f32(p + 4);
         qz[l] = get_f32(p + 8);
         cell[l] = get_f32(p + 12);
+        scale[l] = get_f32(p + 24);
     }
     float weight[PROBE_LANES], distance[PROBE_LANES], bilinear[4][PROBE_LANES];
     int32_t texel[4][PROBE_LANES];
@@ -349,36 +353,44 @@ FXC_HOT_LANES static void probe_weight_lanes(const void *const *probe, uint32_t 
         for (int c = 0; c < 4; c++) {
             int32_t cx = ix0 + (c & 1), cy = iy0 + (c >> 1);
             int32_t out_y = cy < 0 || cy > 7;
-            int32_t wx_ = out_y ? 7 - cx : cx, wy_ = out_y ? (cy < 0 ? 0 : 7) : cy;
-            int32_t out_x = wx_ < 0 || wx_ > 7;
-            int32_t fx_ = out_x ? (wx_ < 0 ? 0 : 7) : wx_, fy_ = out_x ? 7 - wy_ : wy_;
-            fx_ = fx_ < 0 ? 0 : (fx_ > 7 ? 7 : fx_); /* only reached for NaN input */
-            fy_ = fy_ < 0 ? 0 : (fy_ > 7 ? 7 : fy_);
-            texel[c][l] = fy_ * FX_PROBE_MAP + fx_;
+            int32_t wrap_x = out_y ? 7 - cx : cx, wrap_y = out_y ? (cy < 0 ? 0 : 7) : cy;
+            int32_t out_x = wrap_x < 0 || wrap_x > 7;
+            int32_t tex_x = out_x ? (wrap_x < 0 ? 0 : 7) : wrap_x, tex_y = out_x ? 7 - wrap_y : wrap_y;
+            tex_x = tex_x < 0 ? 0 : (tex_x > 7 ? 7 : tex_x); /* only reached for NaN input */
+            tex_y = tex_y < 0 ? 0 : (tex_y > 7 ? 7 : tex_y);
+            texel[c][l] = tex_y * FX_PROBE_MAP + tex_x;
             bilinear[c][l] = ((c & 1) ? wx : 1.0f - wx) * ((c >> 1) ? wy : 1.0f - wy);
         }
     }
-    float mean[PROBE_LANES], mean2[PROBE_LANES];
+    uint32_t moments[4][PROBE_LANES], irradiance[4][3][PROBE_LANES];
     for (uint32_t l = 0; l < PROBE_LANES; l++) {
         const uint8_t *p = probe[l < n ? l : 0];
-        float m1 = 0, m2 = 0;
         for (int c = 0; c < 4; c++) {
-            uint32_t word = get_u32(p + PROBE_MOMENTS + 4 * texel[c][l]);
-            m1 += bilinear[c][l] * half_bits_to_float(word & 0xffffu);
-            m2 += bilinear[c][l] * half_bits_to_float(word >> 16);
+            moments[c][l] = get_u32(p + PROBE_MOMENTS + 4 * texel[c][l]);
+            for (int k = 0; k < 3; k++)
+                irradiance[c][k][l] = fx__get_u16(p + PROBE_IRRADIANCE + 6 * texel_n[c] + 2 * k);
         }
-        mean[l] = m1 * cell[l];
-        mean2[l] = m2 * cell[l] * cell[l];
     }
     for (uint32_t l = 0; l < PROBE_LANES; l++) {
-        float variance = fabsf(mean2[l] - mean[l] * mean[l]), excess = distance[l] - mean[l];
+        float m1 = 0, m2 = 0, e[3] = {0, 0, 0};
+        for (int c = 0; c < 4; c++) {
+            m1 += bilinear[c][l] * half_bits_to_float(moments[c][l] & 0xffffu);
+            m2 += bilinear[c][l] * half_bits_to_float(moments[c][l] >> 16);
+            for (int k = 0; k < 3; k++)
+                e[k] += bilinear_n[c] * half_bits_to_float(irradiance[c][k][l]);
+        }
+        float mean = m1 * cell[l], mean2 = m2 * cell[l] * cell[l];
+        float variance = fabsf(mean2 - mean * mean), excess = distance[l] - mean;
         float chebyshev = variance / (variance + excess * excess);
-        chebyshev = distance[l] > mean[l] ? chebyshev * chebyshev * chebyshev : 1.0f;
+        chebyshev = distance[l] > mean ? chebyshev * chebyshev * chebyshev : 1.0f;
         chebyshev = chebyshev > 0.05f ? chebyshev : 0.05f; /* fmaxf(0.05f, chebyshev), NaN included */
         float w = distance[l] > 0 ? weight[l] * chebyshev : weight[l];
         w = w > 1e-6f ? w : 1e-6f;
         w = w < 0.2f ? w * (w * w / (0.2f * 0.2f)) : w;
-        out[l] = live[l] ? w : 0.0f;
+        w = live[l] ? w : 0.0f;
+        for (int k = 0; k < 3; k++)
+            out[k][l] = w * (w > 0 ? e[k] * scale[l] : 0.0f);
+        out[3][l] = w;
     }
 }
 
@@ -432,27 +444,16 @@ FXC_HOT_CLONES void fx__probes_shade(const fx_context *ctx, const fx_shade_run *
             float mean[3];
             for (int k = 0; k < 3; k++)
                 mean[k] = sg->pixels == 1 ? run->points[sample].position[k] : sg->position_sum[k] / (float)sg->pixels;
-            float weight[FX_MAX_TAPS];
-            for (uint32_t t = 0; t < taps->count; t += PROBE_LANES)
-                probe_weight_lanes(taps->texel + t, taps->count - t < PROBE_LANES ? taps->count - t : PROBE_LANES, mean,
-                                   sg->normal, weight + t);
             uint32_t texel[4];
             float bilinear[4];
             oct_bilinear_inline(sg->normal, texel, bilinear);
-            for (uint32_t t = 0; t < taps->count; t++) {
-                const uint8_t *p = taps->texel[t];
-                float e[3] = {0, 0, 0};
-                if (weight[t] > 0) {
-                    for (int c = 0; c < 4; c++)
-                        for (int k = 0; k < 3; k++)
-                            e[k] += bilinear[c] * half_to_float(fx__get_u16(p + PROBE_IRRADIANCE + 6 * texel[c] + 2 * k));
-                    float scale = get_f32(p + 24);
-                    for (int k = 0; k < 3; k++)
-                        e[k] *= scale;
-                }
-                for (int k = 0; k < 3; k++)
-                    sg->weighted[t][k] = weight[t] * e[k];
-                sg->weighted[t][3] = weight[t];
+            for (uint32_t t = 0; t < taps->count; t += PROBE_LANES) {
+                uint32_t lanes = taps->count - t < PROBE_LANES ? taps->count - t : PROBE_LANES;
+                float out[4][PROBE_LANES];
+                group_weights_lanes(taps->texel + t, lanes, mean, sg->normal, texel, bilinear, out);
+                for (uint32_t l = 0; l < lanes; l++)
+                    for (int k = 0; k < 4; k++)
+                        sg->weighted[t + l][k] = out[k][l];
             }
         }
         /* Pass 3: per pixel, the trilinear weights. */
@@ -471,8 +472,10 @@ FXC_HOT_CLONES void fx__probes_shade(const fx_context *ctx, const fx_shade_run *
             if (!(total > 0))
                 continue;
             float open = run->sky_visibility[i] * (1.0f / FX_PROBE_PI) / total;
-            for (int k = 0; k < 3; k++)
-                run->indirect[3 * i + k] += fminf(sum[k] * open, FLT_MAX);
+            for (int k = 0; k < 3; k++) {
+                float term = sum[k] * open;
+                run->indirect[3 * i + k] += term < FLT_MAX ? term : FLT_MAX; /* fminf(term, FLT_MAX), NaN included */
+            }
             run->sky_visibility[i] = 0.0f;
         }
         done = end;
