@@ -326,8 +326,10 @@ FXC_HOT_CLONES static void group_weights_lanes(const void *const *probe, uint32_
         cell[l] = get_f32(p + 12);
         scale[l] = get_f32(p + 24);
     }
-    float weight[PROBE_LANES], distance[PROBE_LANES], bilinear[4][PROBE_LANES];
-    int32_t texel[4][PROBE_LANES];
+    /* Each loop over the lanes is innermost (GCC vectorises only those): per lane the same operations in
+     * the same order as probe_weight and fx_probe_irradiance. */
+    float weight[PROBE_LANES], distance[PROBE_LANES], wx[PROBE_LANES], wy[PROBE_LANES];
+    int32_t ix0[PROBE_LANES], iy0[PROBE_LANES];
     for (uint32_t l = 0; l < PROBE_LANES; l++) {
         float tx = qx[l] - px, ty = qy[l] - py, tz = qz[l] - pz;
         float bx = qx[l] - (px + nx * FX_PROBE_NORMAL_BIAS * cell[l]);
@@ -348,10 +350,16 @@ FXC_HOT_CLONES static void group_weights_lanes(const void *const *probe, uint32_
         float u = z < 0 ? fold_x : ox, v = z < 0 ? fold_y : oy;
         float fu = (u + 1.0f) * 4.0f - 0.5f, fv = (v + 1.0f) * 4.0f - 0.5f;
         float x0 = floorf(fu), y0 = floorf(fv);
-        float wx = fu - x0, wy = fv - y0;
-        int32_t ix0 = (int32_t)x0, iy0 = (int32_t)y0;
-        for (int c = 0; c < 4; c++) {
-            int32_t cx = ix0 + (c & 1), cy = iy0 + (c >> 1);
+        wx[l] = fu - x0;
+        wy[l] = fv - y0;
+        ix0[l] = (int32_t)x0;
+        iy0[l] = (int32_t)y0;
+    }
+    float bilinear[4][PROBE_LANES];
+    int32_t texel[4][PROBE_LANES];
+    for (int c = 0; c < 4; c++)
+        for (uint32_t l = 0; l < PROBE_LANES; l++) {
+            int32_t cx = ix0[l] + (c & 1), cy = iy0[l] + (c >> 1);
             int32_t out_y = cy < 0 || cy > 7;
             int32_t wrap_x = out_y ? 7 - cx : cx, wrap_y = out_y ? (cy < 0 ? 0 : 7) : cy;
             int32_t out_x = wrap_x < 0 || wrap_x > 7;
@@ -359,9 +367,8 @@ FXC_HOT_CLONES static void group_weights_lanes(const void *const *probe, uint32_
             tex_x = tex_x < 0 ? 0 : (tex_x > 7 ? 7 : tex_x); /* only reached for NaN input */
             tex_y = tex_y < 0 ? 0 : (tex_y > 7 ? 7 : tex_y);
             texel[c][l] = tex_y * FX_PROBE_MAP + tex_x;
-            bilinear[c][l] = ((c & 1) ? wx : 1.0f - wx) * ((c >> 1) ? wy : 1.0f - wy);
+            bilinear[c][l] = ((c & 1) ? wx[l] : 1.0f - wx[l]) * ((c >> 1) ? wy[l] : 1.0f - wy[l]);
         }
-    }
     uint32_t moments[4][PROBE_LANES], irradiance[4][3][PROBE_LANES];
     for (uint32_t l = 0; l < PROBE_LANES; l++) {
         const uint8_t *p = probe[l < n ? l : 0];
@@ -371,15 +378,18 @@ FXC_HOT_CLONES static void group_weights_lanes(const void *const *probe, uint32_
                 irradiance[c][k][l] = fx__get_u16(p + PROBE_IRRADIANCE + 6 * texel_n[c] + 2 * k);
         }
     }
-    for (uint32_t l = 0; l < PROBE_LANES; l++) {
-        float m1 = 0, m2 = 0, e[3] = {0, 0, 0};
-        for (int c = 0; c < 4; c++) {
-            m1 += bilinear[c][l] * half_bits_to_float(moments[c][l] & 0xffffu);
-            m2 += bilinear[c][l] * half_bits_to_float(moments[c][l] >> 16);
-            for (int k = 0; k < 3; k++)
-                e[k] += bilinear_n[c] * half_bits_to_float(irradiance[c][k][l]);
+    float m1[PROBE_LANES] = {0}, m2[PROBE_LANES] = {0}, e[3][PROBE_LANES] = {{0}};
+    for (int c = 0; c < 4; c++) {
+        for (uint32_t l = 0; l < PROBE_LANES; l++) {
+            m1[l] += bilinear[c][l] * half_bits_to_float(moments[c][l] & 0xffffu);
+            m2[l] += bilinear[c][l] * half_bits_to_float(moments[c][l] >> 16);
         }
-        float mean = m1 * cell[l], mean2 = m2 * cell[l] * cell[l];
+        for (int k = 0; k < 3; k++)
+            for (uint32_t l = 0; l < PROBE_LANES; l++)
+                e[k][l] += bilinear_n[c] * half_bits_to_float(irradiance[c][k][l]);
+    }
+    for (uint32_t l = 0; l < PROBE_LANES; l++) {
+        float mean = m1[l] * cell[l], mean2 = m2[l] * cell[l] * cell[l];
         float variance = fabsf(mean2 - mean * mean), excess = distance[l] - mean;
         float chebyshev = variance / (variance + excess * excess);
         chebyshev = distance[l] > mean ? chebyshev * chebyshev * chebyshev : 1.0f;
@@ -388,8 +398,9 @@ FXC_HOT_CLONES static void group_weights_lanes(const void *const *probe, uint32_
         w = w > 1e-6f ? w : 1e-6f;
         w = w < 0.2f ? w * (w * w / (0.2f * 0.2f)) : w;
         w = live[l] ? w : 0.0f;
-        for (int k = 0; k < 3; k++)
-            out[k][l] = w * (w > 0 ? e[k] * scale[l] : 0.0f);
+        out[0][l] = w * (w > 0 ? e[0][l] * scale[l] : 0.0f);
+        out[1][l] = w * (w > 0 ? e[1][l] * scale[l] : 0.0f);
+        out[2][l] = w * (w > 0 ? e[2][l] * scale[l] : 0.0f);
         out[3][l] = w;
     }
 }
