@@ -374,11 +374,8 @@ FXC_HOT_CLONES static void group_weights_lanes(const void *const *probe, uint32_
         const uint8_t *p = probe[l < n ? l : 0];
         for (int c = 0; c < 4; c++) {
             moments[c][l] = get_u32(p + PROBE_MOMENTS + 4 * texel[c][l]);
-            /* the texel's three halves in one 8-byte read (the moments follow the irradiance: in bounds) */
-            const uint8_t *rgb = p + PROBE_IRRADIANCE + 6 * texel_n[c];
-            uint64_t halves = (uint64_t)get_u32(rgb) | (uint64_t)get_u32(rgb + 4) << 32;
             for (int k = 0; k < 3; k++)
-                irradiance[c][k][l] = (uint32_t)(halves >> (16 * k)) & 0xffffu;
+                irradiance[c][k][l] = fx__get_u16(p + PROBE_IRRADIANCE + 6 * texel_n[c] + 2 * k);
         }
     }
     float m1[PROBE_LANES] = {0}, m2[PROBE_LANES] = {0}, e[3][PROBE_LANES] = {{0}};
