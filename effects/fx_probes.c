@@ -94,16 +94,6 @@
 #include <pthread.h>
 #include <stdlib.h>
 
-/* A half (finite, >= 0: moments and stored irradiance) to float, exactly, subnormals included: its bits
- * shifted into a float's place and rescaled by 2^112 (the exponent biases' difference), so it vectorises. */
-static inline float half_bits_to_float(uint32_t h)
-{
-    uint32_t bits = (h & 0x7fffu) << 13;
-    float f;
-    memcpy(&f, &bits, sizeof f);
-    return f * 0x1p112f;
-}
-
 /* fminf(x, m) for m > 0 (not NaN), inline: NaN and x >= m give m, as fminf does (libm's fminf is a call
  * here: without -ffinite-math-only the compiler does not inline it). */
 static inline float min_of(float x, float m)

@@ -7,12 +7,13 @@
 
 /* ---- directions ------------------------------------------------------------------------------------ */
 
-static float sign_nonzero(float x)
+FXC_HOT_INLINE float sign_nonzero(float x)
 {
     return x >= 0 ? 1.0f : -1.0f;
 }
 
-void fx_probe_oct_encode(const float dir[3], float uv[2])
+/* Inlined into compose's shade copies (FXC_HOT_INLINE); fx_probe_oct_encode is the same code as a function. */
+FXC_HOT_INLINE void oct_encode_inline(const float dir[3], float uv[2])
 {
     float l1 = fabsf(dir[0]) + fabsf(dir[1]) + fabsf(dir[2]);
     float x = l1 > 0 ? dir[0] / l1 : 0.0f, y = l1 > 0 ? dir[1] / l1 : 0.0f;
@@ -22,6 +23,11 @@ void fx_probe_oct_encode(const float dir[3], float uv[2])
     }
     uv[0] = x;
     uv[1] = y;
+}
+
+void fx_probe_oct_encode(const float dir[3], float uv[2])
+{
+    oct_encode_inline(dir, uv);
 }
 
 void fx_probe_oct_decode(const float uv[2], float dir[3])
@@ -63,11 +69,12 @@ void fx__probe_texel_dirs(float dirs[FX_PROBE_TEXELS][3])
 
 /* The four texels and bilinear weights of direction dir in the 8 x 8 map; neighbours past an edge of the
  * square wrap as the octahedron does (the edge is mirrored about its midpoint; a corner's neighbour is the
- * opposite corner), i.e. DDGI's border texels without storing them. */
-static void oct_bilinear(const float dir[3], uint32_t texel[4], float weight[4])
+ * opposite corner), i.e. DDGI's border texels without storing them. Inlined into compose's shade copies;
+ * oct_bilinear below is the same code as a function for the other readers. */
+FXC_HOT_INLINE void oct_bilinear_inline(const float dir[3], uint32_t texel[4], float weight[4])
 {
     float uv[2];
-    fx_probe_oct_encode(dir, uv);
+    oct_encode_inline(dir, uv);
     float fx = (uv[0] + 1.0f) * 4.0f - 0.5f, fy = (uv[1] + 1.0f) * 4.0f - 0.5f;
     float x0 = floorf(fx), y0 = floorf(fy);
     float wx = fx - x0, wy = fy - y0;
@@ -86,6 +93,11 @@ static void oct_bilinear(const float dir[3], uint32_t texel[4], float weight[4])
         texel[c] = (uint32_t)(y * FX_PROBE_MAP + x);
         weight[c] = ((c & 1) ? wx : 1.0f - wx) * ((c >> 1) ? wy : 1.0f - wy);
     }
+}
+
+static void oct_bilinear(const float dir[3], uint32_t texel[4], float weight[4])
+{
+    oct_bilinear_inline(dir, texel, weight);
 }
 
 void fx__probe_oct_bilinear(const float dir[3], uint32_t texel[4], float weight[4])
@@ -287,8 +299,115 @@ static bool same_group(const shade_group *g, const fx_taps *taps, const float no
     return memcmp(g->texel + 1, taps->texel + 1, (taps->count - 1) * sizeof taps->texel[0]) == 0;
 }
 
+/* Pass 2 of compose's shade for one group's taps, PROBE_LANES probes at a time: each probe's weight (probe_weight
+ * with visibility at the group's mean position and normal) times its irradiance towards the normal
+ * (fx_probe_irradiance, the normal's four texels and weights `texel`, `bilinear` found once for the group), and
+ * the weight, into out[0..2][l] (RGB) and out[3][l]. Lane by lane without branches so that the AVX2 copy runs the
+ * probes as one vector: the same operations on the same floats as those two functions, so the same results
+ * (the stored halves are >= 0, where half_bits_to_float is half_to_float). The payload loads are the only
+ * scalar part. Lanes at and beyond n, and probes without data or off, give 0. */
+enum { PROBE_LANES = 8 };
+
+FXC_HOT_CLONES static void group_weights_lanes(const void *const *probe, uint32_t n, const float position[3],
+                                               const float normal[3], const uint32_t texel_n[4],
+                                               const float bilinear_n[4], float out[4][PROBE_LANES])
+{
+    const float px = position[0], py = position[1], pz = position[2];
+    const float nx = normal[0], ny = normal[1], nz = normal[2];
+    float qx[PROBE_LANES], qy[PROBE_LANES], qz[PROBE_LANES], cell[PROBE_LANES], scale[PROBE_LANES];
+    int32_t live[PROBE_LANES];
+    for (uint32_t l = 0; l < PROBE_LANES; l++) {
+        const uint8_t *p = probe[l < n ? l : 0];
+        uint32_t flags = get_u32(p + 16);
+        live[l] = l < n && (flags & FX_PROBE_HAS_DATA) && !(flags & FX_PROBE_OFF);
+        qx[l] = get_f32(p);
+        qy[l] = get_f32(p + 4);
+        qz[l] = get_f32(p + 8);
+        cell[l] = get_f32(p + 12);
+        scale[l] = get_f32(p + 24);
+    }
+    /* Each loop over the lanes is innermost (GCC vectorises only those): per lane the same operations in
+     * the same order as probe_weight and fx_probe_irradiance. */
+    float weight[PROBE_LANES], distance[PROBE_LANES], wx[PROBE_LANES], wy[PROBE_LANES];
+    int32_t ix0[PROBE_LANES], iy0[PROBE_LANES];
+    for (uint32_t l = 0; l < PROBE_LANES; l++) {
+        float tx = qx[l] - px, ty = qy[l] - py, tz = qz[l] - pz;
+        float bx = qx[l] - (px + nx * FX_PROBE_NORMAL_BIAS * cell[l]);
+        float by = qy[l] - (py + ny * FX_PROBE_NORMAL_BIAS * cell[l]);
+        float bz = qz[l] - (pz + nz * FX_PROBE_NORMAL_BIAS * cell[l]);
+        float len2 = tx * tx + ty * ty + tz * tz, biased_len2 = bx * bx + by * by + bz * bz;
+        float len = sqrtf(len2);
+        float wrap = len > 0 ? ((tx * nx + ty * ny + tz * nz) / (len > 0 ? len : 1.0f) + 1.0f) * 0.5f : 1.0f;
+        weight[l] = wrap * wrap + 0.2f;
+        float d = sqrtf(biased_len2);
+        distance[l] = d;
+        /* oct_bilinear of the direction from the probe to the biased point */
+        float safe = d > 0 ? d : 1.0f;
+        float x = -bx / safe, y = -by / safe, z = -bz / safe;
+        float l1 = fabsf(x) + fabsf(y) + fabsf(z), l1_safe = l1 > 0 ? l1 : 1.0f;
+        float ox = l1 > 0 ? x / l1_safe : 0.0f, oy = l1 > 0 ? y / l1_safe : 0.0f;
+        float fold_x = (1.0f - fabsf(oy)) * (ox >= 0 ? 1.0f : -1.0f), fold_y = (1.0f - fabsf(ox)) * (oy >= 0 ? 1.0f : -1.0f);
+        float u = z < 0 ? fold_x : ox, v = z < 0 ? fold_y : oy;
+        float fu = (u + 1.0f) * 4.0f - 0.5f, fv = (v + 1.0f) * 4.0f - 0.5f;
+        float x0 = floorf(fu), y0 = floorf(fv);
+        wx[l] = fu - x0;
+        wy[l] = fv - y0;
+        ix0[l] = (int32_t)x0;
+        iy0[l] = (int32_t)y0;
+    }
+    float bilinear[4][PROBE_LANES];
+    int32_t texel[4][PROBE_LANES];
+    for (int c = 0; c < 4; c++)
+        for (uint32_t l = 0; l < PROBE_LANES; l++) {
+            int32_t cx = ix0[l] + (c & 1), cy = iy0[l] + (c >> 1);
+            int32_t out_y = cy < 0 || cy > 7;
+            int32_t wrap_x = out_y ? 7 - cx : cx, wrap_y = out_y ? (cy < 0 ? 0 : 7) : cy;
+            int32_t out_x = wrap_x < 0 || wrap_x > 7;
+            int32_t tex_x = out_x ? (wrap_x < 0 ? 0 : 7) : wrap_x, tex_y = out_x ? 7 - wrap_y : wrap_y;
+            tex_x = tex_x < 0 ? 0 : (tex_x > 7 ? 7 : tex_x); /* only reached for NaN input */
+            tex_y = tex_y < 0 ? 0 : (tex_y > 7 ? 7 : tex_y);
+            texel[c][l] = tex_y * FX_PROBE_MAP + tex_x;
+            bilinear[c][l] = ((c & 1) ? wx[l] : 1.0f - wx[l]) * ((c >> 1) ? wy[l] : 1.0f - wy[l]);
+        }
+    uint32_t moments[4][PROBE_LANES], irradiance[4][3][PROBE_LANES];
+    for (uint32_t l = 0; l < PROBE_LANES; l++) {
+        const uint8_t *p = probe[l < n ? l : 0];
+        for (int c = 0; c < 4; c++) {
+            moments[c][l] = get_u32(p + PROBE_MOMENTS + 4 * texel[c][l]);
+            for (int k = 0; k < 3; k++)
+                irradiance[c][k][l] = fx__get_u16(p + PROBE_IRRADIANCE + 6 * texel_n[c] + 2 * k);
+        }
+    }
+    float m1[PROBE_LANES] = {0}, m2[PROBE_LANES] = {0}, e[3][PROBE_LANES] = {{0}};
+    for (int c = 0; c < 4; c++) {
+        for (uint32_t l = 0; l < PROBE_LANES; l++) {
+            m1[l] += bilinear[c][l] * half_bits_to_float(moments[c][l] & 0xffffu);
+            m2[l] += bilinear[c][l] * half_bits_to_float(moments[c][l] >> 16);
+        }
+        for (int k = 0; k < 3; k++)
+            for (uint32_t l = 0; l < PROBE_LANES; l++)
+                e[k][l] += bilinear_n[c] * half_bits_to_float(irradiance[c][k][l]);
+    }
+    for (uint32_t l = 0; l < PROBE_LANES; l++) {
+        float mean = m1[l] * cell[l], mean2 = m2[l] * cell[l] * cell[l];
+        float variance = fabsf(mean2 - mean * mean), excess = distance[l] - mean;
+        float chebyshev = variance / (variance + excess * excess);
+        chebyshev = distance[l] > mean ? chebyshev * chebyshev * chebyshev : 1.0f;
+        chebyshev = chebyshev > 0.05f ? chebyshev : 0.05f; /* fmaxf(0.05f, chebyshev), NaN included */
+        float w = distance[l] > 0 ? weight[l] * chebyshev : weight[l];
+        w = w > 1e-6f ? w : 1e-6f;
+        w = w < 0.2f ? w * (w * w / (0.2f * 0.2f)) : w;
+        w = live[l] ? w : 0.0f;
+        out[0][l] = w * (w > 0 ? e[0][l] * scale[l] : 0.0f);
+        out[1][l] = w * (w > 0 ? e[1][l] * scale[l] : 0.0f);
+        out[2][l] = w * (w > 0 ? e[2][l] * scale[l] : 0.0f);
+        out[3][l] = w;
+    }
+}
+
 FXC_HOT_CLONES void fx__probes_shade(const fx_context *ctx, const fx_shade_run *run)
 {
+    (void)ctx; /* the probes' irradiance is read directly, without the per-thread memo of fx__probe_filter_memo */
     shade_group groups[SHADE_GROUPS];
     uint8_t group_of[FX_RUN_PIXELS];
     uint32_t group_count = 0;
@@ -324,7 +443,9 @@ FXC_HOT_CLONES void fx__probes_shade(const fx_context *ctx, const fx_shade_run *
             groups[g].pixels++;
         }
         /* Pass 2: per group, each tap's weight at the mean position and irradiance towards the normal. The
-         * taps of a group are the same probes in the same order (same cell), whichever pixel is asked. */
+         * taps of a group are the same probes in the same order (same cell), whichever pixel is asked. The
+         * weights PROBE_LANES probes at a time; the normal's octahedral texels once for all its probes (the
+         * sums of fx_probe_irradiance, the same floats). */
         for (uint32_t g = 0; g < group_count; g++) {
             shade_group *sg = &groups[g];
             uint32_t sample = done;
@@ -334,14 +455,16 @@ FXC_HOT_CLONES void fx__probes_shade(const fx_context *ctx, const fx_shade_run *
             float mean[3];
             for (int k = 0; k < 3; k++)
                 mean[k] = sg->pixels == 1 ? run->points[sample].position[k] : sg->position_sum[k] / (float)sg->pixels;
-            for (uint32_t t = 0; t < taps->count; t++) {
-                const uint8_t *p = taps->texel[t];
-                float weight = probe_weight(p, mean, sg->normal, true), e[3] = {0, 0, 0};
-                if (weight > 0)
-                    probe_irradiance_memo(ctx, true, p, sg->normal, e);
-                for (int k = 0; k < 3; k++)
-                    sg->weighted[t][k] = weight * e[k];
-                sg->weighted[t][3] = weight;
+            uint32_t texel[4];
+            float bilinear[4];
+            oct_bilinear_inline(sg->normal, texel, bilinear);
+            for (uint32_t t = 0; t < taps->count; t += PROBE_LANES) {
+                uint32_t lanes = taps->count - t < PROBE_LANES ? taps->count - t : PROBE_LANES;
+                float out[4][PROBE_LANES];
+                group_weights_lanes(taps->texel + t, lanes, mean, sg->normal, texel, bilinear, out);
+                for (uint32_t l = 0; l < lanes; l++)
+                    for (int k = 0; k < 4; k++)
+                        sg->weighted[t + l][k] = out[k][l];
             }
         }
         /* Pass 3: per pixel, the trilinear weights. */
@@ -360,8 +483,10 @@ FXC_HOT_CLONES void fx__probes_shade(const fx_context *ctx, const fx_shade_run *
             if (!(total > 0))
                 continue;
             float open = run->sky_visibility[i] * (1.0f / FX_PROBE_PI) / total;
-            for (int k = 0; k < 3; k++)
-                run->indirect[3 * i + k] += fminf(sum[k] * open, FLT_MAX);
+            for (int k = 0; k < 3; k++) {
+                float term = sum[k] * open;
+                run->indirect[3 * i + k] += term < FLT_MAX ? term : FLT_MAX; /* fminf(term, FLT_MAX), NaN included */
+            }
             run->sky_visibility[i] = 0.0f;
         }
         done = end;

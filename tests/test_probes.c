@@ -5,6 +5,7 @@
 #include "test_util.h"
 
 #include "fx_internal.h"
+#include "fx_probes_internal.h"
 #include "fxt_scene.h"
 #include "scene_internal.h"
 
@@ -823,6 +824,102 @@ static void test_thread_split_determinism(void **state)
     scene_free(s);
 }
 
+/* compose's shade against the filter read the plain way (fx__probe_filter_memo without a context: probe_weight
+ * and fx_probe_irradiance per probe, no lanes): random payloads (positions around the point, data or not, off
+ * or not, random halves for irradiance and moments, so the Chebyshev bound, the octahedral wrap at every edge
+ * and the crush of small weights all occur), random points, normals and tap counts (1 to 16: a partial group
+ * of lanes and two levels' taps), one pixel a run, so the group's weights are taken at the pixel itself. The
+ * two sum in different orders (the filter renormalises, shade divides once by the total), hence a relative
+ * tolerance of 1e-5 (a few float roundings); a wrong texel, weight or lane would be off by far more. */
+static uint16_t random_half(uint64_t *rng, uint32_t exponent_lo, uint32_t exponent_hi)
+{
+    *rng = fx__mix64(*rng + 0x9e3779b97f4a7c15ull);
+    uint32_t exponent = exponent_lo + (uint32_t)(*rng >> 32) % (exponent_hi - exponent_lo + 1);
+    return (uint16_t)(exponent << 10 | (uint32_t)(*rng & 0x3ffu));
+}
+
+static void test_shade_lanes_match_filter(void **state)
+{
+    (void)state;
+    enum { PROBES = 16, TRIALS = 4000 };
+    static uint8_t payload[PROBES][FX_PROBE_BYTES];
+    uint64_t rng = 0x5eed1e55u;
+    uint32_t compared = 0, lit = 0;
+    double worst = 0;
+    for (uint32_t trial = 0; trial < TRIALS; trial++) {
+        float point[3], normal[3];
+        for (int k = 0; k < 3; k++)
+            point[k] = (float)random_unit(&rng) * 2.0f - 1.0f;
+        do {
+            for (int k = 0; k < 3; k++)
+                normal[k] = (float)random_unit(&rng) * 2.0f - 1.0f;
+        } while (fx__dot(normal, normal) < 0.01f);
+        float len = sqrtf(fx__dot(normal, normal));
+        for (int k = 0; k < 3; k++)
+            normal[k] /= len;
+        if (trial % 7 == 0) /* axis normals: the octahedron's corners and edges */
+            for (int k = 0; k < 3; k++)
+                normal[k] = k == (int)(trial / 7 % 3) ? (trial % 2 ? -1.0f : 1.0f) : 0.0f;
+        fx_taps taps;
+        memset(&taps, 0, sizeof taps);
+        taps.count = 1 + (uint32_t)(random_unit(&rng) * PROBES) % PROBES;
+        for (uint32_t t = 0; t < taps.count; t++) {
+            uint8_t *p = payload[t];
+            memset(p, 0, FX_PROBE_BYTES);
+            float cell = trial % 3 == 0 ? 0.25f : 1.0f;
+            for (int k = 0; k < 3; k++) {
+                float at = point[k] + ((float)random_unit(&rng) * 2.0f - 1.0f) * cell;
+                memcpy(p + 4 * k, &at, 4);
+            }
+            uint32_t roll = (uint32_t)(random_unit(&rng) * 10) % 10;
+            uint32_t flags = roll == 0 ? 0u : (roll == 1 ? FX_PROBE_HAS_DATA | FX_PROBE_OFF : FX_PROBE_HAS_DATA);
+            float scale = (float)random_unit(&rng) * 4.0f;
+            memcpy(p + 12, &cell, 4);
+            memcpy(p + 16, &flags, 4); /* little-endian hosts only, as the rest of this file */
+            memcpy(p + 24, &scale, 4);
+            for (uint32_t i = 0; i < FX_PROBE_TEXELS * 3; i++)
+                fx__put_u16(p + PROBE_IRRADIANCE + 2 * i, random_half(&rng, 1, 15)); /* 2^-14 .. 2 */
+            for (uint32_t i = 0; i < FX_PROBE_TEXELS; i++) {
+                fx__put_u16(p + PROBE_MOMENTS + 4 * i, random_half(&rng, 11, 16));     /* mean: 1/16 .. 4 cells */
+                fx__put_u16(p + PROBE_MOMENTS + 4 * i + 2, random_half(&rng, 8, 18)); /* mean squared */
+            }
+            taps.texel[t] = p;
+            taps.weight[t] = (float)random_unit(&rng) + 1e-3f;
+        }
+        float expected[3];
+        bool any = fx__probe_filter_memo(NULL, true, &taps, point, normal, expected);
+        fx_point pt;
+        memset(&pt, 0, sizeof pt);
+        memcpy(pt.position, point, sizeof pt.position);
+        memcpy(pt.normal, normal, sizeof pt.normal);
+        memcpy(pt.view_normal, normal, sizeof pt.view_normal);
+        float indirect[3] = {0, 0, 0}, visibility = 1, sky = 1;
+        fx_shade_run run = {.count = 1, .taps = &taps, .points = &pt, .light_visibility = &visibility,
+                            .sky_visibility = &sky, .indirect = indirect};
+        fx_effect_probes.shade(NULL, &run);
+        if (!any) { /* no probe with data: shade adds nothing and leaves the sky */
+            assert_true(indirect[0] == 0 && indirect[1] == 0 && indirect[2] == 0);
+            assert_true(sky == 1.0f);
+            continue;
+        }
+        compared++;
+        for (int k = 0; k < 3; k++) {
+            double want = (double)expected[k] / (double)PI_F, got = indirect[k];
+            double error = fabs(got - want) / fmax(fabs(want), 1e-30);
+            if (want > 0)
+                lit++;
+            if (error > worst)
+                worst = error;
+            if (!(error <= 1e-5))
+                printf("trial %u channel %d: shade %.9g, filter %.9g\n", trial, k, got, want);
+            assert_true(error <= 1e-5);
+        }
+    }
+    printf("shade against the filter: %u points compared (%u channels lit), worst relative error %.3g\n", compared,
+           lit, worst);
+    assert_true(compared > TRIALS / 2);
+}
+
 /* Update hits read the probes around them through world_cell (a cell's corners kept per thread) or, without
  * it, through world_taps per hit: the same filter, so after 6 frames of the thin-wall scene (bounces between
  * the probes of both rooms, a wall between them, probes switched off inside the wall) the maps agree. The
@@ -981,6 +1078,7 @@ int main(void)
         cmocka_unit_test(test_wall_edge_stable),
         cmocka_unit_test(test_thread_split_determinism),
         cmocka_unit_test(test_cell_reads_match_taps),
+        cmocka_unit_test(test_shade_lanes_match_filter),
         cmocka_unit_test(test_memo_across_loops),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -83,6 +83,17 @@ static inline float half_to_float(uint16_t h)
     return value;
 }
 
+/* A half (finite, >= 0: moments and stored irradiance) to float, exactly, subnormals included: its bits
+ * shifted into a float's place and rescaled by 2^112 (the exponent biases' difference), so it vectorises.
+ * For those halves the same float as half_to_float. */
+static inline float half_bits_to_float(uint32_t h)
+{
+    uint32_t bits = (h & 0x7fffu) << 13;
+    float f;
+    memcpy(&f, &bits, sizeof f);
+    return f * 0x1p112f;
+}
+
 /* The four texels of direction dir in the 8 x 8 map and their bilinear weights (DDGI's border wrap). */
 void fx__probe_oct_bilinear(const float dir[3], uint32_t texel[4], float weight[4]);
 

@@ -315,7 +315,10 @@ static inline void cell_position(const cell_memo *m, const float p[3], float t[3
 {
     for (int a = 0; a < 3; a++) {
         float u = (float)(((double)p[a] - m->lo[a]) * m->inv_cell);
-        t[a] = fminf(fmaxf(u, 0.0f), 1.0f); /* [0, 1]; NaN cannot occur (the point is inside the cell) */
+        /* [0, 1]; NaN cannot occur (the point is inside the cell). Selects, not fminf(fmaxf(u, 0), 1) (libm
+         * calls here): the same floats but the sign of a zero, and a zero weight is left out either way */
+        float above = u > 0.0f ? u : 0.0f;
+        t[a] = above < 1.0f ? above : 1.0f;
     }
 }
 
