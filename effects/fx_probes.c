@@ -384,14 +384,7 @@ FXC_HOT_INLINE void hit_weights(const hit_cell *restrict e, const float position
         front |= ((e->active >> c & 1) && along[c] >= 0 && tap[c] > 0 ? 1u : 0u) << c;
     for (int c = 0; c < 8; c++) {
         float m1 = half_bits_to_float(word[c] & 0xffffu), m2 = half_bits_to_float(word[c] >> 16);
-        float mean = m1 * cell[c], mean2 = m2 * cell[c] * cell[c];
-        float variance = fabsf(mean2 - mean * mean), excess = distance[c] - mean;
-        float chebyshev = variance / (variance + excess * excess);
-        chebyshev = distance[c] > mean ? chebyshev * chebyshev * chebyshev : 1.0f;
-        chebyshev = chebyshev > 0.05f ? chebyshev : 0.05f; /* fmaxf(0.05f, chebyshev), NaN included */
-        float w = distance[c] > 0 ? weight[c] * chebyshev : weight[c];
-        w = w > 1e-6f ? w : 1e-6f;
-        w = w < 0.2f ? w * (w * w / (0.2f * 0.2f)) : w;
+        float w = probe_visibility_weight(weight[c], m1 * cell[c], m2 * cell[c] * cell[c], distance[c]);
         uint32_t keep = front ? (front >> c & 1) : (e->active >> c & 1);
         out[c] = keep ? w * tap[c] : 0.0f;
     }

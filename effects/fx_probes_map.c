@@ -389,14 +389,7 @@ FXC_HOT_CLONES static void group_weights_lanes(const void *const *probe, uint32_
                 e[k][l] += bilinear_n[c] * half_bits_to_float(irradiance[c][k][l]);
     }
     for (uint32_t l = 0; l < PROBE_LANES; l++) {
-        float mean = m1[l] * cell[l], mean2 = m2[l] * cell[l] * cell[l];
-        float variance = fabsf(mean2 - mean * mean), excess = distance[l] - mean;
-        float chebyshev = variance / (variance + excess * excess);
-        chebyshev = distance[l] > mean ? chebyshev * chebyshev * chebyshev : 1.0f;
-        chebyshev = chebyshev > 0.05f ? chebyshev : 0.05f; /* fmaxf(0.05f, chebyshev), NaN included */
-        float w = distance[l] > 0 ? weight[l] * chebyshev : weight[l];
-        w = w > 1e-6f ? w : 1e-6f;
-        w = w < 0.2f ? w * (w * w / (0.2f * 0.2f)) : w;
+        float w = probe_visibility_weight(weight[l], m1[l] * cell[l], m2[l] * cell[l] * cell[l], distance[l]);
         w = live[l] ? w : 0.0f;
         out[0][l] = w * (w > 0 ? e[0][l] * scale[l] : 0.0f);
         out[1][l] = w * (w > 0 ? e[1][l] * scale[l] : 0.0f);

@@ -94,6 +94,22 @@ static inline float half_bits_to_float(uint32_t h)
     return f * 0x1p112f;
 }
 
+/* DDGI's weight of a probe seen from a point at `distance` (metres; 0: no visibility test): the direction
+ * weight times Chebyshev's bound from the moments towards the point (mean, mean2 in metres), cubed and at least
+ * 0.05; at least 1e-6; and below 0.2 crushed (times w^2 / 0.2^2) so light leaking through a wall fades quickly.
+ * In selects, so loops over lanes vectorise; the same operations as fx_probes_map.c's probe_weight, the scalar
+ * form the tests compare against. */
+static inline float probe_visibility_weight(float weight, float mean, float mean2, float distance)
+{
+    float variance = fabsf(mean2 - mean * mean), excess = distance - mean;
+    float chebyshev = variance / (variance + excess * excess);
+    chebyshev = distance > mean ? chebyshev * chebyshev * chebyshev : 1.0f;
+    chebyshev = chebyshev > 0.05f ? chebyshev : 0.05f; /* fmaxf(0.05f, chebyshev), NaN included */
+    float w = distance > 0 ? weight * chebyshev : weight;
+    w = w > 1e-6f ? w : 1e-6f;
+    return w < 0.2f ? w * (w * w / (0.2f * 0.2f)) : w;
+}
+
 /* The four texels of direction dir in the 8 x 8 map and their bilinear weights (DDGI's border wrap). */
 void fx__probe_oct_bilinear(const float dir[3], uint32_t texel[4], float weight[4]);
 
