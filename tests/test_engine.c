@@ -393,14 +393,27 @@ static void test_osc_taps_run_equals_single(void **state)
                         px->footprint = view->footprint[p];
                         srv__island_uv(f->s, tri, view->bary_u[p], view->bary_v[p], &px->island_u, &px->island_v);
                     }
-                    uint32_t empty = kind->pixel_taps(cache, 0, 0, pixels, n, n_group, group, bias, group_taps,
-                                                      group_blocks);
+                    /* Every other row, the run's call with the pixels also as lanes (what compose's gather
+                     * hands it); the single calls below always without. */
+                    srv_pixel_lanes lanes;
+                    memset(&lanes, 0, sizeof lanes);
+                    for (uint32_t i = 0; i < n; i++) {
+                        lanes.island_u[i] = pixels[i].island_u;
+                        lanes.island_v[i] = pixels[i].island_v;
+                        lanes.footprint[i] = pixels[i].footprint;
+                        lanes.island[i] = pixels[i].island;
+                        lanes.width0[i] = f->s->islands[pixels[i].island].width;
+                        lanes.height0[i] = f->s->islands[pixels[i].island].height;
+                    }
+                    uint32_t empty = kind->pixel_taps(cache, 0, 0, pixels, (y & 1) ? &lanes : NULL, n, n_group,
+                                                      group, bias, group_taps, group_blocks);
                     uint32_t empty_found = 0; /* the taps with count 0 the call says it gave */
                     for (uint32_t i = 0; i < n * n_group; i++) {
                         uint32_t j = i / n, at = i % n;
                         fx_taps *one_taps = &one;
                         uint32_t *one_blocks = &one_block;
-                        kind->pixel_taps(cache, 0, 0, &pixels[at], 1, 1, &group[j], bias, &one_taps, &one_blocks);
+                        kind->pixel_taps(cache, 0, 0, &pixels[at], NULL, 1, 1, &group[j], bias, &one_taps,
+                                         &one_blocks);
                         const fx_taps *a = &run_taps[j][at];
                         assert_int_equal(a->count, one.count);
                         empty_found += a->count == 0;

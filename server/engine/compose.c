@@ -38,8 +38,8 @@ FXC_HOT_INLINE void kind_taps(srv_loop *loop, const srv_viewer *view, uint32_t t
                               uint32_t count, uint32_t e, fx_taps *taps, uint32_t *blocks)
 {
     uint32_t k = loop->effect_kind[e];
-    loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers), thread_index, pixels, count, 1, &e,
-                               loop->bias[e], &taps, &blocks);
+    loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers), thread_index, pixels, NULL, count,
+                               1, &e, loop->bias[e], &taps, &blocks);
 }
 
 /* Per-thread scratch for one run of pixels along a row. */
@@ -53,12 +53,14 @@ typedef struct compose_scratch {
     uint32_t triangle[SRV_RUN];                      /* the albedo's arguments, one array each */
     float bary_u[SRV_RUN], bary_v[SRV_RUN], albedo_footprint[SRV_RUN];
     float shade_normal[3][SRV_RUN]; /* axis k of gathered pixel i at [k][i] */
-    /* A tile's run gathered in lanes (gather_tile_run): per gathered pixel its column and row, footprint, its
-     * triangle's island, normal and island UVs (inputs of gather_lanes), its island texel position (output). */
-    float lane_x[SRV_RUN], lane_y[SRV_RUN], lane_footprint[SRV_RUN];
-    uint32_t lane_island[SRV_RUN];
+    /* A tile's run gathered in lanes (gather_tile_run): per gathered pixel its column and row, its triangle's
+     * normal and island UVs (inputs of gather_lanes); in pixel_lanes its footprint, its triangle's island
+     * and the island's size (inputs), its island texel position (output of gather_lanes). pixel_lanes is
+     * handed to the cache kinds' pixel_taps when the run's pixels are those (have_lanes). */
+    float lane_x[SRV_RUN], lane_y[SRV_RUN];
     float lane_normal[3][SRV_RUN], lane_island_uv[6][SRV_RUN];
-    float lane_island_u[SRV_RUN], lane_island_v[SRV_RUN];
+    srv_pixel_lanes pixel_lanes;
+    bool have_lanes;
     float irradiance[SRV_RUN][3]; /* from the lights, summed light by light */
     uint8_t missing[SRV_RUN];
     float sharing[SRV_RUN];
@@ -408,6 +410,7 @@ FXC_HOT_INLINE uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0
 {
     gather_memo memo = gather_memo_start(view);
     uint32_t count = 0;
+    cs->have_lanes = false;
     for (uint32_t y = y0; y < y1; y++)
         for (uint32_t x = x0; x < x1; x++)
             gather_pixel(loop, view, x, y, (size_t)y * view->frame.width + x, cs, &count, sky, log2_density,
@@ -439,10 +442,10 @@ FXC_HOT_LANES static void gather_lanes(compose_scratch *cs, const gather_memo *m
         cs->shade_normal[0][i] = facing > 0 ? -n0 : n0;
         cs->shade_normal[1][i] = facing > 0 ? -n1 : n1;
         cs->shade_normal[2][i] = facing > 0 ? -n2 : n2;
-        cs->albedo_footprint[i] = cs->lane_footprint[i] - log2_density;
+        cs->albedo_footprint[i] = cs->pixel_lanes.footprint[i] - log2_density;
         float (*uv)[SRV_RUN] = cs->lane_island_uv;
-        cs->lane_island_u[i] = w * uv[0][i] + u * uv[2][i] + v * uv[4][i];
-        cs->lane_island_v[i] = w * uv[1][i] + u * uv[3][i] + v * uv[5][i];
+        cs->pixel_lanes.island_u[i] = w * uv[0][i] + u * uv[2][i] + v * uv[4][i];
+        cs->pixel_lanes.island_v[i] = w * uv[1][i] + u * uv[3][i] + v * uv[5][i];
     }
 }
 
@@ -459,7 +462,8 @@ FXC_HOT_INLINE uint32_t gather_tile_run(srv_loop *loop, srv_viewer *view, uint32
     const float *bary_u = view->bary_u, *bary_v = view->bary_v, *footprint = view->footprint;
     float *views_ao = view->views[SRV_VIEW_AO], *views_shadow = view->views[SRV_VIEW_SHADOW],
           *views_sharing = view->views[SRV_VIEW_SHARING], *radiance = view->radiance;
-    uint32_t count = 0, last = SRV_MISS, island = 0;
+    uint32_t count = 0, last = SRV_MISS, island = 0, width0 = 0, height0 = 0;
+    srv_pixel_lanes *pl = &cs->pixel_lanes;
     float n0 = 0, n1 = 0, n2 = 0, uv0 = 0, uv1 = 0, uv2 = 0, uv3 = 0, uv4 = 0, uv5 = 0;
     for (uint32_t y = y0; y < y1; y++) {
         for (uint32_t x = x0; x < x1; x++) {
@@ -480,16 +484,20 @@ FXC_HOT_INLINE uint32_t gather_tile_run(srv_loop *loop, srv_viewer *view, uint32
                 n0 = normal[0], n1 = normal[1], n2 = normal[2];
                 uv0 = uv[0], uv1 = uv[1], uv2 = uv[2], uv3 = uv[3], uv4 = uv[4], uv5 = uv[5];
                 island = s->tri_island[tri];
+                width0 = s->islands[island].width;
+                height0 = s->islands[island].height;
             }
             uint32_t i = count++;
             cs->index[i] = p;
             cs->triangle[i] = tri;
             cs->bary_u[i] = bary_u[p];
             cs->bary_v[i] = bary_v[p];
-            cs->lane_footprint[i] = footprint[p];
+            pl->footprint[i] = footprint[p];
             cs->lane_x[i] = (float)x;
             cs->lane_y[i] = (float)y;
-            cs->lane_island[i] = island;
+            pl->island[i] = island;
+            pl->width0[i] = width0;
+            pl->height0[i] = height0;
             cs->lane_normal[0][i] = n0;
             cs->lane_normal[1][i] = n1;
             cs->lane_normal[2][i] = n2;
@@ -502,7 +510,8 @@ FXC_HOT_INLINE uint32_t gather_tile_run(srv_loop *loop, srv_viewer *view, uint32
         }
     }
     for (uint32_t i = count; i < SRV_RUN; i++) { /* defined inputs for the lanes past the run */
-        cs->bary_u[i] = cs->bary_v[i] = cs->lane_footprint[i] = cs->lane_x[i] = cs->lane_y[i] = 0.0f;
+        cs->bary_u[i] = cs->bary_v[i] = pl->footprint[i] = cs->lane_x[i] = cs->lane_y[i] = 0.0f;
+        pl->island[i] = pl->width0[i] = pl->height0[i] = 0;
         for (int k = 0; k < 3; k++)
             cs->lane_normal[k][i] = 0.0f;
         for (int k = 0; k < 6; k++)
@@ -513,11 +522,12 @@ FXC_HOT_INLINE uint32_t gather_tile_run(srv_loop *loop, srv_viewer *view, uint32
     for (uint32_t i = 0; i < count; i++) {
         srv_pixel *px = &cs->pixels[i];
         px->triangle = cs->triangle[i];
-        px->island = cs->lane_island[i];
-        px->footprint = cs->lane_footprint[i];
-        px->island_u = cs->lane_island_u[i];
-        px->island_v = cs->lane_island_v[i];
+        px->island = pl->island[i];
+        px->footprint = pl->footprint[i];
+        px->island_u = pl->island_u[i];
+        px->island_v = pl->island_v[i];
     }
+    cs->have_lanes = true;
     scene_albedo_run(s, cs->triangle, cs->bary_u, cs->bary_v, cs->albedo_footprint, count, cs->albedo);
     return count;
 }
@@ -528,6 +538,7 @@ static uint32_t gather_list(srv_loop *loop, srv_viewer *view, size_t first, size
 {
     gather_memo memo = gather_memo_start(view);
     uint32_t count = 0;
+    cs->have_lanes = false;
     for (size_t p = first; p < end; p++)
         gather_pixel(loop, view, view->list[p] & 0xFFFFu, view->list[p] >> 16, p, cs, &count, sky, log2_density,
                      positions, points, &memo);
@@ -930,9 +941,9 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
                 n++;
                 last = f;
             }
-            uint32_t empty = loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers),
-                                                        thread_index, cs->pixels, count, n, group, loop->bias[e],
-                                                        group_taps, group_blocks);
+            uint32_t empty = loop->kinds[k]->pixel_taps(
+                loop->caches[k], (uint32_t)(view - loop->viewers), thread_index, cs->pixels,
+                cs->have_lanes ? &cs->pixel_lanes : NULL, count, n, group, loop->bias[e], group_taps, group_blocks);
             for (uint32_t j = 0; j < n; j++) {
                 uint32_t g = group[j];
                 const uint64_t *bits = loop->viewer_bits[g];

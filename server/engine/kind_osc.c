@@ -345,9 +345,10 @@ FXC_HOT_INLINE void four_taps(fx_taps *out, const uint8_t *const texel[4], float
  * fixed trip count, so GCC vectorises the loop: 8 pixels per instruction in the x86-64-v3 copy). The same IEEE
  * operations in the same order as one pixel at a time: the level as srv__level() gives it, 2^-level built
  * from its exponent bits (the table's values exactly), the bilinear weights renormalised with one reciprocal,
- * and the taps' positions for the usual case (columns and rows not clamped: there (float)x0 is floor(x)). */
+ * and the taps' positions for the usual case (columns and rows not clamped: there (float)x0 is floor(x)).
+ * Computed from a srv_pixel_lanes (the pixels' island UVs, footprints, islands and island sizes; lanes past
+ * the run are 0): the caller's, or a copy of the pixels' values when it has none. */
 typedef struct taps_lanes {
-    float u[SRV_RUN], v[SRV_RUN], footprint[SRV_RUN]; /* input, from the pixels; lanes past the run are 0 */
     int32_t level[SRV_RUN], positive[SRV_RUN];         /* positive: all four weights > 0 */
     float x[SRV_RUN], y[SRV_RUN], fx0[SRV_RUN], fy0[SRV_RUN], ax[SRV_RUN], ay[SRV_RUN];
     /* The usual case's values in the order fx_taps holds them, per lane, so that a pixel copies them with a
@@ -359,11 +360,9 @@ typedef struct taps_lanes {
      * one unsigned compare per axis against the island's size then decides whether the columns and rows
      * lie inside it. */
     int32_t fast_x0[SRV_RUN], fast_y0[SRV_RUN];
-    /* Input: each pixel's island and its size at level 0. Out: whether the pixel is the usual case up to the
-     * blocks' contents (fast_x0 above, columns and rows inside the island at its level, the island's size
+    /* Whether the pixel is the usual case up to the blocks' contents (fast_x0 above, columns and rows inside the island at its level, the island's size
      * there below 2^24), whether its four texels straddle a block edge (x0 mod 8 or y0 mod 8 is 7), the
      * corner texel's block key without the effect field and the corner texel's index in that block. */
-    uint32_t island[SRV_RUN], width0[SRV_RUN], height0[SRV_RUN];
     int32_t fast[SRV_RUN], straddle[SRV_RUN], cell[SRV_RUN];
     uint64_t key[SRV_RUN];
 } taps_lanes;
@@ -379,14 +378,14 @@ static inline void taps_from_lanes(fx_taps *out, const taps_lanes *L, size_t i)
     out->count = 4;
 }
 
-FXC_HOT_LANES static void taps_lanes_fill(taps_lanes *L, int32_t bias)
+FXC_HOT_LANES static void taps_lanes_fill(taps_lanes *restrict L, const srv_pixel_lanes *restrict in, int32_t bias)
 {
     const float fbias = (float)bias;
     for (int i = 0; i < SRV_RUN; i++) {
         int32_t level;
         float scale;
-        LANE_LEVEL(L->footprint[i] + fbias, level, scale);
-        float x = L->u[i] * scale - 0.5f, y = L->v[i] * scale - 0.5f;
+        LANE_LEVEL(in->footprint[i] + fbias, level, scale);
+        float x = in->island_u[i] * scale - 0.5f, y = in->island_v[i] * scale - 0.5f;
         float fx0 = floorf(x), fy0 = floorf(y);
         float ax = x - fx0, ay = y - fy0;
         float wx0 = 1 - ax, wy0 = 1 - ay;
@@ -404,7 +403,7 @@ FXC_HOT_LANES static void taps_lanes_fill(taps_lanes *L, int32_t bias)
         float at_y0 = y + 0.5f - fy0, at_y1 = y + 0.5f - (fy0 + 1.0f);
         L->at_x[i][0] = at_x0, L->at_x[i][1] = at_x1, L->at_x[i][2] = at_x0, L->at_x[i][3] = at_x1;
         L->at_y[i][0] = at_y0, L->at_y[i][1] = at_y0, L->at_y[i][2] = at_y1, L->at_y[i][3] = at_y1;
-        L->footprint_log2[i] = L->footprint[i] - (float)level;
+        L->footprint_log2[i] = in->footprint[i] - (float)level;
         int32_t fast =
             L->positive[i] & (fx0 >= 0.0f) & (fy0 >= 0.0f) & (fx0 < 16777216.0f) & (fy0 < 16777216.0f);
         float fxc = fast ? fx0 : -1.0f, fyc = fast ? fy0 : -1.0f; /* converted only where it fits */
@@ -414,20 +413,20 @@ FXC_HOT_LANES static void taps_lanes_fill(taps_lanes *L, int32_t bias)
 }
 
 /* After taps_lanes_fill: fast, cell and key (in loops of their own, which GCC vectorises). */
-FXC_HOT_LANES static void taps_lanes_fast(taps_lanes *L)
+FXC_HOT_LANES static void taps_lanes_fast(taps_lanes *restrict L, const srv_pixel_lanes *restrict in)
 {
     for (int i = 0; i < SRV_RUN; i++) {
         int32_t x0 = L->fast_x0[i], y0 = L->fast_y0[i], level = L->level[i];
         int32_t round = (1 << level) - 1;
-        int32_t w = (int32_t)((L->width0[i] + (uint32_t)round) >> level);
-        int32_t h = (int32_t)((L->height0[i] + (uint32_t)round) >> level);
+        int32_t w = (int32_t)((in->width0[i] + (uint32_t)round) >> level);
+        int32_t h = (int32_t)((in->height0[i] + (uint32_t)round) >> level);
         int32_t small = (w > 0) & (h > 0) & (w < (1 << 24)) & (h < (1 << 24));
         L->fast[i] = (x0 >= 0) & small & (x0 + 1 < w) & (y0 + 1 < h);
         L->straddle[i] = ((x0 & 7) == 7) | ((y0 & 7) == 7);
         L->cell[i] = (y0 & 7) * 8 + (x0 & 7);
     }
     for (int i = 0; i < SRV_RUN; i++)
-        L->key[i] = ((uint64_t)L->island[i] << OSC_KEY_ISLAND_SHIFT) |
+        L->key[i] = ((uint64_t)in->island[i] << OSC_KEY_ISLAND_SHIFT) |
                     ((uint64_t)(uint32_t)L->level[i] << OSC_KEY_LEVEL_SHIFT) |
                     ((uint64_t)(uint32_t)(L->fast_y0[i] >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
                     ((uint64_t)(uint32_t)(L->fast_x0[i] >> 3) << OSC_KEY_BLOCK_X_SHIFT);
@@ -764,30 +763,34 @@ FXC_HOT_INLINE uint32_t taps_of_effect(const kind_osc *k, const taps_lanes *L, c
  * weights and positions), then each effect's lookups as above (its own memo, in a loop of its own: state
  * shared across effects in one loop was slower, kept in memory instead of registers). */
 FXC_HOT_CLONES static uint32_t osc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread,
-                                               const srv_pixel *pixels, uint32_t count, uint32_t effect_count,
-                                               const uint32_t *effects, int32_t bias, fx_taps *const *taps,
-                                               uint32_t *const *blocks)
+                                                   const srv_pixel *pixels, const srv_pixel_lanes *lanes,
+                                                   uint32_t count, uint32_t effect_count, const uint32_t *effects,
+                                                   int32_t bias, fx_taps *const *taps, uint32_t *const *blocks)
 {
     (void)slot, (void)thread;
     const kind_osc *k = cache;
     taps_lanes L;
-    uint32_t i = 0;
-    const scene_island *islands = k->s->islands;
-    for (; i < count; i++) {
-        L.u[i] = pixels[i].island_u;
-        L.v[i] = pixels[i].island_v;
-        L.footprint[i] = pixels[i].footprint;
-        uint32_t island = pixels[i].island;
-        L.island[i] = island;
-        L.width0[i] = islands[island].width;
-        L.height0[i] = islands[island].height;
+    srv_pixel_lanes copy;
+    if (!lanes) { /* the pixels' values into lanes of our own */
+        uint32_t i = 0;
+        const scene_island *islands = k->s->islands;
+        for (; i < count; i++) {
+            copy.island_u[i] = pixels[i].island_u;
+            copy.island_v[i] = pixels[i].island_v;
+            copy.footprint[i] = pixels[i].footprint;
+            uint32_t island = pixels[i].island;
+            copy.island[i] = island;
+            copy.width0[i] = islands[island].width;
+            copy.height0[i] = islands[island].height;
+        }
+        for (; i < SRV_RUN; i++) {
+            copy.island_u[i] = copy.island_v[i] = copy.footprint[i] = 0.0f;
+            copy.island[i] = copy.width0[i] = copy.height0[i] = 0;
+        }
+        lanes = &copy;
     }
-    for (; i < SRV_RUN; i++) {
-        L.u[i] = L.v[i] = L.footprint[i] = 0.0f;
-        L.island[i] = L.width0[i] = L.height0[i] = 0;
-    }
-    taps_lanes_fill(&L, bias);
-    taps_lanes_fast(&L);
+    taps_lanes_fill(&L, lanes, bias);
+    taps_lanes_fast(&L, lanes);
     uint32_t empty = 0;
     for (uint32_t j = 0; j < effect_count; j++)
         empty += taps_of_effect(k, &L, pixels, count, effects[j], taps[j], blocks ? blocks[j] : NULL);

@@ -717,11 +717,14 @@ static void wsc_kind_memory(const void *cache, srv_memory *out)
     out->total += m.total_bytes + sizeof *k + local;
 }
 
-/* The interface's several effects: one after the other (their lookups share nothing). */
+/* The interface's several effects: one after the other (their lookups share nothing). The lanes are not
+ * used: this kind reads the pixels' positions. */
 static uint32_t wsc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
-                                    uint32_t count, uint32_t effect_count, const uint32_t *effects, int32_t bias,
-                                    fx_taps *const *taps, uint32_t *const *blocks)
+                                    const srv_pixel_lanes *lanes, uint32_t count, uint32_t effect_count,
+                                    const uint32_t *effects, int32_t bias, fx_taps *const *taps,
+                                    uint32_t *const *blocks)
 {
+    (void)lanes;
     uint32_t empty = 0;
     for (uint32_t j = 0; j < effect_count; j++) {
         wsc_kind_pixel_taps_one(cache, slot, thread, pixels, count, effects[j], bias, taps[j],

@@ -53,6 +53,15 @@ typedef struct srv_pixel {
     float distance;
 } srv_pixel;
 
+/* A run's pixels as lanes (structure of arrays over SRV_RUN, lanes past the run 0), what compose's gather
+ * of a tile's run has anyway: island UVs, footprint, island and the island's size at level 0
+ * (scene_island width and height). Handed to a cache kind's pixel_taps with the pixels, so that it need not
+ * copy them out of srv_pixel again for each call. */
+typedef struct srv_pixel_lanes {
+    float island_u[SRV_RUN], island_v[SRV_RUN], footprint[SRV_RUN];
+    uint32_t island[SRV_RUN], width0[SRV_RUN], height0[SRV_RUN];
+} srv_pixel_lanes;
+
 /* A viewer slot. A sparse viewer's per-pixel buffers are indexed by position in its list, not by y * width
  * + x; the stages visit list entries instead of tiles (visibility, requests, compose). */
 typedef struct srv_viewer {
@@ -161,10 +170,12 @@ typedef struct srv_cache_kind {
      * taps are those of a call for it alone; a kind computes what they share (level, footprint, weights)
      * once per pixel. Called from several threads at once; `thread` is the calling pool thread (per-thread
      * state of a kind, such as local lookup tables). Returns how many of the count x effect_count taps have
-     * count 0 (no data), so that a caller can skip looking for them when there are none. */
+     * count 0 (no data), so that a caller can skip looking for them when there are none. lanes (may be NULL):
+     * the same pixels' island UVs, footprints, islands and island sizes as lanes, equal to the pixels'
+     * (a kind may read either). */
     uint32_t (*pixel_taps)(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
-                       uint32_t count, uint32_t effect_count, const uint32_t *effects, int32_t bias,
-                       fx_taps *const *taps, uint32_t *const *blocks);
+                           const srv_pixel_lanes *lanes, uint32_t count, uint32_t effect_count,
+                           const uint32_t *effects, int32_t bias, fx_taps *const *taps, uint32_t *const *blocks);
     uint32_t (*pool_capacity)(const void *cache, uint32_t effect);
     /* Stage 9 and figures. */
     void (*housekeeping)(void *cache);
