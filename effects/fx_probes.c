@@ -302,14 +302,9 @@ static void hit_cells_begin(const fx_context *ctx)
     thread_hit_frame = ctx->frame;
 }
 
-#if defined(__GNUC__) || defined(__clang__)
-#define HIT_PREFETCH(address) __builtin_prefetch(address)
-#else
-#define HIT_PREFETCH(address) ((void)(address))
-#endif
-
-/* The memo entry a cell around `centre` maps to (direct-mapped: it may hold another cell or none). */
-FXC_HOT_INLINE hit_cell *hit_cell_slot(uint32_t effect, uint32_t level, const float centre[3])
+/* The cell around `centre` (a cell's centre: the same cell gives the same bits from any probe of a grid
+ * whose coordinates are exact in float, as powers-of-two cells are; otherwise a cell may take two entries). */
+FXC_HOT_INLINE hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t level, const float centre[3])
 {
     uint32_t bits[3];
     memcpy(bits, centre, sizeof bits);
@@ -317,15 +312,7 @@ FXC_HOT_INLINE hit_cell *hit_cell_slot(uint32_t effect, uint32_t level, const fl
                  (uint64_t)bits[2] * 0x165667B19E3779F9ull ^ ((uint64_t)level << 40) ^ ((uint64_t)effect << 48);
     h ^= h >> 31;
     h *= 0xD6E8FEB86659FD93ull;
-    return &thread_hit_cells[h >> thread_hit_shift];
-}
-
-/* The cell around `centre` (a cell's centre: the same cell gives the same bits from any probe of a grid
- * whose coordinates are exact in float, as powers-of-two cells are; otherwise a cell may take two entries),
- * in its entry e (hit_cell_slot's for the same cell): kept if e holds it, else filled. */
-FXC_HOT_INLINE hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t level, const float centre[3],
-                                       hit_cell *e)
-{
+    hit_cell *e = &thread_hit_cells[h >> thread_hit_shift];
     if (e->generation == thread_hit_generation && memcmp(e->centre, centre, sizeof e->centre) == 0 &&
         e->level == level && e->effect == effect)
         return e;
@@ -420,68 +407,36 @@ FXC_HOT_INLINE void hit_weights(const hit_cell *restrict e, const float position
     }
 }
 
-/* Where a hit lies on the grid of the update (hit_locate) and its memo entry, found in the shadow-ray set-up
- * loop and used by hit_bounce after the shadow rays (the entry prefetched in between: its first load was the
- * update's largest stall). */
-typedef struct hit_grid {
-    float grid_point[3], cell; /* any grid point of the level (the job's) and the cell (metres) */
-    double inverse;            /* 1 / cell */
-    bool exact_inverse;        /* a power-of-two cell: its inverse is exact */
-} hit_grid;
+FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float position[3], const float normal[3],
+                                float out[3]);
 
-typedef struct hit_locus {
-    hit_cell *entry; /* NULL: outside the representable cells (no bounce) */
-    float centre[3];
-    double t[3]; /* the position in the cell, [0, 1] per axis */
-} hit_locus;
-
-static inline void hit_grid_init(hit_grid *g, const float grid_point[3], float cell)
+/* The filter at a hit on the grid of `grid_point` (any grid point of the level, e.g. the job's) and `cell`
+ * (metres): E of the probes around it, or false (and 0) when none contributes. */
+FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, const float grid_point[3],
+                               float cell, const float position[3], const float normal[3], float out[3])
 {
-    memcpy(g->grid_point, grid_point, sizeof g->grid_point);
-    g->cell = cell;
+    out[0] = out[1] = out[2] = 0;
+    float centre[3];
+    double t[3];
     /* A power-of-two cell (the grid's: the finest cell is one and levels double it) has an exact inverse, and
      * multiplying by it rounds as the division does: three divisions fewer per hit. */
     uint32_t cell_bits;
     memcpy(&cell_bits, &cell, sizeof cell_bits);
-    g->exact_inverse = (cell_bits & 0x7fffffu) == 0 && cell > 0x1p-100f && cell < 0x1p100f;
-    g->inverse = 1.0 / (double)cell;
-}
-
-/* The cell of `position` and the position in it (wsc_corners' rule, from the grid point), and its memo entry,
- * prefetched. */
-FXC_HOT_INLINE void hit_locate(const hit_grid *g, uint32_t effect, uint32_t level, const float position[3],
-                               hit_locus *out)
-{
-    out->entry = NULL;
-    for (int k = 0; k < 3; k++) {
-        double delta = (double)position[k] - (double)g->grid_point[k];
-        double q = g->exact_inverse ? delta * g->inverse : delta / (double)g->cell, f = floor(q);
+    const bool exact_inverse = (cell_bits & 0x7fffffu) == 0 && cell > 0x1p-100f && cell < 0x1p100f;
+    const double inverse = 1.0 / (double)cell;
+    for (int k = 0; k < 3; k++) { /* the cell and the position in it (wsc_corners' rule, from the grid point) */
+        double delta = (double)position[k] - (double)grid_point[k];
+        double q = exact_inverse ? delta * inverse : delta / (double)cell, f = floor(q);
         if (!(fabs(f) < 1e9))
-            return;
-        out->centre[k] = (float)((double)g->grid_point[k] + (f + 0.5) * (double)g->cell);
-        out->t[k] = q - f;
-        out->t[k] = out->t[k] < 0.0 ? 0.0 : (out->t[k] > 1.0 ? 1.0 : out->t[k]);
+            return false;
+        centre[k] = (float)((double)grid_point[k] + (f + 0.5) * (double)cell);
+        t[k] = q - f;
+        t[k] = t[k] < 0.0 ? 0.0 : (t[k] > 1.0 ? 1.0 : t[k]);
     }
-    out->entry = hit_cell_slot(effect, level, out->centre);
-    HIT_PREFETCH(out->entry);
-}
-
-FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float position[3], const float normal[3],
-                                float out[3]);
-
-/* The filter at a hit located by hit_locate: E of the probes around it, or false (and 0) when none
- * contributes. */
-FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, const hit_locus *at,
-                               const float position[3], const float normal[3], float out[3])
-{
-    out[0] = out[1] = out[2] = 0;
-    if (!at->entry)
-        return false;
-    hit_cell *e = hit_cell_find(ctx, effect, level, at->centre, at->entry);
+    hit_cell *e = hit_cell_find(ctx, effect, level, centre);
     if (!e->active)
         return false;
     float tap[8];
-    const double *t = at->t;
     double wx[2] = {1.0 - t[0], t[0]}, wy[2] = {1.0 - t[1], t[1]}, wz[2] = {1.0 - t[2], t[2]};
     for (int c = 0; c < 8; c++) /* ((1 x wx) x wy) x wz in double, as before: 1 x wx is exact */
         tap[c] = (float)(wx[c & 1] * wy[c >> 1 & 1] * wz[c >> 2]);
@@ -564,8 +519,8 @@ static void taps_bounce(const fx_taps *taps, const float position[3], const floa
 
 /* Radiance leaving a front-face hit, given its direct light (compose units) and the probes around it. */
 FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job, uint32_t tri, float u, float v,
-                                 float t, const float position[3], const hit_locus *at, const float normal[3],
-                                 const float direct[3], float out[3])
+                                 float t, const float position[3], const float normal[3], const float direct[3],
+                                 float out[3])
 {
     float albedo[3], bounce[3] = {0, 0, 0};
     /* The triangle's mean albedo (one load; file comment, "Albedo at hits"). */
@@ -573,7 +528,7 @@ FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job,
     scene_albedo_mean(ctx->s, tri, albedo);
     uint32_t effect = job->effect, level = job->level;
     if (ctx->world_cell) {
-        hit_bounce(ctx, effect, level, at, position, normal, bounce);
+        hit_bounce(ctx, effect, level, job->origin, job->cell, position, normal, bounce);
     } else if (ctx->world_taps) {
         fx_taps taps;
         memset(&taps, 0, sizeof taps);
@@ -781,8 +736,6 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
         uint32_t backfaces = 0;
         float closest_front = INFINITY, closest_back = INFINITY, front_dir[3] = {0, 0, 0}, back_dir[3] = {0, 0, 0};
         const float max_distance = FX_PROBE_MAX_DISTANCE * cell;
-        hit_grid grid;
-        hit_grid_init(&grid, job->origin, job->cell);
 
         for (uint32_t first = 0; first < rays; first += PROBE_CHUNK) {
             uint32_t n = rays - first < PROBE_CHUNK ? rays - first : PROBE_CHUNK;
@@ -800,7 +753,6 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
             /* Shadow rays of the front-face hits. */
             hs->count = 0;
             float hit_pos[PROBE_CHUNK][3];
-            hit_locus hit_at[PROBE_CHUNK];
             for (uint32_t r = 0; r < n; r++) {
                 hs->direct[r][0] = hs->direct[r][1] = hs->direct[r][2] = 0;
                 const struct RTCRayHit *rh = &hits[r];
@@ -814,8 +766,6 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
                 for (int k = 0; k < 3; k++)
                     p[k] = origin[k] + rh->ray.tfar * dir[k];
                 scene_offset_ray_origin(p, normal, s->ray_offset_scale, hit_pos[r]);
-                if (ctx->world_cell)
-                    hit_locate(&grid, job->effect, job->level, hit_pos[r], &hit_at[r]);
                 traced += queue_shadow_rays(ctx, hs, r, hit_pos[r], normal);
             }
             shadow_flush(ctx, hs);
@@ -840,7 +790,7 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
                             memcpy(back_dir, dir, sizeof back_dir);
                         }
                     } else {
-                        hit_radiance(ctx, job, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r], &hit_at[r], normal,
+                        hit_radiance(ctx, job, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r], normal,
                                      hs->direct[r], radiance);
                         distance = t;
                         if (t < closest_front) {
