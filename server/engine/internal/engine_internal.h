@@ -473,6 +473,9 @@ uint8_t srv__tone_map(float c);
 uint8_t srv__tone_map_reference(float c);
 /* The tone map of n consecutive floats into n bytes as compose's rows take it (in lanes): srv__tone_map of each. */
 void srv__tone_map_lanes(const float *radiance, uint8_t *image, uint32_t n);
+/* The same without building the tables: for compose, which calls srv__tone_map_init once per viewer first. */
+void srv__tone_map_init(void);
+void srv__tone_map_row(const float *radiance, uint8_t *image, uint32_t n);
 
 /* Per-thread compose scratch size for this loop (bytes), known at creation. */
 size_t srv__compose_scratch_bytes(const srv_loop *loop);
