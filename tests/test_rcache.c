@@ -588,6 +588,27 @@ static void check_distinct(const view_rc_pixel *px, uint32_t n, uint32_t w, uint
     free(seen);
 }
 
+/* Left half of the image priority 200, right half 10. */
+static void fill_halves(uint8_t *prio, uint32_t w, uint32_t h)
+{
+    for (uint32_t y = 0; y < h; y++)
+        for (uint32_t x = 0; x < w; x++)
+            prio[y * w + x] = x < w / 2 ? 200 : 10;
+}
+
+/* Dithers 300 samples over prio in bands of `band` rows (0: one band) and returns how many fell in the left
+ * half, after checking they are distinct pixels. */
+static uint32_t dither_left(const uint8_t *prio, uint32_t w, uint32_t h, uint32_t band, view_rc_pixel *out,
+                            void *scratch, size_t scratch_bytes)
+{
+    assert_int_equal(view_rc_dither(prio, w, h, band, 300, out, scratch, scratch_bytes), FXC_OK);
+    check_distinct(out, 300, w, h);
+    uint32_t left = 0;
+    for (int i = 0; i < 300; i++)
+        left += out[i].x < w / 2;
+    return left;
+}
+
 static void test_dither(void **state)
 {
     (void)state;
@@ -597,15 +618,9 @@ static void test_dither(void **state)
     void *scratch = malloc(scratch_bytes);
     view_rc_pixel *out = malloc(sizeof(view_rc_pixel) * w * h);
     /* Left half 200, right half 10: weights 201 and 11, so 300 * 201 / 212 = 284.4 on the left. */
-    for (uint32_t y = 0; y < h; y++)
-        for (uint32_t x = 0; x < w; x++)
-            prio[y * w + x] = x < w / 2 ? 200 : 10;
+    fill_halves(prio, w, h);
     for (uint32_t band = 0; band <= 16; band += 16) {
-        assert_int_equal(view_rc_dither(prio, w, h, band, 300, out, scratch, scratch_bytes), FXC_OK);
-        check_distinct(out, 300, w, h);
-        uint32_t left = 0;
-        for (int i = 0; i < 300; i++)
-            left += out[i].x < w / 2;
+        uint32_t left = dither_left(prio, w, h, band, out, scratch, scratch_bytes);
         assert_true(left >= 281 && left <= 288);
     }
     /* Uniform priority: every 8x8 block gets its share, 400 * 64 / 3072 = 8.3, within 2. */
@@ -636,15 +651,9 @@ static void test_dither(void **state)
     /* Many bands (12 of 4 rows; 10 of 5 rows, the last 3): more than one group of lanes, and spare lanes.
      * Every row has the same weights, so each band gets 300 in proportion to its rows, 201 / 212 of it on the
      * left: 284.4 in all, each band within a rounding of its own share. */
-    for (uint32_t y = 0; y < h; y++)
-        for (uint32_t x = 0; x < w; x++)
-            prio[y * w + x] = x < w / 2 ? 200 : 10;
+    fill_halves(prio, w, h);
     for (uint32_t band = 4; band <= 5; band++) {
-        assert_int_equal(view_rc_dither(prio, w, h, band, 300, out, scratch, scratch_bytes), FXC_OK);
-        check_distinct(out, 300, w, h);
-        uint32_t left = 0;
-        for (int i = 0; i < 300; i++)
-            left += out[i].x < w / 2;
+        uint32_t left = dither_left(prio, w, h, band, out, scratch, scratch_bytes);
         assert_true(left >= 272 && left <= 296);
     }
     /* The seam rule keeps bands independent: each band of a 12-band run, dithered alone with the count it got
