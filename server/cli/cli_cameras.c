@@ -1,46 +1,70 @@
 /* The cameras of a run, shared by sim, ref and report (cli_cameras.h). */
 #include "cli_cameras.h"
+#include "cli.h"
 
 #include <jansson.h>
 
 #include <math.h>
 #include <stdio.h>
 
-bool srv_cli_add_trace(const char *cmd, const char **paths, uint32_t *count, const char *path)
+int srv_cli_view_option(const char *cmd, int code, const char *arg, srv_cli_view_options *v)
 {
-    if (*count == SRV_CLI_MAX_TRACES) {
-        fprintf(stderr, "fxcache %s: --trace: at most %d traces\n", cmd, SRV_CLI_MAX_TRACES);
-        return false;
+    switch (code) {
+    case SRV_CLI_O_VIEWERS:
+        v->viewers_set = true;
+        return srv_cli_u32(cmd, "--viewers", arg, 1, SRV_MAX_VIEWERS, &v->viewers);
+    case SRV_CLI_O_FRAMES:
+        v->frames_set = true;
+        return srv_cli_u32(cmd, "--frames", arg, v->frames_min, v->frames_max, &v->frames);
+    case SRV_CLI_O_RES:
+        v->res_set = true;
+        return srv_cli_resolution(cmd, "--res", arg, SRV_MAX_SIDE, &v->width, &v->height);
+    case SRV_CLI_O_CAMERA:
+        v->camera_set = true;
+        if (srv_camgen_parse(arg, &v->camera))
+            return 1;
+        fprintf(stderr, "fxcache %s: --camera: unknown generator '%s' (one of: %s)\n", cmd, arg,
+                srv_camgen_list());
+        return 0;
+    case SRV_CLI_O_TRACE:
+        if (v->trace_count == SRV_CLI_MAX_TRACES) {
+            fprintf(stderr, "fxcache %s: --trace: at most %d traces\n", cmd, SRV_CLI_MAX_TRACES);
+            return 0;
+        }
+        v->traces[v->trace_count++] = arg;
+        return 1;
+    case SRV_CLI_O_FPS:
+        return srv_cli_double(cmd, "--fps", arg, 0.001, 1000, &v->fps);
+    default:
+        return -1;
     }
-    paths[(*count)++] = path;
-    return true;
 }
 
-bool srv_cli_camera_option(const char *cmd, const char *gen, srv_camgen_kind *out)
+bool srv_cli_view_check(const char *cmd, const srv_cli_view_options *v)
 {
-    if (srv_camgen_parse(gen, out))
-        return true;
-    fprintf(stderr, "fxcache %s: --camera: unknown generator '%s' (one of: %s)\n", cmd, gen, srv_camgen_list());
-    return false;
-}
-
-bool srv_cli_check_cameras(const char *cmd, uint32_t trace_count, bool viewers_set, uint32_t viewers,
-                           bool camera_set)
-{
-    if (trace_count && viewers_set && viewers != trace_count) {
-        fprintf(stderr, "fxcache %s: --viewers %u but %u traces: give one --trace per viewer\n", cmd, viewers,
-                trace_count);
+    if (v->trace_count && v->viewers_set && v->viewers != v->trace_count) {
+        fprintf(stderr, "fxcache %s: --viewers %u but %u traces: give one --trace per viewer\n", cmd,
+                v->viewers, v->trace_count);
         return false;
     }
-    if (trace_count && camera_set) {
+    if (v->trace_count && v->camera_set) {
         fprintf(stderr, "fxcache %s: --camera and --trace both choose the cameras: give one of them\n", cmd);
         return false;
     }
     return true;
 }
 
-bool srv_cli_cameras_load(const char *cmd, srv_cli_cameras *c, const char *const *paths, uint32_t count)
+bool srv_cli_cameras_load(const char *cmd, srv_cli_cameras *c, const srv_cli_view_options *v, uint32_t seed)
 {
+    *c = (srv_cli_cameras){.generator = v->camera,
+                           .viewers = v->viewers,
+                           .seed = seed,
+                           .fps = v->fps,
+                           .width = v->width,
+                           .height = v->height,
+                           .res_set = v->res_set};
+    const char *const *paths = v->traces;
+    uint32_t count = v->trace_count;
     if (!count)
         return true;
     char err[512];

@@ -11,6 +11,7 @@
 #include "engine.h"
 #include "trace.h"
 
+#include <getopt.h>
 #include <stdbool.h>
 #include <stdint.h>
 
@@ -19,36 +20,65 @@ struct json_t;
 enum { SRV_CLI_MAX_TRACES = SRV_MAX_VIEWERS };
 
 typedef struct srv_cli_cameras {
-    /* Set by the command before srv_cli_cameras_load. */
+    /* Set by srv_cli_cameras_load from the options. */
     srv_camgen_kind generator; /* without traces */
     uint32_t viewers;          /* the generator's viewer count (load sets it to the trace count) */
     uint32_t seed;
     double fps;                /* frames per second of trace time */
     uint32_t width, height;    /* --res */
     bool res_set;              /* --res given: it wins over a trace's own resolution */
-    /* Set by srv_cli_cameras_load. */
+    /* Read by srv_cli_cameras_load. */
     srv_trace *traces[SRV_CLI_MAX_TRACES]; /* by viewer; NULL: a generator's viewer */
     const char *trace_paths[SRV_CLI_MAX_TRACES]; /* the paths given (for messages) */
     uint32_t trace_count;
     double start_time, last_time; /* frame 0's time and the last trace's end (0 without traces) */
 } srv_cli_cameras;
 
-/* --trace PATH while parsing: appends path to paths (count entries), or prints "fxcache CMD: --trace: at most
- * 64 traces" and returns false. */
-bool srv_cli_add_trace(const char *cmd, const char **paths, uint32_t *count, const char *path);
+/* The camera options `sim`, `ref` and `report` take alike: --viewers, --frames, --res, --camera, --trace and
+ * --fps, as parsed (defaults set by the command before parsing). */
+typedef struct srv_cli_view_options {
+    uint32_t viewers, frames, width, height;
+    bool viewers_set, frames_set, res_set, camera_set;
+    srv_camgen_kind camera;
+    const char *traces[SRV_CLI_MAX_TRACES]; /* the --trace paths, in order */
+    uint32_t trace_count;
+    double fps;
+    uint32_t frames_min, frames_max; /* --frames' range (the command's) */
+} srv_cli_view_options;
 
-/* --camera GEN while parsing: the generator named gen, or false after "fxcache CMD: --camera: unknown
- * generator 'GEN' (one of: ...)". */
-bool srv_cli_camera_option(const char *cmd, const char *gen, srv_camgen_kind *out);
+/* getopt_long codes of those options: after the engine's (256 on), before a command's own (320 on). */
+enum {
+    SRV_CLI_O_VIEWERS = 300,
+    SRV_CLI_O_FRAMES,
+    SRV_CLI_O_RES,
+    SRV_CLI_O_CAMERA,
+    SRV_CLI_O_TRACE,
+    SRV_CLI_O_FPS
+};
 
-/* The checks every command makes once its options are parsed: one --trace per viewer when --viewers is given
- * too, and not both --camera and --trace. False with a one-line error. */
-bool srv_cli_check_cameras(const char *cmd, uint32_t trace_count, bool viewers_set, uint32_t viewers,
-                           bool camera_set);
+/* Their getopt_long entries, to put in a command's own list. */
+#define SRV_CLI_VIEW_OPTIONS                                                                                 \
+    {"viewers", required_argument, NULL, SRV_CLI_O_VIEWERS},                                                 \
+        {"frames", required_argument, NULL, SRV_CLI_O_FRAMES},                                               \
+        {"res", required_argument, NULL, SRV_CLI_O_RES},                                                     \
+        {"camera", required_argument, NULL, SRV_CLI_O_CAMERA},                                               \
+        {"trace", required_argument, NULL, SRV_CLI_O_TRACE},                                                 \
+    {                                                                                                        \
+        "fps", required_argument, NULL, SRV_CLI_O_FPS                                                        \
+    }
 
-/* Reads the traces (count may be 0: the generator drives every viewer). False with a one-line error naming
- * the file and the problem; what was read is freed by srv_cli_cameras_free either way. */
-bool srv_cli_cameras_load(const char *cmd, srv_cli_cameras *c, const char *const *paths, uint32_t count);
+/* Handles one getopt_long result: 1 when it was one of the camera options and valid, 0 when it was one and
+ * invalid (a one-line error "fxcache CMD: OPTION: ..." was printed), -1 when it is not one of them. */
+int srv_cli_view_option(const char *cmd, int code, const char *arg, srv_cli_view_options *v);
+
+/* The checks once the options are parsed: one --trace per viewer when --viewers is given too, and not both
+ * --camera and --trace. False with a one-line error. */
+bool srv_cli_view_check(const char *cmd, const srv_cli_view_options *v);
+
+/* Sets c from the parsed options (the generator, its viewer count and seed, --fps, --res) and reads the
+ * traces (there may be none: the generator drives every viewer). False with a one-line error naming the file
+ * and the problem; what was read is freed by srv_cli_cameras_free either way. */
+bool srv_cli_cameras_load(const char *cmd, srv_cli_cameras *c, const srv_cli_view_options *v, uint32_t seed);
 
 /* Checks every trace camera against the loaded scene: each must give a usable camera in the scene's local
  * frame (srv_camera_setup: within SCENE_MAX_CAMERA_REACH of the scene's centre, position and target apart in float).

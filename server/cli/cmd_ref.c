@@ -46,20 +46,10 @@ static const struct {
 
 typedef struct ref_options {
     srv_cli_engine engine; /* --scene, --effects, --seed, --threads */
-    uint32_t viewers;
-    bool viewers_set;
-    uint32_t frames;
-    bool frames_set;
-    uint32_t width, height;
-    bool res_set;
+    srv_cli_view_options view; /* --viewers, --frames, --res, --camera, --trace, --fps */
     const char *out_dir;
     uint32_t every;
     bool views, quiet;
-    srv_camgen_kind camera;
-    bool camera_set;
-    const char *traces[SRV_CLI_MAX_TRACES];
-    uint32_t trace_count;
-    double fps;
     uint32_t samples[SAMPLE_OPTIONS]; /* 0: the effect's default */
     uint32_t max_bounces;
 } ref_options;
@@ -136,16 +126,17 @@ static bool samples_valid(uint32_t option, uint32_t value)
 
 static int parse_options(int argc, char **argv, ref_options *o)
 {
-    enum { O_VIEWERS = SRV_CLI_O_COMMAND, O_FRAMES, O_RES, O_OUT, O_EVERY, O_VIEWS, O_QUIET, O_CAMERA, O_TRACE,
-           O_FPS, O_AO, O_SHADOW, O_PATHS, O_BOUNCES };
+    enum { O_OUT = SRV_CLI_O_COMMAND, O_EVERY, O_VIEWS, O_QUIET, O_AO, O_SHADOW, O_PATHS, O_BOUNCES };
     static const struct option own[] = {
-        {"viewers", required_argument, NULL, O_VIEWERS},     {"frames", required_argument, NULL, O_FRAMES},
-        {"res", required_argument, NULL, O_RES},             {"out", required_argument, NULL, O_OUT},
-        {"every", required_argument, NULL, O_EVERY},         {"views", no_argument, NULL, O_VIEWS},
-        {"quiet", no_argument, NULL, O_QUIET},               {"camera", required_argument, NULL, O_CAMERA},
-        {"trace", required_argument, NULL, O_TRACE},         {"fps", required_argument, NULL, O_FPS},
-        {"ao-samples", required_argument, NULL, O_AO},       {"shadow-rays", required_argument, NULL, O_SHADOW},
-        {"paths", required_argument, NULL, O_PATHS},         {"max-bounces", required_argument, NULL, O_BOUNCES},
+        SRV_CLI_VIEW_OPTIONS,
+        {"out", required_argument, NULL, O_OUT},
+        {"every", required_argument, NULL, O_EVERY},
+        {"views", no_argument, NULL, O_VIEWS},
+        {"quiet", no_argument, NULL, O_QUIET},
+        {"ao-samples", required_argument, NULL, O_AO},
+        {"shadow-rays", required_argument, NULL, O_SHADOW},
+        {"paths", required_argument, NULL, O_PATHS},
+        {"max-bounces", required_argument, NULL, O_BOUNCES},
         {"help", no_argument, NULL, 'h'},
     };
     /* Of the engine's options, those that mean something here. */
@@ -161,26 +152,19 @@ static int parse_options(int argc, char **argv, ref_options *o)
     optind = 1;
     opterr = 0;
     for (int c; (c = getopt_long(argc, argv, ":h", options, NULL)) != -1;) {
-        int engine = srv_cli_engine_option("ref", c, optarg, &o->engine);
-        if (engine == 0)
+        int known = srv_cli_engine_option("ref", c, optarg, &o->engine);
+        if (known < 0)
+            known = srv_cli_view_option("ref", c, optarg, &o->view);
+        if (known == 0)
             return 2;
-        if (engine == 1)
+        if (known == 1)
             continue;
         bool ok = true;
         switch (c) {
-        case O_VIEWERS: ok = srv_cli_u32("ref", "--viewers", optarg, 1, SRV_MAX_VIEWERS, &o->viewers); o->viewers_set = true; break;
-        case O_FRAMES: ok = srv_cli_u32("ref", "--frames", optarg, 1, 1000000, &o->frames); o->frames_set = true; break;
-        case O_RES: ok = srv_cli_resolution("ref", "--res", optarg, SRV_MAX_SIDE, &o->width, &o->height); o->res_set = true; break;
         case O_OUT: o->out_dir = srv_cli_dir_arg(optarg); break;
         case O_EVERY: ok = srv_cli_u32("ref", "--every", optarg, 0, 1000000, &o->every); break;
         case O_VIEWS: o->views = true; break;
         case O_QUIET: o->quiet = true; break;
-        case O_CAMERA:
-            o->camera_set = true;
-            ok = srv_cli_camera_option("ref", optarg, &o->camera);
-            break;
-        case O_TRACE: ok = srv_cli_add_trace("ref", o->traces, &o->trace_count, optarg); break;
-        case O_FPS: ok = srv_cli_double("ref", "--fps", optarg, 0.001, 1000, &o->fps); break;
         case O_AO:
         case O_SHADOW:
         case O_PATHS: {
@@ -208,7 +192,7 @@ static int parse_options(int argc, char **argv, ref_options *o)
         fprintf(stderr, "fxcache ref: --out DIR is required (where the images and ref.json go)\n");
         return 2;
     }
-    if (!srv_cli_check_cameras("ref", o->trace_count, o->viewers_set, o->viewers, o->camera_set))
+    if (!srv_cli_view_check("ref", &o->view))
         return 2;
     return -1;
 }
@@ -218,7 +202,7 @@ static int parse_options(int argc, char **argv, ref_options *o)
 /* Whether frame f is one to render: sim --save-every's choice. */
 static bool frame_chosen(const ref_options *o, uint32_t frame)
 {
-    return frame == o->frames - 1 || (o->every && frame % o->every == 0);
+    return frame == o->view.frames - 1 || (o->every && frame % o->every == 0);
 }
 
 /* ---- output -------------------------------------------------------------------------------------------- */
@@ -312,13 +296,19 @@ static void show_progress(void *user, uint64_t done, uint64_t total)
 
 int srv_cmd_ref(int argc, char **argv)
 {
-    ref_options o = {.viewers = 4, .frames = 30, .width = 640, .height = 360, .camera = SRV_CAMGEN_ROOM, .fps = 30};
+    ref_options o = {.view = {.viewers = 4,
+                              .frames = 30,
+                              .width = 640,
+                              .height = 360,
+                              .camera = SRV_CAMGEN_ROOM,
+                              .fps = 30,
+                              .frames_min = 1,
+                              .frames_max = 1000000}};
     srv_cli_engine_defaults(&o.engine);
     int rc = parse_options(argc, argv, &o);
     if (rc >= 0)
         return rc;
-    srv_cli_cameras cams = {.generator = o.camera, .viewers = o.viewers, .seed = o.engine.seed, .fps = o.fps,
-                            .width = o.width, .height = o.height, .res_set = o.res_set};
+    srv_cli_cameras cams = {0};
     scene *s = NULL;
     scene_rt *rt = NULL;
     srv_ref *ref = NULL;
@@ -328,16 +318,16 @@ int srv_cmd_ref(int argc, char **argv)
     char err[512];
 
     /* Traces: sim's clock starts at the earliest first time; frames until the last trace ends. */
-    if (!srv_cli_cameras_load("ref", &cams, o.traces, o.trace_count))
+    if (!srv_cli_cameras_load("ref", &cams, &o.view, o.engine.seed))
         goto done;
-    if (o.trace_count) {
-        o.viewers = o.trace_count;
-        if (!o.frames_set)
-            o.frames = srv_cli_cameras_frames(&cams);
+    if (o.view.trace_count) {
+        o.view.viewers = o.view.trace_count;
+        if (!o.view.frames_set)
+            o.view.frames = srv_cli_cameras_frames(&cams);
     }
     /* Memory: the largest image's buffers within the machine's physical memory, before anything is loaded. */
-    uint64_t largest = (uint64_t)o.width * o.height;
-    for (uint32_t v = 0; v < o.trace_count; v++) {
+    uint64_t largest = (uint64_t)o.view.width * o.view.height;
+    for (uint32_t v = 0; v < o.view.trace_count; v++) {
         uint32_t w, h;
         srv_cli_cameras_size(&cams, v, &w, &h);
         if ((uint64_t)w * h > largest)
@@ -395,17 +385,18 @@ int srv_cmd_ref(int argc, char **argv)
     json_object_set_new(root, "scene", json_string(s->source));
     json_object_set_new(root, "seed", json_integer(o.engine.seed));
     json_object_set_new(root, "threads", json_integer(o.engine.threads));
-    json_object_set_new(root, "cameras", json_string(o.trace_count ? "trace" : srv_camgen_name(o.camera)));
+    json_object_set_new(root, "cameras",
+                        json_string(o.view.trace_count ? "trace" : srv_camgen_name(o.view.camera)));
     json_t *trace_list = json_array();
-    for (uint32_t i = 0; i < o.trace_count; i++)
-        json_array_append_new(trace_list, json_string(o.traces[i]));
+    for (uint32_t i = 0; i < o.view.trace_count; i++)
+        json_array_append_new(trace_list, json_string(o.view.traces[i]));
     json_object_set_new(root, "traces", trace_list);
-    json_object_set_new(root, "viewers", json_integer(o.viewers));
-    json_object_set_new(root, "frames", json_integer(o.frames));
+    json_object_set_new(root, "viewers", json_integer(o.view.viewers));
+    json_object_set_new(root, "frames", json_integer(o.view.frames));
     json_object_set_new(root, "every", json_integer(o.every));
-    json_object_set_new(root, "fps", json_real(o.fps));
+    json_object_set_new(root, "fps", json_real(o.view.fps));
     json_object_set_new(root, "start_time_s", json_real(cams.start_time));
-    srv_cli_cameras_summary_resolution(&cams, o.viewers, root);
+    srv_cli_cameras_summary_resolution(&cams, o.view.viewers, root);
     json_t *on = json_object(), *off = json_object(), *samples = json_object();
     for (uint32_t e = 0; e < effect_count; e++) {
         if (!effects[e]->shade)
@@ -433,9 +424,9 @@ int srv_cmd_ref(int argc, char **argv)
 
     /* The images: sim's chosen frames, every viewer present in them. */
     uint32_t planned = 0;
-    for (uint32_t f = 0; f < o.frames; f++)
+    for (uint32_t f = 0; f < o.view.frames; f++)
         if (frame_chosen(&o, f))
-            for (uint32_t v = 0; v < o.viewers; v++) {
+            for (uint32_t v = 0; v < o.view.viewers; v++) {
                 srv_camera cam;
                 uint32_t w, h;
                 planned += srv_cli_cameras_get(&cams, s, f, v, &cam, &w, &h);
@@ -445,10 +436,10 @@ int srv_cmd_ref(int argc, char **argv)
         goto done;
     bool progress = isatty(STDERR_FILENO);
     uint32_t done_images = 0;
-    for (uint32_t f = 0; f < o.frames && !stop_requested; f++) {
+    for (uint32_t f = 0; f < o.view.frames && !stop_requested; f++) {
         if (!frame_chosen(&o, f))
             continue;
-        for (uint32_t v = 0; v < o.viewers && !stop_requested; v++) {
+        for (uint32_t v = 0; v < o.view.viewers && !stop_requested; v++) {
             srv_camera cam;
             uint32_t w, h;
             if (!srv_cli_cameras_get(&cams, s, f, v, &cam, &w, &h))

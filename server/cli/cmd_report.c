@@ -47,18 +47,11 @@ enum { FAMILIES = sizeof family_names / sizeof family_names[0] };
 
 typedef struct report_options {
     srv_cli_engine engine; /* the base settings every configuration starts from */
-    uint32_t viewers;
-    bool viewers_set;
-    uint32_t frames, warmup, every;
-    bool frames_set, warmup_set, every_set;
-    uint32_t width, height;
-    bool res_set;
+    srv_cli_view_options view; /* --viewers, --frames, --res, --camera, --trace, --fps */
+    uint32_t warmup, every;
+    bool warmup_set, every_set;
     const char *out_dir;
     bool quick, quiet;
-    srv_camgen_kind camera;
-    const char *traces[SRV_CLI_MAX_TRACES];
-    uint32_t trace_count;
-    double fps;
     double ref_samples; /* scale of the reference's default samples (0: 1, or 1/4 with --quick) */
     bool only[FAMILIES];
     bool only_set;
@@ -173,44 +166,50 @@ static bool parse_only(const char *arg, report_options *o)
 
 static int parse_options(int argc, char **argv, report_options *o)
 {
-    enum { O_VIEWERS = SRV_CLI_O_COMMAND, O_FRAMES, O_WARMUP, O_EVERY, O_RES, O_OUT, O_QUICK, O_QUIET, O_CAMERA,
-           O_TRACE, O_FPS, O_REFS, O_ONLY, O_HEATMAX, O_TIME };
+    enum {
+        O_WARMUP = SRV_CLI_O_COMMAND,
+        O_EVERY,
+        O_OUT,
+        O_QUICK,
+        O_QUIET,
+        O_REFS,
+        O_ONLY,
+        O_HEATMAX,
+        O_TIME
+    };
     static const struct option own[] = {
-        {"viewers", required_argument, NULL, O_VIEWERS}, {"frames", required_argument, NULL, O_FRAMES},
-        {"warmup", required_argument, NULL, O_WARMUP},   {"every", required_argument, NULL, O_EVERY},
-        {"res", required_argument, NULL, O_RES},         {"out", required_argument, NULL, O_OUT},
-        {"quick", no_argument, NULL, O_QUICK},           {"quiet", no_argument, NULL, O_QUIET},
-        {"camera", required_argument, NULL, O_CAMERA},   {"trace", required_argument, NULL, O_TRACE},
-        {"fps", required_argument, NULL, O_FPS},         {"ref-samples", required_argument, NULL, O_REFS},
-        {"only", required_argument, NULL, O_ONLY},       {"heatmap-max", required_argument, NULL, O_HEATMAX},
+        SRV_CLI_VIEW_OPTIONS,
+        {"warmup", required_argument, NULL, O_WARMUP},
+        {"every", required_argument, NULL, O_EVERY},
+        {"out", required_argument, NULL, O_OUT},
+        {"quick", no_argument, NULL, O_QUICK},
+        {"quiet", no_argument, NULL, O_QUIET},
+        {"ref-samples", required_argument, NULL, O_REFS},
+        {"only", required_argument, NULL, O_ONLY},
+        {"heatmap-max", required_argument, NULL, O_HEATMAX},
         {"time", required_argument, NULL, O_TIME},
         {"help", no_argument, NULL, 'h'},
     };
     struct option options[sizeof own / sizeof own[0] + 40];
     srv_cli_merge_options(own, sizeof own / sizeof own[0], options, sizeof options / sizeof options[0]);
-    bool camera_set = false;
     for (int c; (c = getopt_long(argc, argv, ":h", options, NULL)) != -1;) {
-        int engine = srv_cli_engine_option("report", c, optarg, &o->engine);
-        if (engine == 0)
+        int known = srv_cli_engine_option("report", c, optarg, &o->engine);
+        if (known < 0)
+            known = srv_cli_view_option("report", c, optarg, &o->view);
+        if (known == 0)
             return 2;
-        if (engine == 1)
+        if (known == 1)
             continue;
         bool ok = true;
         switch (c) {
-        case O_VIEWERS: ok = srv_cli_u32("report", "--viewers", optarg, 1, SRV_MAX_VIEWERS, &o->viewers); o->viewers_set = true; break;
-        case O_FRAMES: ok = srv_cli_u32("report", "--frames", optarg, 2, 100000, &o->frames); o->frames_set = true; break;
         case O_WARMUP: ok = srv_cli_u32("report", "--warmup", optarg, 0, 99999, &o->warmup); o->warmup_set = true; break;
-        case O_EVERY: ok = srv_cli_u32("report", "--every", optarg, 1, 100000, &o->every); o->every_set = true; break;
-        case O_RES: ok = srv_cli_resolution("report", "--res", optarg, SRV_MAX_SIDE, &o->width, &o->height); o->res_set = true; break;
+        case O_EVERY:
+            ok = srv_cli_u32("report", "--every", optarg, 1, 100000, &o->every);
+            o->every_set = true;
+            break;
         case O_OUT: o->out_dir = srv_cli_dir_arg(optarg); break;
         case O_QUICK: o->quick = true; break;
         case O_QUIET: o->quiet = true; break;
-        case O_CAMERA:
-            camera_set = true;
-            ok = srv_cli_camera_option("report", optarg, &o->camera);
-            break;
-        case O_TRACE: ok = srv_cli_add_trace("report", o->traces, &o->trace_count, optarg); break;
-        case O_FPS: ok = srv_cli_double("report", "--fps", optarg, 0.001, 1000, &o->fps); break;
         case O_REFS: ok = parse_power_of_two("--ref-samples", optarg, 0.125, 4, &o->ref_samples); break;
         case O_ONLY: ok = parse_only(optarg, o); break;
         case O_HEATMAX: ok = srv_cli_double("report", "--heatmap-max", optarg, 1e-6, 1e6, &o->heatmap_max); break;
@@ -245,7 +244,7 @@ static int parse_options(int argc, char **argv, report_options *o)
         fprintf(stderr, "fxcache report: --out DIR is required (where the report goes)\n");
         return 2;
     }
-    if (!srv_cli_check_cameras("report", o->trace_count, o->viewers_set, o->viewers, camera_set))
+    if (!srv_cli_view_check("report", &o->view))
         return 2;
     if (o->engine.no_cache) {
         fprintf(stderr, "fxcache report: --no-cache is a sweep of the report (no_cache), not a base setting\n");
@@ -256,22 +255,22 @@ static int parse_options(int argc, char **argv, report_options *o)
         return 2;
     }
     /* --quick's defaults, where the option was not given. */
-    if (!o->frames_set)
-        o->frames = o->quick ? 30 : 60;
+    if (!o->view.frames_set)
+        o->view.frames = o->quick ? 30 : 60;
     if (!o->every_set)
         o->every = o->quick ? 6 : 10;
-    if (!o->res_set && o->quick)
-        o->width = 160, o->height = 90;
+    if (!o->view.res_set && o->quick)
+        o->view.width = 160, o->view.height = 90;
     if (!(o->ref_samples > 0))
         o->ref_samples = o->quick ? 0.25 : 1.0;
     if (!o->warmup_set)
-        o->warmup = o->frames > 10 ? 10 : o->frames / 2;
-    if (o->warmup >= o->frames) {
-        fprintf(stderr, "fxcache report: --warmup %u must be below --frames %u\n", o->warmup, o->frames);
+        o->warmup = o->view.frames > 10 ? 10 : o->view.frames / 2;
+    if (o->warmup >= o->view.frames) {
+        fprintf(stderr, "fxcache report: --warmup %u must be below --frames %u\n", o->warmup, o->view.frames);
         return 2;
     }
-    if (o->trace_count)
-        o->viewers = o->trace_count;
+    if (o->view.trace_count)
+        o->view.viewers = o->view.trace_count;
     return -1;
 }
 
@@ -439,7 +438,7 @@ static void build_plan(report_plan *plan, const report_context *ctx)
         }
     }
     uint32_t steps[8];
-    uint32_t nsteps = viewer_steps(o->viewers, quick, steps);
+    uint32_t nsteps = viewer_steps(o->view.viewers, quick, steps);
     if (WANT(7))
         for (uint32_t i = 0; i < nsteps; i++)
             if (steps[i] > 1)
@@ -447,7 +446,7 @@ static void build_plan(report_plan *plan, const report_context *ctx)
     if (WANT(8)) {
         static const double scales[] = {1.0 / 64, 1.0 / 16, 0.25, 1, 4};
         for (uint32_t v = 0; v < 2; v++) {
-            uint32_t viewers = v == 0 ? 1 : o->viewers;
+            uint32_t viewers = v == 0 ? 1 : o->view.viewers;
             if (v == 1 && viewers == 1)
                 break;
             size_t count = (quick || v == 1) ? 4 : 5;
@@ -475,7 +474,7 @@ static void build_plan(report_plan *plan, const report_context *ctx)
 
 static bool frame_compared(const report_options *o, uint32_t frame)
 {
-    return frame == o->frames - 1 || frame % o->every == 0;
+    return frame == o->view.frames - 1 || frame % o->every == 0;
 }
 
 /* ---- files --------------------------------------------------------------------------------------------- */
@@ -617,13 +616,19 @@ static int run_config(report_config *c, const report_context *ctx, const srv_cli
     char heatmap_path[1400];
     snprintf(heatmap_path, sizeof heatmap_path, "%s/%s", o->out_dir, row->heatmap);
     srv_err_sink errors;
-    srv_err_sink_init(&errors, &(srv_err_sink_desc){
-                                   .refs = refs, .every = o->every, .last_frame = o->frames - 1, .warmup = o->warmup,
-                                   .compare_shadow = ctx->shadow_index >= 0 && ctx->s->light_count > 0,
-                                   .compare_ao = ctx->ao_index >= 0 && !ctx->probes_on, .heatmap_viewer = "viewer_00",
-                                   .heatmap_path = heatmap_path, .heatmap_max = (float)o->heatmap_max,
-                                   .on_image = on_image, .user = row});
-    picture_sink picture = {.clock = &errors, .last_frame = o->frames - 1};
+    srv_err_sink_init(
+        &errors, &(srv_err_sink_desc){.refs = refs,
+                                      .every = o->every,
+                                      .last_frame = o->view.frames - 1,
+                                      .warmup = o->warmup,
+                                      .compare_shadow = ctx->shadow_index >= 0 && ctx->s->light_count > 0,
+                                      .compare_ao = ctx->ao_index >= 0 && !ctx->probes_on,
+                                      .heatmap_viewer = "viewer_00",
+                                      .heatmap_path = heatmap_path,
+                                      .heatmap_max = (float)o->heatmap_max,
+                                      .on_image = on_image,
+                                      .user = row});
+    picture_sink picture = {.clock = &errors, .last_frame = o->view.frames - 1};
     snprintf(picture.path, sizeof picture.path, "%s/%s", o->out_dir, row->frame_png);
     srv_sink err_sink = srv_err_sink_sink(&errors);
     srv_loop_add_sink(loop, &err_sink);
@@ -636,7 +641,7 @@ static int run_config(report_config *c, const report_context *ctx, const srv_cli
     srv_camera last_camera0 = {0};
     uint32_t last_w = 0, last_h = 0;
     bool have_last = false;
-    for (; frame < o->frames; frame++) {
+    for (; frame < o->view.frames; frame++) {
         if (stop_requested) {
             result = 0;
             break;
@@ -668,7 +673,7 @@ static int run_config(report_config *c, const report_context *ctx, const srv_cli
                 result = -1;
                 goto done;
             }
-            if (v == 0 && frame == o->frames - 1) {
+            if (v == 0 && frame == o->view.frames - 1) {
                 last_camera0 = cam;
                 last_w = w;
                 last_h = h;
@@ -688,7 +693,7 @@ static int run_config(report_config *c, const report_context *ctx, const srv_cli
         }
         if (progress)
             fprintf(stderr, "\r  [%zu/%zu] %s: frame %u/%u, %.1f ms   ", index + 1, total, row->id, frame + 1,
-                    o->frames, st.frame_ms - st.time_ms[SRV_STAGE_SINKS]);
+                    o->view.frames, st.frame_ms - st.time_ms[SRV_STAGE_SINKS]);
     }
     if (progress)
         fputs("\r\033[K", stderr);
@@ -728,7 +733,7 @@ static bool prepare_references(const report_context *ctx, const srv_cli_cameras 
 {
     const report_options *o = ctx->o;
     uint32_t planned = 0, done = 0;
-    for (uint32_t f = 0; f < o->frames; f++)
+    for (uint32_t f = 0; f < o->view.frames; f++)
         if (frame_compared(o, f))
             for (uint32_t v = 0; v < viewers; v++) {
                 srv_camera cam;
@@ -736,7 +741,7 @@ static bool prepare_references(const report_context *ctx, const srv_cli_cameras 
                 planned += srv_cli_cameras_get(cams, ctx->s, f, v, &cam, &w, &h);
             }
     double start = now_s();
-    for (uint32_t f = 0; f < o->frames; f++) {
+    for (uint32_t f = 0; f < o->view.frames; f++) {
         if (!frame_compared(o, f))
             continue;
         for (uint32_t v = 0; v < viewers; v++) {
@@ -890,14 +895,19 @@ static bool write_outputs(report_plan *plan, const report_options *o, const char
 
 int srv_cmd_report(int argc, char **argv)
 {
-    report_options o = {.viewers = 8, .width = 320, .height = 180, .camera = SRV_CAMGEN_GROUP, .fps = 30};
+    report_options o = {.view = {.viewers = 8,
+                                 .width = 320,
+                                 .height = 180,
+                                 .camera = SRV_CAMGEN_GROUP,
+                                 .fps = 30,
+                                 .frames_min = 2,
+                                 .frames_max = 100000}};
     srv_cli_engine_defaults(&o.engine);
     int rc = parse_options(argc, argv, &o);
     if (rc >= 0)
         return rc;
     double started = now_s();
-    srv_cli_cameras cams = {.generator = o.camera, .viewers = o.viewers, .seed = o.engine.seed, .fps = o.fps,
-                            .width = o.width, .height = o.height, .res_set = o.res_set};
+    srv_cli_cameras cams = {0};
     scene *s = NULL;
     scene_rt *rt = NULL;
     srv_ref *ref = NULL;
@@ -910,7 +920,7 @@ int srv_cmd_report(int argc, char **argv)
         fprintf(stderr, "fxcache report: out of memory\n");
         goto done;
     }
-    if (!srv_cli_cameras_load("report", &cams, o.traces, o.trace_count))
+    if (!srv_cli_cameras_load("report", &cams, &o.view, o.engine.seed))
         goto done;
     signal(SIGINT, on_signal);
     signal(SIGTERM, on_signal);
@@ -982,17 +992,19 @@ int srv_cmd_report(int argc, char **argv)
 
     /* The plan, and what earlier runs finished. */
     char cameras_text[600] = "";
-    if (o.trace_count) {
-        for (uint32_t i = 0; i < o.trace_count; i++) {
+    if (o.view.trace_count) {
+        for (uint32_t i = 0; i < o.view.trace_count; i++) {
             size_t used = strlen(cameras_text);
-            snprintf(cameras_text + used, sizeof cameras_text - used, "%s%s", i ? "," : "traces ", o.traces[i]);
+            snprintf(cameras_text + used, sizeof cameras_text - used, "%s%s", i ? "," : "traces ",
+                     o.view.traces[i]);
         }
     } else {
-        snprintf(cameras_text, sizeof cameras_text, "%s, %u viewers", srv_camgen_name(o.camera), o.viewers);
+        snprintf(cameras_text, sizeof cameras_text, "%s, %u viewers", srv_camgen_name(o.view.camera),
+                 o.view.viewers);
     }
     snprintf(ctx.run_key, sizeof ctx.run_key, "%s|%s|%ux%u|frames %u warmup %u every %u|fps %g|cameras %s",
-             ref_settings, o.quick ? "quick" : "full", o.width, o.height, o.frames, o.warmup, o.every, o.fps,
-             cameras_text);
+             ref_settings, o.quick ? "quick" : "full", o.view.width, o.view.height, o.view.frames, o.warmup,
+             o.every, o.view.fps, cameras_text);
     build_plan(plan, &ctx);
     uint32_t most_viewers = 1;
     size_t pending = 0;
@@ -1004,10 +1016,11 @@ int srv_cmd_report(int argc, char **argv)
             most_viewers = plan->configs[i].row.viewers;
     }
     bool progress = isatty(STDERR_FILENO);
-    fprintf(stderr, "report: %zu configurations on %s (%s), %ux%u, %u frames (warm-up %u, every %u compared); %zu "
-                    "done earlier, %zu to run\n",
-            plan->count, s->source, cameras_text, o.width, o.height, o.frames, o.warmup, o.every,
-            plan->count - pending, pending);
+    fprintf(stderr,
+            "report: %zu configurations on %s (%s), %ux%u, %u frames (warm-up %u, every %u compared); %zu "
+            "done earlier, %zu to run\n",
+            plan->count, s->source, cameras_text, o.view.width, o.view.height, o.view.frames, o.warmup,
+            o.every, plan->count - pending, pending);
     bool interrupted = false;
     if (pending && !prepare_references(&ctx, &cams, refs, most_viewers, progress)) {
         if (!stop_requested)
@@ -1045,14 +1058,17 @@ int srv_cmd_report(int argc, char **argv)
     /* Everything from the rows: CSVs, plots, page, summary. */
     char title[1200], settings[1600], command[4096] = "fxcache";
     snprintf(title, sizeof title, "Scene %s; cameras %s; effects %s.", s->source, cameras_text, effects_text);
-    snprintf(settings, sizeof settings,
-             "%ux%u pixels, %u frames per configuration, the first %u the warm-up (compared, not in the figures), "
-             "frames 0, %u, %u, ... and the last compared. References: %s, seed %u, rendered once per camera under "
-             "ref/. Threads: %u (0: all cores). %s",
-             o.width, o.height, o.frames, o.warmup, o.every, 2 * o.every, samples_text, o.engine.seed,
-             o.engine.threads, ctx.probes_on ? "AO error is not reported: the probes replace the sky term, so the "
-                                               "frames' AO view is not the AO term."
-                                             : "");
+    snprintf(
+        settings, sizeof settings,
+        "%ux%u pixels, %u frames per configuration, the first %u the warm-up (compared, not in the figures), "
+        "frames 0, %u, %u, ... and the last compared. References: %s, seed %u, rendered once per camera "
+        "under "
+        "ref/. Threads: %u (0: all cores). %s",
+        o.view.width, o.view.height, o.view.frames, o.warmup, o.every, 2 * o.every, samples_text,
+        o.engine.seed, o.engine.threads,
+        ctx.probes_on ? "AO error is not reported: the probes replace the sky term, so the "
+                        "frames' AO view is not the AO term."
+                      : "");
     for (int i = 0; i < argc; i++) { /* argv[0] is "report" */
         size_t used = strlen(command);
         snprintf(command + used, sizeof command - used, " %s", argv[i]);

@@ -35,23 +35,13 @@ static void on_signal(int sig)
 
 typedef struct sim_options {
     srv_cli_engine engine;
-    uint32_t viewers;
-    bool viewers_set;
-    uint32_t frames;
-    bool frames_set;
-    uint32_t width, height;
-    bool res_set;
+    srv_cli_view_options view; /* --viewers, --frames, --res, --camera, --trace, --fps */
     const char *out_dir;
     uint32_t save_every;
     bool views;
     const char *stats_path;
     const char *summary_path;
-    srv_camgen_kind camera;
-    bool camera_set;
-    const char *traces[SRV_CLI_MAX_TRACES];
-    uint32_t trace_count;
     const char *record_dir;
-    double fps;
     bool quiet;
 } sim_options;
 
@@ -83,43 +73,37 @@ static const char sim_usage[] =
 
 static int parse_options(int argc, char **argv, sim_options *o)
 {
-    enum { O_VIEWERS = SRV_CLI_O_COMMAND, O_FRAMES, O_RES, O_OUT, O_SAVE, O_VIEWS, O_STATS, O_SUMMARY, O_CAMERA,
-           O_TRACE, O_RECORD, O_QUIET, O_FPS };
+    enum { O_OUT = SRV_CLI_O_COMMAND, O_SAVE, O_VIEWS, O_STATS, O_SUMMARY, O_RECORD, O_QUIET };
     static const struct option own[] = {
-        {"viewers", required_argument, NULL, O_VIEWERS}, {"frames", required_argument, NULL, O_FRAMES},
-        {"res", required_argument, NULL, O_RES},         {"out", required_argument, NULL, O_OUT},
-        {"save-every", required_argument, NULL, O_SAVE}, {"views", no_argument, NULL, O_VIEWS},
-        {"stats", required_argument, NULL, O_STATS},     {"summary", required_argument, NULL, O_SUMMARY},
-        {"camera", required_argument, NULL, O_CAMERA},   {"trace", required_argument, NULL, O_TRACE},
-        {"record", required_argument, NULL, O_RECORD},   {"quiet", no_argument, NULL, O_QUIET},
-        {"fps", required_argument, NULL, O_FPS},         {"help", no_argument, NULL, 'h'},
+        SRV_CLI_VIEW_OPTIONS,
+        {"out", required_argument, NULL, O_OUT},
+        {"save-every", required_argument, NULL, O_SAVE},
+        {"views", no_argument, NULL, O_VIEWS},
+        {"stats", required_argument, NULL, O_STATS},
+        {"summary", required_argument, NULL, O_SUMMARY},
+        {"record", required_argument, NULL, O_RECORD},
+        {"quiet", no_argument, NULL, O_QUIET},
+        {"help", no_argument, NULL, 'h'},
     };
     struct option options[sizeof own / sizeof own[0] + 32];
     srv_cli_merge_options(own, sizeof own / sizeof own[0], options, sizeof options / sizeof options[0]);
     for (int c; (c = getopt_long(argc, argv, ":h", options, NULL)) != -1;) {
-        int engine = srv_cli_engine_option("sim", c, optarg, &o->engine);
-        if (engine == 0)
+        int known = srv_cli_engine_option("sim", c, optarg, &o->engine);
+        if (known < 0)
+            known = srv_cli_view_option("sim", c, optarg, &o->view);
+        if (known == 0)
             return 2;
-        if (engine == 1)
+        if (known == 1)
             continue;
         bool ok = true;
         switch (c) {
-        case O_VIEWERS: ok = srv_cli_u32("sim", "--viewers", optarg, 1, SRV_MAX_VIEWERS, &o->viewers); o->viewers_set = true; break;
-        case O_FRAMES: ok = srv_cli_u32("sim", "--frames", optarg, 1, 1000000, &o->frames); o->frames_set = true; break;
-        case O_RES: ok = srv_cli_resolution("sim", "--res", optarg, SRV_MAX_SIDE, &o->width, &o->height); o->res_set = true; break;
         case O_OUT: o->out_dir = srv_cli_dir_arg(optarg); break;
         case O_SAVE: ok = srv_cli_u32("sim", "--save-every", optarg, 0, 1000000, &o->save_every); break;
         case O_VIEWS: o->views = true; break;
         case O_STATS: o->stats_path = optarg; break;
         case O_SUMMARY: o->summary_path = optarg; break;
-        case O_CAMERA:
-            o->camera_set = true;
-            ok = srv_cli_camera_option("sim", optarg, &o->camera);
-            break;
-        case O_TRACE: ok = srv_cli_add_trace("sim", o->traces, &o->trace_count, optarg); break;
         case O_RECORD: o->record_dir = srv_cli_dir_arg(optarg); break;
         case O_QUIET: o->quiet = true; break;
-        case O_FPS: ok = srv_cli_double("sim", "--fps", optarg, 0.001, 1000, &o->fps); break;
         case 'h': {
             char names[256];
             srv_cli_effect_names(names, sizeof names);
@@ -135,7 +119,7 @@ static int parse_options(int argc, char **argv, sim_options *o)
     }
     if (!srv_cli_no_operands("sim", argc, argv))
         return 2;
-    if (!srv_cli_check_cameras("sim", o->trace_count, o->viewers_set, o->viewers, o->camera_set))
+    if (!srv_cli_view_check("sim", &o->view))
         return 2;
     if (o->views && !o->out_dir) {
         fprintf(stderr, "fxcache sim: --views needs --out DIR\n");
@@ -207,7 +191,7 @@ static int image_sink_frame(void *user, const srv_viewer_frame *vf)
     bool chosen = sink->force || vf->frame == sink->last_frame || (o->save_every && vf->frame % o->save_every == 0);
     if (!chosen || stop_requested) /* an interrupted run saves its last frame afterwards */
         return 0;
-    return save_viewer_frame(o, vf, o->viewers) ? 0 : -1;
+    return save_viewer_frame(o, vf, o->view.viewers) ? 0 : -1;
 }
 
 /* Recording: the camera each viewer was rendered for, at the frame's time. */
@@ -235,14 +219,20 @@ static int record_sink_frame(void *user, const srv_viewer_frame *vf)
 
 int srv_cmd_sim(int argc, char **argv)
 {
-    sim_options o = {.viewers = 4, .frames = 30, .width = 640, .height = 360, .camera = SRV_CAMGEN_ROOM, .fps = 30};
+    sim_options o = {.view = {.viewers = 4,
+                              .frames = 30,
+                              .width = 640,
+                              .height = 360,
+                              .camera = SRV_CAMGEN_ROOM,
+                              .fps = 30,
+                              .frames_min = 1,
+                              .frames_max = 1000000}};
     srv_cli_engine_defaults(&o.engine);
     int rc = parse_options(argc, argv, &o);
     if (rc >= 0)
         return rc;
-    srv_cli_cameras cams = {.generator = o.camera, .viewers = o.viewers, .seed = o.engine.seed, .fps = o.fps,
-                            .width = o.width, .height = o.height, .res_set = o.res_set};
-    record_sink recorder = {.fps = o.fps};
+    srv_cli_cameras cams = {0};
+    record_sink recorder = {.fps = o.view.fps};
     uint32_t index_of_slot[SRV_MAX_VIEWERS];
     srv_viewer_id ids[SRV_MAX_VIEWERS] = {{0}};
     bool joined[SRV_MAX_VIEWERS] = {false}, left[SRV_MAX_VIEWERS] = {false};
@@ -254,23 +244,24 @@ int srv_cmd_sim(int argc, char **argv)
         index_of_slot[v] = UINT32_MAX;
 
     /* Traces: each viewer joins at its first time and leaves after its last, on one clock at --fps. */
-    if (!srv_cli_cameras_load("sim", &cams, o.traces, o.trace_count))
+    if (!srv_cli_cameras_load("sim", &cams, &o.view, o.engine.seed))
         goto done;
-    if (o.trace_count) {
-        o.viewers = o.trace_count;
-        if (!o.frames_set)
-            o.frames = srv_cli_cameras_frames(&cams);
+    if (o.view.trace_count) {
+        o.view.viewers = o.view.trace_count;
+        if (!o.view.frames_set)
+            o.view.frames = srv_cli_cameras_frames(&cams);
     }
     recorder.start_time = cams.start_time;
     /* Memory: the pools and every viewer's buffers (at its trace's resolution, if it records one) within the
      * machine's physical memory, before anything is loaded. */
     uint64_t pixels = 0;
-    for (uint32_t v = 0; v < o.viewers; v++) {
+    for (uint32_t v = 0; v < o.view.viewers; v++) {
         uint32_t w, h;
         srv_cli_cameras_size(&cams, v, &w, &h);
         pixels += (uint64_t)w * h;
     }
-    if (!srv_cli_check_memory("sim", o.engine.no_cache ? 0 : o.engine.pool_mb, o.viewers, pixels, o.views)) {
+    if (!srv_cli_check_memory("sim", o.engine.no_cache ? 0 : o.engine.pool_mb, o.view.viewers, pixels,
+                              o.views)) {
         exit_code = 2;
         goto done;
     }
@@ -293,7 +284,7 @@ int srv_cmd_sim(int argc, char **argv)
     srv_loop *loop = run.loop;
     srv_report *report = run.report;
     fxc_result r;
-    image_sink images = {.o = &o, .last_frame = o.frames - 1};
+    image_sink images = {.o = &o, .last_frame = o.view.frames - 1};
     if (o.out_dir)
         srv_loop_add_sink(loop, &(srv_sink){.viewer_frame = image_sink_frame, .user = &images});
     if (o.stats_path && !srv_cli_stats_open(&stats, &run, o.stats_path))
@@ -305,9 +296,9 @@ int srv_cmd_sim(int argc, char **argv)
 
     bool progress = isatty(STDERR_FILENO);
     uint32_t frame = 0;
-    for (; frame < o.frames && !stop_requested; frame++) {
+    for (; frame < o.view.frames && !stop_requested; frame++) {
         /* Stage 1: viewers join and leave, then every present viewer gets its camera. */
-        for (uint32_t v = 0; v < o.viewers; v++) {
+        for (uint32_t v = 0; v < o.view.viewers; v++) {
             bool traced = cams.traces[v] != NULL, present = srv_cli_cameras_present(&cams, v, frame);
             if (traced && !present && joined[v] && !left[v]) {
                 srv_viewer_remove(loop, ids[v]);
@@ -320,10 +311,11 @@ int srv_cmd_sim(int argc, char **argv)
                 srv_viewer_desc vd = {0};
                 srv_cli_cameras_size(&cams, v, &vd.width, &vd.height);
                 uint32_t tw, th;
-                if (traced && o.res_set && srv_trace_resolution(cams.traces[v], &tw, &th) &&
-                    (tw != o.width || th != o.height))
-                    fprintf(stderr, "fxcache sim: note: %s records %ux%u; --res %ux%u is used for its viewer\n",
-                            o.traces[v], tw, th, o.width, o.height);
+                if (traced && o.view.res_set && srv_trace_resolution(cams.traces[v], &tw, &th) &&
+                    (tw != o.view.width || th != o.view.height))
+                    fprintf(stderr,
+                            "fxcache sim: note: %s records %ux%u; --res %ux%u is used for its viewer\n",
+                            o.view.traces[v], tw, th, o.view.width, o.view.height);
                 snprintf(vd.name, sizeof vd.name, "viewer_%02u", v);
                 r = srv_viewer_add(loop, &vd, &ids[v]);
                 if (r != FXC_OK) {
@@ -355,8 +347,9 @@ int srv_cmd_sim(int argc, char **argv)
         if (srv_loop_frame(loop, &st) != FXC_OK)
             goto done; /* a sink could not write: it said why */
         if (progress)
-            fprintf(stderr, "\rframe %u/%u  %u viewers  %.1f ms  sharing %.2f   ", frame + 1, o.frames, st.viewer_count,
-                    st.frame_ms, st.unique_texels ? (double)st.requested_texels / (double)st.unique_texels : 0.0);
+            fprintf(stderr, "\rframe %u/%u  %u viewers  %.1f ms  sharing %.2f   ", frame + 1, o.view.frames,
+                    st.viewer_count, st.frame_ms,
+                    st.unique_texels ? (double)st.requested_texels / (double)st.unique_texels : 0.0);
     }
     if (progress)
         fputc('\n', stderr);
@@ -381,19 +374,20 @@ int srv_cmd_sim(int argc, char **argv)
             for (int k = 0; k < SRV_VIEW_COUNT; k++)
                 vf.views[k] = srv_viewer_view(loop, present[i], k);
             if (vf.srgb)
-                save_viewer_frame(&o, &vf, o.viewers);
+                save_viewer_frame(&o, &vf, o.view.viewers);
         }
     }
 
     /* The summary: the run's options, then the report's totals. */
     json_t *sum = srv_cli_summary_json(&run, &o.engine);
-    json_object_set_new(sum, "viewers", json_integer(o.viewers));
-    json_object_set_new(sum, "frames_requested", json_integer(o.frames));
+    json_object_set_new(sum, "viewers", json_integer(o.view.viewers));
+    json_object_set_new(sum, "frames_requested", json_integer(o.view.frames));
     json_object_set_new(sum, "interrupted", json_boolean(stop_requested));
-    srv_cli_cameras_summary_resolution(&cams, o.viewers, sum);
-    json_object_set_new(sum, "camera", json_string(o.trace_count ? "trace" : srv_camgen_name(o.camera)));
-    if (o.trace_count)
-        json_object_set_new(sum, "fps", json_real(o.fps));
+    srv_cli_cameras_summary_resolution(&cams, o.view.viewers, sum);
+    json_object_set_new(sum, "camera",
+                        json_string(o.view.trace_count ? "trace" : srv_camgen_name(o.view.camera)));
+    if (o.view.trace_count)
+        json_object_set_new(sum, "fps", json_real(o.view.fps));
     bool written = !o.summary_path || srv_cli_write_json("sim", o.summary_path, sum);
     json_decref(sum);
     if (!written)
