@@ -829,7 +829,7 @@ static float ref_shadow_visibility(const fx_taps *taps, uint32_t lights, uint32_
 
 /* Random pixels over random masks (a third of them all lit, a third all shadowed, the rest random, per tap
  * and light; taps dropped at random as texels without data are): the shade callback gives the reference's
- * floats exactly, through both its paths. */
+ * floats exactly, through both its paths and its four-tap shortcuts. */
 static void test_shadow_shade_uniform_masks(void **state)
 {
     (void)state;
@@ -838,7 +838,7 @@ static void test_shadow_shade_uniform_masks(void **state)
     uint8_t payload[PIXELS][4][2 * LIGHTS];
     fx_taps taps[PIXELS];
     float visibility[PIXELS * LIGHTS], sky[PIXELS], indirect[PIXELS * 3];
-    uint32_t uniform = 0, mixed = 0;
+    uint32_t uniform = 0, mixed = 0, four_dark = 0;
     for (int round = 0; round < ROUNDS; round++) {
         for (int i = 0; i < PIXELS; i++) {
             fx_taps *tp = &taps[i];
@@ -875,6 +875,7 @@ static void test_shadow_shade_uniform_masks(void **state)
                 }
                 if (tp->count && tp->footprint_log2 < 0)
                     (any == 0 || all == 0xFFFFu) ? uniform++ : mixed++;
+                four_dark += tp->count == 4 && tp->footprint_log2 < 0 && any == 0;
             }
         }
         fx_shade_run run = {.count = PIXELS, .light_count = LIGHTS, .taps = taps, .light_visibility = visibility,
@@ -890,6 +891,7 @@ static void test_shadow_shade_uniform_masks(void **state)
             }
     }
     assert_true(uniform > 1000 && mixed > 1000); /* both paths taken many times */
+    assert_true(four_dark > 100); /* and the four-tap, wholly shadowed shortcut */
 }
 
 /* AO shading reads a texel's fraction with a multiply: the same float as fx_ao_sample (a division) for
