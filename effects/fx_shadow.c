@@ -417,6 +417,29 @@ FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_ru
             }
             continue;
         }
+        if (taps->count == 4 && lights != 0 && taps->footprint_log2 == taps->footprint_log2) {
+            /* Four taps wholly shadowed for every light (most shadowed pixels): each light's fine sum is 0
+             * and its texel average the weights times 0 in the loop's order, 0 for finite weights, which the
+             * loop below takes as fine = average = 0; so each visibility is multiplied by fx__min1(0), the
+             * loop's own step, without its set-up. Otherwise (a lit cell, a weight not finite) the loop. */
+            float average = 0.0f + taps->weight[0] * 0.0f + taps->weight[1] * 0.0f + taps->weight[2] * 0.0f +
+                            taps->weight[3] * 0.0f;
+            /* The first light outside the loops (one light is the usual scene: GCC's vectorised loops cost
+             * more to enter than one light's work). */
+            uint32_t any_lit = (uint32_t)fx__get_u16(taps->texel[0]) | fx__get_u16(taps->texel[1]) |
+                               fx__get_u16(taps->texel[2]) | fx__get_u16(taps->texel[3]);
+            for (uint32_t l = 1; l < lights; l++)
+                any_lit |= fx__get_u16((const uint8_t *)taps->texel[0] + 2u * l) |
+                           fx__get_u16((const uint8_t *)taps->texel[1] + 2u * l) |
+                           fx__get_u16((const uint8_t *)taps->texel[2] + 2u * l) |
+                           fx__get_u16((const uint8_t *)taps->texel[3] + 2u * l);
+            if (any_lit == 0 && average == 0.0f) {
+                visibility[0] *= fx__min1(0.0f);
+                for (uint32_t l = 1; l < lights; l++)
+                    visibility[l] *= fx__min1(0.0f);
+                continue;
+            }
+        }
         /* The tap whose texel holds the pixel and the four fine cells around the pixel with their bilinear
          * weights: found only for a light where some tap's mask has a lit cell (shadow_fine_cells); under
          * wholly shadowed texels (a common case) the fine sum is 0 whatever the cells. */
