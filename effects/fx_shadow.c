@@ -404,10 +404,17 @@ FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_ru
                 float lit = 0;
                 if (taps->count == 4) { /* most pixels: the loop below written out (same sum, same order) */
                     const size_t at = 2u * l;
-                    lit = lit + taps->weight[0] * lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[0] + at)) +
-                          taps->weight[1] * lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[1] + at)) +
-                          taps->weight[2] * lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[2] + at)) +
-                          taps->weight[3] * lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[3] + at));
+                    uint32_t m0 = fx__get_u16((const uint8_t *)taps->texel[0] + at);
+                    uint32_t m1 = fx__get_u16((const uint8_t *)taps->texel[1] + at);
+                    uint32_t m2 = fx__get_u16((const uint8_t *)taps->texel[2] + at);
+                    uint32_t m3 = fx__get_u16((const uint8_t *)taps->texel[3] + at);
+                    if ((m0 | m1 | m2 | m3) == 0) /* wholly shadowed: each lit fraction is 0.0f exactly */
+                        lit = lit + taps->weight[0] * 0.0f + taps->weight[1] * 0.0f + taps->weight[2] * 0.0f +
+                              taps->weight[3] * 0.0f;
+                    else
+                        lit = lit + taps->weight[0] * lit_fraction_hot(m0) +
+                              taps->weight[1] * lit_fraction_hot(m1) +
+                              taps->weight[2] * lit_fraction_hot(m2) + taps->weight[3] * lit_fraction_hot(m3);
                 } else {
                     for (uint32_t t = 0; t < taps->count; t++)
                         lit += taps->weight[t] *

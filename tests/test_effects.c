@@ -839,7 +839,7 @@ static void test_shadow_shade_uniform_masks(void **state)
     uint8_t payload[PIXELS][4][2 * LIGHTS];
     fx_taps taps[PIXELS];
     float visibility[PIXELS * LIGHTS], sky[PIXELS], indirect[PIXELS * 3];
-    uint32_t uniform = 0, mixed = 0, four_dark = 0, all_dark = 0;
+    uint32_t uniform = 0, mixed = 0, four_dark = 0, all_dark = 0, coarse_dark = 0;
     for (int round = 0; round < ROUNDS; round++) {
         const int lights = 1 + round % LIGHTS; /* one light (the usual scene) and two */
         for (int i = 0; i < PIXELS; i++) {
@@ -873,6 +873,7 @@ static void test_shadow_shade_uniform_masks(void **state)
             if (shade_rng_unit(&rng) < 0.02)
                 tp->footprint_log2 = NAN; /* the blend's weight not a number: the definition's exp2f */
             all_dark += tp->count == 4 && tp->footprint_log2 < 0 && dark;
+            coarse_dark += tp->count == 4 && tp->footprint_log2 >= 0 && dark;
             for (int l = 0; l < lights; l++) {
                 visibility[i * lights + l] = 1.0f;
                 uint32_t any = 0, all = 0xFFFFu;
@@ -898,7 +899,7 @@ static void test_shadow_shade_uniform_masks(void **state)
             }
     }
     assert_true(uniform > 1000 && mixed > 1000); /* both paths taken many times */
-    assert_true(four_dark > 100 && all_dark > 500); /* and the four-tap, wholly shadowed shortcuts */
+    assert_true(four_dark > 100 && all_dark > 500 && coarse_dark > 50); /* the wholly shadowed shortcuts */
 }
 
 /* AO shading reads a texel's fraction with a multiply: the same float as fx_ao_sample (a division) for
