@@ -404,10 +404,17 @@ FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_ru
                 float lit = 0;
                 if (taps->count == 4) { /* most pixels: the loop below written out (same sum, same order) */
                     const size_t at = 2u * l;
-                    lit = lit + taps->weight[0] * lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[0] + at)) +
-                          taps->weight[1] * lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[1] + at)) +
-                          taps->weight[2] * lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[2] + at)) +
-                          taps->weight[3] * lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[3] + at));
+                    uint32_t m0 = fx__get_u16((const uint8_t *)taps->texel[0] + at);
+                    uint32_t m1 = fx__get_u16((const uint8_t *)taps->texel[1] + at);
+                    uint32_t m2 = fx__get_u16((const uint8_t *)taps->texel[2] + at);
+                    uint32_t m3 = fx__get_u16((const uint8_t *)taps->texel[3] + at);
+                    if ((m0 | m1 | m2 | m3) == 0) /* wholly shadowed: each lit fraction is 0.0f exactly */
+                        lit = lit + taps->weight[0] * 0.0f + taps->weight[1] * 0.0f + taps->weight[2] * 0.0f +
+                              taps->weight[3] * 0.0f;
+                    else
+                        lit = lit + taps->weight[0] * lit_fraction_hot(m0) +
+                              taps->weight[1] * lit_fraction_hot(m1) +
+                              taps->weight[2] * lit_fraction_hot(m2) + taps->weight[3] * lit_fraction_hot(m3);
                 } else {
                     for (uint32_t t = 0; t < taps->count; t++)
                         lit += taps->weight[t] *
@@ -416,6 +423,29 @@ FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_ru
                 visibility[l] *= fx__min1(lit);
             }
             continue;
+        }
+        if (taps->count == 4 && lights != 0 && taps->footprint_log2 == taps->footprint_log2) {
+            /* Four taps wholly shadowed for every light (most shadowed pixels): each light's fine sum is 0
+             * and its texel average the weights times 0 in the loop's order, 0 for finite weights, which the
+             * loop below takes as fine = average = 0; so each visibility is multiplied by fx__min1(0), the
+             * loop's own step, without its set-up. Otherwise (a lit cell, a weight not finite) the loop. */
+            float average = 0.0f + taps->weight[0] * 0.0f + taps->weight[1] * 0.0f + taps->weight[2] * 0.0f +
+                            taps->weight[3] * 0.0f;
+            /* The first light outside the loops (one light is the usual scene: GCC's vectorised loops cost
+             * more to enter than one light's work). */
+            uint32_t any_lit = (uint32_t)fx__get_u16(taps->texel[0]) | fx__get_u16(taps->texel[1]) |
+                               fx__get_u16(taps->texel[2]) | fx__get_u16(taps->texel[3]);
+            for (uint32_t l = 1; l < lights; l++)
+                any_lit |= fx__get_u16((const uint8_t *)taps->texel[0] + 2u * l) |
+                           fx__get_u16((const uint8_t *)taps->texel[1] + 2u * l) |
+                           fx__get_u16((const uint8_t *)taps->texel[2] + 2u * l) |
+                           fx__get_u16((const uint8_t *)taps->texel[3] + 2u * l);
+            if (any_lit == 0 && average == 0.0f) {
+                visibility[0] *= fx__min1(0.0f);
+                for (uint32_t l = 1; l < lights; l++)
+                    visibility[l] *= fx__min1(0.0f);
+                continue;
+            }
         }
         /* The tap whose texel holds the pixel and the four fine cells around the pixel with their bilinear
          * weights: found only for a light where some tap's mask has a lit cell (shadow_fine_cells); under
@@ -440,20 +470,42 @@ FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_ru
         for (uint32_t l = 0; l < lights; l++) {
             float fine = 0, average = 0;
             uint32_t any_lit = 0, all_lit = 0xFFFFu;
-            for (uint32_t t = 0; t < taps->count; t++) {
-                uint32_t mask = fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l);
-                any_lit |= mask;
-                all_lit &= mask;
-            }
-            /* The texel average: under wholly shadowed texels (every mask 0, the common case here) each lit
-             * fraction is 0, so the same sum without the popcounts. */
-            if (any_lit == 0) {
-                for (uint32_t t = 0; t < taps->count; t++)
-                    average += taps->weight[t] * 0.0f;
+            if (taps->count == 4) { /* most pixels: the loops below written out (the same sums, same order) */
+                const size_t at = 2u * l;
+                uint32_t m0 = fx__get_u16((const uint8_t *)taps->texel[0] + at);
+                uint32_t m1 = fx__get_u16((const uint8_t *)taps->texel[1] + at);
+                uint32_t m2 = fx__get_u16((const uint8_t *)taps->texel[2] + at);
+                uint32_t m3 = fx__get_u16((const uint8_t *)taps->texel[3] + at);
+                any_lit = m0 | m1 | m2 | m3;
+                all_lit = m0 & m1 & m2 & m3;
+                if (any_lit == 0) { /* wholly shadowed (the common case here): the lit fractions are 0 */
+                    average = average + taps->weight[0] * 0.0f + taps->weight[1] * 0.0f +
+                              taps->weight[2] * 0.0f + taps->weight[3] * 0.0f;
+                    if (average == 0.0f && !coarse_found) { /* fine is 0: the shortcut below, at once */
+                        visibility[l] *= fx__min1(fine);
+                        continue;
+                    }
+                } else {
+                    average = average + taps->weight[0] * lit_fraction_hot(m0) +
+                              taps->weight[1] * lit_fraction_hot(m1) + taps->weight[2] * lit_fraction_hot(m2) +
+                              taps->weight[3] * lit_fraction_hot(m3);
+                }
             } else {
-                for (uint32_t t = 0; t < taps->count; t++)
-                    average += taps->weight[t] *
-                               lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
+                for (uint32_t t = 0; t < taps->count; t++) {
+                    uint32_t mask = fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l);
+                    any_lit |= mask;
+                    all_lit &= mask;
+                }
+                /* The texel average: under wholly shadowed texels (every mask 0, the common case here)
+                 * each lit fraction is 0, so the same sum without the popcounts. */
+                if (any_lit == 0) {
+                    for (uint32_t t = 0; t < taps->count; t++)
+                        average += taps->weight[t] * 0.0f;
+                } else {
+                    for (uint32_t t = 0; t < taps->count; t++)
+                        average += taps->weight[t] *
+                                   lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
+                }
             }
             /* Every cell reads a bit of some tap's mask: when the taps' masks are all 0 or all 0xFFFF (most
              * texels: wholly shadowed or wholly lit), every bit read is 0, or 1, and the sum below is the sum

@@ -828,8 +828,9 @@ static float ref_shadow_visibility(const fx_taps *taps, uint32_t lights, uint32_
 }
 
 /* Random pixels over random masks (a third of them all lit, a third all shadowed, the rest random, per tap
- * and light; taps dropped at random as texels without data are): the shade callback gives the reference's
- * floats exactly, through both its paths. */
+ * and light; a tenth of the pixels all shadowed for every tap and light; taps dropped at random as texels
+ * without data are; a fiftieth of the footprints NaN): the shade callback gives the reference's floats
+ * exactly, through both its paths and its four-tap shortcuts. */
 static void test_shadow_shade_uniform_masks(void **state)
 {
     (void)state;
@@ -838,22 +839,25 @@ static void test_shadow_shade_uniform_masks(void **state)
     uint8_t payload[PIXELS][4][2 * LIGHTS];
     fx_taps taps[PIXELS];
     float visibility[PIXELS * LIGHTS], sky[PIXELS], indirect[PIXELS * 3];
-    uint32_t uniform = 0, mixed = 0;
+    uint32_t uniform = 0, mixed = 0, four_dark = 0, all_dark = 0, coarse_dark = 0;
     for (int round = 0; round < ROUNDS; round++) {
+        const int lights = 1 + round % LIGHTS; /* one light (the usual scene) and two */
         for (int i = 0; i < PIXELS; i++) {
             fx_taps *tp = &taps[i];
             float px = (float)shade_rng_unit(&rng) * 3.0f + 0.5f, py = (float)shade_rng_unit(&rng) * 3.0f + 0.5f;
             float x = px - 0.5f, y = py - 0.5f, ax = x - floorf(x), ay = y - floorf(y);
             float tx0 = floorf(x), ty0 = floorf(y), total = 0;
             tp->count = 0;
+            bool dark = shade_rng_unit(&rng) < 0.1; /* every tap wholly shadowed for every light */
             for (int t = 0; t < 4; t++) {
                 float weight = ((t & 1) ? ax : 1 - ax) * ((t >> 1) ? ay : 1 - ay);
                 if (shade_rng_unit(&rng) < 0.15 || !(weight > 0))
                     continue; /* no data there */
                 uint32_t n = tp->count++;
-                for (int l = 0; l < LIGHTS; l++) {
+                for (int l = 0; l < lights; l++) {
                     double pick = shade_rng_unit(&rng);
                     uint32_t mask = pick < 0.33 ? 0xFFFFu : (pick < 0.66 ? 0u : (uint32_t)(shade_rng_next(&rng) >> 20) & 0xFFFFu);
+                    mask = dark ? 0u : mask;
                     payload[i][n][2 * l] = (uint8_t)(mask & 0xFF);
                     payload[i][n][2 * l + 1] = (uint8_t)(mask >> 8);
                 }
@@ -866,8 +870,12 @@ static void test_shadow_shade_uniform_masks(void **state)
             for (uint32_t t = 0; t < tp->count; t++)
                 tp->weight[t] *= 1.0f / total;
             tp->footprint_log2 = (float)shade_rng_unit(&rng) * 4.0f - 3.5f;
-            for (int l = 0; l < LIGHTS; l++) {
-                visibility[i * LIGHTS + l] = 1.0f;
+            if (shade_rng_unit(&rng) < 0.02)
+                tp->footprint_log2 = NAN; /* the blend's weight not a number: the definition's exp2f */
+            all_dark += tp->count == 4 && tp->footprint_log2 < 0 && dark;
+            coarse_dark += tp->count == 4 && tp->footprint_log2 >= 0 && dark;
+            for (int l = 0; l < lights; l++) {
+                visibility[i * lights + l] = 1.0f;
                 uint32_t any = 0, all = 0xFFFFu;
                 for (uint32_t t = 0; t < tp->count; t++) {
                     any |= fx__get_u16(payload[i][t] + 2 * l);
@@ -875,21 +883,23 @@ static void test_shadow_shade_uniform_masks(void **state)
                 }
                 if (tp->count && tp->footprint_log2 < 0)
                     (any == 0 || all == 0xFFFFu) ? uniform++ : mixed++;
+                four_dark += tp->count == 4 && tp->footprint_log2 < 0 && any == 0;
             }
         }
-        fx_shade_run run = {.count = PIXELS, .light_count = LIGHTS, .taps = taps, .light_visibility = visibility,
-                            .sky_visibility = sky, .indirect = indirect};
+        fx_shade_run run = {.count = PIXELS, .light_count = (uint32_t)lights, .taps = taps,
+                            .light_visibility = visibility, .sky_visibility = sky, .indirect = indirect};
         fx_effect_shadow.shade(NULL, &run);
         for (int i = 0; i < PIXELS; i++)
-            for (uint32_t l = 0; l < LIGHTS; l++) {
-                float expected = taps[i].count ? ref_shadow_visibility(&taps[i], LIGHTS, l) : 1.0f;
-                float got = visibility[i * LIGHTS + (int)l];
+            for (uint32_t l = 0; l < (uint32_t)lights; l++) {
+                float expected = taps[i].count ? ref_shadow_visibility(&taps[i], (uint32_t)lights, l) : 1.0f;
+                float got = visibility[i * lights + (int)l];
                 if (memcmp(&expected, &got, sizeof got) != 0)
                     fail_msg("round %d pixel %d light %u: %.9g, the definition %.9g", round, i, l, (double)got,
                              (double)expected);
             }
     }
     assert_true(uniform > 1000 && mixed > 1000); /* both paths taken many times */
+    assert_true(four_dark > 100 && all_dark > 500 && coarse_dark > 50); /* the wholly shadowed shortcuts */
 }
 
 /* AO shading reads a texel's fraction with a multiply: the same float as fx_ao_sample (a division) for

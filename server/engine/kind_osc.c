@@ -657,7 +657,8 @@ static bool taps_straddle(taps_state *st, int32_t x0, int32_t y0, uint64_t key, 
 {
     const uint64_t base =
         key & ~(((uint64_t)0xFFF << OSC_KEY_BLOCK_Y_SHIFT) | ((uint64_t)0xFFF << OSC_KEY_BLOCK_X_SHIFT));
-    for (int t = 0; t < 4; t++) {
+#pragma GCC unroll 4
+    for (int t = 0; t < 4; t++) { /* unrolled: each tap's offsets and the t == 0 test are constants */
         uint32_t xi = (uint32_t)x0 + (uint32_t)(t & 1), yi = (uint32_t)y0 + (uint32_t)(t >> 1);
         uint32_t m = memo_lookup(st->osc, &st->memo, st->effect,
                                  base | ((uint64_t)(yi >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
