@@ -889,53 +889,62 @@ FXC_HOT_CLONES void fx_probes_commit(const fx_context *ctx, const fx_block_job *
             put_u32(p + 20, 0);
             continue;
         }
-        float old_scale = fresh ? 0.0f : get_f32(p + 24), irradiance[FX_PROBE_TEXELS][3],
-              moments[FX_PROBE_TEXELS][2], scale = 0;
+        /* Flat loops over the 192 irradiance halves and the 128 moment halves (texel t's component k at
+         * 3t + k and 2t + k, as in the payload: byte 2 x (3t + k), 2 x (2t + k)), written with selects so
+         * the AVX2 copy runs them 8 wide; per half the same operations in the same order as one texel at a
+         * time, and the maximum (exact in any order: no NaN, no -0) in 8 partial maxima. */
+        enum { IRRADIANCE_HALVES = 3 * FX_PROBE_TEXELS, MOMENT_HALVES = 2 * FX_PROBE_TEXELS };
+        float old_scale = fresh ? 0.0f : get_f32(p + 24), irradiance[IRRADIANCE_HALVES], moments[MOMENT_HALVES];
+        float irradiance_weight[IRRADIANCE_HALVES], moment_weight[MOMENT_HALVES];
         for (uint32_t t = 0; t < FX_PROBE_TEXELS; t++) {
-            for (int k = 0; k < 3; k++) {
-                /* payload halves are halves_stochastic's: finite and >= 0 */
-                float old = old_scale * half_bits_to_float(fx__get_u16(p + PROBE_IRRADIANCE + 6 * t + 2 * k));
-                float value = old;
-                if (in->irradiance_weight[t] > 0)
-                    value = fresh ? in->irradiance[t][k] : h * old + (1.0f - h) * in->irradiance[t][k];
-                irradiance[t][k] = isfinite(value) && value > 0 ? value : (value > 0 ? FLT_MAX : 0.0f);
-                scale = irradiance[t][k] > scale ? irradiance[t][k] : scale; /* fmaxf: neither is NaN */
-            }
-            for (int k = 0; k < 2; k++) {
-                float old = fresh ? 0.0f : half_bits_to_float(fx__get_u16(p + PROBE_MOMENTS + 4 * t + 2 * k));
-                float value = old;
-                if (in->moment_weight[t] > 0)
-                    value = fresh ? in->moments[t][k] : h * old + (1.0f - h) * in->moments[t][k];
-                else if (fresh)
-                    value = k == 0 ? FX_PROBE_MAX_DISTANCE : FX_PROBE_MAX_DISTANCE * FX_PROBE_MAX_DISTANCE;
-                moments[t][k] = value;
-            }
+            for (int k = 0; k < 3; k++)
+                irradiance_weight[3 * t + k] = in->irradiance_weight[t];
+            for (int k = 0; k < 2; k++)
+                moment_weight[2 * t + k] = in->moment_weight[t];
+        }
+        const float *new_irradiance = &in->irradiance[0][0], *new_moments = &in->moments[0][0];
+        for (uint32_t i = 0; i < IRRADIANCE_HALVES; i++) {
+            /* payload halves are halves_stochastic's: finite and >= 0 */
+            float old = old_scale * half_bits_to_float(fx__get_u16(p + PROBE_IRRADIANCE + 2 * i));
+            float blended = fresh ? new_irradiance[i] : h * old + (1.0f - h) * new_irradiance[i];
+            float value = irradiance_weight[i] > 0 ? blended : old;
+            value = value > 0 ? value : 0.0f;                 /* <= 0, -inf and NaN: 0 */
+            irradiance[i] = value <= FLT_MAX ? value : FLT_MAX; /* +inf: the largest float */
+        }
+        float partial[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+        for (uint32_t i = 0; i < IRRADIANCE_HALVES; i += 8)
+            for (uint32_t l = 0; l < 8; l++)
+                partial[l] = irradiance[i + l] > partial[l] ? irradiance[i + l] : partial[l];
+        float scale = 0;
+        for (uint32_t l = 0; l < 8; l++)
+            scale = partial[l] > scale ? partial[l] : scale;
+        for (uint32_t i = 0; i < MOMENT_HALVES; i++) {
+            float old = fresh ? 0.0f : half_bits_to_float(fx__get_u16(p + PROBE_MOMENTS + 2 * i));
+            float blended = fresh ? new_moments[i] : h * old + (1.0f - h) * new_moments[i];
+            float initial = (i & 1) ? FX_PROBE_MAX_DISTANCE * FX_PROBE_MAX_DISTANCE : FX_PROBE_MAX_DISTANCE;
+            moments[i] = moment_weight[i] > 0 ? blended : (fresh ? initial : old);
         }
         put_f32(p + 24, scale);
         float inv = scale > 0 ? 1.0f / scale : 0.0f;
         /* Per texel one hash, 12 bits of it per half (RGB, then the two moments), as halves_stochastic's u. */
-        float relative[FX_PROBE_TEXELS][3], u_irradiance[FX_PROBE_TEXELS][3], u_moments[FX_PROBE_TEXELS][2];
-        uint16_t halves_irradiance[FX_PROBE_TEXELS][3], halves_moments[FX_PROBE_TEXELS][2];
+        float relative[IRRADIANCE_HALVES], u_irradiance[IRRADIANCE_HALVES], u_moments[MOMENT_HALVES];
+        uint16_t halves_irradiance[IRRADIANCE_HALVES], halves_moments[MOMENT_HALVES];
         for (uint32_t t = 0; t < FX_PROBE_TEXELS; t++) {
             uint64_t bits = fx__hash(ctx->seed, job->key, t, updates, FX_STREAM_PROBE_ROUNDING);
-            for (int k = 0; k < 5; k++) {
-                float u = (float)((bits >> (12 * k)) & 0xfffu) * (1.0f / 4096.0f);
-                if (k < 3)
-                    u_irradiance[t][k] = u;
-                else
-                    u_moments[t][k - 3] = u;
-            }
-            for (int k = 0; k < 3; k++)
-                relative[t][k] = min_of(irradiance[t][k] * inv, 1.0f);
+            u_irradiance[3 * t + 0] = (float)(uint32_t)(bits & 0xfffu) * (1.0f / 4096.0f);
+            u_irradiance[3 * t + 1] = (float)(uint32_t)((bits >> 12) & 0xfffu) * (1.0f / 4096.0f);
+            u_irradiance[3 * t + 2] = (float)(uint32_t)((bits >> 24) & 0xfffu) * (1.0f / 4096.0f);
+            u_moments[2 * t + 0] = (float)(uint32_t)((bits >> 36) & 0xfffu) * (1.0f / 4096.0f);
+            u_moments[2 * t + 1] = (float)(uint32_t)((bits >> 48) & 0xfffu) * (1.0f / 4096.0f);
         }
-        halves_stochastic(&relative[0][0], &u_irradiance[0][0], 3 * FX_PROBE_TEXELS, &halves_irradiance[0][0]);
-        halves_stochastic(&moments[0][0], &u_moments[0][0], 2 * FX_PROBE_TEXELS, &halves_moments[0][0]);
-        for (uint32_t t = 0; t < FX_PROBE_TEXELS; t++) {
-            for (int k = 0; k < 3; k++)
-                fx__put_u16(p + PROBE_IRRADIANCE + 6 * t + 2 * k, halves_irradiance[t][k]);
-            for (int k = 0; k < 2; k++)
-                fx__put_u16(p + PROBE_MOMENTS + 4 * t + 2 * k, halves_moments[t][k]);
-        }
+        for (uint32_t i = 0; i < IRRADIANCE_HALVES; i++)
+            relative[i] = min_of(irradiance[i] * inv, 1.0f);
+        halves_stochastic(relative, u_irradiance, IRRADIANCE_HALVES, halves_irradiance);
+        halves_stochastic(moments, u_moments, MOMENT_HALVES, halves_moments);
+        for (uint32_t i = 0; i < IRRADIANCE_HALVES; i++)
+            fx__put_u16(p + PROBE_IRRADIANCE + 2 * i, halves_irradiance[i]);
+        for (uint32_t i = 0; i < MOMENT_HALVES; i++)
+            fx__put_u16(p + PROBE_MOMENTS + 2 * i, halves_moments[i]);
         put_u32(p + 16, FX_PROBE_HAS_DATA | (in->moved_out ? FX_PROBE_MOVED_OUT : 0u) |
                             (in->seen_front ? FX_PROBE_SEEN_FRONT : 0u));
         put_u32(p + 20, updates < UINT32_MAX ? updates + 1 : UINT32_MAX);
