@@ -347,10 +347,10 @@ bool wsc_cell_corners(const wsc_cache *cache, uint32_t effect, uint32_t level, c
         g[0] >= WSC_XZ_MAX || g[2] >= WSC_XZ_MAX || g[1] >= WSC_Y_MAX || !wsc_wgi_pack(level, g[0], g[1], g[2], &base))
         return false;
     /* g + 1 stays in range on every axis, so each field of base has room for the + 1 (no carry). */
-    uint64_t keys[8], valid[8];
-    for (int c = 0; c < 8; c++)
-        keys[c] = base + ((uint64_t)(c & 1) << WSC_WGI_X_SHIFT) + ((uint64_t)(c >> 1 & 1) << WSC_WGI_Y_SHIFT) +
-                  ((uint64_t)(c >> 2 & 1) << WSC_WGI_Z_SHIFT);
+    const uint64_t dx = (uint64_t)1 << WSC_WGI_X_SHIFT, dy = (uint64_t)1 << WSC_WGI_Y_SHIFT,
+                   dz = (uint64_t)1 << WSC_WGI_Z_SHIFT;
+    uint64_t valid[8], keys[8] = {base,      base + dx,      base + dy,      base + dx + dy,
+                                  base + dz, base + dx + dz, base + dy + dz, base + dx + dy + dz};
     osc_find_payloads(cache->cores[effect], 0, keys, 8, valid, payload);
     for (int c = 0; c < 8; c++)
         payload[c] = (valid[c] & 1) ? payload[c] : NULL;
