@@ -905,10 +905,19 @@ FXC_HOT_CLONES void fx_probes_commit(const fx_context *ctx, const fx_block_job *
                 moment_weight[2 * t + k] = in->moment_weight[t];
         }
         const float *new_irradiance = &in->irradiance[0][0], *new_moments = &in->moments[0][0];
+        /* keep x old + take x new: h x old + (1 - h) x new as before, or 0 + new when fresh (old is 0 then: the
+         * same value, a new -0 becoming +0, which the clamp below and halves_stochastic turn into 0 anyway) */
+        const float keep = fresh ? 0.0f : h, take = fresh ? 1.0f : 1.0f - h;
+        const float old_factor = fresh ? 0.0f : 1.0f, initial_factor = fresh ? 1.0f : 0.0f;
+        uint16_t old_irradiance[IRRADIANCE_HALVES], old_moments[MOMENT_HALVES]; /* the payload's, read once */
+        for (uint32_t i = 0; i < IRRADIANCE_HALVES; i++)
+            old_irradiance[i] = fx__get_u16(p + PROBE_IRRADIANCE + 2 * i);
+        for (uint32_t i = 0; i < MOMENT_HALVES; i++)
+            old_moments[i] = fx__get_u16(p + PROBE_MOMENTS + 2 * i);
         for (uint32_t i = 0; i < IRRADIANCE_HALVES; i++) {
             /* payload halves are halves_stochastic's: finite and >= 0 */
-            float old = old_scale * half_bits_to_float(fx__get_u16(p + PROBE_IRRADIANCE + 2 * i));
-            float blended = fresh ? new_irradiance[i] : h * old + (1.0f - h) * new_irradiance[i];
+            float old = old_scale * half_bits_to_float(old_irradiance[i]);
+            float blended = keep * old + take * new_irradiance[i];
             float value = irradiance_weight[i] > 0 ? blended : old;
             value = value > 0 ? value : 0.0f;                 /* <= 0, -inf and NaN: 0 */
             irradiance[i] = value <= FLT_MAX ? value : FLT_MAX; /* +inf: the largest float */
@@ -921,10 +930,11 @@ FXC_HOT_CLONES void fx_probes_commit(const fx_context *ctx, const fx_block_job *
         for (uint32_t l = 0; l < 8; l++)
             scale = partial[l] > scale ? partial[l] : scale;
         for (uint32_t i = 0; i < MOMENT_HALVES; i++) {
-            float old = fresh ? 0.0f : half_bits_to_float(fx__get_u16(p + PROBE_MOMENTS + 2 * i));
-            float blended = fresh ? new_moments[i] : h * old + (1.0f - h) * new_moments[i];
+            /* fresh: old 0 and the unseen texels' start (FX_PROBE_MAX_DISTANCE, its square); else old (x 1, + 0) */
+            float old = old_factor * half_bits_to_float(old_moments[i]);
+            float blended = keep * old + take * new_moments[i];
             float initial = (i & 1) ? FX_PROBE_MAX_DISTANCE * FX_PROBE_MAX_DISTANCE : FX_PROBE_MAX_DISTANCE;
-            moments[i] = moment_weight[i] > 0 ? blended : (fresh ? initial : old);
+            moments[i] = moment_weight[i] > 0 ? blended : old + initial_factor * initial;
         }
         put_f32(p + 24, scale);
         float inv = scale > 0 ? 1.0f / scale : 0.0f;
