@@ -421,10 +421,13 @@ FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t 
         return false;
     float tap[8];
     double wx[2] = {1.0 - t[0], t[0]}, wy[2] = {1.0 - t[1], t[1]}, wz[2] = {1.0 - t[2], t[2]};
-    /* ((1 x wx) x wy) x wz in double, as before: 1 x wx is exact; the 4 products wx x wy once, not twice */
+    /* ((1 x wx) x wy) x wz in double, as before: 1 x wx is exact; the 4 products wx x wy once, not twice,
+     * then times wz[0] and wz[1] as two 4-wide loops */
     double wxy[4] = {wx[0] * wy[0], wx[1] * wy[0], wx[0] * wy[1], wx[1] * wy[1]};
-    for (int c = 0; c < 8; c++)
-        tap[c] = (float)(wxy[c & 3] * wz[c >> 2]);
+    for (int c = 0; c < 4; c++)
+        tap[c] = (float)(wxy[c] * wz[0]);
+    for (int c = 0; c < 4; c++)
+        tap[c + 4] = (float)(wxy[c] * wz[1]);
     return cell_filter(e, tap, position, normal, out);
 }
 
