@@ -395,26 +395,32 @@ FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float pos
 
 /* The filter at a hit on the grid of `grid_point` (any grid point of the level, e.g. the job's) and `cell`
  * (metres): E of the probes around it, or false (and 0) when none contributes. */
+/* 1 / cell when multiplying by it rounds as dividing by cell does, else 0 (hit_bounce then divides). A
+ * power-of-two cell (the grid's: the finest cell is one and levels double it) has an exact inverse: three
+ * divisions fewer per hit. Once per job. */
+static inline double cell_inverse(float cell)
+{
+    uint32_t cell_bits;
+    memcpy(&cell_bits, &cell, sizeof cell_bits);
+    const bool exact_inverse = (cell_bits & 0x7fffffu) == 0 && cell > 0x1p-100f && cell < 0x1p100f;
+    return exact_inverse ? 1.0 / (double)cell : 0.0;
+}
+
 FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, const float grid_point[3],
-                               float cell, const float position[3], const float normal[3], float out[3])
+                               float cell, double inverse, const float position[3], const float normal[3],
+                               float out[3])
 {
     out[0] = out[1] = out[2] = 0;
     float centre[3];
     double t[3];
-    /* A power-of-two cell (the grid's: the finest cell is one and levels double it) has an exact inverse, and
-     * multiplying by it rounds as the division does: three divisions fewer per hit. */
-    uint32_t cell_bits;
-    memcpy(&cell_bits, &cell, sizeof cell_bits);
-    const bool exact_inverse = (cell_bits & 0x7fffffu) == 0 && cell > 0x1p-100f && cell < 0x1p100f;
-    const double inverse = 1.0 / (double)cell;
     for (int k = 0; k < 3; k++) { /* the cell and the position in it (wsc_corners' rule, from the grid point) */
         double delta = (double)position[k] - (double)grid_point[k];
-        double q = exact_inverse ? delta * inverse : delta / (double)cell, f = floor(q);
+        double q = inverse != 0.0 ? delta * inverse : delta / (double)cell, f = floor(q);
         if (!(fabs(f) < 1e9))
             return false;
         centre[k] = (float)((double)grid_point[k] + (f + 0.5) * (double)cell);
+        /* in [0, 1] without a clamp: q is finite, f <= q < f + 1, and rounding q - f keeps it between 0 and 1 */
         t[k] = q - f;
-        t[k] = t[k] < 0.0 ? 0.0 : (t[k] > 1.0 ? 1.0 : t[k]);
     }
     hit_cell *e = hit_cell_find(ctx, effect, level, centre);
     if (!e->active)
@@ -506,9 +512,9 @@ static void taps_bounce(const fx_taps *taps, const float position[3], const floa
 }
 
 /* Radiance leaving a front-face hit, given its direct light (compose units) and the probes around it. */
-FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job, uint32_t tri, float u, float v,
-                                 float t, const float position[3], const float normal[3], const float direct[3],
-                                 float out[3])
+FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job, double inverse, uint32_t tri,
+                                 float u, float v, float t, const float position[3], const float normal[3],
+                                 const float direct[3], float out[3])
 {
     float albedo[3], bounce[3] = {0, 0, 0};
     /* The triangle's mean albedo (one load; file comment, "Albedo at hits"). */
@@ -516,7 +522,7 @@ FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job,
     scene_albedo_mean(ctx->s, tri, albedo);
     uint32_t effect = job->effect, level = job->level;
     if (ctx->world_cell) {
-        hit_bounce(ctx, effect, level, job->origin, job->cell, position, normal, bounce);
+        hit_bounce(ctx, effect, level, job->origin, job->cell, inverse, position, normal, bounce);
     } else if (ctx->world_taps) {
         fx_taps taps;
         memset(&taps, 0, sizeof taps);
@@ -705,6 +711,7 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
         const uint8_t *payload = job->payload;
         uint32_t flags = get_u32(payload + 16), updates = get_u32(payload + 20);
         float cell = job->cell, origin[3], offset[3];
+        const double inverse = cell_inverse(cell);
         for (int k = 0; k < 3; k++) {
             origin[k] = (flags & FX_PROBE_HAS_DATA) ? get_f32(payload + 4 * k) : job->origin[k];
             offset[k] = origin[k] - job->origin[k];
@@ -778,7 +785,7 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
                             memcpy(back_dir, dir, sizeof back_dir);
                         }
                     } else {
-                        hit_radiance(ctx, job, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r], normal,
+                        hit_radiance(ctx, job, inverse, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r], normal,
                                      hs->direct[r], radiance);
                         distance = t;
                         if (t < closest_front) {
