@@ -458,12 +458,16 @@ FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float pos
             if (!(e->active >> c & 1))
                 continue;
             const uint8_t *p = e->texel[c];
-            float scale = get_f32(p + 24), sum[3] = {0, 0, 0};
-            for (int i = 0; i < 4; i++)
-                for (int k = 0; k < 3; k++)
-                    sum[k] += w[i] * half_bits_to_float(fx__get_u16(p + PROBE_IRRADIANCE + 6 * texel[i] + 2 * k));
-            for (int k = 0; k < 3; k++)
-                e->e[slot][c][k] = sum[k] * scale;
+            float scale = get_f32(p + 24), r = 0, g = 0, b = 0;
+            for (int i = 0; i < 4; i++) { /* the texel's three halves, written out: the same sums in the same order */
+                const uint8_t *q = p + PROBE_IRRADIANCE + 6 * texel[i];
+                r += w[i] * half_bits_to_float(fx__get_u16(q));
+                g += w[i] * half_bits_to_float(fx__get_u16(q + 2));
+                b += w[i] * half_bits_to_float(fx__get_u16(q + 4));
+            }
+            e->e[slot][c][0] = r * scale;
+            e->e[slot][c][1] = g * scale;
+            e->e[slot][c][2] = b * scale;
         }
         memcpy(e->normal[slot], normal, sizeof e->normal[slot]);
         e->normal_set |= 1u << slot;
