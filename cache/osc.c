@@ -498,6 +498,31 @@ void osc_find_batch(const osc_cache *cache, const uint64_t *keys, size_t count, 
     osc__table_find_batch(&cache->table, keys, count, block_indices);
 }
 
+/* Read-only batched lookup of blocks' valid masks and payloads (osc.h). */
+void osc_find_payloads(const osc_cache *cache, uint32_t effect, const uint64_t *keys, size_t count, uint64_t *valid,
+                       const void **payload)
+{
+    enum { GROUP = 16 };
+    const osc__pool *pool = osc__pool_of(cache, effect);
+    OSC_ASSERT(pool->texel_bytes != 0);
+    uint32_t blocks[GROUP];
+    for (size_t base = 0; base < count; base += GROUP) {
+        size_t group = count - base < GROUP ? count - base : GROUP;
+        osc__table_find_batch(&cache->table, keys + base, group, blocks);
+        for (size_t i = 0; i < group; i++) {
+            uint32_t b = blocks[i];
+            if (b == OSC_NONE) {
+                valid[base + i] = 0;
+                payload[base + i] = NULL;
+                continue;
+            }
+            OSC_ASSERT(b < pool->capacity);
+            valid[base + i] = pool->valid[b];
+            payload[base + i] = pool->payload + (size_t)b * pool->block_bytes;
+        }
+    }
+}
+
 /* Unmaps a key. */
 osc_result osc_remove(osc_cache *cache, uint64_t key)
 {

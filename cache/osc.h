@@ -320,6 +320,12 @@ uint32_t osc_find(const osc_cache *cache, uint64_t key);
 /* osc_find for `count` keys at once, with software prefetching (faster on large tables). */
 void osc_find_batch(const osc_cache *cache, const uint64_t *keys, size_t count, uint32_t *block_indices);
 
+/* osc_find_batch, then per key its block's valid mask and payload in `effect`'s pool (osc_block_valid,
+ * osc_block_payload), or 0 and NULL when absent: a whole neighbourhood read in one call. Read-only and not
+ * counted, as osc_find. Precondition (asserted): the effect has a pool. */
+void osc_find_payloads(const osc_cache *cache, uint32_t effect, const uint64_t *keys, size_t count, uint64_t *valid,
+                       const void **payload);
+
 /* Unmaps a key and returns its block to its pool's free list. OSC_ERR_NOT_FOUND when absent. */
 osc_result osc_remove(osc_cache *cache, uint64_t key);
 

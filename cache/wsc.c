@@ -336,6 +336,27 @@ uint32_t wsc_find(const wsc_cache *cache, uint32_t effect, uint64_t wgi)
     return osc_find(cache->cores[effect], wgi);
 }
 
+/* A cell's 8 corners in one batched lookup (wsc.h). */
+bool wsc_cell_corners(const wsc_cache *cache, uint32_t effect, uint32_t level, const int32_t g[3],
+                      const void *payload[8])
+{
+    for (int c = 0; c < 8; c++)
+        payload[c] = NULL;
+    uint64_t base;
+    if (effect >= WSC_MAX_EFFECTS || !cache->cores[effect] || cache->effects[effect].brick_size != 1 ||
+        g[0] >= WSC_XZ_MAX || g[2] >= WSC_XZ_MAX || g[1] >= WSC_Y_MAX || !wsc_wgi_pack(level, g[0], g[1], g[2], &base))
+        return false;
+    /* g + 1 stays in range on every axis, so each field of base has room for the + 1 (no carry). */
+    const uint64_t dx = (uint64_t)1 << WSC_WGI_X_SHIFT, dy = (uint64_t)1 << WSC_WGI_Y_SHIFT,
+                   dz = (uint64_t)1 << WSC_WGI_Z_SHIFT;
+    uint64_t valid[8], keys[8] = {base,      base + dx,      base + dy,      base + dx + dy,
+                                  base + dz, base + dx + dz, base + dy + dz, base + dx + dy + dz};
+    osc_find_payloads(cache->cores[effect], 0, keys, 8, valid, payload);
+    for (int c = 0; c < 8; c++)
+        payload[c] = (valid[c] & 1) ? payload[c] : NULL;
+    return true;
+}
+
 /* Eviction in every core. */
 void wsc_housekeeping(wsc_cache *cache)
 {

@@ -180,6 +180,14 @@ void wsc_count_refusals(wsc_cache *cache, uint32_t effect, uint64_t count);
 /* The brick of a WGI, or WSC_NONE (absent effect, level-15 value or not resident). Read-only, not counted. */
 uint32_t wsc_find(const wsc_cache *cache, uint32_t effect, uint64_t wgi);
 
+/* The 8 corners of the cell whose lowest corner is grid point g at `level`, for an effect of brick size 1:
+ * payload[c] is the brick of corner g + (c & 1, c >> 1 & 1, c >> 2 & 1) when it is resident and its cell
+ * holds data (valid bit 0), else NULL; the same as wsc_brick_of, wsc_find, wsc_brick_valid and
+ * wsc_brick_payload per corner, with the 8 WGIs from one pack and one batched lookup. False (all NULL) when
+ * the effect is absent or not of brick size 1, or a corner is out of range. Read-only, not counted. */
+bool wsc_cell_corners(const wsc_cache *cache, uint32_t effect, uint32_t level, const int32_t g[3],
+                      const void *payload[8]);
+
 /* Stage 9: adaptive LRU eviction of every effect's pool (osc_housekeeping). */
 void wsc_housekeeping(wsc_cache *cache);
 

@@ -395,34 +395,45 @@ FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float pos
 
 /* The filter at a hit on the grid of `grid_point` (any grid point of the level, e.g. the job's) and `cell`
  * (metres): E of the probes around it, or false (and 0) when none contributes. */
+/* 1 / cell when multiplying by it rounds as dividing by cell does, else 0 (hit_bounce then divides). A
+ * power-of-two cell (the grid's: the finest cell is one and levels double it) has an exact inverse: three
+ * divisions fewer per hit. Once per job. */
+static inline double cell_inverse(float cell)
+{
+    uint32_t cell_bits;
+    memcpy(&cell_bits, &cell, sizeof cell_bits);
+    const bool exact_inverse = (cell_bits & 0x7fffffu) == 0 && cell > 0x1p-100f && cell < 0x1p100f;
+    return exact_inverse ? 1.0 / (double)cell : 0.0;
+}
+
 FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, const float grid_point[3],
-                               float cell, const float position[3], const float normal[3], float out[3])
+                               float cell, double inverse, const float position[3], const float normal[3],
+                               float out[3])
 {
     out[0] = out[1] = out[2] = 0;
     float centre[3];
     double t[3];
-    /* A power-of-two cell (the grid's: the finest cell is one and levels double it) has an exact inverse, and
-     * multiplying by it rounds as the division does: three divisions fewer per hit. */
-    uint32_t cell_bits;
-    memcpy(&cell_bits, &cell, sizeof cell_bits);
-    const bool exact_inverse = (cell_bits & 0x7fffffu) == 0 && cell > 0x1p-100f && cell < 0x1p100f;
-    const double inverse = 1.0 / (double)cell;
     for (int k = 0; k < 3; k++) { /* the cell and the position in it (wsc_corners' rule, from the grid point) */
         double delta = (double)position[k] - (double)grid_point[k];
-        double q = exact_inverse ? delta * inverse : delta / (double)cell, f = floor(q);
+        double q = inverse != 0.0 ? delta * inverse : delta / (double)cell, f = floor(q);
         if (!(fabs(f) < 1e9))
             return false;
         centre[k] = (float)((double)grid_point[k] + (f + 0.5) * (double)cell);
+        /* in [0, 1] without a clamp: q is finite, f <= q < f + 1, and rounding q - f keeps it between 0 and 1 */
         t[k] = q - f;
-        t[k] = t[k] < 0.0 ? 0.0 : (t[k] > 1.0 ? 1.0 : t[k]);
     }
     hit_cell *e = hit_cell_find(ctx, effect, level, centre);
     if (!e->active)
         return false;
     float tap[8];
     double wx[2] = {1.0 - t[0], t[0]}, wy[2] = {1.0 - t[1], t[1]}, wz[2] = {1.0 - t[2], t[2]};
-    for (int c = 0; c < 8; c++) /* ((1 x wx) x wy) x wz in double, as before: 1 x wx is exact */
-        tap[c] = (float)(wx[c & 1] * wy[c >> 1 & 1] * wz[c >> 2]);
+    /* ((1 x wx) x wy) x wz in double, as before: 1 x wx is exact; the 4 products wx x wy once, not twice,
+     * then times wz[0] and wz[1] as two 4-wide loops */
+    double wxy[4] = {wx[0] * wy[0], wx[1] * wy[0], wx[0] * wy[1], wx[1] * wy[1]};
+    for (int c = 0; c < 4; c++)
+        tap[c] = (float)(wxy[c] * wz[0]);
+    for (int c = 0; c < 4; c++)
+        tap[c + 4] = (float)(wxy[c] * wz[1]);
     return cell_filter(e, tap, position, normal, out);
 }
 
@@ -447,12 +458,16 @@ FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float pos
             if (!(e->active >> c & 1))
                 continue;
             const uint8_t *p = e->texel[c];
-            float scale = get_f32(p + 24), sum[3] = {0, 0, 0};
-            for (int i = 0; i < 4; i++)
-                for (int k = 0; k < 3; k++)
-                    sum[k] += w[i] * half_bits_to_float(fx__get_u16(p + PROBE_IRRADIANCE + 6 * texel[i] + 2 * k));
-            for (int k = 0; k < 3; k++)
-                e->e[slot][c][k] = sum[k] * scale;
+            float scale = get_f32(p + 24), r = 0, g = 0, b = 0;
+            for (int i = 0; i < 4; i++) { /* the texel's three halves, written out: the same sums in the same order */
+                const uint8_t *q = p + PROBE_IRRADIANCE + 6 * texel[i];
+                r += w[i] * half_bits_to_float(fx__get_u16(q));
+                g += w[i] * half_bits_to_float(fx__get_u16(q + 2));
+                b += w[i] * half_bits_to_float(fx__get_u16(q + 4));
+            }
+            e->e[slot][c][0] = r * scale;
+            e->e[slot][c][1] = g * scale;
+            e->e[slot][c][2] = b * scale;
         }
         memcpy(e->normal[slot], normal, sizeof e->normal[slot]);
         e->normal_set |= 1u << slot;
@@ -501,9 +516,9 @@ static void taps_bounce(const fx_taps *taps, const float position[3], const floa
 }
 
 /* Radiance leaving a front-face hit, given its direct light (compose units) and the probes around it. */
-FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job, uint32_t tri, float u, float v,
-                                 float t, const float position[3], const float normal[3], const float direct[3],
-                                 float out[3])
+FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job, double inverse, uint32_t tri,
+                                 float u, float v, float t, const float position[3], const float normal[3],
+                                 const float direct[3], float out[3])
 {
     float albedo[3], bounce[3] = {0, 0, 0};
     /* The triangle's mean albedo (one load; file comment, "Albedo at hits"). */
@@ -511,7 +526,7 @@ FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job,
     scene_albedo_mean(ctx->s, tri, albedo);
     uint32_t effect = job->effect, level = job->level;
     if (ctx->world_cell) {
-        hit_bounce(ctx, effect, level, job->origin, job->cell, position, normal, bounce);
+        hit_bounce(ctx, effect, level, job->origin, job->cell, inverse, position, normal, bounce);
     } else if (ctx->world_taps) {
         fx_taps taps;
         memset(&taps, 0, sizeof taps);
@@ -700,6 +715,7 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
         const uint8_t *payload = job->payload;
         uint32_t flags = get_u32(payload + 16), updates = get_u32(payload + 20);
         float cell = job->cell, origin[3], offset[3];
+        const double inverse = cell_inverse(cell);
         for (int k = 0; k < 3; k++) {
             origin[k] = (flags & FX_PROBE_HAS_DATA) ? get_f32(payload + 4 * k) : job->origin[k];
             offset[k] = origin[k] - job->origin[k];
@@ -773,7 +789,7 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
                             memcpy(back_dir, dir, sizeof back_dir);
                         }
                     } else {
-                        hit_radiance(ctx, job, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r], normal,
+                        hit_radiance(ctx, job, inverse, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r], normal,
                                      hs->direct[r], radiance);
                         distance = t;
                         if (t < closest_front) {
@@ -889,53 +905,72 @@ FXC_HOT_CLONES void fx_probes_commit(const fx_context *ctx, const fx_block_job *
             put_u32(p + 20, 0);
             continue;
         }
-        float old_scale = fresh ? 0.0f : get_f32(p + 24), irradiance[FX_PROBE_TEXELS][3],
-              moments[FX_PROBE_TEXELS][2], scale = 0;
+        /* Flat loops over the 192 irradiance halves and the 128 moment halves (texel t's component k at
+         * 3t + k and 2t + k, as in the payload: byte 2 x (3t + k), 2 x (2t + k)), written with selects so
+         * the AVX2 copy runs them 8 wide; per half the same operations in the same order as one texel at a
+         * time, and the maximum (exact in any order: no NaN, no -0) in 8 partial maxima. */
+        enum { IRRADIANCE_HALVES = 3 * FX_PROBE_TEXELS, MOMENT_HALVES = 2 * FX_PROBE_TEXELS };
+        float old_scale = fresh ? 0.0f : get_f32(p + 24), irradiance[IRRADIANCE_HALVES], moments[MOMENT_HALVES];
+        float irradiance_weight[IRRADIANCE_HALVES], moment_weight[MOMENT_HALVES];
         for (uint32_t t = 0; t < FX_PROBE_TEXELS; t++) {
-            for (int k = 0; k < 3; k++) {
-                /* payload halves are halves_stochastic's: finite and >= 0 */
-                float old = old_scale * half_bits_to_float(fx__get_u16(p + PROBE_IRRADIANCE + 6 * t + 2 * k));
-                float value = old;
-                if (in->irradiance_weight[t] > 0)
-                    value = fresh ? in->irradiance[t][k] : h * old + (1.0f - h) * in->irradiance[t][k];
-                irradiance[t][k] = isfinite(value) && value > 0 ? value : (value > 0 ? FLT_MAX : 0.0f);
-                scale = irradiance[t][k] > scale ? irradiance[t][k] : scale; /* fmaxf: neither is NaN */
-            }
-            for (int k = 0; k < 2; k++) {
-                float old = fresh ? 0.0f : half_bits_to_float(fx__get_u16(p + PROBE_MOMENTS + 4 * t + 2 * k));
-                float value = old;
-                if (in->moment_weight[t] > 0)
-                    value = fresh ? in->moments[t][k] : h * old + (1.0f - h) * in->moments[t][k];
-                else if (fresh)
-                    value = k == 0 ? FX_PROBE_MAX_DISTANCE : FX_PROBE_MAX_DISTANCE * FX_PROBE_MAX_DISTANCE;
-                moments[t][k] = value;
-            }
+            for (int k = 0; k < 3; k++)
+                irradiance_weight[3 * t + k] = in->irradiance_weight[t];
+            for (int k = 0; k < 2; k++)
+                moment_weight[2 * t + k] = in->moment_weight[t];
+        }
+        const float *new_irradiance = &in->irradiance[0][0], *new_moments = &in->moments[0][0];
+        /* keep x old + take x new: h x old + (1 - h) x new as before, or 0 + new when fresh (old is 0 then: the
+         * same value, a new -0 becoming +0, which the clamp below and halves_stochastic turn into 0 anyway) */
+        const float keep = fresh ? 0.0f : h, take = fresh ? 1.0f : 1.0f - h;
+        const float old_factor = fresh ? 0.0f : 1.0f, initial_factor = fresh ? 1.0f : 0.0f;
+        uint16_t old_irradiance[IRRADIANCE_HALVES], old_moments[MOMENT_HALVES]; /* the payload's, read once */
+        for (uint32_t i = 0; i < IRRADIANCE_HALVES; i++)
+            old_irradiance[i] = fx__get_u16(p + PROBE_IRRADIANCE + 2 * i);
+        for (uint32_t i = 0; i < MOMENT_HALVES; i++)
+            old_moments[i] = fx__get_u16(p + PROBE_MOMENTS + 2 * i);
+        for (uint32_t i = 0; i < IRRADIANCE_HALVES; i++) {
+            /* payload halves are halves_stochastic's: finite and >= 0 */
+            float old = old_scale * half_bits_to_float(old_irradiance[i]);
+            float blended = keep * old + take * new_irradiance[i];
+            float value = irradiance_weight[i] > 0 ? blended : old;
+            value = value > 0 ? value : 0.0f;                 /* <= 0, -inf and NaN: 0 */
+            irradiance[i] = value <= FLT_MAX ? value : FLT_MAX; /* +inf: the largest float */
+        }
+        float partial[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+        for (uint32_t i = 0; i < IRRADIANCE_HALVES; i += 8)
+            for (uint32_t l = 0; l < 8; l++)
+                partial[l] = irradiance[i + l] > partial[l] ? irradiance[i + l] : partial[l];
+        float scale = 0;
+        for (uint32_t l = 0; l < 8; l++)
+            scale = partial[l] > scale ? partial[l] : scale;
+        for (uint32_t i = 0; i < MOMENT_HALVES; i++) {
+            /* fresh: old 0 and the unseen texels' start (FX_PROBE_MAX_DISTANCE, its square); else old (x 1, + 0) */
+            float old = old_factor * half_bits_to_float(old_moments[i]);
+            float blended = keep * old + take * new_moments[i];
+            float initial = (i & 1) ? FX_PROBE_MAX_DISTANCE * FX_PROBE_MAX_DISTANCE : FX_PROBE_MAX_DISTANCE;
+            moments[i] = moment_weight[i] > 0 ? blended : old + initial_factor * initial;
         }
         put_f32(p + 24, scale);
         float inv = scale > 0 ? 1.0f / scale : 0.0f;
         /* Per texel one hash, 12 bits of it per half (RGB, then the two moments), as halves_stochastic's u. */
-        float relative[FX_PROBE_TEXELS][3], u_irradiance[FX_PROBE_TEXELS][3], u_moments[FX_PROBE_TEXELS][2];
-        uint16_t halves_irradiance[FX_PROBE_TEXELS][3], halves_moments[FX_PROBE_TEXELS][2];
+        float relative[IRRADIANCE_HALVES], u_irradiance[IRRADIANCE_HALVES], u_moments[MOMENT_HALVES];
+        uint16_t halves_irradiance[IRRADIANCE_HALVES], halves_moments[MOMENT_HALVES];
         for (uint32_t t = 0; t < FX_PROBE_TEXELS; t++) {
             uint64_t bits = fx__hash(ctx->seed, job->key, t, updates, FX_STREAM_PROBE_ROUNDING);
-            for (int k = 0; k < 5; k++) {
-                float u = (float)((bits >> (12 * k)) & 0xfffu) * (1.0f / 4096.0f);
-                if (k < 3)
-                    u_irradiance[t][k] = u;
-                else
-                    u_moments[t][k - 3] = u;
-            }
-            for (int k = 0; k < 3; k++)
-                relative[t][k] = min_of(irradiance[t][k] * inv, 1.0f);
+            u_irradiance[3 * t + 0] = (float)(uint32_t)(bits & 0xfffu) * (1.0f / 4096.0f);
+            u_irradiance[3 * t + 1] = (float)(uint32_t)((bits >> 12) & 0xfffu) * (1.0f / 4096.0f);
+            u_irradiance[3 * t + 2] = (float)(uint32_t)((bits >> 24) & 0xfffu) * (1.0f / 4096.0f);
+            u_moments[2 * t + 0] = (float)(uint32_t)((bits >> 36) & 0xfffu) * (1.0f / 4096.0f);
+            u_moments[2 * t + 1] = (float)(uint32_t)((bits >> 48) & 0xfffu) * (1.0f / 4096.0f);
         }
-        halves_stochastic(&relative[0][0], &u_irradiance[0][0], 3 * FX_PROBE_TEXELS, &halves_irradiance[0][0]);
-        halves_stochastic(&moments[0][0], &u_moments[0][0], 2 * FX_PROBE_TEXELS, &halves_moments[0][0]);
-        for (uint32_t t = 0; t < FX_PROBE_TEXELS; t++) {
-            for (int k = 0; k < 3; k++)
-                fx__put_u16(p + PROBE_IRRADIANCE + 6 * t + 2 * k, halves_irradiance[t][k]);
-            for (int k = 0; k < 2; k++)
-                fx__put_u16(p + PROBE_MOMENTS + 4 * t + 2 * k, halves_moments[t][k]);
-        }
+        for (uint32_t i = 0; i < IRRADIANCE_HALVES; i++)
+            relative[i] = min_of(irradiance[i] * inv, 1.0f);
+        halves_stochastic(relative, u_irradiance, IRRADIANCE_HALVES, halves_irradiance);
+        halves_stochastic(moments, u_moments, MOMENT_HALVES, halves_moments);
+        for (uint32_t i = 0; i < IRRADIANCE_HALVES; i++)
+            fx__put_u16(p + PROBE_IRRADIANCE + 2 * i, halves_irradiance[i]);
+        for (uint32_t i = 0; i < MOMENT_HALVES; i++)
+            fx__put_u16(p + PROBE_MOMENTS + 2 * i, halves_moments[i]);
         put_u32(p + 16, FX_PROBE_HAS_DATA | (in->moved_out ? FX_PROBE_MOVED_OUT : 0u) |
                             (in->seen_front ? FX_PROBE_SEEN_FRONT : 0u));
         put_u32(p + 20, updates < UINT32_MAX ? updates + 1 : UINT32_MAX);

@@ -500,6 +500,77 @@ static void test_local_agrees_with_table(void **state)
     wsc_destroy(cache);
 }
 
+/* wsc_cell_corners (one pack, one batched lookup) against the per-corner path (wsc_brick_of, wsc_find,
+ * wsc_brick_valid, wsc_brick_payload) over random cells around a random set of resident probes, some with data
+ * (valid) and some without; its refusals: the far corner out of range, brick size 4, an absent effect. */
+static void test_cell_corners_match_find(void **state)
+{
+    (void)state;
+    enum { PROBES = 400, CELLS = 4000 };
+    wsc_desc desc = two_effect_desc(PROBES, 4);
+    wsc_cache *cache = create_or_fail(&desc);
+    uint64_t rng = 1234;
+    static uint64_t wgis[PROBES], masks[PROBES];
+    static uint32_t bricks[PROBES];
+    const int32_t lo[3] = {-6, -3, 1000}, span = 8; /* a small box: most cells have resident corners */
+    const uint32_t level = 2;
+    wsc_begin_frame(cache, 0);
+    for (int i = 0; i < PROBES; i++) {
+        int32_t g[3];
+        for (int a = 0; a < 3; a++)
+            g[a] = lo[a] + rng_range(&rng, 0, span);
+        assert_true(wsc_brick_of(g, level, 1, &wgis[i], &masks[i]));
+    }
+    size_t unique = 0;
+    assert_int_equal(wsc_request_batch(cache, 0, wgis, masks, PROBES, &unique, bricks), OSC_OK);
+    for (int i = 0; i < PROBES; i++) /* about two thirds with data */
+        if (rng_next(&rng) % 3)
+            wsc_brick_set_valid(cache, 0, bricks[i], 1);
+    uint32_t seen_valid = 0, seen_invalid = 0, seen_absent = 0;
+    for (int i = 0; i < CELLS; i++) {
+        int32_t g[3];
+        for (int a = 0; a < 3; a++)
+            g[a] = lo[a] - 1 + rng_range(&rng, 0, span + 1);
+        const void *payload[8];
+        assert_true(wsc_cell_corners(cache, 0, level, g, payload));
+        for (int c = 0; c < 8; c++) {
+            int32_t corner[3] = {g[0] + (c & 1), g[1] + (c >> 1 & 1), g[2] + (c >> 2 & 1)};
+            uint64_t wgi, bit;
+            assert_true(wsc_brick_of(corner, level, 1, &wgi, &bit));
+            uint32_t brick = wsc_find(cache, 0, wgi);
+            const void *expected = NULL;
+            if (brick == WSC_NONE)
+                seen_absent++;
+            else if (!(wsc_brick_valid(cache, 0, brick) & bit))
+                seen_invalid++;
+            else {
+                expected = wsc_brick_payload(cache, 0, brick);
+                seen_valid++;
+            }
+            assert_ptr_equal(payload[c], expected);
+        }
+    }
+    assert_true(seen_valid > 0 && seen_invalid > 0 && seen_absent > 0);
+    /* Refusals: every payload NULL. */
+    const int32_t edges[3][3] = {{WSC_XZ_MAX, 0, 0}, {0, WSC_Y_MAX, 0}, {0, 0, WSC_XZ_MAX}};
+    for (int e = 0; e < 3; e++) {
+        const void *payload[8] = {cache, cache, cache, cache, cache, cache, cache, cache};
+        assert_false(wsc_cell_corners(cache, 0, level, edges[e], payload));
+        for (int c = 0; c < 8; c++)
+            assert_null(payload[c]);
+    }
+    const void *payload[8];
+    int32_t at_lo[3] = {WSC_XZ_MIN, WSC_Y_MIN, WSC_XZ_MIN}, below[3] = {WSC_XZ_MIN - 1, 0, 0};
+    assert_true(wsc_cell_corners(cache, 0, level, at_lo, payload));
+    assert_false(wsc_cell_corners(cache, 0, level, below, payload));
+    assert_false(wsc_cell_corners(cache, 0, WSC_MAX_LEVEL + 1, lo, payload));
+    assert_false(wsc_cell_corners(cache, 3, level, lo, payload)); /* 4 x 4 x 4 bricks */
+    assert_false(wsc_cell_corners(cache, 5, level, lo, payload)); /* absent */
+    for (int c = 0; c < 8; c++)
+        assert_null(payload[c]);
+    wsc_destroy(cache);
+}
+
 /* ---- memory, descriptions, the generalised core ------------------------------------------------------------ */
 
 static void test_memory_accounting(void **state)
@@ -685,6 +756,7 @@ int main(void)
         cmocka_unit_test(test_corners),
         cmocka_unit_test(test_bricks_4x4x4_next_to_probes),
         cmocka_unit_test(test_local_agrees_with_table),
+        cmocka_unit_test(test_cell_corners_match_find),
         cmocka_unit_test(test_memory_accounting),
         cmocka_unit_test(test_desc_validation),
         cmocka_unit_test(test_osc_core_generalised),

@@ -581,6 +581,8 @@ bool srv__wsc_world_cell(const void *user, uint32_t effect, uint32_t level, cons
     /* wsc_corners' range: g and the far corner g + 1 inside the grid */
     if (!wsc_grid_point(world, level, k->c0, g) || g[0] >= WSC_XZ_MAX || g[2] >= WSC_XZ_MAX || g[1] >= WSC_Y_MAX)
         return false;
+    if (k->brick_size[effect] == 1) /* probes: the 8 corners in one batched lookup, the same texels */
+        return wsc_cell_corners(k->wsc, effect, level, g, texel);
     cell_memo m = {.level = level};
     memcpy(m.g, g, sizeof m.g);
     cell_taps ct;
