@@ -621,43 +621,6 @@ static void supersede(view_rc *rc, uint32_t q, float depth, const uint8_t rgb[3]
     rc->since_superseded++;
 }
 
-/* Before a batch of samples goes in (in order, one after another: each can change what the next one sees),
- * the lines its random accesses will touch are asked for, all of them at once, so their misses overlap
- * instead of coming one after another: the free slots the batch's points take (their position, colour and
- * list entries), and for the supersede the last frame's winner, shown point and depth at each sample's
- * pixel there, then the winner's colour (read once the winners have arrived). Only hints: nothing read here
- * decides anything. */
-static void prefetch_batch(const view_rc *rc, const rc_batch *b)
-{
-    uint32_t n = b->n < rc->free_count ? b->n : rc->free_count;
-    for (uint32_t k = 0; k < n; k++) {
-        uint32_t i = rc->free_slots[rc->free_count - 1 - k];
-        __builtin_prefetch(&rc->px[i], 1);
-        __builtin_prefetch(&rc->py[i], 1);
-        __builtin_prefetch(&rc->pz[i], 1);
-        __builtin_prefetch(&rc->rgba[i], 1);
-        __builtin_prefetch(&rc->tile_of[i], 1);
-    }
-    if (!rc->last_valid)
-        return;
-    for (uint32_t k = 0; k < b->n; k++) {
-        uint32_t q = b->last_pix[k];
-        if (q == RC_NO_PIXEL)
-            continue;
-        __builtin_prefetch(&rc->win[q]);
-        __builtin_prefetch(&rc->pt[q]);
-        __builtin_prefetch(&rc->zbuf[q]);
-    }
-    for (uint32_t k = 0; k < b->n; k++) {
-        uint32_t q = b->last_pix[k];
-        if (q == RC_NO_PIXEL)
-            continue;
-        uint32_t w = rc->win[q];
-        if (w != RC_NO_POINT)
-            __builtin_prefetch(&rc->rgba[w], 1);
-    }
-}
-
 fxc_result view_rc_insert_samples(view_rc *rc, const view_rc_camera *cam, uint32_t width, uint32_t height,
                                   const view_rc_sample *samples, uint32_t count)
 {
@@ -690,7 +653,6 @@ fxc_result view_rc_insert_samples(view_rc *rc, const view_rc_camera *cam, uint32
             b->rgb[b->n++] = sample->rgb;
         }
         place_batch(b, &v, rc->last_valid ? &rc->last_view : NULL, rc->origin);
-        prefetch_batch(rc, b);
         for (uint32_t k = 0; k < b->n; k++) {
             add_batch_point(rc, b, k);
             if (rc->last_valid)
