@@ -640,8 +640,8 @@ static void check_wide_interpolation(uint32_t w, uint32_t h)
 static void test_interpolation_wide_by_closed_form(void **state)
 {
     (void)state;
-    check_wide_interpolation(600, 24);  /* three strips, the fused cull 6 rows at a time */
-    check_wide_interpolation(5000, 20); /* twenty strips, the cull a row at a time */
+    check_wide_interpolation(600, 24);  /* three strips */
+    check_wide_interpolation(5000, 20); /* twenty strips */
 }
 
 /* ---- the dither ---------------------------------------------------------------------------------------- */

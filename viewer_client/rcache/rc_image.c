@@ -368,15 +368,7 @@ static void interp_row(const rc_band *band, int64_t y, uint16_t *sums, size_t pl
  * colours, the outputs) and the interpolation's (row sums, planes) do not fit in L1 together, so each runs
  * over a batch alone. Row by row, the interpolation's rows left L1 between rows (D1 misses 76.4 -> 91.5 M in
  * 80 frames, the marks' random stores most of it). */
-enum { RC_CULL_ROWS = 8, RC_CULL_PIXELS = 8 * 512 };
-
-/* Rows a batch: 8 up to 512 pixels wide (the batch's culled rows, 32 KiB of shown points and depths, stay in
- * L1 until the interpolation reads them), fewer for wider images (4 at 1024), at least one. */
-static uint32_t cull_rows(const view_rc *rc)
-{
-    uint32_t rows = RC_CULL_PIXELS / rc->width;
-    return rows > RC_CULL_ROWS ? RC_CULL_ROWS : rows > 0 ? rows : 1;
-}
+enum { RC_CULL_ROWS = 8 };
 
 /* Fused: makes sure row y is culled (the band's own rows a batch at a time into the image, with their marks;
  * the row below the band into the halo). */
@@ -390,7 +382,7 @@ static void fused_cull(rc_band *b, uint32_t y, uint32_t worker, uint32_t *culled
     }
     view_rc *rc = b->rc;
     size_t w = rc->width;
-    uint32_t rows = cull_rows(rc), end = y + rows < b->y1 ? y + rows : b->y1;
+    uint32_t end = y + RC_CULL_ROWS < b->y1 ? y + RC_CULL_ROWS : b->y1;
     for (uint32_t r = y; r < end; r++)
         *culled += cull_row(rc, r, rc->pt + r * w, rc->depth + r * w);
     for (uint32_t r = y; r < end; r++)
@@ -430,7 +422,7 @@ static void band_interpolate(view_rc *rc, rc_band *b, uint32_t band, uint32_t wo
             if (yb == y1)
                 fused_cull(b, y1, worker, &culled_to, &culled); /* the halo row below the band */
         } else {
-            yb = ya + cull_rows(rc) < y1 ? ya + cull_rows(rc) : y1;
+            yb = ya + RC_CULL_ROWS < y1 ? ya + RC_CULL_ROWS : y1;
         }
         for (uint32_t xa = 0; xa < w; xa += RC_INTERP_STRIP) {
             uint32_t xb = w - xa > RC_INTERP_STRIP ? xa + RC_INTERP_STRIP : w, n = xb - xa;
