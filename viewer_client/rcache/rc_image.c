@@ -301,7 +301,7 @@ FXC_HOT_CLONES static uint64_t finish_row(const uint16_t *restrict up, const uin
                                           uint8_t *restrict priority, uint32_t n, bool smooth_all,
                                           const uint8_t clear[3], uint32_t kinds[VIEW_RC_PIXEL_KINDS])
 {
-    uint64_t weight = 0;
+    uint32_t weight = 0; /* at most 256 x VIEW_RC_MAX_SIDE a row: 32-bit lanes in the vector loop */
     uint32_t points = 0, interp = 0, empty = 0;
     const uint32_t clear_r = clear[0], clear_g = clear[1], clear_b = clear[2],
                    keep_own = smooth_all ? 0u : 1u;
