@@ -390,10 +390,10 @@ static void fused_cull(rc_band *b, uint32_t y, uint32_t worker, uint32_t *culled
     *culled_to = end;
 }
 
-/* The interpolation's columns at a time: its rows (three of row sums in five planes, their occupancy, the
- * unpacked planes, the output planes: 47 bytes a pixel of width) for 256 columns take 12 KiB of L1, where a
- * whole row of 1024 took 49 KiB, the whole L1 of a core with 48 KiB. Every output pixel depends only on its
- * neighbourhood, so the strips give the same image as whole rows. */
+/* The interpolation's columns at a time: its rows (three of row sums in five planes, the four unpacked planes,
+ * the three output planes: 41 bytes a pixel of width) for 256 columns take 10 KiB of L1, where whole rows of
+ * 1024 (with three rows of occupancy then, 47 bytes a pixel) took 49 KiB, the whole L1 of a core with 48 KiB.
+ * Every output pixel depends only on its neighbourhood, so the strips give the same image as whole rows. */
 enum { RC_INTERP_STRIP = 256 };
 
 /* Rows of a band, each from the row sums of the rows above, itself and below (three kept, one new a row).
