@@ -574,6 +574,76 @@ static void test_filters_by_hand(void **state)
     view_rc_destroy(rc);
 }
 
+/* The 3x3 filter on an image wider than the interpolation's column strips (256 columns), with points on both
+ * sides of the strips' seams (255 | 256, 511 | 512, ...) and at random: every pixel against the filter
+ * computed here directly from the points (kind, colour, and the priority of pixels without a point). */
+static void check_wide_interpolation(uint32_t w, uint32_t h)
+{
+    uint8_t *has = calloc((size_t)w * h, 1);
+    uint8_t *col = calloc((size_t)w * h * 3, 1);
+    view_rc_sample *s = calloc((size_t)w * h, sizeof *s);
+    uint32_t n = 0, seed = 12345;
+    for (uint32_t y = 0; y < h; y++)
+        for (uint32_t x = 0; x < w; x++) {
+            seed = seed * 1664525u + 1013904223u;
+            bool seam = (x % 256 == 255 || (x % 256 == 0 && x > 0 && y % 2 == 0)) && y % 3 == 0;
+            if (!seam && (seed >> 24) >= 70)
+                continue;
+            size_t p = (size_t)y * w + x;
+            has[p] = 1;
+            for (int k = 0; k < 3; k++)
+                col[3 * p + k] = (uint8_t)((x * 7 + y * 13 + (uint32_t)k * 101) & 0xFF);
+            s[n] = (view_rc_sample){.x = x, .y = y, .depth = 5};
+            memcpy(s[n].rgb, col + 3 * p, 3);
+            n++;
+        }
+    view_rc_desc d = {.width = w,
+                      .height = h,
+                      .tile_size = 8,
+                      .no_prefilter = true,
+                      .no_depth_cull = true,
+                      .clear_rgb = {1, 2, 3}};
+    view_rc *rc;
+    view_rc_frame f = filter_frame(&rc, &d, s, n);
+    for (uint32_t y = 0; y < h; y++)
+        for (uint32_t x = 0; x < w; x++) {
+            size_t p = (size_t)y * w + x;
+            if (has[p]) {
+                expect_pixel(&f, x, y, VIEW_RC_POINT, col[3 * p], col[3 * p + 1], col[3 * p + 2]);
+                continue;
+            }
+            uint32_t sum[3] = {0}, weight = 0, count = 0;
+            for (int dy = -1; dy <= 1; dy++)
+                for (int dx = -1; dx <= 1; dx++) {
+                    int64_t nx = (int64_t)x + dx, ny = (int64_t)y + dy;
+                    if (nx < 0 || ny < 0 || nx >= w || ny >= h || !has[ny * w + nx])
+                        continue;
+                    uint32_t wt = (uint32_t)((2 - abs(dx)) * (2 - abs(dy)));
+                    for (int k = 0; k < 3; k++)
+                        sum[k] += wt * col[3 * (ny * w + nx) + k];
+                    weight += wt;
+                    count++;
+                }
+            if (weight == 0)
+                expect_pixel(&f, x, y, VIEW_RC_EMPTY, 1, 2, 3);
+            else
+                expect_pixel(&f, x, y, VIEW_RC_INTERP, (int)((sum[0] + weight / 2) / weight),
+                             (int)((sum[1] + weight / 2) / weight), (int)((sum[2] + weight / 2) / weight));
+            assert_int_equal(f.priority[p], 255 - 16 * count);
+        }
+    view_rc_destroy(rc);
+    free(s);
+    free(col);
+    free(has);
+}
+
+static void test_interpolation_wide_by_closed_form(void **state)
+{
+    (void)state;
+    check_wide_interpolation(600, 24);  /* three strips */
+    check_wide_interpolation(5000, 20); /* twenty strips */
+}
+
 /* ---- the dither ---------------------------------------------------------------------------------------- */
 
 static void check_distinct(const view_rc_pixel *px, uint32_t n, uint32_t w, uint32_t h)
@@ -1240,6 +1310,7 @@ int main(void)
         cmocka_unit_test(test_depth_test_keeps_nearer),
         cmocka_unit_test(test_disocclusion_empty_and_first),
         cmocka_unit_test(test_filters_by_hand),
+        cmocka_unit_test(test_interpolation_wide_by_closed_form),
         cmocka_unit_test(test_dither),
         cmocka_unit_test(test_predicted_requests),
         cmocka_unit_test(test_ageing_and_eviction),

@@ -244,12 +244,11 @@ void view_rc__depth_cull(view_rc *rc)
 /* ---- interpolation and priority ----------------------------------------------------------------------- */
 
 /* 16-bit values per worker for an image `width` wide: three rows of row sums (red, green, blue, weight,
- * count), their rows of occupied pixels (width + 2), one row of four planes (width + 2), three output rows of
- * bytes. */
+ * count), one row of four planes (red, green, blue, occupied: width + 2 each), three output rows of bytes. */
 size_t view_rc__interp_scratch(uint32_t width)
 {
     size_t w = width;
-    return 3 * 5 * w + 3 * (w + 2) + 4 * (w + 2) + 2 * w;
+    return 3 * 5 * w + 4 * (w + 2) + 2 * w;
 }
 
 /* A row of points as planes: red, green, blue (0 where empty) and occupied. */
@@ -293,16 +292,16 @@ FXC_HOT_CLONES static void interleave(const uint8_t *restrict r, const uint8_t *
 }
 
 /* One output row: the column sums of three rows of row sums (up, here, down: five planes each, `plane`
- * apart), the choice of colour, kind and priority. */
+ * apart), the choice of colour, kind and priority (`own`: the row's shown points). */
 FXC_HOT_CLONES static uint64_t finish_row(const uint16_t *restrict up, const uint16_t *restrict here,
                                           const uint16_t *restrict down, size_t plane,
-                                          const uint16_t *restrict own_o, const uint32_t *restrict own,
+                                          const uint32_t *restrict own,
                                           uint8_t *restrict out_r, uint8_t *restrict out_g,
                                           uint8_t *restrict out_b, uint8_t *restrict kind,
                                           uint8_t *restrict priority, uint32_t n, bool smooth_all,
                                           const uint8_t clear[3], uint32_t kinds[VIEW_RC_PIXEL_KINDS])
 {
-    uint64_t weight = 0;
+    uint32_t weight = 0; /* at most 256 x VIEW_RC_MAX_SIDE a row: 32-bit lanes in the vector loop */
     uint32_t points = 0, interp = 0, empty = 0;
     const uint32_t clear_r = clear[0], clear_g = clear[1], clear_b = clear[2],
                    keep_own = smooth_all ? 0u : 1u;
@@ -311,10 +310,9 @@ FXC_HOT_CLONES static uint64_t finish_row(const uint16_t *restrict up, const uin
         uint32_t sg = up[x + plane] + 2u * here[x + plane] + down[x + plane];
         uint32_t sb = up[x + 2 * plane] + 2u * here[x + 2 * plane] + down[x + 2 * plane];
         uint32_t sw = up[x + 3 * plane] + 2u * here[x + 3 * plane] + down[x + 3 * plane];
-        uint32_t count =
-            up[x + 4 * plane] + here[x + 4 * plane] + down[x + 4 * plane] - own_o[x]; /* not itself */
         uint32_t v = own[x];
-        uint32_t has = own_o[x] != 0, keep = has & keep_own, filled = sw > 0;
+        uint32_t has = v != RC_EMPTY_PT, keep = has & keep_own, filled = sw > 0;
+        uint32_t count = up[x + 4 * plane] + here[x + 4 * plane] + down[x + 4 * plane] - has; /* not itself */
         /* Rounded division by 1..16: exact through the float reciprocal (an error below 1/64 either way). */
         float inv = 1.0f / (float)(sw | !filled);
         uint32_t half = sw / 2;
@@ -342,23 +340,27 @@ FXC_HOT_CLONES static uint64_t finish_row(const uint16_t *restrict up, const uin
     return weight;
 }
 
-/* Row y of the shown points (as the band sees them) as row sums into `sums` (five planes, `plane` apart) and
- * its occupied pixels into `occupied` (width + 2, zero at both ends); zeros for a row outside the image. */
-static void interp_row(const rc_band *band, int64_t y, uint16_t *sums, size_t plane, uint16_t *occupied,
-                       uint16_t *unpacked)
+/* Columns [xa, xb) of row y of the shown points (as the band sees them) as row sums into `sums` (five planes,
+ * `plane` apart); zeros for a row outside the image. The row sums at [xa, xb) read the pixels xa - 1 .. xb,
+ * so only those are unpacked into `unpacked` (four planes of width + 2, pixel x at x + 1; the image's edges
+ * read the zeros at both ends). */
+static void interp_row(const rc_band *band, int64_t y, uint16_t *sums, size_t plane, uint16_t *unpacked,
+                       uint32_t xa, uint32_t xb)
 {
     uint32_t w = band->rc->width;
     size_t s = (size_t)w + 2;
     if (y < 0 || y >= band->rc->height) {
-        memset(sums, 0, 5 * plane * sizeof(uint16_t));
-        memset(occupied, 0, s * sizeof(uint16_t));
+        for (int k = 0; k < 5; k++)
+            memset(sums + k * plane + xa, 0, (xb - xa) * sizeof(uint16_t));
         return;
     }
-    uint16_t *r = unpacked, *g = r + s, *b = g + s;
+    uint16_t *r = unpacked, *g = r + s, *b = g + s, *occupied = b + s;
     r[0] = g[0] = b[0] = occupied[0] = 0;
     r[s - 1] = g[s - 1] = b[s - 1] = occupied[s - 1] = 0;
-    unpack_span(band_pt(band, (uint32_t)y), r + 1, g + 1, b + 1, occupied + 1, w);
-    row_sums(r, g, b, occupied, sums, sums + plane, sums + 2 * plane, sums + 3 * plane, sums + 4 * plane, w);
+    uint32_t lo = xa > 0 ? xa - 1 : 0, hi = xb < w ? xb + 1 : w; /* the pixels the sums read */
+    unpack_span(band_pt(band, (uint32_t)y) + lo, r + 1 + lo, g + 1 + lo, b + 1 + lo, occupied + 1 + lo, hi - lo);
+    row_sums(r + xa, g + xa, b + xa, occupied + xa, sums + xa, sums + plane + xa, sums + 2 * plane + xa,
+             sums + 3 * plane + xa, sums + 4 * plane + xa, xb - xa);
 }
 
 /* Fused: the band's rows are culled RC_CULL_ROWS at a time, just before the interpolation reaches them, and
@@ -388,7 +390,16 @@ static void fused_cull(rc_band *b, uint32_t y, uint32_t worker, uint32_t *culled
     *culled_to = end;
 }
 
-/* Rows of a band, each from the row sums of the rows above, itself and below (three kept, one new a row). */
+/* The interpolation's columns at a time: its rows (three of row sums in five planes, the four unpacked planes,
+ * the three output planes: 41 bytes a pixel of width) for 256 columns take 10 KiB of L1, where whole rows of
+ * 1024 (with three rows of occupancy then, 47 bytes a pixel) took 49 KiB, the whole L1 of a core with 48 KiB.
+ * Every output pixel depends only on its neighbourhood, so the strips give the same image as whole rows. */
+enum { RC_INTERP_STRIP = 256 };
+
+/* Rows of a band, each from the row sums of the rows above, itself and below (three kept, one new a row).
+ * The rows go in groups (those the culled batch allows: each output row needs the row below culled), each
+ * group in strips of columns: a strip's three rows of row sums stay in the ring (indexed by the row) from one
+ * group to the next. */
 static void band_interpolate(view_rc *rc, rc_band *b, uint32_t band, uint32_t worker)
 {
     uint32_t y0 = b->y0, y1 = b->y1, culled = 0, culled_to = y0;
@@ -396,26 +407,43 @@ static void band_interpolate(view_rc *rc, rc_band *b, uint32_t band, uint32_t wo
     size_t plane = w, s = (size_t)w + 2;
     uint16_t *scratch = rc->workers[worker].planes;
     uint16_t *sums[3] = {scratch, scratch + 5 * plane, scratch + 10 * plane};
-    uint16_t *occupied[3] = {scratch + 15 * plane, scratch + 15 * plane + s, scratch + 15 * plane + 2 * s};
-    uint16_t *unpacked = scratch + 15 * plane + 3 * s;
+    uint16_t *unpacked = scratch + 15 * plane;
     uint8_t *out_r = (uint8_t *)(unpacked + 4 * s), *out_g = out_r + w, *out_b = out_g + w;
     if (b->fused && y0 > 0)
         band_halo(b, 1);
     fused_cull(b, y0, worker, &culled_to, &culled);
-    interp_row(b, (int64_t)y0 - 1, sums[(y0 + 2) % 3], plane, occupied[(y0 + 2) % 3], unpacked);
-    interp_row(b, y0, sums[y0 % 3], plane, occupied[y0 % 3], unpacked);
     uint32_t kinds[VIEW_RC_PIXEL_KINDS] = {0};
     uint64_t weight = 0;
-    for (uint32_t y = y0; y < y1; y++) {
-        fused_cull(b, y + 1, worker, &culled_to, &culled);
-        interp_row(b, (int64_t)y + 1, sums[(y + 1) % 3], plane, occupied[(y + 1) % 3], unpacked);
-        size_t p = (size_t)y * w;
-        uint32_t before = kinds[VIEW_RC_EMPTY];
-        weight += finish_row(sums[(y + 2) % 3], sums[y % 3], sums[(y + 1) % 3], plane, occupied[y % 3] + 1,
-                             rc->pt + p, out_r, out_g, out_b, rc->kind + p, rc->priority + p, w,
-                             rc->d.smooth_all, rc->d.clear_rgb, kinds);
-        rc->row_need[y] = kinds[VIEW_RC_EMPTY] - before;
-        interleave(out_r, out_g, out_b, rc->rgb + 3 * p, w);
+    for (uint32_t ya = y0; ya < y1;) {
+        uint32_t yb; /* output rows [ya, yb) in this group */
+        if (b->fused) {
+            fused_cull(b, ya + 1, worker, &culled_to, &culled);
+            yb = culled_to >= y1 ? y1 : culled_to - 1;
+            if (yb == y1)
+                fused_cull(b, y1, worker, &culled_to, &culled); /* the halo row below the band */
+        } else {
+            yb = ya + RC_CULL_ROWS < y1 ? ya + RC_CULL_ROWS : y1;
+        }
+        for (uint32_t xa = 0; xa < w; xa += RC_INTERP_STRIP) {
+            uint32_t xb = w - xa > RC_INTERP_STRIP ? xa + RC_INTERP_STRIP : w, n = xb - xa;
+            if (ya == y0) {
+                interp_row(b, (int64_t)y0 - 1, sums[(y0 + 2) % 3], plane, unpacked, xa, xb);
+                interp_row(b, y0, sums[y0 % 3], plane, unpacked, xa, xb);
+            }
+            for (uint32_t y = ya; y < yb; y++) {
+                interp_row(b, (int64_t)y + 1, sums[(y + 1) % 3], plane, unpacked, xa, xb);
+                size_t p = (size_t)y * w + xa;
+                uint32_t before = kinds[VIEW_RC_EMPTY];
+                weight += finish_row(sums[(y + 2) % 3] + xa, sums[y % 3] + xa, sums[(y + 1) % 3] + xa, plane,
+                                     rc->pt + p, out_r + xa, out_g + xa, out_b + xa,
+                                     rc->kind + p, rc->priority + p, n, rc->d.smooth_all, rc->d.clear_rgb,
+                                     kinds);
+                uint32_t need = kinds[VIEW_RC_EMPTY] - before;
+                rc->row_need[y] = xa == 0 ? need : rc->row_need[y] + need;
+                interleave(out_r + xa, out_g + xa, out_b + xa, rc->rgb + 3 * p, n);
+            }
+        }
+        ya = yb;
     }
     if (b->fused)
         rc->band_culled[band] = culled;
