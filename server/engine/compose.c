@@ -273,9 +273,11 @@ FXC_HOT_LANES static void gather_lanes(compose_scratch *cs, const gather_memo *m
 /* gather_run for a tile's run when no visible points are gathered (points false, so positions false too):
  * the same values in three passes instead of one per pixel: the visible pixels and their triangles' data
  * into lanes (a miss gets the sky, as in gather_pixel), their arithmetic in lanes (gather_lanes), then the
- * cache pixels. */
+ * cache pixels, only when some kind reads them (pixels; else cs->pixels stays unset: every pixel_taps call
+ * gets the lanes). */
 FXC_HOT_INLINE uint32_t gather_tile_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32_t x1, uint32_t y0,
-                                        uint32_t y1, compose_scratch *cs, const float sky[3], float log2_density)
+                                        uint32_t y1, compose_scratch *cs, const float sky[3], float log2_density,
+                                        bool pixels)
 {
     const scene *s = loop->s;
     const size_t width = view->frame.width;
@@ -340,7 +342,7 @@ FXC_HOT_INLINE uint32_t gather_tile_run(srv_loop *loop, srv_viewer *view, uint32
     }
     gather_memo memo = gather_memo_start(view);
     gather_lanes(cs, &memo, log2_density);
-    for (uint32_t i = 0; i < count; i++) {
+    for (uint32_t i = 0; pixels && i < count; i++) {
         srv_pixel *px = &cs->pixels[i];
         px->triangle = cs->triangle[i];
         px->island = pl->island[i];
@@ -376,6 +378,9 @@ typedef struct compose_setup {
     bool positions; /* some shading cache kind reads the pixels' positions */
     bool points;    /* the visible points (fx_point) are gathered: someone reads them */
     bool positions_other, points_other; /* the same leaving out loop->coarse_effect: a coarse tile's runs */
+    /* Some shading effect's kind reads the pixels (srv_pixel) even when it gets lanes (not lanes_suffice);
+     * pixels_other leaves out loop->coarse_effect (coarse_shade gathers its own pixels again in full). */
+    bool pixels, pixels_other;
     uint32_t lights, stride;
     float light_dir[CONSTANT_LIGHTS][3], light_rgb[CONSTANT_LIGHTS][3]; /* the same for every pixel */
 } compose_setup;
@@ -388,11 +393,15 @@ static void compose_setup_init(const srv_loop *loop, compose_setup *cu)
     for (int k = 0; k < 3; k++)
         cu->sky[k] = s->sky_color[k] * s->sky_intensity;
     cu->log2_density = log2f(s->texel_density);
-    cu->positions = cu->positions_other = false;
+    cu->positions = cu->positions_other = cu->pixels = cu->pixels_other = false;
     for (uint32_t e = 0; e < loop->effect_count; e++) {
-        bool needs = loop->effect_shading[e] && loop->kinds[loop->effect_kind[e]]->needs_position;
-        cu->positions |= needs;
-        cu->positions_other |= needs && e != loop->coarse_effect;
+        if (!loop->effect_shading[e])
+            continue;
+        const srv_cache_kind *kind = loop->kinds[loop->effect_kind[e]];
+        cu->positions |= kind->needs_position;
+        cu->positions_other |= kind->needs_position && e != loop->coarse_effect;
+        cu->pixels |= !kind->lanes_suffice;
+        cu->pixels_other |= !kind->lanes_suffice && e != loop->coarse_effect;
     }
     for (uint32_t l = 0; l < cu->lights && l < CONSTANT_LIGHTS; l++) {
         float dist;
@@ -870,12 +879,14 @@ FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_
     if (coarse) {
         run_setup.positions = cu.positions_other;
         run_setup.points = cu.points_other;
+        run_setup.pixels = cu.pixels_other;
     }
     for (uint32_t ry = ty0; ry < ty1; ry += SRV_RUN / SRV_TILE) {
         uint32_t ry1 = ry + SRV_RUN / SRV_TILE < ty1 ? ry + SRV_RUN / SRV_TILE : ty1;
         uint32_t count = run_setup.points ? gather_run(loop, view, tx0, tx1, ry, ry1, cs, cu.sky, cu.log2_density,
                                                        run_setup.positions, run_setup.points)
-                                          : gather_tile_run(loop, view, tx0, tx1, ry, ry1, cs, cu.sky, cu.log2_density);
+                                          : gather_tile_run(loop, view, tx0, tx1, ry, ry1, cs, cu.sky, cu.log2_density,
+                                                            run_setup.pixels);
         coarse_run cr = {.g = &grid, .x0 = tx0, .x1 = tx1, .y0 = ry, .y1 = ry1, .values = view->samples,
                          .value_stride = view->sample_capacity, .stride = sample_stride,
                          .first = (size_t)(ty0 / block) * sample_stride + tx0 / block};

@@ -486,15 +486,16 @@ FXC_HOT_INLINE void taps_state_island(taps_state *st, uint32_t island, uint32_t 
 /* Pixel i's taps when the usual case's quick paths (taps_of_effect) did not give them: columns or rows
  * clamped at the island's edge, a weight 0, a footprint straddling a block edge, texels without data. The
  * island and level of st are the pixel's. */
-static void taps_pixel_rest(taps_state *st, const taps_lanes *L, const srv_pixel *px, uint32_t i,
+static void taps_pixel_rest(taps_state *st, const taps_lanes *L, const srv_pixel_lanes *P, uint32_t i,
                             fx_taps *out, uint32_t *blocks)
 {
     const osc_cache *osc = st->osc;
     const size_t texel_bytes = st->texel_bytes;
     const uint32_t effect = st->effect;
     tap_memo *memo = &st->memo;
-    if (px->island != st->memo_island || (uint32_t)L->level[i] != st->memo_level)
-        taps_state_island(st, px->island, (uint32_t)L->level[i]);
+    const uint32_t island = P->island[i];
+    if (island != st->memo_island || (uint32_t)L->level[i] != st->memo_level)
+        taps_state_island(st, island, (uint32_t)L->level[i]);
     const long w = st->w, h = st->h;
     const uint64_t base = st->base;
     uint32_t level = st->memo_level;
@@ -572,7 +573,7 @@ static void taps_pixel_rest(taps_state *st, const taps_lanes *L, const srv_pixel
         ty1 = ty1 < 0 ? 0 : (ty1 >= h ? h - 1 : ty1);
     }
     float wx0 = 1 - ax, wx1 = ax, wy0 = 1 - ay, wy1 = ay;
-    out->footprint_log2 = px->footprint - (float)level;
+    out->footprint_log2 = P->footprint[i] - (float)level;
     float w00 = wx0 * wy0, w10 = wx1 * wy0, w01 = wx0 * wy1, w11 = wx1 * wy1;
     bool positive = w00 > 0 && w10 > 0 && w01 > 0 && w11 > 0;
     if (st->reuse && x0 == st->reuse_x0 && y0 == st->reuse_y0 && positive) {
@@ -687,7 +688,7 @@ static bool taps_straddle(taps_state *st, int32_t x0, int32_t y0, uint64_t key, 
  * the lanes' values, what the general path of taps_pixel_rest gives, value for value. Every other pixel goes
  * through taps_pixel_rest, the general loop body with its state in a struct, not inlined: in one function
  * with the usual case, their state together outnumbered the registers and the usual case ran from the stack. */
-FXC_HOT_INLINE uint32_t taps_of_effect(const kind_osc *k, const taps_lanes *L, const srv_pixel *pixels,
+FXC_HOT_INLINE uint32_t taps_of_effect(const kind_osc *k, const taps_lanes *L, const srv_pixel_lanes *P,
                                        uint32_t count, uint32_t effect, fx_taps *taps, uint32_t *blocks)
 {
     uint32_t empty = 0; /* taps with count 0: only the general path gives them */
@@ -753,7 +754,7 @@ FXC_HOT_INLINE uint32_t taps_of_effect(const kind_osc *k, const taps_lanes *L, c
         }
     rest:
         st.last_slot = last_slot;
-        taps_pixel_rest(&st, L, &pixels[i], i, out, blocks);
+        taps_pixel_rest(&st, L, P, i, out, blocks);
         last_slot = st.last_slot;
         empty += out->count == 0;
     }
@@ -794,7 +795,7 @@ FXC_HOT_CLONES static uint32_t osc_kind_pixel_taps(const void *cache, uint32_t s
     taps_lanes_fast(&L, lanes);
     uint32_t empty = 0;
     for (uint32_t j = 0; j < effect_count; j++)
-        empty += taps_of_effect(k, &L, pixels, count, effects[j], taps[j], blocks ? blocks[j] : NULL);
+        empty += taps_of_effect(k, &L, lanes, count, effects[j], taps[j], blocks ? blocks[j] : NULL);
     return empty;
 }
 
@@ -839,6 +840,7 @@ const srv_cache_kind srv__kind_osc = {
     .kind = SCENE_CACHE_ON_SURFACE,
     .keys_carry_effect = true,
     .needs_position = false,
+    .lanes_suffice = true,
     .create = osc_kind_create,
     .destroy = osc_kind_destroy,
     .begin_frame = osc_kind_begin_frame,

@@ -131,6 +131,7 @@ typedef struct srv_cache_kind {
     bool keys_carry_effect; /* the key names its effect (key_effect, rekey); otherwise requests are batched
                                per effect and the effect is passed alongside */
     bool needs_position;    /* pixels must carry position and distance (srv_pixel) */
+    bool lanes_suffice;     /* pixel_taps given lanes reads only them: the caller may leave pixels unset */
     /* Creates the cache for the loop's effects of this kind that run (loop->effect_cached, pool budget
      * loop->desc.pool_bytes shared by bytes per texel). *cache NULL: nothing of this kind runs. */
     fxc_result (*create)(srv_loop *loop, void **cache, char *err, size_t err_cap);
@@ -172,7 +173,8 @@ typedef struct srv_cache_kind {
      * state of a kind, such as local lookup tables). Returns how many of the count x effect_count taps have
      * count 0 (no data), so that a caller can skip looking for them when there are none. lanes (may be NULL):
      * the same pixels' island UVs, footprints, islands and island sizes as lanes, equal to the pixels'
-     * (a kind may read either). */
+     * (a kind may read either; a kind with lanes_suffice reads only the lanes when it gets them, and the
+     * pixels passed with lanes may then be unset). */
     uint32_t (*pixel_taps)(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
                            const srv_pixel_lanes *lanes, uint32_t count, uint32_t effect_count,
                            const uint32_t *effects, int32_t bias, fx_taps *const *taps, uint32_t *const *blocks);
