@@ -634,7 +634,8 @@ FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scrat
         if (columns == SRV_TILE)
             for (uint32_t j = 0; j < SRV_TILE; j++)
                 visible += view->tri[row + j] != SRV_MISS;
-        if (visible == SRV_TILE && lane + SRV_TILE <= count) { /* the common case: 16 consecutive lanes */
+        /* the common case, a whole row visible: 16 consecutive lanes */
+        if (visible == SRV_TILE && lane + SRV_TILE <= count && !loop->desc.no_lanes) {
             blend_finish_lanes((const float (*)[SRV_TILE])o, cs->sky_visibility + lane, cs->indirect + 3 * lane,
                                cs->sharing + lane, cs->blend_own + lane, bits != NULL);
             lane += SRV_TILE;
