@@ -523,10 +523,12 @@ static inline void add_taps(const cell_taps *ct, const float t[3], float scale, 
         w[c + 4] = wxy[c] * wz1;
     }
     uint32_t n = out->count;
-    bool positive = true;
-    for (int c = 0; c < 8; c++)
-        positive &= w[c] > 0;
-    if (ct->count == 8 && positive) {
+    /* All 8 above 0: their smallest is (the weights are products of factors in [0, 1] and a finite scale,
+     * never NaN; a product may still underflow to 0, so the weights themselves are tested) */
+    float least = w[0];
+    for (int c = 1; c < 8; c++)
+        least = w[c] < least ? w[c] : least;
+    if (ct->count == 8 && least > 0) {
         memcpy(out->texel + n, ct->texel, sizeof ct->texel);
         memcpy(out->weight + n, w, sizeof w);
         out->count = n + 8;
