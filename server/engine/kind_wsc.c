@@ -18,6 +18,7 @@
  * without hashing; one per viewer and pool thread (a local table belongs to one thread at a time), created
  * at the viewer's first frame and dropped when it leaves. They always agree with the table (wsc.h). */
 #include "engine_internal.h"
+#include "fxc_hot.h"
 
 #include "wsc.h"
 
@@ -592,8 +593,9 @@ bool srv__wsc_world_cell(const void *user, uint32_t effect, uint32_t level, cons
     return true;
 }
 
-static void wsc_kind_pixel_taps_one(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
-                                    uint32_t count, uint32_t effect, int32_t bias, fx_taps *taps, uint32_t *blocks)
+FXC_HOT_INLINE void wsc_kind_pixel_taps_one(const void *cache, uint32_t slot, uint32_t thread,
+                                            const srv_pixel *pixels, uint32_t count, uint32_t effect, int32_t bias,
+                                            fx_taps *taps, uint32_t *blocks)
 {
     kind_wsc *k = (kind_wsc *)cache; /* writes only this (viewer, thread)'s local table and counters */
     wsc_local *local = NULL;
@@ -719,12 +721,13 @@ static void wsc_kind_memory(const void *cache, srv_memory *out)
     out->total += m.total_bytes + sizeof *k + local;
 }
 
-/* The interface's several effects: one after the other (their lookups share nothing). The lanes are not
- * used: this kind reads the pixels' positions. */
-static uint32_t wsc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
-                                    const srv_pixel_lanes *lanes, uint32_t count, uint32_t effect_count,
-                                    const uint32_t *effects, int32_t bias, fx_taps *const *taps,
-                                    uint32_t *const *blocks)
+/* The interface's several effects: one after the other (their lookups share nothing); an AVX2 copy
+ * (FXC_HOT_CLONES: the per-pixel level, cell and weights inlined; no contraction, so the same floats). The
+ * lanes are not used: this kind reads the pixels' positions. */
+FXC_HOT_CLONES static uint32_t wsc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread,
+                                                   const srv_pixel *pixels, const srv_pixel_lanes *lanes,
+                                                   uint32_t count, uint32_t effect_count, const uint32_t *effects,
+                                                   int32_t bias, fx_taps *const *taps, uint32_t *const *blocks)
 {
     (void)lanes;
     uint32_t empty = 0;
