@@ -546,8 +546,7 @@ FXC_HOT_LANES static void blend_row(const int32_t *mask, const float *wx, float 
  * gathered lanes from `lane` on (sky, indirect, sharing and own point there), every column a lane
  * (vectorised: FXC_HOT_LANES, contiguous loads only): from the blend's sums o (blend_row) the indirect term
  * added, the sky factor applied and the sharing count kept where any sample was taken, and per lane whether
- * the pixel is evaluated itself. The same operations on the same floats as coarse_shade's scalar loop; what
- * that loop leaves alone (no sample taken) is kept by a select, not by adding 0 (a -0 stays -0). */
+ * the pixel is evaluated itself. The same operations on the same floats as coarse_shade's scalar loop. */
 FXC_HOT_LANES static void blend_finish_lanes(const float (*o)[SRV_TILE], float *restrict sky,
                                              float *restrict indirect, float *restrict sharing,
                                              int32_t *restrict own, int32_t keep_sharing)
@@ -562,9 +561,12 @@ FXC_HOT_LANES static void blend_finish_lanes(const float (*o)[SRV_TILE], float *
         float divisor = blended ? total : 1.0f;
         float s = sky[j], open = s / divisor;
         float t0 = o[0][j] * open, t1 = o[1][j] * open, t2 = o[2][j] * open; /* fminf(x, FLT_MAX) */
-        e0[j] = t0 < FLT_MAX ? t0 : FLT_MAX;
-        e1[j] = t1 < FLT_MAX ? t1 : FLT_MAX;
-        e2[j] = t2 < FLT_MAX ? t2 : FLT_MAX;
+        t0 = t0 < FLT_MAX ? t0 : FLT_MAX;
+        t1 = t1 < FLT_MAX ? t1 : FLT_MAX;
+        t2 = t2 < FLT_MAX ? t2 : FLT_MAX;
+        e0[j] = blended ? t0 : 0.0f;
+        e1[j] = blended ? t1 : 0.0f;
+        e2[j] = blended ? t2 : 0.0f;
         float factor = s * (o[3][j] / divisor);
         sky_out[j] = blended ? factor : s;
         taken[j] = blended;
@@ -583,12 +585,14 @@ FXC_HOT_LANES static void blend_finish_lanes(const float (*o)[SRV_TILE], float *
         for (int j = 0; j < SRV_TILE; j++)
             sharing[j] = sharing_out[j];
     }
-    for (int j = 0; j < SRV_TILE; j++) /* (interleaved: scalar) */
-        if (taken[j]) {
-            indirect[3 * j] += e0[j];
-            indirect[3 * j + 1] += e1[j];
-            indirect[3 * j + 2] += e2[j];
-        }
+    /* Where no sample was taken, + 0 leaves the term as it is: x + (+0) is x for every x but -0, and the
+     * term is never -0 (it starts at +0 in shade_run and only has terms added to it, and a sum is -0 only
+     * when both are) */
+    for (int j = 0; j < SRV_TILE; j++) {
+        indirect[3 * j] += e0[j];
+        indirect[3 * j + 1] += e1[j];
+        indirect[3 * j + 2] += e2[j];
+    }
 }
 
 /* The coarse effect over a gathered run: each pixel blends the terms of the samples that stand in for it (an
