@@ -527,9 +527,9 @@ static inline void add_taps(const cell_taps *ct, const float t[3], float scale, 
     uint32_t n = out->count;
     /* All 8 above 0: their smallest is (the weights are products of factors in [0, 1] and a finite scale,
      * never NaN; a product may still underflow to 0, so the weights themselves are tested) */
-    float a = w[0] < w[1] ? w[0] : w[1], b = w[2] < w[3] ? w[2] : w[3];
-    float c = w[4] < w[5] ? w[4] : w[5], d = w[6] < w[7] ? w[6] : w[7];
-    float ab = a < b ? a : b, cd = c < d ? c : d, least = ab < cd ? ab : cd;
+    float least = w[0];
+    for (int c = 1; c < 8; c++)
+        least = w[c] < least ? w[c] : least;
     if (ct->count == 8 && least > 0) {
         memcpy(out->texel + n, ct->texel, sizeof ct->texel);
         memcpy(out->weight + n, w, sizeof w);
