@@ -369,13 +369,24 @@ FXC_HOT_CLONES static void group_weights_lanes(const void *const *probe, uint32_
             texel[c][l] = tex_y * FX_PROBE_MAP + tex_x;
             bilinear[c][l] = ((c & 1) ? wx[l] : 1.0f - wx[l]) * ((c >> 1) ? wy[l] : 1.0f - wy[l]);
         }
+    /* The payload loads (scalar), their offsets found first: per lane the moments' texels, and the normal's
+     * texels, the same for every probe */
+    int32_t moment_at[4][PROBE_LANES];
+    for (int c = 0; c < 4; c++)
+        for (uint32_t l = 0; l < PROBE_LANES; l++)
+            moment_at[c][l] = PROBE_MOMENTS + 4 * texel[c][l];
+    const uint32_t irradiance_at[4] = {PROBE_IRRADIANCE + 6 * texel_n[0], PROBE_IRRADIANCE + 6 * texel_n[1],
+                                       PROBE_IRRADIANCE + 6 * texel_n[2], PROBE_IRRADIANCE + 6 * texel_n[3]};
     uint32_t moments[4][PROBE_LANES], irradiance[4][3][PROBE_LANES];
     for (uint32_t l = 0; l < PROBE_LANES; l++) {
         const uint8_t *p = probe[l < n ? l : 0];
+#pragma GCC unroll 4
         for (int c = 0; c < 4; c++) {
-            moments[c][l] = get_u32(p + PROBE_MOMENTS + 4 * texel[c][l]);
-            for (int k = 0; k < 3; k++)
-                irradiance[c][k][l] = fx__get_u16(p + PROBE_IRRADIANCE + 6 * texel_n[c] + 2 * k);
+            moments[c][l] = get_u32(p + moment_at[c][l]);
+            const uint8_t *at = p + irradiance_at[c];
+            irradiance[c][0][l] = fx__get_u16(at);
+            irradiance[c][1][l] = fx__get_u16(at + 2);
+            irradiance[c][2][l] = fx__get_u16(at + 4);
         }
     }
     float m1[PROBE_LANES] = {0}, m2[PROBE_LANES] = {0}, e[3][PROBE_LANES] = {{0}};

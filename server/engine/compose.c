@@ -551,6 +551,59 @@ FXC_HOT_LANES static void blend_row(const int32_t *mask, const float *wx, float 
             out[v][j] = o[v][j];
 }
 
+/* coarse_shade's finishing of one row whose 16 columns are all visible, so its pixels are the 16 consecutive
+ * gathered lanes from `lane` on (sky, indirect, sharing and own point there), every column a lane
+ * (vectorised: FXC_HOT_LANES, contiguous loads only): from the blend's sums o (blend_row) the indirect term
+ * added, the sky factor applied and the sharing count kept where any sample was taken, and per lane whether
+ * the pixel is evaluated itself. The same operations on the same floats as coarse_shade's scalar loop. */
+FXC_HOT_LANES static void blend_finish_lanes(const float (*o)[SRV_TILE], float *restrict sky,
+                                             float *restrict indirect, float *restrict sharing,
+                                             int32_t *restrict own, int32_t keep_sharing)
+{
+    /* Results into local arrays first, then stored (a select that may keep the old value, stored in place,
+     * becomes a conditional store, and the loop is not vectorised). */
+    float e0[SRV_TILE], e1[SRV_TILE], e2[SRV_TILE], sky_out[SRV_TILE];
+    int32_t taken[SRV_TILE];
+    for (int j = 0; j < SRV_TILE; j++) {
+        float total = o[4][j];
+        int32_t blended = total > 0;
+        float divisor = blended ? total : 1.0f;
+        float s = sky[j], open = s / divisor;
+        float t0 = o[0][j] * open, t1 = o[1][j] * open, t2 = o[2][j] * open; /* fminf(x, FLT_MAX) */
+        t0 = t0 < FLT_MAX ? t0 : FLT_MAX;
+        t1 = t1 < FLT_MAX ? t1 : FLT_MAX;
+        t2 = t2 < FLT_MAX ? t2 : FLT_MAX;
+        e0[j] = blended ? t0 : 0.0f;
+        e1[j] = blended ? t1 : 0.0f;
+        e2[j] = blended ? t2 : 0.0f;
+        float factor = s * (o[3][j] / divisor);
+        sky_out[j] = blended ? factor : s;
+        taken[j] = blended;
+    }
+    for (int j = 0; j < SRV_TILE; j++) {
+        sky[j] = sky_out[j];
+        own[j] = !taken[j];
+    }
+    if (keep_sharing) { /* (a loop of its own: the flag inside the loop above kept it from vectorising) */
+        float sharing_out[SRV_TILE];
+        for (int j = 0; j < SRV_TILE; j++) {
+            float was = sharing[j], shared = o[5][j];
+            int32_t more = shared > was, keep = taken[j] & more;
+            sharing_out[j] = keep ? shared : was;
+        }
+        for (int j = 0; j < SRV_TILE; j++)
+            sharing[j] = sharing_out[j];
+    }
+    /* Where no sample was taken, + 0 leaves the term as it is: x + (+0) is x for every x but -0, and the
+     * term is never -0 (it starts at +0 in shade_run and only has terms added to it, and a sum is -0 only
+     * when both are) */
+    for (int j = 0; j < SRV_TILE; j++) {
+        indirect[3 * j] += e0[j];
+        indirect[3 * j + 1] += e1[j];
+        indirect[3 * j + 2] += e2[j];
+    }
+}
+
 /* The coarse effect over a gathered run: each pixel blends the terms of the samples that stand in for it (an
  * indirect term and a sky factor, both linear in the pixel's own sky visibility: blend_row), the others are
  * gathered and go through the kind's taps and the effect's shade as one smaller run. The samples are those of
@@ -590,6 +643,17 @@ FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scrat
         float o[6][SRV_TILE];
         blend_row(mask, wx, wy, (int32_t)g->block, (const float (*)[SRV_TILE + SRV_BLEND_MAX_BLOCK])cs->expand[0],
                   (const float (*)[SRV_TILE + SRV_BLEND_MAX_BLOCK])cs->expand[1], o);
+        uint32_t visible = 0;
+        if (columns == SRV_TILE)
+            for (uint32_t j = 0; j < SRV_TILE; j++)
+                visible += view->tri[row + j] != SRV_MISS;
+        /* the common case, a whole row visible: 16 consecutive lanes */
+        if (visible == SRV_TILE && lane + SRV_TILE <= count && !loop->desc.no_lanes) {
+            blend_finish_lanes((const float (*)[SRV_TILE])o, cs->sky_visibility + lane, cs->indirect + 3 * lane,
+                               cs->sharing + lane, cs->blend_own + lane, bits != NULL);
+            lane += SRV_TILE;
+            continue;
+        }
         for (uint32_t j = 0; j < columns; j++) {
             if (view->tri[row + j] == SRV_MISS)
                 continue;

@@ -116,6 +116,9 @@ typedef struct srv_loop_desc {
                                               below) */
     bool no_local_table;                   /* benchmarks: compose finds probes through the hash table only,
                                               not the viewers' local lookup tables */
+    bool no_lanes;                         /* tests: the per-pixel stages' coarse sample choice (requests)
+                                              and blend (compose) through their scalar loops only, not the
+                                              lanes of whole rows (the same results, byte for byte) */
     srv_allocator allocator;               /* default: libc */
 } srv_loop_desc;
 

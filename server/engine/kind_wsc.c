@@ -18,6 +18,7 @@
  * without hashing; one per viewer and pool thread (a local table belongs to one thread at a time), created
  * at the viewer's first frame and dropped when it leaves. They always agree with the table (wsc.h). */
 #include "engine_internal.h"
+#include "fxc_hot.h"
 
 #include "wsc.h"
 
@@ -363,8 +364,9 @@ static uint32_t cell_keys(const cell_memo *m, uint32_t brick_size, uint64_t seen
     return n;
 }
 
-static uint32_t wsc_kind_pixel_requests(const void *cache, uint32_t slot, const srv_pixel *pixels, uint32_t count,
-                                        uint32_t effect, int32_t bias, uint64_t *keys, uint64_t *masks)
+FXC_HOT_CLONES static uint32_t wsc_kind_pixel_requests(const void *cache, uint32_t slot, const srv_pixel *pixels,
+                                                       uint32_t count, uint32_t effect, int32_t bias, uint64_t *keys,
+                                                       uint64_t *masks)
 {
     (void)slot;
     kind_wsc *k = (kind_wsc *)cache; /* only the atomic refusal counter is written */
@@ -523,10 +525,12 @@ static inline void add_taps(const cell_taps *ct, const float t[3], float scale, 
         w[c + 4] = wxy[c] * wz1;
     }
     uint32_t n = out->count;
-    bool positive = true;
-    for (int c = 0; c < 8; c++)
-        positive &= w[c] > 0;
-    if (ct->count == 8 && positive) {
+    /* All 8 above 0: their smallest is (the weights are products of factors in [0, 1] and a finite scale,
+     * never NaN; a product may still underflow to 0, so the weights themselves are tested) */
+    float least = w[0];
+    for (int c = 1; c < 8; c++)
+        least = w[c] < least ? w[c] : least;
+    if (ct->count == 8 && least > 0) {
         memcpy(out->texel + n, ct->texel, sizeof ct->texel);
         memcpy(out->weight + n, w, sizeof w);
         out->count = n + 8;
@@ -592,8 +596,9 @@ bool srv__wsc_world_cell(const void *user, uint32_t effect, uint32_t level, cons
     return true;
 }
 
-static void wsc_kind_pixel_taps_one(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
-                                    uint32_t count, uint32_t effect, int32_t bias, fx_taps *taps, uint32_t *blocks)
+FXC_HOT_INLINE void wsc_kind_pixel_taps_one(const void *cache, uint32_t slot, uint32_t thread,
+                                            const srv_pixel *pixels, uint32_t count, uint32_t effect, int32_t bias,
+                                            fx_taps *taps, uint32_t *blocks)
 {
     kind_wsc *k = (kind_wsc *)cache; /* writes only this (viewer, thread)'s local table and counters */
     wsc_local *local = NULL;
@@ -611,26 +616,50 @@ static void wsc_kind_pixel_taps_one(const void *cache, uint32_t slot, uint32_t t
     if (local)
         wsc_local_stats_get(local, &before);
     cell_cache_entry *cells = k->cell_cache && thread < k->threads ? k->cell_cache + (size_t)thread * CELL_CACHE : NULL;
-    cell_memo memo = {.level = UINT32_MAX}, next = {.level = UINT32_MAX};
-    cell_taps ct = {.count = 0, .first_block = SRV_NONE}, next_ct = {.count = 0, .first_block = SRV_NONE};
+    /* The pixel's cell: the last CELL_SLOTS cells entered and their taps, each kept until it is the oldest
+     * (a run of block samples, or of pixels along rows, goes back and forth between a few cells; each cell's
+     * taps are what find_cell_cached gives it, so which slot answers changes nothing). `levels` only holds
+     * the distances' level range (pixel_level). */
+    enum { CELL_SLOTS = 4 };
+    cell_memo levels = {.level = UINT32_MAX}, slot_memo[CELL_SLOTS], next = {.level = UINT32_MAX};
+    cell_taps slot_ct[CELL_SLOTS], next_ct = {.count = 0, .first_block = SRV_NONE};
+    for (uint32_t c = 0; c < CELL_SLOTS; c++) {
+        slot_memo[c].level = UINT32_MAX;
+        slot_ct[c].count = 0;
+        slot_ct[c].first_block = SRV_NONE;
+    }
+    uint32_t at = 0, oldest = 0;
     for (uint32_t i = 0; i < count; i++) {
         float t[3], blend;
         bool same;
         const float *p = pixels[i].position;
-        uint32_t level = pixel_level(k, &memo, &pixels[i], bias, &blend);
+        uint32_t level = pixel_level(k, &levels, &pixels[i], bias, &blend);
         taps[i].count = 0;
         taps[i].footprint_log2 = 0;
-        if (!cell_enter(k, p, level, &memo, &same)) {
-            if (blocks)
-                blocks[i] = SRV_NONE;
-            continue;
+        if (!cell_same(&slot_memo[at], level, p)) {
+            uint32_t c = 0;
+            while (c < CELL_SLOTS && !cell_same(&slot_memo[c], level, p))
+                c++;
+            if (c < CELL_SLOTS) {
+                at = c;
+            } else {
+                at = oldest;
+                oldest = (oldest + 1) % CELL_SLOTS;
+                if (!cell_enter_slow(k, p, level, &slot_memo[at], &same)) {
+                    if (blocks)
+                        blocks[i] = SRV_NONE;
+                    continue;
+                }
+                if (!same)
+                    find_cell_cached(k, local, cells, effect, &slot_memo[at], &slot_ct[at]);
+            }
         }
-        if (!same)
-            find_cell_cached(k, local, cells, effect, &memo, &ct);
-        cell_position(&memo, p, t);
-        add_taps(&ct, t, 1.0f - blend, &taps[i]);
+        const cell_memo *memo = &slot_memo[at];
+        const cell_taps *ct = &slot_ct[at];
+        cell_position(memo, p, t);
+        add_taps(ct, t, 1.0f - blend, &taps[i]);
         if (blocks)
-            blocks[i] = ct.first_block;
+            blocks[i] = ct->first_block;
         if (blend > 0 && cell_enter(k, p, level + 1, &next, &same)) {
             if (!same)
                 find_cell_cached(k, local, cells, effect, &next, &next_ct);
@@ -719,12 +748,13 @@ static void wsc_kind_memory(const void *cache, srv_memory *out)
     out->total += m.total_bytes + sizeof *k + local;
 }
 
-/* The interface's several effects: one after the other (their lookups share nothing). The lanes are not
- * used: this kind reads the pixels' positions. */
-static uint32_t wsc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
-                                    const srv_pixel_lanes *lanes, uint32_t count, uint32_t effect_count,
-                                    const uint32_t *effects, int32_t bias, fx_taps *const *taps,
-                                    uint32_t *const *blocks)
+/* The interface's several effects: one after the other (their lookups share nothing); an AVX2 copy
+ * (FXC_HOT_CLONES: the per-pixel level, cell and weights inlined; no contraction, so the same floats). The
+ * lanes are not used: this kind reads the pixels' positions. */
+FXC_HOT_CLONES static uint32_t wsc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread,
+                                                   const srv_pixel *pixels, const srv_pixel_lanes *lanes,
+                                                   uint32_t count, uint32_t effect_count, const uint32_t *effects,
+                                                   int32_t bias, fx_taps *const *taps, uint32_t *const *blocks)
 {
     (void)lanes;
     uint32_t empty = 0;

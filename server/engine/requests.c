@@ -134,8 +134,8 @@ typedef struct mask_row {
     float sample_normal[2][3][MASK_COLUMNS], sample_depth[2][MASK_COLUMNS], sample_footprint[2][MASK_COLUMNS];
 } mask_row;
 
-FXC_HOT_LANES static void coarse_mask_lanes(const mask_row *in, int32_t block, int32_t nx, int32_t fy,
-                                            int32_t two_y, float depth_scale, int32_t *out)
+FXC_HOT_LANES static uint32_t coarse_mask_lanes(const mask_row *in, int32_t block, int32_t nx, int32_t fy,
+                                                int32_t two_y, float depth_scale, int32_t *out, uint8_t *bytes)
 {
     const int32_t shift = __builtin_ctz((uint32_t)block), low = block - 1;
     int32_t result[SRV_TILE]; /* (stores to a local array, then out) */
@@ -170,8 +170,22 @@ FXC_HOT_LANES static void coarse_mask_lanes(const mask_row *in, int32_t block, i
         }
         result[j] = ((fx | fy) == 0) ? 1 : mask;
     }
+    /* bytes (the row's view->coarse, a whole row): each visible pixel's mask, a miss's byte left as it was */
+    uint8_t stored[SRV_TILE];
+    for (int32_t j = 0; j < SRV_TILE; j++) {
+        int32_t visible = -(int32_t)(in->tri[j] != SRV_MISS); /* all ones or 0 */
+        stored[j] = (uint8_t)((result[j] & visible) | ((int32_t)bytes[j] & ~visible));
+    }
+    /* bit j of the answer: pixel j asks for its own keys, i.e. it is visible and a rep ((fx | fy) == 0: the
+     * tile starts on a multiple of the block, srv__coarse_is_rep) or no rep stands in for it */
+    uint32_t own = 0;
     for (int32_t j = 0; j < SRV_TILE; j++)
+        own |= (uint32_t)((in->tri[j] != SRV_MISS) & ((result[j] == 0) | (((j & low) | fy) == 0))) << j;
+    for (int32_t j = 0; j < SRV_TILE; j++) {
         out[j] = result[j];
+        bytes[j] = stored[j];
+    }
+    return own;
 }
 
 /* Row `sample_row` of a tile's samples (buffer index of its first) expanded per column into in's row `to`;
@@ -246,29 +260,49 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
             static const float none[3] = {0, 0, 0}; /* a miss's lanes: not used */
             uint32_t memo_tri = SRV_MISS;
             const float *n = none;
+            if (lanes == SRV_TILE && !loop->desc.no_lanes) { /* a whole row: copies */
+                memcpy(in.tri, view->tri + row, sizeof in.tri);
+                memcpy(in.depth, view->depth + row, sizeof in.depth);
+                memcpy(in.footprint, view->footprint + row, sizeof in.footprint);
+            } else {
+                for (uint32_t j = 0; j < SRV_TILE; j++) {
+                    size_t p = row + (j < lanes ? j : 0); /* lanes past the frame's edge: lane 0's pixel, not used */
+                    in.tri[j] = view->tri[p];
+                    in.depth[j] = view->depth[p];
+                    in.footprint[j] = view->footprint[p];
+                }
+            }
             for (uint32_t j = 0; j < SRV_TILE; j++) {
-                size_t p = row + (j < lanes ? j : 0); /* lanes past the frame's edge: lane 0's pixel, not used */
-                uint32_t tri = view->tri[p];
+                uint32_t tri = in.tri[j];
                 if (tri != memo_tri) {
                     memo_tri = tri;
                     n = tri != SRV_MISS ? sc->tri_normal + 3 * (size_t)tri : none;
                 }
-                in.tri[j] = tri;
                 for (int k = 0; k < 3; k++)
                     in.normal[k][j] = n[k];
-                in.depth[j] = view->depth[p];
-                in.footprint[j] = view->footprint[p];
             }
-            coarse_mask_lanes(&in, (int32_t)g.block, (int32_t)g.nx, (int32_t)fy,
-                              (int32_t)(fy != 0 && iy + 1 < g.ny), loop->coarse_depth_scale, row_mask);
-            for (uint32_t j = 0; j < lanes; j++) {
-                size_t p = row + j;
-                if (view->tri[p] == SRV_MISS)
-                    continue;
-                int32_t mask = row_mask[j];
-                coarse[p] = (uint8_t)mask;
-                if (mask == 0 || srv__coarse_is_rep(g.block, x0 + j, y))
-                    fill_pixel(loop->s, view, p, positions, &memo, &pixels[count++]);
+            uint8_t bytes[SRV_TILE] = {0};
+            if (lanes == SRV_TILE)
+                memcpy(bytes, coarse + row, sizeof bytes);
+            uint32_t own = coarse_mask_lanes(&in, (int32_t)g.block, (int32_t)g.nx, (int32_t)fy,
+                                             (int32_t)(fy != 0 && iy + 1 < g.ny), loop->coarse_depth_scale,
+                                             row_mask, bytes);
+            if (lanes == SRV_TILE && !loop->desc.no_lanes) {
+                memcpy(coarse + row, bytes, sizeof bytes);
+                for (; own; own &= own - 1) { /* in column order */
+                    uint32_t j = (uint32_t)__builtin_ctz(own);
+                    fill_pixel(loop->s, view, row + j, positions, &memo, &pixels[count++]);
+                }
+            } else {
+                for (uint32_t j = 0; j < lanes; j++) {
+                    size_t p = row + j;
+                    if (view->tri[p] == SRV_MISS)
+                        continue;
+                    int32_t mask = row_mask[j];
+                    coarse[p] = (uint8_t)mask;
+                    if (mask == 0 || srv__coarse_is_rep(g.block, x0 + j, y))
+                        fill_pixel(loop->s, view, p, positions, &memo, &pixels[count++]);
+                }
             }
         }
         request_pixels(task, thread_index, pixels, count);
