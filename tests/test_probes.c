@@ -1065,6 +1065,26 @@ static void test_memo_across_loops(void **state)
     scene_free(s);
 }
 
+/* half_bits_to_float, the vectorisable reader of the stored halves, against half_to_float for every finite
+ * half >= 0, on a thread set up as the pool's are (denormals-are-zero, flush-to-zero): the subnormal halves
+ * (texels below 2^-14 of their probe's scale) must keep their value, not read as 0. */
+static void test_half_bits_daz(void **state)
+{
+    (void)state;
+    scene_tracing_thread_init();
+    uint32_t subnormal_nonzero = 0;
+    for (uint32_t h = 0; h <= 0x7bffu; h++) {
+        float a = half_bits_to_float(h), b = half_to_float((uint16_t)h);
+        uint32_t abits, bbits;
+        memcpy(&abits, &a, sizeof abits);
+        memcpy(&bbits, &b, sizeof bbits);
+        if (abits != bbits)
+            fail_msg("half 0x%04x: %a against half_to_float's %a", h, (double)a, (double)b);
+        subnormal_nonzero += h > 0 && h < 0x400u && a > 0;
+    }
+    assert_int_equal(subnormal_nonzero, 0x3ffu);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -1080,6 +1100,7 @@ int main(void)
         cmocka_unit_test(test_cell_reads_match_taps),
         cmocka_unit_test(test_shade_lanes_match_filter),
         cmocka_unit_test(test_memo_across_loops),
+        cmocka_unit_test(test_half_bits_daz),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -83,15 +83,19 @@ static inline float half_to_float(uint16_t h)
     return value;
 }
 
-/* A half (finite, >= 0: moments and stored irradiance) to float, exactly, subnormals included: its bits
- * shifted into a float's place and rescaled by 2^112 (the exponent biases' difference), so it vectorises.
- * For those halves the same float as half_to_float. */
+/* A half (finite, >= 0: moments and stored irradiance) to float, exactly, subnormals included, in selects so
+ * loops over it vectorise: a normal half's exponent rebiased (15 -> 127) in its bits, a subnormal one as its
+ * mantissa times 2^-24 (a normal float). For those halves the same float as half_to_float, also on threads
+ * with denormals-are-zero (the pool's, scene_tracing_thread_init): the shorter form that shifts the bits into
+ * a float and multiplies by 2^112 makes a subnormal float of a subnormal half, which such a thread reads as
+ * 0 (test_half_bits_daz). */
 static inline float half_bits_to_float(uint32_t h)
 {
-    uint32_t bits = (h & 0x7fffu) << 13;
-    float f;
-    memcpy(&f, &bits, sizeof f);
-    return f * 0x1p112f;
+    uint32_t magnitude = h & 0x7fffu, normal_bits = (magnitude << 13) + (112u << 23);
+    float normal;
+    memcpy(&normal, &normal_bits, sizeof normal);
+    float subnormal = (float)(int32_t)(magnitude & 0x3ffu) * 0x1p-24f;
+    return magnitude >> 10 == 0 ? subnormal : normal;
 }
 
 /* DDGI's weight of a probe seen from a point at `distance` (metres; 0: no visibility test): the direction
