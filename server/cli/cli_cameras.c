@@ -7,6 +7,18 @@
 #include <math.h>
 #include <stdio.h>
 
+srv_cli_view_options srv_cli_view_defaults(void)
+{
+    return (srv_cli_view_options){.viewers = 4,
+                                  .frames = 30,
+                                  .width = 640,
+                                  .height = 360,
+                                  .camera = SRV_CAMGEN_ROOM,
+                                  .fps = 30,
+                                  .frames_min = 1,
+                                  .frames_max = 1000000};
+}
+
 int srv_cli_view_option(const char *cmd, int code, const char *arg, srv_cli_view_options *v)
 {
     switch (code) {

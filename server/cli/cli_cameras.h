@@ -46,6 +46,11 @@ typedef struct srv_cli_view_options {
     uint32_t frames_min, frames_max; /* --frames' range (the command's) */
 } srv_cli_view_options;
 
+/* The defaults sim and ref share, so that a reference renders the cameras sim renders for the same options:
+ * 4 viewers, 30 frames at 640 x 360, the room generator, 30 frames per second of trace time, --frames
+ * 1..1000000. */
+srv_cli_view_options srv_cli_view_defaults(void);
+
 /* getopt_long codes of those options: after the engine's (256 on), before a command's own (320 on). */
 enum {
     SRV_CLI_O_VIEWERS = 300,

@@ -296,14 +296,7 @@ static void show_progress(void *user, uint64_t done, uint64_t total)
 
 int srv_cmd_ref(int argc, char **argv)
 {
-    ref_options o = {.view = {.viewers = 4,
-                              .frames = 30,
-                              .width = 640,
-                              .height = 360,
-                              .camera = SRV_CAMGEN_ROOM,
-                              .fps = 30,
-                              .frames_min = 1,
-                              .frames_max = 1000000}};
+    ref_options o = {.view = srv_cli_view_defaults()};
     srv_cli_engine_defaults(&o.engine);
     int rc = parse_options(argc, argv, &o);
     if (rc >= 0)

@@ -219,14 +219,7 @@ static int record_sink_frame(void *user, const srv_viewer_frame *vf)
 
 int srv_cmd_sim(int argc, char **argv)
 {
-    sim_options o = {.view = {.viewers = 4,
-                              .frames = 30,
-                              .width = 640,
-                              .height = 360,
-                              .camera = SRV_CAMGEN_ROOM,
-                              .fps = 30,
-                              .frames_min = 1,
-                              .frames_max = 1000000}};
+    sim_options o = {.view = srv_cli_view_defaults()};
     srv_cli_engine_defaults(&o.engine);
     int rc = parse_options(argc, argv, &o);
     if (rc >= 0)
