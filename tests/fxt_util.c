@@ -28,6 +28,20 @@ uint32_t fxt_random(uint32_t *state)
     return *state = x;
 }
 
+float fxt_float_from_bits(uint32_t bits)
+{
+    float v;
+    memcpy(&v, &bits, sizeof v);
+    return v;
+}
+
+uint32_t fxt_bits_from_float(float v)
+{
+    uint32_t bits;
+    memcpy(&bits, &v, sizeof bits);
+    return bits;
+}
+
 const char *fxt_tmp_path(const char *name)
 {
     static char path[1024];

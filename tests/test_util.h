@@ -32,6 +32,10 @@ int fxt_run_cli(const char *args, char *out, size_t out_cap, char *err, size_t e
  * is not 0), stored back into *state. */
 uint32_t fxt_random(uint32_t *state);
 
+/* A float's bits and back (memcpy: no aliasing or union games). */
+float fxt_float_from_bits(uint32_t bits);
+uint32_t fxt_bits_from_float(float v);
+
 /* A counting allocator for the caches' allocator hooks (osc_allocator): live bytes and allocations, and an
  * optional failure of the n-th allocation. free checks it never frees more than is live. */
 typedef struct fxt_counting_allocator {
