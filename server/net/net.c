@@ -1,12 +1,12 @@
 /* `fxcache serve`'s network side and frame clock (net.h): libwebsockets on the calling thread, the frame
- * loop on its own thread, one mutex-protected table of viewer records between them. */
-#include "net.h"
+ * loop on its own thread (net_frames.c), one mutex-protected table of viewer records between them
+ * (net_internal.h). */
+#include "net_internal.h"
 
 #include "proto.h"
 #include "trace.h"
 
 #include <errno.h>
-#include <float.h>
 #include <libwebsockets.h>
 #include <math.h>
 #include <pthread.h>
@@ -16,126 +16,6 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
-
-enum {
-    FRAGMENT_BYTES = 128 * 1024, /* a frame goes out in WebSocket fragments of at most this size */
-    MAX_PENDING_CONNECTIONS = 32 /* connections that have not sent hello yet, beyond max_viewers */
-};
-
-/* A viewer record's life: FREE -> JOINING (hello accepted) -> ACTIVE (in the loop, from its first camera's
- * frame) -> LEAVING (its connection is gone; the frame thread takes it out of the loop) -> FREE. */
-typedef enum viewer_state { VS_FREE = 0, VS_JOINING, VS_ACTIVE, VS_LEAVING } viewer_state;
-
-typedef struct net_viewer {
-    viewer_state state;
-    uint32_t index;                 /* join number: the name is viewer_NN */
-    char name[PROTO_NAME_MAX + 1];
-    proto_hello hello;
-    proto_strategy strategy;        /* hello's reference-frame strategy */
-    /* The latest camera (network thread writes, frame thread reads): the one rendered, after the strategy. */
-    bool has_camera;
-    srv_camera camera;
-    uint32_t camera_sequence;
-    /* The last camera message (network thread only): predictive extrapolates from it to the next. */
-    bool has_previous;
-    double previous_time;
-    proto_pose previous_pose;
-    /* Sample requests (issue 11). The network thread writes the pending one; the frame thread hands it to
-     * the viewer's sparse engine viewer (added at its first request), renders it, and stages the answer. */
-    uint32_t *req_pixels[2];        /* request order, packed y << 16 | x: [req_pending_index] pending, the
-                                       other the one being rendered (max_samples each) */
-    int req_pending_index;
-    bool req_pending, req_rendering;
-    uint32_t req_id[2], req_count[2], req_width[2], req_height[2];
-    srv_camera req_camera[2];
-    srv_viewer_id sample_id;        /* the sparse engine viewer, 0 until the first request */
-    /* The answer outbox: as frames, two buffers (frame thread fills ans_index, network thread takes it). */
-    uint8_t *ans[2];                /* count x PROTO_SAMPLE_BYTES */
-    int ans_index;
-    bool ans_ready;
-    uint32_t ans_request, ans_frame, ans_count, ans_width, ans_height;
-    srv_camera ans_camera;
-    uint64_t requests_dropped;
-    /* In the loop (frame thread). */
-    srv_viewer_id id;
-    uint32_t frame_sequence;        /* the camera sequence of the frame being rendered */
-    srv_trace_writer *trace;
-    int fail_code;                  /* the frame thread could not add it: the network thread says so */
-    /* The outbox: one finished frame (frame thread fills buffer out_index, network thread takes it). */
-    uint8_t *rgb[2];
-    float *depth[2];
-    int out_index;
-    bool staged, ready;
-    uint32_t out_frame, out_sequence;
-    srv_camera out_camera;
-    srv_viewer_stats out_stats;
-    float out_frame_ms;
-    uint64_t dropped;
-    /* Stats on request: the frame thread writes the JSON text, the network thread sends it. */
-    bool stats_requested;
-    char *stats_json;
-    size_t buffer_bytes;
-} net_viewer;
-
-/* Per connection (network thread only; lws allocates and frees it). */
-typedef struct net_session {
-    struct lws *wsi;
-    struct net_session *next;       /* every open session, for the byes at shutdown */
-    net_viewer *viewer;             /* after hello */
-    uint8_t *rx;                    /* the message being received */
-    size_t rx_len, rx_cap;
-    bool rx_bad;                    /* refusing the rest of this message */
-    uint8_t *tx;                    /* LWS_PRE + the message being sent */
-    size_t tx_len, tx_off, tx_cap;
-    int tx_encoding_buffer;         /* the outbox buffer encoded into tx, -1 none */
-    uint8_t *scratch;               /* encoded payloads */
-    size_t scratch_cap;
-    bool welcome_pending;
-    int error_code;                 /* != 0: send this error, then close */
-    char error_reason[PROTO_REASON_MAX + 1];
-    bool bye_pending, closing;
-    double tokens, tokens_time;     /* the camera-rate bucket */
-    double sample_tokens, sample_tokens_time; /* the sample requests' bucket (the same rate) */
-    bool counted;                   /* counted among pending (pre-hello) connections */
-} net_session;
-
-struct srv_net {
-    srv_net_desc d;
-    struct lws_context *context;
-    int port;
-    pthread_mutex_t lock;
-    net_viewer viewers[SRV_MAX_VIEWERS];
-    net_viewer *by_slot[256];       /* viewer id slot -> record (frame thread) */
-    uint32_t next_index;
-    net_session *sessions;
-    uint32_t pending_connections;
-    atomic_bool stopping;           /* the frame thread finished: say bye */
-    bool byes_sent;
-    double stop_deadline;
-    bool clock_started;
-    uint32_t frame;
-    double origin[3];
-    srv_net_totals totals;          /* under lock */
-    uint64_t buffer_bytes;          /* under lock */
-    double frame_ms;                /* the last frame's time (under lock): predictive's latency */
-    fxc_result frame_error;
-    char frame_error_text[256];
-    volatile sig_atomic_t no_signal; /* the stop flag when the description gives none */
-};
-
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
-static void count_buffers(srv_net *net, int64_t delta)
-{
-    net->buffer_bytes = (uint64_t)((int64_t)net->buffer_bytes + delta);
-    if (net->buffer_bytes > net->totals.buffer_bytes_peak)
-        net->totals.buffer_bytes_peak = net->buffer_bytes;
-}
 
 /* ---- messages out -------------------------------------------------------------------------------------- */
 
@@ -232,7 +112,7 @@ static bool take_frame(srv_net *net, net_session *ss)
     pthread_mutex_unlock(&net->lock);
 
     /* Encoding reads buffer `buffer`, which the frame thread no longer writes (it writes the other one). */
-    double t0 = now_s();
+    double t0 = srv__net_now_s();
     uint32_t w = f->width, h = f->height;
     size_t color_cap = proto_color_bound(f->codec, w, h);
     size_t depth_cap = proto_depth_bound(f->depth, w, h);
@@ -255,7 +135,7 @@ static bool take_frame(srv_net *net, net_session *ss)
     f->color_bytes = (uint32_t)color_bytes;
     f->depth_data = depth_bytes ? ss->scratch + color_cap : NULL;
     f->depth_bytes = (uint32_t)depth_bytes;
-    f->stats.encode_ms = (float)((now_s() - t0) * 1e3);
+    f->stats.encode_ms = (float)((srv__net_now_s() - t0) * 1e3);
     if (!tx_message(ss, &m))
         return false;
     pthread_mutex_lock(&net->lock);
@@ -458,7 +338,7 @@ static void on_hello(srv_net *net, net_session *ss, const proto_hello *h)
         return;
     }
     v->buffer_bytes = bytes;
-    count_buffers(net, (int64_t)bytes);
+    srv__net_count_buffers(net, (int64_t)bytes);
     v->state = VS_JOINING;
     v->hello = *h;
     v->strategy = strategy;
@@ -474,7 +354,7 @@ static void on_hello(srv_net *net, net_session *ss, const proto_hello *h)
     lws_set_timeout(ss->wsi, NO_PENDING_TIMEOUT, 0);
     ss->welcome_pending = true;
     ss->tokens = ss->sample_tokens = net->d.camera_rate;
-    ss->tokens_time = ss->sample_tokens_time = now_s();
+    ss->tokens_time = ss->sample_tokens_time = srv__net_now_s();
     lws_callback_on_writable(ss->wsi);
 }
 
@@ -528,7 +408,7 @@ static void on_camera(srv_net *net, net_session *ss, const proto_camera *c)
         return;
     }
     /* The rate: a bucket of one second's worth of cameras, refilled continuously. */
-    double t = now_s();
+    double t = srv__net_now_s();
     ss->tokens = fmin((double)net->d.camera_rate, ss->tokens + (t - ss->tokens_time) * net->d.camera_rate);
     ss->tokens_time = t;
     if (ss->tokens < 1) {
@@ -576,7 +456,7 @@ static void on_sample_request(srv_net *net, net_session *ss, const proto_sample_
         session_fail(net, ss, FXC_ERR_PROTOCOL, "a sample request before hello");
         return;
     }
-    double t = now_s();
+    double t = srv__net_now_s();
     ss->sample_tokens =
         fmin((double)net->d.camera_rate, ss->sample_tokens + (t - ss->sample_tokens_time) * net->d.camera_rate);
     ss->sample_tokens_time = t;
@@ -623,7 +503,7 @@ static void on_sample_request(srv_net *net, net_session *ss, const proto_sample_
         }
         size_t bytes = 2 * n * (sizeof *v->req_pixels[0] + PROTO_SAMPLE_BYTES);
         v->buffer_bytes += bytes;
-        count_buffers(net, (int64_t)bytes);
+        srv__net_count_buffers(net, (int64_t)bytes);
     }
     if (v->req_pending) { /* the newest request wins */
         v->requests_dropped++;
@@ -764,7 +644,7 @@ static void on_wake(srv_net *net)
 {
     if (atomic_load(&net->stopping) && !net->byes_sent) {
         net->byes_sent = true;
-        net->stop_deadline = now_s() + 1.0;
+        net->stop_deadline = srv__net_now_s() + 1.0;
         for (net_session *ss = net->sessions; ss; ss = ss->next) {
             ss->bye_pending = true;
             lws_callback_on_writable(ss->wsi);
@@ -842,271 +722,6 @@ static void lws_log_line(int level, const char *line)
     fprintf(stderr, "fxcache serve: libwebsockets: %s", line);
 }
 
-/* ---- the frame thread ---------------------------------------------------------------------------------- */
-
-static void free_viewer(srv_net *net, net_viewer *v)
-{
-    for (int k = 0; k < 2; k++) {
-        free(v->rgb[k]);
-        free(v->depth[k]);
-        free(v->req_pixels[k]);
-        free(v->ans[k]);
-    }
-    free(v->stats_json);
-    count_buffers(net, -(int64_t)v->buffer_bytes);
-    memset(v, 0, sizeof *v);
-}
-
-static int net_viewer_frame(void *user, const srv_viewer_frame *vf)
-{
-    srv_net *net = user;
-    net_viewer *v = net->by_slot[vf->id.id & 0xFFu];
-    if (!v)
-        return 0;
-    int rc = 0;
-    if (v->trace && srv_trace_writer_add(v->trace, vf->frame / net->d.fps, &vf->camera) != 0) {
-        fprintf(stderr, "fxcache serve: %s: %s\n", v->name, srv_trace_writer_error(v->trace));
-        rc = -1;
-    }
-    size_t pixels = (size_t)vf->width * vf->height;
-    pthread_mutex_lock(&net->lock);
-    if (v->ready) { /* the previous frame was never taken: the newest wins */
-        v->ready = false;
-        v->dropped++;
-        net->totals.frames_dropped++;
-    }
-    int b = v->out_index;
-    memcpy(v->rgb[b], vf->srgb, pixels * 3);
-    if (v->depth[b])
-        memcpy(v->depth[b], vf->depth, pixels * sizeof(float));
-    v->out_frame = vf->frame;
-    v->out_sequence = v->frame_sequence;
-    v->out_camera = vf->camera;
-    v->out_stats = *vf->stats;
-    v->staged = true;
-    pthread_mutex_unlock(&net->lock);
-    return rc;
-}
-
-static int net_frame_done(void *user, const srv_frame_stats *stats)
-{
-    srv_net *net = user;
-    pthread_mutex_lock(&net->lock);
-    for (uint32_t i = 0; i < SRV_MAX_VIEWERS; i++) {
-        net_viewer *v = &net->viewers[i];
-        if (v->staged) {
-            v->staged = false;
-            v->ready = true;
-            v->out_frame_ms = (float)stats->frame_ms;
-        }
-    }
-    pthread_mutex_unlock(&net->lock);
-    return 0;
-}
-
-/* Hands a viewer's pending sample request to its sparse engine viewer (added at the first request) for the
- * next frame. Under the lock. */
-static void take_request(srv_net *net, net_viewer *v)
-{
-    int b = v->req_pending_index;
-    v->req_pending = false;
-    if (!v->sample_id.id) {
-        srv_viewer_desc vd = {.max_pixels = net->d.max_samples};
-        snprintf(vd.name, sizeof vd.name, "%.20s.samples", v->name);
-        fxc_result r = srv_viewer_add(net->d.loop, &vd, &v->sample_id);
-        if (r != FXC_OK) {
-            v->sample_id.id = 0;
-            v->fail_code = r == FXC_ERR_NO_SLOT ? FXC_ERR_LIMIT : r;
-            return;
-        }
-    }
-    /* Checked when it arrived (sizes, pixels, camera): a refusal here would be a bug, and drops the request. */
-    if (srv_viewer_set_pixels(net->d.loop, v->sample_id, &v->req_camera[b], v->req_width[b], v->req_height[b],
-                              v->req_pixels[b], v->req_count[b], NULL) != FXC_OK)
-        return;
-    v->req_rendering = true;
-    v->req_pending_index ^= 1; /* the network thread writes the next request into the other buffer */
-}
-
-/* Stage 1 for the network's viewers: leaves, joins (in join order, as a replay adds them), cameras. */
-static void take_viewers(srv_net *net)
-{
-    pthread_mutex_lock(&net->lock);
-    for (uint32_t i = 0; i < SRV_MAX_VIEWERS; i++) {
-        net_viewer *v = &net->viewers[i];
-        if (v->state != VS_LEAVING)
-            continue;
-        if (v->id.id) {
-            srv_viewer_remove(net->d.loop, v->id);
-            net->by_slot[v->id.id & 0xFFu] = NULL;
-        }
-        if (v->sample_id.id)
-            srv_viewer_remove(net->d.loop, v->sample_id);
-        if (v->trace && srv_trace_writer_close(v->trace) != 0 && !net->frame_error) {
-            net->frame_error = FXC_ERR_IO;
-            snprintf(net->frame_error_text, sizeof net->frame_error_text, "writing %s's trace failed", v->name);
-        }
-        v->trace = NULL;
-        free_viewer(net, v);
-    }
-    for (;;) {
-        net_viewer *next = NULL;
-        for (uint32_t i = 0; i < SRV_MAX_VIEWERS; i++) {
-            net_viewer *v = &net->viewers[i];
-            if (v->state == VS_JOINING && v->has_camera && !v->fail_code && (!next || v->index < next->index))
-                next = v;
-        }
-        if (!next)
-            break;
-        srv_viewer_desc vd = {.width = next->hello.width, .height = next->hello.height};
-        snprintf(vd.name, sizeof vd.name, "%s", next->name);
-        fxc_result r = srv_viewer_add(net->d.loop, &vd, &next->id);
-        if (r != FXC_OK) {
-            next->fail_code = r;
-            continue;
-        }
-        next->state = VS_ACTIVE;
-        net->by_slot[next->id.id & 0xFFu] = next;
-        if (net->d.record_dir) {
-            char path[1024], err[512];
-            snprintf(path, sizeof path, "%s/%s.trace", net->d.record_dir, next->name);
-            next->trace = srv_trace_writer_open_sized(path, net->d.s, vd.width, vd.height, err, sizeof err);
-            if (!next->trace && !net->frame_error) {
-                net->frame_error = FXC_ERR_IO;
-                snprintf(net->frame_error_text, sizeof net->frame_error_text, "%s", err);
-            }
-        }
-    }
-    for (uint32_t i = 0; i < SRV_MAX_VIEWERS; i++) {
-        net_viewer *v = &net->viewers[i];
-        if (v->state != VS_ACTIVE)
-            continue;
-        srv_viewer_set_camera(net->d.loop, v->id, &v->camera); /* checked when it arrived */
-        v->frame_sequence = v->camera_sequence;
-        net->clock_started = true;
-        if (v->req_pending)
-            take_request(net, v);
-    }
-    pthread_mutex_unlock(&net->lock);
-}
-
-/* After a frame: each rendered request's answer, one sample per requested entry in the request's order, into
- * the viewer's answer outbox (a newer answer replaces one not yet sent). Under the lock. */
-static void stage_answers(srv_net *net, uint32_t frame)
-{
-    pthread_mutex_lock(&net->lock);
-    for (uint32_t i = 0; i < SRV_MAX_VIEWERS; i++) {
-        net_viewer *v = &net->viewers[i];
-        if (v->state != VS_ACTIVE || !v->req_rendering)
-            continue;
-        v->req_rendering = false;
-        int r = v->req_pending_index ^ 1; /* the request rendered */
-        const uint8_t *image = srv_viewer_image(net->d.loop, v->sample_id);
-        const float *depth = srv_viewer_depth(net->d.loop, v->sample_id);
-        if (!image || !depth)
-            continue;
-        if (v->ans_ready) {
-            v->requests_dropped++;
-            net->totals.sample_requests_dropped++;
-        }
-        uint8_t *out = v->ans[v->ans_index];
-        for (uint32_t k = 0; k < v->req_count[r]; k++) {
-            uint32_t xy = v->req_pixels[r][k];
-            proto_sample sample = {.x = (uint16_t)(xy & 0xFFFFu), .y = (uint16_t)(xy >> 16)};
-            uint32_t at = srv_viewer_pixel_index(net->d.loop, v->sample_id, sample.x, sample.y);
-            float d = INFINITY;
-            if (at != UINT32_MAX) { /* always: every requested pixel was listed */
-                memcpy(sample.rgb, image + 3 * (size_t)at, 3);
-                d = depth[at];
-            }
-            sample.depth = d > 0.0f ? d : FLT_MIN; /* the wire wants > 0 (a hit at the eye, were it possible) */
-            proto_sample_put(out, k, &sample);
-        }
-        v->ans_request = v->req_id[r];
-        v->ans_frame = frame;
-        v->ans_count = v->req_count[r];
-        v->ans_width = v->req_width[r];
-        v->ans_height = v->req_height[r];
-        v->ans_camera = v->req_camera[r];
-        v->ans_ready = true;
-    }
-    pthread_mutex_unlock(&net->lock);
-}
-
-/* Answers stats requests with the run report as JSON text. */
-static void answer_stats(srv_net *net)
-{
-    bool wanted = false;
-    pthread_mutex_lock(&net->lock);
-    for (uint32_t i = 0; i < SRV_MAX_VIEWERS; i++)
-        wanted |= net->viewers[i].state != VS_FREE && net->viewers[i].stats_requested;
-    pthread_mutex_unlock(&net->lock);
-    if (!wanted)
-        return;
-    json_t *report = srv_report_json(net->d.report);
-    char *text = report ? json_dumps(report, JSON_COMPACT | JSON_PRESERVE_ORDER) : NULL;
-    json_decref(report);
-    pthread_mutex_lock(&net->lock);
-    for (uint32_t i = 0; i < SRV_MAX_VIEWERS; i++) {
-        net_viewer *v = &net->viewers[i];
-        if (v->state == VS_FREE || !v->stats_requested || !text)
-            continue;
-        v->stats_requested = false;
-        free(v->stats_json);
-        v->stats_json = strdup(text);
-    }
-    pthread_mutex_unlock(&net->lock);
-    free(text);
-}
-
-static void sleep_until(double t)
-{
-    double left = t - now_s();
-    if (left <= 0)
-        return;
-    struct timespec ts = {.tv_sec = (time_t)left, .tv_nsec = (long)((left - floor(left)) * 1e9)};
-    nanosleep(&ts, NULL);
-}
-
-static void *frame_thread(void *arg)
-{
-    srv_net *net = arg;
-    double period = 1.0 / net->d.fps, next_tick = now_s();
-    while (!*net->d.stop && !(net->d.frames && net->frame >= net->d.frames)) {
-        take_viewers(net);
-        if (net->clock_started) {
-            srv_frame_stats st;
-            if (srv_loop_frame(net->d.loop, &st) != FXC_OK && !net->frame_error) {
-                net->frame_error = FXC_ERR_IO; /* a sink could not write: it said why */
-                snprintf(net->frame_error_text, sizeof net->frame_error_text, "a frame's output could not be written");
-            }
-            stage_answers(net, st.frame);
-            pthread_mutex_lock(&net->lock);
-            net->frame_ms = st.frame_ms;
-            pthread_mutex_unlock(&net->lock);
-            net->frame++;
-            if (net->d.progress)
-                fprintf(stderr, "\rframe %u  %u viewers  %.1f ms   ", net->frame, st.viewer_count, st.frame_ms);
-        }
-        answer_stats(net);
-        lws_cancel_service(net->context);
-        if (net->frame_error)
-            break;
-        /* The next tick; a late frame starts the schedule again from now (no bursts to catch up). */
-        next_tick += period;
-        double t = now_s();
-        if (next_tick < t)
-            next_tick = t;
-        while (!*net->d.stop && now_s() < next_tick - 1e-4)
-            sleep_until(fmin(next_tick, now_s() + 0.05));
-    }
-    if (net->d.progress)
-        fputc('\n', stderr);
-    atomic_store(&net->stopping, true);
-    lws_cancel_service(net->context);
-    return NULL;
-}
-
 /* ---- the server ---------------------------------------------------------------------------------------- */
 
 fxc_result srv_net_create(const srv_net_desc *desc, srv_net **out, char *err, size_t err_cap)
@@ -1166,7 +781,7 @@ fxc_result srv_net_create(const srv_net_desc *desc, srv_net **out, char *err, si
     }
     struct lws_vhost *vhost = lws_get_vhost_by_name(net->context, "default");
     net->port = vhost ? lws_get_vhost_listen_port(vhost) : net->d.port;
-    srv_sink sink = {.viewer_frame = net_viewer_frame, .frame_done = net_frame_done, .user = net};
+    srv_sink sink = {.viewer_frame = srv__net_viewer_frame, .frame_done = srv__net_frame_done, .user = net};
     srv_loop_add_sink(net->d.loop, &sink);
     *out = net;
     return FXC_OK;
@@ -1180,14 +795,14 @@ int srv_net_port(const srv_net *net)
 fxc_result srv_net_run(srv_net *net, char *err, size_t err_cap)
 {
     pthread_t thread;
-    if (pthread_create(&thread, NULL, frame_thread, net) != 0) {
+    if (pthread_create(&thread, NULL, srv__net_frame_thread, net) != 0) {
         snprintf(err, err_cap, "cannot start the frame thread");
         return FXC_ERR_THREADS;
     }
     for (;;) {
         if (lws_service(net->context, 0) < 0)
             break;
-        if (net->byes_sent && (!net->sessions || now_s() > net->stop_deadline))
+        if (net->byes_sent && (!net->sessions || srv__net_now_s() > net->stop_deadline))
             break;
     }
     pthread_join(thread, NULL);
@@ -1230,7 +845,7 @@ void srv_net_free(srv_net *net)
         if (v->trace)
             srv_trace_writer_close(v->trace);
         if (v->state != VS_FREE)
-            free_viewer(net, v);
+            srv__net_free_viewer(net, v);
     }
     pthread_mutex_destroy(&net->lock);
     free(net);
