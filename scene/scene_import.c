@@ -343,10 +343,17 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
         ai = aiImportFile(path, flags);
         scene_cerr_capture_end(capture, printed, sizeof printed);
     }
-    if (!ai)
-        return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s%s%s%s", path,
-                           assimp_error(why, sizeof why), printed[0] ? " (Assimp also printed: '" : "",
-                           printed, printed[0] ? "')" : "");
+    if (!ai) {
+        assimp_error(why, sizeof why);
+        /* Assimp's validation refuses a scene without meshes (an OBJ of vertices only, a reader that found
+         * nothing it could use): the file is readable, it holds nothing to render, as a scene with no meshes
+         * that passes validation is refused below (SCENE_ERR_EMPTY). */
+        if (strstr(why, "mNumMeshes is 0"))
+            return scene__fail(err, SCENE_ERR_EMPTY, "%s: no usable triangles in the file (Assimp read no meshes "
+                               "from it)", path);
+        return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s%s%s%s", path, why,
+                           printed[0] ? " (Assimp also printed: '" : "", printed, printed[0] ? "')" : "");
+    }
     if (printed[0])
         fprintf(stderr, "fxcache: warning: %s: Assimp printed: '%s'\n", path, printed);
     scene_result checked = check_faces(path, ai, err);

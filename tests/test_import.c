@@ -654,6 +654,8 @@ static void test_inputs_refused_or_read(void **state)
         {"map.bsp", "IBSP\x2e", 5, false, SCENE_ERR_FORMAT, "only from inside a .pk3", 0},
         {"maps.pk3", "PK\x03\x04", 4, false, SCENE_ERR_FORMAT, "vertex indices unset", 0},
         {"folder.obj", NULL, 0, true, SCENE_ERR_IO, "is a directory", 0},
+        {"comment_only.obj", "# nothing but comments here\nmtllib none.mtl\n", 0, false, SCENE_ERR_EMPTY,
+         "Assimp read no meshes from it", 0},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         const input_case *c = &cases[i];
@@ -684,6 +686,7 @@ static void test_assimp_models(void **state)
     }
     static const input_case cases[] = {
         {"AC/nosurfaces.ac", NULL, 0, false, SCENE_ERR_EMPTY, "only 7 points and lines", 0},
+        {"M3D/cube_normals.m3d", NULL, 0, false, SCENE_ERR_EMPTY, "Assimp read no meshes from it", 0},
         {"invalid/OutOfMemory.off", NULL, 0, false, SCENE_ERR_FORMAT, "declares 353535235358 vertices", 0},
         {"PLY/Wuson.ply", NULL, 0, false, SCENE_OK, NULL, 0},
         {"OpenGEX/empty_camera.ogex", NULL, 0, false, SCENE_ERR_FORMAT, "Assimp also printed: 'nullptr", 0},
