@@ -345,12 +345,12 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
     }
     if (!ai) {
         assimp_error(why, sizeof why);
-        /* Assimp's validation refuses a scene without meshes (an OBJ of vertices only, a reader that found
-         * nothing it could use): the file is readable, it holds nothing to render, as a scene with no meshes
-         * that passes validation is refused below (SCENE_ERR_EMPTY). */
+        /* Assimp's validation refuses a scene without meshes (an OBJ of comments only, Assimp's own M3D
+         * cubes, which its reader here returns empty): the file holds nothing to render, as a scene with no
+         * meshes that passes validation is refused below (SCENE_ERR_EMPTY). */
         if (strstr(why, "mNumMeshes is 0"))
-            return scene__fail(err, SCENE_ERR_EMPTY, "%s: no usable triangles in the file (Assimp read no meshes "
-                               "from it)", path);
+            return scene__fail(err, SCENE_ERR_EMPTY,
+                               "%s: no usable triangles in the file (Assimp read no meshes from it)", path);
         return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s%s%s%s", path, why,
                            printed[0] ? " (Assimp also printed: '" : "", printed, printed[0] ? "')" : "");
     }
