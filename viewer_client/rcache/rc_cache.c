@@ -219,6 +219,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_zt[VIEW_RC_MAX_THREADS], o_wt[VIEW_RC_MAX_THREADS], o_ct[VIEW_RC_MAX_THREADS];
     size_t o_halo[VIEW_RC_MAX_THREADS];
     rc->local_z = rc->tile <= RC_LOCAL_TILE;
+    rc->direct_z = d.threads == 1 && !d.tiled_one_thread && !d.no_tiling;
     size_t local = rc->local_z ? (size_t)rc->tile * rc->tile : 0;
     for (uint32_t t = 0; t < d.threads; t++) {
         o_occupied[t] = take(&l, (size_t)rc->low_w * rc->low_h + 1, 1); /* + a sink byte */
