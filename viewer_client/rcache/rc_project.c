@@ -236,46 +236,29 @@ FXC_HOT_CLONES static uint32_t migrate_span(const uint16_t *restrict dest, uint1
     return migrated;
 }
 
-/* One thread's z-buffer straight into the image (direct_z): a chunk's n projected points (key and dep
- * indexed from its first slot, `first`) in slot order, each as the key depth bits << 32 | slot into its
- * pixel's zkey, the smaller kept (the nearer depth, then the lower slot): one load, minimum and store a point
- * without a branch, one cache line (three for separate depth, winner and colour arrays, updated behind a
- * branch). Returns the points projected. */
+/* One thread's z-buffer straight into the image (direct_z): a chunk's n projected points (key, dep and rgba
+ * indexed from its first slot, `first`) in slot order, each tested against its pixel (the nearer depth wins;
+ * between equal depths the first, as in the tile lists, which hold a tile's points in slot order too).
+ * Returns the points projected. */
 FXC_HOT_CLONES static uint32_t zbuffer_span(const uint32_t *restrict key, const float *restrict dep,
-                                            uint32_t first, uint32_t n, uint64_t *restrict zkey,
-                                            uint32_t sink)
+                                            const uint32_t *restrict rgba, uint32_t first, uint32_t n,
+                                            float *restrict zbuf, uint32_t *restrict win,
+                                            uint32_t *restrict pre)
 {
     uint32_t projected = 0;
     for (uint32_t k = 0; k < n; k++) {
-        uint32_t p = key[k], bits;
+        uint32_t p = key[k];
         if (p == RC_NO_PIXEL)
             continue;
         projected++;
-        memcpy(&bits, &dep[k], sizeof bits); /* depth > RC_NEAR > 0 where projected */
-        /* An infinite depth (a point so far that its depth overflows) never wins a pixel of the tiles' +inf
-         * either: to the sink, still counted as projected. */
-        p = bits < 0x7F800000u ? p : sink;
-        uint64_t z = (uint64_t)bits << 32 | (first + k), old = zkey[p];
-        zkey[p] = z < old ? z : old;
+        float z = dep[k];
+        if (z < zbuf[p]) {
+            zbuf[p] = z;
+            win[p] = first + k;
+            pre[p] = rgba[k];
+        }
     }
     return projected;
-}
-
-/* zbuf, win and pre of pixels [p0, p1) from zkey (the winner's colour read from the store). */
-FXC_HOT_CLONES static void zkey_unpack(const uint64_t *restrict zkey, const uint32_t *restrict rgba,
-                                       float *restrict zbuf, uint32_t *restrict win, uint32_t *restrict pre,
-                                       size_t p0, size_t p1)
-{
-    for (size_t p = p0; p < p1; p++) {
-        uint64_t z = zkey[p];
-        uint32_t bits = (uint32_t)(z >> 32), slot = (uint32_t)z;
-        bool none = z == UINT64_MAX;
-        float depth;
-        memcpy(&depth, &bits, sizeof depth);
-        zbuf[p] = none ? INFINITY : depth;
-        win[p] = slot; /* RC_NO_POINT when none: the low half of UINT64_MAX */
-        pre[p] = none ? RC_EMPTY_PT : rgba[slot];
-    }
 }
 
 static void project_task(void *user, uint32_t c, uint32_t worker)
@@ -333,7 +316,7 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
     }
     stat.migrated = migrate_span(dest, rc->tile_of + begin, 0, n, dead, rc->list_new);
     if (rc->direct_z) {
-        stat.projected = zbuffer_span(key, dep, begin, n, rc->zkey, (uint32_t)rc->pixels);
+        stat.projected = zbuffer_span(key, dep, rgba, begin, n, rc->zbuf, rc->win, rc->pre);
         rc->chunk_stat[c] = stat;
         return;
     }
@@ -387,11 +370,14 @@ static void sort_task(void *user, uint32_t c, uint32_t worker)
 void view_rc__project_sort(view_rc *rc)
 {
     if (rc->direct_z) {
-        /* One thread: the keys cleared, every chunk projected into them (in slot order), then unpacked. */
-        memset(rc->zkey, 0xFF, (rc->pixels + 1) * sizeof(uint64_t));
+        /* One thread: the image's z-buffer cleared, then every chunk in slot order projected into it. */
+        for (size_t p = 0; p < rc->pixels; p++) {
+            rc->zbuf[p] = INFINITY;
+            rc->win[p] = RC_NO_POINT;
+            rc->pre[p] = RC_EMPTY_PT;
+        }
         for (uint32_t c = 0; c < rc->chunk_count; c++)
             project_task(rc, c, 0);
-        zkey_unpack(rc->zkey, rc->rgba, rc->zbuf, rc->win, rc->pre, 0, rc->pixels);
         return;
     }
     run_chunks(rc, project_task);

@@ -160,12 +160,9 @@ struct view_rc {
      * apart (which all fall in a few of L1's sets), then copied out row by row. */
     bool local_z;
     /* One thread (and not tiled_one_thread or no_tiling): no tile lists; each chunk, once projected, goes
-     * straight into zkey, the image's z-buffer as one 64-bit key a pixel, the view depth's bits above the
-     * slot: the smallest key is the nearer depth (positive floats order as their bits), then the lower
-     * slot, the winner of the tile lists too (which hold a tile's points in slot order, the first of equal
-     * depths winning). zbuf, win and pre are made from it after the projection. */
+     * straight into the image's z-buffer in slot order (the same winners as the lists, which hold a tile's
+     * points in slot order too: the nearer depth, then the first). */
     bool direct_z;
-    uint64_t *zkey; /* direct_z: pixels + 1 keys (the last a sink for points not projected), else NULL */
 
     /* The point store (structure of arrays over slots). */
     uint32_t slots; /* capacity + insert_reserve */
