@@ -24,7 +24,7 @@
  *
  * Usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] [--lead 2] [--tile 64]
  *        [--capacity F] [--pin CPU] [--separate-pixels]
- *        [--only table|scaling|threads|split|split-pixels|fuse|share|switches|quality]
+ *        [--only table|scaling|threads|split|split-pixels|fuse|share|direct|switches|quality]
  *        (default: all, in that order; --separate-pixels: the table with the depth cull, interpolation and
  *        prefilter as separate passes, each in its own row, instead of fused). Each table also gives the
  * process CPU time of a frame: on a machine shared with other jobs the wall time includes the time the
@@ -504,6 +504,15 @@ static void section_share(const bench_opts *o)
                             "two runs / one run (per-repetition ratio)", "two runs / one run"});
 }
 
+/* One thread through the tile lists (view_rc_desc.tiled_one_thread) against the default there, each chunk
+ * projected straight into the image's z-buffer, alternating: what the direct z-buffer does. */
+static void section_direct(const bench_opts *o)
+{
+    section_ab(o, (view_rc_desc){.tiled_one_thread = true}, 1, (view_rc_desc){0}, 1,
+               &(ab_labels){"1 thread, z-buffer through the tiles against straight into the image", "tiled",
+                            "direct", "tiled / direct (per-repetition ratio)", "tiled / direct"});
+}
+
 typedef struct variant {
     const char *name;
     view_rc_desc d;
@@ -609,7 +618,7 @@ int main(int argc, char **argv)
             fprintf(stderr,
                     "usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] "
                     "[--lead 2] [--tile 64] [--capacity F] [--pin CPU] [--separate-pixels] "
-                    "[--only table|scaling|threads|split|split-pixels|fuse|share|switches|quality]\n");
+                    "[--only table|scaling|threads|split|split-pixels|fuse|share|direct|switches|quality]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }
     }
@@ -643,6 +652,8 @@ int main(int argc, char **argv)
         section_fuse(&o);
     if (!only || !strcmp(only, "share"))
         section_share(&o);
+    if (!only || !strcmp(only, "direct"))
+        section_direct(&o);
     if (!only || !strcmp(only, "switches"))
         section_switches(&o);
     if (!only || !strcmp(only, "quality"))

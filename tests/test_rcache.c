@@ -1160,12 +1160,68 @@ static void test_threads_bit_identical(void **state)
     }
 }
 
+/* The z-buffer's ties, by closed form: two points at exactly the same depth in one pixel (the same sample
+ * inserted twice, 8,000 slots apart: chunks 0 and 1), the pixel must show the first slot's colour; a later
+ * point a little nearer wins. Every z-buffer path: one thread straight into the image (the default), one
+ * thread through the tile lists (tiled_one_thread), 2 threads, no_tiling, tiles in the tile's buffers (64)
+ * and in the image (512). */
+static void test_zbuffer_ties_first_slot(void **state)
+{
+    (void)state;
+    const uint32_t w = 128, h = 64, p = 20 * w + 30, q = 40 * w + 90;
+    view_rc_camera cam = look(0, 0, 0, 0, 0, -1, 60);
+    view_rc_sample *s = malloc(sizeof *s * (w * h + 4));
+    uint32_t n = 0;
+    const uint8_t red[3] = {200, 0, 0}, green[3] = {0, 200, 0}, grey[3] = {90, 90, 90};
+    s[n] = (view_rc_sample){.x = (uint16_t)(p % w), .y = (uint16_t)(p / w), .depth = 5.0f};
+    memcpy(s[n++].rgb, red, 3);
+    s[n] = (view_rc_sample){.x = (uint16_t)(q % w), .y = (uint16_t)(q / w), .depth = 5.0f};
+    memcpy(s[n++].rgb, red, 3);
+    for (uint32_t k = 0; k < w * h; k++) {
+        if (k == p || k == q)
+            continue;
+        s[n] = (view_rc_sample){.x = (uint16_t)(k % w), .y = (uint16_t)(k / w), .depth = 5.0f};
+        memcpy(s[n++].rgb, grey, 3);
+    }
+    s[n] = (view_rc_sample){.x = (uint16_t)(p % w), .y = (uint16_t)(p / w), .depth = 5.0f};
+    memcpy(s[n++].rgb, green, 3);
+    s[n] = (view_rc_sample){.x = (uint16_t)(q % w), .y = (uint16_t)(q / w), .depth = 4.99f};
+    memcpy(s[n++].rgb, green, 3);
+    const struct {
+        uint32_t threads, tile;
+        bool tiled, no_tiling;
+    } ways[] = {{1, 64, false, false}, {1, 512, false, false}, {1, 64, true, false}, {1, 512, true, false},
+                {2, 64, false, false}, {2, 512, false, false}, {1, 64, false, true}};
+    for (size_t k = 0; k < sizeof ways / sizeof ways[0]; k++) {
+        view_rc *rc = make(&(view_rc_desc){.width = w,
+                                           .height = h,
+                                           .threads = ways[k].threads,
+                                           .tile_size = ways[k].tile,
+                                           .capacity = w * h + 8,
+                                           .tiled_one_thread = ways[k].tiled,
+                                           .no_tiling = ways[k].no_tiling});
+        assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, s, n), FXC_OK);
+        view_rc_frame f;
+        render(rc, &cam, NULL, &f);
+        assert_int_equal(f.stats.projected, n);
+        assert_int_equal(f.kind[p], VIEW_RC_POINT);
+        assert_memory_equal(f.rgb + 3 * p, red, 3);
+        assert_int_equal(f.kind[q], VIEW_RC_POINT);
+        assert_memory_equal(f.rgb + 3 * q, green, 3);
+        assert_int_equal(f.kind[p + 1], VIEW_RC_POINT);
+        assert_memory_equal(f.rgb + 3 * (p + 1), grey, 3);
+        view_rc_destroy(rc);
+    }
+    free(s);
+}
+
 /* ---- tiles --------------------------------------------------------------------------------------------- */
 
 /* Tiles organise the work; they must not change the picture: the same sparse points (a pattern dense here,
  * sparse there, so that both ways of the prefilter run) through tiles of 8, 16, 64 and 256 pixels (the
- * z-buffer in buffers of the tile's own), of 512 (above 256: straight into the image), and through
- * the one-pass z-buffer of no_tiling, give the same image, depths, kinds and priorities. */
+ * z-buffer in buffers of the tile's own), of 512 (above 256: straight into the image), through the one-pass
+ * z-buffer of no_tiling, and on one thread through the tile lists (tiled_one_thread; by default one thread
+ * projects chunks straight into the image's z-buffer), give the same image, depths, kinds and priorities. */
 static void test_tiles_do_not_change_the_image(void **state)
 {
     (void)state;
@@ -1190,11 +1246,11 @@ static void test_tiles_do_not_change_the_image(void **state)
         }
     view_rc_camera moved = look(0.2, 0.6, -0.3, 0.1, 0, -5, 60);
     walk_log reference = {0};
-    const uint32_t tiles[] = {64, 8, 16, 256, 512, 64};
+    const uint32_t tiles[] = {64, 8, 16, 256, 512, 64, 64, 512, 16};
     for (size_t t = 0; t < sizeof tiles / sizeof tiles[0]; t++) {
-        bool direct = t + 1 == sizeof tiles / sizeof tiles[0];
-        view_rc *rc =
-            make(&(view_rc_desc){.width = w, .height = h, .tile_size = tiles[t], .no_tiling = direct});
+        bool direct = t == 5, tiled = t >= 6; /* one thread: the tile lists too (tiled_one_thread) */
+        view_rc *rc = make(&(view_rc_desc){
+            .width = w, .height = h, .tile_size = tiles[t], .no_tiling = direct, .tiled_one_thread = tiled});
         assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, s, n), FXC_OK);
         view_rc_frame f;
         render(rc, &moved, NULL, &f);
@@ -1319,6 +1375,7 @@ int main(void)
         cmocka_unit_test(test_colour_change_penalty),
         cmocka_unit_test(test_frame_replaces_what_it_saw),
         cmocka_unit_test(test_threads_bit_identical),
+        cmocka_unit_test(test_zbuffer_ties_first_slot),
         cmocka_unit_test(test_tiles_do_not_change_the_image),
         cmocka_unit_test(test_links_only_libc_libm_pthreads),
     };

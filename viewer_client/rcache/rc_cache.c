@@ -190,7 +190,10 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
         return FXC_ERR_INVALID;
     }
     rc->entry_sink = (uint32_t)(((size_t)rc->slots + line * lists_parts + line - 1) & ~(line - 1));
-    size_t o_entries = take(&l, (size_t)rc->entry_sink + line * (size_t)rc->parts, sizeof(rc_entry));
+    /* One thread's direct z-buffer (direct_z) uses no entries. */
+    rc->direct_z = d.threads == 1 && !d.tiled_one_thread && !d.no_tiling;
+    size_t o_entries =
+        take(&l, rc->direct_z ? 0 : (size_t)rc->entry_sink + line * (size_t)rc->parts, sizeof(rc_entry));
     size_t o_list_start = take(&l, lists_parts, sizeof(uint32_t));
     size_t o_list_end = take(&l, lists_parts, sizeof(uint32_t));
     size_t o_zbuf = take(&l, rc->pixels, sizeof(float));
@@ -274,7 +277,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     rc->chunk_hist = (uint32_t *)(block + o_chunk_hist);
     rc->chunk_quota = (uint32_t *)(block + o_chunk_quota);
     rc->chunk_stat = (rc_chunk_stat *)(block + o_chunk_stat);
-    rc->entries = (rc_entry *)(block + o_entries);
+    rc->entries = rc->direct_z ? NULL : (rc_entry *)(block + o_entries);
     rc->list_start = (uint32_t *)(block + o_list_start);
     rc->list_end = (uint32_t *)(block + o_list_end);
     rc->zbuf = (float *)(block + o_zbuf);

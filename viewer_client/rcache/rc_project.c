@@ -236,6 +236,31 @@ FXC_HOT_CLONES static uint32_t migrate_span(const uint16_t *restrict dest, uint1
     return migrated;
 }
 
+/* One thread's z-buffer straight into the image (direct_z): a chunk's n projected points (key, dep and rgba
+ * indexed from its first slot, `first`) in slot order, each tested against its pixel (the nearer depth wins;
+ * between equal depths the first, as in the tile lists, which hold a tile's points in slot order too).
+ * Returns the points projected. */
+FXC_HOT_CLONES static uint32_t zbuffer_span(const uint32_t *restrict key, const float *restrict dep,
+                                            const uint32_t *restrict rgba, uint32_t first, uint32_t n,
+                                            float *restrict zbuf, uint32_t *restrict win,
+                                            uint32_t *restrict pre)
+{
+    uint32_t projected = 0;
+    for (uint32_t k = 0; k < n; k++) {
+        uint32_t p = key[k];
+        if (p == RC_NO_PIXEL)
+            continue;
+        projected++;
+        float z = dep[k];
+        if (z < zbuf[p]) {
+            zbuf[p] = z;
+            win[p] = first + k;
+            pre[p] = rgba[k];
+        }
+    }
+    return projected;
+}
+
 static void project_task(void *user, uint32_t c, uint32_t worker)
 {
     view_rc *rc = user;
@@ -245,10 +270,19 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
         predict_task(user, c, worker);
     uint32_t begin, end;
     chunk_range(rc, c, &begin, &end);
+    uint32_t n = end - begin;
     uint16_t outside = rc->list_outside, dead = rc->list_dead;
-    /* The tiled z-buffer takes the pixel within the tile; the 1999 one, the image's. */
-    project_span(&rc->view, rc->px, rc->py, rc->pz, rc->rgba, rc->key, rc->dep, rc->dest, begin, end,
-                 rc->tile_shift, rc->tiles_x, !rc->d.no_tiling, outside, dead);
+    /* The chunk's keys, depths and lists, indexed from its first slot: in the store's arrays at the chunk
+     * (the sort reads them later), or with direct_z (used only here) in their first chunk_size entries,
+     * which every chunk reuses while they are in L1 (a frame's 10 bytes a slot not written out to memory). */
+    size_t at = rc->direct_z ? 0 : begin;
+    uint32_t *key = rc->key + at;
+    float *dep = rc->dep + at;
+    uint16_t *dest = rc->dest + at;
+    uint32_t *rgba = rc->rgba + begin;
+    /* The tiled z-buffer takes the pixel within the tile; the 1999 one and direct_z, the image's. */
+    project_span(&rc->view, rc->px + begin, rc->py + begin, rc->pz + begin, rgba, key, dep, dest, 0, n,
+                 rc->tile_shift, rc->tiles_x, !rc->d.no_tiling && !rc->direct_z, outside, dead);
     rc_chunk_stat stat = {0};
     /* The drop plan: points older than drop_age, and the chunk's quota of that age, in slot order. A block of
      * 64 slots without a candidate is skipped after one test; a block whose points of drop_age all fit in
@@ -256,31 +290,36 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
      * goes slot by slot. */
     if (rc->drop_age != RC_AGE_NO_DROP) {
         uint32_t quota = rc->chunk_quota[c], drop_age = rc->drop_age;
-        for (uint32_t b0 = begin; b0 < end; b0 += 64) {
-            uint32_t b1 = end - b0 >= 64 ? b0 + 64 : end;
-            if (b1 - b0 == 64 && !any_candidate(rc->rgba + b0, drop_age))
+        for (uint32_t b0 = 0; b0 < n; b0 += 64) {
+            uint32_t b1 = n - b0 >= 64 ? b0 + 64 : n;
+            if (b1 - b0 == 64 && !any_candidate(rgba + b0, drop_age))
                 continue;
-            uint32_t same = count_age(rc->rgba + b0, b1 - b0, drop_age);
+            uint32_t same = count_age(rgba + b0, b1 - b0, drop_age);
             if (same <= quota) {
                 quota -= same;
-                drop_block(rc->rgba + b0, rc->key + b0, rc->dest + b0, b1 - b0, drop_age, dead, &stat);
+                drop_block(rgba + b0, key + b0, dest + b0, b1 - b0, drop_age, dead, &stat);
                 continue;
             }
             for (uint32_t i = b0; i < b1; i++) {
-                uint32_t age = rc_age(rc->rgba[i]);
+                uint32_t age = rc_age(rgba[i]);
                 if (age == RC_AGE_DEAD || age < drop_age || (age == drop_age && quota == 0))
                     continue;
                 if (age == drop_age)
                     quota--;
                 stat.dropped++;
                 stat.dropped_age_sum += age;
-                rc->rgba[i] = (rc->rgba[i] & 0x00FFFFFFu) | (RC_AGE_DEAD << 24);
-                rc->key[i] = RC_NO_PIXEL;
-                rc->dest[i] = dead;
+                rgba[i] = (rgba[i] & 0x00FFFFFFu) | (RC_AGE_DEAD << 24);
+                key[i] = RC_NO_PIXEL;
+                dest[i] = dead;
             }
         }
     }
-    stat.migrated = migrate_span(rc->dest, rc->tile_of, begin, end, dead, rc->list_new);
+    stat.migrated = migrate_span(dest, rc->tile_of + begin, 0, n, dead, rc->list_new);
+    if (rc->direct_z) {
+        stat.projected = zbuffer_span(key, dep, rgba, begin, n, rc->zbuf, rc->win, rc->pre);
+        rc->chunk_stat[c] = stat;
+        return;
+    }
     /* Counts per list, in four interleaved sets (consecutive points mostly go to the same tile). */
     uint32_t lists = rc->tile_count + 2;
     uint32_t *count = rc->counts + (size_t)c * lists;
@@ -288,15 +327,14 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
     uint32_t part[3][VIEW_RC_MAX_TILES + 2];
     for (int k = 0; k < 3; k++)
         memset(part[k], 0, lists * sizeof(uint32_t));
-    const uint16_t *dest = rc->dest;
-    uint32_t i = begin;
-    for (; i + 4 <= end; i += 4) {
+    uint32_t i = 0;
+    for (; i + 4 <= n; i += 4) {
         count[dest[i]]++;
         part[0][dest[i + 1]]++;
         part[1][dest[i + 2]]++;
         part[2][dest[i + 3]]++;
     }
-    for (; i < end; i++)
+    for (; i < n; i++)
         count[dest[i]]++;
     for (uint32_t l = 0; l < lists; l++)
         count[l] += part[0][l] + part[1][l] + part[2][l];
@@ -331,6 +369,17 @@ static void sort_task(void *user, uint32_t c, uint32_t worker)
 
 void view_rc__project_sort(view_rc *rc)
 {
+    if (rc->direct_z) {
+        /* One thread: the image's z-buffer cleared, then every chunk in slot order projected into it. */
+        for (size_t p = 0; p < rc->pixels; p++) {
+            rc->zbuf[p] = INFINITY;
+            rc->win[p] = RC_NO_POINT;
+            rc->pre[p] = RC_EMPTY_PT;
+        }
+        for (uint32_t c = 0; c < rc->chunk_count; c++)
+            project_task(rc, c, 0);
+        return;
+    }
     run_chunks(rc, project_task);
     /* Offsets: tile by tile, part by part (each list on a line of its own), chunk by chunk. */
     uint32_t lists = rc->tile_count + 2, run = 0, parts = rc->parts;
@@ -440,6 +489,8 @@ static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
 
 void view_rc__zbuffer(view_rc *rc)
 {
+    if (rc->direct_z)
+        return; /* done in the projection */
     rc_run_pixels(rc->pool, rc->d.dynamic_pixels, rc->tile_count, zbuffer_task, rc);
 }
 

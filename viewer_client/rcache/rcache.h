@@ -112,6 +112,10 @@ typedef struct view_rc_desc {
     bool separate_sample_age;   /* the dither and the ageing as two pool runs on 2+ threads, each timed in its
                                    own stage (by default they share one run there, timed as
                                    VIEW_RC_STAGE_SAMPLE_AGE), to measure it (bench_rcache --only share) */
+    bool tiled_one_thread;      /* the tile sort and the tiled z-buffer on one thread too (by default one
+                                   thread projects each chunk of points straight into the image's z-buffer
+                                   in slot order, timed in "project and tile sort"; the tiles serve the
+                                   threads), to measure it (bench_rcache --only direct) */
 } view_rc_desc;
 
 typedef struct view_rc view_rc;
@@ -143,7 +147,8 @@ typedef struct view_rc_sample {
     X(VIEW_RC_STAGE_UPDATE, "update points") /* inserts since the previous frame */                          \
     X(VIEW_RC_STAGE_PREDICT_PROJECT, "predicted projection")                                                 \
     X(VIEW_RC_STAGE_PREDICT_SAMPLE, "predicted sampling")                                                    \
-    X(VIEW_RC_STAGE_PROJECT_SORT, "project and tile sort") /* no_tiling: projection only */                  \
+    X(VIEW_RC_STAGE_PROJECT_SORT, "project and tile sort") /* no_tiling: projection only; one thread: with   \
+                                                            * the z-buffer (not tiled_one_thread) */         \
     X(VIEW_RC_STAGE_ZBUFFER, "z-buffer tiles")                                                               \
     X(VIEW_RC_STAGE_PIXELS, "cull + interpolate + prefilter (fused)") /* the next three, by bands */         \
     X(VIEW_RC_STAGE_DEPTH_CULL, "depth cull")                                                                \

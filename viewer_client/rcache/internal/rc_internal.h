@@ -159,6 +159,10 @@ struct view_rc {
      * winners and colours contiguous (48 KiB at tiles of 64), instead of 64 rows of the image 4 * width bytes
      * apart (which all fall in a few of L1's sets), then copied out row by row. */
     bool local_z;
+    /* One thread (and not tiled_one_thread or no_tiling): no tile lists; each chunk, once projected, goes
+     * straight into the image's z-buffer in slot order (the same winners as the lists, which hold a tile's
+     * points in slot order too: the nearer depth, then the first). */
+    bool direct_z;
 
     /* The point store (structure of arrays over slots). */
     uint32_t slots; /* capacity + insert_reserve */
