@@ -90,6 +90,7 @@
  * called scene_tracing_thread_init() in the tracing thread. */
 #include "fx_probes_internal.h"
 #include "fxc_hot.h"
+#include "scene_inline.h"
 
 #include <pthread.h>
 #include <stdlib.h>
@@ -185,17 +186,55 @@ FXC_HOT_INLINE void shadow_flush(const fx_context *ctx, hit_shading *hs)
     hs->count = 0;
 }
 
+/* The directions of the first PROBE_FIXED_LIGHTS lights that are directional, once per update call: they do not
+ * depend on the point (fx_light_direction's, the same floats), so the shadow-ray set-up skips the call and
+ * its square root and division per hit and light. */
+enum { PROBE_FIXED_LIGHTS = 16 };
+typedef struct fixed_lights {
+    uint32_t directional; /* bit l: light l is directional, its direction in dir[l] */
+    float dir[PROBE_FIXED_LIGHTS][3];
+} fixed_lights;
+
+static void fixed_lights_init(const scene *s, fixed_lights *fl)
+{
+    fl->directional = 0;
+    static const float anywhere[3] = {0, 0, 0};
+    for (uint32_t l = 0; l < s->light_count && l < PROBE_FIXED_LIGHTS; l++) {
+        if (s->lights[l].type != SCENE_LIGHT_DIRECTIONAL)
+            continue;
+        float distance;
+        fx_light_direction(&s->lights[l], anywhere, fl->dir[l], &distance);
+        fl->directional |= 1u << l;
+    }
+}
+
+/* fx__light_arriving, for a directional light with its direction given (distance infinite, no falloff). */
+FXC_HOT_INLINE bool light_arriving_fixed(const scene_light *light, const float fixed_dir[3], const float normal[3],
+                                         float dir[3], float *distance, float *scale)
+{
+    memcpy(dir, fixed_dir, 3 * sizeof(float));
+    *distance = INFINITY;
+    float cosine = fx__dot(normal, dir);
+    if (!(cosine > 0))
+        return false;
+    *scale = light->intensity * cosine * 1.0f; /* fx__light_arriving's falloff 1 */
+    return *scale > 0;
+}
+
 /* Queues the shadow rays of a front-face hit (origin already offset, unit front normal) for chunk slot i;
- * returns the rays queued. Contributions are compose's: intensity x colour x cos (/ d^2 for point lights). */
-FXC_HOT_INLINE uint32_t queue_shadow_rays(const fx_context *ctx, hit_shading *hs, uint32_t i,
-                                          const float origin[3], const float normal[3])
+ * returns the rays queued. Contributions are compose's: intensity x colour x cos (/ d^2 for point lights).
+ * fl: the directional lights' directions (NULL: none given). */
+FXC_HOT_INLINE uint32_t queue_shadow_rays(const fx_context *ctx, const fixed_lights *fl, hit_shading *hs,
+                                          uint32_t i, const float origin[3], const float normal[3])
 {
     const scene *s = ctx->s;
     uint32_t queued = 0;
     for (uint32_t l = 0; l < s->light_count; l++) {
         const scene_light *light = &s->lights[l];
         float dir[3], distance, scale;
-        if (!fx__light_arriving(light, origin, normal, dir, &distance, &scale))
+        bool fixed = fl && l < PROBE_FIXED_LIGHTS && (fl->directional >> l & 1);
+        if (fixed ? !light_arriving_fixed(light, fl->dir[l], normal, dir, &distance, &scale)
+                  : !fx__light_arriving(light, origin, normal, dir, &distance, &scale))
             continue;
         if (hs->count == FX_RAY_BATCH)
             shadow_flush(ctx, hs);
@@ -910,6 +949,8 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
     probe_directions *pd = &thread_directions;
     const bool table = rays <= PROBE_TABLE_RAYS;
     uint64_t traced = 0;
+    fixed_lights lights;
+    fixed_lights_init(s, &lights);
     if (ctx->world_cell)
         hit_cells_begin(ctx);
     /* The front-face hits' bounce in passes (hit_batch) with the heap memo, else one at a time. */
@@ -973,8 +1014,8 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
                 float p[3];
                 for (int k = 0; k < 3; k++)
                     p[k] = origin[k] + rh->ray.tfar * dir[k];
-                scene_offset_ray_origin(p, normal, s->ray_offset_scale, hit_pos[r]);
-                traced += queue_shadow_rays(ctx, hs, r, hit_pos[r], normal);
+                scene_offset_ray_origin_inline(p, normal, s->ray_offset_scale, hit_pos[r]);
+                traced += queue_shadow_rays(ctx, &lights, hs, r, hit_pos[r], normal);
             }
             shadow_flush(ctx, hs);
 
@@ -1250,7 +1291,7 @@ void fx_probe_eval_point(const fx_context *ctx, const float pos[3], const float 
             for (int k = 0; k < 3; k++)
                 p[k] = origin[k] + hits[r].ray.tfar * dir[k];
             scene_offset_ray_origin(p, n_hit, s->ray_offset_scale, hit_pos[r]);
-            traced += queue_shadow_rays(ctx, hs, r, hit_pos[r], n_hit);
+            traced += queue_shadow_rays(ctx, NULL, hs, r, hit_pos[r], n_hit);
         }
         shadow_flush(ctx, hs);
         for (uint32_t r = 0; r < n; r++) {
