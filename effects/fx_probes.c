@@ -1015,7 +1015,7 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
                 for (int k = 0; k < 3; k++)
                     p[k] = origin[k] + rh->ray.tfar * dir[k];
                 scene_offset_ray_origin_inline(p, normal, s->ray_offset_scale, hit_pos[r]);
-                traced += queue_shadow_rays(ctx, &lights, hs, r, hit_pos[r], normal);
+                traced += queue_shadow_rays(ctx, batch ? &lights : NULL, hs, r, hit_pos[r], normal);
             }
             shadow_flush(ctx, hs);
 
