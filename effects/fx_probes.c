@@ -710,6 +710,19 @@ FXC_HOT_INLINE void batch_locate(hit_batch *restrict hb, const fx_block_job *job
 #endif
 }
 
+/* The loads of scene_albedo_mean(s, tri) that miss (the triangle's mesh index and texture mean), prefetched
+ * in pass 1 for pass 3. */
+FXC_HOT_INLINE void albedo_prefetch(const scene *s, uint32_t tri)
+{
+#if defined(__GNUC__)
+    __builtin_prefetch(s->tri_mesh + tri);
+    if (s->tri_texture_mean)
+        __builtin_prefetch(s->tri_texture_mean + 3 * (size_t)tri);
+#else
+    (void)s, (void)tri;
+#endif
+}
+
 /* Pass 3 for batch hits [from, to): the bounce's moments and sum, the radiance into values[r][0..2]. */
 FXC_HOT_INLINE void batch_finish(const fx_context *ctx, const hit_batch *restrict hb, uint32_t from, uint32_t to,
                                  const struct RTCRayHit *hits, const hit_shading *hs, float (*values)[5])
@@ -773,8 +786,10 @@ FXC_HOT_INLINE void hits_bounce_batch(const fx_context *ctx, const fx_block_job 
         hb->front[i] = hit_weights_geometry(e, hit_pos[r], normal, hb->tap[i], hb->texel[i], hb->weight[i],
                                             hb->distance[i]);
 #if defined(__GNUC__)
-        for (int c = 0; c < 8; c++)
-            __builtin_prefetch(hit_moment_address(e, c, hb->texel[i][c]));
+        for (uint32_t m = e->active; m; m &= m - 1) { /* the others read the zero payload, always cached */
+            int c = __builtin_ctz(m);
+            __builtin_prefetch(e->texel[c] + PROBE_MOMENTS + 4 * hb->texel[i][c]);
+        }
 #endif
     }
     batch_finish(ctx, hb, done, hb->count, hits, hs, values);
@@ -1041,6 +1056,7 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
                     } else {
                         if (batch) { /* radiance from hits_bounce_batch below */
                             batch_locate(&memo->batch, job, inverse, hit_pos[r], r);
+                            albedo_prefetch(s, rh->hit.primID);
                             radiance[0] = radiance[1] = radiance[2] = 0;
                         } else {
                             hit_radiance(ctx, job, inverse, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r],
