@@ -304,6 +304,8 @@ typedef struct hit_batch {
     float centre[PROBE_CHUNK][3];
     float tap[PROBE_CHUNK][8], weight[PROBE_CHUNK][8], distance[PROBE_CHUNK][8];
     int32_t texel[PROBE_CHUNK][8];
+    float bounce[PROBE_CHUNK][3]; /* pass 3's E of the probes around the hit */
+    uint32_t done;                /* pass 3 ran for hits [0, done) */
 } hit_batch;
 
 /* The heap memo of a thread: the entries, per entry the last batch that uses it (<< HIT_CELL_NORMALS) and the
@@ -723,29 +725,26 @@ FXC_HOT_INLINE void albedo_prefetch(const scene *s, uint32_t tri)
 #endif
 }
 
-/* Pass 3 for batch hits [from, to): the bounce's moments and sum, the radiance into values[r][0..2]. */
-FXC_HOT_INLINE void batch_finish(const fx_context *ctx, const hit_batch *restrict hb, uint32_t from, uint32_t to,
-                                 const struct RTCRayHit *hits, const hit_shading *hs, float (*values)[5])
+/* Pass 3's bounce for batch hits [from, to): the moments' half of hit_weights and the sum (0 when none). */
+FXC_HOT_INLINE void batch_bounce(hit_batch *restrict hb, uint32_t from, uint32_t to)
 {
     for (uint32_t i = from; i < to; i++) {
-        uint32_t r = hb->ray[i];
-        float albedo[3], bounce[3] = {0, 0, 0};
-        scene_albedo_mean(ctx->s, hits[r].hit.primID, albedo); /* the triangle's mean (file comment) */
+        float *bounce = hb->bounce[i];
+        bounce[0] = bounce[1] = bounce[2] = 0;
         const hit_cell *e = hb->entry[i];
         if (e) {
             float weight[8];
             hit_weights_finish(e, hb->tap[i], hb->texel[i], hb->weight[i], hb->distance[i], hb->front[i], weight);
             cell_sum(e, hb->slot[i], weight, bounce);
         }
-        for (int k = 0; k < 3; k++)
-            values[r][k] = albedo[k] * (hs->direct[r][k] + bounce[k] * (1.0f / FX_PROBE_PI));
     }
 }
 
-/* Passes 2 and 3 of the batched bounce over the chunk's front-face hits (batch_locate's), in hit order. */
-FXC_HOT_INLINE void hits_bounce_batch(const fx_context *ctx, const fx_block_job *job, hit_memo *memo,
-                                      const struct RTCRayHit *hits, const float (*hit_pos)[3],
-                                      const hit_shading *hs, float (*values)[5])
+/* Pass 2 of the batched bounce over the chunk's front-face hits (batch_locate's), in hit order, before the
+ * shadow rays are traced (their tracing covers the moment words' prefetch); pass 3 runs for the hits waiting
+ * when a later hit would replace what they read. */
+FXC_HOT_INLINE void hits_bounce_prepare(const fx_context *ctx, const fx_block_job *job, hit_memo *memo,
+                                        const struct RTCRayHit *hits, const float (*hit_pos)[3])
 {
     hit_batch *restrict hb = &memo->batch;
     const scene *s = ctx->s;
@@ -759,7 +758,7 @@ FXC_HOT_INLINE void hits_bounce_batch(const fx_context *ctx, const fx_block_job 
         uint64_t *pending = &memo->pending[e - memo->cells];
         if (!hit_cell_holds(e, effect, level, hb->centre[i])) {
             if (*pending >> HIT_CELL_NORMALS == batch) { /* a waiting hit reads this entry: finish those first */
-                batch_finish(ctx, hb, done, i, hits, hs, values);
+                batch_bounce(hb, done, i);
                 done = i;
                 batch = ++memo->batch_id;
             }
@@ -774,7 +773,7 @@ FXC_HOT_INLINE void hits_bounce_batch(const fx_context *ctx, const fx_block_job 
         uint32_t slot = cell_normal_find(e, normal);
         if (slot == HIT_CELL_NORMALS) {
             if (*pending >> HIT_CELL_NORMALS == batch && (*pending >> e->normal_next & 1)) { /* the slot is read */
-                batch_finish(ctx, hb, done, i, hits, hs, values);
+                batch_bounce(hb, done, i);
                 done = i;
                 batch = ++memo->batch_id;
             }
@@ -792,7 +791,21 @@ FXC_HOT_INLINE void hits_bounce_batch(const fx_context *ctx, const fx_block_job 
         }
 #endif
     }
-    batch_finish(ctx, hb, done, hb->count, hits, hs, values);
+    hb->done = done;
+}
+
+/* Pass 3 for the hits left, then every batch hit's radiance (direct light back) into values[r][0..2]. */
+FXC_HOT_INLINE void hits_radiance(const fx_context *ctx, hit_batch *restrict hb, const struct RTCRayHit *hits,
+                                  const hit_shading *hs, float (*values)[5])
+{
+    batch_bounce(hb, hb->done, hb->count);
+    for (uint32_t i = 0; i < hb->count; i++) {
+        uint32_t r = hb->ray[i];
+        float albedo[3];
+        scene_albedo_mean(ctx->s, hits[r].hit.primID, albedo); /* the triangle's mean (file comment) */
+        for (int k = 0; k < 3; k++)
+            values[r][k] = albedo[k] * (hs->direct[r][k] + hb->bounce[i][k] * (1.0f / FX_PROBE_PI));
+    }
     hb->count = 0;
 }
 
@@ -1031,7 +1044,13 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
                     p[k] = origin[k] + rh->ray.tfar * dir[k];
                 scene_offset_ray_origin_inline(p, normal, s->ray_offset_scale, hit_pos[r]);
                 traced += queue_shadow_rays(ctx, batch ? &lights : NULL, hs, r, hit_pos[r], normal);
+                if (batch) { /* passes 1 and 2 of the bounce (hit_batch), before the shadow rays are traced */
+                    batch_locate(&memo->batch, job, inverse, hit_pos[r], r);
+                    albedo_prefetch(s, rh->hit.primID);
+                }
             }
+            if (batch)
+                hits_bounce_prepare(ctx, job, memo, hits, (const float(*)[3])hit_pos);
             shadow_flush(ctx, hs);
 
             /* Radiance and distance of every ray. */
@@ -1054,9 +1073,7 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
                             memcpy(back_dir, dir, sizeof back_dir);
                         }
                     } else {
-                        if (batch) { /* radiance from hits_bounce_batch below */
-                            batch_locate(&memo->batch, job, inverse, hit_pos[r], r);
-                            albedo_prefetch(s, rh->hit.primID);
+                        if (batch) { /* radiance from hits_radiance below */
                             radiance[0] = radiance[1] = radiance[2] = 0;
                         } else {
                             hit_radiance(ctx, job, inverse, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r],
@@ -1078,7 +1095,7 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
                 values[r][4] = d * d;
             }
             if (batch)
-                hits_bounce_batch(ctx, job, memo, hits, (const float(*)[3])hit_pos, hs, values);
+                hits_radiance(ctx, &memo->batch, hits, hs, values);
             /* Into the texels (file comment): the weight rows of these rays, from the table or computed. */
             if (!table)
                 direction_weights(pd, first, n, 0, false);
