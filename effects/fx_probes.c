@@ -259,7 +259,8 @@ FXC_HOT_INLINE uint32_t queue_shadow_rays(const fx_context *ctx, const fixed_lig
  * left. The entries hold pointers into the cache: they are kept while ctx->epoch and ctx->frame stay the same
  * (payloads do not change within a frame's updates), else only within one update call.
  *
- * The memo: HIT_CELLS entries of 448 bytes (0.9 MB a thread), direct-mapped, two normals a cell. On Sponza
+ * The memo: HIT_CELLS entries of 448 bytes (0.9 MB a thread; with the batch's marks and arrays, hit_memo,
+ * 0.96 MB), direct-mapped, two normals a cell. On Sponza
  * (bench_probes --part rays, 5 frames; BENCHMARKS, branch probe-upd2) one normal a cell recomputed the corners'
  * irradiance 107,443 times; more entries cut the fills (106,118 with 2,048 entries, 47,132 with 16,384,
  * 39,015 with 65,536: about the distinct cells) but not the time: with 16,384 entries (11 MB) the entries'
@@ -283,6 +284,7 @@ typedef struct hit_cell {
     float normal[HIT_CELL_NORMALS][3];
     float e[HIT_CELL_NORMALS][8][3];
 } hit_cell;
+_Static_assert(sizeof(hit_cell) % 64 == 0, "hit_cell: whole cache lines (hit_memo aligns them)");
 
 /* The bounce of a chunk's front-face hits together (world_cell; hits_bounce_batch). One hit at a time, each
  * hit waited on its memo entry's first load, then on its 8 corners' moment words, each depending on the one
@@ -311,7 +313,7 @@ typedef struct hit_batch {
 /* The heap memo of a thread: the entries, per entry the last batch that uses it (<< HIT_CELL_NORMALS) and the
  * slots it uses, and the batch. */
 typedef struct hit_memo {
-    hit_cell cells[HIT_CELLS];
+    _Alignas(64) hit_cell cells[HIT_CELLS]; /* 448 bytes each: 7 cache lines, not 8, from a line's start */
     uint64_t pending[HIT_CELLS];
     uint64_t batch_id;
     hit_batch batch;
@@ -342,13 +344,15 @@ static void hit_cells_key_create(void)
     hit_cells_key_ok = pthread_key_create(&hit_cells_key, hit_cells_free) == 0;
 }
 
-/* The thread's table: the heap one (zeroed: generation 0, empty), else the fallback. */
+/* The thread's table: the heap one (zeroed: generation 0, empty; aligned to a cache line), else the fallback. */
 static void hit_cells_table(void)
 {
     if (thread_hit_cells)
         return;
     pthread_once(&hit_cells_once, hit_cells_key_create);
-    hit_memo *table = hit_cells_key_ok ? calloc(1, sizeof *table) : NULL;
+    hit_memo *table = hit_cells_key_ok ? aligned_alloc(_Alignof(hit_memo), sizeof *table) : NULL;
+    if (table)
+        memset(table, 0, sizeof *table);
     if (table && pthread_setspecific(hit_cells_key, table) == 0) {
         thread_hit_memo = table;
         thread_hit_cells = table->cells;
