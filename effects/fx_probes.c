@@ -286,13 +286,15 @@ typedef struct hit_cell {
 } hit_cell;
 _Static_assert(sizeof(hit_cell) % 64 == 0, "hit_cell: whole cache lines (hit_memo aligns them)");
 
-/* The bounce of a chunk's front-face hits together (world_cell; hits_bounce_batch). One hit at a time, each
- * hit waited on its memo entry's first load, then on its 8 corners' moment words, each depending on the one
- * before (BENCHMARKS, probe-upd4's perf). Here a chunk's front-face hits go through three passes, so those
- * loads are issued for many hits before any is waited on: (1) in the ray loop, the cell, the memo entry's
- * address and a prefetch of the entry; (2) in hit order, the tag compare and the fill, the normal's slot
- * (computed when new), the trilinear weights, hit_weights' first half and a prefetch of the 8 moment words;
- * (3) hit_weights' second half (the moments), the sum and the hit's radiance. Every float is computed by
+/* The bounce of a chunk's front-face hits together (world_cell with the heap memo; batch_locate,
+ * hits_bounce_prepare, hits_radiance). One hit at a time, each hit waited on its memo entry's first load,
+ * then on its 8 corners' moment words, each depending on the one before (BENCHMARKS, probe-upd4's perf).
+ * Here a chunk's front-face hits go through three passes, so those loads are issued for many hits before any
+ * is waited on: (1) in the shadow-ray set-up loop, the cell, the memo entry's address and a prefetch of the
+ * entry (and of the triangle's albedo loads); (2) before the shadow rays are traced (their tracing covers
+ * the prefetches), in hit order, the tag compare and the fill, the normal's slot (computed when new), the
+ * trilinear weights, hit_weights' first half and a prefetch of the active corners' moment words; (3) after
+ * them, hit_weights' second half (the moments), the sum, and the hit's radiance. Every float is computed by
  * the same operations as one hit at a time (hit_bounce): the passes only move them in time. What pass 3
  * reads of an entry (corners, active, cells, the slot's irradiance) must still be what pass 2 saw: when a
  * later hit's fill would replace an entry, or its new normal a slot, that a hit waiting for pass 3 uses,
