@@ -2,6 +2,7 @@
  * holding exactly the scene's triangles (primID = scene triangle index), the floating-point mode every
  * tracing thread sets, and the one helper for robust ray origins that every ray in fxcache uses. */
 #include "scene_internal.h"
+#include "scene_inline.h"
 
 #include <embree3/rtcore.h>
 
@@ -96,35 +97,9 @@ void *scene_rt_handle(scene_rt *rt)
     return rt->scene;
 }
 
-/* Reinterprets float bits as int32 and back (well-defined through memcpy). */
-static int32_t float_bits(float f)
-{
-    int32_t i;
-    memcpy(&i, &f, sizeof i);
-    return i;
-}
-
-static float bits_float(int32_t i)
-{
-    float f;
-    memcpy(&f, &i, sizeof f);
-    return f;
-}
-
 void scene_offset_ray_origin(const float p[3], const float n[3], float scale, float out[3])
 {
-    /* Waechter and Binder: near the origin a tiny fixed offset (float spacing is fine there); elsewhere an
-     * offset of int_scale * n units in the last place, which scales with the magnitude of p. Their near-zero
-     * constants are for a scene of unit size: a scene of 1 mm would be lifted by 1.5 % of its size. */
-    if (!(scale > 0) || scale > 1.0f)
-        scale = 1.0f;
-    const float origin = scale / 32.0f, float_scale = scale / 65536.0f, int_scale = 256.0f;
-    for (int k = 0; k < 3; k++) {
-        int32_t offset = (int32_t)(int_scale * n[k]);
-        int32_t bits = float_bits(p[k]);
-        float moved = bits_float(bits + (p[k] < 0 ? -offset : offset));
-        out[k] = fabsf(p[k]) < origin ? p[k] + float_scale * n[k] : moved;
-    }
+    scene_offset_ray_origin_inline(p, n, scale, out);
 }
 
 bool scene_rt_intersect1(scene_rt *rt, const float org[3], const float dir[3], float tfar, uint32_t *tri,

@@ -1065,6 +1065,102 @@ static void test_memo_across_loops(void **state)
     scene_free(s);
 }
 
+/* ---- 7. the batched bounce at hits against one hit at a time ---------------------------------------------
+ * The update shades a chunk's front-face hits in passes (fx_probes.c, hit_batch) or, with
+ * fx__probe_hits_batched false, one at a time (hit_bounce): the same operations moved in time, so the payloads
+ * must agree bit for bit after frames of bounces (every float of the irradiance and moments, the positions,
+ * flags). With the memo's 2048 entries, and with 2 and 8 (fx__probe_memo_log2, fresh threads: the memo is
+ * allocated at a thread's first update), where a later hit's fill replaces entries that hits waiting for the
+ * last pass read (the pass must run first); the room corners' cells see three normals (a slot replaced while
+ * read); 144 rays and 200 (a chunk of 128 and one of 72). Two scenes: the thin-wall rooms (a point light) and
+ * an open court under a sky with a sun and a point light (the directional light's direction taken once per
+ * update against fx__light_arriving per hit). */
+typedef struct batch_run {
+    grid *g;
+    scene *s;
+    scene_rt *rt;
+    uint32_t rays;
+    uint8_t *payload; /* out */
+} batch_run;
+
+static void *batch_run_thread(void *arg)
+{
+    batch_run *b = arg;
+    scene_tracing_thread_init();
+    memset(b->g->payload, 0, (size_t)b->g->count * FX_PROBE_BYTES);
+    memset(b->g->scratch, 0, (size_t)b->g->count * b->g->scratch_bytes);
+    fx_context ctx = grid_context(b->s, b->rt, b->g, 0.9f);
+    ctx.probe_rays = b->rays;
+    ctx.epoch = 7;
+    for (uint32_t f = 1; f <= 5; f++) {
+        ctx.frame = f;
+        grid_frame(b->g, &ctx);
+    }
+    memcpy(b->payload, b->g->payload, (size_t)b->g->count * FX_PROBE_BYTES);
+    return NULL;
+}
+
+/* A floor (y = 0, x and z in [-2, 2.5]) and two walls (x = -2, z = -1), open above: a sky, a sun, a lamp. */
+static scene_rt *open_court_scene(scene **out)
+{
+    scene *s = fxt_new_scene();
+    fxt_add_quad(s, "floor", (double[3]){-2, 0, -2}, (double[3]){0, 0, 4.5}, (double[3]){4.5, 0, 0}, 4);
+    fxt_add_quad(s, "wall_x", (double[3]){-2, 0, -2}, (double[3]){0, 2, 0}, (double[3]){0, 0, 4.5}, 4);
+    fxt_add_quad(s, "wall_z", (double[3]){-2, 0, -1}, (double[3]){4.5, 0, 0}, (double[3]){0, 2, 0}, 4);
+    fxt_add_sun(s, 0.3f, -1.0f, 0.4f);
+    add_point_light(s, 0.5f, 1.2f, 0.3f, 0.5f);
+    s->sky_color[0] = 0.2f, s->sky_color[1] = 0.4f, s->sky_color[2] = 0.8f;
+    s->sky_intensity = 0.5f;
+    *out = s;
+    return fxt_finish_scene(s, 4.0f, 1.0f);
+}
+
+static void test_batched_hits_match_single(void **state)
+{
+    (void)state;
+    for (int court = 0; court < 2; court++) {
+        scene *s;
+        scene_rt *rt = court ? open_court_scene(&s) : thin_wall_scene(0.35, &s);
+        grid g;
+        grid_init(&g, s, (float[3]){-1.5f, 0.5f, -0.5f}, 1.0f, 4, 2, 2);
+        size_t bytes = (size_t)g.count * FX_PROBE_BYTES;
+        static const uint32_t memo_log2[3] = {11, 3, 1}, rays[2] = {FX_PROBE_RAYS, 200};
+        uint8_t *single = malloc(bytes), *batched = malloc(bytes);
+        assert_true(single && batched);
+        for (int v = 0; v < 6; v++) {
+            batch_run run = {.g = &g, .s = s, .rt = rt, .rays = rays[v % 2]};
+            fx__probe_memo_log2 = memo_log2[v / 2];
+            pthread_t tid;
+            fx__probe_hits_batched = false;
+            run.payload = single;
+            assert_int_equal(pthread_create(&tid, NULL, batch_run_thread, &run), 0);
+            pthread_join(tid, NULL);
+            fx__probe_hits_batched = true;
+            run.payload = batched;
+            assert_int_equal(pthread_create(&tid, NULL, batch_run_thread, &run), 0);
+            pthread_join(tid, NULL);
+            uint32_t differ = 0, lit = 0;
+            for (size_t i = 0; i < bytes; i++)
+                differ += single[i] != batched[i];
+            for (uint32_t i = 0; i < g.count; i++) {
+                float scale;
+                memcpy(&scale, single + (size_t)i * FX_PROBE_BYTES + 24, sizeof scale);
+                lit += scale > 0;
+            }
+            printf("batched hits, %s, memo 2^%u, %u rays: %u payload bytes differ, %u of %u probes lit\n",
+                   court ? "open court" : "thin wall", memo_log2[v / 2], rays[v % 2], differ, lit, g.count);
+            assert_int_equal(differ, 0);
+            assert_true(lit >= 8);
+        }
+        fx__probe_memo_log2 = 11;
+        free(single);
+        free(batched);
+        grid_free(&g);
+        scene_rt_free(rt);
+        scene_free(s);
+    }
+}
+
 /* half_bits_to_float, the vectorisable reader of the stored halves, against half_to_float for every finite
  * half >= 0, on a thread set up as the pool's are (denormals-are-zero, flush-to-zero): the subnormal halves
  * (texels below 2^-14 of their probe's scale) must keep their value, not read as 0. */
@@ -1101,6 +1197,7 @@ int main(void)
         cmocka_unit_test(test_shade_lanes_match_filter),
         cmocka_unit_test(test_memo_across_loops),
         cmocka_unit_test(test_half_bits_daz),
+        cmocka_unit_test(test_batched_hits_match_single),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

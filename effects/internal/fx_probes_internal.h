@@ -125,6 +125,14 @@ void fx__probe_texel_dirs(float dirs[FX_PROBE_TEXELS][3]);
 bool fx__probe_filter_memo(const fx_context *ctx, bool committed, const fx_taps *taps, const float position[3],
                            const float normal[3], float out_rgb[3]);
 
+/* Whether the update shades a chunk's front-face hits in passes, with the directional lights' directions
+ * once per call (true, the default), or one at a time with fx__light_arriving per hit (the tests set it false
+ * to compare the two bit for bit; not to be changed while updates run). */
+extern bool fx__probe_hits_batched;
+/* log2 of the entries a thread's hit memo uses (1 to 11, the default 11), read when a thread allocates it
+ * (its first update): the tests make it small so that entries are replaced within a chunk. */
+extern uint32_t fx__probe_memo_log2;
+
 /* The probes' term of a run of pixels (fx_effect.shade). */
 void fx__probes_shade(const fx_context *ctx, const fx_shade_run *run);
 
