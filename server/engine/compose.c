@@ -937,28 +937,6 @@ static void compose_done(compose_task *task, const srv_loop *loop, uint64_t miss
             atomic_fetch_add(&task->rays[e], rays[e]);
 }
 
-/* Asks for the visibility stage's values of rows y0..y1 - 1, columns x0..x1 - 1 of a viewer's frame (what
- * gather_tile_run reads) and its radiance and image rows (what the run writes) to be brought into the cache:
- * called a run ahead, since the frame's buffers are far larger than the caches and a run reads them
- * row by row, a page apart (the gather waited on those loads). A hint only: nothing changes but timing. */
-FXC_HOT_INLINE void prefetch_rows(const srv_viewer *view, uint32_t x0, uint32_t x1, uint32_t y0, uint32_t y1)
-{
-    const size_t width = view->frame.width;
-    for (uint32_t y = y0; y < y1; y++) {
-        size_t p = (size_t)y * width + x0, n = x1 - x0;
-        for (size_t q = p; q < p + n; q += 16) { /* 16 values of 4 bytes: one 64-byte line */
-            __builtin_prefetch(view->tri + q);
-            __builtin_prefetch(view->bary_u + q);
-            __builtin_prefetch(view->bary_v + q);
-            __builtin_prefetch(view->footprint + q);
-        }
-        for (size_t b = 0; b < 3 * n * sizeof(float); b += 64)
-            __builtin_prefetch((const uint8_t *)(view->radiance + 3 * p) + b, 1);
-        for (size_t b = 0; b < 3 * n; b += 64)
-            __builtin_prefetch(view->image + 3 * p + b, 1);
-    }
-}
-
 FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_t thread_index)
 {
     compose_task *task = user;
@@ -991,12 +969,6 @@ FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_
     }
     for (uint32_t ry = ty0; ry < ty1; ry += SRV_RUN / SRV_TILE) {
         uint32_t ry1 = ry + SRV_RUN / SRV_TILE < ty1 ? ry + SRV_RUN / SRV_TILE : ty1;
-        /* The next run's rows, or after the tile's last run the first run of the next tile along the row. */
-        if (ry1 < ty1)
-            prefetch_rows(view, tx0, tx1, ry1, ry1 + SRV_RUN / SRV_TILE < ty1 ? ry1 + SRV_RUN / SRV_TILE : ty1);
-        else if (tx1 < f->width)
-            prefetch_rows(view, tx1, tx1 + SRV_TILE < f->width ? tx1 + SRV_TILE : f->width, ty0,
-                          ty0 + SRV_RUN / SRV_TILE < ty1 ? ty0 + SRV_RUN / SRV_TILE : ty1);
         uint32_t count = run_setup.points ? gather_run(loop, view, tx0, tx1, ry, ry1, cs, cu.sky, cu.log2_density,
                                                        run_setup.positions, run_setup.points)
                                           : gather_tile_run(loop, view, tx0, tx1, ry, ry1, cs, cu.sky, cu.log2_density,
