@@ -50,8 +50,21 @@ bool srv__resize(srv_loop *loop, srv_mem_category category, void **array, size_t
     }
     if (size == 0 || new_count > SIZE_MAX / size)
         return false;
-    void *p = a->realloc ? a->realloc(*array, old_count * size, new_count * size, a->user)
-                         : realloc(*array, new_count * size);
+    void *p;
+    if (a->realloc) {
+        p = a->realloc(*array, old_count * size, new_count * size, a->user);
+    } else {
+        /* Cache-line aligned (glibc's large blocks start 16 bytes into a page): a tile's row of 16 pixels of
+         * a per-pixel float array is then one line, not two, for compose's gather. */
+        size_t bytes = new_count * size;
+        if (bytes > SIZE_MAX - 63)
+            return false;
+        p = aligned_alloc(64, (bytes + 63) & ~(size_t)63);
+        if (p && *array) {
+            memcpy(p, *array, (old_count < new_count ? old_count : new_count) * size);
+            free(*array);
+        }
+    }
     if (!p)
         return false;
     *array = p;
