@@ -134,8 +134,8 @@ typedef struct mask_row {
     float sample_normal[2][3][MASK_COLUMNS], sample_depth[2][MASK_COLUMNS], sample_footprint[2][MASK_COLUMNS];
 } mask_row;
 
-FXC_HOT_LANES static uint32_t coarse_mask_lanes(const mask_row *in, int32_t block, int32_t nx, int32_t fy,
-                                                int32_t two_y, float depth_scale, int32_t *out, uint8_t *bytes)
+FXC_HOT_INLINE uint32_t coarse_mask_core(const mask_row *in, int32_t block, int32_t nx, int32_t fy, int32_t two_y,
+                                         float depth_scale, int32_t *out, uint8_t *bytes, bool one_triangle)
 {
     const int32_t shift = __builtin_ctz((uint32_t)block), low = block - 1;
     int32_t result[SRV_TILE]; /* (stores to a local array, then out) */
@@ -165,7 +165,7 @@ FXC_HOT_LANES static uint32_t coarse_mask_lanes(const mask_row *in, int32_t bloc
             float apart = (float)(dx > dy ? dx : dy);
             float tolerance = pow2 * (apart * 1.0f * depth_scale);
             int32_t depth_ok = fabsf(dp - in->sample_depth[rowc][at]) <= tolerance;
-            int32_t match = (tr == tp) | ((tr != SRV_MISS) & normal_ok & depth_ok);
+            int32_t match = one_triangle ? 1 : (tr == tp) | ((tr != SRV_MISS) & normal_ok & depth_ok);
             mask |= (exists & match) << c;
         }
         result[j] = ((fx | fy) == 0) ? 1 : mask;
@@ -186,6 +186,41 @@ FXC_HOT_LANES static uint32_t coarse_mask_lanes(const mask_row *in, int32_t bloc
         bytes[j] = stored[j];
     }
     return own;
+}
+
+FXC_HOT_LANES static uint32_t coarse_mask_lanes(const mask_row *in, int32_t block, int32_t nx, int32_t fy,
+                                                int32_t two_y, float depth_scale, int32_t *out, uint8_t *bytes)
+{
+    return coarse_mask_core(in, block, nx, fy, two_y, depth_scale, out, bytes, false);
+}
+
+/* coarse_mask_lanes for a row whose pixels and every candidate that can exist (samples of the row's block
+ * rows before nx; the second row only when two_y) lie on one triangle (row_one_triangle): every candidate
+ * that exists matches on its triangle (tr == tp), so the normals, depths and footprints are not read (the
+ * same mask: the match is an or with tr == tp). */
+FXC_HOT_LANES static uint32_t coarse_mask_one_triangle(const mask_row *in, int32_t block, int32_t nx, int32_t fy,
+                                                       int32_t two_y, int32_t *out, uint8_t *bytes)
+{
+    return coarse_mask_core(in, block, nx, fy, two_y, 0.0f, out, bytes, true);
+}
+
+/* Whether a row's 16 pixels (in->tri) and the candidates they can take (columns below nx * block of the
+ * expanded sample rows, the second only when two_y) all lie on one triangle, not a miss. */
+static bool row_one_triangle(const mask_row *in, uint32_t block, uint32_t nx, bool two_y)
+{
+    uint32_t t = in->tri[0];
+    if (t == SRV_MISS)
+        return false;
+    uint32_t differ = 0;
+    for (uint32_t j = 0; j < SRV_TILE; j++)
+        differ |= in->tri[j] ^ t;
+    uint32_t columns = nx * block < MASK_COLUMNS ? nx * block : MASK_COLUMNS;
+    for (uint32_t c = 0; c < columns; c++)
+        differ |= in->sample_tri[0][c] ^ t;
+    if (two_y)
+        for (uint32_t c = 0; c < columns; c++)
+            differ |= in->sample_tri[1][c] ^ t;
+    return differ == 0;
 }
 
 /* Row `sample_row` of a tile's samples (buffer index of its first) expanded per column into in's row `to`;
@@ -247,6 +282,7 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
         uint32_t lanes = width - x0 < SRV_TILE ? width - x0 : SRV_TILE, expanded = UINT32_MAX;
         mask_row in;
         int32_t row_mask[SRV_TILE];
+        uint8_t bytes_row[SRV_TILE];
         for (uint32_t y = y0; y < y0 + SRV_TILE && y < height; y++) {
             uint32_t ly = y - y0, iy = ly >> g.shift, fy = ly & (g.block - 1);
             size_t row = (size_t)y * width + x0;
@@ -260,8 +296,20 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
             static const float none[3] = {0, 0, 0}; /* a miss's lanes: not used */
             uint32_t memo_tri = SRV_MISS;
             const float *n = none;
+            bool two_y = fy != 0 && iy + 1 < g.ny;
             if (lanes == SRV_TILE && !loop->desc.no_lanes) { /* a whole row: copies */
                 memcpy(in.tri, view->tri + row, sizeof in.tri);
+                if (row_one_triangle(&in, g.block, g.nx, two_y)) { /* the common case: no other input read */
+                    memcpy(bytes_row, coarse + row, sizeof bytes_row);
+                    uint32_t own = coarse_mask_one_triangle(&in, (int32_t)g.block, (int32_t)g.nx, (int32_t)fy,
+                                                            (int32_t)two_y, row_mask, bytes_row);
+                    memcpy(coarse + row, bytes_row, sizeof bytes_row);
+                    for (; own; own &= own - 1) { /* in column order */
+                        uint32_t j = (uint32_t)__builtin_ctz(own);
+                        fill_pixel(loop->s, view, row + j, positions, &memo, &pixels[count++]);
+                    }
+                    continue;
+                }
                 memcpy(in.depth, view->depth + row, sizeof in.depth);
                 memcpy(in.footprint, view->footprint + row, sizeof in.footprint);
             } else {
@@ -285,7 +333,7 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
             if (lanes == SRV_TILE)
                 memcpy(bytes, coarse + row, sizeof bytes);
             uint32_t own = coarse_mask_lanes(&in, (int32_t)g.block, (int32_t)g.nx, (int32_t)fy,
-                                             (int32_t)(fy != 0 && iy + 1 < g.ny), loop->coarse_depth_scale,
+                                             (int32_t)two_y, loop->coarse_depth_scale,
                                              row_mask, bytes);
             if (lanes == SRV_TILE && !loop->desc.no_lanes) {
                 memcpy(coarse + row, bytes, sizeof bytes);
