@@ -205,15 +205,17 @@ FXC_HOT_LANES static uint32_t coarse_mask_one_triangle(const mask_row *in, int32
 }
 
 /* Whether a row's 16 pixels (in->tri) and the candidates they can take (columns below nx * block of the
- * expanded sample rows, the second only when two_y) all lie on one triangle, not a miss. */
-static bool row_one_triangle(const mask_row *in, uint32_t block, uint32_t nx, bool two_y)
+ * expanded sample rows, the second only when two_y) all lie on one triangle, not a miss; *pixels_one:
+ * whether the pixels do (a miss included). */
+static bool row_one_triangle(const mask_row *in, uint32_t block, uint32_t nx, bool two_y, bool *pixels_one)
 {
     uint32_t t = in->tri[0];
-    if (t == SRV_MISS)
-        return false;
     uint32_t differ = 0;
     for (uint32_t j = 0; j < SRV_TILE; j++)
         differ |= in->tri[j] ^ t;
+    *pixels_one = differ == 0;
+    if (t == SRV_MISS || differ)
+        return false;
     uint32_t columns = nx * block < MASK_COLUMNS ? nx * block : MASK_COLUMNS;
     for (uint32_t c = 0; c < columns; c++)
         differ |= in->sample_tri[0][c] ^ t;
@@ -296,10 +298,10 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
             static const float none[3] = {0, 0, 0}; /* a miss's lanes: not used */
             uint32_t memo_tri = SRV_MISS;
             const float *n = none;
-            bool two_y = fy != 0 && iy + 1 < g.ny;
+            bool two_y = fy != 0 && iy + 1 < g.ny, pixels_one = false;
             if (lanes == SRV_TILE && !loop->desc.no_lanes) { /* a whole row: copies */
                 memcpy(in.tri, view->tri + row, sizeof in.tri);
-                if (row_one_triangle(&in, g.block, g.nx, two_y)) { /* the common case: no other input read */
+                if (row_one_triangle(&in, g.block, g.nx, two_y, &pixels_one)) { /* the common case: no other input read */
                     memcpy(bytes_row, coarse + row, sizeof bytes_row);
                     uint32_t own = coarse_mask_one_triangle(&in, (int32_t)g.block, (int32_t)g.nx, (int32_t)fy,
                                                             (int32_t)two_y, row_mask, bytes_row);
@@ -320,14 +322,23 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
                     in.footprint[j] = view->footprint[p];
                 }
             }
-            for (uint32_t j = 0; j < SRV_TILE; j++) {
-                uint32_t tri = in.tri[j];
-                if (tri != memo_tri) {
-                    memo_tri = tri;
-                    n = tri != SRV_MISS ? sc->tri_normal + 3 * (size_t)tri : none;
+            if (pixels_one) { /* one triangle (or all misses): its normal in every lane */
+                n = in.tri[0] != SRV_MISS ? sc->tri_normal + 3 * (size_t)in.tri[0] : none;
+                for (int k = 0; k < 3; k++) {
+                    float nk = n[k];
+                    for (uint32_t j = 0; j < SRV_TILE; j++)
+                        in.normal[k][j] = nk;
                 }
-                for (int k = 0; k < 3; k++)
-                    in.normal[k][j] = n[k];
+            } else {
+                for (uint32_t j = 0; j < SRV_TILE; j++) {
+                    uint32_t tri = in.tri[j];
+                    if (tri != memo_tri) {
+                        memo_tri = tri;
+                        n = tri != SRV_MISS ? sc->tri_normal + 3 * (size_t)tri : none;
+                    }
+                    for (int k = 0; k < 3; k++)
+                        in.normal[k][j] = n[k];
+                }
             }
             uint8_t bytes[SRV_TILE] = {0};
             if (lanes == SRV_TILE)
