@@ -571,10 +571,12 @@ static inline void add_taps(const cell_taps *ct, const float t[3], float scale, 
     }
     uint32_t n = out->count;
     /* All 8 above 0: their smallest is (the weights are products of factors in [0, 1] and a finite scale,
-     * never NaN; a product may still underflow to 0, so the weights themselves are tested) */
-    float least = w[0];
-    for (int c = 1; c < 8; c++)
-        least = w[c] < least ? w[c] : least;
+     * never NaN; a product may still underflow to 0, so the products are tested). Rounding a product of
+     * factors >= 0 is monotonic in each factor, so the smallest of the 8 rounded products is the rounded
+     * product of the smallest factors: wxy's smallest is x's times y's, w's that times the smaller wz
+     * (the same float as the smallest of w, without comparing all 8). */
+    float x_least = t[0] < 1.0f - t[0] ? t[0] : 1.0f - t[0], y_least = t[1] < 1.0f - t[1] ? t[1] : 1.0f - t[1];
+    float least = x_least * y_least * (wz0 < wz1 ? wz0 : wz1);
     if (ct->count == 8 && least > 0) {
         memcpy(out->texel + n, ct->texel, sizeof ct->texel);
         memcpy(out->weight + n, w, sizeof w);
