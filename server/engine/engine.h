@@ -118,8 +118,7 @@ typedef struct srv_loop_desc {
                                               not the viewers' local lookup tables */
     bool no_lanes;                         /* tests: the per-pixel stages' coarse sample choice (requests)
                                               and blend (compose) through their scalar loops only, not the
-                                              lanes of whole rows, and the world-space requests with one
-                                              remembered cell (the same results, byte for byte) */
+                                              lanes of whole rows (the same results, byte for byte) */
     srv_allocator allocator;               /* default: libc */
 } srv_loop_desc;
 

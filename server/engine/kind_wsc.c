@@ -64,7 +64,6 @@ typedef struct kind_wsc {
     uint32_t cell_bytes[SRV_MAX_EFFECTS];
     uint32_t threads;
     bool use_local;
-    uint32_t request_slots; /* cells wsc_kind_pixel_requests remembers: 4, or 1 with desc.no_lanes (tests) */
     wsc_local **local; /* [SRV_MAX_VIEWERS * threads], NULL until first used */
     _Atomic uint64_t refused;       /* this frame, from the request threads */
     _Atomic uint64_t local_lookups; /* this frame, compose */
@@ -143,7 +142,6 @@ static fxc_result wsc_kind_create(srv_loop *loop, void **out, char *err, size_t 
     k->local = local;
     k->cell_cache = cell_cache;
     k->use_local = !loop->desc.no_local_table;
-    k->request_slots = loop->desc.no_lanes ? 1 : 4;
     char msg[256];
     osc_result r = wsc_create(&wd, &k->wsc, msg, sizeof msg);
     if (r != OSC_OK) {
@@ -386,51 +384,18 @@ FXC_HOT_CLONES static uint32_t wsc_kind_pixel_requests(const void *cache, uint32
     /* Recent cells, direct-mapped: a pixel in a cell already asked for asks for the same 8 grid points. */
     uint64_t seen[32];
     memset(seen, 0xFF, sizeof seen);
-    /* The pixel's cell: the last CELL_SLOTS cells entered (the tile's pixels go along rows of block samples
-     * and back, between a few cells: wsc_kind_pixel_taps_one's slots), so a cell met again skips
-     * cell_enter_slow. The cell a pixel lies in does not depend on the slots, and cell_keys is called
-     * exactly when the pixel's cell is not the last pixel's (as with one memo), so the keys, their order and
-     * the refusals are the same; a point outside the grid's range is in no slot and is refused each time.
-     * `levels` only holds the distances' level range (pixel_level); `next` is level + 1's cell. One slot
-     * (desc.no_lanes) is the single memo this replaced: test_lanes_change_nothing compares the two. */
-    enum { CELL_SLOTS = 4 };
-    const uint32_t slots = k->request_slots < CELL_SLOTS ? k->request_slots : CELL_SLOTS;
-    cell_memo levels = {.level = UINT32_MAX}, slot_memo[CELL_SLOTS], next = {.level = UINT32_MAX};
-    for (uint32_t c = 0; c < CELL_SLOTS; c++)
-        slot_memo[c].level = UINT32_MAX;
-    uint32_t at = CELL_SLOTS, oldest = 0; /* at: the last pixel's cell's slot; CELL_SLOTS: none (refused) */
+    cell_memo memo = {.level = UINT32_MAX}, next = {.level = UINT32_MAX}; /* the pixel's level, and level + 1 */
     for (uint32_t i = 0; i < count; i++) {
         float blend;
         bool same;
         const float *p = pixels[i].position;
-        uint32_t level = pixel_level(k, &levels, &pixels[i], bias, &blend);
-        if (!(at < CELL_SLOTS && cell_same(&slot_memo[at], level, p))) {
-            uint32_t c = 0;
-            while (c < slots && !cell_same(&slot_memo[c], level, p))
-                c++;
-            bool moved = true; /* the pixel's cell is not the last pixel's */
-            if (c == slots) {
-                /* a new slot unless the point is near a face of the last cell (then that cell again) */
-                cell_memo entered = slot_memo[oldest];
-                if (!cell_enter_slow(k, p, level, &entered, &same)) {
-                    refused++;
-                    at = CELL_SLOTS; /* as one memo: the next pixel's cell is new again */
-                    continue;
-                }
-                const cell_memo *last = at < CELL_SLOTS ? &slot_memo[at] : NULL;
-                if (last && last->level == entered.level && memcmp(last->g, entered.g, sizeof entered.g) == 0) {
-                    c = at;
-                    moved = false;
-                } else { /* (the oldest slot may be the last pixel's: moved all the same) */
-                    c = oldest;
-                    slot_memo[c] = entered;
-                    oldest = oldest + 1 < slots ? oldest + 1 : 0;
-                }
-            }
-            at = c;
-            if (moved)
-                n = cell_keys(&slot_memo[at], brick_size, seen, keys, masks, n, &refused);
+        uint32_t level = pixel_level(k, &memo, &pixels[i], bias, &blend);
+        if (!cell_enter(k, p, level, &memo, &same)) {
+            refused++;
+            continue;
         }
+        if (!same)
+            n = cell_keys(&memo, brick_size, seen, keys, masks, n, &refused);
         if (blend > 0 && cell_enter(k, p, level + 1, &next, &same) && !same)
             n = cell_keys(&next, brick_size, seen, keys, masks, n, &refused);
     }
