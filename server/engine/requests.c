@@ -131,6 +131,7 @@ typedef struct mask_row {
     uint32_t tri[SRV_TILE];
     float normal[3][SRV_TILE], depth[SRV_TILE], footprint[SRV_TILE];
     uint32_t sample_tri[2][MASK_COLUMNS];
+    uint32_t sample_one[2]; /* the triangle of every sample of the row before nx (mask_expand), else SRV_MISS */
     float sample_normal[2][3][MASK_COLUMNS], sample_depth[2][MASK_COLUMNS], sample_footprint[2][MASK_COLUMNS];
 } mask_row;
 
@@ -204,25 +205,17 @@ FXC_HOT_LANES static uint32_t coarse_mask_one_triangle(const mask_row *in, int32
     return coarse_mask_core(in, block, nx, fy, two_y, 0.0f, out, bytes, true);
 }
 
-/* Whether a row's 16 pixels (in->tri) and the candidates they can take (columns below nx * block of the
- * expanded sample rows, the second only when two_y) all lie on one triangle, not a miss; *pixels_one:
- * whether the pixels do (a miss included). */
-static bool row_one_triangle(const mask_row *in, uint32_t block, uint32_t nx, bool two_y, bool *pixels_one)
+/* Whether a row's 16 pixels (in->tri) and the candidates they can take (the samples before nx of the
+ * expanded sample rows, the second only when two_y: in->sample_one) all lie on one triangle, not a miss;
+ * *pixels_one: whether the pixels do (a miss included). */
+static bool row_one_triangle(const mask_row *in, bool two_y, bool *pixels_one)
 {
     uint32_t t = in->tri[0];
     uint32_t differ = 0;
     for (uint32_t j = 0; j < SRV_TILE; j++)
         differ |= in->tri[j] ^ t;
     *pixels_one = differ == 0;
-    if (t == SRV_MISS || differ)
-        return false;
-    uint32_t columns = nx * block < MASK_COLUMNS ? nx * block : MASK_COLUMNS;
-    for (uint32_t c = 0; c < columns; c++)
-        differ |= in->sample_tri[0][c] ^ t;
-    if (two_y)
-        for (uint32_t c = 0; c < columns; c++)
-            differ |= in->sample_tri[1][c] ^ t;
-    return differ == 0;
+    return differ == 0 && t != SRV_MISS && in->sample_one[0] == t && (!two_y || in->sample_one[1] == t);
 }
 
 /* Row `sample_row` of a tile's samples (buffer index of its first) expanded per column into in's row `to`;
@@ -232,9 +225,11 @@ FXC_HOT_INLINE void mask_expand_of(const scene *s, const srv_viewer *view, size_
                                    uint32_t block, mask_row *in, int to)
 {
     static const float none[3] = {0, 0, 0};
+    uint32_t one = view->tri[sample_row]; /* (sample 0 exists: nx >= 1) */
     for (uint32_t i = 0; i < MASK_COLUMNS / block; i++) {
         size_t r = sample_row + (size_t)i * block;
         uint32_t tri = i < nx ? view->tri[r] : SRV_MISS;
+        one = i < nx && tri != one ? SRV_MISS : one;
         const float *n = tri != SRV_MISS ? s->tri_normal + 3 * (size_t)tri : none;
         float depth = i < nx ? view->depth[r] : 0.0f, footprint = i < nx ? view->footprint[r] : 0.0f;
         float n0 = n[0], n1 = n[1], n2 = n[2];
@@ -248,6 +243,7 @@ FXC_HOT_INLINE void mask_expand_of(const scene *s, const srv_viewer *view, size_
             in->sample_footprint[to][c] = footprint;
         }
     }
+    in->sample_one[to] = one;
 }
 
 static void mask_expand(const scene *s, const srv_viewer *view, size_t sample_row, uint32_t nx, uint32_t block,
@@ -301,7 +297,7 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
             bool two_y = fy != 0 && iy + 1 < g.ny, pixels_one = false;
             if (lanes == SRV_TILE && !loop->desc.no_lanes) { /* a whole row: copies */
                 memcpy(in.tri, view->tri + row, sizeof in.tri);
-                if (row_one_triangle(&in, g.block, g.nx, two_y, &pixels_one)) { /* the common case: no other input read */
+                if (row_one_triangle(&in, two_y, &pixels_one)) { /* the common case: no other input read */
                     memcpy(bytes_row, coarse + row, sizeof bytes_row);
                     uint32_t own = coarse_mask_one_triangle(&in, (int32_t)g.block, (int32_t)g.nx, (int32_t)fy,
                                                             (int32_t)two_y, row_mask, bytes_row);
