@@ -60,6 +60,8 @@ typedef struct compose_scratch {
     /* The low-frequency effect per block (loop->coarse_effect): the samples' terms come from the viewer's
      * sample image (sample_patch, sky visibility 1 in: the term is linear in it); the run's pixels no sample
      * stands in for are gathered for one call (own_*). */
+    /* coarse_shade's blend (blend_row): the run's block row of samples and the next, expanded per column. */
+    float expand[2][SRV_SAMPLE_VALUES][SRV_TILE + SRV_BLEND_MAX_BLOCK];
     int32_t blend_own[SRV_RUN]; /* per lane: no sample stands in, the pixel is evaluated itself */
     uint32_t sample_slot[SRV_RUN];   /* sample pass: the sample image entry of gathered pixel i */
     uint8_t own_index[SRV_RUN]; /* the run's pixels evaluated themselves */
@@ -622,11 +624,7 @@ FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scrat
         uint32_t ix = j >> shift, fx = j & low;
         wx[j] = fx && ix + 1 < g->nx ? (float)fx * g->inv_block : 0.0f;
     }
-    /* The run's block row of samples and the next, expanded per column (blend_row's input). On the stack, not
-     * in the scratch: refilled once per run, and the scratch's taps between two runs pushed it out of L1
-     * (callgrind's cache simulation: its stores were the largest D1 write misses probes add to compose). */
-    float expand[2][SRV_SAMPLE_VALUES][SRV_TILE + SRV_BLEND_MAX_BLOCK];
-    uint32_t expanded = UINT32_MAX; /* the block row in expand */
+    uint32_t expanded = UINT32_MAX; /* the block row in cs->expand */
     uint32_t lane = 0;              /* the lane of the next visible pixel (gather_run's order) */
     uint32_t owns = 0;              /* pixels no sample stands in for (evaluated below) */
     for (uint32_t y = cr->y0; y < cr->y1; y++) {
@@ -634,9 +632,9 @@ FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scrat
         bool two_y = fy && iy + 1 < g->ny;
         if (iy != expanded) {
             blend_expand_row(cr->values, cr->value_stride, cr->first + (size_t)iy * cr->stride, g->nx, g->block,
-                             expand[0]);
+                             cs->expand[0]);
             blend_expand_row(cr->values, cr->value_stride, cr->first + (size_t)(iy + 1 < g->ny ? iy + 1 : iy) * cr->stride,
-                             g->nx, g->block, expand[1]);
+                             g->nx, g->block, cs->expand[1]);
             expanded = iy;
         }
         float wy = two_y ? (float)fy * g->inv_block : 0.0f;
@@ -647,8 +645,8 @@ FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scrat
         for (uint32_t j = 0; j < SRV_TILE; j++)
             mask[j] = bytes[j];
         float o[6][SRV_TILE];
-        blend_row(mask, wx, wy, (int32_t)g->block, (const float (*)[SRV_TILE + SRV_BLEND_MAX_BLOCK])expand[0],
-                  (const float (*)[SRV_TILE + SRV_BLEND_MAX_BLOCK])expand[1], o);
+        blend_row(mask, wx, wy, (int32_t)g->block, (const float (*)[SRV_TILE + SRV_BLEND_MAX_BLOCK])cs->expand[0],
+                  (const float (*)[SRV_TILE + SRV_BLEND_MAX_BLOCK])cs->expand[1], o);
         uint32_t visible = 0;
         if (columns == SRV_TILE)
             for (uint32_t j = 0; j < SRV_TILE; j++)
