@@ -561,9 +561,9 @@ FXC_HOT_LANES static void blend_row(const int32_t *mask, const float *wx, float 
  * (vectorised: FXC_HOT_LANES, contiguous loads only): from the blend's sums o (blend_row) the indirect term
  * added, the sky factor applied and the sharing count kept where any sample was taken, and per lane whether
  * the pixel is evaluated itself. The same operations on the same floats as coarse_shade's scalar loop. */
-FXC_HOT_LANES static void blend_finish_lanes(const float (*o)[SRV_TILE], float *restrict sky,
-                                             float *restrict indirect, float *restrict sharing,
-                                             int32_t *restrict own, int32_t keep_sharing)
+FXC_HOT_LANES static int32_t blend_finish_lanes(const float (*o)[SRV_TILE], float *restrict sky,
+                                                float *restrict indirect, float *restrict sharing,
+                                                int32_t *restrict own, int32_t keep_sharing)
 {
     /* Results into local arrays first, then stored (a select that may keep the old value, stored in place,
      * becomes a conditional store, and the loop is not vectorised). */
@@ -585,9 +585,11 @@ FXC_HOT_LANES static void blend_finish_lanes(const float (*o)[SRV_TILE], float *
         sky_out[j] = blended ? factor : s;
         taken[j] = blended;
     }
+    int32_t owns = 0; /* the lanes evaluated themselves */
     for (int j = 0; j < SRV_TILE; j++) {
         sky[j] = sky_out[j];
         own[j] = !taken[j];
+        owns += !taken[j];
     }
     if (keep_sharing) { /* (a loop of its own: the flag inside the loop above kept it from vectorising) */
         float sharing_out[SRV_TILE];
@@ -607,6 +609,7 @@ FXC_HOT_LANES static void blend_finish_lanes(const float (*o)[SRV_TILE], float *
         indirect[3 * j + 1] += e1[j];
         indirect[3 * j + 2] += e2[j];
     }
+    return owns;
 }
 
 /* The coarse effect over a gathered run: each pixel blends the terms of the samples that stand in for it (an
@@ -628,6 +631,7 @@ FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scrat
     }
     uint32_t expanded = UINT32_MAX; /* the block row in cs->expand */
     uint32_t lane = 0;              /* the lane of the next visible pixel (gather_run's order) */
+    uint32_t owns = 0;              /* pixels no sample stands in for (evaluated below) */
     for (uint32_t y = cr->y0; y < cr->y1; y++) {
         uint32_t ly = y - g->y0, iy = ly >> shift, fy = ly & low;
         bool two_y = fy && iy + 1 < g->ny;
@@ -654,8 +658,9 @@ FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scrat
                 visible += view->tri[row + j] != SRV_MISS;
         /* the common case, a whole row visible: 16 consecutive lanes */
         if (visible == SRV_TILE && lane + SRV_TILE <= count && !loop->desc.no_lanes) {
-            blend_finish_lanes((const float (*)[SRV_TILE])o, cs->sky_visibility + lane, cs->indirect + 3 * lane,
-                               cs->sharing + lane, cs->blend_own + lane, bits != NULL);
+            owns += (uint32_t)blend_finish_lanes((const float (*)[SRV_TILE])o, cs->sky_visibility + lane,
+                                                 cs->indirect + 3 * lane, cs->sharing + lane, cs->blend_own + lane,
+                                                 bits != NULL);
             lane += SRV_TILE;
             continue;
         }
@@ -679,9 +684,12 @@ FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scrat
                     cs->sharing[lane] = o[5][j];
             }
             cs->blend_own[lane] = !blended;
+            owns += !blended;
             lane++;
         }
     }
+    if (!owns) /* every pixel blended (the common case): nothing to gather or shade */
+        return;
     uint32_t own = 0;
     gather_memo memo = gather_memo_start(view);
     for (uint32_t i = 0; i < count; i++) {

@@ -59,6 +59,7 @@ typedef struct kind_wsc {
     wsc_cache *wsc;
     const scene *s;
     double c0;        /* finest cell, metres */
+    double cell_size[WSC_MAX_LEVEL + 1], inv_cell_size[WSC_MAX_LEVEL + 1]; /* wsc_cell_size per level, 1 / it */
     uint32_t brick_size[SRV_MAX_EFFECTS];
     uint32_t cell_bytes[SRV_MAX_EFFECTS];
     uint32_t threads;
@@ -131,6 +132,10 @@ static fxc_result wsc_kind_create(srv_loop *loop, void **out, char *err, size_t 
     }
     k->s = loop->s;
     k->c0 = loop->desc.probe_cell > 0 ? (double)loop->desc.probe_cell : default_cell(loop->s);
+    for (uint32_t level = 0; level <= WSC_MAX_LEVEL; level++) {
+        k->cell_size[level] = wsc_cell_size(level, k->c0);
+        k->inv_cell_size[level] = 1.0 / k->cell_size[level];
+    }
     memcpy(k->brick_size, brick_size, sizeof brick_size);
     memcpy(k->cell_bytes, cell_bytes, sizeof cell_bytes);
     k->threads = threads;
@@ -291,16 +296,21 @@ static __attribute__((noinline)) bool cell_enter_slow(const kind_wsc *k, const f
                                                       cell_memo *m, bool *same)
 {
     int32_t g[3];
-    double world[3] = {(double)p[0], (double)p[1], (double)p[2]};
-    /* wsc_corners' cell and range (the far corner g + 1 inside it too), without its 8 weights. */
-    if (!wsc_grid_point(world, level, k->c0, g) || g[0] >= WSC_XZ_MAX || g[2] >= WSC_XZ_MAX || g[1] >= WSC_Y_MAX) {
-        m->level = UINT32_MAX;
-        return false;
+    /* wsc_corners' cell and range (the far corner g + 1 inside it too), without its 8 weights: wsc_grid_point
+     * with the level's cell size from the table (the same double), then the far corner's range. */
+    double cell = k->cell_size[level];
+    for (int a = 0; a < 3; a++) {
+        double q = floor((double)p[a] / cell);
+        double lo = a == 1 ? WSC_Y_MIN : WSC_XZ_MIN, hi = a == 1 ? WSC_Y_MAX : WSC_XZ_MAX;
+        if (!(q >= lo && q <= hi - 1)) { /* also NaN and inf; hi - 1: the far corner g + 1 within hi */
+            m->level = UINT32_MAX;
+            return false;
+        }
+        g[a] = (int32_t)q;
     }
-    double cell = wsc_cell_size(level, k->c0);
     bool moved = m->level != level || memcmp(m->g, g, sizeof m->g) != 0;
     m->level = level;
-    m->inv_cell = 1.0 / cell;
+    m->inv_cell = k->inv_cell_size[level];
     for (int a = 0; a < 3; a++) {
         m->g[a] = g[a];
         m->lo[a] = (double)g[a] * cell;
@@ -526,10 +536,12 @@ static inline void add_taps(const cell_taps *ct, const float t[3], float scale, 
     }
     uint32_t n = out->count;
     /* All 8 above 0: their smallest is (the weights are products of factors in [0, 1] and a finite scale,
-     * never NaN; a product may still underflow to 0, so the weights themselves are tested) */
-    float least = w[0];
-    for (int c = 1; c < 8; c++)
-        least = w[c] < least ? w[c] : least;
+     * never NaN; a product may still underflow to 0, so the products are tested). Rounding a product of
+     * factors >= 0 is monotonic in each factor, so the smallest of the 8 rounded products is the rounded
+     * product of the smallest factors: wxy's smallest is x's times y's, w's that times the smaller wz
+     * (the same float as the smallest of w, without comparing all 8). */
+    float x_least = t[0] < 1.0f - t[0] ? t[0] : 1.0f - t[0], y_least = t[1] < 1.0f - t[1] ? t[1] : 1.0f - t[1];
+    float least = x_least * y_least * (wz0 < wz1 ? wz0 : wz1);
     if (ct->count == 8 && least > 0) {
         memcpy(out->texel + n, ct->texel, sizeof ct->texel);
         memcpy(out->weight + n, w, sizeof w);

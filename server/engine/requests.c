@@ -131,11 +131,12 @@ typedef struct mask_row {
     uint32_t tri[SRV_TILE];
     float normal[3][SRV_TILE], depth[SRV_TILE], footprint[SRV_TILE];
     uint32_t sample_tri[2][MASK_COLUMNS];
+    uint32_t sample_one[2]; /* the triangle of every sample of the row before nx (mask_expand), else SRV_MISS */
     float sample_normal[2][3][MASK_COLUMNS], sample_depth[2][MASK_COLUMNS], sample_footprint[2][MASK_COLUMNS];
 } mask_row;
 
-FXC_HOT_LANES static uint32_t coarse_mask_lanes(const mask_row *in, int32_t block, int32_t nx, int32_t fy,
-                                                int32_t two_y, float depth_scale, int32_t *out, uint8_t *bytes)
+FXC_HOT_INLINE uint32_t coarse_mask_core(const mask_row *in, int32_t block, int32_t nx, int32_t fy, int32_t two_y,
+                                         float depth_scale, int32_t *out, uint8_t *bytes, bool one_triangle)
 {
     const int32_t shift = __builtin_ctz((uint32_t)block), low = block - 1;
     int32_t result[SRV_TILE]; /* (stores to a local array, then out) */
@@ -165,7 +166,7 @@ FXC_HOT_LANES static uint32_t coarse_mask_lanes(const mask_row *in, int32_t bloc
             float apart = (float)(dx > dy ? dx : dy);
             float tolerance = pow2 * (apart * 1.0f * depth_scale);
             int32_t depth_ok = fabsf(dp - in->sample_depth[rowc][at]) <= tolerance;
-            int32_t match = (tr == tp) | ((tr != SRV_MISS) & normal_ok & depth_ok);
+            int32_t match = one_triangle ? 1 : (tr == tp) | ((tr != SRV_MISS) & normal_ok & depth_ok);
             mask |= (exists & match) << c;
         }
         result[j] = ((fx | fy) == 0) ? 1 : mask;
@@ -188,6 +189,35 @@ FXC_HOT_LANES static uint32_t coarse_mask_lanes(const mask_row *in, int32_t bloc
     return own;
 }
 
+FXC_HOT_LANES static uint32_t coarse_mask_lanes(const mask_row *in, int32_t block, int32_t nx, int32_t fy,
+                                                int32_t two_y, float depth_scale, int32_t *out, uint8_t *bytes)
+{
+    return coarse_mask_core(in, block, nx, fy, two_y, depth_scale, out, bytes, false);
+}
+
+/* coarse_mask_lanes for a row whose pixels and every candidate that can exist (samples of the row's block
+ * rows before nx; the second row only when two_y) lie on one triangle (row_one_triangle): every candidate
+ * that exists matches on its triangle (tr == tp), so the normals, depths and footprints are not read (the
+ * same mask: the match is an or with tr == tp). */
+FXC_HOT_LANES static uint32_t coarse_mask_one_triangle(const mask_row *in, int32_t block, int32_t nx, int32_t fy,
+                                                       int32_t two_y, int32_t *out, uint8_t *bytes)
+{
+    return coarse_mask_core(in, block, nx, fy, two_y, 0.0f, out, bytes, true);
+}
+
+/* Whether a row's 16 pixels (in->tri) and the candidates they can take (the samples before nx of the
+ * expanded sample rows, the second only when two_y: in->sample_one) all lie on one triangle, not a miss;
+ * *pixels_one: whether the pixels do (a miss included). */
+static bool row_one_triangle(const mask_row *in, bool two_y, bool *pixels_one)
+{
+    uint32_t t = in->tri[0];
+    uint32_t differ = 0;
+    for (uint32_t j = 0; j < SRV_TILE; j++)
+        differ |= in->tri[j] ^ t;
+    *pixels_one = differ == 0;
+    return differ == 0 && t != SRV_MISS && in->sample_one[0] == t && (!two_y || in->sample_one[1] == t);
+}
+
 /* Row `sample_row` of a tile's samples (buffer index of its first) expanded per column into in's row `to`;
  * block is a constant in each copy (mask_expand): B stores of one value. Columns past the last sample are
  * never taken (their candidates do not exist) and hold a miss. */
@@ -195,9 +225,11 @@ FXC_HOT_INLINE void mask_expand_of(const scene *s, const srv_viewer *view, size_
                                    uint32_t block, mask_row *in, int to)
 {
     static const float none[3] = {0, 0, 0};
+    uint32_t one = view->tri[sample_row]; /* (sample 0 exists: nx >= 1) */
     for (uint32_t i = 0; i < MASK_COLUMNS / block; i++) {
         size_t r = sample_row + (size_t)i * block;
         uint32_t tri = i < nx ? view->tri[r] : SRV_MISS;
+        one = i < nx && tri != one ? SRV_MISS : one;
         const float *n = tri != SRV_MISS ? s->tri_normal + 3 * (size_t)tri : none;
         float depth = i < nx ? view->depth[r] : 0.0f, footprint = i < nx ? view->footprint[r] : 0.0f;
         float n0 = n[0], n1 = n[1], n2 = n[2];
@@ -211,6 +243,7 @@ FXC_HOT_INLINE void mask_expand_of(const scene *s, const srv_viewer *view, size_
             in->sample_footprint[to][c] = footprint;
         }
     }
+    in->sample_one[to] = one;
 }
 
 static void mask_expand(const scene *s, const srv_viewer *view, size_t sample_row, uint32_t nx, uint32_t block,
@@ -247,6 +280,7 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
         uint32_t lanes = width - x0 < SRV_TILE ? width - x0 : SRV_TILE, expanded = UINT32_MAX;
         mask_row in;
         int32_t row_mask[SRV_TILE];
+        uint8_t bytes_row[SRV_TILE];
         for (uint32_t y = y0; y < y0 + SRV_TILE && y < height; y++) {
             uint32_t ly = y - y0, iy = ly >> g.shift, fy = ly & (g.block - 1);
             size_t row = (size_t)y * width + x0;
@@ -260,8 +294,20 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
             static const float none[3] = {0, 0, 0}; /* a miss's lanes: not used */
             uint32_t memo_tri = SRV_MISS;
             const float *n = none;
+            bool two_y = fy != 0 && iy + 1 < g.ny, pixels_one = false;
             if (lanes == SRV_TILE && !loop->desc.no_lanes) { /* a whole row: copies */
                 memcpy(in.tri, view->tri + row, sizeof in.tri);
+                if (row_one_triangle(&in, two_y, &pixels_one)) { /* the common case: no other input read */
+                    memcpy(bytes_row, coarse + row, sizeof bytes_row);
+                    uint32_t own = coarse_mask_one_triangle(&in, (int32_t)g.block, (int32_t)g.nx, (int32_t)fy,
+                                                            (int32_t)two_y, row_mask, bytes_row);
+                    memcpy(coarse + row, bytes_row, sizeof bytes_row);
+                    for (; own; own &= own - 1) { /* in column order */
+                        uint32_t j = (uint32_t)__builtin_ctz(own);
+                        fill_pixel(loop->s, view, row + j, positions, &memo, &pixels[count++]);
+                    }
+                    continue;
+                }
                 memcpy(in.depth, view->depth + row, sizeof in.depth);
                 memcpy(in.footprint, view->footprint + row, sizeof in.footprint);
             } else {
@@ -272,20 +318,29 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
                     in.footprint[j] = view->footprint[p];
                 }
             }
-            for (uint32_t j = 0; j < SRV_TILE; j++) {
-                uint32_t tri = in.tri[j];
-                if (tri != memo_tri) {
-                    memo_tri = tri;
-                    n = tri != SRV_MISS ? sc->tri_normal + 3 * (size_t)tri : none;
+            if (pixels_one) { /* one triangle (or all misses): its normal in every lane */
+                n = in.tri[0] != SRV_MISS ? sc->tri_normal + 3 * (size_t)in.tri[0] : none;
+                for (int k = 0; k < 3; k++) {
+                    float nk = n[k];
+                    for (uint32_t j = 0; j < SRV_TILE; j++)
+                        in.normal[k][j] = nk;
                 }
-                for (int k = 0; k < 3; k++)
-                    in.normal[k][j] = n[k];
+            } else {
+                for (uint32_t j = 0; j < SRV_TILE; j++) {
+                    uint32_t tri = in.tri[j];
+                    if (tri != memo_tri) {
+                        memo_tri = tri;
+                        n = tri != SRV_MISS ? sc->tri_normal + 3 * (size_t)tri : none;
+                    }
+                    for (int k = 0; k < 3; k++)
+                        in.normal[k][j] = n[k];
+                }
             }
             uint8_t bytes[SRV_TILE] = {0};
             if (lanes == SRV_TILE)
                 memcpy(bytes, coarse + row, sizeof bytes);
             uint32_t own = coarse_mask_lanes(&in, (int32_t)g.block, (int32_t)g.nx, (int32_t)fy,
-                                             (int32_t)(fy != 0 && iy + 1 < g.ny), loop->coarse_depth_scale,
+                                             (int32_t)two_y, loop->coarse_depth_scale,
                                              row_mask, bytes);
             if (lanes == SRV_TILE && !loop->desc.no_lanes) {
                 memcpy(coarse + row, bytes, sizeof bytes);
