@@ -24,7 +24,7 @@
  *
  * Usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] [--lead 2] [--tile 64]
  *        [--capacity F] [--pin CPU] [--separate-pixels]
- *        [--only table|scaling|threads|split|split-pixels|fuse|share|direct|direct2|switches|quality]
+ *        [--only table|scaling|threads|split|split-pixels|fuse|share|direct|switches|quality]
  *        (default: all, in that order; --separate-pixels: the table with the depth cull, interpolation and
  *        prefilter as separate passes, each in its own row, instead of fused). Each table also gives the
  * process CPU time of a frame: on a machine shared with other jobs the wall time includes the time the
@@ -513,15 +513,6 @@ static void section_direct(const bench_opts *o)
                             "direct", "tiled / direct (per-repetition ratio)", "tiled / direct"});
 }
 
-/* The same on 2 threads (tiled_one_thread keeps the tiles there too) against the default there, each thread
- * projecting its half of the chunks into a z-buffer of its own, then the two merged per pixel. */
-static void section_direct2(const bench_opts *o)
-{
-    section_ab(o, (view_rc_desc){.tiled_one_thread = true}, 2, (view_rc_desc){0}, 2,
-               &(ab_labels){"2 threads, z-buffer through the tiles against two private z-buffers merged",
-                            "tiled", "direct", "tiled / direct (per-repetition ratio)", "tiled / direct"});
-}
-
 typedef struct variant {
     const char *name;
     view_rc_desc d;
@@ -627,7 +618,7 @@ int main(int argc, char **argv)
             fprintf(stderr,
                     "usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] "
                     "[--lead 2] [--tile 64] [--capacity F] [--pin CPU] [--separate-pixels] "
-                    "[--only table|scaling|threads|split|split-pixels|fuse|share|direct|direct2|switches|quality]\n");
+                    "[--only table|scaling|threads|split|split-pixels|fuse|share|direct|switches|quality]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }
     }
@@ -663,8 +654,6 @@ int main(int argc, char **argv)
         section_share(&o);
     if (!only || !strcmp(only, "direct"))
         section_direct(&o);
-    if (!only || !strcmp(only, "direct2"))
-        section_direct2(&o);
     if (!only || !strcmp(only, "switches"))
         section_switches(&o);
     if (!only || !strcmp(only, "quality"))

@@ -26,12 +26,7 @@
  * the tile's entries stream past, then copied into the image row by row. (Written straight into the image,
  * the tile's 64 rows lie 4 x width bytes apart and fall into a few of L1's sets: cachegrind counted an L1
  * miss for nearly every z-buffer write.) The nearer view depth wins; between equal depths, the entry first in
- * the list.
- *
- * One and two threads build no lists (direct_z): each chunk, once projected, is depth-tested straight into a
- * z-buffer in slot order; two threads each take half of the chunks (contiguous slots) into a z-buffer of its
- * own, the second merged into the first per pixel (the nearer, between equal depths the first half's: the
- * winner of one thread in slot order). Measured against the tiles: bench_rcache --only direct, direct2. */
+ * the list. */
 #include "rc_internal.h"
 
 #include <math.h>

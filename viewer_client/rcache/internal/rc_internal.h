@@ -159,11 +159,9 @@ struct view_rc {
      * winners and colours contiguous (48 KiB at tiles of 64), instead of 64 rows of the image 4 * width bytes
      * apart (which all fall in a few of L1's sets), then copied out row by row. */
     bool local_z;
-    /* One or two threads (and not tiled_one_thread or no_tiling): no tile lists; each chunk, once projected,
-     * goes straight into a z-buffer in slot order (the same winners as the lists, which hold a tile's points
-     * in slot order too: the nearer depth, then the first). One thread: the image's. Two: thread part p its
-     * half of the chunks (fxc_pool_static_begin) into its own (part 0 the image's, part 1 zbuf2/win2/pre2),
-     * merged per pixel by the least (depth, slot), by bands of rows, in the z-buffer stage. */
+    /* One thread (and not tiled_one_thread or no_tiling): no tile lists; each chunk, once projected, goes
+     * straight into the image's z-buffer in slot order (the same winners as the lists, which hold a tile's
+     * points in slot order too: the nearer depth, then the first). */
     bool direct_z;
     /* direct_z on 2 threads: the second part's z-buffer (the first part's is zbuf, win, pre), pixels each. */
     float *zbuf2;
