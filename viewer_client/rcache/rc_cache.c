@@ -162,12 +162,6 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     rc->low_h = (d.height + 3) / 4;
     rc->drop_age = RC_AGE_NO_DROP;
 
-    /* One or two threads' direct z-buffer (direct_z) uses no entries, and of key, dep and dest only a chunk
-     * per thread (at least two chunks' worth allocated). */
-    rc->direct_z = d.threads <= 2 && !d.tiled_one_thread && !d.no_tiling;
-    uint32_t per_slot = rc->slots;
-    if (rc->direct_z && per_slot < 2 * chunk)
-        per_slot = 2 * chunk;
     rc_layout l = {0};
     uint32_t lists = rc->tile_count + 2;
     size_t o_px = take(&l, rc->slots, sizeof(float));
@@ -175,9 +169,9 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_pz = take(&l, rc->slots, sizeof(float));
     size_t o_rgba = take(&l, rc->slots, sizeof(uint32_t));
     size_t o_tile_of = take(&l, rc->slots, sizeof(uint16_t));
-    size_t o_key = take(&l, per_slot, sizeof(uint32_t));
-    size_t o_dep = take(&l, per_slot, sizeof(float));
-    size_t o_dest = take(&l, per_slot, sizeof(uint16_t));
+    size_t o_key = take(&l, rc->slots, sizeof(uint32_t));
+    size_t o_dep = take(&l, rc->slots, sizeof(float));
+    size_t o_dest = take(&l, rc->slots, sizeof(uint16_t));
     rc->mark_stride = ((size_t)rc->slots + 1 + 63) & ~(size_t)63; /* + a sink byte, a line apart */
     size_t o_mark = take(&l, rc->mark_stride * d.threads, 1);
     size_t o_free_slots = take(&l, rc->slots, sizeof(uint32_t));
@@ -196,6 +190,8 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
         return FXC_ERR_INVALID;
     }
     rc->entry_sink = (uint32_t)(((size_t)rc->slots + line * lists_parts + line - 1) & ~(line - 1));
+    /* One thread's direct z-buffer (direct_z) uses no entries. */
+    rc->direct_z = d.threads == 1 && !d.tiled_one_thread && !d.no_tiling;
     size_t o_entries =
         take(&l, rc->direct_z ? 0 : (size_t)rc->entry_sink + line * (size_t)rc->parts, sizeof(rc_entry));
     size_t o_list_start = take(&l, lists_parts, sizeof(uint32_t));
@@ -203,10 +199,6 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     size_t o_zbuf = take(&l, rc->pixels, sizeof(float));
     size_t o_win = take(&l, rc->pixels, sizeof(uint32_t));
     size_t o_pre = take(&l, rc->pixels, sizeof(uint32_t));
-    size_t two = rc->direct_z && d.threads == 2 ? rc->pixels : 0;
-    size_t o_zbuf2 = take(&l, two, sizeof(float));
-    size_t o_win2 = take(&l, two, sizeof(uint32_t));
-    size_t o_pre2 = take(&l, two, sizeof(uint32_t));
     size_t o_pt = take(&l, rc->pixels, sizeof(uint32_t));
     size_t o_rgb = take(&l, rc->pixels, 3);
     size_t o_depth = take(&l, rc->pixels, sizeof(float));
@@ -291,9 +283,6 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     rc->zbuf = (float *)(block + o_zbuf);
     rc->win = (uint32_t *)(block + o_win);
     rc->pre = (uint32_t *)(block + o_pre);
-    rc->zbuf2 = two ? (float *)(block + o_zbuf2) : NULL;
-    rc->win2 = two ? (uint32_t *)(block + o_win2) : NULL;
-    rc->pre2 = two ? (uint32_t *)(block + o_pre2) : NULL;
     rc->pt = (uint32_t *)(block + o_pt);
     rc->rgb = (uint8_t *)(block + o_rgb);
     rc->depth = (float *)(block + o_depth);

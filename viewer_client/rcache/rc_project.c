@@ -261,10 +261,9 @@ FXC_HOT_CLONES static uint32_t zbuffer_span(const uint32_t *restrict key, const 
     return projected;
 }
 
-/* Chunk c projected (and, with direct_z, z-buffered into part `part`'s buffers). */
-static void project_chunk(view_rc *rc, uint32_t c, uint32_t worker, uint32_t part)
+static void project_task(void *user, uint32_t c, uint32_t worker)
 {
-    void *user = rc;
+    view_rc *rc = user;
     /* The predicted projection first, over the same chunk (before this frame's drops, as a pass of its own
      * was): the projection below then reads the chunk's positions from L2, 64 KiB, not from memory. */
     if (rc->predict)
@@ -275,9 +274,8 @@ static void project_chunk(view_rc *rc, uint32_t c, uint32_t worker, uint32_t par
     uint16_t outside = rc->list_outside, dead = rc->list_dead;
     /* The chunk's keys, depths and lists, indexed from its first slot: in the store's arrays at the chunk
      * (the sort reads them later), or with direct_z (used only here) in their first chunk_size entries,
-     * which every chunk reuses while they are in L1 (a frame's 10 bytes a slot not written out to memory);
-     * on 2 threads, part p's at p chunk_size. */
-    size_t at = rc->direct_z ? (size_t)part * rc->chunk_size : begin;
+     * which every chunk reuses while they are in L1 (a frame's 10 bytes a slot not written out to memory). */
+    size_t at = rc->direct_z ? 0 : begin;
     uint32_t *key = rc->key + at;
     float *dep = rc->dep + at;
     uint16_t *dest = rc->dest + at;
@@ -318,8 +316,7 @@ static void project_chunk(view_rc *rc, uint32_t c, uint32_t worker, uint32_t par
     }
     stat.migrated = migrate_span(dest, rc->tile_of + begin, 0, n, dead, rc->list_new);
     if (rc->direct_z) {
-        stat.projected = part == 0 ? zbuffer_span(key, dep, rgba, begin, n, rc->zbuf, rc->win, rc->pre)
-                                   : zbuffer_span(key, dep, rgba, begin, n, rc->zbuf2, rc->win2, rc->pre2);
+        stat.projected = zbuffer_span(key, dep, rgba, begin, n, rc->zbuf, rc->win, rc->pre);
         rc->chunk_stat[c] = stat;
         return;
     }
@@ -327,71 +324,24 @@ static void project_chunk(view_rc *rc, uint32_t c, uint32_t worker, uint32_t par
     uint32_t lists = rc->tile_count + 2;
     uint32_t *count = rc->counts + (size_t)c * lists;
     memset(count, 0, lists * sizeof(uint32_t));
-    uint32_t sets[3][VIEW_RC_MAX_TILES + 2];
+    uint32_t part[3][VIEW_RC_MAX_TILES + 2];
     for (int k = 0; k < 3; k++)
-        memset(sets[k], 0, lists * sizeof(uint32_t));
+        memset(part[k], 0, lists * sizeof(uint32_t));
     uint32_t i = 0;
     for (; i + 4 <= n; i += 4) {
         count[dest[i]]++;
-        sets[0][dest[i + 1]]++;
-        sets[1][dest[i + 2]]++;
-        sets[2][dest[i + 3]]++;
+        part[0][dest[i + 1]]++;
+        part[1][dest[i + 2]]++;
+        part[2][dest[i + 3]]++;
     }
     for (; i < n; i++)
         count[dest[i]]++;
     for (uint32_t l = 0; l < lists; l++)
-        count[l] += sets[0][l] + sets[1][l] + sets[2][l];
+        count[l] += part[0][l] + part[1][l] + part[2][l];
     stat.projected = 0;
     for (uint32_t t = 0; t < rc->tile_count; t++)
         stat.projected += count[t];
     rc->chunk_stat[c] = stat;
-}
-
-static void project_task(void *user, uint32_t c, uint32_t worker)
-{
-    project_chunk(user, c, worker, 0);
-}
-
-/* direct_z on 2 threads: part p's z-buffer cleared, then its chunks (a contiguous range of slots) projected
- * into it in slot order. Part 0's buffers are the image's, part 1's its own; view_rc__zbuffer merges them.
- * Which thread runs a part does not change the result. */
-static void direct_part_task(void *user, uint32_t part, uint32_t worker)
-{
-    view_rc *rc = user;
-    float *zbuf = part == 0 ? rc->zbuf : rc->zbuf2;
-    uint32_t *win = part == 0 ? rc->win : rc->win2, *pre = part == 0 ? rc->pre : rc->pre2;
-    for (size_t p = 0; p < rc->pixels; p++) {
-        zbuf[p] = INFINITY;
-        win[p] = RC_NO_POINT;
-        pre[p] = RC_EMPTY_PT;
-    }
-    uint32_t c1 = fxc_pool_static_begin(rc->chunk_count, 2, part + 1);
-    for (uint32_t c = fxc_pool_static_begin(rc->chunk_count, 2, part); c < c1; c++)
-        project_chunk(rc, c, worker, part);
-}
-
-/* The two parts' z-buffers merged over rows [y0, y1) into the image's (part 0's), by the least (depth, slot):
- * every slot of part 1 comes after part 0's, so part 1 wins only where strictly nearer, as on one thread in
- * slot order (vectorised: selects, no branch). */
-FXC_HOT_CLONES static void merge_span(float *restrict zbuf, uint32_t *restrict win, uint32_t *restrict pre,
-                                      const float *restrict z2, const uint32_t *restrict w2,
-                                      const uint32_t *restrict p2, size_t n)
-{
-    for (size_t p = 0; p < n; p++) {
-        bool second = z2[p] < zbuf[p];
-        zbuf[p] = second ? z2[p] : zbuf[p];
-        win[p] = second ? w2[p] : win[p];
-        pre[p] = second ? p2[p] : pre[p];
-    }
-}
-
-static void merge_task(void *user, uint32_t band, uint32_t worker)
-{
-    (void)worker;
-    view_rc *rc = user;
-    uint32_t y0 = band << rc->tile_shift, y1 = y0 + rc->tile < rc->height ? y0 + rc->tile : rc->height;
-    size_t at = (size_t)y0 * rc->width, n = (size_t)(y1 - y0) * rc->width;
-    merge_span(rc->zbuf + at, rc->win + at, rc->pre + at, rc->zbuf2 + at, rc->win2 + at, rc->pre2 + at, n);
 }
 
 static void sort_task(void *user, uint32_t c, uint32_t worker)
@@ -419,10 +369,6 @@ static void sort_task(void *user, uint32_t c, uint32_t worker)
 
 void view_rc__project_sort(view_rc *rc)
 {
-    if (rc->direct_z && rc->thread_count == 2) {
-        fxc_pool_run_static(rc->pool, 2, direct_part_task, rc, true);
-        return;
-    }
     if (rc->direct_z) {
         /* One thread: the image's z-buffer cleared, then every chunk in slot order projected into it. */
         for (size_t p = 0; p < rc->pixels; p++) {
@@ -543,12 +489,8 @@ static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
 
 void view_rc__zbuffer(view_rc *rc)
 {
-    if (rc->direct_z) {
-        /* Done in the projection; on 2 threads, the two parts merged, by bands of a tile's rows. */
-        if (rc->thread_count == 2)
-            rc_run_pixels(rc->pool, rc->d.dynamic_pixels, rc->tiles_y, merge_task, rc);
-        return;
-    }
+    if (rc->direct_z)
+        return; /* done in the projection */
     rc_run_pixels(rc->pool, rc->d.dynamic_pixels, rc->tile_count, zbuffer_task, rc);
 }
 

@@ -112,12 +112,10 @@ typedef struct view_rc_desc {
     bool separate_sample_age;   /* the dither and the ageing as two pool runs on 2+ threads, each timed in its
                                    own stage (by default they share one run there, timed as
                                    VIEW_RC_STAGE_SAMPLE_AGE), to measure it (bench_rcache --only share) */
-    bool tiled_one_thread;      /* the tile sort and the tiled z-buffer on one and two threads too (by
-                                   default one thread projects each chunk of points straight into the
-                                   image's z-buffer in slot order, timed in "project and tile sort"; two
-                                   threads each half of the chunks into a z-buffer of its own, merged per
-                                   pixel in "z-buffer tiles"; the tiles serve 3+ threads), to measure it
-                                   (bench_rcache --only direct, direct2) */
+    bool tiled_one_thread;      /* the tile sort and the tiled z-buffer on one thread too (by default one
+                                   thread projects each chunk of points straight into the image's z-buffer
+                                   in slot order, timed in "project and tile sort"; the tiles serve the
+                                   threads), to measure it (bench_rcache --only direct) */
 } view_rc_desc;
 
 typedef struct view_rc view_rc;

@@ -163,9 +163,6 @@ struct view_rc {
      * straight into the image's z-buffer in slot order (the same winners as the lists, which hold a tile's
      * points in slot order too: the nearer depth, then the first). */
     bool direct_z;
-    /* direct_z on 2 threads: the second part's z-buffer (the first part's is zbuf, win, pre), pixels each. */
-    float *zbuf2;
-    uint32_t *win2, *pre2;
 
     /* The point store (structure of arrays over slots). */
     uint32_t slots; /* capacity + insert_reserve */
