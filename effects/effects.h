@@ -268,19 +268,6 @@ typedef struct fx_taps {
     uint32_t count;
 } fx_taps;
 
-/* A run's on-surface taps in structure of arrays, shared by the effects of one call (see fx_shade_run.four):
- * for pixel i the four taps' weights (renormalised), positions (fx_taps.at_x, at_y) and footprint. */
-typedef struct fx_taps_lanes {
-    float weight[FX_RUN_PIXELS][4];
-    float at_x[FX_RUN_PIXELS][4], at_y[FX_RUN_PIXELS][4];
-    float footprint_log2[FX_RUN_PIXELS];
-} fx_taps_lanes;
-
-/* The four texels of one pixel's taps, in fx_taps' order. */
-typedef struct fx_texel4 {
-    const void *texel[4];
-} fx_texel4;
-
 /* A visible point as compose sees it (for the no-cache evaluation and for world-space effects). */
 typedef struct fx_point {
     float position[3];  /* world (scene-local) position */
@@ -300,17 +287,7 @@ typedef struct fx_point {
 typedef struct fx_shade_run {
     uint32_t count;               /* pixels in the run, <= FX_RUN_PIXELS */
     uint32_t light_count;         /* the scene's lights */
-    const fx_taps *taps;          /* per pixel: this effect's filtered texels (cached mode); for an effect
-                                     with taps_lanes, only where four is NULL or four[i] is 0 */
-    /* Effects with fx_effect.taps_lanes, when the cache kind gives them (else four is NULL and every pixel's
-     * taps are taps[i]): where four[i] is 1, pixel i's taps are what an fx_taps of count 4 would hold, the
-     * texels four_texel[i].texel[0..3] with weights lanes->weight[i][0..3], positions lanes->at_x[i][0..3]
-     * and lanes->at_y[i][0..3] and footprint lanes->footprint_log2[i] (taps[i] is then unset); where four[i]
-     * is 0, taps[i]. The same values either way: only where they are read from differs (the four taps of
-     * most pixels are not copied per pixel and effect). */
-    const uint8_t *four;
-    const fx_texel4 *four_texel;
-    const fx_taps_lanes *lanes;
+    const fx_taps *taps;          /* per pixel: this effect's filtered texels (cached mode) */
     const fx_point *points;       /* per pixel: the visible point; may be NULL when no shading cache
                                      kind needs positions (compose gathers points for readers only) */
     float *light_visibility;      /* count * light_count, pixel-major */
@@ -383,9 +360,6 @@ typedef struct fx_effect {
      * and scale `sky_visibility`, both linearly in the sky_visibility it is given, and read neither
      * light_visibility nor light_count (it is called with NULL and 0). World-space effects only. */
     bool low_frequency;
-    /* shade reads fx_shade_run.four, four_texel and lanes where four is not NULL (the on-surface kind's
-     * taps of most pixels in structure of arrays); false: compose hands it every pixel's taps in taps. */
-    bool taps_lanes;
     /* The no-cache baseline: the same term evaluated at one visible point with the sample counts the cache
      * converges to; returns the rays traced. */
     uint64_t (*eval)(const fx_context *ctx, const fx_point *point, fx_shade_point *out);

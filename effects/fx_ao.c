@@ -229,47 +229,27 @@ static void ao_resample(const fx_context *ctx, const void *const finer[4], void 
     fx__put_u16((uint8_t *)texel + 2, (uint16_t)ao_max_samples(ctx));
 }
 
-/* One pixel's AO from its taps (count > 0). */
-static inline __attribute__((always_inline)) float ao_of_taps(const fx_taps *taps)
-{
-    float ao = 0;
-    if (taps->count == 4) { /* most pixels: the loop below written out (the same sum, in the same order) */
-        ao = ao + taps->weight[0] * fx__unorm16(fx__get_u16(taps->texel[0])) +
-             taps->weight[1] * fx__unorm16(fx__get_u16(taps->texel[1])) +
-             taps->weight[2] * fx__unorm16(fx__get_u16(taps->texel[2])) +
-             taps->weight[3] * fx__unorm16(fx__get_u16(taps->texel[3]));
-    } else {
-        for (uint32_t t = 0; t < taps->count; t++)
-            ao += taps->weight[t] * fx__unorm16(fx__get_u16(taps->texel[t])); /* fx_ao_sample(texel, 0) */
-    }
-    return ao;
-}
-
 /* The sky's visibility: the filtered unoccluded fraction. The renormalised weights sum to 1 only to within
  * rounding, so four texels of 1 can give 1 + 2^-23: the fraction is clamped to 1 (a visibility, never a
  * gain; found by tests/stability). */
 FXC_HOT_CLONES static void ao_shade(const fx_context *ctx, const fx_shade_run *run)
 {
     (void)ctx;
-    const uint8_t *four = run->four;
-    if (!four) { /* every pixel's taps in run->taps */
-        for (uint32_t i = 0; i < run->count; i++)
-            if (run->taps[i].count != 0)
-                run->sky_visibility[i] *= fx__min1(ao_of_taps(&run->taps[i]));
-        return;
-    }
-    const fx_taps_lanes *L = run->lanes;
     for (uint32_t i = 0; i < run->count; i++) {
-        if (four[i]) { /* the usual four taps, in the run's structure of arrays: ao_of_taps' sum */
-            const void *const *texel = run->four_texel[i].texel;
-            const float *weight = L->weight[i];
-            float ao = 0;
-            ao = ao + weight[0] * fx__unorm16(fx__get_u16(texel[0])) + weight[1] * fx__unorm16(fx__get_u16(texel[1])) +
-                 weight[2] * fx__unorm16(fx__get_u16(texel[2])) + weight[3] * fx__unorm16(fx__get_u16(texel[3]));
-            run->sky_visibility[i] *= fx__min1(ao);
-        } else if (run->taps[i].count != 0) {
-            run->sky_visibility[i] *= fx__min1(ao_of_taps(&run->taps[i]));
+        const fx_taps *taps = &run->taps[i];
+        if (taps->count == 0)
+            continue;
+        float ao = 0;
+        if (taps->count == 4) { /* most pixels: the loop below written out (the same sum, in the same order) */
+            ao = ao + taps->weight[0] * fx__unorm16(fx__get_u16(taps->texel[0])) +
+                 taps->weight[1] * fx__unorm16(fx__get_u16(taps->texel[1])) +
+                 taps->weight[2] * fx__unorm16(fx__get_u16(taps->texel[2])) +
+                 taps->weight[3] * fx__unorm16(fx__get_u16(taps->texel[3]));
+        } else {
+            for (uint32_t t = 0; t < taps->count; t++)
+                ao += taps->weight[t] * fx__unorm16(fx__get_u16(taps->texel[t])); /* fx_ao_sample(texel, 0) */
         }
+        run->sky_visibility[i] *= fx__min1(ao);
     }
 }
 
@@ -308,7 +288,6 @@ const fx_effect fx_effect_ao = {
     .run_samples = ao_run_samples,
     .resample = ao_resample,
     .shade = ao_shade,
-    .taps_lanes = true,
     .eval = ao_eval,
     .reference = ao_reference,
     .reference_samples = 1024, /* 16 times the cache's 64: the noise is a quarter of the cached texel's */

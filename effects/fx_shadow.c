@@ -24,7 +24,6 @@
 #include "fx_internal.h"
 #include "fxc_hot.h"
 
-#include <stddef.h>
 #include <string.h>
 
 /* Where the result of one batched ray goes. */
@@ -347,43 +346,12 @@ static void shadow_resample(const fx_context *ctx, const void *const finer[4], v
     }
 }
 
-/* A pixel's taps as shadow_shade reads them: an fx_taps' fields, wherever they are (run->taps[i], or the
- * structure of arrays of fx_shade_run.four). The weights and positions lie at byte offsets w, ax and ay from
- * one base (constants where the view is built, so that the inlined reads address them from one register:
- * with a pointer each, the loop ran out of registers); tap t's weight is TAP_W(taps, t). */
-typedef struct shadow_taps {
-    const void *const *texel;
-    const char *base;
-    size_t w, ax, ay;
-    float footprint_log2;
-    uint32_t count;
-} shadow_taps;
-#define TAP_F(taps, field, t) (((const float *)(const void *)((taps)->base + (taps)->field))[t])
-#define TAP_W(taps, t) TAP_F(taps, w, t)
-#define TAP_AX(taps, t) TAP_F(taps, ax, t)
-#define TAP_AY(taps, t) TAP_F(taps, ay, t)
-
-/* The view of an fx_taps, and of pixel i of a run's structure of arrays (count 4). */
-static inline __attribute__((always_inline)) shadow_taps shadow_taps_of(const fx_taps *t)
-{
-    return (shadow_taps){.texel = t->texel, .base = (const char *)t, .w = offsetof(fx_taps, weight),
-                         .ax = offsetof(fx_taps, at_x), .ay = offsetof(fx_taps, at_y),
-                         .footprint_log2 = t->footprint_log2, .count = t->count};
-}
-static inline __attribute__((always_inline)) shadow_taps shadow_taps_lanes(const fx_shade_run *run, size_t i)
-{
-    const fx_taps_lanes *L = run->lanes;
-    return (shadow_taps){.texel = run->four_texel[i].texel, .base = (const char *)L + i * sizeof L->weight[0],
-                         .w = offsetof(fx_taps_lanes, weight), .ax = offsetof(fx_taps_lanes, at_x),
-                         .ay = offsetof(fx_taps_lanes, at_y), .footprint_log2 = L->footprint_log2[i], .count = 4};
-}
-
 /* The tap whose texel lies (ox, oy) texels from tap `from`'s texel, or -1. */
-static inline int shadow_tap_at(const shadow_taps *taps, int from, int ox, int oy)
+static inline int shadow_tap_at(const fx_taps *taps, int from, int ox, int oy)
 {
     for (uint32_t t = 0; t < taps->count; t++)
-        if (fabsf(TAP_AX(taps, from) - (float)ox - TAP_AX(taps, t)) < 0.5f &&
-            fabsf(TAP_AY(taps, from) - (float)oy - TAP_AY(taps, t)) < 0.5f)
+        if (fabsf(taps->at_x[from] - (float)ox - taps->at_x[t]) < 0.5f &&
+            fabsf(taps->at_y[from] - (float)oy - taps->at_y[t]) < 0.5f)
             return (int)t;
     return -1;
 }
@@ -391,19 +359,19 @@ static inline int shadow_tap_at(const shadow_taps *taps, int from, int ox, int o
 /* For shadow_shade's fine path: the tap whose texel holds the pixel (the one with the largest weight if none
  * does exactly), the first of the four fine cells around the pixel (cx0, cy0, in cells of that texel) and
  * their bilinear weights, cell c at (c & 1, c >> 1) from the first. */
-static inline __attribute__((always_inline)) void shadow_fine_cells(const shadow_taps *taps, int *home_out, float *cx0_out,
+static inline __attribute__((always_inline)) void shadow_fine_cells(const fx_taps *taps, int *home_out, float *cx0_out,
                                                                     float *cy0_out, float cell_weight[4])
 {
     int home = 0;
     for (uint32_t t = 0; t < taps->count; t++) {
-        if (TAP_AX(taps, t) >= 0 && TAP_AX(taps, t) < 1 && TAP_AY(taps, t) >= 0 && TAP_AY(taps, t) < 1) {
+        if (taps->at_x[t] >= 0 && taps->at_x[t] < 1 && taps->at_y[t] >= 0 && taps->at_y[t] < 1) {
             home = (int)t;
             break;
         }
-        if (TAP_W(taps, t) > TAP_W(taps, home))
+        if (taps->weight[t] > taps->weight[home])
             home = (int)t;
     }
-    float fx = TAP_AX(taps, home) * 4.0f - 0.5f, fy = TAP_AY(taps, home) * 4.0f - 0.5f;
+    float fx = taps->at_x[home] * 4.0f - 0.5f, fy = taps->at_y[home] * 4.0f - 0.5f;
     float cx0 = floorf(fx), cy0 = floorf(fy);
     float wx = fx - cx0, wy = fy - cy0;
     /* Written out (a loop of four stayed a loop at -O2). */
@@ -414,164 +382,6 @@ static inline __attribute__((always_inline)) void shadow_fine_cells(const shadow
     *home_out = home, *cx0_out = cx0, *cy0_out = cy0;
 }
 
-/* One pixel's visibility of each light from its taps (shadow_shade). */
-static inline __attribute__((always_inline)) void shadow_shade_pixel(const shadow_taps *taps, float *visibility,
-                                                                     uint32_t lights)
-{
-    if (taps->footprint_log2 >= 0.0f) { /* as large as a texel: the texels' lit fractions */
-        for (uint32_t l = 0; l < lights; l++) {
-            float lit = 0;
-            if (taps->count == 4) { /* most pixels: the loop below written out (same sum, same order) */
-                const size_t at = 2u * l;
-                uint32_t m0 = fx__get_u16((const uint8_t *)taps->texel[0] + at);
-                uint32_t m1 = fx__get_u16((const uint8_t *)taps->texel[1] + at);
-                uint32_t m2 = fx__get_u16((const uint8_t *)taps->texel[2] + at);
-                uint32_t m3 = fx__get_u16((const uint8_t *)taps->texel[3] + at);
-                if ((m0 | m1 | m2 | m3) == 0) /* wholly shadowed: each lit fraction is 0.0f exactly */
-                    lit = lit + TAP_W(taps, 0) * 0.0f + TAP_W(taps, 1) * 0.0f + TAP_W(taps, 2) * 0.0f +
-                          TAP_W(taps, 3) * 0.0f;
-                else
-                    lit = lit + TAP_W(taps, 0) * lit_fraction_hot(m0) +
-                          TAP_W(taps, 1) * lit_fraction_hot(m1) +
-                          TAP_W(taps, 2) * lit_fraction_hot(m2) + TAP_W(taps, 3) * lit_fraction_hot(m3);
-            } else {
-                for (uint32_t t = 0; t < taps->count; t++)
-                    lit += TAP_W(taps, t) *
-                           lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
-            }
-            visibility[l] *= fx__min1(lit);
-        }
-        return;
-    }
-    if (taps->count == 4 && lights != 0 && taps->footprint_log2 == taps->footprint_log2) {
-        /* Four taps wholly shadowed for every light (most shadowed pixels): each light's fine sum is 0
-         * and its texel average the weights times 0 in the loop's order, 0 for finite weights, which the
-         * loop below takes as fine = average = 0; so each visibility is multiplied by fx__min1(0), the
-         * loop's own step, without its set-up. Otherwise (a lit cell, a weight not finite) the loop. */
-        float average = 0.0f + TAP_W(taps, 0) * 0.0f + TAP_W(taps, 1) * 0.0f + TAP_W(taps, 2) * 0.0f +
-                        TAP_W(taps, 3) * 0.0f;
-        /* The first light outside the loops (one light is the usual scene: GCC's vectorised loops cost
-         * more to enter than one light's work). */
-        uint32_t any_lit = (uint32_t)fx__get_u16(taps->texel[0]) | fx__get_u16(taps->texel[1]) |
-                           fx__get_u16(taps->texel[2]) | fx__get_u16(taps->texel[3]);
-        for (uint32_t l = 1; l < lights; l++)
-            any_lit |= fx__get_u16((const uint8_t *)taps->texel[0] + 2u * l) |
-                       fx__get_u16((const uint8_t *)taps->texel[1] + 2u * l) |
-                       fx__get_u16((const uint8_t *)taps->texel[2] + 2u * l) |
-                       fx__get_u16((const uint8_t *)taps->texel[3] + 2u * l);
-        if (any_lit == 0 && average == 0.0f) {
-            visibility[0] *= fx__min1(0.0f);
-            for (uint32_t l = 1; l < lights; l++)
-                visibility[l] *= fx__min1(0.0f);
-            return;
-        }
-    }
-    /* The tap whose texel holds the pixel and the four fine cells around the pixel with their bilinear
-     * weights: found only for a light where some tap's mask has a lit cell (shadow_fine_cells); under
-     * wholly shadowed texels (a common case) the fine sum is 0 whatever the cells. */
-    bool weights_found = false;
-    int home = 0;
-    float cx0 = 0.0f, cy0 = 0.0f, cell_weight[4] = {0.0f, 0.0f, 0.0f, 0.0f};
-    /* Which texel and bit each cell reads, found only for a light whose taps' masks differ (below). */
-    bool cells_found = false;
-    const uint8_t *cell_texel[4];
-    uint32_t cell_bit[4];
-    /* The weight of the texel average: the pixel's size, < 1. Found only for a light where it changes the
-     * result: where the average equals the fine sum (both 0 under a wholly shadowed texel, most shadowed
-     * pixels) fine + coarse x (average - fine) is the fine sum for every finite coarse, and coarse =
-     * 2^footprint_log2 is finite unless footprint_log2 is NaN (then it is found, as before). */
-    float coarse = 0.0f;
-    bool coarse_found = false;
-    if (taps->footprint_log2 != taps->footprint_log2) {
-        coarse = exp2f(taps->footprint_log2);
-        coarse_found = true;
-    }
-    for (uint32_t l = 0; l < lights; l++) {
-        float fine = 0, average = 0;
-        uint32_t any_lit = 0, all_lit = 0xFFFFu;
-        if (taps->count == 4) { /* most pixels: the loops below written out (the same sums, same order) */
-            const size_t at = 2u * l;
-            uint32_t m0 = fx__get_u16((const uint8_t *)taps->texel[0] + at);
-            uint32_t m1 = fx__get_u16((const uint8_t *)taps->texel[1] + at);
-            uint32_t m2 = fx__get_u16((const uint8_t *)taps->texel[2] + at);
-            uint32_t m3 = fx__get_u16((const uint8_t *)taps->texel[3] + at);
-            any_lit = m0 | m1 | m2 | m3;
-            all_lit = m0 & m1 & m2 & m3;
-            if (any_lit == 0) { /* wholly shadowed (the common case here): the lit fractions are 0 */
-                average = average + TAP_W(taps, 0) * 0.0f + TAP_W(taps, 1) * 0.0f +
-                          TAP_W(taps, 2) * 0.0f + TAP_W(taps, 3) * 0.0f;
-                if (average == 0.0f && !coarse_found) { /* fine is 0: the shortcut below, at once */
-                    visibility[l] *= fx__min1(fine);
-                    continue;
-                }
-            } else {
-                average = average + TAP_W(taps, 0) * lit_fraction_hot(m0) +
-                          TAP_W(taps, 1) * lit_fraction_hot(m1) + TAP_W(taps, 2) * lit_fraction_hot(m2) +
-                          TAP_W(taps, 3) * lit_fraction_hot(m3);
-            }
-        } else {
-            for (uint32_t t = 0; t < taps->count; t++) {
-                uint32_t mask = fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l);
-                any_lit |= mask;
-                all_lit &= mask;
-            }
-            /* The texel average: under wholly shadowed texels (every mask 0, the common case here)
-             * each lit fraction is 0, so the same sum without the popcounts. */
-            if (any_lit == 0) {
-                for (uint32_t t = 0; t < taps->count; t++)
-                    average += TAP_W(taps, t) * 0.0f;
-            } else {
-                for (uint32_t t = 0; t < taps->count; t++)
-                    average += TAP_W(taps, t) *
-                               lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
-            }
-        }
-        /* Every cell reads a bit of some tap's mask: when the taps' masks are all 0 or all 0xFFFF (most
-         * texels: wholly shadowed or wholly lit), every bit read is 0, or 1, and the sum below is the sum
-         * of the cell weights times 0 or 1, the same floats without finding the cells. */
-        if (any_lit != 0 && !weights_found) {
-            weights_found = true;
-            shadow_fine_cells(taps, &home, &cx0, &cy0, cell_weight);
-        }
-        if (all_lit == 0xFFFFu) {
-            fine = fine + cell_weight[0] * 1.0f + cell_weight[1] * 1.0f + cell_weight[2] * 1.0f +
-                   cell_weight[3] * 1.0f;
-        } else if (any_lit != 0) {
-            if (!cells_found) {
-                cells_found = true;
-                for (int c = 0; c < 4; c++) {
-                    int cx = (int)cx0 + (c & 1), cy = (int)cy0 + (c >> 1);
-                    int ox = cx < 0 ? -1 : (cx > 3 ? 1 : 0), oy = cy < 0 ? -1 : (cy > 3 ? 1 : 0);
-                    int t = (ox || oy) ? shadow_tap_at(taps, home, ox, oy) : home;
-                    if (t < 0) { /* no data there: the nearest cell of the pixel's own texel */
-                        t = home;
-                        ox = oy = 0;
-                        cx = cx < 0 ? 0 : (cx > 3 ? 3 : cx);
-                        cy = cy < 0 ? 0 : (cy > 3 ? 3 : cy);
-                    }
-                    cell_texel[c] = taps->texel[t];
-                    cell_bit[c] = (uint32_t)((cy - 4 * oy) * 4 + (cx - 4 * ox));
-                }
-            }
-            for (int c = 0; c < 4; c++) {
-                uint32_t mask = fx__get_u16(cell_texel[c] + 2u * l);
-                fine += cell_weight[c] * (float)((mask >> cell_bit[c]) & 1u);
-            }
-        }
-        if (average == fine && fine - fine == 0.0f && !coarse_found) { /* fine finite */
-            visibility[l] *= fx__min1(fine);
-            continue;
-        }
-        if (!coarse_found) {
-            coarse = exp2f(taps->footprint_log2);
-            coarse_found = true;
-        }
-        if (!(coarse > 0))
-            average = 0;
-        visibility[l] *= fx__min1(fine + coarse * (average - fine));
-    }
-}
-
 /* Each light's visibility at the pixel. Bit i of a texel's mask is the ray from cell (i & 3, i >> 2) of its
  * 4 x 4 stratified cells, so the masks of the taps form a sample grid four times finer than the texels.
  * A pixel much smaller than a texel (the finest level, seen from close) reads that grid bilinearly at its
@@ -580,35 +390,166 @@ static inline __attribute__((always_inline)) void shadow_shade_pixel(const shado
  * texel reads the texels' lit fractions bilinearly instead (a point sample of the fine grid would alias);
  * in between, the two are blended by the pixel's size in texels. The renormalised weights sum to 1 only to
  * within rounding: a fraction is clamped to 1 (a visibility, never a gain; found by tests/stability). */
-/* shadow_shade_pixel for taps in an fx_taps, out of line: beside the structure-of-arrays path, the few pixels
- * whose taps are not the usual four. */
-static __attribute__((noinline)) void shadow_shade_taps(const fx_taps *t, float *visibility, uint32_t lights)
-{
-    shadow_taps taps = shadow_taps_of(t);
-    shadow_shade_pixel(&taps, visibility, lights);
-}
-
 FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_run *run)
 {
     (void)ctx;
     uint32_t lights = run->light_count;
-    const uint8_t *four = run->four;
-    if (!four) { /* every pixel's taps in run->taps */
-        for (uint32_t i = 0; i < run->count; i++) {
-            if (run->taps[i].count == 0)
-                continue;
-            shadow_taps taps = shadow_taps_of(&run->taps[i]);
-            shadow_shade_pixel(&taps, run->light_visibility + (size_t)i * lights, lights);
-        }
-        return;
-    }
     for (uint32_t i = 0; i < run->count; i++) {
+        const fx_taps *taps = &run->taps[i];
+        if (taps->count == 0)
+            continue;
         float *visibility = run->light_visibility + (size_t)i * lights;
-        if (four[i]) { /* the usual four taps, in the run's structure of arrays */
-            shadow_taps taps = shadow_taps_lanes(run, i);
-            shadow_shade_pixel(&taps, visibility, lights);
-        } else if (run->taps[i].count != 0) {
-            shadow_shade_taps(&run->taps[i], visibility, lights);
+        if (taps->footprint_log2 >= 0.0f) { /* as large as a texel: the texels' lit fractions */
+            for (uint32_t l = 0; l < lights; l++) {
+                float lit = 0;
+                if (taps->count == 4) { /* most pixels: the loop below written out (same sum, same order) */
+                    const size_t at = 2u * l;
+                    uint32_t m0 = fx__get_u16((const uint8_t *)taps->texel[0] + at);
+                    uint32_t m1 = fx__get_u16((const uint8_t *)taps->texel[1] + at);
+                    uint32_t m2 = fx__get_u16((const uint8_t *)taps->texel[2] + at);
+                    uint32_t m3 = fx__get_u16((const uint8_t *)taps->texel[3] + at);
+                    if ((m0 | m1 | m2 | m3) == 0) /* wholly shadowed: each lit fraction is 0.0f exactly */
+                        lit = lit + taps->weight[0] * 0.0f + taps->weight[1] * 0.0f + taps->weight[2] * 0.0f +
+                              taps->weight[3] * 0.0f;
+                    else
+                        lit = lit + taps->weight[0] * lit_fraction_hot(m0) +
+                              taps->weight[1] * lit_fraction_hot(m1) +
+                              taps->weight[2] * lit_fraction_hot(m2) + taps->weight[3] * lit_fraction_hot(m3);
+                } else {
+                    for (uint32_t t = 0; t < taps->count; t++)
+                        lit += taps->weight[t] *
+                               lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
+                }
+                visibility[l] *= fx__min1(lit);
+            }
+            continue;
+        }
+        if (taps->count == 4 && lights != 0 && taps->footprint_log2 == taps->footprint_log2) {
+            /* Four taps wholly shadowed for every light (most shadowed pixels): each light's fine sum is 0
+             * and its texel average the weights times 0 in the loop's order, 0 for finite weights, which the
+             * loop below takes as fine = average = 0; so each visibility is multiplied by fx__min1(0), the
+             * loop's own step, without its set-up. Otherwise (a lit cell, a weight not finite) the loop. */
+            float average = 0.0f + taps->weight[0] * 0.0f + taps->weight[1] * 0.0f + taps->weight[2] * 0.0f +
+                            taps->weight[3] * 0.0f;
+            /* The first light outside the loops (one light is the usual scene: GCC's vectorised loops cost
+             * more to enter than one light's work). */
+            uint32_t any_lit = (uint32_t)fx__get_u16(taps->texel[0]) | fx__get_u16(taps->texel[1]) |
+                               fx__get_u16(taps->texel[2]) | fx__get_u16(taps->texel[3]);
+            for (uint32_t l = 1; l < lights; l++)
+                any_lit |= fx__get_u16((const uint8_t *)taps->texel[0] + 2u * l) |
+                           fx__get_u16((const uint8_t *)taps->texel[1] + 2u * l) |
+                           fx__get_u16((const uint8_t *)taps->texel[2] + 2u * l) |
+                           fx__get_u16((const uint8_t *)taps->texel[3] + 2u * l);
+            if (any_lit == 0 && average == 0.0f) {
+                visibility[0] *= fx__min1(0.0f);
+                for (uint32_t l = 1; l < lights; l++)
+                    visibility[l] *= fx__min1(0.0f);
+                continue;
+            }
+        }
+        /* The tap whose texel holds the pixel and the four fine cells around the pixel with their bilinear
+         * weights: found only for a light where some tap's mask has a lit cell (shadow_fine_cells); under
+         * wholly shadowed texels (a common case) the fine sum is 0 whatever the cells. */
+        bool weights_found = false;
+        int home = 0;
+        float cx0 = 0.0f, cy0 = 0.0f, cell_weight[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+        /* Which texel and bit each cell reads, found only for a light whose taps' masks differ (below). */
+        bool cells_found = false;
+        const uint8_t *cell_texel[4];
+        uint32_t cell_bit[4];
+        /* The weight of the texel average: the pixel's size, < 1. Found only for a light where it changes the
+         * result: where the average equals the fine sum (both 0 under a wholly shadowed texel, most shadowed
+         * pixels) fine + coarse x (average - fine) is the fine sum for every finite coarse, and coarse =
+         * 2^footprint_log2 is finite unless footprint_log2 is NaN (then it is found, as before). */
+        float coarse = 0.0f;
+        bool coarse_found = false;
+        if (taps->footprint_log2 != taps->footprint_log2) {
+            coarse = exp2f(taps->footprint_log2);
+            coarse_found = true;
+        }
+        for (uint32_t l = 0; l < lights; l++) {
+            float fine = 0, average = 0;
+            uint32_t any_lit = 0, all_lit = 0xFFFFu;
+            if (taps->count == 4) { /* most pixels: the loops below written out (the same sums, same order) */
+                const size_t at = 2u * l;
+                uint32_t m0 = fx__get_u16((const uint8_t *)taps->texel[0] + at);
+                uint32_t m1 = fx__get_u16((const uint8_t *)taps->texel[1] + at);
+                uint32_t m2 = fx__get_u16((const uint8_t *)taps->texel[2] + at);
+                uint32_t m3 = fx__get_u16((const uint8_t *)taps->texel[3] + at);
+                any_lit = m0 | m1 | m2 | m3;
+                all_lit = m0 & m1 & m2 & m3;
+                if (any_lit == 0) { /* wholly shadowed (the common case here): the lit fractions are 0 */
+                    average = average + taps->weight[0] * 0.0f + taps->weight[1] * 0.0f +
+                              taps->weight[2] * 0.0f + taps->weight[3] * 0.0f;
+                    if (average == 0.0f && !coarse_found) { /* fine is 0: the shortcut below, at once */
+                        visibility[l] *= fx__min1(fine);
+                        continue;
+                    }
+                } else {
+                    average = average + taps->weight[0] * lit_fraction_hot(m0) +
+                              taps->weight[1] * lit_fraction_hot(m1) + taps->weight[2] * lit_fraction_hot(m2) +
+                              taps->weight[3] * lit_fraction_hot(m3);
+                }
+            } else {
+                for (uint32_t t = 0; t < taps->count; t++) {
+                    uint32_t mask = fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l);
+                    any_lit |= mask;
+                    all_lit &= mask;
+                }
+                /* The texel average: under wholly shadowed texels (every mask 0, the common case here)
+                 * each lit fraction is 0, so the same sum without the popcounts. */
+                if (any_lit == 0) {
+                    for (uint32_t t = 0; t < taps->count; t++)
+                        average += taps->weight[t] * 0.0f;
+                } else {
+                    for (uint32_t t = 0; t < taps->count; t++)
+                        average += taps->weight[t] *
+                                   lit_fraction_hot(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
+                }
+            }
+            /* Every cell reads a bit of some tap's mask: when the taps' masks are all 0 or all 0xFFFF (most
+             * texels: wholly shadowed or wholly lit), every bit read is 0, or 1, and the sum below is the sum
+             * of the cell weights times 0 or 1, the same floats without finding the cells. */
+            if (any_lit != 0 && !weights_found) {
+                weights_found = true;
+                shadow_fine_cells(taps, &home, &cx0, &cy0, cell_weight);
+            }
+            if (all_lit == 0xFFFFu) {
+                fine = fine + cell_weight[0] * 1.0f + cell_weight[1] * 1.0f + cell_weight[2] * 1.0f +
+                       cell_weight[3] * 1.0f;
+            } else if (any_lit != 0) {
+                if (!cells_found) {
+                    cells_found = true;
+                    for (int c = 0; c < 4; c++) {
+                        int cx = (int)cx0 + (c & 1), cy = (int)cy0 + (c >> 1);
+                        int ox = cx < 0 ? -1 : (cx > 3 ? 1 : 0), oy = cy < 0 ? -1 : (cy > 3 ? 1 : 0);
+                        int t = (ox || oy) ? shadow_tap_at(taps, home, ox, oy) : home;
+                        if (t < 0) { /* no data there: the nearest cell of the pixel's own texel */
+                            t = home;
+                            ox = oy = 0;
+                            cx = cx < 0 ? 0 : (cx > 3 ? 3 : cx);
+                            cy = cy < 0 ? 0 : (cy > 3 ? 3 : cy);
+                        }
+                        cell_texel[c] = taps->texel[t];
+                        cell_bit[c] = (uint32_t)((cy - 4 * oy) * 4 + (cx - 4 * ox));
+                    }
+                }
+                for (int c = 0; c < 4; c++) {
+                    uint32_t mask = fx__get_u16(cell_texel[c] + 2u * l);
+                    fine += cell_weight[c] * (float)((mask >> cell_bit[c]) & 1u);
+                }
+            }
+            if (average == fine && fine - fine == 0.0f && !coarse_found) { /* fine finite */
+                visibility[l] *= fx__min1(fine);
+                continue;
+            }
+            if (!coarse_found) {
+                coarse = exp2f(taps->footprint_log2);
+                coarse_found = true;
+            }
+            if (!(coarse > 0))
+                average = 0;
+            visibility[l] *= fx__min1(fine + coarse * (average - fine));
         }
     }
 }
@@ -674,7 +615,6 @@ const fx_effect fx_effect_shadow = {
     .update = shadow_update,
     .resample = shadow_resample,
     .shade = shadow_shade,
-    .taps_lanes = true,
     .eval = shadow_eval,
     .reference = shadow_reference,
     .reference_samples = 256, /* 16 times the cache's 16 per texel */

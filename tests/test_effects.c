@@ -830,9 +830,7 @@ static float ref_shadow_visibility(const fx_taps *taps, uint32_t lights, uint32_
 /* Random pixels over random masks (a third of them all lit, a third all shadowed, the rest random, per tap
  * and light; a tenth of the pixels all shadowed for every tap and light; taps dropped at random as texels
  * without data are; a fiftieth of the footprints NaN): the shade callback gives the reference's floats
- * exactly, through both its paths and its four-tap shortcuts. And again with most four-tap pixels in the
- * run's structure of arrays (fx_shade_run.four; their fx_taps garbage): the same floats; the same for the AO
- * shade, which reads the same run's taps (the masks' first two bytes as its unorm16 fractions) both ways. */
+ * exactly, through both its paths and its four-tap shortcuts. */
 static void test_shadow_shade_uniform_masks(void **state)
 {
     (void)state;
@@ -841,12 +839,7 @@ static void test_shadow_shade_uniform_masks(void **state)
     uint8_t payload[PIXELS][4][2 * LIGHTS];
     fx_taps taps[PIXELS];
     float visibility[PIXELS * LIGHTS], sky[PIXELS], indirect[PIXELS * 3];
-    uint32_t uniform = 0, mixed = 0, four_dark = 0, all_dark = 0, coarse_dark = 0, in_lanes = 0;
-    static fx_taps soa_taps[PIXELS];
-    static fx_taps_lanes lanes;
-    static fx_texel4 four_texel[PIXELS];
-    uint8_t four[PIXELS];
-    float soa_visibility[PIXELS * LIGHTS], sky_taps[PIXELS], sky_soa[PIXELS];
+    uint32_t uniform = 0, mixed = 0, four_dark = 0, all_dark = 0, coarse_dark = 0;
     for (int round = 0; round < ROUNDS; round++) {
         const int lights = 1 + round % LIGHTS; /* one light (the usual scene) and two */
         for (int i = 0; i < PIXELS; i++) {
@@ -896,50 +889,15 @@ static void test_shadow_shade_uniform_masks(void **state)
         fx_shade_run run = {.count = PIXELS, .light_count = (uint32_t)lights, .taps = taps,
                             .light_visibility = visibility, .sky_visibility = sky, .indirect = indirect};
         fx_effect_shadow.shade(NULL, &run);
-        /* The same taps, four of every five four-tap pixels in structure of arrays. */
-        memset(&lanes, 0xFF, sizeof lanes);
-        memset(four_texel, 0xFF, sizeof four_texel);
-        for (int i = 0; i < PIXELS; i++) {
-            four[i] = taps[i].count == 4 && shade_rng_unit(&rng) < 0.8;
-            memcpy(&soa_taps[i], &taps[i], sizeof taps[i]);
-            if (four[i]) {
-                memset(&soa_taps[i], 0xFF, sizeof soa_taps[i]); /* not read */
-                memcpy(four_texel[i].texel, taps[i].texel, sizeof four_texel[i].texel);
-                memcpy(lanes.weight[i], taps[i].weight, sizeof lanes.weight[i]);
-                memcpy(lanes.at_x[i], taps[i].at_x, sizeof lanes.at_x[i]);
-                memcpy(lanes.at_y[i], taps[i].at_y, sizeof lanes.at_y[i]);
-                lanes.footprint_log2[i] = taps[i].footprint_log2;
-                in_lanes++;
-            }
-            for (int l = 0; l < lights; l++)
-                soa_visibility[i * lights + l] = 1.0f;
-            sky_taps[i] = sky_soa[i] = 0.75f;
-        }
-        fx_shade_run soa = {.count = PIXELS, .light_count = (uint32_t)lights, .taps = soa_taps, .four = four,
-                            .four_texel = four_texel, .lanes = &lanes, .light_visibility = soa_visibility,
-                            .sky_visibility = sky_soa, .indirect = indirect};
-        fx_effect_shadow.shade(NULL, &soa);
-        assert_true(fx_effect_shadow.taps_lanes && fx_effect_ao.taps_lanes);
-        run.sky_visibility = sky_taps;
-        fx_effect_ao.shade(NULL, &run);
-        fx_effect_ao.shade(NULL, &soa);
-        for (int i = 0; i < PIXELS; i++) {
+        for (int i = 0; i < PIXELS; i++)
             for (uint32_t l = 0; l < (uint32_t)lights; l++) {
                 float expected = taps[i].count ? ref_shadow_visibility(&taps[i], (uint32_t)lights, l) : 1.0f;
-                float got = visibility[i * lights + (int)l], got_soa = soa_visibility[i * lights + (int)l];
+                float got = visibility[i * lights + (int)l];
                 if (memcmp(&expected, &got, sizeof got) != 0)
                     fail_msg("round %d pixel %d light %u: %.9g, the definition %.9g", round, i, l, (double)got,
                              (double)expected);
-                if (memcmp(&expected, &got_soa, sizeof got) != 0)
-                    fail_msg("round %d pixel %d light %u (four %d): %.9g, the definition %.9g", round, i, l,
-                             four[i], (double)got_soa, (double)expected);
             }
-            if (memcmp(&sky_taps[i], &sky_soa[i], sizeof sky_soa[i]) != 0)
-                fail_msg("round %d pixel %d AO (four %d): %.9g, through fx_taps %.9g", round, i, four[i],
-                         (double)sky_soa[i], (double)sky_taps[i]);
-        }
     }
-    assert_true(in_lanes > 10000); /* the structure-of-arrays form taken many times */
     assert_true(uniform > 1000 && mixed > 1000); /* both paths taken many times */
     assert_true(four_dark > 100 && all_dark > 500 && coarse_dark > 50); /* the wholly shadowed shortcuts */
 }

@@ -341,10 +341,7 @@ static void test_late_viewer_same_pixels(void **state)
  * that reuses the previous pixel's four texels (same island, level and corner texel) gets what the full
  * lookup gives. Pixels from a converged frame of the fixture, every row in runs of up to 64 and in reverse
  * order too (other neighbours), for each effect at its own level bias and one finer, the two effects' taps
- * in one call (each effect first once); every other row through lanes only (the pixels garbage). Rows 2 and
- * 3 of every 4 through pixel_taps_lanes, the first effect's (row 2) or both effects' (row 3) taps in
- * structure of arrays (fx_shade_run.four): a pixel flagged four reads there, the others their fx_taps; every
- * float compared with the single call's all the same. */
+ * in one call (each effect first once); every other row through lanes only (the pixels garbage). */
 static void test_osc_taps_run_equals_single(void **state)
 {
     fixture *f = *state;
@@ -362,10 +359,7 @@ static void test_osc_taps_run_equals_single(void **state)
     static fx_taps run_taps[SRV_MAX_EFFECTS][SRV_RUN];
     fx_taps one;
     uint32_t run_blocks[SRV_MAX_EFFECTS][SRV_RUN], one_block;
-    uint64_t compared = 0, four = 0, empty_total = 0, soa_four = 0, soa_rest = 0;
-    static fx_taps_lanes soa_lanes;
-    static uint8_t soa_flag[SRV_MAX_EFFECTS][SRV_RUN];
-    static fx_texel4 soa_texel[SRV_MAX_EFFECTS][SRV_RUN];
+    uint64_t compared = 0, four = 0, empty_total = 0;
     for (uint32_t e = 0; e < loop->effect_count; e++) {
         if (!loop->effect_shading[e] || loop->effect_kind[e] != SCENE_CACHE_ON_SURFACE)
             continue;
@@ -417,24 +411,8 @@ static void test_osc_taps_run_equals_single(void **state)
                     static srv_pixel garbage[SRV_RUN];
                     memset(garbage, 0xFF, sizeof garbage);
                     assert_true(kind->lanes_suffice);
-                    uint8_t *flags[SRV_MAX_EFFECTS] = {NULL};
-                    fx_texel4 *texels[SRV_MAX_EFFECTS] = {NULL};
-                    uint32_t soa_effects = (y & 2) ? 1 + (y & 1) : 0; /* of the group's first, in SoA */
-                    for (uint32_t j = 0; j < soa_effects; j++) {
-                        flags[j] = soa_flag[j], texels[j] = soa_texel[j];
-                        memset(soa_flag[j], 0xAA, sizeof soa_flag[j]);   /* every flag must be written */
-                        memset(run_taps[j], 0xFF, sizeof run_taps[j]);   /* taps of four pixels unset */
-                        memset(soa_texel[j], 0xFF, sizeof soa_texel[j]);
-                    }
-                    memset(&soa_lanes, 0xFF, sizeof soa_lanes);
-                    assert_non_null(kind->pixel_taps_lanes);
-                    uint32_t empty =
-                        soa_effects ? kind->pixel_taps_lanes(cache, 0, 0, (y & 1) ? garbage : pixels,
-                                                             (y & 1) ? &lanes : NULL, n, n_group, group, bias,
-                                                             group_taps, group_blocks, &soa_lanes, flags, texels)
-                                    : kind->pixel_taps(cache, 0, 0, (y & 1) ? garbage : pixels,
-                                                       (y & 1) ? &lanes : NULL, n, n_group, group, bias, group_taps,
-                                                       group_blocks);
+                    uint32_t empty = kind->pixel_taps(cache, 0, 0, (y & 1) ? garbage : pixels, (y & 1) ? &lanes : NULL,
+                                                      n, n_group, group, bias, group_taps, group_blocks);
                     uint32_t empty_found = 0; /* the taps with count 0 the call says it gave */
                     for (uint32_t i = 0; i < n * n_group; i++) {
                         uint32_t j = i / n, at = i % n;
@@ -443,23 +421,6 @@ static void test_osc_taps_run_equals_single(void **state)
                         kind->pixel_taps(cache, 0, 0, &pixels[at], NULL, 1, 1, &group[j], bias, &one_taps,
                                          &one_blocks);
                         const fx_taps *a = &run_taps[j][at];
-                        fx_taps from_soa; /* what the effect reads for a pixel flagged four */
-                        if (flags[j]) {
-                            assert_true(soa_flag[j][at] <= 1);
-                            if (soa_flag[j][at]) {
-                                memset(&from_soa, 0, sizeof from_soa);
-                                memcpy(from_soa.texel, soa_texel[j][at].texel, sizeof soa_texel[j][at].texel);
-                                memcpy(from_soa.weight, soa_lanes.weight[at], sizeof soa_lanes.weight[at]);
-                                memcpy(from_soa.at_x, soa_lanes.at_x[at], sizeof soa_lanes.at_x[at]);
-                                memcpy(from_soa.at_y, soa_lanes.at_y[at], sizeof soa_lanes.at_y[at]);
-                                from_soa.footprint_log2 = soa_lanes.footprint_log2[at];
-                                from_soa.count = 4;
-                                a = &from_soa;
-                                soa_four++;
-                            } else {
-                                soa_rest++;
-                            }
-                        }
                         assert_int_equal(a->count, one.count);
                         empty_found += a->count == 0;
                         assert_int_equal(run_blocks[j][at], one_block);
@@ -477,9 +438,6 @@ static void test_osc_taps_run_equals_single(void **state)
     }
     assert_true(compared > 4 * W * H / 2 && four > compared / 2); /* most pixels, most of them four taps */
     assert_true(empty_total > 0); /* some pixel without data, so the count was checked where it is not 0 */
-    /* Both forms seen many times in structure-of-arrays calls (the other effect's taps at the first effect's
-     * levels and the finer level have many pixels without data: those go through their fx_taps). */
-    assert_true(soa_four > 1000 && soa_rest > 1000);
     srv_loop_free(loop);
 }
 

@@ -39,11 +39,6 @@ typedef struct compose_scratch {
     fx_point points[SRV_RUN];
     fx_taps taps[TAPS_GROUP * SRV_RUN];  /* effect j of a group of one kind's effects: from j * SRV_RUN */
     uint32_t blocks[TAPS_GROUP * SRV_RUN];
-    /* The group's taps in structure of arrays, for effects that read them so (fx_effect.taps_lanes) through a
-     * kind that gives them (pixel_taps_lanes): the shared values, and effect j's flags and texels. */
-    fx_taps_lanes taps_lanes;
-    uint8_t four[TAPS_GROUP][SRV_RUN];
-    fx_texel4 four_texel[TAPS_GROUP][SRV_RUN];
     size_t index[SRV_RUN]; /* pixel index of each visible pixel of the run */
     float albedo[SRV_RUN][3];
     uint32_t triangle[SRV_RUN];                      /* the albedo's arguments, one array each */
@@ -837,10 +832,6 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
             uint32_t k = loop->effect_kind[e], group[TAPS_GROUP], n = 0, last = e;
             fx_taps *group_taps[TAPS_GROUP];
             uint32_t *group_blocks[TAPS_GROUP];
-            uint8_t *group_four[TAPS_GROUP];
-            fx_texel4 *group_four_texel[TAPS_GROUP];
-            const srv_cache_kind *kind = loop->kinds[k];
-            bool soa = false; /* some effect of the group reads its taps in structure of arrays */
             for (uint32_t f = e; f < loop->effect_count && n < TAPS_GROUP; f++) {
                 if (!loop->effect_shading[f])
                     continue;
@@ -849,41 +840,28 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
                 group[n] = f;
                 group_taps[n] = cs->taps + (size_t)n * SRV_RUN;
                 group_blocks[n] = loop->viewer_bits[f] ? cs->blocks + (size_t)n * SRV_RUN : NULL;
-                bool lanes = loop->effects[f]->taps_lanes && kind->pixel_taps_lanes;
-                group_four[n] = lanes ? cs->four[n] : NULL;
-                group_four_texel[n] = lanes ? cs->four_texel[n] : NULL;
-                soa |= lanes;
                 n++;
                 last = f;
             }
-            const srv_pixel_lanes *pixel_lanes = cs->have_lanes ? &cs->pixel_lanes : NULL;
-            uint32_t empty =
-                soa ? kind->pixel_taps_lanes(loop->caches[k], (uint32_t)(view - loop->viewers), thread_index,
-                                             cs->pixels, pixel_lanes, count, n, group, loop->bias[e], group_taps,
-                                             group_blocks, &cs->taps_lanes, group_four, group_four_texel)
-                    : kind->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers), thread_index, cs->pixels,
-                                       pixel_lanes, count, n, group, loop->bias[e], group_taps, group_blocks);
+            uint32_t empty = loop->kinds[k]->pixel_taps(
+                loop->caches[k], (uint32_t)(view - loop->viewers), thread_index, cs->pixels,
+                cs->have_lanes ? &cs->pixel_lanes : NULL, count, n, group, loop->bias[e], group_taps, group_blocks);
             for (uint32_t j = 0; j < n; j++) {
                 uint32_t g = group[j];
                 const uint64_t *bits = loop->viewer_bits[g];
                 const fx_taps *taps = group_taps[j];
                 const uint32_t *blocks = group_blocks[j];
-                const uint8_t *four = group_four[j];
                 run.taps = taps;
-                run.four = four;
-                run.four_texel = group_four_texel[j];
-                run.lanes = four ? &cs->taps_lanes : NULL;
                 loop->effects[g]->shade(&loop->fx, &run);
-                /* A pixel has no data for the effect where its taps (in taps, not four) have count 0. */
                 if (bits) {
                     for (uint32_t i = 0; i < count; i++) {
-                        cs->missing[i] |= (!four || !four[i]) && taps[i].count == 0;
+                        cs->missing[i] |= taps[i].count == 0;
                         if (blocks[i] != SRV_NONE)
                             cs->sharing[i] = fmaxf(cs->sharing[i], (float)__builtin_popcountll(bits[blocks[i]]));
                     }
                 } else if (empty) { /* else every pixel has taps: nothing is missing */
                     for (uint32_t i = 0; i < count; i++)
-                        cs->missing[i] |= (!four || !four[i]) && taps[i].count == 0;
+                        cs->missing[i] |= taps[i].count == 0;
                 }
             }
             e = last;

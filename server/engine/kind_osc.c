@@ -351,9 +351,11 @@ FXC_HOT_INLINE void four_taps(fx_taps *out, const uint8_t *const texel[4], float
 typedef struct taps_lanes {
     int32_t level[SRV_RUN], positive[SRV_RUN];         /* positive: all four weights > 0 */
     float x[SRV_RUN], y[SRV_RUN], fx0[SRV_RUN], fy0[SRV_RUN], ax[SRV_RUN], ay[SRV_RUN];
-    /* The usual case's values in the order fx_taps holds them (the renormalised weights, for positive lanes;
-     * at_x and at_y of the four taps; the footprint) are in an fx_taps_lanes of their own (the caller's when
-     * an effect reads them there: fx_shade_run.lanes), handed along beside this. */
+    /* The usual case's values in the order fx_taps holds them, per lane, so that a pixel copies them with a
+     * few wide moves: the renormalised weights (for positive lanes), at_x and at_y of the four taps. */
+    float weight[SRV_RUN][4];
+    float at_x[SRV_RUN][4], at_y[SRV_RUN][4];
+    float footprint_log2[SRV_RUN];
     /* floor(x), floor(y) where the usual case may apply (all four weights > 0, both in [0, 2^24)), else -1:
      * one unsigned compare per axis against the island's size then decides whether the columns and rows
      * lie inside it. */
@@ -367,31 +369,16 @@ typedef struct taps_lanes {
 
 /* A pixel's four taps' weights, positions and footprint as the lanes computed them (its texels are the
  * caller's). */
-static inline void taps_from_lanes(fx_taps *out, const fx_taps_lanes *S, size_t i)
+static inline void taps_from_lanes(fx_taps *out, const taps_lanes *L, size_t i)
 {
-    memcpy(out->weight, S->weight[i], sizeof S->weight[i]);
-    memcpy(out->at_x, S->at_x[i], sizeof S->at_x[i]);
-    memcpy(out->at_y, S->at_y[i], sizeof S->at_y[i]);
-    out->footprint_log2 = S->footprint_log2[i];
+    memcpy(out->weight, L->weight[i], sizeof L->weight[i]);
+    memcpy(out->at_x, L->at_x[i], sizeof L->at_x[i]);
+    memcpy(out->at_y, L->at_y[i], sizeof L->at_y[i]);
+    out->footprint_log2 = L->footprint_log2[i];
     out->count = 4;
 }
 
-/* Pixel i's taps are the usual four with the lanes' values, its texels texel[0..3]: into the effect's
- * structure of arrays when it reads them there (four not NULL), else into its fx_taps. */
-static inline void taps_four(fx_taps *out, const fx_taps_lanes *S, size_t i, const uint8_t *const texel[4],
-                             uint8_t *four, fx_texel4 *four_texel)
-{
-    if (four) {
-        memcpy(four_texel[i].texel, texel, sizeof four_texel[i].texel);
-        four[i] = 1;
-    } else {
-        memcpy(out->texel, texel, sizeof out->texel[0] * 4);
-        taps_from_lanes(out, S, i);
-    }
-}
-
-FXC_HOT_LANES static void taps_lanes_fill(taps_lanes *restrict L, fx_taps_lanes *restrict S,
-                                          const srv_pixel_lanes *restrict in, int32_t bias)
+FXC_HOT_LANES static void taps_lanes_fill(taps_lanes *restrict L, const srv_pixel_lanes *restrict in, int32_t bias)
 {
     const float fbias = (float)bias;
     for (int i = 0; i < SRV_RUN; i++) {
@@ -408,15 +395,15 @@ FXC_HOT_LANES static void taps_lanes_fill(taps_lanes *restrict L, fx_taps_lanes 
         L->level[i] = level;
         L->positive[i] = (w00 > 0) & (w10 > 0) & (w01 > 0) & (w11 > 0);
         L->x[i] = x, L->y[i] = y, L->fx0[i] = fx0, L->fy0[i] = fy0, L->ax[i] = ax, L->ay[i] = ay;
-        S->weight[i][0] = w00 * inv;
-        S->weight[i][1] = w10 * inv;
-        S->weight[i][2] = w01 * inv;
-        S->weight[i][3] = w11 * inv;
+        L->weight[i][0] = w00 * inv;
+        L->weight[i][1] = w10 * inv;
+        L->weight[i][2] = w01 * inv;
+        L->weight[i][3] = w11 * inv;
         float at_x0 = x + 0.5f - fx0, at_x1 = x + 0.5f - (fx0 + 1.0f);
         float at_y0 = y + 0.5f - fy0, at_y1 = y + 0.5f - (fy0 + 1.0f);
-        S->at_x[i][0] = at_x0, S->at_x[i][1] = at_x1, S->at_x[i][2] = at_x0, S->at_x[i][3] = at_x1;
-        S->at_y[i][0] = at_y0, S->at_y[i][1] = at_y0, S->at_y[i][2] = at_y1, S->at_y[i][3] = at_y1;
-        S->footprint_log2[i] = in->footprint[i] - (float)level;
+        L->at_x[i][0] = at_x0, L->at_x[i][1] = at_x1, L->at_x[i][2] = at_x0, L->at_x[i][3] = at_x1;
+        L->at_y[i][0] = at_y0, L->at_y[i][1] = at_y0, L->at_y[i][2] = at_y1, L->at_y[i][3] = at_y1;
+        L->footprint_log2[i] = in->footprint[i] - (float)level;
         int32_t fast =
             L->positive[i] & (fx0 >= 0.0f) & (fy0 >= 0.0f) & (fx0 < 16777216.0f) & (fy0 < 16777216.0f);
         float fxc = fast ? fx0 : -1.0f, fyc = fast ? fy0 : -1.0f; /* converted only where it fits */
@@ -499,8 +486,8 @@ FXC_HOT_INLINE void taps_state_island(taps_state *st, uint32_t island, uint32_t 
 /* Pixel i's taps when the usual case's quick paths (taps_of_effect) did not give them: columns or rows
  * clamped at the island's edge, a weight 0, a footprint straddling a block edge, texels without data. The
  * island and level of st are the pixel's. */
-static void taps_pixel_rest(taps_state *st, const taps_lanes *L, const fx_taps_lanes *S, const srv_pixel_lanes *P,
-                            uint32_t i, fx_taps *out, uint32_t *blocks, uint8_t *four, fx_texel4 *four_texel)
+static void taps_pixel_rest(taps_state *st, const taps_lanes *L, const srv_pixel_lanes *P, uint32_t i,
+                            fx_taps *out, uint32_t *blocks)
 {
     const osc_cache *osc = st->osc;
     const size_t texel_bytes = st->texel_bytes;
@@ -537,7 +524,8 @@ static void taps_pixel_rest(taps_state *st, const taps_lanes *L, const fx_taps_l
         }
     }
     if (found) {
-        taps_four(out, S, i, st->reuse_texel, four, four_texel);
+        memcpy(out->texel, st->reuse_texel, sizeof st->reuse_texel);
+        taps_from_lanes(out, L, i);
         if (blocks)
             blocks[i] = st->reuse_block;
         return;
@@ -566,14 +554,13 @@ static void taps_pixel_rest(taps_state *st, const taps_lanes *L, const fx_taps_l
             for (int t = 0; t < 4; t++)
                 st->reuse_texel[t] = texel[t];
             st->reuse = true, st->reuse_x0 = x0, st->reuse_y0 = y0, st->reuse_block = block0;
-            taps_four(out, S, i, st->reuse_texel, four, four_texel);
+            memcpy(out->texel, st->reuse_texel, sizeof st->reuse_texel);
+            taps_from_lanes(out, L, i);
             if (blocks)
                 blocks[i] = block0;
             return;
         }
     }
-    if (four) /* the taps below go to out, whatever they are */
-        four[i] = 0;
     /* The two columns and rows, clamped to the island (one test each for the usual case, inside it), in
      * scalars: arrays indexed by the tap are built only for the general path below. */
     long tx0 = x0, tx1 = x0 + 1, ty0 = y0, ty1 = y0 + 1;
@@ -701,9 +688,8 @@ static bool taps_straddle(taps_state *st, int32_t x0, int32_t y0, uint64_t key, 
  * the lanes' values, what the general path of taps_pixel_rest gives, value for value. Every other pixel goes
  * through taps_pixel_rest, the general loop body with its state in a struct, not inlined: in one function
  * with the usual case, their state together outnumbered the registers and the usual case ran from the stack. */
-FXC_HOT_INLINE uint32_t taps_of_effect(const kind_osc *k, const taps_lanes *L, const fx_taps_lanes *S,
-                                       const srv_pixel_lanes *P, uint32_t count, uint32_t effect, fx_taps *taps,
-                                       uint32_t *blocks, uint8_t *four, fx_texel4 *four_texel)
+FXC_HOT_INLINE uint32_t taps_of_effect(const kind_osc *k, const taps_lanes *L, const srv_pixel_lanes *P,
+                                       uint32_t count, uint32_t effect, fx_taps *taps, uint32_t *blocks)
 {
     uint32_t empty = 0; /* taps with count 0: only the general path gives them */
     taps_state st;
@@ -757,28 +743,20 @@ FXC_HOT_INLINE uint32_t taps_of_effect(const kind_osc *k, const taps_lanes *L, c
                 }
                 reuse_key = key, reuse_cell = cell;
             }
-            if (four) {
-                four_texel[i].texel[0] = t0;
-                four_texel[i].texel[1] = t1;
-                four_texel[i].texel[2] = t2;
-                four_texel[i].texel[3] = t3;
-                four[i] = 1;
-            } else {
-                out->texel[0] = t0;
-                out->texel[1] = t1;
-                out->texel[2] = t2;
-                out->texel[3] = t3;
-                taps_from_lanes(out, S, i);
-            }
+            out->texel[0] = t0;
+            out->texel[1] = t1;
+            out->texel[2] = t2;
+            out->texel[3] = t3;
+            taps_from_lanes(out, L, i);
             if (blocks)
                 blocks[i] = reuse_block;
             continue;
         }
     rest:
         st.last_slot = last_slot;
-        taps_pixel_rest(&st, L, S, P, i, out, blocks, four, four_texel);
+        taps_pixel_rest(&st, L, P, i, out, blocks);
         last_slot = st.last_slot;
-        empty += (!four || !four[i]) && out->count == 0;
+        empty += out->count == 0;
     }
     return empty;
 }
@@ -786,18 +764,14 @@ FXC_HOT_INLINE uint32_t taps_of_effect(const kind_osc *k, const taps_lanes *L, c
 /* The kind interface's taps: the lanes once for all the call's effects (they share the bias, so the level,
  * weights and positions), then each effect's lookups as above (its own memo, in a loop of its own: state
  * shared across effects in one loop was slower, kept in memory instead of registers). */
-FXC_HOT_CLONES static uint32_t osc_kind_pixel_taps_lanes(const void *cache, uint32_t slot, uint32_t thread,
-                                                         const srv_pixel *pixels, const srv_pixel_lanes *lanes,
-                                                         uint32_t count, uint32_t effect_count,
-                                                         const uint32_t *effects, int32_t bias, fx_taps *const *taps,
-                                                         uint32_t *const *blocks, fx_taps_lanes *taps_lanes_out,
-                                                         uint8_t *const *four, fx_texel4 *const *four_texel)
+FXC_HOT_CLONES static uint32_t osc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread,
+                                                   const srv_pixel *pixels, const srv_pixel_lanes *lanes,
+                                                   uint32_t count, uint32_t effect_count, const uint32_t *effects,
+                                                   int32_t bias, fx_taps *const *taps, uint32_t *const *blocks)
 {
     (void)slot, (void)thread;
     const kind_osc *k = cache;
     taps_lanes L;
-    fx_taps_lanes own;
-    fx_taps_lanes *S = taps_lanes_out ? taps_lanes_out : &own;
     srv_pixel_lanes copy;
     if (!lanes) { /* the pixels' values into lanes of our own */
         uint32_t i = 0;
@@ -817,26 +791,12 @@ FXC_HOT_CLONES static uint32_t osc_kind_pixel_taps_lanes(const void *cache, uint
         }
         lanes = &copy;
     }
-    taps_lanes_fill(&L, S, lanes, bias);
+    taps_lanes_fill(&L, lanes, bias);
     taps_lanes_fast(&L, lanes);
     uint32_t empty = 0;
-    for (uint32_t j = 0; j < effect_count; j++) {
-        /* An effect's structure of arrays only with the shared lanes the caller keeps. */
-        uint8_t *f = taps_lanes_out && four ? four[j] : NULL;
-        empty += taps_of_effect(k, &L, S, lanes, count, effects[j], taps[j], blocks ? blocks[j] : NULL, f,
-                                f ? four_texel[j] : NULL);
-    }
+    for (uint32_t j = 0; j < effect_count; j++)
+        empty += taps_of_effect(k, &L, lanes, count, effects[j], taps[j], blocks ? blocks[j] : NULL);
     return empty;
-}
-
-/* The same without structure-of-arrays output: every pixel's taps in taps[j][i]. */
-static uint32_t osc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
-                                    const srv_pixel_lanes *lanes, uint32_t count, uint32_t effect_count,
-                                    const uint32_t *effects, int32_t bias, fx_taps *const *taps,
-                                    uint32_t *const *blocks)
-{
-    return osc_kind_pixel_taps_lanes(cache, slot, thread, pixels, lanes, count, effect_count, effects, bias, taps,
-                                     blocks, NULL, NULL, NULL);
 }
 
 static uint32_t osc_kind_pool_capacity(const void *cache, uint32_t effect)
@@ -898,7 +858,6 @@ const srv_cache_kind srv__kind_osc = {
     .job_location = osc_kind_job_location,
     .finer_texels = osc_kind_finer_texels,
     .pixel_taps = osc_kind_pixel_taps,
-    .pixel_taps_lanes = osc_kind_pixel_taps_lanes,
     .pool_capacity = osc_kind_pool_capacity,
     .housekeeping = osc_kind_housekeeping,
     .frame_figures = osc_kind_frame_figures,

@@ -178,18 +178,6 @@ typedef struct srv_cache_kind {
     uint32_t (*pixel_taps)(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
                            const srv_pixel_lanes *lanes, uint32_t count, uint32_t effect_count,
                            const uint32_t *effects, int32_t bias, fx_taps *const *taps, uint32_t *const *blocks);
-    /* Optional (NULL: the kind has none): pixel_taps, with the taps of the effects that ask for it in
-     * structure of arrays (what fx_shade_run.four, four_texel and lanes mean). taps_lanes (may be NULL: then
-     * every effect's taps go to taps[j]) receives the values the call's effects share; four[j] (four may be
-     * NULL, and so may each four[j]: that effect's taps go to taps[j]) and four_texel[j] receive effect j's:
-     * for pixel i, four[j][i] = 1 with its texels in four_texel[j][i] where its taps are the usual four
-     * taps with taps_lanes' values (taps[j][i] is then left unset), else four[j][i] = 0 and taps[j][i]. The
-     * count it returns is that of the taps with count 0 in taps[j] (four[j][i] 0). */
-    uint32_t (*pixel_taps_lanes)(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
-                                 const srv_pixel_lanes *lanes, uint32_t count, uint32_t effect_count,
-                                 const uint32_t *effects, int32_t bias, fx_taps *const *taps,
-                                 uint32_t *const *blocks, fx_taps_lanes *taps_lanes, uint8_t *const *four,
-                                 fx_texel4 *const *four_texel);
     uint32_t (*pool_capacity)(const void *cache, uint32_t effect);
     /* Stage 9 and figures. */
     void (*housekeeping)(void *cache);
