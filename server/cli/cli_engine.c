@@ -536,3 +536,9 @@ void srv_cli_print_summary(const srv_cli_run *run, bool no_cache, bool interrupt
         printf("note:       %llu of %llu visible pixels were composed before their texels held data\n",
                (unsigned long long)t->pixels_missing, (unsigned long long)t->pixels_visible);
 }
+
+int srv_cli_run_option(const char *cmd, int code, const char *arg, srv_cli_engine *e, srv_cli_view_options *v)
+{
+    int known = srv_cli_engine_option(cmd, code, arg, e);
+    return known < 0 ? srv_cli_view_option(cmd, code, arg, v) : known;
+}

@@ -3,6 +3,7 @@
 #ifndef FXC_SERVER_CLI_ENGINE_H
 #define FXC_SERVER_CLI_ENGINE_H
 
+#include "cli_cameras.h"
 #include "engine.h"
 #include "report.h"
 
@@ -52,6 +53,10 @@ void srv_cli_effect_names(char *out, size_t cap);
 /* Handles one getopt_long result: 1 when it was an engine option and valid, 0 when it was one and invalid
  * (a one-line error "fxcache CMD: OPTION: ..." was printed), -1 when it is not an engine option. */
 int srv_cli_engine_option(const char *cmd, int code, const char *arg, srv_cli_engine *e);
+
+/* The same for the commands that take both the engine's and the camera options (sim, ref, report): 1 when
+ * code was one of them and valid, 0 when it was one and invalid (its one-line error printed), -1 otherwise. */
+int srv_cli_run_option(const char *cmd, int code, const char *arg, srv_cli_engine *e, srv_cli_view_options *v);
 
 /* Decides which effects run on scene s: the registry's needs, narrowed by --effects `list` (NULL or "auto":
  * all that are needed); effect_on by registry index, a reason for each (why it runs or is left out), and in

@@ -152,9 +152,7 @@ static int parse_options(int argc, char **argv, ref_options *o)
     optind = 1;
     opterr = 0;
     for (int c; (c = getopt_long(argc, argv, ":h", options, NULL)) != -1;) {
-        int known = srv_cli_engine_option("ref", c, optarg, &o->engine);
-        if (known < 0)
-            known = srv_cli_view_option("ref", c, optarg, &o->view);
+        int known = srv_cli_run_option("ref", c, optarg, &o->engine, &o->view);
         if (known == 0)
             return 2;
         if (known == 1)

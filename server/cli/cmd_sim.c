@@ -88,9 +88,7 @@ static int parse_options(int argc, char **argv, sim_options *o)
     struct option options[sizeof own / sizeof own[0] + 32];
     srv_cli_merge_options(own, sizeof own / sizeof own[0], options, sizeof options / sizeof options[0]);
     for (int c; (c = getopt_long(argc, argv, ":h", options, NULL)) != -1;) {
-        int known = srv_cli_engine_option("sim", c, optarg, &o->engine);
-        if (known < 0)
-            known = srv_cli_view_option("sim", c, optarg, &o->view);
+        int known = srv_cli_run_option("sim", c, optarg, &o->engine, &o->view);
         if (known == 0)
             return 2;
         if (known == 1)

@@ -151,9 +151,7 @@ int srv_report_parse_options(int argc, char **argv, report_options *o)
     struct option options[sizeof own / sizeof own[0] + 40];
     srv_cli_merge_options(own, sizeof own / sizeof own[0], options, sizeof options / sizeof options[0]);
     for (int c; (c = getopt_long(argc, argv, ":h", options, NULL)) != -1;) {
-        int known = srv_cli_engine_option("report", c, optarg, &o->engine);
-        if (known < 0)
-            known = srv_cli_view_option("report", c, optarg, &o->view);
+        int known = srv_cli_run_option("report", c, optarg, &o->engine, &o->view);
         if (known == 0)
             return 2;
         if (known == 1)
