@@ -15,154 +15,21 @@
  *   - ageing steps of 128 k / N with the fraction carried, hidden points twice as fast, eviction at 255 (and
  *     none with no_eviction), a full cache dropping its oldest points at age 128, a colour change ageing the
  *     neighbours, a new frame replacing what it saw;
- *   - 1, 2 and 4 threads give bit-identical frames, requests and caches over a moving sequence (the point
- * passes split statically, the default, or handed out dynamically), and tiles of any size (or none) the same
- * image;
- *   - descriptions and cameras out of range are refused;
- *   - the library needs nothing but libc, libm and pthreads (nm; the same check refuses fxc_proto). */
+ *   - descriptions and cameras out of range are refused.
+ * The scene is tests/fxt_rcache.h's; test_rcache_walk.c holds the threads, tiles and links checks. */
 #include "test_util.h"
 
-#include "rcache.h"
+#include "fxt_rcache.h"
 
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-#define PI 3.14159265358979323846
-
-/* ---- a small analytic scene, ray cast in double -------------------------------------------------------- */
-
-/* Floor y = floor_y (checkered; -1.5 unless a test lowers the sphere onto it), sphere of radius 1 at (0, 0,
- * -5) (shaded by its normal), wall z = -12 up to y = 3 (striped), sky beyond. Returns the distance along the
- * unit ray dir from o (+inf for the sky) and the colour. */
-typedef struct scene_hit {
-    double t;
-    uint8_t rgb[3];
-} scene_hit;
-
-static double sphere_t(const double o[3], const double d[3], const double c[3], double r)
-{
-    double oc[3] = {o[0] - c[0], o[1] - c[1], o[2] - c[2]};
-    double b = oc[0] * d[0] + oc[1] * d[1] + oc[2] * d[2];
-    double cc = oc[0] * oc[0] + oc[1] * oc[1] + oc[2] * oc[2] - r * r;
-    double disc = b * b - cc;
-    if (disc < 0)
-        return INFINITY;
-    double t = -b - sqrt(disc);
-    return t > 1e-9 ? t : INFINITY;
-}
-
-static const double sphere_centre[3] = {0, 0, -5};
-static double floor_y = -1.5;
-
-static scene_hit cast(const double o[3], const double d[3], bool with_sphere, bool with_floor)
-{
-    scene_hit h = {INFINITY, {100, 150, 220}};
-    double ts = with_sphere ? sphere_t(o, d, sphere_centre, 1.0) : INFINITY;
-    double tf = with_floor && d[1] < 0 ? (floor_y - o[1]) / d[1] : INFINITY;
-    double tw = d[2] < 0 ? (-12.0 - o[2]) / d[2] : INFINITY;
-    if (tw < INFINITY && o[1] + tw * d[1] > 3)
-        tw = INFINITY;
-    if (ts < h.t && ts <= tf && ts <= tw) {
-        h.t = ts;
-        double n[3];
-        for (int k = 0; k < 3; k++)
-            n[k] = o[k] + ts * d[k] - sphere_centre[k];
-        h.rgb[0] = (uint8_t)(127.5 + 127 * n[0]);
-        h.rgb[1] = (uint8_t)(127.5 + 127 * n[1]);
-        h.rgb[2] = (uint8_t)(127.5 + 127 * n[2]);
-    } else if (tf < h.t && tf <= tw) {
-        h.t = tf;
-        double x = o[0] + tf * d[0], z = o[2] + tf * d[2];
-        bool dark = ((int)floor(x) + (int)floor(z)) & 1;
-        h.rgb[0] = dark ? 40 : 210, h.rgb[1] = dark ? 50 : 200, h.rgb[2] = dark ? 60 : 190;
-    } else if (tw < h.t) {
-        h.t = tw;
-        double y = o[1] + tw * d[1];
-        bool band = ((int)floor(2 * y + 100)) & 1;
-        h.rgb[0] = band ? 180 : 90, h.rgb[1] = band ? 60 : 120, h.rgb[2] = 30;
-    }
-    return h;
-}
-
-static view_rc_camera look(double px, double py, double pz, double tx, double ty, double tz, float fov)
-{
-    view_rc_camera c = {.position = {px, py, pz},
-                        .direction = {(float)(tx - px), (float)(ty - py), (float)(tz - pz)},
-                        .fov_deg = fov};
-    return c;
-}
-
-/* The unit ray through pixel (x + 0.5, y + 0.5) of cam's w x h image, the server's pinhole model in double.
- */
-static void pixel_ray(const view_rc_camera *cam, uint32_t w, uint32_t h, uint32_t x, uint32_t y, double d[3])
-{
-    double f[3] = {cam->direction[0], cam->direction[1], cam->direction[2]};
-    double fl = sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]);
-    for (int k = 0; k < 3; k++)
-        f[k] /= fl;
-    double r[3] = {-f[2], 0, f[0]}; /* f x (0, 1, 0) */
-    double rl = sqrt(r[0] * r[0] + r[2] * r[2]);
-    r[0] /= rl, r[2] /= rl;
-    double u[3] = {r[1] * f[2] - r[2] * f[1], r[2] * f[0] - r[0] * f[2], r[0] * f[1] - r[1] * f[0]};
-    double thy = tan(cam->fov_deg * PI / 360.0), thx = thy * w / h;
-    double sx = (2.0 * (x + 0.5) / w - 1.0) * thx, sy = (1.0 - 2.0 * (y + 0.5) / h) * thy;
-    double len = 0;
-    for (int k = 0; k < 3; k++) {
-        d[k] = f[k] + sx * r[k] + sy * u[k];
-        len += d[k] * d[k];
-    }
-    for (int k = 0; k < 3; k++)
-        d[k] /= sqrt(len);
-}
-
-/* A frame of the scene: colours and distances along the rays. */
-static void render_scene(const view_rc_camera *cam, uint32_t w, uint32_t h, bool with_sphere, bool with_floor,
-                         uint8_t *rgb, float *depth)
-{
-    for (uint32_t y = 0; y < h; y++)
-        for (uint32_t x = 0; x < w; x++) {
-            double d[3];
-            pixel_ray(cam, w, h, x, y, d);
-            scene_hit hit = cast(cam->position, d, with_sphere, with_floor);
-            size_t p = (size_t)y * w + x;
-            memcpy(rgb + 3 * p, hit.rgb, 3);
-            depth[p] = (float)hit.t;
-        }
-}
-
-/* Round to IEEE binary16 (nearest, ties to even), as a PROTO_DEPTH_HALF frame carries it. */
-static float to_half(float v)
-{
-    if (!isfinite(v) || v == 0)
-        return v;
-    int e;
-    double m = frexp(v, &e); /* v = m 2^e, 0.5 <= |m| < 1: 11 significant bits */
-    double scaled = m * 2048.0;
-    double rounded = nearbyint(scaled);
-    return (float)ldexp(rounded / 2048.0, e);
-}
-
-static view_rc *make(const view_rc_desc *d)
-{
-    view_rc *rc = NULL;
-    assert_int_equal(view_rc_create(d, &rc), FXC_OK);
-    assert_non_null(rc);
-    return rc;
-}
-
-static void render(view_rc *rc, const view_rc_camera *cam, const view_rc_camera *predicted, view_rc_frame *f)
-{
-    assert_int_equal(view_rc_render(rc, cam, predicted, f), FXC_OK);
-}
-
-/* ---- descriptions and cameras -------------------------------------------------------------------------- */
-
 static void test_desc_defaults_and_refusals(void **state)
 {
     (void)state;
-    view_rc *rc = make(&(view_rc_desc){.width = 640, .height = 360});
+    view_rc *rc = fxt_rc_make(&(view_rc_desc){.width = 640, .height = 360});
     view_rc_desc d = view_rc_resolved_desc(rc);
     assert_int_equal(d.capacity, 640 * 360);
     assert_int_equal(d.sample_budget, 640 * 360 / 32);
@@ -197,7 +64,7 @@ static void test_desc_defaults_and_refusals(void **state)
     assert_int_equal(view_rc_create(NULL, NULL), FXC_ERR_INVALID);
 
     /* Cameras: the server's rules. */
-    rc = make(&(view_rc_desc){.width = 16, .height = 16});
+    rc = fxt_rc_make(&(view_rc_desc){.width = 16, .height = 16});
     view_rc_frame f;
     static const view_rc_camera cams[] = {
         {.position = {0, 0, 0}, .direction = {0, 0, -1}, .fov_deg = 0},
@@ -212,14 +79,14 @@ static void test_desc_defaults_and_refusals(void **state)
         float depth = 1;
         assert_int_equal(view_rc_insert_frame(rc, &cams[i], 1, 1, rgb, &depth), FXC_ERR_CAMERA);
     }
-    view_rc_camera good = look(0, 0, 0, 0, 0, -1, 60);
+    view_rc_camera good = fxt_rc_look(0, 0, 0, 0, 0, -1, 60);
     assert_int_equal(view_rc_render(rc, &good, &cams[2], &f), FXC_ERR_CAMERA); /* a bad predicted camera */
     assert_int_equal(view_rc_insert_frame(rc, &good, 0, 1, (uint8_t[3]){0}, (float[1]){1}), FXC_ERR_INVALID);
     assert_int_equal(view_rc_insert_frame(rc, &good, 1, 1, NULL, (float[1]){1}), FXC_ERR_INVALID);
     assert_int_equal(view_rc_insert_samples(rc, &good, 16, 16, NULL, 3), FXC_ERR_INVALID);
     view_rc_destroy(rc);
     /* More pixels than the capacity. */
-    rc = make(&(view_rc_desc){.width = 4, .height = 4, .capacity = 8});
+    rc = fxt_rc_make(&(view_rc_desc){.width = 4, .height = 4, .capacity = 8});
     uint8_t rgb[16 * 3] = {0};
     float depth[16];
     for (int i = 0; i < 16; i++)
@@ -233,18 +100,18 @@ static void test_desc_defaults_and_refusals(void **state)
 static void check_own_camera(uint32_t threads, bool half, bool cull)
 {
     const uint32_t w = 97, h = 61;
-    view_rc_camera cam = look(1.3, 0.7, 2.2, 0.2, -0.4, -5, 55);
+    view_rc_camera cam = fxt_rc_look(1.3, 0.7, 2.2, 0.2, -0.4, -5, 55);
     uint8_t *rgb = malloc((size_t)w * h * 3);
     float *depth = malloc((size_t)w * h * sizeof(float));
-    render_scene(&cam, w, h, true, true, rgb, depth);
+    fxt_rc_render_scene(&cam, w, h, true, true, rgb, depth);
     if (half)
         for (size_t p = 0; p < (size_t)w * h; p++)
-            depth[p] = to_half(depth[p]);
-    view_rc *rc = make(&(view_rc_desc){
+            depth[p] = fxt_rc_to_half(depth[p]);
+    view_rc *rc = fxt_rc_make(&(view_rc_desc){
         .width = w, .height = h, .tile_size = 16, .threads = threads, .no_depth_cull = !cull});
     assert_int_equal(view_rc_insert_frame(rc, &cam, w, h, rgb, depth), FXC_OK);
     view_rc_frame f;
-    render(rc, &cam, NULL, &f);
+    fxt_rc_render(rc, &cam, NULL, &f);
     assert_memory_equal(f.rgb, rgb, (size_t)w * h * 3);
     size_t sky = 0;
     for (size_t p = 0; p < (size_t)w * h; p++) {
@@ -275,10 +142,10 @@ static void test_reprojection_own_camera(void **state)
     check_own_camera(3, true, true);
     /* With the sphere resting on the floor, the floor shows in slivers one pixel thin behind the contact,
      * which the depth cull (a 3x3 heuristic) cannot tell from a gap in the sphere: exact without the cull. */
-    floor_y = -1.0;
+    fxt_rc_floor_y = -1.0;
     check_own_camera(1, true, false);
     check_own_camera(2, false, false);
-    floor_y = -1.5;
+    fxt_rc_floor_y = -1.5;
 }
 
 /* ---- closed-form motion -------------------------------------------------------------------------------- */
@@ -293,8 +160,8 @@ static void test_closed_form_motion(void **state)
     (void)state;
     const uint32_t w = 101, h = 61;
     const float fov = 50;
-    const double thy = tan(fov * PI / 360.0), thx = thy * w / h;
-    view_rc_camera c0 = look(0, 0, 0, 0, 0, -1, fov);
+    const double thy = tan(fov * FXT_RC_PI / 360.0), thx = thy * w / h;
+    view_rc_camera c0 = fxt_rc_look(0, 0, 0, 0, 0, -1, fov);
     const uint32_t columns[] = {8, 23, 37, 50, 61, 77, 94};
     const float dist[] = {3.0f, 4.5f, 6.0f, 7.5f, 9.0f, 10.5f, 12.0f};
     enum { N = sizeof columns / sizeof columns[0] };
@@ -313,14 +180,15 @@ static void test_closed_form_motion(void **state)
     } moves[] = {{0, 0, 0},   {4, 0, 0},       {-7.5, 0, 0},   {12, 0, 0},
                  {0, 0.6, 0}, {0, -1.1, 0.35}, {0, 0.25, -0.5}};
     for (size_t m = 0; m < sizeof moves / sizeof moves[0]; m++) {
-        view_rc *rc = make(&(view_rc_desc){.width = w, .height = h, .tile_size = 32, .no_prefilter = true});
+        view_rc *rc =
+            fxt_rc_make(&(view_rc_desc){.width = w, .height = h, .tile_size = 32, .no_prefilter = true});
         assert_int_equal(view_rc_insert_samples(rc, &c0, w, h, samples, N), FXC_OK);
-        double a = moves[m].yaw_deg * PI / 180;
+        double a = moves[m].yaw_deg * FXT_RC_PI / 180;
         view_rc_camera c1 = {.position = {moves[m].tx, moves[m].ty, 0},
                              .direction = {(float)sin(a), 0, (float)-cos(a)},
                              .fov_deg = fov};
         view_rc_frame f;
-        render(rc, &c1, NULL, &f);
+        fxt_rc_render(rc, &c1, NULL, &f);
         uint32_t expected_points = 0;
         for (int i = 0; i < N; i++) {
             double px, py;
@@ -354,31 +222,31 @@ static void test_depth_test_keeps_nearer(void **state)
 {
     (void)state;
     const uint32_t w = 32, h = 32;
-    view_rc_camera cam = look(0.5, 1, 3, 0, 0.5, -4, 60);
+    view_rc_camera cam = fxt_rc_look(0.5, 1, 3, 0, 0.5, -4, 60);
     view_rc_sample near_s = {.x = 13, .y = 20, .rgb = {250, 10, 10}, .depth = 3.0f};
     view_rc_sample far_s = {.x = 13, .y = 20, .rgb = {10, 10, 250}, .depth = 7.0f};
     for (int order = 0; order < 2; order++) {
-        view_rc *rc = make(&(view_rc_desc){.width = w, .height = h});
+        view_rc *rc = fxt_rc_make(&(view_rc_desc){.width = w, .height = h});
         /* Two batches without a frame between them: nothing replaces anything, the z-buffer decides. */
         assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, order ? &far_s : &near_s, 1), FXC_OK);
         assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, order ? &near_s : &far_s, 1), FXC_OK);
         assert_int_equal(view_rc_point_count(rc), 2);
         view_rc_frame f;
-        render(rc, &cam, NULL, &f);
+        fxt_rc_render(rc, &cam, NULL, &f);
         size_t p = 20 * w + 13;
         assert_int_equal(f.kind[p], VIEW_RC_POINT);
         assert_memory_equal(f.rgb + 3 * p, near_s.rgb, 3);
         assert_true(fabsf(f.depth[p] - 3.0f) < 1e-5f);
         assert_int_equal(f.stats.pixels[VIEW_RC_POINT], 1);
         /* A frame later, from another place, the nearer one still wins where both land. */
-        view_rc_camera moved = look(1.0, 1, 3, 0.5, 0.5, -4, 60);
-        render(rc, &moved, NULL, &f);
+        view_rc_camera moved = fxt_rc_look(1.0, 1, 3, 0.5, 0.5, -4, 60);
+        fxt_rc_render(rc, &moved, NULL, &f);
         assert_int_equal(f.stats.points, 2);
         assert_int_equal(f.stats.pixels[VIEW_RC_POINT], 2); /* different parallax: both show */
         view_rc_destroy(rc);
     }
     /* A whole far frame, then a near object's samples: the near colours show. */
-    view_rc *rc = make(&(view_rc_desc){.width = w, .height = h, .capacity = 2 * w * h});
+    view_rc *rc = fxt_rc_make(&(view_rc_desc){.width = w, .height = h, .capacity = 2 * w * h});
     uint8_t rgb[32 * 32 * 3];
     float depth[32 * 32];
     for (int p = 0; p < 32 * 32; p++) {
@@ -392,7 +260,7 @@ static void test_depth_test_keeps_nearer(void **state)
             .x = (uint16_t)(4 + 6 * i), .y = 9, .rgb = {200, 100, (uint8_t)i}, .depth = 2.5f};
     assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, s, 4), FXC_OK);
     view_rc_frame f;
-    render(rc, &cam, NULL, &f);
+    fxt_rc_render(rc, &cam, NULL, &f);
     for (int i = 0; i < 4; i++)
         assert_memory_equal(f.rgb + 3 * (9 * w + 4 + 6 * i), s[i].rgb, 3);
     assert_int_equal(f.stats.points, 32 * 32 + 4);
@@ -405,16 +273,17 @@ static void test_disocclusion_empty_and_first(void **state)
 {
     (void)state;
     const uint32_t w = 96, h = 64;
-    view_rc_camera c0 = look(0, 0, 0, 0, 0, -1, 50);
+    view_rc_camera c0 = fxt_rc_look(0, 0, 0, 0, 0, -1, 50);
     uint8_t *rgb = malloc(w * h * 3);
     float *depth = malloc(w * h * sizeof(float));
-    render_scene(&c0, w, h, true, false, rgb, depth); /* sphere before the wall, no floor */
-    view_rc *rc = make(&(view_rc_desc){.width = w, .height = h, .tile_size = 16, .capacity = 2 * w * h});
+    fxt_rc_render_scene(&c0, w, h, true, false, rgb, depth); /* sphere before the wall, no floor */
+    view_rc *rc =
+        fxt_rc_make(&(view_rc_desc){.width = w, .height = h, .tile_size = 16, .capacity = 2 * w * h});
     assert_int_equal(view_rc_insert_frame(rc, &c0, w, h, rgb, depth), FXC_OK);
     view_rc_frame f;
-    render(rc, &c0, NULL, &f);
-    view_rc_camera c1 = look(1.5, 0, 0, 1.5, 0, -1, 50); /* 1.5 m to the right */
-    render(rc, &c1, NULL, &f);
+    fxt_rc_render(rc, &c0, NULL, &f);
+    view_rc_camera c1 = fxt_rc_look(1.5, 0, 0, 1.5, 0, -1, 50); /* 1.5 m to the right */
+    fxt_rc_render(rc, &c1, NULL, &f);
 
     /* Disoccluded: pixels of c1 that see the wall where c0's view of that wall point was blocked by the
      * sphere. */
@@ -423,9 +292,9 @@ static void test_disocclusion_empty_and_first(void **state)
     for (uint32_t y = 0; y < h; y++)
         for (uint32_t x = 0; x < w; x++) {
             double d[3];
-            pixel_ray(&c1, w, h, x, y, d);
-            scene_hit hit = cast(c1.position, d, true, false);
-            if (!(hit.t < INFINITY) || sphere_t(c1.position, d, sphere_centre, 1.0) == hit.t)
+            fxt_rc_pixel_ray(&c1, w, h, x, y, d);
+            fxt_rc_hit hit = fxt_rc_cast(c1.position, d, true, false);
+            if (!(hit.t < INFINITY) || fxt_rc_sphere_t(c1.position, d, fxt_rc_sphere_centre, 1.0) == hit.t)
                 continue;
             double q[3], to[3], len = 0;
             for (int k = 0; k < 3; k++) {
@@ -436,7 +305,7 @@ static void test_disocclusion_empty_and_first(void **state)
             len = sqrt(len);
             for (int k = 0; k < 3; k++)
                 to[k] /= len;
-            if (sphere_t(c0.position, to, sphere_centre, 1.0) < len) {
+            if (fxt_rc_sphere_t(c0.position, to, fxt_rc_sphere_centre, 1.0) < len) {
                 dis[y * w + x] = 1;
                 dis_count++;
             }
@@ -496,11 +365,11 @@ static void test_disocclusion_empty_and_first(void **state)
 static view_rc_frame filter_frame(view_rc **rc_out, const view_rc_desc *d, const view_rc_sample *s,
                                   uint32_t n)
 {
-    view_rc *rc = make(d);
-    view_rc_camera cam = look(0, 0, 0, 0, 0, -1, 60);
+    view_rc *rc = fxt_rc_make(d);
+    view_rc_camera cam = fxt_rc_look(0, 0, 0, 0, 0, -1, 60);
     assert_int_equal(view_rc_insert_samples(rc, &cam, d->width, d->height, s, n), FXC_OK);
     view_rc_frame f;
-    render(rc, &cam, NULL, &f);
+    fxt_rc_render(rc, &cam, NULL, &f);
     *rc_out = rc;
     return f;
 }
@@ -763,25 +632,26 @@ static void test_predicted_requests(void **state)
 {
     (void)state;
     const uint32_t w = 128, h = 96;
-    view_rc_camera c0 = look(0, 0, 0, 0, 0, -1, 60);
+    view_rc_camera c0 = fxt_rc_look(0, 0, 0, 0, 0, -1, 60);
     uint8_t *rgb = malloc(w * h * 3);
     float *depth = malloc(w * h * sizeof(float));
-    render_scene(&c0, w, h, true, true, rgb, depth);
+    fxt_rc_render_scene(&c0, w, h, true, true, rgb, depth);
     for (int budget_case = 0; budget_case < 2; budget_case++) {
         uint32_t budget = budget_case ? 64 : 2000;
-        view_rc *rc = make(&(view_rc_desc){.width = w, .height = h, .sample_budget = budget});
+        view_rc *rc = fxt_rc_make(&(view_rc_desc){.width = w, .height = h, .sample_budget = budget});
         assert_int_equal(view_rc_insert_frame(rc, &c0, w, h, rgb, depth), FXC_OK);
         /* Turned 25 degrees to the right: beyond c0's frustum nothing is cached. */
-        view_rc_camera turned = {.position = {0, 0, 0},
-                                 .direction = {(float)sin(25 * PI / 180), 0, (float)-cos(25 * PI / 180)},
-                                 .fov_deg = 60};
+        view_rc_camera turned = {
+            .position = {0, 0, 0},
+            .direction = {(float)sin(25 * FXT_RC_PI / 180), 0, (float)-cos(25 * FXT_RC_PI / 180)},
+            .fov_deg = 60};
         view_rc_frame f;
-        render(rc, &c0, &turned, &f);
+        fxt_rc_render(rc, &c0, &turned, &f);
         /* Where a ray of `turned` through image-plane point (sx, sy) meets c0's image plane: c0 sees along
          * -z, `turned` along (sin a, 0, -cos a) with right (cos a, 0, sin a), so the ray's c0 coordinates are
          * x = sin a + sx cos a, y = sy, depth = cos a - sx sin a. Outside c0's frustum when |x| / depth or
          * |y| / depth exceeds c0's tangents: nothing is cached there. */
-        double a = 25 * PI / 180, thy = tan(30 * PI / 180), thx = thy * w / h;
+        double a = 25 * FXT_RC_PI / 180, thy = tan(30 * FXT_RC_PI / 180), thx = thy * w / h;
         uint32_t surely_empty = 0;
         for (uint32_t ly = 0; ly < h / 4; ly++)
             for (uint32_t lx = 0; lx < w / 4; lx++) {
@@ -813,9 +683,10 @@ static void test_predicted_requests(void **state)
         check_distinct(f.requests, f.request_count, w, h);
         view_rc_destroy(rc);
         /* Switched off: no predicted requests, the whole budget to the dither. */
-        rc = make(&(view_rc_desc){.width = w, .height = h, .sample_budget = budget, .no_prediction = true});
+        rc = fxt_rc_make(
+            &(view_rc_desc){.width = w, .height = h, .sample_budget = budget, .no_prediction = true});
         assert_int_equal(view_rc_insert_frame(rc, &c0, w, h, rgb, depth), FXC_OK);
-        render(rc, &c0, &turned, &f);
+        fxt_rc_render(rc, &c0, &turned, &f);
         assert_int_equal(f.predicted_count, 0);
         assert_int_equal(f.request_count, budget);
         view_rc_destroy(rc);
@@ -848,9 +719,9 @@ static void test_ageing_and_eviction(void **state)
     (void)state;
     const uint32_t w = 64, h = 64;
     for (int no_eviction = 0; no_eviction < 2; no_eviction++) {
-        view_rc *rc =
-            make(&(view_rc_desc){.width = w, .height = h, .capacity = 4096, .no_eviction = no_eviction});
-        view_rc_camera cam = look(0, 0, 0, 0, 0, -1, 60), back = look(0, 0, 0, 0, 0, 1, 60);
+        view_rc *rc = fxt_rc_make(
+            &(view_rc_desc){.width = w, .height = h, .capacity = 4096, .no_eviction = no_eviction});
+        view_rc_camera cam = fxt_rc_look(0, 0, 0, 0, 0, -1, 60), back = fxt_rc_look(0, 0, 0, 0, 0, 1, 60);
         /* One point in view (colour 1, 2, 3) and one behind the camera (4, 5, 6). */
         view_rc_sample seen = {.x = 0, .y = 0, .rgb = {1, 2, 3}, .depth = 4};
         view_rc_sample hidden = {.x = 30, .y = 30, .rgb = {4, 5, 6}, .depth = 4};
@@ -858,7 +729,7 @@ static void test_ageing_and_eviction(void **state)
         assert_int_equal(view_rc_insert_samples(rc, &back, w, h, &hidden, 1), FXC_OK);
         uint32_t next_pixel = 1; /* fresh pixels for the filler samples, never the same twice */
         view_rc_frame f;
-        render(rc, &cam, NULL, &f); /* frame 0 inserted 2: its step is 0 */
+        fxt_rc_render(rc, &cam, NULL, &f); /* frame 0 inserted 2: its step is 0 */
         assert_int_equal(age_of(rc, 1, 2, 3), 0);
         for (int frame = 1; frame <= 85;
              frame++) { /* 85 * 48 + 2 points: within the capacity and the image */
@@ -871,7 +742,7 @@ static void test_ageing_and_eviction(void **state)
                                            .rgb = {200, (uint8_t)(p & 0xFF), (uint8_t)(p >> 8)}};
             }
             assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, fill, 48), FXC_OK);
-            render(rc, &cam, NULL, &f);
+            fxt_rc_render(rc, &cam, NULL, &f);
             assert_int_equal(f.stats.age_step, (uint32_t)(floor(1.5 * frame) - floor(1.5 * (frame - 1))));
             assert_int_equal(f.stats.hidden_age_step, 3);
             assert_int_equal(age_of(rc, 1, 2, 3), (int)floor(1.5 * frame));
@@ -897,8 +768,8 @@ static void test_full_cache_drops_oldest_at_128(void **state)
 {
     (void)state;
     const uint32_t w = 128, h = 128;
-    view_rc *rc = make(&(view_rc_desc){.width = w, .height = h, .capacity = 4096});
-    view_rc_camera cam = look(0, 0, 0, 0, 0, -1, 60);
+    view_rc *rc = fxt_rc_make(&(view_rc_desc){.width = w, .height = h, .capacity = 4096});
+    view_rc_camera cam = fxt_rc_look(0, 0, 0, 0, 0, -1, 60);
     uint64_t dropped = 0, dropped_age = 0;
     for (uint32_t frame = 0; frame < 48; frame++) {
         view_rc_sample s[256];
@@ -909,7 +780,7 @@ static void test_full_cache_drops_oldest_at_128(void **state)
         }
         assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, s, 256), FXC_OK);
         view_rc_frame f;
-        render(rc, &cam, NULL, &f);
+        fxt_rc_render(rc, &cam, NULL, &f);
         assert_int_equal(f.stats.age_step, 8);
         assert_int_equal(f.stats.dropped, frame >= 16 ? 256 : 0);
         assert_true(f.stats.points <= 4096);
@@ -934,8 +805,8 @@ static void test_drops_first_in_slot_order(void **state)
 {
     (void)state;
     const uint32_t w = 128, h = 128, n = 4096, more = 100;
-    view_rc *rc = make(&(view_rc_desc){.width = w, .height = h, .capacity = n});
-    view_rc_camera cam = look(0, 0, 0, 0, 0, -1, 60);
+    view_rc *rc = fxt_rc_make(&(view_rc_desc){.width = w, .height = h, .capacity = n});
+    view_rc_camera cam = fxt_rc_look(0, 0, 0, 0, 0, -1, 60);
     view_rc_sample *s = malloc(sizeof *s * n);
     for (uint32_t p = 0; p < n; p++)
         s[p] = (view_rc_sample){.x = (uint16_t)(p % w),
@@ -944,7 +815,7 @@ static void test_drops_first_in_slot_order(void **state)
                                 .rgb = {(uint8_t)(p & 255), (uint8_t)(p >> 8), 1}};
     assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, s, n), FXC_OK);
     view_rc_frame f;
-    render(rc, &cam, NULL, &f);
+    fxt_rc_render(rc, &cam, NULL, &f);
     assert_int_equal(f.stats.points, n);
     for (uint32_t i = 0; i < more; i++)
         s[i] = (view_rc_sample){.x = (uint16_t)((n + i) % w),
@@ -952,7 +823,7 @@ static void test_drops_first_in_slot_order(void **state)
                                 .depth = 5,
                                 .rgb = {(uint8_t)i, 0, 2}};
     assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, s, more), FXC_OK);
-    render(rc, &cam, NULL, &f);
+    fxt_rc_render(rc, &cam, NULL, &f);
     assert_int_equal(f.stats.dropped, more);
     assert_int_equal(f.stats.dropped_age_sum, (uint64_t)more * 128);
     uint32_t count = view_rc_point_count(rc);
@@ -981,8 +852,8 @@ static void test_colour_change_penalty(void **state)
 {
     (void)state;
     const uint32_t w = 32, h = 32;
-    view_rc *rc = make(&(view_rc_desc){.width = w, .height = h, .capacity = 2048});
-    view_rc_camera cam = look(0, 0, 0, 0, 0, -1, 60);
+    view_rc *rc = fxt_rc_make(&(view_rc_desc){.width = w, .height = h, .capacity = 2048});
+    view_rc_camera cam = fxt_rc_look(0, 0, 0, 0, 0, -1, 60);
     uint8_t rgb[32 * 32 * 3];
     float depth[32 * 32];
     memset(rgb, 128, sizeof rgb);
@@ -990,13 +861,13 @@ static void test_colour_change_penalty(void **state)
         depth[p] = 5;
     assert_int_equal(view_rc_insert_frame(rc, &cam, w, h, rgb, depth), FXC_OK);
     view_rc_frame f;
-    render(rc, &cam, NULL, &f); /* 1024 new in 2048: step 64 */
+    fxt_rc_render(rc, &cam, NULL, &f); /* 1024 new in 2048: step 64 */
     assert_int_equal(f.stats.age_step, 64);
     view_rc_sample changed = {.x = 16, .y = 16, .rgb = {255, 0, 0}, .depth = 5};
     view_rc_sample similar = {.x = 5, .y = 5, .rgb = {150, 110, 128}, .depth = 5.05f};
     assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, &changed, 1), FXC_OK);
     assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, &similar, 1), FXC_OK);
-    render(rc, &cam, NULL, &f); /* 2 new in 2048: step 0 (0.125, carried) */
+    fxt_rc_render(rc, &cam, NULL, &f); /* 2 new in 2048: step 0 (0.125, carried) */
     assert_int_equal(f.stats.superseded, 2);
     assert_int_equal(f.stats.points, 1024);
     expect_pixel(&f, 16, 16, VIEW_RC_POINT, 255, 0, 0);
@@ -1020,341 +891,24 @@ static void test_frame_replaces_what_it_saw(void **state)
 {
     (void)state;
     const uint32_t w = 48, h = 40;
-    view_rc_camera cam = look(0.3, 0.5, 1, 0, 0, -5, 60);
+    view_rc_camera cam = fxt_rc_look(0.3, 0.5, 1, 0, 0, -5, 60);
     uint8_t *rgb = malloc(w * h * 3);
     float *depth = malloc(w * h * sizeof(float));
-    render_scene(&cam, w, h, true, true, rgb, depth);
-    view_rc *rc = make(&(view_rc_desc){.width = w, .height = h});
+    fxt_rc_render_scene(&cam, w, h, true, true, rgb, depth);
+    view_rc *rc = fxt_rc_make(&(view_rc_desc){.width = w, .height = h});
     assert_int_equal(view_rc_insert_frame(rc, &cam, w, h, rgb, depth), FXC_OK);
     view_rc_frame f;
-    render(rc, &cam, NULL, &f);
+    fxt_rc_render(rc, &cam, NULL, &f);
     for (size_t i = 0; i < (size_t)w * h * 3; i++)
         rgb[i] = (uint8_t)(255 - rgb[i]);
     assert_int_equal(view_rc_insert_frame(rc, &cam, w, h, rgb, depth), FXC_OK);
     assert_int_equal(view_rc_point_count(rc), w * h);
-    render(rc, &cam, NULL, &f);
+    fxt_rc_render(rc, &cam, NULL, &f);
     assert_int_equal(f.stats.superseded, w * h);
     assert_memory_equal(f.rgb, rgb, (size_t)w * h * 3);
     view_rc_destroy(rc);
     free(rgb);
     free(depth);
-}
-
-/* ---- threads ------------------------------------------------------------------------------------------- */
-
-/* A walk: a first frame, then each client frame the camera turns and moves a little, the previous frame's
- * requests (both kinds) are answered by the ray caster with one frame of delay, and every few frames a whole
- * new frame arrives. Run with `threads`; every output of every frame is appended to a log for comparison. */
-typedef struct walk_log {
-    uint8_t *bytes;
-    size_t used, cap;
-} walk_log;
-
-static void log_bytes(walk_log *log, const void *data, size_t n)
-{
-    if (log->used + n > log->cap) {
-        log->cap = (log->used + n) * 2;
-        log->bytes = realloc(log->bytes, log->cap);
-    }
-    memcpy(log->bytes + log->used, data, n);
-    log->used += n;
-}
-
-static view_rc_camera walk_camera(int frame)
-{
-    double a = frame * 2.0 * PI / 180, px = 0.05 * frame, pz = 1.0 - 0.04 * frame;
-    return look(px, 0.2, pz, px + sin(a), 0.1, pz - cos(a), 60);
-}
-
-static void answer(view_rc *rc, const view_rc_camera *cam, uint32_t w, uint32_t h, const view_rc_pixel *px,
-                   uint32_t n)
-{
-    view_rc_sample *s = malloc(sizeof *s * (n + 1));
-    for (uint32_t i = 0; i < n; i++) {
-        double d[3];
-        pixel_ray(cam, w, h, px[i].x, px[i].y, d);
-        scene_hit hit = cast(cam->position, d, true, true);
-        s[i] = (view_rc_sample){.x = px[i].x, .y = px[i].y, .depth = (float)hit.t};
-        memcpy(s[i].rgb, hit.rgb, 3);
-    }
-    assert_int_equal(view_rc_insert_samples(rc, cam, w, h, s, n), FXC_OK);
-    free(s);
-}
-
-static walk_log walk(uint32_t threads, uint32_t tile, bool dynamic, bool separate)
-{
-    const uint32_t w = 83, h = 57;
-    walk_log log = {0};
-    view_rc *rc = make(&(view_rc_desc){.width = w,
-                                       .height = h,
-                                       .threads = threads,
-                                       .tile_size = tile,
-                                       .capacity = w * h * 3 / 2,
-                                       .dynamic_points = dynamic,
-                                       .dynamic_pixels = dynamic,
-                                       .separate_pixel_passes = separate});
-    uint8_t *rgb = malloc(w * h * 3);
-    float *depth = malloc(w * h * sizeof(float));
-    view_rc_pixel *req = malloc(sizeof *req * w * h), *pred = malloc(sizeof *pred * w * h);
-    uint32_t nreq = 0, npred = 0;
-    view_rc_camera prev = walk_camera(0), prev_pred = walk_camera(3);
-    for (int frame = 0; frame < 24; frame++) {
-        view_rc_camera cam = walk_camera(frame), predicted = walk_camera(frame + 3);
-        if (frame % 8 == 0) {
-            render_scene(&cam, w, h, true, true, rgb, depth);
-            assert_int_equal(view_rc_insert_frame(rc, &cam, w, h, rgb, depth), FXC_OK);
-        }
-        answer(rc, &prev, w, h, req, nreq);
-        answer(rc, &prev_pred, w, h, pred, npred);
-        view_rc_frame f;
-        render(rc, &cam, &predicted, &f);
-        log_bytes(&log, f.rgb, (size_t)w * h * 3);
-        log_bytes(&log, f.depth, (size_t)w * h * sizeof(float));
-        log_bytes(&log, f.kind, (size_t)w * h);
-        log_bytes(&log, f.priority, (size_t)w * h);
-        log_bytes(&log, f.requests, f.request_count * sizeof(view_rc_pixel));
-        log_bytes(&log, f.predicted_requests, f.predicted_count * sizeof(view_rc_pixel));
-        uint32_t counts[] = {f.stats.points,  f.stats.projected, f.stats.migrated,  f.stats.culled,
-                             f.stats.evicted, f.stats.dropped,   f.stats.superseded};
-        log_bytes(&log, counts, sizeof counts);
-        memcpy(req, f.requests, f.request_count * sizeof *req);
-        memcpy(pred, f.predicted_requests, f.predicted_count * sizeof *pred);
-        nreq = f.request_count;
-        npred = f.predicted_count;
-        prev = cam;
-        prev_pred = predicted;
-        if (frame > 0)
-            assert_true(f.stats.migrated > 0 || tile >= 83);
-    }
-    uint32_t n = view_rc_point_count(rc);
-    view_rc_point *pts = calloc(n + 1, sizeof *pts); /* zeroed: the struct's padding is compared too */
-    uint32_t got = view_rc_points(rc, 0, n, pts);
-    assert_int_equal(got, n);
-    log_bytes(&log, pts, sizeof *pts * n);
-    free(pts);
-    view_rc_destroy(rc);
-    free(rgb);
-    free(depth);
-    free(req);
-    free(pred);
-    return log;
-}
-
-static void test_threads_bit_identical(void **state)
-{
-    (void)state;
-    const uint32_t tiles[] = {16, 13, 64};
-    for (size_t t = 0; t < sizeof tiles / sizeof tiles[0]; t++) {
-        walk_log one = walk(1, tiles[t], false, false);
-        /* 2 and 4 threads, the point and pixel passes split statically (the default) and handed out
-         * dynamically; then the cull, interpolation and prefilter as separate passes over the image instead
-         * of fused by bands (whose halo rows are culled twice), on 1 and 2 threads. */
-        const uint32_t threads[] = {2, 4, 2, 4, 1, 2};
-        for (size_t k = 0; k < 6; k++) {
-            walk_log many = walk(threads[k], tiles[t], k >= 2 && k < 4, k >= 4);
-            assert_int_equal(many.used, one.used);
-            assert_memory_equal(many.bytes, one.bytes, one.used);
-            free(many.bytes);
-        }
-        free(one.bytes);
-    }
-}
-
-/* The z-buffer's ties, by closed form: two points at exactly the same depth in one pixel (the same sample
- * inserted twice, 8,000 slots apart: chunks 0 and 1), the pixel must show the first slot's colour; a later
- * point a little nearer wins. Every z-buffer path: one thread straight into the image (the default), one
- * thread through the tile lists (tiled_one_thread), 2 threads, no_tiling, tiles in the tile's buffers (64)
- * and in the image (512). */
-static void test_zbuffer_ties_first_slot(void **state)
-{
-    (void)state;
-    const uint32_t w = 128, h = 64, p = 20 * w + 30, q = 40 * w + 90;
-    view_rc_camera cam = look(0, 0, 0, 0, 0, -1, 60);
-    view_rc_sample *s = malloc(sizeof *s * (w * h + 4));
-    uint32_t n = 0;
-    const uint8_t red[3] = {200, 0, 0}, green[3] = {0, 200, 0}, grey[3] = {90, 90, 90};
-    s[n] = (view_rc_sample){.x = (uint16_t)(p % w), .y = (uint16_t)(p / w), .depth = 5.0f};
-    memcpy(s[n++].rgb, red, 3);
-    s[n] = (view_rc_sample){.x = (uint16_t)(q % w), .y = (uint16_t)(q / w), .depth = 5.0f};
-    memcpy(s[n++].rgb, red, 3);
-    for (uint32_t k = 0; k < w * h; k++) {
-        if (k == p || k == q)
-            continue;
-        s[n] = (view_rc_sample){.x = (uint16_t)(k % w), .y = (uint16_t)(k / w), .depth = 5.0f};
-        memcpy(s[n++].rgb, grey, 3);
-    }
-    s[n] = (view_rc_sample){.x = (uint16_t)(p % w), .y = (uint16_t)(p / w), .depth = 5.0f};
-    memcpy(s[n++].rgb, green, 3);
-    s[n] = (view_rc_sample){.x = (uint16_t)(q % w), .y = (uint16_t)(q / w), .depth = 4.99f};
-    memcpy(s[n++].rgb, green, 3);
-    const struct {
-        uint32_t threads, tile;
-        bool tiled, no_tiling;
-    } ways[] = {{1, 64, false, false}, {1, 512, false, false}, {1, 64, true, false}, {1, 512, true, false},
-                {2, 64, false, false}, {2, 512, false, false}, {1, 64, false, true}};
-    for (size_t k = 0; k < sizeof ways / sizeof ways[0]; k++) {
-        view_rc *rc = make(&(view_rc_desc){.width = w,
-                                           .height = h,
-                                           .threads = ways[k].threads,
-                                           .tile_size = ways[k].tile,
-                                           .capacity = w * h + 8,
-                                           .tiled_one_thread = ways[k].tiled,
-                                           .no_tiling = ways[k].no_tiling});
-        assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, s, n), FXC_OK);
-        view_rc_frame f;
-        render(rc, &cam, NULL, &f);
-        assert_int_equal(f.stats.projected, n);
-        assert_int_equal(f.kind[p], VIEW_RC_POINT);
-        assert_memory_equal(f.rgb + 3 * p, red, 3);
-        assert_int_equal(f.kind[q], VIEW_RC_POINT);
-        assert_memory_equal(f.rgb + 3 * q, green, 3);
-        assert_int_equal(f.kind[p + 1], VIEW_RC_POINT);
-        assert_memory_equal(f.rgb + 3 * (p + 1), grey, 3);
-        view_rc_destroy(rc);
-    }
-    free(s);
-}
-
-/* ---- tiles --------------------------------------------------------------------------------------------- */
-
-/* Tiles organise the work; they must not change the picture: the same sparse points (a pattern dense here,
- * sparse there, so that both ways of the prefilter run) through tiles of 8, 16, 64 and 256 pixels (the
- * z-buffer in buffers of the tile's own), of 512 (above 256: straight into the image), through the one-pass
- * z-buffer of no_tiling, and on one thread through the tile lists (tiled_one_thread; by default one thread
- * projects chunks straight into the image's z-buffer), give the same image, depths, kinds and priorities. */
-static void test_tiles_do_not_change_the_image(void **state)
-{
-    (void)state;
-    const uint32_t w = 150, h = 90;
-    view_rc_camera cam = look(0, 0.5, 0, 0, 0, -5, 60);
-    view_rc_sample *s = malloc(sizeof *s * w * h);
-    uint32_t n = 0;
-    uint64_t seed = 12345;
-    for (uint32_t y = 0; y < h; y++)
-        for (uint32_t x = 0; x < w; x++) {
-            seed = seed * 6364136223846793005u + 1442695040888963407u;
-            uint32_t r = (uint32_t)(seed >> 33);
-            /* Dense on the left third, one in 12 in the middle, one in 60 on the right. */
-            uint32_t keep = x < w / 3 ? 2 : x < 2 * w / 3 ? 12 : 60;
-            if (r % keep != 0)
-                continue;
-            double d[3];
-            pixel_ray(&cam, w, h, x, y, d);
-            scene_hit hit = cast(cam.position, d, true, true);
-            s[n] = (view_rc_sample){.x = (uint16_t)x, .y = (uint16_t)y, .depth = (float)hit.t};
-            memcpy(s[n++].rgb, hit.rgb, 3);
-        }
-    view_rc_camera moved = look(0.2, 0.6, -0.3, 0.1, 0, -5, 60);
-    walk_log reference = {0};
-    const uint32_t tiles[] = {64, 8, 16, 256, 512, 64, 64, 512, 16};
-    for (size_t t = 0; t < sizeof tiles / sizeof tiles[0]; t++) {
-        bool direct = t == 5, tiled = t >= 6; /* one thread: the tile lists too (tiled_one_thread) */
-        view_rc *rc = make(&(view_rc_desc){
-            .width = w, .height = h, .tile_size = tiles[t], .no_tiling = direct, .tiled_one_thread = tiled});
-        assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, s, n), FXC_OK);
-        view_rc_frame f;
-        render(rc, &moved, NULL, &f);
-        assert_true(f.stats.pixels[VIEW_RC_PREFILTER] > 100 && f.stats.pixels[VIEW_RC_INTERP] > 100);
-        walk_log log = {0};
-        log_bytes(&log, f.rgb, (size_t)w * h * 3);
-        log_bytes(&log, f.depth, (size_t)w * h * sizeof(float));
-        log_bytes(&log, f.kind, (size_t)w * h);
-        log_bytes(&log, f.priority, (size_t)w * h);
-        if (t == 0) {
-            reference = log;
-        } else {
-            assert_int_equal(log.used, reference.used);
-            assert_memory_equal(log.bytes, reference.bytes, reference.used);
-            free(log.bytes);
-        }
-        view_rc_destroy(rc);
-    }
-    free(reference.bytes);
-    free(s);
-}
-
-/* ---- the client stays light ---------------------------------------------------------------------------- */
-
-/* The symbols an archive leaves undefined that are not its own (view_rc_), libc's, libm's, pthreads' or the
- * compiler runtime's (function multi-versioning, sanitizers), through `nm -u`; their count, the first few in
- * `names`. -1 when nm cannot run. */
-static int foreign_symbols(const char *archive, char *names, size_t cap)
-{
-    static const char *const allowed[] = {"aligned_alloc",
-                                          "madvise",
-                                          "calloc",
-                                          "malloc",
-                                          "realloc",
-                                          "free",
-                                          "memcpy",
-                                          "memmove",
-                                          "memset",
-                                          "memcmp",
-                                          "abs",
-                                          "clock_gettime",
-                                          "sqrtf",
-                                          "tanf",
-                                          "floor",
-                                          "floorf",
-                                          "sysconf",
-                                          "_GLOBAL_OFFSET_TABLE_"};
-    char command[1200];
-    snprintf(command, sizeof command, "nm -u '%s' 2>/dev/null", archive);
-    FILE *pipe = popen(command, "r");
-    if (!pipe)
-        return -1;
-    int foreign = 0, lines = 0;
-    names[0] = 0;
-    char line[512];
-    while (fgets(line, sizeof line, pipe)) {
-        char kind[8], symbol[400];
-        if (sscanf(line, " %7s %399s", kind, symbol) != 2 || strlen(kind) != 1)
-            continue;
-        lines++;
-        if (!strncmp(symbol, "view_rc_", 8) || !strncmp(symbol, "fxc_pool_", 9) ||
-            !strncmp(symbol, "pthread_", 8) || !strncmp(symbol, "__", 2))
-            continue;
-        bool ok = false;
-        for (size_t i = 0; i < sizeof allowed / sizeof allowed[0]; i++)
-            ok |= !strcmp(symbol, allowed[i]);
-        if (!ok) {
-            if (strlen(names) + strlen(symbol) + 2 < cap) {
-                strcat(names, symbol);
-                strcat(names, " ");
-            }
-            foreign++;
-        }
-    }
-    return pclose(pipe) == 0 && lines > 0 ? foreign : -1;
-}
-
-/* libfxc_rcache.a needs nothing but libc, libm, pthreads and the shared thread pool (libfxc_pool.a, itself
- * libc and pthreads only); the check refuses fxc_proto (zstd, libturbojpeg). The archives are found from this
- * test's scratch folder, <build>/tests/tmp_test_rcache. */
-static void test_links_only_libc_libm_pthreads(void **state)
-{
-    (void)state;
-    char build[1024], archive[1200], names[600];
-    snprintf(build, sizeof build, "%s", FXC_TEST_TMP);
-    for (int up = 0; up < 2; up++) {
-        char *slash = strrchr(build, '/');
-        assert_non_null(slash);
-        *slash = 0;
-    }
-    snprintf(archive, sizeof archive, "%s/viewer_client/rcache/libfxc_rcache.a", build);
-    int foreign = foreign_symbols(archive, names, sizeof names);
-    if (foreign < 0)
-        skip(); /* no nm */
-    if (foreign != 0)
-        fail_msg("%s needs %d symbols from outside libc, libm and pthreads: %s", archive, foreign, names);
-    snprintf(archive, sizeof archive, "%s/libfxc_pool.a", build);
-    foreign = foreign_symbols(archive, names, sizeof names);
-    if (foreign != 0)
-        fail_msg("%s needs %d symbols from outside libc and pthreads: %s", archive, foreign, names);
-    snprintf(archive, sizeof archive, "%s/proto/libfxc_proto.a", build);
-    foreign = foreign_symbols(archive, names, sizeof names);
-    assert_true(foreign > 0);
-    assert_non_null(strstr(names, "ZSTD_"));
 }
 
 int main(void)
@@ -1374,10 +928,6 @@ int main(void)
         cmocka_unit_test(test_drops_first_in_slot_order),
         cmocka_unit_test(test_colour_change_penalty),
         cmocka_unit_test(test_frame_replaces_what_it_saw),
-        cmocka_unit_test(test_threads_bit_identical),
-        cmocka_unit_test(test_zbuffer_ties_first_slot),
-        cmocka_unit_test(test_tiles_do_not_change_the_image),
-        cmocka_unit_test(test_links_only_libc_libm_pthreads),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
