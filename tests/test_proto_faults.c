@@ -1,8 +1,9 @@
 /* Tests of the wire format (proto/proto.c) against malformed input, with tests/fxt_proto.h's sample messages:
  * header faults have their own codes; one table changes one field's bytes per row and expects RANGE (or
  * TRUNCATED/TRAILING for length fields), another changes one struct field and expects proto_encode to refuse;
- * every buffer shorter than the bound is refused; a bounded mutation loop checks that whatever decodes re-encodes to the
- * same bytes. The round trips, offsets, prefixes and the fuzz corpus are in test_proto.c. */
+ * every buffer shorter than the bound is refused; a bounded mutation loop checks that whatever decodes
+ * re-encodes to the same bytes. The round trips, offsets, prefixes and the fuzz corpus are in test_proto.c.
+ */
 #include "test_util.h"
 
 #include "fxt_proto.h"
