@@ -165,31 +165,6 @@ void fxt_grid_shade_at(const fxt_grid *g, const float pos[3], const float normal
     fxt_grid_shade_ctx(NULL, g, pos, normal, indirect, sky);
 }
 
-/* A closed axis-aligned box [lo, hi] of 6 quads of cells x cells, normals inward (inward = true: a room seen
- * from inside) or outward (a solid). */
-void fxt_add_box(scene *s, const char *name, const double lo[3], const double hi[3], bool inward,
-                 uint32_t cells)
-{
-    for (int axis = 0; axis < 3; axis++)
-        for (int side = 0; side < 2; side++) {
-            int a = (axis + 1) % 3, b = (axis + 2) % 3;
-            double corner[3], ea[3] = {0, 0, 0}, eb[3] = {0, 0, 0};
-            corner[axis] = side ? hi[axis] : lo[axis];
-            corner[a] = lo[a];
-            corner[b] = lo[b];
-            ea[a] = hi[a] - lo[a];
-            eb[b] = hi[b] - lo[b];
-            /* ea x eb points along +axis; the face at hi faces +axis outward. */
-            bool along_plus = (side == 1) != inward;
-            char face[64];
-            snprintf(face, sizeof face, "%s_%d%d", name, axis, side);
-            if (along_plus)
-                fxt_add_quad(s, face, corner, ea, eb, cells);
-            else
-                fxt_add_quad(s, face, corner, eb, ea, cells);
-        }
-}
-
 void fxt_add_point_light(scene *s, float x, float y, float z, float intensity)
 {
     scene_light light = {

@@ -44,11 +44,6 @@ void fxt_grid_shade_ctx(const fx_context *ctx, const fxt_grid *g, const float po
 void fxt_grid_shade_at(const fxt_grid *g, const float pos[3], const float normal[3], float indirect[3],
                        float *sky);
 
-/* A closed axis-aligned box [lo, hi] of 6 quads of cells x cells, normals inward (inward = true: a room seen
- * from inside) or outward (a solid). */
-void fxt_add_box(scene *s, const char *name, const double lo[3], const double hi[3], bool inward,
-                 uint32_t cells);
-
 /* A white point light of the given intensity. */
 void fxt_add_point_light(scene *s, float x, float y, float z, float intensity);
 

@@ -50,6 +50,34 @@ void fxt_add_quad(scene *s, const char *name, const double corner[3], const doub
     free(indices);
 }
 
+void fxt_add_box_face(scene *s, const char *name, const double lo[3], const double hi[3], int axis, int side,
+                      bool inward, uint32_t cells)
+{
+    int a = (axis + 1) % 3, b = (axis + 2) % 3;
+    double corner[3], ea[3] = {0, 0, 0}, eb[3] = {0, 0, 0};
+    corner[axis] = side ? hi[axis] : lo[axis];
+    corner[a] = lo[a];
+    corner[b] = lo[b];
+    ea[a] = hi[a] - lo[a];
+    eb[b] = hi[b] - lo[b];
+    /* ea x eb points along +axis: outward on the high side. */
+    if ((side == 1) != inward)
+        fxt_add_quad(s, name, corner, ea, eb, cells);
+    else
+        fxt_add_quad(s, name, corner, eb, ea, cells);
+}
+
+void fxt_add_box(scene *s, const char *name, const double lo[3], const double hi[3], bool inward,
+                 uint32_t cells)
+{
+    for (int axis = 0; axis < 3; axis++)
+        for (int side = 0; side < 2; side++) {
+            char face[64];
+            snprintf(face, sizeof face, "%s_%d%d", name, axis, side);
+            fxt_add_box_face(s, face, lo, hi, axis, side, inward, cells);
+        }
+}
+
 /* Adds a directional light travelling along direction. */
 void fxt_add_sun(scene *s, float dx, float dy, float dz)
 {

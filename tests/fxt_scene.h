@@ -25,6 +25,16 @@ scene *fxt_new_scene(void);
 void fxt_add_quad(scene *s, const char *name, const double corner[3], const double edge_a[3],
                   const double edge_b[3], uint32_t cells);
 
+/* Adds face (axis, side) of the axis-aligned box [lo, hi] (side 0 at lo[axis], 1 at hi[axis]) as a quad of
+ * cells x cells named name, facing out of the box, or into it when inward. */
+void fxt_add_box_face(scene *s, const char *name, const double lo[3], const double hi[3], int axis, int side,
+                      bool inward, uint32_t cells);
+
+/* Adds the closed box [lo, hi]: its 6 faces named name_AS (axis, side), facing out (a solid) or, when inward,
+ * in (a room seen from inside). */
+void fxt_add_box(scene *s, const char *name, const double lo[3], const double hi[3], bool inward,
+                 uint32_t cells);
+
 /* Adds a directional light travelling along direction. */
 void fxt_add_sun(scene *s, float dx, float dy, float dz);
 

@@ -92,7 +92,7 @@ static void test_near_plane_inside_wall(void **state)
     scene *s = fxt_new_scene();
     stab_add_floor(s, 0.7, 0.3, -0.4, 20.0, 4);
     const double lo[3] = {-2.0, 0.3, -0.2}, hi[3] = {2.0, 2.3, 0.2};
-    stab_add_box(s, "wall", lo, hi, 2);
+    fxt_add_box(s, "wall", lo, hi, false, 2);
     fxt_add_sun(s, sun_dir[0], sun_dir[1], sun_dir[2]);
     stab_set_sun(s, sun_dir, 2.0f);
     s->sky_color[0] = 0.2f, s->sky_color[1] = 0.3f, s->sky_color[2] = 0.4f;
@@ -248,7 +248,7 @@ static void test_camera_1e6_away(void **state)
     scene *s = fxt_new_scene();
     stab_add_floor(s, 0.7, 0.3, -0.4, 20.0, 8);
     const double lo[3] = {-2.0, (double)0.3f, -2.0}, hi[3] = {2.0, 6.3, 2.0};
-    stab_add_box(s, "box", lo, hi, 2);
+    fxt_add_box(s, "box", lo, hi, false, 2);
     fxt_add_sun(s, low_sun[0], low_sun[1], low_sun[2]);
     stab_set_sun(s, low_sun, 2.0f);
     s->sky_color[0] = 0.2f, s->sky_color[1] = 0.3f, s->sky_color[2] = 0.4f;

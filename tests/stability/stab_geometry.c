@@ -445,7 +445,7 @@ static void test_island_at_12bit_limit(void **state)
     s = fxt_new_scene();
     fxt_add_quad(s, "floor", (const double[3]){corner, (double)PLANE_Y, corner}, (const double[3]){0, 0, side},
                  (const double[3]){side, 0, 0}, 1);
-    stab_add_box(s, "box", lo, hi, 1);
+    fxt_add_box(s, "box", lo, hi, false, 1);
     const float out_sun[3] = {(float)-in_x, -1.0f, (float)-in_z};
     fxt_add_sun(s, out_sun[0], out_sun[1], out_sun[2]);
     stab_set_sun(s, out_sun, 2.0f);

@@ -204,8 +204,8 @@ static scene *inside_scene(int extra, scene_rt **rt)
 {
     scene *s = fxt_new_scene();
     stab_add_floor(s, 0.0, 0.0, 0.0, 4.0, 4);
-    stab_add_box(s, "box", (const double[3]){-0.5, 0.3, -0.5}, (const double[3]){0.5, 1.3, 0.5}, 2);
-    stab_add_box(s, "wall", (const double[3]){-2.0, 0.05, -1.51}, (const double[3]){2.0, 1.5, -1.49}, 2);
+    fxt_add_box(s, "box", (const double[3]){-0.5, 0.3, -0.5}, (const double[3]){0.5, 1.3, 0.5}, false, 2);
+    fxt_add_box(s, "wall", (const double[3]){-2.0, 0.05, -1.51}, (const double[3]){2.0, 1.5, -1.49}, false, 2);
     fxt_add_sun(s, 0.3f, -1.0f, -0.4f);
     if (extra == 1) {
         stab_add_point_light(s, 0.1f, 0.8f, -0.05f, 1e8f); /* inside the box */

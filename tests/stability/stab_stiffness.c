@@ -147,23 +147,11 @@ static scene *ao_floor(bool boxed, scene_rt **rt)
     fxt_add_quad(s, "floor", (const double[3]){0, 0, 0}, (const double[3]){0, 0, 0.5}, (const double[3]){0.5, 0, 0}, 1);
     if (boxed) {
         const double lo[3] = {0, 0, 0}, hi[3] = {0.5, 0.02, 0.5};
-        /* the box's five other faces, facing in: stab_add_box's faces reversed, less its bottom */
+        /* the box's five other faces, facing in, less its bottom */
         for (int axis = 0; axis < 3; axis++)
-            for (int side = 0; side < 2; side++) {
-                if (axis == 1 && side == 0)
-                    continue;
-                int a = (axis + 1) % 3, b = (axis + 2) % 3;
-                double corner[3], ea[3] = {0, 0, 0}, eb[3] = {0, 0, 0};
-                corner[axis] = side ? hi[axis] : lo[axis];
-                corner[a] = lo[a];
-                corner[b] = lo[b];
-                ea[a] = hi[a] - lo[a];
-                eb[b] = hi[b] - lo[b];
-                if (side == 1)
-                    fxt_add_quad(s, "box", corner, eb, ea, 1);
-                else
-                    fxt_add_quad(s, "box", corner, ea, eb, 1);
-            }
+            for (int side = 0; side < 2; side++)
+                if (axis != 1 || side != 0)
+                    fxt_add_box_face(s, "box", lo, hi, axis, side, true, 1);
     }
     s->sky_intensity = 1.0f;
     *rt = fxt_finish_scene(s, 128.0f, 1.0f);

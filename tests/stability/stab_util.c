@@ -429,26 +429,6 @@ void stab_add_floor(scene *s, double cx, double height, double cz, double half, 
                  (const double[3]){2 * half, 0, 0}, cells);
 }
 
-void stab_add_box(scene *s, const char *name, const double lo[3], const double hi[3], uint32_t cells)
-{
-    for (int axis = 0; axis < 3; axis++)
-        for (int side = 0; side < 2; side++) {
-            int a = (axis + 1) % 3, b = (axis + 2) % 3;
-            double corner[3], ea[3] = {0, 0, 0}, eb[3] = {0, 0, 0};
-            corner[axis] = side ? hi[axis] : lo[axis];
-            corner[a] = lo[a];
-            corner[b] = lo[b];
-            ea[a] = hi[a] - lo[a];
-            eb[b] = hi[b] - lo[b];
-            char face[64];
-            snprintf(face, sizeof face, "%s_%d%d", name, axis, side);
-            if (side == 1) /* ea x eb = +axis: outward on the high side */
-                fxt_add_quad(s, face, corner, ea, eb, cells);
-            else
-                fxt_add_quad(s, face, corner, eb, ea, cells);
-        }
-}
-
 void stab_add_point_light(scene *s, float x, float y, float z, float intensity)
 {
     scene_light light = {.type = SCENE_LIGHT_POINT, .position = {x, y, z}, .color = {1, 1, 1}, .intensity = intensity};

@@ -53,9 +53,6 @@ double stab_relative_rmse(const float *a, const float *b, size_t n);
 /* An open square floor y = height, side 2 * half about (cx, cz), cells x cells quads, facing up, grey (0.5). */
 void stab_add_floor(scene *s, double cx, double height, double cz, double half, uint32_t cells);
 
-/* A solid axis-aligned box [lo, hi] with outward faces (cells x cells quads each). */
-void stab_add_box(scene *s, const char *name, const double lo[3], const double hi[3], uint32_t cells);
-
 /* Adds a point light at a scene-local position (the scene is still being built: world == local until
  * finalisation; call before fxt_finish_scene). */
 void stab_add_point_light(scene *s, float x, float y, float z, float intensity);
