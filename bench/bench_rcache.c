@@ -24,7 +24,7 @@
  *
  * Usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] [--lead 2] [--tile 64]
  *        [--capacity F] [--pin CPU] [--separate-pixels]
- *        [--only table|scaling|threads|split|split-pixels|fuse|share|direct|switches|quality]
+ *        [--only table|scaling|threads|split|split-pixels|fuse|share|direct|bands|switches|quality]
  *        (default: all, in that order; --separate-pixels: the table with the depth cull, interpolation and
  *        prefilter as separate passes, each in its own row, instead of fused). Each table also gives the
  * process CPU time of a frame: on a machine shared with other jobs the wall time includes the time the
@@ -513,6 +513,19 @@ static void section_direct(const bench_opts *o)
                             "direct", "tiled / direct (per-repetition ratio)", "tiled / direct"});
 }
 
+/* The band lists (view_rc_desc.band_lists: the points bucket-sorted by bands of full rows, each band's
+ * z-buffer in L2) against the default, on 1 thread (the direct z-buffer) and then on 2 (the tiles),
+ * alternating. */
+static void section_bands(const bench_opts *o)
+{
+    for (int threads = 1; threads <= 2; threads++)
+        section_ab(o, (view_rc_desc){0}, threads, (view_rc_desc){.band_lists = true}, threads,
+                   &(ab_labels){threads == 1 ? "1 thread, z-buffer direct against band lists"
+                                             : "2 threads, z-buffer through the tiles against band lists",
+                                threads == 1 ? "direct" : "tiles", "bands",
+                                "default / bands (per-repetition ratio)", "default / bands"});
+}
+
 typedef struct variant {
     const char *name;
     view_rc_desc d;
@@ -618,7 +631,7 @@ int main(int argc, char **argv)
             fprintf(stderr,
                     "usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] "
                     "[--lead 2] [--tile 64] [--capacity F] [--pin CPU] [--separate-pixels] "
-                    "[--only table|scaling|threads|split|split-pixels|fuse|share|direct|switches|quality]\n");
+                    "[--only table|scaling|threads|split|split-pixels|fuse|share|direct|bands|switches|quality]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }
     }
@@ -654,6 +667,8 @@ int main(int argc, char **argv)
         section_share(&o);
     if (!only || !strcmp(only, "direct"))
         section_direct(&o);
+    if (!only || !strcmp(only, "bands"))
+        section_bands(&o);
     if (!only || !strcmp(only, "switches"))
         section_switches(&o);
     if (!only || !strcmp(only, "quality"))

@@ -116,6 +116,11 @@ typedef struct view_rc_desc {
                                    thread projects each chunk of points straight into the image's z-buffer
                                    in slot order, timed in "project and tile sort"; the tiles serve the
                                    threads), to measure it (bench_rcache --only direct) */
+    bool band_lists;            /* the points bucket-sorted into bands of full rows (as many rows as keep a
+                                   band's depth, winner and colour within 384 KiB, in L2) instead of tiles,
+                                   and each band depth-tested straight into the image's rows, on any thread
+                                   count (thread k on the k-th range of bands); the same image. Not the
+                                   default (docs/BENCHMARKS.md, rc-seven): bench_rcache --only bands */
 } view_rc_desc;
 
 typedef struct view_rc view_rc;
