@@ -289,6 +289,26 @@ static void count_bands(const uint32_t *restrict key, uint32_t n, uint32_t bits,
         count[b] = part[0][b] + part[1][b] + part[2][b] + part[3][b];
 }
 
+/* band_flush: chunk c's entries [from, to) of band b's buffer noted as a segment (none when empty). */
+static void note_segment(view_rc *rc, uint32_t b, uint32_t c, uint32_t from, uint32_t to)
+{
+    if (to == from)
+        return;
+    uint32_t *seg = rc->zband_seg + (size_t)b * 2 * rc->chunk_count + 2 * rc->zband_nseg[b]++;
+    seg[0] = c;
+    seg[1] = to;
+}
+
+/* The depth, winner and colour of n pixels cleared (vectorised). */
+FXC_HOT_CLONES static void clear_z(float *restrict zb, uint32_t *restrict wb, uint32_t *restrict cb, size_t n)
+{
+    for (size_t p = 0; p < n; p++) {
+        zb[p] = INFINITY;
+        wb[p] = RC_NO_POINT;
+        cb[p] = RC_EMPTY_PT;
+    }
+}
+
 /* band_flush: band `band`'s buffer depth-tested into its rows of the image, segment by segment (the chunks in
  * order, each chunk's entries in slot order), then emptied. The rows are cleared at the band's first flush of
  * the frame. */
@@ -300,11 +320,7 @@ static void flush_band(view_rc *rc, uint32_t band)
     float *restrict zb = rc->zbuf + first;
     uint32_t *restrict wb = rc->win + first, *restrict cb = rc->pre + first;
     if (!rc->zband_clear[band]) {
-        for (size_t p = 0; p < last - first; p++) {
-            zb[p] = INFINITY;
-            wb[p] = RC_NO_POINT;
-            cb[p] = RC_EMPTY_PT;
-        }
+        clear_z(zb, wb, cb, last - first);
         rc->zband_clear[band] = 1;
     }
     const rc_entry *entries = rc->entries;
@@ -327,36 +343,36 @@ static void flush_band(view_rc *rc, uint32_t band)
     rc->zband_nseg[band] = 0;
 }
 
-/* band_flush: chunk c's n keys and depths (in L1) appended to their bands' buffers in slot order, each band
- * flushed first if the chunk would overflow it. Returns the points projected. */
+/* band_flush: chunk c's n keys and depths (in L1) appended to their bands' buffers in slot order; a band whose
+ * buffer is full is flushed first (its part of this chunk noted as a segment before). Returns the points
+ * projected. (A counting pass per chunk before the appends, to flush before the chunk instead, cost more.) */
 static uint32_t append_bands(view_rc *rc, uint32_t c, const uint32_t *restrict key, const float *restrict dep,
                              uint32_t n)
 {
     uint32_t bands = rc->zband_count, bits = rc->zband_bits, mask = (1u << bits) - 1, cap = rc->zband_cap;
-    uint32_t count[VIEW_RC_MAX_TILES + 2], cursor[VIEW_RC_MAX_TILES + 2];
-    count_bands(key, n, bits, bands, count);
-    uint32_t projected = 0;
-    for (uint32_t b = 0; b < bands; b++) {
-        projected += count[b];
-        if (count[b] == 0) {
-            cursor[b] = b * cap + rc->zband_fill[b]; /* not written */
-            continue;
-        }
-        if (rc->zband_fill[b] + count[b] > cap)
-            flush_band(rc, b);
-        cursor[b] = b * cap + rc->zband_fill[b];
-        rc->zband_fill[b] += count[b];
-        uint32_t *seg = rc->zband_seg + (size_t)b * 2 * rc->chunk_count + 2 * rc->zband_nseg[b]++;
-        seg[0] = c;
-        seg[1] = rc->zband_fill[b];
-    }
-    cursor[bands] = bands * cap; /* the sink: outside, behind, free or dropped; its cursor does not move */
+    uint32_t fill[VIEW_RC_MAX_TILES + 1], start[VIEW_RC_MAX_TILES + 1];
+    memcpy(fill, rc->zband_fill, bands * sizeof(uint32_t));
+    memcpy(start, rc->zband_fill, bands * sizeof(uint32_t));
+    fill[bands] = start[bands] = 0; /* the sink (outside, behind, free or dropped): it never moves */
     rc_entry *entries = rc->entries;
+    uint32_t projected = 0;
     for (uint32_t i = 0; i < n; i++) {
-        uint32_t k = key[i], b = RC_BAND_OF(k), o = cursor[b];
-        cursor[b] = o + (b < bands);
+        uint32_t k = key[i], b = RC_BAND_OF(k);
+        if (fill[b] == cap) { /* rare: the band's buffer is full (the sink's fill stays 0) */
+            rc->zband_fill[b] = cap;
+            note_segment(rc, b, c, start[b], cap);
+            flush_band(rc, b);
+            fill[b] = start[b] = 0;
+        }
+        uint32_t o = b * cap + fill[b];
+        fill[b] += b < bands;
+        projected += b < bands;
         entries[o].key = (k & mask) | i << bits;
         entries[o].depth = dep[i];
+    }
+    for (uint32_t b = 0; b < bands; b++) {
+        rc->zband_fill[b] = fill[b];
+        note_segment(rc, b, c, start[b], fill[b]);
     }
     return projected;
 }
