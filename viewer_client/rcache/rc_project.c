@@ -26,7 +26,11 @@
  * the tile's entries stream past, then copied into the image row by row. (Written straight into the image,
  * the tile's 64 rows lie 4 x width bytes apart and fall into a few of L1's sets: cachegrind counted an L1
  * miss for nearly every z-buffer write.) The nearer view depth wins; between equal depths, the entry first in
- * the list. */
+ * the list.
+ *
+ * Band lists (band_z): the same with bands of full rows for tiles (a band's depth, winner and colour at most
+ * 384 KiB, in L2), each band tested straight into the image's rows; on one thread (band_flush) without the
+ * sort pass: chunks appended to per-band buffers, flushed into the band's rows when full and at the end. */
 #include "rc_internal.h"
 
 #include <math.h>
