@@ -24,7 +24,7 @@
  *
  * Usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] [--lead 2] [--tile 64]
  *        [--capacity F] [--pin CPU] [--separate-pixels]
- *        [--only table|scaling|threads|split|split-pixels|fuse|share|direct|switches|quality]
+ *        [--only table|scaling|threads|split|split-pixels|fuse|share|direct|bands|switches|quality]
  *        (default: all, in that order; --separate-pixels: the table with the depth cull, interpolation and
  *        prefilter as separate passes, each in its own row, instead of fused). Each table also gives the
  * process CPU time of a frame: on a machine shared with other jobs the wall time includes the time the
@@ -504,13 +504,28 @@ static void section_share(const bench_opts *o)
                             "two runs / one run (per-repetition ratio)", "two runs / one run"});
 }
 
-/* One thread through the tile lists (view_rc_desc.tiled_one_thread) against the default there, each chunk
- * projected straight into the image's z-buffer, alternating: what the direct z-buffer does. */
+/* One thread through the tile lists (view_rc_desc.tiled_one_thread) against each chunk projected straight
+ * into the image's z-buffer (no_band_lists: the default at 512, not at 1024), alternating: what the direct
+ * z-buffer does. */
 static void section_direct(const bench_opts *o)
 {
-    section_ab(o, (view_rc_desc){.tiled_one_thread = true}, 1, (view_rc_desc){0}, 1,
+    section_ab(o, (view_rc_desc){.tiled_one_thread = true}, 1, (view_rc_desc){.no_band_lists = true}, 1,
                &(ab_labels){"1 thread, z-buffer through the tiles against straight into the image", "tiled",
                             "direct", "tiled / direct (per-repetition ratio)", "tiled / direct"});
+}
+
+/* The band lists (view_rc_desc.band_lists: the points bucket-sorted by bands of full rows, each band's
+ * z-buffer in L2) against the path without them (no_band_lists), on 1 thread (the direct z-buffer) and then
+ * on 2 (the tiles), alternating. */
+static void section_bands(const bench_opts *o)
+{
+    for (int threads = 1; threads <= 2; threads++)
+        section_ab(o, (view_rc_desc){.no_band_lists = true}, threads, (view_rc_desc){.band_lists = true},
+                   threads,
+                   &(ab_labels){threads == 1 ? "1 thread, z-buffer direct against band lists"
+                                             : "2 threads, z-buffer through the tiles against band lists",
+                                threads == 1 ? "direct" : "tiles", "bands",
+                                "without / with bands (per-repetition ratio)", "without / with bands"});
 }
 
 typedef struct variant {
@@ -618,7 +633,7 @@ int main(int argc, char **argv)
             fprintf(stderr,
                     "usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] "
                     "[--lead 2] [--tile 64] [--capacity F] [--pin CPU] [--separate-pixels] "
-                    "[--only table|scaling|threads|split|split-pixels|fuse|share|direct|switches|quality]\n");
+                    "[--only table|scaling|threads|split|split-pixels|fuse|share|direct|bands|switches|quality]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }
     }
@@ -654,6 +669,8 @@ int main(int argc, char **argv)
         section_share(&o);
     if (!only || !strcmp(only, "direct"))
         section_direct(&o);
+    if (!only || !strcmp(only, "bands"))
+        section_bands(&o);
     if (!only || !strcmp(only, "switches"))
         section_switches(&o);
     if (!only || !strcmp(only, "quality"))

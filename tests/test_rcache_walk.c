@@ -134,15 +134,16 @@ static void test_threads_bit_identical(void **state)
     }
 }
 
-/* The z-buffer's ties, by closed form: two points at exactly the same depth in one pixel (the same sample
- * inserted twice, 8,000 slots apart: chunks 0 and 1), the pixel must show the first slot's colour; a later
- * point a little nearer wins. Every z-buffer path: one thread straight into the image (the default), one
- * thread through the tile lists (tiled_one_thread), 2 threads, no_tiling, tiles in the tile's buffers (64)
- * and in the image (512). */
-static void test_zbuffer_ties_first_slot(void **state)
+/* The z-buffer's ties, by closed form, at w x h: two points at exactly the same depth in one pixel p (the same
+ * sample inserted twice, w x h slots apart: different chunks), the pixel must show the first slot's colour; a
+ * later point a little nearer (in pixel q) wins. Every z-buffer path: one thread straight into the image (the
+ * default), one thread through the tile lists (tiled_one_thread), 2 threads, no_tiling, tiles in the tile's
+ * buffers (64) and in the image (512), and the band lists (band_lists) on 1, 2 and 3 threads: at 128 x 64
+ * one band of 64 rows, whose buffer (8,192 entries) the last chunk overflows, so the first point is flushed
+ * into the z-buffer before the second arrives; at 1024 x 64 two bands of 32 rows, p in the first and q in
+ * the second (on 2 threads each thread's band), each band's buffer (32,768 entries) overflowing too. */
+static void check_ties_first_slot(uint32_t w, uint32_t h, uint32_t p, uint32_t q)
 {
-    (void)state;
-    const uint32_t w = 128, h = 64, p = 20 * w + 30, q = 40 * w + 90;
     view_rc_camera cam = fxt_rc_look(0, 0, 0, 0, 0, -1, 60);
     view_rc_sample *s = malloc(sizeof *s * (w * h + 4));
     uint32_t n = 0;
@@ -164,8 +165,11 @@ static void test_zbuffer_ties_first_slot(void **state)
     const struct {
         uint32_t threads, tile;
         bool tiled, no_tiling;
-    } ways[] = {{1, 64, false, false}, {1, 512, false, false}, {1, 64, true, false}, {1, 512, true, false},
-                {2, 64, false, false}, {2, 512, false, false}, {1, 64, false, true}};
+        bool bands;
+    } ways[] = {{1, 64, false, false, false}, {1, 512, false, false, false}, {1, 64, true, false, false},
+                {1, 512, true, false, false},  {2, 64, false, false, false},  {2, 512, false, false, false},
+                {1, 64, false, true, false},   {1, 64, false, false, true},   {2, 64, false, false, true},
+                {3, 64, false, false, true},   {1, 16, false, false, true}};
     for (size_t k = 0; k < sizeof ways / sizeof ways[0]; k++) {
         view_rc *rc = fxt_rc_make(&(view_rc_desc){.width = w,
                                                   .height = h,
@@ -173,7 +177,8 @@ static void test_zbuffer_ties_first_slot(void **state)
                                                   .tile_size = ways[k].tile,
                                                   .capacity = w * h + 8,
                                                   .tiled_one_thread = ways[k].tiled,
-                                                  .no_tiling = ways[k].no_tiling});
+                                                  .no_tiling = ways[k].no_tiling,
+                                                  .band_lists = ways[k].bands});
         assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, s, n), FXC_OK);
         view_rc_frame f;
         fxt_rc_render(rc, &cam, NULL, &f);
@@ -189,13 +194,21 @@ static void test_zbuffer_ties_first_slot(void **state)
     free(s);
 }
 
+static void test_zbuffer_ties_first_slot(void **state)
+{
+    (void)state;
+    check_ties_first_slot(128, 64, 20 * 128 + 30, 40 * 128 + 90);
+    check_ties_first_slot(1024, 64, 20 * 1024 + 300, 40 * 1024 + 900);
+}
+
 /* ---- tiles --------------------------------------------------------------------------------------------- */
 
 /* Tiles organise the work; they must not change the picture: the same sparse points (a pattern dense here,
  * sparse there, so that both ways of the prefilter run) through tiles of 8, 16, 64 and 256 pixels (the
  * z-buffer in buffers of the tile's own), of 512 (above 256: straight into the image), through the one-pass
  * z-buffer of no_tiling, and on one thread through the tile lists (tiled_one_thread; by default one thread
- * projects chunks straight into the image's z-buffer), give the same image, depths, kinds and priorities. */
+ * projects chunks straight into the image's z-buffer), and through the band lists (band_lists) on 1, 2 and 3
+ * threads, give the same image, depths, kinds and priorities. */
 static void test_tiles_do_not_change_the_image(void **state)
 {
     (void)state;
@@ -220,11 +233,17 @@ static void test_tiles_do_not_change_the_image(void **state)
         }
     view_rc_camera moved = fxt_rc_look(0.2, 0.6, -0.3, 0.1, 0, -5, 60);
     walk_log reference = {0};
-    const uint32_t tiles[] = {64, 8, 16, 256, 512, 64, 64, 512, 16};
+    const uint32_t tiles[] = {64, 8, 16, 256, 512, 64, 64, 512, 16, 64, 64, 16};
     for (size_t t = 0; t < sizeof tiles / sizeof tiles[0]; t++) {
-        bool direct = t == 5, tiled = t >= 6; /* one thread: the tile lists too (tiled_one_thread) */
-        view_rc *rc = fxt_rc_make(&(view_rc_desc){
-            .width = w, .height = h, .tile_size = tiles[t], .no_tiling = direct, .tiled_one_thread = tiled});
+        bool direct = t == 5, tiled = t >= 6 && t <= 8; /* one thread: the tile lists too (tiled_one_thread) */
+        bool bands = t >= 9;                            /* the band lists on 1, 2 and 3 threads */
+        view_rc *rc = fxt_rc_make(&(view_rc_desc){.width = w,
+                                                  .height = h,
+                                                  .tile_size = tiles[t],
+                                                  .threads = bands ? (uint32_t)(t - 8) : 0,
+                                                  .no_tiling = direct,
+                                                  .tiled_one_thread = tiled,
+                                                  .band_lists = bands});
         assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, s, n), FXC_OK);
         view_rc_frame f;
         fxt_rc_render(rc, &moved, NULL, &f);

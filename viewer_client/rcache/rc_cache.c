@@ -152,8 +152,28 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
      * more than 32 bits (tiles above 1024 pixels a side, or tens of millions of slots with tiles above 64),
      * chunks get smaller, and more. */
     rc->pix_bits = 2 * shift;
-    if (chunk_shift + rc->pix_bits > 32)
-        chunk_shift = 32 - rc->pix_bits;
+    /* Band lists (band_lists): bands of a power of two of rows, as many as keep a band's depth, winner and
+     * colour (12 bytes a pixel) within 384 KiB, so a band stays in L2 (2 MiB here) with room for the entries
+     * streaming through: 64 rows at 512 wide, 32 at 1024. Their keys hold the pixel within the band. */
+    bool big = (uint64_t)d.width * d.height * 12 > RC_BAND_DEFAULT_BYTES;
+    rc->band_z = !d.no_tiling && !d.no_band_lists &&
+                 (d.band_lists || (d.threads == 1 && !d.tiled_one_thread && big));
+    rc->zband_shift = 0;
+    while (rc->zband_shift < 16 && ((uint64_t)d.width << (rc->zband_shift + 1)) <= 32768 &&
+           (1u << rc->zband_shift) < d.height)
+        rc->zband_shift++;
+    while (((uint64_t)d.height + (1u << rc->zband_shift) - 1) >> rc->zband_shift > VIEW_RC_MAX_TILES)
+        rc->zband_shift++; /* at most as many bands as tiles (the counting's scratch) */
+    rc->zband_rows = 1u << rc->zband_shift;
+    rc->zband_count = (d.height + rc->zband_rows - 1) / rc->zband_rows;
+    rc->zband_bits = 1;
+    while (((uint64_t)1 << rc->zband_bits) < (uint64_t)rc->zband_rows * d.width)
+        rc->zband_bits++;
+    uint32_t key_bits = rc->band_z && rc->zband_bits > rc->pix_bits ? rc->zband_bits : rc->pix_bits;
+    if (chunk_shift + key_bits > 32)
+        chunk_shift = 32 - key_bits;
+    rc->list_count = rc->band_z ? rc->zband_count : rc->tile_count;
+    rc->count_stride = rc->list_count + 2;
     uint32_t chunk = 1u << chunk_shift;
     rc->chunk_shift = chunk_shift;
     rc->chunk_size = chunk;
@@ -163,7 +183,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     rc->drop_age = RC_AGE_NO_DROP;
 
     rc_layout l = {0};
-    uint32_t lists = rc->tile_count + 2;
+    uint32_t lists = rc->count_stride > rc->tile_count + 2 ? rc->count_stride : rc->tile_count + 2;
     size_t o_px = take(&l, rc->slots, sizeof(float));
     size_t o_py = take(&l, rc->slots, sizeof(float));
     size_t o_pz = take(&l, rc->slots, sizeof(float));
@@ -184,16 +204,31 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     /* Entries: one per slot, up to RC_ENTRY_LINE - 1 of padding per list (tile and part), then the sort's
      * sinks (one per thread, a line each). */
     rc->parts = d.threads;
-    size_t lists_parts = (size_t)rc->tile_count * rc->parts, line = RC_ENTRY_LINE;
+    size_t lists_parts = (size_t)rc->list_count * rc->parts, line = RC_ENTRY_LINE;
     if ((size_t)rc->slots + line * lists_parts + line * (size_t)rc->parts > UINT32_MAX) {
         free(rc);
         return FXC_ERR_INVALID;
     }
     rc->entry_sink = (uint32_t)(((size_t)rc->slots + line * lists_parts + line - 1) & ~(line - 1));
     /* One thread's direct z-buffer (direct_z) uses no entries. */
-    rc->direct_z = d.threads == 1 && !d.tiled_one_thread && !d.no_tiling;
-    size_t o_entries =
-        take(&l, rc->direct_z ? 0 : (size_t)rc->entry_sink + line * (size_t)rc->parts, sizeof(rc_entry));
+    rc->direct_z = d.threads == 1 && !d.tiled_one_thread && !d.no_tiling && !rc->band_z;
+    rc->band_flush = rc->band_z && d.threads == 1;
+    size_t band_px = (size_t)rc->zband_rows * d.width;
+    rc->zband_cap = (uint32_t)(band_px > chunk ? band_px : chunk);
+    rc->zband_cap = (rc->zband_cap + (uint32_t)line - 1) & ~((uint32_t)line - 1);
+    size_t entry_count = (size_t)rc->entry_sink + line * (size_t)rc->parts;
+    if (rc->band_flush)
+        entry_count = (size_t)rc->zband_count * rc->zband_cap + line;
+    if (entry_count > UINT32_MAX) {
+        free(rc);
+        return FXC_ERR_INVALID;
+    }
+    size_t o_entries = take(&l, rc->direct_z ? 0 : entry_count, sizeof(rc_entry));
+    size_t zbands = rc->band_flush ? rc->zband_count : 0;
+    size_t o_zband_fill = take(&l, zbands, sizeof(uint32_t));
+    size_t o_zband_nseg = take(&l, zbands, sizeof(uint32_t));
+    size_t o_zband_seg = take(&l, zbands * 2 * rc->chunk_count, sizeof(uint32_t));
+    size_t o_zband_clear = take(&l, zbands, 1);
     size_t o_list_start = take(&l, lists_parts, sizeof(uint32_t));
     size_t o_list_end = take(&l, lists_parts, sizeof(uint32_t));
     size_t o_zbuf = take(&l, rc->pixels, sizeof(float));
@@ -278,6 +313,10 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     rc->chunk_quota = (uint32_t *)(block + o_chunk_quota);
     rc->chunk_stat = (rc_chunk_stat *)(block + o_chunk_stat);
     rc->entries = rc->direct_z ? NULL : (rc_entry *)(block + o_entries);
+    rc->zband_fill = (uint32_t *)(block + o_zband_fill);
+    rc->zband_nseg = (uint32_t *)(block + o_zband_nseg);
+    rc->zband_seg = (uint32_t *)(block + o_zband_seg);
+    rc->zband_clear = (uint8_t *)(block + o_zband_clear);
     rc->list_start = (uint32_t *)(block + o_list_start);
     rc->list_end = (uint32_t *)(block + o_list_end);
     rc->zbuf = (float *)(block + o_zbuf);

@@ -26,7 +26,11 @@
  * the tile's entries stream past, then copied into the image row by row. (Written straight into the image,
  * the tile's 64 rows lie 4 x width bytes apart and fall into a few of L1's sets: cachegrind counted an L1
  * miss for nearly every z-buffer write.) The nearer view depth wins; between equal depths, the entry first in
- * the list. */
+ * the list.
+ *
+ * Band lists (band_z): the same with bands of full rows for tiles (a band's depth, winner and colour at most
+ * 384 KiB, in L2), each band tested straight into the image's rows; on one thread (band_flush) without the
+ * sort pass: chunks appended to per-band buffers, flushed into the band's rows when full and at the end. */
 #include "rc_internal.h"
 
 #include <math.h>
@@ -79,7 +83,8 @@ static void chunk_range(const view_rc *rc, uint32_t c, uint32_t *begin, uint32_t
 /* ---- projection without branches ----------------------------------------------------------------------- */
 
 /* The pixel of every slot in [begin, end) for view v (RC_NO_PIXEL for free slots, points behind the camera or
- * outside the image; `local`: row * tile + column within its tile, else the image's index), its view depth,
+ * outside the image; `local`: row * tile + column within its tile, else band << band_bits | the pixel within
+ * its band of 1 << band_shift rows, row * width + column: with band_shift 31, the image's index), its depth,
  * and its list: the tile (two shifts of the pixel's coordinates), or `outside`, or `dead` for a free slot.
  * rc_project's arithmetic; the conversion to integers happens only on coordinates known to be inside. (The
  * slot within the chunk is added to the key by the sort: in this loop it cost 1.2 M instructions a frame.) */
@@ -87,7 +92,8 @@ FXC_HOT_CLONES static void project_span(const rc_view *v, const float *restrict 
                                         const float *restrict pz, const uint32_t *restrict rgba,
                                         uint32_t *restrict key, float *restrict dep, uint16_t *restrict dest,
                                         uint32_t begin, uint32_t end, uint32_t shift, uint32_t tiles_x,
-                                        bool local, uint16_t outside, uint16_t dead)
+                                        bool local, uint32_t band_shift, uint32_t band_bits, uint16_t outside,
+                                        uint16_t dead)
 {
     const float cx = v->rel[0], cy = v->rel[1], cz = v->rel[2];
     const float fx = v->forward[0], fy = v->forward[1], fz = v->forward[2];
@@ -95,7 +101,7 @@ FXC_HOT_CLONES static void project_span(const rc_view *v, const float *restrict 
     const float ux = v->up[0], uy = v->up[1], uz = v->up[2];
     const float hw = v->half_w, hh = v->half_h, kx = v->kx, ky = v->ky;
     const float w = (float)v->width, h = (float)v->height;
-    const uint32_t width = v->width, m = (1u << shift) - 1;
+    const uint32_t width = v->width, m = (1u << shift) - 1, band_mask = (1u << band_shift) - 1;
     for (uint32_t i = begin; i < end; i++) {
         float vx = px[i] - cx, vy = py[i] - cy, vz = pz[i] - cz;
         float zc = vx * fx + vy * fy + vz * fz;
@@ -110,7 +116,8 @@ FXC_HOT_CLONES static void project_span(const rc_view *v, const float *restrict 
         uint32_t iy = (uint32_t)(int32_t)(inside ? sy : 0.0f);
         uint32_t tile = (iy >> shift) * tiles_x + (ix >> shift);
         uint32_t in_tile = ((iy & m) << shift) | (ix & m);
-        key[i] = inside ? (local ? in_tile : iy * width + ix) : RC_NO_PIXEL;
+        uint32_t in_band = ((iy >> band_shift) << band_bits) | ((iy & band_mask) * width + ix);
+        key[i] = inside ? (local ? in_tile : in_band) : RC_NO_PIXEL;
         dep[i] = zc;
         dest[i] = (uint16_t)(inside ? tile : live ? outside : dead);
     }
@@ -261,6 +268,119 @@ FXC_HOT_CLONES static uint32_t zbuffer_span(const uint32_t *restrict key, const 
     return projected;
 }
 
+/* The band of a key (band << bits | pixel within the band): RC_NO_PIXEL, and anything past the last band,
+ * go to list `bands`, the sink. */
+#define RC_BAND_OF(k) ((k) >> bits < bands ? (k) >> bits : bands)
+
+/* Band lists: a chunk's n keys counted by band (key >> bits; RC_NO_PIXEL and anything past the last band in
+ * list `bands`, the sink), in four interleaved sets (consecutive points mostly go to one band). */
+static void count_bands(const uint32_t *restrict key, uint32_t n, uint32_t bits, uint32_t bands,
+                        uint32_t *restrict count)
+{
+    uint32_t part[4][VIEW_RC_MAX_TILES + 2];
+    for (int k = 0; k < 4; k++)
+        memset(part[k], 0, (bands + 1) * sizeof(uint32_t));
+    uint32_t i = 0;
+    for (; i + 4 <= n; i += 4) {
+        part[0][RC_BAND_OF(key[i])]++;
+        part[1][RC_BAND_OF(key[i + 1])]++;
+        part[2][RC_BAND_OF(key[i + 2])]++;
+        part[3][RC_BAND_OF(key[i + 3])]++;
+    }
+    for (; i < n; i++)
+        part[0][RC_BAND_OF(key[i])]++;
+    for (uint32_t b = 0; b <= bands; b++)
+        count[b] = part[0][b] + part[1][b] + part[2][b] + part[3][b];
+}
+
+/* band_flush: chunk c's entries [from, to) of band b's buffer noted as a segment (none when empty). */
+static void note_segment(view_rc *rc, uint32_t b, uint32_t c, uint32_t from, uint32_t to)
+{
+    if (to == from)
+        return;
+    uint32_t *seg = rc->zband_seg + (size_t)b * 2 * rc->chunk_count + 2 * rc->zband_nseg[b]++;
+    seg[0] = c;
+    seg[1] = to;
+}
+
+/* The depth, winner and colour of n pixels cleared (vectorised). */
+FXC_HOT_CLONES static void clear_z(float *restrict zb, uint32_t *restrict wb, uint32_t *restrict cb, size_t n)
+{
+    for (size_t p = 0; p < n; p++) {
+        zb[p] = INFINITY;
+        wb[p] = RC_NO_POINT;
+        cb[p] = RC_EMPTY_PT;
+    }
+}
+
+/* band_flush: band `band`'s buffer depth-tested into its rows of the image, segment by segment (the chunks in
+ * order, each chunk's entries in slot order), then emptied. The rows are cleared at the band's first flush of
+ * the frame. */
+static void flush_band(view_rc *rc, uint32_t band)
+{
+    size_t first = (size_t)band * rc->zband_rows * rc->width;
+    size_t last = (size_t)(band + 1) * rc->zband_rows * rc->width;
+    last = last < rc->pixels ? last : rc->pixels;
+    float *restrict zb = rc->zbuf + first;
+    uint32_t *restrict wb = rc->win + first, *restrict cb = rc->pre + first;
+    if (!rc->zband_clear[band]) {
+        clear_z(zb, wb, cb, last - first);
+        rc->zband_clear[band] = 1;
+    }
+    const rc_entry *entries = rc->entries;
+    const uint32_t *rgba = rc->rgba;
+    uint32_t bits = rc->zband_bits, mask = (1u << bits) - 1, at = band * rc->zband_cap;
+    const uint32_t *seg = rc->zband_seg + (size_t)band * 2 * rc->chunk_count;
+    for (uint32_t s = 0; s < rc->zband_nseg[band]; s++) {
+        uint32_t base = seg[2 * s] << rc->chunk_shift, end = band * rc->zband_cap + seg[2 * s + 1];
+        for (; at < end; at++) {
+            uint32_t k = entries[at].key, p = k & mask, slot = base + (k >> bits);
+            float z = entries[at].depth;
+            if (z < zb[p]) {
+                zb[p] = z;
+                wb[p] = slot;
+                cb[p] = rgba[slot];
+            }
+        }
+    }
+    rc->zband_fill[band] = 0;
+    rc->zband_nseg[band] = 0;
+}
+
+/* band_flush: chunk c's n keys and depths (in L1) appended to their bands' buffers in slot order; a band whose
+ * buffer is full is flushed first (its part of this chunk noted as a segment before). Returns the points
+ * projected. (A counting pass per chunk before the appends, to flush before the chunk instead, cost more.) */
+static uint32_t append_bands(view_rc *rc, uint32_t c, const uint32_t *restrict key, const float *restrict dep,
+                             uint32_t n)
+{
+    uint32_t bands = rc->zband_count, bits = rc->zband_bits, mask = (1u << bits) - 1, cap = rc->zband_cap;
+    uint32_t fill[VIEW_RC_MAX_TILES + 1], start[VIEW_RC_MAX_TILES + 1];
+    memcpy(fill, rc->zband_fill, bands * sizeof(uint32_t));
+    memcpy(start, rc->zband_fill, bands * sizeof(uint32_t));
+    fill[bands] = start[bands] = 0; /* the sink (outside, behind, free or dropped): it never moves */
+    rc_entry *entries = rc->entries;
+    uint32_t projected = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        uint32_t k = key[i], b = RC_BAND_OF(k);
+        if (fill[b] == cap) { /* rare: the band's buffer is full (the sink's fill stays 0) */
+            rc->zband_fill[b] = cap;
+            note_segment(rc, b, c, start[b], cap);
+            flush_band(rc, b);
+            fill[b] = start[b] = 0;
+        }
+        uint32_t o = b * cap + fill[b];
+        fill[b] += b < bands;
+        projected += b < bands;
+        entries[o].key = (k & mask) | i << bits;
+        entries[o].depth = dep[i];
+    }
+    for (uint32_t b = 0; b < bands; b++) {
+        rc->zband_fill[b] = fill[b];
+        note_segment(rc, b, c, start[b], fill[b]);
+    }
+    return projected;
+}
+
 static void project_task(void *user, uint32_t c, uint32_t worker)
 {
     view_rc *rc = user;
@@ -275,14 +395,17 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
     /* The chunk's keys, depths and lists, indexed from its first slot: in the store's arrays at the chunk
      * (the sort reads them later), or with direct_z (used only here) in their first chunk_size entries,
      * which every chunk reuses while they are in L1 (a frame's 10 bytes a slot not written out to memory). */
-    size_t at = rc->direct_z ? 0 : begin;
+    size_t at = rc->direct_z || rc->band_flush ? 0 : begin;
     uint32_t *key = rc->key + at;
     float *dep = rc->dep + at;
     uint16_t *dest = rc->dest + at;
     uint32_t *rgba = rc->rgba + begin;
-    /* The tiled z-buffer takes the pixel within the tile; the 1999 one and direct_z, the image's. */
+    /* The tiled z-buffer takes the pixel within the tile; band_z the band and the pixel within it; the 1999
+     * one and direct_z, the image's. */
+    bool band_z = rc->band_z;
     project_span(&rc->view, rc->px + begin, rc->py + begin, rc->pz + begin, rgba, key, dep, dest, 0, n,
-                 rc->tile_shift, rc->tiles_x, !rc->d.no_tiling && !rc->direct_z, outside, dead);
+                 rc->tile_shift, rc->tiles_x, !rc->d.no_tiling && !rc->direct_z && !band_z,
+                 band_z ? rc->zband_shift : 31, band_z ? rc->zband_bits : 0, outside, dead);
     rc_chunk_stat stat = {0};
     /* The drop plan: points older than drop_age, and the chunk's quota of that age, in slot order. A block of
      * 64 slots without a candidate is skipped after one test; a block whose points of drop_age all fit in
@@ -320,9 +443,22 @@ static void project_task(void *user, uint32_t c, uint32_t worker)
         rc->chunk_stat[c] = stat;
         return;
     }
-    /* Counts per list, in four interleaved sets (consecutive points mostly go to the same tile). */
-    uint32_t lists = rc->tile_count + 2;
+    uint32_t lists = rc->count_stride;
     uint32_t *count = rc->counts + (size_t)c * lists;
+    if (rc->band_flush) {
+        stat.projected = append_bands(rc, c, key, dep, n);
+        rc->chunk_stat[c] = stat;
+        return;
+    }
+    if (band_z) {
+        count_bands(key, n, rc->zband_bits, rc->zband_count, count);
+        stat.projected = 0;
+        for (uint32_t b = 0; b < rc->zband_count; b++)
+            stat.projected += count[b];
+        rc->chunk_stat[c] = stat;
+        return;
+    }
+    /* Counts per list, in four interleaved sets (consecutive points mostly go to the same tile). */
     memset(count, 0, lists * sizeof(uint32_t));
     uint32_t part[3][VIEW_RC_MAX_TILES + 2];
     for (int k = 0; k < 3; k++)
@@ -349,7 +485,7 @@ static void sort_task(void *user, uint32_t c, uint32_t worker)
     view_rc *rc = user;
     uint32_t begin, end;
     chunk_range(rc, c, &begin, &end);
-    uint32_t *offset = rc->counts + (size_t)c * (rc->tile_count + 2);
+    uint32_t *offset = rc->counts + (size_t)c * rc->count_stride;
     const uint16_t *dest = rc->dest;
     const uint32_t *key = rc->key;
     const float *dep = rc->dep;
@@ -367,8 +503,42 @@ static void sort_task(void *user, uint32_t c, uint32_t worker)
     }
 }
 
+/* Band lists: the chunk's projected points written to their bands' lists in slot order, each entry the pixel
+ * within the band and the slot within the chunk above it; the rest to this thread's sink. */
+static void sort_bands_task(void *user, uint32_t c, uint32_t worker)
+{
+    view_rc *rc = user;
+    uint32_t begin, end;
+    chunk_range(rc, c, &begin, &end);
+    uint32_t bands = rc->zband_count, bits = rc->zband_bits, mask = (1u << bits) - 1;
+    uint32_t *offset = rc->counts + (size_t)c * rc->count_stride;
+    const uint32_t *key = rc->key;
+    const float *dep = rc->dep;
+    rc_entry *entries = rc->entries;
+    offset[bands] = rc->entry_sink + RC_ENTRY_LINE * worker;
+    for (uint32_t i = begin; i < end; i++) {
+        uint32_t k = key[i], b = RC_BAND_OF(k), o = offset[b];
+        offset[b] = o + (b < bands);
+        entries[o].key = (k & mask) | (i - begin) << bits;
+        entries[o].depth = dep[i];
+    }
+}
+#undef RC_BAND_OF
+
 void view_rc__project_sort(view_rc *rc)
 {
+    if (rc->band_flush) {
+        /* One thread, band lists: every chunk in slot order projected and appended to the bands' buffers,
+         * then every band's last flush (a band no point reached is only cleared). */
+        memset(rc->zband_fill, 0, rc->zband_count * sizeof(uint32_t));
+        memset(rc->zband_nseg, 0, rc->zband_count * sizeof(uint32_t));
+        memset(rc->zband_clear, 0, rc->zband_count);
+        for (uint32_t c = 0; c < rc->chunk_count; c++)
+            project_task(rc, c, 0);
+        for (uint32_t b = 0; b < rc->zband_count; b++)
+            flush_band(rc, b);
+        return;
+    }
     if (rc->direct_z) {
         /* One thread: the image's z-buffer cleared, then every chunk in slot order projected into it. */
         for (size_t p = 0; p < rc->pixels; p++) {
@@ -381,9 +551,9 @@ void view_rc__project_sort(view_rc *rc)
         return;
     }
     run_chunks(rc, project_task);
-    /* Offsets: tile by tile, part by part (each list on a line of its own), chunk by chunk. */
-    uint32_t lists = rc->tile_count + 2, run = 0, parts = rc->parts;
-    for (uint32_t t = 0; t < rc->tile_count; t++)
+    /* Offsets: list by list (tile or band), part by part (each list on a line of its own), chunk by chunk. */
+    uint32_t lists = rc->count_stride, run = 0, parts = rc->parts;
+    for (uint32_t t = 0; t < rc->list_count; t++)
         for (uint32_t p = 0; p < parts; p++) {
             run = (run + RC_ENTRY_LINE - 1) & ~(RC_ENTRY_LINE - 1);
             rc->list_start[t * parts + p] = run;
@@ -396,17 +566,17 @@ void view_rc__project_sort(view_rc *rc)
             }
             rc->list_end[t * parts + p] = run;
         }
-    run_chunks(rc, sort_task);
+    run_chunks(rc, rc->band_z ? sort_bands_task : sort_task);
 }
 
 /* ---- z-buffer tiles (2002 3.2) ------------------------------------------------------------------------- */
 
 /* The chunk-by-chunk walk of one tile's list, entry by entry: test(p, depth, slot) for each, in list order
  * (part, then chunk, then slot). */
-#define RC_FOR_TILE_ENTRIES(rc, tile, test)                                                                  \
+#define RC_FOR_TILE_ENTRIES(rc, tile, bits, test)                                                            \
     do {                                                                                                     \
         const rc_entry *entries_ = (rc)->entries;                                                            \
-        uint32_t parts_ = (rc)->parts, lists_ = (rc)->tile_count + 2, bits_ = (rc)->pix_bits;                \
+        uint32_t parts_ = (rc)->parts, lists_ = (rc)->count_stride, bits_ = (bits);                          \
         uint32_t mask_ = (1u << bits_) - 1;                                                                  \
         for (uint32_t part_ = 0; part_ < parts_; part_++) {                                                  \
             uint32_t e_ = (rc)->list_start[(size_t)(tile)*parts_ + part_];                                   \
@@ -454,7 +624,7 @@ static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
         wt[p] = (slot);                                                                                      \
         ct[p] = rgba[slot];                                                                                  \
     }
-        RC_FOR_TILE_ENTRIES(rc, tile, RC_TEST_LOCAL);
+        RC_FOR_TILE_ENTRIES(rc, tile, rc->pix_bits, RC_TEST_LOCAL);
 #undef RC_TEST_LOCAL
         for (uint32_t y = y0; y < y1; y++) {
             size_t at = (size_t)(y - y0) * side;
@@ -483,15 +653,47 @@ static void zbuffer_task(void *user, uint32_t tile, uint32_t worker)
             pre[p] = rc->rgba[slot];                                                                         \
         }                                                                                                    \
     }
-    RC_FOR_TILE_ENTRIES(rc, tile, RC_TEST_IMAGE);
+    RC_FOR_TILE_ENTRIES(rc, tile, rc->pix_bits, RC_TEST_IMAGE);
 #undef RC_TEST_IMAGE
+}
+
+/* Band lists: one band's rows of the image cleared, then its lists tested straight into them in list order
+ * (part, chunk, slot: slot order), the nearer depth winning, between equal depths the first; a winner's
+ * colour read from the store when it wins. The band's rows are contiguous, at most 384 KiB of depth, winner
+ * and colour: they stay in L2 while the band's entries stream past. */
+static void zbuffer_band_task(void *user, uint32_t band, uint32_t worker)
+{
+    (void)worker;
+    view_rc *rc = user;
+    size_t first = (size_t)band * rc->zband_rows * rc->width;
+    size_t last = (size_t)(band + 1) * rc->zband_rows * rc->width;
+    last = last < rc->pixels ? last : rc->pixels;
+    float *restrict zb = rc->zbuf + first;
+    uint32_t *restrict wb = rc->win + first, *restrict cb = rc->pre + first;
+    const uint32_t *rgba = rc->rgba;
+    for (size_t p = 0; p < last - first; p++) {
+        zb[p] = INFINITY;
+        wb[p] = RC_NO_POINT;
+        cb[p] = RC_EMPTY_PT;
+    }
+#define RC_TEST_BAND(p, z, slot)                                                                             \
+    if ((z) < zb[p]) {                                                                                       \
+        zb[p] = (z);                                                                                         \
+        wb[p] = (slot);                                                                                      \
+        cb[p] = rgba[slot];                                                                                  \
+    }
+    RC_FOR_TILE_ENTRIES(rc, band, rc->zband_bits, RC_TEST_BAND);
+#undef RC_TEST_BAND
 }
 
 void view_rc__zbuffer(view_rc *rc)
 {
-    if (rc->direct_z)
+    if (rc->direct_z || rc->band_flush)
         return; /* done in the projection */
-    rc_run_pixels(rc->pool, rc->d.dynamic_pixels, rc->tile_count, zbuffer_task, rc);
+    if (rc->band_z)
+        rc_run_pixels(rc->pool, rc->d.dynamic_pixels, rc->zband_count, zbuffer_band_task, rc);
+    else
+        rc_run_pixels(rc->pool, rc->d.dynamic_pixels, rc->tile_count, zbuffer_task, rc);
 }
 
 /* ---- the 1999 render cache: one z-buffer in slot order ------------------------------------------------- */

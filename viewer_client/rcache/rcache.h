@@ -116,6 +116,17 @@ typedef struct view_rc_desc {
                                    thread projects each chunk of points straight into the image's z-buffer
                                    in slot order, timed in "project and tile sort"; the tiles serve the
                                    threads), to measure it (bench_rcache --only direct) */
+    bool band_lists;    /* the points bucket-sorted into bands of full rows (as many rows as keep a band's
+                           depth, winner and colour within 384 KiB, in L2) instead of tiles, each band
+                           depth-tested straight into the image's rows; on one thread without a sort pass
+                           (each chunk appended to per-band buffers, 8 bytes a pixel in all, flushed when
+                           full), on 2+ threads through the tile sort's counting and offsets (thread k on
+                           the k-th range of bands). The same image. By default only on one thread above
+                           8 MiB of z-buffer (12 bytes a pixel: above about 836 x 836), where it measured
+                           faster than the direct z-buffer (docs/BENCHMARKS.md, rc-seven; bench_rcache
+                           --only bands) */
+    bool no_band_lists; /* never the band lists (one thread: the direct z-buffer at every size), to measure
+                           them */
 } view_rc_desc;
 
 typedef struct view_rc view_rc;

@@ -37,6 +37,10 @@
 #define RC_EMPTY_PT    0xFF000000u /* a pixel without a point: colour 0, age 255 */
 #define RC_NEAR        1.0e-4f     /* points nearer than this (metres along the view axis) are behind */
 #define RC_LOCAL_TILE  256u        /* the largest tile side the z-buffer works on in its own buffers */
+/* One thread takes the band lists by default above this much z-buffer (depth, winner and colour: 12 bytes a
+ * pixel), 4 x the 2 MiB L2: at 1024 x 1024 (12 MiB) they measured faster than the direct z-buffer, at 512 x
+ * 512 (3 MiB) slower, at 768 x 768 (6.75 MiB) even (docs/BENCHMARKS.md, rc-seven). */
+#define RC_BAND_DEFAULT_BYTES ((uint64_t)8 << 20)
 
 static inline uint32_t rc_age(uint32_t rgba)
 {
@@ -163,6 +167,28 @@ struct view_rc {
      * straight into the image's z-buffer in slot order (the same winners as the lists, which hold a tile's
      * points in slot order too: the nearer depth, then the first). */
     bool direct_z;
+    /* band_lists: the lists are bands of zband_rows full rows (a power of two; zband_count of them) instead
+     * of tiles: a point's key is its band << zband_bits | its pixel within the band (row * width + column),
+     * the entry's the pixel within the band and the slot within its chunk above it; the z-buffer tests a
+     * band's lists straight into the image's rows (384 KiB at most of depth, winner and colour: in L2). The
+     * points' tiles (dest, tile_of, the migrations) stay the tiles'. */
+    bool band_z;
+    uint32_t zband_rows, zband_shift, zband_count, zband_bits;
+    /* band_z on one thread (band_flush): no sort pass. Each chunk, once projected (its keys in L1, as
+     * direct_z), is appended band by band to a buffer of zband_cap entries per band (band b's at b *
+     * zband_cap: the pixel within the band and the slot within the chunk above it), and the chunk's count
+     * noted as a segment of that buffer (chunk, end); a band whose buffer the next chunk would overflow is
+     * first flushed: its segments depth-tested in order into its rows of the image (cleared at its first
+     * flush). The last flush of every band ends the pass. Slot order throughout: the same winners. */
+    bool band_flush;
+    uint32_t zband_cap;    /* entries a band's buffer holds (at least a chunk) */
+    uint32_t *zband_fill;  /* per band: entries in its buffer */
+    uint32_t *zband_nseg;  /* per band: segments in its buffer */
+    uint32_t *zband_seg;   /* per band: chunk_count x (chunk, end) */
+    uint8_t *zband_clear;  /* per band: its rows cleared this frame */
+    uint32_t list_count;   /* the lists the sort fills: tile_count, or zband_count with band_z */
+    uint32_t count_stride; /* counts per chunk: list_count + 2 (the tiles' outside and dead lists, or the
+                            * bands' one sink) */
 
     /* The point store (structure of arrays over slots). */
     uint32_t slots; /* capacity + insert_reserve */
@@ -186,7 +212,7 @@ struct view_rc {
     /* Chunks of slots: the unit of the parallel passes over points. */
     uint32_t chunk_size, chunk_shift, chunk_count; /* chunk_size = 1 << chunk_shift (pix_bits + chunk_shift
                                                     * <= 32, so an entry's key holds both) */
-    uint32_t *counts;      /* chunk_count x (tile_count + 2): points going to each list, then offsets */
+    uint32_t *counts;      /* chunk_count x count_stride: points going to each list, then offsets */
     uint32_t *chunk_hist;  /* chunk_count x 256: ages of the live points per chunk */
     uint32_t *chunk_quota; /* per chunk: points of age drop_age to drop this frame */
     rc_chunk_stat *chunk_stat;
@@ -203,8 +229,8 @@ struct view_rc {
     uint32_t parts;       /* the pool's threads */
     uint32_t entry_sink;  /* the sort writes points outside the image and free slots to entry_sink + 8 x its
                            * thread: a line per thread, so no two threads write one entry */
-    uint32_t *list_start; /* tile_count x parts */
-    uint32_t *list_end;   /* tile_count x parts */
+    uint32_t *list_start; /* list_count x parts */
+    uint32_t *list_end;   /* list_count x parts */
 
     /* Ageing (2002 3.4). */
     double age_carry, hidden_carry; /* fractional parts carried to the next frame */
