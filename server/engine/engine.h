@@ -119,9 +119,6 @@ typedef struct srv_loop_desc {
     bool no_lanes;                         /* tests: the per-pixel stages' coarse sample choice (requests)
                                               and blend (compose) through their scalar loops only, not the
                                               lanes of whole rows (the same results, byte for byte) */
-    bool separate_request_passes;          /* tests: the requests' passes (one per cache kind, or per effect of a
-                                              kind whose keys do not name it) each in a pool run of its own,
-                                              not every tile through all of them in one (the same requests) */
     srv_allocator allocator;               /* default: libc */
 } srv_loop_desc;
 

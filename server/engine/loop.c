@@ -354,13 +354,10 @@ fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err,
         }
     }
     uint32_t threads = srv_pool_threads(loop->pool);
-    srv_request_pass passes[SRV_MAX_EFFECTS];
-    loop->request_pass_count = srv__request_passes(loop, passes);
-    size_t lists = (size_t)threads * (loop->request_pass_count ? loop->request_pass_count : 1);
-    bool ok = srv__resize(loop, SRV_MEM_QUEUES, (void **)&loop->thread_requests, 0, lists,
+    bool ok = srv__resize(loop, SRV_MEM_QUEUES, (void **)&loop->thread_requests, 0, threads,
                           sizeof *loop->thread_requests);
     if (ok)
-        memset(loop->thread_requests, 0, lists * sizeof *loop->thread_requests);
+        memset(loop->thread_requests, 0, threads * sizeof *loop->thread_requests);
     for (uint32_t e = 0; ok && e < loop->effect_count; e++) {
         if (!desc->keep_views || !loop->effect_shading[e])
             continue;
@@ -410,10 +407,9 @@ void srv_loop_free(srv_loop *loop)
             viewer_free_buffers(loop, &loop->viewers[v]);
     uint32_t threads = loop->pool ? srv_pool_threads(loop->pool) : 0;
     if (loop->thread_requests) {
-        size_t lists = (size_t)threads * (loop->request_pass_count ? loop->request_pass_count : 1);
-        for (size_t t = 0; t < lists; t++)
+        for (uint32_t t = 0; t < threads; t++)
             srv__request_list_free(loop, SRV_MEM_QUEUES, &loop->thread_requests[t]);
-        srv__resize(loop, SRV_MEM_QUEUES, (void **)&loop->thread_requests, lists, 0, sizeof *loop->thread_requests);
+        srv__resize(loop, SRV_MEM_QUEUES, (void **)&loop->thread_requests, threads, 0, sizeof *loop->thread_requests);
     }
     for (uint32_t e = 0; e < SRV_MAX_EFFECTS; e++) {
         srv_effect_queue *q = &loop->queues[e];

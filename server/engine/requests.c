@@ -23,14 +23,10 @@ typedef struct fold_buffer {
 typedef struct request_task {
     srv_loop *loop;
     srv_viewer *view;
-    const srv_request_pass *passes; /* the passes each tile runs, one after another (its pixels' view buffers
-                                       read from memory once for all of them) */
-    uint32_t pass_count;
-    uint32_t first_list; /* passes[i]'s lists: thread_requests[(first_list + i) * threads + thread] */
-    uint32_t threads;
+    uint32_t kind;
+    uint32_t effect; /* the one effect whose keys this pass gathers, or SRV_NO_EFFECT for all of the kind */
     uint32_t tiles_x;
-    atomic_bool failed[SRV_MAX_EFFECTS]; /* per pass: a thread ran out of memory, this viewer's requests of
-                                            the pass are dropped this frame */
+    atomic_bool failed; /* a thread ran out of memory: this viewer's requests are dropped this frame */
 } request_task;
 
 static bool fold_flush_slot(srv_loop *loop, fold_buffer *fold, uint32_t slot, srv_request_list *out)
@@ -94,24 +90,23 @@ FXC_HOT_INLINE void fill_pixel(const scene *s, const srv_viewer *view, size_t p,
     }
 }
 
-/* The keys of up to SRV_TILE * SRV_TILE pixels for pass `pass` of the task, folded, onto the thread's list. */
-FXC_HOT_INLINE void request_pixels(request_task *task, uint32_t pass, uint32_t thread_index, const srv_pixel *pixels,
-                                   uint32_t count)
+/* The keys of up to SRV_TILE * SRV_TILE pixels, folded, onto the thread's list. */
+FXC_HOT_INLINE void request_pixels(request_task *task, uint32_t thread_index, const srv_pixel *pixels, uint32_t count)
 {
     srv_loop *loop = task->loop;
     const srv_viewer *view = task->view;
-    const uint32_t k = task->passes[pass].kind, effect = task->passes[pass].effect;
-    const srv_cache_kind *kind = loop->kinds[k];
-    const void *cache = loop->caches[k];
+    const srv_cache_kind *kind = loop->kinds[task->kind];
+    const void *cache = loop->caches[task->kind];
     const uint32_t viewer_slot = (uint32_t)(view - loop->viewers);
-    srv_request_list *out = &loop->thread_requests[(size_t)(task->first_list + pass) * task->threads + thread_index];
+    srv_request_list *out = &loop->thread_requests[thread_index];
     fold_buffer fold;
     memset(fold.keys, 0xFF, sizeof fold.keys);
     bool ok = true;
     /* The whole tile in one call, so the kind can skip pixels that repeat one above or beside them. */
     uint64_t keys[SRV_TILE * SRV_TILE * SRV_KEYS_PER_PIXEL], masks[SRV_TILE * SRV_TILE * SRV_KEYS_PER_PIXEL];
     for (uint32_t e = 0; e < loop->effect_count; e++) {
-        if (!loop->effect_shading[e] || loop->effect_kind[e] != k || (effect != SRV_NO_EFFECT && effect != e))
+        if (!loop->effect_shading[e] || loop->effect_kind[e] != task->kind ||
+            (task->effect != SRV_NO_EFFECT && task->effect != e))
             continue;
         /* Only the effect's own keys: its dependency's are derived after merging (half the keys). */
         uint32_t n = kind->pixel_requests(cache, viewer_slot, pixels, count, e, loop->bias[e], keys, masks);
@@ -121,7 +116,7 @@ FXC_HOT_INLINE void request_pixels(request_task *task, uint32_t pass, uint32_t t
     for (uint32_t f = 0; f < FOLD_SLOTS; f++)
         ok &= fold_flush_slot(loop, &fold, f, out);
     if (!ok)
-        atomic_store(&task->failed[pass], true);
+        atomic_store(&task->failed, true);
 }
 
 /* srv__coarse_mask for one row of a tile, lane j for pixel (x0 + j, y) (vectorised: FXC_HOT_LANES; contiguous
@@ -262,12 +257,11 @@ static void mask_expand(const scene *s, const srv_viewer *view, size_t sample_ro
         mask_expand_of(s, view, sample_row, nx, 8, in, to);
 }
 
-/* Pass `pass` of the task over one tile. */
-static void request_tile_pass(request_task *task, uint32_t pass, uint32_t task_index, uint32_t thread_index)
+static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
 {
+    request_task *task = user;
     const srv_viewer *view = task->view;
-    const uint32_t effect = task->passes[pass].effect;
-    const bool positions = task->loop->kinds[task->passes[pass].kind]->needs_position;
+    const bool positions = task->loop->kinds[task->kind]->needs_position;
     uint32_t width = view->frame.width, height = view->frame.height;
     uint32_t x0 = (task_index % task->tiles_x) * SRV_TILE, y0 = (task_index / task->tiles_x) * SRV_TILE;
     srv_pixel pixels[SRV_TILE * SRV_TILE];
@@ -275,7 +269,7 @@ static void request_tile_pass(request_task *task, uint32_t pass, uint32_t task_i
     pixel_memo memo = {.tri = SRV_MISS};
     const srv_loop *loop = task->loop;
     uint32_t block =
-        effect != SRV_NO_EFFECT && effect == loop->coarse_effect ? srv__coarse_block(loop, view) : 1;
+        task->effect != SRV_NO_EFFECT && task->effect == loop->coarse_effect ? srv__coarse_block(loop, view) : 1;
     if (block > 1) {
         /* Evaluated per block in compose: the reps, and the pixels no rep stands in for. The sample choice is
          * made here, once, and kept for compose (view->coarse; engine_internal.h, srv__coarse_mask). */
@@ -366,7 +360,7 @@ static void request_tile_pass(request_task *task, uint32_t pass, uint32_t task_i
                 }
             }
         }
-        request_pixels(task, pass, thread_index, pixels, count);
+        request_pixels(task, thread_index, pixels, count);
         return;
     }
     for (uint32_t y = y0; y < y0 + SRV_TILE && y < height; y++)
@@ -375,15 +369,15 @@ static void request_tile_pass(request_task *task, uint32_t pass, uint32_t task_i
             if (view->tri[p] != SRV_MISS)
                 fill_pixel(task->loop->s, view, p, positions, &memo, &pixels[count++]);
         }
-    request_pixels(task, pass, thread_index, pixels, count);
+    request_pixels(task, thread_index, pixels, count);
 }
 
-/* Pass `pass` of the task over SRV_TILE * SRV_TILE consecutive entries of a sparse viewer's (row-sorted)
- * list. */
-static void request_list_pass(request_task *task, uint32_t pass, uint32_t task_index, uint32_t thread_index)
+/* A sparse viewer: SRV_TILE * SRV_TILE consecutive entries of its (row-sorted) list per task. */
+static void request_list_task(void *user, uint32_t task_index, uint32_t thread_index)
 {
+    request_task *task = user;
     const srv_viewer *view = task->view;
-    const bool positions = task->loop->kinds[task->passes[pass].kind]->needs_position;
+    const bool positions = task->loop->kinds[task->kind]->needs_position;
     size_t first = (size_t)task_index * SRV_TILE * SRV_TILE, end = first + SRV_TILE * SRV_TILE;
     if (end > view->list_count)
         end = view->list_count;
@@ -393,84 +387,49 @@ static void request_list_pass(request_task *task, uint32_t pass, uint32_t task_i
     for (size_t p = first; p < end; p++)
         if (view->tri[p] != SRV_MISS)
             fill_pixel(task->loop->s, view, p, positions, &memo, &pixels[count++]);
-    request_pixels(task, pass, thread_index, pixels, count);
+    request_pixels(task, thread_index, pixels, count);
 }
 
-/* Every pass of the task over one tile, in pass order: the later passes find the tile's view buffers in the
- * core's cache. */
-static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
-{
-    request_task *task = user;
-    for (uint32_t pass = 0; pass < task->pass_count; pass++)
-        request_tile_pass(task, pass, task_index, thread_index);
-}
-
-/* A sparse viewer: SRV_TILE * SRV_TILE consecutive entries of its (row-sorted) list per task, every pass. */
-static void request_list_task(void *user, uint32_t task_index, uint32_t thread_index)
-{
-    request_task *task = user;
-    for (uint32_t pass = 0; pass < task->pass_count; pass++)
-        request_list_pass(task, pass, task_index, thread_index);
-}
-
-/* Gathers passes[0..pass_count) of one viewer on the pool, each tile (or run of a sparse list) through all
- * of them; passes[i]'s keys land on lists first_list + i. */
-static void request_gather(srv_loop *loop, uint32_t slot, const srv_request_pass *passes, uint32_t pass_count,
-                           uint32_t first_list, bool failed[])
+/* One pass of one viewer over one kind (and one effect when the kind's keys do not name it): gather on the
+ * pool, merge, batch-request, then the dependency's keys. Returns the requested texels (or cells). */
+static uint64_t request_pass(srv_loop *loop, uint32_t slot, uint32_t k, uint32_t effect, srv_frame_stats *st)
 {
     srv_viewer *view = &loop->viewers[slot];
+    const srv_cache_kind *kind = loop->kinds[k];
     uint32_t threads = srv_pool_threads(loop->pool);
-    for (uint32_t i = 0; i < pass_count; i++)
-        for (uint32_t t = 0; t < threads; t++)
-            loop->thread_requests[(size_t)(first_list + i) * threads + t].count = 0;
+    uint64_t requested = 0;
+    for (uint32_t t = 0; t < threads; t++)
+        loop->thread_requests[t].count = 0;
     request_task task = {.loop = loop,
                          .view = view,
-                         .passes = passes,
-                         .pass_count = pass_count,
-                         .first_list = first_list,
-                         .threads = threads,
+                         .kind = k,
+                         .effect = effect,
                          .tiles_x = (view->frame.width + SRV_TILE - 1) / SRV_TILE};
-    for (uint32_t i = 0; i < SRV_MAX_EFFECTS; i++)
-        atomic_init(&task.failed[i], false);
+    atomic_init(&task.failed, false);
     uint32_t tiles_y = (view->frame.height + SRV_TILE - 1) / SRV_TILE;
     if (view->sparse)
         srv_pool_run(loop->pool, (view->list_count + SRV_TILE * SRV_TILE - 1) / (SRV_TILE * SRV_TILE),
                      request_list_task, &task);
     else
         srv_pool_run(loop->pool, task.tiles_x * tiles_y, request_tile, &task);
-    for (uint32_t i = 0; i < pass_count; i++)
-        failed[i] = atomic_load(&task.failed[i]);
-}
-
-/* The gathered keys of one pass of one viewer (lists `list` of the threads): merge, batch-request, then the
- * dependency's keys. Returns the requested texels (or cells). */
-static uint64_t request_batch(srv_loop *loop, uint32_t slot, srv_request_pass pass, uint32_t list, bool failed,
-                              srv_frame_stats *st)
-{
-    srv_viewer *view = &loop->viewers[slot];
-    const uint32_t k = pass.kind, effect = pass.effect;
-    const srv_cache_kind *kind = loop->kinds[k];
-    uint32_t threads = srv_pool_threads(loop->pool);
-    const srv_request_list *lists = loop->thread_requests + (size_t)list * threads;
-    uint64_t requested = 0;
 
     /* Gather the threads' lists (order does not matter: the batch sorts). */
     size_t total = 0;
     for (uint32_t t = 0; t < threads; t++)
-        total += lists[t].count;
+        total += loop->thread_requests[t].count;
     srv_request_list *merged = &view->requests;
     merged->count = 0;
-    if (failed || !srv__request_reserve(loop, SRV_MEM_VIEWERS, merged, total ? total : 1)) {
+    if (atomic_load(&task.failed) || !srv__request_reserve(loop, SRV_MEM_VIEWERS, merged, total ? total : 1)) {
         st->drops[SRV_DROP_NOMEM_REQUESTS]++; /* the frame goes on without this viewer's requests */
         return 0;
     }
     for (uint32_t t = 0; t < threads; t++) {
-        const srv_request_list *one = &lists[t];
-        if (one->count == 0)
+        const srv_request_list *list = &loop->thread_requests[t];
+        if (list->count == 0)
             continue;
-        memcpy(merged->keys + merged->count, one->keys, one->count * sizeof *one->keys);
-        memcpy(merged->masks + merged->count, one->masks, one->count * sizeof *one->masks);
-        merged->count += one->count;
+        memcpy(merged->keys + merged->count, list->keys, list->count * sizeof *list->keys);
+        memcpy(merged->masks + merged->count, list->masks, list->count * sizeof *list->masks);
+        merged->count += list->count;
     }
     size_t unique = 0;
     uint32_t *blocks = merged->blocks;
@@ -511,40 +470,19 @@ static uint64_t request_batch(srv_loop *loop, uint32_t slot, srv_request_pass pa
     return requested;
 }
 
-uint32_t srv__request_passes(const srv_loop *loop, srv_request_pass passes[SRV_MAX_EFFECTS])
+void srv__requests(srv_loop *loop, uint32_t slot, srv_frame_stats *st, uint64_t requested[SCENE_CACHE_COUNT])
 {
-    uint32_t n = 0;
     for (uint32_t k = 0; k < SCENE_CACHE_COUNT; k++) {
+        requested[k] = 0;
         const srv_cache_kind *kind = loop->kinds[k];
         if (!kind)
             continue;
         if (kind->keys_carry_effect) {
-            if (n < SRV_MAX_EFFECTS)
-                passes[n++] = (srv_request_pass){.kind = k, .effect = SRV_NO_EFFECT};
+            requested[k] += request_pass(loop, slot, k, SRV_NO_EFFECT, st);
             continue;
         }
         for (uint32_t e = 0; e < loop->effect_count; e++)
-            if (loop->effect_shading[e] && loop->effect_kind[e] == k && n < SRV_MAX_EFFECTS)
-                passes[n++] = (srv_request_pass){.kind = k, .effect = e};
-    }
-    return n;
-}
-
-void srv__requests(srv_loop *loop, uint32_t slot, srv_frame_stats *st, uint64_t requested[SCENE_CACHE_COUNT])
-{
-    for (uint32_t k = 0; k < SCENE_CACHE_COUNT; k++)
-        requested[k] = 0;
-    srv_request_pass passes[SRV_MAX_EFFECTS];
-    uint32_t count = srv__request_passes(loop, passes);
-    /* (count == loop->request_pass_count: the same passes as at create, where the lists were made) */
-    bool failed[SRV_MAX_EFFECTS] = {false};
-    if (!loop->desc.separate_request_passes && count > 0) /* one pool run: each tile through every pass */
-        request_gather(loop, slot, passes, count, 0, failed);
-    /* The batches in pass order (with separate passes, each pass's gather just before its batch: the same
-     * requests either way, since no pass's keys depend on another's batch). */
-    for (uint32_t i = 0; i < count; i++) {
-        if (loop->desc.separate_request_passes)
-            request_gather(loop, slot, passes + i, 1, i, failed + i);
-        requested[passes[i].kind] += request_batch(loop, slot, passes[i], i, failed[i], st);
+            if (loop->effect_shading[e] && loop->effect_kind[e] == k)
+                requested[k] += request_pass(loop, slot, k, e, st);
     }
 }

@@ -223,9 +223,7 @@ struct srv_loop {
     srv_sink sinks[SRV_MAX_SINKS];
     uint32_t sink_count;
     /* Scratch kept across frames. */
-    srv_request_list *thread_requests;      /* one per pool thread and request pass: pass * threads + thread
-                                               (requests.c: srv__request_passes) */
-    uint32_t request_pass_count;            /* the passes of srv__requests (srv__request_passes) */
+    srv_request_list *thread_requests;      /* one per pool thread */
     srv_effect_queue queues[SRV_MAX_EFFECTS];
     uint64_t *viewer_bits[SRV_MAX_EFFECTS]; /* per block: which viewer slots requested it (keep_views) */
     uint32_t coarse_effect;                 /* the low-frequency effect whole frames evaluate once per block of
@@ -456,16 +454,6 @@ void srv__visibility_list(const scene *s, scene_rt *rt, const srv_camera_frame *
  * t). The pixel's footprint the no-cache baseline jitters shadow rays over. */
 void srv__pixel_differentials(const srv_camera_frame *f, const float dir[3], float t, const float n[3],
                               float dpdx[3], float dpdy[3]);
-
-/* A request pass: one kind's keys (of one effect when the kind's keys do not name it, else SRV_NO_EFFECT
- * for all its effects), gathered per tile and batch-requested together. */
-typedef struct srv_request_pass {
-    uint32_t kind, effect;
-} srv_request_pass;
-
-/* The loop's request passes in the order their batches run (kinds in order; a kind whose keys do not carry
- * the effect: one pass per shading effect of it). Writes at most SRV_MAX_EFFECTS; returns how many. */
-uint32_t srv__request_passes(const srv_loop *loop, srv_request_pass passes[SRV_MAX_EFFECTS]);
 
 /* Stage 3: requests of one viewer into the caches; fills the viewer's requested texels and cells
  * (deduplicated within the viewer, shading effects only, per cache kind) and counts drops in st. */
