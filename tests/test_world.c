@@ -7,6 +7,7 @@
 
 #include "camgen.h"
 #include "engine.h"
+#include "engine_internal.h" /* white-box: the blocks each frame requested, per kind and effect */
 #include "fxt_scene.h"
 #include "scene.h"
 
@@ -546,6 +547,116 @@ static void test_lanes_change_nothing(void **state)
     }
 }
 
+/* One block a frame requested: its cache kind, effect, key and requested texels (or cells). */
+typedef struct request_record {
+    uint64_t key, requested;
+    uint32_t kind, effect;
+} request_record;
+
+/* Every block of every cached effect the last frame requested (the kinds' frame blocks, in their order) into
+ * out (capacity cap); counts[k]: how many of kind k. Returns how many. */
+static size_t frame_requests(const srv_loop *loop, request_record *out, size_t cap, size_t counts[SCENE_CACHE_COUNT])
+{
+    size_t n = 0;
+    for (uint32_t k = 0; k < SCENE_CACHE_COUNT; k++) {
+        counts[k] = 0;
+        const srv_cache_kind *kind = loop->kinds[k];
+        if (!kind || !loop->caches[k])
+            continue;
+        for (uint32_t e = 0; e < loop->effect_count; e++) {
+            if (!loop->effect_cached[e] || loop->effect_kind[e] != k)
+                continue;
+            uint32_t count = 0;
+            const uint32_t *blocks = kind->frame_blocks(loop->caches[k], e, &count);
+            for (uint32_t i = 0; i < count; i++) {
+                assert_true(n < cap);
+                out[n++] = (request_record){.key = kind->block_key(loop->caches[k], e, blocks[i]),
+                                            .requested = kind->block_requested(loop->caches[k], e, blocks[i]),
+                                            .kind = k,
+                                            .effect = e};
+                counts[k]++;
+            }
+        }
+    }
+    return n;
+}
+
+/* The requests' per-thread lists with their recent table (a key an earlier tile appended gets the mask
+ * or-ed in) against every tile's keys appended (srv_loop_desc.no_request_recent): after every frame the same
+ * blocks requested with the same texels and cells, in the same order, the same counts, and at the end the
+ * same radiance. A whole-frame viewer of 4 x 4 blocks on one thread; two whole-frame viewers (2 x 2 blocks)
+ * and a sparse one on two threads; shadows, AO (and its triangle lookup: a dependency's keys) and probes. */
+static void test_request_lists_merge_nothing_away(void **state)
+{
+    fixture *f = *state;
+    enum { CAP = 1 << 20, SPARSE = 500 };
+    const struct {
+        uint32_t w, h, threads, viewers;
+        float fov;
+        bool sparse;
+    } cases[] = {{200, 108, 1, 1, 20.0f, false}, {200, 200, 2, 2, 60.0f, true}};
+    request_record *rec[2];
+    rec[0] = malloc(CAP * sizeof(request_record));
+    rec[1] = malloc(CAP * sizeof(request_record));
+    assert_true(rec[0] && rec[1]);
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        srv_loop *loops[2];
+        srv_viewer_id ids[2][2], sparse[2];
+        for (int m = 0; m < 2; m++) {
+            srv_loop_desc d = probe_desc(f, true);
+            fxt_effects_on(&d, (const char *const[]){"ao"}, 1);
+            d.threads = cases[c].threads;
+            d.no_request_recent = m == 1;
+            loops[m] = fxt_loop(&d, cases[c].viewers, cases[c].w, cases[c].h, ids[m]);
+            if (cases[c].sparse)
+                assert_int_equal(srv_viewer_add(loops[m], &(srv_viewer_desc){.max_pixels = SPARSE}, &sparse[m]),
+                                 FXC_OK);
+        }
+        size_t kinds_seen[SCENE_CACHE_COUNT] = {0};
+        for (uint32_t frame = 0; frame < 5; frame++) {
+            srv_camera cams[2];
+            for (uint32_t v = 0; v < cases[c].viewers; v++) {
+                cams[v] = srv_camgen_camera(SRV_CAMGEN_WALK, f->s, v, cases[c].viewers, frame, 1);
+                cams[v].fov_deg = cases[c].fov;
+            }
+            uint32_t list[SPARSE], state_lcg = 0x9e3779b9u + frame;
+            for (uint32_t i = 0; i < SPARSE; i++) {
+                state_lcg = state_lcg * 1664525u + 1013904223u;
+                uint32_t x = (state_lcg >> 8) % cases[c].w, y = (state_lcg >> 20) % cases[c].h;
+                list[i] = y << 16 | x;
+            }
+            srv_frame_stats st[2];
+            size_t n[2], counts[2][SCENE_CACHE_COUNT];
+            for (int m = 0; m < 2; m++) {
+                if (cases[c].sparse)
+                    assert_int_equal(srv_viewer_set_pixels(loops[m], sparse[m], &cams[0], cases[c].w, cases[c].h,
+                                                           list, SPARSE, NULL),
+                                     FXC_OK);
+                fxt_frame(loops[m], ids[m], cases[c].viewers, cams, &st[m]);
+                n[m] = frame_requests(loops[m], rec[m], CAP, counts[m]);
+            }
+            assert_int_equal(n[0], n[1]);
+            assert_memory_equal(counts[0], counts[1], sizeof counts[0]);
+            assert_memory_equal(rec[0], rec[1], n[0] * sizeof(request_record));
+            assert_int_equal(st[0].requested_texels, st[1].requested_texels);
+            assert_int_equal(st[0].world.requested_cells, st[1].world.requested_cells);
+            assert_memory_equal(st[0].drops, st[1].drops, sizeof st[0].drops);
+            for (uint32_t k = 0; k < SCENE_CACHE_COUNT; k++)
+                kinds_seen[k] += counts[0][k];
+        }
+        /* both kinds requested: not a comparison of empty passes */
+        assert_true(kinds_seen[SCENE_CACHE_ON_SURFACE] > 0);
+        assert_true(kinds_seen[SCENE_CACHE_WORLD_SPACE] > 0);
+        for (uint32_t v = 0; v < cases[c].viewers; v++)
+            assert_memory_equal(srv_viewer_radiance(loops[0], ids[0][v]), srv_viewer_radiance(loops[1], ids[1][v]),
+                                (size_t)cases[c].w * cases[c].h * 3 * sizeof(float));
+        srv_loop_free(loops[0]);
+        srv_loop_free(loops[1]);
+    }
+    free(rec[0]);
+    free(rec[1]);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -559,6 +670,7 @@ int main(void)
         cmocka_unit_test(test_levels_blend_without_seams),
         cmocka_unit_test(test_blocks_close_to_every_pixel),
         cmocka_unit_test(test_lanes_change_nothing),
+        cmocka_unit_test(test_request_lists_merge_nothing_away),
     };
     return cmocka_run_group_tests(tests, fxt_default_scene_setup, fxt_default_scene_teardown);
 }

@@ -119,6 +119,9 @@ typedef struct srv_loop_desc {
     bool no_lanes;                         /* tests: the per-pixel stages' coarse sample choice (requests)
                                               and blend (compose) through their scalar loops only, not the
                                               lanes of whole rows (the same results, byte for byte) */
+    bool no_request_recent;                /* tests: every tile's requests appended to its thread's list, none
+                                              or-ed into an entry of the same key from an earlier tile (the
+                                              same requests after the batch merges them) */
     srv_allocator allocator;               /* default: libc */
 } srv_loop_desc;
 

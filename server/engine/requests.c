@@ -29,13 +29,29 @@ typedef struct request_task {
     atomic_bool failed; /* a thread ran out of memory: this viewer's requests are dropped this frame */
 } request_task;
 
+/* Moves a folded key onto the thread's list: or-ed into the entry of the same key when the list's recent
+ * table finds one (neighbouring tiles ask for the same blocks and cells: a probe cell spans tiles), else
+ * appended. The batch sorts and ors equal keys' masks anyway, so the merged requests are the same; its sort
+ * gets fewer keys (Sponza at 640 x 360: the probes' pass about 20,000 keys for 1,600 distinct cells, the
+ * on-surface one 12,900 for 4,100 blocks, without the table). */
 static bool fold_flush_slot(srv_loop *loop, fold_buffer *fold, uint32_t slot, srv_request_list *out)
 {
-    if (fold->keys[slot] == OSC_KEY_EMPTY)
+    uint64_t key = fold->keys[slot];
+    if (key == OSC_KEY_EMPTY)
         return true;
+    /* the top bits of another multiplier than fold_add's (whose slot fixes the top 6 bits of its product) */
+    uint32_t h = (uint32_t)((key * 0xC2B2AE3D27D4EB4Full) >> 54); /* 10 bits: SRV_REQUEST_RECENT */
+    uint32_t at = out->recent[h];
+    if (!loop->desc.no_request_recent && at < out->count && out->keys[at] == key) {
+        out->masks[at] |= fold->masks[slot];
+        fold->keys[slot] = OSC_KEY_EMPTY;
+        return true;
+    }
     if (out->count == out->capacity && !srv__request_reserve(loop, SRV_MEM_QUEUES, out, out->count + 1))
         return false;
-    out->keys[out->count] = fold->keys[slot];
+    if (out->count < UINT32_MAX)
+        out->recent[h] = (uint32_t)out->count;
+    out->keys[out->count] = key;
     out->masks[out->count] = fold->masks[slot];
     out->count++;
     fold->keys[slot] = OSC_KEY_EMPTY;

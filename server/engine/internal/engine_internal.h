@@ -29,6 +29,8 @@ enum {
 /* Memory categories counted by the engine's allocator (srv_memory's viewers and queues). */
 typedef enum srv_mem_category { SRV_MEM_VIEWERS = 0, SRV_MEM_QUEUES, SRV_MEM_COUNT } srv_mem_category;
 
+enum { SRV_REQUEST_RECENT = 1024 }; /* srv_request_list.recent: a power of two */
+
 /* A growable (key, mask) list, kept across frames so steady state allocates nothing. Padded to two cache
  * lines, whatever the alignment the allocator gives the array of per-thread lists: the fields of two
  * neighbouring lists (64 bytes each) are then at least 64 bytes apart and never share a cache line. */
@@ -38,6 +40,10 @@ typedef struct srv_request_list {
     uint32_t *blocks; /* block index per key after the batch request */
     size_t count, capacity;
     size_t keys_capacity, masks_capacity, blocks_capacity; /* each array's own (equal unless a grow failed) */
+    /* Per-thread lists (requests.c): by a hash of a key, the index of the entry that last took that hash, so
+     * that a key another tile of the same pass already appended gets its mask or-ed in instead of a second
+     * entry. An index is trusted only if it is below count and its entry holds the key: never reset. */
+    uint32_t recent[SRV_REQUEST_RECENT];
     uint8_t padding[64];
 } srv_request_list;
 
