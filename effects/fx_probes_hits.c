@@ -152,8 +152,10 @@ typedef struct hit_batch {
     uint16_t ray[PROBE_CHUNK];
     uint32_t slot[PROBE_CHUNK], front[PROBE_CHUNK];
     hit_cell *entry[PROBE_CHUNK]; /* NULL: no bounce (out of range; after pass 2 also no active corner) */
-    double t[PROBE_CHUNK][3];
-    float centre[PROBE_CHUNK][3];
+    /* per axis (structure of arrays: pass 1's lanes load and store them whole): the hit's shading point, its
+     * cell's centre and its position in the cell */
+    float position[3][PROBE_CHUNK], centre[3][PROBE_CHUNK];
+    double t[3][PROBE_CHUNK];
     float tap[PROBE_CHUNK][8], weight[PROBE_CHUNK][8], distance[PROBE_CHUNK][8];
     int32_t texel[PROBE_CHUNK][8];
     float bounce[PROBE_CHUNK][3]; /* pass 3's E of the probes around the hit */
@@ -567,20 +569,25 @@ FXC_HOT_INLINE void batch_locate_at(hit_batch *restrict hb, const fx_block_job *
                                     const float position[3], uint32_t i)
 {
     hb->entry[i] = NULL;
-    if (!hit_locate(job->origin, job->cell, inverse, position, hb->centre[i], hb->t[i]))
+    float centre[3];
+    double t[3];
+    if (!hit_locate(job->origin, job->cell, inverse, position, centre, t))
         return;
-    hit_cell *e = hit_cell_entry(job->effect, job->level, hb->centre[i]);
+    for (int k = 0; k < 3; k++) {
+        hb->centre[k][i] = centre[k];
+        hb->t[k][i] = t[k];
+    }
+    hit_cell *e = hit_cell_entry(job->effect, job->level, centre);
     hb->entry[i] = e;
     entry_prefetch(e);
 }
 
-/* Pass 1 in lanes: batch hits [0, count) (hb->ray set, positions in hit_pos) located HIT_LANES at a time, the
+/* Pass 1 in lanes: batch hits [0, count) (hb->ray and hb->position set) located HIT_LANES at a time, the
  * same operations as hit_locate and hit_cell_entry per lane (every axis computed, the range test combined after;
  * the hash's 64-bit products are exact in any form), the rest one by one (batch_locate's body). */
 enum { HIT_LANES = 8 };
 
-FXC_HOT_INLINE void batch_locate_lanes(hit_batch *restrict hb, const fx_block_job *job, double inverse,
-                                       const float (*hit_pos)[3])
+FXC_HOT_INLINE void batch_locate_lanes(hit_batch *restrict hb, const fx_block_job *job, double inverse)
 {
     static const uint64_t mix[3] = {0x9E3779B97F4A7C15ull, 0xC2B2AE3D27D4EB4Full, 0x165667B19E3779F9ull};
     const double cell = (double)job->cell;
@@ -598,11 +605,11 @@ FXC_HOT_INLINE void batch_locate_lanes(hit_batch *restrict hb, const fx_block_jo
         }
         for (int k = 0; k < 3; k++) {
             const double grid = (double)job->origin[k];
-            float position[HIT_LANES], centre[HIT_LANES];
-            double q[HIT_LANES], f[HIT_LANES], t[HIT_LANES];
+            const float *restrict position = hb->position[k] + i;
+            float *restrict centre = hb->centre[k] + i;
+            double *restrict t = hb->t[k] + i;
+            double q[HIT_LANES], f[HIT_LANES];
             uint32_t bits[HIT_LANES];
-            for (int l = 0; l < HIT_LANES; l++)
-                position[l] = hit_pos[hb->ray[i + l]][k];
             for (int l = 0; l < HIT_LANES; l++) {
                 double delta = (double)position[l] - grid;
                 q[l] = inverse != 0.0 ? delta * inverse : delta / cell;
@@ -617,10 +624,6 @@ FXC_HOT_INLINE void batch_locate_lanes(hit_batch *restrict hb, const fx_block_jo
             memcpy(bits, centre, sizeof bits);
             for (int l = 0; l < HIT_LANES; l++)
                 h[l] ^= (uint64_t)bits[l] * mix[k];
-            for (int l = 0; l < HIT_LANES; l++) {
-                hb->centre[i + l][k] = centre[l];
-                hb->t[i + l][k] = t[l];
-            }
         }
         for (int l = 0; l < HIT_LANES; l++) {
             h[l] ^= h[l] >> 31;
@@ -633,7 +636,8 @@ FXC_HOT_INLINE void batch_locate_lanes(hit_batch *restrict hb, const fx_block_jo
                 entry_prefetch(hb->entry[i + l]);
     }
     for (; i < hb->count; i++)
-        batch_locate_at(hb, job, inverse, hit_pos[hb->ray[i]], i);
+        batch_locate_at(hb, job, inverse, (const float[3]){hb->position[0][i], hb->position[1][i], hb->position[2][i]},
+                        i);
 }
 
 /* The loads of scene_albedo_mean(s, tri) that miss (the triangle's mesh index and texture mean), prefetched
@@ -680,13 +684,14 @@ FXC_HOT_INLINE void hits_bounce_prepare(const fx_context *ctx, const fx_block_jo
         if (!e)
             continue;
         uint64_t *pending = &memo->pending[e - memo->cells];
-        if (!hit_cell_holds(e, effect, level, hb->centre[i])) {
+        const float centre[3] = {hb->centre[0][i], hb->centre[1][i], hb->centre[2][i]};
+        if (!hit_cell_holds(e, effect, level, centre)) {
             if (*pending >> HIT_CELL_NORMALS == batch) { /* a waiting hit reads this entry: finish those first */
                 batch_bounce(hb, done, i);
                 done = i;
                 batch = ++memo->batch_id;
             }
-            hit_cell_fill(ctx, e, effect, level, hb->centre[i]);
+            hit_cell_fill(ctx, e, effect, level, centre);
         }
         if (!e->active) {
             hb->entry[i] = NULL;
@@ -705,7 +710,7 @@ FXC_HOT_INLINE void hits_bounce_prepare(const fx_context *ctx, const fx_block_jo
         }
         *pending = (*pending >> HIT_CELL_NORMALS == batch ? *pending : batch << HIT_CELL_NORMALS) | (1u << slot);
         hb->slot[i] = slot;
-        hit_taps(hb->t[i], hb->tap[i]);
+        hit_taps((const double[3]){hb->t[0][i], hb->t[1][i], hb->t[2][i]}, hb->tap[i]);
         hb->front[i] = hit_weights_geometry(e, hit_pos[r], normal, hb->tap[i], hb->texel[i], hb->weight[i],
                                             hb->distance[i]);
 #if defined(__GNUC__)
@@ -785,11 +790,14 @@ FXC_HOT_CLONES uint64_t fx__probe_shade_chunk(const fx_context *ctx, const fx_bl
     }
     if (batch) {
         hit_batch *restrict hb = &memo->batch;
-        for (uint32_t f = 0; f < fronts; f++)
+        for (uint32_t f = 0; f < fronts; f++) {
             hb->ray[f] = front[f];
+            for (int k = 0; k < 3; k++)
+                hb->position[k][f] = hit_pos[front[f]][k];
+        }
         hb->count = fronts;
         if (fx__probe_hit_lanes)
-            batch_locate_lanes(hb, job, inverse, (const float(*)[3])hit_pos);
+            batch_locate_lanes(hb, job, inverse);
         else
             for (uint32_t f = 0; f < fronts; f++)
                 batch_locate_at(hb, job, inverse, hit_pos[front[f]], f);
