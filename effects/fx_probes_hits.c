@@ -10,7 +10,6 @@
 #include "scene_inline.h"
 
 #include <pthread.h>
-#include <stddef.h>
 #include <stdlib.h>
 
 /* The shading of a chunk of hits: per primary ray, its radiance once the shadow rays are back. */
@@ -152,10 +151,8 @@ typedef struct hit_batch {
     uint16_t ray[PROBE_CHUNK];
     uint32_t slot[PROBE_CHUNK], front[PROBE_CHUNK];
     hit_cell *entry[PROBE_CHUNK]; /* NULL: no bounce (out of range; after pass 2 also no active corner) */
-    /* per axis (structure of arrays: pass 1's lanes load and store them whole): the hit's shading point, its
-     * cell's centre and its position in the cell */
-    float position[3][PROBE_CHUNK], centre[3][PROBE_CHUNK];
-    double t[3][PROBE_CHUNK];
+    double t[PROBE_CHUNK][3];
+    float centre[PROBE_CHUNK][3];
     float tap[PROBE_CHUNK][8], weight[PROBE_CHUNK][8], distance[PROBE_CHUNK][8];
     int32_t texel[PROBE_CHUNK][8];
     float bounce[PROBE_CHUNK][3]; /* pass 3's E of the probes around the hit */
@@ -174,7 +171,6 @@ typedef struct hit_memo {
 /* Whether update shades a chunk's front-face hits in passes (the default) or one at a time (the tests
  * compare the two, bit for bit). */
 bool fx__probe_hits_batched = true;
-bool fx__probe_hit_lanes = true;
 uint32_t fx__probe_memo_log2 = HIT_CELLS_LOG2;
 
 static _Thread_local hit_cell thread_hit_fallback[1 << HIT_CELLS_FALLBACK_LOG2]; /* 115 KB */
@@ -551,93 +547,22 @@ FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job,
         out[k] = albedo[k] * (direct[k] + bounce[k] * (1.0f / FX_PROBE_PI));
 }
 
-/* Pass 1's prefetch of a memo entry, all its lines (BENCHMARKS, probe-upd7: the lines pass 2 reads here and
- * the slot's two lines in pass 2 measured the same). */
-FXC_HOT_INLINE void entry_prefetch(const hit_cell *e)
+/* Pass 1 of the batched bounce (the comment at hit_batch): chunk hit r at `position` joins the batch, its
+ * cell located and its memo entry prefetched. */
+FXC_HOT_INLINE void batch_locate(hit_batch *restrict hb, const fx_block_job *job, double inverse,
+                                 const float position[3], uint32_t r)
 {
+    uint32_t i = hb->count++;
+    hb->ray[i] = (uint16_t)r;
+    hb->entry[i] = NULL;
+    if (!hit_locate(job->origin, job->cell, inverse, position, hb->centre[i], hb->t[i]))
+        return;
+    hit_cell *e = hit_cell_entry(job->effect, job->level, hb->centre[i]);
+    hb->entry[i] = e;
 #if defined(__GNUC__)
     for (size_t line = 0; line < sizeof *e; line += 64)
         __builtin_prefetch((const char *)e + line);
-#else
-    (void)e;
 #endif
-}
-
-/* Pass 1 of the batched bounce (the comment at hit_batch), one hit: batch hit i at `position` (its ray set)
- * located and its memo entry prefetched. */
-FXC_HOT_INLINE void batch_locate_at(hit_batch *restrict hb, const fx_block_job *job, double inverse,
-                                    const float position[3], uint32_t i)
-{
-    hb->entry[i] = NULL;
-    float centre[3];
-    double t[3];
-    if (!hit_locate(job->origin, job->cell, inverse, position, centre, t))
-        return;
-    for (int k = 0; k < 3; k++) {
-        hb->centre[k][i] = centre[k];
-        hb->t[k][i] = t[k];
-    }
-    hit_cell *e = hit_cell_entry(job->effect, job->level, centre);
-    hb->entry[i] = e;
-    entry_prefetch(e);
-}
-
-/* Pass 1 in lanes: batch hits [0, count) (hb->ray and hb->position set) located HIT_LANES at a time, the
- * same operations as hit_locate and hit_cell_entry per lane (every axis computed, the range test combined after;
- * the hash's 64-bit products are exact in any form), the rest one by one (batch_locate's body). */
-enum { HIT_LANES = 8 };
-
-FXC_HOT_INLINE void batch_locate_lanes(hit_batch *restrict hb, const fx_block_job *job, double inverse)
-{
-    static const uint64_t mix[3] = {0x9E3779B97F4A7C15ull, 0xC2B2AE3D27D4EB4Full, 0x165667B19E3779F9ull};
-    const double cell = (double)job->cell;
-    const uint64_t salt = ((uint64_t)job->level << 40) ^ ((uint64_t)job->effect << 48);
-    const uint32_t shift = thread_hit_shift;
-    uint32_t i = 0;
-    for (; i + HIT_LANES <= hb->count; i += HIT_LANES) {
-        /* Local arrays in and out, loops without branches, so GCC's vectoriser takes each (vroundpd,
-         * vpmuludq in the AVX2 copy); the scattered reads and writes of the batch are separate loops. */
-        uint64_t h[HIT_LANES];
-        uint32_t in_range[HIT_LANES];
-        for (int l = 0; l < HIT_LANES; l++) {
-            h[l] = salt;
-            in_range[l] = 1;
-        }
-        for (int k = 0; k < 3; k++) {
-            const double grid = (double)job->origin[k];
-            const float *restrict position = hb->position[k] + i;
-            float *restrict centre = hb->centre[k] + i;
-            double *restrict t = hb->t[k] + i;
-            double q[HIT_LANES], f[HIT_LANES];
-            uint32_t bits[HIT_LANES];
-            for (int l = 0; l < HIT_LANES; l++) {
-                double delta = (double)position[l] - grid;
-                q[l] = inverse != 0.0 ? delta * inverse : delta / cell;
-            }
-            for (int l = 0; l < HIT_LANES; l++)
-                f[l] = floor(q[l]);
-            for (int l = 0; l < HIT_LANES; l++) {
-                in_range[l] &= fabs(f[l]) < 1e9 ? 1u : 0u;
-                centre[l] = (float)(grid + (f[l] + 0.5) * cell);
-                t[l] = q[l] - f[l];
-            }
-            memcpy(bits, centre, sizeof bits);
-            for (int l = 0; l < HIT_LANES; l++)
-                h[l] ^= (uint64_t)bits[l] * mix[k];
-        }
-        for (int l = 0; l < HIT_LANES; l++) {
-            h[l] ^= h[l] >> 31;
-            h[l] *= 0xD6E8FEB86659FD93ull;
-        }
-        for (int l = 0; l < HIT_LANES; l++)
-            hb->entry[i + l] = in_range[l] ? &thread_hit_cells[h[l] >> shift] : NULL;
-        for (int l = 0; l < HIT_LANES; l++)
-            if (hb->entry[i + l])
-                entry_prefetch(hb->entry[i + l]);
-    }
-    for (; i < hb->count; i++)
-        batch_locate_at(hb, job, inverse, (const float[3]){hb->position[0][i], hb->position[1][i], hb->position[2][i]},
-                        i);
 }
 
 /* The loads of scene_albedo_mean(s, tri) that miss (the triangle's mesh index and texture mean), prefetched
@@ -684,14 +609,13 @@ FXC_HOT_INLINE void hits_bounce_prepare(const fx_context *ctx, const fx_block_jo
         if (!e)
             continue;
         uint64_t *pending = &memo->pending[e - memo->cells];
-        const float centre[3] = {hb->centre[0][i], hb->centre[1][i], hb->centre[2][i]};
-        if (!hit_cell_holds(e, effect, level, centre)) {
+        if (!hit_cell_holds(e, effect, level, hb->centre[i])) {
             if (*pending >> HIT_CELL_NORMALS == batch) { /* a waiting hit reads this entry: finish those first */
                 batch_bounce(hb, done, i);
                 done = i;
                 batch = ++memo->batch_id;
             }
-            hit_cell_fill(ctx, e, effect, level, centre);
+            hit_cell_fill(ctx, e, effect, level, hb->centre[i]);
         }
         if (!e->active) {
             hb->entry[i] = NULL;
@@ -710,7 +634,7 @@ FXC_HOT_INLINE void hits_bounce_prepare(const fx_context *ctx, const fx_block_jo
         }
         *pending = (*pending >> HIT_CELL_NORMALS == batch ? *pending : batch << HIT_CELL_NORMALS) | (1u << slot);
         hb->slot[i] = slot;
-        hit_taps((const double[3]){hb->t[0][i], hb->t[1][i], hb->t[2][i]}, hb->tap[i]);
+        hit_taps(hb->t[i], hb->tap[i]);
         hb->front[i] = hit_weights_geometry(e, hit_pos[r], normal, hb->tap[i], hb->texel[i], hb->weight[i],
                                             hb->distance[i]);
 #if defined(__GNUC__)
@@ -767,12 +691,9 @@ FXC_HOT_CLONES uint64_t fx__probe_shade_chunk(const fx_context *ctx, const fx_bl
     const double inverse = cell_inverse(cell);
     uint64_t traced = 0;
 
-    /* The front-face hits and their shading points; pass 1 of the bounce (hit_batch) over them in lanes, then
-     * their shadow rays (covering pass 1's prefetches) and pass 2, before the shadow rays are traced. */
+    /* Shadow rays of the front-face hits. */
     hs->count = 0;
     float hit_pos[PROBE_CHUNK][3];
-    uint16_t front[PROBE_CHUNK];
-    uint32_t fronts = 0;
     for (uint32_t r = 0; r < n; r++) {
         hs->direct[r][0] = hs->direct[r][1] = hs->direct[r][2] = 0;
         const struct RTCRayHit *rh = &hits[r];
@@ -786,28 +707,11 @@ FXC_HOT_CLONES uint64_t fx__probe_shade_chunk(const fx_context *ctx, const fx_bl
         for (int k = 0; k < 3; k++)
             p[k] = origin[k] + rh->ray.tfar * dir[k];
         scene_offset_ray_origin_inline(p, normal, s->ray_offset_scale, hit_pos[r]);
-        front[fronts++] = (uint16_t)r;
-    }
-    if (batch) {
-        hit_batch *restrict hb = &memo->batch;
-        for (uint32_t f = 0; f < fronts; f++) {
-            hb->ray[f] = front[f];
-            for (int k = 0; k < 3; k++)
-                hb->position[k][f] = hit_pos[front[f]][k];
-        }
-        hb->count = fronts;
-        if (fx__probe_hit_lanes)
-            batch_locate_lanes(hb, job, inverse);
-        else
-            for (uint32_t f = 0; f < fronts; f++)
-                batch_locate_at(hb, job, inverse, hit_pos[front[f]], f);
-    }
-    for (uint32_t f = 0; f < fronts; f++) {
-        uint32_t r = front[f];
-        const float *normal = s->tri_normal + 3 * (size_t)hits[r].hit.primID;
         traced += queue_shadow_rays(ctx, batch ? lights : NULL, hs, r, hit_pos[r], normal);
-        if (batch)
-            albedo_prefetch(s, hits[r].hit.primID);
+        if (batch) { /* passes 1 and 2 of the bounce (hit_batch), before the shadow rays are traced */
+            batch_locate(&memo->batch, job, inverse, hit_pos[r], r);
+            albedo_prefetch(s, rh->hit.primID);
+        }
     }
     if (batch)
         hits_bounce_prepare(ctx, job, memo, hits, (const float(*)[3])hit_pos);

@@ -370,9 +370,8 @@ static void test_memo_across_loops(void **state)
  * for the last pass read (the pass must run first); the room corners' cells see three normals (a slot
  * replaced while read); 144 rays and 200 (a chunk of 128 and one of 72). Two scenes: the thin-wall rooms (a
  * point light) and an open court under a sky with a sun and a point light (the directional light's direction
- * taken once per update against fx__light_arriving per hit). The batched runs locate their hits' cells in
- * lanes of 8 (fx__probe_hit_lanes, the default) and one by one: both must match one hit at a time; the rooms
- * also with a cell of 0.7 (no exact inverse: the lanes divide). */
+ * taken once per update against fx__light_arriving per hit); the rooms also with a cell of 0.7 (no exact
+ * inverse: hit_locate divides). */
 typedef struct batch_run {
     fxt_grid *g;
     scene *s;
@@ -425,8 +424,8 @@ static void test_batched_hits_match_single(void **state)
         fxt_grid_init(&g, s, (float[3]){-1.5f, 0.5f, -0.5f}, cell, 4, 2, 2);
         size_t bytes = (size_t)g.count * FX_PROBE_BYTES;
         static const uint32_t memo_log2[3] = {11, 3, 1}, rays[2] = {FX_PROBE_RAYS, 200};
-        uint8_t *single = malloc(bytes), *batched = malloc(bytes), *one_by_one = malloc(bytes);
-        assert_true(single && batched && one_by_one);
+        uint8_t *single = malloc(bytes), *batched = malloc(bytes);
+        assert_true(single && batched);
         for (int v = 0; v < 6; v++) {
             batch_run run = {.g = &g, .s = s, .rt = rt, .rays = rays[v % 2]};
             fx__probe_memo_log2 = memo_log2[v / 2];
@@ -439,33 +438,23 @@ static void test_batched_hits_match_single(void **state)
             run.payload = batched;
             assert_int_equal(pthread_create(&tid, NULL, batch_run_thread, &run), 0);
             pthread_join(tid, NULL);
-            fx__probe_hit_lanes = false;
-            run.payload = one_by_one;
-            assert_int_equal(pthread_create(&tid, NULL, batch_run_thread, &run), 0);
-            pthread_join(tid, NULL);
-            fx__probe_hit_lanes = true;
-            uint32_t differ = 0, differ_one = 0, lit = 0;
-            for (size_t i = 0; i < bytes; i++) {
+            uint32_t differ = 0, lit = 0;
+            for (size_t i = 0; i < bytes; i++)
                 differ += single[i] != batched[i];
-                differ_one += single[i] != one_by_one[i];
-            }
             for (uint32_t i = 0; i < g.count; i++) {
                 float scale;
                 memcpy(&scale, single + (size_t)i * FX_PROBE_BYTES + 24, sizeof scale);
                 lit += scale > 0;
             }
-            printf("batched hits, %s, cell %.1f, memo 2^%u, %u rays: %u payload bytes differ (%u located one by "
-                   "one), %u of %u probes lit\n",
-                   court ? "open court" : "thin wall", (double)cell, memo_log2[v / 2], rays[v % 2], differ,
-                   differ_one, lit, g.count);
+            printf("batched hits, %s, cell %.1f, memo 2^%u, %u rays: %u payload bytes differ, %u of %u probes lit\n",
+                   court ? "open court" : "thin wall", (double)cell, memo_log2[v / 2], rays[v % 2], differ, lit,
+                   g.count);
             assert_int_equal(differ, 0);
-            assert_int_equal(differ_one, 0);
             assert_true(lit >= 8);
         }
         fx__probe_memo_log2 = 11;
         free(single);
         free(batched);
-        free(one_by_one);
         fxt_grid_free(&g);
         scene_rt_free(rt);
         scene_free(s);

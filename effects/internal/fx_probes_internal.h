@@ -143,9 +143,6 @@ bool fx__probe_filter_memo(const fx_context *ctx, bool committed, const fx_taps 
  * once per call (true, the default), or one at a time with fx__light_arriving per hit (the tests set it false
  * to compare the two bit for bit; not to be changed while updates run). */
 extern bool fx__probe_hits_batched;
-/* Whether the batched bounce locates its hits' cells HIT_LANES at a time (true, the default) or one by one (the
- * tests compare the two, bit for bit). */
-extern bool fx__probe_hit_lanes;
 /* log2 of the entries a thread's hit memo uses (1 to 11, the default 11), read when a thread allocates it
  * (its first update): the tests make it small so that entries are replaced within a chunk. */
 extern uint32_t fx__probe_memo_log2;
