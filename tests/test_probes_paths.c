@@ -1,8 +1,8 @@
-/* The probe effect (effects/fx_probes.c) against itself run another way, through the harness of fxt_probes.h:
- * threads splitting the probes any way give the same bytes; the shading lanes match the per-point filter;
- * cell reads match the taps; the per-thread memos give the same results across loops; the batched bounce at
- * hits matches one hit at a time; half reads with denormals-are-zero keep their values. The closed-form
- * checks are in test_probes.c. */
+/* The probe effect (effects/fx_probes.c, fx_probes_hits.c) against itself run another way, through the
+ * harness of fxt_probes.h: threads splitting the probes any way give the same bytes; the shading lanes match
+ * the per-point filter; cell reads match the taps; the per-thread memos give the same results across loops;
+ * the batched bounce at hits matches one hit at a time; half reads with denormals-are-zero keep their values.
+ * The closed-form checks are in test_probes.c. */
 #include "test_util.h"
 
 #include "fxt_probes.h"
@@ -362,7 +362,7 @@ static void test_memo_across_loops(void **state)
 }
 
 /* ---- 7. the batched bounce at hits against one hit at a time ---------------------------------------------
- * The update shades a chunk's front-face hits in passes (fx_probes.c, hit_batch) or, with
+ * The update shades a chunk's front-face hits in passes (fx_probes_hits.c, hit_batch) or, with
  * fx__probe_hits_batched false, one at a time (hit_bounce): the same operations moved in time, so the
  * payloads must agree bit for bit after frames of bounces (every float of the irradiance and moments, the
  * positions, flags). With the memo's 2048 entries, and with 2 and 8 (fx__probe_memo_log2, fresh threads: the
@@ -446,9 +446,10 @@ static void test_batched_hits_match_single(void **state)
                 memcpy(&scale, single + (size_t)i * FX_PROBE_BYTES + 24, sizeof scale);
                 lit += scale > 0;
             }
-            printf("batched hits, %s, cell %.1f, memo 2^%u, %u rays: %u payload bytes differ, %u of %u probes lit\n",
-                   court ? "open court" : "thin wall", (double)cell, memo_log2[v / 2], rays[v % 2], differ, lit,
-                   g.count);
+            printf("batched hits, %s, cell %.1f, memo 2^%u, %u rays: %u payload bytes differ, %u of %u "
+                   "probes lit\n",
+                   court ? "open court" : "thin wall", (double)cell, memo_log2[v / 2], rays[v % 2], differ,
+                   lit, g.count);
             assert_int_equal(differ, 0);
             assert_true(lit >= 8);
         }

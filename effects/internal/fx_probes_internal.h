@@ -1,6 +1,7 @@
-/* fx_probes_internal.h: what the probe effect's two files share (effects/fx_probes.c: update, commit, the
- * no-cache estimate and the table; effects/fx_probes_map.c: the octahedral maps, reading payloads, the shading
- * filter and compose's shade). The payload layout and units are described at the top of fx_probes.c. */
+/* fx_probes_internal.h: what the probe effect's three files share (effects/fx_probes.c: update, commit and
+ * the table; effects/fx_probes_hits.c: the update's hits and the no-cache estimate; effects/fx_probes_map.c:
+ * the octahedral maps, reading payloads, the shading filter and compose's shade). The payload layout and
+ * units are described at the top of fx_probes.c. */
 #ifndef FXC_FX_PROBES_INTERNAL_H
 #define FXC_FX_PROBES_INTERNAL_H
 
@@ -149,9 +150,9 @@ extern uint32_t fx__probe_memo_log2;
 
 /* What an update's rays saw of the faces they hit, per probe (update's relocation and off test). */
 typedef struct fx_probe_faces {
-    uint32_t backfaces;                      /* rays that hit a back face */
-    float closest_front, closest_back;       /* metres; INFINITY: none */
-    float front_dir[3], back_dir[3];         /* the rays' directions to them */
+    uint32_t backfaces;                /* rays that hit a back face */
+    float closest_front, closest_back; /* metres; INFINITY: none */
+    float front_dir[3], back_dir[3];   /* the rays' directions to them */
 } fx_probe_faces;
 
 /* fx_probes_hits.c. Once per update call, in the tracing thread, before fx__probe_shade_chunk: the call's
