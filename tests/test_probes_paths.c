@@ -1,8 +1,8 @@
-/* The probe effect (effects/fx_probes.c) against itself run another way, through the harness of fxt_probes.h:
- * threads splitting the probes any way give the same bytes; the shading lanes match the per-point filter;
- * cell reads match the taps; the per-thread memos give the same results across loops; the batched bounce at
- * hits matches one hit at a time; half reads with denormals-are-zero keep their values. The closed-form
- * checks are in test_probes.c. */
+/* The probe effect (effects/fx_probes.c, fx_probes_hits.c) against itself run another way, through the
+ * harness of fxt_probes.h: threads splitting the probes any way give the same bytes; the shading lanes match
+ * the per-point filter; cell reads match the taps; the per-thread memos give the same results across loops;
+ * the batched bounce at hits matches one hit at a time; half reads with denormals-are-zero keep their values.
+ * The closed-form checks are in test_probes.c. */
 #include "test_util.h"
 
 #include "fxt_probes.h"
@@ -362,7 +362,7 @@ static void test_memo_across_loops(void **state)
 }
 
 /* ---- 7. the batched bounce at hits against one hit at a time ---------------------------------------------
- * The update shades a chunk's front-face hits in passes (fx_probes.c, hit_batch) or, with
+ * The update shades a chunk's front-face hits in passes (fx_probes_hits.c, hit_batch) or, with
  * fx__probe_hits_batched false, one at a time (hit_bounce): the same operations moved in time, so the
  * payloads must agree bit for bit after frames of bounces (every float of the irradiance and moments, the
  * positions, flags). With the memo's 2048 entries, and with 2 and 8 (fx__probe_memo_log2, fresh threads: the
@@ -370,7 +370,8 @@ static void test_memo_across_loops(void **state)
  * for the last pass read (the pass must run first); the room corners' cells see three normals (a slot
  * replaced while read); 144 rays and 200 (a chunk of 128 and one of 72). Two scenes: the thin-wall rooms (a
  * point light) and an open court under a sky with a sun and a point light (the directional light's direction
- * taken once per update against fx__light_arriving per hit). */
+ * taken once per update against fx__light_arriving per hit); the rooms also with a cell of 0.7 (no exact
+ * inverse: hit_locate divides). */
 typedef struct batch_run {
     fxt_grid *g;
     scene *s;
@@ -414,11 +415,13 @@ static scene_rt *open_court_scene(scene **out)
 static void test_batched_hits_match_single(void **state)
 {
     (void)state;
-    for (int court = 0; court < 2; court++) {
+    for (int setup = 0; setup < 3; setup++) {
+        const int court = setup == 1;
+        const float cell = setup == 2 ? 0.7f : 1.0f;
         scene *s;
         scene_rt *rt = court ? open_court_scene(&s) : fxt_thin_wall_scene(0.35, &s);
         fxt_grid g;
-        fxt_grid_init(&g, s, (float[3]){-1.5f, 0.5f, -0.5f}, 1.0f, 4, 2, 2);
+        fxt_grid_init(&g, s, (float[3]){-1.5f, 0.5f, -0.5f}, cell, 4, 2, 2);
         size_t bytes = (size_t)g.count * FX_PROBE_BYTES;
         static const uint32_t memo_log2[3] = {11, 3, 1}, rays[2] = {FX_PROBE_RAYS, 200};
         uint8_t *single = malloc(bytes), *batched = malloc(bytes);
@@ -443,8 +446,10 @@ static void test_batched_hits_match_single(void **state)
                 memcpy(&scale, single + (size_t)i * FX_PROBE_BYTES + 24, sizeof scale);
                 lit += scale > 0;
             }
-            printf("batched hits, %s, memo 2^%u, %u rays: %u payload bytes differ, %u of %u probes lit\n",
-                   court ? "open court" : "thin wall", memo_log2[v / 2], rays[v % 2], differ, lit, g.count);
+            printf("batched hits, %s, cell %.1f, memo 2^%u, %u rays: %u payload bytes differ, %u of %u "
+                   "probes lit\n",
+                   court ? "open court" : "thin wall", (double)cell, memo_log2[v / 2], rays[v % 2], differ,
+                   lit, g.count);
             assert_int_equal(differ, 0);
             assert_true(lit >= 8);
         }

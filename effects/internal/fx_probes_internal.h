@@ -1,6 +1,7 @@
-/* fx_probes_internal.h: what the probe effect's two files share (effects/fx_probes.c: update, commit, the
- * no-cache estimate and the table; effects/fx_probes_map.c: the octahedral maps, reading payloads, the shading
- * filter and compose's shade). The payload layout and units are described at the top of fx_probes.c. */
+/* fx_probes_internal.h: what the probe effect's three files share (effects/fx_probes.c: update, commit and
+ * the table; effects/fx_probes_hits.c: the update's hits and the no-cache estimate; effects/fx_probes_map.c:
+ * the octahedral maps, reading payloads, the shading filter and compose's shade). The payload layout and
+ * units are described at the top of fx_probes.c. */
 #ifndef FXC_FX_PROBES_INTERNAL_H
 #define FXC_FX_PROBES_INTERNAL_H
 
@@ -33,6 +34,20 @@ enum {
 };
 
 _Static_assert(PROBE_MOMENTS + FX_PROBE_TEXELS * 4 == FX_PROBE_BYTES, "payload layout");
+
+/* fminf(x, m) for m > 0 (not NaN), inline: NaN and x >= m give m, as fminf does (libm's fminf is a call
+ * here: without -ffinite-math-only the compiler does not inline it). */
+static inline float min_of(float x, float m)
+{
+    return x < m ? x : m;
+}
+
+/* The rays an update traces per probe (ctx->probe_rays, default FX_PROBE_RAYS, at most FX_PROBE_MAX_RAYS). */
+static inline uint32_t probe_ray_count(const fx_context *ctx)
+{
+    uint32_t n = ctx->probe_rays ? ctx->probe_rays : FX_PROBE_RAYS;
+    return n > FX_PROBE_MAX_RAYS ? FX_PROBE_MAX_RAYS : n;
+}
 
 /* ---- bytes ---------------------------------------------------------------------------------------------- */
 
@@ -132,6 +147,24 @@ extern bool fx__probe_hits_batched;
 /* log2 of the entries a thread's hit memo uses (1 to 11, the default 11), read when a thread allocates it
  * (its first update): the tests make it small so that entries are replaced within a chunk. */
 extern uint32_t fx__probe_memo_log2;
+
+/* What an update's rays saw of the faces they hit, per probe (update's relocation and off test). */
+typedef struct fx_probe_faces {
+    uint32_t backfaces;                /* rays that hit a back face */
+    float closest_front, closest_back; /* metres; INFINITY: none */
+    float front_dir[3], back_dir[3];   /* the rays' directions to them */
+} fx_probe_faces;
+
+/* fx_probes_hits.c. Once per update call, in the tracing thread, before fx__probe_shade_chunk: the call's
+ * lights and the thread's hit memo. */
+void fx__probe_hits_begin(const fx_context *ctx);
+/* The chunk's n rays from `origin` in directions dirs[0..n-1] of probe `job`, after rtcIntersect1M (hits):
+ * values[r] = radiance RGB (front faces: albedo x (direct + the probes' bounce / pi); back faces 0; misses
+ * `sky`), the distance in cells (clamped; back faces shortened) and its square; faces updated. Returns the
+ * shadow rays traced. */
+uint64_t fx__probe_shade_chunk(const fx_context *ctx, const fx_block_job *job, const float origin[3],
+                               const float (*dirs)[3], const struct RTCRayHit *hits, uint32_t n,
+                               const float sky[3], fx_probe_faces *faces, float (*values)[5]);
 
 /* The probes' term of a run of pixels (fx_effect.shade). */
 void fx__probes_shade(const fx_context *ctx, const fx_shade_run *run);
