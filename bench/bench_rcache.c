@@ -505,7 +505,7 @@ static void section_share(const bench_opts *o)
 }
 
 /* One thread through the tile lists (view_rc_desc.tiled_one_thread) against each chunk projected straight
- * into the image's z-buffer (no_band_lists: the default at 512, not at 1024), alternating: what the direct
+ * into the image's z-buffer (the default; no_band_lists), alternating: what the direct
  * z-buffer does. */
 static void section_direct(const bench_opts *o)
 {
@@ -633,7 +633,8 @@ int main(int argc, char **argv)
             fprintf(stderr,
                     "usage: bench_rcache [--res 512] [--reps 5] [--warmup 60] [--frames 100] [--deg 2] "
                     "[--lead 2] [--tile 64] [--capacity F] [--pin CPU] [--separate-pixels] "
-                    "[--only table|scaling|threads|split|split-pixels|fuse|share|direct|bands|switches|quality]\n");
+                    "[--only "
+                    "table|scaling|threads|split|split-pixels|fuse|share|direct|bands|switches|quality]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }
     }

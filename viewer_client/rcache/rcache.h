@@ -121,12 +121,11 @@ typedef struct view_rc_desc {
                            depth-tested straight into the image's rows; on one thread without a sort pass
                            (each chunk appended to per-band buffers, 8 bytes a pixel in all, flushed when
                            full), on 2+ threads through the tile sort's counting and offsets (thread k on
-                           the k-th range of bands). The same image. By default only on one thread above
-                           8 MiB of z-buffer (12 bytes a pixel: above about 836 x 836), where it measured
-                           faster than the direct z-buffer (docs/BENCHMARKS.md, rc-seven; bench_rcache
+                           the k-th range of bands). The same image. Off by default: on an idle machine
+                           slower than the direct z-buffer on one thread at 512 and at 1024 and than the
+                           tiles on 2 (docs/BENCHMARKS.md, rc-seven and the lead's idle run; bench_rcache
                            --only bands) */
-    bool no_band_lists; /* never the band lists (one thread: the direct z-buffer at every size), to measure
-                           them */
+    bool no_band_lists; /* never the band lists, even with band_lists (the default path), to measure them */
 } view_rc_desc;
 
 typedef struct view_rc view_rc;

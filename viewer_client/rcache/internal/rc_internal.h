@@ -37,10 +37,6 @@
 #define RC_EMPTY_PT    0xFF000000u /* a pixel without a point: colour 0, age 255 */
 #define RC_NEAR        1.0e-4f     /* points nearer than this (metres along the view axis) are behind */
 #define RC_LOCAL_TILE  256u        /* the largest tile side the z-buffer works on in its own buffers */
-/* One thread takes the band lists by default above this much z-buffer (depth, winner and colour: 12 bytes a
- * pixel), 4 x the 2 MiB L2: at 1024 x 1024 (12 MiB) they measured faster than the direct z-buffer, at 512 x
- * 512 (3 MiB) slower, at 768 x 768 (6.75 MiB) even (docs/BENCHMARKS.md, rc-seven). */
-#define RC_BAND_DEFAULT_BYTES ((uint64_t)8 << 20)
 
 static inline uint32_t rc_age(uint32_t rgba)
 {
