@@ -505,23 +505,22 @@ static void section_share(const bench_opts *o)
 }
 
 /* One thread through the tile lists (view_rc_desc.tiled_one_thread) against each chunk projected straight
- * into the image's z-buffer (the default; no_band_lists), alternating: what the direct
+ * into the image's z-buffer (the default), alternating: what the direct
  * z-buffer does. */
 static void section_direct(const bench_opts *o)
 {
-    section_ab(o, (view_rc_desc){.tiled_one_thread = true}, 1, (view_rc_desc){.no_band_lists = true}, 1,
+    section_ab(o, (view_rc_desc){.tiled_one_thread = true}, 1, (view_rc_desc){0}, 1,
                &(ab_labels){"1 thread, z-buffer through the tiles against straight into the image", "tiled",
                             "direct", "tiled / direct (per-repetition ratio)", "tiled / direct"});
 }
 
 /* The band lists (view_rc_desc.band_lists: the points bucket-sorted by bands of full rows, each band's
- * z-buffer in L2) against the path without them (no_band_lists), on 1 thread (the direct z-buffer) and then
+ * z-buffer in L2) against the path without them (the default), on 1 thread (the direct z-buffer) and then
  * on 2 (the tiles), alternating. */
 static void section_bands(const bench_opts *o)
 {
     for (int threads = 1; threads <= 2; threads++)
-        section_ab(o, (view_rc_desc){.no_band_lists = true}, threads, (view_rc_desc){.band_lists = true},
-                   threads,
+        section_ab(o, (view_rc_desc){0}, threads, (view_rc_desc){.band_lists = true}, threads,
                    &(ab_labels){threads == 1 ? "1 thread, z-buffer direct against band lists"
                                              : "2 threads, z-buffer through the tiles against band lists",
                                 threads == 1 ? "direct" : "tiles", "bands",

@@ -155,7 +155,7 @@ fxc_result view_rc_create(const view_rc_desc *desc, view_rc **out)
     /* Band lists (band_lists): bands of a power of two of rows, as many as keep a band's depth, winner and
      * colour (12 bytes a pixel) within 384 KiB, so a band stays in L2 (2 MiB here) with room for the entries
      * streaming through: 64 rows at 512 wide, 32 at 1024. Their keys hold the pixel within the band. */
-    rc->band_z = !d.no_tiling && !d.no_band_lists && d.band_lists;
+    rc->band_z = !d.no_tiling && d.band_lists;
     rc->zband_shift = 0;
     while (rc->zband_shift < 16 && ((uint64_t)d.width << (rc->zband_shift + 1)) <= 32768 &&
            (1u << rc->zband_shift) < d.height)

@@ -116,16 +116,15 @@ typedef struct view_rc_desc {
                                    thread projects each chunk of points straight into the image's z-buffer
                                    in slot order, timed in "project and tile sort"; the tiles serve the
                                    threads), to measure it (bench_rcache --only direct) */
-    bool band_lists;    /* the points bucket-sorted into bands of full rows (as many rows as keep a band's
-                           depth, winner and colour within 384 KiB, in L2) instead of tiles, each band
-                           depth-tested straight into the image's rows; on one thread without a sort pass
-                           (each chunk appended to per-band buffers, 8 bytes a pixel in all, flushed when
-                           full), on 2+ threads through the tile sort's counting and offsets (thread k on
-                           the k-th range of bands). The same image. Off by default: on an idle machine
-                           slower than the direct z-buffer on one thread at 512 and at 1024 and than the
-                           tiles on 2 (docs/BENCHMARKS.md, rc-seven and the lead's idle run; bench_rcache
-                           --only bands) */
-    bool no_band_lists; /* never the band lists, even with band_lists (the default path), to measure them */
+    bool band_lists; /* the points bucket-sorted into bands of full rows (as many rows as keep a band's
+                        depth, winner and colour within 384 KiB, in L2) instead of tiles, each band
+                        depth-tested straight into the image's rows; on one thread without a sort pass
+                        (each chunk appended to per-band buffers, 8 bytes a pixel in all, flushed when
+                        full), on 2+ threads through the tile sort's counting and offsets (thread k on
+                        the k-th range of bands). The same image. Off by default: on an idle machine not
+                        faster than the direct z-buffer on one thread (slower at 512, -3 % to +1 % at
+                        1024) and slower than the tiles on 2 (docs/BENCHMARKS.md, rc-seven and the lead's
+                        idle run; bench_rcache --only bands) */
 } view_rc_desc;
 
 typedef struct view_rc view_rc;
