@@ -32,6 +32,7 @@
 
 #include <embree3/rtcore.h>
 
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -51,6 +52,7 @@ typedef struct options {
     const char *out; /* --part image: where the radiance goes */
     uint64_t seed;   /* --part image: the loops' seed (1 unless --seed; another seed measures the noise) */
     uint32_t indirect_block; /* the loops' srv_loop_desc.indirect_block (0: the default) */
+    bool apis;               /* --part rays: also replay through the other Embree calls (replay_api) */
 } options;
 
 static int32_t effect_index(const char *name)
@@ -162,6 +164,303 @@ static double replay(scene_rt *rt, const captured *c, struct RTCRayHit *hit_work
     return bench_now_ms() - t;
 }
 
+/* ---- rays: the same streams through other Embree calls (the update's choice of API) ------------------- */
+
+/* How a replay hands the captured rays to Embree: streams as the update does (rtcIntersect1M /
+ * rtcOccluded1M), the same streams with the context flag COHERENT, or packets of 8 or 16 rays of one stream
+ * (an intersection stream is one chunk of one probe's rays: one origin) in the order of their directions
+ * (octahedral position, Morton order: rays of one packet point the same way). */
+typedef enum replay_api { API_STREAM, API_STREAM_COHERENT, API_PACKET8, API_PACKET16, API_COUNT } replay_api;
+static const char *const api_names[API_COUNT] = {"rtcIntersect1M / rtcOccluded1M streams (the update's)",
+                                                 "the same streams, RTC_INTERSECT_CONTEXT_FLAG_COHERENT",
+                                                 "rtcIntersect8 / rtcOccluded8, rays sorted by direction",
+                                                 "rtcIntersect16 / rtcOccluded16, rays sorted by direction"};
+
+/* A direction's place on the octahedral map (8 bits per axis), Morton-interleaved: nearby directions, nearby
+ * keys; the octants are the map's triangles. */
+static uint32_t direction_key(float x, float y, float z)
+{
+    float l1 = fabsf(x) + fabsf(y) + fabsf(z);
+    float u = l1 > 0 ? x / l1 : 0, v = l1 > 0 ? y / l1 : 0;
+    if (z < 0) {
+        float fu = (1.0f - fabsf(v)) * (u >= 0 ? 1.0f : -1.0f), fv = (1.0f - fabsf(u)) * (v >= 0 ? 1.0f : -1.0f);
+        u = fu, v = fv;
+    }
+    uint32_t qu = (uint32_t)fminf(fmaxf((u + 1.0f) * 128.0f, 0.0f), 255.0f);
+    uint32_t qv = (uint32_t)fminf(fmaxf((v + 1.0f) * 128.0f, 0.0f), 255.0f);
+    uint32_t key = 0;
+    for (int b = 0; b < 8; b++)
+        key |= ((qu >> b & 1u) << (2 * b)) | ((qv >> b & 1u) << (2 * b + 1));
+    return key;
+}
+
+typedef struct keyed {
+    uint32_t key, index;
+} keyed;
+
+static int keyed_compare(const void *a, const void *b)
+{
+    const keyed *x = a, *y = b;
+    if (x->key != y->key)
+        return x->key < y->key ? -1 : 1;
+    return x->index < y->index ? -1 : (x->index > y->index);
+}
+
+/* The order of a stream's rays for packets: by direction key, ties in stream order. */
+static void packet_order(const struct RTCRay *const *ray, uint32_t n, uint32_t *order)
+{
+    keyed k[4096];
+    for (uint32_t i = 0; i < n; i++)
+        k[i] = (keyed){direction_key(ray[i]->dir_x, ray[i]->dir_y, ray[i]->dir_z), i};
+    qsort(k, n, sizeof *k, keyed_compare);
+    for (uint32_t i = 0; i < n; i++)
+        order[i] = k[i].index;
+}
+
+/* Packet copies of the captured rays: SoA packets of `width` lanes (8 or 16), each stream's rays in its
+ * packet order, the last packet of a stream with invalid lanes. Built once per frame, outside the timing. */
+static size_t packet_bytes(uint32_t width, bool hit)
+{
+    return hit ? (width == 16 ? sizeof(struct RTCRayHit16) : sizeof(struct RTCRayHit8))
+               : (width == 16 ? sizeof(struct RTCRay16) : sizeof(struct RTCRay8));
+}
+
+/* Writes ray r (AoS) into lane l of the SoA packet at p (RTCRayN's field order, each field width floats). */
+static void packet_put(uint8_t *p, uint32_t width, uint32_t l, const struct RTCRay *r)
+{
+    float *f = (float *)p;
+    const float v[8] = {r->org_x, r->org_y, r->org_z, r->tnear, r->dir_x, r->dir_y, r->dir_z, r->time};
+    for (int k = 0; k < 8; k++)
+        f[k * width + l] = v[k];
+    f[8 * width + l] = r->tfar;
+    uint32_t *u = (uint32_t *)p;
+    u[9 * width + l] = r->mask, u[10 * width + l] = r->id, u[11 * width + l] = r->flags;
+}
+
+typedef struct packet_set {
+    uint8_t *data;     /* packets, 64-byte aligned, hit and occlusion packets in stream order */
+    size_t bytes, cap;
+    uint32_t *lane_ray; /* per packet lane: the captured ray (index into hits or rays), UINT32_MAX: none */
+    size_t lanes, lane_cap;
+    uint8_t *is_hit;    /* per packet */
+    size_t packets, packet_cap;
+    int *valid;         /* per packet lane */
+    size_t valid_cap;
+} packet_set;
+
+static void packet_set_build(packet_set *ps, const captured *c, uint32_t width)
+{
+    ps->bytes = ps->lanes = ps->packets = 0;
+    size_t h = 0, r = 0;
+    const struct RTCRay *ptr[4096];
+    uint32_t order[4096];
+    for (size_t k = 0; k < c->streams; k++) {
+        bool hit = c->is_hit[k];
+        uint32_t n = c->sizes[k];
+        if (n > 4096) {
+            fprintf(stderr, "bench_probes: a stream of %u rays\n", n);
+            exit(1);
+        }
+        for (uint32_t i = 0; i < n; i++)
+            ptr[i] = hit ? &c->hits[h + i].ray : &c->rays[r + i];
+        packet_order(ptr, n, order);
+        size_t pb = packet_bytes(width, hit);
+        for (uint32_t first = 0; first < n; first += width) {
+            if (!grow((void **)&ps->data, &ps->cap, ps->bytes + pb, 1, 64) ||
+                !grow((void **)&ps->lane_ray, &ps->lane_cap, ps->lanes + width, sizeof *ps->lane_ray, 0) ||
+                !grow((void **)&ps->valid, &ps->valid_cap, ps->lanes + width, sizeof *ps->valid, 64) ||
+                !grow((void **)&ps->is_hit, &ps->packet_cap, ps->packets + 1, 1, 0)) {
+                fprintf(stderr, "bench_probes: out of memory\n");
+                exit(1);
+            }
+            uint8_t *p = ps->data + ps->bytes;
+            memset(p, 0, pb);
+            for (uint32_t l = 0; l < width; l++) {
+                bool on = first + l < n;
+                ps->valid[ps->lanes + l] = on ? -1 : 0;
+                ps->lane_ray[ps->lanes + l] = on ? (uint32_t)((hit ? h : r) + order[first + l]) : UINT32_MAX;
+                if (on)
+                    packet_put(p, width, l, ptr[order[first + l]]);
+                if (hit) { /* geomID and instID[0] invalid, as the update sets them */
+                    uint32_t *u = (uint32_t *)(p + (width == 16 ? sizeof(struct RTCRay16) : sizeof(struct RTCRay8)));
+                    u[6 * width + l] = RTC_INVALID_GEOMETRY_ID, u[7 * width + l] = RTC_INVALID_GEOMETRY_ID;
+                }
+            }
+            ps->is_hit[ps->packets++] = hit;
+            ps->bytes += pb;
+            ps->lanes += width;
+        }
+        if (hit)
+            h += n;
+        else
+            r += n;
+    }
+}
+
+/* Traces the captured rays through `api`; the results (hits, tfar) land in hit_work / ray_work in captured
+ * order (packets: scattered back after the timing). Returns ms of the Embree calls alone; *ms_hit: of the
+ * intersections. */
+static double replay_api_run(scene_rt *rt, const captured *c, replay_api api, packet_set *ps, uint8_t *packet_work,
+                             struct RTCRayHit *hit_work, struct RTCRay *ray_work, double *ms_hit)
+{
+    struct RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    RTCScene rtc = scene_rt_handle(rt);
+    double hit_ms = 0, all_ms = 0;
+    if (api == API_STREAM || api == API_STREAM_COHERENT) {
+        if (api == API_STREAM_COHERENT)
+            context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+        memcpy(hit_work, c->hits, c->hit_count * sizeof *hit_work);
+        memcpy(ray_work, c->rays, c->ray_count * sizeof *ray_work);
+        size_t h = 0, r = 0;
+        for (size_t k = 0; k < c->streams; k++) {
+            double t = bench_now_ms();
+            if (c->is_hit[k]) {
+                rtcIntersect1M(rtc, &context, hit_work + h, c->sizes[k], sizeof *hit_work);
+                h += c->sizes[k];
+                hit_ms += bench_now_ms() - t;
+            } else {
+                rtcOccluded1M(rtc, &context, ray_work + r, c->sizes[k], sizeof *ray_work);
+                r += c->sizes[k];
+            }
+            all_ms += bench_now_ms() - t;
+        }
+        *ms_hit = hit_ms;
+        return all_ms;
+    }
+    uint32_t width = api == API_PACKET16 ? 16 : 8;
+    memcpy(packet_work, ps->data, ps->bytes);
+    size_t off = 0, lane = 0;
+    for (size_t k = 0; k < ps->packets; k++) {
+        bool hit = ps->is_hit[k];
+        uint8_t *p = packet_work + off;
+        const int *valid = ps->valid + lane;
+        double t = bench_now_ms();
+        if (hit) {
+            if (width == 16)
+                rtcIntersect16(valid, rtc, &context, (struct RTCRayHit16 *)p);
+            else
+                rtcIntersect8(valid, rtc, &context, (struct RTCRayHit8 *)p);
+            hit_ms += bench_now_ms() - t;
+        } else {
+            if (width == 16)
+                rtcOccluded16(valid, rtc, &context, (struct RTCRay16 *)p);
+            else
+                rtcOccluded8(valid, rtc, &context, (struct RTCRay8 *)p);
+        }
+        all_ms += bench_now_ms() - t;
+        /* back into captured order: tfar, and for hits u, v, Ng, primID, geomID */
+        const float *f = (const float *)p;
+        size_t ray_bytes = width == 16 ? sizeof(struct RTCRay16) : sizeof(struct RTCRay8);
+        const float *hf = (const float *)(p + ray_bytes);
+        const uint32_t *hu = (const uint32_t *)(p + ray_bytes);
+        for (uint32_t l = 0; l < width; l++) {
+            uint32_t i = ps->lane_ray[lane + l];
+            if (i == UINT32_MAX)
+                continue;
+            if (hit) {
+                struct RTCRayHit *o = &hit_work[i];
+                o->ray = c->hits[i].ray;
+                o->ray.tfar = f[8 * width + l];
+                o->hit.Ng_x = hf[0 * width + l], o->hit.Ng_y = hf[1 * width + l], o->hit.Ng_z = hf[2 * width + l];
+                o->hit.u = hf[3 * width + l], o->hit.v = hf[4 * width + l];
+                o->hit.primID = hu[5 * width + l], o->hit.geomID = hu[6 * width + l];
+            } else {
+                ray_work[i] = c->rays[i];
+                ray_work[i].tfar = f[8 * width + l];
+            }
+        }
+        off += packet_bytes(width, hit);
+        lane += width;
+    }
+    *ms_hit = hit_ms;
+    return all_ms;
+}
+
+/* Rays whose results differ between two replays (hits: geomID, primID, t, u, v bit for bit; occlusion: the
+ * tfar that says occluded or not). */
+static size_t replay_differences(const captured *c, const struct RTCRayHit *ha, const struct RTCRay *ra,
+                                 const struct RTCRayHit *hb, const struct RTCRay *rb)
+{
+    size_t d = 0;
+    for (size_t i = 0; i < c->hit_count; i++) {
+        const struct RTCRayHit *x = &ha[i], *y = &hb[i];
+        bool same = x->hit.geomID == y->hit.geomID &&
+                    (x->hit.geomID == RTC_INVALID_GEOMETRY_ID ||
+                     (x->hit.primID == y->hit.primID && !memcmp(&x->ray.tfar, &y->ray.tfar, 4) &&
+                      !memcmp(&x->hit.u, &y->hit.u, 4) && !memcmp(&x->hit.v, &y->hit.v, 4)));
+        d += !same;
+    }
+    for (size_t i = 0; i < c->ray_count; i++)
+        d += (ra[i].tfar == -INFINITY) != (rb[i].tfar == -INFINITY);
+    return d;
+}
+
+/* The API comparison's state over the measured frames. */
+typedef struct apis_state {
+    packet_set sets[2]; /* 8 and 16 lanes */
+    uint8_t *packet_work;
+    size_t packet_work_cap;
+    struct RTCRayHit *ref_hits, *hits;
+    struct RTCRay *ref_rays, *rays;
+    size_t ref_hit_cap, ref_ray_cap, hit_cap, ray_cap;
+    double all[API_COUNT][BENCH_MAX_SAMPLES], hit[API_COUNT][BENCH_MAX_SAMPLES], occ[API_COUNT][BENCH_MAX_SAMPLES];
+    double update_over[API_COUNT][BENCH_MAX_SAMPLES];
+    size_t differences[API_COUNT], hit_rays, occ_rays;
+} apis_state;
+
+/* One measured frame: every API over the frame's captured rays, in a rotating order (frame f starts with
+ * API f mod API_COUNT), each result compared with the streams' (API_STREAM, traced first, untimed). */
+static void apis_frame(apis_state *a, scene_rt *rt, const captured *c, int n, uint32_t f, double update_ms,
+                       double rays)
+{
+    if (!grow((void **)&a->ref_hits, &a->ref_hit_cap, c->hit_count + 1, sizeof *a->ref_hits, 64) ||
+        !grow((void **)&a->hits, &a->hit_cap, c->hit_count + 1, sizeof *a->hits, 64) ||
+        !grow((void **)&a->ref_rays, &a->ref_ray_cap, c->ray_count + 1, sizeof *a->ref_rays, 64) ||
+        !grow((void **)&a->rays, &a->ray_cap, c->ray_count + 1, sizeof *a->rays, 64)) {
+        fprintf(stderr, "bench_probes: out of memory\n");
+        exit(1);
+    }
+    packet_set_build(&a->sets[0], c, 8);
+    packet_set_build(&a->sets[1], c, 16);
+    size_t most = a->sets[0].bytes > a->sets[1].bytes ? a->sets[0].bytes : a->sets[1].bytes;
+    if (!grow((void **)&a->packet_work, &a->packet_work_cap, most + 1, 1, 64)) {
+        fprintf(stderr, "bench_probes: out of memory\n");
+        exit(1);
+    }
+    double hit_ms;
+    replay_api_run(rt, c, API_STREAM, NULL, NULL, a->ref_hits, a->ref_rays, &hit_ms);
+    for (int k = 0; k < API_COUNT; k++) {
+        replay_api api = (replay_api)((f + (uint32_t)k) % API_COUNT);
+        packet_set *ps = api == API_PACKET8 ? &a->sets[0] : api == API_PACKET16 ? &a->sets[1] : NULL;
+        double all_ms = replay_api_run(rt, c, api, ps, a->packet_work, a->hits, a->rays, &hit_ms);
+        a->all[api][n] = rays / all_ms / 1000.0;
+        a->hit[api][n] = (double)c->hit_count / hit_ms / 1000.0;
+        a->occ[api][n] = (double)c->ray_count / (all_ms - hit_ms) / 1000.0;
+        a->update_over[api][n] = all_ms / update_ms;
+        a->differences[api] += replay_differences(c, a->ref_hits, a->ref_rays, a->hits, a->rays);
+    }
+    a->hit_rays += c->hit_count;
+    a->occ_rays += c->ray_count;
+}
+
+static void apis_print(apis_state *a, int n)
+{
+    printf("\nthe same rays through other Embree calls (Embree time only; packets: built before the timing, "
+           "results scattered back after it), per frame, APIs in a rotating order (%zu intersection and %zu "
+           "occlusion rays):\n\n| API | all Mrays/s | intersection Mrays/s | occlusion Mrays/s | update / this raw "
+           "| rays whose result differs from the streams' |\n|---|---|---|---|---|---|\n",
+           a->hit_rays, a->occ_rays);
+    for (int k = 0; k < API_COUNT; k++)
+        printf("| %s | %.3f | %.3f | %.3f | %.3f | %zu |\n", api_names[k], bench_quantile(a->all[k], n, 0.5),
+               bench_quantile(a->hit[k], n, 0.5), bench_quantile(a->occ[k], n, 0.5),
+               bench_quantile(a->update_over[k], n, 0.5), a->differences[k]);
+    for (int k = 0; k < 2; k++) {
+        free(a->sets[k].data), free(a->sets[k].lane_ray), free(a->sets[k].is_hit), free(a->sets[k].valid);
+    }
+    free(a->packet_work), free(a->ref_hits), free(a->hits), free(a->ref_rays), free(a->rays);
+}
+
 static void part_rays(const options *o, scene *s, scene_rt *rt)
 {
     int32_t probes = effect_index("probes");
@@ -183,6 +482,8 @@ static void part_rays(const options *o, scene *s, scene_rt *rt)
     size_t hit_work_cap = 0, ray_work_cap = 0;
     uint64_t total_rays = 0;
     int n = 0;
+    apis_state ac;
+    memset(&ac, 0, sizeof ac);
     for (uint32_t f = 0; f < o->warmup + o->frames; f++) {
         c.hit_count = c.ray_count = c.streams = 0;
         c.truncated = false;
@@ -203,6 +504,8 @@ static void part_rays(const options *o, scene *s, scene_rt *rt)
         }
         double update_ms = st.time_ms[SRV_STAGE_EFFECTS];
         double raw_ms = replay(rt, &c, hit_work, ray_work);
+        if (o->apis)
+            apis_frame(&ac, rt, &c, n, f, update_ms, (double)st.rays[probes]);
         double rays = (double)st.rays[probes];
         total_rays += st.rays[probes];
         update_mrays[n] = rays / update_ms / 1000.0;
@@ -225,6 +528,8 @@ static void part_rays(const options *o, scene *s, scene_rt *rt)
         print_row("update without the recording Mrays/s", own_mrays, n);
         print_row("update without the recording / raw", own_ratio, n);
     }
+    if (o->apis)
+        apis_print(&ac, n);
     free(hit_work);
     free(ray_work);
     free(c.hits);
@@ -435,12 +740,14 @@ int main(int argc, char **argv)
             o.out = v, i++;
         else if (!strcmp(a, "--seed") && v)
             o.seed = strtoull(v, NULL, 10), i++;
+        else if (!strcmp(a, "--apis"))
+            o.apis = true;
         else if (!strcmp(a, "--indirect-block") && v)
             o.indirect_block = (uint32_t)atoi(v), i++;
         else {
             fprintf(stderr, "usage: bench_probes [--scene PATH] [--res WxH] [--warmup N] [--frames N] [--camera GEN] "
                             "[--part rays|viewers|overhead|memory|image|all] [--out FILE (image)] [--seed N (image)] "
-                            "[--indirect-block 1|2|4]\n");
+                            "[--indirect-block 1|2|4] [--apis (rays)]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }
     }
