@@ -21,9 +21,6 @@ typedef struct hit_shading {
     float direct[PROBE_CHUNK][3]; /* compose units (irradiance / pi) */
 } hit_shading;
 
-/* MEASUREMENT ONLY (reverted in the next commit): FXC_MEASURE_BOUNCE=1 no bounce at hits, 2 the trilinear
- * weights alone (no wrap, Chebyshev or plane test), 3 the first active corner's irradiance; 0 or unset: as main. */
-static int measure_bounce;
 static _Thread_local hit_shading thread_hit_shading; /* update's and eval's, within one call */
 
 FXC_HOT_INLINE void shadow_flush(const fx_context *ctx, hit_shading *hs)
@@ -537,8 +534,7 @@ FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job,
     (void)u, (void)v, (void)t;
     scene_albedo_mean(ctx->s, tri, albedo);
     uint32_t effect = job->effect, level = job->level;
-    if (measure_bounce == 1) {
-    } else if (ctx->world_cell) {
+    if (ctx->world_cell) {
         hit_bounce(ctx, effect, level, job->origin, job->cell, inverse, position, normal, bounce);
     } else if (ctx->world_taps) {
         fx_taps taps;
@@ -589,13 +585,7 @@ FXC_HOT_INLINE void batch_bounce(hit_batch *restrict hb, uint32_t from, uint32_t
         float *bounce = hb->bounce[i];
         bounce[0] = bounce[1] = bounce[2] = 0;
         const hit_cell *e = hb->entry[i];
-        if (e && measure_bounce == 3) {
-            int c = __builtin_ctz(e->active);
-            for (int k = 0; k < 3; k++)
-                bounce[k] = e->e[hb->slot[i]][c][k];
-        } else if (e && measure_bounce == 2) {
-            cell_sum(e, hb->slot[i], hb->tap[i], bounce);
-        } else if (e) {
+        if (e) {
             float weight[8];
             hit_weights_finish(e, hb->tap[i], hb->texel[i], hb->weight[i], hb->distance[i], hb->front[i], weight);
             cell_sum(e, hb->slot[i], weight, bounce);
@@ -645,8 +635,6 @@ FXC_HOT_INLINE void hits_bounce_prepare(const fx_context *ctx, const fx_block_jo
         *pending = (*pending >> HIT_CELL_NORMALS == batch ? *pending : batch << HIT_CELL_NORMALS) | (1u << slot);
         hb->slot[i] = slot;
         hit_taps(hb->t[i], hb->tap[i]);
-        if (measure_bounce >= 2)
-            continue;
         hb->front[i] = hit_weights_geometry(e, hit_pos[r], normal, hb->tap[i], hb->texel[i], hb->weight[i],
                                             hb->distance[i]);
 #if defined(__GNUC__)
@@ -681,13 +669,11 @@ static _Thread_local hit_memo *thread_batch_memo;
 
 void fx__probe_hits_begin(const fx_context *ctx)
 {
-    const char *mb = getenv("FXC_MEASURE_BOUNCE");
-    measure_bounce = mb ? atoi(mb) : 0;
     fixed_lights_init(ctx->s, &thread_lights);
     if (ctx->world_cell)
         hit_cells_begin(ctx);
     /* The front-face hits' bounce in passes (hit_batch) with the heap memo, else one at a time. */
-    thread_batch_memo = ctx->world_cell && fx__probe_hits_batched && measure_bounce != 1 ? thread_hit_memo : NULL;
+    thread_batch_memo = ctx->world_cell && fx__probe_hits_batched ? thread_hit_memo : NULL;
     if (thread_batch_memo)
         thread_batch_memo->batch.count = 0;
 }

@@ -15,7 +15,6 @@
  * chunk and summed in order, and valid masks are set after the chunks, on one thread. */
 #include "engine_internal.h"
 
-#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -302,30 +301,6 @@ static void commit_chunk(void *user, uint32_t task_index, uint32_t thread_index)
     task->effect->commit(&task->loop->fx, task->jobs + first, n);
 }
 
-/* MEASUREMENT ONLY (reverted in the next commit): world-space jobs in Morton order of their grid points. */
-static uint64_t measure_spread(uint32_t v)
-{
-    uint64_t x = v & 0x1fffffu, r = 0;
-    for (int b = 0; b < 21; b++)
-        r |= ((x >> b) & 1u) << (3 * b);
-    return r;
-}
-static uint64_t measure_key(const fx_block_job *j)
-{
-    uint64_t m = 0;
-    for (int a = 0; a < 3; a++)
-        m |= measure_spread((uint32_t)((int32_t)lrintf(j->origin[a] / j->cell) + (1 << 20))) << a;
-    return m;
-}
-static int measure_job_compare(const void *a, const void *b)
-{
-    const fx_block_job *x = a, *y = b;
-    if (x->level != y->level)
-        return x->level < y->level ? -1 : 1;
-    uint64_t kx = measure_key(x), ky = measure_key(y);
-    return (kx > ky) - (kx < ky);
-}
-
 void srv__updates(srv_loop *loop, bool lookup, srv_frame_stats *st)
 {
     for (uint32_t e = 0; e < loop->effect_count; e++) {
@@ -359,8 +334,6 @@ void srv__updates(srv_loop *loop, bool lookup, srv_frame_stats *st)
             fj->lookup = dep == SRV_NO_EFFECT ? NULL : kind->block_payload(cache, dep, job->dependency_block);
             fj->payload = kind->block_payload(cache, e, job->block);
         }
-        if (getenv("FXC_MEASURE_JOB_ORDER") && count && q->fx_jobs[0].cell > 0) /* MEASUREMENT ONLY */
-            qsort(q->fx_jobs, count, sizeof *q->fx_jobs, measure_job_compare);
         effect_task task = {.loop = loop, .effect = loop->effects[e], .jobs = q->fx_jobs, .count = (uint32_t)count,
                             .samples = loop->samples[e], .rays = q->chunk_rays};
         srv_pool_run(loop->pool, chunks, effect_chunk, &task);
