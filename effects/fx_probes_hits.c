@@ -21,13 +21,6 @@ typedef struct hit_shading {
     float direct[PROBE_CHUNK][3]; /* compose units (irradiance / pi) */
 } hit_shading;
 
-/* MEASUREMENT ONLY (reverted in the next commit): FXC_MEASURE_BOUNCE=1 no bounce at hits, 2 the trilinear
- * weights alone (no wrap, Chebyshev or plane test), 3 the first active corner's irradiance; 0 or unset: as main. */
-static int measure_bounce;
-static float measure_far;
-static unsigned long long measure_skipped, measure_front;
-#include <stdio.h>
-static void measure_print(void) { if (measure_bounce >= 4) fprintf(stderr, "MEASURE skipped %llu of %llu front-face hits\n", measure_skipped, measure_front); }
 static _Thread_local hit_shading thread_hit_shading; /* update's and eval's, within one call */
 
 FXC_HOT_INLINE void shadow_flush(const fx_context *ctx, hit_shading *hs)
@@ -164,7 +157,6 @@ typedef struct hit_batch {
     int32_t texel[PROBE_CHUNK][8];
     float bounce[PROBE_CHUNK][3]; /* pass 3's E of the probes around the hit */
     uint32_t done;                /* pass 3 ran for hits [0, done) */
-    uint8_t far[PROBE_CHUNK];
 } hit_batch;
 
 /* The heap memo of a thread: the entries, per entry the last batch that uses it (<< HIT_CELL_NORMALS) and the
@@ -542,8 +534,7 @@ FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job,
     (void)u, (void)v, (void)t;
     scene_albedo_mean(ctx->s, tri, albedo);
     uint32_t effect = job->effect, level = job->level;
-    if (measure_bounce == 1) {
-    } else if (ctx->world_cell) {
+    if (ctx->world_cell) {
         hit_bounce(ctx, effect, level, job->origin, job->cell, inverse, position, normal, bounce);
     } else if (ctx->world_taps) {
         fx_taps taps;
@@ -594,13 +585,7 @@ FXC_HOT_INLINE void batch_bounce(hit_batch *restrict hb, uint32_t from, uint32_t
         float *bounce = hb->bounce[i];
         bounce[0] = bounce[1] = bounce[2] = 0;
         const hit_cell *e = hb->entry[i];
-        if (e && measure_bounce == 3) {
-            int c = __builtin_ctz(e->active);
-            for (int k = 0; k < 3; k++)
-                bounce[k] = e->e[hb->slot[i]][c][k];
-        } else if (e && measure_bounce == 2) {
-            cell_sum(e, hb->slot[i], hb->tap[i], bounce);
-        } else if (e) {
+        if (e) {
             float weight[8];
             hit_weights_finish(e, hb->tap[i], hb->texel[i], hb->weight[i], hb->distance[i], hb->front[i], weight);
             cell_sum(e, hb->slot[i], weight, bounce);
@@ -650,8 +635,6 @@ FXC_HOT_INLINE void hits_bounce_prepare(const fx_context *ctx, const fx_block_jo
         *pending = (*pending >> HIT_CELL_NORMALS == batch ? *pending : batch << HIT_CELL_NORMALS) | (1u << slot);
         hb->slot[i] = slot;
         hit_taps(hb->t[i], hb->tap[i]);
-        if (measure_bounce >= 2)
-            continue;
         hb->front[i] = hit_weights_geometry(e, hit_pos[r], normal, hb->tap[i], hb->texel[i], hb->weight[i],
                                             hb->distance[i]);
 #if defined(__GNUC__)
@@ -674,7 +657,7 @@ FXC_HOT_INLINE void hits_radiance(const fx_context *ctx, hit_batch *restrict hb,
         float albedo[3];
         scene_albedo_mean(ctx->s, hits[r].hit.primID, albedo); /* the triangle's mean (file comment) */
         for (int k = 0; k < 3; k++)
-            values[r][k] = albedo[k] * (hs->direct[r][k] + hb->bounce[i][k] * (hb->far[i] ? (float)measure_bounce / FX_PROBE_PI : 1.0f / FX_PROBE_PI));
+            values[r][k] = albedo[k] * (hs->direct[r][k] + hb->bounce[i][k] * (1.0f / FX_PROBE_PI));
     }
     hb->count = 0;
 }
@@ -686,17 +669,11 @@ static _Thread_local hit_memo *thread_batch_memo;
 
 void fx__probe_hits_begin(const fx_context *ctx)
 {
-    const char *mb = getenv("FXC_MEASURE_BOUNCE");
-    measure_bounce = mb ? atoi(mb) : 0;
-    const char *mf = getenv("FXC_MEASURE_FAR");
-    measure_far = mf ? (float)atof(mf) : 0.0f;
-    static int once;
-    if (!once) { once = 1; atexit(measure_print); }
     fixed_lights_init(ctx->s, &thread_lights);
     if (ctx->world_cell)
         hit_cells_begin(ctx);
     /* The front-face hits' bounce in passes (hit_batch) with the heap memo, else one at a time. */
-    thread_batch_memo = ctx->world_cell && fx__probe_hits_batched && measure_bounce != 1 ? thread_hit_memo : NULL;
+    thread_batch_memo = ctx->world_cell && fx__probe_hits_batched ? thread_hit_memo : NULL;
     if (thread_batch_memo)
         thread_batch_memo->batch.count = 0;
 }
@@ -730,17 +707,9 @@ FXC_HOT_CLONES uint64_t fx__probe_shade_chunk(const fx_context *ctx, const fx_bl
         for (int k = 0; k < 3; k++)
             p[k] = origin[k] + rh->ray.tfar * dir[k];
         scene_offset_ray_origin_inline(p, normal, s->ray_offset_scale, hit_pos[r]);
-        measure_front++;
         traced += queue_shadow_rays(ctx, batch ? lights : NULL, hs, r, hit_pos[r], normal);
-        if (batch && measure_bounce >= 4 && rh->ray.tfar > measure_far * cell && ((r + (uint32_t)(fx__hash(ctx->seed, job->key, ctx->frame, 0, 0x5042) >> 20)) % (uint32_t)measure_bounce) != 0) {
-            uint32_t i = memo->batch.count++;
-            memo->batch.ray[i] = (uint16_t)r;
-            memo->batch.entry[i] = NULL;
-            measure_skipped++;
-            albedo_prefetch(s, rh->hit.primID);
-        } else if (batch) { /* passes 1 and 2 of the bounce (hit_batch), before the shadow rays are traced */
+        if (batch) { /* passes 1 and 2 of the bounce (hit_batch), before the shadow rays are traced */
             batch_locate(&memo->batch, job, inverse, hit_pos[r], r);
-            if (measure_bounce >= 4 && rh->ray.tfar > measure_far * cell) memo->batch.far[memo->batch.count - 1] = 1; else memo->batch.far[memo->batch.count - 1] = 0;
             albedo_prefetch(s, rh->hit.primID);
         }
     }
