@@ -9,6 +9,10 @@
  *             bare Embree over the same rays); median and spread. The recording (copying every stream,
  *             inside the update) is timed too: the ratio is printed with it, as before, and without it
  *             (the update's own work: the update time less the time spent in the recording hooks).
+ *             With --apis, each measured frame's rays are also traced through other Embree calls (the same
+ *             streams with the context flag COHERENT; packets of 8 and 16 rays of one stream in the order of
+ *             their directions), APIs in a rotating order, Embree's time only, and every result compared
+ *             with the streams' (hits: geomID, primID, t, u, v bit for bit; occlusion: occluded or not).
  *   viewers:  1, 4 and 8 viewers (--camera, default group) with everything the scene needs: probes requested
  *             and unique per frame, the world-space cache's bytes and bricks, time per stage (medians); then
  *             two loops, with and without the viewers' local lookup tables, frames alternating: requests and
@@ -23,7 +27,7 @@
  *
  * Usage: bench_probes [--scene PATH (default ../shared/scenes/sponza/sponza.3ds)] [--res WxH (640x360)]
  *                     [--warmup N (10)] [--frames N (20)] [--camera GEN (group)]
- *                     [--part rays|viewers|overhead|memory|image|all] [--out FILE (image)]
+ *                     [--part rays|viewers|overhead|memory|image|all] [--out FILE (image)] [--apis (rays)]
  *                     [--indirect-block 1|2|4 (the loops with probes in overhead and image; default the
  *                     engine's)]
  */
@@ -448,8 +452,8 @@ static void apis_print(apis_state *a, int n)
 {
     printf("\nthe same rays through other Embree calls (Embree time only; packets: built before the timing, "
            "results scattered back after it), per frame, APIs in a rotating order (%zu intersection and %zu "
-           "occlusion rays):\n\n| API | all Mrays/s | intersection Mrays/s | occlusion Mrays/s | update / this raw "
-           "| rays whose result differs from the streams' |\n|---|---|---|---|---|---|\n",
+           "occlusion rays):\n\n| API | all Mrays/s | intersection Mrays/s | occlusion Mrays/s | update / raw "
+           "through this API (its time / update time) | rays whose result differs from the streams' |\n|---|---|---|---|---|---|\n",
            a->hit_rays, a->occ_rays);
     for (int k = 0; k < API_COUNT; k++)
         printf("| %s | %.3f | %.3f | %.3f | %.3f | %zu |\n", api_names[k], bench_quantile(a->all[k], n, 0.5),
