@@ -410,6 +410,8 @@ typedef struct apis_state {
     size_t ref_hit_cap, ref_ray_cap, hit_cap, ray_cap;
     double all[API_COUNT][BENCH_MAX_SAMPLES], hit[API_COUNT][BENCH_MAX_SAMPLES], occ[API_COUNT][BENCH_MAX_SAMPLES];
     double update_over[API_COUNT][BENCH_MAX_SAMPLES];
+    double hit_ms[API_COUNT], occ_ms[API_COUNT]; /* this frame's */
+    double hit_speedup[API_COUNT][BENCH_MAX_SAMPLES], occ_speedup[API_COUNT][BENCH_MAX_SAMPLES];
     size_t differences[API_COUNT], hit_rays, occ_rays;
 } apis_state;
 
@@ -442,7 +444,13 @@ static void apis_frame(apis_state *a, scene_rt *rt, const captured *c, int n, ui
         a->hit[api][n] = (double)c->hit_count / hit_ms / 1000.0;
         a->occ[api][n] = (double)c->ray_count / (all_ms - hit_ms) / 1000.0;
         a->update_over[api][n] = all_ms / update_ms;
+        a->hit_ms[api] = hit_ms;
+        a->occ_ms[api] = all_ms - hit_ms;
         a->differences[api] += replay_differences(c, a->ref_hits, a->ref_rays, a->hits, a->rays);
+    }
+    for (int k = 0; k < API_COUNT; k++) { /* per frame, the streams' time over this API's (> 1: faster) */
+        a->hit_speedup[k][n] = a->hit_ms[API_STREAM] / a->hit_ms[k];
+        a->occ_speedup[k][n] = a->occ_ms[API_STREAM] / a->occ_ms[k];
     }
     a->hit_rays += c->hit_count;
     a->occ_rays += c->ray_count;
@@ -456,8 +464,11 @@ static void apis_print(apis_state *a, int n)
            "through this API (its time / update time) | rays whose result differs from the streams' |\n|---|---|---|---|---|---|\n",
            a->hit_rays, a->occ_rays);
     for (int k = 0; k < API_COUNT; k++)
-        printf("| %s | %.3f | %.3f | %.3f | %.3f | %zu |\n", api_names[k], bench_quantile(a->all[k], n, 0.5),
-               bench_quantile(a->hit[k], n, 0.5), bench_quantile(a->occ[k], n, 0.5),
+        printf("| %s | %.3f | %.3f | %.3f | %.3f (%.3f-%.3f), %.3f (%.3f-%.3f) | %.3f | %zu |\n", api_names[k],
+               bench_quantile(a->all[k], n, 0.5), bench_quantile(a->hit[k], n, 0.5), bench_quantile(a->occ[k], n, 0.5),
+               bench_quantile(a->hit_speedup[k], n, 0.5), bench_quantile(a->hit_speedup[k], n, 0.1),
+               bench_quantile(a->hit_speedup[k], n, 0.9), bench_quantile(a->occ_speedup[k], n, 0.5),
+               bench_quantile(a->occ_speedup[k], n, 0.1), bench_quantile(a->occ_speedup[k], n, 0.9),
                bench_quantile(a->update_over[k], n, 0.5), a->differences[k]);
     for (int k = 0; k < 2; k++) {
         free(a->sets[k].data), free(a->sets[k].lane_ray), free(a->sets[k].is_hit), free(a->sets[k].valid);
