@@ -21,8 +21,6 @@ typedef struct hit_shading {
     float direct[PROBE_CHUNK][3]; /* compose units (irradiance / pi) */
 } hit_shading;
 
-#include <stdio.h>
-static unsigned long long measure_hits, measure_pairs, measure_entries, measure_alone, measure_fills, measure_normals;
 static _Thread_local hit_shading thread_hit_shading; /* update's and eval's, within one call */
 
 FXC_HOT_INLINE void shadow_flush(const fx_context *ctx, hit_shading *hs)
@@ -252,7 +250,6 @@ FXC_HOT_INLINE void hit_cell_fill(const fx_context *ctx, hit_cell *e, uint32_t e
                                   const float centre[3])
 {
     const void *texel[8];
-    measure_fills++;
     if (!ctx->world_cell(ctx->world_user, effect, level, centre, texel))
         memset(texel, 0, sizeof texel);
     e->generation = thread_hit_generation;
@@ -426,7 +423,6 @@ FXC_HOT_INLINE uint32_t cell_normal_find(const hit_cell *e, const float normal[3
 FXC_HOT_INLINE uint32_t cell_normal_compute(hit_cell *e, const float normal[3])
 {
     uint32_t slot = e->normal_next;
-    measure_normals++;
     e->normal_next = (slot + 1) % HIT_CELL_NORMALS;
     uint32_t texel[4];
     float w[4];
@@ -651,47 +647,11 @@ FXC_HOT_INLINE void hits_bounce_prepare(const fx_context *ctx, const fx_block_jo
     hb->done = done;
 }
 
-/* MEASUREMENT ONLY (reverted in the next commit): counts printed at exit to stderr. */
-static void measure_print(void)
-{
-    fprintf(stderr, "MEASURE front-face hits with a bounce %llu, distinct (entry, slot) pairs per chunk %llu, distinct "
-                    "entries per chunk %llu, hits alone in their pair %llu, fills %llu, new normals %llu\n",
-            measure_hits, measure_pairs, measure_entries, measure_alone, measure_fills, measure_normals);
-}
-static void measure_count(const hit_batch *hb)
-{
-    static int once;
-    if (!once)
-        once = 1, atexit(measure_print);
-    const void *pair_entry[PROBE_CHUNK], *entries[PROBE_CHUNK];
-    uint32_t pair_slot[PROBE_CHUNK], pair_hits[PROBE_CHUNK], pairs = 0, n_entries = 0;
-    for (uint32_t i = 0; i < hb->count; i++) {
-        if (!hb->entry[i])
-            continue;
-        measure_hits++;
-        uint32_t j = 0;
-        while (j < pairs && !(pair_entry[j] == hb->entry[i] && pair_slot[j] == hb->slot[i]))
-            j++;
-        if (j == pairs)
-            pair_entry[pairs] = hb->entry[i], pair_slot[pairs] = hb->slot[i], pair_hits[pairs++] = 0;
-        pair_hits[j]++;
-        j = 0;
-        while (j < n_entries && entries[j] != hb->entry[i])
-            j++;
-        if (j == n_entries)
-            entries[n_entries++] = hb->entry[i];
-    }
-    measure_pairs += pairs, measure_entries += n_entries;
-    for (uint32_t j = 0; j < pairs; j++)
-        measure_alone += pair_hits[j] == 1;
-}
-
 /* Pass 3 for the hits left, then every batch hit's radiance (direct light back) into values[r][0..2]. */
 FXC_HOT_INLINE void hits_radiance(const fx_context *ctx, hit_batch *restrict hb, const struct RTCRayHit *hits,
                                   const hit_shading *hs, float (*values)[5])
 {
     batch_bounce(hb, hb->done, hb->count);
-    measure_count(hb);
     for (uint32_t i = 0; i < hb->count; i++) {
         uint32_t r = hb->ray[i];
         float albedo[3];
