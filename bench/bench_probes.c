@@ -460,8 +460,9 @@ static void apis_print(apis_state *a, int n)
 {
     printf("\nthe same rays through other Embree calls (Embree time only; packets: built before the timing, "
            "results scattered back after it), per frame, APIs in a rotating order (%zu intersection and %zu "
-           "occlusion rays):\n\n| API | all Mrays/s | intersection Mrays/s | occlusion Mrays/s | update / raw "
-           "through this API (its time / update time) | rays whose result differs from the streams' |\n|---|---|---|---|---|---|\n",
+           "occlusion rays):\n\n| API | all Mrays/s | intersection Mrays/s | occlusion Mrays/s | speed against "
+           "the streams in the same frame: intersection, occlusion (median, p10-p90) | update / raw through this API "
+           "(its time / update time) | rays whose result differs from the streams' |\n|---|---|---|---|---|---|---|\n",
            a->hit_rays, a->occ_rays);
     for (int k = 0; k < API_COUNT; k++)
         printf("| %s | %.3f | %.3f | %.3f | %.3f (%.3f-%.3f), %.3f (%.3f-%.3f) | %.3f | %zu |\n", api_names[k],
