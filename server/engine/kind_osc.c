@@ -722,27 +722,25 @@ FXC_HOT_INLINE uint32_t taps_of_effect(const kind_osc *k, const taps_lanes *L, c
         if (L->fast[i]) {
             uint64_t key = L->key[i] | effect_field;
             int32_t cell = L->cell[i];
-            if (!L->straddle[i]) {
-                /* Inside one block: its texels found again for every pixel, without a test of whether they
-                 * are the previous pixel's (at the finest levels the corner texel changes about every other
-                 * pixel, so that test was a branch the CPU mispredicted; the memo's block rarely changes). */
-                if (st.memo.key[last_slot] != key)
-                    last_slot = memo_lookup(osc, &st.memo, effect, key);
-                uint32_t m0 = last_slot;
-                uint64_t need = (uint64_t)3 << cell | (uint64_t)3 << (cell + 8);
-                if (!(st.memo.block[m0] != OSC_NONE && (st.memo.valid[m0] & need) == need))
-                    goto rest;
-                /* The texels (x0, y0), (x0 + 1, y0), (x0, y0 + 1), (x0 + 1, y0 + 1) of the block. */
-                const uint8_t *corner = st.memo.payload[m0] + (size_t)cell * texel_bytes;
-                t0 = corner, t1 = corner + texel_bytes, t2 = corner + 8 * texel_bytes;
-                t3 = corner + 9 * texel_bytes;
-                reuse_block = st.memo.block[m0];
-                reuse_key = key, reuse_cell = cell;
-            } else if (key != reuse_key || cell != reuse_cell) {
-                const uint8_t *t[4];
-                if (!taps_straddle(&st, L->fast_x0[i], L->fast_y0[i], key, t, &reuse_block))
-                    goto rest;
-                t0 = t[0], t1 = t[1], t2 = t[2], t3 = t[3];
+            if (key != reuse_key || cell != reuse_cell) {
+                if (!L->straddle[i]) {
+                    if (st.memo.key[last_slot] != key)
+                        last_slot = memo_lookup(osc, &st.memo, effect, key);
+                    uint32_t m0 = last_slot;
+                    uint64_t need = (uint64_t)3 << cell | (uint64_t)3 << (cell + 8);
+                    if (!(st.memo.block[m0] != OSC_NONE && (st.memo.valid[m0] & need) == need))
+                        goto rest;
+                    /* The texels (x0, y0), (x0 + 1, y0), (x0, y0 + 1), (x0 + 1, y0 + 1) of the block. */
+                    const uint8_t *corner = st.memo.payload[m0] + (size_t)cell * texel_bytes;
+                    t0 = corner, t1 = corner + texel_bytes, t2 = corner + 8 * texel_bytes;
+                    t3 = corner + 9 * texel_bytes;
+                    reuse_block = st.memo.block[m0];
+                } else {
+                    const uint8_t *t[4];
+                    if (!taps_straddle(&st, L->fast_x0[i], L->fast_y0[i], key, t, &reuse_block))
+                        goto rest;
+                    t0 = t[0], t1 = t[1], t2 = t[2], t3 = t[3];
+                }
                 reuse_key = key, reuse_cell = cell;
             }
             out->texel[0] = t0;
