@@ -506,6 +506,25 @@ static void test_err_trace_camera_beyond_reach(void **state)
     }
 }
 
+/* Traces lasting more frames than a run may have (1e9 s at 30 fps) are refused when --frames is not given,
+ * naming the trace; they were cut at 1,000,000 frames without a word (a run of hours replaying a fraction of
+ * the trace). With --frames the first frames are rendered as asked. */
+static void test_err_traces_too_long(void **state)
+{
+    (void)state;
+    char path[1100], out[1100], args[2400];
+    write_file(path, sizeof path, "long.trace", "fxcache-trace 1\n0 0 1 3 0 0 -1 60\n1e9 0 1 3 0 0 -1 60\n");
+    tmp_path(out, sizeof out, "long_out");
+    const char *cmds[] = {"sim", "ref"};
+    for (int i = 0; i < 2; i++) {
+        snprintf(args, sizeof args, "%s --trace '%s' --res 8x8 --quiet --out '%s'", cmds[i], path, out);
+        expect_error(2, args, "long.trace ends 1e+09 s after the traces' start", "3e+10 frames at 30 fps",
+                     "--frames N", NULL);
+    }
+    snprintf(args, sizeof args, "sim --trace '%s' --res 8x8 --quiet --frames 2 --threads 1", path);
+    assert_int_equal(run("%s", args), 0);
+}
+
 static void test_err_traces_and_viewers_disagree(void **state)
 {
     (void)state;
@@ -1045,6 +1064,7 @@ int main(void)
         cmocka_unit_test(test_err_trace_bad_line),
         cmocka_unit_test(test_err_trace_newer_version),
         cmocka_unit_test(test_err_trace_camera_beyond_reach),
+        cmocka_unit_test(test_err_traces_too_long),
         cmocka_unit_test(test_err_traces_and_viewers_disagree),
         cmocka_unit_test(test_err_memory_beyond_physical),
         cmocka_unit_test(test_err_output_paths_checked_first),
