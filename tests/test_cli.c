@@ -645,6 +645,20 @@ static void test_render_png(void **state)
     assert_true(size > 33);
 }
 
+/* A render camera beyond the scene's reach is refused as such, not as "position equals target" (what it
+ * said for --camera 1e30,0,0, whose position and target differ by 1e30 m); one that coincides with its target
+ * is named degenerate. */
+static void test_err_render_camera(void **state)
+{
+    (void)state;
+    char path[1100], args[1400];
+    tmp_path(path, sizeof path, "far.png");
+    snprintf(args, sizeof args, "render default -o '%s' --res 8x8 --camera 1e30,0,0", path);
+    expect_error(2, args, "lies 1e+30 m from the scene's centre", "1e+13", NULL);
+    snprintf(args, sizeof args, "render default -o '%s' --res 8x8 --camera 1,1,1 --target 1,1,1", path);
+    expect_error(2, args, "degenerate", NULL);
+}
+
 /* ---------------------------------------------------------------------------------------------------------
  * sim */
 
@@ -1069,6 +1083,7 @@ int main(void)
         cmocka_unit_test(test_err_memory_beyond_physical),
         cmocka_unit_test(test_err_output_paths_checked_first),
         cmocka_unit_test(test_render_png),
+        cmocka_unit_test(test_err_render_camera),
         cmocka_unit_test(test_sim_identical_summary_and_stats),
         cmocka_unit_test(test_sim_indirect_off),
         cmocka_unit_test(test_sim_record_replay),
