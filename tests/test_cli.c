@@ -572,6 +572,18 @@ static void test_err_output_paths_checked_first(void **state)
     mkdir(dir, 0755);
     assert_int_equal(run("%s", args), 0);
     assert_int_equal(access(summary, F_OK), 0);
+    /* --stats and --summary naming one file (the summary overwrote the statistics without a word): the same
+     * path, the same name spelt through another path to its folder (not there yet), an existing file. */
+    snprintf(args, sizeof args,
+             "sim --frames 1 --res 8x8 --viewers 1 --quiet --stats '%s/same.json' --summary '%s/./same.json'",
+             dir, dir);
+    expect_error(1, args, "--stats and --summary name the same file", NULL);
+    snprintf(args, sizeof args, "serve --port 0 --stats '%s' --summary '%s'", summary, summary);
+    expect_error(1, args, "--stats and --summary name the same file", NULL);
+    snprintf(args, sizeof args,
+             "sim --frames 1 --res 8x8 --viewers 1 --quiet --stats '%s' --summary '%s/./%s'", summary, dir,
+             "inside/summary.json");
+    expect_error(1, args, "--stats and --summary name the same file", NULL);
 }
 
 static void test_err_memory_beyond_physical(void **state)

@@ -54,6 +54,13 @@ char *srv_cli_dir_arg(char *dir);
  * why" and returns false otherwise (the file itself is opened later, when the run needs it). */
 bool srv_cli_output_file_ok(const char *cmd, const char *option, const char *path);
 
+/* Whether two output files (--stats and --summary) are different files: the same path, the same existing
+ * file (also through a link) or the same name in the same folder is refused with "fxcache CMD: OPTION_A and
+ * OPTION_B name the same file" (the summary overwrote the statistics without a word). True when either is
+ * NULL. */
+bool srv_cli_output_files_differ(const char *cmd, const char *option_a, const char *a, const char *option_b,
+                                 const char *b);
+
 /* Loads the scene at path ("default" or NULL: the embedded scene); prints the error on failure, and the
  * scene's precision warning (if any) as "fxcache CMD: warning: ..." on stderr. */
 scene *srv_cli_load_scene(const char *cmd, const char *path, float texel_density);

@@ -187,7 +187,8 @@ int srv_cmd_serve(int argc, char **argv)
         return 1;
     }
     if ((o.stats_path && !srv_cli_output_file_ok("serve", "--stats", o.stats_path)) ||
-        (o.summary_path && !srv_cli_output_file_ok("serve", "--summary", o.summary_path)))
+        (o.summary_path && !srv_cli_output_file_ok("serve", "--summary", o.summary_path)) ||
+        !srv_cli_output_files_differ("serve", "--stats", o.stats_path, "--summary", o.summary_path))
         return 1;
     signal(SIGINT, on_signal);
     signal(SIGTERM, on_signal);

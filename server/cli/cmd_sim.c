@@ -265,7 +265,8 @@ int srv_cmd_sim(int argc, char **argv)
     if ((o.out_dir && !make_dir(o.out_dir)) || (o.record_dir && !make_dir(o.record_dir)))
         goto done;
     if ((o.stats_path && !srv_cli_output_file_ok("sim", "--stats", o.stats_path)) ||
-        (o.summary_path && !srv_cli_output_file_ok("sim", "--summary", o.summary_path)))
+        (o.summary_path && !srv_cli_output_file_ok("sim", "--summary", o.summary_path)) ||
+        !srv_cli_output_files_differ("sim", "--stats", o.stats_path, "--summary", o.summary_path))
         goto done;
     signal(SIGINT, on_signal); /* from here on: a signal during the load ends the run after it */
     signal(SIGTERM, on_signal);
