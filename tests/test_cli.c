@@ -586,6 +586,23 @@ static void test_err_output_paths_checked_first(void **state)
     expect_error(1, args, "--stats and --summary name the same file", NULL);
 }
 
+/* An output folder that exists as a file is refused before the run, in one line: sim ran the whole run and
+ * then failed on every image (a line each); the others the same way. */
+static void test_err_output_folder_is_a_file(void **state)
+{
+    (void)state;
+    char path[1100], args[2400];
+    write_file(path, sizeof path, "a_file", "not a folder\n");
+    const char *cmds[] = {"sim --frames 1 --res 8x8 --viewers 1 --quiet --out",
+                          "sim --frames 1 --res 8x8 --viewers 1 --quiet --record",
+                          "ref --frames 1 --res 8x8 --viewers 1 --quiet --out",
+                          "report --quick --only default --quiet --out", "serve --port 0 --record"};
+    for (size_t i = 0; i < sizeof cmds / sizeof cmds[0]; i++) {
+        snprintf(args, sizeof args, "%s '%s'", cmds[i], path);
+        expect_error(1, args, "cannot create folder", "a_file: a file of that name is in the way", NULL);
+    }
+}
+
 static void test_err_memory_beyond_physical(void **state)
 {
     (void)state;
@@ -1094,6 +1111,7 @@ int main(void)
         cmocka_unit_test(test_err_traces_and_viewers_disagree),
         cmocka_unit_test(test_err_memory_beyond_physical),
         cmocka_unit_test(test_err_output_paths_checked_first),
+        cmocka_unit_test(test_err_output_folder_is_a_file),
         cmocka_unit_test(test_render_png),
         cmocka_unit_test(test_err_render_camera),
         cmocka_unit_test(test_sim_identical_summary_and_stats),

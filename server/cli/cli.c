@@ -153,6 +153,19 @@ char *srv_cli_dir_arg(char *dir)
     return dir;
 }
 
+bool srv_cli_make_dir(const char *cmd, const char *path)
+{
+    struct stat st;
+    if (mkdir(path, 0755) == 0)
+        return true;
+    int mkdir_errno = errno;
+    if (mkdir_errno == EEXIST && stat(path, &st) == 0 && S_ISDIR(st.st_mode))
+        return true;
+    fprintf(stderr, "fxcache %s: cannot create folder %s: %s\n", cmd, path,
+            mkdir_errno == EEXIST ? "a file of that name is in the way" : strerror(mkdir_errno));
+    return false;
+}
+
 bool srv_cli_output_file_ok(const char *cmd, const char *option, const char *path)
 {
     struct stat st;

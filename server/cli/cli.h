@@ -49,6 +49,10 @@ int srv_cli_interrupted(const char *cmd, int sig, const char *when);
  * read "out/index.html", not "out//index.html". Returns dir, changed in place (an argv string). */
 char *srv_cli_dir_arg(char *dir);
 
+/* Creates the folder path, or accepts it if it exists as a folder (not as a file: every image of a run
+ * would fail to be written after the run); false with "fxcache CMD: cannot create folder PATH: why". */
+bool srv_cli_make_dir(const char *cmd, const char *path);
+
 /* Whether an output file named by option (--stats, --summary) can be written, checked before the scene
  * loads: not a directory, its folder exists and is writable. Prints "fxcache CMD: cannot write PATH (OPTION):
  * why" and returns false otherwise (the file itself is opened later, when the run needs it). */

@@ -208,10 +208,7 @@ static bool frame_chosen(const ref_options *o, uint32_t frame)
 
 static bool make_dir(const char *path)
 {
-    if (mkdir(path, 0755) == 0 || errno == EEXIST)
-        return true;
-    fprintf(stderr, "fxcache ref: cannot create folder %s: %s\n", path, strerror(errno));
-    return false;
+    return srv_cli_make_dir("ref", path);
 }
 
 /* Writes ref.json whole through a temporary file and a rename, so a reader never sees half of it. */

@@ -186,10 +186,8 @@ int srv_cmd_serve(int argc, char **argv)
         return rc;
     if (!srv_cli_check_memory("serve", o.engine.no_cache ? 0 : o.engine.pool_mb, 0, 0, false))
         return 2;
-    if (o.net.record_dir && mkdir(o.net.record_dir, 0755) != 0 && errno != EEXIST) {
-        fprintf(stderr, "fxcache serve: cannot create folder %s: %s\n", o.net.record_dir, strerror(errno));
+    if (o.net.record_dir && !srv_cli_make_dir("serve", o.net.record_dir))
         return 1;
-    }
     if ((o.stats_path && !srv_cli_output_file_ok("serve", "--stats", o.stats_path)) ||
         (o.summary_path && !srv_cli_output_file_ok("serve", "--summary", o.summary_path)) ||
         !srv_cli_output_files_differ("serve", "--stats", o.stats_path, "--summary", o.summary_path))

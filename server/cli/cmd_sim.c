@@ -129,10 +129,7 @@ static int parse_options(int argc, char **argv, sim_options *o)
 
 static bool make_dir(const char *path)
 {
-    if (mkdir(path, 0755) == 0 || errno == EEXIST)
-        return true;
-    fprintf(stderr, "fxcache sim: cannot create folder %s: %s\n", path, strerror(errno));
-    return false;
+    return srv_cli_make_dir("sim", path);
 }
 
 /* ---- sinks ----------------------------------------------------------------------------------------------- */
