@@ -367,6 +367,42 @@ static void test_err_malformed_json(void **state)
     expect_error(1, args, "malformed.json:2:13", NULL);
 }
 
+/* A glTF 2 file whose second triangle uses vertex 9 of 4: Assimp drops that face and says so only in its
+ * log; the import now repeats it as a warning, and the scene keeps the one good triangle. The same file with
+ * index 2 there has both triangles and no warning. */
+static void test_warn_assimp_dropped_faces(void **state)
+{
+    (void)state;
+    /* indices 0 1 2 1 3 9 (u16), then the corners (0,0,0) (1,0,0) (0,1,0) (1,1,0) */
+    const char *gltf_head =
+        "{\"asset\": {\"version\": \"2.0\"}, \"scene\": 0, \"scenes\": [{\"nodes\": [0]}], \"nodes\": "
+        "[{\"mesh\": "
+        "0}], \"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": 1}, \"indices\": 0}]}], "
+        "\"buffers\": [{\"byteLength\": 60, \"uri\": \"data:application/octet-stream;base64,AAABAAIAAQADAA";
+    const char *gltf_tail =
+        "AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAAAACAPwAAgD8AAAAA\"}], \"bufferViews\": "
+        "[{\"buffer\": "
+        "0, \"byteOffset\": 0, \"byteLength\": 12}, {\"buffer\": 0, \"byteOffset\": 12, \"byteLength\": "
+        "48}], \"accessors\": [{\"bufferView\": 0, \"componentType\": 5123, \"count\": 6, \"type\": "
+        "\"SCALAR\"}, {\"bufferView\": 1, \"componentType\": 5126, \"count\": 4, \"type\": \"VEC3\", "
+        "\"min\": [0, 0, 0], \"max\": [1, 1, 0]}]}\n";
+    char text[2048], path[1100];
+    for (int bad = 0; bad < 2; bad++) {
+        snprintf(text, sizeof text, "%s%s%s", gltf_head, bad ? "kA" : "IA", gltf_tail);
+        write_file(path, sizeof path, bad ? "dropped.gltf" : "whole.gltf", text);
+        assert_int_equal(run("scene-info '%s' --json", path), 0);
+        json_t *root = parse_json_text(out_buf);
+        assert_int_equal(json_integer_value(json_object_get(root, "triangles")), bad ? 1 : 2);
+        json_decref(root);
+        if (bad)
+            assert_contains(err_buf,
+                            "dropped.gltf: Assimp dropped geometry while reading it: 'Some faces had "
+                            "out-of-range indices. Those faces were dropped.'");
+        else if (strstr(err_buf, "dropped geometry"))
+            fail_msg("a whole file warned: %s", err_buf);
+    }
+}
+
 static void test_err_nan_vertex(void **state)
 {
     (void)state;
@@ -1092,6 +1128,7 @@ int main(void)
         cmocka_unit_test(test_err_unsupported_format),
         cmocka_unit_test(test_err_model_inputs),
         cmocka_unit_test(test_err_malformed_json),
+        cmocka_unit_test(test_warn_assimp_dropped_faces),
         cmocka_unit_test(test_err_nan_vertex),
         cmocka_unit_test(test_err_nan_vertex_names_file),
         cmocka_unit_test(test_err_density),
