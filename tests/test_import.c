@@ -638,8 +638,11 @@ static void test_inputs_refused_or_read(void **state)
         {"normal.x", x_normal, 0, false, SCENE_ERR_FORMAT, "uses normal -10, but it has 1 normals", 0},
         {"format.x", "xof 03024\nMe 0064\n", 0, false, SCENE_ERR_FORMAT, "Unsupported x-file format '4 Me'",
          0},
-        {"sliver.obj", "v 0 0 0\nv 1000 0 0\nv 0 0.001 0\nf 1 2 3\n", 0, false, SCENE_ERR_RANGE,
-         "an island may be at most", 0},
+        /* a sliver 1000 m long: the auto density is lowered so that it fits an island (it was refused at its
+         * own auto density with "lower the texel density"); at a density given for it, it is refused */
+        {"sliver.obj", "v 0 0 0\nv 1000 0 0\nv 0 0.001 0\nf 1 2 3\n", 0, false, SCENE_OK, NULL, 1},
+        {"sliver.json", "{\"version\": 1, \"meshes\": [{\"file\": \"sliver.obj\"}], \"texel_density\": 100}",
+         0, false, SCENE_ERR_RANGE, "an island may be at most", 0},
         {"honest.ase", ase_ok, 0, false, SCENE_OK, NULL, 1},
         {"huge.ase", ase_huge, 0, false, SCENE_ERR_FORMAT, "declares 300000000 items (*MESH_NUMVERTEX)", 0},
         {"no_face_line.ase", ase_no_face_line, 0, false, SCENE_ERR_FORMAT,
