@@ -12,6 +12,8 @@
 #include <string>
 #include <vector>
 
+#include <unistd.h>
+
 using OIIO::ImageInput;
 using OIIO::ImageOutput;
 using OIIO::ImageSpec;
@@ -47,7 +49,28 @@ extern "C" int scene_image_read_rgb(const char *path, uint32_t *width, uint32_t 
             return -1;
         }
         size_t w = (size_t)spec.width, h = (size_t)spec.height, nc = (size_t)spec.nchannels;
-        std::vector<float> pixels(w * h * nc);
+        // A header may declare up to 65536 x 65536 pixels of any number of channels (an 8 KB PNG of one row
+        // declared 60000 x 60000: 40 GiB as floats): beyond the machine's memory it is refused with the
+        // figures before anything is allocated (a sanitizer build aborts on such an allocation).
+        double need = (double)w * (double)h * (double)nc * sizeof(float);
+        double memory = (double)sysconf(_SC_PHYS_PAGES) * (double)sysconf(_SC_PAGESIZE);
+        char figures[160];
+        std::snprintf(figures, sizeof figures, "%zu x %zu pixels of %zu channels need %.3g GiB as floats", w,
+                      h, nc, need / (1u << 30));
+        if (memory > 0 && need > memory) {
+            char more[96];
+            std::snprintf(more, sizeof more, ", more than this machine's %.3g GiB of memory",
+                          memory / (1u << 30));
+            set_msg(msg, msg_cap, std::string(path) + ": " + figures + more);
+            return -1;
+        }
+        std::vector<float> pixels;
+        try {
+            pixels.resize(w * h * nc);
+        } catch (const std::bad_alloc &) {
+            set_msg(msg, msg_cap, std::string(path) + ": out of memory: " + figures);
+            return -1;
+        }
         if (!in->read_image(0, 0, 0, (int)nc, TypeDesc::FLOAT, pixels.data())) {
             set_msg(msg, msg_cap, std::string(path) + ": " + in->geterror());
             return -1;

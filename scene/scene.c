@@ -638,6 +638,19 @@ scene_result scene__add_mesh(scene *s, const char *name, const float *positions,
 
 /* ---- finalisation ------------------------------------------------------------------------------------- */
 
+double scene__longest_edge(const scene *s)
+{
+    double longest = 0;
+    for (size_t t = 0; t < s->triangle_count; t++)
+        for (int e = 0; e < 3; e++) {
+            const float *a = s->positions + 3 * (size_t)s->indices[3 * t + (size_t)e];
+            const float *b = s->positions + 3 * (size_t)s->indices[3 * t + (size_t)(e + 1) % 3];
+            double dx = (double)b[0] - a[0], dy = (double)b[1] - a[1], dz = (double)b[2] - a[2];
+            longest = fmax(longest, sqrt(dx * dx + dy * dy + dz * dz));
+        }
+    return longest;
+}
+
 double scene_surface_area(const scene *s)
 {
     double area = 0;
@@ -876,6 +889,14 @@ scene_result scene__finalize(scene *s, const scene_load_desc *desc, scene_error 
         double area = scene_surface_area(s);
         s->texel_density = area > 0 ? (float)sqrt(SCENE_AUTO_TEXELS / area) : 1.0f;
         s->density_auto = true;
+        /* A triangle spans at most its longest edge in any direction, so its island needs at most that times
+         * the density plus a border of texels a side: the auto density stays low enough for every triangle
+         * to fit. A sliver 1000 m by 1 mm (0.5 m^2 of surface) was refused at its own auto density with
+         * "lower the texel density", which the user never set. An explicit density is kept and refused. */
+        double longest = scene__longest_edge(s);
+        double fits = (SCENE_MAX_ISLAND_TEXELS - 4) / longest;
+        if (longest > 0 && s->texel_density > fits)
+            s->texel_density = (float)(0.999 * fits);
     }
     if (!(s->ao_radius > 0)) {
         double dx = s->bounds_max[0] - s->bounds_min[0], dy = s->bounds_max[1] - s->bounds_min[1],

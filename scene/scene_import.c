@@ -16,6 +16,7 @@
 #include <errno.h>
 #include <limits.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -104,6 +105,49 @@ static const char *assimp_error(char *text, size_t cap)
             *p = ' ';
     return text;
 }
+
+/* Assimp's log lines that mean it dropped or changed geometry while reading a file it still returns: its
+ * glTF 2 reader drops faces with out-of-range indices and the vertices of an incomplete primitive, its PLY
+ * reader skips an element it cannot parse (Assimp's own test models glTF2/IndexOutOfRange, .../
+ * IncorrectVertexArrays and PLY/issue623.ply load that way). Found by reading every file of Debian's
+ * assimp-testmodels, the shared scenes and the bunny through a log stream: none of these scenes logs one,
+ * and Assimp's many other warnings (unknown chunks, Blender DNA fields) do not mean lost geometry. */
+static const char *const assimp_dropped_markers[] = {
+    "were dropped",          /* glTF 2: faces with out-of-range indices; vertices beyond a primitive */
+    "out-of-range indices",  /* glTF 2 */
+    "index is out of range", /* OFF (refused earlier by check_off) and others */
+    "Skipping this element instance", /* PLY: an element whose properties do not parse */
+};
+
+/* What one import logged of those lines: their count and the first, cleaned to one line. */
+typedef struct assimp_dropped_log {
+    unsigned count;
+    char first[200];
+} assimp_dropped_log;
+
+/* Assimp's log stream callback during an import (user: the assimp_dropped_log). Messages look like
+ * "Warn,  T0: Some faces had out-of-range indices. Those faces were dropped.\n". */
+static void assimp_log_line(const char *message, char *user)
+{
+    assimp_dropped_log *log = (assimp_dropped_log *)(void *)user;
+    bool dropped = false;
+    for (size_t i = 0; i < sizeof assimp_dropped_markers / sizeof assimp_dropped_markers[0]; i++)
+        dropped |= strstr(message, assimp_dropped_markers[i]) != NULL;
+    if (!dropped || (strncmp(message, "Warn", 4) != 0 && strncmp(message, "Error", 5) != 0))
+        return;
+    if (log->count++ == 0) {
+        const char *text = strstr(message, ": ");
+        snprintf(log->first, sizeof log->first, "%s", text ? text + 2 : message);
+        for (char *p = log->first; *p; p++)
+            if ((unsigned char)*p < 32 || *p == 127)
+                *p = ' ';
+        for (size_t n = strlen(log->first); n > 0 && log->first[n - 1] == ' ';)
+            log->first[--n] = '\0';
+    }
+}
+
+/* Assimp's logger is one for the process: imports that listen to it take turns. */
+static pthread_mutex_t assimp_log_lock = PTHREAD_MUTEX_INITIALIZER;
 
 /* How many meshes the node graph below node places (references), counting a mesh once per reference.
  * Assimp's validation has checked every index is below mNumMeshes and that the graph is a tree. */
@@ -310,12 +354,12 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
     char printed[200], why[400];
     if (format && format->refused)
         return scene__fail(err, SCENE_ERR_FORMAT, "%s: %s", path, format->refused);
+    char *buf = NULL;
+    size_t len = 0;
     if (gz || (format && format->check)) {
         /* The whole file in memory for the check (read_gz also reads plain files: zlib passes them
          * through); Assimp reads a .gz from this memory and a plain file from its path, where readers
          * that open files beside it (MD5's .md5anim) find them. */
-        char *buf = NULL;
-        size_t len = 0;
         rc = read_gz(path, &buf, &len, err);
         if (rc != SCENE_OK)
             return rc;
@@ -331,18 +375,21 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
             free(buf);
             return rc;
         }
-        if (gz) {
-            scene_cerr_capture *capture = scene_cerr_capture_begin();
-            ai = aiImportFileFromMemory(buf, (unsigned)len, flags, hint);
-            scene_cerr_capture_end(capture, printed, sizeof printed);
+        if (!gz) {
+            free(buf);
+            buf = NULL;
         }
-        free(buf);
     }
-    if (!gz) {
-        scene_cerr_capture *capture = scene_cerr_capture_begin();
-        ai = aiImportFile(path, flags);
-        scene_cerr_capture_end(capture, printed, sizeof printed);
-    }
+    assimp_dropped_log dropped = {0};
+    struct aiLogStream log_stream = {.callback = assimp_log_line, .user = (char *)(void *)&dropped};
+    pthread_mutex_lock(&assimp_log_lock);
+    aiAttachLogStream(&log_stream);
+    scene_cerr_capture *capture = scene_cerr_capture_begin();
+    ai = gz ? aiImportFileFromMemory(buf, (unsigned)len, flags, hint) : aiImportFile(path, flags);
+    scene_cerr_capture_end(capture, printed, sizeof printed);
+    aiDetachLogStream(&log_stream);
+    pthread_mutex_unlock(&assimp_log_lock);
+    free(buf);
     if (!ai) {
         assimp_error(why, sizeof why);
         /* Assimp's validation refuses a scene without meshes (an OBJ of comments only, Assimp's own M3D
@@ -356,6 +403,9 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
     }
     if (printed[0])
         fprintf(stderr, "fxcache: warning: %s: Assimp printed: '%s'\n", path, printed);
+    if (dropped.count)
+        fprintf(stderr, "fxcache: warning: %s: Assimp dropped geometry while reading it: '%s'%s\n", path,
+                dropped.first, dropped.count > 1 ? " (and more such messages)" : "");
     scene_result checked = check_faces(path, ai, err);
     if (checked == SCENE_OK)
         checked = check_scene_graph(path, ai, err);

@@ -1,7 +1,7 @@
 /* The checks fxcache runs on a mesh file before Assimp reads it, by format (scene_import.c calls them
  * through scene__import_format_of()): declared counts against the file's size (PLY, OFF, STL, ASE, .x) and
  * the indices Assimp uses without checking (ASE, .x, MD5), each found crashing or exhausting memory on
- * damaged files; and the formats refused outright, with the reason. The input is untrusted: every check
+ * damaged files; the OFF faces Assimp would drop or change silently; and the formats refused outright, with the reason. The input is untrusted: every check
  * reads within [buf, buf + len) and refuses with one line naming the file and, where known, the line. */
 #include "scene_internal.h"
 
@@ -145,7 +145,8 @@ static scene_result check_ply(const char *path, const char *buf, size_t len, sce
     return scene__fail(err, SCENE_ERR_FORMAT, "%s: the PLY header has no end_header line", path);
 }
 
-/* Skips blanks, line ends and '#' comment lines the way Assimp's OFF reader does. */
+/* Skips blanks, line ends and '#' comment lines the way Assimp's OFF reader does (its SkipLine() ends a
+ * comment at '\r' as well as '\n'). */
 static const char *off_next_token(const char *p, const char *end)
 {
     for (;;) {
@@ -153,14 +154,107 @@ static const char *off_next_token(const char *p, const char *end)
             p++;
         if (p >= end || *p != '#')
             return p;
-        while (p < end && *p != '\n')
+        while (p < end && *p != '\n' && *p != '\r' && *p != '\0')
             p++;
     }
 }
 
+/* Assimp's line buffer (ParsingUtils.h BufferSize): GetNextLine() copies up to this many bytes of a line and
+ * then writes its terminating zero one byte past the buffer; the rest of a longer line becomes the next. */
+#define OFF_ASSIMP_LINE_BUFFER 4096
+
+static bool off_line_end(char c)
+{
+    return c == '\r' || c == '\n' || c == '\0' || c == '\f';
+}
+
+/* The next line as Assimp's GetNextLine() splits the OFF body: false at the end of the data (Assimp's buffer
+ * ends at the first zero byte); otherwise the line is [*start, *stop) and *p moves past it and every line
+ * end after it, so blank lines are skipped. */
+static bool off_next_line(const char **p, const char *end, const char **start, const char **stop)
+{
+    const char *q = *p;
+    if (q >= end || *q == '\0')
+        return false;
+    *start = q;
+    while (q < end && !off_line_end(*q))
+        q++;
+    *stop = q;
+    while (q < end && off_line_end(*q) && *q != '\0')
+        q++;
+    *p = q;
+    return true;
+}
+
+/* Checks the vertex and face lines of an OFF body the way Assimp 5.2.5's reader walks them, for what it
+ * would otherwise do silently: it drops a face of more than 9 corners (or of 0, or whose count is not a
+ * number), clamps a vertex index beyond the list to the last vertex, reads a missing or non-numeric index
+ * (a negative one, say) as vertex 0, and overruns its line buffer by one byte on a line of 4096 bytes or
+ * more. p is where Assimp starts reading vertex lines. Fewer lines than declared are left to Assimp,
+ * which refuses the file. */
+static scene_result off_check_body(const char *path, const char *buf, const char *p, const char *end,
+                                   uint64_t vertices, uint64_t faces, scene_error *err)
+{
+    const char *start, *stop;
+    for (uint64_t v = 0; v < vertices; v++) {
+        if (!off_next_line(&p, end, &start, &stop))
+            return SCENE_OK;
+        if (stop - start >= OFF_ASSIMP_LINE_BUFFER)
+            goto too_long;
+    }
+    for (uint64_t f = 0; f < faces; f++) {
+        if (!off_next_line(&p, end, &start, &stop))
+            return SCENE_OK;
+        if (stop - start >= OFF_ASSIMP_LINE_BUFFER)
+            goto too_long;
+        const char *q = start;
+        while (q < stop && (*q == ' ' || *q == '\t'))
+            q++;
+        uint64_t corners = 0;
+        bool number = q < stop && *q >= '0' && *q <= '9';
+        assimp_strtoul10(q, stop, &corners);
+        if (!number)
+            return scene__fail(err, SCENE_ERR_FORMAT,
+                               "%s:%u: face %llu does not start with its corner count (Assimp's OFF reader "
+                               "would drop it silently)",
+                               path, line_of(buf, start), (unsigned long long)f);
+        if (corners == 0 || corners > 9)
+            return scene__fail(err, SCENE_ERR_FORMAT,
+                               "%s:%u: face %llu has %llu corners; Assimp's OFF reader reads faces of 1 to 9 "
+                               "corners and would drop it silently",
+                               path, line_of(buf, start), (unsigned long long)f, (unsigned long long)corners);
+        while (q < stop && *q >= '0' && *q <= '9')
+            q++;
+        for (uint64_t c = 0; c < corners; c++) {
+            while (q < stop && (*q == ' ' || *q == '\t'))
+                q++;
+            uint64_t index = 0;
+            if (q >= stop || *q < '0' || *q > '9')
+                return scene__fail(err, SCENE_ERR_FORMAT,
+                                   "%s:%u: face %llu: corner %llu of %llu is missing or not a vertex index",
+                                   path, line_of(buf, start), (unsigned long long)f, (unsigned long long)c,
+                                   (unsigned long long)corners);
+            assimp_strtoul10(q, stop, &index);
+            if (index >= vertices)
+                return scene__fail(err, SCENE_ERR_FORMAT,
+                                   "%s:%u: face %llu uses vertex %llu, but the file declares %llu vertices", path,
+                                   line_of(buf, start), (unsigned long long)f, (unsigned long long)index,
+                                   (unsigned long long)vertices);
+            while (q < stop && *q >= '0' && *q <= '9')
+                q++;
+        }
+    }
+    return SCENE_OK;
+too_long:
+    return scene__fail(err, SCENE_ERR_FORMAT,
+                       "%s:%u: a line of %lld bytes; Assimp's OFF reader reads lines of at most %d bytes",
+                       path, line_of(buf, start), (long long)(stop - start), OFF_ASSIMP_LINE_BUFFER - 1);
+}
+
 /* Checks an OFF header's vertex and face counts against the file size before Assimp reads it: Assimp
  * allocates both arrays from the header alone. The header is parsed as Assimp parses it: optional "ST",
- * "C", "N", "4" and "n" prefixes, "OFF" (which may be absent), a dimension after "n", then the counts. */
+ * "C", "N", "4" and "n" prefixes, "OFF" (which may be absent), a dimension after "n", then the counts.
+ * Then the body's lines and face indices (off_check_body()). */
 static scene_result check_off(const char *path, const char *buf, size_t len, scene_error *err)
 {
     const char *p = off_next_token(buf, buf + len), *end = buf + len;
@@ -189,20 +283,23 @@ static scene_result check_off(const char *path, const char *buf, size_t len, sce
         p = off_next_token(p, end);
     }
     static const char *const what[2] = {"vertices", "faces"};
+    uint64_t declared[2] = {0, 0};
     for (int k = 0; k < 2; k++) {
-        uint64_t declared = 0;
-        assimp_strtoul10(p, end, &declared);
-        unsigned line = 1;
-        for (const char *q = buf; q < p; q++)
-            line += *q == '\n';
-        scene_result rc = check_count(path, line, what[k], declared, len, err);
+        /* Assimp reads the counts as unsigned int: a count that wraps to a smaller one is refused here by
+         * its unwrapped value, so the body below is walked with the counts Assimp uses */
+        assimp_strtoul10(p, end, &declared[k]);
+        scene_result rc = check_count_at(path, buf, p, what[k], declared[k], len, err);
         if (rc != SCENE_OK)
             return rc;
         while (p < end && *p >= '0' && *p <= '9')
             p++;
         p = off_next_token(p, end);
     }
-    return SCENE_OK;
+    /* the edge count, which Assimp skips; the vertex lines start at the next token */
+    while (p < end && *p >= '0' && *p <= '9')
+        p++;
+    p = off_next_token(p, end);
+    return off_check_body(path, buf, p, end, declared[0], declared[1], err);
 }
 
 /* Checks a binary STL's facet count against the file size. Assimp takes a file for binary STL when

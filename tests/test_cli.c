@@ -367,6 +367,42 @@ static void test_err_malformed_json(void **state)
     expect_error(1, args, "malformed.json:2:13", NULL);
 }
 
+/* A glTF 2 file whose second triangle uses vertex 9 of 4: Assimp drops that face and says so only in its
+ * log; the import now repeats it as a warning, and the scene keeps the one good triangle. The same file with
+ * index 2 there has both triangles and no warning. */
+static void test_warn_assimp_dropped_faces(void **state)
+{
+    (void)state;
+    /* indices 0 1 2 1 3 9 (u16), then the corners (0,0,0) (1,0,0) (0,1,0) (1,1,0) */
+    const char *gltf_head =
+        "{\"asset\": {\"version\": \"2.0\"}, \"scene\": 0, \"scenes\": [{\"nodes\": [0]}], \"nodes\": "
+        "[{\"mesh\": "
+        "0}], \"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": 1}, \"indices\": 0}]}], "
+        "\"buffers\": [{\"byteLength\": 60, \"uri\": \"data:application/octet-stream;base64,AAABAAIAAQADAA";
+    const char *gltf_tail =
+        "AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAAAACAPwAAgD8AAAAA\"}], \"bufferViews\": "
+        "[{\"buffer\": "
+        "0, \"byteOffset\": 0, \"byteLength\": 12}, {\"buffer\": 0, \"byteOffset\": 12, \"byteLength\": "
+        "48}], \"accessors\": [{\"bufferView\": 0, \"componentType\": 5123, \"count\": 6, \"type\": "
+        "\"SCALAR\"}, {\"bufferView\": 1, \"componentType\": 5126, \"count\": 4, \"type\": \"VEC3\", "
+        "\"min\": [0, 0, 0], \"max\": [1, 1, 0]}]}\n";
+    char text[2048], path[1100];
+    for (int bad = 0; bad < 2; bad++) {
+        snprintf(text, sizeof text, "%s%s%s", gltf_head, bad ? "kA" : "IA", gltf_tail);
+        write_file(path, sizeof path, bad ? "dropped.gltf" : "whole.gltf", text);
+        assert_int_equal(run("scene-info '%s' --json", path), 0);
+        json_t *root = parse_json_text(out_buf);
+        assert_int_equal(json_integer_value(json_object_get(root, "triangles")), bad ? 1 : 2);
+        json_decref(root);
+        if (bad)
+            assert_contains(err_buf,
+                            "dropped.gltf: Assimp dropped geometry while reading it: 'Some faces had "
+                            "out-of-range indices. Those faces were dropped.'");
+        else if (strstr(err_buf, "dropped geometry"))
+            fail_msg("a whole file warned: %s", err_buf);
+    }
+}
+
 static void test_err_nan_vertex(void **state)
 {
     (void)state;
@@ -506,6 +542,25 @@ static void test_err_trace_camera_beyond_reach(void **state)
     }
 }
 
+/* Traces lasting more frames than a run may have (1e9 s at 30 fps) are refused when --frames is not given,
+ * naming the trace; they were cut at 1,000,000 frames without a word (a run of hours replaying a fraction of
+ * the trace). With --frames the first frames are rendered as asked. */
+static void test_err_traces_too_long(void **state)
+{
+    (void)state;
+    char path[1100], out[1100], args[2400];
+    write_file(path, sizeof path, "long.trace", "fxcache-trace 1\n0 0 1 3 0 0 -1 60\n1e9 0 1 3 0 0 -1 60\n");
+    tmp_path(out, sizeof out, "long_out");
+    const char *cmds[] = {"sim", "ref"};
+    for (int i = 0; i < 2; i++) {
+        snprintf(args, sizeof args, "%s --trace '%s' --res 8x8 --quiet --out '%s'", cmds[i], path, out);
+        expect_error(2, args, "long.trace ends 1e+09 s after the traces' start", "3e+10 frames at 30 fps",
+                     "--frames N", NULL);
+    }
+    snprintf(args, sizeof args, "sim --trace '%s' --res 8x8 --quiet --frames 2 --threads 1", path);
+    assert_int_equal(run("%s", args), 0);
+}
+
 static void test_err_traces_and_viewers_disagree(void **state)
 {
     (void)state;
@@ -553,6 +608,35 @@ static void test_err_output_paths_checked_first(void **state)
     mkdir(dir, 0755);
     assert_int_equal(run("%s", args), 0);
     assert_int_equal(access(summary, F_OK), 0);
+    /* --stats and --summary naming one file (the summary overwrote the statistics without a word): the same
+     * path, the same name spelt through another path to its folder (not there yet), an existing file. */
+    snprintf(args, sizeof args,
+             "sim --frames 1 --res 8x8 --viewers 1 --quiet --stats '%s/same.json' --summary '%s/./same.json'",
+             dir, dir);
+    expect_error(1, args, "--stats and --summary name the same file", NULL);
+    snprintf(args, sizeof args, "serve --port 0 --stats '%s' --summary '%s'", summary, summary);
+    expect_error(1, args, "--stats and --summary name the same file", NULL);
+    snprintf(args, sizeof args,
+             "sim --frames 1 --res 8x8 --viewers 1 --quiet --stats '%s' --summary '%s/./%s'", summary, dir,
+             "inside/summary.json");
+    expect_error(1, args, "--stats and --summary name the same file", NULL);
+}
+
+/* An output folder that exists as a file is refused before the run, in one line: sim ran the whole run and
+ * then failed on every image (a line each); the others the same way. */
+static void test_err_output_folder_is_a_file(void **state)
+{
+    (void)state;
+    char path[1100], args[2400];
+    write_file(path, sizeof path, "a_file", "not a folder\n");
+    const char *cmds[] = {"sim --frames 1 --res 8x8 --viewers 1 --quiet --out",
+                          "sim --frames 1 --res 8x8 --viewers 1 --quiet --record",
+                          "ref --frames 1 --res 8x8 --viewers 1 --quiet --out",
+                          "report --quick --only default --quiet --out", "serve --port 0 --record"};
+    for (size_t i = 0; i < sizeof cmds / sizeof cmds[0]; i++) {
+        snprintf(args, sizeof args, "%s '%s'", cmds[i], path);
+        expect_error(1, args, "cannot create folder", "a_file: a file of that name is in the way", NULL);
+    }
 }
 
 static void test_err_memory_beyond_physical(void **state)
@@ -624,6 +708,20 @@ static void test_render_png(void **state)
     assert_int_equal(w, 64);
     assert_int_equal(h, 36);
     assert_true(size > 33);
+}
+
+/* A render camera beyond the scene's reach is refused as such, not as "position equals target" (what it
+ * said for --camera 1e30,0,0, whose position and target differ by 1e30 m); one that coincides with its target
+ * is named degenerate. */
+static void test_err_render_camera(void **state)
+{
+    (void)state;
+    char path[1100], args[1400];
+    tmp_path(path, sizeof path, "far.png");
+    snprintf(args, sizeof args, "render default -o '%s' --res 8x8 --camera 1e30,0,0", path);
+    expect_error(2, args, "lies 1e+30 m from the scene's centre", "1e+13", NULL);
+    snprintf(args, sizeof args, "render default -o '%s' --res 8x8 --camera 1,1,1 --target 1,1,1", path);
+    expect_error(2, args, "degenerate", NULL);
 }
 
 /* ---------------------------------------------------------------------------------------------------------
@@ -1030,6 +1128,7 @@ int main(void)
         cmocka_unit_test(test_err_unsupported_format),
         cmocka_unit_test(test_err_model_inputs),
         cmocka_unit_test(test_err_malformed_json),
+        cmocka_unit_test(test_warn_assimp_dropped_faces),
         cmocka_unit_test(test_err_nan_vertex),
         cmocka_unit_test(test_err_nan_vertex_names_file),
         cmocka_unit_test(test_err_density),
@@ -1045,10 +1144,13 @@ int main(void)
         cmocka_unit_test(test_err_trace_bad_line),
         cmocka_unit_test(test_err_trace_newer_version),
         cmocka_unit_test(test_err_trace_camera_beyond_reach),
+        cmocka_unit_test(test_err_traces_too_long),
         cmocka_unit_test(test_err_traces_and_viewers_disagree),
         cmocka_unit_test(test_err_memory_beyond_physical),
         cmocka_unit_test(test_err_output_paths_checked_first),
+        cmocka_unit_test(test_err_output_folder_is_a_file),
         cmocka_unit_test(test_render_png),
+        cmocka_unit_test(test_err_render_camera),
         cmocka_unit_test(test_sim_identical_summary_and_stats),
         cmocka_unit_test(test_sim_indirect_off),
         cmocka_unit_test(test_sim_record_replay),

@@ -523,6 +523,28 @@ static void test_inputs_refused_or_read(void **state)
     snprintf(off_no_keyword, sizeof off_no_keyword, "3 99999999 0\n%s", tri_off_tail);
     snprintf(coff, sizeof coff, "COFF 99999999 1 0\n%s", tri_off_tail);
     snprintf(off_ok, sizeof off_ok, "OFF\n3 1 0\n%s", tri_off_tail);
+    /* Faces Assimp's OFF reader (5.2.5) would drop or change without a word: a decagon (it drops faces of
+     * more than 9 corners), index 7 of 3 vertices (clamped to vertex 2: the file loaded as a triangle it
+     * does not have), a missing or negative index (read as vertex 0), a line too long for its buffer (it
+     * writes a byte past it and reads the rest as the next line). A nonagon with comments, blank lines and
+     * CRLF line ends is read: 9 corners make 7 triangles. */
+    static char off_decagon[512], off_nonagon[512], off_long[6000];
+    snprintf(off_decagon, sizeof off_decagon, "OFF\n11 2 0\n");
+    size_t at = (size_t)snprintf(off_nonagon, sizeof off_nonagon, "OFF 9 1 0\r\n# nine corners\r\n");
+    for (int k = 0; k < 10; k++) {
+        double a = 2 * M_PI * k / 10, b = 2 * M_PI * k / 9;
+        size_t used = strlen(off_decagon);
+        snprintf(off_decagon + used, sizeof off_decagon - used, "%.6f %.6f 0\n", cos(a), sin(a));
+        if (k < 9)
+            at += (size_t)snprintf(off_nonagon + at, sizeof off_nonagon - at, "%.6f %.6f 0\r\n\r\n", cos(b),
+                                   sin(b));
+    }
+    size_t used = strlen(off_decagon);
+    snprintf(off_decagon + used, sizeof off_decagon - used, "0 0 1\n10 0 1 2 3 4 5 6 7 8 9\n3 0 1 10\n");
+    snprintf(off_nonagon + at, sizeof off_nonagon - at, "9 0 1 2 3 4 5 6 7 8  \r\n");
+    at = (size_t)snprintf(off_long, sizeof off_long, "OFF\n3 1 0\n0 0 0");
+    memset(off_long + at, ' ', 5000);
+    snprintf(off_long + at + 5000, sizeof off_long - at - 5000, "\n1 0 0\n0 1 0\n3 0 1 2\n");
     const char *ply_head = "ply\nformat ascii 1.0\n";
     const char *ply_body = "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
                            "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
@@ -616,8 +638,11 @@ static void test_inputs_refused_or_read(void **state)
         {"normal.x", x_normal, 0, false, SCENE_ERR_FORMAT, "uses normal -10, but it has 1 normals", 0},
         {"format.x", "xof 03024\nMe 0064\n", 0, false, SCENE_ERR_FORMAT, "Unsupported x-file format '4 Me'",
          0},
-        {"sliver.obj", "v 0 0 0\nv 1000 0 0\nv 0 0.001 0\nf 1 2 3\n", 0, false, SCENE_ERR_RANGE,
-         "an island may be at most", 0},
+        /* a sliver 1000 m long: the auto density is lowered so that it fits an island (it was refused at its
+         * own auto density with "lower the texel density"); at a density given for it, it is refused */
+        {"sliver.obj", "v 0 0 0\nv 1000 0 0\nv 0 0.001 0\nf 1 2 3\n", 0, false, SCENE_OK, NULL, 1},
+        {"sliver.json", "{\"version\": 1, \"meshes\": [{\"file\": \"sliver.obj\"}], \"texel_density\": 100}",
+         0, false, SCENE_ERR_RANGE, "an island may be at most", 0},
         {"honest.ase", ase_ok, 0, false, SCENE_OK, NULL, 1},
         {"huge.ase", ase_huge, 0, false, SCENE_ERR_FORMAT, "declares 300000000 items (*MESH_NUMVERTEX)", 0},
         {"no_face_line.ase", ase_no_face_line, 0, false, SCENE_ERR_FORMAT,
@@ -643,6 +668,17 @@ static void test_inputs_refused_or_read(void **state)
         {"no_keyword.off", off_no_keyword, 0, false, SCENE_ERR_FORMAT, "declares 99999999 faces", 0},
         {"coff.off", coff, 0, false, SCENE_ERR_FORMAT, "declares 99999999 vertices", 0},
         {"honest.off", off_ok, 0, false, SCENE_OK, NULL, 1},
+        {"nonagon.off", off_nonagon, 0, false, SCENE_OK, NULL, 7},
+        {"decagon.off", off_decagon, 0, false, SCENE_ERR_FORMAT, ":14: face 0 has 10 corners", 0},
+        {"range.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n", 0, false, SCENE_ERR_FORMAT,
+         ":6: face 0 uses vertex 7, but the file declares 3 vertices", 0},
+        {"short_face.off", "OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n4 1 2 3\n", 0, false,
+         SCENE_ERR_FORMAT, ":8: face 1: corner 3 of 4 is missing", 0},
+        {"negative_index.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n", 0, false, SCENE_ERR_FORMAT,
+         "corner 1 of 3 is missing or not a vertex index", 0},
+        {"no_count.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n-3 0 1 2\n", 0, false, SCENE_ERR_FORMAT,
+         "face 0 does not start with its corner count", 0},
+        {"long_line.off", off_long, 0, false, SCENE_ERR_FORMAT, ":3: a line of 5005 bytes", 0},
         {"wrapped.stl", stl_wrapped, stl_wrapped_len, false, SCENE_ERR_FORMAT, "declares 2147483649 facets",
          0},
         {"one.stl", stl_one, stl_one_len, false, SCENE_OK, NULL, 1},
@@ -689,6 +725,8 @@ static void test_assimp_models(void **state)
         {"M3D/cube_normals.m3d", NULL, 0, false, SCENE_ERR_EMPTY, "Assimp read no meshes from it", 0},
         {"invalid/OutOfMemory.off", NULL, 0, false, SCENE_ERR_FORMAT, "declares 353535235358 vertices", 0},
         {"PLY/Wuson.ply", NULL, 0, false, SCENE_OK, NULL, 0},
+        {"OFF/Cube.off", NULL, 0, false, SCENE_OK, NULL, 12},
+        {"OFF/invalid.off", NULL, 0, false, SCENE_ERR_FORMAT, ":6: face 0 has 0 corners", 0},
         {"OpenGEX/empty_camera.ogex", NULL, 0, false, SCENE_ERR_FORMAT, "Assimp also printed: 'nullptr", 0},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {

@@ -13,6 +13,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 /* A unit quad in the XZ plane facing up (+y), two triangles. */
 static const char quad_obj[] = "o quad\n"
@@ -898,6 +899,32 @@ static void test_error_missing_texture(void **state)
                  SCENE_ERR_IO, "meshes[0]", "nope.png");
 }
 
+/* A texture whose header declares more than the machine's memory (a 69-byte PNG of 65536 x 65536 RGBA
+ * pixels: 64 GiB as floats) is refused with the figures before anything is allocated; it said
+ * "std::bad_alloc", or tried the allocation (a sanitizer build aborts on it). Skipped on a machine with the
+ * memory. */
+static void test_error_texture_beyond_memory(void **state)
+{
+    (void)state;
+    double memory = (double)sysconf(_SC_PHYS_PAGES) * (double)sysconf(_SC_PAGESIZE);
+    if (memory >= 64.0 * (1u << 30)) {
+        print_message("SKIP: this machine has %.0f GiB of memory\n", memory / (1u << 30));
+        skip();
+    }
+    static const unsigned char png[69] =
+        "\x89\x50\x4e\x47\x0d\x0a\x1a\x0a\x00\x00\x00\x0d\x49\x48\x44\x52\x00\x01\x00\x00\x00\x01\x00\x00"
+        "\x08\x06\x00\x00\x00\x6c\x84\x30\xe3\x00\x00\x00\x0c\x49\x44\x41\x54\x78\x9c\x63\x60\xa0\x0c\x00"
+        "\x00\x00\x40\x00\x01\xb7\x34\x7c\xef\x00\x00\x00\x00\x49\x45\x4e\x44\xae\x42\x60\x82";
+    FILE *f = fopen(fxt_tmp_path("vast.png"), "wb");
+    assert_non_null(f);
+    assert_int_equal(fwrite(png, 1, sizeof png, f), sizeof png);
+    fclose(f);
+    expect_error(
+        "vast_texture.json",
+        "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"material\": {\"texture\": \"vast.png\"}}]}",
+        SCENE_ERR_IO, "65536 x 65536 pixels of 4 channels need 64 GiB as floats", "of memory");
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -955,6 +982,7 @@ int main(void)
         cmocka_unit_test(test_error_obj_index_out_of_range),
         cmocka_unit_test(test_error_obj_only_degenerate),
         cmocka_unit_test(test_error_missing_texture),
+        cmocka_unit_test(test_error_texture_beyond_memory),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

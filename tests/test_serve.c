@@ -413,6 +413,50 @@ static void test_options(void **state)
     assert_non_null(strstr(out, "--record"));
 }
 
+/* --bind resolves to an IPv4 address of this machine or is refused with one line: "::1" made
+ * libwebsockets listen on every IPv4 interface (0.0.0.0), with no token since it counted as loopback; a name
+ * it could not find ("localhost", a misspelling) left the server without a listening socket while it said
+ * "listening on"; a port in use printed four lines. "localhost" now listens on 127.0.0.1. */
+static void test_bind_addresses(void **state)
+{
+    (void)state;
+    char err[1024];
+    static const char *const bad[][2] = {
+        {"serve --bind ::1", "--bind ::1: IPv6 addresses are not supported"},
+        {"serve --bind no-such-host.invalid --token t", "not an IPv4 address or a host name with one"},
+        {"serve --bind 999.1.1.1 --token t", "not an IPv4 address"},
+        {"serve --bind 192.0.2.1 --token t",
+         "not an address of this machine"}, /* TEST-NET-1: bound, never sent to */
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        err[0] = 0;
+        int rc = fxt_run_cli(bad[i][0], NULL, 0, err, sizeof err);
+        if (rc != 2 || !strstr(err, bad[i][1]) || strchr(err, '\n') != strrchr(err, '\n'))
+            fail_msg("'%s' gave %d: %s", bad[i][0], rc, err);
+    }
+    /* a port in use: one line */
+    int fd = socket(AF_INET, SOCK_STREAM, 0);
+    struct sockaddr_in addr = {.sin_family = AF_INET, .sin_addr.s_addr = htonl(INADDR_LOOPBACK)};
+    socklen_t len = sizeof addr;
+    assert_int_equal(bind(fd, (struct sockaddr *)&addr, sizeof addr), 0);
+    assert_int_equal(listen(fd, 1), 0);
+    assert_int_equal(getsockname(fd, (struct sockaddr *)&addr, &len), 0);
+    char args[128];
+    snprintf(args, sizeof args, "serve --port %d", ntohs(addr.sin_port));
+    err[0] = 0;
+    assert_int_equal(fxt_run_cli(args, NULL, 0, err, sizeof err), 1);
+    close(fd);
+    if (!strstr(err, "the port is in use") || strchr(err, '\n') != strrchr(err, '\n'))
+        fail_msg("'%s': %s", args, err);
+    /* localhost: listens on 127.0.0.1 and says so */
+    fxt_server sv;
+    fxt_server_start(&sv, "bind_localhost", (const char *const[]){"--bind", "localhost", NULL});
+    int client = fxt_tcp_connect(sv.port);
+    assert_true(client >= 0);
+    close(client);
+    assert_int_equal(fxt_server_stop(&sv), 0);
+}
+
 /* Node's ws client, with zstd decoded by the zstd tool. */
 static void test_node_peer(void **state)
 {
@@ -545,6 +589,7 @@ int main(void)
     mkdir(FXC_TEST_TMP, 0755);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_options),
+        cmocka_unit_test(test_bind_addresses),
         cmocka_unit_test(test_node_peer),
         cmocka_unit_test(test_limits_and_token),
         cmocka_unit_test(test_replay_bit_identical),

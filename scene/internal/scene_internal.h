@@ -12,6 +12,9 @@
  * triangles. */
 void scene__precision_lost(const scene_repairs *r, uint64_t before, char *out, size_t cap);
 
+/* The longest triangle edge of the scene, metres (local frame); 0 without triangles. */
+double scene__longest_edge(const scene *s);
+
 /* Fills err with code and a printf-style message; returns code so callers can `return scene__fail(...)`. */
 scene_result scene__fail(scene_error *err, scene_result code, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));

@@ -153,6 +153,19 @@ char *srv_cli_dir_arg(char *dir)
     return dir;
 }
 
+bool srv_cli_make_dir(const char *cmd, const char *path)
+{
+    struct stat st;
+    if (mkdir(path, 0755) == 0)
+        return true;
+    int mkdir_errno = errno;
+    if (mkdir_errno == EEXIST && stat(path, &st) == 0 && S_ISDIR(st.st_mode))
+        return true;
+    fprintf(stderr, "fxcache %s: cannot create folder %s: %s\n", cmd, path,
+            mkdir_errno == EEXIST ? "a file of that name is in the way" : strerror(mkdir_errno));
+    return false;
+}
+
 bool srv_cli_output_file_ok(const char *cmd, const char *option, const char *path)
 {
     struct stat st;
@@ -185,4 +198,44 @@ bool srv_cli_output_file_ok(const char *cmd, const char *option, const char *pat
     if (why)
         fprintf(stderr, "fxcache %s: cannot write %s (%s): %s\n", cmd, path, option, why);
     return why == NULL;
+}
+
+/* The device and inode of path's folder ("." without a slash); false when it cannot be stat'ed. */
+static bool folder_id(const char *path, struct stat *st)
+{
+    char folder[4096];
+    const char *slash = strrchr(path, '/');
+    if (!slash)
+        return stat(".", st) == 0;
+    size_t n = (size_t)(slash - path);
+    if (n == 0)
+        return stat("/", st) == 0;
+    if (n >= sizeof folder)
+        return false;
+    memcpy(folder, path, n);
+    folder[n] = '\0';
+    return stat(folder, st) == 0;
+}
+
+bool srv_cli_output_files_differ(const char *cmd, const char *option_a, const char *a, const char *option_b,
+                                 const char *b)
+{
+    if (!a || !b)
+        return true;
+    struct stat sa, sb;
+    bool same = strcmp(a, b) == 0;
+    if (!same && stat(a, &sa) == 0 && stat(b, &sb) == 0)
+        same = sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino; /* also through links */
+    else if (!same) {
+        /* not both there yet: the same name in the same folder, however the folder is spelt */
+        const char *name_a = strrchr(a, '/'), *name_b = strrchr(b, '/');
+        name_a = name_a ? name_a + 1 : a;
+        name_b = name_b ? name_b + 1 : b;
+        same = strcmp(name_a, name_b) == 0 && folder_id(a, &sa) && folder_id(b, &sb) &&
+               sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
+    }
+    if (same)
+        fprintf(stderr, "fxcache %s: %s and %s name the same file (%s): one would overwrite the other\n", cmd,
+                option_a, option_b, a);
+    return !same;
 }

@@ -49,10 +49,21 @@ int srv_cli_interrupted(const char *cmd, int sig, const char *when);
  * read "out/index.html", not "out//index.html". Returns dir, changed in place (an argv string). */
 char *srv_cli_dir_arg(char *dir);
 
+/* Creates the folder path, or accepts it if it exists as a folder (not as a file: every image of a run
+ * would fail to be written after the run); false with "fxcache CMD: cannot create folder PATH: why". */
+bool srv_cli_make_dir(const char *cmd, const char *path);
+
 /* Whether an output file named by option (--stats, --summary) can be written, checked before the scene
  * loads: not a directory, its folder exists and is writable. Prints "fxcache CMD: cannot write PATH (OPTION):
  * why" and returns false otherwise (the file itself is opened later, when the run needs it). */
 bool srv_cli_output_file_ok(const char *cmd, const char *option, const char *path);
+
+/* Whether two output files (--stats and --summary) are different files: the same path, the same existing
+ * file (also through a link) or the same name in the same folder is refused with "fxcache CMD: OPTION_A and
+ * OPTION_B name the same file" (the summary overwrote the statistics without a word). True when either is
+ * NULL. */
+bool srv_cli_output_files_differ(const char *cmd, const char *option_a, const char *a, const char *option_b,
+                                 const char *b);
 
 /* Loads the scene at path ("default" or NULL: the embedded scene); prints the error on failure, and the
  * scene's precision warning (if any) as "fxcache CMD: warning: ..." on stderr. */

@@ -132,6 +132,26 @@ uint32_t srv_cli_cameras_frames(const srv_cli_cameras *c)
     return span < 1e6 ? (uint32_t)floor(span + 1e-6) + 1 : 1000000;
 }
 
+bool srv_cli_cameras_frames_fit(const char *cmd, const srv_cli_cameras *c, uint32_t max_frames,
+                                uint32_t *frames)
+{
+    *frames = srv_cli_cameras_frames(c);
+    double span = (c->last_time - c->start_time) * c->fps; /* inf for times 1e308 apart: refused as well */
+    if (!c->trace_count || (span < 1e6 && *frames <= max_frames))
+        return true;
+    uint32_t longest = 0; /* the trace that ends last */
+    for (uint32_t i = 1; i < c->trace_count; i++)
+        if (srv_trace_last_time(c->traces[i]) > srv_trace_last_time(c->traces[longest]))
+            longest = i;
+    fprintf(
+        stderr,
+        "fxcache %s: %s ends %.6g s after the traces' start: %.6g frames at %g fps, more than the %u a run "
+        "may have; give --frames N (at most %u) to render the first N, or a lower --fps\n",
+        cmd, c->trace_paths[longest], c->last_time - c->start_time, floor(span + 1e-6) + 1, c->fps,
+        max_frames, max_frames);
+    return false;
+}
+
 double srv_cli_cameras_time(const srv_cli_cameras *c, uint32_t frame)
 {
     return c->start_time + frame / c->fps;

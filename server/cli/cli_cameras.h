@@ -93,6 +93,12 @@ bool srv_cli_cameras_check(const char *cmd, const srv_cli_cameras *c, const scen
 /* Frames from start until the last trace ends (1..1000000); 0 without traces. */
 uint32_t srv_cli_cameras_frames(const srv_cli_cameras *c);
 
+/* The same count in *frames, checked: traces lasting more than max_frames frames at the run's fps (a trace
+ * over 1e9 s at 30 fps) are refused with "fxcache CMD: the traces last ..." on stderr and false, instead of
+ * being cut at the limit without a word. True (any count) without traces. */
+bool srv_cli_cameras_frames_fit(const char *cmd, const srv_cli_cameras *c, uint32_t max_frames,
+                                uint32_t *frames);
+
 /* Frame f's time on the run's clock. */
 double srv_cli_cameras_time(const srv_cli_cameras *c, uint32_t frame);
 

@@ -73,7 +73,8 @@ static const char ref_usage[] =
     "  --camera GEN         camera generator when no --trace is given (default room):\n"
     "                       %s\n"
     "  --viewers N          viewers of the generator, 1..64 (default 4)\n"
-    "  --frames F           frames, 1..1000000 (default 30, or until the last trace ends)\n"
+    "  --frames F           frames, 1..1000000 (default 30, or until the last trace ends: traces\n"
+    "                       lasting more frames need --frames)\n"
     "  --every K            render frames 0, K, 2K, ... and the last: what 'sim --out DIR --save-every K'\n"
     "                       saves (default 0: only the last frame)\n"
     "  --res WxH            resolution, sides 1..8192 (default 640x360; a version 2 trace's own resolution\n"
@@ -207,10 +208,7 @@ static bool frame_chosen(const ref_options *o, uint32_t frame)
 
 static bool make_dir(const char *path)
 {
-    if (mkdir(path, 0755) == 0 || errno == EEXIST)
-        return true;
-    fprintf(stderr, "fxcache ref: cannot create folder %s: %s\n", path, strerror(errno));
-    return false;
+    return srv_cli_make_dir("ref", path);
 }
 
 /* Writes ref.json whole through a temporary file and a rename, so a reader never sees half of it. */
@@ -313,8 +311,11 @@ int srv_cmd_ref(int argc, char **argv)
         goto done;
     if (o.view.trace_count) {
         o.view.viewers = o.view.trace_count;
-        if (!o.view.frames_set)
-            o.view.frames = srv_cli_cameras_frames(&cams);
+        if (!o.view.frames_set &&
+            !srv_cli_cameras_frames_fit("ref", &cams, o.view.frames_max, &o.view.frames)) {
+            exit_code = 2;
+            goto done;
+        }
     }
     /* Memory: the largest image's buffers within the machine's physical memory, before anything is loaded. */
     uint64_t largest = (uint64_t)o.view.width * o.view.height;

@@ -121,7 +121,20 @@ int srv_cmd_render(int argc, char **argv)
         cam.fov_deg = (float)fov;
     srv_camera_frame frame;
     if (!srv_camera_setup(&cam, width, height, &frame)) {
-        fprintf(stderr, "fxcache render: the camera is degenerate (position equals target)\n");
+        /* the same two causes, and words, as a trace camera's (srv_cli_cameras_check) */
+        double reach = 0;
+        for (int k = 0; k < 3; k++)
+            reach = fmax(reach, fmax(fabs((double)cam.position[k]), fabs((double)cam.target[k])));
+        if (!(reach <= SCENE_MAX_CAMERA_REACH))
+            fprintf(stderr,
+                    "fxcache render: the camera lies %.3g m from the scene's centre; cameras may be at most "
+                    "%.0e m "
+                    "from it\n",
+                    reach, SCENE_MAX_CAMERA_REACH);
+        else
+            fprintf(stderr,
+                    "fxcache render: the camera is degenerate: its position and target coincide in the "
+                    "scene's float coordinates\n");
         scene_free(s);
         return 2;
     }

@@ -50,10 +50,7 @@ static bool frame_compared(const report_options *o, uint32_t frame)
 
 static bool make_dir(const char *path)
 {
-    if (mkdir(path, 0755) == 0 || errno == EEXIST)
-        return true;
-    fprintf(stderr, "fxcache report: cannot create folder %s: %s\n", path, strerror(errno));
-    return false;
+    return srv_cli_make_dir("report", path);
 }
 
 /* Loads a configuration's marker if it exists and was made with the same key. */

@@ -152,7 +152,7 @@ static void print_text(const scene *s, const island_summary *is, const scene_nee
 {
     const scene_repairs *r = &s->repairs;
     printf("scene:          %s\n", s->source);
-    printf("triangles:      %u (vertices %u after welding %llu)\n", s->triangle_count, s->vertex_count,
+    printf("triangles:      %u (%u vertices after welding, %llu merged)\n", s->triangle_count, s->vertex_count,
            (unsigned long long)r->vertices_welded);
     char lost[160] = "";
     if (r->precision_skipped)

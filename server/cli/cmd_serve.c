@@ -44,7 +44,8 @@ static const char serve_usage[] =
     "are answered with exactly the pixels asked for, rendered through the same caches. Runs until SIGINT\n"
     "or SIGTERM (or --frames), then says bye to every viewer, writes the statistics and prints a summary.\n"
     "\n"
-    "  --bind ADDR          address to listen on (default 127.0.0.1; beyond loopback needs --token)\n"
+    "  --bind ADDR          IPv4 address of this machine to listen on, or a host name with one such as\n"
+    "                       localhost (default 127.0.0.1; beyond 127.0.0.0/8 needs --token)\n"
     "  --port P             TCP port, 0..65535; 0 = any free port (default 7681). The address is\n"
     "                       printed on stdout as 'fxcache serve: listening on ws://ADDR:PORT'\n"
     "  --token T            access token every hello must carry (default: $FXCACHE_TOKEN, else none)\n"
@@ -64,11 +65,6 @@ static const char serve_usage[] =
     "  --stats FILE         one JSON line of statistics per frame\n"
     "  --summary FILE       one JSON object at the end\n"
     "  --quiet              no summary in words on stdout\n";
-
-static bool is_loopback(const char *address)
-{
-    return strncmp(address, "127.", 4) == 0 || strcmp(address, "localhost") == 0 || strcmp(address, "::1") == 0;
-}
 
 static int parse_options(int argc, char **argv, serve_options *o)
 {
@@ -144,7 +140,15 @@ static int parse_options(int argc, char **argv, serve_options *o)
             fprintf(stderr, "fxcache serve: --token: only printable characters without spaces\n");
             return 2;
         }
-    if (!is_loopback(o->net.bind) && !o->net.token) {
+    /* the address as it resolves ("127.example.com" need not be loopback), refused if it is not one the
+     * server can listen on */
+    char address[64], err[256];
+    bool loopback = false;
+    if (!srv_net_resolve_bind(o->net.bind, address, sizeof address, &loopback, err, sizeof err)) {
+        fprintf(stderr, "fxcache serve: %s\n", err);
+        return 2;
+    }
+    if (!loopback && !o->net.token) {
         fprintf(stderr, "fxcache serve: --bind %s is beyond loopback: give --token (or FXCACHE_TOKEN) so that only "
                         "viewers with it can connect\n", o->net.bind);
         return 2;
@@ -182,12 +186,11 @@ int srv_cmd_serve(int argc, char **argv)
         return rc;
     if (!srv_cli_check_memory("serve", o.engine.no_cache ? 0 : o.engine.pool_mb, 0, 0, false))
         return 2;
-    if (o.net.record_dir && mkdir(o.net.record_dir, 0755) != 0 && errno != EEXIST) {
-        fprintf(stderr, "fxcache serve: cannot create folder %s: %s\n", o.net.record_dir, strerror(errno));
+    if (o.net.record_dir && !srv_cli_make_dir("serve", o.net.record_dir))
         return 1;
-    }
     if ((o.stats_path && !srv_cli_output_file_ok("serve", "--stats", o.stats_path)) ||
-        (o.summary_path && !srv_cli_output_file_ok("serve", "--summary", o.summary_path)))
+        (o.summary_path && !srv_cli_output_file_ok("serve", "--summary", o.summary_path)) ||
+        !srv_cli_output_files_differ("serve", "--stats", o.stats_path, "--summary", o.summary_path))
         return 1;
     signal(SIGINT, on_signal);
     signal(SIGTERM, on_signal);
@@ -211,7 +214,7 @@ int srv_cmd_serve(int argc, char **argv)
         fprintf(stderr, "fxcache serve: %s\n", err);
         goto done;
     }
-    printf("fxcache serve: listening on ws://%s:%d\n", o.net.bind, srv_net_port(net));
+    printf("fxcache serve: listening on ws://%s:%d\n", srv_net_address(net), srv_net_port(net));
     fflush(stdout);
     fxc_result r = srv_net_run(net, err, sizeof err);
     if (r != FXC_OK)

@@ -53,7 +53,8 @@ static const char sim_usage[] =
     "image per viewer. Prints a summary in words.\n"
     "\n"
     "  --viewers N          viewers, 1..64 (default 4, or one per --trace)\n"
-    "  --frames F           frames, 1..1000000 (default 30, or until the last trace ends)\n"
+    "  --frames F           frames, 1..1000000 (default 30, or until the last trace ends: traces\n"
+    "                       lasting more frames need --frames)\n"
     "  --res WxH            resolution per viewer, sides 1..8192 (default 640x360; a version 2 trace's own\n"
     "                       resolution wins for its viewer unless --res is given)\n"
     "  --camera GEN         camera generator when no --trace is given (default room):\n"
@@ -128,10 +129,7 @@ static int parse_options(int argc, char **argv, sim_options *o)
 
 static bool make_dir(const char *path)
 {
-    if (mkdir(path, 0755) == 0 || errno == EEXIST)
-        return true;
-    fprintf(stderr, "fxcache sim: cannot create folder %s: %s\n", path, strerror(errno));
-    return false;
+    return srv_cli_make_dir("sim", path);
 }
 
 /* ---- sinks ----------------------------------------------------------------------------------------------- */
@@ -239,8 +237,11 @@ int srv_cmd_sim(int argc, char **argv)
         goto done;
     if (o.view.trace_count) {
         o.view.viewers = o.view.trace_count;
-        if (!o.view.frames_set)
-            o.view.frames = srv_cli_cameras_frames(&cams);
+        if (!o.view.frames_set &&
+            !srv_cli_cameras_frames_fit("sim", &cams, o.view.frames_max, &o.view.frames)) {
+            exit_code = 2;
+            goto done;
+        }
     }
     recorder.start_time = cams.start_time;
     /* Memory: the pools and every viewer's buffers (at its trace's resolution, if it records one) within the
@@ -261,7 +262,8 @@ int srv_cmd_sim(int argc, char **argv)
     if ((o.out_dir && !make_dir(o.out_dir)) || (o.record_dir && !make_dir(o.record_dir)))
         goto done;
     if ((o.stats_path && !srv_cli_output_file_ok("sim", "--stats", o.stats_path)) ||
-        (o.summary_path && !srv_cli_output_file_ok("sim", "--summary", o.summary_path)))
+        (o.summary_path && !srv_cli_output_file_ok("sim", "--summary", o.summary_path)) ||
+        !srv_cli_output_files_differ("sim", "--stats", o.stats_path, "--summary", o.summary_path))
         goto done;
     signal(SIGINT, on_signal); /* from here on: a signal during the load ends the run after it */
     signal(SIGTERM, on_signal);

@@ -6,8 +6,13 @@
 #include "proto.h"
 #include "trace.h"
 
+#include <arpa/inet.h>
 #include <errno.h>
 #include <libwebsockets.h>
+#include <netdb.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdarg.h>
@@ -724,6 +729,59 @@ static void lws_log_line(int level, const char *line)
 
 /* ---- the server ---------------------------------------------------------------------------------------- */
 
+/* Binds fd to addr as libwebsockets binds its listening socket (SO_REUSEADDR), to find out before it
+ * whether it can: false with errno set. */
+static bool bind_socket(int fd, const struct sockaddr_in *addr)
+{
+    int one = 1;
+    setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
+    return bind(fd, (const struct sockaddr *)addr, sizeof *addr) == 0;
+}
+
+bool srv_net_resolve_bind(const char *bind, char *numeric, size_t numeric_cap, bool *loopback, char *err,
+                          size_t err_cap)
+{
+    struct in6_addr v6;
+    if (inet_pton(AF_INET6, bind, &v6) == 1) {
+        snprintf(err, err_cap,
+                 "--bind %s: IPv6 addresses are not supported (the server listens on IPv4 only; for loopback "
+                 "use 127.0.0.1)",
+                 bind);
+        return false;
+    }
+    struct addrinfo hints = {.ai_family = AF_INET, .ai_socktype = SOCK_STREAM}, *found = NULL;
+    int rc = getaddrinfo(bind, NULL, &hints, &found);
+    if (rc != 0 || !found) {
+        snprintf(err, err_cap, "--bind %s: not an IPv4 address or a host name with one (%s)", bind,
+                 rc ? gai_strerror(rc) : "no address");
+        return false;
+    }
+    struct sockaddr_in addr;
+    memcpy(&addr, found->ai_addr, sizeof addr);
+    freeaddrinfo(found);
+    addr.sin_port = 0;
+    if (!inet_ntop(AF_INET, &addr.sin_addr, numeric, (socklen_t)numeric_cap)) {
+        snprintf(err, err_cap, "--bind %s: address does not fit", bind);
+        return false;
+    }
+    *loopback = (ntohl(addr.sin_addr.s_addr) >> 24) == 127;
+    /* libwebsockets would report a missing address in its log and go on without a listening socket */
+    int fd = socket(AF_INET, SOCK_STREAM, 0);
+    if (fd < 0) {
+        snprintf(err, err_cap, "--bind %s: cannot make a socket: %s", bind, strerror(errno));
+        return false;
+    }
+    bool bound = bind_socket(fd, &addr);
+    int bind_errno = errno;
+    close(fd);
+    if (!bound) {
+        snprintf(err, err_cap, "--bind %s (%s): %s", bind, numeric,
+                 bind_errno == EADDRNOTAVAIL ? "not an address of this machine" : strerror(bind_errno));
+        return false;
+    }
+    return true;
+}
+
 fxc_result srv_net_create(const srv_net_desc *desc, srv_net **out, char *err, size_t err_cap)
 {
     *out = NULL;
@@ -762,11 +820,32 @@ fxc_result srv_net_create(const srv_net_desc *desc, srv_net **out, char *err, si
     for (int k = 0; k < 3; k++)
         net->origin[k] = desc->s->origin[k];
     pthread_mutex_init(&net->lock, NULL);
+    bool loopback;
+    if (!srv_net_resolve_bind(net->d.bind, net->address, sizeof net->address, &loopback, err, err_cap)) {
+        srv_net_free(net);
+        return FXC_ERR_RANGE;
+    }
+    if (net->d.port > 0) {
+        /* a port in use, found here, is one line instead of libwebsockets' three log lines and ours */
+        struct sockaddr_in addr = {.sin_family = AF_INET, .sin_port = htons((uint16_t)net->d.port)};
+        inet_pton(AF_INET, net->address, &addr.sin_addr);
+        int fd = socket(AF_INET, SOCK_STREAM, 0);
+        bool bound = fd >= 0 && bind_socket(fd, &addr);
+        int bind_errno = errno;
+        if (fd >= 0)
+            close(fd);
+        if (!bound) {
+            snprintf(err, err_cap, "cannot listen on %s:%d: %s", net->address, net->d.port,
+                     bind_errno == EADDRINUSE ? "the port is in use" : strerror(bind_errno));
+            srv_net_free(net);
+            return FXC_ERR_IO;
+        }
+    }
     lws_set_log_level(LLL_ERR, lws_log_line);
     struct lws_context_creation_info info;
     memset(&info, 0, sizeof info);
     info.port = net->d.port;
-    info.iface = net->d.bind;
+    info.iface = net->address;
     info.protocols = net_protocols;
     info.user = net;
     info.options = LWS_SERVER_OPTION_DISABLE_IPV6;
@@ -774,8 +853,8 @@ fxc_result srv_net_create(const srv_net_desc *desc, srv_net **out, char *err, si
     info.uid = -1;
     net->context = lws_create_context(&info);
     if (!net->context) {
-        snprintf(err, err_cap, "cannot listen on %s:%d (in use, or not an address of this machine)", net->d.bind,
-                 net->d.port);
+        snprintf(err, err_cap, "cannot listen on %s:%d (in use, or not an address of this machine)",
+                 net->address, net->d.port);
         srv_net_free(net);
         return FXC_ERR_IO;
     }
@@ -790,6 +869,11 @@ fxc_result srv_net_create(const srv_net_desc *desc, srv_net **out, char *err, si
 int srv_net_port(const srv_net *net)
 {
     return net->port;
+}
+
+const char *srv_net_address(const srv_net *net)
+{
+    return net->address;
 }
 
 fxc_result srv_net_run(srv_net *net, char *err, size_t err_cap)

@@ -96,12 +96,23 @@ typedef struct srv_net_totals {
 
 typedef struct srv_net srv_net;
 
+/* Resolves a --bind address to the IPv4 address the server listens on, in dotted form in numeric (at least
+ * 16 bytes): an IPv4 address or a host name with one (localhost), which must be an address of this machine;
+ * *loopback says whether it is in 127.0.0.0/8. The listening socket is IPv4 only, so an IPv6 address is
+ * refused (libwebsockets listened on every IPv4 interface for "::1", and on none for a name it could not
+ * find, while the server said it was listening). False with one line in err. */
+bool srv_net_resolve_bind(const char *bind, char *numeric, size_t numeric_cap, bool *loopback, char *err,
+                          size_t err_cap);
+
 /* Creates the server and starts listening. Returns FXC_OK and *out, or a code with one line in err (an
  * address that cannot be bound, say). Frames are not produced before srv_net_run. */
 fxc_result srv_net_create(const srv_net_desc *desc, srv_net **out, char *err, size_t err_cap);
 
 /* The TCP port the server listens on. */
 int srv_net_port(const srv_net *net);
+
+/* The IPv4 address the server listens on, dotted (srv_net_resolve_bind of desc->bind). */
+const char *srv_net_address(const srv_net *net);
 
 /* Runs until *desc->stop is set or desc->frames frames were made; then says bye on every connection, waits
  * up to a second for them to close, and closes every trace file. FXC_OK, or FXC_ERR_THREADS / FXC_ERR_IO

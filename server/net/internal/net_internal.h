@@ -104,6 +104,7 @@ struct srv_net {
     srv_net_desc d;
     struct lws_context *context;
     int port;
+    char address[64]; /* d.bind resolved: the IPv4 address listened on, dotted */
     pthread_mutex_t lock;
     net_viewer viewers[SRV_MAX_VIEWERS];
     net_viewer *by_slot[256];       /* viewer id slot -> record (frame thread) */
