@@ -61,8 +61,10 @@ enum {
     JSON_WHERE_CAP = 128,       /* JSON paths such as "meshes[12].transform.scale" */
 };
 
-#define JSON_DENSITY_MIN 1e-6   /* texels per metre: one texel per 1000 km */
-#define JSON_DENSITY_MAX 1e6    /* texels per metre: a texel of 1 um (the same bound as --density) */
+/* Floats, as the value is compared after its conversion to float: the double 1e-6 is larger than the float
+ * nearest to it, so a bound in double refused the documented end "texel_density": 1e-6 itself. */
+#define JSON_DENSITY_MIN 1e-6f  /* texels per metre: one texel per 1000 km */
+#define JSON_DENSITY_MAX 1e6f   /* texels per metre: a texel of 1 um (the same bound as --density) */
 #define JSON_AO_RADIUS_MAX 1e9  /* metres */
 #define JSON_DEFAULT_FOV 60.0f  /* degrees */
 
@@ -687,7 +689,7 @@ static scene_result json_read_density_and_radius(const json_ctx *ctx, scene *s, 
             if (!(value >= JSON_DENSITY_MIN && value <= JSON_DENSITY_MAX))
                 return json_fail(ctx, SCENE_ERR_RANGE, "texel_density",
                                  "%g texels per metre is out of range (allowed %g .. %g, or \"auto\")",
-                                 (double)value, JSON_DENSITY_MIN, JSON_DENSITY_MAX);
+                                 (double)value, (double)JSON_DENSITY_MIN, (double)JSON_DENSITY_MAX);
             s->texel_density = value;
             s->density_auto = false;
         } else {

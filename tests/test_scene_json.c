@@ -667,6 +667,35 @@ static void test_error_density_range(void **state)
     expect_error("density_huge.json",
                  "{\"version\": 1, \"texel_density\": 1e12, \"meshes\": [{\"file\": \"quad.obj\"}]}",
                  SCENE_ERR_RANGE, "texel_density", "allowed");
+    /* just outside the ends, as doubles that stay outside once rounded to float */
+    expect_error("density_low.json",
+                 "{\"version\": 1, \"texel_density\": 9.9e-7, \"meshes\": [{\"file\": \"quad.obj\"}]}",
+                 SCENE_ERR_RANGE, "texel_density", "allowed");
+    expect_error("density_high.json",
+                 "{\"version\": 1, \"texel_density\": 1.0001e6, \"meshes\": [{\"file\": \"quad.obj\"}]}",
+                 SCENE_ERR_RANGE, "texel_density", "allowed");
+}
+
+/* The documented ends of the range, 1e-6 and 1e6, are accepted (1e-6 was refused: the double bound is larger
+ * than the float the value becomes). */
+static void test_density_range_ends(void **state)
+{
+    (void)state;
+    /* a 1 mm quad: 1000 texels on a side at 1e6, within an island's limit */
+    fxt_write_file("mm_quad.obj", "v 0 0 0\nv 0.001 0 0\nv 0.001 0 0.001\nv 0 0 0.001\nf 1 3 2\nf 1 4 3\n");
+    static const char *const texts[2] = {
+        "{\"version\": 1, \"texel_density\": 1e-6, \"meshes\": [{\"file\": \"mm_quad.obj\"}]}",
+        "{\"version\": 1, \"texel_density\": 1e6, \"meshes\": [{\"file\": \"mm_quad.obj\"}]}"};
+    static const float expected[2] = {1e-6f, 1e6f};
+    for (int i = 0; i < 2; i++) {
+        scene_error err;
+        scene *s = load_json_text("density_end.json", texts[i], &err);
+        if (!s)
+            fail_msg("texel_density %g refused: %s", (double)expected[i], err.msg);
+        assert_false(s->density_auto);
+        assert_true(s->texel_density == expected[i]);
+        scene_free(s);
+    }
 }
 
 /* A texel density word other than "auto". */
@@ -939,6 +968,7 @@ int main(void)
         cmocka_unit_test(test_error_zero_direction),
         cmocka_unit_test(test_error_negative_sky_color),
         cmocka_unit_test(test_error_density_range),
+        cmocka_unit_test(test_density_range_ends),
         cmocka_unit_test(test_error_density_word),
         cmocka_unit_test(test_error_bad_override),
         cmocka_unit_test(test_error_camera_fov),
