@@ -348,7 +348,7 @@ static int run_config(report_config *c, const report_context *ctx, const srv_cli
         double mse = t->images ? t->mse_sum / t->images : NAN, noise2 = t->images ? t->noise2_sum / t->images : NAN;
         row->rmse = sqrt(mse);
         row->psnr_db = srv_err_psnr(row->rmse);
-        row->rmse_denoised = sqrt(fmax(0.0, mse - noise2));
+        row->rmse_denoised = t->images ? sqrt(fmax(0.0, mse - noise2)) : NAN; /* fmax(0, NaN) would say 0 */
         row->rmse_shadow = t->images && errors.desc.compare_shadow ? sqrt(t->mse_shadow_sum / t->images) : NAN;
         row->rmse_ao = t->images && errors.desc.compare_ao ? sqrt(t->mse_ao_sum / t->images) : NAN;
         row->ref_noise = sqrt(noise2);
@@ -688,10 +688,17 @@ int srv_cmd_report(int argc, char **argv)
         char ao_text[48] = "";
         if (isfinite(row->rmse_ao))
             snprintf(ao_text, sizeof ao_text, ", AO %.3g", row->rmse_ao);
-        fprintf(stderr, "report: [%zu/%zu] %s: %.1f ms/frame (%.1f per viewer, CPU %.1f), RMSE %.4g, PSNR %.2f dB, "
-                        "shadow %.3g%s (%.1f s)\n",
-                i + 1, plan->count, row->id, row->ms_per_frame, row->ms_per_viewer, row->cpu_ms_per_frame, row->rmse,
-                row->psnr_db, row->rmse_shadow, ao_text, row->run_s);
+        if (row->images == 0) /* every viewer had left (traces shorter than --frames) before a compared frame */
+            fprintf(stderr, "report: [%zu/%zu] %s: %.1f ms/frame (%.1f per viewer, CPU %.1f), no error: no frame "
+                            "after the warm-up was compared with a viewer present (the traces end before it; lower "
+                            "--frames or --warmup) (%.1f s)\n",
+                    i + 1, plan->count, row->id, row->ms_per_frame, row->ms_per_viewer, row->cpu_ms_per_frame,
+                    row->run_s);
+        else
+            fprintf(stderr, "report: [%zu/%zu] %s: %.1f ms/frame (%.1f per viewer, CPU %.1f), RMSE %.4g, PSNR %.2f dB, "
+                            "shadow %.3g%s (%.1f s)\n",
+                    i + 1, plan->count, row->id, row->ms_per_frame, row->ms_per_viewer, row->cpu_ms_per_frame,
+                    row->rmse, row->psnr_db, row->rmse_shadow, ao_text, row->run_s);
         if (!write_outputs(plan, &o, NULL, NULL, NULL, false, NULL)) /* the CSVs after every configuration */
             goto done;
     }
