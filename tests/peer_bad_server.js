@@ -6,9 +6,11 @@
 // Listens on 127.0.0.1 (a free port, printed as "listening on ws://127.0.0.1:PORT"), answers the first hello
 // the way MODE says, and exits when the viewer closes. Modes: empty (an empty binary message), text (a text
 // message), wrong_type (an unknown type), len_more / len_less (a welcome whose header declares more or fewer
-// bytes than it has), frame_first (a frame before the welcome), welcome_twice, nan_camera (frames for a camera of
-// NaNs), stall (a welcome, one frame, then nothing), unasked (frames as asked, and with every frame a samples
-// message for a request never made, for pixels never asked; the frames with binary16 depth).
+// bytes than it has), frame_first (a frame before the welcome), welcome_twice, nan_camera (frames for a camera
+// of NaNs), stall (a welcome, one frame, then nothing), unasked (frames with binary16 depth as asked, and with
+// each a samples message for a request never made, for pixels never asked), slow_clock (a frame for the first
+// camera only, and an error at a second camera: the viewer runs at --fps 1e-300), tiny_fps (the same with a
+// welcome of 1e-30 fps, and an error at a second sample request too).
 'use strict';
 
 const { load_ws, TYPE, header, text8, pose } = require('./peer_wire.js');
@@ -21,10 +23,17 @@ function f32(v) { const b = Buffer.alloc(4); b.writeFloatLE(v, 0); return b; }
 function u64(v) { const b = Buffer.alloc(8); b.writeBigUInt64LE(BigInt(v), 0); return b; }
 
 // The welcome: viewer 1, "bad_00", 30 fps, the default scene's room, a camera at (0, 1.6, 3) looking -z.
-function welcome() {
+function welcome(fps) {
     const bounds = Buffer.alloc(48);
     [-5, 0, -4, 5, 4, 4].forEach((v, k) => bounds.writeDoubleLE(v, 8 * k));
-    return header(TYPE.welcome, Buffer.concat([u32(1), text8('bad_00'), f32(30), bounds, pose([0, 1.6, 3], [0, 0, -1], 60), u32(240)]));
+    return header(TYPE.welcome, Buffer.concat([u32(1), text8('bad_00'), f32(fps || 30), bounds, pose([0, 1.6, 3], [0, 0, -1], 60), u32(240)]));
+}
+
+// An error message (FXC_ERR_RANGE, -10) with a reason.
+function error(reason) {
+    const r = Buffer.from(reason, 'latin1'), length = Buffer.alloc(2);
+    length.writeUInt16LE(r.length, 0);
+    return header(TYPE.error, Buffer.concat([Buffer.from([0xf6, 0xff, 0xff, 0xff]), length, r]));
 }
 
 // One zstd frame (RFC 8878) holding b in raw blocks: a single segment with a 4-byte content size.
@@ -70,7 +79,7 @@ function unasked_samples(w, h, k) {
 const server = new WebSocket.Server({ host: '127.0.0.1', port: 0 });
 server.on('listening', () => console.log(`listening on ws://127.0.0.1:${server.address().port}`));
 server.on('connection', ws => {
-    let frames = 0;
+    let frames = 0, requests = 0;
     ws.on('close', () => process.exit(0));
     ws.on('message', data => {
         const b = Buffer.from(data);
@@ -78,7 +87,7 @@ server.on('connection', ws => {
             return;
         const type = b.readUInt16LE(6);
         if (type === TYPE.hello) {
-            const m = welcome();
+            const m = welcome(mode === 'tiny_fps' ? 1e-30 : 30);
             switch (mode) {
             case 'empty': ws.send(Buffer.alloc(0)); return;
             case 'text': ws.send('welcome'); return;
@@ -89,6 +98,15 @@ server.on('connection', ws => {
             case 'welcome_twice': ws.send(m); ws.send(m); return;
             default: ws.send(m); return;
             }
+        }
+        if (mode === 'slow_clock' || mode === 'tiny_fps') {
+            // One camera (and one sample request) at most: the clock's next is 1e300 s away. A frame for the
+            // first camera, then nothing: the viewer waits for its second frame until --timeout.
+            if (type === TYPE.camera && frames++ === 0)
+                ws.send(frame(16, 9, b.readUInt32LE(12), [0, 1.6, 3], [0, 0, -1], 60, true));
+            else if (type === TYPE.camera || (mode === 'tiny_fps' && type === TYPE.sample_request && requests++ > 0))
+                ws.send(error(`a flood: a ${type === TYPE.camera ? 'camera' : 'sample request'} after the first`));
+            return;
         }
         if (type !== TYPE.camera)
             return;

@@ -465,6 +465,8 @@ static void test_misbehaving_server(void **state)
         {"nan_camera", 1, "value out of range"},
         {"stall", 1, "no frame for 1 s"},
         {"unasked", 0, NULL},
+        {"slow_clock", 1, "no frame for 1 s"}, /* was "server error: a flood" */
+        {"tiny_fps", 1, "no frame for 1 s"},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         char out[512], cmd[2048];
@@ -493,8 +495,13 @@ static void test_misbehaving_server(void **state)
                               "--timeout", "1", "--quiet", NULL};
         const char *reproject_args[] = {"--connect", url, "--res", "16x9", "--codec", "raw", "--frames", "3",
                                         "--timeout", "1", "--quiet", "--reproject", NULL};
+        const char *slow_args[] = {"--connect", url, "--res", "16x9", "--codec", "raw", "--frames", "2", "--timeout",
+                                   "1", "--quiet", "--reproject", "--fps", "1e-300", "--display-fps", "100", NULL};
         viewer_run r;
-        run_viewer(strcmp(cases[i].mode, "unasked") == 0 ? reproject_args : args, NULL, &r);
+        bool slow = strcmp(cases[i].mode, "slow_clock") == 0 || strcmp(cases[i].mode, "tiny_fps") == 0;
+        if (slow && strcmp(cases[i].mode, "tiny_fps") == 0)
+            slow_args[12] = NULL; /* the welcome's fps, not --fps */
+        run_viewer(slow ? slow_args : strcmp(cases[i].mode, "unasked") == 0 ? reproject_args : args, NULL, &r);
         kill(fake, SIGTERM);
         waitpid(fake, NULL, 0);
         print_message("%-13s exit %d in %.1f s: %s", cases[i].mode, r.status, r.seconds, r.err[0] ? r.err : "\n");
