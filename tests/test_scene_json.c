@@ -698,6 +698,25 @@ static void test_density_range_ends(void **state)
     }
 }
 
+/* The smallest scene: the embedded room (10 m long) scaled by 1e-8 spans 1e-7 m and is refused with the bound
+ * and the remedy; at 1e-7 it spans 1e-6 m and loads (it used to load at any scale and render dark blotches and
+ * holes below about 1e-11 m, and be refused camera by camera at 1e-20). */
+static void test_error_scene_too_small(void **state)
+{
+    (void)state;
+    expect_error("tiny.json",
+                 "{\"version\": 1, \"meshes\": [{\"builtin\": \"default\", \"transform\": {\"scale\": 1e-8}}]}",
+                 SCENE_ERR_RANGE, "spans only 1e-07 m", "scale the scene up");
+    scene_error err;
+    scene *s = load_json_text("small.json",
+                              "{\"version\": 1, \"meshes\": [{\"builtin\": \"default\", \"transform\": "
+                              "{\"scale\": 1e-7}}]}",
+                              &err);
+    if (!s)
+        fail_msg("a scene 1e-6 m across is refused: %s", err.msg);
+    scene_free(s);
+}
+
 /* A texel density word other than "auto". */
 static void test_error_density_word(void **state)
 {
@@ -969,6 +988,7 @@ int main(void)
         cmocka_unit_test(test_error_negative_sky_color),
         cmocka_unit_test(test_error_density_range),
         cmocka_unit_test(test_density_range_ends),
+        cmocka_unit_test(test_error_scene_too_small),
         cmocka_unit_test(test_error_density_word),
         cmocka_unit_test(test_error_bad_override),
         cmocka_unit_test(test_error_camera_fov),
