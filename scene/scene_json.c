@@ -48,6 +48,7 @@
 #include "scene_internal.h"
 
 #include <float.h>
+#include <errno.h>
 #include <jansson.h>
 #include <math.h>
 #include <stdarg.h>
@@ -896,8 +897,17 @@ scene_result scene__load_json(scene *s, const char *path, scene_error *err)
         ctx.dir[dir_length] = 0;
     }
 
+    /* A UTF-8 byte-order mark (editors on Windows write one) is skipped, as the trace reader does: RFC 8259
+     * lets a parser ignore it, jansson refuses it ("'[' or '{' expected near '\xef\xbb\xbf'"). */
+    FILE *file = fopen(path, "rb");
+    if (!file)
+        return scene__fail(err, SCENE_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+    unsigned char bom[3];
+    if (!(fread(bom, 1, 3, file) == 3 && bom[0] == 0xef && bom[1] == 0xbb && bom[2] == 0xbf))
+        rewind(file);
     json_error_t parse_error;
-    json_t *root = json_load_file(path, JSON_REJECT_DUPLICATES, &parse_error);
+    json_t *root = json_loadf(file, JSON_REJECT_DUPLICATES, &parse_error);
+    fclose(file);
     if (!root) {
         if (json_error_code(&parse_error) == json_error_cannot_open_file)
             return scene__fail(err, SCENE_ERR_IO, "%s: %s", path, parse_error.text);

@@ -717,6 +717,21 @@ static void test_error_scene_too_small(void **state)
     scene_free(s);
 }
 
+/* A UTF-8 byte-order mark before the JSON is skipped (it was refused: "'[' or '{' expected"); one anywhere
+ * else is still malformed JSON. */
+static void test_byte_order_mark(void **state)
+{
+    (void)state;
+    scene_error err;
+    scene *s = load_json_text("bom.json", "\xef\xbb\xbf{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}]}", &err);
+    if (!s)
+        fail_msg("a byte-order mark is refused: %s", err.msg);
+    assert_int_equal(s->triangle_count, 2);
+    scene_free(s);
+    expect_error("bom_twice.json", "\xef\xbb\xbf\xef\xbb\xbf{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}]}",
+                 SCENE_ERR_JSON, "bom_twice.json:1:", NULL);
+}
+
 /* A texel density word other than "auto". */
 static void test_error_density_word(void **state)
 {
@@ -988,6 +1003,7 @@ int main(void)
         cmocka_unit_test(test_error_negative_sky_color),
         cmocka_unit_test(test_error_density_range),
         cmocka_unit_test(test_density_range_ends),
+        cmocka_unit_test(test_byte_order_mark),
         cmocka_unit_test(test_error_scene_too_small),
         cmocka_unit_test(test_error_density_word),
         cmocka_unit_test(test_error_bad_override),
