@@ -840,7 +840,15 @@ static double reach_of(const float p[3])
  * farther than SCENE_MAX_CAMERA_REACH (after the frame is settled and the bounds are known). */
 static scene_result check_reach(const scene *s, scene_error *err)
 {
-    double reach = fmax(reach_of(s->bounds_min), reach_of(s->bounds_max));
+    double reach = fmax(reach_of(s->bounds_min), reach_of(s->bounds_max)), extent = 0;
+    for (int k = 0; k < 3; k++)
+        extent = fmax(extent, (double)s->bounds_max[k] - (double)s->bounds_min[k]);
+    if (!(extent >= SCENE_MIN_EXTENT * (1 - 1e-6))) /* the bound itself loads, within the bounds' float rounding */
+        return scene__fail(err, SCENE_ERR_RANGE,
+                           "%s: the geometry spans only %.4g m; fxcache handles scenes at least %.0e m across "
+                           "(below, float products of its lengths leave the normal range and shadows, AO and "
+                           "probes come out wrong): scale the scene up with a transform",
+                           s->source, extent, SCENE_MIN_EXTENT);
     if (!(reach <= SCENE_MAX_REACH))
         return scene__fail(err, SCENE_ERR_RANGE,
                            "%s: the geometry spans %.4g m from its centre; fxcache handles at most %.0e m (squared "

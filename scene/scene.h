@@ -205,6 +205,12 @@ typedef struct scene {
  * generators' viewers around the largest scene (an orbit at 1.5 times its half diagonal) are within it; squared
  * distances from there (about 1e26) still fit a float. */
 #define SCENE_MAX_CAMERA_REACH 1e13
+/* The smallest scene, metres: the longest side of the geometry's bounding box. Below it products of lengths
+ * (areas, squared distances, their squares in the probes' moments) leave float's normal range: measured with the
+ * embedded scene scaled down, shadows, AO and probes match scale 1 down to a 1e-10 m room and break at 1e-11 m
+ * (dark blotches, holes); Sponza breaks ten times larger, and at 1e-19 m sim refused its cameras. A
+ * micrometre leaves a thousandfold margin; a smaller model loads scaled up by a transform. */
+#define SCENE_MIN_EXTENT 1e-6
 
 /* Options for loading. All-zero means defaults. */
 typedef struct scene_load_desc {

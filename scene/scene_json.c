@@ -48,6 +48,7 @@
 #include "scene_internal.h"
 
 #include <float.h>
+#include <errno.h>
 #include <jansson.h>
 #include <math.h>
 #include <stdarg.h>
@@ -61,8 +62,10 @@ enum {
     JSON_WHERE_CAP = 128,       /* JSON paths such as "meshes[12].transform.scale" */
 };
 
-#define JSON_DENSITY_MIN 1e-6   /* texels per metre: one texel per 1000 km */
-#define JSON_DENSITY_MAX 1e6    /* texels per metre: a texel of 1 um (the same bound as --density) */
+/* Floats, as the value is compared after its conversion to float: the double 1e-6 is larger than the float
+ * nearest to it, so a bound in double refused the documented end "texel_density": 1e-6 itself. */
+#define JSON_DENSITY_MIN 1e-6f  /* texels per metre: one texel per 1000 km */
+#define JSON_DENSITY_MAX 1e6f   /* texels per metre: a texel of 1 um (the same bound as --density) */
 #define JSON_AO_RADIUS_MAX 1e9  /* metres */
 #define JSON_DEFAULT_FOV 60.0f  /* degrees */
 
@@ -687,7 +690,7 @@ static scene_result json_read_density_and_radius(const json_ctx *ctx, scene *s, 
             if (!(value >= JSON_DENSITY_MIN && value <= JSON_DENSITY_MAX))
                 return json_fail(ctx, SCENE_ERR_RANGE, "texel_density",
                                  "%g texels per metre is out of range (allowed %g .. %g, or \"auto\")",
-                                 (double)value, JSON_DENSITY_MIN, JSON_DENSITY_MAX);
+                                 (double)value, (double)JSON_DENSITY_MIN, (double)JSON_DENSITY_MAX);
             s->texel_density = value;
             s->density_auto = false;
         } else {
@@ -894,8 +897,17 @@ scene_result scene__load_json(scene *s, const char *path, scene_error *err)
         ctx.dir[dir_length] = 0;
     }
 
+    /* A UTF-8 byte-order mark (editors on Windows write one) is skipped, as the trace reader does: RFC 8259
+     * lets a parser ignore it, jansson refuses it ("'[' or '{' expected near '\xef\xbb\xbf'"). */
+    FILE *file = fopen(path, "rb");
+    if (!file)
+        return scene__fail(err, SCENE_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+    unsigned char bom[3];
+    if (!(fread(bom, 1, 3, file) == 3 && bom[0] == 0xef && bom[1] == 0xbb && bom[2] == 0xbf))
+        rewind(file);
     json_error_t parse_error;
-    json_t *root = json_load_file(path, JSON_REJECT_DUPLICATES, &parse_error);
+    json_t *root = json_loadf(file, JSON_REJECT_DUPLICATES, &parse_error);
+    fclose(file);
     if (!root) {
         if (json_error_code(&parse_error) == json_error_cannot_open_file)
             return scene__fail(err, SCENE_ERR_IO, "%s: %s", path, parse_error.text);

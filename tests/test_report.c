@@ -389,6 +389,100 @@ static void test_cli_resume(void **state)
     assert_int_equal(check_configs_csv(dir), 2);
 }
 
+/* Runs a small report of the scene and trace below into dir with extra options; returns its stderr in err. */
+static void run_small_report(const char *dir, const char *scene_path, const char *trace_path, const char *extra,
+                             char *err, size_t err_cap)
+{
+    char args[3072];
+    snprintf(args, sizeof args,
+             "report --out %s --scene %s --trace %s --res 16x9 --frames 3 --warmup 1 --every 2 --threads 1 --only "
+             "default --ref-samples 1/8 --effects shadow %s",
+             dir, scene_path, trace_path, extra);
+    err[0] = 0;
+    int rc = fxt_run_cli(args, NULL, 0, err, err_cap);
+    if (rc != 0)
+        fail_msg("exit %d: %s", rc, err);
+}
+
+/* A folder is reused only for what it was made from: run again unchanged, the configuration is done earlier
+ * and every reference read; with the scene file edited in place (another sun), the trace edited in place
+ * (another camera) or another --indirect-block, neither the configuration nor (for the edits) the references
+ * are taken from the folder. Before, the scene and traces counted by their paths and --indirect-block not at
+ * all, so each of the three silently reported the old results. */
+static void test_cli_folder_of_other_content(void **state)
+{
+    (void)state;
+    static const char scene_a[] = "{\"version\": 1, \"meshes\": [{\"builtin\": \"default\"}], \"lights\": "
+                                  "[{\"type\": \"directional\", \"direction\": [-0.3, -1, -0.2], \"intensity\": 3}]}";
+    static const char scene_b[] = "{\"version\": 1, \"meshes\": [{\"builtin\": \"default\"}], \"lights\": "
+                                  "[{\"type\": \"directional\", \"direction\": [-0.3, -1, -0.2], \"intensity\": 1}]}";
+    static const char trace_a[] = "fxcache-trace 1\n0 0 1.6 3 0 -0.2 -1 60\n0.05 0.1 1.6 3 0 -0.2 -1 60\n"
+                                  "0.1 0.1 1.6 3 0 -0.2 -1 60\n";
+    static const char trace_b[] = "fxcache-trace 1\n0 0 1.6 3 0 -0.2 -1 60\n0.05 0.2 1.6 3 0 -0.2 -1 60\n"
+                                  "0.1 0.2 1.6 3 0 -0.2 -1 60\n";
+    char dir[1024], scene_path[1024], trace_path[1024], err[8192];
+    snprintf(dir, sizeof dir, "%s", fxt_tmp_path("report_other_content"));
+    remove_tree(dir);
+    snprintf(scene_path, sizeof scene_path, "%s", fxt_write_file("report_scene.json", scene_a));
+    snprintf(trace_path, sizeof trace_path, "%s", fxt_write_file("report_walk.trace", trace_a));
+
+    run_small_report(dir, scene_path, trace_path, "", err, sizeof err);
+    if (strstr(err, "default_v1: done earlier") || strstr(err, "RMSE nan"))
+        fail_msg("the first run: %s", err);
+    run_small_report(dir, scene_path, trace_path, "", err, sizeof err);
+    if (!strstr(err, "default_v1: done earlier"))
+        fail_msg("the same again: %s", err);
+
+    fxt_write_file("report_scene.json", scene_b);
+    run_small_report(dir, scene_path, trace_path, "", err, sizeof err);
+    if (strstr(err, "default_v1: done earlier") || !strstr(err, "references: 2 rendered"))
+        fail_msg("the scene edited in place: %s", err);
+
+    fxt_write_file("report_walk.trace", trace_b);
+    run_small_report(dir, scene_path, trace_path, "", err, sizeof err);
+    if (strstr(err, "default_v1: done earlier") || !strstr(err, "references: 2 rendered"))
+        fail_msg("the trace edited in place: %s", err);
+
+    run_small_report(dir, scene_path, trace_path, "--indirect-block 1", err, sizeof err);
+    if (strstr(err, "default_v1: done earlier") || !strstr(err, "references: 0 rendered"))
+        fail_msg("another --indirect-block: %s", err);
+}
+
+/* A trace that ends before the first compared frame after the warm-up: the configuration has no error to give.
+ * Its line says so, and every error column of configs.csv is empty; before, the line printed "RMSE nan, PSNR
+ * inf dB" and rmse_denoised was 0 (fmax(0, NaN)), an exact match where nothing was compared. PSNR of no
+ * error is no PSNR (NaN), of a zero error infinite. */
+static void test_cli_trace_ends_before_compared_frames(void **state)
+{
+    (void)state;
+    assert_true(isnan(srv_err_psnr(NAN)));
+    assert_true(isinf(srv_err_psnr(0.0)));
+    assert_true(fabs(srv_err_psnr(0.1) - 20.0) < 1e-12);
+    static const char trace[] = "fxcache-trace 1\n0 0 1.6 3 0 -0.2 -1 60\n0.05 0.1 1.6 3 0 -0.2 -1 60\n";
+    char dir[1024], trace_path[1024], args[3072], err[8192] = "";
+    snprintf(dir, sizeof dir, "%s", fxt_tmp_path("report_short_trace"));
+    remove_tree(dir);
+    snprintf(trace_path, sizeof trace_path, "%s", fxt_write_file("report_short.trace", trace));
+    /* frames at 0, 1/30 and 2/30 s: the viewer has left at frame 2, the only compared frame after warm-up 1 */
+    snprintf(args, sizeof args,
+             "report --out %s --trace %s --res 16x9 --frames 3 --warmup 1 --every 2 --threads 1 --only default "
+             "--ref-samples 1/8 --effects shadow",
+             dir, trace_path);
+    int rc = fxt_run_cli(args, NULL, 0, err, sizeof err);
+    if (rc != 0)
+        fail_msg("exit %d: %s", rc, err);
+    if (strstr(err, "nan") || strstr(err, " inf") || !strstr(err, "no frame after the warm-up was compared"))
+        fail_msg("%s", err);
+    char path[1200];
+    size_t fields[64];
+    snprintf(path, sizeof path, "%s/configs.csv", dir);
+    assert_int_equal(read_csv(path, csv, 64, fields), 2);
+    for (size_t k = 0; k < fields[0]; k++)
+        if (strncmp(csv[0][k], "rmse", 4) == 0 || strcmp(csv[0][k], "psnr_db") == 0)
+            if (csv[1][k][0])
+                fail_msg("configs.csv: %s is '%s' with no frame compared", csv[0][k], csv[1][k]);
+}
+
 #define SCENE_TEST(fn)                                                                                       \
     cmocka_unit_test_setup_teardown(fn, fxt_default_scene_setup, fxt_default_scene_teardown)
 
@@ -401,6 +495,8 @@ int main(void)
         cmocka_unit_test(test_cli_option_errors),
         cmocka_unit_test(test_cli_end_to_end),
         cmocka_unit_test(test_cli_resume),
+        cmocka_unit_test(test_cli_folder_of_other_content),
+        cmocka_unit_test(test_cli_trace_ends_before_compared_frames),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -668,6 +668,69 @@ static void test_error_density_range(void **state)
     expect_error("density_huge.json",
                  "{\"version\": 1, \"texel_density\": 1e12, \"meshes\": [{\"file\": \"quad.obj\"}]}",
                  SCENE_ERR_RANGE, "texel_density", "allowed");
+    /* just outside the ends, as doubles that stay outside once rounded to float */
+    expect_error("density_low.json",
+                 "{\"version\": 1, \"texel_density\": 9.9e-7, \"meshes\": [{\"file\": \"quad.obj\"}]}",
+                 SCENE_ERR_RANGE, "texel_density", "allowed");
+    expect_error("density_high.json",
+                 "{\"version\": 1, \"texel_density\": 1.0001e6, \"meshes\": [{\"file\": \"quad.obj\"}]}",
+                 SCENE_ERR_RANGE, "texel_density", "allowed");
+}
+
+/* The documented ends of the range, 1e-6 and 1e6, are accepted (1e-6 was refused: the double bound is larger
+ * than the float the value becomes). */
+static void test_density_range_ends(void **state)
+{
+    (void)state;
+    /* a 1 mm quad: 1000 texels on a side at 1e6, within an island's limit */
+    fxt_write_file("mm_quad.obj", "v 0 0 0\nv 0.001 0 0\nv 0.001 0 0.001\nv 0 0 0.001\nf 1 3 2\nf 1 4 3\n");
+    static const char *const texts[2] = {
+        "{\"version\": 1, \"texel_density\": 1e-6, \"meshes\": [{\"file\": \"mm_quad.obj\"}]}",
+        "{\"version\": 1, \"texel_density\": 1e6, \"meshes\": [{\"file\": \"mm_quad.obj\"}]}"};
+    static const float expected[2] = {1e-6f, 1e6f};
+    for (int i = 0; i < 2; i++) {
+        scene_error err;
+        scene *s = load_json_text("density_end.json", texts[i], &err);
+        if (!s)
+            fail_msg("texel_density %g refused: %s", (double)expected[i], err.msg);
+        assert_false(s->density_auto);
+        assert_true(s->texel_density == expected[i]);
+        scene_free(s);
+    }
+}
+
+/* The smallest scene: the embedded room (10 m long) scaled by 1e-8 spans 1e-7 m and is refused with the bound
+ * and the remedy; at 1e-7 it spans 1e-6 m and loads (it used to load at any scale and render dark blotches and
+ * holes below about 1e-11 m, and be refused camera by camera at 1e-20). */
+static void test_error_scene_too_small(void **state)
+{
+    (void)state;
+    expect_error("tiny.json",
+                 "{\"version\": 1, \"meshes\": [{\"builtin\": \"default\", \"transform\": {\"scale\": 1e-8}}]}",
+                 SCENE_ERR_RANGE, "spans only 1e-07 m", "scale the scene up");
+    scene_error err;
+    scene *s = load_json_text("small.json",
+                              "{\"version\": 1, \"meshes\": [{\"builtin\": \"default\", \"transform\": "
+                              "{\"scale\": 1e-7}}]}",
+                              &err);
+    if (!s)
+        fail_msg("a scene 1e-6 m across is refused: %s", err.msg);
+    scene_free(s);
+}
+
+/* A UTF-8 byte-order mark before the JSON is skipped (it was refused: "'[' or '{' expected"); one anywhere
+ * else is still malformed JSON. */
+static void test_byte_order_mark(void **state)
+{
+    (void)state;
+    scene_error err;
+    scene *s = load_json_text("bom.json", "\xef\xbb\xbf{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}]}", &err);
+    if (!s)
+        fail_msg("a byte-order mark is refused: %s", err.msg);
+    assert_int_equal(s->triangle_count, 2);
+    scene_free(s);
+    expect_error("bom_twice.json", "\xef\xbb\xbf\xef\xbb\xbf{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}]}",
+                 SCENE_ERR_JSON, "bom_twice.json:1:", NULL);
 }
 
 /* A texel density word other than "auto". */
@@ -966,6 +1029,9 @@ int main(void)
         cmocka_unit_test(test_error_zero_direction),
         cmocka_unit_test(test_error_negative_sky_color),
         cmocka_unit_test(test_error_density_range),
+        cmocka_unit_test(test_density_range_ends),
+        cmocka_unit_test(test_byte_order_mark),
+        cmocka_unit_test(test_error_scene_too_small),
         cmocka_unit_test(test_error_density_word),
         cmocka_unit_test(test_error_bad_override),
         cmocka_unit_test(test_error_camera_fov),

@@ -9,6 +9,7 @@
  * `identical`); the walk inside the default room; the turn rate; the orbit rate. */
 #include "test_util.h"
 
+#include "camera.h"
 #include "camgen.h"
 #include "scene.h"
 #include "trace.h"
@@ -341,6 +342,37 @@ static void test_frame_past_end(void **state)
     }
     srv_trace_free(t);
     srv_trace_free(NULL);
+}
+
+/* Directions the format accepts but far below a float's precision at 1 m: (1e-30, 0, 0) moves the target off a
+ * position at x = 0, and a subnormal 1e-40 off one at z = 0. Each replays as a usable camera looking exactly
+ * along its direction (the closed form: the unit vector of the direction). Before, the float squares of the
+ * difference underflowed and srv_camera_setup refused the camera ("position and target coincide"), so
+ * `sim --trace` refused a valid trace. */
+static void test_tiny_directions(void **state)
+{
+    (void)state;
+    static const struct {
+        const char *line;
+        float forward[3];
+    } cases[] = {
+        {"0 0 1.6 3 1e-30 0 0 60\n", {1, 0, 0}},
+        {"0 0.5 1.6 0 0 0 -1e-40 60\n", {0, 0, -1}},
+        {"0 0 1.6 3 3e-31 0 -4e-31 60\n", {0.6f, 0, -0.8f}},
+        {"0 0 1.6 3 0 0 -1 60\n", {0, 0, -1}}, /* an ordinary one, the same way */
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        char text[256];
+        snprintf(text, sizeof text, "fxcache-trace 1\n%s", cases[i].line);
+        srv_trace *t = expect_accept("tiny.trace", text, strlen(text));
+        srv_camera cam = srv_trace_camera(t, NULL, 0);
+        srv_camera_frame f;
+        if (!srv_camera_setup(&cam, 64, 36, &f))
+            fail_msg("'%s' is refused as a camera", cases[i].line);
+        for (int k = 0; k < 3; k++)
+            assert_true(fabsf(f.forward[k] - cases[i].forward[k]) < 1e-6f);
+        srv_trace_free(t);
+    }
 }
 
 /* The writer refuses cameras the reader would refuse, writes nothing for them, and flushes every line. */
@@ -784,6 +816,7 @@ int main(void)
         cmocka_unit_test(test_refusals),
         cmocka_unit_test(test_version2_resolution_and_time),
         cmocka_unit_test(test_frame_past_end),
+        cmocka_unit_test(test_tiny_directions),
         cmocka_unit_test(test_writer),
         cmocka_unit_test(test_every_prefix),
         cmocka_unit_test(test_fuzz),

@@ -10,12 +10,15 @@
  * implementation is in the tree (viewer_client/CMakeLists.txt); until then every test here skips. */
 #include "test_util.h"
 
+#include "fxt_serve.h"
+
 #include <arpa/inet.h>
 #include <fcntl.h>
 #include <jansson.h>
 #include <netinet/in.h>
 #include <poll.h>
 #include <signal.h>
+#include <spawn.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -23,6 +26,8 @@
 #include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
+
+extern char **environ;
 
 /* What one run of the program gave. */
 typedef struct viewer_run {
@@ -430,6 +435,92 @@ static void test_no_server(void **state)
     assert_int_equal(line_count(r.err), 1);
 }
 
+/* A misbehaving server (tests/peer_bad_server.js, Node's ws, the wire format written by hand): for each way it
+ * misbehaves the viewer either ends with exactly one line naming what went wrong (exit 1, --quiet) or goes on
+ * to its frames (exit 0), within seconds, and never with a sanitizer's report. The empty message was a
+ * memcpy from a NULL buffer (UBSan: "null pointer passed as argument 1") before its first message. */
+static void test_misbehaving_server(void **state)
+{
+    (void)state;
+#ifndef FXC_VIEWER_BIN
+    print_message("SKIP: fxcache-viewer is not built\n");
+    skip();
+#else
+    if (system("node --version >/dev/null 2>&1") != 0) {
+        print_message("node is missing (./install-deps.sh installs it): skipped\n");
+        skip();
+    }
+    static const struct {
+        const char *mode;
+        int status;
+        const char *says; /* in the one line (status 1) */
+    } cases[] = {
+        {"empty", 1, "does not decode: message truncated (0 bytes)"},
+        {"text", 1, "sent a text message"},
+        {"wrong_type", 1, "unknown message type"},
+        {"len_more", 1, "message truncated"},
+        {"len_less", 1, "trailing bytes"},
+        {"frame_first", 1, "before its welcome"},
+        {"welcome_twice", 1, "does not expect now"},
+        {"nan_camera", 1, "value out of range"},
+        {"stall", 1, "no frame for 1 s"},
+        {"unasked", 0, NULL},
+        {"slow_clock", 1, "no frame for 1 s"}, /* was "server error: a flood" */
+        {"tiny_fps", 1, "no frame for 1 s"},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        char out[512], cmd[2048];
+        snprintf(out, sizeof out, "%s", fxt_tmp_path("bad_server.out"));
+        remove(out); /* a port from an earlier run must not be read */
+        snprintf(cmd, sizeof cmd, "NODE_PATH=/usr/share/nodejs exec node '%s/tests/peer_bad_server.js' %s > '%s' 2>&1",
+                 FXC_SOURCE_DIR, cases[i].mode, out);
+        pid_t fake;
+        const char *sh[] = {"/bin/sh", "-c", cmd, NULL};
+        assert_int_equal(posix_spawn(&fake, "/bin/sh", NULL, NULL, (char *const *)sh, environ), 0);
+        int port = 0;
+        for (double t0 = now_seconds(); now_seconds() - t0 < 30 && !port;) {
+            port = fxt_listening_port(out);
+            if (!port && fxt_file_contains(out, "ws module is missing")) {
+                waitpid(fake, NULL, 0);
+                print_message("Node's ws module is missing (Debian's node-ws): skipped\n");
+                skip();
+            }
+            if (!port)
+                usleep(20000);
+        }
+        assert_true(port > 0);
+        char url[64];
+        snprintf(url, sizeof url, "ws://127.0.0.1:%d", port);
+        const char *args[] = {"--connect", url, "--res", "16x9", "--codec", "raw", "--frames", "3",
+                              "--timeout", "1", "--quiet", NULL};
+        const char *reproject_args[] = {"--connect", url, "--res", "16x9", "--codec", "raw", "--frames", "3",
+                                        "--timeout", "1", "--quiet", "--reproject", NULL};
+        const char *slow_args[] = {"--connect", url, "--res", "16x9", "--codec", "raw", "--frames", "2", "--timeout",
+                                   "1", "--quiet", "--reproject", "--fps", "1e-300", "--display-fps", "100", NULL};
+        viewer_run r;
+        bool slow = strcmp(cases[i].mode, "slow_clock") == 0 || strcmp(cases[i].mode, "tiny_fps") == 0;
+        if (slow && strcmp(cases[i].mode, "tiny_fps") == 0)
+            slow_args[12] = NULL; /* the welcome's fps, not --fps */
+        run_viewer(slow ? slow_args : strcmp(cases[i].mode, "unasked") == 0 ? reproject_args : args, NULL, &r);
+        kill(fake, SIGTERM);
+        waitpid(fake, NULL, 0);
+        print_message("%-13s exit %d in %.1f s: %s", cases[i].mode, r.status, r.seconds, r.err[0] ? r.err : "\n");
+        if (strstr(r.err, "runtime error") || strstr(r.err, "AddressSanitizer"))
+            fail_msg("%s: a sanitizer's report: %s", cases[i].mode, r.err);
+        if (r.status != cases[i].status)
+            fail_msg("%s: exit %d, expected %d: %s", cases[i].mode, r.status, cases[i].status, r.err);
+        assert_true(r.seconds < 20);
+        if (cases[i].status == 1) {
+            assert_int_equal(line_count(r.err), 1);
+            if (!strstr(r.err, "fxcache-viewer: viewer 0: ") || !strstr(r.err, cases[i].says))
+                fail_msg("%s: stderr lacks '%s': %s", cases[i].mode, cases[i].says, r.err);
+        } else {
+            assert_string_equal(r.err, "");
+        }
+    }
+#endif
+}
+
 /* A server that never answers: --timeout gives up on every viewer; SIGTERM ends the wait at once, cleanly. */
 static void test_timeout_and_signal(void **state)
 {
@@ -476,6 +567,7 @@ int main(void)
         cmocka_unit_test(test_help),
         cmocka_unit_test(test_no_server),
         cmocka_unit_test(test_timeout_and_signal),
+        cmocka_unit_test(test_misbehaving_server),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

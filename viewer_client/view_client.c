@@ -527,7 +527,8 @@ static int viewer_receive(view_viewer *v, const void *in, size_t len, lws_usec_t
         v->rx = grown;
         v->rx_cap = capacity;
     }
-    memcpy(v->rx + v->rx_len, in, len);
+    if (len) /* an empty message arrives as len 0, possibly before any buffer exists (rx NULL) */
+        memcpy(v->rx + v->rx_len, in, len);
     v->rx_len += len;
     if (!v->rx_header_checked && v->rx_len >= PROTO_HEADER_BYTES) {
         proto_header header;

@@ -247,7 +247,8 @@ static void viewer_send_requests(view_viewer *v, const view_rc_frame *frame, con
     bool use_predicted = frame->predicted_count && (!frame->request_count || (v->display_index & 1));
     const view_rc_pixel *pixels = use_predicted ? frame->predicted_requests : frame->requests;
     uint32_t count = use_predicted ? frame->predicted_count : frame->request_count;
-    lws_usec_t interval = (lws_usec_t)(0.9e6 / v->welcome.fps);
+    double gap_us = 0.9e6 / v->welcome.fps; /* a welcome's fps of 1e-30: saturated, not wrapped below zero */
+    lws_usec_t interval = (lws_usec_t)(gap_us < 1e15 ? gap_us : 1e15);
     bool wanted = v->client->options->sample_budget > 0 || !v->client->options->sample_budget_given;
     if (!count || !wanted || (v->last_request_us && now - v->last_request_us < interval) ||
         v->out_count == v->out_capacity) {

@@ -240,7 +240,12 @@ static inline double view__time_scale(const view_viewer *v)
 /* The wall-clock moment of scene time t (seconds after the welcome). */
 static inline lws_usec_t view__wall_us(const view_viewer *v, double t)
 {
-    return v->welcome_us + (lws_usec_t)ceil(t * 1e6 * view__time_scale(v));
+    /* Saturated at 1e15 us (31 years, a moment no run reaches): a clock of --fps 1e-300, or a welcome's fps of
+     * 1e-30, puts its next camera 1e300 s away, and that converted to int64 wrapped into the past, so cameras
+     * went out as fast as the loop ran. */
+    double us = ceil(t * 1e6 * view__time_scale(v));
+    us = us < 1e15 ? (us > -1e15 ? us : -1e15) : 1e15;
+    return v->welcome_us + (lws_usec_t)us;
 }
 
 /* Scene seconds after the welcome at wall-clock moment now. */

@@ -1,6 +1,7 @@
 /* Pinhole cameras: see camera.h. */
 #include "camera.h"
 
+#include <float.h>
 #include <math.h>
 #include <string.h>
 
@@ -34,11 +35,21 @@ bool srv_camera_setup(const srv_camera *cam, uint32_t width, uint32_t height, sr
         out->origin[k] = cam->position[k];
         out->forward[k] = cam->target[k] - cam->position[k];
     }
-    float len = sqrtf(out->forward[0] * out->forward[0] + out->forward[1] * out->forward[1] +
-                      out->forward[2] * out->forward[2]);
-    if (!(len > 0))
-        return false;
-    normalize3(out->forward);
+    float len2 = out->forward[0] * out->forward[0] + out->forward[1] * out->forward[1] +
+                 out->forward[2] * out->forward[2];
+    if (!(len2 >= FLT_MIN)) {
+        /* A target within about 1e-19 of the position (a trace's direction of 1e-30 is valid, docs/TRACE_FORMAT.md):
+         * the float squares underflow to zero or lose their precision, and the camera was refused as if position
+         * and target coincided. Any non-zero difference is a direction: normalised in double. */
+        double length = sqrt((double)out->forward[0] * out->forward[0] + (double)out->forward[1] * out->forward[1] +
+                             (double)out->forward[2] * out->forward[2]);
+        if (!(length > 0))
+            return false;
+        for (int k = 0; k < 3; k++)
+            out->forward[k] = (float)(out->forward[k] / length);
+    } else {
+        normalize3(out->forward);
+    }
     /* right = forward x up hint, normalised in double: looking within a tiny angle of the up hint (a target
      * 1e-30 m beside the point straight below) the product is tiny, its squared length underflows a float (or
      * is flushed to zero in a tracing thread), and right stayed unnormalised: the image plane collapsed onto

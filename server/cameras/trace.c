@@ -148,16 +148,18 @@ srv_camera srv_trace_camera_world(const scene *s, const double position[3], cons
             cam.position[k] = (float)position[k];
     }
     /* The target from the rounded position, so a recorded camera reads back exactly. */
-    bool target_differs = false;
+    double length = sqrt(direction[0] * direction[0] + direction[1] * direction[1] + direction[2] * direction[2]);
+    double off2 = 0; /* squared distance between the direction and the one the float target gives */
     for (int k = 0; k < 3; k++) {
         cam.target[k] = (float)((double)cam.position[k] + direction[k]);
-        target_differs |= cam.target[k] != cam.position[k];
+        double realized = (double)cam.target[k] - (double)cam.position[k];
+        off2 += (realized - direction[k]) * (realized - direction[k]);
     }
-    if (!target_differs) {
-        /* A direction below the float spacing at this position: the same direction, one position-length
-         * long (the view does not depend on the target's distance). */
-        double length = sqrt(direction[0] * direction[0] + direction[1] * direction[1] +
-                             direction[2] * direction[2]);
+    if (!(sqrt(off2) <= 1e-4 * length)) {
+        /* A direction below the float spacing at this position, wholly (the target rounds onto the position)
+         * or in part (a component rounds away: (3e-31, 0, -4e-31) at z = 3 looked along +x): the same
+         * direction, one position-length long (the view does not depend on the target's distance). A recorded
+         * camera's direction is a difference of floats and never comes here. */
         double reach = 1.0;
         for (int k = 0; k < 3; k++)
             reach = fmax(reach, fabs((double)cam.position[k]));

@@ -46,6 +46,77 @@ static bool frame_compared(const report_options *o, uint32_t frame)
     return frame == o->view.frames - 1 || frame % o->every == 0;
 }
 
+/* ---- what a folder's results were made from ---------------------------------------------------------- */
+
+/* FNV-1a 64 over n bytes, continuing from h (the reference cache's keys use the same hash). */
+static uint64_t fnv_bytes(uint64_t h, const void *data, size_t n)
+{
+    const unsigned char *p = data;
+    for (size_t i = 0; i < n; i++)
+        h = (h ^ p[i]) * 0x100000001b3ull;
+    return h;
+}
+
+/* A fingerprint of what the results depend on beyond the options and the scene's path: the loaded scene's
+ * content (geometry, UVs, materials, textures, lights, sky, density, AO radius, effect overrides, default
+ * camera, origin) and the camera and size of every viewer in every frame (trace files and generators alike).
+ * The references and the finished configurations in DIR are keyed by it, so a scene or trace edited in place
+ * under the same name makes them again instead of being taken for the one the folder was made from. */
+static uint64_t content_fingerprint(const scene *s, const srv_cli_cameras *cams, uint32_t frames)
+{
+    uint64_t h = 0xcbf29ce484222325ull;
+    h = fnv_bytes(h, &s->vertex_count, sizeof s->vertex_count);
+    h = fnv_bytes(h, s->positions, (size_t)s->vertex_count * 3 * sizeof(float));
+    h = fnv_bytes(h, &s->triangle_count, sizeof s->triangle_count);
+    h = fnv_bytes(h, s->indices, (size_t)s->triangle_count * 3 * sizeof(uint32_t));
+    if (s->corner_uv)
+        h = fnv_bytes(h, s->corner_uv, (size_t)s->triangle_count * 6 * sizeof(float));
+    h = fnv_bytes(h, s->tri_mesh, (size_t)s->triangle_count * sizeof(uint32_t));
+    for (uint32_t m = 0; m < s->mesh_count; m++)
+        h = fnv_bytes(h, &s->meshes[m].material, sizeof s->meshes[m].material);
+    for (uint32_t m = 0; m < s->material_count; m++) {
+        h = fnv_bytes(h, s->materials[m].diffuse, sizeof s->materials[m].diffuse);
+        h = fnv_bytes(h, &s->materials[m].texture, sizeof s->materials[m].texture);
+    }
+    for (uint32_t t = 0; t < s->texture_count; t++) {
+        const scene_texture *tex = &s->textures[t];
+        h = fnv_bytes(h, &tex->width, sizeof tex->width);
+        h = fnv_bytes(h, &tex->height, sizeof tex->height);
+        h = fnv_bytes(h, tex->rgb, (size_t)tex->width * tex->height * 3 * sizeof(float));
+    }
+    for (uint32_t l = 0; l < s->light_count; l++) {
+        const scene_light *light = &s->lights[l];
+        int type = (int)light->type;
+        h = fnv_bytes(h, &type, sizeof type);
+        h = fnv_bytes(h, light->direction, sizeof light->direction);
+        h = fnv_bytes(h, light->position, sizeof light->position);
+        h = fnv_bytes(h, light->color, sizeof light->color);
+        h = fnv_bytes(h, &light->intensity, sizeof light->intensity);
+    }
+    int toggles[3] = {(int)s->fx_shadows, (int)s->fx_ao, (int)s->fx_indirect};
+    h = fnv_bytes(h, s->sky_color, sizeof s->sky_color);
+    h = fnv_bytes(h, &s->sky_intensity, sizeof s->sky_intensity);
+    h = fnv_bytes(h, &s->texel_density, sizeof s->texel_density);
+    h = fnv_bytes(h, &s->ao_radius, sizeof s->ao_radius);
+    h = fnv_bytes(h, toggles, sizeof toggles);
+    h = fnv_bytes(h, s->origin, sizeof s->origin);
+    for (uint32_t f = 0; f < frames; f++)
+        for (uint32_t v = 0; v < cams->viewers; v++) {
+            srv_camera c = {0};
+            uint32_t size[2] = {0, 0};
+            unsigned char present = srv_cli_cameras_get(cams, s, f, v, &c, &size[0], &size[1]);
+            h = fnv_bytes(h, &present, 1);
+            if (present) {
+                h = fnv_bytes(h, c.position, sizeof c.position);
+                h = fnv_bytes(h, c.target, sizeof c.target);
+                h = fnv_bytes(h, c.up, sizeof c.up);
+                h = fnv_bytes(h, &c.fov_deg, sizeof c.fov_deg);
+                h = fnv_bytes(h, size, sizeof size);
+            }
+        }
+    return h;
+}
+
 /* ---- files --------------------------------------------------------------------------------------------- */
 
 static bool make_dir(const char *path)
@@ -274,7 +345,7 @@ static int run_config(report_config *c, const report_context *ctx, const srv_cli
         double mse = t->images ? t->mse_sum / t->images : NAN, noise2 = t->images ? t->noise2_sum / t->images : NAN;
         row->rmse = sqrt(mse);
         row->psnr_db = srv_err_psnr(row->rmse);
-        row->rmse_denoised = sqrt(fmax(0.0, mse - noise2));
+        row->rmse_denoised = t->images ? sqrt(fmax(0.0, mse - noise2)) : NAN; /* fmax(0, NaN) would say 0 */
         row->rmse_shadow = t->images && errors.desc.compare_shadow ? sqrt(t->mse_shadow_sum / t->images) : NAN;
         row->rmse_ao = t->images && errors.desc.compare_ao ? sqrt(t->mse_ao_sum / t->images) : NAN;
         row->ref_noise = sqrt(noise2);
@@ -547,8 +618,9 @@ int srv_cmd_report(int argc, char **argv)
             goto done;
     }
     char ref_settings[1024];
-    snprintf(ref_settings, sizeof ref_settings, "scene %s|effects %s|samples %s|seed %u", s->source, effects_text,
-             samples_text, o.engine.seed);
+    snprintf(ref_settings, sizeof ref_settings, "scene %s content %016llx|effects %s|samples %s|seed %u", s->source,
+             (unsigned long long)content_fingerprint(s, &cams, o.view.frames), effects_text, samples_text,
+             o.engine.seed);
     snprintf(sub, sizeof sub, "%s/ref", o.out_dir);
     refs = srv_refcache_create(ref, sub, ref_settings, err, sizeof err);
     if (!refs) {
@@ -613,10 +685,17 @@ int srv_cmd_report(int argc, char **argv)
         char ao_text[48] = "";
         if (isfinite(row->rmse_ao))
             snprintf(ao_text, sizeof ao_text, ", AO %.3g", row->rmse_ao);
-        fprintf(stderr, "report: [%zu/%zu] %s: %.1f ms/frame (%.1f per viewer, CPU %.1f), RMSE %.4g, PSNR %.2f dB, "
-                        "shadow %.3g%s (%.1f s)\n",
-                i + 1, plan->count, row->id, row->ms_per_frame, row->ms_per_viewer, row->cpu_ms_per_frame, row->rmse,
-                row->psnr_db, row->rmse_shadow, ao_text, row->run_s);
+        if (row->images == 0) /* every viewer had left (traces shorter than --frames) before a compared frame */
+            fprintf(stderr, "report: [%zu/%zu] %s: %.1f ms/frame (%.1f per viewer, CPU %.1f), no error: no frame "
+                            "after the warm-up was compared with a viewer present (the traces end before it; lower "
+                            "--frames or --warmup) (%.1f s)\n",
+                    i + 1, plan->count, row->id, row->ms_per_frame, row->ms_per_viewer, row->cpu_ms_per_frame,
+                    row->run_s);
+        else
+            fprintf(stderr, "report: [%zu/%zu] %s: %.1f ms/frame (%.1f per viewer, CPU %.1f), RMSE %.4g, PSNR %.2f dB, "
+                            "shadow %.3g%s (%.1f s)\n",
+                    i + 1, plan->count, row->id, row->ms_per_frame, row->ms_per_viewer, row->cpu_ms_per_frame,
+                    row->rmse, row->psnr_db, row->rmse_shadow, ao_text, row->run_s);
         if (!write_outputs(plan, &o, NULL, NULL, NULL, false, NULL)) /* the CSVs after every configuration */
             goto done;
     }

@@ -33,6 +33,8 @@ double srv_err_rmse(const float *a, const float *b, size_t count)
 
 double srv_err_psnr(double rmse)
 {
+    if (isnan(rmse))
+        return NAN; /* no image compared: no error, so no PSNR either (not the infinity of an exact match) */
     return rmse > 0 ? 20.0 * log10(1.0 / rmse) : INFINITY;
 }
 

@@ -268,10 +268,10 @@ static void finish_config(report_config *c, const report_context *ctx)
     r->ray_budget = e->ray_budget;
     snprintf(c->key, sizeof c->key,
              "%s|viewers %u|no_cache %d x%g|bias %d %d|ao %u|shadow %u|probe rays %u cell %g hyst %g budget %u|"
-             "ray budget %g|pool %g|ao step %u|density %g|local %d",
+             "ray budget %g|pool %g|ao step %u|density %g|local %d|indirect block %u",
              ctx->run_key, r->viewers, r->no_cache, r->no_cache_samples, r->bias_shadow, r->bias_ao, r->ao_samples,
              r->shadow_rays, r->probe_rays, r->probe_cell, e->probe_hysteresis, e->probe_budget, r->ray_budget,
-             e->pool_mb, e->ao_step, e->density, !e->no_local_table);
+             e->pool_mb, e->ao_step, e->density, !e->no_local_table, e->indirect_block);
 }
 
 /* The viewer counts of the viewers sweep: 1, 2, 4, 8 up to the most, and the most. */

@@ -314,7 +314,7 @@ void srv_loop_set_observer(srv_loop *loop, void (*occlusion)(void *user, const v
                            void (*hits)(void *user, const void *rayhits, uint32_t count), void *user);
 
 /* The finest world-grid cell a loop on scene s uses when probe_cell is 0 (the power of two nearest a 64th of
- * the bounding-box diagonal, at least 1/64 m), metres. */
+ * the bounding-box diagonal; 1/64 m for a scene without extent), metres. */
 double srv_probe_cell_default(const scene *s);
 
 /* The finest world-grid cell the run uses, metres; 0 when no world-space cache exists. */

@@ -73,7 +73,9 @@ typedef struct kind_wsc {
 } kind_wsc;
 
 /* The default finest cell: the power of two nearest a 64th of the bounding-box diagonal (a grid that does
- * not move when the scene does), at least 1/64 m. */
+ * not move when the scene does); 1/64 m only for a scene without extent. No floor in metres: with one (it was
+ * 1/64 m) a scene smaller than a metre, such as the embedded scene at 1e-4, had its whole room in one or a few
+ * probe cells, and its indirect light came out flat and too bright instead of the same image at every scale. */
 static double default_cell(const scene *s)
 {
     double d2 = 0;
@@ -82,7 +84,7 @@ static double default_cell(const scene *s)
         d2 += e > 0 ? e * e : 0;
     }
     double target = sqrt(d2) / 64.0;
-    if (!(target > 1.0 / 64.0))
+    if (!(target > 0) || !isfinite(target))
         return 1.0 / 64.0;
     return ldexp(1.0, (int)lround(log2(target)));
 }

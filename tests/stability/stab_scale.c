@@ -279,6 +279,47 @@ static void test_default_translated_1e6(void **state)
     check_default(*state, 1.0, 1e6);
 }
 
+/* The default finest probe cell (probe_cell 0) follows the scale: it is a power of two within a factor
+ * sqrt(2) of a 64th of the bounding-box diagonal at every scale (a closed form), and the embedded scene at
+ * 2^-14 (a power of two, so its default cell is exactly the unit scene's times the scale) renders with its
+ * default cell no further from the unit scene's own default-cell image than another seed is. Before, the
+ * default had a floor of 1/64 m: at 2^-14 (a room 1.6 mm long) the whole scene sat in one or two cells and
+ * its indirect light came out flat and too bright. */
+static void test_default_probe_cell_follows_scale(void **state)
+{
+    const reference *ref = *state;
+    static const double scales[] = {1.0, 0x1p-14, 1e-4, 1e-6, 1e4};
+    for (size_t i = 0; i < sizeof scales / sizeof scales[0]; i++) {
+        scene *s = fxt_transformed_default(scales[i], 0.0, 1.0f);
+        double d2 = 0;
+        for (int k = 0; k < 3; k++) {
+            double e = (double)s->bounds_max[k] - (double)s->bounds_min[k];
+            d2 += e * e;
+        }
+        double cell = srv_probe_cell_default(s), ratio = cell / (sqrt(d2) / 64.0);
+        int exponent;
+        print_message("scale %g: default probe cell %g m, %.3f x a 64th of the diagonal\n", scales[i], cell, ratio);
+        assert_true(frexp(cell, &exponent) == 0.5);
+        assert_true(ratio >= 1.0 / sqrt(2.0) - 1e-12 && ratio <= sqrt(2.0) + 1e-12);
+        scene_free(s);
+    }
+    uint32_t w = ref->plain.w / 2, h = ref->plain.h / 2;
+    size_t n = (size_t)w * h * 3;
+    scene *unit = fxt_transformed_default(1.0, 0.0, 1.0f), *small = fxt_transformed_default(0x1p-14, 0.0, 1.0f);
+    render_out a = render(unit, true, 0, 7, w, h), b = render(unit, true, 0, 8, w, h);
+    render_out c = render(small, true, 0, 7, w, h);
+    double noise = stab_relative_rmse(a.radiance, b.radiance, n), rmse = stab_relative_rmse(a.radiance, c.radiance, n);
+    print_message("default cell %g m at scale 1, %g m at 2^-14; relative RMSE %.2e (another seed: %.2e)\n",
+                  (double)a.probe_cell, (double)c.probe_cell, rmse, noise);
+    assert_true(c.probe_cell == a.probe_cell * 0x1p-14f);
+    assert_true(rmse <= noise);
+    render_free(&a);
+    render_free(&b);
+    render_free(&c);
+    scene_free(unit);
+    scene_free(small);
+}
+
 /* ---- Sponza -------------------------------------------------------------------------------------------- */
 
 enum { SW = 64, SH = 36 };
@@ -370,6 +411,7 @@ int main(void)
         cmocka_unit_test(test_default_scaled_1e_4),
         cmocka_unit_test(test_default_scaled_1e4),
         cmocka_unit_test(test_default_translated_1e6),
+        cmocka_unit_test(test_default_probe_cell_follows_scale),
     };
     const struct CMUnitTest sponza_tests[] = {
         cmocka_unit_test(test_sponza_scaled_1e_4),
