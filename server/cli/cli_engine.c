@@ -25,7 +25,7 @@ const char srv_cli_engine_usage[] =
     "                       AO rays per pixel)\n"
     "  --shadow-rays N      shadow rays per texel and light, 1, 2, 4, 8 or 16, stratified over the texel\n"
     "                       (default 16; the no-cache baseline's per pixel and light)\n"
-    "  --probe-cell M       finest world-grid cell in metres, [0.001, 1000]; a cell at distance d from a\n"
+    "  --probe-cell M       finest world-grid cell in metres, [1e-8, 1000]; a cell at distance d from a\n"
     "                       viewer is about d/16..d/8 wide, never finer (default: the power of two nearest\n"
     "                       a 64th of the scene's bounding-box diagonal)\n"
     "  --probe-rays N       rays per probe update, 1..4096 (default 144, DDGI's)\n"
@@ -232,7 +232,8 @@ int srv_cli_engine_option(const char *cmd, int code, const char *arg, srv_cli_en
     case SRV_CLI_O_POOL: return srv_cli_double(cmd, "--pool-mb", arg, 1, 65536, &e->pool_mb);
     case SRV_CLI_O_BUDGET: return srv_cli_double(cmd, "--ray-budget", arg, 0, 1e12, &e->ray_budget);
     case SRV_CLI_O_AOSTEP: return srv_cli_u32(cmd, "--ao-step", arg, 1, 64, &e->ao_step);
-    case SRV_CLI_O_PCELL: return srv_cli_double(cmd, "--probe-cell", arg, 0.001, 1000, &e->probe_cell);
+    /* down to about a 64th of the smallest scene fxcache loads (SCENE_MIN_EXTENT, 1e-6 m) */
+    case SRV_CLI_O_PCELL: return srv_cli_double(cmd, "--probe-cell", arg, 1e-8, 1000, &e->probe_cell);
     case SRV_CLI_O_PRAYS: return srv_cli_u32(cmd, "--probe-rays", arg, 1, 4096, &e->probe_rays);
     case SRV_CLI_O_PHYST:
         if (!srv_cli_double(cmd, "--probe-hysteresis", arg, 0, 0.999, &e->probe_hysteresis))
