@@ -493,8 +493,11 @@ static void test_misbehaving_server(void **state)
         snprintf(url, sizeof url, "ws://127.0.0.1:%d", port);
         const char *args[] = {"--connect", url, "--res", "16x9", "--codec", "raw", "--frames", "3",
                               "--timeout", "1", "--quiet", NULL};
+        char stats[1024];
+        snprintf(stats, sizeof stats, "%s", fxt_tmp_path("bad_server.json"));
+        remove(stats);
         const char *reproject_args[] = {"--connect", url, "--res", "16x9", "--codec", "raw", "--frames", "3",
-                                        "--timeout", "1", "--quiet", "--reproject", NULL};
+                                        "--timeout", "1", "--quiet", "--reproject", "--stats", stats, NULL};
         const char *slow_args[] = {"--connect", url, "--res", "16x9", "--codec", "raw", "--frames", "2", "--timeout",
                                    "1", "--quiet", "--reproject", "--fps", "1e-300", "--display-fps", "100", NULL};
         viewer_run r;
@@ -516,6 +519,15 @@ static void test_misbehaving_server(void **state)
                 fail_msg("%s: stderr lacks '%s': %s", cases[i].mode, cases[i].says, r.err);
         } else {
             assert_string_equal(r.err, "");
+        }
+        if (strcmp(cases[i].mode, "unasked") == 0) {
+            /* The answers to a request never sent are refused and counted, not inserted or counted as answers. */
+            json_t *root = load_stats(stats, 1, 0);
+            json_t *rc = json_object_get(json_array_get(json_object_get(root, "viewers"), 0), "render_cache");
+            assert_int_equal(json_integer_value(json_object_get(rc, "requests_answered")), 0);
+            assert_int_equal(json_integer_value(json_object_get(rc, "samples_received")), 0);
+            assert_true(json_integer_value(json_object_get(rc, "insert_errors")) >= 1);
+            json_decref(root);
         }
     }
 #endif

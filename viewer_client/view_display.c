@@ -311,6 +311,10 @@ void view__use_samples(view_viewer *v, const proto_msg *msg)
 {
     const proto_samples *answer = &msg->u.samples;
     view_display_stats *d = &v->stats->display;
+    if (answer->request >= v->next_request) { /* an answer to a request never sent: refused, counted */
+        d->insert_errors++;
+        return;
+    }
     if (answer->count > v->samples_cap) {
         view_rc_sample *grown = realloc(v->samples, (size_t)answer->count * sizeof *grown);
         if (!grown) {
