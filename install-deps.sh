@@ -11,7 +11,7 @@ packages=(
   libopenimageio-dev
   libjansson-dev
   zlib1g-dev libzstd-dev libturbojpeg0-dev
-  clang libclang-rt-14-dev
+  clang libclang-rt-14-dev clang-format
   libwebsockets-dev
   libcmocka-dev
   nodejs node-ws zstd
