@@ -168,8 +168,8 @@ int main(int argc, char **argv)
             double ms = bench_now_ms() - start;
             if (run < 0) {
                 if (rays.truncated || rays.count != traced) {
-                    fprintf(stderr, "bench_effects: captured %zu of %llu rays (at most %d are kept)\n", rays.count,
-                            (unsigned long long)traced, MAX_CAPTURED);
+                    fprintf(stderr, "bench_effects: captured %zu of %llu rays (at most %d are kept)\n",
+                            rays.count, (unsigned long long)traced, MAX_CAPTURED);
                     return 1;
                 }
                 work = aligned_alloc(64, (rays.count ? rays.count : 1) * sizeof *work);
@@ -182,12 +182,14 @@ int main(int argc, char **argv)
             ratio[run] = raw_ms[run] / update_ms[run]; /* update throughput over raw throughput */
         }
         double n = (double)rays.count;
-        printf("%s: %zu rays in %zu streams; update %.2f Mrays/s, raw rtcOccluded1M over the same rays %.2f Mrays/s "
-               "(medians of 5 alternating runs, 1 thread); update / raw throughput %.2f (p10 %.2f, p90 %.2f)\n",
-               ao ? "fx_ao_update (4 frames x 16 samples)" : "fx_shadow_update (16 rays per texel and light)",
-               rays.count, rays.streams, n / bench_quantile(update_ms, 5, 0.5) * 1e-3,
-               n / bench_quantile(raw_ms, 5, 0.5) * 1e-3, bench_quantile(ratio, 5, 0.5), bench_quantile(ratio, 5, 0.1),
-               bench_quantile(ratio, 5, 0.9));
+        printf(
+            "%s: %zu rays in %zu streams; update %.2f Mrays/s, raw rtcOccluded1M over the same rays %.2f "
+            "Mrays/s "
+            "(medians of 5 alternating runs, 1 thread); update / raw throughput %.2f (p10 %.2f, p90 %.2f)\n",
+            ao ? "fx_ao_update (4 frames x 16 samples)" : "fx_shadow_update (16 rays per texel and light)",
+            rays.count, rays.streams, n / bench_quantile(update_ms, 5, 0.5) * 1e-3,
+            n / bench_quantile(raw_ms, 5, 0.5) * 1e-3, bench_quantile(ratio, 5, 0.5),
+            bench_quantile(ratio, 5, 0.1), bench_quantile(ratio, 5, 0.9));
         free(work);
         free(rays.rays);
         free(rays.stream_sizes);

@@ -13,8 +13,8 @@
 
 /* A loop with description d running what the scene needs except the effect named skip (NULL: none), with
  * `viewers` viewers of w x h whose ids go to ids. */
-static inline srv_loop *bench_make_loop_desc(const char *who, srv_loop_desc d, const char *skip, uint32_t viewers,
-                                             uint32_t w, uint32_t h, srv_viewer_id *ids)
+static inline srv_loop *bench_make_loop_desc(const char *who, srv_loop_desc d, const char *skip,
+                                             uint32_t viewers, uint32_t w, uint32_t h, srv_viewer_id *ids)
 {
     uint32_t count = 0;
     const fx_effect *const *registry = fx_registry(&count);
@@ -39,8 +39,9 @@ static inline srv_loop *bench_make_loop_desc(const char *who, srv_loop_desc d, c
 
 /* The same with the default description, without probes: the figures of bench_stages and bench_steady are
  * the on-surface effects' (docs/BENCHMARKS.md); bench_probes measures what probes add. */
-static inline srv_loop *bench_make_loop(const char *who, scene *s, scene_rt *rt, bool no_cache, uint32_t threads,
-                                        uint32_t viewers, uint32_t w, uint32_t h, srv_viewer_id *ids)
+static inline srv_loop *bench_make_loop(const char *who, scene *s, scene_rt *rt, bool no_cache,
+                                        uint32_t threads, uint32_t viewers, uint32_t w, uint32_t h,
+                                        srv_viewer_id *ids)
 {
     srv_loop_desc d = {.s = s, .rt = rt, .threads = threads, .seed = 1, .no_cache = no_cache};
     return bench_make_loop_desc(who, d, "probes", viewers, w, h, ids);
@@ -48,7 +49,8 @@ static inline srv_loop *bench_make_loop(const char *who, scene *s, scene_rt *rt,
 
 /* Frame `frame` of generator gen for every viewer; returns its wall time in ms and fills *st. */
 static inline double bench_run_frame(const char *who, srv_loop *loop, const scene *s, srv_camgen_kind gen,
-                                     const srv_viewer_id *ids, uint32_t viewers, uint32_t frame, srv_frame_stats *st)
+                                     const srv_viewer_id *ids, uint32_t viewers, uint32_t frame,
+                                     srv_frame_stats *st)
 {
     for (uint32_t v = 0; v < viewers; v++) {
         srv_camera cam = srv_camgen_camera(gen, s, v, viewers, frame, 1);

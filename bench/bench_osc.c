@@ -120,7 +120,8 @@ static void check_same_answers(const bench_tables *tables, const uint64_t *strea
         uint32_t theirs = found ? found->value : OSC_NONE;
         uint32_t glib = g ? (uint32_t)(GPOINTER_TO_SIZE(g) - 1) : OSC_NONE;
         if (ours != theirs || ours != glib) {
-            fprintf(stderr, "bench_osc: implementations disagree on key %016llx\n", (unsigned long long)stream[i]);
+            fprintf(stderr, "bench_osc: implementations disagree on key %016llx\n",
+                    (unsigned long long)stream[i]);
             exit(1);
         }
     }
@@ -202,8 +203,8 @@ static void bench_config(uint32_t slots_log2, uint32_t load_percent, size_t stre
             rate[impl] = (double)stream_count / best[impl] / 1e6;
         double faster_other = rate[IMPL_UTHASH] > rate[IMPL_GHASH] ? rate[IMPL_UTHASH] : rate[IMPL_GHASH];
         printf("| 2^%u | %u %% (%u keys) | %s | %.1f | %.1f | %.1f | %.1f | %.2fx | %.2fx |\n", slots_log2,
-               load_percent, stats.table_count, hits ? "hits" : "misses", rate[IMPL_OURS], rate[IMPL_OURS_BATCH],
-               rate[IMPL_UTHASH], rate[IMPL_GHASH], rate[IMPL_OURS] / faster_other,
+               load_percent, stats.table_count, hits ? "hits" : "misses", rate[IMPL_OURS],
+               rate[IMPL_OURS_BATCH], rate[IMPL_UTHASH], rate[IMPL_GHASH], rate[IMPL_OURS] / faster_other,
                rate[IMPL_OURS_BATCH] / faster_other);
         fflush(stdout);
     }
@@ -228,8 +229,9 @@ int main(int argc, char **argv)
     int repeats = quick ? 2 : 3;
     printf("osc table lookups, single core, %zu lookups per run, best of %d; M lookups/s\n\n", stream_count,
            repeats);
-    printf("| slots | load | stream | ours osc_find | ours osc_find_batch | uthash | GHashTable | ours / faster "
-           "other | batched / faster other |\n");
+    printf(
+        "| slots | load | stream | ours osc_find | ours osc_find_batch | uthash | GHashTable | ours / faster "
+        "other | batched / faster other |\n");
     printf("|---|---|---|---|---|---|---|---|---|\n");
     const uint32_t sizes[] = {16, 20};
     const uint32_t loads[] = {50, 75};

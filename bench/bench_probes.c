@@ -44,8 +44,8 @@
 
 static void print_row(const char *what, const double *values, int n)
 {
-    printf("| %s | %.3f | %.3f | %.3f |\n", what, bench_quantile(values, n, 0.5), bench_quantile(values, n, 0.1),
-           bench_quantile(values, n, 0.9));
+    printf("| %s | %.3f | %.3f | %.3f |\n", what, bench_quantile(values, n, 0.5),
+           bench_quantile(values, n, 0.1), bench_quantile(values, n, 0.9));
 }
 
 typedef struct options {
@@ -187,7 +187,8 @@ static uint32_t direction_key(float x, float y, float z)
     float l1 = fabsf(x) + fabsf(y) + fabsf(z);
     float u = l1 > 0 ? x / l1 : 0, v = l1 > 0 ? y / l1 : 0;
     if (z < 0) {
-        float fu = (1.0f - fabsf(v)) * (u >= 0 ? 1.0f : -1.0f), fv = (1.0f - fabsf(u)) * (v >= 0 ? 1.0f : -1.0f);
+        float fu = (1.0f - fabsf(v)) * (u >= 0 ? 1.0f : -1.0f),
+              fv = (1.0f - fabsf(u)) * (v >= 0 ? 1.0f : -1.0f);
         u = fu, v = fv;
     }
     uint32_t qu = (uint32_t)fminf(fmaxf((u + 1.0f) * 128.0f, 0.0f), 255.0f);
@@ -242,13 +243,13 @@ static void packet_put(uint8_t *p, uint32_t width, uint32_t l, const struct RTCR
 }
 
 typedef struct packet_set {
-    uint8_t *data;     /* packets, 64-byte aligned, hit and occlusion packets in stream order */
+    uint8_t *data; /* packets, 64-byte aligned, hit and occlusion packets in stream order */
     size_t bytes, cap;
     uint32_t *lane_ray; /* per packet lane: the captured ray (index into hits or rays), UINT32_MAX: none */
     size_t lanes, lane_cap;
-    uint8_t *is_hit;    /* per packet */
+    uint8_t *is_hit; /* per packet */
     size_t packets, packet_cap;
-    int *valid;         /* per packet lane */
+    int *valid; /* per packet lane */
     size_t valid_cap;
 } packet_set;
 
@@ -286,7 +287,8 @@ static void packet_set_build(packet_set *ps, const captured *c, uint32_t width)
                 if (on)
                     packet_put(p, width, l, ptr[order[first + l]]);
                 if (hit) { /* geomID and instID[0] invalid, as the update sets them */
-                    uint32_t *u = (uint32_t *)(p + (width == 16 ? sizeof(struct RTCRay16) : sizeof(struct RTCRay8)));
+                    uint32_t *u =
+                        (uint32_t *)(p + (width == 16 ? sizeof(struct RTCRay16) : sizeof(struct RTCRay8)));
                     u[6 * width + l] = RTC_INVALID_GEOMETRY_ID, u[7 * width + l] = RTC_INVALID_GEOMETRY_ID;
                 }
             }
@@ -304,8 +306,9 @@ static void packet_set_build(packet_set *ps, const captured *c, uint32_t width)
 /* Traces the captured rays through `api`; the results (hits, tfar) land in hit_work / ray_work in captured
  * order (packets: scattered back after the timing). Returns ms of the Embree calls alone; *ms_hit: of the
  * intersections. */
-static double replay_api_run(scene_rt *rt, const captured *c, replay_api api, packet_set *ps, uint8_t *packet_work,
-                             struct RTCRayHit *hit_work, struct RTCRay *ray_work, double *ms_hit)
+static double replay_api_run(scene_rt *rt, const captured *c, replay_api api, packet_set *ps,
+                             uint8_t *packet_work, struct RTCRayHit *hit_work, struct RTCRay *ray_work,
+                             double *ms_hit)
 {
     struct RTCIntersectContext context;
     rtcInitIntersectContext(&context);
@@ -366,7 +369,8 @@ static double replay_api_run(scene_rt *rt, const captured *c, replay_api api, pa
                 struct RTCRayHit *o = &hit_work[i];
                 o->ray = c->hits[i].ray;
                 o->ray.tfar = f[8 * width + l];
-                o->hit.Ng_x = hf[0 * width + l], o->hit.Ng_y = hf[1 * width + l], o->hit.Ng_z = hf[2 * width + l];
+                o->hit.Ng_x = hf[0 * width + l], o->hit.Ng_y = hf[1 * width + l],
+                o->hit.Ng_z = hf[2 * width + l];
                 o->hit.u = hf[3 * width + l], o->hit.v = hf[4 * width + l];
                 o->hit.primID = hu[5 * width + l], o->hit.geomID = hu[6 * width + l];
             } else {
@@ -408,7 +412,8 @@ typedef struct apis_state {
     struct RTCRayHit *ref_hits, *hits;
     struct RTCRay *ref_rays, *rays;
     size_t ref_hit_cap, ref_ray_cap, hit_cap, ray_cap;
-    double all[API_COUNT][BENCH_MAX_SAMPLES], hit[API_COUNT][BENCH_MAX_SAMPLES], occ[API_COUNT][BENCH_MAX_SAMPLES];
+    double all[API_COUNT][BENCH_MAX_SAMPLES], hit[API_COUNT][BENCH_MAX_SAMPLES],
+        occ[API_COUNT][BENCH_MAX_SAMPLES];
     double update_over[API_COUNT][BENCH_MAX_SAMPLES];
     double hit_ms[API_COUNT], occ_ms[API_COUNT]; /* this frame's */
     double hit_speedup[API_COUNT][BENCH_MAX_SAMPLES], occ_speedup[API_COUNT][BENCH_MAX_SAMPLES];
@@ -458,19 +463,23 @@ static void apis_frame(apis_state *a, scene_rt *rt, const captured *c, int n, ui
 
 static void apis_print(apis_state *a, int n)
 {
-    printf("\nthe same rays through other Embree calls (Embree time only; packets: built before the timing, "
-           "results scattered back after it), per frame, APIs in a rotating order (%zu intersection and %zu "
-           "occlusion rays):\n\n| API | all Mrays/s | intersection Mrays/s | occlusion Mrays/s | speed against "
-           "the streams in the same frame: intersection, occlusion (median, p10-p90) | update / raw through this API "
-           "(its time / update time) | rays whose result differs from the streams' |\n|---|---|---|---|---|---|---|\n",
-           a->hit_rays, a->occ_rays);
+    printf(
+        "\nthe same rays through other Embree calls (Embree time only; packets: built before the timing, "
+        "results scattered back after it), per frame, APIs in a rotating order (%zu intersection and %zu "
+        "occlusion rays):\n\n| API | all Mrays/s | intersection Mrays/s | occlusion Mrays/s | speed against "
+        "the streams in the same frame: intersection, occlusion (median, p10-p90) | update / raw through "
+        "this API "
+        "(its time / update time) | rays whose result differs from the streams' "
+        "|\n|---|---|---|---|---|---|---|\n",
+        a->hit_rays, a->occ_rays);
     for (int k = 0; k < API_COUNT; k++)
-        printf("| %s | %.3f | %.3f | %.3f | %.3f (%.3f-%.3f), %.3f (%.3f-%.3f) | %.3f | %zu |\n", api_names[k],
-               bench_quantile(a->all[k], n, 0.5), bench_quantile(a->hit[k], n, 0.5), bench_quantile(a->occ[k], n, 0.5),
-               bench_quantile(a->hit_speedup[k], n, 0.5), bench_quantile(a->hit_speedup[k], n, 0.1),
-               bench_quantile(a->hit_speedup[k], n, 0.9), bench_quantile(a->occ_speedup[k], n, 0.5),
-               bench_quantile(a->occ_speedup[k], n, 0.1), bench_quantile(a->occ_speedup[k], n, 0.9),
-               bench_quantile(a->update_over[k], n, 0.5), a->differences[k]);
+        printf("| %s | %.3f | %.3f | %.3f | %.3f (%.3f-%.3f), %.3f (%.3f-%.3f) | %.3f | %zu |\n",
+               api_names[k], bench_quantile(a->all[k], n, 0.5), bench_quantile(a->hit[k], n, 0.5),
+               bench_quantile(a->occ[k], n, 0.5), bench_quantile(a->hit_speedup[k], n, 0.5),
+               bench_quantile(a->hit_speedup[k], n, 0.1), bench_quantile(a->hit_speedup[k], n, 0.9),
+               bench_quantile(a->occ_speedup[k], n, 0.5), bench_quantile(a->occ_speedup[k], n, 0.1),
+               bench_quantile(a->occ_speedup[k], n, 0.9), bench_quantile(a->update_over[k], n, 0.5),
+               a->differences[k]);
     for (int k = 0; k < 2; k++) {
         free(a->sets[k].data), free(a->sets[k].lane_ray), free(a->sets[k].is_hit), free(a->sets[k].valid);
     }
@@ -485,7 +494,8 @@ static void part_rays(const options *o, scene *s, scene_rt *rt)
     srv_viewer_id id;
     srv_loop *loop = NULL;
     char err[256];
-    if (srv_loop_create(&d, &loop, err, sizeof err) != FXC_OK || srv_viewer_add(loop, &(srv_viewer_desc){.width = o->w, .height = o->h}, &id) != FXC_OK) {
+    if (srv_loop_create(&d, &loop, err, sizeof err) != FXC_OK ||
+        srv_viewer_add(loop, &(srv_viewer_desc){.width = o->w, .height = o->h}, &id) != FXC_OK) {
         fprintf(stderr, "bench_probes: %s\n", err);
         exit(1);
     }
@@ -509,8 +519,9 @@ static void part_rays(const options *o, scene *s, scene_rt *rt)
         if (f < o->warmup || st.rays[probes] == 0)
             continue;
         if (c.truncated || c.hit_count + c.ray_count != st.rays[probes]) {
-            fprintf(stderr, "bench_probes: frame %u: %zu rays recorded, %llu counted%s\n", f, c.hit_count + c.ray_count,
-                    (unsigned long long)st.rays[probes], c.truncated ? " (truncated)" : "");
+            fprintf(stderr, "bench_probes: frame %u: %zu rays recorded, %llu counted%s\n", f,
+                    c.hit_count + c.ray_count, (unsigned long long)st.rays[probes],
+                    c.truncated ? " (truncated)" : "");
             exit(1);
         }
         if (!grow((void **)&hit_work, &hit_work_cap, c.hit_count + 1, sizeof *hit_work, 64) ||
@@ -533,9 +544,10 @@ static void part_rays(const options *o, scene *s, scene_rt *rt)
         record_share[n] = c.record_ms / update_ms;
         n++;
     }
-    printf("\nrays: probe updates on 1 thread against raw Embree over the same streams (%d frames, %llu rays, "
-           "%.0f per frame)\n\n| figure | median | p10 | p90 |\n|---|---|---|---|\n",
-           n, (unsigned long long)total_rays, n ? (double)total_rays / n : 0.0);
+    printf(
+        "\nrays: probe updates on 1 thread against raw Embree over the same streams (%d frames, %llu rays, "
+        "%.0f per frame)\n\n| figure | median | p10 | p90 |\n|---|---|---|---|\n",
+        n, (unsigned long long)total_rays, n ? (double)total_rays / n : 0.0);
     if (n) {
         print_row("update Mrays/s (effects stage: gather, shading, commit)", update_mrays, n);
         print_row("raw rtcIntersect1M + rtcOccluded1M Mrays/s", raw_mrays, n);
@@ -561,14 +573,16 @@ static void part_viewers(const options *o, scene *s, scene_rt *rt)
 {
     static const uint32_t counts[] = {1, 4, 8};
     printf("\nviewers (%s camera, everything the scene needs, all cores), per frame after the warm-up:\n\n"
-           "| viewers | probes requested | unique | sharing | bricks | world-space MiB | visibility ms | requests ms "
-           "| queues ms | effects ms | compose ms | frame ms |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+           "| viewers | probes requested | unique | sharing | bricks | world-space MiB | visibility ms | "
+           "requests ms "
+           "| queues ms | effects ms | compose ms | frame ms "
+           "|\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
            srv_camgen_name(o->gen));
     for (size_t c = 0; c < sizeof counts / sizeof counts[0]; c++) {
         uint32_t n = counts[c];
         srv_viewer_id ids[SRV_MAX_VIEWERS];
-        srv_loop *loop = bench_make_loop_desc("bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1}, NULL, n,
-                                              o->w, o->h, ids);
+        srv_loop *loop = bench_make_loop_desc("bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1},
+                                              NULL, n, o->w, o->h, ids);
         double stage[SRV_STAGE_COUNT][BENCH_MAX_SAMPLES], frame[BENCH_MAX_SAMPLES];
         uint64_t requested = 0, unique = 0;
         srv_frame_stats st;
@@ -586,8 +600,10 @@ static void part_viewers(const options *o, scene *s, scene_rt *rt)
         printf("| %u | %.0f | %.0f | %.2f | %llu | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f |\n", n,
                (double)requested / m, (double)unique / m, unique ? (double)requested / (double)unique : 0.0,
                (unsigned long long)st.world.bricks_resident, st.world.bytes / 1048576.0,
-               bench_quantile(stage[SRV_STAGE_VISIBILITY], m, 0.5), bench_quantile(stage[SRV_STAGE_REQUESTS], m, 0.5),
-               bench_quantile(stage[SRV_STAGE_QUEUES], m, 0.5), bench_quantile(stage[SRV_STAGE_EFFECTS], m, 0.5),
+               bench_quantile(stage[SRV_STAGE_VISIBILITY], m, 0.5),
+               bench_quantile(stage[SRV_STAGE_REQUESTS], m, 0.5),
+               bench_quantile(stage[SRV_STAGE_QUEUES], m, 0.5),
+               bench_quantile(stage[SRV_STAGE_EFFECTS], m, 0.5),
                bench_quantile(stage[SRV_STAGE_COMPOSE], m, 0.5), bench_quantile(frame, m, 0.5));
         srv_loop_free(loop);
     }
@@ -595,11 +611,11 @@ static void part_viewers(const options *o, scene *s, scene_rt *rt)
     /* Local lookup tables on and off: same cameras, frames alternating between two loops. */
     uint32_t n = 4;
     srv_viewer_id on_ids[SRV_MAX_VIEWERS], off_ids[SRV_MAX_VIEWERS];
-    srv_loop *on = bench_make_loop_desc("bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1}, NULL, n, o->w,
-                                        o->h, on_ids);
+    srv_loop *on = bench_make_loop_desc("bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1}, NULL, n,
+                                        o->w, o->h, on_ids);
     srv_loop *off = bench_make_loop_desc("bench_probes",
-                                         (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .no_local_table = true}, NULL,
-                                         n, o->w, o->h, off_ids);
+                                         (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .no_local_table = true},
+                                         NULL, n, o->w, o->h, off_ids);
     double req_on[BENCH_MAX_SAMPLES], req_off[BENCH_MAX_SAMPLES], comp_on[BENCH_MAX_SAMPLES],
         comp_off[BENCH_MAX_SAMPLES], ratio[BENCH_MAX_SAMPLES], hit[BENCH_MAX_SAMPLES];
     for (uint32_t f = 0; f < o->warmup + o->frames; f++) {
@@ -616,8 +632,10 @@ static void part_viewers(const options *o, scene *s, scene_rt *rt)
         ratio[i] = comp_off[i] / comp_on[i];
         hit[i] = a.world.local_lookups ? (double)a.world.local_hits / (double)a.world.local_lookups : 0.0;
     }
-    printf("\nlocal lookup tables, %u viewers, frames alternating between a loop with them and one without:\n\n"
-           "| figure | median | p10 | p90 |\n|---|---|---|---|\n", n);
+    printf(
+        "\nlocal lookup tables, %u viewers, frames alternating between a loop with them and one without:\n\n"
+        "| figure | median | p10 | p90 |\n|---|---|---|---|\n",
+        n);
     int m = (int)o->frames;
     print_row("requests ms, with", req_on, m);
     print_row("requests ms, without", req_off, m);
@@ -634,10 +652,14 @@ static void part_viewers(const options *o, scene *s, scene_rt *rt)
 static void part_overhead(const options *o, scene *s, scene_rt *rt)
 {
     srv_viewer_id with_ids[1], without_ids[1];
-    srv_loop *with = bench_make_loop_desc("bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .threads = 1, .indirect_block = o->indirect_block},
-                                          NULL, 1, o->w, o->h, with_ids);
+    srv_loop *with = bench_make_loop_desc(
+        "bench_probes",
+        (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .threads = 1, .indirect_block = o->indirect_block}, NULL,
+        1, o->w, o->h, with_ids);
     srv_loop *without = bench_make_loop_desc(
-        "bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .threads = 1, .indirect_block = o->indirect_block}, "probes", 1, o->w, o->h, without_ids);
+        "bench_probes",
+        (srv_loop_desc){.s = s, .rt = rt, .seed = 1, .threads = 1, .indirect_block = o->indirect_block},
+        "probes", 1, o->w, o->h, without_ids);
     double added[BENCH_MAX_SAMPLES], req_added[BENCH_MAX_SAMPLES], comp_added[BENCH_MAX_SAMPLES];
     for (uint32_t f = 0; f < o->warmup + o->frames; f++) {
         srv_frame_stats a, b;
@@ -651,9 +673,11 @@ static void part_overhead(const options *o, scene *s, scene_rt *rt)
         comp_added[i] = (a.time_ms[SRV_STAGE_COMPOSE] - b.time_ms[SRV_STAGE_COMPOSE]) / vis;
         added[i] = req_added[i] + comp_added[i];
     }
-    printf("\noverhead: 1 viewer (%s camera), 1 thread, frames alternating between a loop with probes and one "
-           "without; what probes add, as a fraction of the frame's visibility time:\n\n"
-           "| figure | median | p10 | p90 |\n|---|---|---|---|\n", srv_camgen_name(o->gen));
+    printf(
+        "\noverhead: 1 viewer (%s camera), 1 thread, frames alternating between a loop with probes and one "
+        "without; what probes add, as a fraction of the frame's visibility time:\n\n"
+        "| figure | median | p10 | p90 |\n|---|---|---|---|\n",
+        srv_camgen_name(o->gen));
     int m = (int)o->frames;
     print_row("requests added / visibility", req_added, m);
     print_row("compose added / visibility", comp_added, m);
@@ -677,10 +701,14 @@ static int part_image(const options *o, scene *s, scene_rt *rt)
         return 1;
     }
     srv_viewer_id with_ids[1], without_ids[1];
-    srv_loop *with = bench_make_loop_desc("bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = o->seed, .threads = 1, .indirect_block = o->indirect_block},
-                                          NULL, 1, o->w, o->h, with_ids);
+    srv_loop *with = bench_make_loop_desc(
+        "bench_probes",
+        (srv_loop_desc){.s = s, .rt = rt, .seed = o->seed, .threads = 1, .indirect_block = o->indirect_block},
+        NULL, 1, o->w, o->h, with_ids);
     srv_loop *without = bench_make_loop_desc(
-        "bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = o->seed, .threads = 1, .indirect_block = o->indirect_block}, "probes", 1, o->w, o->h, without_ids);
+        "bench_probes",
+        (srv_loop_desc){.s = s, .rt = rt, .seed = o->seed, .threads = 1, .indirect_block = o->indirect_block},
+        "probes", 1, o->w, o->h, without_ids);
     size_t n = (size_t)o->w * o->h * 3;
     for (uint32_t frame = 0; frame < o->warmup + o->frames; frame++) {
         srv_frame_stats a, b;
@@ -688,7 +716,8 @@ static int part_image(const options *o, scene *s, scene_rt *rt)
         bench_run_frame("bench_probes", without, s, o->gen, without_ids, 1, frame, &b);
         if (frame < o->warmup)
             continue;
-        const float *ra = srv_viewer_radiance(with, with_ids[0]), *rb = srv_viewer_radiance(without, without_ids[0]);
+        const float *ra = srv_viewer_radiance(with, with_ids[0]),
+                    *rb = srv_viewer_radiance(without, without_ids[0]);
         if (!ra || !rb || fwrite(ra, sizeof(float), n, f) != n || fwrite(rb, sizeof(float), n, f) != n) {
             fprintf(stderr, "bench_probes: cannot write %s\n", o->out);
             fclose(f);
@@ -697,8 +726,8 @@ static int part_image(const options *o, scene *s, scene_rt *rt)
     }
     srv_loop_free(with);
     srv_loop_free(without);
-    printf("\nimage: %u frames of %ux%u radiance (with probes, then without, float RGB) in %s\n", o->frames, o->w,
-           o->h, o->out);
+    printf("\nimage: %u frames of %ux%u radiance (with probes, then without, float RGB) in %s\n", o->frames,
+           o->w, o->h, o->out);
     return fclose(f) == 0 ? 0 : 1;
 }
 
@@ -711,8 +740,8 @@ static void part_memory(const options *o, scene *s, scene_rt *rt)
     const fx_effect *const *registry = fx_registry(&count);
     uint32_t payload = registry[probes]->texel_bytes(s);
     srv_viewer_id ids[8];
-    srv_loop *loop = bench_make_loop_desc("bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1}, NULL, 8, o->w,
-                                          o->h, ids);
+    srv_loop *loop = bench_make_loop_desc("bench_probes", (srv_loop_desc){.s = s, .rt = rt, .seed = 1}, NULL,
+                                          8, o->w, o->h, ids);
     srv_frame_stats st;
     for (uint32_t f = 0; f < o->warmup + o->frames; f++)
         bench_run_frame("bench_probes", loop, s, o->gen, ids, 8, f, &st);
@@ -721,7 +750,8 @@ static void part_memory(const options *o, scene *s, scene_rt *rt)
     /* RTXGI's layout: 8x8 irradiance texels plus a 1-texel border (10x10) in R10G10B10A2 (4 bytes), and 16x16
      * distance texels plus border (18x18) in RG16F (4 bytes); probe data (offsets, states) RGBA16F (8 bytes). */
     double rtxgi_per_probe = 10 * 10 * 4 + 18 * 18 * 4 + 8;
-    printf("\nmemory after %u frames of 8 viewers:\n\n| figure | value |\n|---|---|\n", o->warmup + o->frames);
+    printf("\nmemory after %u frames of 8 viewers:\n\n| figure | value |\n|---|---|\n",
+           o->warmup + o->frames);
     printf("| payload bytes per probe (ours) | %u |\n", payload);
     printf("| world-space cache bytes per resident probe (table, metadata, lists, local tables) | %.0f |\n",
            st.world.bricks_resident ? (double)st.world.bytes / (double)st.world.bricks_resident : 0.0);
@@ -736,8 +766,14 @@ static void part_memory(const options *o, scene *s, scene_rt *rt)
 
 int main(int argc, char **argv)
 {
-    options o = {.path = "../shared/scenes/sponza/sponza.3ds", .w = 640, .h = 360, .warmup = 10, .frames = 20,
-                 .gen = SRV_CAMGEN_GROUP, .part = "all", .seed = 1};
+    options o = {.path = "../shared/scenes/sponza/sponza.3ds",
+                 .w = 640,
+                 .h = 360,
+                 .warmup = 10,
+                 .frames = 20,
+                 .gen = SRV_CAMGEN_GROUP,
+                 .part = "all",
+                 .seed = 1};
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
         if (!strcmp(a, "--scene") && v)
@@ -761,9 +797,10 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--indirect-block") && v)
             o.indirect_block = (uint32_t)atoi(v), i++;
         else {
-            fprintf(stderr, "usage: bench_probes [--scene PATH] [--res WxH] [--warmup N] [--frames N] [--camera GEN] "
-                            "[--part rays|viewers|overhead|memory|image|all] [--out FILE (image)] [--seed N (image)] "
-                            "[--indirect-block 1|2|4] [--apis (rays)]\n");
+            fprintf(stderr,
+                    "usage: bench_probes [--scene PATH] [--res WxH] [--warmup N] [--frames N] [--camera GEN] "
+                    "[--part rays|viewers|overhead|memory|image|all] [--out FILE (image)] [--seed N (image)] "
+                    "[--indirect-block 1|2|4] [--apis (rays)]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }
     }

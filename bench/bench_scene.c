@@ -26,8 +26,8 @@
 enum { MAX_REPS = 101 };
 
 enum { ST_LOAD = 0, ST_WELD, ST_TEXTURES, ST_ISLANDS, ST_SCENE_LOAD_TOTAL, ST_BVH, ST_COUNT };
-static const char *const stage_names[ST_COUNT] = {"load",  "weld", "textures", "islands",
-                                                  "scene_load total", "BVH build"};
+static const char *const stage_names[ST_COUNT] = {
+    "load", "weld", "textures", "islands", "scene_load total", "BVH build"};
 
 typedef struct row {
     char name[64];
@@ -80,7 +80,8 @@ static int run_scene(const char *path, int reps, row *out)
             fprintf(stderr, "bench_scene: %s: island count differs between runs (%u, then %u)\n", path,
                     out->islands, s->island_count);
         }
-        fprintf(stderr, "  %s run %d: load %.1f weld %.1f textures %.1f islands %.1f (scene_load %.1f) BVH %.1f ms\n",
+        fprintf(stderr,
+                "  %s run %d: load %.1f weld %.1f textures %.1f islands %.1f (scene_load %.1f) BVH %.1f ms\n",
                 out->name, r + 1, samples[ST_LOAD][r], samples[ST_WELD][r], samples[ST_TEXTURES][r],
                 samples[ST_ISLANDS][r], samples[ST_SCENE_LOAD_TOTAL][r], samples[ST_BVH][r]);
         scene_rt_free(rt);

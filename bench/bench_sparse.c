@@ -41,10 +41,11 @@ int main(int argc, char **argv)
         else if (!strcmp(argv[i], "--threads"))
             threads = (uint32_t)atoi(argv[i + 1]);
     }
-    if (!w || !h || w > SRV_MAX_SIDE || h > SRV_MAX_SIDE || !pixels || pixels > SRV_MAX_PIXEL_LIST || !frames ||
-        frames > 100000) {
-        fprintf(stderr, "usage: bench_sparse [--scene PATH] [--res WxH] [--pixels N] [--frames N] [--warmup N] "
-                        "[--threads T]\n");
+    if (!w || !h || w > SRV_MAX_SIDE || h > SRV_MAX_SIDE || !pixels || pixels > SRV_MAX_PIXEL_LIST ||
+        !frames || frames > 100000) {
+        fprintf(stderr,
+                "usage: bench_sparse [--scene PATH] [--res WxH] [--pixels N] [--frames N] [--warmup N] "
+                "[--threads T]\n");
         return 2;
     }
     scene_error err = {0};
@@ -106,18 +107,22 @@ int main(int argc, char **argv)
         primary_b += sb.visibility_rays;
         n++;
     }
-    printf("bench_sparse: %s, %ux%u, a sample request of %u random pixels, %u frames (after %u), orbit camera\n",
-           scene_path ? scene_path : "the embedded scene", w, h, pixels, n, warmup);
+    printf(
+        "bench_sparse: %s, %ux%u, a sample request of %u random pixels, %u frames (after %u), orbit camera\n",
+        scene_path ? scene_path : "the embedded scene", w, h, pixels, n, warmup);
     printf("| per frame, against one viewer alone | median | p10 | p90 |\n|---|---|---|---|\n");
     printf("| CPU time, + the sample request | %.3f | %.3f | %.3f |\n", bench_quantile(ratio_ms_b, n, 0.5),
            bench_quantile(ratio_ms_b, n, 0.1), bench_quantile(ratio_ms_b, n, 0.9));
     printf("| CPU time, + a second whole viewer | %.3f | %.3f | %.3f |\n", bench_quantile(ratio_ms_c, n, 0.5),
            bench_quantile(ratio_ms_c, n, 0.1), bench_quantile(ratio_ms_c, n, 0.9));
-    printf("| effect rays, + the sample request | %.3f | %.3f | %.3f |\n", bench_quantile(ratio_rays_b, n, 0.5),
-           bench_quantile(ratio_rays_b, n, 0.1), bench_quantile(ratio_rays_b, n, 0.9));
-    printf("| effect rays, + a second whole viewer | %.3f | %.3f | %.3f |\n", bench_quantile(ratio_rays_c, n, 0.5),
-           bench_quantile(ratio_rays_c, n, 0.1), bench_quantile(ratio_rays_c, n, 0.9));
-    printf("primary rays per frame: one viewer %.0f, with the sample request %.0f (distinct listed pixels added)\n",
+    printf("| effect rays, + the sample request | %.3f | %.3f | %.3f |\n",
+           bench_quantile(ratio_rays_b, n, 0.5), bench_quantile(ratio_rays_b, n, 0.1),
+           bench_quantile(ratio_rays_b, n, 0.9));
+    printf("| effect rays, + a second whole viewer | %.3f | %.3f | %.3f |\n",
+           bench_quantile(ratio_rays_c, n, 0.5), bench_quantile(ratio_rays_c, n, 0.1),
+           bench_quantile(ratio_rays_c, n, 0.9));
+    printf("primary rays per frame: one viewer %.0f, with the sample request %.0f (distinct listed pixels "
+           "added)\n",
            (double)primary_a / n, (double)primary_b / n);
     free(list);
     free(ratio_ms_b);

@@ -22,8 +22,8 @@
 
 static void print_row(const char *what, const double *values, int n)
 {
-    printf("| %s | %.3f | %.3f | %.3f |\n", what, bench_quantile(values, n, 0.5), bench_quantile(values, n, 0.1),
-           bench_quantile(values, n, 0.9));
+    printf("| %s | %.3f | %.3f | %.3f |\n", what, bench_quantile(values, n, 0.5),
+           bench_quantile(values, n, 0.1), bench_quantile(values, n, 0.9));
 }
 
 int main(int argc, char **argv)
@@ -49,8 +49,9 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--no-scaling"))
             scaling = false;
         else {
-            fprintf(stderr, "usage: bench_stages [--scene PATH] [--res WxH] [--warmup N] [--frames N] [--camera GEN] "
-                            "[--viewers N] [--no-scaling]\n");
+            fprintf(stderr,
+                    "usage: bench_stages [--scene PATH] [--res WxH] [--warmup N] [--frames N] [--camera GEN] "
+                    "[--viewers N] [--no-scaling]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }
     }
@@ -73,8 +74,8 @@ int main(int argc, char **argv)
         fprintf(stderr, "bench_stages: %s\n", err.msg);
         return 1;
     }
-    printf("scene %s (%u triangles), %u viewer(s) of %ux%u, camera %s, %u warm-up frames then %u measured\n", path,
-           s->triangle_count, viewers, w, h, srv_camgen_name(gen), warmup, frames);
+    printf("scene %s (%u triangles), %u viewer(s) of %ux%u, camera %s, %u warm-up frames then %u measured\n",
+           path, s->triangle_count, viewers, w, h, srv_camgen_name(gen), warmup, frames);
 
     /* Part 1: stage ratios on one thread. */
     srv_viewer_id ids[SRV_MAX_VIEWERS];
@@ -144,7 +145,8 @@ int main(int argc, char **argv)
     printf("\nper stage, the same frames (median ms; speed-up of the medians):\n\n"
            "| stage | 1 thread | 2 threads | speed-up |\n|---|---|---|---|\n");
     for (int k = 0; k < SRV_STAGE_COUNT; k++) {
-        double m1 = bench_quantile(stage1[k], (int)frames, 0.5), m2 = bench_quantile(stage2[k], (int)frames, 0.5);
+        double m1 = bench_quantile(stage1[k], (int)frames, 0.5),
+               m2 = bench_quantile(stage2[k], (int)frames, 0.5);
         printf("| %s | %.3f | %.3f | %.2f |\n", srv_stage_name((srv_stage)k), m1, m2, m2 > 0 ? m1 / m2 : 0.0);
     }
     srv_loop_free(l1);

@@ -38,14 +38,17 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--camera") && v && srv_camgen_parse(v, &gen))
             i++;
         else {
-            fprintf(stderr, "usage: bench_steady [--scene PATH] [--res WxH] [--camera GEN] [--viewers N] [--warmup N] "
-                            "[--frames N] [--threads T]\n");
+            fprintf(
+                stderr,
+                "usage: bench_steady [--scene PATH] [--res WxH] [--camera GEN] [--viewers N] [--warmup N] "
+                "[--frames N] [--threads T]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }
     }
     if (!w || !h || frames < 1 || frames > BENCH_MAX_SAMPLES || viewers < 1 || viewers > SRV_MAX_VIEWERS ||
         gen == SRV_CAMGEN_STATIC || gen == SRV_CAMGEN_IDENTICAL) {
-        fprintf(stderr, "bench_steady: bad --res, --frames (1..%d) or --viewers, or a camera that does not move\n",
+        fprintf(stderr,
+                "bench_steady: bad --res, --frames (1..%d) or --viewers, or a camera that does not move\n",
                 BENCH_MAX_SAMPLES);
         return 2;
     }
@@ -60,7 +63,8 @@ int main(int argc, char **argv)
         fprintf(stderr, "bench_steady: %s\n", err.msg);
         return 1;
     }
-    printf("scene %s, %u viewer(s) of %ux%u, camera %s, threads %u (0 = all), %u warm-up frames, then %u frames; "
+    printf("scene %s, %u viewer(s) of %ux%u, camera %s, threads %u (0 = all), %u warm-up frames, then %u "
+           "frames; "
            "each frame on the cached loop, then on the no-cache loop\n\n",
            path, viewers, w, h, srv_camgen_name(gen), threads, warmup, frames);
     srv_viewer_id ids_c[SRV_MAX_VIEWERS], ids_n[SRV_MAX_VIEWERS];
@@ -68,7 +72,8 @@ int main(int argc, char **argv)
     srv_loop *baseline = bench_make_loop("bench_steady", s, rt, true, threads, viewers, w, h, ids_n);
     double ray_ratio[BENCH_MAX_SAMPLES], time_ratio[BENCH_MAX_SAMPLES], ms_c[BENCH_MAX_SAMPLES],
         ms_n[BENCH_MAX_SAMPLES], rays_c[BENCH_MAX_SAMPLES], rays_n[BENCH_MAX_SAMPLES];
-    printf("| frame | cached effect rays | no-cache effect rays | rays cached / no-cache | cached ms | no-cache ms | "
+    printf("| frame | cached effect rays | no-cache effect rays | rays cached / no-cache | cached ms | "
+           "no-cache ms | "
            "time cached / no-cache |\n|---|---|---|---|---|---|---|\n");
     for (uint32_t f = 0; f < warmup + frames; f++) {
         srv_frame_stats sc, sn;
@@ -84,22 +89,23 @@ int main(int argc, char **argv)
         ms_n[i] = tn;
         ray_ratio[i] = rn ? (double)rc / (double)rn : 0.0;
         time_ratio[i] = tc / tn;
-        printf("| %u | %llu | %llu | %.4f | %.1f | %.1f | %.4f |\n", f, (unsigned long long)rc, (unsigned long long)rn,
-               ray_ratio[i], tc, tn, time_ratio[i]);
+        printf("| %u | %llu | %llu | %.4f | %.1f | %.1f | %.4f |\n", f, (unsigned long long)rc,
+               (unsigned long long)rn, ray_ratio[i], tc, tn, time_ratio[i]);
         fflush(stdout);
     }
     int n = (int)frames;
-    printf("\n| figure (frames %u..%u) | median | p10 | p90 |\n|---|---|---|---|\n", warmup, warmup + frames - 1);
+    printf("\n| figure (frames %u..%u) | median | p10 | p90 |\n|---|---|---|---|\n", warmup,
+           warmup + frames - 1);
     printf("| cached effect rays per frame | %.0f | %.0f | %.0f |\n", bench_quantile(rays_c, n, 0.5),
            bench_quantile(rays_c, n, 0.1), bench_quantile(rays_c, n, 0.9));
     printf("| no-cache effect rays per frame | %.0f | %.0f | %.0f |\n", bench_quantile(rays_n, n, 0.5),
            bench_quantile(rays_n, n, 0.1), bench_quantile(rays_n, n, 0.9));
     printf("| rays cached / no-cache | %.4f | %.4f | %.4f |\n", bench_quantile(ray_ratio, n, 0.5),
            bench_quantile(ray_ratio, n, 0.1), bench_quantile(ray_ratio, n, 0.9));
-    printf("| cached frame ms | %.1f | %.1f | %.1f |\n", bench_quantile(ms_c, n, 0.5), bench_quantile(ms_c, n, 0.1),
-           bench_quantile(ms_c, n, 0.9));
-    printf("| no-cache frame ms | %.1f | %.1f | %.1f |\n", bench_quantile(ms_n, n, 0.5), bench_quantile(ms_n, n, 0.1),
-           bench_quantile(ms_n, n, 0.9));
+    printf("| cached frame ms | %.1f | %.1f | %.1f |\n", bench_quantile(ms_c, n, 0.5),
+           bench_quantile(ms_c, n, 0.1), bench_quantile(ms_c, n, 0.9));
+    printf("| no-cache frame ms | %.1f | %.1f | %.1f |\n", bench_quantile(ms_n, n, 0.5),
+           bench_quantile(ms_n, n, 0.1), bench_quantile(ms_n, n, 0.9));
     printf("| time cached / no-cache | %.4f | %.4f | %.4f |\n", bench_quantile(time_ratio, n, 0.5),
            bench_quantile(time_ratio, n, 0.1), bench_quantile(time_ratio, n, 0.9));
     srv_loop_free(cached);

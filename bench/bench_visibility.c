@@ -139,9 +139,10 @@ int main(int argc, char **argv)
             for (char *tok = strtok(s, ","); tok && thread_count_n < 8; tok = strtok(NULL, ","))
                 thread_list[thread_count_n++] = (uint32_t)atoi(tok);
         } else {
-            fprintf(stderr,
-                    "usage: bench_visibility [--scene PATH] [--width W] [--height H] [--reps N] [--threads 1,2] "
-                    "[--only vis|raw] [--pos x,y,z] [--target x,y,z] [--fov deg]\n");
+            fprintf(
+                stderr,
+                "usage: bench_visibility [--scene PATH] [--width W] [--height H] [--reps N] [--threads 1,2] "
+                "[--only vis|raw] [--pos x,y,z] [--target x,y,z] [--fov deg]\n");
             return !strcmp(a, "-h") || !strcmp(a, "--help") ? 0 : 2;
         }
     }
@@ -168,8 +169,10 @@ int main(int argc, char **argv)
         fprintf(stderr, "bench_visibility: %s\n", err.msg);
         return 1;
     }
-    srv_camera cam = {.position = {pos[0], pos[1], pos[2]}, .target = {target[0], target[1], target[2]},
-                      .up = {0, 1, 0}, .fov_deg = fov};
+    srv_camera cam = {.position = {pos[0], pos[1], pos[2]},
+                      .target = {target[0], target[1], target[2]},
+                      .up = {0, 1, 0},
+                      .fov_deg = fov};
     if (!strcmp(path, "default") && !camera_given)
         cam = srv_camera_default(s);
     srv_camera_frame f;
@@ -203,7 +206,8 @@ int main(int argc, char **argv)
         }
     uint32_t tiles_x = (width + TILE - 1) / TILE, tiles = tiles_x * ((height + TILE - 1) / TILE);
 
-    printf("\n| threads | visibility ms | visibility Mrays/s | raw ms | raw Mrays/s | raw+gen ms | raw+gen Mrays/s "
+    printf("\n| threads | visibility ms | visibility Mrays/s | raw ms | raw Mrays/s | raw+gen ms | raw+gen "
+           "Mrays/s "
            "| visibility / raw | visibility / raw+gen | best of runs: vis / raw / raw+gen ms | compose ms "
            "| hit pixels (vis / raw) |\n"
            "|---|---|---|---|---|---|---|---|---|---|---|---|\n");
@@ -225,8 +229,14 @@ int main(int argc, char **argv)
             fprintf(stderr, "bench_visibility: %s\n", loop ? "cannot start the pool" : msg);
             return 1;
         }
-        raw_job job = {.rtc = scene_rt_handle(rt), .f = &f, .dir = {dir[0], dir[1], dir[2]}, .tiles_x = tiles_x,
-                       .tri = tri, .u = u, .v = v, .t = t};
+        raw_job job = {.rtc = scene_rt_handle(rt),
+                       .f = &f,
+                       .dir = {dir[0], dir[1], dir[2]},
+                       .tiles_x = tiles_x,
+                       .tri = tri,
+                       .u = u,
+                       .v = v,
+                       .t = t};
         double vis_ms[MAX_REPS], raw_ms[MAX_REPS], gen_ms[MAX_REPS], compose_ms[MAX_REPS];
         double ratio_raw[MAX_REPS], ratio_gen[MAX_REPS];
         uint64_t vis_hits = 0, raw_hits = 0;
@@ -265,12 +275,16 @@ int main(int argc, char **argv)
         raw_hits = 0;
         for (size_t p = 0; p < pixels; p++)
             raw_hits += tri[p] != 0xFFFFFFFFu;
-        double mv = bench_quantile(vis_ms, reps, 0.5), mr = bench_quantile(raw_ms, reps, 0.5), mg = bench_quantile(gen_ms, reps, 0.5);
-        printf("| %u | %.2f | %.1f | %.2f | %.1f | %.2f | %.1f | %.2f | %.2f | %.1f / %.1f / %.1f | %.2f | %llu / %llu |\n",
-               threads, mv, (double)pixels / mv / 1e3, mr, (double)pixels / mr / 1e3, mg, (double)pixels / mg / 1e3,
-               bench_quantile(ratio_raw, reps, 0.5), bench_quantile(ratio_gen, reps, 0.5), bench_quantile(vis_ms, reps, 0.0), bench_quantile(raw_ms, reps, 0.0),
-               bench_quantile(gen_ms, reps, 0.0), bench_quantile(compose_ms, reps, 0.5),
-               (unsigned long long)vis_hits, (unsigned long long)raw_hits);
+        double mv = bench_quantile(vis_ms, reps, 0.5), mr = bench_quantile(raw_ms, reps, 0.5),
+               mg = bench_quantile(gen_ms, reps, 0.5);
+        printf("| %u | %.2f | %.1f | %.2f | %.1f | %.2f | %.1f | %.2f | %.2f | %.1f / %.1f / %.1f | %.2f | "
+               "%llu / %llu |\n",
+               threads, mv, (double)pixels / mv / 1e3, mr, (double)pixels / mr / 1e3, mg,
+               (double)pixels / mg / 1e3, bench_quantile(ratio_raw, reps, 0.5),
+               bench_quantile(ratio_gen, reps, 0.5), bench_quantile(vis_ms, reps, 0.0),
+               bench_quantile(raw_ms, reps, 0.0), bench_quantile(gen_ms, reps, 0.0),
+               bench_quantile(compose_ms, reps, 0.5), (unsigned long long)vis_hits,
+               (unsigned long long)raw_hits);
         fflush(stdout);
         srv_pool_free(pool);
         srv_loop_free(loop);

@@ -33,8 +33,8 @@
 const char *osc_result_string(osc_result result)
 {
     switch (result) {
-#define OSC_RESULT_CASE(name, value, text)                                                                 \
-    case name:                                                                                             \
+#define OSC_RESULT_CASE(name, value, text)                                                                   \
+    case name:                                                                                               \
         return text;
         OSC_RESULT_LIST(OSC_RESULT_CASE)
 #undef OSC_RESULT_CASE
@@ -59,7 +59,8 @@ static void osc__default_free(void *pointer, size_t size, void *user)
 
 /* Allocates `count` elements of `element_size` bytes (overflow-checked) and counts them in `bucket` of
  * the cache and, when pool is not NULL, of that pool. NULL on overflow or failure. */
-static void *osc__alloc_array(osc_cache *cache, osc__pool *pool, int bucket, size_t count, size_t element_size)
+static void *osc__alloc_array(osc_cache *cache, osc__pool *pool, int bucket, size_t count,
+                              size_t element_size)
 {
     if (count == 0 || element_size == 0 || count > SIZE_MAX / element_size)
         return NULL;
@@ -84,7 +85,8 @@ static void osc__free_array(const osc_cache *cache, void *pointer, size_t count,
 #if defined(__GNUC__) || defined(__clang__)
 __attribute__((format(printf, 3, 4)))
 #endif
-static osc_result osc__invalid(char *error_text, size_t error_text_cap, const char *format, ...)
+static osc_result
+osc__invalid(char *error_text, size_t error_text_cap, const char *format, ...)
 {
     if (error_text && error_text_cap > 0) {
         va_list arguments;
@@ -113,9 +115,9 @@ static osc_result osc__resolve_desc(const osc_desc *desc, osc_desc *resolved, ch
         osc_effect_desc *effect_desc = &resolved->effects[effect];
         if (effect_desc->texel_bytes == 0) {
             if (effect_desc->max_blocks != 0 || effect_desc->convergence || effect_desc->block_texels != 0)
-                return osc__invalid(error_text, error_text_cap,
-                                    "effects[%u]: max_blocks, convergence or block_texels set but texel_bytes is 0",
-                                    effect);
+                return osc__invalid(
+                    error_text, error_text_cap,
+                    "effects[%u]: max_blocks, convergence or block_texels set but texel_bytes is 0", effect);
             continue;
         }
         if (resolved->single_pool && effect != 0)
@@ -146,12 +148,12 @@ static osc_result osc__resolve_desc(const osc_desc *desc, osc_desc *resolved, ch
                             resolved->max_load_percent);
     if (resolved->table_capacity == 0) {
         uint64_t wanted = (total_blocks * 3 + 1) / 2;
-        resolved->table_capacity = osc__next_power_of_two(wanted < OSC__MIN_TABLE_CAPACITY ? OSC__MIN_TABLE_CAPACITY
-                                                                                            : wanted);
+        resolved->table_capacity =
+            osc__next_power_of_two(wanted < OSC__MIN_TABLE_CAPACITY ? OSC__MIN_TABLE_CAPACITY : wanted);
     } else if ((resolved->table_capacity & (resolved->table_capacity - 1)) != 0 ||
                resolved->table_capacity < OSC__MIN_TABLE_CAPACITY) {
-        return osc__invalid(error_text, error_text_cap,
-                            "table_capacity %u is not a power of two >= 16", resolved->table_capacity);
+        return osc__invalid(error_text, error_text_cap, "table_capacity %u is not a power of two >= 16",
+                            resolved->table_capacity);
     }
     if (resolved->initial_age_frames == 0)
         resolved->initial_age_frames = OSC__DEFAULT_INITIAL_AGE;
@@ -221,7 +223,8 @@ osc_result osc_create(const osc_desc *desc, osc_cache **out_cache, char *error_t
     osc_cache *cache = resolved.allocator.alloc(sizeof *cache, resolved.allocator.user);
     if (!cache) {
         if (error_text && error_text_cap > 0)
-            snprintf(error_text, error_text_cap, "out of memory allocating the cache (%zu bytes)", sizeof *cache);
+            snprintf(error_text, error_text_cap, "out of memory allocating the cache (%zu bytes)",
+                     sizeof *cache);
         return OSC_ERR_OUT_OF_MEMORY;
     }
     memset(cache, 0, sizeof *cache);
@@ -231,7 +234,8 @@ osc_result osc_create(const osc_desc *desc, osc_cache **out_cache, char *error_t
     cache->pool_select = resolved.single_pool ? 0u : 0xFu;
 
     uint32_t table_capacity = resolved.table_capacity;
-    uint64_t *table_keys = osc__alloc_array(cache, NULL, OSC__MEM_TABLE_KEYS, table_capacity, sizeof(uint64_t));
+    uint64_t *table_keys =
+        osc__alloc_array(cache, NULL, OSC__MEM_TABLE_KEYS, table_capacity, sizeof(uint64_t));
     uint32_t *table_values =
         osc__alloc_array(cache, NULL, OSC__MEM_TABLE_VALUES, table_capacity, sizeof(uint32_t));
     cache->table.keys = table_keys; /* so osc_destroy frees them even if the next step fails */
@@ -255,8 +259,8 @@ osc_result osc_create(const osc_desc *desc, osc_cache **out_cache, char *error_t
             allocated += cache->bytes[bucket];
         osc_destroy(cache);
         if (error_text && error_text_cap > 0)
-            snprintf(error_text, error_text_cap, "out of memory creating the cache (%zu bytes allocated before)",
-                     allocated);
+            snprintf(error_text, error_text_cap,
+                     "out of memory creating the cache (%zu bytes allocated before)", allocated);
         return OSC_ERR_OUT_OF_MEMORY;
     }
     cache->stats.table_capacity = table_capacity;
@@ -499,8 +503,8 @@ void osc_find_batch(const osc_cache *cache, const uint64_t *keys, size_t count, 
 }
 
 /* Read-only batched lookup of blocks' valid masks and payloads (osc.h). */
-void osc_find_payloads(const osc_cache *cache, uint32_t effect, const uint64_t *keys, size_t count, uint64_t *valid,
-                       const void **payload)
+void osc_find_payloads(const osc_cache *cache, uint32_t effect, const uint64_t *keys, size_t count,
+                       uint64_t *valid, const void **payload)
 {
     enum { GROUP = 16 };
     const osc__pool *pool = osc__pool_of(cache, effect);
@@ -692,8 +696,8 @@ void osc_memory(const osc_cache *cache, osc_memory_report *out)
         effect_memory->payload_reserved_bytes = pool->bytes[OSC__MEM_PAYLOAD];
         effect_memory->payload_in_use_bytes = (size_t)pool->in_use * pool->block_bytes;
         effect_memory->list_bytes = pool->bytes[OSC__MEM_LISTS];
-        effect_memory->total_bytes =
-            effect_memory->block_meta_bytes + effect_memory->payload_reserved_bytes + effect_memory->list_bytes;
+        effect_memory->total_bytes = effect_memory->block_meta_bytes + effect_memory->payload_reserved_bytes +
+                                     effect_memory->list_bytes;
         out->payload_in_use_bytes += effect_memory->payload_in_use_bytes;
     }
     out->total_bytes = out->cache_struct_bytes + out->table_key_bytes + out->table_value_bytes +

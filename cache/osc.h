@@ -39,24 +39,24 @@
 
 /* OSC_ASSERT stays on in every build type (tests run RelWithDebInfo, where assert() is compiled out);
  * it is used for programming errors only (bad arguments from our own code), never on hot probe loops. */
-#define OSC_ASSERT(cond)                                                                                   \
-    do {                                                                                                   \
-        if (!(cond)) {                                                                                     \
-            fprintf(stderr, "%s:%d: osc assertion failed: %s\n", __FILE__, __LINE__, #cond);               \
-            abort();                                                                                       \
-        }                                                                                                  \
+#define OSC_ASSERT(cond)                                                                                     \
+    do {                                                                                                     \
+        if (!(cond)) {                                                                                       \
+            fprintf(stderr, "%s:%d: osc assertion failed: %s\n", __FILE__, __LINE__, #cond);                 \
+            abort();                                                                                         \
+        }                                                                                                    \
     } while (0)
 
 /* ---- constants ------------------------------------------------------------------------------------ */
 
-#define OSC_MAX_EFFECTS     16u         /* effect field is 4 bits */
-#define OSC_MAX_LEVEL       15u         /* level field is 4 bits */
-#define OSC_MAX_BLOCK_COORD 4095u       /* block_x, block_y are 12 bits */
-#define OSC_BLOCK_SIZE      8u          /* texels per block side */
-#define OSC_BLOCK_TEXELS    64u         /* texels per block (one bit each in a texel mask) */
-#define OSC_MAX_ISLAND_SIZE 32768u      /* level-0 island size limit in texels: 4096 blocks of 8 */
-#define OSC_NONE            UINT32_MAX  /* "no block" */
-#define OSC_FRAME_NEVER     UINT32_MAX  /* osc_block_last_frame() of a block never requested */
+#define OSC_MAX_EFFECTS     16u        /* effect field is 4 bits */
+#define OSC_MAX_LEVEL       15u        /* level field is 4 bits */
+#define OSC_MAX_BLOCK_COORD 4095u      /* block_x, block_y are 12 bits */
+#define OSC_BLOCK_SIZE      8u         /* texels per block side */
+#define OSC_BLOCK_TEXELS    64u        /* texels per block (one bit each in a texel mask) */
+#define OSC_MAX_ISLAND_SIZE 32768u     /* level-0 island size limit in texels: 4096 blocks of 8 */
+#define OSC_NONE            UINT32_MAX /* "no block" */
+#define OSC_FRAME_NEVER     UINT32_MAX /* osc_block_last_frame() of a block never requested */
 
 /* The one key value that is never a valid key: effect 15, island 0xffffffff, level 15, block (4095, 4095).
  * It cannot name a real block because an island at level 15 is one texel, i.e. only block (0, 0). The
@@ -89,8 +89,9 @@ static inline uint64_t osc_key_pack(uint32_t effect, uint32_t island_id, uint32_
     OSC_ASSERT(level <= OSC_MAX_LEVEL);
     OSC_ASSERT(block_x <= OSC_MAX_BLOCK_COORD);
     OSC_ASSERT(block_y <= OSC_MAX_BLOCK_COORD);
-    uint64_t key = ((uint64_t)effect << OSC_KEY_EFFECT_SHIFT) | ((uint64_t)island_id << OSC_KEY_ISLAND_SHIFT) |
-                   ((uint64_t)level << OSC_KEY_LEVEL_SHIFT) | ((uint64_t)block_y << OSC_KEY_BLOCK_Y_SHIFT) |
+    uint64_t key = ((uint64_t)effect << OSC_KEY_EFFECT_SHIFT) |
+                   ((uint64_t)island_id << OSC_KEY_ISLAND_SHIFT) | ((uint64_t)level << OSC_KEY_LEVEL_SHIFT) |
+                   ((uint64_t)block_y << OSC_KEY_BLOCK_Y_SHIFT) |
                    ((uint64_t)block_x << OSC_KEY_BLOCK_X_SHIFT);
     OSC_ASSERT(key != OSC_KEY_EMPTY);
     return key;
@@ -160,7 +161,8 @@ static inline uint64_t osc_texel_bit(uint32_t texel_x, uint32_t texel_y)
 }
 
 /* Point filtering at `level`: fills *out with 1 block. Precondition: level <= 15, island size valid. */
-void osc_footprint_point(const osc_island_extent *island, uint32_t level, float x, float y, osc_footprint *out);
+void osc_footprint_point(const osc_island_extent *island, uint32_t level, float x, float y,
+                         osc_footprint *out);
 
 /* Bilinear filtering at `level`: fills *out with 1..4 blocks. Same preconditions. */
 void osc_footprint_bilinear(const osc_island_extent *island, uint32_t level, float x, float y,
@@ -175,8 +177,9 @@ void osc_footprint_trilinear(const osc_island_extent *island, uint32_t level, fl
  * osc_footprint_bilinear() for the same arguments, without its argument checks and inlined. Precondition
  * (the caller's, unchecked): effect < 16, level <= 15, 1 <= width0, height0 <= OSC_MAX_ISLAND_SIZE.
  * Writes 1..4 (key, mask) pairs and returns how many. */
-static inline uint32_t osc_bilinear_keys(uint32_t effect, uint32_t island_id, uint32_t width0, uint32_t height0,
-                                         uint32_t level, float x, float y, uint64_t keys[4], uint64_t masks[4])
+static inline uint32_t osc_bilinear_keys(uint32_t effect, uint32_t island_id, uint32_t width0,
+                                         uint32_t height0, uint32_t level, float x, float y, uint64_t keys[4],
+                                         uint64_t masks[4])
 {
     uint32_t width = (width0 + (1u << level) - 1u) >> level, height = (height0 + (1u << level) - 1u) >> level;
     float fx = x - 0.5f, fy = y - 0.5f;
@@ -188,18 +191,22 @@ static inline uint32_t osc_bilinear_keys(uint32_t effect, uint32_t island_id, ui
         tx[i] = cx < 0 ? 0 : ((uint32_t)cx >= width ? width - 1 : (uint32_t)cx);
         ty[i] = cy < 0 ? 0 : ((uint32_t)cy >= height ? height - 1 : (uint32_t)cy);
     }
-    uint64_t base = ((uint64_t)effect << OSC_KEY_EFFECT_SHIFT) | ((uint64_t)island_id << OSC_KEY_ISLAND_SHIFT) |
-                    ((uint64_t)level << OSC_KEY_LEVEL_SHIFT);
+    uint64_t base = ((uint64_t)effect << OSC_KEY_EFFECT_SHIFT) |
+                    ((uint64_t)island_id << OSC_KEY_ISLAND_SHIFT) | ((uint64_t)level << OSC_KEY_LEVEL_SHIFT);
     if ((tx[0] >> 3) == (tx[1] >> 3) && (ty[0] >> 3) == (ty[1] >> 3)) { /* the usual case: one block */
-        keys[0] = base | ((uint64_t)(ty[0] >> 3) << OSC_KEY_BLOCK_Y_SHIFT) | ((uint64_t)(tx[0] >> 3) << OSC_KEY_BLOCK_X_SHIFT);
-        masks[0] = ((uint64_t)1 << ((ty[0] & 7u) * 8u + (tx[0] & 7u))) | ((uint64_t)1 << ((ty[0] & 7u) * 8u + (tx[1] & 7u))) |
-                   ((uint64_t)1 << ((ty[1] & 7u) * 8u + (tx[0] & 7u))) | ((uint64_t)1 << ((ty[1] & 7u) * 8u + (tx[1] & 7u)));
+        keys[0] = base | ((uint64_t)(ty[0] >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
+                  ((uint64_t)(tx[0] >> 3) << OSC_KEY_BLOCK_X_SHIFT);
+        masks[0] = ((uint64_t)1 << ((ty[0] & 7u) * 8u + (tx[0] & 7u))) |
+                   ((uint64_t)1 << ((ty[0] & 7u) * 8u + (tx[1] & 7u))) |
+                   ((uint64_t)1 << ((ty[1] & 7u) * 8u + (tx[0] & 7u))) |
+                   ((uint64_t)1 << ((ty[1] & 7u) * 8u + (tx[1] & 7u)));
         return 1;
     }
     uint32_t count = 0;
     for (int i = 0; i < 4; i++) { /* (x0,y0) (x1,y0) (x0,y1) (x1,y1), as osc_footprint_bilinear */
         uint32_t px = tx[i & 1], py = ty[i >> 1];
-        uint64_t key = base | ((uint64_t)(py >> 3) << OSC_KEY_BLOCK_Y_SHIFT) | ((uint64_t)(px >> 3) << OSC_KEY_BLOCK_X_SHIFT);
+        uint64_t key = base | ((uint64_t)(py >> 3) << OSC_KEY_BLOCK_Y_SHIFT) |
+                       ((uint64_t)(px >> 3) << OSC_KEY_BLOCK_X_SHIFT);
         uint64_t bit = (uint64_t)1 << ((py & 7u) * 8u + (px & 7u));
         uint32_t j = 0;
         while (j < count && keys[j] != key)
@@ -219,13 +226,15 @@ static inline uint32_t osc_bilinear_keys(uint32_t effect, uint32_t island_id, ui
 /* The cache's result codes: its own names and texts, the shared values of common/fxc_result.h (name, value,
  * text). Run-time failures only (pool exhausted is a
  * normal, counted event the caller degrades on); programming errors are asserted instead. */
-#define OSC_RESULT_LIST(X)                                                                                 \
-    X(OSC_OK, FXC_OK, "ok")                                                                                \
-    X(OSC_ERR_INVALID_DESC, FXC_ERR_INVALID, "invalid cache description")                                \
-    X(OSC_ERR_OUT_OF_MEMORY, FXC_ERR_NOMEM, "out of memory while creating the cache")                    \
-    X(OSC_ERR_NO_POOL, FXC_ERR_NO_POOL, "the key's effect has no block pool (texel_bytes 0 in the description)") \
-    X(OSC_ERR_POOL_EXHAUSTED, FXC_ERR_POOL_EXHAUSTED, "every block of the effect's pool is requested this frame") \
-    X(OSC_ERR_TABLE_FULL, FXC_ERR_TABLE_FULL, "the hash table is at its maximum load")                   \
+#define OSC_RESULT_LIST(X)                                                                                   \
+    X(OSC_OK, FXC_OK, "ok")                                                                                  \
+    X(OSC_ERR_INVALID_DESC, FXC_ERR_INVALID, "invalid cache description")                                    \
+    X(OSC_ERR_OUT_OF_MEMORY, FXC_ERR_NOMEM, "out of memory while creating the cache")                        \
+    X(OSC_ERR_NO_POOL, FXC_ERR_NO_POOL,                                                                      \
+      "the key's effect has no block pool (texel_bytes 0 in the description)")                               \
+    X(OSC_ERR_POOL_EXHAUSTED, FXC_ERR_POOL_EXHAUSTED,                                                        \
+      "every block of the effect's pool is requested this frame")                                            \
+    X(OSC_ERR_TABLE_FULL, FXC_ERR_TABLE_FULL, "the hash table is at its maximum load")                       \
     X(OSC_ERR_NOT_FOUND, FXC_ERR_NOT_FOUND, "the key is not resident")
 
 typedef enum osc_result {
@@ -242,7 +251,7 @@ const char *osc_result_string(osc_result result);
 /* Optional allocator: every allocation of the cache goes through it, once, in osc_create(). free gets the
  * size that was allocated, so a counting allocator needs no header. */
 typedef struct osc_allocator {
-    void *(*alloc)(size_t size, void *user);          /* NULL: malloc */
+    void *(*alloc)(size_t size, void *user);              /* NULL: malloc */
     void (*free)(void *pointer, size_t size, void *user); /* NULL: free */
     void *user;
 } osc_allocator;
@@ -252,25 +261,25 @@ typedef struct osc_allocator {
  * of 1 element has a payload of texel_bytes and uses bit 0 of its masks only (the caller keeps the other
  * bits zero). A block of 64 elements is an 8 x 8 texel block here and a 4 x 4 x 4 brick in the wsc. */
 typedef struct osc_effect_desc {
-    uint32_t texel_bytes; /* payload bytes per texel, 1..1024 (0 = effect absent; e.g. 2 shadow, 4 AO) */
-    uint32_t max_blocks;  /* pool capacity in 8x8 blocks (default 65536 when texel_bytes > 0) */
-    bool convergence;     /* keep one uint32 convergence word per block (default false) */
+    uint32_t texel_bytes;  /* payload bytes per texel, 1..1024 (0 = effect absent; e.g. 2 shadow, 4 AO) */
+    uint32_t max_blocks;   /* pool capacity in 8x8 blocks (default 65536 when texel_bytes > 0) */
+    bool convergence;      /* keep one uint32 convergence word per block (default false) */
     uint32_t block_texels; /* elements per block: 64 or 1 (default 64, the 8 x 8 texel block) */
 } osc_effect_desc;
 
 /* The cache's configuration; all-zero fields take the defaults written beside them. */
 typedef struct osc_desc {
     osc_effect_desc effects[OSC_MAX_EFFECTS]; /* indexed by the key's effect field */
-    uint32_t table_capacity;      /* slots, a power of two (default: 150 % of all pools' blocks, rounded up
+    uint32_t table_capacity;     /* slots, a power of two (default: 150 % of all pools' blocks, rounded up
                                      to a power of two, at least 16) */
-    uint32_t max_load_percent;    /* inserts beyond this load fail with OSC_ERR_TABLE_FULL, 10..95
+    uint32_t max_load_percent;   /* inserts beyond this load fail with OSC_ERR_TABLE_FULL, 10..95
                                      (default 75) */
-    uint32_t initial_age_frames;  /* starting adaptive age threshold, frames (default 64) */
-    uint32_t max_age_frames;      /* a block not requested for more frames than this is evicted even when
+    uint32_t initial_age_frames; /* starting adaptive age threshold, frames (default 64) */
+    uint32_t max_age_frames;     /* a block not requested for more frames than this is evicted even when
                                      memory is free, and the adaptive threshold never exceeds it, frames
                                      (default 1024) */
-    osc_allocator allocator;      /* default: malloc / free */
-    bool single_pool;             /* keys carry no effect field: every key, all 64 bits of it, goes to
+    osc_allocator allocator;     /* default: malloc / free */
+    bool single_pool;            /* keys carry no effect field: every key, all 64 bits of it, goes to
                                      pool 0 and only effects[0] may be present (the world-space cache's
                                      WGIs); OSC_KEY_EMPTY stays reserved (default false: the top 4 bits
                                      select the pool) */
@@ -323,8 +332,8 @@ void osc_find_batch(const osc_cache *cache, const uint64_t *keys, size_t count, 
 /* osc_find_batch, then per key its block's valid mask and payload in `effect`'s pool (osc_block_valid,
  * osc_block_payload), or 0 and NULL when absent: a whole neighbourhood read in one call. Read-only and not
  * counted, as osc_find. Precondition (asserted): the effect has a pool. */
-void osc_find_payloads(const osc_cache *cache, uint32_t effect, const uint64_t *keys, size_t count, uint64_t *valid,
-                       const void **payload);
+void osc_find_payloads(const osc_cache *cache, uint32_t effect, const uint64_t *keys, size_t count,
+                       uint64_t *valid, const void **payload);
 
 /* Unmaps a key and returns its block to its pool's free list. OSC_ERR_NOT_FOUND when absent. */
 osc_result osc_remove(osc_cache *cache, uint64_t key);
@@ -344,9 +353,9 @@ void osc_housekeeping(osc_cache *cache);
 const uint32_t *osc_frame_blocks(osc_cache *cache, uint32_t effect, uint32_t *count);
 
 /* Per-block accessors. Precondition: the effect has a pool and block_index < its capacity. */
-uint64_t osc_block_key(const osc_cache *cache, uint32_t effect, uint32_t block_index);       /* EMPTY if free */
-uint64_t osc_block_requested(const osc_cache *cache, uint32_t effect, uint32_t block_index); /* this frame */
-uint64_t osc_block_valid(const osc_cache *cache, uint32_t effect, uint32_t block_index);     /* hold data */
+uint64_t osc_block_key(const osc_cache *cache, uint32_t effect, uint32_t block_index); /* EMPTY if free */
+uint64_t osc_block_requested(const osc_cache *cache, uint32_t effect, uint32_t block_index);  /* this frame */
+uint64_t osc_block_valid(const osc_cache *cache, uint32_t effect, uint32_t block_index);      /* hold data */
 uint32_t osc_block_last_frame(const osc_cache *cache, uint32_t effect, uint32_t block_index); /* or NEVER */
 
 /* Replaces a block's valid mask (the effect calls it after writing texels of the payload). */
@@ -369,31 +378,31 @@ uint32_t osc_pool_block_texels(const osc_cache *cache, uint32_t effect);
 
 /* Per-effect counters (cumulative since creation unless said otherwise). */
 typedef struct osc_effect_stats {
-    uint64_t requests;          /* osc_request calls (batch: unique keys) for this effect */
-    uint64_t inserts;           /* blocks mapped */
-    uint64_t evictions;         /* blocks evicted, housekeeping and immediate */
+    uint64_t requests;            /* osc_request calls (batch: unique keys) for this effect */
+    uint64_t inserts;             /* blocks mapped */
+    uint64_t evictions;           /* blocks evicted, housekeeping and immediate */
     uint64_t immediate_evictions; /* of which evicted inside a request because the pool was empty */
-    uint64_t removals;          /* osc_remove */
-    uint64_t exhausted;         /* requests failed with OSC_ERR_POOL_EXHAUSTED */
-    uint32_t blocks_resident;   /* now */
-    uint32_t blocks_peak;       /* highest blocks_resident seen */
-    uint32_t blocks_this_frame; /* blocks requested in the current frame */
-    uint32_t new_this_frame;    /* blocks the current frame asked to map (mapped or failed) */
-    uint32_t expected_new;      /* running estimate of new blocks per frame (eviction target) */
-    uint32_t age_threshold;     /* current adaptive age threshold, frames */
+    uint64_t removals;            /* osc_remove */
+    uint64_t exhausted;           /* requests failed with OSC_ERR_POOL_EXHAUSTED */
+    uint32_t blocks_resident;     /* now */
+    uint32_t blocks_peak;         /* highest blocks_resident seen */
+    uint32_t blocks_this_frame;   /* blocks requested in the current frame */
+    uint32_t new_this_frame;      /* blocks the current frame asked to map (mapped or failed) */
+    uint32_t expected_new;        /* running estimate of new blocks per frame (eviction target) */
+    uint32_t age_threshold;       /* current adaptive age threshold, frames */
 } osc_effect_stats;
 
 /* Whole-cache counters. */
 typedef struct osc_stats {
-    uint64_t lookups;      /* table lookups by request, batch and remove (osc_find is not counted) */
-    uint64_t hits;         /* of which found */
-    uint64_t inserts;      /* sum over effects */
-    uint64_t evictions;    /* sum over effects */
-    uint64_t exhausted;    /* sum over effects */
-    uint64_t table_full;   /* inserts refused at maximum load */
-    uint32_t table_count;  /* keys in the table now */
+    uint64_t lookups;        /* table lookups by request, batch and remove (osc_find is not counted) */
+    uint64_t hits;           /* of which found */
+    uint64_t inserts;        /* sum over effects */
+    uint64_t evictions;      /* sum over effects */
+    uint64_t exhausted;      /* sum over effects */
+    uint64_t table_full;     /* inserts refused at maximum load */
+    uint32_t table_count;    /* keys in the table now */
     uint32_t table_capacity; /* slots */
-    uint32_t frame;        /* current frame number */
+    uint32_t frame;          /* current frame number */
     osc_effect_stats effects[OSC_MAX_EFFECTS];
 } osc_stats;
 
@@ -402,24 +411,24 @@ void osc_stats_get(const osc_cache *cache, osc_stats *out);
 
 /* Bytes allocated for one effect, by structure. */
 typedef struct osc_effect_memory {
-    size_t block_meta_bytes;      /* requested, valid, last frame, key and convergence arrays */
+    size_t block_meta_bytes;       /* requested, valid, last frame, key and convergence arrays */
     size_t payload_reserved_bytes; /* the whole payload pool (allocated) */
-    size_t payload_in_use_bytes;  /* the part held by resident blocks (not an extra allocation) */
-    size_t list_bytes;            /* free stack, this frame's block list, eviction candidates */
-    size_t total_bytes;           /* block_meta + payload_reserved + list */
+    size_t payload_in_use_bytes;   /* the part held by resident blocks (not an extra allocation) */
+    size_t list_bytes;             /* free stack, this frame's block list, eviction candidates */
+    size_t total_bytes;            /* block_meta + payload_reserved + list */
 } osc_effect_memory;
 
 /* Every byte the cache allocated, by structure and by effect; total_bytes equals the bytes that went
  * through the allocator. Reserved pool capacity is reported apart from what resident blocks use. */
 typedef struct osc_memory_report {
-    size_t cache_struct_bytes;   /* the osc_cache object itself */
-    size_t table_key_bytes;      /* hash table keys */
-    size_t table_value_bytes;    /* hash table values (block indices) */
-    size_t block_meta_bytes;     /* sum over effects */
+    size_t cache_struct_bytes;     /* the osc_cache object itself */
+    size_t table_key_bytes;        /* hash table keys */
+    size_t table_value_bytes;      /* hash table values (block indices) */
+    size_t block_meta_bytes;       /* sum over effects */
     size_t payload_reserved_bytes; /* sum over effects */
-    size_t payload_in_use_bytes; /* sum over effects (part of payload_reserved_bytes) */
-    size_t list_bytes;           /* sum over effects */
-    size_t total_bytes;          /* everything allocated */
+    size_t payload_in_use_bytes;   /* sum over effects (part of payload_reserved_bytes) */
+    size_t list_bytes;             /* sum over effects */
+    size_t total_bytes;            /* everything allocated */
     osc_effect_memory effects[OSC_MAX_EFFECTS];
 } osc_memory_report;
 

@@ -74,7 +74,8 @@ static void osc__bilinear_append(const osc_island_extent *island, uint32_t level
 }
 
 /* Point filtering: the one texel containing (x, y), clamped to the island. */
-void osc_footprint_point(const osc_island_extent *island, uint32_t level, float x, float y, osc_footprint *out)
+void osc_footprint_point(const osc_island_extent *island, uint32_t level, float x, float y,
+                         osc_footprint *out)
 {
     osc__check_island(island, level);
     uint32_t width = osc_level_size(island->width0, level);

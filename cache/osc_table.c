@@ -14,7 +14,8 @@
 #endif
 
 /* Initializes the table over caller-owned arrays and marks every slot empty. */
-void osc__table_init(osc__table *table, uint64_t *keys, uint32_t *values, uint32_t capacity, uint32_t max_count)
+void osc__table_init(osc__table *table, uint64_t *keys, uint32_t *values, uint32_t capacity,
+                     uint32_t max_count)
 {
     OSC_ASSERT(capacity >= 16 && (capacity & (capacity - 1)) == 0);
     OSC_ASSERT(max_count < capacity);

@@ -128,8 +128,8 @@ bool wsc_brick_of(const int32_t g[3], uint32_t level, uint32_t brick_size, uint6
         return true;
     }
     /* Range first: the brick coordinates of an out-of-range point could still pack. */
-    if (g[0] < WSC_XZ_MIN || g[0] > WSC_XZ_MAX || g[2] < WSC_XZ_MIN || g[2] > WSC_XZ_MAX || g[1] < WSC_Y_MIN ||
-        g[1] > WSC_Y_MAX)
+    if (g[0] < WSC_XZ_MIN || g[0] > WSC_XZ_MAX || g[2] < WSC_XZ_MIN || g[2] > WSC_XZ_MAX ||
+        g[1] < WSC_Y_MIN || g[1] > WSC_Y_MAX)
         return false;
     int32_t b[3];
     uint32_t local[3];
@@ -181,7 +181,8 @@ static void wsc__default_free(void *pointer, size_t size, void *user)
 #if defined(__GNUC__) || defined(__clang__)
 __attribute__((format(printf, 4, 5)))
 #endif
-static osc_result wsc__fail(osc_result result, char *error_text, size_t error_text_cap, const char *format, ...)
+static osc_result
+wsc__fail(osc_result result, char *error_text, size_t error_text_cap, const char *format, ...)
 {
     if (error_text && error_text_cap > 0) {
         va_list arguments;
@@ -214,23 +215,25 @@ static osc_result wsc__resolve_desc(const wsc_desc *desc, wsc_desc *resolved, ch
         if (fx->cell_bytes == 0) {
             if (fx->brick_size != 0 || fx->max_bricks != 0 || fx->convergence)
                 return wsc__fail(OSC_ERR_INVALID_DESC, error_text, cap,
-                                 "effects[%u]: brick_size, max_bricks or convergence set but cell_bytes is 0", effect);
+                                 "effects[%u]: brick_size, max_bricks or convergence set but cell_bytes is 0",
+                                 effect);
             continue;
         }
         if (fx->cell_bytes > WSC__MAX_CELL_BYTES)
-            return wsc__fail(OSC_ERR_INVALID_DESC, error_text, cap, "effects[%u].cell_bytes %u exceeds 1024", effect,
-                             fx->cell_bytes);
+            return wsc__fail(OSC_ERR_INVALID_DESC, error_text, cap, "effects[%u].cell_bytes %u exceeds 1024",
+                             effect, fx->cell_bytes);
         if (fx->brick_size == 0)
             fx->brick_size = 1;
         if (fx->brick_size != 1 && fx->brick_size != 4)
-            return wsc__fail(OSC_ERR_INVALID_DESC, error_text, cap, "effects[%u].brick_size %u is neither 1 nor 4",
-                             effect, fx->brick_size);
+            return wsc__fail(OSC_ERR_INVALID_DESC, error_text, cap,
+                             "effects[%u].brick_size %u is neither 1 nor 4", effect, fx->brick_size);
         if (fx->max_bricks > WSC__MAX_BRICKS)
-            return wsc__fail(OSC_ERR_INVALID_DESC, error_text, cap, "effects[%u].max_bricks %u exceeds 2^30", effect,
-                             fx->max_bricks);
+            return wsc__fail(OSC_ERR_INVALID_DESC, error_text, cap, "effects[%u].max_bricks %u exceeds 2^30",
+                             effect, fx->max_bricks);
     }
     if (!wsc__resolve_allocator(&desc->allocator, &resolved->allocator))
-        return wsc__fail(OSC_ERR_INVALID_DESC, error_text, cap, "allocator: set both alloc and free, or neither");
+        return wsc__fail(OSC_ERR_INVALID_DESC, error_text, cap,
+                         "allocator: set both alloc and free, or neither");
     return OSC_OK;
 }
 
@@ -344,7 +347,8 @@ bool wsc_cell_corners(const wsc_cache *cache, uint32_t effect, uint32_t level, c
         payload[c] = NULL;
     uint64_t base;
     if (effect >= WSC_MAX_EFFECTS || !cache->cores[effect] || cache->effects[effect].brick_size != 1 ||
-        g[0] >= WSC_XZ_MAX || g[2] >= WSC_XZ_MAX || g[1] >= WSC_Y_MAX || !wsc_wgi_pack(level, g[0], g[1], g[2], &base))
+        g[0] >= WSC_XZ_MAX || g[2] >= WSC_XZ_MAX || g[1] >= WSC_Y_MAX ||
+        !wsc_wgi_pack(level, g[0], g[1], g[2], &base))
         return false;
     /* g + 1 stays in range on every axis, so each field of base has room for the + 1 (no carry). */
     const uint64_t dx = (uint64_t)1 << WSC_WGI_X_SHIFT, dy = (uint64_t)1 << WSC_WGI_Y_SHIFT,
@@ -505,11 +509,11 @@ struct wsc_local {
     osc_allocator allocator;
     const wsc_cache *cache;
     uint32_t side, side_mask, levels;
-    size_t slots_per_effect;                   /* levels * side^3 */
-    uint64_t *slot_wgis[WSC_MAX_EFFECTS];      /* [slots_per_effect], WSC_WGI_EMPTY = unused; NULL: absent */
-    uint32_t *slot_bricks[WSC_MAX_EFFECTS];    /* [slots_per_effect] */
+    size_t slots_per_effect;                    /* levels * side^3 */
+    uint64_t *slot_wgis[WSC_MAX_EFFECTS];       /* [slots_per_effect], WSC_WGI_EMPTY = unused; NULL: absent */
+    uint32_t *slot_bricks[WSC_MAX_EFFECTS];     /* [slots_per_effect] */
     const uint64_t *pool_keys[WSC_MAX_EFFECTS]; /* the core's pool key array: the O(1) trust check */
-    wsc_local_stats stats;                     /* bytes kept up to date at creation */
+    wsc_local_stats stats;                      /* bytes kept up to date at creation */
 };
 
 /* Frees a local table's arrays and the object. */
@@ -542,18 +546,21 @@ osc_result wsc_local_create(const wsc_local_desc *desc, const wsc_cache *cache, 
         resolved.side = WSC__LOCAL_DEFAULT_SIDE;
     if (resolved.levels == 0)
         resolved.levels = WSC_MAX_LEVEL + 1;
-    if (resolved.side < 2 || resolved.side > WSC__LOCAL_MAX_SIDE || (resolved.side & (resolved.side - 1)) != 0)
-        return wsc__fail(OSC_ERR_INVALID_DESC, error_text, error_text_cap, "side %u is not a power of two in 2..64",
-                         resolved.side);
+    if (resolved.side < 2 || resolved.side > WSC__LOCAL_MAX_SIDE ||
+        (resolved.side & (resolved.side - 1)) != 0)
+        return wsc__fail(OSC_ERR_INVALID_DESC, error_text, error_text_cap,
+                         "side %u is not a power of two in 2..64", resolved.side);
     if (resolved.levels > WSC_MAX_LEVEL + 1)
-        return wsc__fail(OSC_ERR_INVALID_DESC, error_text, error_text_cap, "levels %u exceeds 15", resolved.levels);
+        return wsc__fail(OSC_ERR_INVALID_DESC, error_text, error_text_cap, "levels %u exceeds 15",
+                         resolved.levels);
     osc_allocator allocator;
     if (!wsc__resolve_allocator(&resolved.allocator, &allocator))
         return wsc__fail(OSC_ERR_INVALID_DESC, error_text, error_text_cap,
                          "allocator: set both alloc and free, or neither");
     wsc_local *local = allocator.alloc(sizeof *local, allocator.user);
     if (!local)
-        return wsc__fail(OSC_ERR_OUT_OF_MEMORY, error_text, error_text_cap, "out of memory allocating a local table");
+        return wsc__fail(OSC_ERR_OUT_OF_MEMORY, error_text, error_text_cap,
+                         "out of memory allocating a local table");
     memset(local, 0, sizeof *local);
     local->allocator = allocator;
     local->cache = cache;
@@ -591,7 +598,7 @@ void wsc_local_clear(wsc_local *local)
 {
     for (unsigned effect = 0; effect < WSC_MAX_EFFECTS; effect++) {
         if (local->slot_wgis[effect]) {
-            memset(local->slot_wgis[effect], 0xFF, local->slots_per_effect * sizeof(uint64_t)); /* EMPTY */
+            memset(local->slot_wgis[effect], 0xFF, local->slots_per_effect * sizeof(uint64_t));   /* EMPTY */
             memset(local->slot_bricks[effect], 0xFF, local->slots_per_effect * sizeof(uint32_t)); /* NONE */
         }
     }

@@ -50,24 +50,24 @@
  * empty marker, is never a valid WGI, and every stored coordinate value of levels 0..14 stays usable.
  * For bricks of n = 4 the coordinates are the brick's own, b = floor(g / 4) (the same ranges, of which
  * only a quarter is reachable): the brick's WGI names its first cell, grid point 4 * b (wsc_brick_first_cell). */
-#define WSC_MAX_EFFECTS   16u
-#define WSC_MAX_LEVEL     14u
-#define WSC_RESERVED_LEVEL 15u
-#define WSC_WGI_X_SHIFT   0
-#define WSC_WGI_Z_SHIFT   21
-#define WSC_WGI_Y_SHIFT   42
+#define WSC_MAX_EFFECTS     16u
+#define WSC_MAX_LEVEL       14u
+#define WSC_RESERVED_LEVEL  15u
+#define WSC_WGI_X_SHIFT     0
+#define WSC_WGI_Z_SHIFT     21
+#define WSC_WGI_Y_SHIFT     42
 #define WSC_WGI_LEVEL_SHIFT 60
-#define WSC_XZ_BITS       21
-#define WSC_Y_BITS        18
-#define WSC_XZ_OFFSET     (1 << 20)  /* stored = g + offset */
-#define WSC_Y_OFFSET      (1 << 17)
-#define WSC_XZ_MIN        (-(1 << 20))
-#define WSC_XZ_MAX        ((1 << 20) - 1)
-#define WSC_Y_MIN         (-(1 << 17))
-#define WSC_Y_MAX         ((1 << 17) - 1)
-#define WSC_WGI_EMPTY     UINT64_MAX /* never a valid WGI (level 15) */
-#define WSC_NONE          OSC_NONE   /* "no brick" */
-#define WSC_FRAME_NEVER   OSC_FRAME_NEVER
+#define WSC_XZ_BITS         21
+#define WSC_Y_BITS          18
+#define WSC_XZ_OFFSET       (1 << 20) /* stored = g + offset */
+#define WSC_Y_OFFSET        (1 << 17)
+#define WSC_XZ_MIN          (-(1 << 20))
+#define WSC_XZ_MAX          ((1 << 20) - 1)
+#define WSC_Y_MIN           (-(1 << 17))
+#define WSC_Y_MAX           ((1 << 17) - 1)
+#define WSC_WGI_EMPTY       UINT64_MAX /* never a valid WGI (level 15) */
+#define WSC_NONE            OSC_NONE   /* "no brick" */
+#define WSC_FRAME_NEVER     OSC_FRAME_NEVER
 
 /* WSC_ASSERT: programming errors only, on in every build type (as OSC_ASSERT). */
 #define WSC_ASSERT(cond) OSC_ASSERT(cond)
@@ -133,20 +133,20 @@ bool wsc_brick_first_cell(uint64_t wgi, uint32_t brick_size, uint32_t *level, in
 
 /* One world-space effect. All-zero: absent (nothing allocated). */
 typedef struct wsc_effect_desc {
-    uint32_t cell_bytes;  /* payload bytes per cell, 1..1024 (0 = effect absent) */
-    uint32_t brick_size;  /* cells per brick side: 1 (probes) or 4 (volumetric; 64 cells) (default 1) */
-    uint32_t max_bricks;  /* pool capacity in bricks (default 65536) */
-    bool convergence;     /* keep one uint32 convergence word per brick (default false) */
+    uint32_t cell_bytes; /* payload bytes per cell, 1..1024 (0 = effect absent) */
+    uint32_t brick_size; /* cells per brick side: 1 (probes) or 4 (volumetric; 64 cells) (default 1) */
+    uint32_t max_bricks; /* pool capacity in bricks (default 65536) */
+    bool convergence;    /* keep one uint32 convergence word per brick (default false) */
 } wsc_effect_desc;
 
 /* The cache's configuration; zero fields take the defaults written beside them. Table capacity, load and
  * ageing apply to every effect's core (see osc_desc for their meaning and defaults). */
 typedef struct wsc_desc {
     wsc_effect_desc effects[WSC_MAX_EFFECTS]; /* indexed by world-space effect index 0..15 */
-    uint32_t max_load_percent;   /* 10..95 (default 75) */
-    uint32_t initial_age_frames; /* frames (default 64) */
-    uint32_t max_age_frames;     /* frames (default 1024) */
-    osc_allocator allocator;     /* default: malloc / free; every allocation goes through it */
+    uint32_t max_load_percent;                /* 10..95 (default 75) */
+    uint32_t initial_age_frames;              /* frames (default 64) */
+    uint32_t max_age_frames;                  /* frames (default 1024) */
+    osc_allocator allocator;                  /* default: malloc / free; every allocation goes through it */
 } wsc_desc;
 
 typedef struct wsc_cache wsc_cache;
@@ -198,7 +198,7 @@ void wsc_housekeeping(wsc_cache *cache);
 const uint32_t *wsc_frame_bricks(wsc_cache *cache, uint32_t effect, uint32_t *count);
 
 /* Per-brick accessors. Precondition (asserted): the effect is present and brick < its max_bricks. */
-uint64_t wsc_brick_key(const wsc_cache *cache, uint32_t effect, uint32_t brick);       /* WGI, EMPTY if free */
+uint64_t wsc_brick_key(const wsc_cache *cache, uint32_t effect, uint32_t brick); /* WGI, EMPTY if free */
 uint64_t wsc_brick_requested(const wsc_cache *cache, uint32_t effect, uint32_t brick); /* cells, this frame */
 uint64_t wsc_brick_valid(const wsc_cache *cache, uint32_t effect, uint32_t brick);     /* cells with data */
 uint32_t wsc_brick_last_frame(const wsc_cache *cache, uint32_t effect, uint32_t brick); /* or NEVER */
@@ -222,11 +222,11 @@ uint32_t wsc_capacity(const wsc_cache *cache, uint32_t effect);
 
 /* Per-effect figures (cumulative since creation unless said otherwise). */
 typedef struct wsc_effect_stats {
-    uint32_t brick_size;        /* 0: effect absent (every other field 0) */
-    uint32_t entries;           /* WGIs in the effect's table now */
-    uint32_t table_capacity;    /* slots */
-    float table_load;           /* entries / table_capacity */
-    uint32_t bricks_resident;   /* now (equals entries) */
+    uint32_t brick_size;      /* 0: effect absent (every other field 0) */
+    uint32_t entries;         /* WGIs in the effect's table now */
+    uint32_t table_capacity;  /* slots */
+    float table_load;         /* entries / table_capacity */
+    uint32_t bricks_resident; /* now (equals entries) */
     uint32_t bricks_peak;
     uint32_t bricks_this_frame; /* bricks requested in the current frame */
     size_t bytes;               /* every byte allocated for the effect (its osc core), as wsc_memory */
@@ -251,14 +251,14 @@ void wsc_stats_get(const wsc_cache *cache, wsc_stats *out);
  * keys and values, brick metadata, payload reserved and in use, lists; see osc_memory_report, where
  * cache_struct_bytes is the core object). total_bytes equals the bytes that went through the allocator. */
 typedef struct wsc_memory_report {
-    size_t cache_struct_bytes;     /* the wsc_cache object */
-    size_t table_key_bytes;        /* sums over effects */
+    size_t cache_struct_bytes; /* the wsc_cache object */
+    size_t table_key_bytes;    /* sums over effects */
     size_t table_value_bytes;
     size_t block_meta_bytes;
     size_t payload_reserved_bytes;
-    size_t payload_in_use_bytes;   /* part of payload_reserved_bytes */
+    size_t payload_in_use_bytes; /* part of payload_reserved_bytes */
     size_t list_bytes;
-    size_t core_struct_bytes;      /* the osc core objects */
+    size_t core_struct_bytes; /* the osc core objects */
     size_t total_bytes;
     osc_memory_report effects[WSC_MAX_EFFECTS]; /* per effect; its total_bytes is the effect's all */
 } wsc_memory_report;
@@ -281,8 +281,8 @@ void wsc_memory(const wsc_cache *cache, wsc_memory_report *out);
  * brick, so an evicted or re-mapped brick can never be returned for the old WGI. Negative results (not
  * resident) are not kept: they could turn positive without the slot noticing. */
 typedef struct wsc_local_desc {
-    uint32_t side;    /* slots per axis per level, a power of two 2..64 (default 16: 4096 slots) */
-    uint32_t levels;  /* levels 0..levels-1 get slots; coarser WGIs go to the table directly, counted as
+    uint32_t side;   /* slots per axis per level, a power of two 2..64 (default 16: 4096 slots) */
+    uint32_t levels; /* levels 0..levels-1 get slots; coarser WGIs go to the table directly, counted as
                          bypasses (1..15, default 15: every level) */
     osc_allocator allocator; /* default: malloc / free */
 } wsc_local_desc;

@@ -16,8 +16,10 @@
  * cloned as above and compiled without -ftrapping-math, since GCC will not turn a float compare-and-select
  * into a vector select while compares may trap. That flag changes no value (only whether FP exception flags
  * may be raised speculatively; nothing here reads them). */
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__linux__) && !defined(FXC_NO_CLONES)
-#define FXC_HOT_LANES __attribute__((noinline, target_clones("arch=x86-64-v3", "default"), optimize("no-trapping-math")))
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__linux__) &&                 \
+    !defined(FXC_NO_CLONES)
+#define FXC_HOT_LANES                                                                                        \
+    __attribute__((noinline, target_clones("arch=x86-64-v3", "default"), optimize("no-trapping-math")))
 #elif defined(__GNUC__) && !defined(__clang__)
 #define FXC_HOT_LANES __attribute__((noinline, optimize("no-trapping-math")))
 #else

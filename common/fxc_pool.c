@@ -61,12 +61,12 @@ struct fxc_pool {
     pthread_mutex_t lock;
     pthread_cond_t work_ready, work_done;
     atomic_bool stopping;
-    atomic_uint sleepers;                 /* workers waiting on work_ready (or about to) */
-    atomic_uint busy;                     /* workers inside a run */
-    _Atomic(uint64_t) claim;              /* generation << 32 | next task index */
-    run_params params[2];                 /* by the generation's parity */
-    atomic_uint remaining;                /* static runs: tasks not yet finished */
-    pool_part *parts;                     /* static runs: [thread_count], one cache line each */
+    atomic_uint sleepers;    /* workers waiting on work_ready (or about to) */
+    atomic_uint busy;        /* workers inside a run */
+    _Atomic(uint64_t) claim; /* generation << 32 | next task index */
+    run_params params[2];    /* by the generation's parity */
+    atomic_uint remaining;   /* static runs: tasks not yet finished */
+    pool_part *parts;        /* static runs: [thread_count], one cache line each */
 };
 
 typedef struct worker_start {
@@ -134,7 +134,8 @@ static void drain_static(fxc_pool *pool, uint32_t g, uint32_t thread_index)
         return;
     for (uint32_t k = 1; k < threads; k++) {
         uint32_t part = (thread_index + k) % threads;
-        drain_part(pool, g, part, thread_index, false, task, user, fxc_pool_static_begin(count, threads, part));
+        drain_part(pool, g, part, thread_index, false, task, user,
+                   fxc_pool_static_begin(count, threads, part));
     }
 }
 

@@ -13,7 +13,8 @@
 
 enum {
     FXC_POOL_MAX_THREADS = 256,
-    FXC_POOL_STATIC_MAX = 65535 /* the most tasks a static run splits; larger counts are handed out dynamically */
+    FXC_POOL_STATIC_MAX =
+        65535 /* the most tasks a static run splits; larger counts are handed out dynamically */
 };
 
 typedef struct fxc_pool fxc_pool;

@@ -9,24 +9,24 @@
 
 #define FXC_RESULT_LIST(X)                                                                                   \
     X(FXC_OK, 0, "ok")                                                                                       \
-    X(FXC_ERR_INVALID, -1, "invalid argument or description")                                              \
+    X(FXC_ERR_INVALID, -1, "invalid argument or description")                                                \
     X(FXC_ERR_NOMEM, -2, "out of memory")                                                                    \
     X(FXC_ERR_NO_POOL, -3, "the effect has no block pool")                                                   \
-    X(FXC_ERR_POOL_EXHAUSTED, -4, "every block of the effect's pool is requested this frame")              \
-    X(FXC_ERR_TABLE_FULL, -5, "the hash table is at its maximum load")                                      \
+    X(FXC_ERR_POOL_EXHAUSTED, -4, "every block of the effect's pool is requested this frame")                \
+    X(FXC_ERR_TABLE_FULL, -5, "the hash table is at its maximum load")                                       \
     X(FXC_ERR_NOT_FOUND, -6, "not found")                                                                    \
     X(FXC_ERR_IO, -7, "cannot read or write a file")                                                         \
     X(FXC_ERR_FORMAT, -8, "unsupported or malformed file")                                                   \
-    X(FXC_ERR_JSON, -9, "malformed scene description")                                                      \
-    X(FXC_ERR_CONTENT, -10, "invalid scene content")                                                        \
+    X(FXC_ERR_JSON, -9, "malformed scene description")                                                       \
+    X(FXC_ERR_CONTENT, -10, "invalid scene content")                                                         \
     X(FXC_ERR_RANGE, -11, "value out of range")                                                              \
     X(FXC_ERR_EMPTY, -12, "empty scene")                                                                     \
     X(FXC_ERR_EMBREE, -13, "Embree error")                                                                   \
-    X(FXC_ERR_STALE_ID, -14, "no such viewer: the id is stale, was removed or never existed")              \
+    X(FXC_ERR_STALE_ID, -14, "no such viewer: the id is stale, was removed or never existed")                \
     X(FXC_ERR_NO_SLOT, -15, "every viewer slot is taken")                                                    \
     X(FXC_ERR_CAMERA, -16,                                                                                   \
-      "invalid camera (non-finite, position equals target, fov outside (0, 180), or beyond 1e13 m)")        \
-    X(FXC_ERR_EFFECTS, -17, "invalid effect list (unknown dependency, too many effects, or a bad table)")   \
+      "invalid camera (non-finite, position equals target, fov outside (0, 180), or beyond 1e13 m)")         \
+    X(FXC_ERR_EFFECTS, -17, "invalid effect list (unknown dependency, too many effects, or a bad table)")    \
     X(FXC_ERR_THREADS, -18, "cannot start threads")                                                          \
     X(FXC_ERR_BAD_MAGIC, -19, "not an fxcache message (bad magic)")                                          \
     X(FXC_ERR_VERSION, -20, "unsupported protocol version")                                                  \

@@ -82,14 +82,16 @@ typedef struct fx_context {
      * none. False (all NULL) outside the grid's range. The same contract as world_taps otherwise: committed
      * data only, read-only, any thread. Probe updates keep what it returns per thread for the frame (see
      * epoch), so a cell's 8 corners are looked up once, not once per ray that hits it. */
-    bool (*world_cell)(const void *user, uint32_t effect, uint32_t level, const float centre[3], const void *texel[8]);
+    bool (*world_cell)(const void *user, uint32_t effect, uint32_t level, const float centre[3],
+                       const void *texel[8]);
     const void *world_user;
-    uint64_t epoch; /* unique per loop within the process (0: unknown). With frame it names the payloads'
+    uint64_t epoch;      /* unique per loop within the process (0: unknown). With frame it names the payloads'
                        state: memos that keep pointers into the cache are kept only while both are the same */
-    uint32_t probe_rays;    /* rays per probe update (default 144, DDGI's) */
-    uint32_t frame;         /* the frame being run, + 1 (0: unknown). Cache payloads change only between
+    uint32_t probe_rays; /* rays per probe update (default 144, DDGI's) */
+    uint32_t frame;      /* the frame being run, + 1 (0: unknown). Cache payloads change only between
                                frames, so what is derived from them can be kept within one frame. */
-    float probe_hysteresis; /* weight of the old irradiance in a probe update's blend (default 0.97, RTXGI's) */
+    float
+        probe_hysteresis; /* weight of the old irradiance in a probe update's blend (default 0.97, RTXGI's) */
     uint32_t reference_bounces; /* the reference's path tracing (fx_indirect_reference_point): bounces at most
                                    (0: until Russian roulette ends the path) */
     /* Run-time sample counts (0: the default). In a cached run they are what a texel converges at; in the
@@ -104,7 +106,7 @@ typedef struct fx_context {
 
 /* One queued block. payload and lookup point into the cache; the effect writes payload texels of mask. */
 typedef struct fx_block_job {
-    uint64_t key;           /* the block's cache key (seeds the random numbers) */
+    uint64_t key; /* the block's cache key (seeds the random numbers) */
     uint32_t island, level, block_x, block_y;
     uint64_t mask;          /* texels to update */
     const uint32_t *lookup; /* the block's 64 triangle-lookup texels (valid for every texel of mask) */
@@ -158,8 +160,9 @@ void fx_surface_point(const scene *s, uint32_t island, uint32_t lookup, float is
  * ray from pos reaches it past every surface, and is otherwise clamped into the triangle, so no ray starts on
  * or behind another surface. Returns the fraction; *rays receives the rays traced, those checks included
  * (0 when facing away). */
-float fx_shadow_eval_point(const fx_context *ctx, const float pos[3], const float normal[3], const float dpdx[3],
-                           const float dpdy[3], uint32_t light, uint64_t pixel_id, uint64_t *rays);
+float fx_shadow_eval_point(const fx_context *ctx, const float pos[3], const float normal[3],
+                           const float dpdx[3], const float dpdy[3], uint32_t light, uint64_t pixel_id,
+                           uint64_t *rays);
 
 /* AO at a visible point with `samples` cosine-weighted rays, seeded by (seed, pixel_id), from pos moved a
  * rounding-safe distance inside the triangle it lies on (a pixel exactly on a crease reads the AO beside it,
@@ -188,10 +191,10 @@ void fx_light_direction(const scene_light *light, const float pos[3], float dir[
  * sky of radiance L gives pi L); shade hands compose E / pi, which is what compose's bracket holds. */
 enum {
     FX_PROBE_BYTES = 672,
-    FX_PROBE_MAP = 8,               /* octahedral map side, texels */
+    FX_PROBE_MAP = 8, /* octahedral map side, texels */
     FX_PROBE_TEXELS = 64,
-    FX_PROBE_RAYS = 144,            /* default rays per update (DDGI's) */
-    FX_PROBE_MAX_RAYS = 4096,       /* probe_rays is clamped to this */
+    FX_PROBE_RAYS = 144,      /* default rays per update (DDGI's) */
+    FX_PROBE_MAX_RAYS = 4096, /* probe_rays is clamped to this */
     FX_PROBE_HAS_DATA = 1u,
     FX_PROBE_OFF = 2u,
     FX_PROBE_MOVED_OUT = 4u,
@@ -244,15 +247,15 @@ void fx_probe_eval_point(const fx_context *ctx, const float pos[3], const float 
  * ctx->reference_bounces vertices (0: no limit but FX_PATH_MAX_VERTICES). Writes E (true units, pi L under a
  * uniform sky L, as fx_probe_eval_point) to out_rgb; *rays receives the rays traced (paths and shadow rays). */
 enum { FX_PATH_MAX_VERTICES = 256 };
-void fx_indirect_reference_point(const fx_context *ctx, const float pos[3], const float normal[3], uint32_t paths,
-                                 uint64_t stream, float out_rgb[3], uint64_t *rays);
+void fx_indirect_reference_point(const fx_context *ctx, const float pos[3], const float normal[3],
+                                 uint32_t paths, uint64_t stream, float out_rgb[3], uint64_t *rays);
 
 /* ---- effects as plug-ins: one table of data and callbacks per effect ---------------------------------- */
 
 enum {
-    FX_MAX_EFFECTS = 16,  /* the on-surface key's 4-bit effect field */
-    FX_RUN_PIXELS = 64,   /* compose hands an effect at most this many pixels per shade call */
-    FX_MAX_TAPS = 16,     /* texels one filtered read touches (trilinear: 8; world-space cells blended
+    FX_MAX_EFFECTS = 16, /* the on-surface key's 4-bit effect field */
+    FX_RUN_PIXELS = 64,  /* compose hands an effect at most this many pixels per shade call */
+    FX_MAX_TAPS = 16,    /* texels one filtered read touches (trilinear: 8; world-space cells blended
                              across two levels: 16) */
 };
 
@@ -270,13 +273,14 @@ typedef struct fx_taps {
 
 /* A visible point as compose sees it (for the no-cache evaluation and for world-space effects). */
 typedef struct fx_point {
-    float position[3];  /* world (scene-local) position */
-    float normal[3];    /* unit geometric normal of the hit triangle (its front side) */
+    float position[3];    /* world (scene-local) position */
+    float normal[3];      /* unit geometric normal of the hit triangle (its front side) */
     float view_normal[3]; /* the same normal turned to the side the viewer sees (what light reaches) */
-    float dpdx[3], dpdy[3]; /* the pixel's footprint on the surface: offsets to the next pixel right and down */
-    uint32_t triangle;  /* scene triangle */
-    float u, v;         /* barycentrics of corners 1 and 2 */
-    uint64_t pixel_id;  /* seeds the no-cache random numbers */
+    float dpdx[3],
+        dpdy[3];       /* the pixel's footprint on the surface: offsets to the next pixel right and down */
+    uint32_t triangle; /* scene triangle */
+    float u, v;        /* barycentrics of corners 1 and 2 */
+    uint64_t pixel_id; /* seeds the no-cache random numbers */
 } fx_point;
 
 /* The shading terms of a run of pixels that compose combines as
@@ -285,21 +289,21 @@ typedef struct fx_point {
  * Compose starts every pixel unshadowed (1), unoccluded (1) and with no indirect light (0); each effect's
  * shade multiplies the visibility it knows and adds the light it brings. The arrays hold `count` pixels. */
 typedef struct fx_shade_run {
-    uint32_t count;               /* pixels in the run, <= FX_RUN_PIXELS */
-    uint32_t light_count;         /* the scene's lights */
-    const fx_taps *taps;          /* per pixel: this effect's filtered texels (cached mode) */
-    const fx_point *points;       /* per pixel: the visible point; may be NULL when no shading cache
+    uint32_t count;          /* pixels in the run, <= FX_RUN_PIXELS */
+    uint32_t light_count;    /* the scene's lights */
+    const fx_taps *taps;     /* per pixel: this effect's filtered texels (cached mode) */
+    const fx_point *points;  /* per pixel: the visible point; may be NULL when no shading cache
                                      kind needs positions (compose gathers points for readers only) */
-    float *light_visibility;      /* count * light_count, pixel-major */
-    float *sky_visibility;        /* count */
-    float *indirect;              /* count * 3, linear RGB irradiance */
+    float *light_visibility; /* count * light_count, pixel-major */
+    float *sky_visibility;   /* count */
+    float *indirect;         /* count * 3, linear RGB irradiance */
 } fx_shade_run;
 
 /* The terms of one pixel in no-cache mode (same meaning as fx_shade_run's, one pixel). */
 typedef struct fx_shade_point {
     float *light_visibility; /* light_count */
     float *sky_visibility;
-    float *indirect;         /* 3 */
+    float *indirect; /* 3 */
     /* Optional (NULL: not asked). An effect that replaces the sky term by light that carries the sky (the
      * probes: sky_visibility becomes 0) writes here the sky visibility it found and scaled its light by (what
      * ambient occlusion left): the ambient-occlusion term a picture of it shows. */
@@ -312,14 +316,14 @@ typedef struct fx_shade_point {
  * NULL. Every callback is called from any thread with distinct blocks or pixels and must be deterministic
  * (random numbers from hashes of seed, key, texel and sample index). */
 typedef struct fx_effect {
-    const char *name;             /* "shadow": command line, statistics, summaries */
-    const char *alias;            /* another accepted spelling on the command line ("shadows"), or NULL */
-    scene_cache_kind cache;       /* where it lives: SCENE_CACHE_ON_SURFACE or SCENE_CACHE_WORLD_SPACE */
-    int32_t level_bias;           /* default level bias (coarser is positive) */
-    fx_filter filter;             /* how compose reads it */
-    fx_policy policy;             /* once, progressive to max_samples, continuous */
-    uint32_t max_samples;         /* progressive: samples at which a texel is converged */
-    const char *depends_on;       /* the effect (by name) whose texels of the same block every update needs
+    const char *name;       /* "shadow": command line, statistics, summaries */
+    const char *alias;      /* another accepted spelling on the command line ("shadows"), or NULL */
+    scene_cache_kind cache; /* where it lives: SCENE_CACHE_ON_SURFACE or SCENE_CACHE_WORLD_SPACE */
+    int32_t level_bias;     /* default level bias (coarser is positive) */
+    fx_filter filter;       /* how compose reads it */
+    fx_policy policy;       /* once, progressive to max_samples, continuous */
+    uint32_t max_samples;   /* progressive: samples at which a texel is converged */
+    const char *depends_on; /* the effect (by name) whose texels of the same block every update needs
                                      (every on-surface effect: "triangle_lookup"), or NULL */
 
     /* Payload bytes per texel for scene s (> 0, <= 1024). */
@@ -368,7 +372,8 @@ typedef struct fx_effect {
      * random number hashed from (ctx->seed, point->pixel_id), so calls with different pixel_ids are
      * independent estimates. Terms are taken on the side the viewer sees (point->view_normal). Returns the
      * rays traced. NULL: the effect has no reference estimator (the reference renderer refuses to run it). */
-    uint64_t (*reference)(const fx_context *ctx, const fx_point *point, uint32_t samples, fx_shade_point *out);
+    uint64_t (*reference)(const fx_context *ctx, const fx_point *point, uint32_t samples,
+                          fx_shade_point *out);
     uint32_t reference_samples; /* the reference's default samples per pixel */
     uint32_t reference_granule; /* samples come in sets of this many (0: 1) */
     const char *reference_unit; /* what a sample is, for messages and --help: "rays", "rays per light", ... */
@@ -384,7 +389,8 @@ int32_t fx_find(const fx_effect *const *effects, uint32_t count, const char *nam
 /* Which of effects[0..count) scene s needs, with a reason for each (why[i], why_cap bytes each): an
  * effect with a needs callback decides for itself; one without is needed exactly when a needed effect
  * depends on it. */
-void fx_needs(const fx_effect *const *effects, uint32_t count, const scene *s, bool *needed, char (*why)[200]);
+void fx_needs(const fx_effect *const *effects, uint32_t count, const scene *s, bool *needed,
+              char (*why)[200]);
 
 /* The built-in tables (each defined beside its effect's code). */
 extern const fx_effect fx_effect_triangle_lookup, fx_effect_shadow, fx_effect_ao, fx_effect_probes;

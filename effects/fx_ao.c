@@ -63,8 +63,7 @@ static void ao_flush(const fx_context *ctx, ao_batch *batch)
         uint32_t total = texel->count + texel->added;
         uint32_t fraction = (uint32_t)lrint((double)texel->unoccluded * 65535.0 / (double)total);
         fx__put_u16(texel->texel_bytes, (uint16_t)(fraction > 65535u ? 65535u : fraction));
-        fx__put_u16(texel->texel_bytes + 2,
-                    (uint16_t)(total > max ? max : total));
+        fx__put_u16(texel->texel_bytes + 2, (uint16_t)(total > max ? max : total));
     }
     batch->ray_count = 0;
     batch->pending_count = 0;
@@ -103,7 +102,8 @@ uint64_t fx_ao_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
                 continue; /* converged (a larger stored count saturates here too) */
             uint32_t add = max - stored;
             add = samples < add ? samples : add;
-            add = add < FX_RAY_BATCH ? add : FX_RAY_BATCH; /* a texel's rays fit one batch; the rest next time */
+            add = add < FX_RAY_BATCH ? add
+                                     : FX_RAY_BATCH; /* a texel's rays fit one batch; the rest next time */
             /* Recover the exact number of unoccluded rays from the stored mean. */
             long unoccluded = stored ? lrint((double)fx__get_u16(texel_bytes) * stored / 65535.0) : 0;
             if (unoccluded > (long)stored)
@@ -240,7 +240,8 @@ FXC_HOT_CLONES static void ao_shade(const fx_context *ctx, const fx_shade_run *r
         if (taps->count == 0)
             continue;
         float ao = 0;
-        if (taps->count == 4) { /* most pixels: the loop below written out (the same sum, in the same order) */
+        if (taps->count ==
+            4) { /* most pixels: the loop below written out (the same sum, in the same order) */
             ao = ao + taps->weight[0] * fx__unorm16(fx__get_u16(taps->texel[0])) +
                  taps->weight[1] * fx__unorm16(fx__get_u16(taps->texel[1])) +
                  taps->weight[2] * fx__unorm16(fx__get_u16(taps->texel[2])) +
@@ -256,17 +257,18 @@ FXC_HOT_CLONES static void ao_shade(const fx_context *ctx, const fx_shade_run *r
 static uint64_t ao_eval(const fx_context *ctx, const fx_point *point, fx_shade_point *out)
 {
     uint64_t rays = 0;
-    *out->sky_visibility *= fx_ao_eval_point(ctx, point->position, point->normal, ao_max_samples(ctx),
-                                             point->pixel_id, &rays);
+    *out->sky_visibility *=
+        fx_ao_eval_point(ctx, point->position, point->normal, ao_max_samples(ctx), point->pixel_id, &rays);
     return rays;
 }
 
 /* The reference: `samples` rays from the side the viewer sees, one Sobol set scrambled by the pixel id. */
-static uint64_t ao_reference(const fx_context *ctx, const fx_point *point, uint32_t samples, fx_shade_point *out)
+static uint64_t ao_reference(const fx_context *ctx, const fx_point *point, uint32_t samples,
+                             fx_shade_point *out)
 {
     uint64_t rays = 0;
-    *out->sky_visibility *= fx_ao_eval_point(ctx, point->position, point->view_normal, samples, point->pixel_id,
-                                             &rays);
+    *out->sky_visibility *=
+        fx_ao_eval_point(ctx, point->position, point->view_normal, samples, point->pixel_id, &rays);
     return rays;
 }
 

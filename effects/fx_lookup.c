@@ -199,12 +199,13 @@ static uint64_t lookup_cost(const scene *s, uint32_t samples)
     return 0; /* no rays */
 }
 
-static uint64_t lookup_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count, uint32_t samples)
+static uint64_t lookup_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count,
+                              uint32_t samples)
 {
     (void)samples;
     for (uint32_t j = 0; j < count; j++)
-        fx_lookup_update(ctx->s, jobs[j].island, jobs[j].level, jobs[j].block_x, jobs[j].block_y, jobs[j].mask,
-                         jobs[j].payload);
+        fx_lookup_update(ctx->s, jobs[j].island, jobs[j].level, jobs[j].block_x, jobs[j].block_y,
+                         jobs[j].mask, jobs[j].payload);
     return 0;
 }
 

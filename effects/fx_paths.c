@@ -34,14 +34,14 @@
 #include <string.h>
 
 enum {
-    PATH_CHUNK = 128,                  /* paths traced together (one intersection stream per vertex) */
-    FX_STREAM_PATH_FIRST = 0x5046,     /* "PF": the first directions' scramble */
-    FX_STREAM_PATH_BOUNCE = 0x5042,    /* "PB": later directions */
-    FX_STREAM_PATH_ROULETTE = 0x5055,  /* "PU": Russian roulette */
+    PATH_CHUNK = 128,                 /* paths traced together (one intersection stream per vertex) */
+    FX_STREAM_PATH_FIRST = 0x5046,    /* "PF": the first directions' scramble */
+    FX_STREAM_PATH_BOUNCE = 0x5042,   /* "PB": later directions */
+    FX_STREAM_PATH_ROULETTE = 0x5055, /* "PU": Russian roulette */
 };
 
 #define PATH_SURVIVAL_MAX 0.95f
-#define PATH_PI 3.14159265358979323846
+#define PATH_PI           3.14159265358979323846
 
 /* One live path: where its next ray leaves, which way, and what it carries. */
 typedef struct path_state {
@@ -95,8 +95,8 @@ static uint32_t queue_lights(const fx_context *ctx, path_work *w, double sum[3],
     return queued;
 }
 
-void fx_indirect_reference_point(const fx_context *ctx, const float pos[3], const float normal[3], uint32_t paths,
-                                 uint64_t stream, float out_rgb[3], uint64_t *rays)
+void fx_indirect_reference_point(const fx_context *ctx, const float pos[3], const float normal[3],
+                                 uint32_t paths, uint64_t stream, float out_rgb[3], uint64_t *rays)
 {
     const scene *s = ctx->s;
     float sky[3];

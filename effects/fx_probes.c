@@ -96,7 +96,6 @@
 #include <pthread.h>
 #include <stdlib.h>
 
-
 /* Values >= 0 to halves, each rounded up with probability equal to its position between the two neighbouring
  * halves (u in [0, 1)), so the rounding is unbiased; saturates at the largest half (65504), never infinity;
  * negative values and NaN become 0 (irradiance and distances are never negative). Written without branches
@@ -107,7 +106,8 @@
 FXC_HOT_CLONES static void halves_stochastic(const float *restrict x, const float *restrict u, uint32_t n,
                                              uint16_t *restrict out)
 {
-    for (uint32_t i = 0; i < n; i++) { /* selects only: && or a bool mixed into integers stop the vectoriser */
+    for (uint32_t i = 0; i < n;
+         i++) { /* selects only: && or a bool mixed into integers stop the vectoriser */
         float xi = x[i];
         float v = xi > 0 ? xi : 0.0f;
         v = v < 65504.0f ? v : 65504.0f;
@@ -129,14 +129,14 @@ FXC_HOT_CLONES static void halves_stochastic(const float *restrict x, const floa
 typedef struct probe_scratch {
     float irradiance[FX_PROBE_TEXELS][3]; /* new estimate of E per texel */
     float irradiance_weight[FX_PROBE_TEXELS];
-    float moments[FX_PROBE_TEXELS][2];    /* new mean distance and squared distance, cells */
+    float moments[FX_PROBE_TEXELS][2]; /* new mean distance and squared distance, cells */
     float moment_weight[FX_PROBE_TEXELS];
-    float position[3];                    /* relocated position for the next update */
+    float position[3]; /* relocated position for the next update */
     float backface_fraction;
     uint32_t off;
     uint32_t moved_out;  /* FX_PROBE_MOVED_OUT for the payload */
     uint32_t seen_front; /* FX_PROBE_SEEN_FRONT for the payload */
-    uint32_t valid; /* 1 once update wrote it */
+    uint32_t valid;      /* 1 once update wrote it */
 } probe_scratch;
 
 /* A uniform random rotation (Shoemake's quaternion from three uniform numbers) as a row-major matrix. */
@@ -170,11 +170,12 @@ typedef struct gather_sums {
  * the weights are kept for the frame; beyond that (probe_rays above the default) each chunk's rows are
  * computed again per probe into the first rows of the table, the same numbers. */
 enum { PROBE_TABLE_RAYS = 256 };
-_Static_assert((int)PROBE_TABLE_RAYS >= (int)PROBE_CHUNK && (int)PROBE_TABLE_RAYS % (int)PROBE_CHUNK == 0, "table rows");
+_Static_assert((int)PROBE_TABLE_RAYS >= (int)PROBE_CHUNK && (int)PROBE_TABLE_RAYS % (int)PROBE_CHUNK == 0,
+               "table rows");
 
 typedef struct probe_directions {
     uint64_t h1, h2; /* the hashes the rotation came from, seed included (valid when rays != 0) */
-    uint32_t rays;         /* 0: none yet */
+    uint32_t rays;   /* 0: none yet */
     float dir[FX_PROBE_MAX_RAYS][3];
     _Alignas(64) float cosine[PROBE_TABLE_RAYS][FX_PROBE_TEXELS];
     _Alignas(64) float lobe[PROBE_TABLE_RAYS][FX_PROBE_TEXELS];
@@ -183,8 +184,8 @@ typedef struct probe_directions {
 
 /* Rows [first, first + n) of the weights into rows [row, row + n) of the table; adds them to the sums when
  * `sum`. Each texel's sum runs in ray order. */
-FXC_HOT_CLONES static void direction_weights(probe_directions *restrict pd, uint32_t first, uint32_t n, uint32_t row,
-                                             bool sum)
+FXC_HOT_CLONES static void direction_weights(probe_directions *restrict pd, uint32_t first, uint32_t n,
+                                             uint32_t row, bool sum)
 {
     float dirs[FX_PROBE_TEXELS][3], dir_x[FX_PROBE_TEXELS], dir_y[FX_PROBE_TEXELS], dir_z[FX_PROBE_TEXELS];
     fx__probe_texel_dirs(dirs);
@@ -226,7 +227,8 @@ static void directions_prepare(probe_directions *pd, uint32_t rays, uint64_t h1,
         float fib[3];
         fx_probe_fibonacci(i, rays, fib);
         for (int k = 0; k < 3; k++)
-            pd->dir[i][k] = rotation[3 * k] * fib[0] + rotation[3 * k + 1] * fib[1] + rotation[3 * k + 2] * fib[2];
+            pd->dir[i][k] =
+                rotation[3 * k] * fib[0] + rotation[3 * k + 1] * fib[1] + rotation[3 * k + 2] * fib[2];
     }
     memset(pd->cosine_sum, 0, sizeof pd->cosine_sum);
     memset(pd->lobe_sum, 0, sizeof pd->lobe_sum);
@@ -341,8 +343,7 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
         /* The frame's rotation (every probe of the frame shares it); without a frame number (ctx->frame 0),
          * one per update count, so successive updates of a probe still turn. */
         uint64_t rotation_key = ctx->frame ? ((uint64_t)1 << 63) | ctx->frame : updates;
-        directions_prepare(pd, rays,
-                           fx__hash(ctx->seed, rotation_key, 0, 0, FX_STREAM_PROBE_ROTATION),
+        directions_prepare(pd, rays, fx__hash(ctx->seed, rotation_key, 0, 0, FX_STREAM_PROBE_ROTATION),
                            fx__hash(ctx->seed, rotation_key, 1, 0, FX_STREAM_PROBE_ROTATION));
         memset(out, 0, sizeof *out);
         memset(acc, 0, sizeof *acc);
@@ -362,8 +363,8 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
             traced += n;
 
             /* The hits' radiance (shadow rays, the bounce) and distances, and the faces seen: fx_probes_hits.c. */
-            traced += fx__probe_shade_chunk(ctx, job, origin, (const float(*)[3])pd->dir + first, hits, n, sky,
-                                            &faces, values);
+            traced += fx__probe_shade_chunk(ctx, job, origin, (const float(*)[3])pd->dir + first, hits, n,
+                                            sky, &faces, values);
             /* Into the texels (file comment): the weight rows of these rays, from the table or computed. */
             if (!table)
                 direction_weights(pd, first, n, 0, false);
@@ -405,7 +406,8 @@ FXC_HOT_CLONES uint64_t fx_probes_update(const fx_context *ctx, const fx_block_j
         if (out->off && isfinite(closest_back)) {
             float moved = 0;
             for (int k = 0; k < 3; k++) {
-                next[k] = fminf(fmaxf(next[k] + back_dir[k] * (closest_back + 0.5f * min_front), -limit), limit);
+                next[k] =
+                    fminf(fmaxf(next[k] + back_dir[k] * (closest_back + 0.5f * min_front), -limit), limit);
                 moved += (next[k] - offset[k]) * back_dir[k];
             }
             /* Through the face only if the clamp leaves it at least a quarter of the margin beyond it; else it
@@ -471,7 +473,8 @@ FXC_HOT_CLONES void fx_probes_commit(const fx_context *ctx, const fx_block_job *
          * the AVX2 copy runs them 8 wide; per half the same operations in the same order as one texel at a
          * time, and the maximum (exact in any order: no NaN, no -0) in 8 partial maxima. */
         enum { IRRADIANCE_HALVES = 3 * FX_PROBE_TEXELS, MOMENT_HALVES = 2 * FX_PROBE_TEXELS };
-        float old_scale = fresh ? 0.0f : get_f32(p + 24), irradiance[IRRADIANCE_HALVES], moments[MOMENT_HALVES];
+        float old_scale = fresh ? 0.0f : get_f32(p + 24), irradiance[IRRADIANCE_HALVES],
+              moments[MOMENT_HALVES];
         float irradiance_weight[IRRADIANCE_HALVES], moment_weight[MOMENT_HALVES];
         for (uint32_t t = 0; t < FX_PROBE_TEXELS; t++) {
             for (int k = 0; k < 3; k++)
@@ -494,7 +497,7 @@ FXC_HOT_CLONES void fx_probes_commit(const fx_context *ctx, const fx_block_job *
             float old = old_scale * half_bits_to_float(old_irradiance[i]);
             float blended = keep * old + take * new_irradiance[i];
             float value = irradiance_weight[i] > 0 ? blended : old;
-            value = value > 0 ? value : 0.0f;                 /* <= 0, -inf and NaN: 0 */
+            value = value > 0 ? value : 0.0f;                   /* <= 0, -inf and NaN: 0 */
             irradiance[i] = value <= FLT_MAX ? value : FLT_MAX; /* +inf: the largest float */
         }
         float partial[8] = {0, 0, 0, 0, 0, 0, 0, 0};
@@ -538,7 +541,6 @@ FXC_HOT_CLONES void fx_probes_commit(const fx_context *ctx, const fx_block_job *
     }
 }
 
-
 /* ---- the effect table ------------------------------------------------------------------------------- */
 
 static uint32_t probes_texel_bytes(const scene *s)
@@ -560,7 +562,8 @@ static uint64_t probes_cost(const scene *s, uint32_t samples)
     return rays * (1u + (uint64_t)s->light_count);
 }
 
-static uint64_t probes_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count, uint32_t samples)
+static uint64_t probes_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count,
+                              uint32_t samples)
 {
     (void)samples;
     return fx_probes_update(ctx, jobs, count);

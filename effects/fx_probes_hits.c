@@ -56,8 +56,8 @@ static void fixed_lights_init(const scene *s, fixed_lights *fl)
 }
 
 /* fx__light_arriving, for a directional light with its direction given (distance infinite, no falloff). */
-FXC_HOT_INLINE bool light_arriving_fixed(const scene_light *light, const float fixed_dir[3], const float normal[3],
-                                         float dir[3], float *distance, float *scale)
+FXC_HOT_INLINE bool light_arriving_fixed(const scene_light *light, const float fixed_dir[3],
+                                         const float normal[3], float dir[3], float *distance, float *scale)
 {
     memcpy(dir, fixed_dir, 3 * sizeof(float));
     *distance = INFINITY;
@@ -85,8 +85,8 @@ FXC_HOT_INLINE uint32_t queue_shadow_rays(const fx_context *ctx, const fixed_lig
             continue;
         if (hs->count == FX_RAY_BATCH)
             shadow_flush(ctx, hs);
-        fx__set_ray(&hs->shadow[hs->count], origin, dir, isinf(distance) ? INFINITY : distance * (1.0f - 1e-4f),
-                    hs->count);
+        fx__set_ray(&hs->shadow[hs->count], origin, dir,
+                    isinf(distance) ? INFINITY : distance * (1.0f - 1e-4f), hs->count);
         hs->owner[hs->count] = (uint16_t)i;
         for (int k = 0; k < 3; k++)
             hs->light[hs->count][k] = min_of(scale * light->color[k], FLT_MAX);
@@ -116,7 +116,12 @@ FXC_HOT_INLINE uint32_t queue_shadow_rays(const fx_context *ctx, const fixed_lig
  * in thread-local storage: static TLS beyond a few hundred KB makes pthread_create fail), allocated at a
  * thread's first update and freed when the thread ends (a pthread key's destructor); if that fails, a small
  * thread-local table serves: more fills, the same numbers. */
-enum { HIT_CELLS_LOG2 = 11, HIT_CELLS = 1 << HIT_CELLS_LOG2, HIT_CELLS_FALLBACK_LOG2 = 8, HIT_CELL_NORMALS = 2 };
+enum {
+    HIT_CELLS_LOG2 = 11,
+    HIT_CELLS = 1 << HIT_CELLS_LOG2,
+    HIT_CELLS_FALLBACK_LOG2 = 8,
+    HIT_CELL_NORMALS = 2
+};
 
 typedef struct hit_cell {
     uint64_t generation; /* the thread's generation it was filled in (0: empty) */
@@ -205,8 +210,9 @@ static void hit_cells_table(void)
     if (table && pthread_setspecific(hit_cells_key, table) == 0) {
         thread_hit_memo = table;
         thread_hit_cells = table->cells;
-        uint32_t log2 = fx__probe_memo_log2 >= 1 && fx__probe_memo_log2 <= HIT_CELLS_LOG2 ? fx__probe_memo_log2
-                                                                                         : HIT_CELLS_LOG2;
+        uint32_t log2 = fx__probe_memo_log2 >= 1 && fx__probe_memo_log2 <= HIT_CELLS_LOG2
+                            ? fx__probe_memo_log2
+                            : HIT_CELLS_LOG2;
         thread_hit_shift = 64 - log2;
     } else {
         free(table);
@@ -232,7 +238,8 @@ FXC_HOT_INLINE hit_cell *hit_cell_entry(uint32_t effect, uint32_t level, const f
     uint32_t bits[3];
     memcpy(bits, centre, sizeof bits);
     uint64_t h = (uint64_t)bits[0] * 0x9E3779B97F4A7C15ull ^ (uint64_t)bits[1] * 0xC2B2AE3D27D4EB4Full ^
-                 (uint64_t)bits[2] * 0x165667B19E3779F9ull ^ ((uint64_t)level << 40) ^ ((uint64_t)effect << 48);
+                 (uint64_t)bits[2] * 0x165667B19E3779F9ull ^ ((uint64_t)level << 40) ^
+                 ((uint64_t)effect << 48);
     h ^= h >> 31;
     h *= 0xD6E8FEB86659FD93ull;
     return &thread_hit_cells[h >> thread_hit_shift];
@@ -276,7 +283,8 @@ FXC_HOT_INLINE void hit_cell_fill(const fx_context *ctx, hit_cell *e, uint32_t e
 
 /* The cell around `centre` (a cell's centre: the same cell gives the same bits from any probe of a grid
  * whose coordinates are exact in float, as powers-of-two cells are; otherwise a cell may take two entries). */
-FXC_HOT_INLINE hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t level, const float centre[3])
+FXC_HOT_INLINE hit_cell *hit_cell_find(const fx_context *ctx, uint32_t effect, uint32_t level,
+                                       const float centre[3])
 {
     hit_cell *e = hit_cell_entry(effect, level, centre);
     if (!hit_cell_holds(e, effect, level, centre))
@@ -319,7 +327,8 @@ FXC_HOT_INLINE uint32_t hit_weights_geometry(const hit_cell *restrict e, const f
         float x = -bx / safe, y = -by / safe, z = -bz / safe;
         float l1 = fabsf(x) + fabsf(y) + fabsf(z);
         float ox = l1 > 0 ? x / (l1 > 0 ? l1 : 1.0f) : 0.0f, oy = l1 > 0 ? y / (l1 > 0 ? l1 : 1.0f) : 0.0f;
-        float fold_x = (1.0f - fabsf(oy)) * (ox >= 0 ? 1.0f : -1.0f), fold_y = (1.0f - fabsf(ox)) * (oy >= 0 ? 1.0f : -1.0f);
+        float fold_x = (1.0f - fabsf(oy)) * (ox >= 0 ? 1.0f : -1.0f),
+              fold_y = (1.0f - fabsf(ox)) * (oy >= 0 ? 1.0f : -1.0f);
         float u = z < 0 ? fold_x : ox, v = z < 0 ? fold_y : oy;
         /* the texel the direction falls in (u, v in [-1, 1]: texel (u + 1) x 4, clamped at the edge) */
         int32_t ix = (int32_t)((u + 1.0f) * 4.0f), iy = (int32_t)((v + 1.0f) * 4.0f);
@@ -344,7 +353,8 @@ FXC_HOT_INLINE const uint8_t *hit_moment_address(const hit_cell *restrict e, int
 
 /* Its second half: the moments' Chebyshev weight times the trilinear weight, the plane test. */
 FXC_HOT_INLINE void hit_weights_finish(const hit_cell *restrict e, const float tap[8], const int32_t texel[8],
-                                       const float weight[8], const float distance[8], uint32_t front, float out[8])
+                                       const float weight[8], const float distance[8], uint32_t front,
+                                       float out[8])
 {
     uint32_t word[8]; /* the texel's two moments: mean distance (low half), mean squared distance */
     float cell[8];
@@ -385,7 +395,8 @@ static inline double cell_inverse(float cell)
 FXC_HOT_INLINE bool hit_locate(const float grid_point[3], float cell, double inverse, const float position[3],
                                float centre[3], double t[3])
 {
-    for (int k = 0; k < 3; k++) { /* the cell and the position in it (wsc_corners' rule, from the grid point) */
+    for (int k = 0; k < 3;
+         k++) { /* the cell and the position in it (wsc_corners' rule, from the grid point) */
         double delta = (double)position[k] - (double)grid_point[k];
         double q = inverse != 0.0 ? delta * inverse : delta / (double)cell, f = floor(q);
         if (!(fabs(f) < 1e9))
@@ -432,7 +443,8 @@ FXC_HOT_INLINE uint32_t cell_normal_compute(hit_cell *e, const float normal[3])
             continue;
         const uint8_t *p = e->texel[c];
         float scale = get_f32(p + 24), r = 0, g = 0, b = 0;
-        for (int i = 0; i < 4; i++) { /* the texel's three halves, written out: the same sums in the same order */
+        for (int i = 0; i < 4;
+             i++) { /* the texel's three halves, written out: the same sums in the same order */
             const uint8_t *q = p + PROBE_IRRADIANCE + 6 * texel[i];
             r += w[i] * half_bits_to_float(fx__get_u16(q));
             g += w[i] * half_bits_to_float(fx__get_u16(q + 2));
@@ -468,8 +480,8 @@ FXC_HOT_INLINE bool cell_sum(const hit_cell *e, uint32_t slot, const float weigh
 
 /* The filter over a cell's corners with trilinear weights `tap`: E of the probes around the hit, or false
  * (out untouched: 0) when none contributes. */
-FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float position[3], const float normal[3],
-                                float out[3])
+FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float position[3],
+                                const float normal[3], float out[3])
 {
     uint32_t slot = cell_normal_find(e, normal);
     if (slot == HIT_CELL_NORMALS)
@@ -481,9 +493,9 @@ FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float pos
 
 /* The filter at a hit (one hit at a time: the path of the tests' comparison and of fx__probe_hits_batched
  * false): E of the probes around it, or false (and 0) when none contributes. */
-FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level, const float grid_point[3],
-                               float cell, double inverse, const float position[3], const float normal[3],
-                               float out[3])
+FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level,
+                               const float grid_point[3], float cell, double inverse, const float position[3],
+                               const float normal[3], float out[3])
 {
     out[0] = out[1] = out[2] = 0;
     float centre[3];
@@ -587,7 +599,8 @@ FXC_HOT_INLINE void batch_bounce(hit_batch *restrict hb, uint32_t from, uint32_t
         const hit_cell *e = hb->entry[i];
         if (e) {
             float weight[8];
-            hit_weights_finish(e, hb->tap[i], hb->texel[i], hb->weight[i], hb->distance[i], hb->front[i], weight);
+            hit_weights_finish(e, hb->tap[i], hb->texel[i], hb->weight[i], hb->distance[i], hb->front[i],
+                               weight);
             cell_sum(e, hb->slot[i], weight, bounce);
         }
     }
@@ -610,7 +623,8 @@ FXC_HOT_INLINE void hits_bounce_prepare(const fx_context *ctx, const fx_block_jo
             continue;
         uint64_t *pending = &memo->pending[e - memo->cells];
         if (!hit_cell_holds(e, effect, level, hb->centre[i])) {
-            if (*pending >> HIT_CELL_NORMALS == batch) { /* a waiting hit reads this entry: finish those first */
+            if (*pending >> HIT_CELL_NORMALS ==
+                batch) { /* a waiting hit reads this entry: finish those first */
                 batch_bounce(hb, done, i);
                 done = i;
                 batch = ++memo->batch_id;
@@ -625,14 +639,16 @@ FXC_HOT_INLINE void hits_bounce_prepare(const fx_context *ctx, const fx_block_jo
         const float *normal = s->tri_normal + 3 * (size_t)hits[r].hit.primID;
         uint32_t slot = cell_normal_find(e, normal);
         if (slot == HIT_CELL_NORMALS) {
-            if (*pending >> HIT_CELL_NORMALS == batch && (*pending >> e->normal_next & 1)) { /* the slot is read */
+            if (*pending >> HIT_CELL_NORMALS == batch &&
+                (*pending >> e->normal_next & 1)) { /* the slot is read */
                 batch_bounce(hb, done, i);
                 done = i;
                 batch = ++memo->batch_id;
             }
             slot = cell_normal_compute(e, normal);
         }
-        *pending = (*pending >> HIT_CELL_NORMALS == batch ? *pending : batch << HIT_CELL_NORMALS) | (1u << slot);
+        *pending =
+            (*pending >> HIT_CELL_NORMALS == batch ? *pending : batch << HIT_CELL_NORMALS) | (1u << slot);
         hb->slot[i] = slot;
         hit_taps(hb->t[i], hb->tap[i]);
         hb->front[i] = hit_weights_geometry(e, hit_pos[r], normal, hb->tap[i], hb->texel[i], hb->weight[i],
@@ -678,9 +694,10 @@ void fx__probe_hits_begin(const fx_context *ctx)
         thread_batch_memo->batch.count = 0;
 }
 
-FXC_HOT_CLONES uint64_t fx__probe_shade_chunk(const fx_context *ctx, const fx_block_job *job, const float origin[3],
-                                              const float (*dirs)[3], const struct RTCRayHit *hits, uint32_t n,
-                                              const float sky[3], fx_probe_faces *faces, float (*values)[5])
+FXC_HOT_CLONES uint64_t fx__probe_shade_chunk(const fx_context *ctx, const fx_block_job *job,
+                                              const float origin[3], const float (*dirs)[3],
+                                              const struct RTCRayHit *hits, uint32_t n, const float sky[3],
+                                              fx_probe_faces *faces, float (*values)[5])
 {
     const scene *s = ctx->s;
     hit_shading *hs = &thread_hit_shading; /* 20 KB: off the (pool thread) stack, never allocated */
@@ -740,8 +757,8 @@ FXC_HOT_CLONES uint64_t fx__probe_shade_chunk(const fx_context *ctx, const fx_bl
                 if (batch) { /* radiance from hits_radiance below */
                     radiance[0] = radiance[1] = radiance[2] = 0;
                 } else {
-                    hit_radiance(ctx, job, inverse, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r], normal,
-                                 hs->direct[r], radiance);
+                    hit_radiance(ctx, job, inverse, rh->hit.primID, rh->hit.u, rh->hit.v, t, hit_pos[r],
+                                 normal, hs->direct[r], radiance);
                 }
                 distance = t;
                 if (t < faces->closest_front) {

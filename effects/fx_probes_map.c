@@ -198,15 +198,16 @@ static float probe_weight(const uint8_t *p, const float position[3], const float
 enum { IRRADIANCE_MEMO = 256 };
 typedef struct irradiance_memo {
     const void *probe;
-    uint64_t epoch; /* ctx->epoch: a later loop's payload may sit at a freed one's address, on the same frame */
+    uint64_t
+        epoch; /* ctx->epoch: a later loop's payload may sit at a freed one's address, on the same frame */
     uint32_t frame;
     float normal[3];
     float e[3];
 } irradiance_memo;
 static _Thread_local irradiance_memo irradiance_memo_table[IRRADIANCE_MEMO];
 
-static void probe_irradiance_memo(const fx_context *ctx, bool committed, const void *probe, const float normal[3],
-                                  float e[3])
+static void probe_irradiance_memo(const fx_context *ctx, bool committed, const void *probe,
+                                  const float normal[3], float e[3])
 {
     /* Without a loop's epoch (0: test harnesses) the entries could not tell two loops apart (a freed loop's
      * payload address reused, the same frame numbers): no memo then. */
@@ -218,11 +219,11 @@ static void probe_irradiance_memo(const fx_context *ctx, bool committed, const v
     uint32_t generation = ctx->frame * 2u + (committed ? 1u : 0u);
     uint32_t bits[3];
     memcpy(bits, normal, sizeof bits);
-    uint64_t h = (uint64_t)(uintptr_t)probe * 0x9E3779B97F4A7C15ull ^ (bits[0] * 0x85EBCA6Bu) ^ (bits[1] * 0xC2B2AE35u) ^
-                 ((uint64_t)bits[2] << 17);
+    uint64_t h = (uint64_t)(uintptr_t)probe * 0x9E3779B97F4A7C15ull ^ (bits[0] * 0x85EBCA6Bu) ^
+                 (bits[1] * 0xC2B2AE35u) ^ ((uint64_t)bits[2] << 17);
     irradiance_memo *m = &irradiance_memo_table[(h ^ (h >> 29)) & (IRRADIANCE_MEMO - 1)];
-    if (m->probe == probe && m->epoch == ctx->epoch && m->frame == generation && m->normal[0] == normal[0] && m->normal[1] == normal[1] &&
-        m->normal[2] == normal[2]) {
+    if (m->probe == probe && m->epoch == ctx->epoch && m->frame == generation && m->normal[0] == normal[0] &&
+        m->normal[1] == normal[1] && m->normal[2] == normal[2]) {
         memcpy(e, m->e, sizeof m->e);
         return;
     }
@@ -236,8 +237,8 @@ static void probe_irradiance_memo(const fx_context *ctx, bool committed, const v
 
 /* The DDGI filter at a point: each probe with data and not off weighted by its trilinear tap weight x wrap x
  * Chebyshev visibility, renormalised; each probe's irradiance towards the normal from the per-thread memo. */
-bool fx__probe_filter_memo(const fx_context *ctx, bool committed, const fx_taps *taps, const float position[3],
-                              const float normal[3], float out_rgb[3])
+bool fx__probe_filter_memo(const fx_context *ctx, bool committed, const fx_taps *taps,
+                           const float position[3], const float normal[3], float out_rgb[3])
 {
     float sum[3] = {0, 0, 0}, total = 0;
     for (uint32_t t = 0; t < taps->count; t++) {
@@ -346,7 +347,8 @@ FXC_HOT_CLONES static void group_weights_lanes(const void *const *probe, uint32_
         float x = -bx / safe, y = -by / safe, z = -bz / safe;
         float l1 = fabsf(x) + fabsf(y) + fabsf(z), l1_safe = l1 > 0 ? l1 : 1.0f;
         float ox = l1 > 0 ? x / l1_safe : 0.0f, oy = l1 > 0 ? y / l1_safe : 0.0f;
-        float fold_x = (1.0f - fabsf(oy)) * (ox >= 0 ? 1.0f : -1.0f), fold_y = (1.0f - fabsf(ox)) * (oy >= 0 ? 1.0f : -1.0f);
+        float fold_x = (1.0f - fabsf(oy)) * (ox >= 0 ? 1.0f : -1.0f),
+              fold_y = (1.0f - fabsf(ox)) * (oy >= 0 ? 1.0f : -1.0f);
         float u = z < 0 ? fold_x : ox, v = z < 0 ? fold_y : oy;
         float fu = (u + 1.0f) * 4.0f - 0.5f, fv = (v + 1.0f) * 4.0f - 0.5f;
         float x0 = floorf(fu), y0 = floorf(fv);
@@ -411,7 +413,8 @@ FXC_HOT_CLONES static void group_weights_lanes(const void *const *probe, uint32_
 
 FXC_HOT_CLONES void fx__probes_shade(const fx_context *ctx, const fx_shade_run *run)
 {
-    (void)ctx; /* the probes' irradiance is read directly, without the per-thread memo of fx__probe_filter_memo */
+    (void)
+        ctx; /* the probes' irradiance is read directly, without the per-thread memo of fx__probe_filter_memo */
     shade_group groups[SHADE_GROUPS];
     uint8_t group_of[FX_RUN_PIXELS];
     uint32_t group_count = 0;
@@ -458,7 +461,8 @@ FXC_HOT_CLONES void fx__probes_shade(const fx_context *ctx, const fx_shade_run *
             const fx_taps *taps = &run->taps[sample];
             float mean[3];
             for (int k = 0; k < 3; k++)
-                mean[k] = sg->pixels == 1 ? run->points[sample].position[k] : sg->position_sum[k] / (float)sg->pixels;
+                mean[k] = sg->pixels == 1 ? run->points[sample].position[k]
+                                          : sg->position_sum[k] / (float)sg->pixels;
             uint32_t texel[4];
             float bilinear[4];
             oct_bilinear_inline(sg->normal, texel, bilinear);
@@ -489,11 +493,11 @@ FXC_HOT_CLONES void fx__probes_shade(const fx_context *ctx, const fx_shade_run *
             float open = run->sky_visibility[i] * (1.0f / FX_PROBE_PI) / total;
             for (int k = 0; k < 3; k++) {
                 float term = sum[k] * open;
-                run->indirect[3 * i + k] += term < FLT_MAX ? term : FLT_MAX; /* fminf(term, FLT_MAX), NaN included */
+                run->indirect[3 * i + k] +=
+                    term < FLT_MAX ? term : FLT_MAX; /* fminf(term, FLT_MAX), NaN included */
             }
             run->sky_visibility[i] = 0.0f;
         }
         done = end;
     }
 }
-

@@ -25,7 +25,8 @@ int32_t fx_find(const fx_effect *const *effects, uint32_t count, const char *nam
     if (!name)
         return -1;
     for (uint32_t i = 0; i < count; i++)
-        if (strcmp(effects[i]->name, name) == 0 || (effects[i]->alias && strcmp(effects[i]->alias, name) == 0))
+        if (strcmp(effects[i]->name, name) == 0 ||
+            (effects[i]->alias && strcmp(effects[i]->alias, name) == 0))
             return (int32_t)i;
     return -1;
 }
@@ -44,7 +45,8 @@ void fx_needs(const fx_effect *const *effects, uint32_t count, const scene *s, b
             continue;
         char users[160] = "";
         for (uint32_t j = 0; j < count; j++)
-            if (needed[j] && effects[j]->depends_on && strcmp(effects[j]->depends_on, effects[i]->name) == 0) {
+            if (needed[j] && effects[j]->depends_on &&
+                strcmp(effects[j]->depends_on, effects[i]->name) == 0) {
                 size_t used = strlen(users);
                 snprintf(users + used, sizeof users - used, "%s%s", used ? ", " : "", effects[j]->name);
             }

@@ -61,7 +61,8 @@ static inline uint32_t shadow_texel_rays(const fx_context *ctx)
 /* The n jitter offsets in [0,1)^2 of the stratified pattern (n of 1, 2, 4, 8, 16: a columns x rows grid of
  * strata, ray i in stratum (i % columns, i / columns)) for hash inputs (seed, key, texel). With 16 rays this is
  * the 4 x 4 pattern whose cell i is mask bit i. */
-static void shadow_jitter(uint32_t seed, uint64_t key, uint32_t texel, uint32_t n, float offsets[FX_SHADOW_RAYS][2])
+static void shadow_jitter(uint32_t seed, uint64_t key, uint32_t texel, uint32_t n,
+                          float offsets[FX_SHADOW_RAYS][2])
 {
     uint32_t columns = shadow_columns(n), rows = n / columns;
     float cell_x = 1.0f / (float)columns, cell_y = 1.0f / (float)rows; /* 0.25f exactly for 4 */
@@ -199,8 +200,9 @@ float fx_shadow_sample(const void *payload, uint32_t texel, uint32_t light_count
 }
 
 /* fx_shadow_eval_point with n rays (1, 2, 4, 8 or 16) in n strata of the footprint. */
-static float shadow_eval_rays(const fx_context *ctx, const float pos[3], const float normal[3], const float dpdx[3],
-                              const float dpdy[3], uint32_t light, uint64_t pixel_id, uint32_t n, uint64_t *rays)
+static float shadow_eval_rays(const fx_context *ctx, const float pos[3], const float normal[3],
+                              const float dpdx[3], const float dpdy[3], uint32_t light, uint64_t pixel_id,
+                              uint32_t n, uint64_t *rays)
 {
     FX_ASSERT(light < ctx->s->light_count && n >= 1 && n <= FX_SHADOW_RAYS);
     const scene *s = ctx->s;
@@ -317,7 +319,8 @@ static uint32_t shadow_run_samples(const fx_context *ctx)
     return shadow_texel_rays(ctx);
 }
 
-static uint64_t shadow_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count, uint32_t samples)
+static uint64_t shadow_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count,
+                              uint32_t samples)
 {
     (void)samples;
     return fx_shadow_update(ctx, jobs, count);
@@ -359,8 +362,8 @@ static inline int shadow_tap_at(const fx_taps *taps, int from, int ox, int oy)
 /* For shadow_shade's fine path: the tap whose texel holds the pixel (the one with the largest weight if none
  * does exactly), the first of the four fine cells around the pixel (cx0, cy0, in cells of that texel) and
  * their bilinear weights, cell c at (c & 1, c >> 1) from the first. */
-static inline __attribute__((always_inline)) void shadow_fine_cells(const fx_taps *taps, int *home_out, float *cx0_out,
-                                                                    float *cy0_out, float cell_weight[4])
+static inline __attribute__((always_inline)) void
+shadow_fine_cells(const fx_taps *taps, int *home_out, float *cx0_out, float *cy0_out, float cell_weight[4])
 {
     int home = 0;
     for (uint32_t t = 0; t < taps->count; t++) {
@@ -487,8 +490,8 @@ FXC_HOT_CLONES static void shadow_shade(const fx_context *ctx, const fx_shade_ru
                     }
                 } else {
                     average = average + taps->weight[0] * lit_fraction_hot(m0) +
-                              taps->weight[1] * lit_fraction_hot(m1) + taps->weight[2] * lit_fraction_hot(m2) +
-                              taps->weight[3] * lit_fraction_hot(m3);
+                              taps->weight[1] * lit_fraction_hot(m1) +
+                              taps->weight[2] * lit_fraction_hot(m2) + taps->weight[3] * lit_fraction_hot(m3);
                 }
             } else {
                 for (uint32_t t = 0; t < taps->count; t++) {

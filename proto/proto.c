@@ -229,8 +229,8 @@ static fxc_result check_hello(const proto_hello *h)
         !depth_ok(h->depth))
         return FXC_ERR_RANGE;
     /* The quality belongs to JPEG alone: a nonzero quality with a lossless codec is a confused client. */
-    bool quality_ok = h->codec == PROTO_CODEC_JPEG ? h->jpeg_quality >= 1 && h->jpeg_quality <= 100
-                                                   : h->jpeg_quality == 0;
+    bool quality_ok =
+        h->codec == PROTO_CODEC_JPEG ? h->jpeg_quality >= 1 && h->jpeg_quality <= 100 : h->jpeg_quality == 0;
     return quality_ok ? FXC_OK : FXC_ERR_RANGE;
 }
 
@@ -264,8 +264,8 @@ static bool ms_ok(float ms)
 
 static fxc_result check_frame(const proto_frame *f)
 {
-    if (check_pose(&f->camera) || !side_ok(f->width) || !side_ok(f->height) || f->codec >= PROTO_CODEC_COUNT ||
-        !depth_ok(f->depth))
+    if (check_pose(&f->camera) || !side_ok(f->width) || !side_ok(f->height) ||
+        f->codec >= PROTO_CODEC_COUNT || !depth_ok(f->depth))
         return FXC_ERR_RANGE;
     if (!ms_ok(f->stats.frame_ms) || !ms_ok(f->stats.encode_ms))
         return FXC_ERR_RANGE;
@@ -349,8 +349,8 @@ static fxc_result payload_size(const proto_msg *m, uint64_t *size)
             return r;
         if (!m->u.frame.color || (m->u.frame.depth_bytes && !m->u.frame.depth_data))
             return FXC_ERR_INVALID;
-        *size = 4 + 4 + POSE_BYTES + 4 + 4 + 1 + 1 + 5 * 8 + 4 + 4 + 4 + (uint64_t)m->u.frame.color_bytes + 4 +
-                (uint64_t)m->u.frame.depth_bytes;
+        *size = 4 + 4 + POSE_BYTES + 4 + 4 + 1 + 1 + 5 * 8 + 4 + 4 + 4 + (uint64_t)m->u.frame.color_bytes +
+                4 + (uint64_t)m->u.frame.depth_bytes;
         break;
     case PROTO_STATS_REQUEST:
         *size = 0;

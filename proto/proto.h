@@ -26,11 +26,11 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define PROTO_MAGIC0 'F'
-#define PROTO_MAGIC1 'X'
-#define PROTO_MAGIC2 'C'
-#define PROTO_MAGIC3 'P'
-#define PROTO_VERSION 1u
+#define PROTO_MAGIC0       'F'
+#define PROTO_MAGIC1       'X'
+#define PROTO_MAGIC2       'C'
+#define PROTO_MAGIC3       'P'
+#define PROTO_VERSION      1u
 #define PROTO_HEADER_BYTES 12u
 
 enum {
@@ -45,16 +45,17 @@ enum { PROTO_MAX_SAMPLES = 1 << 20 }; /* pixels in one request or answer */
 
 /* Message types. Values are fixed on the wire; new types get new numbers. */
 #define PROTO_TYPES(X)                                                                                       \
-    X(PROTO_HELLO, 1, "hello")                 /* client -> server: who, what size, which codec */           \
-    X(PROTO_WELCOME, 2, "welcome")             /* server -> client: accepted; the scene's frame of reference */ \
-    X(PROTO_CAMERA, 3, "camera")               /* client -> server: the viewer's latest camera */            \
-    X(PROTO_FRAME, 4, "frame")                 /* server -> client: a composed frame */                      \
+    X(PROTO_HELLO, 1, "hello")     /* client -> server: who, what size, which codec */                       \
+    X(PROTO_WELCOME, 2, "welcome") /* server -> client: accepted; the scene's frame of reference */          \
+    X(PROTO_CAMERA, 3, "camera")   /* client -> server: the viewer's latest camera */                        \
+    X(PROTO_FRAME, 4, "frame")     /* server -> client: a composed frame */                                  \
     X(PROTO_STATS_REQUEST, 5, "stats-request") /* client -> server: send the run report's figures */         \
     X(PROTO_STATS, 6, "stats")                 /* server -> client: the run report as JSON text */           \
     X(PROTO_ERROR, 7, "error")                 /* either way: a code from fxc_result.h and a reason */       \
     X(PROTO_BYE, 8, "bye")                     /* either way: closing, with a reason */                      \
-    X(PROTO_SAMPLE_REQUEST, 9, "sample-request") /* client -> server: pixels of a camera's image to render */ \
-    X(PROTO_SAMPLES, 10, "samples")              /* server -> client: those pixels, rendered */
+    X(PROTO_SAMPLE_REQUEST, 9,                                                                               \
+      "sample-request")             /* client -> server: pixels of a camera's image to render */             \
+    X(PROTO_SAMPLES, 10, "samples") /* server -> client: those pixels, rendered */
 
 typedef enum proto_type {
 #define PROTO_TYPE_ENUM(name, value, text) name = value,
@@ -88,20 +89,20 @@ bool proto_codec_parse(const char *text, proto_codec *out);
 /* A camera on the wire: world coordinates in double (a scene far from the origin keeps its precision), a view
  * direction (non-zero, need not be unit; up is +Y, as in viewer traces) and the vertical field of view. */
 typedef struct proto_pose {
-    double position[3];     /* metres, world coordinates, finite */
-    float direction[3];     /* finite, not all zero */
-    float fov_deg;          /* (0, 180) */
+    double position[3]; /* metres, world coordinates, finite */
+    float direction[3]; /* finite, not all zero */
+    float fov_deg;      /* (0, 180) */
 } proto_pose;
 
 typedef struct proto_hello {
-    char name[PROTO_NAME_MAX + 1];          /* 0..31 printable bytes, NUL-terminated here ("" = server names it) */
-    uint32_t width, height;                 /* 1..PROTO_MAX_SIDE */
-    float fov_deg;                          /* (0, 180) */
-    uint8_t codec;                          /* proto_codec */
-    uint8_t jpeg_quality;                   /* 1..100 with PROTO_CODEC_JPEG, else 0 */
-    uint8_t depth;                          /* proto_depth */
-    char token[PROTO_TOKEN_MAX + 1];        /* optional access token ("" = none) */
-    char strategy[PROTO_STRATEGY_MAX + 1];  /* reference strategy (proto_strategy_parse; "" = basic). Any
+    char name[PROTO_NAME_MAX + 1];   /* 0..31 printable bytes, NUL-terminated here ("" = server names it) */
+    uint32_t width, height;          /* 1..PROTO_MAX_SIDE */
+    float fov_deg;                   /* (0, 180) */
+    uint8_t codec;                   /* proto_codec */
+    uint8_t jpeg_quality;            /* 1..100 with PROTO_CODEC_JPEG, else 0 */
+    uint8_t depth;                   /* proto_depth */
+    char token[PROTO_TOKEN_MAX + 1]; /* optional access token ("" = none) */
+    char strategy[PROTO_STRATEGY_MAX + 1]; /* reference strategy (proto_strategy_parse; "" = basic). Any
                                                printable text decodes: the server refuses names it does not
                                                know (docs/PROTOCOL.md, "Session rules") */
 } proto_hello;
@@ -123,58 +124,59 @@ const char *proto_strategy_name(uint32_t strategy);
 bool proto_strategy_parse(const char *text, proto_strategy *out);
 
 typedef struct proto_welcome {
-    uint32_t viewer_id;        /* the server's id for this viewer (nonzero) */
-    char name[PROTO_NAME_MAX + 1]; /* the server's name for it ("viewer_NN", 1..31 printable bytes): its frames,
+    uint32_t viewer_id; /* the server's id for this viewer (nonzero) */
+    char name[PROTO_NAME_MAX +
+              1];         /* the server's name for it ("viewer_NN", 1..31 printable bytes): its frames,
                                       statistics and trace */
-    float fps;                 /* the server's target frames per second, > 0 */
-    double bounds_min[3];      /* the scene's bounding box, world coordinates (min <= max, finite) */
+    float fps;            /* the server's target frames per second, > 0 */
+    double bounds_min[3]; /* the scene's bounding box, world coordinates (min <= max, finite) */
     double bounds_max[3];
-    proto_pose camera;         /* the scene's default camera */
-    uint32_t max_camera_rate;  /* camera messages per second the server accepts before it disconnects */
+    proto_pose camera;        /* the scene's default camera */
+    uint32_t max_camera_rate; /* camera messages per second the server accepts before it disconnects */
 } proto_welcome;
 
 typedef struct proto_camera {
-    uint32_t sequence;         /* the client's number for this camera (echoed in the frames rendered for it) */
-    double time;               /* the client's clock, seconds, finite */
+    uint32_t sequence; /* the client's number for this camera (echoed in the frames rendered for it) */
+    double time;       /* the client's clock, seconds, finite */
     proto_pose pose;
-    bool has_predicted;        /* an optional predicted pose (the predictive strategy renders it) */
+    bool has_predicted; /* an optional predicted pose (the predictive strategy renders it) */
     double predicted_time;
     proto_pose predicted;
 } proto_camera;
 
 /* The server's per-viewer figures for one frame. */
 typedef struct proto_frame_stats {
-    uint64_t requested_texels;  /* deduplicated within the viewer */
-    uint64_t requested_cells;   /* world-space cells (probes) */
+    uint64_t requested_texels; /* deduplicated within the viewer */
+    uint64_t requested_cells;  /* world-space cells (probes) */
     uint64_t pixels_visible;
-    uint64_t pixels_missing;    /* visible pixels composed without cached data */
-    uint64_t frames_dropped;    /* this viewer's frames replaced by a newer one before they were sent, so far */
-    float frame_ms;             /* the server's whole frame, all viewers (finite, >= 0) */
-    float encode_ms;            /* encoding this message (finite, >= 0) */
+    uint64_t pixels_missing; /* visible pixels composed without cached data */
+    uint64_t frames_dropped; /* this viewer's frames replaced by a newer one before they were sent, so far */
+    float frame_ms;          /* the server's whole frame, all viewers (finite, >= 0) */
+    float encode_ms;         /* encoding this message (finite, >= 0) */
 } proto_frame_stats;
 
 typedef struct proto_frame {
-    uint32_t frame;             /* the server's frame number */
-    uint32_t camera_sequence;   /* the sequence of the camera message it was rendered for */
-    proto_pose camera;          /* the camera it was rendered for */
-    uint32_t width, height;     /* 1..PROTO_MAX_SIDE */
-    uint8_t codec;              /* proto_codec */
-    uint8_t depth;              /* proto_depth */
+    uint32_t frame;           /* the server's frame number */
+    uint32_t camera_sequence; /* the sequence of the camera message it was rendered for */
+    proto_pose camera;        /* the camera it was rendered for */
+    uint32_t width, height;   /* 1..PROTO_MAX_SIDE */
+    uint8_t codec;            /* proto_codec */
+    uint8_t depth;            /* proto_depth */
     proto_frame_stats stats;
-    const uint8_t *color;       /* encoded colour payload (into the message buffer when decoded) */
+    const uint8_t *color; /* encoded colour payload (into the message buffer when decoded) */
     uint32_t color_bytes;
-    const uint8_t *depth_data;  /* encoded depth payload, NULL/0 with PROTO_DEPTH_NONE */
+    const uint8_t *depth_data; /* encoded depth payload, NULL/0 with PROTO_DEPTH_NONE */
     uint32_t depth_bytes;
 } proto_frame;
 
 typedef struct proto_stats {
-    const char *json;           /* UTF-8 JSON text, not NUL-terminated */
+    const char *json; /* UTF-8 JSON text, not NUL-terminated */
     uint32_t json_bytes;
 } proto_stats;
 
 typedef struct proto_error {
-    int32_t code;                          /* an fxc_result code (negative) */
-    char reason[PROTO_REASON_MAX + 1];     /* 0..200 printable bytes, NUL-terminated here */
+    int32_t code;                      /* an fxc_result code (negative) */
+    char reason[PROTO_REASON_MAX + 1]; /* 0..200 printable bytes, NUL-terminated here */
 } proto_error;
 
 typedef struct proto_bye {
@@ -184,33 +186,33 @@ typedef struct proto_bye {
 /* A request for some pixels of one camera's image (the client's render cache asks for the pixels it needs
  * most). The server answers with a samples message for the same request number. */
 typedef struct proto_sample_request {
-    uint32_t request;        /* the client's number for it (echoed in the answer) */
-    proto_pose camera;       /* the camera whose image the pixels belong to */
-    uint32_t width, height;  /* that image's size, 1..PROTO_MAX_SIDE */
-    uint32_t count;          /* 1..min(width*height, PROTO_MAX_SAMPLES) */
-    const uint8_t *pixels;   /* count x (u16 x, u16 y), little-endian, x < width, y < height (points into
+    uint32_t request;       /* the client's number for it (echoed in the answer) */
+    proto_pose camera;      /* the camera whose image the pixels belong to */
+    uint32_t width, height; /* that image's size, 1..PROTO_MAX_SIDE */
+    uint32_t count;         /* 1..min(width*height, PROTO_MAX_SAMPLES) */
+    const uint8_t *pixels;  /* count x (u16 x, u16 y), little-endian, x < width, y < height (points into
                                 the message buffer when decoded); duplicates are allowed here */
 } proto_sample_request;
 
 /* One rendered pixel, as proto_sample_get reads it. */
 typedef struct proto_sample {
-    uint16_t x, y;           /* pixel of the request's image, x < width, y < height */
-    uint8_t rgb[3];          /* sRGB, as in a frame */
-    float depth;             /* metres along the primary ray, +infinity for the sky; > 0, not NaN */
+    uint16_t x, y;  /* pixel of the request's image, x < width, y < height */
+    uint8_t rgb[3]; /* sRGB, as in a frame */
+    float depth;    /* metres along the primary ray, +infinity for the sky; > 0, not NaN */
 } proto_sample;
 
 typedef struct proto_samples {
-    uint32_t request;        /* the request answered */
-    uint32_t frame;          /* the server frame that rendered them */
+    uint32_t request; /* the request answered */
+    uint32_t frame;   /* the server frame that rendered them */
     proto_pose camera;
     uint32_t width, height;
-    uint32_t count;          /* 0..PROTO_MAX_SAMPLES */
-    const uint8_t *samples;  /* count x PROTO_SAMPLE_BYTES: u16 x, u16 y, u8 r, g, b, u8 0, f32 depth
+    uint32_t count;         /* 0..PROTO_MAX_SAMPLES */
+    const uint8_t *samples; /* count x PROTO_SAMPLE_BYTES: u16 x, u16 y, u8 r, g, b, u8 0, f32 depth
                                 (metres along the primary ray, +inf for the sky) */
 } proto_samples;
 
 #define PROTO_REQUEST_PIXEL_BYTES 4u
-#define PROTO_SAMPLE_BYTES 12u
+#define PROTO_SAMPLE_BYTES        12u
 
 /* Writes / reads entry i of a sample request's pixel array (4 bytes each). No range checks: the caller
  * sized the array (count x PROTO_REQUEST_PIXEL_BYTES). */
@@ -222,7 +224,7 @@ void proto_sample_get(const uint8_t *samples, uint32_t i, proto_sample *s);
 
 /* Any message: the type says which member is valid (stats-request has none). */
 typedef struct proto_msg {
-    uint32_t type;              /* proto_type */
+    uint32_t type; /* proto_type */
     union {
         proto_hello hello;
         proto_welcome welcome;
@@ -288,8 +290,8 @@ size_t proto_depth_bound(uint32_t depth, uint32_t width, uint32_t height);
 
 /* Encodes width*height depths (metres, +infinity for the sky) as binary16 (rounded to nearest even; above
  * 65504 becomes +infinity) or binary32, then zstd. Same results as proto_color_encode. */
-fxc_result proto_depth_encode(uint32_t depth, const float *values, uint32_t width, uint32_t height, uint8_t *out,
-                              size_t cap, size_t *out_bytes);
+fxc_result proto_depth_encode(uint32_t depth, const float *values, uint32_t width, uint32_t height,
+                              uint8_t *out, size_t cap, size_t *out_bytes);
 
 /* Decodes a depth payload into width*height floats. FXC_ERR_CODEC as proto_color_decode. */
 fxc_result proto_depth_decode(uint32_t depth, const uint8_t *payload, size_t payload_bytes, uint32_t width,

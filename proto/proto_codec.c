@@ -142,8 +142,8 @@ fxc_result proto_color_decode(uint32_t codec, const uint8_t *payload, size_t pay
         if (tjDecompressHeader3(jpeg, payload, (unsigned long)payload_bytes, &jpeg_width, &jpeg_height,
                                 &subsampling, &colorspace) == 0 &&
             jpeg_width == (int)width && jpeg_height == (int)height &&
-            tjDecompress2(jpeg, payload, (unsigned long)payload_bytes, rgb, (int)width, 0, (int)height, TJPF_RGB,
-                          TJFLAG_STOPONWARNING | TJFLAG_LIMITSCANS) == 0)
+            tjDecompress2(jpeg, payload, (unsigned long)payload_bytes, rgb, (int)width, 0, (int)height,
+                          TJPF_RGB, TJFLAG_STOPONWARNING | TJFLAG_LIMITSCANS) == 0)
             result = FXC_OK;
         tjDestroy(jpeg);
         return result;
@@ -235,8 +235,8 @@ static void depth_to_bytes(size_t value_bytes, const float *values, size_t count
     }
 }
 
-fxc_result proto_depth_encode(uint32_t depth, const float *values, uint32_t width, uint32_t height, uint8_t *out,
-                              size_t cap, size_t *out_bytes)
+fxc_result proto_depth_encode(uint32_t depth, const float *values, uint32_t width, uint32_t height,
+                              uint8_t *out, size_t cap, size_t *out_bytes)
 {
     size_t value_bytes = depth_value_bytes(depth);
     if (!value_bytes || !sides_ok(width, height) || !values || !out || !out_bytes)
@@ -261,7 +261,8 @@ fxc_result proto_depth_encode(uint32_t depth, const float *values, uint32_t widt
         ZSTD_inBuffer input = {chunk, n * value_bytes, 0};
         for (;;) {
             size_t before_in = input.pos, before_out = output.pos;
-            size_t remaining = ZSTD_compressStream2(zstd, &output, &input, last ? ZSTD_e_end : ZSTD_e_continue);
+            size_t remaining =
+                ZSTD_compressStream2(zstd, &output, &input, last ? ZSTD_e_end : ZSTD_e_continue);
             if (ZSTD_isError(remaining)) {
                 result = zstd_failure(remaining);
                 break;

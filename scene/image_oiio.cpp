@@ -111,7 +111,8 @@ static int write_image(const char *path, uint32_t width, uint32_t height, uint32
         }
         auto out = ImageOutput::create(path);
         if (!out) {
-            set_msg(msg, msg_cap, std::string(path) + ": no image writer for this file name: " + OIIO::geterror());
+            set_msg(msg, msg_cap,
+                    std::string(path) + ": no image writer for this file name: " + OIIO::geterror());
             return -1;
         }
         ImageSpec spec((int)width, (int)height, (int)channels, type);

@@ -48,8 +48,8 @@ typedef struct staged_mesh {
     uint32_t *indices; /* triangle_count * 3 */
     float *uv;         /* vertex_count * 2, or NULL */
     uint32_t vertex_count, triangle_count, material;
-    bool mirrored;     /* the transform mirrors: corners are swapped to keep the winding */
-    uint32_t mesh;     /* its entry in scene.meshes, UINT32_MAX when nothing of it was left */
+    bool mirrored; /* the transform mirrors: corners are swapped to keep the winding */
+    uint32_t mesh; /* its entry in scene.meshes, UINT32_MAX when nothing of it was left */
 } staged_mesh;
 
 /* What a scene holds while it is being loaded (scene.builder); scene__finalize() releases it. */
@@ -58,9 +58,9 @@ struct scene__builder {
     double frame_origin[3]; /* the provisional frame the meshes are welded in: the first mesh's */
     staged_mesh *meshes;
     uint32_t mesh_count;
-    double *light_world;    /* 3 per light slot: the world position of the light in that slot, in double */
+    double *light_world; /* 3 per light slot: the world position of the light in that slot, in double */
     uint32_t light_slots;
-    bool camera_set;        /* camera_pos/target hold the scene's camera in double */
+    bool camera_set; /* camera_pos/target hold the scene's camera in double */
     double camera_pos[3], camera_target[3];
     char source[256];       /* the file the next meshes come from (scene__set_source) */
     double input_step;      /* the coarsest input spacing seen, metres (float spacing x transform stretch) */
@@ -254,7 +254,8 @@ scene_result scene__add_light_world(scene *s, const scene_light *l, const double
     /* The slot's world position in double; scene__finalize() moves the light into the local frame. */
     scene__builder *b = builder_of(s);
     uint32_t slot = s->light_count;
-    if (!b || (slot >= b->light_slots && !scene__grow((void **)&b->light_world, 3 * ((size_t)slot + 1), sizeof(double))))
+    if (!b || (slot >= b->light_slots &&
+               !scene__grow((void **)&b->light_world, 3 * ((size_t)slot + 1), sizeof(double))))
         return scene__fail(err, SCENE_ERR_NOMEM, "out of memory adding a light");
     if (slot >= b->light_slots)
         b->light_slots = slot + 1;
@@ -337,17 +338,30 @@ static int tri_key_compare(const void *a, const void *b)
 static void sort3(uint32_t v[3])
 {
     uint32_t t;
-    if (v[0] > v[1]) { t = v[0]; v[0] = v[1]; v[1] = t; }
-    if (v[1] > v[2]) { t = v[1]; v[1] = v[2]; v[2] = t; }
-    if (v[0] > v[1]) { t = v[0]; v[0] = v[1]; v[1] = t; }
+    if (v[0] > v[1]) {
+        t = v[0];
+        v[0] = v[1];
+        v[1] = t;
+    }
+    if (v[1] > v[2]) {
+        t = v[1];
+        v[1] = v[2];
+        v[2] = t;
+    }
+    if (v[0] > v[1]) {
+        t = v[0];
+        v[0] = v[1];
+        v[1] = t;
+    }
 }
 
 void scene__precision_lost(const scene_repairs *r, uint64_t before, char *out, size_t cap)
 {
     uint64_t n = r->precision_skipped - before;
     if (n)
-        snprintf(out, cap, "; %llu of the degenerate ones have an area but collapse at float precision %.4g m "
-                           "from the local origin, where floats are %.3g m apart",
+        snprintf(out, cap,
+                 "; %llu of the degenerate ones have an area but collapse at float precision %.4g m "
+                 "from the local origin, where floats are %.3g m apart",
                  (unsigned long long)n, r->precision_reach, float_spacing(r->precision_reach));
     else if (cap)
         out[0] = 0;
@@ -389,7 +403,8 @@ static bool triangle_degenerate(const float *a, const float *b, const float *c)
 /* Whether the triangle with these corners (world positions, double) keeps its shape when moved by -origin in
  * double: a triangle degenerate only once rounded to float lies too far from the frame's origin for its size.
  * Its farthest corner from the origin goes into *reach. */
-static bool triangle_fine_in_double(const double *world, const uint32_t *tri, const double origin[3], double *reach)
+static bool triangle_fine_in_double(const double *world, const uint32_t *tri, const double origin[3],
+                                    double *reach)
 {
     double p[3][3];
     for (int c = 0; c < 3; c++)
@@ -427,8 +442,8 @@ static scene_result commit_mesh(scene *s, const staged_mesh *m, const double ori
             w[k] = (float)(p[k] - origin[k]) + 0.0f;
         if (!finite3(w)) {
             rc = scene__fail(err, SCENE_ERR_INVALID,
-                             "mesh '%s': vertex %u is not finite after the mesh transform (%g, %g, %g)", name, v,
-                             p[0], p[1], p[2]);
+                             "mesh '%s': vertex %u is not finite after the mesh transform (%g, %g, %g)", name,
+                             v, p[0], p[1], p[2]);
             goto done;
         }
         order[v] = v;
@@ -552,8 +567,8 @@ scene_result scene__add_mesh(scene *s, const char *name, const float *positions,
                              uint32_t material, const double *xform, scene_error *err)
 {
     if (material >= s->material_count)
-        return scene__fail(err, SCENE_ERR_INVALID, "mesh '%s': material %u out of range (%u materials)",
-                           name, material, s->material_count);
+        return scene__fail(err, SCENE_ERR_INVALID, "mesh '%s': material %u out of range (%u materials)", name,
+                           material, s->material_count);
     for (uint32_t v = 0; v < vertex_count; v++) {
         const float *p = positions + 3 * (size_t)v;
         if (!finite3(p))
@@ -597,14 +612,16 @@ scene_result scene__add_mesh(scene *s, const char *name, const float *positions,
         const float *p = positions + 3 * (size_t)v;
         double *w = m->world + 3 * (size_t)v;
         for (int r = 0; r < 3; r++) {
-            w[r] = xform ? xform[4 * r] * p[0] + xform[4 * r + 1] * p[1] + xform[4 * r + 2] * p[2] + xform[4 * r + 3]
+            w[r] = xform ? xform[4 * r] * p[0] + xform[4 * r + 1] * p[1] + xform[4 * r + 2] * p[2] +
+                               xform[4 * r + 3]
                          : (double)p[r];
             input_magnitude = fmax(input_magnitude, fabs((double)p[r]));
         }
         if (!(fabs(w[0]) <= FLT_MAX && fabs(w[1]) <= FLT_MAX && fabs(w[2]) <= FLT_MAX)) { /* and NaN */
             staged_mesh_release(m);
             return scene__fail(err, SCENE_ERR_INVALID,
-                               "mesh '%s': vertex %u is not finite (as a float) after the mesh transform", name, v);
+                               "mesh '%s': vertex %u is not finite (as a float) after the mesh transform",
+                               name, v);
         }
     }
     b->mesh_count++; /* owned by the builder from here on */
@@ -706,7 +723,8 @@ static scene_result compute_normals_and_bounds(scene *s, scene_error *err)
         }
     double diag2 = 0;
     for (int k = 0; k < 3; k++)
-        diag2 += ((double)s->bounds_max[k] - s->bounds_min[k]) * ((double)s->bounds_max[k] - s->bounds_min[k]);
+        diag2 +=
+            ((double)s->bounds_max[k] - s->bounds_min[k]) * ((double)s->bounds_max[k] - s->bounds_min[k]);
     s->ray_offset_scale = (float)fmin(1.0, fmax(sqrt(diag2), 1e-30));
     return SCENE_OK;
 }
@@ -799,12 +817,13 @@ static void assess_precision(scene *s)
     s->position_step = fmax(local_step, input_step);
     s->precision_warning[0] = 0;
     if (s->repairs.precision_skipped) {
-        snprintf(s->precision_warning, sizeof s->precision_warning,
-                 "%s: %llu triangle(s) with an area dropped as degenerate: they collapse at float precision up "
-                 "to %.4g m from the local origin, where floats are %.3g m apart; keep distant parts in a scene "
-                 "of their own, or scale the scene down",
-                 s->source, (unsigned long long)s->repairs.precision_skipped, s->repairs.precision_reach,
-                 float_spacing(s->repairs.precision_reach));
+        snprintf(
+            s->precision_warning, sizeof s->precision_warning,
+            "%s: %llu triangle(s) with an area dropped as degenerate: they collapse at float precision up "
+            "to %.4g m from the local origin, where floats are %.3g m apart; keep distant parts in a scene "
+            "of their own, or scale the scene down",
+            s->source, (unsigned long long)s->repairs.precision_skipped, s->repairs.precision_reach,
+            float_spacing(s->repairs.precision_reach));
         return;
     }
     double texel = 1.0 / (double)s->texel_density;
@@ -813,13 +832,15 @@ static void assess_precision(scene *s)
     if (input_step > local_step) {
         char stretch[64] = "";
         if (b->input_stretch != 1.0)
-            snprintf(stretch, sizeof stretch, ", stretched %.4g times by the mesh transform", b->input_stretch);
-        snprintf(s->precision_warning, sizeof s->precision_warning,
-                 "%s: its coordinates (up to %.7g%s) arrive as 32-bit floats, so positions are %.3g m apart: "
-                 "%.3g texels at %.4g texels per metre (more than 1/%.0f texel); keep a model near the origin "
-                 "in its own file and place it with a scene transform",
-                 b->input_source, b->input_magnitude, stretch, input_step, input_step / texel,
-                 (double)s->texel_density, 1.0 / SCENE_PRECISION_TEXEL_FRACTION);
+            snprintf(stretch, sizeof stretch, ", stretched %.4g times by the mesh transform",
+                     b->input_stretch);
+        snprintf(
+            s->precision_warning, sizeof s->precision_warning,
+            "%s: its coordinates (up to %.7g%s) arrive as 32-bit floats, so positions are %.3g m apart: "
+            "%.3g texels at %.4g texels per metre (more than 1/%.0f texel); keep a model near the origin "
+            "in its own file and place it with a scene transform",
+            b->input_source, b->input_magnitude, stretch, input_step, input_step / texel,
+            (double)s->texel_density, 1.0 / SCENE_PRECISION_TEXEL_FRACTION);
     } else {
         snprintf(s->precision_warning, sizeof s->precision_warning,
                  "%s: the scene reaches %.4g m from its local origin, where floats are %.3g m apart: %.3g "
@@ -843,24 +864,29 @@ static scene_result check_reach(const scene *s, scene_error *err)
     double reach = fmax(reach_of(s->bounds_min), reach_of(s->bounds_max)), extent = 0;
     for (int k = 0; k < 3; k++)
         extent = fmax(extent, (double)s->bounds_max[k] - (double)s->bounds_min[k]);
-    if (!(extent >= SCENE_MIN_EXTENT * (1 - 1e-6))) /* the bound itself loads, within the bounds' float rounding */
-        return scene__fail(err, SCENE_ERR_RANGE,
-                           "%s: the geometry spans only %.4g m; fxcache handles scenes at least %.0e m across "
-                           "(below, float products of its lengths leave the normal range and shadows, AO and "
-                           "probes come out wrong): scale the scene up with a transform",
-                           s->source, extent, SCENE_MIN_EXTENT);
+    if (!(extent >=
+          SCENE_MIN_EXTENT * (1 - 1e-6))) /* the bound itself loads, within the bounds' float rounding */
+        return scene__fail(
+            err, SCENE_ERR_RANGE,
+            "%s: the geometry spans only %.4g m; fxcache handles scenes at least %.0e m across "
+            "(below, float products of its lengths leave the normal range and shadows, AO and "
+            "probes come out wrong): scale the scene up with a transform",
+            s->source, extent, SCENE_MIN_EXTENT);
     if (!(reach <= SCENE_MAX_REACH))
-        return scene__fail(err, SCENE_ERR_RANGE,
-                           "%s: the geometry spans %.4g m from its centre; fxcache handles at most %.0e m (squared "
-                           "distances must fit a float): scale the scene down or split it",
-                           s->source, reach, SCENE_MAX_REACH);
+        return scene__fail(
+            err, SCENE_ERR_RANGE,
+            "%s: the geometry spans %.4g m from its centre; fxcache handles at most %.0e m (squared "
+            "distances must fit a float): scale the scene down or split it",
+            s->source, reach, SCENE_MAX_REACH);
     for (uint32_t i = 0; i < s->light_count; i++)
         if (s->lights[i].type == SCENE_LIGHT_POINT && !(reach_of(s->lights[i].position) <= SCENE_MAX_REACH))
-            return scene__fail(err, SCENE_ERR_RANGE,
-                               "%s: lights[%u] (point) lies %.4g m from the scene's centre; at most %.0e m (squared "
-                               "distances must fit a float): use a directional light for a far source",
-                               s->source, i, reach_of(s->lights[i].position), SCENE_MAX_REACH);
-    if (s->has_camera && !(fmax(reach_of(s->camera_pos), reach_of(s->camera_target)) <= SCENE_MAX_CAMERA_REACH))
+            return scene__fail(
+                err, SCENE_ERR_RANGE,
+                "%s: lights[%u] (point) lies %.4g m from the scene's centre; at most %.0e m (squared "
+                "distances must fit a float): use a directional light for a far source",
+                s->source, i, reach_of(s->lights[i].position), SCENE_MAX_REACH);
+    if (s->has_camera &&
+        !(fmax(reach_of(s->camera_pos), reach_of(s->camera_target)) <= SCENE_MAX_CAMERA_REACH))
         return scene__fail(err, SCENE_ERR_RANGE,
                            "%s: the camera lies %.4g m from the scene's centre; at most %.0e m", s->source,
                            fmax(reach_of(s->camera_pos), reach_of(s->camera_target)), SCENE_MAX_CAMERA_REACH);
@@ -875,8 +901,9 @@ scene_result scene__finalize(scene *s, const scene_load_desc *desc, scene_error 
     if (s->triangle_count == 0) {
         char lost[160];
         scene__precision_lost(&s->repairs, 0, lost, sizeof lost);
-        return scene__fail(err, SCENE_ERR_EMPTY, "%s: the scene has no triangles (%llu duplicate and %llu "
-                                                  "degenerate skipped%s)",
+        return scene__fail(err, SCENE_ERR_EMPTY,
+                           "%s: the scene has no triangles (%llu duplicate and %llu "
+                           "degenerate skipped%s)",
                            s->source, (unsigned long long)s->repairs.duplicate_skipped,
                            (unsigned long long)s->repairs.degenerate_skipped, lost);
     }
@@ -888,7 +915,8 @@ scene_result scene__finalize(scene *s, const scene_load_desc *desc, scene_error 
         return rc;
     if (desc && desc->texel_density != 0) {
         if (!(desc->texel_density >= 1e-6f) || !(desc->texel_density <= 1e6f))
-            return scene__fail(err, SCENE_ERR_RANGE, "texel density %g is outside [1e-6, 1e6] texels per metre",
+            return scene__fail(err, SCENE_ERR_RANGE,
+                               "texel density %g is outside [1e-6, 1e6] texels per metre",
                                (double)desc->texel_density);
         s->texel_density = desc->texel_density;
         s->density_auto = false;
@@ -1010,4 +1038,3 @@ scene *scene_load(const char *path, const scene_load_desc *desc, scene_error *er
 }
 
 /* ---- materials ---------------------------------------------------------------------------------------- */
-

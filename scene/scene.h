@@ -72,9 +72,9 @@ typedef struct scene_texture {
     uint32_t width, height; /* texels */
     float *rgb;             /* linear RGB, width*height*3, row 0 at the top of the image */
     uint32_t levels;        /* mip levels, level 0 included (box-filtered halvings down to 1 x 1) */
-    float *mip_rgb[SCENE_TEXTURE_MAX_LEVELS];       /* level l (mip_rgb[0] == rgb) */
+    float *mip_rgb[SCENE_TEXTURE_MAX_LEVELS]; /* level l (mip_rgb[0] == rgb) */
     uint32_t mip_width[SCENE_TEXTURE_MAX_LEVELS], mip_height[SCENE_TEXTURE_MAX_LEVELS];
-    char path[256];         /* where it came from, for messages */
+    char path[256]; /* where it came from, for messages */
 } scene_texture;
 
 typedef struct scene_material {
@@ -106,13 +106,13 @@ enum {
 
 /* Counts of input the importer repaired or skipped, never silently. */
 typedef struct scene_repairs {
-    uint64_t degenerate_skipped;   /* zero-area or repeated-vertex triangles dropped */
-    uint64_t precision_skipped;    /* of those, triangles with an area in double that collapsed in float in the
+    uint64_t degenerate_skipped; /* zero-area or repeated-vertex triangles dropped */
+    uint64_t precision_skipped;  /* of those, triangles with an area in double that collapsed in float in the
                                       local frame (too far from the scene's centre for their size) */
-    double precision_reach;        /* the farthest such triangle's corner from the local origin, metres */
-    uint64_t duplicate_skipped;    /* triangles with the same three welded vertices as an earlier one */
-    uint64_t nonmanifold_split;    /* triangles split off from the half-edge mesh (non-manifold edges) */
-    uint64_t vertices_welded;      /* vertices merged into an earlier one with the same position */
+    double precision_reach;      /* the farthest such triangle's corner from the local origin, metres */
+    uint64_t duplicate_skipped;  /* triangles with the same three welded vertices as an earlier one */
+    uint64_t nonmanifold_split;  /* triangles split off from the half-edge mesh (non-manifold edges) */
+    uint64_t vertices_welded;    /* vertices merged into an earlier one with the same position */
     uint64_t non_triangles_dropped; /* points and lines in the input */
     uint64_t textures_missing;      /* texture files named by a material that could not be read */
 } scene_repairs;
@@ -132,11 +132,11 @@ typedef struct scene {
     uint32_t vertex_count;
     float *positions; /* vertex_count * 3 */
     uint32_t triangle_count;
-    uint32_t *indices;     /* triangle_count * 3, into positions */
-    float *corner_uv;      /* triangle_count * 6: the mesh's own UVs per corner (for textures), 0 if none */
-    uint32_t *tri_mesh;    /* triangle_count: mesh index */
-    float *tri_normal;     /* triangle_count * 3: unit geometric normal */
-    float *tri_texture_lod; /* triangle_count: log2 of its texture's texels per metre on it (-1000: none) */
+    uint32_t *indices;       /* triangle_count * 3, into positions */
+    float *corner_uv;        /* triangle_count * 6: the mesh's own UVs per corner (for textures), 0 if none */
+    uint32_t *tri_mesh;      /* triangle_count: mesh index */
+    float *tri_normal;       /* triangle_count * 3: unit geometric normal */
+    float *tri_texture_lod;  /* triangle_count: log2 of its texture's texels per metre on it (-1000: none) */
     float *tri_texture_mean; /* triangle_count * 3: its texture's mean over it (1, 1, 1: none); see
                               * scene_albedo_mean */
 
@@ -152,13 +152,13 @@ typedef struct scene {
     float sky_color[3]; /* linear RGB */
     float sky_intensity;
 
-    float texel_density;  /* level-0 texels per metre */
-    bool density_auto;    /* chosen by scene_finalize() from the surface area */
-    float ao_radius;      /* metres; 0 = auto (a tenth of the bounding-box diagonal) */
+    float texel_density; /* level-0 texels per metre */
+    bool density_auto;   /* chosen by scene_finalize() from the surface area */
+    float ao_radius;     /* metres; 0 = auto (a tenth of the bounding-box diagonal) */
 
     scene_toggle fx_shadows, fx_ao, fx_indirect;
 
-    bool has_camera; /* a default camera from the scene description */
+    bool has_camera;                                       /* a default camera from the scene description */
     float camera_pos[3], camera_target[3], camera_fov_deg; /* local frame, like every position here */
 
     /* The local frame: world = local + origin, metres. The centre of the geometry's bounding box rounded to a
@@ -253,14 +253,15 @@ void scene_albedo_filtered(const scene *s, uint32_t tri, float u, float v, float
 typedef struct scene_albedo_triangle {
     const scene_texture *texture; /* NULL: untextured, the diffuse colour alone */
     float diffuse[3];
-    float uv[6];                  /* mesh UVs of the three corners */
-    float lod;                    /* log2 of texture texels per metre on the triangle */
+    float uv[6]; /* mesh UVs of the three corners */
+    float lod;   /* log2 of texture texels per metre on the triangle */
 } scene_albedo_triangle;
 
 /* Prepares albedo sampling of triangle tri; scene_albedo_sample() then gives what scene_albedo_filtered()
  * gives for the same arguments. */
 void scene_albedo_prepare(const scene *s, uint32_t tri, scene_albedo_triangle *out);
-void scene_albedo_sample(const scene_albedo_triangle *t, float u, float v, float footprint_log2, float out_rgb[3]);
+void scene_albedo_sample(const scene_albedo_triangle *t, float u, float v, float footprint_log2,
+                         float out_rgb[3]);
 
 /* The albedo of a run of `count` hits: out_rgb[i] is what scene_albedo_filtered(s, tri[i], u[i], v[i],
  * footprint_log2[i]) gives. Neighbouring hits on the same triangle share one lookup of its material, and
@@ -287,7 +288,11 @@ typedef enum scene_effect {
     SCENE_FX_COUNT
 } scene_effect;
 
-typedef enum scene_cache_kind { SCENE_CACHE_ON_SURFACE = 0, SCENE_CACHE_WORLD_SPACE, SCENE_CACHE_COUNT } scene_cache_kind;
+typedef enum scene_cache_kind {
+    SCENE_CACHE_ON_SURFACE = 0,
+    SCENE_CACHE_WORLD_SPACE,
+    SCENE_CACHE_COUNT
+} scene_cache_kind;
 
 typedef struct scene_needs_result {
     bool effect[SCENE_FX_COUNT];

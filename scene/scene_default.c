@@ -99,8 +99,8 @@ typedef struct default_hole {
 /* Appends the rectangle origin + [0,1] * edge_u + [0,1] * edge_v as cells_u x cells_v quads, facing
  * edge_u x edge_v, leaving out the cells of hole (may be NULL). Each quad has its own four corners; the
  * scene welds the shared ones (they are computed the same way, so they are bit-identical). */
-static void builder_grid(default_builder *b, const float origin[3], const float edge_u[3], const float edge_v[3],
-                         uint32_t cells_u, uint32_t cells_v, const default_hole *hole)
+static void builder_grid(default_builder *b, const float origin[3], const float edge_u[3],
+                         const float edge_v[3], uint32_t cells_u, uint32_t cells_v, const default_hole *hole)
 {
     for (uint32_t i = 0; i < cells_u; i++) {
         for (uint32_t j = 0; j < cells_v; j++) {
@@ -190,9 +190,10 @@ static scene_result builder_commit(default_builder *b, scene *s, const char *nam
                                    const double *xform, scene_error *err)
 {
     if (b->failed)
-        return scene__fail(err, SCENE_ERR_NOMEM, "(embedded default scene): out of memory building '%s'", name);
-    scene_result r = scene__add_mesh(s, name, b->positions, b->vertex_count, b->indices, b->triangle_count, NULL,
-                                     material, xform, err);
+        return scene__fail(err, SCENE_ERR_NOMEM, "(embedded default scene): out of memory building '%s'",
+                           name);
+    scene_result r = scene__add_mesh(s, name, b->positions, b->vertex_count, b->indices, b->triangle_count,
+                                     NULL, material, xform, err);
     builder_reset(b);
     return r;
 }
@@ -250,7 +251,8 @@ scene_result scene__build_default_xform(scene *s, const double *xform, scene_err
     const float ceiling_origin[3] = {-hx, h, -hz};
     const default_hole opening = {.i0 = 4, .i1 = 7, .j0 = 2, .j1 = 4};
     builder_grid(&b, ceiling_origin, along_x, along_z, cells_x, cells_z, &opening);
-    if ((r = builder_commit(&b, s, "ceiling with opening", material_index[MAT_WALLS], xform, err)) != SCENE_OK)
+    if ((r = builder_commit(&b, s, "ceiling with opening", material_index[MAT_WALLS], xform, err)) !=
+        SCENE_OK)
         goto done;
 
     /* Four walls facing into the room. */
@@ -272,7 +274,8 @@ scene_result scene__build_default_xform(scene *s, const double *xform, scene_err
     /* A tall blue box in the corner of the west and north walls: only its three free faces. */
     const float blue_lo[3] = {-hx, 0, -hz}, blue_hi[3] = {-hx + 1.2f, 2.2f, -hz + 1.0f};
     builder_box(&b, blue_lo, blue_hi, BOX_POS_X | BOX_POS_Y | BOX_POS_Z);
-    if ((r = builder_commit(&b, s, "blue box in the corner", material_index[MAT_BLUE], xform, err)) != SCENE_OK)
+    if ((r = builder_commit(&b, s, "blue box in the corner", material_index[MAT_BLUE], xform, err)) !=
+        SCENE_OK)
         goto done;
 
     /* A low, wide yellow box in the shade. */

@@ -88,8 +88,8 @@ static scene_result check_faces(const char *path, const struct aiScene *ai, scen
             for (uint32_t k = 0; k < face->mNumIndices; k++)
                 if (face->mIndices[k] >= mesh->mNumVertices)
                     return scene__fail(err, SCENE_ERR_FORMAT,
-                                       "%s: mesh %u face %u uses vertex %u, but the mesh has %u vertices", path, i,
-                                       f, face->mIndices[k], mesh->mNumVertices);
+                                       "%s: mesh %u face %u uses vertex %u, but the mesh has %u vertices",
+                                       path, i, f, face->mIndices[k], mesh->mNumVertices);
         }
     }
     return SCENE_OK;
@@ -263,7 +263,8 @@ static scene_result import_material(scene *s, const struct aiMaterial *am, const
             scene_error tex_err = {0};
             m.texture = scene__add_texture(s, path, &tex_err);
             if (m.texture < 0) {
-                fprintf(stderr, "fxcache: warning: material '%s': %s (using its colour)\n", m.name, tex_err.msg);
+                fprintf(stderr, "fxcache: warning: material '%s': %s (using its colour)\n", m.name,
+                        tex_err.msg);
                 s->repairs.textures_missing++;
             } else {
                 /* The texture carries the colour; Assimp's 3DS and OBJ readers give a tint we keep. */
@@ -272,8 +273,9 @@ static scene_result import_material(scene *s, const struct aiMaterial *am, const
                     m.diffuse[0] = m.diffuse[1] = m.diffuse[2] = 1.0f;
             }
         } else {
-            fprintf(stderr, "fxcache: warning: material '%s': texture '%s' not found beside the model "
-                            "(using its colour)\n",
+            fprintf(stderr,
+                    "fxcache: warning: material '%s': texture '%s' not found beside the model "
+                    "(using its colour)\n",
                     m.name, tex.data);
             s->repairs.textures_missing++;
         }
@@ -365,7 +367,8 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
             return rc;
         if (len == 0) {
             free(buf);
-            return scene__fail(err, SCENE_ERR_FORMAT, "%s: %s", path, gz ? "decompresses to nothing" : "empty file");
+            return scene__fail(err, SCENE_ERR_FORMAT, "%s: %s", path,
+                               gz ? "decompresses to nothing" : "empty file");
         }
         if (len > UINT32_MAX) {
             free(buf);

@@ -86,7 +86,8 @@ static scene_result check_ply(const char *path, const char *buf, size_t len, sce
         const char *end = start + m;
         if (line == 1) {
             if (!(m == 3 && memcmp(start, "ply", 3) == 0))
-                return scene__fail(err, SCENE_ERR_FORMAT, "%s: not a PLY file (the first line is not 'ply')", path);
+                return scene__fail(err, SCENE_ERR_FORMAT, "%s: not a PLY file (the first line is not 'ply')",
+                                   path);
         } else if (m >= 10 && memcmp(start, "end_header", 10) == 0 &&
                    (m == 10 || start[10] == ' ' || start[10] == '\t')) {
             return SCENE_OK;
@@ -237,9 +238,9 @@ static scene_result off_check_body(const char *path, const char *buf, const char
             assimp_strtoul10(q, stop, &index);
             if (index >= vertices)
                 return scene__fail(err, SCENE_ERR_FORMAT,
-                                   "%s:%u: face %llu uses vertex %llu, but the file declares %llu vertices", path,
-                                   line_of(buf, start), (unsigned long long)f, (unsigned long long)index,
-                                   (unsigned long long)vertices);
+                                   "%s:%u: face %llu uses vertex %llu, but the file declares %llu vertices",
+                                   path, line_of(buf, start), (unsigned long long)f,
+                                   (unsigned long long)index, (unsigned long long)vertices);
             while (q < stop && *q >= '0' && *q <= '9')
                 q++;
         }
@@ -1101,4 +1102,3 @@ const scene_import_format *scene__import_format_of(const char *ext)
             return &import_formats[i];
     return NULL;
 }
-

@@ -10,7 +10,8 @@
 #include <string.h>
 
 /* scene_offset_ray_origin (scene.h; scene_rt.c calls this). */
-static inline void scene_offset_ray_origin_inline(const float p[3], const float n[3], float scale, float out[3])
+static inline void scene_offset_ray_origin_inline(const float p[3], const float n[3], float scale,
+                                                  float out[3])
 {
     /* Waechter and Binder: near the origin a tiny fixed offset (float spacing is fine there); elsewhere an
      * offset of int_scale * n units in the last place, which scales with the magnitude of p. Their near-zero

@@ -57,17 +57,17 @@
 #include <string.h>
 
 enum {
-    JSON_SCENE_VERSION = 1,     /* the newest version this reader understands */
-    JSON_PATH_CAP = 1024,       /* resolved file paths */
-    JSON_WHERE_CAP = 128,       /* JSON paths such as "meshes[12].transform.scale" */
+    JSON_SCENE_VERSION = 1, /* the newest version this reader understands */
+    JSON_PATH_CAP = 1024,   /* resolved file paths */
+    JSON_WHERE_CAP = 128,   /* JSON paths such as "meshes[12].transform.scale" */
 };
 
 /* Floats, as the value is compared after its conversion to float: the double 1e-6 is larger than the float
  * nearest to it, so a bound in double refused the documented end "texel_density": 1e-6 itself. */
-#define JSON_DENSITY_MIN 1e-6f  /* texels per metre: one texel per 1000 km */
-#define JSON_DENSITY_MAX 1e6f   /* texels per metre: a texel of 1 um (the same bound as --density) */
-#define JSON_AO_RADIUS_MAX 1e9  /* metres */
-#define JSON_DEFAULT_FOV 60.0f  /* degrees */
+#define JSON_DENSITY_MIN   1e-6f /* texels per metre: one texel per 1000 km */
+#define JSON_DENSITY_MAX   1e6f  /* texels per metre: a texel of 1 um (the same bound as --density) */
+#define JSON_AO_RADIUS_MAX 1e9   /* metres */
+#define JSON_DEFAULT_FOV   60.0f /* degrees */
 
 /* What the reader carries through every check: the file for messages, its folder for relative paths. */
 typedef struct json_ctx {
@@ -78,14 +78,14 @@ typedef struct json_ctx {
 
 /* One checked "meshes" entry, imported in a second pass. */
 typedef struct json_mesh_entry {
-    bool builtin;               /* {"builtin": "default"} */
-    char file[JSON_PATH_CAP];   /* resolved against the JSON file's folder */
+    bool builtin;             /* {"builtin": "default"} */
+    char file[JSON_PATH_CAP]; /* resolved against the JSON file's folder */
     bool has_name;
     char name[128];
     bool has_xform;
-    double xform[16];           /* row-major affine, applied in double */
+    double xform[16]; /* row-major affine, applied in double */
     bool has_material;
-    scene_material material;    /* texture index filled at import time */
+    scene_material material; /* texture index filled at import time */
     bool has_texture;
     char texture[JSON_PATH_CAP];
 } json_mesh_entry;
@@ -100,7 +100,8 @@ __attribute__((format(printf, 4, 5))) static scene_result json_fail(const json_c
     va_start(args, fmt);
     vsnprintf(text, sizeof text, fmt, args);
     va_end(args);
-    for (char *c = text; *c; c++) /* keys and strings from the file may hold "\n": keep the message one line */
+    for (char *c = text; *c;
+         c++) /* keys and strings from the file may hold "\n": keep the message one line */
         if ((unsigned char)*c < 0x20 || *c == 0x7f)
             *c = '?';
     if (where && where[0])
@@ -128,14 +129,21 @@ static void json_element_path(char *out, size_t cap, const char *where, size_t i
 static const char *json_type_word(const json_t *value)
 {
     switch (json_typeof(value)) {
-    case JSON_OBJECT: return "an object";
-    case JSON_ARRAY: return "an array";
-    case JSON_STRING: return "a string";
-    case JSON_INTEGER: return "an integer";
-    case JSON_REAL: return "a real number";
+    case JSON_OBJECT:
+        return "an object";
+    case JSON_ARRAY:
+        return "an array";
+    case JSON_STRING:
+        return "a string";
+    case JSON_INTEGER:
+        return "an integer";
+    case JSON_REAL:
+        return "a real number";
     case JSON_TRUE:
-    case JSON_FALSE: return "a boolean";
-    case JSON_NULL: return "null";
+    case JSON_FALSE:
+        return "a boolean";
+    case JSON_NULL:
+        return "null";
     }
     return "something else";
 }
@@ -148,12 +156,14 @@ static scene_result json_check_object(const json_ctx *ctx, const json_t *value, 
         return json_fail(ctx, SCENE_ERR_JSON, where, "must be an object, not %s", json_type_word(value));
     const char *key;
     json_t *member;
-    json_object_foreach((json_t *)value, key, member) {
+    json_object_foreach((json_t *)value, key, member)
+    {
         if (strcmp(key, "comment") == 0) {
             if (!json_is_string(member)) {
                 char field[JSON_WHERE_CAP];
                 json_field_path(field, sizeof field, where, key);
-                return json_fail(ctx, SCENE_ERR_JSON, field, "must be a string, not %s", json_type_word(member));
+                return json_fail(ctx, SCENE_ERR_JSON, field, "must be a string, not %s",
+                                 json_type_word(member));
             }
             continue;
         }
@@ -191,8 +201,8 @@ static scene_result json_read_number(const json_ctx *ctx, const json_t *value, c
 }
 
 /* Reads an optional number field key of obj; leaves *out alone when the field is absent. */
-static scene_result json_get_number(const json_ctx *ctx, const json_t *obj, const char *where, const char *key,
-                                    float *out, bool *present)
+static scene_result json_get_number(const json_ctx *ctx, const json_t *obj, const char *where,
+                                    const char *key, float *out, bool *present)
 {
     const json_t *value = json_object_get(obj, key);
     if (present)
@@ -206,7 +216,8 @@ static scene_result json_get_number(const json_ctx *ctx, const json_t *obj, cons
 
 /* Reads a finite number from value at where into out, in double: positions and transforms keep the
  * precision the file gives them (a scene far from the origin needs more than a float has). */
-static scene_result json_read_number_d(const json_ctx *ctx, const json_t *value, const char *where, double *out)
+static scene_result json_read_number_d(const json_ctx *ctx, const json_t *value, const char *where,
+                                       double *out)
 {
     if (!json_is_number(value))
         return json_fail(ctx, SCENE_ERR_JSON, where, "must be a number, not %s", json_type_word(value));
@@ -219,8 +230,8 @@ static scene_result json_read_number_d(const json_ctx *ctx, const json_t *value,
 }
 
 /* Reads an array of count finite numbers from value (at where) into out, in double. */
-static scene_result json_read_numbers_d(const json_ctx *ctx, const json_t *value, const char *where, double *out,
-                                        size_t count)
+static scene_result json_read_numbers_d(const json_ctx *ctx, const json_t *value, const char *where,
+                                        double *out, size_t count)
 {
     if (!json_is_array(value) || json_array_size(value) != count)
         return json_fail(ctx, SCENE_ERR_JSON, where, "must be an array of %zu numbers, not %s%s", count,
@@ -236,8 +247,8 @@ static scene_result json_read_numbers_d(const json_ctx *ctx, const json_t *value
 }
 
 /* Reads an optional array of count finite numbers, field key of obj, in double; out alone when absent. */
-static scene_result json_get_numbers_d(const json_ctx *ctx, const json_t *obj, const char *where, const char *key,
-                                       double *out, size_t count, bool *present)
+static scene_result json_get_numbers_d(const json_ctx *ctx, const json_t *obj, const char *where,
+                                       const char *key, double *out, size_t count, bool *present)
 {
     const json_t *value = json_object_get(obj, key);
     if (present)
@@ -264,8 +275,8 @@ static scene_result json_read_numbers(const json_ctx *ctx, const json_t *value, 
 }
 
 /* Reads an optional array of count finite numbers, field key of obj; leaves out alone when absent. */
-static scene_result json_get_numbers(const json_ctx *ctx, const json_t *obj, const char *where, const char *key,
-                                     float *out, size_t count, bool *present)
+static scene_result json_get_numbers(const json_ctx *ctx, const json_t *obj, const char *where,
+                                     const char *key, float *out, size_t count, bool *present)
 {
     const json_t *value = json_object_get(obj, key);
     if (present)
@@ -278,8 +289,8 @@ static scene_result json_get_numbers(const json_ctx *ctx, const json_t *obj, con
 }
 
 /* Reads an optional non-empty string field key of obj into out (cap bytes); NULL-safe on absence. */
-static scene_result json_get_string(const json_ctx *ctx, const json_t *obj, const char *where, const char *key,
-                                    char *out, size_t cap, bool *present)
+static scene_result json_get_string(const json_ctx *ctx, const json_t *obj, const char *where,
+                                    const char *key, char *out, size_t cap, bool *present)
 {
     const json_t *value = json_object_get(obj, key);
     if (present)
@@ -297,13 +308,15 @@ static scene_result json_get_string(const json_ctx *ctx, const json_t *obj, cons
     if (strlen(text) != length)
         return json_fail(ctx, SCENE_ERR_INVALID, field, "must not contain a NUL character");
     if (length >= cap)
-        return json_fail(ctx, SCENE_ERR_INVALID, field, "is too long (%zu bytes, at most %zu)", length, cap - 1);
+        return json_fail(ctx, SCENE_ERR_INVALID, field, "is too long (%zu bytes, at most %zu)", length,
+                         cap - 1);
     memcpy(out, text, length + 1);
     return SCENE_OK;
 }
 
 /* Checks a colour (at where.key) has no negative component. */
-static scene_result json_check_color(const json_ctx *ctx, const char *where, const char *key, const float rgb[3])
+static scene_result json_check_color(const json_ctx *ctx, const char *where, const char *key,
+                                     const float rgb[3])
 {
     for (int i = 0; i < 3; i++) {
         if (rgb[i] < 0.0f) {
@@ -363,8 +376,9 @@ static scene_result json_read_transform(const json_ctx *ctx, const json_t *value
     }
 
     if (has_matrix) {
-        if (json_is_object(value) && (json_object_get(value, "translate") || json_object_get(value, "rotate_deg") ||
-                                      json_object_get(value, "scale")))
+        if (json_is_object(value) &&
+            (json_object_get(value, "translate") || json_object_get(value, "rotate_deg") ||
+             json_object_get(value, "scale")))
             return json_fail(ctx, SCENE_ERR_JSON, where,
                              "'matrix' cannot be combined with translate, rotate_deg or scale");
         if (matrix[12] != 0.0 || matrix[13] != 0.0 || matrix[14] != 0.0 || matrix[15] != 1.0)
@@ -439,8 +453,8 @@ static scene_result json_read_mesh_entry(const json_ctx *ctx, const json_t *valu
             return r;
         if (strcmp(which, "default") != 0) {
             json_field_path(field, sizeof field, where, "builtin");
-            return json_fail(ctx, SCENE_ERR_INVALID, field, "unknown builtin '%s' (the only one is \"default\")",
-                             which);
+            return json_fail(ctx, SCENE_ERR_INVALID, field,
+                             "unknown builtin '%s' (the only one is \"default\")", which);
         }
         entry->builtin = true;
         const json_t *transform = json_object_get(value, "transform");
@@ -461,7 +475,8 @@ static scene_result json_read_mesh_entry(const json_ctx *ctx, const json_t *valu
     if ((r = json_get_string(ctx, value, where, "file", relative, sizeof relative, &has_file)) != SCENE_OK)
         return r;
     if (!has_file)
-        return json_fail(ctx, SCENE_ERR_JSON, where, "missing required field 'file' (or \"builtin\": \"default\")");
+        return json_fail(ctx, SCENE_ERR_JSON, where,
+                         "missing required field 'file' (or \"builtin\": \"default\")");
     json_field_path(field, sizeof field, where, "file");
     if ((r = json_resolve_path(ctx, field, relative, entry->file, sizeof entry->file)) != SCENE_OK)
         return r;
@@ -504,8 +519,8 @@ static scene_result json_read_mesh_entry(const json_ctx *ctx, const json_t *valu
         }
         if (entry->has_texture) {
             json_field_path(field, sizeof field, material_where, "texture");
-            if ((r = json_resolve_path(ctx, field, texture_relative, entry->texture, sizeof entry->texture)) !=
-                SCENE_OK)
+            if ((r = json_resolve_path(ctx, field, texture_relative, entry->texture,
+                                       sizeof entry->texture)) != SCENE_OK)
                 return r;
         }
         bool has_material_name = false;
@@ -562,8 +577,9 @@ static scene_result json_read_lights(const json_ctx *ctx, scene *s, const json_t
         if (strcmp(type, "directional") == 0) {
             light.type = SCENE_LIGHT_DIRECTIONAL;
             if (!has_direction)
-                return json_fail(ctx, SCENE_ERR_JSON, where, "missing required field 'direction' (a directional "
-                                                             "light needs the direction it travels)");
+                return json_fail(ctx, SCENE_ERR_JSON, where,
+                                 "missing required field 'direction' (a directional "
+                                 "light needs the direction it travels)");
             if (has_position)
                 return json_fail(ctx, SCENE_ERR_JSON, where,
                                  "field 'position' does not apply to a directional light (use 'direction')");
@@ -578,8 +594,9 @@ static scene_result json_read_lights(const json_ctx *ctx, scene *s, const json_t
         } else if (strcmp(type, "point") == 0) {
             light.type = SCENE_LIGHT_POINT;
             if (!has_position)
-                return json_fail(ctx, SCENE_ERR_JSON, where, "missing required field 'position' (a point light "
-                                                             "needs a position)");
+                return json_fail(ctx, SCENE_ERR_JSON, where,
+                                 "missing required field 'position' (a point light "
+                                 "needs a position)");
             if (has_direction)
                 return json_fail(ctx, SCENE_ERR_JSON, where,
                                  "field 'direction' does not apply to a point light (use 'position')");
@@ -639,7 +656,8 @@ static scene_result json_read_toggle(const json_ctx *ctx, const json_t *effects,
     else if (strcmp(word, "off") == 0)
         *out = SCENE_OFF;
     else
-        return json_fail(ctx, SCENE_ERR_INVALID, field, "must be \"auto\", \"on\" or \"off\", not \"%s\"", word);
+        return json_fail(ctx, SCENE_ERR_INVALID, field, "must be \"auto\", \"on\" or \"off\", not \"%s\"",
+                         word);
     return SCENE_OK;
 }
 
@@ -695,7 +713,8 @@ static scene_result json_read_density_and_radius(const json_ctx *ctx, scene *s, 
             s->density_auto = false;
         } else {
             return json_fail(ctx, SCENE_ERR_JSON, "texel_density",
-                             "must be a number of texels per metre or \"auto\", not %s", json_type_word(density));
+                             "must be a number of texels per metre or \"auto\", not %s",
+                             json_type_word(density));
         }
     }
     const json_t *radius = json_object_get(root, "ao_radius");
@@ -714,7 +733,8 @@ static scene_result json_read_density_and_radius(const json_ctx *ctx, scene *s, 
 
 /* Adds the embedded default scene's geometry and materials (moved by xform, may be NULL), without its lights,
  * sky and camera: a JSON scene says exactly which lights it has. */
-static scene_result json_add_builtin_default(const json_ctx *ctx, scene *s, const double *xform, const char *where)
+static scene_result json_add_builtin_default(const json_ctx *ctx, scene *s, const double *xform,
+                                             const char *where)
 {
     uint32_t light_count = s->light_count;
     float sky_color[3];
@@ -756,7 +776,8 @@ static void json_join_name(char *out, size_t cap, const char *prefix, const char
 }
 
 /* Imports one checked mesh entry: the material override (and its texture), the file, then the names. */
-static scene_result json_import_entry(const json_ctx *ctx, scene *s, json_mesh_entry *entry, const char *where)
+static scene_result json_import_entry(const json_ctx *ctx, scene *s, json_mesh_entry *entry,
+                                      const char *where)
 {
     if (entry->builtin)
         return json_add_builtin_default(ctx, s, entry->has_xform ? entry->xform : NULL, where);
@@ -831,18 +852,19 @@ static scene_result json_read_root(const json_ctx *ctx, scene *s, const json_t *
     if (!json_is_object(root))
         return json_fail(ctx, SCENE_ERR_JSON, NULL, "the top level must be an object, not %s",
                          json_type_word(root));
-    static const char *const allowed[] = {"version", "meshes", "lights", "sky", "texel_density",
-                                          "ao_radius", "effects", "camera"};
+    static const char *const allowed[] = {"version",       "meshes",    "lights",  "sky",
+                                          "texel_density", "ao_radius", "effects", "camera"};
     scene_result r = json_check_object(ctx, root, "", allowed, sizeof allowed / sizeof allowed[0]);
     if (r != SCENE_OK)
         return r;
 
     const json_t *version = json_object_get(root, "version");
     if (!version)
-        return json_fail(ctx, SCENE_ERR_JSON, NULL, "missing required field 'version' (this fxcache reads %d)",
-                         JSON_SCENE_VERSION);
+        return json_fail(ctx, SCENE_ERR_JSON, NULL,
+                         "missing required field 'version' (this fxcache reads %d)", JSON_SCENE_VERSION);
     if (!json_is_integer(version))
-        return json_fail(ctx, SCENE_ERR_JSON, "version", "must be an integer, not %s", json_type_word(version));
+        return json_fail(ctx, SCENE_ERR_JSON, "version", "must be an integer, not %s",
+                         json_type_word(version));
     json_int_t version_number = json_integer_value(version);
     if (version_number > JSON_SCENE_VERSION)
         return json_fail(ctx, SCENE_ERR_FORMAT, "version",

@@ -93,8 +93,9 @@ scene_result scene__compute_texture_lods(scene *s, scene_error *err)
             continue;
         const scene_texture *tex = &s->textures[m->texture];
         const float *uv = s->corner_uv + 6 * (size_t)t;
-        double uv_area = 0.5 * fabs(((double)uv[2] - uv[0]) * ((double)uv[5] - uv[1]) -
-                                    ((double)uv[4] - uv[0]) * ((double)uv[3] - uv[1])) *
+        double uv_area = 0.5 *
+                         fabs(((double)uv[2] - uv[0]) * ((double)uv[5] - uv[1]) -
+                              ((double)uv[4] - uv[0]) * ((double)uv[3] - uv[1])) *
                          (double)tex->width * (double)tex->height;
         const float *a = s->positions + 3 * (size_t)s->indices[3 * (size_t)t];
         const float *b = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 1];
@@ -104,7 +105,8 @@ scene_result scene__compute_texture_lods(scene *s, scene_error *err)
             e1[k] = (double)b[k] - a[k];
             e2[k] = (double)c[k] - a[k];
         }
-        double cx = e1[1] * e2[2] - e1[2] * e2[1], cy = e1[2] * e2[0] - e1[0] * e2[2], cz = e1[0] * e2[1] - e1[1] * e2[0];
+        double cx = e1[1] * e2[2] - e1[2] * e2[1], cy = e1[2] * e2[0] - e1[0] * e2[2],
+               cz = e1[0] * e2[1] - e1[1] * e2[0];
         double world_area = 0.5 * sqrt(cx * cx + cy * cy + cz * cz);
         if (uv_area > 0 && world_area > 0 && isfinite(uv_area))
             s->tri_texture_lod[t] = (float)(0.5 * log2(uv_area / world_area));
@@ -154,7 +156,8 @@ FXC_HOT_INLINE void texture_sample(const scene_texture *tex, uint32_t level, flo
 {
     /* Level 0 straight from rgb: a texture filled by hand may have no mip chain. */
     const float *texels = level ? tex->mip_rgb[level] : tex->rgb;
-    uint32_t width = level ? tex->mip_width[level] : tex->width, height = level ? tex->mip_height[level] : tex->height;
+    uint32_t width = level ? tex->mip_width[level] : tex->width,
+             height = level ? tex->mip_height[level] : tex->height;
     if (!isfinite(u) || !isfinite(v)) {
         u = 0;
         v = 0;
@@ -177,7 +180,7 @@ FXC_HOT_INLINE void texture_sample(const scene_texture *tex, uint32_t level, flo
 
 /* scene_albedo_sample's body, inlined into the run. */
 FXC_HOT_INLINE void albedo_sample(const scene_albedo_triangle *t, float u, float v, float footprint_log2,
-                                 float out_rgb[3])
+                                  float out_rgb[3])
 {
     if (!t->texture) {
         memcpy(out_rgb, t->diffuse, 3 * sizeof(float));
@@ -216,7 +219,8 @@ void scene_albedo_prepare(const scene *s, uint32_t tri, scene_albedo_triangle *o
     out->lod = s->tri_texture_lod ? s->tri_texture_lod[tri] : -1000.0f;
 }
 
-void scene_albedo_sample(const scene_albedo_triangle *t, float u, float v, float footprint_log2, float out_rgb[3])
+void scene_albedo_sample(const scene_albedo_triangle *t, float u, float v, float footprint_log2,
+                         float out_rgb[3])
 {
     albedo_sample(t, u, v, footprint_log2, out_rgb);
 }
@@ -254,7 +258,8 @@ typedef struct albedo_lanes {
 /* The lanes of the first chunks * ALBEDO_CHUNK hits (vectorised: FXC_HOT_LANES, a fixed trip count per chunk). */
 FXC_HOT_LANES static void albedo_lanes_fill(albedo_lanes *L, uint32_t chunks)
 {
-    const float uv0 = L->uv[0], uv1 = L->uv[1], uv2 = L->uv[2], uv3 = L->uv[3], uv4 = L->uv[4], uv5 = L->uv[5];
+    const float uv0 = L->uv[0], uv1 = L->uv[1], uv2 = L->uv[2], uv3 = L->uv[3], uv4 = L->uv[4],
+                uv5 = L->uv[5];
     const float lod = L->lod, top = L->top, width = L->width, height = L->height;
     const int32_t levels = L->levels, mip = L->mip;
     for (int c = 0; c < (int)chunks; c++) {
@@ -300,7 +305,8 @@ FXC_HOT_INLINE void albedo_stretch(const scene_albedo_triangle *t, albedo_lanes 
     const scene_texture *tex = t->texture;
     uint32_t n = end - first, mip = albedo_mip(t, footprint_log2[first]);
     const float *texels = mip ? tex->mip_rgb[mip] : tex->rgb;
-    uint32_t width = mip ? tex->mip_width[mip] : tex->width, height = mip ? tex->mip_height[mip] : tex->height;
+    uint32_t width = mip ? tex->mip_width[mip] : tex->width,
+             height = mip ? tex->mip_height[mip] : tex->height;
     memcpy(L->uv, t->uv, sizeof L->uv);
     L->lod = t->lod;
     L->levels = (int32_t)tex->levels;
@@ -338,7 +344,7 @@ FXC_HOT_INLINE void albedo_stretch(const scene_albedo_triangle *t, albedo_lanes 
  * lanes over the stretch (albedo_stretch: no per-hit fill of triangle data, which made a lanes version over
  * the whole run slower), the texel reads and the filter per hit. */
 FXC_HOT_CLONES void scene_albedo_run(const scene *s, const uint32_t *tri, const float *u, const float *v,
-                      const float *footprint_log2, uint32_t count, float (*out_rgb)[3])
+                                     const float *footprint_log2, uint32_t count, float (*out_rgb)[3])
 {
     scene_albedo_triangle t;
     albedo_lanes L;
@@ -373,8 +379,9 @@ void scene_albedo_filtered(const scene *s, uint32_t tri, float u, float v, float
  * texels), rounded, within the chain. */
 static uint32_t mean_level(const scene_texture *tex, const float uv[6])
 {
-    double uv_area = 0.5 * fabs(((double)uv[2] - uv[0]) * ((double)uv[5] - uv[1]) -
-                                ((double)uv[4] - uv[0]) * ((double)uv[3] - uv[1])) *
+    double uv_area = 0.5 *
+                     fabs(((double)uv[2] - uv[0]) * ((double)uv[5] - uv[1]) -
+                          ((double)uv[4] - uv[0]) * ((double)uv[3] - uv[1])) *
                      (double)tex->width * (double)tex->height;
     if (tex->levels <= 1 || !(uv_area > 1.0))
         return 0;

@@ -76,8 +76,9 @@ static void needs_shadow(const scene *s, const needs_content *content, scene_nee
             needs_reason(reason, cap, "forced on in the scene description (%u of %u lights carry energy)",
                          content->lights_with_energy, s->light_count);
         else
-            needs_reason(reason, cap, "forced on in the scene description; warning: no light has intensity > 0 "
-                                      "and a non-black colour, so there is nothing to shadow");
+            needs_reason(reason, cap,
+                         "forced on in the scene description; warning: no light has intensity > 0 "
+                         "and a non-black colour, so there is nothing to shadow");
     } else if (content->lights_with_energy > 0) {
         out->effect[SCENE_FX_SHADOW] = true;
         needs_reason(reason, cap, "%u of %u lights carry energy (intensity > 0, non-black colour)",
@@ -105,8 +106,9 @@ static void needs_ao(const scene *s, const needs_content *content, scene_needs_r
         if (content->sky_with_energy)
             needs_reason(reason, cap, "forced on in the scene description (the sky gives ambient light)");
         else
-            needs_reason(reason, cap, "forced on in the scene description; warning: there is no sky (ambient "
-                                      "light) with energy, so occlusion darkens nothing");
+            needs_reason(reason, cap,
+                         "forced on in the scene description; warning: there is no sky (ambient "
+                         "light) with energy, so occlusion darkens nothing");
     } else if (content->sky_with_energy) {
         out->effect[SCENE_FX_AO] = true;
         needs_reason(reason, cap, "the sky gives ambient light (intensity %g)", (double)s->sky_intensity);
@@ -115,7 +117,8 @@ static void needs_ao(const scene *s, const needs_content *content, scene_needs_r
         needs_reason(reason, cap, "the scene has no sky (no ambient light to occlude)");
     } else {
         out->effect[SCENE_FX_AO] = false;
-        needs_reason(reason, cap, "the sky is dark (intensity 0 or a black colour): no ambient light to occlude");
+        needs_reason(reason, cap,
+                     "the sky is dark (intensity 0 or a black colour): no ambient light to occlude");
     }
 }
 
@@ -139,7 +142,8 @@ static void needs_probes(const scene *s, const needs_content *content, scene_nee
                          !has_energy ? "no light or sky with energy" : "every material is black");
     } else if (!has_energy) {
         out->effect[SCENE_FX_PROBES] = false;
-        needs_reason(reason, cap, "nothing lights the scene (no light or sky with energy), so no light bounces");
+        needs_reason(reason, cap,
+                     "nothing lights the scene (no light or sky with energy), so no light bounces");
     } else if (!has_albedo) {
         out->effect[SCENE_FX_PROBES] = false;
         needs_reason(reason, cap, "every material is black (zero albedo, no texture), so no light bounces");
@@ -176,16 +180,19 @@ void scene_needs(const scene *s, scene_needs_result *out)
     if (shadow && ao)
         needs_reason(lookup_reason, lookup_cap, "needed by the on-surface effects shadow and ao");
     else if (shadow || ao)
-        needs_reason(lookup_reason, lookup_cap, "needed by the on-surface effect %s", shadow ? "shadow" : "ao");
+        needs_reason(lookup_reason, lookup_cap, "needed by the on-surface effect %s",
+                     shadow ? "shadow" : "ao");
     else
         needs_reason(lookup_reason, lookup_cap, "no on-surface effect runs (shadow and ao are left out)");
 
     out->cache[SCENE_CACHE_ON_SURFACE] = out->effect[SCENE_FX_TRIANGLE_LOOKUP];
     if (out->cache[SCENE_CACHE_ON_SURFACE])
-        needs_reason(out->cache_reason[SCENE_CACHE_ON_SURFACE], sizeof out->cache_reason[SCENE_CACHE_ON_SURFACE],
-                     "holds triangle_lookup%s%s", shadow ? ", shadow" : "", ao ? ", ao" : "");
+        needs_reason(out->cache_reason[SCENE_CACHE_ON_SURFACE],
+                     sizeof out->cache_reason[SCENE_CACHE_ON_SURFACE], "holds triangle_lookup%s%s",
+                     shadow ? ", shadow" : "", ao ? ", ao" : "");
     else
-        needs_reason(out->cache_reason[SCENE_CACHE_ON_SURFACE], sizeof out->cache_reason[SCENE_CACHE_ON_SURFACE],
+        needs_reason(out->cache_reason[SCENE_CACHE_ON_SURFACE],
+                     sizeof out->cache_reason[SCENE_CACHE_ON_SURFACE],
                      "no on-surface effect runs (shadow and ao are left out)");
 
     out->cache[SCENE_CACHE_WORLD_SPACE] = out->effect[SCENE_FX_PROBES];

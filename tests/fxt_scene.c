@@ -188,8 +188,8 @@ scene *fxt_transformed_default(double scale, double offset, float intensity_scal
     for (uint32_t m = 0; m < base->mesh_count; m++) {
         const scene_mesh *mesh = &base->meshes[m];
         assert_int_equal(scene__add_mesh(s, mesh->name, base->positions, base->vertex_count,
-                                         base->indices + 3 * (size_t)mesh->first_triangle, mesh->triangle_count,
-                                         NULL, mesh->material, xform, &err),
+                                         base->indices + 3 * (size_t)mesh->first_triangle,
+                                         mesh->triangle_count, NULL, mesh->material, xform, &err),
                          SCENE_OK);
     }
     for (uint32_t l = 0; l < base->light_count; l++) {

@@ -31,7 +31,6 @@ double fxt_now_s(void)
 
 /* ---- the server process ---------------------------------------------------------------------------------- */
 
-
 /* Starts `fxcache serve --port 0 ARGS...` with stdout and stderr in files; waits for its address line. */
 void fxt_server_start(fxt_server *sv, const char *name, const char *const *args)
 {
@@ -167,8 +166,9 @@ int fxt_ws_connect(int port)
     int fd = fxt_tcp_connect(port);
     if (fd < 0)
         return -1;
-    static const char request[] = "GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-                                  "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n";
+    static const char request[] =
+        "GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+        "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n";
     char reply[2048];
     size_t len = 0;
     if (!fxt_write_all(fd, request, sizeof request - 1))
@@ -315,4 +315,3 @@ bool fxt_read_welcome(int fd, proto_welcome *out)
     free(msg);
     return ok;
 }
-

@@ -180,12 +180,14 @@ static void test_subcommand_help(void **state)
  * to N within the rule (a quarter of the narrowest probe cell in pixels). At 320 x 180 and 60 degrees the
  * rule allows 2: the default (4) and 2 give the same bytes, 1 (every pixel) other bytes, and the summary
  * reports the option as resolved. */
-static void sim_frame(const char *name, const char *block_option, char *image, size_t image_cap, long long *block)
+static void sim_frame(const char *name, const char *block_option, char *image, size_t image_cap,
+                      long long *block)
 {
     char out[1024], summary[1024];
     tmp_path(out, sizeof out, name);
     snprintf(summary, sizeof summary, "%s/summary.json", out);
-    assert_int_equal(run("sim --res 320x180 --viewers 1 --frames 3 --threads 1 --camera walk %s --out '%s' --summary '%s' --quiet",
+    assert_int_equal(run("sim --res 320x180 --viewers 1 --frames 3 --threads 1 --camera walk %s --out '%s' "
+                         "--summary '%s' --quiet",
                          block_option, out, summary),
                      0);
     json_t *sum = load_json_file(summary);
@@ -273,8 +275,8 @@ static void test_scene_info_bunny(void **state)
     /* 69,666 triangles in the file; cleaning drops only degenerate and duplicate ones. */
     long long tris = jint(info, "triangles");
     assert_true(tris > 69000 && tris <= 69666);
-    assert_int_equal(tris + jint(info, "repairs.degenerate_skipped") + jint(info, "repairs.duplicate_skipped"),
-                     69666);
+    assert_int_equal(
+        tris + jint(info, "repairs.degenerate_skipped") + jint(info, "repairs.duplicate_skipped"), 69666);
     assert_int_equal(jint(info, "meshes"), 1);
     json_decref(info);
 }
@@ -285,7 +287,8 @@ static void test_scene_info_no_lights_no_sky(void **state)
     char obj[1100], scene_file[1100];
     write_file(obj, sizeof obj, "tri.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
     (void)obj;
-    write_file(scene_file, sizeof scene_file, "dark.json", "{\"version\": 1, \"meshes\": [{\"file\": \"tri.obj\"}]}\n");
+    write_file(scene_file, sizeof scene_file, "dark.json",
+               "{\"version\": 1, \"meshes\": [{\"file\": \"tri.obj\"}]}\n");
     assert_int_equal(run("scene-info '%s' --json", scene_file), 0);
     json_t *info = parse_json_text(out_buf);
     assert_int_equal(jint(info, "lights"), 0);
@@ -604,8 +607,8 @@ static void test_err_output_paths_checked_first(void **state)
     expect_error(1, args, "--summary", "is a directory", NULL);
     tmp_path(dir, sizeof dir, "paths_out");
     snprintf(summary, sizeof summary, "%s/inside/summary.json", dir);
-    snprintf(args, sizeof args, "sim --frames 1 --res 8x8 --viewers 1 --quiet --out '%s/inside/' --summary '%s'", dir,
-             summary);
+    snprintf(args, sizeof args,
+             "sim --frames 1 --res 8x8 --viewers 1 --quiet --out '%s/inside/' --summary '%s'", dir, summary);
     mkdir(dir, 0755);
     assert_int_equal(run("%s", args), 0);
     assert_int_equal(access(summary, F_OK), 0);
@@ -736,10 +739,11 @@ static void test_sim_identical_summary_and_stats(void **state)
     tmp_path(stats, sizeof stats, "F.jsonl");
     remove(summary);
     remove(stats);
-    assert_int_equal(run("sim --viewers 2 --frames 3 --res 64x36 --camera identical --summary '%s' --stats '%s' "
-                         "--quiet",
-                         summary, stats),
-                     0);
+    assert_int_equal(
+        run("sim --viewers 2 --frames 3 --res 64x36 --camera identical --summary '%s' --stats '%s' "
+            "--quiet",
+            summary, stats),
+        0);
     assert_string_equal(out_buf, ""); /* --quiet */
     json_t *s = load_json_file(summary);
     assert_int_equal(jint(s, "viewers"), 2);
@@ -754,7 +758,8 @@ static void test_sim_identical_summary_and_stats(void **state)
     assert_true(jint(s, "rays.shadow") > 0);
     assert_true(jint(s, "rays.ao") > 0);
     assert_true(jint(s, "rays.probes") > 0); /* the embedded scene has a sun and a sky: indirect light */
-    assert_int_equal(jint(s, "rays.effects_total"), jint(s, "rays.shadow") + jint(s, "rays.ao") + jint(s, "rays.probes"));
+    assert_int_equal(jint(s, "rays.effects_total"),
+                     jint(s, "rays.shadow") + jint(s, "rays.ao") + jint(s, "rays.probes"));
     assert_int_equal(jint(s, "world_space.requested_cells"), 2 * jint(s, "world_space.unique_cells"));
     assert_true(jint(s, "pixels_visible") > 0 && jint(s, "pixels_visible") <= 3 * 2 * 64 * 36);
     assert_true(jint(s, "memory_bytes.peak.total") > 0);
@@ -802,7 +807,8 @@ static void test_sim_indirect_off(void **state)
                " \"effects\": {\"indirect\": \"off\"}}\n");
     tmp_path(summary, sizeof summary, "noindirect_summary.json");
     remove(summary);
-    assert_int_equal(run("sim --scene '%s' --viewers 1 --frames 2 --res 48x27 --summary '%s'", scene_file, summary), 0);
+    assert_int_equal(
+        run("sim --scene '%s' --viewers 1 --frames 2 --res 48x27 --summary '%s'", scene_file, summary), 0);
     assert_non_null(strstr(out_buf, "left out probes"));
     assert_non_null(strstr(out_buf, "no world-space cache"));
     json_t *s = load_json_file(summary);
@@ -823,13 +829,15 @@ static void test_sim_record_replay(void **state)
     tmp_path(b, sizeof b, "B.json");
     remove(a);
     remove(b);
-    assert_int_equal(run("sim --camera orbit --viewers 2 --frames 3 --res 64x36 --record '%s' --summary '%s' --quiet",
-                         dir, a),
-                     0);
+    assert_int_equal(
+        run("sim --camera orbit --viewers 2 --frames 3 --res 64x36 --record '%s' --summary '%s' --quiet", dir,
+            a),
+        0);
     /* No --res: the recorded traces (version 2) carry 64x36, and the summary says what the viewers rendered. */
-    assert_int_equal(run("sim --trace '%s/viewer_00.trace' --trace '%s/viewer_01.trace' --summary '%s' --quiet", dir,
-                         dir, b),
-                     0);
+    assert_int_equal(
+        run("sim --trace '%s/viewer_00.trace' --trace '%s/viewer_01.trace' --summary '%s' --quiet", dir, dir,
+            b),
+        0);
     json_t *ja = load_json_file(a), *jb = load_json_file(b);
     assert_int_equal(jint(jb, "viewers"), 2);
     assert_string_equal(json_string_value(jget(jb, "resolution")), "64x36");
@@ -855,7 +863,8 @@ static void test_sim_no_cache(void **state)
     char summary[1100];
     tmp_path(summary, sizeof summary, "N.json");
     remove(summary);
-    assert_int_equal(run("sim --no-cache --viewers 1 --res 64x36 --frames 1 --summary '%s' --quiet", summary), 0);
+    assert_int_equal(run("sim --no-cache --viewers 1 --res 64x36 --frames 1 --summary '%s' --quiet", summary),
+                     0);
     json_t *s = load_json_file(summary);
     assert_true(json_is_true(jget(s, "no_cache")));
     long long visible = jint(s, "pixels_visible");
@@ -890,7 +899,8 @@ static void test_sim_tiny_pool(void **state)
     long long reserved = 0;
     const char *name;
     const json_t *fx;
-    json_object_foreach((json_t *)effects, name, fx) {
+    json_object_foreach((json_t *)effects, name, fx)
+    {
         long long r = jint(fx, "pool_reserved"), used = jint(fx, "pool_in_use");
         assert_true(used <= r);
         reserved += r;
@@ -929,8 +939,8 @@ static void test_sim_viewers_see_nothing(void **state)
                " \"camera\": {\"position\": [0.3, 0.3, 5], \"target\": [0.3, 0.3, 10], \"fov_deg\": 60}}\n");
     tmp_path(summary, sizeof summary, "W.json");
     remove(summary);
-    int rc = run("sim --scene '%s' --camera static --viewers 2 --frames 2 --res 64x36 --summary '%s' --quiet", scene_file,
-                 summary);
+    int rc = run("sim --scene '%s' --camera static --viewers 2 --frames 2 --res 64x36 --summary '%s' --quiet",
+                 scene_file, summary);
     if (rc != 0)
         print_error("stderr: %s\n", err_buf);
     assert_int_equal(rc, 0);
@@ -965,8 +975,8 @@ static void test_sim_room_cameras_inside_default_room(void **state)
                 continue;
             cameras++;
             if (!(p[0] > -5 && p[0] < 5 && p[1] > 0 && p[1] < 4 && p[2] > -4 && p[2] < 4)) {
-                print_error("viewer %d camera %d at (%g, %g, %g) is outside the room [-5,5]x[0,4]x[-4,4]\n", v,
-                            cameras - 1, p[0], p[1], p[2]);
+                print_error("viewer %d camera %d at (%g, %g, %g) is outside the room [-5,5]x[0,4]x[-4,4]\n",
+                            v, cameras - 1, p[0], p[1], p[2]);
                 fclose(f);
                 fail();
             }
@@ -993,8 +1003,8 @@ static void test_sim_interrupted_keeps_results(void **state)
         int devnull = open("/dev/null", O_WRONLY);
         dup2(devnull, STDOUT_FILENO);
         dup2(devnull, STDERR_FILENO);
-        execl(FXC_BIN, FXC_BIN, "sim", "--frames", "100000", "--res", "64x36", "--viewers", "2", "--stats", stats,
-              "--summary", summary, "--out", out, "--quiet", (char *)NULL);
+        execl(FXC_BIN, FXC_BIN, "sim", "--frames", "100000", "--res", "64x36", "--viewers", "2", "--stats",
+              stats, "--summary", summary, "--out", out, "--quiet", (char *)NULL);
         _exit(127);
     }
     /* Wait (at most 60 s) until two frames are on record, then interrupt. */

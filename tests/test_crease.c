@@ -39,8 +39,6 @@
 
 /* ---- scene building (as in test_effects.c) -------------------------------------------------------- */
 
-
-
 /* Where a test room goes: world = rot * room + shift. */
 typedef struct placement {
     double rot[3][3];
@@ -90,14 +88,7 @@ static void add_rect(scene *s, const char *name, const placement *pl, int axis, 
         fxt_add_quad(s, name, world_corner, world_b, world_a, cells);
 }
 
-
-
-
 /* ---- running an effect over a whole island -------------------------------------------------------- */
-
-
-
-
 
 /* The affine map from level-0 island UV to world of a planar island, from its first triangle (computed here
  * in double, independently of the effect code): world = origin + u * along_u + v * along_v. */

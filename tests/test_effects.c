@@ -36,9 +36,6 @@ static const double PI = 3.14159265358979323846;
 
 /* ---- scene building ------------------------------------------------------------------------------ */
 
-
-
-
 /* Adds a point light at (x, y, z). */
 static void add_point_light(scene *s, float x, float y, float z)
 {
@@ -48,13 +45,7 @@ static void add_point_light(scene *s, float x, float y, float z)
     assert_int_equal(scene__add_light(s, &light, "test lamp", &err), SCENE_OK);
 }
 
-
-
 /* ---- running an effect over a whole island -------------------------------------------------------- */
-
-
-
-
 
 /* World position and normal of the centre of texel t of block b. */
 static void texel_centre(const scene *s, const fxt_island_run *run, uint32_t b, uint32_t t, float pos[3],
@@ -345,7 +336,7 @@ static scene *wall_scene(scene_rt **rt)
     scene *s = fxt_new_scene();
     fxt_add_quad(s, "floor", (double[3]){0, 0, -3}, (double[3]){0, 0, 6}, (double[3]){3, 0, 0}, 2);
     fxt_add_quad(s, "wall", (double[3]){0, 0, -6}, (double[3]){0, 10, 0}, (double[3]){0, 0, 12},
-             2); /* normal +x */
+                 2); /* normal +x */
     *rt = fxt_finish_scene(s, 20.0f, WALL_RADIUS);
     return s;
 }
@@ -561,7 +552,8 @@ static void test_shadow_occluder(void **state)
     (void)state;
     scene *s = fxt_new_scene();
     fxt_add_quad(s, "floor", (double[3]){-4, 0, -4}, (double[3]){0, 0, 8}, (double[3]){8, 0, 0}, 2);
-    fxt_add_quad(s, "occluder", (double[3]){-1, 1, -1}, (double[3]){2, 0, 0}, (double[3]){0, 0, 2}, 1); /* -y */
+    fxt_add_quad(s, "occluder", (double[3]){-1, 1, -1}, (double[3]){2, 0, 0}, (double[3]){0, 0, 2},
+                 1); /* -y */
     fxt_add_sun(s, 0, -1, 0);
     add_point_light(s, 0, 3, 0);
     scene_rt *rt = fxt_finish_scene(s, 8.0f, 1.0f);
@@ -708,10 +700,11 @@ static void check_open_planes_at_scale(double scale, double offset)
     scene *s = fxt_new_scene();
     double o = offset;
     fxt_add_quad(s, "flat", (double[3]){o - 5 * scale, o, o - 5 * scale}, (double[3]){0, 0, 10 * scale},
-             (double[3]){10 * scale, 0, 0}, 3);
+                 (double[3]){10 * scale, 0, 0}, 3);
     /* Tilted about two axes, above and beside the flat one (out of its sun rays and AO radius). */
     fxt_add_quad(s, "tilted", (double[3]){o + 30 * scale, o + 20 * scale, o - 2 * scale},
-             (double[3]){1 * scale, 3 * scale, 7 * scale}, (double[3]){6 * scale, 1 * scale, -1 * scale}, 3);
+                 (double[3]){1 * scale, 3 * scale, 7 * scale}, (double[3]){6 * scale, 1 * scale, -1 * scale},
+                 3);
     fxt_add_sun(s, 0.2f, -1.0f, 0.1f);
     scene_rt *rt = fxt_finish_scene(s, (float)(6.0 / scale), (float)(2.0 * scale));
     fx_context ctx = {.s = s, .rt = rt, .seed = 4, .ao_radius = (float)(2.0 * scale)};
@@ -791,7 +784,8 @@ static float ref_shadow_visibility(const fx_taps *taps, uint32_t lights, uint32_
 {
     float lit_average = 0;
     for (uint32_t t = 0; t < taps->count; t++)
-        lit_average += taps->weight[t] * ref_lit_fraction(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
+        lit_average +=
+            taps->weight[t] * ref_lit_fraction(fx__get_u16((const uint8_t *)taps->texel[t] + 2u * l));
     (void)lights;
     if (taps->footprint_log2 >= 0.0f)
         return fminf(lit_average, 1.0f);
@@ -844,7 +838,8 @@ static void test_shadow_shade_uniform_masks(void **state)
         const int lights = 1 + round % LIGHTS; /* one light (the usual scene) and two */
         for (int i = 0; i < PIXELS; i++) {
             fx_taps *tp = &taps[i];
-            float px = (float)shade_rng_unit(&rng) * 3.0f + 0.5f, py = (float)shade_rng_unit(&rng) * 3.0f + 0.5f;
+            float px = (float)shade_rng_unit(&rng) * 3.0f + 0.5f,
+                  py = (float)shade_rng_unit(&rng) * 3.0f + 0.5f;
             float x = px - 0.5f, y = py - 0.5f, ax = x - floorf(x), ay = y - floorf(y);
             float tx0 = floorf(x), ty0 = floorf(y), total = 0;
             tp->count = 0;
@@ -856,7 +851,9 @@ static void test_shadow_shade_uniform_masks(void **state)
                 uint32_t n = tp->count++;
                 for (int l = 0; l < lights; l++) {
                     double pick = shade_rng_unit(&rng);
-                    uint32_t mask = pick < 0.33 ? 0xFFFFu : (pick < 0.66 ? 0u : (uint32_t)(shade_rng_next(&rng) >> 20) & 0xFFFFu);
+                    uint32_t mask =
+                        pick < 0.33 ? 0xFFFFu
+                                    : (pick < 0.66 ? 0u : (uint32_t)(shade_rng_next(&rng) >> 20) & 0xFFFFu);
                     mask = dark ? 0u : mask;
                     payload[i][n][2 * l] = (uint8_t)(mask & 0xFF);
                     payload[i][n][2 * l + 1] = (uint8_t)(mask >> 8);
@@ -886,19 +883,23 @@ static void test_shadow_shade_uniform_masks(void **state)
                 four_dark += tp->count == 4 && tp->footprint_log2 < 0 && any == 0;
             }
         }
-        fx_shade_run run = {.count = PIXELS, .light_count = (uint32_t)lights, .taps = taps,
-                            .light_visibility = visibility, .sky_visibility = sky, .indirect = indirect};
+        fx_shade_run run = {.count = PIXELS,
+                            .light_count = (uint32_t)lights,
+                            .taps = taps,
+                            .light_visibility = visibility,
+                            .sky_visibility = sky,
+                            .indirect = indirect};
         fx_effect_shadow.shade(NULL, &run);
         for (int i = 0; i < PIXELS; i++)
             for (uint32_t l = 0; l < (uint32_t)lights; l++) {
                 float expected = taps[i].count ? ref_shadow_visibility(&taps[i], (uint32_t)lights, l) : 1.0f;
                 float got = visibility[i * lights + (int)l];
                 if (memcmp(&expected, &got, sizeof got) != 0)
-                    fail_msg("round %d pixel %d light %u: %.9g, the definition %.9g", round, i, l, (double)got,
-                             (double)expected);
+                    fail_msg("round %d pixel %d light %u: %.9g, the definition %.9g", round, i, l,
+                             (double)got, (double)expected);
             }
     }
-    assert_true(uniform > 1000 && mixed > 1000); /* both paths taken many times */
+    assert_true(uniform > 1000 && mixed > 1000);                        /* both paths taken many times */
     assert_true(four_dark > 100 && all_dark > 500 && coarse_dark > 50); /* the wholly shadowed shortcuts */
 }
 

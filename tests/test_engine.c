@@ -51,7 +51,8 @@ static uint64_t position_cost(const scene *s, uint32_t samples)
 }
 
 /* Each texel's centre located through the triangle lookup (which the loop filled first, as a dependency). */
-static uint64_t position_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count, uint32_t samples)
+static uint64_t position_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count,
+                                uint32_t samples)
 {
     (void)samples;
     for (uint32_t j = 0; j < count; j++) {
@@ -148,16 +149,16 @@ static void test_effect_plugin(void **state)
     const float heights[6] = {0.3f, 0.6f, 1.2f, 2.4f, 3.0f, 3.6f};
     for (int frame = 0; frame < 6; frame++) {
         float height = heights[frame];
-        srv_camera cam = {.position = {0.5f, height, 0.3f}, .target = {0.5f, 0, 0.3f}, .up = {0, 0, -1},
-                          .fov_deg = 50};
+        srv_camera cam = {
+            .position = {0.5f, height, 0.3f}, .target = {0.5f, 0, 0.3f}, .up = {0, 0, -1}, .fov_deg = 50};
         fxt_frame(loop, &id, 1, &cam, &st);
         updated += st.texels_updated[1];
         resampled += st.texels_resampled[1];
         requested += st.requested_texels;
         assert_int_equal(st.rays[1], 0);
     }
-    print_message("world_position: %llu requested, %llu updated, %llu resampled\n", (unsigned long long)requested,
-                  (unsigned long long)updated, (unsigned long long)resampled);
+    print_message("world_position: %llu requested, %llu updated, %llu resampled\n",
+                  (unsigned long long)requested, (unsigned long long)updated, (unsigned long long)resampled);
     assert_true(requested > 0);
     assert_true(updated > 0);
     assert_true(resampled > 0);
@@ -192,9 +193,10 @@ static void test_effect_plugin(void **state)
             checked++;
             within += err <= 2 * texel;
         }
-    print_message("height from the effect vs from the depth buffer: %u pixels, %u within 2 texels (%.4f m), worst "
-                  "%.4f m\n",
-                  checked, within, 2 * texel, worst);
+    print_message(
+        "height from the effect vs from the depth buffer: %u pixels, %u within 2 texels (%.4f m), worst "
+        "%.4f m\n",
+        checked, within, 2 * texel, worst);
     assert_true(checked > w * h / 2);
     assert_true(within >= checked * 0.95); /* the rest: coarse texels across a crease or an island border */
 
@@ -275,8 +277,10 @@ static void test_viewer_handles(void **state)
     assert_int_equal(srv_viewer_check(loop, (srv_viewer_id){0xFFFFFFFFu}), FXC_ERR_STALE_ID);
     /* Bad shapes and cameras are refused with their codes. */
     srv_viewer_id bad;
-    assert_int_equal(srv_viewer_add(loop, &(srv_viewer_desc){.width = 0, .height = 5}, &bad), FXC_ERR_INVALID);
-    assert_int_equal(srv_viewer_add(loop, &(srv_viewer_desc){.width = 9000, .height = 5}, &bad), FXC_ERR_INVALID);
+    assert_int_equal(srv_viewer_add(loop, &(srv_viewer_desc){.width = 0, .height = 5}, &bad),
+                     FXC_ERR_INVALID);
+    assert_int_equal(srv_viewer_add(loop, &(srv_viewer_desc){.width = 9000, .height = 5}, &bad),
+                     FXC_ERR_INVALID);
     srv_camera degenerate = cam;
     memcpy(degenerate.target, degenerate.position, sizeof degenerate.target);
     assert_int_equal(srv_viewer_set_camera(loop, c, &degenerate), FXC_ERR_CAMERA);
@@ -333,7 +337,8 @@ static void test_late_viewer_same_pixels(void **state)
         fxt_frame(loop, (srv_viewer_id[]){early, late}, 2, (srv_camera[]){cam, cam}, &st);
     assert_int_equal(st.rays[1] + st.rays[2], 0); /* converged: nothing left to trace */
     assert_memory_equal(srv_viewer_image(loop, early), srv_viewer_image(loop, late), 64 * 36 * 3);
-    assert_memory_equal(srv_viewer_radiance(loop, early), srv_viewer_radiance(loop, late), 64 * 36 * 3 * sizeof(float));
+    assert_memory_equal(srv_viewer_radiance(loop, early), srv_viewer_radiance(loop, late),
+                        64 * 36 * 3 * sizeof(float));
     srv_loop_free(loop);
 }
 
@@ -391,7 +396,8 @@ static void test_osc_taps_run_equals_single(void **state)
                         px->triangle = tri;
                         px->island = f->s->tri_island[tri];
                         px->footprint = view->footprint[p];
-                        srv__island_uv(f->s, tri, view->bary_u[p], view->bary_v[p], &px->island_u, &px->island_v);
+                        srv__island_uv(f->s, tri, view->bary_u[p], view->bary_v[p], &px->island_u,
+                                       &px->island_v);
                     }
                     /* Every other row, the run's call with the pixels also as lanes (what compose's gather
                      * hands it); the single calls below always without. */
@@ -411,8 +417,9 @@ static void test_osc_taps_run_equals_single(void **state)
                     static srv_pixel garbage[SRV_RUN];
                     memset(garbage, 0xFF, sizeof garbage);
                     assert_true(kind->lanes_suffice);
-                    uint32_t empty = kind->pixel_taps(cache, 0, 0, (y & 1) ? garbage : pixels, (y & 1) ? &lanes : NULL,
-                                                      n, n_group, group, bias, group_taps, group_blocks);
+                    uint32_t empty =
+                        kind->pixel_taps(cache, 0, 0, (y & 1) ? garbage : pixels, (y & 1) ? &lanes : NULL, n,
+                                         n_group, group, bias, group_taps, group_blocks);
                     uint32_t empty_found = 0; /* the taps with count 0 the call says it gave */
                     for (uint32_t i = 0; i < n * n_group; i++) {
                         uint32_t j = i / n, at = i % n;
@@ -479,7 +486,8 @@ static void test_sinks_and_report(void **state)
     srv_viewer_id ids[2];
     srv_loop *loop = fxt_loop(&d, 1, 24, 12, ids);
     counting_sink counter = {0};
-    assert_int_equal(srv_loop_add_sink(loop, &(srv_sink){count_viewer_frame, count_frame_done, &counter}), FXC_OK);
+    assert_int_equal(srv_loop_add_sink(loop, &(srv_sink){count_viewer_frame, count_frame_done, &counter}),
+                     FXC_OK);
     srv_report *report = srv_report_create(loop);
     srv_sink rs = srv_report_sink(report);
     assert_int_equal(srv_loop_add_sink(loop, &rs), FXC_OK);
@@ -515,8 +523,8 @@ static void test_sinks_and_report(void **state)
 /* ---- a replay through the command line against the same schedule through the API ---------------------- */
 
 typedef struct trace_plan {
-    double start;      /* seconds */
-    uint32_t cameras;  /* lines, 1/30 s apart */
+    double start;     /* seconds */
+    uint32_t cameras; /* lines, 1/30 s apart */
     uint32_t width, height;
 } trace_plan;
 
@@ -532,7 +540,8 @@ static void test_replay_matches_api(void **state)
         char name[32];
         snprintf(name, sizeof name, "replay_%d.trace", i);
         snprintf(paths[i], sizeof paths[i], "%s", fxt_tmp_path(name));
-        srv_trace_writer *w = srv_trace_writer_open_sized(paths[i], f->s, plans[i].width, plans[i].height, err, sizeof err);
+        srv_trace_writer *w =
+            srv_trace_writer_open_sized(paths[i], f->s, plans[i].width, plans[i].height, err, sizeof err);
         assert_non_null(w);
         for (uint32_t k = 0; k < plans[i].cameras; k++) {
             srv_camera cam = srv_camgen_camera(SRV_CAMGEN_WALK, f->s, (uint32_t)i, 3, k, 2);
@@ -546,8 +555,9 @@ static void test_replay_matches_api(void **state)
     char summary[1100], stats[1100], args[4096];
     snprintf(summary, sizeof summary, "%s", fxt_tmp_path("replay_summary.json"));
     snprintf(stats, sizeof stats, "%s", fxt_tmp_path("replay_stats.jsonl"));
-    snprintf(args, sizeof args, "sim --trace '%s' --trace '%s' --trace '%s' --summary '%s' --stats '%s' --quiet",
-             paths[0], paths[1], paths[2], summary, stats);
+    snprintf(args, sizeof args,
+             "sim --trace '%s' --trace '%s' --trace '%s' --summary '%s' --stats '%s' --quiet", paths[0],
+             paths[1], paths[2], summary, stats);
     char out[4096], errs[4096];
     int rc = fxt_run_cli(args, out, sizeof out, errs, sizeof errs);
     if (rc != 0)
@@ -570,7 +580,8 @@ static void test_replay_matches_api(void **state)
     for (uint32_t frame = 0; frame < frames; frame++) {
         double now = frame / fps;
         for (int i = 0; i < 3; i++) {
-            bool present = srv_trace_first_time(traces[i]) <= now + 1e-9 && now <= srv_trace_last_time(traces[i]) + 1e-9;
+            bool present =
+                srv_trace_first_time(traces[i]) <= now + 1e-9 && now <= srv_trace_last_time(traces[i]) + 1e-9;
             if (!present && joined[i] && !left[i]) {
                 assert_int_equal(srv_viewer_remove(loop, ids[i]), FXC_OK);
                 left[i] = true;
@@ -640,8 +651,9 @@ static void test_result_codes(void **state)
     assert_string_equal(fxc_strerror(12345), "unknown result");
     /* The cache's and the scene's codes are values of the same table. */
     const int module_codes[] = {OSC_ERR_INVALID_DESC, OSC_ERR_OUT_OF_MEMORY, OSC_ERR_POOL_EXHAUSTED,
-                                OSC_ERR_TABLE_FULL, OSC_ERR_NOT_FOUND, SCENE_ERR_IO, SCENE_ERR_FORMAT,
-                                SCENE_ERR_JSON, SCENE_ERR_INVALID, SCENE_ERR_NOMEM, SCENE_ERR_EMBREE};
+                                OSC_ERR_TABLE_FULL,   OSC_ERR_NOT_FOUND,     SCENE_ERR_IO,
+                                SCENE_ERR_FORMAT,     SCENE_ERR_JSON,        SCENE_ERR_INVALID,
+                                SCENE_ERR_NOMEM,      SCENE_ERR_EMBREE};
     for (size_t i = 0; i < sizeof module_codes / sizeof module_codes[0]; i++)
         assert_string_not_equal(fxc_strerror(module_codes[i]), "unknown result");
     assert_int_equal(SCENE_ERR_NOMEM, OSC_ERR_OUT_OF_MEMORY);
@@ -684,7 +696,9 @@ static void test_allocation_failures_counted(void **state)
         atomic_init(&fa.armed, 0);
         atomic_init(&fa.countdown, k);
         atomic_init(&fa.failures, 0);
-        srv_loop_desc d = {.s = f->s, .rt = f->rt, .threads = 1,
+        srv_loop_desc d = {.s = f->s,
+                           .rt = f->rt,
+                           .threads = 1,
                            .allocator = {.realloc = failing_realloc, .free = failing_free, .user = &fa}};
         fxt_effects_on(&d, (const char *const[]){"shadow", "ao"}, 2);
         srv_viewer_id ids[2];
@@ -778,7 +792,8 @@ static void test_tone_map_lanes(void **state)
                 if (got[j] != want) {
                     uint32_t b;
                     memcpy(&b, &c[j], sizeof b);
-                    fail_msg("tone map lanes of %.9g (0x%08x): %u, definition %u", (double)c[j], b, got[j], want);
+                    fail_msg("tone map lanes of %.9g (0x%08x): %u, definition %u", (double)c[j], b, got[j],
+                             want);
                 }
             }
             checked += count;
@@ -819,23 +834,18 @@ static void test_tone_map_lanes(void **state)
 }
 
 /* A test run with the embedded default scene as its state. */
-#define SCENE_TEST(test) cmocka_unit_test_setup_teardown(test, fxt_default_scene_setup, fxt_default_scene_teardown)
+#define SCENE_TEST(test)                                                                                     \
+    cmocka_unit_test_setup_teardown(test, fxt_default_scene_setup, fxt_default_scene_teardown)
 
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        SCENE_TEST(test_effect_plugin),
-        SCENE_TEST(test_effect_list_refused),
-        SCENE_TEST(test_viewer_handles),
-        SCENE_TEST(test_sixty_four_viewers),
-        SCENE_TEST(test_late_viewer_same_pixels),
-        SCENE_TEST(test_osc_taps_run_equals_single),
-        SCENE_TEST(test_sinks_and_report),
-        SCENE_TEST(test_replay_matches_api),
-        cmocka_unit_test(test_result_codes),
-        cmocka_unit_test(test_tone_map_thresholds),
-        cmocka_unit_test(test_tone_map_lanes),
-        SCENE_TEST(test_allocation_failures_counted),
+        SCENE_TEST(test_effect_plugin),           SCENE_TEST(test_effect_list_refused),
+        SCENE_TEST(test_viewer_handles),          SCENE_TEST(test_sixty_four_viewers),
+        SCENE_TEST(test_late_viewer_same_pixels), SCENE_TEST(test_osc_taps_run_equals_single),
+        SCENE_TEST(test_sinks_and_report),        SCENE_TEST(test_replay_matches_api),
+        cmocka_unit_test(test_result_codes),      cmocka_unit_test(test_tone_map_thresholds),
+        cmocka_unit_test(test_tone_map_lanes),    SCENE_TEST(test_allocation_failures_counted),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

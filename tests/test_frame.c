@@ -186,10 +186,12 @@ static void test_cached_matches_no_cache(void **state)
     srv_loop *baseline_b = fxt_loop(&d, 1, w, h, &id_b);
     fxt_frame(baseline_b, &id_b, 1, &cam, &st);
     size_t n = (size_t)w * h * 3;
-    double cache_err = relative_rmse(srv_viewer_radiance(cached, id_c), srv_viewer_radiance(baseline_a, id_a), n);
-    double noise = relative_rmse(srv_viewer_radiance(baseline_b, id_b), srv_viewer_radiance(baseline_a, id_a), n);
-    print_message("relative RMSE: cached vs no-cache %.4f, no-cache vs no-cache (other seed) %.4f\n", cache_err,
-                  noise);
+    double cache_err =
+        relative_rmse(srv_viewer_radiance(cached, id_c), srv_viewer_radiance(baseline_a, id_a), n);
+    double noise =
+        relative_rmse(srv_viewer_radiance(baseline_b, id_b), srv_viewer_radiance(baseline_a, id_a), n);
+    print_message("relative RMSE: cached vs no-cache %.4f, no-cache vs no-cache (other seed) %.4f\n",
+                  cache_err, noise);
     assert_true(noise > 0.0);
     assert_true(cache_err < 0.15);
     assert_true(cache_err <= 3.0 * noise);
@@ -200,7 +202,8 @@ static void test_cached_matches_no_cache(void **state)
             mean_c += c[i];
             mean_b += b[i];
         }
-        print_message("view %d: mean cached %.4f, mean no-cache %.4f\n", view, mean_c / (w * h), mean_b / (w * h));
+        print_message("view %d: mean cached %.4f, mean no-cache %.4f\n", view, mean_c / (w * h),
+                      mean_b / (w * h));
         assert_true(fabs(mean_c - mean_b) <= (view == SRV_VIEW_AO ? 0.02 : 0.04) * mean_b);
     }
     srv_loop_free(cached);
@@ -259,12 +262,14 @@ static void test_memory_report(void **state)
     srv_loop_memory(loop, &m);
     assert_true(m.pools_reserved[SCENE_FX_AO] >= 64u * 4u * st.blocks_resident[SCENE_FX_AO]);
     assert_int_equal(m.pools_in_use[SCENE_FX_AO], 64u * 4u * st.blocks_resident[SCENE_FX_AO]);
-    assert_true(m.total >= m.table + m.viewers + m.pools_reserved[SCENE_FX_AO] + m.pools_reserved[SCENE_FX_SHADOW]);
+    assert_true(m.total >=
+                m.table + m.viewers + m.pools_reserved[SCENE_FX_AO] + m.pools_reserved[SCENE_FX_SHADOW]);
     srv_loop_free(loop);
 }
 
 /* A test run with the embedded default scene as its state. */
-#define SCENE_TEST(test) cmocka_unit_test_setup_teardown(test, fxt_default_scene_setup, fxt_default_scene_teardown)
+#define SCENE_TEST(test)                                                                                     \
+    cmocka_unit_test_setup_teardown(test, fxt_default_scene_setup, fxt_default_scene_teardown)
 
 int main(void)
 {

@@ -48,7 +48,8 @@ static void test_gltf(void **state)
         "\"bufferViews\":[{\"buffer\":0,\"byteOffset\":0,\"byteLength\":36},"
         "{\"buffer\":0,\"byteOffset\":36,\"byteLength\":6}],"
         "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\","
-        "\"min\":[0,0,0],\"max\":[1,1,0]},{\"bufferView\":1,\"componentType\":5123,\"count\":3,\"type\":\"SCALAR\"}]}");
+        "\"min\":[0,0,0],\"max\":[1,1,0]},{\"bufferView\":1,\"componentType\":5123,\"count\":3,\"type\":"
+        "\"SCALAR\"}]}");
     scene *s = load_ok(path);
     assert_int_equal(s->triangle_count, 1);
     assert_int_equal(s->island_count, 1);
@@ -129,13 +130,15 @@ static void test_texture_mip_levels(void **state)
         for (int x = 0; x < 64; x++)
             memset(checker + 3 * (y * 64 + x), (x + y) & 1 ? 255 : 0, 3);
     char msg[256];
-    assert_int_equal(scene_image_write_u8(fxt_tmp_path("checker64.png"), 64, 64, 3, checker, msg, sizeof msg), 0);
+    assert_int_equal(scene_image_write_u8(fxt_tmp_path("checker64.png"), 64, 64, 3, checker, msg, sizeof msg),
+                     0);
     fxt_write_file("mip.mtl", "newmtl c\nKd 1 1 1\nmap_Kd checker64.png\n");
-    const char *obj = fxt_write_file("mip.obj", "mtllib mip.mtl\nusemtl c\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
-                                                "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n");
+    const char *obj =
+        fxt_write_file("mip.obj", "mtllib mip.mtl\nusemtl c\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+                                  "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n");
     scene *s = load_ok(obj);
     assert_int_equal(s->texture_count, 1);
-    assert_int_equal(s->textures[0].levels, 7); /* 64, 32, ..., 1 */
+    assert_int_equal(s->textures[0].levels, 7);               /* 64, 32, ..., 1 */
     assert_true(fabsf(s->tri_texture_lod[0] - 6.0f) < 1e-4f); /* 64 texels per metre */
     float rgb[3];
     scene_albedo_filtered(s, 0, 0.3f, 0.2f, 0.0f, rgb); /* a 1 m pixel: the 1 x 1 level */
@@ -143,7 +146,8 @@ static void test_texture_mip_levels(void **state)
     scene_albedo_filtered(s, 0, 0.3f, 0.2f, -4.0f, rgb); /* 1/16 m: the 4 x 4 level, still the average */
     assert_true(fabsf(rgb[0] - 0.5f) < 0.01f);
     /* Far below a texel, at a texel centre: level 0, pure black or white. */
-    float u = (10.5f / 64.0f) - (3.5f / 64.0f), v = 3.5f / 64.0f; /* texture uv (10.5, 3.5)/64 on triangle 0 */
+    float u = (10.5f / 64.0f) - (3.5f / 64.0f),
+          v = 3.5f / 64.0f; /* texture uv (10.5, 3.5)/64 on triangle 0 */
     scene_albedo_filtered(s, 0, u, v, -12.0f, rgb);
     assert_true(rgb[0] < 0.01f || rgb[0] > 0.99f);
     scene_free(s);
@@ -165,11 +169,13 @@ static void test_albedo_run_equals_filtered(void **state)
         noise[i] = (uint8_t)(rng >> 56);
     }
     char msg[256];
-    assert_int_equal(scene_image_write_u8(fxt_tmp_path("noise64.png"), SIDE, SIDE, 3, noise, msg, sizeof msg), 0);
+    assert_int_equal(scene_image_write_u8(fxt_tmp_path("noise64.png"), SIDE, SIDE, 3, noise, msg, sizeof msg),
+                     0);
     fxt_write_file("run.mtl", "newmtl t\nKd 0.9 0.7 0.5\nmap_Kd noise64.png\nnewmtl plain\nKd 0.3 0.6 0.2\n");
-    const char *obj = fxt_write_file("run.obj", "mtllib run.mtl\nusemtl t\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
-                                                "v 3 0 0\nv 4 0 0\nv 3 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
-                                                "f 1/1 2/2 3/3\nf 1/1 3/3 4/4\nusemtl plain\nf 5 6 7\n");
+    const char *obj =
+        fxt_write_file("run.obj", "mtllib run.mtl\nusemtl t\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+                                  "v 3 0 0\nv 4 0 0\nv 3 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+                                  "f 1/1 2/2 3/3\nf 1/1 3/3 4/4\nusemtl plain\nf 5 6 7\n");
     scene *s = load_ok(obj);
     assert_int_equal(s->texture_count, 1);
     assert_int_equal(s->textures[0].levels, 7);
@@ -186,7 +192,8 @@ static void test_albedo_run_equals_filtered(void **state)
             u[n] = (float)((double)(rng >> 11) * 0x1p-53 * 3.0 - 1.0);
             rng = rng * 6364136223846793005ull + 1442695040888963407ull;
             v[n] = (float)((double)(rng >> 11) * 0x1p-53 * 3.0 - 1.0);
-            footprint[n] = level_base + (float)((double)(rng >> 40) * 0x1p-24 * 1.5); /* a level or two apart */
+            footprint[n] =
+                level_base + (float)((double)(rng >> 40) * 0x1p-24 * 1.5); /* a level or two apart */
             if (rng % 97 == 0)
                 u[n] = rng % 2 ? NAN : INFINITY;
             textured += t < 2;
@@ -201,9 +208,11 @@ static void test_albedo_run_equals_filtered(void **state)
         float expected[3];
         scene_albedo_filtered(s, tri[i], u[i], v[i], footprint[i], expected);
         if (memcmp(expected, run[i], sizeof expected) != 0)
-            fail_msg("hit %u (triangle %u, uv %.9g %.9g, footprint %.9g): %.9g %.9g %.9g, expected %.9g %.9g %.9g", i,
-                     tri[i], (double)u[i], (double)v[i], (double)footprint[i], (double)run[i][0], (double)run[i][1],
-                     (double)run[i][2], (double)expected[0], (double)expected[1], (double)expected[2]);
+            fail_msg(
+                "hit %u (triangle %u, uv %.9g %.9g, footprint %.9g): %.9g %.9g %.9g, expected %.9g %.9g %.9g",
+                i, tri[i], (double)u[i], (double)v[i], (double)footprint[i], (double)run[i][0],
+                (double)run[i][1], (double)run[i][2], (double)expected[0], (double)expected[1],
+                (double)expected[2]);
     }
     assert_true(textured > HITS / 2);
     scene_free(s);
@@ -244,13 +253,14 @@ static void test_texture_bilinear_wrap(void **state)
             double expected = 0;
             for (int c = 0; c < 4; c++) {
                 int xi = ((int)x0 + (c & 1) + W) % W, yi = ((int)y0 + (c >> 1) + H) % H;
-                expected += ((c & 1) ? ax : 1 - ax) * ((c >> 1) ? ay : 1 - ay) * texels[3 * (yi * W + xi) + k];
+                expected +=
+                    ((c & 1) ? ax : 1 - ax) * ((c >> 1) ? ay : 1 - ay) * texels[3 * (yi * W + xi) + k];
             }
             if (n < W * H)
                 expected = texels[3 * n + k];
             if (fabs(rgb[k] - expected) > 2e-6)
-                fail_msg("uv (%.9g, %.9g) channel %d: %.9g, expected %.9g", (double)u, (double)v, k, (double)rgb[k],
-                         expected);
+                fail_msg("uv (%.9g, %.9g) channel %d: %.9g, expected %.9g", (double)u, (double)v, k,
+                         (double)rgb[k], expected);
         }
     }
     assert_true(edge > 5000); /* the wrapped path was taken, as well as the inside one */
@@ -261,7 +271,8 @@ static void test_missing_texture_counted(void **state)
 {
     (void)state;
     fxt_write_file("gone.mtl", "newmtl m\nKd 0.5 0.5 0.5\nmap_Kd nowhere.png\n");
-    const char *obj = fxt_write_file("gone.obj", "mtllib gone.mtl\nusemtl m\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    const char *obj =
+        fxt_write_file("gone.obj", "mtllib gone.mtl\nusemtl m\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
     scene *s = load_ok(obj);
     assert_int_equal(s->repairs.textures_missing, 1);
     assert_int_equal(s->texture_count, 0);
@@ -322,14 +333,16 @@ static void test_damaged_ply_refused(void **state)
     static const char *const files[] = {
         /* end_header damaged */
         "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
-        "element face 1\nproperty list uchar int vertex_indices\nen-1d_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+        "element face 1\nproperty list uchar int vertex_indices\nen-1d_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 "
+        "2\n",
         /* a header line that is no PLY keyword: Assimp skips it, and then finds no vertex element */
         "ply\nformat ascii 1.0\nelnanement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
         "end_header\n0 0 0\n1 0 0\n0 1 0\n",
         /* an element without its count */
         "ply\nformat ascii 1.0\nelement ver\nproperty float x\nend_header\n0\n",
         /* an element count larger than the file */
-        "ply\nformat ascii 1.0\nelement vertex 99999999\nproperty float x\nproperty float y\nproperty float z\n"
+        "ply\nformat ascii 1.0\nelement vertex 99999999\nproperty float x\nproperty float y\nproperty float "
+        "z\n"
         "end_header\n0 0 0\n",
         /* a face with no data: Assimp's triangulation asserts */
         "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
@@ -352,7 +365,8 @@ static void test_damaged_ply_refused(void **state)
 static void mutation_run(const char *const *seeds, const char *const *names, int kinds, int rounds,
                          uint64_t rng, unsigned *loaded, unsigned *refused)
 {
-    static const char *const inserts[] = {"99999999", "-1", "1e39", "nan", "f 1 2 9\n", "4294967295", "\"", "]"};
+    static const char *const inserts[] = {"99999999",  "-1",         "1e39", "nan",
+                                          "f 1 2 9\n", "4294967295", "\"",   "]"};
     static const char alphabet[] = "0123456789-. \nfvn/e+x\"{}[],:";
     char buf[2048];
     for (int round = 0; round < rounds; round++) {

@@ -11,12 +11,12 @@
 
 /* What a test scene holds. */
 typedef struct needs_fixture {
-    int lights;                /* directional lights to add */
-    float light_intensity;     /* of each light */
-    float light_color;         /* grey level of each light */
-    float sky_intensity;       /* 0 = no sky */
-    float albedo;              /* grey level of the one material */
-    bool textured;             /* the material has a texture (with a black diffuse colour when albedo = 0) */
+    int lights;            /* directional lights to add */
+    float light_intensity; /* of each light */
+    float light_color;     /* grey level of each light */
+    float sky_intensity;   /* 0 = no sky */
+    float albedo;          /* grey level of the one material */
+    bool textured;         /* the material has a texture (with a black diffuse colour when albedo = 0) */
     scene_toggle shadows, ao, indirect;
 } needs_fixture;
 
@@ -152,7 +152,8 @@ static void test_needs_sky_only(void **state)
 static void test_needs_everything(void **state)
 {
     (void)state;
-    needs_fixture f = {.lights = 2, .light_intensity = 1, .light_color = 1, .sky_intensity = 1, .albedo = 0.5f};
+    needs_fixture f = {
+        .lights = 2, .light_intensity = 1, .light_color = 1, .sky_intensity = 1, .albedo = 0.5f};
     scene *s = make_scene(&f);
     scene_needs_result r = needs_of(s);
     for (int fx = 0; fx < SCENE_FX_COUNT; fx++)
@@ -229,8 +230,14 @@ static void test_needs_texture_counts_as_albedo(void **state)
 static void test_needs_off_wins(void **state)
 {
     (void)state;
-    needs_fixture f = {.lights = 1, .light_intensity = 1, .light_color = 1, .sky_intensity = 1, .albedo = 0.5f,
-                       .shadows = SCENE_OFF, .ao = SCENE_OFF, .indirect = SCENE_OFF};
+    needs_fixture f = {.lights = 1,
+                       .light_intensity = 1,
+                       .light_color = 1,
+                       .sky_intensity = 1,
+                       .albedo = 0.5f,
+                       .shadows = SCENE_OFF,
+                       .ao = SCENE_OFF,
+                       .indirect = SCENE_OFF};
     scene *s = make_scene(&f);
     scene_needs_result r = needs_of(s);
     assert_false(r.effect[SCENE_FX_SHADOW]);
@@ -249,7 +256,11 @@ static void test_needs_off_wins(void **state)
 static void test_needs_indirect_off(void **state)
 {
     (void)state;
-    needs_fixture f = {.lights = 1, .light_intensity = 1, .light_color = 1, .sky_intensity = 1, .albedo = 0.5f,
+    needs_fixture f = {.lights = 1,
+                       .light_intensity = 1,
+                       .light_color = 1,
+                       .sky_intensity = 1,
+                       .albedo = 0.5f,
                        .indirect = SCENE_OFF};
     scene *s = make_scene(&f);
     scene_needs_result r = needs_of(s);
@@ -285,7 +296,8 @@ static void test_needs_on_forces_with_warning(void **state)
 static void test_needs_on_without_warning(void **state)
 {
     (void)state;
-    needs_fixture f = {.lights = 1, .light_intensity = 1, .light_color = 1, .albedo = 0.5f, .shadows = SCENE_ON};
+    needs_fixture f = {
+        .lights = 1, .light_intensity = 1, .light_color = 1, .albedo = 0.5f, .shadows = SCENE_ON};
     scene *s = make_scene(&f);
     scene_needs_result r = needs_of(s);
     assert_true(r.effect[SCENE_FX_SHADOW]);

@@ -36,18 +36,19 @@ static const double no_shift[3] = {0, 0, 0};
 static scene *default_scene_at(const double shift[3], const char *name)
 {
     char text[2048];
-    snprintf(text, sizeof text,
-             "{\"version\": 1,\n"
-             " \"meshes\": [{\"builtin\": \"default\", \"transform\": {\"translate\": [%.17g, %.17g, %.17g]}}],\n"
-             " \"lights\": [{\"type\": \"directional\", \"direction\": [0.5, -1, 0.3], \"color\": [1, 0.95, 0.85],"
-             " \"intensity\": 3},\n"
-             "            {\"type\": \"point\", \"position\": [%.17g, %.17g, %.17g], \"intensity\": 2}],\n"
-             " \"sky\": {\"color\": [0.55, 0.7, 1], \"intensity\": 0.6},\n"
-             " \"ao_radius\": 1,\n"
-             " \"camera\": {\"position\": [%.17g, %.17g, %.17g], \"target\": [%.17g, %.17g, %.17g],"
-             " \"fov_deg\": 60}}\n",
-             shift[0], shift[1], shift[2], -2.0 + shift[0], 3.5 + shift[1], 2.0 + shift[2], 4.3 + shift[0],
-             2.2 + shift[1], 3.5 + shift[2], -1.0 + shift[0], 0.5 + shift[1], -1.5 + shift[2]);
+    snprintf(
+        text, sizeof text,
+        "{\"version\": 1,\n"
+        " \"meshes\": [{\"builtin\": \"default\", \"transform\": {\"translate\": [%.17g, %.17g, %.17g]}}],\n"
+        " \"lights\": [{\"type\": \"directional\", \"direction\": [0.5, -1, 0.3], \"color\": [1, 0.95, 0.85],"
+        " \"intensity\": 3},\n"
+        "            {\"type\": \"point\", \"position\": [%.17g, %.17g, %.17g], \"intensity\": 2}],\n"
+        " \"sky\": {\"color\": [0.55, 0.7, 1], \"intensity\": 0.6},\n"
+        " \"ao_radius\": 1,\n"
+        " \"camera\": {\"position\": [%.17g, %.17g, %.17g], \"target\": [%.17g, %.17g, %.17g],"
+        " \"fov_deg\": 60}}\n",
+        shift[0], shift[1], shift[2], -2.0 + shift[0], 3.5 + shift[1], 2.0 + shift[2], 4.3 + shift[0],
+        2.2 + shift[1], 3.5 + shift[2], -1.0 + shift[0], 0.5 + shift[1], -1.5 + shift[2]);
     const char *path = fxt_write_file(name, text);
     scene_error err = {0};
     scene *s = scene_load(path, NULL, &err);
@@ -76,12 +77,14 @@ static scene *default_scene_as_floats_at(const double shift[3])
     for (uint32_t m = 0; m < base->mesh_count; m++) {
         const scene_mesh *mesh = &base->meshes[m];
         assert_int_equal(scene__add_mesh(s, mesh->name, moved, base->vertex_count,
-                                         base->indices + 3 * (size_t)mesh->first_triangle, mesh->triangle_count,
-                                         NULL, mesh->material, NULL, &err),
+                                         base->indices + 3 * (size_t)mesh->first_triangle,
+                                         mesh->triangle_count, NULL, mesh->material, NULL, &err),
                          SCENE_OK);
     }
     free(moved);
-    scene_light sun = {.type = SCENE_LIGHT_DIRECTIONAL, .direction = {0.5f, -1, 0.3f}, .color = {1, 0.95f, 0.85f},
+    scene_light sun = {.type = SCENE_LIGHT_DIRECTIONAL,
+                       .direction = {0.5f, -1, 0.3f},
+                       .color = {1, 0.95f, 0.85f},
                        .intensity = 3};
     scene_light bulb = {.type = SCENE_LIGHT_POINT, .color = {1, 1, 1}, .intensity = 2};
     const double bulb_world[3] = {-2.0 + shift[0], 3.5 + shift[1], 2.0 + shift[2]};
@@ -136,8 +139,8 @@ typedef struct world_camera {
 } world_camera;
 
 static const world_camera views[2] = {
-    {{4.3, 2.2, 3.5}, {-1.0, 0.5, -1.5}, 60.0f},  /* the default camera: sunlit patch, boxes, opening */
-    {{-4.2, 1.4, -3.1}, {2.4, 0.4, 0.6}, 50.0f},  /* from the blue box's corner across the sphere */
+    {{4.3, 2.2, 3.5}, {-1.0, 0.5, -1.5}, 60.0f}, /* the default camera: sunlit patch, boxes, opening */
+    {{-4.2, 1.4, -3.1}, {2.4, 0.4, 0.6}, 50.0f}, /* from the blue box's corner across the sphere */
 };
 
 enum { VIEW_W = 96, VIEW_H = 54, VIEW_FRAMES = 6 };
@@ -217,8 +220,8 @@ static void test_default_scene_far_renders_like_at_origin(void **state)
     double diff = max_position_difference(near, far);
     print_message("default scene at 1e6: %u triangles (at the origin %u), %u islands, origin (%.17g, %.17g, "
                   "%.17g), largest local position difference %g m\n",
-                  far->triangle_count, near->triangle_count, far->island_count, far->origin[0], far->origin[1],
-                  far->origin[2], diff);
+                  far->triangle_count, near->triangle_count, far->island_count, far->origin[0],
+                  far->origin[1], far->origin[2], diff);
     assert_true(diff <= 1e-6);
     assert_string_equal(far->precision_warning, "");
 
@@ -227,7 +230,8 @@ static void test_default_scene_far_renders_like_at_origin(void **state)
         assert_float_equal(far->lights[1].position[k] + far->origin[k],
                            near->lights[1].position[k] + near->origin[k] + far_shift[k], 1e-6);
         assert_float_equal(far->camera_pos[k] + far->origin[k], near->camera_pos[k] + far_shift[k], 1e-6);
-        assert_float_equal(far->camera_target[k] + far->origin[k], near->camera_target[k] + far_shift[k], 1e-6);
+        assert_float_equal(far->camera_target[k] + far->origin[k], near->camera_target[k] + far_shift[k],
+                           1e-6);
     }
 
     float *image_near = render_views(near, no_shift);
@@ -266,22 +270,24 @@ static void test_sponza_far_keeps_its_triangles(void **state)
     for (int i = 0; i < 2; i++) {
         const double *shift = i ? far_shift : no_shift;
         char text[2048];
-        snprintf(text, sizeof text,
-                 "{\"version\": 1, \"meshes\": [{\"file\": \"%s\", \"transform\": {\"translate\": [%.17g, %.17g, "
-                 "%.17g]}}], \"lights\": [{\"type\": \"directional\", \"direction\": [-0.3, -1, -0.2]}],"
-                 " \"sky\": {\"color\": [0.5, 0.6, 1], \"intensity\": 0.6}}",
-                 sponza, shift[0], shift[1], shift[2]);
+        snprintf(
+            text, sizeof text,
+            "{\"version\": 1, \"meshes\": [{\"file\": \"%s\", \"transform\": {\"translate\": [%.17g, %.17g, "
+            "%.17g]}}], \"lights\": [{\"type\": \"directional\", \"direction\": [-0.3, -1, -0.2]}],"
+            " \"sky\": {\"color\": [0.5, 0.6, 1], \"intensity\": 0.6}}",
+            sponza, shift[0], shift[1], shift[2]);
         const char *path = fxt_write_file(i ? "sponza_far.json" : "sponza_near.json", text);
         scene_error err = {0};
         s[i] = scene_load(path, NULL, &err);
         if (!s[i])
             fail_msg("%s", err.msg);
     }
-    print_message("sponza: %u triangles at the origin, %u at 1e6 (%llu and %llu degenerate skipped), %u and %u "
-                  "islands, origin (%.17g, %.17g, %.17g)\n",
-                  s[0]->triangle_count, s[1]->triangle_count, (unsigned long long)s[0]->repairs.degenerate_skipped,
-                  (unsigned long long)s[1]->repairs.degenerate_skipped, s[0]->island_count, s[1]->island_count,
-                  s[1]->origin[0], s[1]->origin[1], s[1]->origin[2]);
+    print_message(
+        "sponza: %u triangles at the origin, %u at 1e6 (%llu and %llu degenerate skipped), %u and %u "
+        "islands, origin (%.17g, %.17g, %.17g)\n",
+        s[0]->triangle_count, s[1]->triangle_count, (unsigned long long)s[0]->repairs.degenerate_skipped,
+        (unsigned long long)s[1]->repairs.degenerate_skipped, s[0]->island_count, s[1]->island_count,
+        s[1]->origin[0], s[1]->origin[1], s[1]->origin[2]);
     assert_same_build(s[0], s[1]);
     assert_true(max_position_difference(s[0], s[1]) <= 1e-5);
     assert_string_equal(s[1]->precision_warning, "");
@@ -311,7 +317,8 @@ static void test_rebuild_in_final_frame(void **state)
         s[i] = scene__alloc();
         scene_material grey = {.diffuse = {0.5f, 0.5f, 0.5f}, .texture = -1};
         assert_int_equal(scene__add_material(s[i], &grey, &err), 0);
-        const double move[16] = {1, 0, 0, far_shift[0], 0, 1, 0, far_shift[1], 0, 0, 1, far_shift[2], 0, 0, 0, 1};
+        const double move[16] = {1, 0, 0, far_shift[0], 0, 1, 0, far_shift[1],
+                                 0, 0, 1, far_shift[2], 0, 0, 0, 1};
         const double *xform = i == 1 ? move : NULL;
         const float *parts[3] = {post, floor_pos, sliver};
         const uint32_t *part_idx[3] = {post_idx, floor_idx, sliver_idx};
@@ -321,9 +328,9 @@ static void test_rebuild_in_final_frame(void **state)
             float moved[12];
             for (uint32_t c = 0; c < 3 * part_nv[p]; c++)
                 moved[c] = i == 2 ? (float)((double)parts[p][c] + far_shift[c % 3]) : parts[p][c];
-            assert_int_equal(
-                scene__add_mesh(s[i], names[p], moved, part_nv[p], part_idx[p], part_nt[p], NULL, 0, xform, &err),
-                SCENE_OK);
+            assert_int_equal(scene__add_mesh(s[i], names[p], moved, part_nv[p], part_idx[p], part_nt[p], NULL,
+                                             0, xform, &err),
+                             SCENE_OK);
         }
         if (i < 2) {
             assert_int_equal(s[i]->mesh_count, 3);
@@ -363,8 +370,8 @@ static void test_far_mesh_file_is_warned_about(void **state)
         char text[1024] = "o box\n";
         for (int v = 0; v < 8; v++) {
             char line[128];
-            snprintf(line, sizeof line, "v %.4f %.4f %.4f\n", at[0] + 0.5 * (v >> 2 & 1), at[1] + 0.5 * (v >> 1 & 1),
-                     at[2] + 0.5 * (v & 1));
+            snprintf(line, sizeof line, "v %.4f %.4f %.4f\n", at[0] + 0.5 * (v >> 2 & 1),
+                     at[1] + 0.5 * (v >> 1 & 1), at[2] + 0.5 * (v & 1));
             strcat(text, line);
         }
         strcat(text, box_faces);
@@ -432,7 +439,8 @@ static void test_far_mesh_file_is_warned_about(void **state)
 static void test_extent_too_large_for_density_is_warned_about(void **state)
 {
     (void)state;
-    const float positions[] = {0, 0, 0, 0.01f, 0, 0, 0, 0, 0.01f, 1e4f, 0, 0, 1e4f + 0.01f, 0, 0, 1e4f, 0, 0.01f};
+    const float positions[] = {0,    0, 0, 0.01f,        0, 0, 0,    0, 0.01f,
+                               1e4f, 0, 0, 1e4f + 0.01f, 0, 0, 1e4f, 0, 0.01f};
     const uint32_t indices[] = {0, 2, 1, 3, 5, 4};
     const float densities[2] = {1000, 10};
     for (int i = 0; i < 2; i++) {
@@ -440,7 +448,8 @@ static void test_extent_too_large_for_density_is_warned_about(void **state)
         scene *s = scene__alloc();
         scene_material grey = {.diffuse = {0.5f, 0.5f, 0.5f}, .texture = -1};
         assert_int_equal(scene__add_material(s, &grey, &err), 0);
-        assert_int_equal(scene__add_mesh(s, "far apart", positions, 6, indices, 2, NULL, 0, NULL, &err), SCENE_OK);
+        assert_int_equal(scene__add_mesh(s, "far apart", positions, 6, indices, 2, NULL, 0, NULL, &err),
+                         SCENE_OK);
         scene_load_desc desc = {.texel_density = densities[i]};
         assert_int_equal(scene__finalize(s, &desc, &err), SCENE_OK);
         print_message("density %g: step %g m, warning '%s'\n", (double)densities[i], s->position_step,
@@ -469,7 +478,8 @@ static void test_trace_cameras_follow(void **state)
         /* Frame 1 looks along a direction too short to move a float at its position (not a double's). */
         snprintf(text[i], sizeof text[i],
                  "fxcache-trace 1\n0 %.17g %.17g %.17g -5.3 -1.7 -5 60\n1 %.17g %.17g %.17g 1e-9 0 0 40\n",
-                 4.3 + shift[0], 2.2 + shift[1], 3.5 + shift[2], -4.2 + shift[0], 1.4 + shift[1], -3.1 + shift[2]);
+                 4.3 + shift[0], 2.2 + shift[1], 3.5 + shift[2], -4.2 + shift[0], 1.4 + shift[1],
+                 -3.1 + shift[2]);
     }
     char err[512];
     srv_trace *trace_near = srv_trace_read(fxt_write_file("near.trace", text[0]), err, sizeof err);
@@ -482,7 +492,8 @@ static void test_trace_cameras_follow(void **state)
         srv_camera_frame fa, fb;
         assert_true(srv_camera_setup(&a, 64, 36, &fa) && srv_camera_setup(&b, 64, 36, &fb));
         for (int k = 0; k < 3; k++) {
-            assert_float_equal(a.position[k] + near->origin[k] + far_shift[k], b.position[k] + far->origin[k], 1e-6);
+            assert_float_equal(a.position[k] + near->origin[k] + far_shift[k], b.position[k] + far->origin[k],
+                               1e-6);
             assert_float_equal(fa.forward[k], fb.forward[k], 1e-6);
         }
     }

@@ -34,8 +34,8 @@ static uint64_t random_key(uint64_t *state, uint32_t effects, uint32_t islands)
 {
     uint32_t level = rng_below(state, 4);
     uint32_t span = 32u >> level;
-    return osc_key_pack(rng_below(state, effects), 1000 + rng_below(state, islands), level, rng_below(state, span),
-                        rng_below(state, span));
+    return osc_key_pack(rng_below(state, effects), 1000 + rng_below(state, islands), level,
+                        rng_below(state, span), rng_below(state, span));
 }
 
 static void shuffle_pairs(uint64_t *keys, uint64_t *masks, size_t count, uint64_t *state)
@@ -49,7 +49,6 @@ static void shuffle_pairs(uint64_t *keys, uint64_t *masks, size_t count, uint64_
         masks[j] = mask;
     }
 }
-
 
 static osc_cache *create_or_fail(const osc_desc *desc)
 {
@@ -110,7 +109,9 @@ static void test_radix_sort(void **state)
     for (int round = 0; round < 6; round++) {
         size_t count = round == 0 ? 0 : round == 1 ? 1 : round == 2 ? 31 : N;
         for (size_t i = 0; i < count; i++) {
-            keys[i] = round == 3 ? rng_next(&rng) : round == 4 ? rng_below(&rng, 50) : random_key(&rng, 3, 40);
+            keys[i] = round == 3   ? rng_next(&rng)
+                      : round == 4 ? rng_below(&rng, 50)
+                                   : random_key(&rng, 3, 40);
             payload[i] = ~keys[i];
             expected[i] = keys[i];
         }
@@ -449,7 +450,8 @@ static void test_cache_random_frames(void **state)
             if (frame_keys[i] == OSC_KEY_EMPTY)
                 continue;
             assert_int_equal(osc_find(cache, frame_keys[i]), frame_blocks_seen[i]);
-            assert_int_equal(osc_block_last_frame(cache, osc_key_effect(frame_keys[i]), frame_blocks_seen[i]), frame);
+            assert_int_equal(osc_block_last_frame(cache, osc_key_effect(frame_keys[i]), frame_blocks_seen[i]),
+                             frame);
         }
         check_cache_consistency(cache);
         osc_housekeeping(cache);
@@ -687,7 +689,8 @@ static void test_batch_determinism(void **state)
     osc_cache *reference = create_batch_cache(); /* single thread, generated order */
     osc_cache *shuffled = create_batch_cache();  /* single thread, shuffled order */
     osc_cache *threaded = create_batch_cache();  /* per-thread buffers, concatenated in reverse order */
-    uint64_t *keys = malloc(BATCH_REQUESTS * sizeof(uint64_t)), *masks = malloc(BATCH_REQUESTS * sizeof(uint64_t));
+    uint64_t *keys = malloc(BATCH_REQUESTS * sizeof(uint64_t)),
+             *masks = malloc(BATCH_REQUESTS * sizeof(uint64_t));
     uint64_t *work_keys = malloc(BATCH_REQUESTS * sizeof(uint64_t));
     uint64_t *work_masks = malloc(BATCH_REQUESTS * sizeof(uint64_t));
     uint64_t *thread_keys = malloc(BATCH_REQUESTS * sizeof(uint64_t));
@@ -709,8 +712,8 @@ static void test_batch_determinism(void **state)
         memcpy(work_keys, keys, BATCH_REQUESTS * sizeof(uint64_t));
         memcpy(work_masks, masks, BATCH_REQUESTS * sizeof(uint64_t));
         size_t unique_reference;
-        osc_result result_reference =
-            osc_request_batch(reference, work_keys, work_masks, BATCH_REQUESTS, &unique_reference, blocks_reference);
+        osc_result result_reference = osc_request_batch(reference, work_keys, work_masks, BATCH_REQUESTS,
+                                                        &unique_reference, blocks_reference);
         for (size_t i = 1; i < unique_reference; i++)
             assert_true(work_keys[i - 1] < work_keys[i]);
 
@@ -730,8 +733,14 @@ static void test_batch_determinism(void **state)
         size_t offset = 0;
         for (uint32_t t = 0; t < BATCH_THREADS; t++) {
             size_t share = (BATCH_REQUESTS + BATCH_THREADS - 1) / BATCH_THREADS;
-            jobs[t] = (thread_job){keys, masks, BATCH_REQUESTS, t, BATCH_THREADS, thread_keys + t * share,
-                                   thread_masks + t * share, 0};
+            jobs[t] = (thread_job){keys,
+                                   masks,
+                                   BATCH_REQUESTS,
+                                   t,
+                                   BATCH_THREADS,
+                                   thread_keys + t * share,
+                                   thread_masks + t * share,
+                                   0};
             assert_int_equal(pthread_create(&threads[t], NULL, gather_requests, &jobs[t]), 0);
         }
         for (uint32_t t = 0; t < BATCH_THREADS; t++)
@@ -742,7 +751,8 @@ static void test_batch_determinism(void **state)
             offset += jobs[t].out_count;
         }
         assert_int_equal(offset, BATCH_REQUESTS);
-        result_other = osc_request_batch(threaded, work_keys, work_masks, offset, &unique_other, blocks_other);
+        result_other =
+            osc_request_batch(threaded, work_keys, work_masks, offset, &unique_other, blocks_other);
         assert_int_equal(result_other, result_reference);
         assert_int_equal(unique_other, unique_reference);
         assert_memory_equal(blocks_other, blocks_reference, unique_reference * sizeof(uint32_t));
@@ -758,8 +768,8 @@ static void test_batch_determinism(void **state)
     }
     osc_stats stats;
     osc_stats_get(reference, &stats);
-    assert_true(stats.evictions > 0);   /* the test exercised eviction ... */
-    assert_true(stats.exhausted > 0);   /* ... and exhaustion */
+    assert_true(stats.evictions > 0); /* the test exercised eviction ... */
+    assert_true(stats.exhausted > 0); /* ... and exhaustion */
     free(keys);
     free(masks);
     free(work_keys);

@@ -83,7 +83,8 @@ static void expect_block(const osc_footprint *footprint, uint32_t index, const o
                          uint32_t level, uint32_t block_x, uint32_t block_y, uint64_t mask)
 {
     assert_true(index < footprint->count);
-    assert_true(footprint->keys[index] == osc_key_pack(island->effect, island->island_id, level, block_x, block_y));
+    assert_true(footprint->keys[index] ==
+                osc_key_pack(island->effect, island->island_id, level, block_x, block_y));
     assert_true(footprint->texel_masks[index] == mask);
 }
 
@@ -183,12 +184,14 @@ static void test_bilinear_keys_match(void **state)
     for (int i = 0; i < 200000; i++) {
         rng = rng * 6364136223846793005ull + 1442695040888963407ull;
         uint32_t r = (uint32_t)(rng >> 32);
-        osc_island_extent island = {.effect = r & 15u, .island_id = (uint32_t)(rng >> 7) & 0xFFFFFFu,
+        osc_island_extent island = {.effect = r & 15u,
+                                    .island_id = (uint32_t)(rng >> 7) & 0xFFFFFFu,
                                     .width0 = 1 + (r >> 4) % (i % 3 == 0 ? 40 : OSC_MAX_ISLAND_SIZE),
                                     .height0 = 1 + (r >> 12) % (i % 5 == 0 ? 17 : OSC_MAX_ISLAND_SIZE)};
         uint32_t level = (r >> 24) % 16;
         rng = rng * 6364136223846793005ull + 1442695040888963407ull;
-        float w = (float)osc_level_size(island.width0, level), h = (float)osc_level_size(island.height0, level);
+        float w = (float)osc_level_size(island.width0, level),
+              h = (float)osc_level_size(island.height0, level);
         float x = ((float)(rng >> 40) / 16777216.0f) * (w + 4.0f) - 2.0f;
         float y = ((float)((rng >> 16) & 0xFFFFFFu) / 16777216.0f) * (h + 4.0f) - 2.0f;
         if (i % 7 == 0)
@@ -196,8 +199,8 @@ static void test_bilinear_keys_match(void **state)
         osc_footprint fp;
         osc_footprint_bilinear(&island, level, x, y, &fp);
         uint64_t keys[4], masks[4];
-        uint32_t n = osc_bilinear_keys(island.effect, island.island_id, island.width0, island.height0, level, x, y,
-                                       keys, masks);
+        uint32_t n = osc_bilinear_keys(island.effect, island.island_id, island.width0, island.height0, level,
+                                       x, y, keys, masks);
         assert_int_equal(n, fp.count);
         for (uint32_t k = 0; k < n; k++) {
             assert_int_equal(keys[k], fp.keys[k]);
@@ -246,14 +249,10 @@ static void test_footprint_trilinear(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_key_bit_positions),
-        cmocka_unit_test(test_key_round_trip),
-        cmocka_unit_test(test_result_strings),
-        cmocka_unit_test(test_level_size),
-        cmocka_unit_test(test_footprint_point),
-        cmocka_unit_test(test_footprint_bilinear),
-        cmocka_unit_test(test_footprint_trilinear),
-        cmocka_unit_test(test_bilinear_keys_match),
+        cmocka_unit_test(test_key_bit_positions),   cmocka_unit_test(test_key_round_trip),
+        cmocka_unit_test(test_result_strings),      cmocka_unit_test(test_level_size),
+        cmocka_unit_test(test_footprint_point),     cmocka_unit_test(test_footprint_bilinear),
+        cmocka_unit_test(test_footprint_trilinear), cmocka_unit_test(test_bilinear_keys_match),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -25,13 +25,13 @@ enum { MAX_TASKS = 64 };
 
 typedef struct run_state {
     uint32_t threads;
-    uint32_t run;                   /* this run's number, written into every slot it ran */
-    atomic_uint ran[MAX_TASKS];     /* times each task ran in this run */
-    atomic_uint stamp[MAX_TASKS];   /* the run number each task saw */
-    atomic_uint bad_thread;         /* tasks that got a thread index out of range */
-    atomic_uint by_thread[16];      /* tasks each thread ran, over the test */
+    uint32_t run;                     /* this run's number, written into every slot it ran */
+    atomic_uint ran[MAX_TASKS];       /* times each task ran in this run */
+    atomic_uint stamp[MAX_TASKS];     /* the run number each task saw */
+    atomic_uint bad_thread;           /* tasks that got a thread index out of range */
+    atomic_uint by_thread[16];        /* tasks each thread ran, over the test */
     atomic_uint thread_of[MAX_TASKS]; /* the thread that ran each task in this run */
-    uint32_t spin;                  /* busy-work per task, to let other threads join */
+    uint32_t spin;                    /* busy-work per task, to let other threads join */
 } run_state;
 
 static void task(void *user, uint32_t index, uint32_t thread_index)
@@ -83,7 +83,8 @@ static void check_runs_mode(uint32_t threads, uint32_t runs, uint32_t pause_ever
                 fail_msg("%u threads, run %u of %u tasks: task %u ran %u times", threads, r, count, i,
                          atomic_load(&st->ran[i]));
             if (i < count && atomic_load(&st->stamp[i]) != r)
-                fail_msg("%u threads, run %u: task %u carries run %u", threads, r, i, atomic_load(&st->stamp[i]));
+                fail_msg("%u threads, run %u: task %u carries run %u", threads, r, i,
+                         atomic_load(&st->stamp[i]));
         }
         if (mode != RUN_DYNAMIC) {
             check_static(st, count, mode == RUN_STATIC_STEAL, seen_count[count] ? first_thread[count] : NULL);
@@ -135,13 +136,14 @@ static void check_static(const run_state *st, uint32_t count, bool steal, uint32
     if (count < 2)
         return;
     for (uint32_t t = 0; t < threads; t++) {
-        uint32_t begin = fxc_pool_static_begin(count, threads, t), end = fxc_pool_static_begin(count, threads, t + 1);
+        uint32_t begin = fxc_pool_static_begin(count, threads, t),
+                 end = fxc_pool_static_begin(count, threads, t + 1);
         bool others = false;
         for (uint32_t i = begin; i < end; i++) {
             bool own = atomic_load(&st->thread_of[i]) == t;
             if (own && others)
-                fail_msg("%u threads, %u tasks: task %u of thread %u's range ran on it after a stolen one", threads,
-                         count, i, t);
+                fail_msg("%u threads, %u tasks: task %u of thread %u's range ran on it after a stolen one",
+                         threads, count, i, t);
             others |= !own;
         }
     }
@@ -333,14 +335,10 @@ static void test_thread_init(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_back_to_back),
-        cmocka_unit_test(test_with_sleeps),
-        cmocka_unit_test(test_workers_take_part),
-        cmocka_unit_test(test_thread_init),
-        cmocka_unit_test(test_static_back_to_back),
-        cmocka_unit_test(test_static_with_sleeps),
-        cmocka_unit_test(test_mixed_modes),
-        cmocka_unit_test(test_static_steal),
+        cmocka_unit_test(test_back_to_back),        cmocka_unit_test(test_with_sleeps),
+        cmocka_unit_test(test_workers_take_part),   cmocka_unit_test(test_thread_init),
+        cmocka_unit_test(test_static_back_to_back), cmocka_unit_test(test_static_with_sleeps),
+        cmocka_unit_test(test_mixed_modes),         cmocka_unit_test(test_static_steal),
         cmocka_unit_test(test_static_large_count),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

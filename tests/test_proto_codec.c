@@ -35,8 +35,8 @@ static uint8_t *make_image(uint32_t w, uint32_t h, bool noisy, uint32_t seed)
 }
 
 /* Encodes rgb with codec into an allocation of exactly proto_color_bound bytes. */
-static uint8_t *color_encode_alloc(uint32_t codec, uint32_t quality, const uint8_t *rgb, uint32_t w, uint32_t h,
-                                   size_t *bytes)
+static uint8_t *color_encode_alloc(uint32_t codec, uint32_t quality, const uint8_t *rgb, uint32_t w,
+                                   uint32_t h, size_t *bytes)
 {
     size_t bound = proto_color_bound(codec, w, h);
     assert_true(bound > 0);
@@ -50,8 +50,8 @@ static uint8_t *color_encode_alloc(uint32_t codec, uint32_t quality, const uint8
 }
 
 /* Decodes into an allocation of exactly w*h*3 bytes; returns it (or NULL, freed, when the decode failed). */
-static uint8_t *color_decode_alloc(uint32_t codec, const uint8_t *payload, size_t bytes, uint32_t w, uint32_t h,
-                                   fxc_result *result)
+static uint8_t *color_decode_alloc(uint32_t codec, const uint8_t *payload, size_t bytes, uint32_t w,
+                                   uint32_t h, fxc_result *result)
 {
     uint8_t *rgb = malloc((size_t)w * h * 3);
     assert_non_null(rgb);
@@ -241,7 +241,8 @@ static void test_color_corrupt(void **state)
         for (size_t i = 0; i < bytes; i++)
             noise[i] = (uint8_t)fxt_random(&rng);
         if (trial % 2) { /* sometimes behind a plausible magic */
-            static const uint8_t zstd_magic[4] = {0x28, 0xb5, 0x2f, 0xfd}, jpeg_magic[4] = {0xff, 0xd8, 0xff, 0xdb};
+            static const uint8_t zstd_magic[4] = {0x28, 0xb5, 0x2f, 0xfd},
+                                 jpeg_magic[4] = {0xff, 0xd8, 0xff, 0xdb};
             memcpy(noise, trial % 4 == 1 ? zstd_magic : jpeg_magic, bytes < 4 ? bytes : 4);
         }
         expect_color_codec_error("random zstd", PROTO_CODEC_ZSTD, noise, bytes, w, h);
@@ -266,12 +267,18 @@ static void test_color_encode_errors(void **state)
     uint8_t *rgb = make_image(w, h, true, 4);
     uint8_t out[8192];
     size_t bytes = 12345;
-    assert_int_equal(proto_color_encode(PROTO_CODEC_COUNT, 0, rgb, w, h, out, sizeof out, &bytes), FXC_ERR_INVALID);
-    assert_int_equal(proto_color_encode(PROTO_CODEC_JPEG, 0, rgb, w, h, out, sizeof out, &bytes), FXC_ERR_INVALID);
-    assert_int_equal(proto_color_encode(PROTO_CODEC_JPEG, 101, rgb, w, h, out, sizeof out, &bytes), FXC_ERR_INVALID);
-    assert_int_equal(proto_color_encode(PROTO_CODEC_RAW, 0, rgb, 0, h, out, sizeof out, &bytes), FXC_ERR_INVALID);
-    assert_int_equal(proto_color_encode(PROTO_CODEC_RAW, 0, rgb, w, 8193, out, sizeof out, &bytes), FXC_ERR_INVALID);
-    assert_int_equal(proto_color_encode(PROTO_CODEC_RAW, 0, NULL, w, h, out, sizeof out, &bytes), FXC_ERR_INVALID);
+    assert_int_equal(proto_color_encode(PROTO_CODEC_COUNT, 0, rgb, w, h, out, sizeof out, &bytes),
+                     FXC_ERR_INVALID);
+    assert_int_equal(proto_color_encode(PROTO_CODEC_JPEG, 0, rgb, w, h, out, sizeof out, &bytes),
+                     FXC_ERR_INVALID);
+    assert_int_equal(proto_color_encode(PROTO_CODEC_JPEG, 101, rgb, w, h, out, sizeof out, &bytes),
+                     FXC_ERR_INVALID);
+    assert_int_equal(proto_color_encode(PROTO_CODEC_RAW, 0, rgb, 0, h, out, sizeof out, &bytes),
+                     FXC_ERR_INVALID);
+    assert_int_equal(proto_color_encode(PROTO_CODEC_RAW, 0, rgb, w, 8193, out, sizeof out, &bytes),
+                     FXC_ERR_INVALID);
+    assert_int_equal(proto_color_encode(PROTO_CODEC_RAW, 0, NULL, w, h, out, sizeof out, &bytes),
+                     FXC_ERR_INVALID);
     /* Quality is ignored by the lossless codecs. */
     assert_int_equal(proto_color_encode(PROTO_CODEC_ZSTD, 0, rgb, w, h, out, sizeof out, &bytes), FXC_OK);
     assert_int_equal(proto_color_encode(PROTO_CODEC_RAW, 500, rgb, w, h, out, sizeof out, &bytes), FXC_OK);
@@ -280,7 +287,10 @@ static void test_color_encode_errors(void **state)
     const struct {
         uint32_t codec;
         size_t cap;
-    } small[] = {{PROTO_CODEC_RAW, raw - 1}, {PROTO_CODEC_ZSTD, 16}, {PROTO_CODEC_ZSTD, 1}, {PROTO_CODEC_JPEG, jpeg_bound - 1}};
+    } small[] = {{PROTO_CODEC_RAW, raw - 1},
+                 {PROTO_CODEC_ZSTD, 16},
+                 {PROTO_CODEC_ZSTD, 1},
+                 {PROTO_CODEC_JPEG, jpeg_bound - 1}};
     for (size_t i = 0; i < sizeof small / sizeof small[0]; i++) {
         uint8_t *buf = malloc(small[i].cap);
         assert_non_null(buf);
@@ -318,11 +328,13 @@ static void *codec_thread(void *arg)
     uint8_t *out = malloc(cap), *back = malloc((size_t)THREAD_W * THREAD_H * 3);
     for (int round = 0; out && back && round < 40; round++) {
         size_t bytes;
-        if (proto_color_encode(PROTO_CODEC_JPEG, 75, job->rgb, THREAD_W, THREAD_H, out, cap, &bytes) != FXC_OK ||
+        if (proto_color_encode(PROTO_CODEC_JPEG, 75, job->rgb, THREAD_W, THREAD_H, out, cap, &bytes) !=
+                FXC_OK ||
             bytes != job->want_jpeg_bytes || memcmp(out, job->want_jpeg, bytes) != 0 ||
             proto_color_decode(PROTO_CODEC_JPEG, out, bytes, THREAD_W, THREAD_H, back) != FXC_OK)
             job->failures++;
-        if (proto_color_encode(PROTO_CODEC_ZSTD, 0, job->rgb, THREAD_W, THREAD_H, out, cap, &bytes) != FXC_OK ||
+        if (proto_color_encode(PROTO_CODEC_ZSTD, 0, job->rgb, THREAD_W, THREAD_H, out, cap, &bytes) !=
+                FXC_OK ||
             bytes != job->want_zstd_bytes || memcmp(out, job->want_zstd, bytes) != 0 ||
             proto_color_decode(PROTO_CODEC_ZSTD, out, bytes, THREAD_W, THREAD_H, back) != FXC_OK ||
             memcmp(back, job->rgb, (size_t)THREAD_W * THREAD_H * 3) != 0)
@@ -415,31 +427,31 @@ static void test_depth_half_closed_forms(void **state)
     } cases[] = {
         {1.0f, 1.0f},
         {-2.0f, -2.0f},
-        {65504.0f, 65504.0f},                 /* the largest half */
-        {65519.0f, 65504.0f},                 /* below the midpoint to 2^16 */
-        {65520.0f, INFINITY},                 /* the midpoint: ties to even, which is 2^16: overflow */
+        {65504.0f, 65504.0f}, /* the largest half */
+        {65519.0f, 65504.0f}, /* below the midpoint to 2^16 */
+        {65520.0f, INFINITY}, /* the midpoint: ties to even, which is 2^16: overflow */
         {1e6f, INFINITY},
         {-65520.0f, -INFINITY},
         {INFINITY, INFINITY},
         {-INFINITY, -INFINITY},
-        {1e-8f, 0.0f},                        /* 0.168 of the smallest subnormal */
-        {ulp_sub, ulp_sub},                   /* 2^-24 exact */
-        {ulp_sub / 2, 0.0f},                  /* 2^-25: a tie, to the even 0 */
-        {ulp_sub * 0.75f, ulp_sub},           /* above the tie */
-        {ulp_sub * 1.5f, 2 * ulp_sub},        /* tie between 1 and 2 ulps: to the even 2 */
-        {ulp_sub * 2.5f, 2 * ulp_sub},        /* tie between 2 and 3: to the even 2 */
+        {1e-8f, 0.0f},                          /* 0.168 of the smallest subnormal */
+        {ulp_sub, ulp_sub},                     /* 2^-24 exact */
+        {ulp_sub / 2, 0.0f},                    /* 2^-25: a tie, to the even 0 */
+        {ulp_sub * 0.75f, ulp_sub},             /* above the tie */
+        {ulp_sub * 1.5f, 2 * ulp_sub},          /* tie between 1 and 2 ulps: to the even 2 */
+        {ulp_sub * 2.5f, 2 * ulp_sub},          /* tie between 2 and 3: to the even 2 */
         {ulp_sub * 1023.0f, ulp_sub * 1023.0f}, /* the largest subnormal */
-        {ulp_sub * 1023.5f, 6.103515625e-5f}, /* tie to the even 1024 = 2^-14, the smallest normal */
+        {ulp_sub * 1023.5f, 6.103515625e-5f},   /* tie to the even 1024 = 2^-14, the smallest normal */
         {6.103515625e-5f, 6.103515625e-5f},
-        {1.0f + 0x1p-11f, 1.0f},              /* tie between 1 and 1 + 2^-10: to the even 1 */
+        {1.0f + 0x1p-11f, 1.0f},               /* tie between 1 and 1 + 2^-10: to the even 1 */
         {1.0f + 3 * 0x1p-11f, 1.0f + 0x1p-9f}, /* tie between 1 + 2^-10 and 1 + 2^-9: to the even one */
         {1.0f + 0x1p-11f + 0x1p-20f, 1.0f + 0x1p-10f}, /* just above the tie */
-        {1.0f / 3.0f, 0.333251953125f},       /* 0x3555 */
-        {0.1f, 0.0999755859375f},             /* 0x2e66 */
-        {2049.0f, 2048.0f},                   /* the spacing is 2 from 2048: a tie, to the even 2048 */
-        {2051.0f, 2052.0f},                   /* a tie, to the even 2052 */
+        {1.0f / 3.0f, 0.333251953125f},                /* 0x3555 */
+        {0.1f, 0.0999755859375f},                      /* 0x2e66 */
+        {2049.0f, 2048.0f}, /* the spacing is 2 from 2048: a tie, to the even 2048 */
+        {2051.0f, 2052.0f}, /* a tie, to the even 2052 */
         {0.0f, 0.0f},
-        {fxt_float_from_bits(1), 0.0f},           /* a float subnormal */
+        {fxt_float_from_bits(1), 0.0f}, /* a float subnormal */
     };
     enum { COUNT = sizeof cases / sizeof cases[0] };
     float in[COUNT + 4];
@@ -447,7 +459,7 @@ static void test_depth_half_closed_forms(void **state)
         in[i] = cases[i].in;
     in[COUNT] = -0.0f;
     in[COUNT + 1] = NAN;
-    in[COUNT + 2] = -1e-9f;                       /* rounds to -0 */
+    in[COUNT + 2] = -1e-9f;                           /* rounds to -0 */
     in[COUNT + 3] = fxt_float_from_bits(0xff800001u); /* a NaN whose payload lies only in the dropped bits */
     float *back = depth_round_trip(PROTO_DEPTH_HALF, in, COUNT + 4, 1);
     for (int i = 0; i < COUNT; i++)
@@ -532,7 +544,8 @@ static void test_depth_half_sweep(void **state)
 #ifdef __FLT16_MAX__
         _Float16 reference = (_Float16)values[i];
         if (fxt_bits_from_float((float)reference) != fxt_bits_from_float(back[i]))
-            fail_msg("half(%.10g) = %.10g, _Float16 says %.10g", values[i], back[i], (double)(float)reference);
+            fail_msg("half(%.10g) = %.10g, _Float16 says %.10g", values[i], back[i],
+                     (double)(float)reference);
 #endif
     }
     print_message("binary16 sweep: %zu values, worst error %.4f ulp\n", count, worst);
@@ -577,7 +590,8 @@ static void test_depth_errors(void **state)
         }
         /* Too small a buffer. */
         uint8_t small[16];
-        assert_int_equal(proto_depth_encode(depth, values, w, h, small, sizeof small, &bytes), FXC_ERR_TOO_LARGE);
+        assert_int_equal(proto_depth_encode(depth, values, w, h, small, sizeof small, &bytes),
+                         FXC_ERR_TOO_LARGE);
         free(back);
         free(payload);
     }
@@ -601,8 +615,10 @@ static void test_depth_errors(void **state)
     assert_int_equal(proto_depth_bound(PROTO_DEPTH_NONE, w, h), 0);
     assert_int_equal(proto_depth_bound(8, w, h), 0);
     assert_int_equal(proto_depth_bound(PROTO_DEPTH_HALF, 0, h), 0);
-    assert_int_equal(proto_depth_encode(PROTO_DEPTH_NONE, &one, 1, 1, out, sizeof out, &bytes), FXC_ERR_INVALID);
-    assert_int_equal(proto_depth_encode(PROTO_DEPTH_HALF, &one, 8193, 1, out, sizeof out, &bytes), FXC_ERR_INVALID);
+    assert_int_equal(proto_depth_encode(PROTO_DEPTH_NONE, &one, 1, 1, out, sizeof out, &bytes),
+                     FXC_ERR_INVALID);
+    assert_int_equal(proto_depth_encode(PROTO_DEPTH_HALF, &one, 8193, 1, out, sizeof out, &bytes),
+                     FXC_ERR_INVALID);
     assert_int_equal(proto_depth_decode(PROTO_DEPTH_NONE, out, 10, 1, 1, &one), FXC_ERR_INVALID);
     assert_int_equal(proto_depth_decode(17, out, 10, 1, 1, &one), FXC_ERR_INVALID);
 }
@@ -610,16 +626,11 @@ static void test_depth_errors(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_color_lossless),
-        cmocka_unit_test(test_color_jpeg),
-        cmocka_unit_test(test_color_corrupt),
-        cmocka_unit_test(test_color_encode_errors),
-        cmocka_unit_test(test_codec_threads),
-        cmocka_unit_test(test_depth_float_exact),
-        cmocka_unit_test(test_depth_half_closed_forms),
-        cmocka_unit_test(test_depth_half_every_value),
-        cmocka_unit_test(test_depth_half_sweep),
-        cmocka_unit_test(test_depth_errors),
+        cmocka_unit_test(test_color_lossless),          cmocka_unit_test(test_color_jpeg),
+        cmocka_unit_test(test_color_corrupt),           cmocka_unit_test(test_color_encode_errors),
+        cmocka_unit_test(test_codec_threads),           cmocka_unit_test(test_depth_float_exact),
+        cmocka_unit_test(test_depth_half_closed_forms), cmocka_unit_test(test_depth_half_every_value),
+        cmocka_unit_test(test_depth_half_sweep),        cmocka_unit_test(test_depth_errors),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -167,9 +167,9 @@ static void check_ties_first_slot(uint32_t w, uint32_t h, uint32_t p, uint32_t q
         bool tiled, no_tiling;
         bool bands;
     } ways[] = {{1, 64, false, false, false}, {1, 512, false, false, false}, {1, 64, true, false, false},
-                {1, 512, true, false, false},  {2, 64, false, false, false},  {2, 512, false, false, false},
-                {1, 64, false, true, false},   {1, 64, false, false, true},   {2, 64, false, false, true},
-                {3, 64, false, false, true},   {1, 16, false, false, true}};
+                {1, 512, true, false, false}, {2, 64, false, false, false},  {2, 512, false, false, false},
+                {1, 64, false, true, false},  {1, 64, false, false, true},   {2, 64, false, false, true},
+                {3, 64, false, false, true},  {1, 16, false, false, true}};
     for (size_t k = 0; k < sizeof ways / sizeof ways[0]; k++) {
         view_rc *rc = fxt_rc_make(&(view_rc_desc){.width = w,
                                                   .height = h,
@@ -235,8 +235,9 @@ static void test_tiles_do_not_change_the_image(void **state)
     walk_log reference = {0};
     const uint32_t tiles[] = {64, 8, 16, 256, 512, 64, 64, 512, 16, 64, 64, 16};
     for (size_t t = 0; t < sizeof tiles / sizeof tiles[0]; t++) {
-        bool direct = t == 5, tiled = t >= 6 && t <= 8; /* one thread: the tile lists too (tiled_one_thread) */
-        bool bands = t >= 9;                            /* the band lists on 1, 2 and 3 threads */
+        bool direct = t == 5,
+             tiled = t >= 6 && t <= 8; /* one thread: the tile lists too (tiled_one_thread) */
+        bool bands = t >= 9;           /* the band lists on 1, 2 and 3 threads */
         view_rc *rc = fxt_rc_make(&(view_rc_desc){.width = w,
                                                   .height = h,
                                                   .tile_size = tiles[t],

@@ -105,8 +105,11 @@ static void render(const srv_ref_desc *desc, const srv_camera *cam, uint32_t w, 
     fxc_result r = srv_ref_create(desc, &ref, err, sizeof err);
     if (r != FXC_OK)
         fail_msg("srv_ref_create: %s", err);
-    srv_ref_image out = {.radiance = im->radiance, .half = {im->half[0], im->half[1]}, .ao = im->ao,
-                         .shadow = im->shadow, .srgb = im->srgb};
+    srv_ref_image out = {.radiance = im->radiance,
+                         .half = {im->half[0], im->half[1]},
+                         .ao = im->ao,
+                         .shadow = im->shadow,
+                         .srgb = im->srgb};
     assert_int_equal(srv_ref_render(ref, cam, w, h, frame, &out, &im->stats, NULL, NULL), FXC_OK);
     srv_ref_free(ref);
 }
@@ -136,7 +139,8 @@ static bool hit_ground(const float origin[3], const double dir[3], double p[3])
 /* The unnormalised direction of the ray through image position (px, py) (the camera model). */
 static void pixel_ray(const srv_camera_frame *f, double px, double py, double dir[3])
 {
-    double sx = (2.0 * px / f->width - 1.0) * f->tan_half_x, sy = (1.0 - 2.0 * py / f->height) * f->tan_half_y;
+    double sx = (2.0 * px / f->width - 1.0) * f->tan_half_x,
+           sy = (1.0 - 2.0 * py / f->height) * f->tan_half_y;
     for (int k = 0; k < 3; k++)
         dir[k] = f->forward[k] + sx * f->right[k] + sy * f->up[k];
 }
@@ -224,7 +228,8 @@ static void test_direct_light_analytic(void **state)
     add_ground(s, 40, 8);
     fxt_add_sun(s, 0.3f, -1.0f, 0.2f); /* intensity 1, white */
     scene_error err;
-    scene_light lamp = {.type = SCENE_LIGHT_POINT, .position = {1, 3, -1}, .color = {1, 0.5f, 0.25f}, .intensity = 5};
+    scene_light lamp = {
+        .type = SCENE_LIGHT_POINT, .position = {1, 3, -1}, .color = {1, 0.5f, 0.25f}, .intensity = 5};
     assert_int_equal(scene__add_light(s, &lamp, "test lamp", &err), SCENE_OK);
     scene_rt *rt = fxt_finish_scene(s, 4, 1.0f);
     srv_ref_desc d = {.s = s, .rt = rt, .seed = 5, .threads = 2};
@@ -319,8 +324,10 @@ static void test_shadow_analytic(void **state)
                     double corner[3];
                     pixel_ray(&f, x + ((c & 1) ? 2.0 : -1.0), y + ((c & 2) ? 2.0 : -1.0), dir);
                     hit_ground(cam.position, dir, corner);
-                    double v = side == 0 ? sx0 - corner[0] : side == 1 ? corner[0] - sx1
-                             : side == 2 ? sz0 - corner[2] : corner[2] - sz1;
+                    double v = side == 0   ? sx0 - corner[0]
+                               : side == 1 ? corner[0] - sx1
+                               : side == 2 ? sz0 - corner[2]
+                                           : corner[2] - sz1;
                     all = all && v > 0;
                 }
                 beyond = all;
@@ -343,7 +350,8 @@ static void test_shadow_analytic(void **state)
         }
     print_message("shadow: %u pixels in it, %u lit, %u across its edge\n", dark, lit, edge);
     if (dark < 20 || lit < 20 || edge < 5)
-        fail_msg("the view should hold shadow, light and the edge: %u dark, %u lit, %u across", dark, lit, edge);
+        fail_msg("the view should hold shadow, light and the edge: %u dark, %u lit, %u across", dark, lit,
+                 edge);
     image_free(&im);
     scene_rt_free(rt);
     scene_free(s);
@@ -368,8 +376,8 @@ static void test_closed_sphere_series(void **state)
     float *positions = malloc(sizeof(float) * 3 * vertex_count);
     uint32_t *indices = malloc(sizeof(uint32_t) * 3 * triangle_count);
     assert_true(positions && indices);
-    positions[0] = 0, positions[1] = (float)radius, positions[2] = 0;      /* north pole */
-    positions[3] = 0, positions[4] = (float)-radius, positions[5] = 0;     /* south pole */
+    positions[0] = 0, positions[1] = (float)radius, positions[2] = 0;  /* north pole */
+    positions[3] = 0, positions[4] = (float)-radius, positions[5] = 0; /* south pole */
     for (uint32_t j = 1; j < RINGS; j++)
         for (uint32_t i = 0; i < SEGMENTS; i++) {
             double theta = M_PI * j / RINGS, phi = 2 * M_PI * i / SEGMENTS;
@@ -379,15 +387,15 @@ static void test_closed_sphere_series(void **state)
             p[2] = (float)(radius * sin(theta) * sin(phi));
         }
     uint32_t t = 0;
-#define RING_VERTEX(j, i) (2 + ((j) - 1) * SEGMENTS + ((i) % SEGMENTS))
+#define RING_VERTEX(j, i) (2 + ((j)-1) * SEGMENTS + ((i) % SEGMENTS))
     for (uint32_t i = 0; i < SEGMENTS; i++) {
         uint32_t tris[2][3] = {{0, RING_VERTEX(1, i), RING_VERTEX(1, i + 1)},
                                {1, RING_VERTEX(RINGS - 1, i + 1), RING_VERTEX(RINGS - 1, i)}};
         memcpy(indices + 3 * t, tris, sizeof tris);
         t += 2;
         for (uint32_t j = 1; j + 1 < RINGS; j++) {
-            uint32_t quad[6] = {RING_VERTEX(j, i),     RING_VERTEX(j + 1, i), RING_VERTEX(j + 1, i + 1),
-                                RING_VERTEX(j, i),     RING_VERTEX(j + 1, i + 1), RING_VERTEX(j, i + 1)};
+            uint32_t quad[6] = {RING_VERTEX(j, i), RING_VERTEX(j + 1, i),     RING_VERTEX(j + 1, i + 1),
+                                RING_VERTEX(j, i), RING_VERTEX(j + 1, i + 1), RING_VERTEX(j, i + 1)};
             memcpy(indices + 3 * t, quad, sizeof quad);
             t += 2;
         }
@@ -403,7 +411,8 @@ static void test_closed_sphere_series(void **state)
             e1[q] = (double)b[q] - a[q];
             e2[q] = (double)c[q] - a[q];
         }
-        double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+        double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                       e1[0] * e2[1] - e1[1] * e2[0]};
         for (int q = 0; q < 3; q++)
             centroid += n[q] * ((double)a[q] + b[q] + c[q]);
         if (centroid > 0) {
@@ -413,13 +422,13 @@ static void test_closed_sphere_series(void **state)
         }
     }
     scene_error err;
-    assert_int_equal(scene__add_mesh(s, "sphere", positions, vertex_count, indices, triangle_count, NULL, 0, NULL,
-                                     &err),
-                     SCENE_OK);
+    assert_int_equal(
+        scene__add_mesh(s, "sphere", positions, vertex_count, indices, triangle_count, NULL, 0, NULL, &err),
+        SCENE_OK);
     free(positions);
     free(indices);
-    scene_light lamp = {.type = SCENE_LIGHT_POINT, .position = {0, 0, 0}, .color = {1, 1, 1},
-                        .intensity = (float)intensity};
+    scene_light lamp = {
+        .type = SCENE_LIGHT_POINT, .position = {0, 0, 0}, .color = {1, 1, 1}, .intensity = (float)intensity};
     assert_int_equal(scene__add_light(s, &lamp, "centre", &err), SCENE_OK);
     scene_rt *rt = fxt_finish_scene(s, 8, 0.5f);
     for (uint32_t k = 0; k < s->triangle_count; k++) { /* the precondition: every normal faces the centre */
@@ -472,7 +481,11 @@ static void test_one_bounce_matches_no_cache(void **state)
     srv_camera cam = srv_camera_default(fx->s);
     float *baseline[2];
     for (int run = 0; run < 2; run++) {
-        srv_loop_desc d = {.s = fx->s, .rt = fx->rt, .seed = 21 + (uint32_t)run, .threads = 2, .no_cache = true,
+        srv_loop_desc d = {.s = fx->s,
+                           .rt = fx->rt,
+                           .seed = 21 + (uint32_t)run,
+                           .threads = 2,
+                           .no_cache = true,
                            .probe_rays = 1024};
         static const char *const names[] = {"shadow", "ao", "probes"};
         fxt_effects_on(&d, names, 3);
@@ -502,8 +515,9 @@ static void test_one_bounce_matches_no_cache(void **state)
     }
     mean_ref /= (double)n;
     mean_base /= (double)n;
-    print_message("one bounce: MSE against the baseline %.4g, their variances %.4g + %.4g; means %.5f, %.5f\n",
-                  measured, baseline_variance, reference_variance, mean_ref, mean_base);
+    print_message(
+        "one bounce: MSE against the baseline %.4g, their variances %.4g + %.4g; means %.5f, %.5f\n",
+        measured, baseline_variance, reference_variance, mean_ref, mean_base);
     assert_true(measured > 0.8 * expected && measured < 1.25 * expected);
     assert_true(fabs(mean_ref - mean_base) < 4 * sqrt(expected / (double)(w * h)));
     free(baseline[0]);
@@ -572,8 +586,8 @@ static void test_noise_estimate(void **state)
     double actual2 = mse(im[0].radiance, im[1].radiance, n) - im[1].stats.noise_rmse * im[1].stats.noise_rmse;
     assert_true(actual2 > 0);
     double ratio = estimated / sqrt(actual2);
-    print_message("noise: estimated %.5f, measured %.5f (ratio %.3f); 4x samples: estimated %.5f\n", estimated,
-                  sqrt(actual2), ratio, im[1].stats.noise_rmse);
+    print_message("noise: estimated %.5f, measured %.5f (ratio %.3f); 4x samples: estimated %.5f\n",
+                  estimated, sqrt(actual2), ratio, im[1].stats.noise_rmse);
     assert_true(ratio > 1 / 1.5 && ratio < 1.5);
     /* Four times the samples: about half the noise. */
     assert_true(im[1].stats.noise_rmse < 0.7 * estimated && im[1].stats.noise_rmse > 0.35 * estimated);
@@ -618,7 +632,8 @@ static void test_refusals(void **state)
     assert_int_equal(srv_ref_render(ref, &degenerate, 1, 1, 0, &out, NULL, NULL, NULL), FXC_ERR_CAMERA);
     srv_camera cam = srv_camera_default(fx->s);
     assert_int_equal(srv_ref_render(ref, &cam, 0, 1, 0, &out, NULL, NULL, NULL), FXC_ERR_INVALID);
-    assert_int_equal(srv_ref_render(ref, &cam, 1, 1, 0, &(srv_ref_image){0}, NULL, NULL, NULL), FXC_ERR_INVALID);
+    assert_int_equal(srv_ref_render(ref, &cam, 1, 1, 0, &(srv_ref_image){0}, NULL, NULL, NULL),
+                     FXC_ERR_INVALID);
     srv_ref_free(ref);
 }
 
@@ -667,8 +682,8 @@ static void test_cli_option_errors(void **state)
         if (rc != 2 || len < 2 || err_buf[len - 1] != '\n' || memchr(err_buf, '\n', len - 1) ||
             !strstr(err_buf, cases[i].needle1) || !strstr(err_buf, cases[i].needle2) ||
             strncmp(err_buf, "fxcache ref: ", 13) != 0)
-            fail_msg("fxcache %s: exit %d, stderr '%s' (expected exit 2 and one line with %s and %s)", args, rc,
-                     err_buf, cases[i].needle1, cases[i].needle2);
+            fail_msg("fxcache %s: exit %d, stderr '%s' (expected exit 2 and one line with %s and %s)", args,
+                     rc, err_buf, cases[i].needle1, cases[i].needle2);
     }
     /* --out is required. */
     assert_int_equal(fxt_run_cli("ref --ao-samples 4", out_buf, sizeof out_buf, err_buf, sizeof err_buf), 2);
@@ -680,9 +695,10 @@ static void test_cli_option_errors(void **state)
     assert_non_null(strstr(err_buf, "absent.trace"));
     /* --help tells the options and exits 0. */
     assert_int_equal(fxt_run_cli("ref --help", out_buf, sizeof out_buf, err_buf, sizeof err_buf), 0);
-    static const char *const documented[] = {"--trace", "--every", "--fps", "--camera", "--viewers", "--frames",
-                                             "--res", "--ao-samples", "--shadow-rays", "--paths", "--max-bounces",
-                                             "--seed", "--threads", "--out", "--views", "--effects", "--scene"};
+    static const char *const documented[] = {
+        "--trace",   "--every",      "--fps",         "--camera",  "--viewers",     "--frames",
+        "--res",     "--ao-samples", "--shadow-rays", "--paths",   "--max-bounces", "--seed",
+        "--threads", "--out",        "--views",       "--effects", "--scene"};
     for (size_t i = 0; i < sizeof documented / sizeof documented[0]; i++)
         assert_non_null(strstr(out_buf, documented[i]));
 }
@@ -741,8 +757,8 @@ static void test_cli_trace_frames_match_sim(void **state)
     /* Viewer 0 from t = 0.5 to 1.4, ten cameras; viewer 1 from 0.8 to 1.1. */
     char text[4096] = "fxcache-trace 2\nresolution 24 14\n";
     for (int i = 0; i < 10; i++)
-        snprintf(text + strlen(text), sizeof text - strlen(text), "%.1f %.2f 2 3 -1 -0.4 -1 60\n", 0.5 + 0.1 * i,
-                 4.0 - 0.1 * i);
+        snprintf(text + strlen(text), sizeof text - strlen(text), "%.1f %.2f 2 3 -1 -0.4 -1 60\n",
+                 0.5 + 0.1 * i, 4.0 - 0.1 * i);
     snprintf(a, sizeof a, "%s", fxt_write_file("a.trace", text));
     snprintf(text, sizeof text, "fxcache-trace 1\n0.8 -3 2 2 1 -0.3 -1 50\n1.1 -2.5 2 2 1 -0.3 -1 50\n");
     snprintf(b, sizeof b, "%s", fxt_write_file("b.trace", text));
@@ -750,8 +766,9 @@ static void test_cli_trace_frames_match_sim(void **state)
     tmp_path(ref_dir, sizeof ref_dir, "trace_ref");
     clear_dir(sim_dir);
     clear_dir(ref_dir);
-    snprintf(args, sizeof args, "sim --trace '%s' --trace '%s' --fps 10 --save-every 3 --res 16x9 --out '%s' --quiet",
-             a, b, sim_dir);
+    snprintf(args, sizeof args,
+             "sim --trace '%s' --trace '%s' --fps 10 --save-every 3 --res 16x9 --out '%s' --quiet", a, b,
+             sim_dir);
     assert_int_equal(fxt_run_cli(args, out_buf, sizeof out_buf, err_buf, sizeof err_buf), 0);
     snprintf(args, sizeof args,
              "ref --trace '%s' --trace '%s' --fps 10 --every 3 --res 16x9 --ao-samples 4 --shadow-rays 32 "
@@ -762,8 +779,9 @@ static void test_cli_trace_frames_match_sim(void **state)
     png_names(sim_dir, sim_names, sizeof sim_names);
     png_names(ref_dir, ref_names, sizeof ref_names);
     assert_string_equal(sim_names, ref_names);
-    assert_string_equal(ref_names, "frame_0000_viewer_00.png frame_0003_viewer_00.png frame_0003_viewer_01.png "
-                                   "frame_0006_viewer_00.png frame_0006_viewer_01.png frame_0009_viewer_00.png ");
+    assert_string_equal(ref_names,
+                        "frame_0000_viewer_00.png frame_0003_viewer_00.png frame_0003_viewer_01.png "
+                        "frame_0006_viewer_00.png frame_0006_viewer_01.png frame_0009_viewer_00.png ");
     /* The same resolution rule as ref: --res wins over the trace's own 24 x 14 (cli_cameras.c). */
     char png[1100], msg[256];
     snprintf(png, sizeof png, "%s/frame_0000_viewer_00.png", sim_dir);
@@ -782,13 +800,15 @@ static void test_cli_trace_frames_match_sim(void **state)
     assert_true(json_is_false(json_object_get(root, "interrupted")));
     size_t i;
     json_t *image;
-    json_array_foreach(images, i, image) {
+    json_array_foreach(images, i, image)
+    {
         json_int_t frame = json_integer_value(json_object_get(image, "frame"));
         double time = json_real_value(json_object_get(image, "time_s"));
         assert_true(fabs(time - (0.5 + frame / 10.0)) < 1e-9);
         /* Viewer 0's camera is its trace line of that time: x = 4.0 - 0.1 line, line = frame. */
         if (json_integer_value(json_object_get(image, "viewer")) == 0) {
-            double x = json_real_value(json_array_get(json_object_get(json_object_get(image, "camera"), "position"), 0));
+            double x = json_real_value(
+                json_array_get(json_object_get(json_object_get(image, "camera"), "position"), 0));
             assert_true(fabs(x - (4.0 - 0.1 * (double)frame)) < 1e-6);
             assert_int_equal(json_integer_value(json_object_get(image, "width")), 16); /* --res wins */
         }
@@ -809,8 +829,8 @@ static void test_cli_generator_cameras_match_sim(void **state)
     tmp_path(ref_dir, sizeof ref_dir, "gen_ref");
     clear_dir(rec_dir);
     clear_dir(ref_dir);
-    snprintf(args, sizeof args, "sim --camera walk --viewers 2 --frames 5 --seed 9 --res 8x6 --record '%s' --quiet",
-             rec_dir);
+    snprintf(args, sizeof args,
+             "sim --camera walk --viewers 2 --frames 5 --seed 9 --res 8x6 --record '%s' --quiet", rec_dir);
     assert_int_equal(fxt_run_cli(args, out_buf, sizeof out_buf, err_buf, sizeof err_buf), 0);
     snprintf(args, sizeof args,
              "ref --camera walk --viewers 2 --frames 5 --every 2 --seed 9 --res 16x9 --ao-samples 4 "
@@ -827,7 +847,8 @@ static void test_cli_generator_cameras_match_sim(void **state)
     assert_non_null(s);
     size_t i;
     json_t *image;
-    json_array_foreach(images, i, image) {
+    json_array_foreach(images, i, image)
+    {
         uint32_t frame = (uint32_t)json_integer_value(json_object_get(image, "frame"));
         uint32_t viewer = (uint32_t)json_integer_value(json_object_get(image, "viewer"));
         snprintf(path, sizeof path, "%s/viewer_%02u.trace", rec_dir, viewer);
@@ -869,9 +890,9 @@ static void test_cli_interrupted(void **state)
         int devnull = open("/dev/null", O_WRONLY);
         dup2(devnull, STDOUT_FILENO);
         dup2(devnull, STDERR_FILENO);
-        execl(FXC_BIN, FXC_BIN, "ref", "--camera", "orbit", "--viewers", "1", "--frames", "100000", "--every", "1",
-              "--res", "24x14", "--ao-samples", "8", "--shadow-rays", "32", "--paths", "4", "--threads", "1", "--out",
-              dir, (char *)NULL);
+        execl(FXC_BIN, FXC_BIN, "ref", "--camera", "orbit", "--viewers", "1", "--frames", "100000", "--every",
+              "1", "--res", "24x14", "--ao-samples", "8", "--shadow-rays", "32", "--paths", "4", "--threads",
+              "1", "--out", dir, (char *)NULL);
         _exit(127);
     }
     /* Wait (at most 60 s) until two images are on record, then ask it to stop. */
@@ -903,7 +924,8 @@ static void test_cli_interrupted(void **state)
     json_decref(root);
 }
 
-#define SCENE_TEST(fn) cmocka_unit_test_setup_teardown(fn, fxt_default_scene_setup, fxt_default_scene_teardown)
+#define SCENE_TEST(fn)                                                                                       \
+    cmocka_unit_test_setup_teardown(fn, fxt_default_scene_setup, fxt_default_scene_teardown)
 
 int main(void)
 {

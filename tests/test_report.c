@@ -390,14 +390,15 @@ static void test_cli_resume(void **state)
 }
 
 /* Runs a small report of the scene and trace below into dir with extra options; returns its stderr in err. */
-static void run_small_report(const char *dir, const char *scene_path, const char *trace_path, const char *extra,
-                             char *err, size_t err_cap)
+static void run_small_report(const char *dir, const char *scene_path, const char *trace_path,
+                             const char *extra, char *err, size_t err_cap)
 {
     char args[3072];
-    snprintf(args, sizeof args,
-             "report --out %s --scene %s --trace %s --res 16x9 --frames 3 --warmup 1 --every 2 --threads 1 --only "
-             "default --ref-samples 1/8 --effects shadow %s",
-             dir, scene_path, trace_path, extra);
+    snprintf(
+        args, sizeof args,
+        "report --out %s --scene %s --trace %s --res 16x9 --frames 3 --warmup 1 --every 2 --threads 1 --only "
+        "default --ref-samples 1/8 --effects shadow %s",
+        dir, scene_path, trace_path, extra);
     err[0] = 0;
     int rc = fxt_run_cli(args, NULL, 0, err, err_cap);
     if (rc != 0)
@@ -412,10 +413,12 @@ static void run_small_report(const char *dir, const char *scene_path, const char
 static void test_cli_folder_of_other_content(void **state)
 {
     (void)state;
-    static const char scene_a[] = "{\"version\": 1, \"meshes\": [{\"builtin\": \"default\"}], \"lights\": "
-                                  "[{\"type\": \"directional\", \"direction\": [-0.3, -1, -0.2], \"intensity\": 3}]}";
-    static const char scene_b[] = "{\"version\": 1, \"meshes\": [{\"builtin\": \"default\"}], \"lights\": "
-                                  "[{\"type\": \"directional\", \"direction\": [-0.3, -1, -0.2], \"intensity\": 1}]}";
+    static const char scene_a[] =
+        "{\"version\": 1, \"meshes\": [{\"builtin\": \"default\"}], \"lights\": "
+        "[{\"type\": \"directional\", \"direction\": [-0.3, -1, -0.2], \"intensity\": 3}]}";
+    static const char scene_b[] =
+        "{\"version\": 1, \"meshes\": [{\"builtin\": \"default\"}], \"lights\": "
+        "[{\"type\": \"directional\", \"direction\": [-0.3, -1, -0.2], \"intensity\": 1}]}";
     static const char trace_a[] = "fxcache-trace 1\n0 0 1.6 3 0 -0.2 -1 60\n0.05 0.1 1.6 3 0 -0.2 -1 60\n"
                                   "0.1 0.1 1.6 3 0 -0.2 -1 60\n";
     static const char trace_b[] = "fxcache-trace 1\n0 0 1.6 3 0 -0.2 -1 60\n0.05 0.2 1.6 3 0 -0.2 -1 60\n"
@@ -464,10 +467,11 @@ static void test_cli_trace_ends_before_compared_frames(void **state)
     remove_tree(dir);
     snprintf(trace_path, sizeof trace_path, "%s", fxt_write_file("report_short.trace", trace));
     /* frames at 0, 1/30 and 2/30 s: the viewer has left at frame 2, the only compared frame after warm-up 1 */
-    snprintf(args, sizeof args,
-             "report --out %s --trace %s --res 16x9 --frames 3 --warmup 1 --every 2 --threads 1 --only default "
-             "--ref-samples 1/8 --effects shadow",
-             dir, trace_path);
+    snprintf(
+        args, sizeof args,
+        "report --out %s --trace %s --res 16x9 --frames 3 --warmup 1 --every 2 --threads 1 --only default "
+        "--ref-samples 1/8 --effects shadow",
+        dir, trace_path);
     int rc = fxt_run_cli(args, NULL, 0, err, sizeof err);
     if (rc != 0)
         fail_msg("exit %d: %s", rc, err);

@@ -36,7 +36,8 @@ static frame_result run_view(scene *s, float fov_override)
     for (int frame = 0; frame < 5; frame++)
         fxt_frame(loop, &id, 1, &cam, &st);
     frame_result r = {.visible = st.pixels_visible, .finite = true};
-    const float *ao = srv_viewer_view(loop, id, SRV_VIEW_AO), *shadow = srv_viewer_view(loop, id, SRV_VIEW_SHADOW);
+    const float *ao = srv_viewer_view(loop, id, SRV_VIEW_AO),
+                *shadow = srv_viewer_view(loop, id, SRV_VIEW_SHADOW);
     const float *rad = srv_viewer_radiance(loop, id);
     for (size_t i = 0; i < (size_t)w * h; i++) {
         r.mean_ao += ao[i];

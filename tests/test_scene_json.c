@@ -104,27 +104,28 @@ static void test_valid_full_description(void **state)
 {
     (void)state;
     scene_error err;
-    scene *s = load_json_text("full.json",
-                              "{\n"
-                              "  \"version\": 1,\n"
-                              "  \"comment\": \"everything\",\n"
-                              "  \"meshes\": [\n"
-                              "    {\"file\": \"quad.obj\", \"name\": \"ground\",\n"
-                              "     \"transform\": {\"translate\": [10, 1, -2], \"scale\": 2},\n"
-                              "     \"material\": {\"diffuse\": [0.2, 0.4, 0.6], \"name\": \"blueish\"}}\n"
-                              "  ],\n"
-                              "  \"lights\": [\n"
-                              "    {\"type\": \"directional\", \"direction\": [0, -2, 0], \"color\": [1, 0.5, 0.25],"
-                              " \"intensity\": 3},\n"
-                              "    {\"type\": \"point\", \"position\": [1, 2, 3], \"intensity\": 40}\n"
-                              "  ],\n"
-                              "  \"sky\": {\"color\": [0.5, 0.6, 0.7], \"intensity\": 0.25},\n"
-                              "  \"texel_density\": 50,\n"
-                              "  \"ao_radius\": 0.3,\n"
-                              "  \"effects\": {\"shadows\": \"on\", \"ao\": \"off\", \"indirect\": \"auto\"},\n"
-                              "  \"camera\": {\"position\": [0, 1.5, 5], \"target\": [0, 0, 0], \"fov_deg\": 45}\n"
-                              "}\n",
-                              &err);
+    scene *s =
+        load_json_text("full.json",
+                       "{\n"
+                       "  \"version\": 1,\n"
+                       "  \"comment\": \"everything\",\n"
+                       "  \"meshes\": [\n"
+                       "    {\"file\": \"quad.obj\", \"name\": \"ground\",\n"
+                       "     \"transform\": {\"translate\": [10, 1, -2], \"scale\": 2},\n"
+                       "     \"material\": {\"diffuse\": [0.2, 0.4, 0.6], \"name\": \"blueish\"}}\n"
+                       "  ],\n"
+                       "  \"lights\": [\n"
+                       "    {\"type\": \"directional\", \"direction\": [0, -2, 0], \"color\": [1, 0.5, 0.25],"
+                       " \"intensity\": 3},\n"
+                       "    {\"type\": \"point\", \"position\": [1, 2, 3], \"intensity\": 40}\n"
+                       "  ],\n"
+                       "  \"sky\": {\"color\": [0.5, 0.6, 0.7], \"intensity\": 0.25},\n"
+                       "  \"texel_density\": 50,\n"
+                       "  \"ao_radius\": 0.3,\n"
+                       "  \"effects\": {\"shadows\": \"on\", \"ao\": \"off\", \"indirect\": \"auto\"},\n"
+                       "  \"camera\": {\"position\": [0, 1.5, 5], \"target\": [0, 0, 0], \"fov_deg\": 45}\n"
+                       "}\n",
+                       &err);
     if (!s)
         fail_msg("%s", err.msg);
     assert_int_equal(s->mesh_count, 1);
@@ -204,16 +205,17 @@ static void test_valid_transforms(void **state)
     scene_error err;
     /* Rx(90) maps (x, y, z) to (x, -z, y): the quad (z 0..1, y = 0) then spans y -1..0 at z = 0, and the
      * translation moves it to z = 5. The matrix forms below write the same transform out. */
-    scene *s = load_json_text("xforms.json",
-                              "{\"version\": 1, \"meshes\": [\n"
-                              " {\"file\": \"quad.obj\", \"transform\": {\"rotate_deg\": [90, 0, 0],"
-                              " \"translate\": [0, 0, 5]}},\n"
-                              " {\"file\": \"quad.obj\", \"transform\": {\"matrix\": [1,0,0,0, 0,0,-1,0,"
-                              " 0,1,0,5, 0,0,0,1]}},\n"
-                              " {\"file\": \"quad.obj\", \"transform\": [1,0,0,0, 0,0,-1,0, 0,1,0,5, 0,0,0,1]},\n"
-                              " {\"file\": \"quad.obj\", \"transform\": {\"scale\": [2, 1, 3]}}\n"
-                              "]}",
-                              &err);
+    scene *s =
+        load_json_text("xforms.json",
+                       "{\"version\": 1, \"meshes\": [\n"
+                       " {\"file\": \"quad.obj\", \"transform\": {\"rotate_deg\": [90, 0, 0],"
+                       " \"translate\": [0, 0, 5]}},\n"
+                       " {\"file\": \"quad.obj\", \"transform\": {\"matrix\": [1,0,0,0, 0,0,-1,0,"
+                       " 0,1,0,5, 0,0,0,1]}},\n"
+                       " {\"file\": \"quad.obj\", \"transform\": [1,0,0,0, 0,0,-1,0, 0,1,0,5, 0,0,0,1]},\n"
+                       " {\"file\": \"quad.obj\", \"transform\": {\"scale\": [2, 1, 3]}}\n"
+                       "]}",
+                       &err);
     if (!s)
         fail_msg("%s", err.msg);
     assert_int_equal(s->mesh_count, 4);
@@ -263,10 +265,11 @@ static void test_valid_builtin_default(void **state)
 {
     (void)state;
     scene_error err;
-    scene *s = load_json_text("builtin.json",
-                              "{\"version\": 1, \"meshes\": [{\"builtin\": \"default\"}, {\"file\": \"quad.obj\"}],"
-                              " \"lights\": [{\"type\": \"point\", \"position\": [0, 2, 0], \"intensity\": 5}]}",
-                              &err);
+    scene *s =
+        load_json_text("builtin.json",
+                       "{\"version\": 1, \"meshes\": [{\"builtin\": \"default\"}, {\"file\": \"quad.obj\"}],"
+                       " \"lights\": [{\"type\": \"point\", \"position\": [0, 2, 0], \"intensity\": 5}]}",
+                       &err);
     if (!s)
         fail_msg("%s", err.msg);
     assert_true(s->mesh_count >= 5);
@@ -401,9 +404,10 @@ static void test_cli_reports_json_error(void **state)
 {
     (void)state;
     write_quad();
-    const char *path = fxt_write_file("cli_bad.json", "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}],"
-                                                      " \"lights\": [{\"type\": \"point\", \"position\": [0,1,0],"
-                                                      " \"intensity\": -1}]}");
+    const char *path =
+        fxt_write_file("cli_bad.json", "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}],"
+                                       " \"lights\": [{\"type\": \"point\", \"position\": [0,1,0],"
+                                       " \"intensity\": -1}]}");
     char args[1200], out[4096], errors[4096];
     snprintf(args, sizeof args, "scene-info '%s'", path);
     int status = fxt_run_cli(args, out, sizeof out, errors, sizeof errors);
@@ -418,8 +422,9 @@ static void test_cli_scene_info_without_lights(void **state)
 {
     (void)state;
     write_quad();
-    const char *path = fxt_write_file("cli_ok.json", "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}],"
-                                                     " \"sky\": {\"intensity\": 1}}");
+    const char *path =
+        fxt_write_file("cli_ok.json", "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}],"
+                                      " \"sky\": {\"intensity\": 1}}");
     char args[1200], out[8192], errors[4096];
     snprintf(args, sizeof args, "scene-info '%s'", path);
     int status = fxt_run_cli(args, out, sizeof out, errors, sizeof errors);
@@ -457,7 +462,8 @@ static void test_error_duplicate_key(void **state)
 static void test_error_number_overflow(void **state)
 {
     (void)state;
-    expect_error("overflow.json", "{\"version\": 1,\n\n \"ao_radius\": 1e400, \"meshes\": [{\"file\": \"quad.obj\"}]}",
+    expect_error("overflow.json",
+                 "{\"version\": 1,\n\n \"ao_radius\": 1e400, \"meshes\": [{\"file\": \"quad.obj\"}]}",
                  SCENE_ERR_JSON, "overflow.json:3:", NULL);
 }
 
@@ -486,16 +492,18 @@ static void test_error_missing_json_file(void **state)
 static void test_error_unknown_top_field(void **state)
 {
     (void)state;
-    expect_error("unknown_top.json", "{\"version\": 1, \"lightz\": [], \"meshes\": [{\"file\": \"quad.obj\"}]}",
-                 SCENE_ERR_JSON, "'lightz'", "top level");
+    expect_error("unknown_top.json",
+                 "{\"version\": 1, \"lightz\": [], \"meshes\": [{\"file\": \"quad.obj\"}]}", SCENE_ERR_JSON,
+                 "'lightz'", "top level");
 }
 
 /* An unknown field whose name holds a newline still gives a one-line message. */
 static void test_error_unknown_field_with_newline(void **state)
 {
     (void)state;
-    expect_error("newline_key.json", "{\"version\": 1, \"bad\\nkey\": 1, \"meshes\": [{\"file\": \"quad.obj\"}]}",
-                 SCENE_ERR_JSON, "'bad?key'", NULL);
+    expect_error("newline_key.json",
+                 "{\"version\": 1, \"bad\\nkey\": 1, \"meshes\": [{\"file\": \"quad.obj\"}]}", SCENE_ERR_JSON,
+                 "'bad?key'", NULL);
 }
 
 /* An unknown field inside a light is named with the light's path. */
@@ -513,9 +521,10 @@ static void test_error_unknown_light_field(void **state)
 static void test_error_unknown_transform_field(void **state)
 {
     (void)state;
-    expect_error("unknown_xform.json",
-                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"transform\": {\"rotate\": [0,0,0]}}]}",
-                 SCENE_ERR_JSON, "meshes[0].transform", "'rotate'");
+    expect_error(
+        "unknown_xform.json",
+        "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"transform\": {\"rotate\": [0,0,0]}}]}",
+        SCENE_ERR_JSON, "meshes[0].transform", "'rotate'");
 }
 
 /* A string where a number belongs. */
@@ -542,15 +551,16 @@ static void test_error_wrong_length_color(void **state)
 static void test_error_meshes_not_array(void **state)
 {
     (void)state;
-    expect_error("meshes_object.json", "{\"version\": 1, \"meshes\": {\"file\": \"quad.obj\"}}", SCENE_ERR_JSON,
-                 "meshes", "must be an array");
+    expect_error("meshes_object.json", "{\"version\": 1, \"meshes\": {\"file\": \"quad.obj\"}}",
+                 SCENE_ERR_JSON, "meshes", "must be an array");
 }
 
 /* "version" is required. */
 static void test_error_missing_version(void **state)
 {
     (void)state;
-    expect_error("no_version.json", "{\"meshes\": [{\"file\": \"quad.obj\"}]}", SCENE_ERR_JSON, "'version'", NULL);
+    expect_error("no_version.json", "{\"meshes\": [{\"file\": \"quad.obj\"}]}", SCENE_ERR_JSON, "'version'",
+                 NULL);
 }
 
 /* "meshes" is required. */
@@ -574,9 +584,10 @@ static void test_error_missing_light_fields(void **state)
     (void)state;
     expect_error("no_type.json", "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}], \"lights\": [{}]}",
                  SCENE_ERR_JSON, "lights[0]", "'type'");
-    expect_error("no_direction.json",
-                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}], \"lights\": [{\"type\": \"directional\"}]}",
-                 SCENE_ERR_JSON, "lights[0]", "'direction'");
+    expect_error(
+        "no_direction.json",
+        "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}], \"lights\": [{\"type\": \"directional\"}]}",
+        SCENE_ERR_JSON, "lights[0]", "'direction'");
 }
 
 /* A point light with a direction is a mistake worth naming. */
@@ -593,9 +604,10 @@ static void test_error_point_light_with_direction(void **state)
 static void test_error_unknown_light_type(void **state)
 {
     (void)state;
-    expect_error("spot.json",
-                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}], \"lights\": [{\"type\": \"spot\"}]}",
-                 SCENE_ERR_INVALID, "lights[0].type", "'spot'");
+    expect_error(
+        "spot.json",
+        "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}], \"lights\": [{\"type\": \"spot\"}]}",
+        SCENE_ERR_INVALID, "lights[0].type", "'spot'");
 }
 
 /* A newer version is refused with both numbers. */
@@ -651,16 +663,18 @@ static void test_error_zero_direction(void **state)
 static void test_error_negative_sky_color(void **state)
 {
     (void)state;
-    expect_error("sky_color.json",
-                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}], \"sky\": {\"color\": [0.5, -0.1, 1]}}",
-                 SCENE_ERR_INVALID, "sky.color", ">= 0");
+    expect_error(
+        "sky_color.json",
+        "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}], \"sky\": {\"color\": [0.5, -0.1, 1]}}",
+        SCENE_ERR_INVALID, "sky.color", ">= 0");
 }
 
 /* Texel density 0, negative and absurdly large: refused with the allowed range. */
 static void test_error_density_range(void **state)
 {
     (void)state;
-    expect_error("density0.json", "{\"version\": 1, \"texel_density\": 0, \"meshes\": [{\"file\": \"quad.obj\"}]}",
+    expect_error("density0.json",
+                 "{\"version\": 1, \"texel_density\": 0, \"meshes\": [{\"file\": \"quad.obj\"}]}",
                  SCENE_ERR_RANGE, "texel_density", "allowed");
     expect_error("density_neg.json",
                  "{\"version\": 1, \"texel_density\": -5, \"meshes\": [{\"file\": \"quad.obj\"}]}",
@@ -705,9 +719,10 @@ static void test_density_range_ends(void **state)
 static void test_error_scene_too_small(void **state)
 {
     (void)state;
-    expect_error("tiny.json",
-                 "{\"version\": 1, \"meshes\": [{\"builtin\": \"default\", \"transform\": {\"scale\": 1e-8}}]}",
-                 SCENE_ERR_RANGE, "spans only 1e-07 m", "scale the scene up");
+    expect_error(
+        "tiny.json",
+        "{\"version\": 1, \"meshes\": [{\"builtin\": \"default\", \"transform\": {\"scale\": 1e-8}}]}",
+        SCENE_ERR_RANGE, "spans only 1e-07 m", "scale the scene up");
     scene_error err;
     scene *s = load_json_text("small.json",
                               "{\"version\": 1, \"meshes\": [{\"builtin\": \"default\", \"transform\": "
@@ -724,12 +739,14 @@ static void test_byte_order_mark(void **state)
 {
     (void)state;
     scene_error err;
-    scene *s = load_json_text("bom.json", "\xef\xbb\xbf{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}]}", &err);
+    scene *s = load_json_text("bom.json",
+                              "\xef\xbb\xbf{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}]}", &err);
     if (!s)
         fail_msg("a byte-order mark is refused: %s", err.msg);
     assert_int_equal(s->triangle_count, 2);
     scene_free(s);
-    expect_error("bom_twice.json", "\xef\xbb\xbf\xef\xbb\xbf{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}]}",
+    expect_error("bom_twice.json",
+                 "\xef\xbb\xbf\xef\xbb\xbf{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}]}",
                  SCENE_ERR_JSON, "bom_twice.json:1:", NULL);
 }
 
@@ -758,19 +775,21 @@ static void test_error_bad_override(void **state)
 static void test_error_camera_fov(void **state)
 {
     (void)state;
-    expect_error("fov.json",
-                 "{\"version\": 1, \"camera\": {\"position\": [0,0,1], \"target\": [0,0,0], \"fov_deg\": 180},"
-                 " \"meshes\": [{\"file\": \"quad.obj\"}]}",
-                 SCENE_ERR_INVALID, "camera.fov_deg", "180");
+    expect_error(
+        "fov.json",
+        "{\"version\": 1, \"camera\": {\"position\": [0,0,1], \"target\": [0,0,0], \"fov_deg\": 180},"
+        " \"meshes\": [{\"file\": \"quad.obj\"}]}",
+        SCENE_ERR_INVALID, "camera.fov_deg", "180");
 }
 
 /* A zero scale, a non-affine matrix and a singular matrix. */
 static void test_error_bad_transforms(void **state)
 {
     (void)state;
-    expect_error("scale0.json",
-                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"transform\": {\"scale\": [1, 0, 1]}}]}",
-                 SCENE_ERR_INVALID, "meshes[0].transform.scale", "zero");
+    expect_error(
+        "scale0.json",
+        "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"transform\": {\"scale\": [1, 0, 1]}}]}",
+        SCENE_ERR_INVALID, "meshes[0].transform.scale", "zero");
     expect_error("projective.json",
                  "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"transform\": {\"matrix\":"
                  " [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,1,0]}}]}",
@@ -789,17 +808,18 @@ static void test_error_bad_transforms(void **state)
 static void test_error_albedo_above_one(void **state)
 {
     (void)state;
-    expect_error("albedo.json",
-                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"material\": {\"diffuse\": [1.5, 0, 0]}}]}",
-                 SCENE_ERR_INVALID, "meshes[0].material.diffuse", "0..1");
+    expect_error(
+        "albedo.json",
+        "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"material\": {\"diffuse\": [1.5, 0, 0]}}]}",
+        SCENE_ERR_INVALID, "meshes[0].material.diffuse", "0..1");
 }
 
 /* An unknown builtin scene. */
 static void test_error_unknown_builtin(void **state)
 {
     (void)state;
-    expect_error("builtin_bad.json", "{\"version\": 1, \"meshes\": [{\"builtin\": \"sponza\"}]}", SCENE_ERR_INVALID,
-                 "meshes[0].builtin", "'sponza'");
+    expect_error("builtin_bad.json", "{\"version\": 1, \"meshes\": [{\"builtin\": \"sponza\"}]}",
+                 SCENE_ERR_INVALID, "meshes[0].builtin", "'sponza'");
 }
 
 /* An empty meshes list. */
@@ -825,8 +845,8 @@ static void test_error_unsupported_format(void **state)
 {
     (void)state;
     fxt_write_file("notes.xyz", "this is not a mesh\n");
-    expect_error("unsupported.json", "{\"version\": 1, \"meshes\": [{\"file\": \"notes.xyz\"}]}", SCENE_ERR_FORMAT,
-                 "meshes[0]", "notes.xyz");
+    expect_error("unsupported.json", "{\"version\": 1, \"meshes\": [{\"file\": \"notes.xyz\"}]}",
+                 SCENE_ERR_FORMAT, "meshes[0]", "notes.xyz");
 }
 
 /* Assimp's OBJ reader turns the token "nan" into a NaN coordinate: refused, naming mesh and vertex. */
@@ -866,7 +886,8 @@ static void test_error_transform_overflow(void **state)
 {
     (void)state;
     expect_error("xform_overflow.json",
-                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"transform\": {\"scale\": 3e38, \"translate\": [3e38, 0, 0]}}]}",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"transform\": {\"scale\": 3e38, "
+                 "\"translate\": [3e38, 0, 0]}}]}",
                  SCENE_ERR_INVALID, "meshes[0]", "vertex");
 }
 
@@ -892,7 +913,8 @@ static void test_error_beyond_reach(void **state)
                  " \"camera\": {\"position\": [0, 0, 5e13], \"target\": [0, 0, 0]}}",
                  SCENE_ERR_RANGE, "camera lies", "1e+13");
     const char *fine[] = {
-        "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"transform\": {\"translate\": [2e13, 0, -2e13]}}],"
+        "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"transform\": {\"translate\": [2e13, 0, "
+        "-2e13]}}],"
         " \"camera\": {\"position\": [2e13, 0, -1.99e13], \"target\": [2e13, 0, -2e13]}}",
         "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"},"
         " {\"file\": \"quad.obj\", \"transform\": {\"scale\": 1e6, \"translate\": [1e11, 0, 0]}}],"
@@ -922,10 +944,11 @@ static void test_precision_collapse_named(void **state)
     fxt_write_file("mixed_tri.obj", "o m\nv 0 0 0\nv 100000 0 0\nv 0 0 100000\nv 5 0 5\nv 6 0 5\nv 5 0 6\n"
                                     "f 1 3 2\nf 4 6 5\n");
     scene_error err;
-    scene *sc = load_json_text("mixed.json",
-                               "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"},"
-                               " {\"file\": \"mixed_tri.obj\", \"transform\": {\"translate\": [1e9, 0, 0]}}]}",
-                               &err);
+    scene *sc =
+        load_json_text("mixed.json",
+                       "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"},"
+                       " {\"file\": \"mixed_tri.obj\", \"transform\": {\"translate\": [1e9, 0, 0]}}]}",
+                       &err);
     if (!sc)
         fail_msg("%s", err.msg);
     assert_int_equal(sc->repairs.precision_skipped, 1);
@@ -957,9 +980,10 @@ static void test_error_obj_only_degenerate(void **state)
 static void test_error_missing_texture(void **state)
 {
     (void)state;
-    expect_error("texture.json",
-                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"material\": {\"texture\": \"nope.png\"}}]}",
-                 SCENE_ERR_IO, "meshes[0]", "nope.png");
+    expect_error(
+        "texture.json",
+        "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\", \"material\": {\"texture\": \"nope.png\"}}]}",
+        SCENE_ERR_IO, "meshes[0]", "nope.png");
 }
 
 /* A texture whose header declares more than the machine's memory (a 69-byte PNG of 65536 x 65536 RGBA

@@ -87,7 +87,8 @@ static void *good_viewer_run(void *arg)
         long n = fxt_ws_recv(fd, &msg, 10);
         proto_msg m;
         if (n < 0 || proto_decode(msg, (size_t)n, &m) != FXC_OK || m.type != PROTO_FRAME ||
-            proto_color_decode(m.u.frame.codec, m.u.frame.color, m.u.frame.color_bytes, 64, 36, rgb) != FXC_OK) {
+            proto_color_decode(m.u.frame.codec, m.u.frame.color, m.u.frame.color_bytes, 64, 36, rgb) !=
+                FXC_OK) {
             free(msg);
             g->failed = true;
             break;
@@ -165,7 +166,8 @@ static void misbehave(int port, misbehaviour_result *r)
         proto_msg hello = fxt_hello_msg(64, 36, PROTO_CODEC_ZSTD);
         uint8_t buf[256];
         size_t n = proto_encode(&hello, buf, sizeof buf, NULL);
-        proto_put_u32le(buf + PROTO_HEADER_BYTES + 1, 1000000); /* width, after the empty name's length byte */
+        proto_put_u32le(buf + PROTO_HEADER_BYTES + 1,
+                        1000000); /* width, after the empty name's length byte */
         fxt_ws_send(fd, buf, n);
         r->absurd_hello_refused = fxt_expect_error(fd, FXC_ERR_RANGE);
         close(fd);
@@ -201,7 +203,8 @@ static void misbehave(int port, misbehaviour_result *r)
         proto_welcome w;
         if (fxt_ws_send_msg(fd, &hello) && fxt_read_welcome(fd, &w)) {
             proto_msg cam = {.type = PROTO_CAMERA};
-            cam.u.camera.pose = (proto_pose){.position = {1e30, 2, 3}, .direction = {-1e29, 0, 0}, .fov_deg = 60};
+            cam.u.camera.pose =
+                (proto_pose){.position = {1e30, 2, 3}, .direction = {-1e29, 0, 0}, .fov_deg = 60};
             fxt_ws_send_msg(fd, &cam);
             r->far_refused = fxt_expect_error(fd, FXC_ERR_CAMERA);
         }
@@ -273,8 +276,8 @@ static void test_misbehaving_clients(void **state)
     }
     for (int i = 0; i < 2; i++) {
         double before = rate_in(&good[i], a0, a1), during = rate_in(&good[i], b0, b1);
-        print_message("good viewer %d: %.1f frames/s before, %.1f while misbehaving peers ran (%.1f s)\n", i, before,
-                      during, b1 - b0);
+        print_message("good viewer %d: %.1f frames/s before, %.1f while misbehaving peers ran (%.1f s)\n", i,
+                      before, during, b1 - b0);
         assert_false(good[i].failed);
         assert_true(before > 5);
         assert_true(during >= 0.8 * before);
@@ -296,7 +299,8 @@ static void test_limits_and_token(void **state)
 {
     (void)state;
     fxt_server sv;
-    const char *args[] = {"--fps", "10", "--max-viewers", "2", "--max-res", "320x240", "--token", "s3cret", NULL};
+    const char *args[] = {"--fps",   "10",      "--max-viewers", "2", "--max-res",
+                          "320x240", "--token", "s3cret",        NULL};
     fxt_server_start(&sv, "limits", args);
     /* No token, a wrong token. */
     int fd = fxt_ws_connect(sv.port);
@@ -396,10 +400,14 @@ static void test_options(void **state)
     assert_int_equal(fxt_run_cli("serve --bind 0.0.0.0", NULL, 0, err, sizeof err), 2);
     assert_non_null(strstr(err, "--token"));
     static const char *const bad[][2] = {
-        {"serve --port 70000", "--port"},       {"serve --fps 0", "--fps"},
-        {"serve --max-viewers 65", "--max-viewers"}, {"serve --max-res 0x10", "--max-res"},
-        {"serve --max-message 10", "--max-message"}, {"serve --camera-rate 0", "--camera-rate"},
-        {"serve --token ''", "--token"},         {"serve --bogus", "--bogus"},
+        {"serve --port 70000", "--port"},
+        {"serve --fps 0", "--fps"},
+        {"serve --max-viewers 65", "--max-viewers"},
+        {"serve --max-res 0x10", "--max-res"},
+        {"serve --max-message 10", "--max-message"},
+        {"serve --camera-rate 0", "--camera-rate"},
+        {"serve --token ''", "--token"},
+        {"serve --bogus", "--bogus"},
         {"serve --bias ao=99", "--bias"},
     };
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
@@ -469,7 +477,8 @@ static void test_node_peer(void **state)
     const char *args[] = {"--fps", "30", NULL};
     fxt_server_start(&sv, "node", args);
     char cmd[1024];
-    snprintf(cmd, sizeof cmd, "NODE_PATH=/usr/share/nodejs node '%s/tests/peer_ws.js' ws://127.0.0.1:%d 15 96 54",
+    snprintf(cmd, sizeof cmd,
+             "NODE_PATH=/usr/share/nodejs node '%s/tests/peer_ws.js' ws://127.0.0.1:%d 15 96 54",
              FXC_SOURCE_DIR, sv.port);
     int rc = system(cmd);
     int code = WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
@@ -521,8 +530,8 @@ static void test_replay_bit_identical(void **state)
     fxt_server_start(&sv, "replay", args);
     char url[64];
     snprintf(url, sizeof url, "ws://127.0.0.1:%d", sv.port);
-    const char *argv[] = {FXC_VIEWER_BIN, "--connect", url, "--viewers", "4", "--res", "96x54", "--out", client,
-                          "--quiet", "--timeout", "120", NULL};
+    const char *argv[] = {FXC_VIEWER_BIN, "--connect", url,       "--viewers", "4",   "--res", "96x54",
+                          "--out",        client,      "--quiet", "--timeout", "120", NULL};
     pid_t viewer;
     assert_int_equal(posix_spawn(&viewer, FXC_VIEWER_BIN, NULL, NULL, (char *const *)argv, environ), 0);
     /* Until every viewer has about 20 frames, then SIGTERM in the middle of the session. */

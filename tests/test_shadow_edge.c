@@ -32,8 +32,8 @@ static scene *edge_scene(double angle_deg, const double u_dir[2])
         double e2[2] = {-e1[1], e1[0]};
         for (int c = 0; c < 4; c++) {
             double s1 = (c == 1 || c == 2) ? 0.5 : -0.5, s2 = (c >= 2) ? 0.5 : -0.5;
-            n += snprintf(obj + n, sizeof obj - (size_t)n, "v %.9f 1 %.9f\n", centre[0] + s1 * e1[0] + s2 * e2[0],
-                          centre[1] + s1 * e1[1] + s2 * e2[1]);
+            n += snprintf(obj + n, sizeof obj - (size_t)n, "v %.9f 1 %.9f\n",
+                          centre[0] + s1 * e1[0] + s2 * e2[0], centre[1] + s1 * e1[1] + s2 * e2[1]);
         }
         n += snprintf(obj + n, sizeof obj - (size_t)n, "f 5 6 7\nf 5 7 8\n");
     }
@@ -86,7 +86,9 @@ static double edge_width(bool no_cache, double angle_deg)
     srv_viewer_id id;
     srv_loop *loop = fxt_loop(&d, 1, RES, RES, &id);
     srv_camera cam = {.position = {(float)centre[0], 0.9f, (float)centre[1]},
-                      .target = {(float)centre[0], 0.0f, (float)centre[1]}, .up = {0, 0, -1}, .fov_deg = 100};
+                      .target = {(float)centre[0], 0.0f, (float)centre[1]},
+                      .up = {0, 0, -1},
+                      .fov_deg = 100};
     srv_frame_stats st;
     fxt_frame(loop, &id, 1, &cam, &st);
     assert_int_equal(st.pixels_missing, 0);
@@ -144,8 +146,8 @@ static void test_shadow_edge_width(void **state)
     for (int i = 0; i < 3; i++) {
         double cached = edge_width(false, angles[i]);
         double baseline = edge_width(true, angles[i]);
-        print_message("edge at %4.1f deg: 10-90 %% width %.2f texels cached, %.2f per pixel (no cache)\n", angles[i],
-                      cached, baseline);
+        print_message("edge at %4.1f deg: 10-90 %% width %.2f texels cached, %.2f per pixel (no cache)\n",
+                      angles[i], cached, baseline);
         assert_true(cached <= 1.0);
         assert_true(cached > 0.0);
     }

@@ -280,9 +280,10 @@ static void test_probe_blocks_within_tolerance(void **state)
         }
     }
     double mean = (double)dif.total / (3.0 * (double)dif.compared);
-    print_message("4x4 blocks: %llu of %llu listed pixels differ from the whole frame, by at most %d sRGB levels, "
-                  "%.3f on average per channel\n",
-                  (unsigned long long)dif.differing, (unsigned long long)dif.compared, dif.worst, mean);
+    print_message(
+        "4x4 blocks: %llu of %llu listed pixels differ from the whole frame, by at most %d sRGB levels, "
+        "%.3f on average per channel\n",
+        (unsigned long long)dif.differing, (unsigned long long)dif.compared, dif.worst, mean);
     assert_true(dif.compared > 2000);
     assert_true(dif.worst <= BLOCK_TOLERANCE);
     assert_true(mean <= BLOCK_MEAN_TOLERANCE);
@@ -484,12 +485,9 @@ static void test_refusals_and_memory(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        SCENE_TEST(test_sparse_equals_whole_frame),
-        SCENE_TEST(test_probes_within_tolerance),
-        SCENE_TEST(test_probe_blocks_within_tolerance),
-        SCENE_TEST(test_every_pixel_costs_a_whole_frame),
-        SCENE_TEST(test_few_pixels_cost_few_rays),
-        SCENE_TEST(test_refusals_and_memory),
+        SCENE_TEST(test_sparse_equals_whole_frame),     SCENE_TEST(test_probes_within_tolerance),
+        SCENE_TEST(test_probe_blocks_within_tolerance), SCENE_TEST(test_every_pixel_costs_a_whole_frame),
+        SCENE_TEST(test_few_pixels_cost_few_rays),      SCENE_TEST(test_refusals_and_memory),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

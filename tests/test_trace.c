@@ -269,20 +269,21 @@ static void test_refusals(void **state)
     EXPECT_REFUSAL("newer.trace", "fxcache-trace 3\n0 0 0 0 1 0 0 60 0\n",
                    "newer.trace:1: trace format version 3 is newer", "version 2");
     /* Version 2's resolution line: only in version 2, before the cameras, once, two sides in 1..8192. */
-    EXPECT_REFUSAL("res_v1.trace", "fxcache-trace 1\nresolution 64 36\n0 0 0 0 1 0 0 60\n", ":2:",
-                   "needs format version 2");
-    EXPECT_REFUSAL("res_late.trace", "fxcache-trace 2\n0 0 0 0 1 0 0 60\nresolution 64 36\n", ":3:",
-                   "before the first camera");
-    EXPECT_REFUSAL("res_twice.trace", "fxcache-trace 2\nresolution 64 36\nresolution 64 36\n0 0 0 0 1 0 0 60\n",
+    EXPECT_REFUSAL("res_v1.trace", "fxcache-trace 1\nresolution 64 36\n0 0 0 0 1 0 0 60\n",
+                   ":2:", "needs format version 2");
+    EXPECT_REFUSAL("res_late.trace", "fxcache-trace 2\n0 0 0 0 1 0 0 60\nresolution 64 36\n",
+                   ":3:", "before the first camera");
+    EXPECT_REFUSAL("res_twice.trace",
+                   "fxcache-trace 2\nresolution 64 36\nresolution 64 36\n0 0 0 0 1 0 0 60\n",
                    ":3:", "second 'resolution'");
-    EXPECT_REFUSAL("res_zero.trace", "fxcache-trace 2\nresolution 0 36\n0 0 0 0 1 0 0 60\n", ":2:",
-                   "width 0 is outside 1..8192");
-    EXPECT_REFUSAL("res_big.trace", "fxcache-trace 2\nresolution 64 8193\n0 0 0 0 1 0 0 60\n", ":2:",
-                   "height 8193");
-    EXPECT_REFUSAL("res_words.trace", "fxcache-trace 2\nresolution 64\n0 0 0 0 1 0 0 60\n", ":2:",
-                   "resolution WIDTH HEIGHT");
-    EXPECT_REFUSAL("res_text.trace", "fxcache-trace 2\nresolution 64 3x6\n0 0 0 0 1 0 0 60\n", ":2:",
-                   "not a whole number");
+    EXPECT_REFUSAL("res_zero.trace", "fxcache-trace 2\nresolution 0 36\n0 0 0 0 1 0 0 60\n",
+                   ":2:", "width 0 is outside 1..8192");
+    EXPECT_REFUSAL("res_big.trace", "fxcache-trace 2\nresolution 64 8193\n0 0 0 0 1 0 0 60\n",
+                   ":2:", "height 8193");
+    EXPECT_REFUSAL("res_words.trace", "fxcache-trace 2\nresolution 64\n0 0 0 0 1 0 0 60\n",
+                   ":2:", "resolution WIDTH HEIGHT");
+    EXPECT_REFUSAL("res_text.trace", "fxcache-trace 2\nresolution 64 3x6\n0 0 0 0 1 0 0 60\n",
+                   ":2:", "not a whole number");
     EXPECT_REFUSAL("much_newer.trace", "fxcache-trace 99999999999999999999\n", ":1: trace format version",
                    "is newer");
     EXPECT_REFUSAL("version0.trace", "fxcache-trace 0\n", ":1: trace format version 0 is not supported");
@@ -403,10 +404,10 @@ static void test_version2_resolution_and_time(void **state)
     assert_int_equal(width, 320);
     assert_int_equal(height, 180);
     assert_true(srv_trace_first_time(t) == 0.5 && srv_trace_last_time(t) == 1.5);
-    assert_true(srv_trace_camera_at(t, NULL, 0.0).position[0] == 0.0f);  /* before the start: the first */
+    assert_true(srv_trace_camera_at(t, NULL, 0.0).position[0] == 0.0f); /* before the start: the first */
     assert_true(srv_trace_camera_at(t, NULL, 1.4999).position[0] == 0.0f);
-    assert_true(srv_trace_camera_at(t, NULL, 1.5).position[0] == 2.0f);   /* exactly at a line's time */
-    assert_true(srv_trace_camera_at(t, NULL, 99.0).position[0] == 2.0f);  /* past the end: the last */
+    assert_true(srv_trace_camera_at(t, NULL, 1.5).position[0] == 2.0f);  /* exactly at a line's time */
+    assert_true(srv_trace_camera_at(t, NULL, 99.0).position[0] == 2.0f); /* past the end: the last */
     srv_trace_free(t);
     /* Without a resolution the writer keeps version 1, which older readers read. */
     w = srv_trace_writer_open(path, NULL, err, sizeof err);
@@ -525,7 +526,7 @@ static void test_fuzz(void **state)
             for (int e = 0; e < edits; e++) {
                 size_t at = fxt_random(&rng) % len;
                 char c = (fxt_random(&rng) & 1) ? alphabet[fxt_random(&rng) % (sizeof alphabet - 1)]
-                                                 : (char)fxt_random(&rng);
+                                                : (char)fxt_random(&rng);
                 switch (fxt_random(&rng) % 3) {
                 case 0:
                     buf[at] = c;

@@ -425,7 +425,8 @@ static void test_png_same_as_server(void **state)
     assert_int_equal(view_image_write_png(client_path, width, height, rgb, msg, sizeof msg), 0);
     assert_int_equal(scene_image_write_u8(server_path, width, height, 3, rgb, msg, sizeof msg), 0);
     size_t client_len, server_len;
-    uint8_t *client = fxt_read_file(client_path, &client_len), *server = fxt_read_file(server_path, &server_len);
+    uint8_t *client = fxt_read_file(client_path, &client_len),
+            *server = fxt_read_file(server_path, &server_len);
     assert_int_equal(client_len, server_len);
     assert_memory_equal(client, server, client_len);
     assert_memory_equal(client, "\x89PNG\r\n\x1a\n", 8);

@@ -472,7 +472,8 @@ static void test_misbehaving_server(void **state)
         char out[512], cmd[2048];
         snprintf(out, sizeof out, "%s", fxt_tmp_path("bad_server.out"));
         remove(out); /* a port from an earlier run must not be read */
-        snprintf(cmd, sizeof cmd, "NODE_PATH=/usr/share/nodejs exec node '%s/tests/peer_bad_server.js' %s > '%s' 2>&1",
+        snprintf(cmd, sizeof cmd,
+                 "NODE_PATH=/usr/share/nodejs exec node '%s/tests/peer_bad_server.js' %s > '%s' 2>&1",
                  FXC_SOURCE_DIR, cases[i].mode, out);
         pid_t fake;
         const char *sh[] = {"/bin/sh", "-c", cmd, NULL};
@@ -491,23 +492,29 @@ static void test_misbehaving_server(void **state)
         assert_true(port > 0);
         char url[64];
         snprintf(url, sizeof url, "ws://127.0.0.1:%d", port);
-        const char *args[] = {"--connect", url, "--res", "16x9", "--codec", "raw", "--frames", "3",
-                              "--timeout", "1", "--quiet", NULL};
+        const char *args[] = {"--connect", url, "--res",     "16x9", "--codec", "raw",
+                              "--frames",  "3", "--timeout", "1",    "--quiet", NULL};
         char stats[1024];
         snprintf(stats, sizeof stats, "%s", fxt_tmp_path("bad_server.json"));
         remove(stats);
-        const char *reproject_args[] = {"--connect", url, "--res", "16x9", "--codec", "raw", "--frames", "3",
-                                        "--timeout", "1", "--quiet", "--reproject", "--stats", stats, NULL};
-        const char *slow_args[] = {"--connect", url, "--res", "16x9", "--codec", "raw", "--frames", "2", "--timeout",
-                                   "1", "--quiet", "--reproject", "--fps", "1e-300", "--display-fps", "100", NULL};
+        const char *reproject_args[] = {"--connect", url,           "--res",   "16x9",      "--codec",
+                                        "raw",       "--frames",    "3",       "--timeout", "1",
+                                        "--quiet",   "--reproject", "--stats", stats,       NULL};
+        const char *slow_args[] = {"--connect", url,      "--res",         "16x9", "--codec", "raw",
+                                   "--frames",  "2",      "--timeout",     "1",    "--quiet", "--reproject",
+                                   "--fps",     "1e-300", "--display-fps", "100",  NULL};
         viewer_run r;
         bool slow = strcmp(cases[i].mode, "slow_clock") == 0 || strcmp(cases[i].mode, "tiny_fps") == 0;
         if (slow && strcmp(cases[i].mode, "tiny_fps") == 0)
             slow_args[12] = NULL; /* the welcome's fps, not --fps */
-        run_viewer(slow ? slow_args : strcmp(cases[i].mode, "unasked") == 0 ? reproject_args : args, NULL, &r);
+        run_viewer(slow                                    ? slow_args
+                   : strcmp(cases[i].mode, "unasked") == 0 ? reproject_args
+                                                           : args,
+                   NULL, &r);
         kill(fake, SIGTERM);
         waitpid(fake, NULL, 0);
-        print_message("%-13s exit %d in %.1f s: %s", cases[i].mode, r.status, r.seconds, r.err[0] ? r.err : "\n");
+        print_message("%-13s exit %d in %.1f s: %s", cases[i].mode, r.status, r.seconds,
+                      r.err[0] ? r.err : "\n");
         if (strstr(r.err, "runtime error") || strstr(r.err, "AddressSanitizer"))
             fail_msg("%s: a sanitizer's report: %s", cases[i].mode, r.err);
         if (r.status != cases[i].status)

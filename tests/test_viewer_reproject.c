@@ -296,7 +296,8 @@ static void test_turning_camera(void **state)
     snprintf(trace, sizeof trace, "%s", fxt_write_file("turn.trace", text));
     free(text);
     fxt_server server;
-    fxt_server_start(&server, "turning", (const char *const[]){"--fps", "15", NULL}); /* 30 a second of the session's time */
+    fxt_server_start(&server, "turning",
+                     (const char *const[]){"--fps", "15", NULL}); /* 30 a second of the session's time */
     int port = server.port;
     char url[64], display[512], stats[512];
     snprintf(url, sizeof url, "ws://127.0.0.1:%d", port);
@@ -414,7 +415,8 @@ static void test_sample_requests(void **state)
         "--connect", url,       "--camera",    "static",        "--res", "64x36",   "--latency",
         "20",        "--quiet", "--reproject", "--display-out", display, "--stats", stats,
         "--timeout", "60",      NULL};
-    assert_int_equal(run_viewer_for(args, "fake", display, 60), 0); /* about 2 s at 30 display frames a second */
+    assert_int_equal(run_viewer_for(args, "fake", display, 60),
+                     0); /* about 2 s at 30 display frames a second */
     int status = 0;
     for (double t0 = fxt_now_s(); fxt_now_s() - t0 < 30;) {
         if (waitpid(fake, &status, WNOHANG) == fake)

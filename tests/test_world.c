@@ -61,7 +61,8 @@ static void test_dark_scene_leaves_probes_out(void **state)
 {
     (void)state;
     scene *s = fxt_new_scene();
-    fxt_add_quad(s, "floor", (const double[3]){-2, 0, -2}, (const double[3]){0, 0, 4}, (const double[3]){4, 0, 0}, 2);
+    fxt_add_quad(s, "floor", (const double[3]){-2, 0, -2}, (const double[3]){0, 0, 4},
+                 (const double[3]){4, 0, 0}, 2);
     s->sky_intensity = 0;
     scene_rt *rt = fxt_finish_scene(s, 8, 0.5f);
     uint32_t count = 0;
@@ -107,7 +108,7 @@ static void test_cached_probes_match_baseline(void **state)
     enum { W = 64, H = 36 };
     srv_camera cam = srv_camgen_camera(SRV_CAMGEN_WALK, f->s, 0, 1, 0, 1);
     srv_loop_desc d = probe_desc(f, false); /* the probe term alone: radiance = albedo x E / pi */
-    d.probe_hysteresis = 0.5f; /* the same fixed point as 0.97, reached in fewer frames */
+    d.probe_hysteresis = 0.5f;              /* the same fixed point as 0.97, reached in fewer frames */
     srv_viewer_id id;
     srv_loop *loop = fxt_loop(&d, 1, W, H, &id);
     srv_frame_stats st;
@@ -158,7 +159,8 @@ static void test_local_tables_change_nothing(void **state)
     srv_loop_desc d = probe_desc(f, false);
     float *with = run_frames(f, &d, 64, 40, 4, &st, NULL);
     assert_true(st.world.local_lookups > 0);
-    print_message("local table hit rate %.3f\n", (double)st.world.local_hits / (double)st.world.local_lookups);
+    print_message("local table hit rate %.3f\n",
+                  (double)st.world.local_hits / (double)st.world.local_lookups);
     assert_true(st.world.local_hits * 2 > st.world.local_lookups);
     d.no_local_table = true;
     float *without = run_frames(f, &d, 64, 40, 4, &st, NULL);
@@ -262,7 +264,8 @@ static uint64_t volume_cost(const scene *s, uint32_t samples)
     return 0;
 }
 
-static uint64_t volume_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count, uint32_t samples)
+static uint64_t volume_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count,
+                              uint32_t samples)
 {
     (void)ctx, (void)samples;
     for (uint32_t j = 0; j < count; j++)
@@ -295,16 +298,24 @@ static void volume_shade(const fx_context *ctx, const fx_shade_run *run)
 }
 
 static const fx_effect volume_effect = {
-    .name = "volume_height", .cache = SCENE_CACHE_WORLD_SPACE, .filter = FX_FILTER_TRILINEAR,
-    .policy = FX_UPDATE_ONCE, .brick_size = 4, .texel_bytes = volume_texel_bytes, .needs = volume_needs,
-    .cost = volume_cost, .update = volume_update, .shade = volume_shade,
+    .name = "volume_height",
+    .cache = SCENE_CACHE_WORLD_SPACE,
+    .filter = FX_FILTER_TRILINEAR,
+    .policy = FX_UPDATE_ONCE,
+    .brick_size = 4,
+    .texel_bytes = volume_texel_bytes,
+    .needs = volume_needs,
+    .cost = volume_cost,
+    .update = volume_update,
+    .shade = volume_shade,
 };
 
 static void test_volumetric_4x4x4_effect(void **state)
 {
     fixture *f = *state;
     const fx_effect *effects[] = {&volume_effect};
-    srv_loop_desc d = {.s = f->s, .rt = f->rt, .seed = 1, .effects = effects, .effect_count = 1, .probe_budget = 1u << 20};
+    srv_loop_desc d = {
+        .s = f->s, .rt = f->rt, .seed = 1, .effects = effects, .effect_count = 1, .probe_budget = 1u << 20};
     d.effect_on[0] = true;
     srv_viewer_id id;
     srv_loop *loop = fxt_loop(&d, 1, VOLUME_W, VOLUME_H, &id);
@@ -326,8 +337,9 @@ static void test_volumetric_4x4x4_effect(void **state)
         double err = fabs((double)volume_read[p] - (double)volume_height[p]);
         worst = err > worst ? err : worst;
     }
-    print_message("%u pixels with every corner, worst height error %.2e m, %llu bricks for %llu cells\n", full, worst,
-                  (unsigned long long)st.world.bricks_resident, (unsigned long long)st.world.unique_cells);
+    print_message("%u pixels with every corner, worst height error %.2e m, %llu bricks for %llu cells\n",
+                  full, worst, (unsigned long long)st.world.bricks_resident,
+                  (unsigned long long)st.world.unique_cells);
     assert_true(full > (uint32_t)(VOLUME_W * VOLUME_H) * 9 / 10);
     assert_true(worst < 1e-4);
     srv_loop_free(loop);
@@ -339,7 +351,8 @@ static void test_volumetric_4x4x4_effect(void **state)
  * boundary), and the band is there (fractional values). */
 static float level_read[VOLUME_W * VOLUME_H], level_total[VOLUME_W * VOLUME_H];
 
-static uint64_t level_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count, uint32_t samples)
+static uint64_t level_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count,
+                             uint32_t samples)
 {
     (void)ctx, (void)samples;
     for (uint32_t j = 0; j < count; j++) {
@@ -368,21 +381,30 @@ static void level_shade(const fx_context *ctx, const fx_shade_run *run)
 }
 
 static const fx_effect level_effect = {
-    .name = "cell_level", .cache = SCENE_CACHE_WORLD_SPACE, .filter = FX_FILTER_TRILINEAR,
-    .policy = FX_UPDATE_ONCE, .brick_size = 1, .texel_bytes = volume_texel_bytes, .needs = volume_needs,
-    .cost = volume_cost, .update = level_update, .shade = level_shade,
+    .name = "cell_level",
+    .cache = SCENE_CACHE_WORLD_SPACE,
+    .filter = FX_FILTER_TRILINEAR,
+    .policy = FX_UPDATE_ONCE,
+    .brick_size = 1,
+    .texel_bytes = volume_texel_bytes,
+    .needs = volume_needs,
+    .cost = volume_cost,
+    .update = level_update,
+    .shade = level_shade,
 };
 
 static void test_levels_blend_without_seams(void **state)
 {
     fixture *f = *state;
     const fx_effect *effects[] = {&level_effect};
-    srv_loop_desc d = {.s = f->s, .rt = f->rt, .seed = 1, .effects = effects, .effect_count = 1, .probe_budget = 1u << 20};
+    srv_loop_desc d = {
+        .s = f->s, .rt = f->rt, .seed = 1, .effects = effects, .effect_count = 1, .probe_budget = 1u << 20};
     d.effect_on[0] = true;
     srv_viewer_id id;
     srv_loop *loop = fxt_loop(&d, 1, VOLUME_W, VOLUME_H, &id);
     srv_frame_stats st;
-    srv_camera cam = {.position = {-3.5f, 0.6f, -3.5f}, .target = {3, 0.2f, 3}, .up = {0, 1, 0}, .fov_deg = 70};
+    srv_camera cam = {
+        .position = {-3.5f, 0.6f, -3.5f}, .target = {3, 0.2f, 3}, .up = {0, 1, 0}, .fov_deg = 70};
     for (uint32_t frame = 0; frame < 2; frame++) {
         memset(level_total, 0, sizeof level_total);
         fxt_frame(loop, &id, 1, &cam, &st);
@@ -404,12 +426,13 @@ static void test_levels_blend_without_seams(void **state)
                 worst = fmaxf(worst, fabsf(level_read[p + 1] - level_read[p]));
             }
         }
-    print_message("levels read %.2f..%.2f, %u fractional pixels, worst step between neighbours %.3f over %u pairs\n",
-                  lo, hi, fractional, worst, pairs);
+    print_message(
+        "levels read %.2f..%.2f, %u fractional pixels, worst step between neighbours %.3f over %u pairs\n",
+        lo, hi, fractional, worst, pairs);
     assert_true(hi - lo >= 1.0f); /* a level boundary is in view */
     assert_true(fractional > 0);  /* the blend band */
     assert_true(pairs > 100);
-    assert_true(worst < 0.5f);    /* no whole-level jump */
+    assert_true(worst < 0.5f); /* no whole-level jump */
     srv_loop_free(loop);
 }
 
@@ -428,8 +451,8 @@ static int compare_floats(const void *a, const void *b)
 
 /* run_frames with the walk camera's field of view narrowed to 20 degrees: at 192 x 108 the narrowest probe
  * cell then spans 19 pixels, so the viewer uses 4 x 4 blocks (srv_loop_desc.indirect_block). */
-static float *run_narrow_frames(const fixture *f, const srv_loop_desc *d, uint32_t w, uint32_t h, uint32_t frames,
-                                srv_frame_stats *last)
+static float *run_narrow_frames(const fixture *f, const srv_loop_desc *d, uint32_t w, uint32_t h,
+                                uint32_t frames, srv_frame_stats *last)
 {
     srv_viewer_id id;
     srv_loop *loop = fxt_loop(d, 1, w, h, &id);
@@ -446,7 +469,8 @@ static float *run_narrow_frames(const fixture *f, const srv_loop_desc *d, uint32
 }
 
 /* RMS and 99th percentile of |a - b| over n floats, as fractions of b's mean. */
-static void difference_of_mean(const float *a, const float *b, size_t n, double *rms, double *p99, double *mean_b)
+static void difference_of_mean(const float *a, const float *b, size_t n, double *rms, double *p99,
+                               double *mean_b)
 {
     double mean = 0, squares = 0;
     float *diff = malloc(n * sizeof *diff);
@@ -479,11 +503,12 @@ static void test_blocks_close_to_every_pixel(void **state)
     double rms, p99, mean, seed_rms, seed_p99, seed_mean;
     difference_of_mean(block, pixel, n, &rms, &p99, &mean);
     difference_of_mean(other_seed, pixel, n, &seed_rms, &seed_p99, &seed_mean);
-    print_message("4x4 blocks against every pixel: mean radiance %.4f, RMS %.4f, 99th percentile %.4f (of the "
-                  "mean); another seed per pixel: RMS %.4f, 99th percentile %.4f; probes requested %llu "
-                  "against %llu\n",
-                  mean, rms, p99, seed_rms, seed_p99, (unsigned long long)st_block.world.requested_cells,
-                  (unsigned long long)st_pixel.world.requested_cells);
+    print_message(
+        "4x4 blocks against every pixel: mean radiance %.4f, RMS %.4f, 99th percentile %.4f (of the "
+        "mean); another seed per pixel: RMS %.4f, 99th percentile %.4f; probes requested %llu "
+        "against %llu\n",
+        mean, rms, p99, seed_rms, seed_p99, (unsigned long long)st_block.world.requested_cells,
+        (unsigned long long)st_pixel.world.requested_cells);
     assert_true(mean > 0.01);
     assert_true(seed_rms > 0.05); /* the yardstick is the probes' noise, not zero */
     assert_true(rms < RMS_OF_SEEDS * seed_rms);
@@ -498,8 +523,8 @@ static void test_blocks_close_to_every_pixel(void **state)
  * after frames of the walk camera. 200 x 108 at 20 degrees (4 x 4 blocks; the last tile column 8 pixels
  * wide, so partial rows take the scalar loops in both) and 200 x 200 at 60 degrees (2 x 2 blocks); shadows,
  * AO and probes, so the sky visibility and the indirect term the blend finishes are both in play. */
-static void run_lanes_frames(const fixture *f, bool no_lanes, uint32_t w, uint32_t h, float fov, float *radiance,
-                             float *sharing)
+static void run_lanes_frames(const fixture *f, bool no_lanes, uint32_t w, uint32_t h, float fov,
+                             float *radiance, float *sharing)
 {
     srv_loop_desc d = probe_desc(f, true);
     fxt_effects_on(&d, (const char *const[]){"ao"}, 1);
@@ -555,7 +580,8 @@ typedef struct request_record {
 
 /* Every block of every cached effect the last frame requested (the kinds' frame blocks, in their order) into
  * out (capacity cap); counts[k]: how many of kind k. Returns how many. */
-static size_t frame_requests(const srv_loop *loop, request_record *out, size_t cap, size_t counts[SCENE_CACHE_COUNT])
+static size_t frame_requests(const srv_loop *loop, request_record *out, size_t cap,
+                             size_t counts[SCENE_CACHE_COUNT])
 {
     size_t n = 0;
     for (uint32_t k = 0; k < SCENE_CACHE_COUNT; k++) {
@@ -609,8 +635,8 @@ static void test_request_lists_merge_nothing_away(void **state)
             d.no_request_recent = m == 1;
             loops[m] = fxt_loop(&d, cases[c].viewers, cases[c].w, cases[c].h, ids[m]);
             if (cases[c].sparse)
-                assert_int_equal(srv_viewer_add(loops[m], &(srv_viewer_desc){.max_pixels = SPARSE}, &sparse[m]),
-                                 FXC_OK);
+                assert_int_equal(
+                    srv_viewer_add(loops[m], &(srv_viewer_desc){.max_pixels = SPARSE}, &sparse[m]), FXC_OK);
         }
         size_t kinds_seen[SCENE_CACHE_COUNT] = {0};
         for (uint32_t frame = 0; frame < 5; frame++) {
@@ -629,8 +655,8 @@ static void test_request_lists_merge_nothing_away(void **state)
             size_t n[2], counts[2][SCENE_CACHE_COUNT];
             for (int m = 0; m < 2; m++) {
                 if (cases[c].sparse)
-                    assert_int_equal(srv_viewer_set_pixels(loops[m], sparse[m], &cams[0], cases[c].w, cases[c].h,
-                                                           list, SPARSE, NULL),
+                    assert_int_equal(srv_viewer_set_pixels(loops[m], sparse[m], &cams[0], cases[c].w,
+                                                           cases[c].h, list, SPARSE, NULL),
                                      FXC_OK);
                 fxt_frame(loops[m], ids[m], cases[c].viewers, cams, &st[m]);
                 n[m] = frame_requests(loops[m], rec[m], CAP, counts[m]);
@@ -648,7 +674,8 @@ static void test_request_lists_merge_nothing_away(void **state)
         assert_true(kinds_seen[SCENE_CACHE_ON_SURFACE] > 0);
         assert_true(kinds_seen[SCENE_CACHE_WORLD_SPACE] > 0);
         for (uint32_t v = 0; v < cases[c].viewers; v++)
-            assert_memory_equal(srv_viewer_radiance(loops[0], ids[0][v]), srv_viewer_radiance(loops[1], ids[1][v]),
+            assert_memory_equal(srv_viewer_radiance(loops[0], ids[0][v]),
+                                srv_viewer_radiance(loops[1], ids[1][v]),
                                 (size_t)cases[c].w * cases[c].h * 3 * sizeof(float));
         srv_loop_free(loops[0]);
         srv_loop_free(loops[1]);

@@ -36,7 +36,6 @@ static int32_t rng_range(uint64_t *state, int32_t lo, int32_t hi) /* [lo, hi] */
     return lo + (int32_t)(rng_next(state) % (uint64_t)(hi - lo + 1));
 }
 
-
 static wsc_cache *create_or_fail(const wsc_desc *desc)
 {
     wsc_cache *cache = NULL;
@@ -119,7 +118,7 @@ static void test_wgi_refusals(void **state)
         int32_t gx, gy, gz;
     } beyond[] = {
         {WSC_XZ_MIN - 1, 0, 0}, {WSC_XZ_MAX + 1, 0, 0}, {0, WSC_Y_MIN - 1, 0}, {0, WSC_Y_MAX + 1, 0},
-        {0, 0, WSC_XZ_MIN - 1}, {0, 0, WSC_XZ_MAX + 1}, {INT32_MIN, 0, 0},      {0, INT32_MAX, 0},
+        {0, 0, WSC_XZ_MIN - 1}, {0, 0, WSC_XZ_MAX + 1}, {INT32_MIN, 0, 0},     {0, INT32_MAX, 0},
     };
     for (uint32_t level = 0; level <= 16; level++) {
         for (size_t i = 0; i < sizeof beyond / sizeof beyond[0]; i++) {
@@ -145,8 +144,18 @@ static void test_level_formula(void **state)
     static const struct {
         double distance;
         uint32_t level;
-    } expected[] = {{0.0, 0}, {4.0, 0}, {4.000000000000001, 1}, {8.0, 1}, {8.000000000000002, 2}, {4096.0, 10},
-                    {1e300, WSC_MAX_LEVEL}, {INFINITY, WSC_MAX_LEVEL}, {NAN, 0}, {-5.0, 0}, {-INFINITY, 0}, {5e-324, 0}};
+    } expected[] = {{0.0, 0},
+                    {4.0, 0},
+                    {4.000000000000001, 1},
+                    {8.0, 1},
+                    {8.000000000000002, 2},
+                    {4096.0, 10},
+                    {1e300, WSC_MAX_LEVEL},
+                    {INFINITY, WSC_MAX_LEVEL},
+                    {NAN, 0},
+                    {-5.0, 0},
+                    {-INFINITY, 0},
+                    {5e-324, 0}};
     for (size_t i = 0; i < sizeof expected / sizeof expected[0]; i++)
         assert_int_equal(wsc_level(expected[i].distance, c0), expected[i].level);
     /* Random distances: 8 < distance / cell <= 16 for levels 1..13 (cells distance/16..distance/8 wide). */
@@ -223,7 +232,8 @@ static void test_grid_static_and_refusals(void **state)
         double cell = wsc_cell_size(level, c0);
         for (int axis = 0; axis < 3; axis++) {
             double lo = axis == 1 ? WSC_Y_MIN : WSC_XZ_MIN, hi = axis == 1 ? WSC_Y_MAX : WSC_XZ_MAX;
-            double inside[2] = {lo * cell, (hi + 0.5) * cell}, outside[2] = {(lo - 0.5) * cell, (hi + 1.0) * cell};
+            double inside[2] = {lo * cell, (hi + 0.5) * cell},
+                   outside[2] = {(lo - 0.5) * cell, (hi + 1.0) * cell};
             for (int end = 0; end < 2; end++) {
                 double p[3] = {0.5, 0.5, 0.5};
                 p[axis] = inside[end];
@@ -354,8 +364,10 @@ static void test_bricks_4x4x4_next_to_probes(void **state)
     wsc_begin_frame(cache, 0);
     size_t unique_probes, unique_bricks;
     static uint32_t bricks[POINTS];
-    assert_int_equal(wsc_request_batch(cache, 0, probe_wgis, probe_masks, POINTS, &unique_probes, bricks), OSC_OK);
-    assert_int_equal(wsc_request_batch(cache, 3, brick_wgis, brick_masks, POINTS, &unique_bricks, bricks), OSC_OK);
+    assert_int_equal(wsc_request_batch(cache, 0, probe_wgis, probe_masks, POINTS, &unique_probes, bricks),
+                     OSC_OK);
+    assert_int_equal(wsc_request_batch(cache, 3, brick_wgis, brick_masks, POINTS, &unique_bricks, bricks),
+                     OSC_OK);
     assert_int_equal(unique_bricks, ref_count);
     for (size_t r = 0; r < ref_count; r++) {
         uint32_t brick = wsc_find(cache, 3, ref_wgis[r]);
@@ -382,7 +394,8 @@ static void test_bricks_4x4x4_next_to_probes(void **state)
     uint32_t brick_a, brick_b;
     assert_int_equal(wsc_request_batch(cache, 0, &wgi_a, &mask_a, 1, NULL, &brick_a), OSC_OK);
     assert_int_equal(wsc_request_batch(cache, 3, &wgi_b, &mask_b, 1, NULL, &brick_b), OSC_OK);
-    unsigned char *payload_a = wsc_brick_payload(cache, 0, brick_a), *payload_b = wsc_brick_payload(cache, 3, brick_b);
+    unsigned char *payload_a = wsc_brick_payload(cache, 0, brick_a),
+                  *payload_b = wsc_brick_payload(cache, 3, brick_b);
     assert_true(payload_a + 16 <= payload_b || payload_b + 256 <= payload_a);
     memset(payload_a, 0xAA, 16);
     memset(payload_b, 0x55, 256);
@@ -434,7 +447,8 @@ static void test_local_agrees_with_table(void **state)
                 assert_true(wsc_corners(world, level, c0, corners, weights));
                 for (int c = 0; c < 8; c++) {
                     for (int e = 0; e < 2; e++) {
-                        assert_true(wsc_brick_of(corners[c], level, e ? 4 : 1, &wgis[e][count[e]], &masks[e][count[e]]));
+                        assert_true(wsc_brick_of(corners[c], level, e ? 4 : 1, &wgis[e][count[e]],
+                                                 &masks[e][count[e]]));
                         if (e == 0 && history_count < HISTORY)
                             history[history_count++] = wgis[e][count[e]];
                         else if (e == 0)
@@ -445,7 +459,8 @@ static void test_local_agrees_with_table(void **state)
             }
             for (int e = 0; e < 2; e++) {
                 /* Exhaustion is allowed (small pools); a failed WGI is simply absent. */
-                osc_result result = wsc_request_batch(cache, effects[e], wgis[e], masks[e], count[e], NULL, NULL);
+                osc_result result =
+                    wsc_request_batch(cache, effects[e], wgis[e], masks[e], count[e], NULL, NULL);
                 assert_true(result == OSC_OK || result == OSC_ERR_POOL_EXHAUSTED);
             }
             /* Lookups: this batch's WGIs (unique, sorted) and old ones from the history, through both
@@ -593,7 +608,8 @@ static void test_memory_accounting(void **state)
     assert_int_equal(report.core_struct_bytes, 2 * sizeof(osc_cache));
     wsc_stats stats;
     wsc_stats_get(cache, &stats);
-    assert_int_equal(stats.effects[0].bytes + stats.effects[3].bytes + report.cache_struct_bytes, counter.live_bytes);
+    assert_int_equal(stats.effects[0].bytes + stats.effects[3].bytes + report.cache_struct_bytes,
+                     counter.live_bytes);
 
     size_t before_local = counter.live_bytes;
     wsc_local_desc local_desc = {.side = 8, .levels = 5, .allocator = desc.allocator};
@@ -602,7 +618,8 @@ static void test_memory_accounting(void **state)
     wsc_local_stats local_stats;
     wsc_local_stats_get(local, &local_stats);
     assert_int_equal(local_stats.bytes, counter.live_bytes - before_local);
-    assert_true(local_stats.bytes > 2u * 5 * 8 * 8 * 8 * 12 && local_stats.bytes < 2u * 5 * 8 * 8 * 8 * 12 + 4096);
+    assert_true(local_stats.bytes > 2u * 5 * 8 * 8 * 8 * 12 &&
+                local_stats.bytes < 2u * 5 * 8 * 8 * 8 * 12 + 4096);
 
     /* No allocation during frames; payload in use follows resident bricks. */
     size_t allocations = counter.total_allocations;
@@ -656,13 +673,14 @@ static void test_desc_validation(void **state)
         uint32_t effect, cell_bytes, brick_size, max_bricks, load;
         const char *message;
     } cases[] = {
-        {2, 0, 4, 0, 0, "effects[2]: brick_size"},     {1, 2000, 1, 0, 0, "effects[1].cell_bytes 2000"},
-        {4, 4, 2, 0, 0, "effects[4].brick_size 2"},     {4, 4, 8, 0, 0, "effects[4].brick_size 8"},
+        {2, 0, 4, 0, 0, "effects[2]: brick_size"},       {1, 2000, 1, 0, 0, "effects[1].cell_bytes 2000"},
+        {4, 4, 2, 0, 0, "effects[4].brick_size 2"},      {4, 4, 8, 0, 0, "effects[4].brick_size 8"},
         {0, 4, 1, 1u << 31, 0, "effects[0].max_bricks"}, {7, 4, 1, 0, 99, "effects[7]: max_load_percent 99"},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         wsc_desc desc = {0};
-        desc.effects[cases[i].effect] = (wsc_effect_desc){cases[i].cell_bytes, cases[i].brick_size, cases[i].max_bricks, false};
+        desc.effects[cases[i].effect] =
+            (wsc_effect_desc){cases[i].cell_bytes, cases[i].brick_size, cases[i].max_bricks, false};
         desc.max_load_percent = cases[i].load;
         wsc_cache *cache = (wsc_cache *)&desc;
         char message[256];
@@ -683,7 +701,8 @@ static void test_desc_validation(void **state)
     wsc_local *local;
     wsc_local_desc bad_local = {.side = 12};
     char message[128];
-    assert_int_equal(wsc_local_create(&bad_local, cache, &local, message, sizeof message), OSC_ERR_INVALID_DESC);
+    assert_int_equal(wsc_local_create(&bad_local, cache, &local, message, sizeof message),
+                     OSC_ERR_INVALID_DESC);
     assert_null(local);
     assert_non_null(strstr(message, "side 12"));
     wsc_destroy(cache);
@@ -703,11 +722,14 @@ static void test_osc_core_generalised(void **state)
     uint32_t blocks[9];
     for (uint64_t i = 0; i < 8; i++) /* top nibbles 0, 2, 4, ..., 14 and 15 for the last: all pool 0 */
         assert_int_equal(osc_request(cache, (i == 7 ? 0xFull : 2 * i) << 60 | i, 1, &blocks[i]), OSC_OK);
-    assert_int_equal(osc_request(cache, 0x5ull << 60, 1, &blocks[8]), OSC_ERR_POOL_EXHAUSTED); /* shared pool */
+    assert_int_equal(osc_request(cache, 0x5ull << 60, 1, &blocks[8]),
+                     OSC_ERR_POOL_EXHAUSTED); /* shared pool */
     assert_int_equal(cache->pools[0].in_use, 8);
     for (int i = 1; i < 16; i++)
         assert_int_equal(cache->pools[i].capacity, 0);
-    assert_int_equal((unsigned char *)osc_block_payload(cache, 0, 1) - (unsigned char *)osc_block_payload(cache, 0, 0), 12);
+    assert_int_equal((unsigned char *)osc_block_payload(cache, 0, 1) -
+                         (unsigned char *)osc_block_payload(cache, 0, 0),
+                     12);
     assert_int_equal(osc_pool_block_texels(cache, 0), 1);
     osc_memory_report report;
     osc_memory(cache, &report);

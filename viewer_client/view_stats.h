@@ -50,7 +50,7 @@ typedef struct view_display_stats {
     uint64_t answers;          /* samples messages inserted */
     uint64_t samples_received; /* samples in them */
     uint64_t frames_inserted;  /* frames inserted into the cache */
-    uint64_t insert_errors;    /* frames or answers the cache refused (no depth, too large, never asked for) */
+    uint64_t insert_errors; /* frames or answers the cache refused (no depth, too large, never asked for) */
     double stage_ms_sum[VIEW_RC_STAGE_COUNT]; /* view_rc_stats.stage_ms */
     double total_ms_sum;                      /* view_rc_stats.total_ms */
     double total_ms_max;

@@ -105,31 +105,31 @@ enum {
 };
 
 typedef struct osc__pool {
-    uint32_t texel_bytes;    /* 0: no pool */
-    uint32_t capacity;       /* blocks */
-    uint32_t block_texels;   /* elements per block: 64 (8 x 8 texels, 4 x 4 x 4 cells) or 1 */
-    uint32_t block_bytes;    /* block_texels * texel_bytes */
-    uint32_t in_use;         /* resident blocks */
+    uint32_t texel_bytes;  /* 0: no pool */
+    uint32_t capacity;     /* blocks */
+    uint32_t block_texels; /* elements per block: 64 (8 x 8 texels, 4 x 4 x 4 cells) or 1 */
+    uint32_t block_bytes;  /* block_texels * texel_bytes */
+    uint32_t in_use;       /* resident blocks */
     /* Block metadata, structure of arrays, [capacity] each. */
-    uint64_t *requested;     /* texels requested this frame */
-    uint64_t *valid;         /* texels holding data */
-    uint32_t *last_stamp;    /* frame + 1 of the last request, 0 = never */
-    uint64_t *keys;          /* the block's key, OSC_KEY_EMPTY when free */
-    uint32_t *convergence;   /* optional, NULL when the effect keeps none */
-    uint8_t *payload;        /* capacity * block_bytes */
+    uint64_t *requested;   /* texels requested this frame */
+    uint64_t *valid;       /* texels holding data */
+    uint32_t *last_stamp;  /* frame + 1 of the last request, 0 = never */
+    uint64_t *keys;        /* the block's key, OSC_KEY_EMPTY when free */
+    uint32_t *convergence; /* optional, NULL when the effect keeps none */
+    uint8_t *payload;      /* capacity * block_bytes */
     /* Lists. */
-    uint32_t *free_stack;    /* [capacity]; free_stack[0..free_count) */
+    uint32_t *free_stack; /* [capacity]; free_stack[0..free_count) */
     uint32_t free_count;
-    uint32_t *frame_blocks;  /* [capacity]; blocks first requested this frame, in order */
+    uint32_t *frame_blocks; /* [capacity]; blocks first requested this frame, in order */
     uint32_t frame_block_count;
-    uint64_t *candidates;    /* [capacity]; (last_stamp << 32 | block), oldest first */
+    uint64_t *candidates; /* [capacity]; (last_stamp << 32 | block), oldest first */
     uint32_t candidate_count;
     uint32_t candidate_cursor;
     uint32_t candidate_stamp; /* frame stamp the candidate list was built in, 0 = stale */
     /* Adaptive eviction state. */
-    uint32_t new_this_frame;  /* blocks asked to be mapped this frame (mapped or failed) */
-    uint32_t expected_new;    /* running estimate of new blocks per frame */
-    uint32_t age_threshold;   /* frames */
+    uint32_t new_this_frame; /* blocks asked to be mapped this frame (mapped or failed) */
+    uint32_t expected_new;   /* running estimate of new blocks per frame */
+    uint32_t age_threshold;  /* frames */
     /* Statistics. */
     osc_effect_stats stats;
     size_t bytes[OSC__MEM_COUNT]; /* bytes allocated for this pool, by bucket */
@@ -139,11 +139,11 @@ struct osc_cache {
     osc_allocator allocator;
     osc__table table;
     osc__pool pools[OSC_MAX_EFFECTS];
-    uint32_t pool_select;    /* ANDed with the key's top 4 bits to pick the pool: 0xF, or 0 for a
+    uint32_t pool_select; /* ANDed with the key's top 4 bits to pick the pool: 0xF, or 0 for a
                                 single-pool cache (osc__pool_of_key) */
-    uint32_t stamp;          /* current frame + 1; 0 before the first osc_begin_frame */
+    uint32_t stamp;       /* current frame + 1; 0 before the first osc_begin_frame */
     uint32_t max_age_frames;
-    osc_stats stats;         /* whole-cache counters (effects[] filled on osc_stats_get) */
+    osc_stats stats;              /* whole-cache counters (effects[] filled on osc_stats_get) */
     size_t bytes[OSC__MEM_COUNT]; /* bytes allocated, by bucket, whole cache */
 };
 

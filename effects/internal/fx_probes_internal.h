@@ -15,13 +15,13 @@
  * 8 x 8 texel (power 16) mixed a thin wall's distance with the floor's behind it, and the Chebyshev test let
  * 15 % of the lit room through to a floor point beside the wall (tests/test_probes.c); at 64 it is under 1 %.
  * Each texel then rests on about 1.1 rays' weight per update; the hysteresis averages over the rotations. */
-#define FX_PROBE_DEPTH_POWER 64
-#define FX_PROBE_BACKFACE_OFF 0.25f  /* back-face fraction above which a probe is off (RTXGI) */
-#define FX_PROBE_BACKFACE_SHORTEN 0.2f /* back-face distances are stored shortened (RTXGI) */
-#define FX_PROBE_MAX_DISTANCE 2.598076f /* 1.5 sqrt(3): distances are clamped to this many cells */
-#define FX_PROBE_MIN_FRONT 0.25f     /* cells: relocation keeps front faces at least this far */
-#define FX_PROBE_MAX_OFFSET 0.45f    /* cells, per axis: relocation range */
-#define FX_PROBE_NORMAL_BIAS 0.2f    /* cells: the shading point moves this far along its normal for Chebyshev */
+#define FX_PROBE_DEPTH_POWER      64
+#define FX_PROBE_BACKFACE_OFF     0.25f     /* back-face fraction above which a probe is off (RTXGI) */
+#define FX_PROBE_BACKFACE_SHORTEN 0.2f      /* back-face distances are stored shortened (RTXGI) */
+#define FX_PROBE_MAX_DISTANCE     2.598076f /* 1.5 sqrt(3): distances are clamped to this many cells */
+#define FX_PROBE_MIN_FRONT        0.25f     /* cells: relocation keeps front faces at least this far */
+#define FX_PROBE_MAX_OFFSET       0.45f     /* cells, per axis: relocation range */
+#define FX_PROBE_NORMAL_BIAS      0.2f /* cells: the shading point moves this far along its normal for Chebyshev */
 
 enum {
     FX_STREAM_PROBE_ROTATION = 0x5052, /* "PR" */
@@ -137,8 +137,8 @@ void fx__probe_texel_dirs(float dirs[FX_PROBE_TEXELS][3]);
 
 /* The shading filter (DDGI's weights, renormalised; false when no probe contributes), each probe's irradiance towards the normal from a per-thread memo of the frame (ctx may be
  * NULL: no memo). committed: read after this frame's commits (compose) or before them (update hits). */
-bool fx__probe_filter_memo(const fx_context *ctx, bool committed, const fx_taps *taps, const float position[3],
-                           const float normal[3], float out_rgb[3]);
+bool fx__probe_filter_memo(const fx_context *ctx, bool committed, const fx_taps *taps,
+                           const float position[3], const float normal[3], float out_rgb[3]);
 
 /* Whether the update shades a chunk's front-face hits in passes, with the directional lights' directions
  * once per call (true, the default), or one at a time with fx__light_arriving per hit (the tests set it false

@@ -95,7 +95,8 @@ scene_result scene__check_file(const char *path, scene_error *err);
 /* What fxcache knows about a mesh format before Assimp reads it (scene_import_check.c), by the file's (inner,
  * for .gz) extension: a check of the whole file that runs before Assimp, or the reason the format is refused
  * outright. */
-typedef scene_result (*scene_import_check_fn)(const char *path, const char *buf, size_t len, scene_error *err);
+typedef scene_result (*scene_import_check_fn)(const char *path, const char *buf, size_t len,
+                                              scene_error *err);
 typedef struct scene_import_format {
     const char *ext;             /* lower case, without the dot */
     scene_import_check_fn check; /* NULL: none */

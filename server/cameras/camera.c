@@ -30,7 +30,8 @@ bool srv_camera_setup(const srv_camera *cam, uint32_t width, uint32_t height, sr
         up_hint[1] = 1;
     for (int k = 0; k < 3; k++) {
         if (!isfinite(cam->position[k]) || !isfinite(cam->target[k]) || !isfinite(up_hint[k]) ||
-            !(fabsf(cam->position[k]) <= SCENE_MAX_CAMERA_REACH) || !(fabsf(cam->target[k]) <= SCENE_MAX_CAMERA_REACH))
+            !(fabsf(cam->position[k]) <= SCENE_MAX_CAMERA_REACH) ||
+            !(fabsf(cam->target[k]) <= SCENE_MAX_CAMERA_REACH))
             return false;
         out->origin[k] = cam->position[k];
         out->forward[k] = cam->target[k] - cam->position[k];
@@ -41,8 +42,9 @@ bool srv_camera_setup(const srv_camera *cam, uint32_t width, uint32_t height, sr
         /* A target within about 1e-19 of the position (a trace's direction of 1e-30 is valid, docs/TRACE_FORMAT.md):
          * the float squares underflow to zero or lose their precision, and the camera was refused as if position
          * and target coincided. Any non-zero difference is a direction: normalised in double. */
-        double length = sqrt((double)out->forward[0] * out->forward[0] + (double)out->forward[1] * out->forward[1] +
-                             (double)out->forward[2] * out->forward[2]);
+        double length =
+            sqrt((double)out->forward[0] * out->forward[0] + (double)out->forward[1] * out->forward[1] +
+                 (double)out->forward[2] * out->forward[2]);
         if (!(length > 0))
             return false;
         for (int k = 0; k < 3; k++)

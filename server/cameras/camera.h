@@ -9,8 +9,8 @@
 typedef struct srv_camera {
     float position[3];
     float target[3];
-    float up[3];     /* world up hint (default 0,1,0 when zero) */
-    float fov_deg;   /* vertical field of view, degrees, (0, 180) */
+    float up[3];   /* world up hint (default 0,1,0 when zero) */
+    float fov_deg; /* vertical field of view, degrees, (0, 180) */
 } srv_camera;
 
 /* A camera's orthonormal frame and image-plane scale, precomputed once per frame. */

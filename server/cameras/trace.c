@@ -138,7 +138,8 @@ uint32_t srv_trace_count(const srv_trace *t)
     return t ? t->parsed.count : 0;
 }
 
-srv_camera srv_trace_camera_world(const scene *s, const double position[3], const double direction[3], float fov_deg)
+srv_camera srv_trace_camera_world(const scene *s, const double position[3], const double direction[3],
+                                  float fov_deg)
 {
     srv_camera cam = {.up = {0, 1, 0}, .fov_deg = fov_deg};
     if (s) {
@@ -148,7 +149,8 @@ srv_camera srv_trace_camera_world(const scene *s, const double position[3], cons
             cam.position[k] = (float)position[k];
     }
     /* The target from the rounded position, so a recorded camera reads back exactly. */
-    double length = sqrt(direction[0] * direction[0] + direction[1] * direction[1] + direction[2] * direction[2]);
+    double length =
+        sqrt(direction[0] * direction[0] + direction[1] * direction[1] + direction[2] * direction[2]);
     double off2 = 0; /* squared distance between the direction and the one the float target gives */
     for (int k = 0; k < 3; k++) {
         cam.target[k] = (float)((double)cam.position[k] + direction[k]);
@@ -236,8 +238,8 @@ srv_trace_writer *srv_trace_writer_open(const char *path, const scene *s, char *
     return srv_trace_writer_open_sized(path, s, 0, 0, err, cap);
 }
 
-srv_trace_writer *srv_trace_writer_open_sized(const char *path, const scene *s, uint32_t width, uint32_t height,
-                                              char *err, size_t cap)
+srv_trace_writer *srv_trace_writer_open_sized(const char *path, const scene *s, uint32_t width,
+                                              uint32_t height, char *err, size_t cap)
 {
     if (err && cap > 0)
         err[0] = 0;
@@ -263,10 +265,11 @@ srv_trace_writer *srv_trace_writer_open_sized(const char *path, const scene *s, 
     }
     bool sized = width >= 1 && height >= 1 && width <= SRV_TRACE_MAX_SIDE && height <= SRV_TRACE_MAX_SIDE;
     /* Version 1 when there is no resolution to record, so version-1 readers keep reading such files. */
-    int written = fprintf(w->file,
-                          "%s %d\n# columns: time px py pz dx dy dz fov_deg (seconds, position, view direction, "
-                          "vertical fov in degrees; up is +Y)\n",
-                          SRV_TRACE_MAGIC, sized ? 2 : 1);
+    int written =
+        fprintf(w->file,
+                "%s %d\n# columns: time px py pz dx dy dz fov_deg (seconds, position, view direction, "
+                "vertical fov in degrees; up is +Y)\n",
+                SRV_TRACE_MAGIC, sized ? 2 : 1);
     if (written >= 0 && sized)
         written = fprintf(w->file, "resolution %u %u\n", width, height);
     if (written < 0 || fflush(w->file) != 0) {

@@ -56,7 +56,8 @@ srv_camera srv_trace_camera(const srv_trace *t, const scene *s, uint32_t frame);
 /* A camera given in world coordinates (a position, a direction, a field of view; up +Y), in the local frame
  * of scene s exactly as a trace line with these values replays: a live viewer's camera built this way and
  * recorded reads back as the same camera. s NULL: world coordinates as they are. */
-srv_camera srv_trace_camera_world(const scene *s, const double position[3], const double direction[3], float fov_deg);
+srv_camera srv_trace_camera_world(const scene *s, const double position[3], const double direction[3],
+                                  float fov_deg);
 
 /* The time (seconds) of frame `frame`, with the same past-the-end rule as srv_trace_camera(). */
 double srv_trace_time(const srv_trace *t, uint32_t frame);
@@ -84,8 +85,8 @@ srv_trace_writer *srv_trace_writer_open(const char *path, const scene *s, char *
 
 /* The same, recording the viewer's resolution: writes format version 2 with a 'resolution W H' line when
  * both sides are in 1..SRV_TRACE_MAX_SIDE (else version 1, as srv_trace_writer_open). */
-srv_trace_writer *srv_trace_writer_open_sized(const char *path, const scene *s, uint32_t width, uint32_t height,
-                                              char *err, size_t cap);
+srv_trace_writer *srv_trace_writer_open_sized(const char *path, const scene *s, uint32_t width,
+                                              uint32_t height, char *err, size_t cap);
 
 /* Appends one camera at `time` seconds: position = local position + origin in double, direction = target -
  * position, the time and position printed with as many digits as they need to read back exactly (at least

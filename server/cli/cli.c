@@ -98,14 +98,13 @@ bool srv_cli_check_memory(const char *cmd, double pool_mb, uint32_t viewers, uin
     uint64_t pools = pool_mb > 0 ? (uint64_t)(pool_mb * 1048576.0) : 0;
     if (pools + buffers <= physical)
         return true;
-    fprintf(
-        stderr,
-        "fxcache %s: the block pools (%.0f MiB) and the per-pixel buffers of %u viewers, %llu pixels (%.0f MiB) "
-        "need %.0f MiB, more than this machine's %llu MiB of physical memory: lower --pool-mb, --viewers "
-        "or --res\n",
-        cmd, pools / 1048576.0, viewers, (unsigned long long)pixels, buffers / 1048576.0,
-        (pools + buffers) / 1048576.0,
-        (unsigned long long)(physical >> 20));
+    fprintf(stderr,
+            "fxcache %s: the block pools (%.0f MiB) and the per-pixel buffers of %u viewers, %llu pixels "
+            "(%.0f MiB) "
+            "need %.0f MiB, more than this machine's %llu MiB of physical memory: lower --pool-mb, --viewers "
+            "or --res\n",
+            cmd, pools / 1048576.0, viewers, (unsigned long long)pixels, buffers / 1048576.0,
+            (pools + buffers) / 1048576.0, (unsigned long long)(physical >> 20));
     return false;
 }
 
@@ -141,7 +140,8 @@ bool srv_cli_no_operands(const char *cmd, int argc, char **argv)
 {
     if (optind >= argc)
         return true;
-    fprintf(stderr, "fxcache %s: unexpected argument '%s' (the scene is given with --scene)\n", cmd, argv[optind]);
+    fprintf(stderr, "fxcache %s: unexpected argument '%s' (the scene is given with --scene)\n", cmd,
+            argv[optind]);
     return false;
 }
 

@@ -111,12 +111,15 @@ bool srv_cli_cameras_check(const char *cmd, const srv_cli_cameras *c, const scen
             for (int k = 0; k < 3; k++)
                 reach = fmax(reach, fmax(fabs((double)cam.position[k]), fabs((double)cam.target[k])));
             if (!(reach <= SCENE_MAX_CAMERA_REACH))
-                fprintf(stderr, "fxcache %s: %s: camera %u (time %.9g s) lies %.3g m from the scene's centre; cameras "
-                                "may be at most %.0e m from it\n",
-                        cmd, c->trace_paths[v], i + 1, srv_trace_time(t, i), reach, SCENE_MAX_CAMERA_REACH);
+                fprintf(
+                    stderr,
+                    "fxcache %s: %s: camera %u (time %.9g s) lies %.3g m from the scene's centre; cameras "
+                    "may be at most %.0e m from it\n",
+                    cmd, c->trace_paths[v], i + 1, srv_trace_time(t, i), reach, SCENE_MAX_CAMERA_REACH);
             else
-                fprintf(stderr, "fxcache %s: %s: camera %u (time %.9g s): its position and target coincide in the "
-                                "scene's float coordinates (move the target farther away)\n",
+                fprintf(stderr,
+                        "fxcache %s: %s: camera %u (time %.9g s): its position and target coincide in the "
+                        "scene's float coordinates (move the target farther away)\n",
                         cmd, c->trace_paths[v], i + 1, srv_trace_time(t, i));
             return false;
         }
@@ -199,8 +202,8 @@ void srv_cli_cameras_summary_resolution(const srv_cli_cameras *c, uint32_t viewe
     json_object_set_new(obj, "resolutions", list);
 }
 
-bool srv_cli_cameras_get(const srv_cli_cameras *c, const scene *s, uint32_t frame, uint32_t v, srv_camera *camera,
-                         uint32_t *width, uint32_t *height)
+bool srv_cli_cameras_get(const srv_cli_cameras *c, const scene *s, uint32_t frame, uint32_t v,
+                         srv_camera *camera, uint32_t *width, uint32_t *height)
 {
     srv_cli_cameras_size(c, v, width, height);
     const srv_trace *t = v < SRV_CLI_MAX_TRACES ? c->traces[v] : NULL;

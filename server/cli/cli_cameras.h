@@ -24,11 +24,11 @@ typedef struct srv_cli_cameras {
     srv_camgen_kind generator; /* without traces */
     uint32_t viewers;          /* the generator's viewer count (load sets it to the trace count) */
     uint32_t seed;
-    double fps;                /* frames per second of trace time */
-    uint32_t width, height;    /* --res */
-    bool res_set;              /* --res given: it wins over a trace's own resolution */
+    double fps;             /* frames per second of trace time */
+    uint32_t width, height; /* --res */
+    bool res_set;           /* --res given: it wins over a trace's own resolution */
     /* Read by srv_cli_cameras_load. */
-    srv_trace *traces[SRV_CLI_MAX_TRACES]; /* by viewer; NULL: a generator's viewer */
+    srv_trace *traces[SRV_CLI_MAX_TRACES];       /* by viewer; NULL: a generator's viewer */
     const char *trace_paths[SRV_CLI_MAX_TRACES]; /* the paths given (for messages) */
     uint32_t trace_count;
     double start_time, last_time; /* frame 0's time and the last trace's end (0 without traces) */
@@ -113,8 +113,8 @@ void srv_cli_cameras_size(const srv_cli_cameras *c, uint32_t v, uint32_t *width,
 void srv_cli_cameras_summary_resolution(const srv_cli_cameras *c, uint32_t viewers, struct json_t *obj);
 
 /* Viewer v's camera (scene-local) and resolution in frame f; false when it is not present then. */
-bool srv_cli_cameras_get(const srv_cli_cameras *c, const scene *s, uint32_t frame, uint32_t v, srv_camera *camera,
-                         uint32_t *width, uint32_t *height);
+bool srv_cli_cameras_get(const srv_cli_cameras *c, const scene *s, uint32_t frame, uint32_t v,
+                         srv_camera *camera, uint32_t *width, uint32_t *height);
 
 void srv_cli_cameras_free(srv_cli_cameras *c);
 

@@ -115,18 +115,19 @@ static bool parse_bias(const char *cmd, const char *text, srv_cli_engine *e)
         char list[256];
         srv_cli_effect_names(list, sizeof list);
         if (!eq)
-            fprintf(stderr, "fxcache %s: --bias: '%s' is not EFFECT=LEVELS (effects: %s)\n", cmd, text ? text : "",
-                    list);
+            fprintf(stderr, "fxcache %s: --bias: '%s' is not EFFECT=LEVELS (effects: %s)\n", cmd,
+                    text ? text : "", list);
         else
-            fprintf(stderr, "fxcache %s: --bias: unknown effect '%.*s' (effects: %s)\n", cmd, (int)(eq - text), text,
-                    list);
+            fprintf(stderr, "fxcache %s: --bias: unknown effect '%.*s' (effects: %s)\n", cmd,
+                    (int)(eq - text), text, list);
         return false;
     }
     double levels;
     if (!srv_cli_double(cmd, "--bias", eq + 1, -4, 8, &levels))
         return false;
     if (levels != floor(levels)) {
-        fprintf(stderr, "fxcache %s: --bias: '%s' must be a whole number of levels in [-4, 8]\n", cmd, eq + 1);
+        fprintf(stderr, "fxcache %s: --bias: '%s' must be a whole number of levels in [-4, 8]\n", cmd,
+                eq + 1);
         return false;
     }
     e->bias[fx] = (int32_t)levels;
@@ -152,7 +153,8 @@ static bool effects_list_valid(const char *cmd, const char *list)
         if (fx < 0 || !effects[fx]->shade) {
             char names[256];
             srv_cli_effect_names(names, sizeof names);
-            fprintf(stderr, "fxcache %s: --effects: '%.*s' in '%s' is not an effect (auto, or a comma list of %s)\n",
+            fprintf(stderr,
+                    "fxcache %s: --effects: '%.*s' in '%s' is not an effect (auto, or a comma list of %s)\n",
                     cmd, (int)n, p, list, names);
             return false;
         }
@@ -169,8 +171,10 @@ static bool parse_shadow_rays(const char *cmd, const char *arg, srv_cli_engine *
     if (!srv_cli_u32(cmd, "--shadow-rays", arg, 1, FX_SHADOW_TEXEL_RAYS_MAX, &n))
         return false;
     if (n & (n - 1)) {
-        fprintf(stderr, "fxcache %s: --shadow-rays: '%s' must be 1, 2, 4, 8 or 16 (strata of the texel's 4x4 "
-                        "shadow mask)\n", cmd, arg);
+        fprintf(stderr,
+                "fxcache %s: --shadow-rays: '%s' must be 1, 2, 4, 8 or 16 (strata of the texel's 4x4 "
+                "shadow mask)\n",
+                cmd, arg);
         return false;
     }
     e->shadow_rays = n;
@@ -184,8 +188,8 @@ static bool parse_indirect_block(const char *cmd, const char *arg, srv_cli_engin
     if (!srv_cli_u32(cmd, "--indirect-block", arg, 1, 4, &n))
         return false;
     if (n == 3) {
-        fprintf(stderr, "fxcache %s: --indirect-block: '%s' must be 1, 2 or 4 (pixels per side of a block)\n", cmd,
-                arg);
+        fprintf(stderr, "fxcache %s: --indirect-block: '%s' must be 1, 2 or 4 (pixels per side of a block)\n",
+                cmd, arg);
         return false;
     }
     e->indirect_block = n;
@@ -207,7 +211,8 @@ static bool parse_no_cache_samples(const char *cmd, const char *arg, srv_cli_eng
     }
     int exponent;
     if (frexp(value, &exponent) != 0.5) {
-        fprintf(stderr, "fxcache %s: --no-cache-samples: '%s' is not a power of two in [1/64, 16]\n", cmd, arg);
+        fprintf(stderr, "fxcache %s: --no-cache-samples: '%s' is not a power of two in [1/64, 16]\n", cmd,
+                arg);
         return false;
     }
     e->no_cache_samples = value;
@@ -217,7 +222,8 @@ static bool parse_no_cache_samples(const char *cmd, const char *arg, srv_cli_eng
 bool srv_cli_engine_check(const char *cmd, const srv_cli_engine *e)
 {
     if (e->no_cache_samples > 0 && !e->no_cache) {
-        fprintf(stderr, "fxcache %s: --no-cache-samples scales the no-cache baseline: it needs --no-cache\n", cmd);
+        fprintf(stderr, "fxcache %s: --no-cache-samples scales the no-cache baseline: it needs --no-cache\n",
+                cmd);
         return false;
     }
     return true;
@@ -226,38 +232,62 @@ bool srv_cli_engine_check(const char *cmd, const srv_cli_engine *e)
 int srv_cli_engine_option(const char *cmd, int code, const char *arg, srv_cli_engine *e)
 {
     switch (code) {
-    case SRV_CLI_O_SCENE: e->scene_path = arg; return 1;
-    case SRV_CLI_O_EFFECTS: e->effects = arg; return effects_list_valid(cmd, arg);
-    case SRV_CLI_O_BIAS: return parse_bias(cmd, arg, e);
-    case SRV_CLI_O_POOL: return srv_cli_double(cmd, "--pool-mb", arg, 1, 65536, &e->pool_mb);
-    case SRV_CLI_O_BUDGET: return srv_cli_double(cmd, "--ray-budget", arg, 0, 1e12, &e->ray_budget);
-    case SRV_CLI_O_AOSTEP: return srv_cli_u32(cmd, "--ao-step", arg, 1, 64, &e->ao_step);
+    case SRV_CLI_O_SCENE:
+        e->scene_path = arg;
+        return 1;
+    case SRV_CLI_O_EFFECTS:
+        e->effects = arg;
+        return effects_list_valid(cmd, arg);
+    case SRV_CLI_O_BIAS:
+        return parse_bias(cmd, arg, e);
+    case SRV_CLI_O_POOL:
+        return srv_cli_double(cmd, "--pool-mb", arg, 1, 65536, &e->pool_mb);
+    case SRV_CLI_O_BUDGET:
+        return srv_cli_double(cmd, "--ray-budget", arg, 0, 1e12, &e->ray_budget);
+    case SRV_CLI_O_AOSTEP:
+        return srv_cli_u32(cmd, "--ao-step", arg, 1, 64, &e->ao_step);
     /* down to about a 64th of the smallest scene fxcache loads (SCENE_MIN_EXTENT, 1e-6 m) */
-    case SRV_CLI_O_PCELL: return srv_cli_double(cmd, "--probe-cell", arg, 1e-8, 1000, &e->probe_cell);
-    case SRV_CLI_O_PRAYS: return srv_cli_u32(cmd, "--probe-rays", arg, 1, 4096, &e->probe_rays);
+    case SRV_CLI_O_PCELL:
+        return srv_cli_double(cmd, "--probe-cell", arg, 1e-8, 1000, &e->probe_cell);
+    case SRV_CLI_O_PRAYS:
+        return srv_cli_u32(cmd, "--probe-rays", arg, 1, 4096, &e->probe_rays);
     case SRV_CLI_O_PHYST:
         if (!srv_cli_double(cmd, "--probe-hysteresis", arg, 0, 0.999, &e->probe_hysteresis))
             return 0;
         if (e->probe_hysteresis == 0)
             e->probe_hysteresis = 1e-9; /* 0 means "default" in the loop's description */
         return 1;
-    case SRV_CLI_O_PBUDGET: return srv_cli_u32(cmd, "--probe-budget", arg, 1, 1000000, &e->probe_budget);
-    case SRV_CLI_O_IBLOCK: return parse_indirect_block(cmd, arg, e);
-    case SRV_CLI_O_NOLOCAL: e->no_local_table = true; return 1;
-    case SRV_CLI_O_NOCACHE: e->no_cache = true; return 1;
-    case SRV_CLI_O_SEED: return srv_cli_u32(cmd, "--seed", arg, 0, UINT32_MAX, &e->seed);
-    case SRV_CLI_O_THREADS: return srv_cli_u32(cmd, "--threads", arg, 0, 256, &e->threads);
-    case SRV_CLI_O_DENSITY: return srv_cli_double(cmd, "--density", arg, 1e-6, 1e6, &e->density);
-    case SRV_CLI_O_AOSAMPLES: return srv_cli_u32(cmd, "--ao-samples", arg, 1, FX_AO_SAMPLES_LIMIT, &e->ao_samples);
-    case SRV_CLI_O_SHADOWRAYS: return parse_shadow_rays(cmd, arg, e);
-    case SRV_CLI_O_NCSAMPLES: return parse_no_cache_samples(cmd, arg, e);
-    default: return -1;
+    case SRV_CLI_O_PBUDGET:
+        return srv_cli_u32(cmd, "--probe-budget", arg, 1, 1000000, &e->probe_budget);
+    case SRV_CLI_O_IBLOCK:
+        return parse_indirect_block(cmd, arg, e);
+    case SRV_CLI_O_NOLOCAL:
+        e->no_local_table = true;
+        return 1;
+    case SRV_CLI_O_NOCACHE:
+        e->no_cache = true;
+        return 1;
+    case SRV_CLI_O_SEED:
+        return srv_cli_u32(cmd, "--seed", arg, 0, UINT32_MAX, &e->seed);
+    case SRV_CLI_O_THREADS:
+        return srv_cli_u32(cmd, "--threads", arg, 0, 256, &e->threads);
+    case SRV_CLI_O_DENSITY:
+        return srv_cli_double(cmd, "--density", arg, 1e-6, 1e6, &e->density);
+    case SRV_CLI_O_AOSAMPLES:
+        return srv_cli_u32(cmd, "--ao-samples", arg, 1, FX_AO_SAMPLES_LIMIT, &e->ao_samples);
+    case SRV_CLI_O_SHADOWRAYS:
+        return parse_shadow_rays(cmd, arg, e);
+    case SRV_CLI_O_NCSAMPLES:
+        return parse_no_cache_samples(cmd, arg, e);
+    default:
+        return -1;
     }
 }
 
 /* Decides which effects run (cli_engine.h). */
-bool srv_cli_choose_effects(const char *cmd, const scene *s, const char *list, bool effect_on[SRV_MAX_EFFECTS],
-                           char reasons[SRV_MAX_EFFECTS][200], json_t *left_out_extra)
+bool srv_cli_choose_effects(const char *cmd, const scene *s, const char *list,
+                            bool effect_on[SRV_MAX_EFFECTS], char reasons[SRV_MAX_EFFECTS][200],
+                            json_t *left_out_extra)
 {
     uint32_t count = 0;
     const fx_effect *const *effects = fx_registry(&count);
@@ -298,7 +328,8 @@ bool srv_cli_choose_effects(const char *cmd, const scene *s, const char *list, b
             continue;
         char reason[320];
         if (needs.effect[fx])
-            snprintf(reason, sizeof reason, "%s; but %s is not implemented yet (no effect of that name is registered)",
+            snprintf(reason, sizeof reason,
+                     "%s; but %s is not implemented yet (no effect of that name is registered)",
                      needs.effect_reason[fx], name);
         else
             snprintf(reason, sizeof reason, "%s", needs.effect_reason[fx]);
@@ -326,13 +357,24 @@ int srv_cli_run_open(const char *cmd, const srv_cli_engine *e, bool keep_views, 
         fprintf(stderr, "fxcache %s: %s\n", cmd, serr.msg);
         return 1;
     }
-    srv_loop_desc desc = {.s = run->s, .rt = run->rt, .pool_bytes = (uint64_t)(e->pool_mb * 1048576.0),
-                          .ray_budget = (uint64_t)e->ray_budget, .samples_per_update = e->ao_step,
-                          .no_cache = e->no_cache, .seed = e->seed, .threads = e->threads, .keep_views = keep_views,
-                          .probe_cell = (float)e->probe_cell, .probe_rays = e->probe_rays,
-                          .probe_hysteresis = (float)e->probe_hysteresis, .probe_budget = e->probe_budget,
-                          .indirect_block = e->indirect_block, .no_local_table = e->no_local_table, .ao_samples = e->ao_samples,
-                          .shadow_rays = e->shadow_rays, .no_cache_samples = (float)e->no_cache_samples};
+    srv_loop_desc desc = {.s = run->s,
+                          .rt = run->rt,
+                          .pool_bytes = (uint64_t)(e->pool_mb * 1048576.0),
+                          .ray_budget = (uint64_t)e->ray_budget,
+                          .samples_per_update = e->ao_step,
+                          .no_cache = e->no_cache,
+                          .seed = e->seed,
+                          .threads = e->threads,
+                          .keep_views = keep_views,
+                          .probe_cell = (float)e->probe_cell,
+                          .probe_rays = e->probe_rays,
+                          .probe_hysteresis = (float)e->probe_hysteresis,
+                          .probe_budget = e->probe_budget,
+                          .indirect_block = e->indirect_block,
+                          .no_local_table = e->no_local_table,
+                          .ao_samples = e->ao_samples,
+                          .shadow_rays = e->shadow_rays,
+                          .no_cache_samples = (float)e->no_cache_samples};
     if (!srv_cli_choose_effects(cmd, run->s, e->effects, desc.effect_on, run->reasons, run->left_out_extra))
         return 2;
     memcpy(desc.bias, e->bias, sizeof desc.bias);
@@ -422,16 +464,18 @@ json_t *srv_cli_summary_json(const srv_cli_run *run, const srv_cli_engine *e)
         json_object_set_new(sum, "no_cache_samples", json_real(resolved->no_cache_samples));
     if (srv_loop_probe_cell(loop) > 0)
         json_object_set_new(sum, "probes",
-                            json_pack("{s:f,s:I,s:f,s:I,s:I,s:b}", "cell_m", (double)srv_loop_probe_cell(loop), "rays",
+                            json_pack("{s:f,s:I,s:f,s:I,s:I,s:b}", "cell_m",
+                                      (double)srv_loop_probe_cell(loop), "rays",
                                       (json_int_t)srv_loop_desc_of(loop)->probe_rays, "hysteresis",
                                       (double)srv_loop_desc_of(loop)->probe_hysteresis, "budget",
                                       (json_int_t)srv_loop_desc_of(loop)->probe_budget, "indirect_block",
                                       (json_int_t)srv_loop_desc_of(loop)->indirect_block, "local_tables",
                                       !e->no_local_table));
     else
-        json_object_set_new(sum, "world_space_cache",
-                            json_string(e->no_cache ? "none: no cache at all (--no-cache)"
-                                                    : "not created: no effect that runs lives in it (nothing allocated)"));
+        json_object_set_new(
+            sum, "world_space_cache",
+            json_string(e->no_cache ? "none: no cache at all (--no-cache)"
+                                    : "not created: no effect that runs lives in it (nothing allocated)"));
     json_t *effects = json_object(), *left_out = json_object(), *bias = json_object();
     for (uint32_t i = 0; i < srv_loop_effect_count(loop); i++) {
         const char *name = srv_loop_effect(loop, i)->name;
@@ -472,12 +516,14 @@ void srv_cli_print_summary(const srv_cli_run *run, bool no_cache, bool interrupt
         effect_rays += t->rays[e];
         pools_in_use += t->final.pools_in_use[e];
     }
-    printf("%u viewer%s (%llu viewer-frames), %u frames on %s%s%s\n", t->viewers_seen, t->viewers_seen == 1 ? "" : "s",
-           (unsigned long long)t->viewer_frames, t->frames, run->s->source, no_cache ? " (no cache)" : "",
-           interrupted ? " (interrupted)" : "");
+    printf("%u viewer%s (%llu viewer-frames), %u frames on %s%s%s\n", t->viewers_seen,
+           t->viewers_seen == 1 ? "" : "s", (unsigned long long)t->viewer_frames, t->frames, run->s->source,
+           no_cache ? " (no cache)" : "", interrupted ? " (interrupted)" : "");
     if (t->sample_viewers_seen)
-        printf("           and %u sample viewer%s (clients' sample requests, %llu viewer-frames; their texels count in "
-               "the sharing)\n", t->sample_viewers_seen, t->sample_viewers_seen == 1 ? "" : "s",
+        printf("           and %u sample viewer%s (clients' sample requests, %llu viewer-frames; their "
+               "texels count in "
+               "the sharing)\n",
+               t->sample_viewers_seen, t->sample_viewers_seen == 1 ? "" : "s",
                (unsigned long long)t->sample_viewer_frames);
     printf("effects:   ");
     for (uint32_t e = 0; e < srv_loop_effect_count(loop); e++)
@@ -496,19 +542,24 @@ void srv_cli_print_summary(const srv_cli_run *run, bool no_cache, bool interrupt
     else if (!t->unique)
         printf("texels:     none requested (no viewer saw a surface)\n");
     else
-        printf("texels:     %llu requested, %llu unique: sharing ratio %.2f\n", (unsigned long long)t->requested,
-               (unsigned long long)t->unique, (double)t->requested / (double)t->unique);
+        printf("texels:     %llu requested, %llu unique: sharing ratio %.2f\n",
+               (unsigned long long)t->requested, (unsigned long long)t->unique,
+               (double)t->requested / (double)t->unique);
     if (srv_loop_probe_cell(loop) > 0) {
         printf("probes:     %llu requested, %llu unique: sharing ratio %.2f; finest cell %g m\n",
                (unsigned long long)t->world_requested, (unsigned long long)t->world_unique,
                t->world_unique ? (double)t->world_requested / (double)t->world_unique : 0.0,
                (double)srv_loop_probe_cell(loop));
-        printf("world:      %llu bricks, %.1f MiB, table load %.2f, %llu points refused, local tables answered "
-               "%.1f %% of reads\n",
-               (unsigned long long)t->world_last.bricks_resident, t->world_last.bytes / 1048576.0,
-               t->world_last.table_capacity ? (double)t->world_last.entries / (double)t->world_last.table_capacity : 0.0,
-               (unsigned long long)t->world_refusals,
-               t->world_local_lookups ? 100.0 * (double)t->world_local_hits / (double)t->world_local_lookups : 0.0);
+        printf(
+            "world:      %llu bricks, %.1f MiB, table load %.2f, %llu points refused, local tables answered "
+            "%.1f %% of reads\n",
+            (unsigned long long)t->world_last.bricks_resident, t->world_last.bytes / 1048576.0,
+            t->world_last.table_capacity
+                ? (double)t->world_last.entries / (double)t->world_last.table_capacity
+                : 0.0,
+            (unsigned long long)t->world_refusals,
+            t->world_local_lookups ? 100.0 * (double)t->world_local_hits / (double)t->world_local_lookups
+                                   : 0.0);
     } else if (!no_cache) {
         printf("world:      no world-space cache (no effect that runs lives in it: nothing allocated)\n");
     }
@@ -521,7 +572,8 @@ void srv_cli_print_summary(const srv_cli_run *run, bool no_cache, bool interrupt
            t->final.total / 1048576.0, pools_in_use / 1048576.0);
     printf("time:       %.1f ms per frame (", t->frames ? t->frame_ms / t->frames : 0.0);
     for (int stg = 0; stg < SRV_STAGE_COUNT; stg++)
-        printf("%s%s %.1f", stg ? ", " : "", srv_stage_name((srv_stage)stg), t->frames ? t->time_ms[stg] / t->frames : 0.0);
+        printf("%s%s %.1f", stg ? ", " : "", srv_stage_name((srv_stage)stg),
+               t->frames ? t->time_ms[stg] / t->frames : 0.0);
     printf(")\n");
     uint64_t drops = 0;
     for (int d = 0; d < SRV_DROP_COUNT; d++)

@@ -29,10 +29,25 @@ typedef struct srv_cli_engine {
 
 /* getopt_long codes of the engine options (a command's own codes start at SRV_CLI_O_COMMAND). */
 enum {
-    SRV_CLI_O_SCENE = 256, SRV_CLI_O_EFFECTS, SRV_CLI_O_BIAS, SRV_CLI_O_POOL, SRV_CLI_O_BUDGET, SRV_CLI_O_AOSTEP,
-    SRV_CLI_O_PCELL, SRV_CLI_O_PRAYS, SRV_CLI_O_PHYST, SRV_CLI_O_PBUDGET, SRV_CLI_O_NOLOCAL, SRV_CLI_O_NOCACHE,
-    SRV_CLI_O_SEED, SRV_CLI_O_THREADS, SRV_CLI_O_DENSITY, SRV_CLI_O_AOSAMPLES, SRV_CLI_O_SHADOWRAYS,
-    SRV_CLI_O_NCSAMPLES, SRV_CLI_O_IBLOCK,
+    SRV_CLI_O_SCENE = 256,
+    SRV_CLI_O_EFFECTS,
+    SRV_CLI_O_BIAS,
+    SRV_CLI_O_POOL,
+    SRV_CLI_O_BUDGET,
+    SRV_CLI_O_AOSTEP,
+    SRV_CLI_O_PCELL,
+    SRV_CLI_O_PRAYS,
+    SRV_CLI_O_PHYST,
+    SRV_CLI_O_PBUDGET,
+    SRV_CLI_O_NOLOCAL,
+    SRV_CLI_O_NOCACHE,
+    SRV_CLI_O_SEED,
+    SRV_CLI_O_THREADS,
+    SRV_CLI_O_DENSITY,
+    SRV_CLI_O_AOSAMPLES,
+    SRV_CLI_O_SHADOWRAYS,
+    SRV_CLI_O_NCSAMPLES,
+    SRV_CLI_O_IBLOCK,
     SRV_CLI_O_COMMAND = 320
 };
 
@@ -56,15 +71,17 @@ int srv_cli_engine_option(const char *cmd, int code, const char *arg, srv_cli_en
 
 /* The same for the commands that take both the engine's and the camera options (sim, ref, report): 1 when
  * code was one of them and valid, 0 when it was one and invalid (its one-line error printed), -1 otherwise. */
-int srv_cli_run_option(const char *cmd, int code, const char *arg, srv_cli_engine *e, srv_cli_view_options *v);
+int srv_cli_run_option(const char *cmd, int code, const char *arg, srv_cli_engine *e,
+                       srv_cli_view_options *v);
 
 /* Decides which effects run on scene s: the registry's needs, narrowed by --effects `list` (NULL or "auto":
  * all that are needed); effect_on by registry index, a reason for each (why it runs or is left out), and in
  * left_out_extra (a JSON object) the needs of the scene no registered effect serves. False (and an error line)
  * for an unknown effect. `sim`, `serve` and `ref` decide the same way, so a reference has the terms the
  * cached frames it is compared with have. */
-bool srv_cli_choose_effects(const char *cmd, const scene *s, const char *list, bool effect_on[SRV_MAX_EFFECTS],
-                            char reasons[SRV_MAX_EFFECTS][200], json_t *left_out_extra);
+bool srv_cli_choose_effects(const char *cmd, const scene *s, const char *list,
+                            bool effect_on[SRV_MAX_EFFECTS], char reasons[SRV_MAX_EFFECTS][200],
+                            json_t *left_out_extra);
 
 /* A run: the scene, its Embree scene, the loop with the chosen effects, the report (its sink registered). */
 typedef struct srv_cli_run {

@@ -23,7 +23,6 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-
 static volatile sig_atomic_t stop_requested = 0;
 
 /* The first signal asks for the end after the current image; the second ends at once (default action). */
@@ -45,7 +44,7 @@ static const struct {
 };
 
 typedef struct ref_options {
-    srv_cli_engine engine; /* --scene, --effects, --seed, --threads */
+    srv_cli_engine engine;     /* --scene, --effects, --seed, --threads */
     srv_cli_view_options view; /* --viewers, --frames, --res, --camera, --trace, --fps */
     const char *out_dir;
     uint32_t every;
@@ -120,8 +119,10 @@ static bool samples_valid(uint32_t option, uint32_t value)
         fprintf(stderr, "fxcache ref: %s: '%u' is odd: each of the two halves takes half\n",
                 sample_options[option].option, value);
     else
-        fprintf(stderr, "fxcache ref: %s: '%u' is not a multiple of %u: each of the two halves takes whole sets "
-                        "of %u\n", sample_options[option].option, value, 2 * granule, granule);
+        fprintf(stderr,
+                "fxcache ref: %s: '%u' is not a multiple of %u: each of the two halves takes whole sets "
+                "of %u\n",
+                sample_options[option].option, value, 2 * granule, granule);
     return false;
 }
 
@@ -160,10 +161,18 @@ static int parse_options(int argc, char **argv, ref_options *o)
             continue;
         bool ok = true;
         switch (c) {
-        case O_OUT: o->out_dir = srv_cli_dir_arg(optarg); break;
-        case O_EVERY: ok = srv_cli_u32("ref", "--every", optarg, 0, 1000000, &o->every); break;
-        case O_VIEWS: o->views = true; break;
-        case O_QUIET: o->quiet = true; break;
+        case O_OUT:
+            o->out_dir = srv_cli_dir_arg(optarg);
+            break;
+        case O_EVERY:
+            ok = srv_cli_u32("ref", "--every", optarg, 0, 1000000, &o->every);
+            break;
+        case O_VIEWS:
+            o->views = true;
+            break;
+        case O_QUIET:
+            o->quiet = true;
+            break;
         case O_AO:
         case O_SHADOW:
         case O_PATHS: {
@@ -173,14 +182,17 @@ static int parse_options(int argc, char **argv, ref_options *o)
                  samples_valid(which, o->samples[which]);
             break;
         }
-        case O_BOUNCES: ok = srv_cli_u32("ref", "--max-bounces", optarg, 0, FX_PATH_MAX_VERTICES, &o->max_bounces); break;
+        case O_BOUNCES:
+            ok = srv_cli_u32("ref", "--max-bounces", optarg, 0, FX_PATH_MAX_VERTICES, &o->max_bounces);
+            break;
         case 'h': {
             char names[256];
             srv_cli_effect_names(names, sizeof names);
             printf(ref_usage, srv_camgen_list(), names);
             return 0;
         }
-        default: return srv_cli_getopt_error("ref", c, argv);
+        default:
+            return srv_cli_getopt_error("ref", c, argv);
         }
         if (!ok)
             return 2;
@@ -328,8 +340,9 @@ int srv_cmd_ref(int argc, char **argv)
     uint64_t per_pixel = SRV_REF_BYTES_PER_PIXEL + 12 + 3 + (o.views ? 8 : 0);
     uint64_t physical = srv_cli_physical_memory();
     if (physical && largest * per_pixel > physical) {
-        fprintf(stderr, "fxcache ref: an image of %llu pixels needs %.0f MiB, more than this machine's %llu MiB of "
-                        "physical memory: lower --res\n",
+        fprintf(stderr,
+                "fxcache ref: an image of %llu pixels needs %.0f MiB, more than this machine's %llu MiB of "
+                "physical memory: lower --res\n",
                 (unsigned long long)largest, (double)(largest * per_pixel) / 1048576.0,
                 (unsigned long long)(physical >> 20));
         exit_code = 2;
@@ -350,8 +363,8 @@ int srv_cmd_ref(int argc, char **argv)
         fprintf(stderr, "fxcache ref: %s\n", serr.msg);
         goto done;
     }
-    srv_ref_desc desc = {.s = s, .rt = rt, .seed = o.engine.seed, .threads = o.engine.threads,
-                         .max_bounces = o.max_bounces};
+    srv_ref_desc desc = {
+        .s = s, .rt = rt, .seed = o.engine.seed, .threads = o.engine.threads, .max_bounces = o.max_bounces};
     char reasons[SRV_MAX_EFFECTS][200];
     if (!srv_cli_choose_effects("ref", s, o.engine.effects, desc.effect_on, reasons, left_out_extra)) {
         exit_code = 2;
@@ -395,21 +408,23 @@ int srv_cmd_ref(int argc, char **argv)
             continue;
         json_object_set_new(desc.effect_on[e] ? on : off, effects[e]->name, json_string(reasons[e]));
         if (resolved->samples[e])
-            json_object_set_new(samples, effects[e]->name,
-                                json_pack("{s:I,s:s}", "per_pixel", (json_int_t)resolved->samples[e], "unit",
-                                          effects[e]->reference_unit ? effects[e]->reference_unit : "samples"));
+            json_object_set_new(
+                samples, effects[e]->name,
+                json_pack("{s:I,s:s}", "per_pixel", (json_int_t)resolved->samples[e], "unit",
+                          effects[e]->reference_unit ? effects[e]->reference_unit : "samples"));
     }
     json_object_update(off, left_out_extra);
     json_object_set_new(root, "effects", on);
     json_object_set_new(root, "left_out", off);
     json_object_set_new(root, "samples", samples);
     json_object_set_new(root, "max_bounces", json_integer(o.max_bounces));
-    json_object_set_new(root, "noise_definition",
-                        json_string("RMSE(half 0 - half 1) / 2 in linear radiance over every pixel and channel: "
-                                    "each half has half of every effect's samples and independent random "
-                                    "numbers and the image is their mean, so this is the standard error of "
-                                    "its pixels (RMS over the image); noise_rmse_visible is the same over "
-                                    "the pixels that see a surface"));
+    json_object_set_new(
+        root, "noise_definition",
+        json_string("RMSE(half 0 - half 1) / 2 in linear radiance over every pixel and channel: "
+                    "each half has half of every effect's samples and independent random "
+                    "numbers and the image is their mean, so this is the standard error of "
+                    "its pixels (RMS over the image); noise_rmse_visible is the same over "
+                    "the pixels that see a surface"));
     json_object_set_new(root, "interrupted", json_false());
     json_t *images = json_array();
     json_object_set_new(root, "images", images);
@@ -440,11 +455,14 @@ int srv_cmd_ref(int argc, char **argv)
                 fprintf(stderr, "fxcache ref: out of memory for a %ux%u image\n", w, h);
                 goto done;
             }
-            srv_ref_image out = {.radiance = buffers.radiance, .srgb = buffers.srgb, .ao = buffers.ao,
+            srv_ref_image out = {.radiance = buffers.radiance,
+                                 .srgb = buffers.srgb,
+                                 .ao = buffers.ao,
                                  .shadow = buffers.shadow};
             progress_line line = {.image = done_images + 1, .images = planned, .frame = f, .viewer = v};
             srv_ref_stats st;
-            fxc_result r = srv_ref_render(ref, &cam, w, h, f, &out, &st, progress ? show_progress : NULL, &line);
+            fxc_result r =
+                srv_ref_render(ref, &cam, w, h, f, &out, &st, progress ? show_progress : NULL, &line);
             if (progress)
                 fputc('\n', stderr);
             if (r != FXC_OK) {
@@ -461,7 +479,8 @@ int srv_cmd_ref(int argc, char **argv)
                 snprintf(path, sizeof path, "%s_ao.exr", base);
                 written = scene_image_write_f32(path, w, h, 1, buffers.ao, msg, sizeof msg) == 0;
                 snprintf(path, sizeof path, "%s_shadow.exr", base);
-                written = written && scene_image_write_f32(path, w, h, 1, buffers.shadow, msg, sizeof msg) == 0;
+                written =
+                    written && scene_image_write_f32(path, w, h, 1, buffers.shadow, msg, sizeof msg) == 0;
             }
             if (!written) {
                 fprintf(stderr, "fxcache ref: %s\n", msg);
@@ -475,22 +494,23 @@ int srv_cmd_ref(int argc, char **argv)
             json_object_set_new(rays, "total", json_integer((json_int_t)st.rays_total));
             const char *name = strrchr(base, '/') + 1;
             json_t *image = json_pack(
-                "{s:I,s:I,s:f,s:I,s:I,s:o,s:s+,s:s+,s:f,s:o,s:f,s:f,s:f,s:f,s:[f,f,f],s:I}", "frame", (json_int_t)f,
-                "viewer", (json_int_t)v, "time_s", srv_cli_cameras_time(&cams, f), "width", (json_int_t)w, "height",
-                (json_int_t)h, "camera", camera_json(s, &cam), "exr", name, ".exr", "png", name, ".png", "render_ms",
-                st.render_ms, "rays", rays, "noise_rmse", st.noise_rmse, "noise_rmse_visible",
-                st.noise_rmse_visible, "noise_ao", st.noise_ao, "noise_shadow", st.noise_shadow, "mean_radiance",
-                st.mean_radiance[0], st.mean_radiance[1], st.mean_radiance[2], "pixels_visible",
-                (json_int_t)st.pixels_visible);
+                "{s:I,s:I,s:f,s:I,s:I,s:o,s:s+,s:s+,s:f,s:o,s:f,s:f,s:f,s:f,s:[f,f,f],s:I}", "frame",
+                (json_int_t)f, "viewer", (json_int_t)v, "time_s", srv_cli_cameras_time(&cams, f), "width",
+                (json_int_t)w, "height", (json_int_t)h, "camera", camera_json(s, &cam), "exr", name, ".exr",
+                "png", name, ".png", "render_ms", st.render_ms, "rays", rays, "noise_rmse", st.noise_rmse,
+                "noise_rmse_visible", st.noise_rmse_visible, "noise_ao", st.noise_ao, "noise_shadow",
+                st.noise_shadow, "mean_radiance", st.mean_radiance[0], st.mean_radiance[1],
+                st.mean_radiance[2], "pixels_visible", (json_int_t)st.pixels_visible);
             json_array_append_new(images, image);
             done_images++;
             if (!write_record(&o, root))
                 goto done;
             if (!o.quiet)
-                printf("frame %04u viewer %02u: %ux%u in %.1f s, %.1f M rays, noise %.3g (visible pixels %.3g), "
-                       "mean radiance %.4g %.4g %.4g\n",
-                       f, v, w, h, st.render_ms / 1000.0, (double)st.rays_total / 1e6, st.noise_rmse,
-                       st.noise_rmse_visible, st.mean_radiance[0], st.mean_radiance[1], st.mean_radiance[2]);
+                printf(
+                    "frame %04u viewer %02u: %ux%u in %.1f s, %.1f M rays, noise %.3g (visible pixels %.3g), "
+                    "mean radiance %.4g %.4g %.4g\n",
+                    f, v, w, h, st.render_ms / 1000.0, (double)st.rays_total / 1e6, st.noise_rmse,
+                    st.noise_rmse_visible, st.mean_radiance[0], st.mean_radiance[1], st.mean_radiance[2]);
             fflush(stdout);
         }
     }

@@ -134,7 +134,8 @@ static bool load_marker(const char *dir, report_config *c)
     if (!marker)
         return false;
     const char *key = json_string_value(json_object_get(marker, "key"));
-    bool ok = key && strcmp(key, c->key) == 0 && srv_rep_row_from_json(&c->row, json_object_get(marker, "row"));
+    bool ok =
+        key && strcmp(key, c->key) == 0 && srv_rep_row_from_json(&c->row, json_object_get(marker, "row"));
     json_decref(marker);
     if (!ok) {
         c->row.done = false;
@@ -149,7 +150,8 @@ static bool write_marker(const char *dir, const report_config *c)
     snprintf(path, sizeof path, "%s/done/%s.json", dir, c->row.id);
     snprintf(tmp, sizeof tmp, "%s.tmp", path);
     json_t *marker = json_pack("{s:s,s:o}", "key", c->key, "row", srv_rep_row_json(&c->row));
-    bool ok = marker && json_dump_file(marker, tmp, JSON_INDENT(1) | JSON_PRESERVE_ORDER) == 0 && rename(tmp, path) == 0;
+    bool ok = marker && json_dump_file(marker, tmp, JSON_INDENT(1) | JSON_PRESERVE_ORDER) == 0 &&
+              rename(tmp, path) == 0;
     json_decref(marker);
     if (!ok)
         fprintf(stderr, "fxcache report: cannot write %s: %s\n", path, strerror(errno));
@@ -209,8 +211,12 @@ static int picture_frame(void *user, const srv_viewer_frame *vf)
 static void on_image(void *user, const srv_err_image *im)
 {
     srv_rep_row *row = user;
-    srv_rep_image image = {.frame = im->frame, .steady = im->steady, .rmse = im->rmse, .psnr_db = im->psnr_db,
-                           .rmse_shadow = im->rmse_shadow, .rmse_ao = im->rmse_ao};
+    srv_rep_image image = {.frame = im->frame,
+                           .steady = im->steady,
+                           .rmse = im->rmse,
+                           .psnr_db = im->psnr_db,
+                           .rmse_shadow = im->rmse_shadow,
+                           .rmse_ao = im->rmse_ao};
     snprintf(image.viewer, sizeof image.viewer, "%s", im->viewer);
     srv_rep_row_add_image(row, &image);
 }
@@ -232,13 +238,24 @@ static int run_config(report_config *c, const report_context *ctx, const srv_cli
     srv_rep_row *row = &c->row;
     srv_rep_row_free_images(row);
     double start = now_s();
-    srv_loop_desc desc = {.s = ctx->s, .rt = rt, .pool_bytes = (uint64_t)(e->pool_mb * 1048576.0),
-                          .ray_budget = (uint64_t)e->ray_budget, .samples_per_update = e->ao_step,
-                          .no_cache = e->no_cache, .seed = e->seed, .threads = e->threads, .keep_views = true,
-                          .probe_cell = (float)e->probe_cell, .probe_rays = e->probe_rays,
-                          .probe_hysteresis = (float)e->probe_hysteresis, .probe_budget = e->probe_budget,
-                          .indirect_block = e->indirect_block, .no_local_table = e->no_local_table, .ao_samples = e->ao_samples,
-                          .shadow_rays = e->shadow_rays, .no_cache_samples = (float)e->no_cache_samples};
+    srv_loop_desc desc = {.s = ctx->s,
+                          .rt = rt,
+                          .pool_bytes = (uint64_t)(e->pool_mb * 1048576.0),
+                          .ray_budget = (uint64_t)e->ray_budget,
+                          .samples_per_update = e->ao_step,
+                          .no_cache = e->no_cache,
+                          .seed = e->seed,
+                          .threads = e->threads,
+                          .keep_views = true,
+                          .probe_cell = (float)e->probe_cell,
+                          .probe_rays = e->probe_rays,
+                          .probe_hysteresis = (float)e->probe_hysteresis,
+                          .probe_budget = e->probe_budget,
+                          .indirect_block = e->indirect_block,
+                          .no_local_table = e->no_local_table,
+                          .ao_samples = e->ao_samples,
+                          .shadow_rays = e->shadow_rays,
+                          .no_cache_samples = (float)e->no_cache_samples};
     memcpy(desc.effect_on, effect_on, sizeof desc.effect_on);
     memcpy(desc.bias, e->bias, sizeof desc.bias);
     memcpy(desc.bias_set, e->bias_set, sizeof desc.bias_set);
@@ -306,7 +323,8 @@ static int run_config(report_config *c, const report_context *ctx, const srv_cli
                 joined[v] = true;
             }
             if (srv_viewer_set_camera(loop, ids[v], &cam) != FXC_OK) {
-                fprintf(stderr, "fxcache report: %s: frame %u, viewer %u: a degenerate camera\n", row->id, frame, v);
+                fprintf(stderr, "fxcache report: %s: frame %u, viewer %u: a degenerate camera\n", row->id,
+                        frame, v);
                 result = -1;
                 goto done;
             }
@@ -342,11 +360,13 @@ static int run_config(report_config *c, const report_context *ctx, const srv_cli
         row->ms_per_viewer = t->viewer_frames ? t->ms_sum / (double)t->viewer_frames : NAN;
         row->cpu_ms_per_frame = t->frames ? t->cpu_ms_sum / t->frames : NAN;
         row->rays_per_frame = t->frames ? (double)t->effect_rays / t->frames : NAN;
-        double mse = t->images ? t->mse_sum / t->images : NAN, noise2 = t->images ? t->noise2_sum / t->images : NAN;
+        double mse = t->images ? t->mse_sum / t->images : NAN,
+               noise2 = t->images ? t->noise2_sum / t->images : NAN;
         row->rmse = sqrt(mse);
         row->psnr_db = srv_err_psnr(row->rmse);
         row->rmse_denoised = t->images ? sqrt(fmax(0.0, mse - noise2)) : NAN; /* fmax(0, NaN) would say 0 */
-        row->rmse_shadow = t->images && errors.desc.compare_shadow ? sqrt(t->mse_shadow_sum / t->images) : NAN;
+        row->rmse_shadow =
+            t->images && errors.desc.compare_shadow ? sqrt(t->mse_shadow_sum / t->images) : NAN;
         row->rmse_ao = t->images && errors.desc.compare_ao ? sqrt(t->mse_ao_sum / t->images) : NAN;
         row->ref_noise = sqrt(noise2);
         if (have_last)
@@ -420,9 +440,10 @@ static bool write_outputs(report_plan *plan, const report_options *o, const char
     for (size_t i = 0; i < n; i++) {
         rows[i] = plan->configs[i].row;
         if (o->time_cpu && rows[i].done) { /* the chosen time in ms_per_frame, for everything below the CSV */
-            rows[i].ms_per_viewer = rows[i].ms_per_frame > 0
-                                        ? rows[i].cpu_ms_per_frame * rows[i].ms_per_viewer / rows[i].ms_per_frame
-                                        : NAN;
+            rows[i].ms_per_viewer =
+                rows[i].ms_per_frame > 0
+                    ? rows[i].cpu_ms_per_frame * rows[i].ms_per_viewer / rows[i].ms_per_frame
+                    : NAN;
             rows[i].ms_per_frame = rows[i].cpu_ms_per_frame;
         }
     }
@@ -471,8 +492,13 @@ static bool write_outputs(report_plan *plan, const report_options *o, const char
             fprintf(stderr, "fxcache report: warning: no plots: %s\n", err);
         *plots_made = plots > 0;
     }
-    srv_rep_page page = {.title = title, .command = command, .settings = settings, .time_label = time_label,
-                         .plots = plots_made && *plots_made, .interrupted = interrupted, .planned = (uint32_t)n};
+    srv_rep_page page = {.title = title,
+                         .command = command,
+                         .settings = settings,
+                         .time_label = time_label,
+                         .plots = plots_made && *plots_made,
+                         .interrupted = interrupted,
+                         .planned = (uint32_t)n};
     if (ok && !srv_rep_write_html(o->out_dir, rows, n, &page, err, sizeof err)) {
         fprintf(stderr, "fxcache report: %s\n", err);
         ok = false;
@@ -483,29 +509,32 @@ static bool write_outputs(report_plan *plan, const report_options *o, const char
     json_t *sum = json_object(), *list = json_array();
     for (size_t k = 0; k < m; k++)
         json_array_append_new(
-            list, json_pack("{s:I,s:s,s:f,s:f,s:o,s:I,s:s,s:o,s:b}", "viewers", (json_int_t)eq[k].viewers, "cached",
-                            eq[k].cached->id, "cached_rmse", eq[k].cached_rmse, "cached_ms_per_frame", eq[k].cached_ms,
-                            "no_cache_rmse_at_equal_time",
+            list, json_pack("{s:I,s:s,s:f,s:f,s:o,s:I,s:s,s:o,s:b}", "viewers", (json_int_t)eq[k].viewers,
+                            "cached", eq[k].cached->id, "cached_rmse", eq[k].cached_rmse,
+                            "cached_ms_per_frame", eq[k].cached_ms, "no_cache_rmse_at_equal_time",
                             isfinite(eq[k].no_cache_rmse) ? json_real(eq[k].no_cache_rmse) : json_null(),
                             "no_cache_points", (json_int_t)eq[k].no_cache_points, "within_no_cache_range",
-                            eq[k].where < 0 ? "below (cache faster than every no-cache point)"
+                            eq[k].where < 0   ? "below (cache faster than every no-cache point)"
                             : eq[k].where > 0 ? "above (cache slower than every no-cache point)"
                                               : "yes",
                             "ratio", isfinite(eq[k].ratio) ? json_real(eq[k].ratio) : json_null(), "goal_met",
                             eq[k].goal_met));
     for (size_t k = 0; k < m; k++) {
         json_t *item = json_array_get(list, k);
-        json_object_set_new(item, "cached_rmse_shadow", isfinite(eq[k].cached_shadow) ? json_real(eq[k].cached_shadow) : json_null());
+        json_object_set_new(item, "cached_rmse_shadow",
+                            isfinite(eq[k].cached_shadow) ? json_real(eq[k].cached_shadow) : json_null());
         json_object_set_new(item, "no_cache_rmse_shadow_at_equal_time",
                             isfinite(eq[k].no_cache_shadow) ? json_real(eq[k].no_cache_shadow) : json_null());
         if (eq[k].best)
             json_object_set_new(item, "most_exact_cached",
-                                json_pack("{s:s,s:f,s:f,s:o}", "config", eq[k].best->id, "rmse", eq[k].best->rmse,
-                                          "ms_per_frame", eq[k].best->ms_per_frame, "no_cache_rmse_at_equal_time",
+                                json_pack("{s:s,s:f,s:f,s:o}", "config", eq[k].best->id, "rmse",
+                                          eq[k].best->rmse, "ms_per_frame", eq[k].best->ms_per_frame,
+                                          "no_cache_rmse_at_equal_time",
                                           isfinite(eq[k].no_cache_at_best) ? json_real(eq[k].no_cache_at_best)
                                                                            : json_null()));
     }
-    json_object_set_new(sum, "goal", json_string("cached RMSE at most half the no-cache RMSE at equal time per frame"));
+    json_object_set_new(sum, "goal",
+                        json_string("cached RMSE at most half the no-cache RMSE at equal time per frame"));
     json_object_set_new(sum, "equal_time", list);
     json_object_set_new(sum, "interrupted", json_boolean(interrupted));
     json_object_set_new(sum, "time", json_string(time_label));
@@ -515,7 +544,8 @@ static bool write_outputs(report_plan *plan, const report_options *o, const char
     json_decref(sum);
     if (ok && plots_made && !o->quiet && !interrupted) { /* the final write only */
         for (size_t k = 0; k < m; k++)
-            printf("equal time, %u viewer%s: cached RMSE %.4g at %.1f ms/frame, no cache %.4g: ratio %.2f, goal (<= "
+            printf("equal time, %u viewer%s: cached RMSE %.4g at %.1f ms/frame, no cache %.4g: ratio %.2f, "
+                   "goal (<= "
                    "0.5) %s%s\n",
                    eq[k].viewers, eq[k].viewers == 1 ? "" : "s", eq[k].cached_rmse, eq[k].cached_ms,
                    eq[k].no_cache_rmse, eq[k].ratio, eq[k].goal_met ? "met" : "NOT met",
@@ -600,9 +630,11 @@ int srv_cmd_report(int argc, char **argv)
         if (effect_on[e] && effects[e]->reference) {
             rdesc.samples[e] = (uint32_t)lround(effects[e]->reference_samples * o.ref_samples);
             size_t used = strlen(effects_text), used2 = strlen(samples_text);
-            snprintf(effects_text + used, sizeof effects_text - used, "%s%s", used ? "," : "", effects[e]->name);
+            snprintf(effects_text + used, sizeof effects_text - used, "%s%s", used ? "," : "",
+                     effects[e]->name);
             snprintf(samples_text + used2, sizeof samples_text - used2, "%s%s %u %s", used2 ? ", " : "",
-                     effects[e]->name, rdesc.samples[e], effects[e]->reference_unit ? effects[e]->reference_unit : "");
+                     effects[e]->name, rdesc.samples[e],
+                     effects[e]->reference_unit ? effects[e]->reference_unit : "");
         }
     if (srv_ref_create(&rdesc, &ref, err, sizeof err) != FXC_OK) {
         fprintf(stderr, "fxcache report: %s\n", err);
@@ -618,9 +650,9 @@ int srv_cmd_report(int argc, char **argv)
             goto done;
     }
     char ref_settings[1024];
-    snprintf(ref_settings, sizeof ref_settings, "scene %s content %016llx|effects %s|samples %s|seed %u", s->source,
-             (unsigned long long)content_fingerprint(s, &cams, o.view.frames), effects_text, samples_text,
-             o.engine.seed);
+    snprintf(ref_settings, sizeof ref_settings, "scene %s content %016llx|effects %s|samples %s|seed %u",
+             s->source, (unsigned long long)content_fingerprint(s, &cams, o.view.frames), effects_text,
+             samples_text, o.engine.seed);
     snprintf(sub, sizeof sub, "%s/ref", o.out_dir);
     refs = srv_refcache_create(ref, sub, ref_settings, err, sizeof err);
     if (!refs) {
@@ -668,8 +700,8 @@ int srv_cmd_report(int argc, char **argv)
     for (size_t i = 0; i < plan->count && !interrupted; i++) {
         report_config *c = &plan->configs[i];
         if (c->row.done) {
-            fprintf(stderr, "report: [%zu/%zu] %s: done earlier (%s/done/%s.json)\n", i + 1, plan->count, c->row.id,
-                    o.out_dir, c->row.id);
+            fprintf(stderr, "report: [%zu/%zu] %s: done earlier (%s/done/%s.json)\n", i + 1, plan->count,
+                    c->row.id, o.out_dir, c->row.id);
             continue;
         }
         int r = run_config(c, &ctx, &cams, rt, effect_on, refs, progress, i, plan->count);
@@ -685,17 +717,21 @@ int srv_cmd_report(int argc, char **argv)
         char ao_text[48] = "";
         if (isfinite(row->rmse_ao))
             snprintf(ao_text, sizeof ao_text, ", AO %.3g", row->rmse_ao);
-        if (row->images == 0) /* every viewer had left (traces shorter than --frames) before a compared frame */
-            fprintf(stderr, "report: [%zu/%zu] %s: %.1f ms/frame (%.1f per viewer, CPU %.1f), no error: no frame "
-                            "after the warm-up was compared with a viewer present (the traces end before it; lower "
-                            "--frames or --warmup) (%.1f s)\n",
+        if (row->images ==
+            0) /* every viewer had left (traces shorter than --frames) before a compared frame */
+            fprintf(stderr,
+                    "report: [%zu/%zu] %s: %.1f ms/frame (%.1f per viewer, CPU %.1f), no error: no frame "
+                    "after the warm-up was compared with a viewer present (the traces end before it; lower "
+                    "--frames or --warmup) (%.1f s)\n",
                     i + 1, plan->count, row->id, row->ms_per_frame, row->ms_per_viewer, row->cpu_ms_per_frame,
                     row->run_s);
         else
-            fprintf(stderr, "report: [%zu/%zu] %s: %.1f ms/frame (%.1f per viewer, CPU %.1f), RMSE %.4g, PSNR %.2f dB, "
-                            "shadow %.3g%s (%.1f s)\n",
-                    i + 1, plan->count, row->id, row->ms_per_frame, row->ms_per_viewer, row->cpu_ms_per_frame,
-                    row->rmse, row->psnr_db, row->rmse_shadow, ao_text, row->run_s);
+            fprintf(
+                stderr,
+                "report: [%zu/%zu] %s: %.1f ms/frame (%.1f per viewer, CPU %.1f), RMSE %.4g, PSNR %.2f dB, "
+                "shadow %.3g%s (%.1f s)\n",
+                i + 1, plan->count, row->id, row->ms_per_frame, row->ms_per_viewer, row->cpu_ms_per_frame,
+                row->rmse, row->psnr_db, row->rmse_shadow, ao_text, row->run_s);
         if (!write_outputs(plan, &o, NULL, NULL, NULL, false, NULL)) /* the CSVs after every configuration */
             goto done;
     }
@@ -726,8 +762,9 @@ int srv_cmd_report(int argc, char **argv)
         size_t finished = 0;
         for (size_t i = 0; i < plan->count; i++)
             finished += plan->configs[i].row.done;
-        fprintf(stderr, "fxcache report: interrupted by %s: %zu of %zu configurations done and written; run the same "
-                        "command again to resume\n",
+        fprintf(stderr,
+                "fxcache report: interrupted by %s: %zu of %zu configurations done and written; run the same "
+                "command again to resume\n",
                 stop_requested == SIGINT ? "SIGINT" : "SIGTERM", finished, plan->count);
     } else {
         fprintf(stderr, "report: done in %.1f s\n", now_s() - started);

@@ -17,12 +17,12 @@ typedef struct island_summary {
     uint32_t min_triangles, max_triangles;
     double mean_triangles;
     uint64_t histogram[HIST_BUCKETS];
-    uint64_t texels;    /* level-0 texels over all islands, borders included */
-    uint64_t blocks;    /* level-0 8x8 blocks over all islands */
-    uint32_t max_side;  /* largest island side, texels */
+    uint64_t texels;   /* level-0 texels over all islands, borders included */
+    uint64_t blocks;   /* level-0 8x8 blocks over all islands */
+    uint32_t max_side; /* largest island side, texels */
 } island_summary;
 
-static const char *const bucket_names[HIST_BUCKETS] = {"1",     "2-3",   "4-7",     "8-15", "16-31",
+static const char *const bucket_names[HIST_BUCKETS] = {"1",     "2-3",    "4-7",     "8-15", "16-31",
                                                        "32-63", "64-127", "128-255", "256"};
 
 static int bucket_of(uint32_t triangles)
@@ -40,8 +40,10 @@ static void summarize_islands(const scene *s, island_summary *out)
     out->min_triangles = s->island_count ? UINT32_MAX : 0;
     for (uint32_t i = 0; i < s->island_count; i++) {
         const scene_island *is = &s->islands[i];
-        out->min_triangles = is->triangle_count < out->min_triangles ? is->triangle_count : out->min_triangles;
-        out->max_triangles = is->triangle_count > out->max_triangles ? is->triangle_count : out->max_triangles;
+        out->min_triangles =
+            is->triangle_count < out->min_triangles ? is->triangle_count : out->min_triangles;
+        out->max_triangles =
+            is->triangle_count > out->max_triangles ? is->triangle_count : out->max_triangles;
         out->histogram[bucket_of(is->triangle_count)]++;
         out->texels += (uint64_t)is->width * is->height;
         out->blocks += (uint64_t)((is->width + 7) / 8) * ((is->height + 7) / 8);
@@ -87,16 +89,19 @@ static json_t *scene_info_json(const scene *s, const island_summary *is, const s
                                                 vec3_json(l->color), "intensity", (double)l->intensity));
     }
     json_object_set_new(root, "light_list", lights);
-    json_object_set_new(root, "sky", json_pack("{s:o,s:f}", "color", vec3_json(s->sky_color), "intensity",
-                                               (double)s->sky_intensity));
+    json_object_set_new(
+        root, "sky",
+        json_pack("{s:o,s:f}", "color", vec3_json(s->sky_color), "intensity", (double)s->sky_intensity));
     json_object_set_new(root, "texel_density", json_real(s->texel_density));
     json_object_set_new(root, "texel_density_auto", json_boolean(s->density_auto));
     json_object_set_new(root, "ao_radius", json_real(s->ao_radius));
     json_object_set_new(root, "surface_area_m2", json_real(scene_surface_area(s)));
-    json_object_set_new(root, "bounds", json_pack("{s:o,s:o}", "min", vec3_json(s->bounds_min), "max",
-                                                  vec3_json(s->bounds_max)));
-    json_object_set_new(root, "origin", json_pack("[ooo]", exact_number_json(s->origin[0]),
-                                                  exact_number_json(s->origin[1]), exact_number_json(s->origin[2])));
+    json_object_set_new(
+        root, "bounds",
+        json_pack("{s:o,s:o}", "min", vec3_json(s->bounds_min), "max", vec3_json(s->bounds_max)));
+    json_object_set_new(root, "origin",
+                        json_pack("[ooo]", exact_number_json(s->origin[0]), exact_number_json(s->origin[1]),
+                                  exact_number_json(s->origin[2])));
     json_object_set_new(root, "position_step_m", json_real(s->position_step));
     json_object_set_new(root, "position_step_texels", json_real(s->position_step * (double)s->texel_density));
     json_object_set_new(root, "precision_warning",
@@ -105,23 +110,21 @@ static json_t *scene_info_json(const scene *s, const island_summary *is, const s
     json_t *hist = json_object();
     for (int b = 0; b < HIST_BUCKETS; b++)
         json_object_set_new(hist, bucket_names[b], json_integer((json_int_t)is->histogram[b]));
-    json_object_set_new(root, "islands",
-                        json_pack("{s:i,s:i,s:i,s:f,s:o,s:I,s:I,s:i}", "count", (int)is->count, "min_triangles",
-                                  (int)is->min_triangles, "max_triangles", (int)is->max_triangles,
-                                  "mean_triangles", is->mean_triangles, "triangles_histogram", hist,
-                                  "texels_level0", (json_int_t)is->texels, "blocks_level0",
-                                  (json_int_t)is->blocks, "max_side_texels", (int)is->max_side));
+    json_object_set_new(
+        root, "islands",
+        json_pack("{s:i,s:i,s:i,s:f,s:o,s:I,s:I,s:i}", "count", (int)is->count, "min_triangles",
+                  (int)is->min_triangles, "max_triangles", (int)is->max_triangles, "mean_triangles",
+                  is->mean_triangles, "triangles_histogram", hist, "texels_level0", (json_int_t)is->texels,
+                  "blocks_level0", (json_int_t)is->blocks, "max_side_texels", (int)is->max_side));
 
     const scene_repairs *r = &s->repairs;
-    json_object_set_new(root, "repairs",
-                        json_pack("{s:I,s:I,s:I,s:I,s:I,s:I,s:I}", "degenerate_skipped",
-                                  (json_int_t)r->degenerate_skipped, "precision_skipped",
-                                  (json_int_t)r->precision_skipped, "duplicate_skipped",
-                                  (json_int_t)r->duplicate_skipped, "nonmanifold_split",
-                                  (json_int_t)r->nonmanifold_split, "vertices_welded",
-                                  (json_int_t)r->vertices_welded, "non_triangles_dropped",
-                                  (json_int_t)r->non_triangles_dropped, "textures_missing",
-                                  (json_int_t)r->textures_missing));
+    json_object_set_new(
+        root, "repairs",
+        json_pack("{s:I,s:I,s:I,s:I,s:I,s:I,s:I}", "degenerate_skipped", (json_int_t)r->degenerate_skipped,
+                  "precision_skipped", (json_int_t)r->precision_skipped, "duplicate_skipped",
+                  (json_int_t)r->duplicate_skipped, "nonmanifold_split", (json_int_t)r->nonmanifold_split,
+                  "vertices_welded", (json_int_t)r->vertices_welded, "non_triangles_dropped",
+                  (json_int_t)r->non_triangles_dropped, "textures_missing", (json_int_t)r->textures_missing));
     json_object_set_new(root, "time_ms",
                         json_pack("{s:f,s:f,s:f,s:f,s:f}", "load", s->timings.load_ms, "weld",
                                   s->timings.weld_ms, "textures", s->timings.textures_ms, "islands",
@@ -148,23 +151,26 @@ static json_t *scene_info_json(const scene *s, const island_summary *is, const s
     return root;
 }
 
-static void print_text(const scene *s, const island_summary *is, const scene_needs_result *needs, double bvh_ms)
+static void print_text(const scene *s, const island_summary *is, const scene_needs_result *needs,
+                       double bvh_ms)
 {
     const scene_repairs *r = &s->repairs;
     printf("scene:          %s\n", s->source);
-    printf("triangles:      %u (%u vertices after welding, %llu merged)\n", s->triangle_count, s->vertex_count,
-           (unsigned long long)r->vertices_welded);
+    printf("triangles:      %u (%u vertices after welding, %llu merged)\n", s->triangle_count,
+           s->vertex_count, (unsigned long long)r->vertices_welded);
     char lost[160] = "";
     if (r->precision_skipped)
-        snprintf(lost, sizeof lost, " (%llu of them with an area, collapsed at float precision up to %.4g m from "
-                                    "the local origin)",
+        snprintf(lost, sizeof lost,
+                 " (%llu of them with an area, collapsed at float precision up to %.4g m from "
+                 "the local origin)",
                  (unsigned long long)r->precision_skipped, r->precision_reach);
     printf("repairs:        %llu degenerate%s and %llu duplicate triangles skipped, %llu split off at "
            "non-manifold edges, %llu points/lines dropped, %llu textures missing\n",
            (unsigned long long)r->degenerate_skipped, lost, (unsigned long long)r->duplicate_skipped,
            (unsigned long long)r->nonmanifold_split, (unsigned long long)r->non_triangles_dropped,
            (unsigned long long)r->textures_missing);
-    printf("meshes:         %u (materials %u, textures %u)\n", s->mesh_count, s->material_count, s->texture_count);
+    printf("meshes:         %u (materials %u, textures %u)\n", s->mesh_count, s->material_count,
+           s->texture_count);
     uint32_t dirs = 0;
     for (uint32_t i = 0; i < s->light_count; i++)
         dirs += s->lights[i].type == SCENE_LIGHT_DIRECTIONAL;
@@ -173,17 +179,19 @@ static void print_text(const scene *s, const island_summary *is, const scene_nee
            (double)s->sky_color[1], (double)s->sky_color[2], (double)s->sky_intensity);
     printf("texel density:  %.4g texels per metre%s\n", (double)s->texel_density,
            s->density_auto ? " (auto)" : "");
-    printf("surface area:   %.4g m^2; bounds (%.3g, %.3g, %.3g) to (%.3g, %.3g, %.3g)%s\n", scene_surface_area(s),
-           (double)s->bounds_min[0], (double)s->bounds_min[1], (double)s->bounds_min[2],
-           (double)s->bounds_max[0], (double)s->bounds_max[1], (double)s->bounds_max[2],
+    printf("surface area:   %.4g m^2; bounds (%.3g, %.3g, %.3g) to (%.3g, %.3g, %.3g)%s\n",
+           scene_surface_area(s), (double)s->bounds_min[0], (double)s->bounds_min[1],
+           (double)s->bounds_min[2], (double)s->bounds_max[0], (double)s->bounds_max[1],
+           (double)s->bounds_max[2],
            s->origin[0] != 0 || s->origin[1] != 0 || s->origin[2] != 0 ? " in the local frame" : "");
-    printf("origin:         (%.17g, %.17g, %.17g): positions are kept relative to it (world = local + origin)\n",
-           s->origin[0], s->origin[1], s->origin[2]);
+    printf(
+        "origin:         (%.17g, %.17g, %.17g): positions are kept relative to it (world = local + origin)\n",
+        s->origin[0], s->origin[1], s->origin[2]);
     printf("precision:      positions %.3g m apart = %.3g texels%s%s\n", s->position_step,
            s->position_step * (double)s->texel_density, s->precision_warning[0] ? "; WARNING: " : "",
            s->precision_warning);
-    printf("islands:        %u; triangles per island min %u, mean %.1f, max %u\n", is->count, is->min_triangles,
-           is->mean_triangles, is->max_triangles);
+    printf("islands:        %u; triangles per island min %u, mean %.1f, max %u\n", is->count,
+           is->min_triangles, is->mean_triangles, is->max_triangles);
     printf("  level 0:      %llu texels, %llu blocks of 8x8, largest side %u texels\n",
            (unsigned long long)is->texels, (unsigned long long)is->blocks, is->max_side);
     printf("  histogram:   ");
@@ -194,12 +202,12 @@ static void print_text(const scene *s, const island_summary *is, const scene_nee
            s->timings.load_ms, s->timings.weld_ms, s->timings.textures_ms, s->timings.islands_ms, bvh_ms);
     printf("effects:\n");
     for (int fx = 0; fx < SCENE_FX_COUNT; fx++)
-        printf("  %-16s %-9s %s\n", scene_effect_name((scene_effect)fx), needs->effect[fx] ? "runs" : "left out",
-               needs->effect_reason[fx]);
+        printf("  %-16s %-9s %s\n", scene_effect_name((scene_effect)fx),
+               needs->effect[fx] ? "runs" : "left out", needs->effect_reason[fx]);
     printf("caches:\n");
     for (int c = 0; c < SCENE_CACHE_COUNT; c++)
-        printf("  %-16s %-9s %s\n", scene_cache_name((scene_cache_kind)c), needs->cache[c] ? "exists" : "left out",
-               needs->cache_reason[c]);
+        printf("  %-16s %-9s %s\n", scene_cache_name((scene_cache_kind)c),
+               needs->cache[c] ? "exists" : "left out", needs->cache_reason[c]);
 }
 
 static const char scene_info_usage[] =
@@ -208,7 +216,8 @@ static const char scene_info_usage[] =
     "Loads SCENE (a *.json scene description, a mesh file Assimp reads, optionally .gz, or 'default' for\n"
     "the embedded scene; the default) and prints its triangles, meshes, lights, islands (count,\n"
     "triangles-per-island histogram, texels and blocks at level 0), texel density, the origin of its local\n"
-    "frame (world = local + origin) and the spacing of its float positions (with a warning when that exceeds\n"
+    "frame (world = local + origin) and the spacing of its float positions (with a warning when that "
+    "exceeds\n"
     "1/16 of a texel), build time per stage (including the Embree BVH), and which effects and caches the\n"
     "scene needs and why.\n"
     "\n"
@@ -269,7 +278,8 @@ int srv_cmd_scene_info(int argc, char **argv)
         case 'h':
             fputs(scene_info_usage, stdout);
             return 0;
-        default: return srv_cli_getopt_error("scene-info", c, argv);
+        default:
+            return srv_cli_getopt_error("scene-info", c, argv);
         }
     }
     if (argc - optind > 1) {

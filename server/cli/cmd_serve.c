@@ -68,16 +68,37 @@ static const char serve_usage[] =
 
 static int parse_options(int argc, char **argv, serve_options *o)
 {
-    enum { O_BIND = SRV_CLI_O_COMMAND, O_PORT, O_TOKEN, O_FPS, O_FRAMES, O_MAXV, O_MAXRES, O_MAXMSG, O_RATE,
-           O_RECORD, O_STATS, O_SUMMARY, O_QUIET, O_MAXSAMPLES };
+    enum {
+        O_BIND = SRV_CLI_O_COMMAND,
+        O_PORT,
+        O_TOKEN,
+        O_FPS,
+        O_FRAMES,
+        O_MAXV,
+        O_MAXRES,
+        O_MAXMSG,
+        O_RATE,
+        O_RECORD,
+        O_STATS,
+        O_SUMMARY,
+        O_QUIET,
+        O_MAXSAMPLES
+    };
     static const struct option own[] = {
-        {"bind", required_argument, NULL, O_BIND},          {"port", required_argument, NULL, O_PORT},
-        {"token", required_argument, NULL, O_TOKEN},        {"fps", required_argument, NULL, O_FPS},
-        {"frames", required_argument, NULL, O_FRAMES},      {"max-viewers", required_argument, NULL, O_MAXV},
-        {"max-res", required_argument, NULL, O_MAXRES},     {"max-message", required_argument, NULL, O_MAXMSG},
-        {"camera-rate", required_argument, NULL, O_RATE},   {"record", required_argument, NULL, O_RECORD},
-        {"stats", required_argument, NULL, O_STATS},        {"summary", required_argument, NULL, O_SUMMARY},
-        {"quiet", no_argument, NULL, O_QUIET},              {"help", no_argument, NULL, 'h'},
+        {"bind", required_argument, NULL, O_BIND},
+        {"port", required_argument, NULL, O_PORT},
+        {"token", required_argument, NULL, O_TOKEN},
+        {"fps", required_argument, NULL, O_FPS},
+        {"frames", required_argument, NULL, O_FRAMES},
+        {"max-viewers", required_argument, NULL, O_MAXV},
+        {"max-res", required_argument, NULL, O_MAXRES},
+        {"max-message", required_argument, NULL, O_MAXMSG},
+        {"camera-rate", required_argument, NULL, O_RATE},
+        {"record", required_argument, NULL, O_RECORD},
+        {"stats", required_argument, NULL, O_STATS},
+        {"summary", required_argument, NULL, O_SUMMARY},
+        {"quiet", no_argument, NULL, O_QUIET},
+        {"help", no_argument, NULL, 'h'},
         {"max-samples", required_argument, NULL, O_MAXSAMPLES},
     };
     struct option options[sizeof own / sizeof own[0] + 32];
@@ -91,27 +112,50 @@ static int parse_options(int argc, char **argv, serve_options *o)
         bool ok = true;
         uint32_t value = 0;
         switch (c) {
-        case O_BIND: o->net.bind = optarg; break;
+        case O_BIND:
+            o->net.bind = optarg;
+            break;
         case O_PORT:
             ok = srv_cli_u32("serve", "--port", optarg, 0, 65535, &value);
             o->net.port = (int)value;
             break;
-        case O_TOKEN: o->net.token = optarg; break;
-        case O_FPS: ok = srv_cli_double("serve", "--fps", optarg, 0.001, 1000, &o->net.fps); break;
-        case O_FRAMES: ok = srv_cli_u32("serve", "--frames", optarg, 1, 100000000, &o->net.frames); break;
-        case O_MAXV: ok = srv_cli_u32("serve", "--max-viewers", optarg, 1, SRV_MAX_VIEWERS, &o->net.max_viewers); break;
-        case O_MAXRES:
-            ok = srv_cli_resolution("serve", "--max-res", optarg, PROTO_MAX_SIDE, &o->net.max_width, &o->net.max_height);
+        case O_TOKEN:
+            o->net.token = optarg;
             break;
-        case O_MAXMSG: ok = srv_cli_u32("serve", "--max-message", optarg, 1024, 16777216, &o->net.max_message); break;
-        case O_RATE: ok = srv_cli_u32("serve", "--camera-rate", optarg, 1, 100000, &o->net.camera_rate); break;
+        case O_FPS:
+            ok = srv_cli_double("serve", "--fps", optarg, 0.001, 1000, &o->net.fps);
+            break;
+        case O_FRAMES:
+            ok = srv_cli_u32("serve", "--frames", optarg, 1, 100000000, &o->net.frames);
+            break;
+        case O_MAXV:
+            ok = srv_cli_u32("serve", "--max-viewers", optarg, 1, SRV_MAX_VIEWERS, &o->net.max_viewers);
+            break;
+        case O_MAXRES:
+            ok = srv_cli_resolution("serve", "--max-res", optarg, PROTO_MAX_SIDE, &o->net.max_width,
+                                    &o->net.max_height);
+            break;
+        case O_MAXMSG:
+            ok = srv_cli_u32("serve", "--max-message", optarg, 1024, 16777216, &o->net.max_message);
+            break;
+        case O_RATE:
+            ok = srv_cli_u32("serve", "--camera-rate", optarg, 1, 100000, &o->net.camera_rate);
+            break;
         case O_MAXSAMPLES:
             ok = srv_cli_u32("serve", "--max-samples", optarg, 1, PROTO_MAX_SAMPLES, &o->net.max_samples);
             break;
-        case O_RECORD: o->net.record_dir = srv_cli_dir_arg(optarg); break;
-        case O_STATS: o->stats_path = optarg; break;
-        case O_SUMMARY: o->summary_path = optarg; break;
-        case O_QUIET: o->quiet = true; break;
+        case O_RECORD:
+            o->net.record_dir = srv_cli_dir_arg(optarg);
+            break;
+        case O_STATS:
+            o->stats_path = optarg;
+            break;
+        case O_SUMMARY:
+            o->summary_path = optarg;
+            break;
+        case O_QUIET:
+            o->quiet = true;
+            break;
         case 'h': {
             char names[256];
             srv_cli_effect_names(names, sizeof names);
@@ -120,7 +164,8 @@ static int parse_options(int argc, char **argv, serve_options *o)
             printf("  -h, --help           this text\n");
             return 0;
         }
-        default: return srv_cli_getopt_error("serve", c, argv);
+        default:
+            return srv_cli_getopt_error("serve", c, argv);
         }
         if (!ok)
             return 2;
@@ -149,8 +194,10 @@ static int parse_options(int argc, char **argv, serve_options *o)
         return 2;
     }
     if (!loopback && !o->net.token) {
-        fprintf(stderr, "fxcache serve: --bind %s is beyond loopback: give --token (or FXCACHE_TOKEN) so that only "
-                        "viewers with it can connect\n", o->net.bind);
+        fprintf(stderr,
+                "fxcache serve: --bind %s is beyond loopback: give --token (or FXCACHE_TOKEN) so that only "
+                "viewers with it can connect\n",
+                o->net.bind);
         return 2;
     }
     return -1;
@@ -162,14 +209,16 @@ static json_t *net_json(const serve_options *o, const srv_net *net, const srv_ne
     json_t *refused = json_object();
     for (int code = 1; code < 32; code++)
         if (t->refused_by_code[code])
-            json_object_set_new(refused, fxc_strerror(-code), json_integer((json_int_t)t->refused_by_code[code]));
-    json_t *j = json_pack("{s:s,s:i,s:f,s:i,s:I,s:I,s:I,s:o,s:I,s:I,s:I,s:I,s:f,s:I}", "bind", o->net.bind, "port",
-                         srv_net_port(net), "fps", o->net.fps, "max_viewers", (int)o->net.max_viewers, "connections",
-                         (json_int_t)t->connections, "viewers_joined", (json_int_t)t->viewers_joined, "refused",
-                         (json_int_t)t->refused, "refused_by", refused, "frames_sent", (json_int_t)t->frames_sent,
-                         "frames_dropped", (json_int_t)t->frames_dropped, "bytes_sent", (json_int_t)t->bytes_sent,
-                         "cameras_received", (json_int_t)t->cameras_received, "encode_ms", t->encode_ms,
-                         "buffer_bytes_peak", (json_int_t)t->buffer_bytes_peak);
+            json_object_set_new(refused, fxc_strerror(-code),
+                                json_integer((json_int_t)t->refused_by_code[code]));
+    json_t *j =
+        json_pack("{s:s,s:i,s:f,s:i,s:I,s:I,s:I,s:o,s:I,s:I,s:I,s:I,s:f,s:I}", "bind", o->net.bind, "port",
+                  srv_net_port(net), "fps", o->net.fps, "max_viewers", (int)o->net.max_viewers, "connections",
+                  (json_int_t)t->connections, "viewers_joined", (json_int_t)t->viewers_joined, "refused",
+                  (json_int_t)t->refused, "refused_by", refused, "frames_sent", (json_int_t)t->frames_sent,
+                  "frames_dropped", (json_int_t)t->frames_dropped, "bytes_sent", (json_int_t)t->bytes_sent,
+                  "cameras_received", (json_int_t)t->cameras_received, "encode_ms", t->encode_ms,
+                  "buffer_bytes_peak", (json_int_t)t->buffer_bytes_peak);
     json_object_set_new(j, "sample_requests", json_integer((json_int_t)t->sample_requests));
     json_object_set_new(j, "sample_requests_dropped", json_integer((json_int_t)t->sample_requests_dropped));
     json_object_set_new(j, "samples_sent", json_integer((json_int_t)t->samples_sent));
@@ -228,16 +277,19 @@ int srv_cmd_serve(int argc, char **argv)
     json_decref(sum);
     if (!o.quiet) {
         srv_cli_print_summary(&run, o.engine.no_cache, false);
-        printf("network:    %llu connections, %llu viewers joined, %llu refused; %llu frames sent (%.1f MB), %llu "
+        printf("network:    %llu connections, %llu viewers joined, %llu refused; %llu frames sent (%.1f MB), "
+               "%llu "
                "dropped for newer ones; %.2f ms encoding per frame sent\n",
                (unsigned long long)totals.connections, (unsigned long long)totals.viewers_joined,
-               (unsigned long long)totals.refused, (unsigned long long)totals.frames_sent, totals.bytes_sent / 1e6,
-               (unsigned long long)totals.frames_dropped,
+               (unsigned long long)totals.refused, (unsigned long long)totals.frames_sent,
+               totals.bytes_sent / 1e6, (unsigned long long)totals.frames_dropped,
                totals.frames_sent ? totals.encode_ms / (double)totals.frames_sent : 0.0);
         if (totals.sample_requests)
-            printf("samples:    %llu sample requests, %llu answered (%llu pixels), %llu dropped for newer ones\n",
+            printf("samples:    %llu sample requests, %llu answered (%llu pixels), %llu dropped for newer "
+                   "ones\n",
                    (unsigned long long)totals.sample_requests, (unsigned long long)totals.samples_sent,
-                   (unsigned long long)totals.samples_pixels, (unsigned long long)totals.sample_requests_dropped);
+                   (unsigned long long)totals.samples_pixels,
+                   (unsigned long long)totals.sample_requests_dropped);
     }
     exit_code = r == FXC_OK && written ? 0 : 1;
 done:

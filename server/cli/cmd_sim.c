@@ -25,7 +25,6 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-
 static volatile sig_atomic_t stop_requested = 0;
 
 static void on_signal(int sig)
@@ -96,13 +95,27 @@ static int parse_options(int argc, char **argv, sim_options *o)
             continue;
         bool ok = true;
         switch (c) {
-        case O_OUT: o->out_dir = srv_cli_dir_arg(optarg); break;
-        case O_SAVE: ok = srv_cli_u32("sim", "--save-every", optarg, 0, 1000000, &o->save_every); break;
-        case O_VIEWS: o->views = true; break;
-        case O_STATS: o->stats_path = optarg; break;
-        case O_SUMMARY: o->summary_path = optarg; break;
-        case O_RECORD: o->record_dir = srv_cli_dir_arg(optarg); break;
-        case O_QUIET: o->quiet = true; break;
+        case O_OUT:
+            o->out_dir = srv_cli_dir_arg(optarg);
+            break;
+        case O_SAVE:
+            ok = srv_cli_u32("sim", "--save-every", optarg, 0, 1000000, &o->save_every);
+            break;
+        case O_VIEWS:
+            o->views = true;
+            break;
+        case O_STATS:
+            o->stats_path = optarg;
+            break;
+        case O_SUMMARY:
+            o->summary_path = optarg;
+            break;
+        case O_RECORD:
+            o->record_dir = srv_cli_dir_arg(optarg);
+            break;
+        case O_QUIET:
+            o->quiet = true;
+            break;
         case 'h': {
             char names[256];
             srv_cli_effect_names(names, sizeof names);
@@ -111,7 +124,8 @@ static int parse_options(int argc, char **argv, sim_options *o)
             printf("  -h, --help           this text\n");
             return 0;
         }
-        default: return srv_cli_getopt_error("sim", c, argv);
+        default:
+            return srv_cli_getopt_error("sim", c, argv);
         }
         if (!ok)
             return 2;
@@ -184,7 +198,8 @@ static int image_sink_frame(void *user, const srv_viewer_frame *vf)
 {
     image_sink *sink = user;
     const sim_options *o = sink->o;
-    bool chosen = sink->force || vf->frame == sink->last_frame || (o->save_every && vf->frame % o->save_every == 0);
+    bool chosen =
+        sink->force || vf->frame == sink->last_frame || (o->save_every && vf->frame % o->save_every == 0);
     if (!chosen || stop_requested) /* an interrupted run saves its last frame afterwards */
         return 0;
     return save_viewer_frame(o, vf, o->view.viewers) ? 0 : -1;
@@ -320,7 +335,8 @@ int srv_cmd_sim(int argc, char **argv)
                 if (o.record_dir) {
                     char path[1024];
                     snprintf(path, sizeof path, "%s/viewer_%02u.trace", o.record_dir, v);
-                    recorder.writers[v] = srv_trace_writer_open_sized(path, s, vd.width, vd.height, err, sizeof err);
+                    recorder.writers[v] =
+                        srv_trace_writer_open_sized(path, s, vd.width, vd.height, err, sizeof err);
                     if (!recorder.writers[v]) {
                         fprintf(stderr, "fxcache sim: %s\n", err);
                         goto done;
@@ -348,10 +364,12 @@ int srv_cmd_sim(int argc, char **argv)
         fputc('\n', stderr);
     const srv_report_totals *tot = srv_report_get_totals(report);
     if (tot->exhausted > 0)
-        fprintf(stderr, "fxcache sim: warning: the block pools (--pool-mb %g) were too small for the requests of one "
-                        "frame %llu times; the run went on degraded (%llu visible pixels composed without cached "
-                        "data)\n",
-                o.engine.pool_mb, (unsigned long long)tot->exhausted, (unsigned long long)tot->pixels_missing);
+        fprintf(stderr,
+                "fxcache sim: warning: the block pools (--pool-mb %g) were too small for the requests of one "
+                "frame %llu times; the run went on degraded (%llu visible pixels composed without cached "
+                "data)\n",
+                o.engine.pool_mb, (unsigned long long)tot->exhausted,
+                (unsigned long long)tot->pixels_missing);
     if (stop_requested && o.out_dir && frame > 0) {
         /* Interrupted: the last finished frame of every viewer still present. */
         srv_viewer_id present[SRV_MAX_VIEWERS];
@@ -362,7 +380,11 @@ int srv_cmd_sim(int argc, char **argv)
             uint32_t v = index_of_slot[present[i].id & 0xFFu];
             char name[32];
             snprintf(name, sizeof name, "viewer_%02u", v);
-            srv_viewer_frame vf = {.id = present[i], .name = name, .frame = frame - 1, .width = w, .height = h,
+            srv_viewer_frame vf = {.id = present[i],
+                                   .name = name,
+                                   .frame = frame - 1,
+                                   .width = w,
+                                   .height = h,
                                    .srgb = srv_viewer_image(loop, present[i])};
             for (int k = 0; k < SRV_VIEW_COUNT; k++)
                 vf.views[k] = srv_viewer_view(loop, present[i], k);

@@ -62,11 +62,13 @@ typedef struct srv_refcache srv_refcache;
 /* A cache of reference images in folder dir (created if missing) for renderer ref; settings describes
  * everything besides the camera and size that changes a reference (scene, effects, samples, seed, bounces)
  * and goes into every key. NULL on no memory or an unwritable folder (with a line in err). */
-srv_refcache *srv_refcache_create(srv_ref *ref, const char *dir, const char *settings, char *err, size_t err_cap);
+srv_refcache *srv_refcache_create(srv_ref *ref, const char *dir, const char *settings, char *err,
+                                  size_t err_cap);
 void srv_refcache_free(srv_refcache *cache);
 
 /* The key of a camera at a size under the cache's settings: FNV-1a 64 of their exact text. */
-uint64_t srv_refcache_key(const srv_refcache *cache, const srv_camera *camera, uint32_t width, uint32_t height);
+uint64_t srv_refcache_key(const srv_refcache *cache, const srv_camera *camera, uint32_t width,
+                          uint32_t height);
 
 /* The reference image for camera at width x height: from memory, else from disk, else rendered (and written,
  * the .json last, so an interrupted write is rendered again). *rendered (may be NULL) says whether it was
@@ -91,15 +93,15 @@ typedef struct srv_err_image {
 } srv_err_image;
 
 typedef struct srv_err_sink_desc {
-    srv_refcache *refs;          /* required */
-    uint32_t every;              /* frames compared: f % every == 0 (0: none of those), and last_frame */
+    srv_refcache *refs; /* required */
+    uint32_t every;     /* frames compared: f % every == 0 (0: none of those), and last_frame */
     uint32_t last_frame;
-    uint32_t warmup;             /* frames before this one are compared but not in the totals */
-    bool compare_shadow;         /* the frames carry the shadow view (keep_views) and the scene has a light */
-    bool compare_ao;             /* the AO view is the AO term (no effect replaces the sky) */
-    const char *heatmap_viewer;  /* the viewer whose last compared frame gets a heat map (NULL: none) */
-    const char *heatmap_path;    /* PNG: per pixel |frame - reference|, mean over channels */
-    float heatmap_max;           /* the error shown white (default 0.1) */
+    uint32_t warmup;            /* frames before this one are compared but not in the totals */
+    bool compare_shadow;        /* the frames carry the shadow view (keep_views) and the scene has a light */
+    bool compare_ao;            /* the AO view is the AO term (no effect replaces the sky) */
+    const char *heatmap_viewer; /* the viewer whose last compared frame gets a heat map (NULL: none) */
+    const char *heatmap_path;   /* PNG: per pixel |frame - reference|, mean over channels */
+    float heatmap_max;          /* the error shown white (default 0.1) */
     /* Called for every compared image (may be NULL), from the thread running the frame. */
     void (*on_image)(void *user, const srv_err_image *image);
     void *user;
@@ -107,23 +109,23 @@ typedef struct srv_err_sink_desc {
 
 /* What the sink summed over the steady-state frames. */
 typedef struct srv_err_totals {
-    uint32_t images;                 /* compared images, steady state */
-    double mse_sum;                  /* sum of their mean squared errors */
+    uint32_t images; /* compared images, steady state */
+    double mse_sum;  /* sum of their mean squared errors */
     double mse_shadow_sum, mse_ao_sum;
-    double noise2_sum;               /* sum of the references' noise squared */
-    uint32_t frames;                 /* steady-state frames timed */
-    double ms_sum;                   /* sum over them of frame_ms minus the sinks stage */
-    double cpu_ms_sum;               /* process CPU time of those frames minus what the sink itself used
+    double noise2_sum;      /* sum of the references' noise squared */
+    uint32_t frames;        /* steady-state frames timed */
+    double ms_sum;          /* sum over them of frame_ms minus the sinks stage */
+    double cpu_ms_sum;      /* process CPU time of those frames minus what the sink itself used
                                         (filled by the caller through srv_err_sink_add_cpu) */
-    uint64_t viewer_frames;          /* sum over them of the viewers rendered */
-    uint64_t effect_rays;            /* sum over them of every effect's rays */
-    uint32_t images_all;             /* compared images, warm-up included */
-    char error[512];                 /* the first failure (reference or heat map), "" if none */
+    uint64_t viewer_frames; /* sum over them of the viewers rendered */
+    uint64_t effect_rays;   /* sum over them of every effect's rays */
+    uint32_t images_all;    /* compared images, warm-up included */
+    char error[512];        /* the first failure (reference or heat map), "" if none */
 } srv_err_totals;
 
 typedef struct srv_err_sink {
     srv_err_sink_desc desc;
-    uint32_t frame;     /* the caller's frame number of the frame about to run (set before srv_loop_frame):
+    uint32_t frame; /* the caller's frame number of the frame about to run (set before srv_loop_frame):
                            what is compared, timed and named uses it, not the loop's own count, so a run may
                            skip frames (the no-cache baseline keeps no state between frames) */
     srv_err_totals totals;
@@ -143,7 +145,7 @@ double srv_err_cpu_ms(void);
 
 /* Writes a heat map PNG of per-pixel |a - b| (mean over the 3 channels), `max` shown white, through a
  * black-red-yellow-white ramp. 0, or -1 with msg. */
-int srv_err_heatmap(const char *path, const float *a, const float *b, uint32_t width, uint32_t height, float max,
-                    char *msg, size_t msg_cap);
+int srv_err_heatmap(const char *path, const float *a, const float *b, uint32_t width, uint32_t height,
+                    float max, char *msg, size_t msg_cap);
 
 #endif

@@ -690,16 +690,19 @@ bool srv_rep_write_html(const char *dir, const srv_rep_row *rows, size_t n, cons
         fprintf(f, "<li>Why: the most exact cached configuration of %u viewer%s, ", eq[k].viewers,
                 eq[k].viewers == 1 ? "" : "s");
         html_text(f, b->label);
-        fprintf(f, ", has RMSE %.4g at %.1f ms per frame, against %.4g for no cache at that time (ratio %.2f). ",
+        fprintf(f,
+                ", has RMSE %.4g at %.1f ms per frame, against %.4g for no cache at that time (ratio %.2f). ",
                 b->rmse, b->ms_per_frame, eq[k].no_cache_at_best, b->rmse / eq[k].no_cache_at_best);
         if (best_meets && b != eq[k].cached)
-            fprintf(f, "That setting meets the goal: the default misses it by its time, not by its error (%.0f "
-                       "effect rays per frame against %.0f). ",
+            fprintf(f,
+                    "That setting meets the goal: the default misses it by its time, not by its error (%.0f "
+                    "effect rays per frame against %.0f). ",
                     eq[k].cached->rays_per_frame, b->rays_per_frame);
         else if (!best_meets)
-            fputs("No swept setting brings the cached error under half: the cached error is a floor the sample "
-                  "counts do not move, not noise. ",
-                  f);
+            fputs(
+                "No swept setting brings the cached error under half: the cached error is a floor the sample "
+                "counts do not move, not noise. ",
+                f);
         if (isfinite(eq[k].cached_shadow) && isfinite(eq[k].no_cache_shadow))
             fprintf(f,
                     "The shadow term (lit fraction of light 0) has RMSE %.4g cached against %.4g without the "
@@ -710,14 +713,14 @@ bool srv_rep_write_html(const char *dir, const srv_rep_row *rows, size_t n, cons
     }
     fputs("</ul>\n", f);
 
-    fputs(
-        "<h2>Error against time per frame</h2>\n<p>Time per frame here: ", f);
+    fputs("<h2>Error against time per frame</h2>\n<p>Time per frame here: ", f);
     html_text(f, page->time_label ? page->time_label : "");
-    fputs("; mean over the steady-state frames, on a shared, noisy machine. The CSV has both the engine's "
-          "elapsed frame time (the statistics sim writes, without the sinks stage, so the comparison with the "
-          "reference is not counted) and the process CPU time of the frame less the sink's. Points on the "
-          "Pareto front are no slower and no less exact than any other of their viewer count.</p>\n",
-          f);
+    fputs(
+        "; mean over the steady-state frames, on a shared, noisy machine. The CSV has both the engine's "
+        "elapsed frame time (the statistics sim writes, without the sinks stage, so the comparison with the "
+        "reference is not counted) and the process CPU time of the frame less the sink's. Points on the "
+        "Pareto front are no slower and no less exact than any other of their viewer count.</p>\n",
+        f);
     uint32_t counts[SRV_REP_MAX_VIEWER_COUNTS];
     size_t vc = viewer_counts(rows, n, counts, SRV_REP_MAX_VIEWER_COUNTS);
     for (size_t k = 0; k < vc; k++) {
@@ -748,7 +751,8 @@ bool srv_rep_write_html(const char *dir, const srv_rep_row *rows, size_t n, cons
         "pixel; <i>denoised</i> removes the reference's own noise in quadrature (sqrt(RMSE&sup2; &minus; "
         "noise&sup2;)); shadow: the lit fraction of light 0; AO only where no probes replace the sky "
         "term.</p>\n"
-        "<table><tr><th>configuration</th><th>family</th><th>viewers</th><th>ms/frame (the time above)</th><th>ms/viewer</th>"
+        "<table><tr><th>configuration</th><th>family</th><th>viewers</th><th>ms/frame (the time "
+        "above)</th><th>ms/viewer</th>"
         "<th>CPU ms/frame</th><th>effect rays/frame</th><th>RMSE</th><th>PSNR dB</th><th>RMSE denoised</th>"
         "<th>shadow RMSE</th><th>AO RMSE</th><th>ref noise</th><th>FLIP</th></tr>\n",
         f);
@@ -762,10 +766,10 @@ bool srv_rep_write_html(const char *dir, const srv_rep_row *rows, size_t n, cons
         const struct {
             const char *format;
             double value;
-        } cells[] = {{"%.1f", r->ms_per_frame}, {"%.1f", r->ms_per_viewer}, {"%.1f", r->cpu_ms_per_frame},
-                     {"%.0f", r->rays_per_frame}, {"%.4g", r->rmse}, {"%.2f", r->psnr_db},
-                     {"%.4g", r->rmse_denoised}, {"%.4g", r->rmse_shadow}, {"%.4g", r->rmse_ao},
-                     {"%.3g", r->ref_noise}, {"%.4f", r->flip_mean}};
+        } cells[] = {{"%.1f", r->ms_per_frame},   {"%.1f", r->ms_per_viewer}, {"%.1f", r->cpu_ms_per_frame},
+                     {"%.0f", r->rays_per_frame}, {"%.4g", r->rmse},          {"%.2f", r->psnr_db},
+                     {"%.4g", r->rmse_denoised},  {"%.4g", r->rmse_shadow},   {"%.4g", r->rmse_ao},
+                     {"%.3g", r->ref_noise},      {"%.4f", r->flip_mean}};
         for (size_t k = 0; k < sizeof cells / sizeof cells[0]; k++) {
             if (k)
                 fputs("</td><td>", f);

@@ -106,10 +106,10 @@ int srv_rep_plots(const char *dir, const srv_rep_row *rows, size_t n, const char
 
 /* What the page says of the run besides the rows. */
 typedef struct srv_rep_page {
-    const char *title;    /* the scene and cameras */
-    const char *command;  /* the command line */
-    const char *settings; /* one paragraph: resolution, frames, warm-up, references */
-    bool plots;           /* the plots exist */
+    const char *title;      /* the scene and cameras */
+    const char *command;    /* the command line */
+    const char *settings;   /* one paragraph: resolution, frames, warm-up, references */
+    bool plots;             /* the plots exist */
     const char *time_label; /* what ms_per_frame is (the plots' and the comparison's time) */
     bool interrupted;
     uint32_t planned; /* configurations planned */

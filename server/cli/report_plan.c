@@ -13,8 +13,9 @@
 /* ---- options ------------------------------------------------------------------------------------------- */
 
 /* The sweep families, in the order they run (--only picks some). */
-static const char *const family_names[] = {"default",    "bias",       "ao_samples", "shadow_rays", "probe_cell",
-                                           "probe_rays", "ray_budget", "viewers",    "no_cache"};
+static const char *const family_names[] = {"default",     "bias",       "ao_samples",
+                                           "shadow_rays", "probe_cell", "probe_rays",
+                                           "ray_budget",  "viewers",    "no_cache"};
 _Static_assert(sizeof family_names / sizeof family_names[0] == REPORT_FAMILIES, "one name a family");
 
 static const char report_usage[] =
@@ -22,8 +23,10 @@ static const char report_usage[] =
     "\n"
     "Error against run time: sweeps of the engine's settings on one scene and one set of cameras, each\n"
     "configuration a run of the engine. For every configuration: time per frame (the engine's frame time,\n"
-    "as sim's statistics have it, without the sinks stage; mean over the frames after the warm-up, per frame\n"
-    "and per viewer) and the error of its frames against reference images of the same cameras (RMSE and PSNR\n"
+    "as sim's statistics have it, without the sinks stage; mean over the frames after the warm-up, per "
+    "frame\n"
+    "and per viewer) and the error of its frames against reference images of the same cameras (RMSE and "
+    "PSNR\n"
     "in linear radiance with peak 1.0, the shadow term, and the AO term where no probes replace the sky).\n"
     "\n"
     "Sweeps (from the base settings given with the engine options below; one viewer unless said):\n"
@@ -106,8 +109,9 @@ static bool parse_only(const char *arg, report_options *o)
             if (strcmp(tok, family_names[k]) == 0)
                 found = k;
         if (found < 0) {
-            fprintf(stderr, "fxcache report: --only: '%s' is not a sweep (default, bias, ao_samples, shadow_rays, "
-                            "probe_cell, probe_rays, ray_budget, viewers, no_cache)\n",
+            fprintf(stderr,
+                    "fxcache report: --only: '%s' is not a sweep (default, bias, ao_samples, shadow_rays, "
+                    "probe_cell, probe_rays, ray_budget, viewers, no_cache)\n",
                     tok);
             return false;
         }
@@ -158,17 +162,32 @@ int srv_report_parse_options(int argc, char **argv, report_options *o)
             continue;
         bool ok = true;
         switch (c) {
-        case O_WARMUP: ok = srv_cli_u32("report", "--warmup", optarg, 0, 99999, &o->warmup); o->warmup_set = true; break;
+        case O_WARMUP:
+            ok = srv_cli_u32("report", "--warmup", optarg, 0, 99999, &o->warmup);
+            o->warmup_set = true;
+            break;
         case O_EVERY:
             ok = srv_cli_u32("report", "--every", optarg, 1, 100000, &o->every);
             o->every_set = true;
             break;
-        case O_OUT: o->out_dir = srv_cli_dir_arg(optarg); break;
-        case O_QUICK: o->quick = true; break;
-        case O_QUIET: o->quiet = true; break;
-        case O_REFS: ok = parse_power_of_two("--ref-samples", optarg, 0.125, 4, &o->ref_samples); break;
-        case O_ONLY: ok = parse_only(optarg, o); break;
-        case O_HEATMAX: ok = srv_cli_double("report", "--heatmap-max", optarg, 1e-6, 1e6, &o->heatmap_max); break;
+        case O_OUT:
+            o->out_dir = srv_cli_dir_arg(optarg);
+            break;
+        case O_QUICK:
+            o->quick = true;
+            break;
+        case O_QUIET:
+            o->quiet = true;
+            break;
+        case O_REFS:
+            ok = parse_power_of_two("--ref-samples", optarg, 0.125, 4, &o->ref_samples);
+            break;
+        case O_ONLY:
+            ok = parse_only(optarg, o);
+            break;
+        case O_HEATMAX:
+            ok = srv_cli_double("report", "--heatmap-max", optarg, 1e-6, 1e6, &o->heatmap_max);
+            break;
         case O_TIME:
             o->time_cpu = strcmp(optarg, "cpu") == 0;
             if (!o->time_cpu && strcmp(optarg, "elapsed") != 0) {
@@ -181,15 +200,19 @@ int srv_report_parse_options(int argc, char **argv, report_options *o)
             srv_cli_effect_names(names, sizeof names);
             printf(report_usage, srv_camgen_list());
             printf(srv_cli_engine_usage, names);
-            printf("  -h, --help           this text\n"
-                   "\n"
-                   "Progress: a line per configuration on stderr (a status line too on a terminal). SIGINT or\n"
-                   "SIGTERM: stops after the current frame with every finished configuration written; run the same\n"
-                   "command again to resume. Where a 'flip' executable (NVIDIA's FLIP) is on PATH, a FLIP column\n"
-                   "is added. Exit status: 0 done or interrupted, 1 a failure, 2 bad options.\n");
+            printf(
+                "  -h, --help           this text\n"
+                "\n"
+                "Progress: a line per configuration on stderr (a status line too on a terminal). SIGINT or\n"
+                "SIGTERM: stops after the current frame with every finished configuration written; run the "
+                "same\n"
+                "command again to resume. Where a 'flip' executable (NVIDIA's FLIP) is on PATH, a FLIP "
+                "column\n"
+                "is added. Exit status: 0 done or interrupted, 1 a failure, 2 bad options.\n");
             return 0;
         }
-        default: return srv_cli_getopt_error("report", c, argv);
+        default:
+            return srv_cli_getopt_error("report", c, argv);
         }
         if (!ok)
             return 2;
@@ -203,11 +226,13 @@ int srv_report_parse_options(int argc, char **argv, report_options *o)
     if (!srv_cli_view_check("report", &o->view))
         return 2;
     if (o->engine.no_cache) {
-        fprintf(stderr, "fxcache report: --no-cache is a sweep of the report (no_cache), not a base setting\n");
+        fprintf(stderr,
+                "fxcache report: --no-cache is a sweep of the report (no_cache), not a base setting\n");
         return 2;
     }
     if (o->engine.no_cache_samples > 0) {
-        fprintf(stderr, "fxcache report: --no-cache-samples: the no_cache sweep sets the baseline's samples\n");
+        fprintf(stderr,
+                "fxcache report: --no-cache-samples: the no_cache sweep sets the baseline's samples\n");
         return 2;
     }
     /* --quick's defaults, where the option was not given. */
@@ -233,8 +258,8 @@ int srv_report_parse_options(int argc, char **argv, report_options *o)
 /* ---- configurations ------------------------------------------------------------------------------------ */
 
 /* Adds a configuration derived from the base settings; `apply` edits its engine settings. */
-static report_config *add_config(report_plan *plan, const report_context *ctx, const char *family, const char *id,
-                                 const char *label, uint32_t viewers)
+static report_config *add_config(report_plan *plan, const report_context *ctx, const char *family,
+                                 const char *id, const char *label, uint32_t viewers)
 {
     if (plan->count == REPORT_MAX_CONFIGS)
         return NULL;
@@ -257,21 +282,24 @@ static void finish_config(report_config *c, const report_context *ctx)
     const fx_effect *const *effects = fx_registry(&count);
     r->no_cache = e->no_cache;
     r->no_cache_samples = e->no_cache ? (e->no_cache_samples > 0 ? e->no_cache_samples : 1.0) : 1.0;
-    r->bias_shadow = ctx->shadow_index < 0 ? 0
+    r->bias_shadow = ctx->shadow_index < 0            ? 0
                      : e->bias_set[ctx->shadow_index] ? e->bias[ctx->shadow_index]
                                                       : effects[ctx->shadow_index]->level_bias;
-    r->bias_ao = ctx->ao_index < 0 ? 0 : e->bias_set[ctx->ao_index] ? e->bias[ctx->ao_index] : effects[ctx->ao_index]->level_bias;
+    r->bias_ao = ctx->ao_index < 0            ? 0
+                 : e->bias_set[ctx->ao_index] ? e->bias[ctx->ao_index]
+                                              : effects[ctx->ao_index]->level_bias;
     r->ao_samples = e->ao_samples ? e->ao_samples : FX_AO_MAX_SAMPLES;
     r->shadow_rays = e->shadow_rays ? e->shadow_rays : FX_SHADOW_RAYS;
     r->probe_rays = e->probe_rays ? e->probe_rays : FX_PROBE_RAYS;
     r->probe_cell = ctx->probes_on ? (e->probe_cell > 0 ? e->probe_cell : ctx->default_cell) : NAN;
     r->ray_budget = e->ray_budget;
-    snprintf(c->key, sizeof c->key,
-             "%s|viewers %u|no_cache %d x%g|bias %d %d|ao %u|shadow %u|probe rays %u cell %g hyst %g budget %u|"
-             "ray budget %g|pool %g|ao step %u|density %g|local %d|indirect block %u",
-             ctx->run_key, r->viewers, r->no_cache, r->no_cache_samples, r->bias_shadow, r->bias_ao, r->ao_samples,
-             r->shadow_rays, r->probe_rays, r->probe_cell, e->probe_hysteresis, e->probe_budget, r->ray_budget,
-             e->pool_mb, e->ao_step, e->density, !e->no_local_table, e->indirect_block);
+    snprintf(
+        c->key, sizeof c->key,
+        "%s|viewers %u|no_cache %d x%g|bias %d %d|ao %u|shadow %u|probe rays %u cell %g hyst %g budget %u|"
+        "ray budget %g|pool %g|ao step %u|density %g|local %d|indirect block %u",
+        ctx->run_key, r->viewers, r->no_cache, r->no_cache_samples, r->bias_shadow, r->bias_ao, r->ao_samples,
+        r->shadow_rays, r->probe_rays, r->probe_cell, e->probe_hysteresis, e->probe_budget, r->ray_budget,
+        e->pool_mb, e->ao_step, e->density, !e->no_local_table, e->indirect_block);
 }
 
 /* The viewer counts of the viewers sweep: 1, 2, 4, 8 up to the most, and the most. */
@@ -313,8 +341,9 @@ void srv_report_build_plan(report_plan *plan, const report_context *ctx)
             if (effects[k].index < 0)
                 continue;
             uint32_t registered = 0;
-            int32_t base = o->engine.bias_set[effects[k].index] ? o->engine.bias[effects[k].index]
-                                                                 : fx_registry(&registered)[effects[k].index]->level_bias;
+            int32_t base = o->engine.bias_set[effects[k].index]
+                               ? o->engine.bias[effects[k].index]
+                               : fx_registry(&registered)[effects[k].index]->level_bias;
             for (size_t i = 0; i < count; i++) {
                 if (list[i] == base)
                     continue; /* that is the default configuration */

@@ -17,7 +17,7 @@ enum { REPORT_MAX_CONFIGS = 96 };
 enum { REPORT_FAMILIES = 9 };
 
 typedef struct report_options {
-    srv_cli_engine engine; /* the base settings every configuration starts from */
+    srv_cli_engine engine;     /* the base settings every configuration starts from */
     srv_cli_view_options view; /* --viewers, --frames, --res, --camera, --trace, --fps */
     uint32_t warmup, every;
     bool warmup_set, every_set;

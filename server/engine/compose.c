@@ -17,7 +17,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-
 /* The effects of one cache kind whose taps one call gathers for a run (kind->pixel_taps). */
 enum { TAPS_GROUP = 4 };
 
@@ -25,23 +24,24 @@ enum { TAPS_GROUP = 4 };
 enum { SRV_BLEND_MAX_BLOCK = 8 };
 
 /* One effect's taps of a run through the kind's call for several. */
-FXC_HOT_INLINE void kind_taps(srv_loop *loop, const srv_viewer *view, uint32_t thread_index, const srv_pixel *pixels,
-                              uint32_t count, uint32_t e, fx_taps *taps, uint32_t *blocks)
+FXC_HOT_INLINE void kind_taps(srv_loop *loop, const srv_viewer *view, uint32_t thread_index,
+                              const srv_pixel *pixels, uint32_t count, uint32_t e, fx_taps *taps,
+                              uint32_t *blocks)
 {
     uint32_t k = loop->effect_kind[e];
-    loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers), thread_index, pixels, NULL, count,
-                               1, &e, loop->bias[e], &taps, &blocks);
+    loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers), thread_index, pixels, NULL,
+                               count, 1, &e, loop->bias[e], &taps, &blocks);
 }
 
 /* Per-thread scratch for one run of pixels along a row. */
 typedef struct compose_scratch {
     srv_pixel pixels[SRV_RUN];
     fx_point points[SRV_RUN];
-    fx_taps taps[TAPS_GROUP * SRV_RUN];  /* effect j of a group of one kind's effects: from j * SRV_RUN */
+    fx_taps taps[TAPS_GROUP * SRV_RUN]; /* effect j of a group of one kind's effects: from j * SRV_RUN */
     uint32_t blocks[TAPS_GROUP * SRV_RUN];
     size_t index[SRV_RUN]; /* pixel index of each visible pixel of the run */
     float albedo[SRV_RUN][3];
-    uint32_t triangle[SRV_RUN];                      /* the albedo's arguments, one array each */
+    uint32_t triangle[SRV_RUN]; /* the albedo's arguments, one array each */
     float bary_u[SRV_RUN], bary_v[SRV_RUN], albedo_footprint[SRV_RUN];
     float shade_normal[3][SRV_RUN]; /* axis k of gathered pixel i at [k][i] */
     /* A tile's run gathered in lanes (gather_tile_run): per gathered pixel its column and row, its triangle's
@@ -62,15 +62,15 @@ typedef struct compose_scratch {
      * stands in for are gathered for one call (own_*). */
     /* coarse_shade's blend (blend_row): the run's block row of samples and the next, expanded per column. */
     float expand[2][SRV_SAMPLE_VALUES][SRV_TILE + SRV_BLEND_MAX_BLOCK];
-    int32_t blend_own[SRV_RUN]; /* per lane: no sample stands in, the pixel is evaluated itself */
-    uint32_t sample_slot[SRV_RUN];   /* sample pass: the sample image entry of gathered pixel i */
-    uint8_t own_index[SRV_RUN]; /* the run's pixels evaluated themselves */
+    int32_t blend_own[SRV_RUN];    /* per lane: no sample stands in, the pixel is evaluated itself */
+    uint32_t sample_slot[SRV_RUN]; /* sample pass: the sample image entry of gathered pixel i */
+    uint8_t own_index[SRV_RUN];    /* the run's pixels evaluated themselves */
     srv_pixel own_pixels[SRV_RUN];
     fx_point own_points[SRV_RUN];
     float own_sky[SRV_RUN];
     float own_indirect[SRV_RUN * 3];
     float radiance[SRV_RUN][3]; /* the formula's result, before it is stored in the viewer's buffer */
-    float light_visibility[]; /* SRV_RUN * max(light_count, 1) */
+    float light_visibility[];   /* SRV_RUN * max(light_count, 1) */
 } compose_scratch;
 
 size_t srv__compose_scratch_bytes(const srv_loop *loop)
@@ -101,7 +101,6 @@ void srv__pixel_differentials(const srv_camera_frame *f, const float dir[3], flo
             out[k] = d2[k] * t2 - dir[k] * t;
     }
 }
-
 
 /* min(x, FLT_MAX) without a libm call: infinity saturates, NaN passes on (and is caught after). */
 static inline float saturate_max(float x)
@@ -264,7 +263,7 @@ FXC_HOT_LANES static void gather_lanes(compose_scratch *cs, const gather_memo *m
         cs->shade_normal[1][i] = facing > 0 ? -n1 : n1;
         cs->shade_normal[2][i] = facing > 0 ? -n2 : n2;
         cs->albedo_footprint[i] = cs->pixel_lanes.footprint[i] - log2_density;
-        float (*uv)[SRV_RUN] = cs->lane_island_uv;
+        float(*uv)[SRV_RUN] = cs->lane_island_uv;
         cs->pixel_lanes.island_u[i] = w * uv[0][i] + u * uv[2][i] + v * uv[4][i];
         cs->pixel_lanes.island_v[i] = w * uv[1][i] + u * uv[3][i] + v * uv[5][i];
     }
@@ -275,9 +274,9 @@ FXC_HOT_LANES static void gather_lanes(compose_scratch *cs, const gather_memo *m
  * into lanes (a miss gets the sky, as in gather_pixel), their arithmetic in lanes (gather_lanes), then the
  * cache pixels, only when some kind reads them (pixels; else cs->pixels stays unset: every pixel_taps call
  * gets the lanes). */
-FXC_HOT_INLINE uint32_t gather_tile_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32_t x1, uint32_t y0,
-                                        uint32_t y1, compose_scratch *cs, const float sky[3], float log2_density,
-                                        bool pixels)
+FXC_HOT_INLINE uint32_t gather_tile_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32_t x1,
+                                        uint32_t y0, uint32_t y1, compose_scratch *cs, const float sky[3],
+                                        float log2_density, bool pixels)
 {
     const scene *s = loop->s;
     const size_t width = view->frame.width;
@@ -303,7 +302,8 @@ FXC_HOT_INLINE uint32_t gather_tile_run(srv_loop *loop, srv_viewer *view, uint32
             }
             if (tri != last) {
                 last = tri;
-                const float *normal = s->tri_normal + 3 * (size_t)tri, *uv = s->tri_island_uv + 6 * (size_t)tri;
+                const float *normal = s->tri_normal + 3 * (size_t)tri,
+                            *uv = s->tri_island_uv + 6 * (size_t)tri;
                 n0 = normal[0], n1 = normal[1], n2 = normal[2];
                 uv0 = uv[0], uv1 = uv[1], uv2 = uv[2], uv3 = uv[3], uv4 = uv[4], uv5 = uv[5];
                 island = s->tri_island[tri];
@@ -363,8 +363,8 @@ static uint32_t gather_list(srv_loop *loop, srv_viewer *view, size_t first, size
     uint32_t count = 0;
     cs->have_lanes = false;
     for (size_t p = first; p < end; p++)
-        gather_pixel(loop, view, view->list[p] & 0xFFFFu, view->list[p] >> 16, p, cs, &count, sky, log2_density,
-                     positions, points, &memo);
+        gather_pixel(loop, view, view->list[p] & 0xFFFFu, view->list[p] >> 16, p, cs, &count, sky,
+                     log2_density, positions, points, &memo);
     scene_albedo_run(loop->s, cs->triangle, cs->bary_u, cs->bary_v, cs->albedo_footprint, count, cs->albedo);
     return count;
 }
@@ -375,8 +375,8 @@ enum { CONSTANT_LIGHTS = 8 }; /* directional lights whose direction and irradian
 typedef struct compose_setup {
     float sky[3];
     float log2_density;
-    bool positions; /* some shading cache kind reads the pixels' positions */
-    bool points;    /* the visible points (fx_point) are gathered: someone reads them */
+    bool positions;                     /* some shading cache kind reads the pixels' positions */
+    bool points;                        /* the visible points (fx_point) are gathered: someone reads them */
     bool positions_other, points_other; /* the same leaving out loop->coarse_effect: a coarse tile's runs */
     /* Some shading effect's kind reads the pixels (srv_pixel) even when it gets lanes (not lanes_suffice);
      * pixels_other leaves out loop->coarse_effect (coarse_shade gathers its own pixels again in full). */
@@ -430,7 +430,8 @@ FXC_HOT_LANES static void radiance_lanes(compose_scratch *cs, const float sky[3]
             /* saturate_max() written out: a helper is not inlined into a function of other options */
             float sk = k == 0 ? sky0 : (k == 1 ? sky1 : sky2);
             float a = cs->irradiance[i][k], b = sk * sv, c = cs->indirect[3 * i + k];
-            float irr = (a > FLT_MAX ? FLT_MAX : a) + (b > FLT_MAX ? FLT_MAX : b) + (c > FLT_MAX ? FLT_MAX : c);
+            float irr =
+                (a > FLT_MAX ? FLT_MAX : a) + (b > FLT_MAX ? FLT_MAX : b) + (c > FLT_MAX ? FLT_MAX : c);
             float value = cs->albedo[i][k] * (irr > FLT_MAX ? FLT_MAX : irr);
             cs->radiance[i][k] = value <= FLT_MAX ? value : (value > 0 ? FLT_MAX : 0.0f);
         }
@@ -447,7 +448,8 @@ FXC_HOT_LANES static void directional_lanes(compose_scratch *cs, const float ldi
     const float l0 = ldir[0], l1 = ldir[1], l2 = ldir[2], c0 = rgb[0], c1 = rgb[1], c2 = rgb[2];
     if (stride == 1) { /* one light: its visibility contiguous (the loop below, vectorised without gathers) */
         for (int i = 0; i < SRV_RUN; i++) {
-            float cosine = cs->shade_normal[0][i] * l0 + cs->shade_normal[1][i] * l1 + cs->shade_normal[2][i] * l2;
+            float cosine =
+                cs->shade_normal[0][i] * l0 + cs->shade_normal[1][i] * l1 + cs->shade_normal[2][i] * l2;
             float visibility = cs->light_visibility[i];
             bool lit = cosine > 0;
             cs->irradiance[i][0] += lit ? cosine * visibility * c0 : 0.0f;
@@ -457,7 +459,8 @@ FXC_HOT_LANES static void directional_lanes(compose_scratch *cs, const float ldi
         return;
     }
     for (int i = 0; i < SRV_RUN; i++) {
-        float cosine = cs->shade_normal[0][i] * l0 + cs->shade_normal[1][i] * l1 + cs->shade_normal[2][i] * l2;
+        float cosine =
+            cs->shade_normal[0][i] * l0 + cs->shade_normal[1][i] * l1 + cs->shade_normal[2][i] * l2;
         float visibility = cs->light_visibility[(size_t)i * stride + l];
         bool lit = cosine > 0;
         cs->irradiance[i][0] += lit ? cosine * visibility * c0 : 0.0f;
@@ -473,9 +476,9 @@ FXC_HOT_LANES static void directional_lanes(compose_scratch *cs, const float ldi
 typedef struct coarse_run {
     const srv_coarse_grid *g;
     uint32_t x0, x1, y0, y1;
-    const float *values;       /* the sample image's first value (coarse_shade) */
-    size_t value_stride;       /* floats from one value of the image to the next */
-    size_t stride, first;      /* samples a row; the tile's first sample */
+    const float *values;  /* the sample image's first value (coarse_shade) */
+    size_t value_stride;  /* floats from one value of the image to the next */
+    size_t stride, first; /* samples a row; the tile's first sample */
 } coarse_run;
 
 /* A row of a tile's samples, expanded per pixel column (out[v][c]: sample c / B of the row, value v; zeros
@@ -483,7 +486,8 @@ typedef struct coarse_run {
  * c + B, with contiguous loads (gathers are slow on the machines we measure on). `values` is sample image
  * value 0 (the others every `value_stride` floats on), `row` the index of the row's first sample. */
 FXC_HOT_INLINE void blend_expand_row_of(const float *values, size_t value_stride, size_t row, uint32_t nx,
-                                        uint32_t block, float out[SRV_SAMPLE_VALUES][SRV_TILE + SRV_BLEND_MAX_BLOCK])
+                                        uint32_t block,
+                                        float out[SRV_SAMPLE_VALUES][SRV_TILE + SRV_BLEND_MAX_BLOCK])
 {
     const uint32_t columns = SRV_TILE + SRV_BLEND_MAX_BLOCK, samples = columns / block;
     for (uint32_t v = 0; v < SRV_SAMPLE_VALUES; v++) {
@@ -498,7 +502,8 @@ FXC_HOT_INLINE void blend_expand_row_of(const float *values, size_t value_stride
 
 /* blend_expand_row_of with the block a constant in each call (2 or 4: srv__coarse_block's choices). */
 FXC_HOT_INLINE void blend_expand_row(const float *values, size_t value_stride, size_t row, uint32_t nx,
-                                     uint32_t block, float out[SRV_SAMPLE_VALUES][SRV_TILE + SRV_BLEND_MAX_BLOCK])
+                                     uint32_t block,
+                                     float out[SRV_SAMPLE_VALUES][SRV_TILE + SRV_BLEND_MAX_BLOCK])
 {
     if (block == 4)
         blend_expand_row_of(values, value_stride, row, nx, 4, out);
@@ -528,7 +533,7 @@ FXC_HOT_LANES static void blend_row(const int32_t *mask, const float *wx, float 
         float sum0 = 0, sum1 = 0, sum2 = 0, sum3 = 0, total = 0, sharing = 0;
 #pragma GCC unroll 4
         for (int c = 0; c < 4; c++) {
-            const float (*src)[SRV_TILE + SRV_BLEND_MAX_BLOCK] = (c & 2) ? bottom : top;
+            const float(*src)[SRV_TILE + SRV_BLEND_MAX_BLOCK] = (c & 2) ? bottom : top;
             int32_t at = j + ((c & 1) ? block : 0);
             float taken = src[SRV_SAMPLE_OK][at] * (float)((m >> c) & 1), w = weight[c] * taken;
             sum0 += w * src[SRV_SAMPLE_R][at];
@@ -613,7 +618,8 @@ FXC_HOT_LANES static int32_t blend_finish_lanes(const float (*o)[SRV_TILE], floa
  * the sample image `values` (value_stride floats from one value to the next, `stride` samples a row, the
  * tile's first at `first`). */
 FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scratch *cs, uint32_t e,
-                                 const coarse_run *cr, const compose_setup *cu, uint32_t thread_index, uint32_t count)
+                                 const coarse_run *cr, const compose_setup *cu, uint32_t thread_index,
+                                 uint32_t count)
 {
     const uint64_t *bits = loop->viewer_bits[e];
     const srv_coarse_grid *g = cr->g;
@@ -631,10 +637,11 @@ FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scrat
         uint32_t ly = y - g->y0, iy = ly >> shift, fy = ly & low;
         bool two_y = fy && iy + 1 < g->ny;
         if (iy != expanded) {
-            blend_expand_row(cr->values, cr->value_stride, cr->first + (size_t)iy * cr->stride, g->nx, g->block,
-                             cs->expand[0]);
-            blend_expand_row(cr->values, cr->value_stride, cr->first + (size_t)(iy + 1 < g->ny ? iy + 1 : iy) * cr->stride,
-                             g->nx, g->block, cs->expand[1]);
+            blend_expand_row(cr->values, cr->value_stride, cr->first + (size_t)iy * cr->stride, g->nx,
+                             g->block, cs->expand[0]);
+            blend_expand_row(cr->values, cr->value_stride,
+                             cr->first + (size_t)(iy + 1 < g->ny ? iy + 1 : iy) * cr->stride, g->nx, g->block,
+                             cs->expand[1]);
             expanded = iy;
         }
         float wy = two_y ? (float)fy * g->inv_block : 0.0f;
@@ -645,17 +652,18 @@ FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scrat
         for (uint32_t j = 0; j < SRV_TILE; j++)
             mask[j] = bytes[j];
         float o[6][SRV_TILE];
-        blend_row(mask, wx, wy, (int32_t)g->block, (const float (*)[SRV_TILE + SRV_BLEND_MAX_BLOCK])cs->expand[0],
-                  (const float (*)[SRV_TILE + SRV_BLEND_MAX_BLOCK])cs->expand[1], o);
+        blend_row(mask, wx, wy, (int32_t)g->block,
+                  (const float(*)[SRV_TILE + SRV_BLEND_MAX_BLOCK]) cs->expand[0],
+                  (const float(*)[SRV_TILE + SRV_BLEND_MAX_BLOCK]) cs->expand[1], o);
         uint32_t visible = 0;
         if (columns == SRV_TILE)
             for (uint32_t j = 0; j < SRV_TILE; j++)
                 visible += view->tri[row + j] != SRV_MISS;
         /* the common case, a whole row visible: 16 consecutive lanes */
         if (visible == SRV_TILE && lane + SRV_TILE <= count && !loop->desc.no_lanes) {
-            owns += (uint32_t)blend_finish_lanes((const float (*)[SRV_TILE])o, cs->sky_visibility + lane,
-                                                 cs->indirect + 3 * lane, cs->sharing + lane, cs->blend_own + lane,
-                                                 bits != NULL);
+            owns += (uint32_t)blend_finish_lanes((const float(*)[SRV_TILE])o, cs->sky_visibility + lane,
+                                                 cs->indirect + 3 * lane, cs->sharing + lane,
+                                                 cs->blend_own + lane, bits != NULL);
             lane += SRV_TILE;
             continue;
         }
@@ -705,7 +713,10 @@ FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scrat
     if (!own)
         return;
     kind_taps(loop, view, thread_index, cs->own_pixels, own, e, cs->taps, bits ? cs->blocks : NULL);
-    fx_shade_run run = {.count = own, .taps = cs->taps, .points = cs->own_points, .sky_visibility = cs->own_sky,
+    fx_shade_run run = {.count = own,
+                        .taps = cs->taps,
+                        .points = cs->own_points,
+                        .sky_visibility = cs->own_sky,
                         .indirect = cs->own_indirect};
     loop->effects[e]->shade(&loop->fx, &run);
     for (uint32_t j = 0; j < own; j++) {
@@ -756,13 +767,15 @@ FXC_HOT_CLONES static void sample_patch(void *user, uint32_t task_index, uint32_
             uint32_t gx = gx0 + first % across, gy = gy0 + first / across;
             size_t sample = (size_t)gy * task->stride + gx;
             for (uint32_t v = 0; v < SRV_SAMPLE_VALUES; v++)
-                values[v * value_stride + sample] = 0.0f; /* and finite values: blend_row multiplies them by 0 */
+                values[v * value_stride + sample] =
+                    0.0f; /* and finite values: blend_row multiplies them by 0 */
             uint32_t x = gx * block, y = gy * block;
             size_t p = (size_t)y * width + x;
             if (view->tri[p] == SRV_MISS)
                 continue;
             cs->sample_slot[count] = (uint32_t)sample;
-            gather_pixel(loop, view, x, y, p, cs, &count, cu.sky, cu.log2_density, cu.positions, cu.points, &memo);
+            gather_pixel(loop, view, x, y, p, cs, &count, cu.sky, cu.log2_density, cu.positions, cu.points,
+                         &memo);
         }
         if (!count)
             continue;
@@ -771,8 +784,11 @@ FXC_HOT_CLONES static void sample_patch(void *user, uint32_t task_index, uint32_
             cs->sky_visibility[i] = 1.0f;
             cs->indirect[3 * i] = cs->indirect[3 * i + 1] = cs->indirect[3 * i + 2] = 0.0f;
         }
-        fx_shade_run run = {.count = count, .taps = cs->taps, .points = cs->points,
-                            .sky_visibility = cs->sky_visibility, .indirect = cs->indirect};
+        fx_shade_run run = {.count = count,
+                            .taps = cs->taps,
+                            .points = cs->points,
+                            .sky_visibility = cs->sky_visibility,
+                            .indirect = cs->indirect};
         loop->effects[e]->shade(&loop->fx, &run);
         for (uint32_t i = 0; i < count; i++) {
             size_t sample = cs->sample_slot[i];
@@ -787,8 +803,8 @@ FXC_HOT_CLONES static void sample_patch(void *user, uint32_t task_index, uint32_
 }
 
 FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch *cs, uint32_t count,
-                              const compose_setup *cu, uint32_t thread_index, uint64_t *missing, uint64_t *rays,
-                              const coarse_run *cr)
+                              const compose_setup *cu, uint32_t thread_index, uint64_t *missing,
+                              uint64_t *rays, const coarse_run *cr)
 {
     const scene *s = loop->s;
     const uint32_t lights = cu->lights, stride = cu->stride;
@@ -835,7 +851,8 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
             for (uint32_t f = e; f < loop->effect_count && n < TAPS_GROUP; f++) {
                 if (!loop->effect_shading[f])
                     continue;
-                if ((cr && f == loop->coarse_effect) || loop->effect_kind[f] != k || loop->bias[f] != loop->bias[e])
+                if ((cr && f == loop->coarse_effect) || loop->effect_kind[f] != k ||
+                    loop->bias[f] != loop->bias[e])
                     break;
                 group[n] = f;
                 group_taps[n] = cs->taps + (size_t)n * SRV_RUN;
@@ -843,9 +860,10 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
                 n++;
                 last = f;
             }
-            uint32_t empty = loop->kinds[k]->pixel_taps(
-                loop->caches[k], (uint32_t)(view - loop->viewers), thread_index, cs->pixels,
-                cs->have_lanes ? &cs->pixel_lanes : NULL, count, n, group, loop->bias[e], group_taps, group_blocks);
+            uint32_t empty =
+                loop->kinds[k]->pixel_taps(loop->caches[k], (uint32_t)(view - loop->viewers), thread_index,
+                                           cs->pixels, cs->have_lanes ? &cs->pixel_lanes : NULL, count, n,
+                                           group, loop->bias[e], group_taps, group_blocks);
             for (uint32_t j = 0; j < n; j++) {
                 uint32_t g = group[j];
                 const uint64_t *bits = loop->viewer_bits[g];
@@ -857,7 +875,8 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
                     for (uint32_t i = 0; i < count; i++) {
                         cs->missing[i] |= taps[i].count == 0;
                         if (blocks[i] != SRV_NONE)
-                            cs->sharing[i] = fmaxf(cs->sharing[i], (float)__builtin_popcountll(bits[blocks[i]]));
+                            cs->sharing[i] =
+                                fmaxf(cs->sharing[i], (float)__builtin_popcountll(bits[blocks[i]]));
                     }
                 } else if (empty) { /* else every pixel has taps: nothing is missing */
                     for (uint32_t i = 0; i < count; i++)
@@ -880,8 +899,8 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
         for (uint32_t i = 0; i < count; i++) {
             float ldir[3], dist;
             fx_light_direction(light, cs->points[i].position, ldir, &dist); /* cu->points holds them */
-            float cosine =
-                cs->shade_normal[0][i] * ldir[0] + cs->shade_normal[1][i] * ldir[1] + cs->shade_normal[2][i] * ldir[2];
+            float cosine = cs->shade_normal[0][i] * ldir[0] + cs->shade_normal[1][i] * ldir[1] +
+                           cs->shade_normal[2][i] * ldir[2];
             if (!(cosine > 0))
                 continue;
             float falloff = light->type == SCENE_LIGHT_POINT ? 1.0f / fmaxf(dist * dist, 1e-8f) : 1.0f;
@@ -955,12 +974,18 @@ FXC_HOT_CLONES static void compose_tile(void *user, uint32_t task_index, uint32_
     }
     for (uint32_t ry = ty0; ry < ty1; ry += SRV_RUN / SRV_TILE) {
         uint32_t ry1 = ry + SRV_RUN / SRV_TILE < ty1 ? ry + SRV_RUN / SRV_TILE : ty1;
-        uint32_t count = run_setup.points ? gather_run(loop, view, tx0, tx1, ry, ry1, cs, cu.sky, cu.log2_density,
-                                                       run_setup.positions, run_setup.points)
-                                          : gather_tile_run(loop, view, tx0, tx1, ry, ry1, cs, cu.sky, cu.log2_density,
-                                                            run_setup.pixels);
-        coarse_run cr = {.g = &grid, .x0 = tx0, .x1 = tx1, .y0 = ry, .y1 = ry1, .values = view->samples,
-                         .value_stride = view->sample_capacity, .stride = sample_stride,
+        uint32_t count = run_setup.points ? gather_run(loop, view, tx0, tx1, ry, ry1, cs, cu.sky,
+                                                       cu.log2_density, run_setup.positions, run_setup.points)
+                                          : gather_tile_run(loop, view, tx0, tx1, ry, ry1, cs, cu.sky,
+                                                            cu.log2_density, run_setup.pixels);
+        coarse_run cr = {.g = &grid,
+                         .x0 = tx0,
+                         .x1 = tx1,
+                         .y0 = ry,
+                         .y1 = ry1,
+                         .values = view->samples,
+                         .value_stride = view->sample_capacity,
+                         .stride = sample_stride,
                          .first = (size_t)(ty0 / block) * sample_stride + tx0 / block};
         shade_run(loop, view, cs, count, &run_setup, thread_index, &missing, rays, coarse ? &cr : NULL);
         for (uint32_t y = ry; y < ry1; y++) {
@@ -992,10 +1017,11 @@ FXC_HOT_CLONES static void compose_list_task(void *user, uint32_t task_index, ui
     for (size_t run = first, run_end; run < end; run = run_end) {
         /* The entries of one whole-frame run (srv__run_key's order keeps them together). */
         uint32_t run_index = srv__run_key(view->list[run], tiles_x) >> 6;
-        for (run_end = run + 1; run_end < end && srv__run_key(view->list[run_end], tiles_x) >> 6 == run_index;)
+        for (run_end = run + 1;
+             run_end < end && srv__run_key(view->list[run_end], tiles_x) >> 6 == run_index;)
             run_end++;
-        uint32_t count = gather_list(loop, view, run, run_end, cs, cu.sky, cu.log2_density, cu.positions,
-                                    cu.points);
+        uint32_t count =
+            gather_list(loop, view, run, run_end, cs, cu.sky, cu.log2_density, cu.positions, cu.points);
         shade_run(loop, view, cs, count, &cu, thread_index, &missing, rays, NULL);
         srv__tone_map_row(view->radiance + 3 * run, view->image + 3 * run, (uint32_t)(3 * (run_end - run)));
     }
@@ -1014,17 +1040,19 @@ void srv__compose(srv_loop *loop, uint32_t slot, srv_frame_stats *st)
         uint32_t per_task = LIST_RUNS * SRV_RUN;
         srv_pool_run(loop->pool, (view->list_count + per_task - 1) / per_task, compose_list_task, &task);
     } else {
-        uint32_t tiles =
-            ((view->frame.width + SRV_TILE - 1) / SRV_TILE) * ((view->frame.height + SRV_TILE - 1) / SRV_TILE);
+        uint32_t tiles = ((view->frame.width + SRV_TILE - 1) / SRV_TILE) *
+                         ((view->frame.height + SRV_TILE - 1) / SRV_TILE);
         uint32_t block = srv__coarse_block(loop, view);
         if (block > 1) { /* the block samples, once per frame, before the tiles blend them */
-            sample_task samples = {.loop = loop, .view = view, .block = block,
+            sample_task samples = {.loop = loop,
+                                   .view = view,
+                                   .block = block,
                                    .stride = srv__sample_stride(view->frame.width, block),
                                    .rows = srv__sample_stride(view->frame.height, block)};
             uint32_t patch_w = SRV_TILE / block * SAMPLE_PATCH_TILES, patch_h = SRV_TILE / block;
             samples.patches_x = (samples.stride + patch_w - 1) / patch_w;
-            srv_pool_run(loop->pool, samples.patches_x * ((samples.rows + patch_h - 1) / patch_h), sample_patch,
-                         &samples);
+            srv_pool_run(loop->pool, samples.patches_x * ((samples.rows + patch_h - 1) / patch_h),
+                         sample_patch, &samples);
         }
         /* Each thread a contiguous half of the tiles (in order), then the other's last tiles: tiles handed out
          * one by one alternated between the threads, which then wrote neighbouring tiles' rows of the image

@@ -28,10 +28,10 @@
 #include <stdint.h>
 
 enum {
-    SRV_MAX_VIEWERS = 64,          /* viewer slots */
+    SRV_MAX_VIEWERS = 64, /* viewer slots */
     SRV_MAX_EFFECTS = FX_MAX_EFFECTS,
-    SRV_MAX_SIDE = 8192,           /* largest image side */
-    SRV_MAX_PIXEL_LIST = 1 << 20,  /* most pixels a sparse viewer may list (max_pixels) */
+    SRV_MAX_SIDE = 8192,          /* largest image side */
+    SRV_MAX_PIXEL_LIST = 1 << 20, /* most pixels a sparse viewer may list (max_pixels) */
 };
 
 /* Stages timed per frame, in the order they run. */
@@ -55,7 +55,7 @@ typedef enum srv_drop {
     SRV_DROP_NOMEM_UPDATES,      /* an effect's updates lost: no memory for its job lists */
     SRV_DROP_POOL_EXHAUSTED,     /* blocks not mapped: the effect's pool was full of this frame's blocks */
     SRV_DROP_TABLE_FULL,         /* blocks not mapped: the cache's table at its maximum load */
-    SRV_DROP_NO_DEPENDENCY,      /* texels not updated: the block they depend on (triangle lookup) is absent */
+    SRV_DROP_NO_DEPENDENCY, /* texels not updated: the block they depend on (triangle lookup) is absent */
     SRV_DROP_COUNT
 } srv_drop;
 
@@ -72,41 +72,41 @@ typedef struct srv_allocator {
 
 /* Configuration; zero fields take the defaults beside them. */
 typedef struct srv_loop_desc {
-    const scene *s;                        /* required, outlives the loop */
-    scene_rt *rt;                          /* required, outlives the loop */
-    const fx_effect *const *effects;       /* the effect list (default: fx_registry()); index = effect id */
-    uint32_t effect_count;                 /* entries of effects (<= SRV_MAX_EFFECTS) */
-    bool effect_on[SRV_MAX_EFFECTS];       /* which effects run; their dependencies run with them */
-    int32_t bias[SRV_MAX_EFFECTS];         /* level bias per effect (used where bias_set) */
-    bool bias_set[SRV_MAX_EFFECTS];        /* bias given explicitly (replaces the effect's default) */
-    uint64_t pool_bytes;                   /* payload pool budget for all effects (default 64 MiB) */
-    uint64_t ray_budget;                   /* effect rays per frame, 0 = unlimited */
-    uint32_t samples_per_update;           /* progressive effects: samples added per texel per update
+    const scene *s;                  /* required, outlives the loop */
+    scene_rt *rt;                    /* required, outlives the loop */
+    const fx_effect *const *effects; /* the effect list (default: fx_registry()); index = effect id */
+    uint32_t effect_count;           /* entries of effects (<= SRV_MAX_EFFECTS) */
+    bool effect_on[SRV_MAX_EFFECTS]; /* which effects run; their dependencies run with them */
+    int32_t bias[SRV_MAX_EFFECTS];   /* level bias per effect (used where bias_set) */
+    bool bias_set[SRV_MAX_EFFECTS];  /* bias given explicitly (replaces the effect's default) */
+    uint64_t pool_bytes;             /* payload pool budget for all effects (default 64 MiB) */
+    uint64_t ray_budget;             /* effect rays per frame, 0 = unlimited */
+    uint32_t samples_per_update;     /* progressive effects: samples added per texel per update
                                               (default 16, at most the effect's max_samples) */
-    bool no_cache;                         /* the per-pixel baseline */
+    bool no_cache;                   /* the per-pixel baseline */
     /* Sample counts (effects.h, fx_context). In a cached run: what a texel converges at; in the no-cache
      * baseline: what each pixel traces, times no_cache_samples. */
-    uint32_t ao_samples;                   /* AO samples a texel converges at, 1..FX_AO_SAMPLES_LIMIT
+    uint32_t ao_samples;    /* AO samples a texel converges at, 1..FX_AO_SAMPLES_LIMIT
                                               (default 64) */
-    uint32_t shadow_rays;                  /* shadow rays per texel and light: 1, 2, 4, 8 or 16 (default 16) */
-    float no_cache_samples;                /* no_cache: the baseline's AO rays, shadow rays and probe rays per
+    uint32_t shadow_rays;   /* shadow rays per texel and light: 1, 2, 4, 8 or 16 (default 16) */
+    float no_cache_samples; /* no_cache: the baseline's AO rays, shadow rays and probe rays per
                                               pixel as a multiple of ao_samples, shadow_rays and probe_rays, a
                                               power of two in [1/64, 16] (default 1; AO at least 1 ray, shadow
                                               rays 1..256, probe rays 1..4096) */
     uint32_t seed;
-    uint32_t threads;                      /* 0 = all cores */
-    bool keep_views;                       /* keep per-viewer AO, shadow and sharing images */
+    uint32_t threads; /* 0 = all cores */
+    bool keep_views;  /* keep per-viewer AO, shadow and sharing images */
     /* World-space effects (probes). */
-    float probe_cell;                      /* finest cell, metres: the grid's one scene-scale parameter
+    float probe_cell;        /* finest cell, metres: the grid's one scene-scale parameter
                                               (default: the power of two nearest a 64th of the
                                               scene's bounding-box diagonal) */
-    uint32_t probe_rays;                   /* rays per probe update (default 144, DDGI's) */
-    float probe_hysteresis;                /* old irradiance's weight in an update, (0, 0.999] (default 0.97,
+    uint32_t probe_rays;     /* rays per probe update (default 144, DDGI's) */
+    float probe_hysteresis;  /* old irradiance's weight in an update, (0, 0.999] (default 0.97,
                                               RTXGI's; a tiny weight such as 1e-9 spells "none", as the
                                               command line's 0 does) */
-    uint32_t probe_budget;                 /* cells (probes) updated per frame at most, new ones first, then
+    uint32_t probe_budget;   /* cells (probes) updated per frame at most, new ones first, then
                                               the longest unrefreshed (default 1024; shares the ray budget) */
-    uint32_t indirect_block;               /* low-frequency effects (probes) in whole frames: evaluated once
+    uint32_t indirect_block; /* low-frequency effects (probes) in whole frames: evaluated once
                                               per block of B x B pixels, then a depth- and normal-aware
                                               upsample; pixels no block sample matches are evaluated
                                               themselves. The largest B: 1 = every pixel (sparse viewers
@@ -114,15 +114,15 @@ typedef struct srv_loop_desc {
                                               the narrowest probe cell in its pixels (640 x 360 at 60
                                               degrees: 4; at 60 degrees, 2 from 148 to 295 pixels high, 1
                                               below) */
-    bool no_local_table;                   /* benchmarks: compose finds probes through the hash table only,
+    bool no_local_table;     /* benchmarks: compose finds probes through the hash table only,
                                               not the viewers' local lookup tables */
-    bool no_lanes;                         /* tests: the per-pixel stages' coarse sample choice (requests)
+    bool no_lanes;           /* tests: the per-pixel stages' coarse sample choice (requests)
                                               and blend (compose) through their scalar loops only, not the
                                               lanes of whole rows (the same results, byte for byte) */
-    bool no_request_recent;                /* tests: every tile's requests appended to its thread's list, none
+    bool no_request_recent;  /* tests: every tile's requests appended to its thread's list, none
                                               or-ed into an entry of the same key from an earlier tile (the
                                               same requests after the batch merges them) */
-    srv_allocator allocator;               /* default: libc */
+    srv_allocator allocator; /* default: libc */
 } srv_loop_desc;
 
 /* A viewer: a handle with a generation counter (slot in the low 8 bits, generation above), 0 is never valid.
@@ -146,7 +146,7 @@ typedef struct srv_viewer_desc {
  * radiance (12), sRGB image (3); and the three kept views with keep_views (4 each). For memory checks before
  * anything is created; tests/test_engine.c checks them against the counted allocations. */
 #define SRV_VIEWER_BYTES_PER_PIXEL 35u
-#define SRV_VIEWS_BYTES_PER_PIXEL 12u
+#define SRV_VIEWS_BYTES_PER_PIXEL  12u
 /* A sparse viewer's list and its sorting scratch, per entry (4 each). */
 #define SRV_LIST_BYTES_PER_ENTRY 8u
 
@@ -157,9 +157,9 @@ typedef struct srv_viewer_stats {
     uint64_t requested_texels; /* deduplicated within the viewer, shading effects */
     uint64_t requested_cells;  /* world-space cells (probes), deduplicated within the viewer */
     uint64_t pixels_visible;
-    uint64_t pixels_missing;   /* visible pixels composed without cached data */
-    uint64_t pixels_rendered;  /* primary rays: width*height, or a sparse viewer's distinct listed pixels */
-    bool sparse;               /* a sparse viewer (a client's sample requests), not a whole-frame viewer */
+    uint64_t pixels_missing;  /* visible pixels composed without cached data */
+    uint64_t pixels_rendered; /* primary rays: width*height, or a sparse viewer's distinct listed pixels */
+    bool sparse;              /* a sparse viewer (a client's sample requests), not a whole-frame viewer */
 } srv_viewer_stats;
 
 /* The world-space cache's figures in a frame (all zero when no world-space effect runs). Requested and
@@ -168,33 +168,33 @@ typedef struct srv_viewer_stats {
 typedef struct srv_world_stats {
     uint64_t requested_cells;
     uint64_t unique_cells;
-    uint64_t entries;          /* keys in its tables (one per resident brick) */
-    uint64_t table_capacity;   /* slots of its tables */
+    uint64_t entries;        /* keys in its tables (one per resident brick) */
+    uint64_t table_capacity; /* slots of its tables */
     uint64_t bricks_resident;
-    uint64_t bytes;            /* every byte it allocated, local lookup tables included */
-    uint64_t refusals;         /* this frame: points outside the grid's range, refused (never wrapped) */
-    uint64_t local_lookups;    /* this frame: compose's reads through the viewers' local lookup tables */
-    uint64_t local_hits;       /* of which answered without the hash table */
+    uint64_t bytes;         /* every byte it allocated, local lookup tables included */
+    uint64_t refusals;      /* this frame: points outside the grid's range, refused (never wrapped) */
+    uint64_t local_lookups; /* this frame: compose's reads through the viewers' local lookup tables */
+    uint64_t local_hits;    /* of which answered without the hash table */
 } srv_world_stats;
 
 /* One frame's figures. */
 typedef struct srv_frame_stats {
     uint32_t frame;
-    uint32_t viewer_count;                         /* viewers rendered this frame */
-    srv_viewer_stats viewers[SRV_MAX_VIEWERS];     /* [0, viewer_count), in slot order */
-    uint64_t requested_texels;                     /* sum over viewers, shading effects */
-    uint64_t unique_texels;                        /* after deduplication across viewers */
-    uint64_t rays[SRV_MAX_EFFECTS];                /* effect rays traced this frame */
+    uint32_t viewer_count;                     /* viewers rendered this frame */
+    srv_viewer_stats viewers[SRV_MAX_VIEWERS]; /* [0, viewer_count), in slot order */
+    uint64_t requested_texels;                 /* sum over viewers, shading effects */
+    uint64_t unique_texels;                    /* after deduplication across viewers */
+    uint64_t rays[SRV_MAX_EFFECTS];            /* effect rays traced this frame */
     uint64_t visibility_rays;
-    uint64_t texels_updated[SRV_MAX_EFFECTS];      /* texels written (traced or resampled) */
-    uint64_t texels_resampled[SRV_MAX_EFFECTS];    /* of which filled from a finer level */
-    uint64_t texels_deferred[SRV_MAX_EFFECTS];     /* requested but left for later by the ray budget */
+    uint64_t texels_updated[SRV_MAX_EFFECTS];   /* texels written (traced or resampled) */
+    uint64_t texels_resampled[SRV_MAX_EFFECTS]; /* of which filled from a finer level */
+    uint64_t texels_deferred[SRV_MAX_EFFECTS];  /* requested but left for later by the ray budget */
     uint64_t blocks_resident[SRV_MAX_EFFECTS];
     uint64_t pixels_visible;
     uint64_t pixels_missing;
-    uint64_t drops[SRV_DROP_COUNT];                /* this frame */
-    uint64_t evictions, exhausted;                 /* cumulative cache counters */
-    uint32_t table_count, table_capacity;          /* keys in the on-surface table, and its slots */
+    uint64_t drops[SRV_DROP_COUNT];       /* this frame */
+    uint64_t evictions, exhausted;        /* cumulative cache counters */
+    uint32_t table_count, table_capacity; /* keys in the on-surface table, and its slots */
     srv_world_stats world;
     double time_ms[SRV_STAGE_COUNT];
     double frame_ms;
@@ -219,12 +219,12 @@ typedef struct srv_viewer_frame {
     const char *name;
     uint32_t frame;
     uint32_t width, height;
-    const uint8_t *srgb;     /* width*height*3, sRGB 8-bit, top row first */
-    const float *radiance;   /* width*height*3, linear */
-    const float *depth;      /* width*height, distance along the primary ray, INFINITY for the sky */
-    srv_camera camera;       /* the camera it was rendered for */
+    const uint8_t *srgb;   /* width*height*3, sRGB 8-bit, top row first */
+    const float *radiance; /* width*height*3, linear */
+    const float *depth;    /* width*height, distance along the primary ray, INFINITY for the sky */
+    srv_camera camera;     /* the camera it was rendered for */
     const srv_viewer_stats *stats;
-    const float *views[3];   /* with keep_views: AO, lit fraction of light 0, sharing; else NULL */
+    const float *views[3]; /* with keep_views: AO, lit fraction of light 0, sharing; else NULL */
 } srv_viewer_frame;
 
 enum { SRV_VIEW_AO = 0, SRV_VIEW_SHADOW, SRV_VIEW_SHARING, SRV_VIEW_COUNT };

@@ -76,16 +76,16 @@ static void osc_kind_begin_frame(void *cache, uint32_t frame)
 /* A lane's level (srv__level of l: NaN and l <= 0 give 0, at most 15) and 2^-level, as the per-pixel code
  * computes them. A macro, not a function: a helper is not inlined into FXC_HOT_LANES functions (other
  * options), and the loops must stay free of calls to vectorise. */
-#define LANE_LEVEL(l_in, level_out, scale_out)                                                                  \
-    do {                                                                                                       \
-        float l_ = (l_in);                                                                                     \
-        float above_ = l_ > 0.0f ? l_ : 0.0f;                                                                  \
-        float clamped_ = above_ < 15.0f ? above_ : 15.0f;                                                      \
-        int32_t level_ = (int32_t)(clamped_ + 0.5f);                                                           \
-        level_ = level_ > 15 ? 15 : level_;                                                                    \
-        int32_t scale_bits_ = (127 - level_) << 23;                                                            \
-        memcpy(&(scale_out), &scale_bits_, sizeof(scale_out));                                                 \
-        (level_out) = level_;                                                                                  \
+#define LANE_LEVEL(l_in, level_out, scale_out)                                                               \
+    do {                                                                                                     \
+        float l_ = (l_in);                                                                                   \
+        float above_ = l_ > 0.0f ? l_ : 0.0f;                                                                \
+        float clamped_ = above_ < 15.0f ? above_ : 15.0f;                                                    \
+        int32_t level_ = (int32_t)(clamped_ + 0.5f);                                                         \
+        level_ = level_ > 15 ? 15 : level_;                                                                  \
+        int32_t scale_bits_ = (127 - level_) << 23;                                                          \
+        memcpy(&(scale_out), &scale_bits_, sizeof(scale_out));                                               \
+        (level_out) = level_;                                                                                \
     } while (0)
 
 /* What the request pass computes per pixel before its dedup and keys, for a run at once over SRV_RUN lanes
@@ -115,8 +115,9 @@ FXC_HOT_LANES static void request_lanes_fill(request_lanes *L, int32_t bias)
     }
 }
 
-static uint32_t osc_kind_pixel_requests(const void *cache, uint32_t slot, const srv_pixel *pixels, uint32_t count,
-                                        uint32_t effect, int32_t bias, uint64_t *keys, uint64_t *masks)
+static uint32_t osc_kind_pixel_requests(const void *cache, uint32_t slot, const srv_pixel *pixels,
+                                        uint32_t count, uint32_t effect, int32_t bias, uint64_t *keys,
+                                        uint64_t *masks)
 {
     (void)slot;
     const kind_osc *k = cache;
@@ -160,7 +161,8 @@ static uint32_t osc_kind_pixel_requests(const void *cache, uint32_t slot, const 
                 width0 = islands[memo_island].width;
                 height0 = islands[memo_island].height;
             }
-            n += osc_bilinear_keys(effect, px->island, width0, height0, level, L.x[i], L.y[i], keys + n, masks + n);
+            n += osc_bilinear_keys(effect, px->island, width0, height0, level, L.x[i], L.y[i], keys + n,
+                                   masks + n);
         }
     }
     return n;
@@ -349,7 +351,7 @@ FXC_HOT_INLINE void four_taps(fx_taps *out, const uint8_t *const texel[4], float
  * Computed from a srv_pixel_lanes (the pixels' island UVs, footprints, islands and island sizes; lanes past
  * the run are 0): the caller's, or a copy of the pixels' values when it has none. */
 typedef struct taps_lanes {
-    int32_t level[SRV_RUN], positive[SRV_RUN];         /* positive: all four weights > 0 */
+    int32_t level[SRV_RUN], positive[SRV_RUN]; /* positive: all four weights > 0 */
     float x[SRV_RUN], y[SRV_RUN], fx0[SRV_RUN], fy0[SRV_RUN], ax[SRV_RUN], ay[SRV_RUN];
     /* The usual case's values in the order fx_taps holds them, per lane, so that a pixel copies them with a
      * few wide moves: the renormalised weights (for positive lanes), at_x and at_y of the four taps. */
@@ -378,7 +380,8 @@ static inline void taps_from_lanes(fx_taps *out, const taps_lanes *L, size_t i)
     out->count = 4;
 }
 
-FXC_HOT_LANES static void taps_lanes_fill(taps_lanes *restrict L, const srv_pixel_lanes *restrict in, int32_t bias)
+FXC_HOT_LANES static void taps_lanes_fill(taps_lanes *restrict L, const srv_pixel_lanes *restrict in,
+                                          int32_t bias)
 {
     const float fbias = (float)bias;
     for (int i = 0; i < SRV_RUN; i++) {
@@ -457,8 +460,9 @@ typedef struct taps_state {
 
 /* Remembers the four texels (rows row0/row1, columns col0/col1, as offsets within the block) of one block's
  * payload for the pixel whose footprint corner is (x0, y0): the next pixel with the same corner reuses them. */
-static inline void reuse_block_texels(taps_state *st, const uint8_t *payload, uint32_t block, size_t texel_bytes,
-                                      uint32_t row0, uint32_t row1, uint32_t col0, uint32_t col1, long x0, long y0)
+static inline void reuse_block_texels(taps_state *st, const uint8_t *payload, uint32_t block,
+                                      size_t texel_bytes, uint32_t row0, uint32_t row1, uint32_t col0,
+                                      uint32_t col1, long x0, long y0)
 {
     st->reuse_texel[0] = payload + (row0 + col0) * texel_bytes;
     st->reuse_texel[1] = payload + (row0 + col1) * texel_bytes;
@@ -517,8 +521,8 @@ static void taps_pixel_rest(taps_state *st, const taps_lanes *L, const srv_pixel
             uint32_t col0 = (uint32_t)x0 & 7, col1 = col0 + 1;
             uint64_t need = (uint64_t)3 << (row0 + col0) | (uint64_t)3 << (row1 + col0);
             if (memo->block[m0] != OSC_NONE && (memo->valid[m0] & need) == need) {
-                reuse_block_texels(st, memo->payload[m0], memo->block[m0], texel_bytes, row0, row1, col0, col1,
-                                   x0, y0);
+                reuse_block_texels(st, memo->payload[m0], memo->block[m0], texel_bytes, row0, row1, col0,
+                                   col1, x0, y0);
                 found = true;
             }
         }
@@ -601,7 +605,8 @@ static void taps_pixel_rest(taps_state *st, const taps_lanes *L, const srv_pixel
         uint64_t need = (uint64_t)1 << (row0 + col0) | (uint64_t)1 << (row0 + col1) |
                         (uint64_t)1 << (row1 + col0) | (uint64_t)1 << (row1 + col1);
         if ((memo->valid[m0] & need) == need && positive) {
-            reuse_block_texels(st, memo->payload[m0], memo->block[m0], texel_bytes, row0, row1, col0, col1, x0, y0);
+            reuse_block_texels(st, memo->payload[m0], memo->block[m0], texel_bytes, row0, row1, col0, col1,
+                               x0, y0);
             four_taps(out, st->reuse_texel, w00, w10, w01, w11, x, y, tx0, tx1, ty0, ty1);
             if (blocks)
                 blocks[i] = st->reuse_block;
@@ -766,8 +771,9 @@ FXC_HOT_INLINE uint32_t taps_of_effect(const kind_osc *k, const taps_lanes *L, c
  * shared across effects in one loop was slower, kept in memory instead of registers). */
 FXC_HOT_CLONES static uint32_t osc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread,
                                                    const srv_pixel *pixels, const srv_pixel_lanes *lanes,
-                                                   uint32_t count, uint32_t effect_count, const uint32_t *effects,
-                                                   int32_t bias, fx_taps *const *taps, uint32_t *const *blocks)
+                                                   uint32_t count, uint32_t effect_count,
+                                                   const uint32_t *effects, int32_t bias,
+                                                   fx_taps *const *taps, uint32_t *const *blocks)
 {
     (void)slot, (void)thread;
     const kind_osc *k = cache;

@@ -58,13 +58,14 @@ typedef struct cell_cache_entry {
 typedef struct kind_wsc {
     wsc_cache *wsc;
     const scene *s;
-    double c0;        /* finest cell, metres */
-    double cell_size[WSC_MAX_LEVEL + 1], inv_cell_size[WSC_MAX_LEVEL + 1]; /* wsc_cell_size per level, 1 / it */
+    double c0; /* finest cell, metres */
+    double cell_size[WSC_MAX_LEVEL + 1],
+        inv_cell_size[WSC_MAX_LEVEL + 1]; /* wsc_cell_size per level, 1 / it */
     uint32_t brick_size[SRV_MAX_EFFECTS];
     uint32_t cell_bytes[SRV_MAX_EFFECTS];
     uint32_t threads;
     bool use_local;
-    wsc_local **local; /* [SRV_MAX_VIEWERS * threads], NULL until first used */
+    wsc_local **local;              /* [SRV_MAX_VIEWERS * threads], NULL until first used */
     _Atomic uint64_t refused;       /* this frame, from the request threads */
     _Atomic uint64_t local_lookups; /* this frame, compose */
     _Atomic uint64_t local_hits;
@@ -204,8 +205,8 @@ static void wsc_kind_begin_frame(void *cache, uint32_t frame)
  * inwards: a pixel's position and distance are floats, so a float inside the float box is inside the double
  * one, and the test per pixel is six float comparisons (the answer is the same as in double). */
 typedef struct cell_memo {
-    uint32_t level; /* UINT32_MAX: none */
-    int32_t g[3];   /* the cell's grid point */
+    uint32_t level;                   /* UINT32_MAX: none */
+    int32_t g[3];                     /* the cell's grid point */
     float inside_lo[3], inside_hi[3]; /* the cell's box a millionth inside, rounded inwards to float */
     double lo[3];                     /* the cell's lower corner */
     double inv_cell;
@@ -250,7 +251,8 @@ static inline uint32_t memo_level(const kind_wsc *k, cell_memo *m, float distanc
         return m->distance_level;
     uint32_t level = wsc_level((double)distance, k->c0);
     double step = 16.0 * k->c0;
-    double lo = level == 0 ? -INFINITY : ldexp(step, (int)level - 1), hi = level == WSC_MAX_LEVEL ? INFINITY : ldexp(step, (int)level);
+    double lo = level == 0 ? -INFINITY : ldexp(step, (int)level - 1),
+           hi = level == WSC_MAX_LEVEL ? INFINITY : ldexp(step, (int)level);
     m->distance_level = level;
     m->distance_lo = level == 0 ? -INFINITY : float_above(lo * (1.0 + 1e-6));
     m->distance_hi = float_below(hi * (1.0 - 1e-6));
@@ -266,7 +268,8 @@ static inline uint32_t memo_level(const kind_wsc *k, cell_memo *m, float distanc
  * of level + 1 in [0, 1]. The sum is taken in 64 bits (a bias of INT32_MAX overflowed it), and a bias that
  * puts the next level below 0 too leaves nothing to blend (both clamp to level 0; it used to blend level 1
  * in: found by tests/stability/stab_caches.c). */
-static inline uint32_t pixel_level(const kind_wsc *k, cell_memo *m, const srv_pixel *px, int32_t bias, float *blend)
+static inline uint32_t pixel_level(const kind_wsc *k, cell_memo *m, const srv_pixel *px, int32_t bias,
+                                   float *blend)
 {
     double distance = (double)px->distance;
     int64_t l = (int64_t)memo_level(k, m, px->distance) + bias;
@@ -279,8 +282,9 @@ static inline uint32_t pixel_level(const kind_wsc *k, cell_memo *m, const srv_pi
 /* Whether a point (scene-local, float) lies well inside the memo's cell at `level`. */
 static inline bool cell_same(const cell_memo *m, uint32_t level, const float p[3])
 {
-    return m->level == level && p[0] >= m->inside_lo[0] && p[0] < m->inside_hi[0] && p[1] >= m->inside_lo[1] &&
-           p[1] < m->inside_hi[1] && p[2] >= m->inside_lo[2] && p[2] < m->inside_hi[2];
+    return m->level == level && p[0] >= m->inside_lo[0] && p[0] < m->inside_hi[0] &&
+           p[1] >= m->inside_lo[1] && p[1] < m->inside_hi[1] && p[2] >= m->inside_lo[2] &&
+           p[2] < m->inside_hi[2];
 }
 
 /* The cell of a point at a level (memo m); false when the point is outside the grid's range. *same: the
@@ -344,8 +348,8 @@ static void corner_of(const cell_memo *m, int c, int32_t out[3])
 }
 
 /* Writes the keys of the memo's cell's 8 corners unless a recent pixel wrote them (seen). */
-static uint32_t cell_keys(const cell_memo *m, uint32_t brick_size, uint64_t seen[32], uint64_t *keys, uint64_t *masks,
-                          uint32_t n, uint32_t *refused)
+static uint32_t cell_keys(const cell_memo *m, uint32_t brick_size, uint64_t seen[32], uint64_t *keys,
+                          uint64_t *masks, uint32_t n, uint32_t *refused)
 {
     uint64_t cell;
     if (!wsc_wgi_pack(m->level, m->g[0], m->g[1], m->g[2], &cell)) {
@@ -376,8 +380,9 @@ static uint32_t cell_keys(const cell_memo *m, uint32_t brick_size, uint64_t seen
     return n;
 }
 
-FXC_HOT_CLONES static uint32_t wsc_kind_pixel_requests(const void *cache, uint32_t slot, const srv_pixel *pixels,
-                                                       uint32_t count, uint32_t effect, int32_t bias, uint64_t *keys,
+FXC_HOT_CLONES static uint32_t wsc_kind_pixel_requests(const void *cache, uint32_t slot,
+                                                       const srv_pixel *pixels, uint32_t count,
+                                                       uint32_t effect, int32_t bias, uint64_t *keys,
                                                        uint64_t *masks)
 {
     (void)slot;
@@ -386,7 +391,8 @@ FXC_HOT_CLONES static uint32_t wsc_kind_pixel_requests(const void *cache, uint32
     /* Recent cells, direct-mapped: a pixel in a cell already asked for asks for the same 8 grid points. */
     uint64_t seen[32];
     memset(seen, 0xFF, sizeof seen);
-    cell_memo memo = {.level = UINT32_MAX}, next = {.level = UINT32_MAX}; /* the pixel's level, and level + 1 */
+    cell_memo memo = {.level = UINT32_MAX},
+              next = {.level = UINT32_MAX}; /* the pixel's level, and level + 1 */
     for (uint32_t i = 0; i < count; i++) {
         float blend;
         bool same;
@@ -476,7 +482,6 @@ static void wsc_kind_job_location(const void *cache, uint32_t effect, uint64_t k
         job->origin[a] = (float)((double)first[a] * cell);
 }
 
-
 /* Looks the memo's cell's corners up (through `local` when not NULL, else the hash table). */
 static void find_cell_taps(kind_wsc *k, wsc_local *local, uint32_t effect, const cell_memo *m, cell_taps *out)
 {
@@ -497,11 +502,11 @@ static void find_cell_taps(kind_wsc *k, wsc_local *local, uint32_t effect, const
         if (!(wsc_brick_valid(k->wsc, effect, brick) & bit))
             continue;
         uint32_t index = (uint32_t)__builtin_ctzll(bit);
-        out->texel[out->count] = (const uint8_t *)wsc_brick_payload(k->wsc, effect, brick) + (size_t)index * cell_bytes;
+        out->texel[out->count] =
+            (const uint8_t *)wsc_brick_payload(k->wsc, effect, brick) + (size_t)index * cell_bytes;
         out->corner[out->count++] = (uint8_t)c;
     }
 }
-
 
 static void find_cell_cached(kind_wsc *k, wsc_local *local, cell_cache_entry *cache, uint32_t effect,
                              const cell_memo *m, cell_taps *out)
@@ -542,7 +547,8 @@ static inline void add_taps(const cell_taps *ct, const float t[3], float scale, 
      * factors >= 0 is monotonic in each factor, so the smallest of the 8 rounded products is the rounded
      * product of the smallest factors: wxy's smallest is x's times y's, w's that times the smaller wz
      * (the same float as the smallest of w, without comparing all 8). */
-    float x_least = t[0] < 1.0f - t[0] ? t[0] : 1.0f - t[0], y_least = t[1] < 1.0f - t[1] ? t[1] : 1.0f - t[1];
+    float x_least = t[0] < 1.0f - t[0] ? t[0] : 1.0f - t[0],
+          y_least = t[1] < 1.0f - t[1] ? t[1] : 1.0f - t[1];
     float least = x_least * y_least * (wz0 < wz1 ? wz0 : wz1);
     if (ct->count == 8 && least > 0) {
         memcpy(out->texel + n, ct->texel, sizeof ct->texel);
@@ -587,7 +593,8 @@ uint32_t srv__wsc_world_taps(const void *user, uint32_t effect, const float posi
     return taps->count;
 }
 
-bool srv__wsc_world_cell(const void *user, uint32_t effect, uint32_t level, const float centre[3], const void *texel[8])
+bool srv__wsc_world_cell(const void *user, uint32_t effect, uint32_t level, const float centre[3],
+                         const void *texel[8])
 {
     kind_wsc *k = (kind_wsc *)user; /* read-only, as srv__wsc_world_taps */
     for (int c = 0; c < 8; c++)
@@ -597,7 +604,8 @@ bool srv__wsc_world_cell(const void *user, uint32_t effect, uint32_t level, cons
     double world[3] = {(double)centre[0], (double)centre[1], (double)centre[2]};
     int32_t g[3];
     /* wsc_corners' range: g and the far corner g + 1 inside the grid */
-    if (!wsc_grid_point(world, level, k->c0, g) || g[0] >= WSC_XZ_MAX || g[2] >= WSC_XZ_MAX || g[1] >= WSC_Y_MAX)
+    if (!wsc_grid_point(world, level, k->c0, g) || g[0] >= WSC_XZ_MAX || g[2] >= WSC_XZ_MAX ||
+        g[1] >= WSC_Y_MAX)
         return false;
     if (k->brick_size[effect] == 1) /* probes: the 8 corners in one batched lookup, the same texels */
         return wsc_cell_corners(k->wsc, effect, level, g, texel);
@@ -611,8 +619,8 @@ bool srv__wsc_world_cell(const void *user, uint32_t effect, uint32_t level, cons
 }
 
 FXC_HOT_INLINE void wsc_kind_pixel_taps_one(const void *cache, uint32_t slot, uint32_t thread,
-                                            const srv_pixel *pixels, uint32_t count, uint32_t effect, int32_t bias,
-                                            fx_taps *taps, uint32_t *blocks)
+                                            const srv_pixel *pixels, uint32_t count, uint32_t effect,
+                                            int32_t bias, fx_taps *taps, uint32_t *blocks)
 {
     kind_wsc *k = (kind_wsc *)cache; /* writes only this (viewer, thread)'s local table and counters */
     wsc_local *local = NULL;
@@ -629,7 +637,8 @@ FXC_HOT_INLINE void wsc_kind_pixel_taps_one(const void *cache, uint32_t slot, ui
     wsc_local_stats before = {0}, after = {0};
     if (local)
         wsc_local_stats_get(local, &before);
-    cell_cache_entry *cells = k->cell_cache && thread < k->threads ? k->cell_cache + (size_t)thread * CELL_CACHE : NULL;
+    cell_cache_entry *cells =
+        k->cell_cache && thread < k->threads ? k->cell_cache + (size_t)thread * CELL_CACHE : NULL;
     /* The pixel's cell: the last CELL_SLOTS cells entered and their taps, each kept until it is the oldest
      * (a run of block samples, or of pixels along rows, goes back and forth between a few cells; each cell's
      * taps are what find_cell_cached gives it, so which slot answers changes nothing). `levels` only holds
@@ -752,7 +761,8 @@ static void wsc_kind_memory(const void *cache, srv_memory *out)
     wsc_memory_report m;
     wsc_memory(k->wsc, &m);
     size_t local = locals_bytes(k);
-    out->table += m.table_key_bytes + m.table_value_bytes + m.cache_struct_bytes + m.core_struct_bytes + sizeof *k;
+    out->table +=
+        m.table_key_bytes + m.table_value_bytes + m.cache_struct_bytes + m.core_struct_bytes + sizeof *k;
     for (uint32_t e = 0; e < SRV_MAX_EFFECTS; e++) {
         out->pools_reserved[e] += m.effects[e].payload_reserved_bytes;
         out->pools_in_use[e] += m.effects[e].payload_in_use_bytes;
@@ -767,8 +777,9 @@ static void wsc_kind_memory(const void *cache, srv_memory *out)
  * lanes are not used: this kind reads the pixels' positions. */
 FXC_HOT_CLONES static uint32_t wsc_kind_pixel_taps(const void *cache, uint32_t slot, uint32_t thread,
                                                    const srv_pixel *pixels, const srv_pixel_lanes *lanes,
-                                                   uint32_t count, uint32_t effect_count, const uint32_t *effects,
-                                                   int32_t bias, fx_taps *const *taps, uint32_t *const *blocks)
+                                                   uint32_t count, uint32_t effect_count,
+                                                   const uint32_t *effects, int32_t bias,
+                                                   fx_taps *const *taps, uint32_t *const *blocks)
 {
     (void)lanes;
     uint32_t empty = 0;

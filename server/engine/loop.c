@@ -9,7 +9,7 @@
 #include <time.h>
 
 static const char *const stage_names[SRV_STAGE_COUNT] = {"visibility", "requests", "queues", "lookup",
-                                                         "effects", "compose", "sinks", "housekeeping"};
+                                                         "effects",    "compose",  "sinks",  "housekeeping"};
 
 const char *srv_stage_name(srv_stage stage)
 {
@@ -73,8 +73,8 @@ bool srv__resize(srv_loop *loop, srv_mem_category category, void **array, size_t
     return true;
 }
 
-bool srv__grow(srv_loop *loop, srv_mem_category category, void **array, size_t *capacity, size_t n, size_t first,
-               size_t size)
+bool srv__grow(srv_loop *loop, srv_mem_category category, void **array, size_t *capacity, size_t n,
+               size_t first, size_t size)
 {
     if (n <= *capacity)
         return true;
@@ -106,7 +106,8 @@ bool srv__request_reserve(srv_loop *loop, srv_mem_category category, srv_request
     if (!srv__resize(loop, category, (void **)&list->masks, list->masks_capacity, cap, sizeof *list->masks))
         return false;
     list->masks_capacity = cap;
-    if (!srv__resize(loop, category, (void **)&list->blocks, list->blocks_capacity, cap, sizeof *list->blocks))
+    if (!srv__resize(loop, category, (void **)&list->blocks, list->blocks_capacity, cap,
+                     sizeof *list->blocks))
         return false;
     list->blocks_capacity = cap;
     list->capacity = cap;
@@ -141,8 +142,9 @@ static fxc_result resolve_effects(srv_loop *loop, char *err, size_t err_cap)
         if (!fx || !fx->name || !fx->texel_bytes || !fx->update || !fx->cost ||
             (fx->policy == FX_UPDATE_PROGRESSIVE && (!fx->texel_samples || fx->max_samples == 0)) ||
             fx->cache >= SCENE_CACHE_COUNT) {
-            snprintf(err, err_cap, "frame loop: effect %u (%s) lacks a name, texel_bytes, cost or update, or is "
-                                   "progressive without texel_samples and max_samples",
+            snprintf(err, err_cap,
+                     "frame loop: effect %u (%s) lacks a name, texel_bytes, cost or update, or is "
+                     "progressive without texel_samples and max_samples",
                      e, fx && fx->name ? fx->name : "?");
             return FXC_ERR_EFFECTS;
         }
@@ -152,8 +154,9 @@ static fxc_result resolve_effects(srv_loop *loop, char *err, size_t err_cap)
         if (fx->depends_on) {
             int32_t dep = fx_find(list, count, fx->depends_on);
             if (dep < 0 || (uint32_t)dep == e || list[dep]->depends_on || list[dep]->cache != fx->cache) {
-                snprintf(err, err_cap, "frame loop: effect %s depends on '%s', which is not in the list, is itself "
-                                       "dependent, or lives in another cache",
+                snprintf(err, err_cap,
+                         "frame loop: effect %s depends on '%s', which is not in the list, is itself "
+                         "dependent, or lives in another cache",
                          fx->name, fx->depends_on);
                 return FXC_ERR_EFFECTS;
             }
@@ -185,8 +188,8 @@ static fxc_result resolve_effects(srv_loop *loop, char *err, size_t err_cap)
         if (fx->policy == FX_UPDATE_CONTINUOUS && fx->cache == SCENE_CACHE_WORLD_SPACE)
             loop->samples[e] = loop->desc.probe_rays; /* the rays of one update: what its cost counts */
         if (loop->effect_on[e] && !loop->effect_cached[e] && !d->no_cache) {
-            snprintf(err, err_cap, "frame loop: effect %s needs the %s cache, which is not built yet", fx->name,
-                     scene_cache_name(fx->cache));
+            snprintf(err, err_cap, "frame loop: effect %s needs the %s cache, which is not built yet",
+                     fx->name, scene_cache_name(fx->cache));
             return FXC_ERR_EFFECTS;
         }
     }
@@ -272,7 +275,8 @@ fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err,
     if (loop->desc.probe_rays > 1u << 16 ||
         !(loop->desc.probe_hysteresis > 0.0f && loop->desc.probe_hysteresis <= 0.999f) ||
         !(loop->desc.probe_cell >= 0.0f && loop->desc.probe_cell <= 1e6f)) {
-        snprintf(err, err_cap, "frame loop: probe rays must be 1..65536, hysteresis in (0, 0.999], the cell 0..1e6 m");
+        snprintf(err, err_cap,
+                 "frame loop: probe rays must be 1..65536, hysteresis in (0, 0.999], the cell 0..1e6 m");
         srv_loop_free(loop);
         return FXC_ERR_INVALID;
     }
@@ -282,8 +286,9 @@ fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err,
     if (loop->desc.ao_samples > FX_AO_SAMPLES_LIMIT || shadow_rays > FX_SHADOW_TEXEL_RAYS_MAX ||
         (shadow_rays & (shadow_rays - 1)) != 0 || scale_mantissa != 0.5f || scale_exponent < -5 ||
         scale_exponent > 5) {
-        snprintf(err, err_cap, "frame loop: AO samples must be 1..%d, shadow rays 1, 2, 4, 8 or 16, the no-cache "
-                               "sample scale a power of two in [1/64, 16]",
+        snprintf(err, err_cap,
+                 "frame loop: AO samples must be 1..%d, shadow rays 1, 2, 4, 8 or 16, the no-cache "
+                 "sample scale a power of two in [1/64, 16]",
                  FX_AO_SAMPLES_LIMIT);
         srv_loop_free(loop);
         return FXC_ERR_INVALID;
@@ -366,7 +371,8 @@ fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err,
         ok = srv__resize(loop, SRV_MEM_QUEUES, (void **)&loop->viewer_bits[e], 0, blocks, sizeof(uint64_t));
     }
     loop->compose_scratch_bytes = srv__compose_scratch_bytes(loop);
-    ok = ok && srv__resize(loop, SRV_MEM_QUEUES, &loop->compose_scratch, 0, threads, loop->compose_scratch_bytes);
+    ok = ok &&
+         srv__resize(loop, SRV_MEM_QUEUES, &loop->compose_scratch, 0, threads, loop->compose_scratch_bytes);
     if (!ok) {
         snprintf(err, err_cap, "frame loop: out of memory");
         srv_loop_free(loop);
@@ -391,7 +397,8 @@ static void viewer_free_buffers(srv_loop *loop, srv_viewer *view)
     srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->radiance, 3 * n, 0, sizeof(float));
     srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->image, 3 * n, 0, 1);
     for (int w = 0; w < SRV_VIEW_COUNT; w++)
-        srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->views[w], view->views[w] ? n : 0, 0, sizeof(float));
+        srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->views[w], view->views[w] ? n : 0, 0,
+                    sizeof(float));
     srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->list, view->list ? n : 0, 0, sizeof *view->list);
     srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->list_scratch, view->list_scratch ? n : 0, 0,
                 sizeof *view->list_scratch);
@@ -409,7 +416,8 @@ void srv_loop_free(srv_loop *loop)
     if (loop->thread_requests) {
         for (uint32_t t = 0; t < threads; t++)
             srv__request_list_free(loop, SRV_MEM_QUEUES, &loop->thread_requests[t]);
-        srv__resize(loop, SRV_MEM_QUEUES, (void **)&loop->thread_requests, threads, 0, sizeof *loop->thread_requests);
+        srv__resize(loop, SRV_MEM_QUEUES, (void **)&loop->thread_requests, threads, 0,
+                    sizeof *loop->thread_requests);
     }
     for (uint32_t e = 0; e < SRV_MAX_EFFECTS; e++) {
         srv_effect_queue *q = &loop->queues[e];
@@ -419,7 +427,8 @@ void srv_loop_free(srv_loop *loop)
         srv__resize(loop, SRV_MEM_QUEUES, (void **)&q->dependency, q->capacity, 0, sizeof *q->dependency);
         srv__resize(loop, SRV_MEM_QUEUES, (void **)&q->jobs, q->job_capacity, 0, sizeof *q->jobs);
         srv__resize(loop, SRV_MEM_QUEUES, (void **)&q->fx_jobs, q->fx_job_capacity, 0, sizeof *q->fx_jobs);
-        srv__resize(loop, SRV_MEM_QUEUES, (void **)&q->chunk_rays, q->chunk_capacity, 0, sizeof *q->chunk_rays);
+        srv__resize(loop, SRV_MEM_QUEUES, (void **)&q->chunk_rays, q->chunk_capacity, 0,
+                    sizeof *q->chunk_rays);
         srv__resize(loop, SRV_MEM_QUEUES, (void **)&q->scratch, q->scratch_capacity, 0, 1);
         srv__resize(loop, SRV_MEM_QUEUES, (void **)&q->order, q->order_capacity, 0, sizeof *q->order);
         if (loop->viewer_bits[e]) {
@@ -504,7 +513,8 @@ fxc_result srv_viewer_add(srv_loop *loop, const srv_viewer_desc *desc, srv_viewe
     ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->image, 0, 3 * n, 1);
     if (view->sparse) {
         ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->list, 0, n, sizeof *view->list);
-        ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->list_scratch, 0, n, sizeof *view->list_scratch);
+        ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->list_scratch, 0, n,
+                               sizeof *view->list_scratch);
     }
     for (int w = 0; ok && loop->desc.keep_views && w < SRV_VIEW_COUNT; w++) {
         ok = srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->views[w], 0, n, sizeof(float));
@@ -759,7 +769,8 @@ fxc_result srv_loop_frame(srv_loop *loop, srv_frame_stats *st)
     for (uint32_t e = 0; e < loop->effect_count; e++)
         if (loop->viewer_bits[e]) {
             uint32_t k = loop->effect_kind[e];
-            memset(loop->viewer_bits[e], 0, sizeof(uint64_t) * loop->kinds[k]->pool_capacity(loop->caches[k], e));
+            memset(loop->viewer_bits[e], 0,
+                   sizeof(uint64_t) * loop->kinds[k]->pool_capacity(loop->caches[k], e));
         }
     for (uint32_t i = 0; i < active; i++) {
         srv_viewer *view = &loop->viewers[slots[i]];
@@ -777,7 +788,8 @@ fxc_result srv_loop_frame(srv_loop *loop, srv_frame_stats *st)
         const uint32_t *blocks = loop->kinds[k]->frame_blocks(loop->caches[k], e, &n);
         uint64_t unique = 0;
         for (uint32_t b = 0; b < n; b++)
-            unique += (uint64_t)__builtin_popcountll(loop->kinds[k]->block_requested(loop->caches[k], e, blocks[b]));
+            unique += (uint64_t)__builtin_popcountll(
+                loop->kinds[k]->block_requested(loop->caches[k], e, blocks[b]));
         if (k == SCENE_CACHE_WORLD_SPACE)
             st->world.unique_cells += unique;
         else
@@ -820,9 +832,15 @@ fxc_result srv_loop_frame(srv_loop *loop, srv_frame_stats *st)
             srv_viewer *view = &loop->viewers[slots[i]];
             if (view->sparse)
                 continue; /* no whole image: read with srv_viewer_pixels */
-            srv_viewer_frame vf = {.id = st->viewers[i].id, .name = view->desc.name, .frame = st->frame,
-                                   .width = view->desc.width, .height = view->desc.height, .srgb = view->image,
-                                   .radiance = view->radiance, .depth = view->depth, .camera = view->camera,
+            srv_viewer_frame vf = {.id = st->viewers[i].id,
+                                   .name = view->desc.name,
+                                   .frame = st->frame,
+                                   .width = view->desc.width,
+                                   .height = view->desc.height,
+                                   .srgb = view->image,
+                                   .radiance = view->radiance,
+                                   .depth = view->depth,
+                                   .camera = view->camera,
                                    .stats = &st->viewers[i]};
             for (int w = 0; w < SRV_VIEW_COUNT; w++)
                 vf.views[w] = view->views[w];

@@ -41,7 +41,8 @@ static inline void srv_pool_run(srv_pool *pool, uint32_t count, srv_pool_task ta
 
 /* Runs task for every index in [0, count) split statically (fxc_pool_run_static): thread t takes its own
  * contiguous range in order, then, with steal, the others' last tasks. Not reentrant. */
-static inline void srv_pool_run_static(srv_pool *pool, uint32_t count, srv_pool_task task, void *user, bool steal)
+static inline void srv_pool_run_static(srv_pool *pool, uint32_t count, srv_pool_task task, void *user,
+                                       bool steal)
 {
     fxc_pool_run_static(pool, count, task, user, steal);
 }

@@ -23,14 +23,14 @@ struct srv_ref {
     bool runs[SRV_MAX_EFFECTS]; /* on and has a reference term */
     fx_context fx;
     srv_pool *pool;
-    uint32_t stride;            /* lights per pixel in the per-thread scratch (at least 1) */
-    float *thread_visibility;   /* per thread: 2 halves x stride light visibilities */
-    float *thread_unshadowed;   /* per thread: stride x 3, the lights' terms before shadowing */
+    uint32_t stride;          /* lights per pixel in the per-thread scratch (at least 1) */
+    float *thread_visibility; /* per thread: 2 halves x stride light visibilities */
+    float *thread_unshadowed; /* per thread: stride x 3, the lights' terms before shadowing */
     /* Per-pixel working buffers of the current image, grown as needed. */
-    size_t capacity;            /* pixels */
+    size_t capacity; /* pixels */
     uint32_t *tri;
     float *bary_u, *bary_v, *depth, *footprint;
-    float *noise;               /* per pixel: squared half differences of radiance (summed over channels),
+    float *noise; /* per pixel: squared half differences of radiance (summed over channels),
                                    AO and shadow */
 };
 
@@ -105,16 +105,18 @@ fxc_result srv_ref_create(const srv_ref_desc *desc, srv_ref **out, char *err, si
             continue; /* off, or shades nothing itself (the triangle lookup) */
         }
         if (!fx->reference) {
-            snprintf(err, err_cap, "reference: effect %s has no reference estimator", fx->name ? fx->name : "?");
+            snprintf(err, err_cap, "reference: effect %s has no reference estimator",
+                     fx->name ? fx->name : "?");
             srv_ref_free(ref);
             return FXC_ERR_EFFECTS;
         }
         uint32_t samples = desc->samples[e] ? desc->samples[e] : fx->reference_samples;
         uint32_t granule = fx->reference_granule ? fx->reference_granule : 1;
         if (samples == 0 || samples % (2 * granule) != 0) {
-            snprintf(err, err_cap, "reference: effect %s: %u %s per pixel do not split into two halves of whole "
-                                   "sets of %u", fx->name, samples, fx->reference_unit ? fx->reference_unit : "samples",
-                     granule);
+            snprintf(err, err_cap,
+                     "reference: effect %s: %u %s per pixel do not split into two halves of whole "
+                     "sets of %u",
+                     fx->name, samples, fx->reference_unit ? fx->reference_unit : "samples", granule);
             srv_ref_free(ref);
             return FXC_ERR_INVALID;
         }
@@ -127,7 +129,10 @@ fxc_result srv_ref_create(const srv_ref_desc *desc, srv_ref **out, char *err, si
         srv_ref_free(ref);
         return FXC_ERR_INVALID;
     }
-    ref->fx = (fx_context){.s = s, .rt = desc->rt, .seed = desc->seed, .ao_radius = s->ao_radius,
+    ref->fx = (fx_context){.s = s,
+                           .rt = desc->rt,
+                           .seed = desc->seed,
+                           .ao_radius = s->ao_radius,
                            .reference_bounces = desc->max_bounces};
     ref->pool = srv_pool_create(desc->threads);
     if (!ref->pool) {
@@ -199,8 +204,8 @@ static bool reserve(srv_ref *ref, size_t pixels)
 
 /* Compose's bracket for one half: the lights' unshadowed terms times their visibility, the sky times its
  * visibility, the indirect light; each saturating, never infinite. */
-static void bracket(const scene *s, const float (*unshadowed)[3], const float *visibility, float sky_visibility,
-                    const float indirect[3], float out[3])
+static void bracket(const scene *s, const float (*unshadowed)[3], const float *visibility,
+                    float sky_visibility, const float indirect[3], float out[3])
 {
     float irradiance[3] = {0, 0, 0};
     for (uint32_t l = 0; l < s->light_count; l++)
@@ -214,7 +219,8 @@ static void bracket(const scene *s, const float (*unshadowed)[3], const float *v
 }
 
 /* One visible pixel: both halves, their mean, the AO and shadow terms. */
-static void shade_pixel(ref_task *task, uint32_t thread_index, uint32_t x, uint32_t y, uint64_t rays[SRV_MAX_EFFECTS])
+static void shade_pixel(ref_task *task, uint32_t thread_index, uint32_t x, uint32_t y,
+                        uint64_t rays[SRV_MAX_EFFECTS])
 {
     srv_ref *ref = task->ref;
     const scene *s = ref->desc.s;
@@ -244,8 +250,10 @@ static void shade_pixel(ref_task *task, uint32_t thread_index, uint32_t x, uint3
     memset(&pt, 0, sizeof pt);
     float u = ref->bary_u[p], v = ref->bary_v[p];
     srv__hit_point(s, tri, u, v, pt.position, pt.normal);
-    const float scale_x = 2.0f * f->tan_half_x / (float)f->width, scale_y = 2.0f * f->tan_half_y / (float)f->height;
-    float sx = ((float)x + 0.5f) * scale_x - f->tan_half_x, sy = f->tan_half_y - ((float)y + 0.5f) * scale_y, dir[3];
+    const float scale_x = 2.0f * f->tan_half_x / (float)f->width,
+                scale_y = 2.0f * f->tan_half_y / (float)f->height;
+    float sx = ((float)x + 0.5f) * scale_x - f->tan_half_x, sy = f->tan_half_y - ((float)y + 0.5f) * scale_y,
+          dir[3];
     for (int k = 0; k < 3; k++)
         dir[k] = f->forward[k] + sx * f->right[k] + sy * f->up[k];
     float facing = pt.normal[0] * dir[0] + pt.normal[1] * dir[1] + pt.normal[2] * dir[2];
@@ -260,12 +268,13 @@ static void shade_pixel(ref_task *task, uint32_t thread_index, uint32_t x, uint3
     scene_albedo_filtered(s, tri, u, v, ref->footprint[p] - log2f(s->texel_density), albedo);
 
     /* The lights' terms without shadow, at the pixel centre (compose's). */
-    float (*unshadowed)[3] = (float(*)[3])(ref->thread_unshadowed + (size_t)thread_index * 3 * ref->stride);
+    float(*unshadowed)[3] = (float(*)[3])(ref->thread_unshadowed + (size_t)thread_index * 3 * ref->stride);
     for (uint32_t l = 0; l < s->light_count; l++) {
         const scene_light *light = &s->lights[l];
         float ldir[3], dist;
         fx_light_direction(light, pt.position, ldir, &dist);
-        float cosine = pt.view_normal[0] * ldir[0] + pt.view_normal[1] * ldir[1] + pt.view_normal[2] * ldir[2];
+        float cosine =
+            pt.view_normal[0] * ldir[0] + pt.view_normal[1] * ldir[1] + pt.view_normal[2] * ldir[2];
         float falloff = light->type == SCENE_LIGHT_POINT ? 1.0f / fmaxf(dist * dist, 1e-8f) : 1.0f;
         for (int k = 0; k < 3; k++)
             unshadowed[l][k] = cosine > 0 ? light->intensity * cosine * falloff * light->color[k] : 0.0f;
@@ -277,8 +286,10 @@ static void shade_pixel(ref_task *task, uint32_t thread_index, uint32_t x, uint3
         for (uint32_t l = 0; l < ref->stride; l++)
             visibility[l] = 1.0f;
         float sky_visibility = 1.0f, indirect[3] = {0, 0, 0}, sky_open = -1.0f;
-        fx_shade_point sp = {.light_visibility = visibility, .sky_visibility = &sky_visibility,
-                             .indirect = indirect, .sky_open = &sky_open};
+        fx_shade_point sp = {.light_visibility = visibility,
+                             .sky_visibility = &sky_visibility,
+                             .indirect = indirect,
+                             .sky_open = &sky_open};
         pt.pixel_id = ref_stream(task->frame_number, p, h);
         for (uint32_t e = 0; e < ref->desc.effect_count; e++)
             if (ref->runs[e])
@@ -319,8 +330,8 @@ static void ref_tile(void *user, uint32_t task_index, uint32_t thread_index)
     uint32_t tx0 = (task_index % task->tiles_x) * SRV_TILE, ty0 = (task_index / task->tiles_x) * SRV_TILE;
     uint32_t tx1 = tx0 + SRV_TILE < f->width ? tx0 + SRV_TILE : f->width;
     uint32_t ty1 = ty0 + SRV_TILE < f->height ? ty0 + SRV_TILE : f->height;
-    srv__visibility_tile(ref->desc.s, ref->desc.rt, f, tx0, ty0, ref->tri, ref->bary_u, ref->bary_v, ref->depth,
-                         ref->footprint);
+    srv__visibility_tile(ref->desc.s, ref->desc.rt, f, tx0, ty0, ref->tri, ref->bary_u, ref->bary_v,
+                         ref->depth, ref->footprint);
     uint64_t rays[SRV_MAX_EFFECTS] = {0};
     for (uint32_t y = ty0; y < ty1; y++)
         for (uint32_t x = tx0; x < tx1; x++) {
@@ -340,8 +351,9 @@ static void ref_tile(void *user, uint32_t task_index, uint32_t thread_index)
         task->progress(task->user, done, task->pixels_total);
 }
 
-fxc_result srv_ref_render(srv_ref *ref, const srv_camera *camera, uint32_t width, uint32_t height, uint32_t frame,
-                          const srv_ref_image *out, srv_ref_stats *stats, srv_ref_progress progress, void *user)
+fxc_result srv_ref_render(srv_ref *ref, const srv_camera *camera, uint32_t width, uint32_t height,
+                          uint32_t frame, const srv_ref_image *out, srv_ref_stats *stats,
+                          srv_ref_progress progress, void *user)
 {
     if (!out || !out->radiance || width < 1 || height < 1 || width > SRV_MAX_SIDE || height > SRV_MAX_SIDE)
         return FXC_ERR_INVALID;
@@ -394,7 +406,8 @@ fxc_result srv_ref_render(srv_ref *ref, const srv_camera *camera, uint32_t width
     }
     /* Sky pixels add nothing to the sums, so the visible pixels' figure only changes the count. */
     st.noise_rmse = 0.5 * sqrt(noise_all / (3.0 * (double)pixels));
-    st.noise_rmse_visible = st.pixels_visible ? 0.5 * sqrt(noise_all / (3.0 * (double)st.pixels_visible)) : 0.0;
+    st.noise_rmse_visible =
+        st.pixels_visible ? 0.5 * sqrt(noise_all / (3.0 * (double)st.pixels_visible)) : 0.0;
     st.noise_ao = 0.5 * sqrt(ao / (double)pixels);
     st.noise_shadow = 0.5 * sqrt(shadow / (double)pixels);
     for (int k = 0; k < 3; k++)

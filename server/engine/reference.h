@@ -39,18 +39,18 @@
 
 /* Configuration; zero fields take the defaults beside them. */
 typedef struct srv_ref_desc {
-    const scene *s;                        /* required, outlives the renderer */
-    scene_rt *rt;                          /* required, outlives the renderer */
-    const fx_effect *const *effects;       /* the effect list (default: fx_registry()); index = effect id */
-    uint32_t effect_count;                 /* entries of effects (<= SRV_MAX_EFFECTS) */
-    bool effect_on[SRV_MAX_EFFECTS];       /* whose terms are in the image (what the frames it is compared with
+    const scene *s;                    /* required, outlives the renderer */
+    scene_rt *rt;                      /* required, outlives the renderer */
+    const fx_effect *const *effects;   /* the effect list (default: fx_registry()); index = effect id */
+    uint32_t effect_count;             /* entries of effects (<= SRV_MAX_EFFECTS) */
+    bool effect_on[SRV_MAX_EFFECTS];   /* whose terms are in the image (what the frames it is compared with
                                               ran); an effect that shades must have a reference estimator */
-    uint32_t samples[SRV_MAX_EFFECTS];     /* per pixel, in the effect's reference_unit (default its
+    uint32_t samples[SRV_MAX_EFFECTS]; /* per pixel, in the effect's reference_unit (default its
                                               reference_samples); a multiple of twice its reference_granule,
                                               as each half takes half */
     uint32_t seed;
-    uint32_t threads;                      /* 0 = all cores */
-    uint32_t max_bounces;                  /* indirect paths: vertices at most (0: until Russian roulette
+    uint32_t threads;     /* 0 = all cores */
+    uint32_t max_bounces; /* indirect paths: vertices at most (0: until Russian roulette
                                               ends them; 1: one bounce, what the no-cache baseline traces) */
 } srv_ref_desc;
 
@@ -71,28 +71,28 @@ const srv_ref_desc *srv_ref_desc_of(const srv_ref *ref);
 
 /* Where an image goes, top row first; NULL members are not produced. */
 typedef struct srv_ref_image {
-    float *radiance;  /* required: width*height*3 linear RGB, the mean of the two halves */
-    float *half[2];   /* width*height*3 each: the half-sample images */
-    float *ao;        /* width*height: the ambient-occlusion term alone, as sim's _ao view means it: the sky's
+    float *radiance; /* required: width*height*3 linear RGB, the mean of the two halves */
+    float *half[2];  /* width*height*3 each: the half-sample images */
+    float *ao;       /* width*height: the ambient-occlusion term alone, as sim's _ao view means it: the sky's
                          visibility the effects leave, before the probes replace the sky term (1 for the sky
                          and without AO) */
-    float *shadow;    /* width*height: the lit fraction of light 0 (1 for the sky and without lights), as sim's
+    float *shadow;   /* width*height: the lit fraction of light 0 (1 for the sky and without lights), as sim's
                          _shadow view */
-    uint8_t *srgb;    /* width*height*3: the display image through compose's tone map and sRGB encoding (what
+    uint8_t *srgb;   /* width*height*3: the display image through compose's tone map and sRGB encoding (what
                          sim writes as PNG) */
 } srv_ref_image;
 
 /* One image's figures. */
 typedef struct srv_ref_stats {
     uint64_t pixels, pixels_visible;
-    uint64_t primary_rays;               /* one per pixel */
-    uint64_t rays[SRV_MAX_EFFECTS];      /* per effect, both halves */
-    uint64_t rays_total;                 /* primary and every effect's */
-    double noise_rmse;                   /* RMSE(half 0 - half 1) / 2 over every pixel and channel: the
+    uint64_t primary_rays;          /* one per pixel */
+    uint64_t rays[SRV_MAX_EFFECTS]; /* per effect, both halves */
+    uint64_t rays_total;            /* primary and every effect's */
+    double noise_rmse;              /* RMSE(half 0 - half 1) / 2 over every pixel and channel: the
                                             standard error of `radiance` */
-    double noise_rmse_visible;           /* the same over the pixels that see a surface */
-    double noise_ao, noise_shadow;       /* the same for the AO and shadow terms, every pixel */
-    double mean_radiance[3];             /* over every pixel */
+    double noise_rmse_visible;      /* the same over the pixels that see a surface */
+    double noise_ao, noise_shadow;  /* the same for the AO and shadow terms, every pixel */
+    double mean_radiance[3];        /* over every pixel */
     double render_ms;
 } srv_ref_stats;
 
@@ -103,7 +103,8 @@ typedef void (*srv_ref_progress)(void *user, uint64_t done, uint64_t total);
  * numbers (the same camera at another frame gets independent noise). progress may be NULL. Returns FXC_OK,
  * FXC_ERR_CAMERA for a degenerate camera, FXC_ERR_INVALID for a bad size or no radiance output,
  * FXC_ERR_NOMEM. */
-fxc_result srv_ref_render(srv_ref *ref, const srv_camera *camera, uint32_t width, uint32_t height, uint32_t frame,
-                          const srv_ref_image *out, srv_ref_stats *stats, srv_ref_progress progress, void *user);
+fxc_result srv_ref_render(srv_ref *ref, const srv_camera *camera, uint32_t width, uint32_t height,
+                          uint32_t frame, const srv_ref_image *out, srv_ref_stats *stats,
+                          srv_ref_progress progress, void *user);
 
 #endif

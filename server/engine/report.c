@@ -130,7 +130,8 @@ static json_t *stage_json(const double time_ms[SRV_STAGE_COUNT], double frame_ms
 {
     json_t *o = json_object();
     for (int s = 0; s < SRV_STAGE_COUNT; s++)
-        json_object_set_new(o, srv_stage_name((srv_stage)s), json_real(divide > 0 ? time_ms[s] / divide : 0.0));
+        json_object_set_new(o, srv_stage_name((srv_stage)s),
+                            json_real(divide > 0 ? time_ms[s] / divide : 0.0));
     json_object_set_new(o, "frame", json_real(divide > 0 ? frame_ms / divide : 0.0));
     return o;
 }
@@ -155,9 +156,9 @@ json_t *srv_report_memory_json(const srv_report *report, const srv_memory *m)
                                       "pool_in_use", (json_int_t)m->pools_in_use[e], "block_meta",
                                       (json_int_t)m->block_meta[e]));
     }
-    return json_pack("{s:I,s:I,s:I,s:I,s:o,s:I}", "table", (json_int_t)m->table, "viewers", (json_int_t)m->viewers,
-                     "queues", (json_int_t)m->queues, "world_local_tables", (json_int_t)m->world_local, "effects",
-                     effects, "total", (json_int_t)m->total);
+    return json_pack("{s:I,s:I,s:I,s:I,s:o,s:I}", "table", (json_int_t)m->table, "viewers",
+                     (json_int_t)m->viewers, "queues", (json_int_t)m->queues, "world_local_tables",
+                     (json_int_t)m->world_local, "effects", effects, "total", (json_int_t)m->total);
 }
 
 /* The world-space cache's figures: cells (probes) requested and unique, their sharing ratio (the texels'
@@ -168,7 +169,8 @@ static json_t *world_json(uint64_t requested, uint64_t unique, const srv_world_s
     json_t *o = json_object();
     json_object_set_new(o, "requested_cells", json_integer((json_int_t)requested));
     json_object_set_new(o, "unique_cells", json_integer((json_int_t)unique));
-    json_object_set_new(o, "sharing_ratio", unique ? json_real((double)requested / (double)unique) : json_null());
+    json_object_set_new(o, "sharing_ratio",
+                        unique ? json_real((double)requested / (double)unique) : json_null());
     json_object_set_new(o, "entries", json_integer((json_int_t)w->entries));
     json_object_set_new(o, "bricks", json_integer((json_int_t)w->bricks_resident));
     json_object_set_new(o, "bytes", json_integer((json_int_t)w->bytes));
@@ -176,7 +178,8 @@ static json_t *world_json(uint64_t requested, uint64_t unique, const srv_world_s
                         json_real(w->table_capacity ? (double)w->entries / (double)w->table_capacity : 0.0));
     json_object_set_new(o, "refusals", json_integer((json_int_t)refusals));
     json_object_set_new(o, "local_table_lookups", json_integer((json_int_t)lookups));
-    json_object_set_new(o, "local_table_hit_rate", lookups ? json_real((double)hits / (double)lookups) : json_null());
+    json_object_set_new(o, "local_table_hit_rate",
+                        lookups ? json_real((double)hits / (double)lookups) : json_null());
     return o;
 }
 
@@ -186,21 +189,22 @@ json_t *srv_report_frame_json(const srv_report *report, const srv_frame_stats *s
     json_t *viewers = json_array();
     for (uint32_t i = 0; i < st->viewer_count; i++) {
         const srv_viewer_stats *v = &st->viewers[i];
-        json_array_append_new(viewers, json_pack("{s:I,s:I,s:I,s:I,s:I,s:I,s:I,s:b}", "id", (json_int_t)v->id.id,
-                                                 "slot", (json_int_t)(v->id.id & 0xFFu), "width", (json_int_t)v->width,
-                                                 "height", (json_int_t)v->height, "requested_texels",
-                                                 (json_int_t)v->requested_texels, "requested_cells",
-                                                 (json_int_t)v->requested_cells, "pixels_missing",
-                                                 (json_int_t)v->pixels_missing, "sparse", (int)v->sparse));
+        json_array_append_new(
+            viewers, json_pack("{s:I,s:I,s:I,s:I,s:I,s:I,s:I,s:b}", "id", (json_int_t)v->id.id, "slot",
+                               (json_int_t)(v->id.id & 0xFFu), "width", (json_int_t)v->width, "height",
+                               (json_int_t)v->height, "requested_texels", (json_int_t)v->requested_texels,
+                               "requested_cells", (json_int_t)v->requested_cells, "pixels_missing",
+                               (json_int_t)v->pixels_missing, "sparse", (int)v->sparse));
     }
     json_t *o = json_object();
     json_object_set_new(o, "frame", json_integer(st->frame));
     json_object_set_new(o, "viewers", viewers);
     json_object_set_new(o, "requested_texels", json_integer((json_int_t)st->requested_texels));
     json_object_set_new(o, "unique_texels", json_integer((json_int_t)st->unique_texels));
-    json_object_set_new(o, "sharing_ratio", st->unique_texels
-                                                ? json_real((double)st->requested_texels / (double)st->unique_texels)
-                                                : json_null());
+    json_object_set_new(o, "sharing_ratio",
+                        st->unique_texels
+                            ? json_real((double)st->requested_texels / (double)st->unique_texels)
+                            : json_null());
     json_object_set_new(o, "rays", rays_json(loop, st->rays, st->visibility_rays));
     json_object_set_new(o, "texels_updated", per_effect(loop, st->texels_updated, false));
     json_object_set_new(o, "texels_resampled", per_effect(loop, st->texels_resampled, false));
@@ -214,9 +218,9 @@ json_t *srv_report_frame_json(const srv_report *report, const srv_frame_stats *s
     json_object_set_new(o, "evictions", json_integer((json_int_t)st->evictions));
     json_object_set_new(o, "pool_exhausted", json_integer((json_int_t)st->exhausted));
     if (st->world.table_capacity)
-        json_object_set_new(o, "world_space", world_json(st->world.requested_cells, st->world.unique_cells, &st->world,
-                                                         st->world.refusals, st->world.local_lookups,
-                                                         st->world.local_hits));
+        json_object_set_new(o, "world_space",
+                            world_json(st->world.requested_cells, st->world.unique_cells, &st->world,
+                                       st->world.refusals, st->world.local_lookups, st->world.local_hits));
     if (mem)
         json_object_set_new(o, "memory_bytes", srv_report_memory_json(report, mem));
     json_object_set_new(o, "time_ms", stage_json(st->time_ms, st->frame_ms, 1.0));
@@ -237,8 +241,8 @@ json_t *srv_report_json(const srv_report *report)
     json_object_set_new(o, "requested_texels", json_integer((json_int_t)t->requested));
     json_object_set_new(o, "unique_texels", json_integer((json_int_t)t->unique));
     /* No cache, or nothing visible: nothing is requested, so there is no ratio (null, not 0). */
-    json_object_set_new(o, "sharing_ratio", t->unique ? json_real((double)t->requested / (double)t->unique)
-                                                      : json_null());
+    json_object_set_new(o, "sharing_ratio",
+                        t->unique ? json_real((double)t->requested / (double)t->unique) : json_null());
     json_object_set_new(o, "rays", rays_json(loop, t->rays, t->visibility_rays));
     json_object_set_new(o, "texels_updated", per_effect(loop, t->texels_updated, false));
     json_object_set_new(o, "texels_resampled", per_effect(loop, t->resampled, false));
@@ -248,9 +252,9 @@ json_t *srv_report_json(const srv_report *report)
     json_object_set_new(o, "pool_exhausted", json_integer((json_int_t)t->exhausted));
     json_object_set_new(o, "drops", drops_json(t->drops));
     if (t->world_last.table_capacity)
-        json_object_set_new(o, "world_space", world_json(t->world_requested, t->world_unique, &t->world_last,
-                                                         t->world_refusals, t->world_local_lookups,
-                                                         t->world_local_hits));
+        json_object_set_new(o, "world_space",
+                            world_json(t->world_requested, t->world_unique, &t->world_last, t->world_refusals,
+                                       t->world_local_lookups, t->world_local_hits));
     json_object_set_new(o, "memory_bytes",
                         json_pack("{s:o,s:o}", "peak", srv_report_memory_json(report, &t->peak), "final",
                                   srv_report_memory_json(report, &t->final)));

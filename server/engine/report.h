@@ -20,9 +20,9 @@
 
 typedef struct srv_report_totals {
     uint32_t frames;
-    uint64_t viewer_frames;        /* sum over frames of the viewers rendered */
-    uint32_t viewers_seen;         /* distinct viewer ids */
-    uint32_t max_viewers;          /* most viewers in one frame */
+    uint64_t viewer_frames; /* sum over frames of the viewers rendered */
+    uint32_t viewers_seen;  /* distinct viewer ids */
+    uint32_t max_viewers;   /* most viewers in one frame */
     /* The three above count whole-frame viewers; sparse viewers (the server's answers to a client's sample
      * requests, one per client that asks) are counted apart. Both kinds' requests are in the sharing. */
     uint64_t sample_viewer_frames;
@@ -31,7 +31,7 @@ typedef struct srv_report_totals {
     uint64_t rays[SRV_MAX_EFFECTS], texels_updated[SRV_MAX_EFFECTS], resampled[SRV_MAX_EFFECTS],
         deferred[SRV_MAX_EFFECTS];
     uint64_t drops[SRV_DROP_COUNT];
-    uint64_t exhausted;            /* cumulative failed block requests (pool exhausted), from the caches */
+    uint64_t exhausted; /* cumulative failed block requests (pool exhausted), from the caches */
     /* The world-space cache (zero when it is left out): cells requested and unique, summed over frames;
      * refusals and local-table reads summed; the last frame's table and bricks. */
     uint64_t world_requested, world_unique, world_refusals, world_local_lookups, world_local_hits;
@@ -58,7 +58,8 @@ const srv_report_totals *srv_report_get_totals(const srv_report *report);
 const srv_memory *srv_report_last_memory(const srv_report *report);
 
 /* JSON: one frame (with its memory), the totals; new references owned by the caller. */
-json_t *srv_report_frame_json(const srv_report *report, const srv_frame_stats *stats, const srv_memory *memory);
+json_t *srv_report_frame_json(const srv_report *report, const srv_frame_stats *stats,
+                              const srv_memory *memory);
 json_t *srv_report_json(const srv_report *report);
 
 /* The memory as JSON (per structure, per effect). */

@@ -78,8 +78,8 @@ typedef struct pixel_memo {
 } pixel_memo;
 
 /* The cache pixel of buffer entry p of a viewer (visible: tri[p] != SRV_MISS). */
-FXC_HOT_INLINE void fill_pixel(const scene *s, const srv_viewer *view, size_t p, bool positions, pixel_memo *memo,
-                              srv_pixel *px)
+FXC_HOT_INLINE void fill_pixel(const scene *s, const srv_viewer *view, size_t p, bool positions,
+                               pixel_memo *memo, srv_pixel *px)
 {
     uint32_t tri = view->tri[p];
     if (tri != memo->tri) {
@@ -107,7 +107,8 @@ FXC_HOT_INLINE void fill_pixel(const scene *s, const srv_viewer *view, size_t p,
 }
 
 /* The keys of up to SRV_TILE * SRV_TILE pixels, folded, onto the thread's list. */
-FXC_HOT_INLINE void request_pixels(request_task *task, uint32_t thread_index, const srv_pixel *pixels, uint32_t count)
+FXC_HOT_INLINE void request_pixels(request_task *task, uint32_t thread_index, const srv_pixel *pixels,
+                                   uint32_t count)
 {
     srv_loop *loop = task->loop;
     const srv_viewer *view = task->view;
@@ -147,12 +148,14 @@ typedef struct mask_row {
     uint32_t tri[SRV_TILE];
     float normal[3][SRV_TILE], depth[SRV_TILE], footprint[SRV_TILE];
     uint32_t sample_tri[2][MASK_COLUMNS];
-    uint32_t sample_one[2]; /* the triangle of every sample of the row before nx (mask_expand), else SRV_MISS */
+    uint32_t
+        sample_one[2]; /* the triangle of every sample of the row before nx (mask_expand), else SRV_MISS */
     float sample_normal[2][3][MASK_COLUMNS], sample_depth[2][MASK_COLUMNS], sample_footprint[2][MASK_COLUMNS];
 } mask_row;
 
-FXC_HOT_INLINE uint32_t coarse_mask_core(const mask_row *in, int32_t block, int32_t nx, int32_t fy, int32_t two_y,
-                                         float depth_scale, int32_t *out, uint8_t *bytes, bool one_triangle)
+FXC_HOT_INLINE uint32_t coarse_mask_core(const mask_row *in, int32_t block, int32_t nx, int32_t fy,
+                                         int32_t two_y, float depth_scale, int32_t *out, uint8_t *bytes,
+                                         bool one_triangle)
 {
     const int32_t shift = __builtin_ctz((uint32_t)block), low = block - 1;
     int32_t result[SRV_TILE]; /* (stores to a local array, then out) */
@@ -174,7 +177,8 @@ FXC_HOT_INLINE uint32_t coarse_mask_core(const mask_row *in, int32_t block, int3
             /* srv__pow2_floor of the larger footprint (clamped to [-60, 60], NaN to -60), from the bits */
             float fr = in->sample_footprint[rowc][at], x = fp > fr ? fp : fr;
             x = x > -60.0f ? (x < 60.0f ? x : 60.0f) : -60.0f;
-            int32_t e = (int32_t)floorf(x); /* (roundps in the AVX2 copy; floor by hand kept GCC from vectorising) */
+            int32_t e =
+                (int32_t)floorf(x); /* (roundps in the AVX2 copy; floor by hand kept GCC from vectorising) */
             uint32_t bits = (uint32_t)(e + 127) << 23;
             float pow2;
             memcpy(&pow2, &bits, sizeof pow2);
@@ -206,7 +210,8 @@ FXC_HOT_INLINE uint32_t coarse_mask_core(const mask_row *in, int32_t block, int3
 }
 
 FXC_HOT_LANES static uint32_t coarse_mask_lanes(const mask_row *in, int32_t block, int32_t nx, int32_t fy,
-                                                int32_t two_y, float depth_scale, int32_t *out, uint8_t *bytes)
+                                                int32_t two_y, float depth_scale, int32_t *out,
+                                                uint8_t *bytes)
 {
     return coarse_mask_core(in, block, nx, fy, two_y, depth_scale, out, bytes, false);
 }
@@ -215,8 +220,9 @@ FXC_HOT_LANES static uint32_t coarse_mask_lanes(const mask_row *in, int32_t bloc
  * rows before nx; the second row only when two_y) lie on one triangle (row_one_triangle): every candidate
  * that exists matches on its triangle (tr == tp), so the normals, depths and footprints are not read (the
  * same mask: the match is an or with tr == tp). */
-FXC_HOT_LANES static uint32_t coarse_mask_one_triangle(const mask_row *in, int32_t block, int32_t nx, int32_t fy,
-                                                       int32_t two_y, int32_t *out, uint8_t *bytes)
+FXC_HOT_LANES static uint32_t coarse_mask_one_triangle(const mask_row *in, int32_t block, int32_t nx,
+                                                       int32_t fy, int32_t two_y, int32_t *out,
+                                                       uint8_t *bytes)
 {
     return coarse_mask_core(in, block, nx, fy, two_y, 0.0f, out, bytes, true);
 }
@@ -262,8 +268,8 @@ FXC_HOT_INLINE void mask_expand_of(const scene *s, const srv_viewer *view, size_
     in->sample_one[to] = one;
 }
 
-static void mask_expand(const scene *s, const srv_viewer *view, size_t sample_row, uint32_t nx, uint32_t block,
-                        mask_row *in, int to)
+static void mask_expand(const scene *s, const srv_viewer *view, size_t sample_row, uint32_t nx,
+                        uint32_t block, mask_row *in, int to)
 {
     if (block == 4)
         mask_expand_of(s, view, sample_row, nx, 4, in, to);
@@ -284,8 +290,9 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
     uint32_t count = 0;
     pixel_memo memo = {.tri = SRV_MISS};
     const srv_loop *loop = task->loop;
-    uint32_t block =
-        task->effect != SRV_NO_EFFECT && task->effect == loop->coarse_effect ? srv__coarse_block(loop, view) : 1;
+    uint32_t block = task->effect != SRV_NO_EFFECT && task->effect == loop->coarse_effect
+                         ? srv__coarse_block(loop, view)
+                         : 1;
     if (block > 1) {
         /* Evaluated per block in compose: the reps, and the pixels no rep stands in for. The sample choice is
          * made here, once, and kept for compose (view->coarse; engine_internal.h, srv__coarse_mask). */
@@ -328,7 +335,8 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
                 memcpy(in.footprint, view->footprint + row, sizeof in.footprint);
             } else {
                 for (uint32_t j = 0; j < SRV_TILE; j++) {
-                    size_t p = row + (j < lanes ? j : 0); /* lanes past the frame's edge: lane 0's pixel, not used */
+                    size_t p =
+                        row + (j < lanes ? j : 0); /* lanes past the frame's edge: lane 0's pixel, not used */
                     in.tri[j] = view->tri[p];
                     in.depth[j] = view->depth[p];
                     in.footprint[j] = view->footprint[p];
@@ -356,8 +364,7 @@ static void request_tile(void *user, uint32_t task_index, uint32_t thread_index)
             if (lanes == SRV_TILE)
                 memcpy(bytes, coarse + row, sizeof bytes);
             uint32_t own = coarse_mask_lanes(&in, (int32_t)g.block, (int32_t)g.nx, (int32_t)fy,
-                                             (int32_t)two_y, loop->coarse_depth_scale,
-                                             row_mask, bytes);
+                                             (int32_t)two_y, loop->coarse_depth_scale, row_mask, bytes);
             if (lanes == SRV_TILE && !loop->desc.no_lanes) {
                 memcpy(coarse + row, bytes, sizeof bytes);
                 for (; own; own &= own - 1) { /* in column order */
@@ -435,7 +442,8 @@ static uint64_t request_pass(srv_loop *loop, uint32_t slot, uint32_t k, uint32_t
         total += loop->thread_requests[t].count;
     srv_request_list *merged = &view->requests;
     merged->count = 0;
-    if (atomic_load(&task.failed) || !srv__request_reserve(loop, SRV_MEM_VIEWERS, merged, total ? total : 1)) {
+    if (atomic_load(&task.failed) ||
+        !srv__request_reserve(loop, SRV_MEM_VIEWERS, merged, total ? total : 1)) {
         st->drops[SRV_DROP_NOMEM_REQUESTS]++; /* the frame goes on without this viewer's requests */
         return 0;
     }
@@ -449,8 +457,8 @@ static uint64_t request_pass(srv_loop *loop, uint32_t slot, uint32_t k, uint32_t
     }
     size_t unique = 0;
     uint32_t *blocks = merged->blocks;
-    kind->request_batch(loop->caches[k], slot, effect, merged->keys, merged->masks, merged->count, &unique, blocks,
-                        &st->drops[SRV_DROP_POOL_EXHAUSTED], &st->drops[SRV_DROP_TABLE_FULL]);
+    kind->request_batch(loop->caches[k], slot, effect, merged->keys, merged->masks, merged->count, &unique,
+                        blocks, &st->drops[SRV_DROP_POOL_EXHAUSTED], &st->drops[SRV_DROP_TABLE_FULL]);
     merged->count = unique;
     size_t dependent = 0;
     for (size_t i = 0; i < unique; i++) {

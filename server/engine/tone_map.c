@@ -29,10 +29,10 @@ enum { TONE_LUT_SIZE = 4096 };
 static uint8_t tone_lut[TONE_LUT_SIZE];
 
 /* A check of a table's premise at start-up: a programming error if it fails, in every build type. */
-#define FX_CHECK(cond)                                                                                      \
+#define FX_CHECK(cond)                                                                                       \
     do {                                                                                                     \
         if (!(cond)) {                                                                                       \
-            fprintf(stderr, "%s:%d: compose: check failed: %s\n", __FILE__, __LINE__, #cond);              \
+            fprintf(stderr, "%s:%d: compose: check failed: %s\n", __FILE__, __LINE__, #cond);                \
             abort();                                                                                         \
         }                                                                                                    \
     } while (0)
@@ -40,8 +40,8 @@ static uint8_t tone_lut[TONE_LUT_SIZE];
  * mantissa), so each cell spans 1/256 of an octave of radiance. Within a cell the byte changes at most once
  * (checked when the table is built): the cell holds its first byte and the radiance where the next begins. */
 enum {
-    TONE_EXP_LO = 107,                           /* 2^-20: below it every byte is 0 (checked) */
-    TONE_EXP_HI = 132,                           /* 2^5 = 32: from 20 on every byte is 255 */
+    TONE_EXP_LO = 107, /* 2^-20: below it every byte is 0 (checked) */
+    TONE_EXP_HI = 132, /* 2^5 = 32: from 20 on every byte is 255 */
     TONE_CELLS = (TONE_EXP_HI - TONE_EXP_LO) << 8,
 };
 static uint8_t tone_cell_byte[TONE_CELLS];
@@ -76,7 +76,8 @@ static void tone_lut_init(void)
     FX_CHECK(tone_map_reference(20.0f) == 255);
     for (uint32_t cell = 0; cell < TONE_CELLS; cell++) {
         uint32_t first = ((uint32_t)TONE_EXP_LO << 23) + (cell << 15), last = first + (1u << 15) - 1;
-        uint8_t lo_byte = tone_map_reference(float_of_bits(first)), hi_byte = tone_map_reference(float_of_bits(last));
+        uint8_t lo_byte = tone_map_reference(float_of_bits(first)),
+                hi_byte = tone_map_reference(float_of_bits(last));
         FX_CHECK(hi_byte - lo_byte <= 1); /* one change at most: the table's premise */
         tone_cell_byte[cell] = lo_byte;
         tone_cell_byte32[cell] = lo_byte;

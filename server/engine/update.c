@@ -46,8 +46,8 @@ static bool queue_reserve(srv_loop *loop, srv_effect_queue *q, size_t n)
 }
 
 /* Texels of mask whose sample count is below the run's maximum for the effect. */
-static uint64_t unconverged(const fx_effect *e, uint32_t max_samples, const uint8_t *payload, uint32_t texel_bytes,
-                            uint64_t mask)
+static uint64_t unconverged(const fx_effect *e, uint32_t max_samples, const uint8_t *payload,
+                            uint32_t texel_bytes, uint64_t mask)
 {
     uint64_t out = 0;
     for (uint64_t m = mask; m; m &= m - 1) {
@@ -59,7 +59,8 @@ static uint64_t unconverged(const fx_effect *e, uint32_t max_samples, const uint
 }
 
 /* Fills texels of `need` from four final finer texels each; returns the texels filled. */
-static uint64_t resample_block(srv_loop *loop, uint32_t e, uint32_t block, uint64_t need, uint32_t texel_bytes)
+static uint64_t resample_block(srv_loop *loop, uint32_t e, uint32_t block, uint64_t need,
+                               uint32_t texel_bytes)
 {
     const fx_effect *fx = loop->effects[e];
     const srv_cache_kind *kind = loop->kinds[loop->effect_kind[e]];
@@ -84,8 +85,9 @@ static uint64_t resample_block(srv_loop *loop, uint32_t e, uint32_t block, uint6
 
 /* Takes texels of masks[i] into take[i] within the remaining budget (cost per texel); what does not fit is
  * counted as deferred, texels without their dependency block as dropped. */
-static void take_within_budget(srv_loop *loop, uint32_t e, srv_effect_queue *q, uint32_t count, const uint64_t *masks,
-                               uint64_t cost, uint64_t *budget_left, srv_frame_stats *st)
+static void take_within_budget(srv_loop *loop, uint32_t e, srv_effect_queue *q, uint32_t count,
+                               const uint64_t *masks, uint64_t cost, uint64_t *budget_left,
+                               srv_frame_stats *st)
 {
     bool unlimited = loop->desc.ray_budget == 0;
     bool needs_dependency = loop->dependency[e] != SRV_NO_EFFECT;
@@ -129,7 +131,8 @@ static int compare_u64(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
-static void continuous_order(srv_loop *loop, uint32_t e, srv_effect_queue *q, const uint32_t *blocks, uint32_t count)
+static void continuous_order(srv_loop *loop, uint32_t e, srv_effect_queue *q, const uint32_t *blocks,
+                             uint32_t count)
 {
     const fx_effect *fx = loop->effects[e];
     const srv_cache_kind *kind = loop->kinds[loop->effect_kind[e]];
@@ -141,9 +144,11 @@ static void continuous_order(srv_loop *loop, uint32_t e, srv_effect_queue *q, co
         return; /* no refresh this frame: only cells without data are taken */
     uint32_t stamp = loop->frame_number + 1;
     /* Shortly after the lights changed, what a converged probe holds is out of date: no refresh waits. */
-    bool settling = loop->light_changed && loop->frame_number - loop->light_change_frame < loop->light_settle_frames;
+    bool settling =
+        loop->light_changed && loop->frame_number - loop->light_change_frame < loop->light_settle_frames;
     for (uint32_t i = 0; i < count; i++) {
-        uint64_t have = q->refine[i] = kind->block_requested(cache, e, blocks[i]) & kind->block_valid(cache, e, blocks[i]);
+        uint64_t have = q->refine[i] =
+            kind->block_requested(cache, e, blocks[i]) & kind->block_valid(cache, e, blocks[i]);
         if (!have)
             continue;
         uint32_t *word = kind->block_word ? kind->block_word(cache, e, blocks[i]) : NULL;
@@ -152,7 +157,8 @@ static void continuous_order(srv_loop *loop, uint32_t e, srv_effect_queue *q, co
             const uint8_t *payload = kind->block_payload(cache, e, blocks[i]);
             bool converged = true;
             for (uint64_t m = have; m && converged; m &= m - 1)
-                converged = fx->texel_samples(payload + (size_t)__builtin_ctzll(m) * texel_bytes) >= loop->max_samples[e];
+                converged = fx->texel_samples(payload + (size_t)__builtin_ctzll(m) * texel_bytes) >=
+                            loop->max_samples[e];
             if (converged)
                 continue;
         }
@@ -175,10 +181,12 @@ static void take_continuous(srv_loop *loop, uint32_t e, srv_effect_queue *q, uin
         if (!mask)
             continue;
         uint64_t cells = (uint64_t)__builtin_popcountll(mask);
-        bool fits = q->cells_taken + cells <= loop->desc.probe_budget && (unlimited || *budget_left >= cells * cost);
+        bool fits =
+            q->cells_taken + cells <= loop->desc.probe_budget && (unlimited || *budget_left >= cells * cost);
         if (!fits) {
             if (!refresh)
-                st->texels_deferred[e] += cells; /* a refresh that waits is not a deferral: the cell has data */
+                st->texels_deferred[e] +=
+                    cells; /* a refresh that waits is not a deferral: the cell has data */
             continue;
         }
         q->cells_taken += cells;
@@ -227,7 +235,8 @@ void srv__queues(srv_loop *loop, srv_frame_stats *st)
             }
             q->empty[i] = need;
             q->refine[i] = fx->policy == FX_UPDATE_PROGRESSIVE
-                               ? unconverged(fx, loop->max_samples[e], kind->block_payload(cache, e, b), texel_bytes[e], requested & valid)
+                               ? unconverged(fx, loop->max_samples[e], kind->block_payload(cache, e, b),
+                                             texel_bytes[e], requested & valid)
                                : 0;
             q->dependency[i] = dep == SRV_NO_EFFECT
                                    ? SRV_NONE
@@ -252,7 +261,8 @@ void srv__queues(srv_loop *loop, srv_frame_stats *st)
                 take_continuous(loop, e, q, counts[e], round == 2, cost, &budget_left, st);
                 continue;
             }
-            take_within_budget(loop, e, q, counts[e], round == 0 ? q->empty : q->refine, cost, &budget_left, st);
+            take_within_budget(loop, e, q, counts[e], round == 0 ? q->empty : q->refine, cost, &budget_left,
+                               st);
         }
     /* One job per block with texels taken. */
     for (uint32_t e = 0; e < loop->effect_count; e++) {
@@ -269,8 +279,8 @@ void srv__queues(srv_loop *loop, srv_frame_stats *st)
         }
         for (uint32_t i = 0; i < counts[e]; i++)
             if (q->take[i])
-                q->jobs[q->job_count++] =
-                    (srv_job){.block = blocks[e][i], .dependency_block = q->dependency[i], .mask = q->take[i]};
+                q->jobs[q->job_count++] = (srv_job){
+                    .block = blocks[e][i], .dependency_block = q->dependency[i], .mask = q->take[i]};
     }
 }
 
@@ -334,8 +344,12 @@ void srv__updates(srv_loop *loop, bool lookup, srv_frame_stats *st)
             fj->lookup = dep == SRV_NO_EFFECT ? NULL : kind->block_payload(cache, dep, job->dependency_block);
             fj->payload = kind->block_payload(cache, e, job->block);
         }
-        effect_task task = {.loop = loop, .effect = loop->effects[e], .jobs = q->fx_jobs, .count = (uint32_t)count,
-                            .samples = loop->samples[e], .rays = q->chunk_rays};
+        effect_task task = {.loop = loop,
+                            .effect = loop->effects[e],
+                            .jobs = q->fx_jobs,
+                            .count = (uint32_t)count,
+                            .samples = loop->samples[e],
+                            .rays = q->chunk_rays};
         srv_pool_run(loop->pool, chunks, effect_chunk, &task);
         for (uint32_t c = 0; c < chunks; c++)
             st->rays[e] += q->chunk_rays[c];

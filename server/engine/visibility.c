@@ -58,15 +58,16 @@ static float pixel_footprint(const srv_camera_frame *f, const float dir[3], floa
  * results written at index[i] of the output arrays. The direction formula is srv_camera_ray's, inlined, so a
  * pixel traced in a tile or from a list gets the same ray. */
 static void trace_packet(const scene *s, RTCScene rtc, const srv_camera_frame *f, const uint32_t x[16],
-                         const uint32_t y[16], const size_t index[16], const int valid_lane[16], uint32_t *tri,
-                         float *bary_u, float *bary_v, float *depth, float *footprint)
+                         const uint32_t y[16], const size_t index[16], const int valid_lane[16],
+                         uint32_t *tri, float *bary_u, float *bary_v, float *depth, float *footprint)
 {
     _Alignas(64) struct RTCRayHit16 packet;
     _Alignas(64) int valid[16];
     float dirs[16][3];
     struct RTCIntersectContext ctx;
     /* The image plane per pixel: dir = forward + sx * right + sy * up, normalised (srv_camera_ray, inlined). */
-    const float scale_x = 2.0f * f->tan_half_x / (float)f->width, scale_y = 2.0f * f->tan_half_y / (float)f->height;
+    const float scale_x = 2.0f * f->tan_half_x / (float)f->width,
+                scale_y = 2.0f * f->tan_half_y / (float)f->height;
     for (int i = 0; i < 16; i++) {
         valid[i] = valid_lane[i] ? -1 : 0;
         float sx = ((float)x[i] + 0.5f) * scale_x - f->tan_half_x;
@@ -110,8 +111,8 @@ static void trace_packet(const scene *s, RTCScene rtc, const srv_camera_frame *f
         bary_u[p] = packet.hit.u[i];
         bary_v[p] = packet.hit.v[i];
         depth[p] = packet.ray.tfar[i];
-        footprint[p] =
-            pixel_footprint(f, dirs[i], packet.ray.tfar[i], s->tri_normal + 3 * (size_t)hit, s->texel_density);
+        footprint[p] = pixel_footprint(f, dirs[i], packet.ray.tfar[i], s->tri_normal + 3 * (size_t)hit,
+                                       s->texel_density);
     }
 }
 
@@ -136,8 +137,8 @@ void srv__visibility_tile(const scene *s, scene_rt *rt, const srv_camera_frame *
 }
 
 void srv__visibility_list(const scene *s, scene_rt *rt, const srv_camera_frame *f, const uint32_t *list,
-                          uint32_t first, uint32_t count, uint32_t *tri, float *bary_u, float *bary_v, float *depth,
-                          float *footprint)
+                          uint32_t first, uint32_t count, uint32_t *tri, float *bary_u, float *bary_v,
+                          float *depth, float *footprint)
 {
     uint32_t xs[16] = {0}, ys[16] = {0};
     size_t index[16] = {0};
@@ -164,8 +165,8 @@ static void visibility_tile(void *user, uint32_t task_index, uint32_t thread_ind
     visibility_task *task = user;
     srv_viewer *view = task->view;
     srv__visibility_tile(task->loop->s, task->loop->rt, &view->frame, (task_index % task->tiles_x) * SRV_TILE,
-                         (task_index / task->tiles_x) * SRV_TILE, view->tri, view->bary_u, view->bary_v, view->depth,
-                         view->footprint);
+                         (task_index / task->tiles_x) * SRV_TILE, view->tri, view->bary_u, view->bary_v,
+                         view->depth, view->footprint);
 }
 
 enum { LIST_TASK = 256 }; /* listed pixels per visibility task: 16 packets */

@@ -130,11 +130,12 @@ static bool take_frame(srv_net *net, net_session *ss)
     }
     size_t color_bytes = 0, depth_bytes = 0;
     uint32_t quality = f->codec == PROTO_CODEC_JPEG ? v->hello.jpeg_quality : 0;
-    if (proto_color_encode(f->codec, quality, v->rgb[buffer], w, h, ss->scratch, color_cap, &color_bytes) != FXC_OK)
+    if (proto_color_encode(f->codec, quality, v->rgb[buffer], w, h, ss->scratch, color_cap, &color_bytes) !=
+        FXC_OK)
         return false;
     if (f->depth != PROTO_DEPTH_NONE &&
-        proto_depth_encode(f->depth, v->depth[buffer], w, h, ss->scratch + color_cap, depth_cap, &depth_bytes) !=
-            FXC_OK)
+        proto_depth_encode(f->depth, v->depth[buffer], w, h, ss->scratch + color_cap, depth_cap,
+                           &depth_bytes) != FXC_OK)
         return false;
     f->color = ss->scratch;
     f->color_bytes = (uint32_t)color_bytes;
@@ -307,8 +308,8 @@ static void on_hello(srv_net *net, net_session *ss, const proto_hello *h)
         return;
     }
     if (h->width > net->d.max_width || h->height > net->d.max_height) {
-        session_fail(net, ss, FXC_ERR_LIMIT, "resolution %ux%u is above the server's limit %ux%u", h->width, h->height,
-                     net->d.max_width, net->d.max_height);
+        session_fail(net, ss, FXC_ERR_LIMIT, "resolution %ux%u is above the server's limit %ux%u", h->width,
+                     h->height, net->d.max_width, net->d.max_height);
         return;
     }
     size_t pixels = (size_t)h->width * h->height;
@@ -434,11 +435,12 @@ static void on_camera(srv_net *net, net_session *ss, const proto_camera *c)
      * time (at most a second). */
     double latency = fmin(1.0, 1.0 / net->d.fps + 1e-3 * net->frame_ms);
     pthread_mutex_unlock(&net->lock);
-    proto_pose rendered_pose = srv_net_strategy_pose(v->strategy, c, v->has_previous ? &v->previous_pose : NULL,
-                                                     v->previous_time, latency);
-    double rendered_direction[3] = {rendered_pose.direction[0], rendered_pose.direction[1], rendered_pose.direction[2]};
-    srv_camera rendered = srv_trace_camera_world(net->d.s, rendered_pose.position, rendered_direction,
-                                                 rendered_pose.fov_deg);
+    proto_pose rendered_pose = srv_net_strategy_pose(
+        v->strategy, c, v->has_previous ? &v->previous_pose : NULL, v->previous_time, latency);
+    double rendered_direction[3] = {rendered_pose.direction[0], rendered_pose.direction[1],
+                                    rendered_pose.direction[2]};
+    srv_camera rendered =
+        srv_trace_camera_world(net->d.s, rendered_pose.position, rendered_direction, rendered_pose.fov_deg);
     if (!srv_camera_setup(&rendered, v->hello.width, v->hello.height, &check))
         rendered = cam; /* a prediction the renderer cannot use: the reported camera */
     v->has_previous = true;
@@ -462,8 +464,8 @@ static void on_sample_request(srv_net *net, net_session *ss, const proto_sample_
         return;
     }
     double t = srv__net_now_s();
-    ss->sample_tokens =
-        fmin((double)net->d.camera_rate, ss->sample_tokens + (t - ss->sample_tokens_time) * net->d.camera_rate);
+    ss->sample_tokens = fmin((double)net->d.camera_rate,
+                             ss->sample_tokens + (t - ss->sample_tokens_time) * net->d.camera_rate);
     ss->sample_tokens_time = t;
     if (ss->sample_tokens < 1) {
         session_fail(net, ss, FXC_ERR_LIMIT, "more than %u sample requests per second", net->d.camera_rate);
@@ -476,15 +478,17 @@ static void on_sample_request(srv_net *net, net_session *ss, const proto_sample_
         return;
     }
     if (q->width > net->d.max_width || q->height > net->d.max_height) {
-        session_fail(net, ss, FXC_ERR_LIMIT, "sample request %u: image %ux%u is above the server's limit %ux%u",
-                     q->request, q->width, q->height, net->d.max_width, net->d.max_height);
+        session_fail(net, ss, FXC_ERR_LIMIT,
+                     "sample request %u: image %ux%u is above the server's limit %ux%u", q->request, q->width,
+                     q->height, net->d.max_width, net->d.max_height);
         return;
     }
     double direction[3] = {q->camera.direction[0], q->camera.direction[1], q->camera.direction[2]};
     srv_camera cam = srv_trace_camera_world(net->d.s, q->camera.position, direction, q->camera.fov_deg);
     srv_camera_frame check;
     if (!srv_camera_setup(&cam, q->width, q->height, &check)) {
-        session_fail(net, ss, FXC_ERR_CAMERA, "sample request %u: %s", q->request, fxc_strerror(FXC_ERR_CAMERA));
+        session_fail(net, ss, FXC_ERR_CAMERA, "sample request %u: %s", q->request,
+                     fxc_strerror(FXC_ERR_CAMERA));
         return;
     }
     pthread_mutex_lock(&net->lock);
@@ -539,9 +543,15 @@ static void on_message(srv_net *net, net_session *ss, const uint8_t *bytes, size
         return;
     }
     switch (m.type) {
-    case PROTO_HELLO: on_hello(net, ss, &m.u.hello); break;
-    case PROTO_CAMERA: on_camera(net, ss, &m.u.camera); break;
-    case PROTO_SAMPLE_REQUEST: on_sample_request(net, ss, &m.u.sample_request); break;
+    case PROTO_HELLO:
+        on_hello(net, ss, &m.u.hello);
+        break;
+    case PROTO_CAMERA:
+        on_camera(net, ss, &m.u.camera);
+        break;
+    case PROTO_SAMPLE_REQUEST:
+        on_sample_request(net, ss, &m.u.sample_request);
+        break;
     case PROTO_STATS_REQUEST:
         if (!ss->viewer) {
             session_fail(net, ss, FXC_ERR_PROTOCOL, "a stats request before hello");
@@ -557,7 +567,8 @@ static void on_message(srv_net *net, net_session *ss, const uint8_t *bytes, size
         lws_set_timeout(ss->wsi, PENDING_TIMEOUT_CLOSE_SEND, LWS_TO_KILL_ASYNC);
         break;
     default:
-        session_fail(net, ss, FXC_ERR_PROTOCOL, "a %s message is not for the server", proto_type_name(m.type));
+        session_fail(net, ss, FXC_ERR_PROTOCOL, "a %s message is not for the server",
+                     proto_type_name(m.type));
         break;
     }
 }
@@ -612,8 +623,8 @@ static void on_receive(srv_net *net, net_session *ss, const uint8_t *in, size_t 
         }
         limit = message_limit(net, ss);
         if (h.length > limit - PROTO_HEADER_BYTES) {
-            session_fail(net, ss, FXC_ERR_TOO_LARGE, "a message of %u bytes is over the server's limit of %zu",
-                         h.length, limit);
+            session_fail(net, ss, FXC_ERR_TOO_LARGE,
+                         "a message of %u bytes is over the server's limit of %zu", h.length, limit);
             return;
         }
     }
@@ -661,7 +672,8 @@ static void on_wake(srv_net *net)
         if (!ss->viewer)
             continue;
         pthread_mutex_lock(&net->lock);
-        bool work = ss->viewer->ready || ss->viewer->ans_ready || ss->viewer->stats_json || ss->viewer->fail_code;
+        bool work =
+            ss->viewer->ready || ss->viewer->ans_ready || ss->viewer->stats_json || ss->viewer->fail_code;
         pthread_mutex_unlock(&net->lock);
         if (work)
             lws_callback_on_writable(ss->wsi);
@@ -898,7 +910,8 @@ fxc_result srv_net_run(srv_net *net, char *err, size_t err_cap)
         net_viewer *v = &net->viewers[i];
         if (v->trace && srv_trace_writer_close(v->trace) != 0 && !net->frame_error) {
             net->frame_error = FXC_ERR_IO;
-            snprintf(net->frame_error_text, sizeof net->frame_error_text, "writing %s's trace failed", v->name);
+            snprintf(net->frame_error_text, sizeof net->frame_error_text, "writing %s's trace failed",
+                     v->name);
         }
         v->trace = NULL;
     }

@@ -43,7 +43,7 @@
 /* The fan strategy's widening: tan(fov/2) multiplied by this (Baxter's wider reference frame at the same pixel
  * count), the result capped at SRV_FAN_MAX_FOV degrees. */
 #define SRV_FAN_TAN_FACTOR 1.5
-#define SRV_FAN_MAX_FOV 170.0
+#define SRV_FAN_MAX_FOV    170.0
 
 /* The camera rendered for a camera message under a strategy: basic the reported pose; fan that pose widened;
  * predictive the message's predicted pose when it has one, else the reported pose extrapolated linearly from
@@ -54,44 +54,45 @@ proto_pose srv_net_strategy_pose(uint32_t strategy, const proto_camera *c, const
 
 /* Configuration; zero fields take the defaults beside them. */
 typedef struct srv_net_desc {
-    srv_loop *loop;             /* required: the engine (the frame thread drives it) */
-    srv_report *report;         /* required: the run report (stats requests read it, on the frame thread) */
-    const scene *s;             /* required: world <-> local, the welcome's bounds and default camera */
-    const char *bind;           /* address to listen on (default 127.0.0.1) */
-    int port;                   /* TCP port, 0 = any free port (srv_net_port tells which); -1 = default 7681 */
-    const char *token;          /* the access token hello must carry (NULL or "": none) */
-    double fps;                 /* target frames per second (default 30) */
-    uint32_t max_viewers;       /* viewers at once (default 16, at most SRV_MAX_VIEWERS) */
+    srv_loop *loop;       /* required: the engine (the frame thread drives it) */
+    srv_report *report;   /* required: the run report (stats requests read it, on the frame thread) */
+    const scene *s;       /* required: world <-> local, the welcome's bounds and default camera */
+    const char *bind;     /* address to listen on (default 127.0.0.1) */
+    int port;             /* TCP port, 0 = any free port (srv_net_port tells which); -1 = default 7681 */
+    const char *token;    /* the access token hello must carry (NULL or "": none) */
+    double fps;           /* target frames per second (default 30) */
+    uint32_t max_viewers; /* viewers at once (default 16, at most SRV_MAX_VIEWERS) */
     uint32_t max_width, max_height; /* largest resolution a viewer may ask for (default 3840 x 2160) */
-    uint32_t max_message;       /* largest message a client may send, bytes (default 65536) */
-    uint32_t camera_rate;       /* camera messages per second per viewer (default 240; a burst of one second's
+    uint32_t max_message;           /* largest message a client may send, bytes (default 65536) */
+    uint32_t camera_rate;     /* camera messages per second per viewer (default 240; a burst of one second's
                                    worth is allowed); sample requests have a bucket of their own at this rate */
-    uint32_t max_samples;       /* pixels one sample request may ask for (default 65536, at most
+    uint32_t max_samples;     /* pixels one sample request may ask for (default 65536, at most
                                    PROTO_MAX_SAMPLES); its message may be 56 + 4 x max_samples bytes whatever
                                    max_message says */
-    uint32_t hello_timeout_s;   /* seconds a connection may take to send hello (default 10) */
-    const char *record_dir;     /* write every viewer's rendered cameras as DIR/NAME.trace (NULL: none) */
-    uint32_t frames;            /* stop after this many frames of the clock (0: until stopped) */
-    volatile sig_atomic_t *stop;/* set non-zero (by a signal handler) to stop cleanly */
-    bool progress;              /* a status line on stderr (a terminal) */
+    uint32_t hello_timeout_s; /* seconds a connection may take to send hello (default 10) */
+    const char *record_dir;   /* write every viewer's rendered cameras as DIR/NAME.trace (NULL: none) */
+    uint32_t frames;          /* stop after this many frames of the clock (0: until stopped) */
+    volatile sig_atomic_t *stop; /* set non-zero (by a signal handler) to stop cleanly */
+    bool progress;               /* a status line on stderr (a terminal) */
 } srv_net_desc;
 
 /* Totals of a run (network side). */
 typedef struct srv_net_totals {
-    uint64_t connections;       /* WebSocket connections accepted */
-    uint64_t viewers_joined;    /* hellos accepted */
-    uint64_t refused;           /* connections closed with an error message */
+    uint64_t connections;         /* WebSocket connections accepted */
+    uint64_t viewers_joined;      /* hellos accepted */
+    uint64_t refused;             /* connections closed with an error message */
     uint64_t refused_by_code[32]; /* by -code (fxc_result), for codes up to 31 */
     uint64_t frames_sent, frames_dropped, bytes_sent;
     uint64_t cameras_received;
-    uint64_t sample_requests;   /* sample requests received */
-    uint64_t sample_requests_dropped; /* replaced by a newer one before being rendered, or answered but replaced
+    uint64_t sample_requests; /* sample requests received */
+    uint64_t
+        sample_requests_dropped; /* replaced by a newer one before being rendered, or answered but replaced
                                          before being sent */
-    uint64_t samples_sent;      /* answers sent */
-    uint64_t samples_pixels;    /* samples in the answers sent */
-    double encode_ms;           /* time spent encoding frames */
-    uint32_t frames;            /* frames of the clock */
-    uint64_t buffer_bytes_peak; /* per-viewer frame and message buffers, at most at once */
+    uint64_t samples_sent;       /* answers sent */
+    uint64_t samples_pixels;     /* samples in the answers sent */
+    double encode_ms;            /* time spent encoding frames */
+    uint32_t frames;             /* frames of the clock */
+    uint64_t buffer_bytes_peak;  /* per-viewer frame and message buffers, at most at once */
 } srv_net_totals;
 
 typedef struct srv_net srv_net;

@@ -114,7 +114,8 @@ static void take_viewers(srv_net *net)
             srv_viewer_remove(net->d.loop, v->sample_id);
         if (v->trace && srv_trace_writer_close(v->trace) != 0 && !net->frame_error) {
             net->frame_error = FXC_ERR_IO;
-            snprintf(net->frame_error_text, sizeof net->frame_error_text, "writing %s's trace failed", v->name);
+            snprintf(net->frame_error_text, sizeof net->frame_error_text, "writing %s's trace failed",
+                     v->name);
         }
         v->trace = NULL;
         srv__net_free_viewer(net, v);
@@ -189,7 +190,8 @@ static void stage_answers(srv_net *net, uint32_t frame)
                 memcpy(sample.rgb, image + 3 * (size_t)at, 3);
                 d = depth[at];
             }
-            sample.depth = d > 0.0f ? d : FLT_MIN; /* the wire wants > 0 (a hit at the eye, were it possible) */
+            sample.depth =
+                d > 0.0f ? d : FLT_MIN; /* the wire wants > 0 (a hit at the eye, were it possible) */
             proto_sample_put(out, k, &sample);
         }
         v->ans_request = v->req_id[r];
@@ -248,7 +250,8 @@ void *srv__net_frame_thread(void *arg)
             srv_frame_stats st;
             if (srv_loop_frame(net->d.loop, &st) != FXC_OK && !net->frame_error) {
                 net->frame_error = FXC_ERR_IO; /* a sink could not write: it said why */
-                snprintf(net->frame_error_text, sizeof net->frame_error_text, "a frame's output could not be written");
+                snprintf(net->frame_error_text, sizeof net->frame_error_text,
+                         "a frame's output could not be written");
             }
             stage_answers(net, st.frame);
             pthread_mutex_lock(&net->lock);
@@ -256,7 +259,8 @@ void *srv__net_frame_thread(void *arg)
             pthread_mutex_unlock(&net->lock);
             net->frame++;
             if (net->d.progress)
-                fprintf(stderr, "\rframe %u  %u viewers  %.1f ms   ", net->frame, st.viewer_count, st.frame_ms);
+                fprintf(stderr, "\rframe %u  %u viewers  %.1f ms   ", net->frame, st.viewer_count,
+                        st.frame_ms);
         }
         answer_stats(net);
         lws_cancel_service(net->context);
@@ -276,4 +280,3 @@ void *srv__net_frame_thread(void *arg)
     lws_cancel_service(net->context);
     return NULL;
 }
-

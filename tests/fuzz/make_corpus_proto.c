@@ -42,17 +42,28 @@ int main(int argc, char **argv)
     for (uint32_t codec = 0; codec < PROTO_CODEC_COUNT; codec++) {
         memset(&m, 0, sizeof m);
         m.type = PROTO_HELLO;
-        m.u.hello = (proto_hello){.name = "alice", .width = 640, .height = 360, .fov_deg = 60.0f,
-                                  .codec = (uint8_t)codec, .jpeg_quality = codec == PROTO_CODEC_JPEG ? 85 : 0,
-                                  .depth = (uint8_t)(codec * 16), .token = "secret", .strategy = ""};
+        m.u.hello = (proto_hello){.name = "alice",
+                                  .width = 640,
+                                  .height = 360,
+                                  .fov_deg = 60.0f,
+                                  .codec = (uint8_t)codec,
+                                  .jpeg_quality = codec == PROTO_CODEC_JPEG ? 85 : 0,
+                                  .depth = (uint8_t)(codec * 16),
+                                  .token = "secret",
+                                  .strategy = ""};
         char name[64];
         snprintf(name, sizeof name, "hello-%s", proto_codec_name(codec));
         write_message(dir, name, &m);
     }
     memset(&m, 0, sizeof m);
     m.type = PROTO_WELCOME;
-    m.u.welcome = (proto_welcome){.viewer_id = 1, .name = "viewer_01", .fps = 30.0f, .bounds_min = {-5, 0, -5},
-                                  .bounds_max = {5, 3, 5}, .camera = pose(), .max_camera_rate = 120};
+    m.u.welcome = (proto_welcome){.viewer_id = 1,
+                                  .name = "viewer_01",
+                                  .fps = 30.0f,
+                                  .bounds_min = {-5, 0, -5},
+                                  .bounds_max = {5, 3, 5},
+                                  .camera = pose(),
+                                  .max_camera_rate = 120};
     write_message(dir, "welcome", &m);
     memset(&m, 0, sizeof m);
     m.type = PROTO_CAMERA;
@@ -79,21 +90,30 @@ int main(int argc, char **argv)
             size_t color_size = 0, depth_size = 0;
             if (proto_color_encode(codec, 80, rgb, W, H, color, sizeof color, &color_size) != FXC_OK ||
                 (depths[d] != PROTO_DEPTH_NONE &&
-                 proto_depth_encode(depths[d], depth, W, H, depth_bytes, sizeof depth_bytes, &depth_size) != FXC_OK)) {
+                 proto_depth_encode(depths[d], depth, W, H, depth_bytes, sizeof depth_bytes, &depth_size) !=
+                     FXC_OK)) {
                 fprintf(stderr, "make_corpus_proto: cannot encode the payloads\n");
                 return 1;
             }
             memset(&m, 0, sizeof m);
             m.type = PROTO_FRAME;
-            m.u.frame = (proto_frame){.frame = 7, .camera_sequence = 1, .camera = pose(), .width = W, .height = H,
-                                      .codec = (uint8_t)codec, .depth = (uint8_t)depths[d],
-                                      .stats = {100, 10, W * H, 3, 0, 16.7f, 0.4f}, .color = color,
+            m.u.frame = (proto_frame){.frame = 7,
+                                      .camera_sequence = 1,
+                                      .camera = pose(),
+                                      .width = W,
+                                      .height = H,
+                                      .codec = (uint8_t)codec,
+                                      .depth = (uint8_t)depths[d],
+                                      .stats = {100, 10, W * H, 3, 0, 16.7f, 0.4f},
+                                      .color = color,
                                       .color_bytes = (uint32_t)color_size,
                                       .depth_data = depth_size ? depth_bytes : NULL,
                                       .depth_bytes = (uint32_t)depth_size};
             char name[64];
             snprintf(name, sizeof name, "frame-%s-%s", proto_codec_name(codec),
-                     depths[d] == PROTO_DEPTH_NONE ? "nodepth" : depths[d] == PROTO_DEPTH_HALF ? "half" : "float");
+                     depths[d] == PROTO_DEPTH_NONE   ? "nodepth"
+                     : depths[d] == PROTO_DEPTH_HALF ? "half"
+                                                     : "float");
             write_message(dir, name, &m);
         }
     memset(&m, 0, sizeof m);
@@ -120,18 +140,19 @@ int main(int argc, char **argv)
     for (uint32_t i = 0; i < 5; i++) {
         proto_request_pixel_put(pixels, i, wanted[i][0], wanted[i][1]);
         uint32_t at = wanted[i][1] * W + wanted[i][0];
-        proto_sample s = {wanted[i][0], wanted[i][1], {rgb[3 * at], rgb[3 * at + 1], rgb[3 * at + 2]}, depth[at]};
+        proto_sample s = {
+            wanted[i][0], wanted[i][1], {rgb[3 * at], rgb[3 * at + 1], rgb[3 * at + 2]}, depth[at]};
         proto_sample_put(samples, i, &s);
     }
     memset(&m, 0, sizeof m);
     m.type = PROTO_SAMPLE_REQUEST;
-    m.u.sample_request = (proto_sample_request){.request = 3, .camera = pose(), .width = W, .height = H,
-                                                .count = 5, .pixels = pixels};
+    m.u.sample_request = (proto_sample_request){
+        .request = 3, .camera = pose(), .width = W, .height = H, .count = 5, .pixels = pixels};
     write_message(dir, "sample-request", &m);
     memset(&m, 0, sizeof m);
     m.type = PROTO_SAMPLES;
-    m.u.samples = (proto_samples){.request = 3, .frame = 8, .camera = pose(), .width = W, .height = H,
-                                  .count = 5, .samples = samples};
+    m.u.samples = (proto_samples){
+        .request = 3, .frame = 8, .camera = pose(), .width = W, .height = H, .count = 5, .samples = samples};
     write_message(dir, "samples", &m);
     return 0;
 }

@@ -55,7 +55,8 @@ static uint64_t recompute_resident(srv_loop *loop)
                 job.lookup = lookup;
                 job.payload = fresh;
                 if (strcmp(name, "triangle_lookup") == 0) {
-                    fx_lookup_update(s, job.island, job.level, job.block_x, job.block_y, job.mask, fresh_words);
+                    fx_lookup_update(s, job.island, job.level, job.block_x, job.block_y, job.mask,
+                                     fresh_words);
                 } else if (strcmp(name, "shadow") == 0) {
                     fx_shadow_update(&loop->fx, &job, 1);
                 } else if (strcmp(name, "ao") == 0) {
@@ -64,7 +65,8 @@ static uint64_t recompute_resident(srv_loop *loop)
                     continue;
                 }
                 if (memcmp(fresh + (size_t)t * bytes, held + (size_t)t * bytes, bytes) != 0)
-                    fail_msg("effect %s, block %016llx texel %u: the cache holds bytes its effect does not compute "
+                    fail_msg("effect %s, block %016llx texel %u: the cache holds bytes its effect does not "
+                             "compute "
                              "for that key",
                              name, (unsigned long long)key, t);
                 compared++;
@@ -107,8 +109,15 @@ static thrash_result thrash(uint64_t pool_bytes, bool probes)
     assert_non_null(s);
     scene_rt *rt = scene_rt_create(s, NULL, &err);
     assert_non_null(rt);
-    srv_loop_desc d = {.s = s, .rt = rt, .seed = 13, .pool_bytes = pool_bytes, .effects = thrash_effects,
-                       .effect_count = 4, .threads = 2, .probe_rays = 32, .keep_views = true};
+    srv_loop_desc d = {.s = s,
+                       .rt = rt,
+                       .seed = 13,
+                       .pool_bytes = pool_bytes,
+                       .effects = thrash_effects,
+                       .effect_count = 4,
+                       .threads = 2,
+                       .probe_rays = 32,
+                       .keep_views = true};
     d.effect_on[1] = d.effect_on[2] = true;
     d.effect_on[3] = probes;
     srv_viewer_id ids[3];
@@ -158,8 +167,14 @@ static void test_pool_far_smaller_than_working_set(void **state)
     srv_viewer_id ids[2];
     thrash_effects_init();
     for (int i = 0; i < 2; i++) {
-        srv_loop_desc d = {.s = s, .rt = rt, .seed = 13, .pool_bytes = i ? 1 : 64u << 20, .threads = 2,
-                           .samples_per_update = 64, .effects = thrash_effects, .effect_count = 3};
+        srv_loop_desc d = {.s = s,
+                           .rt = rt,
+                           .seed = 13,
+                           .pool_bytes = i ? 1 : 64u << 20,
+                           .threads = 2,
+                           .samples_per_update = 64,
+                           .effects = thrash_effects,
+                           .effect_count = 3};
         d.effect_on[1] = d.effect_on[2] = true;
         loops[i] = fxt_loop(&d, 1, 32, 18, &ids[i]);
     }
@@ -182,11 +197,12 @@ static void test_pool_far_smaller_than_working_set(void **state)
             dropped_frames++;
         }
     }
-    print_message("six views twice, pools of 64 blocks: %llu effect rays (64 MiB: %llu), %llu evictions; %u frames "
-                  "without a drop, each bit for bit the 64 MiB frame, %u with drops; %llu resident texels "
-                  "recomputed, all identical\n",
-                  (unsigned long long)rays[1], (unsigned long long)rays[0], (unsigned long long)st[1].evictions, same,
-                  dropped_frames, (unsigned long long)compared);
+    print_message(
+        "six views twice, pools of 64 blocks: %llu effect rays (64 MiB: %llu), %llu evictions; %u frames "
+        "without a drop, each bit for bit the 64 MiB frame, %u with drops; %llu resident texels "
+        "recomputed, all identical\n",
+        (unsigned long long)rays[1], (unsigned long long)rays[0], (unsigned long long)st[1].evictions, same,
+        dropped_frames, (unsigned long long)compared);
     assert_true(rays[1] > rays[0]);
     assert_true(st[1].evictions > 0 && st[0].evictions == 0);
     assert_true(same >= 6);
@@ -197,14 +213,16 @@ static void test_pool_far_smaller_than_working_set(void **state)
     scene_free(s);
 
     thrash_result small = thrash(1, true), large = thrash(64u << 20, true);
-    print_message("three viewers, pools of 64 blocks: %llu evictions, %llu exhausted requests, %llu blocks dropped, "
-                  "%llu missing pixels (64 MiB: %llu); %llu resident texels recomputed (64 MiB: %llu), all "
-                  "identical\n",
-                  (unsigned long long)small.evictions, (unsigned long long)small.exhausted,
-                  (unsigned long long)small.dropped, (unsigned long long)small.missing,
-                  (unsigned long long)large.missing, (unsigned long long)small.compared,
-                  (unsigned long long)large.compared);
-    assert_true(small.exhausted > 0 && small.evictions > 0 && small.dropped > 0 && small.missing > large.missing);
+    print_message(
+        "three viewers, pools of 64 blocks: %llu evictions, %llu exhausted requests, %llu blocks dropped, "
+        "%llu missing pixels (64 MiB: %llu); %llu resident texels recomputed (64 MiB: %llu), all "
+        "identical\n",
+        (unsigned long long)small.evictions, (unsigned long long)small.exhausted,
+        (unsigned long long)small.dropped, (unsigned long long)small.missing,
+        (unsigned long long)large.missing, (unsigned long long)small.compared,
+        (unsigned long long)large.compared);
+    assert_true(small.exhausted > 0 && small.evictions > 0 && small.dropped > 0 &&
+                small.missing > large.missing);
     assert_int_equal(large.exhausted, 0);
     assert_true(small.compared > 1000 && large.compared > small.compared);
     assert_true(small.blocks <= 3 * 64);
@@ -226,8 +244,13 @@ static void test_table_at_load_limit(void **state)
     scene_error err = {0};
     scene *s = scene_create_default(NULL, &err);
     scene_rt *rt = scene_rt_create(s, NULL, &err);
-    srv_loop_desc d = {.s = s, .rt = rt, .seed = 13, .pool_bytes = pool, .effects = thrash_effects,
-                       .effect_count = 3, .threads = 2};
+    srv_loop_desc d = {.s = s,
+                       .rt = rt,
+                       .seed = 13,
+                       .pool_bytes = pool,
+                       .effects = thrash_effects,
+                       .effect_count = 3,
+                       .threads = 2};
     d.effect_on[1] = d.effect_on[2] = true;
     srv_viewer_id ids[3];
     srv_loop *loop = fxt_loop(&d, 3, 64, 36, ids);
@@ -251,8 +274,8 @@ static void test_table_at_load_limit(void **state)
                     continue;
                 resident++;
                 if (kind->find(cache, e, key) != b)
-                    fail_msg("frame %u: key %016llx of block %u is found at block %u", frame, (unsigned long long)key,
-                             b, kind->find(cache, e, key));
+                    fail_msg("frame %u: key %016llx of block %u is found at block %u", frame,
+                             (unsigned long long)key, b, kind->find(cache, e, key));
             }
         }
         assert_int_equal(resident, st.table_count);
@@ -260,8 +283,9 @@ static void test_table_at_load_limit(void **state)
         assert_true(load > 0.5 && load <= 2.0 / 3.0);
         peak = fmax(peak, load);
         compared += recompute_resident(loop);
-        print_message("frame %u: table %u of %u slots (%.1f %%), %llu evictions so far\n", frame, st.table_count,
-                      st.table_capacity, 100.0 * st.table_count / st.table_capacity, (unsigned long long)st.evictions);
+        print_message("frame %u: table %u of %u slots (%.1f %%), %llu evictions so far\n", frame,
+                      st.table_count, st.table_capacity, 100.0 * st.table_count / st.table_capacity,
+                      (unsigned long long)st.evictions);
     }
     print_message("table: peak load %.1f %% of 512 slots (every pool full: %.1f %%)\n", 100 * peak,
                   100.0 * 3 * blocks / 512);
@@ -284,9 +308,11 @@ static void test_largest_level_bias(void **state)
     const int32_t biases[] = {15, INT32_MAX, -15, INT32_MIN};
     scene_rt *rt;
     scene *plane = stab_open_plane((const float[3]){0.4f, -0.8f, 0.3f}, 2.0f, 1.0f, &rt);
-    srv_camera cam = {.position = {0.2f, 3.3f, 1.9f}, .target = {0.2f, 0.3f, -3.3f}, .up = {0, 1, 0}, .fov_deg = 70};
+    srv_camera cam = {
+        .position = {0.2f, 3.3f, 1.9f}, .target = {0.2f, 0.3f, -3.3f}, .up = {0, 1, 0}, .fov_deg = 70};
     for (size_t i = 0; i < sizeof biases / sizeof biases[0]; i++) {
-        srv_loop_desc d = {.s = plane, .rt = rt, .seed = 2, .keep_views = true, .samples_per_update = 64, .threads = 2};
+        srv_loop_desc d = {
+            .s = plane, .rt = rt, .seed = 2, .keep_views = true, .samples_per_update = 64, .threads = 2};
         fxt_effects_on(&d, (const char *const[]){"shadow", "ao"}, 2);
         d.bias[SCENE_FX_SHADOW] = d.bias[SCENE_FX_AO] = biases[i];
         d.bias_set[SCENE_FX_SHADOW] = d.bias_set[SCENE_FX_AO] = true;
@@ -295,7 +321,8 @@ static void test_largest_level_bias(void **state)
         srv_frame_stats st;
         stab_frames(loop, &id, 1, &cam, true, 2, &st);
         stab_plane_result r = stab_check_open_plane(loop, id, &cam, (double)0.3f, 0.7, -0.4, 20.0, 20.0);
-        print_message("open plane, bias %d: %llu pixels the closed form\n", biases[i], (unsigned long long)r.plane_pixels);
+        print_message("open plane, bias %d: %llu pixels the closed form\n", biases[i],
+                      (unsigned long long)r.plane_pixels);
         assert_true(r.plane_pixels > 1000);
         srv_loop_free(loop);
     }
@@ -310,7 +337,8 @@ static void test_largest_level_bias(void **state)
     for (size_t i = 0; i < sizeof biases / sizeof biases[0]; i++)
         for (int no_cache = 0; no_cache < 2; no_cache++) {
             int32_t probe_bias = biases[i]; /* the world-space levels end at 14 and 0 */
-            srv_loop_desc d = {.s = s, .rt = rt, .seed = 2, .no_cache = no_cache, .threads = 2, .probe_rays = 32};
+            srv_loop_desc d = {
+                .s = s, .rt = rt, .seed = 2, .no_cache = no_cache, .threads = 2, .probe_rays = 32};
             fxt_effects_on(&d, (const char *const[]){"shadow", "ao", "probes"}, 3);
             d.bias[SCENE_FX_SHADOW] = d.bias[SCENE_FX_AO] = biases[i];
             d.bias[SCENE_FX_PROBES] = probe_bias;
@@ -343,17 +371,19 @@ static void test_largest_level_bias(void **state)
                         fx_block_job job;
                         memset(&job, 0, sizeof job);
                         kind->job_location(loop->caches[k], e, key, &job);
-                        uint32_t want = k == SCENE_CACHE_WORLD_SPACE ? (probe_bias > 0 ? WSC_MAX_LEVEL : 0) : expected_level;
+                        uint32_t want = k == SCENE_CACHE_WORLD_SPACE ? (probe_bias > 0 ? WSC_MAX_LEVEL : 0)
+                                                                     : expected_level;
                         wrong += job.level != want;
                         blocks++;
                     }
                 }
             }
-            print_message("embedded scene, bias %d (probes %d): %llu AO and %llu shadow texels, %llu probes, %u "
-                          "blocks, %u at another level, %llu refused\n",
-                          biases[i], probe_bias, (unsigned long long)c.texels[SCENE_FX_AO],
-                          (unsigned long long)c.texels[SCENE_FX_SHADOW], (unsigned long long)c.texels[SCENE_FX_PROBES],
-                          blocks, wrong, (unsigned long long)st.world.refusals);
+            print_message(
+                "embedded scene, bias %d (probes %d): %llu AO and %llu shadow texels, %llu probes, %u "
+                "blocks, %u at another level, %llu refused\n",
+                biases[i], probe_bias, (unsigned long long)c.texels[SCENE_FX_AO],
+                (unsigned long long)c.texels[SCENE_FX_SHADOW], (unsigned long long)c.texels[SCENE_FX_PROBES],
+                blocks, wrong, (unsigned long long)st.world.refusals);
             assert_int_equal(wrong, 0);
             assert_true(c.texels[SCENE_FX_AO] > 0 && c.texels[SCENE_FX_PROBES] > 0);
             assert_int_equal(st.world.refusals, 0);
@@ -379,7 +409,8 @@ static void test_world_positions_at_and_beyond_range(void **state)
     (void)state;
     const double limit = (double)((1 << 17) - 1) * 0.25;
     scene *s = fxt_new_scene();
-    fxt_add_quad(s, "speck", (const double[3]){0, 0, 0}, (const double[3]){0, 0, 0.1}, (const double[3]){0.1, 0, 0}, 1);
+    fxt_add_quad(s, "speck", (const double[3]){0, 0, 0}, (const double[3]){0, 0, 0.1},
+                 (const double[3]){0.1, 0, 0}, 1);
     /* edge_a along +x, edge_b along +y: x cross y = +z */
     fxt_add_quad(s, "wall", (const double[3]){-1.5, limit - 1.25, 0}, (const double[3]){3, 0, 0},
                  (const double[3]){0, 2.5, 0}, 2);
@@ -389,12 +420,18 @@ static void test_world_positions_at_and_beyond_range(void **state)
     scene_rt *rt = fxt_finish_scene(s, 8.0f, 0.5f);
     assert_true(s->origin[1] == 0);
     assert_string_equal(s->precision_warning, "");
-    srv_loop_desc d = {.s = s, .rt = rt, .seed = 3, .threads = 2, .probe_rays = 32, .probe_cell = 1.0f / 16,
+    srv_loop_desc d = {.s = s,
+                       .rt = rt,
+                       .seed = 3,
+                       .threads = 2,
+                       .probe_rays = 32,
+                       .probe_cell = 1.0f / 16,
                        .keep_views = true};
     fxt_effects_on(&d, (const char *const[]){"probes"}, 1);
     srv_viewer_id id;
     srv_loop *loop = fxt_loop(&d, 1, 48, 48, &id);
-    srv_camera cam = {.position = {0, (float)limit, 2.2f}, .target = {0, (float)limit, 0}, .up = {0, 1, 0}, .fov_deg = 60};
+    srv_camera cam = {
+        .position = {0, (float)limit, 2.2f}, .target = {0, (float)limit, 0}, .up = {0, 1, 0}, .fov_deg = 60};
     srv_frame_stats st;
     stab_frames(loop, &id, 1, &cam, true, 2, &st);
     srv_camera_frame f;
@@ -413,16 +450,20 @@ static void test_world_positions_at_and_beyond_range(void **state)
             } else if (q[1] < limit) {
                 inside++;
                 if (!(share[p] > 0))
-                    fail_msg("pixel (%u, %u) at y %.6f, below the limit %.2f: no probe taps", x, y, q[1], limit);
+                    fail_msg("pixel (%u, %u) at y %.6f, below the limit %.2f: no probe taps", x, y, q[1],
+                             limit);
             } else {
                 beyond++;
                 if (share[p] != 0)
-                    fail_msg("pixel (%u, %u) at y %.6f, beyond the limit %.2f: it has probe taps", x, y, q[1], limit);
+                    fail_msg("pixel (%u, %u) at y %.6f, beyond the limit %.2f: it has probe taps", x, y, q[1],
+                             limit);
             }
         }
-    print_message("world-space range: %u pixels below the limit with their probes, %u beyond without, %u within "
-                  "1 mm; %llu points refused, %llu cells\n",
-                  inside, beyond, either, (unsigned long long)st.world.refusals, (unsigned long long)st.world.unique_cells);
+    print_message(
+        "world-space range: %u pixels below the limit with their probes, %u beyond without, %u within "
+        "1 mm; %llu points refused, %llu cells\n",
+        inside, beyond, either, (unsigned long long)st.world.refusals,
+        (unsigned long long)st.world.unique_cells);
     assert_true(inside > 500 && beyond > 500);
     assert_true(st.world.refusals > 0);
     srv_loop_free(loop);

@@ -18,8 +18,13 @@ static const float sun_dir[3] = {0.4f, -0.8f, 0.3f};
 /* A loop with shadows and AO (kept views) and one viewer of w x h. */
 static srv_loop *plane_loop(scene *s, scene_rt *rt, bool no_cache, uint32_t w, uint32_t h, srv_viewer_id *id)
 {
-    srv_loop_desc d = {.s = s, .rt = rt, .seed = 4, .keep_views = true, .no_cache = no_cache,
-                       .samples_per_update = 64, .threads = 2};
+    srv_loop_desc d = {.s = s,
+                       .rt = rt,
+                       .seed = 4,
+                       .keep_views = true,
+                       .no_cache = no_cache,
+                       .samples_per_update = 64,
+                       .threads = 2};
     fxt_effects_on(&d, (const char *const[]){"shadow", "ao"}, 2);
     return fxt_loop(&d, 1, w, h, id);
 }
@@ -50,13 +55,16 @@ static void test_fov_0_5_and_170_deg(void **state)
     const float fovs[] = {0.5f, 170.0f, 179.9f};
     for (size_t i = 0; i < sizeof fovs / sizeof fovs[0]; i++)
         for (int no_cache = 0; no_cache < 2; no_cache++) {
-            srv_camera cam = {.position = {0.2f, 3.3f, 1.9f}, .target = {0.2f, 0.3f, -3.296f}, .up = {0, 1, 0},
+            srv_camera cam = {.position = {0.2f, 3.3f, 1.9f},
+                              .target = {0.2f, 0.3f, -3.296f},
+                              .up = {0, 1, 0},
                               .fov_deg = fovs[i]};
             stab_plane_result r = plane_view(s, rt, &cam, no_cache);
-            print_message("fov %g%s: %llu plane pixels, %llu sky; worst depth error %.2f of its bound, radiance "
-                          "%.2e\n",
-                          (double)fovs[i], no_cache ? " (no cache)" : "", (unsigned long long)r.plane_pixels,
-                          (unsigned long long)r.sky_pixels, r.worst_depth, r.worst_radiance);
+            print_message(
+                "fov %g%s: %llu plane pixels, %llu sky; worst depth error %.2f of its bound, radiance "
+                "%.2e\n",
+                (double)fovs[i], no_cache ? " (no cache)" : "", (unsigned long long)r.plane_pixels,
+                (unsigned long long)r.sky_pixels, r.worst_depth, r.worst_radiance);
             assert_true(r.plane_pixels > 500);
             assert_true(fovs[i] < 10 || r.sky_pixels > 50);
         }
@@ -103,8 +111,8 @@ static void test_near_plane_inside_wall(void **state)
     for (int no_cache = 0; no_cache < 2; no_cache++) {
         srv_viewer_id id;
         srv_loop *loop = plane_loop(s, rt, no_cache, 48, 32, &id);
-        srv_camera cam = {.position = {-1.7f, 1.1f, 0.05f}, .target = {2.0f, 1.2f, -0.01f}, .up = {0, 1, 0},
-                          .fov_deg = 80};
+        srv_camera cam = {
+            .position = {-1.7f, 1.1f, 0.05f}, .target = {2.0f, 1.2f, -0.01f}, .up = {0, 1, 0}, .fov_deg = 80};
         srv_frame_stats st;
         stab_frames(loop, &id, 1, &cam, true, 2, &st);
         srv_camera_frame f;
@@ -124,9 +132,10 @@ static void test_near_plane_inside_wall(void **state)
                              (double)depth[(size_t)y * 48 + x], t);
             }
         assert_int_equal(st.pixels_visible, 48 * 32);
-        print_message("camera inside the wall%s: every pixel meets the wall's inside, worst relative depth error "
-                      "%.2e\n",
-                      no_cache ? " (no cache)" : "", worst);
+        print_message(
+            "camera inside the wall%s: every pixel meets the wall's inside, worst relative depth error "
+            "%.2e\n",
+            no_cache ? " (no cache)" : "", worst);
         srv_loop_free(loop);
     }
 
@@ -140,7 +149,8 @@ static void test_near_plane_inside_wall(void **state)
             srv_viewer_id id;
             srv_loop *loop = plane_loop(s, rt, no_cache, 48, 32, &id);
             float y0 = above ? 0.301f : 0.3f;
-            srv_camera cam = {.position = {0.7f, y0, 3.0f}, .target = {0.7f, y0, 9.0f}, .up = {0, 1, 0}, .fov_deg = 60};
+            srv_camera cam = {
+                .position = {0.7f, y0, 3.0f}, .target = {0.7f, y0, 9.0f}, .up = {0, 1, 0}, .fov_deg = 60};
             srv_frame_stats st;
             stab_frames(loop, &id, 1, &cam, true, 2, &st);
             srv_camera_frame f;
@@ -148,7 +158,8 @@ static void test_near_plane_inside_wall(void **state)
             const float *depth = srv_viewer_depth(loop, id);
             uint64_t down = 0;
             if (above) {
-                stab_plane_result r = stab_check_open_plane(loop, id, &cam, (double)0.3f, 0.7, -0.4, 20.0, 20.0);
+                stab_plane_result r =
+                    stab_check_open_plane(loop, id, &cam, (double)0.3f, 0.7, -0.4, 20.0, 20.0);
                 down = r.plane_pixels;
                 assert_true(r.sky_pixels > 0);
             } else {
@@ -159,7 +170,8 @@ static void test_near_plane_inside_wall(void **state)
                         float dv = depth[(size_t)y * 48 + x];
                         if (q[1] < f.origin[1]) { /* going down from the surface itself */
                             if (!(dv <= 1e-6f || dv == INFINITY))
-                                fail_msg("on the plane, pixel (%u, %u) going down: depth %g", x, y, (double)dv);
+                                fail_msg("on the plane, pixel (%u, %u) going down: depth %g", x, y,
+                                         (double)dv);
                             down += dv <= 1e-6f;
                         } else if (!(dv <= 1e-6f || dv == INFINITY)) {
                             /* Going up, the ray may meet the plane at its own origin (t = 0, tnear is 0): a
@@ -190,8 +202,9 @@ static void check_frame(const srv_camera *cam)
     for (int i = 0; i < 3; i++) {
         double len = sqrt((double)v[i][0] * v[i][0] + (double)v[i][1] * v[i][1] + (double)v[i][2] * v[i][2]);
         if (!(fabs(len - 1) <= 0x1p-20))
-            fail_msg("camera looking along (%g, %g, %g): frame vector %d has length %g", (double)(cam->target[0] - cam->position[0]),
-                     (double)(cam->target[1] - cam->position[1]), (double)(cam->target[2] - cam->position[2]), i, len);
+            fail_msg("camera looking along (%g, %g, %g): frame vector %d has length %g",
+                     (double)(cam->target[0] - cam->position[0]), (double)(cam->target[1] - cam->position[1]),
+                     (double)(cam->target[2] - cam->position[2]), i, len);
         for (int j = 0; j < i; j++) {
             double dot = (double)v[i][0] * v[j][0] + (double)v[i][1] * v[j][1] + (double)v[i][2] * v[j][2];
             if (!(fabs(dot) <= 0x1p-20))
@@ -212,7 +225,9 @@ static void test_straight_up_and_down(void **state)
     const float offsets[] = {0.0f, 1e-20f, 1e-30f};
     for (size_t i = 0; i < sizeof offsets / sizeof offsets[0]; i++)
         for (int up = 0; up < 2; up++) {
-            srv_camera cam = {.position = {0, 2.3f, 0}, .target = {offsets[i], up ? 4.3f : 0.3f, 0}, .up = {0, 1, 0},
+            srv_camera cam = {.position = {0, 2.3f, 0},
+                              .target = {offsets[i], up ? 4.3f : 0.3f, 0},
+                              .up = {0, 1, 0},
                               .fov_deg = 90};
             check_frame(&cam);
             srv_viewer_id id;
@@ -220,8 +235,9 @@ static void test_straight_up_and_down(void **state)
             srv_frame_stats st;
             stab_frames(loop, &id, 1, &cam, true, 2, &st);
             stab_plane_result r = stab_check_open_plane(loop, id, &cam, (double)0.3f, 0.7, -0.4, 20.0, 20.0);
-            print_message("looking straight %s (target off by %g): %llu plane pixels, %llu sky\n", up ? "up" : "down",
-                          (double)offsets[i], (unsigned long long)r.plane_pixels, (unsigned long long)r.sky_pixels);
+            print_message("looking straight %s (target off by %g): %llu plane pixels, %llu sky\n",
+                          up ? "up" : "down", (double)offsets[i], (unsigned long long)r.plane_pixels,
+                          (unsigned long long)r.sky_pixels);
             if (up)
                 assert_int_equal(r.sky_pixels, 48 * 48);
             else
@@ -256,21 +272,31 @@ static void test_camera_1e6_away(void **state)
     const float density = 8.0f, ao_radius = 1.0f;
     scene_rt *rt = fxt_finish_scene(s, density, ao_radius);
     enum { FW = 192, FH = 108 };
-    srv_camera cam = {.position = {0.25f, 5e5f, 866025.4f}, .target = {2.0f, 0.3f, 2.0f}, .up = {0, 1, 0},
+    srv_camera cam = {.position = {0.25f, 5e5f, 866025.4f},
+                      .target = {2.0f, 0.3f, 2.0f},
+                      .up = {0, 1, 0},
                       .fov_deg = 0.0012f};
     for (int no_cache = 0; no_cache < 2; no_cache++) {
-        srv_loop_desc d = {.s = s, .rt = rt, .seed = 4, .keep_views = true, .no_cache = no_cache,
-                           .samples_per_update = 64, .threads = 2};
+        srv_loop_desc d = {.s = s,
+                           .rt = rt,
+                           .seed = 4,
+                           .keep_views = true,
+                           .no_cache = no_cache,
+                           .samples_per_update = 64,
+                           .threads = 2};
         fxt_effects_on(&d, (const char *const[]){"shadow", "ao"}, 2);
         srv_viewer_id id;
         srv_loop *loop = fxt_loop(&d, 1, FW, FH, &id);
         srv_frame_stats st;
         stab_frames(loop, &id, 1, &cam, true, no_cache ? 1 : 2, &st);
-        stab_box_result r = stab_check_box_on_plane(loop, id, &cam, (double)0.3f, lo, hi, true, density, ao_radius, 1e-6);
-        print_message("camera 1e6 away%s: %u plane pixels (worst relative depth error %.2e), %u away from shadow "
-                      "edges of which %u in the shadow, all exact; AO exactly 1 at %u open ones\n",
-                      no_cache ? " (no cache)" : "", r.plane_pixels, r.worst_depth, r.lit_checked, r.dark, r.open);
-        assert_true(r.plane_pixels > FW * FH / 2 && r.lit_checked > r.plane_pixels / 2 && r.dark > 20 && r.open > 100);
+        stab_box_result r =
+            stab_check_box_on_plane(loop, id, &cam, (double)0.3f, lo, hi, true, density, ao_radius, 1e-6);
+        print_message(
+            "camera 1e6 away%s: %u plane pixels (worst relative depth error %.2e), %u away from shadow "
+            "edges of which %u in the shadow, all exact; AO exactly 1 at %u open ones\n",
+            no_cache ? " (no cache)" : "", r.plane_pixels, r.worst_depth, r.lit_checked, r.dark, r.open);
+        assert_true(r.plane_pixels > FW * FH / 2 && r.lit_checked > r.plane_pixels / 2 && r.dark > 20 &&
+                    r.open > 100);
         srv_loop_free(loop);
     }
     /* The probes from there: the coarsest grid level, every frame checked. */
@@ -280,8 +306,8 @@ static void test_camera_1e6_away(void **state)
     srv_loop *loop = fxt_loop(&d, 1, FW, FH, &id);
     srv_frame_stats st;
     stab_checked c = stab_frames(loop, &id, 1, &cam, true, 3, &st);
-    print_message("camera 1e6 away, probes: %llu cells, %llu refused\n", (unsigned long long)c.texels[SCENE_FX_PROBES],
-                  (unsigned long long)st.world.refusals);
+    print_message("camera 1e6 away, probes: %llu cells, %llu refused\n",
+                  (unsigned long long)c.texels[SCENE_FX_PROBES], (unsigned long long)st.world.refusals);
     assert_true(c.texels[SCENE_FX_PROBES] > 0);
     srv_loop_free(loop);
     scene_rt_free(rt);

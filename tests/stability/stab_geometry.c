@@ -20,8 +20,8 @@ static const float sun_dir[3] = {0.4f, -0.8f, 0.3f};
 
 /* Adds a mesh of nv positions (x, z pairs on the plane y = PLANE_Y when `flat`, else xyz triples) and nt
  * triangles, each turned to face +y when `flat`. */
-static void add_mesh(scene *s, const char *name, const float *coords, uint32_t nv, const uint32_t *idx, uint32_t nt,
-                     bool flat)
+static void add_mesh(scene *s, const char *name, const float *coords, uint32_t nv, const uint32_t *idx,
+                     uint32_t nt, bool flat)
 {
     float *p = malloc(sizeof(float) * 3 * nv);
     uint32_t *t = malloc(sizeof(uint32_t) * 3 * nt);
@@ -39,7 +39,8 @@ static void add_mesh(scene *s, const char *name, const float *coords, uint32_t n
     for (uint32_t i = 0; flat && i < nt; i++) {
         const float *a = p + 3 * t[3 * i], *b = p + 3 * t[3 * i + 1], *c = p + 3 * t[3 * i + 2];
         /* y of (b - a) x (c - a) for points in the xz plane: dz1 dx2 - dx1 dz2 */
-        double ny = ((double)b[2] - a[2]) * ((double)c[0] - a[0]) - ((double)b[0] - a[0]) * ((double)c[2] - a[2]);
+        double ny =
+            ((double)b[2] - a[2]) * ((double)c[0] - a[0]) - ((double)b[0] - a[0]) * ((double)c[2] - a[2]);
         if (ny < 0) {
             uint32_t swap = t[3 * i + 1];
             t[3 * i + 1] = t[3 * i + 2];
@@ -65,8 +66,13 @@ static void light(scene *s)
 /* A loop with shadows and AO (views kept), every texel converged in one update. */
 static srv_loop *views_loop(scene *s, scene_rt *rt, bool no_cache, uint32_t w, uint32_t h, srv_viewer_id *id)
 {
-    srv_loop_desc d = {.s = s, .rt = rt, .seed = 6, .keep_views = true, .no_cache = no_cache,
-                       .samples_per_update = 64, .threads = 2};
+    srv_loop_desc d = {.s = s,
+                       .rt = rt,
+                       .seed = 6,
+                       .keep_views = true,
+                       .no_cache = no_cache,
+                       .samples_per_update = 64,
+                       .threads = 2};
     fxt_effects_on(&d, (const char *const[]){"shadow", "ao"}, 2);
     return fxt_loop(&d, 1, w, h, id);
 }
@@ -83,11 +89,13 @@ static uint64_t check_flat(scene *s, scene_rt *rt, const srv_camera *cams, uint3
             srv_loop *loop = views_loop(s, rt, no_cache, 64, 36, &id);
             srv_frame_stats st;
             stab_frames(loop, &id, 1, &cams[c], true, no_cache ? 1 : 2, &st);
-            stab_plane_result r = stab_check_open_plane(loop, id, &cams[c], (double)PLANE_Y, cx, cz, half_x, half_z);
-            print_message("%s, camera %u%s: %llu plane pixels (closed form within %.2e, depth within %.2f of its "
-                          "bound), %llu sky\n",
-                          what, c, no_cache ? " (no cache)" : "", (unsigned long long)r.plane_pixels, r.worst_radiance,
-                          r.worst_depth, (unsigned long long)r.sky_pixels);
+            stab_plane_result r =
+                stab_check_open_plane(loop, id, &cams[c], (double)PLANE_Y, cx, cz, half_x, half_z);
+            print_message(
+                "%s, camera %u%s: %llu plane pixels (closed form within %.2e, depth within %.2f of its "
+                "bound), %llu sky\n",
+                what, c, no_cache ? " (no cache)" : "", (unsigned long long)r.plane_pixels, r.worst_radiance,
+                r.worst_depth, (unsigned long long)r.sky_pixels);
             assert_true(r.plane_pixels > 64 * 36 / 8);
             pixels += r.plane_pixels;
             srv_loop_free(loop);
@@ -170,8 +178,8 @@ static void test_zero_area_and_duplicates(void **state)
     light(s);
     scene_rt *rt = fxt_finish_scene(s, 16.0f, 1.0f);
     print_message("degenerate %llu, duplicate %llu, %u triangles kept\n",
-                  (unsigned long long)s->repairs.degenerate_skipped, (unsigned long long)s->repairs.duplicate_skipped,
-                  s->triangle_count);
+                  (unsigned long long)s->repairs.degenerate_skipped,
+                  (unsigned long long)s->repairs.duplicate_skipped, s->triangle_count);
     assert_int_equal(s->repairs.degenerate_skipped, 2);
     assert_int_equal(s->repairs.duplicate_skipped, 3);
     assert_int_equal(s->triangle_count, 2);
@@ -203,8 +211,8 @@ static void test_non_manifold_edge(void **state)
     (void)state;
     const double R = 1.0, half = 4.0;
     const float p[] = {-4, PLANE_Y, -4, 0, PLANE_Y, -4, 0, PLANE_Y, 4, -4, PLANE_Y, 4, /* left floor */
-                       4,  PLANE_Y, -4, 4, PLANE_Y, 4,                                  /* right floor */
-                       0,  5.3f,    -4, 0, 5.3f,    4};                                 /* wall top */
+                       4,  PLANE_Y, -4, 4, PLANE_Y, 4,                                 /* right floor */
+                       0,  5.3f,    -4, 0, 5.3f,    4};                                /* wall top */
     /* Each quad's first triangle has the shared edge 1-2 as an edge. Left floor: (0, 2, 1), (0, 3, 2) face up
      * (z x x); right floor: (4, 1, 2), (4, 2, 5); wall facing +x: (6, 1, 2)?, (6, 2, 7) (y x z = +x). */
     const uint32_t idx[] = {0, 2, 1, 0, 3, 2, 4, 1, 2, 4, 2, 5, 6, 2, 1, 6, 7, 2};
@@ -225,7 +233,8 @@ static void test_non_manifold_edge(void **state)
         const float *n = s->tri_normal + 3 * t;
         assert_true(n[1] == 1.0f || n[0] == 1.0f);
     }
-    srv_camera cam = {.position = {2.6f, 2.0f, 0.0f}, .target = {0.4f, 0.3f, 0.0f}, .up = {0, 1, 0}, .fov_deg = 70};
+    srv_camera cam = {
+        .position = {2.6f, 2.0f, 0.0f}, .target = {0.4f, 0.3f, 0.0f}, .up = {0, 1, 0}, .fov_deg = 70};
     const double lo[3] = {0, (double)PLANE_Y, -half}, hi[3] = {0, 5.3, half};
     enum { NW = 96, NH = 64, BINS = 10 };
     for (int no_cache = 0; no_cache < 2; no_cache++) {
@@ -233,8 +242,8 @@ static void test_non_manifold_edge(void **state)
         srv_loop *loop = views_loop(s, rt, no_cache, NW, NH, &id);
         srv_frame_stats st;
         stab_frames(loop, &id, 1, &cam, true, no_cache ? 1 : 2, &st);
-        stab_box_result r = stab_check_box_on_plane(loop, id, &cam, (double)PLANE_Y, lo, hi, false, density,
-                                                    (float)R, 1e-5);
+        stab_box_result r =
+            stab_check_box_on_plane(loop, id, &cam, (double)PLANE_Y, lo, hi, false, density, (float)R, 1e-5);
         assert_true(r.lit_checked > 1000 && r.dark > 100);
         /* AO against the closed form, by distance from the wall. */
         srv_camera_frame f;
@@ -267,15 +276,17 @@ static void test_non_manifold_edge(void **state)
             double error = fabs(measured[b] - closed[b]) / count[b];
             worst = fmax(worst, error / bound);
             if (error > bound)
-                fail_msg("non-manifold%s: AO at %.1f..%.1f R from the wall %.4f, closed form %.4f (bound %.4f, %u "
-                         "pixels)",
-                         no_cache ? " (no cache)" : "", 0.1 * b, 0.1 * (b + 1), measured[b] / count[b],
-                         closed[b] / count[b], bound, count[b]);
+                fail_msg(
+                    "non-manifold%s: AO at %.1f..%.1f R from the wall %.4f, closed form %.4f (bound %.4f, %u "
+                    "pixels)",
+                    no_cache ? " (no cache)" : "", 0.1 * b, 0.1 * (b + 1), measured[b] / count[b],
+                    closed[b] / count[b], bound, count[b]);
         }
-        print_message("non-manifold%s: %u pixels' shadows exact (%u dark); AO in 10 bins within %.2f of its bound "
-                      "(at the wall %.4f, closed form %.4f)\n",
-                      no_cache ? " (no cache)" : "", r.lit_checked, r.dark, worst, measured[0] / count[0],
-                      closed[0] / count[0]);
+        print_message(
+            "non-manifold%s: %u pixels' shadows exact (%u dark); AO in 10 bins within %.2f of its bound "
+            "(at the wall %.4f, closed form %.4f)\n",
+            no_cache ? " (no cache)" : "", r.lit_checked, r.dark, worst, measured[0] / count[0],
+            closed[0] / count[0]);
         srv_loop_free(loop);
     }
     scene_rt_free(rt);
@@ -291,18 +302,20 @@ static void test_non_manifold_edge(void **state)
 static void test_t_junction(void **state)
 {
     (void)state;
-    const float xz[] = {-4, -4, 0, -4, 0, 4, -4, 4,   /* left quad: 0 1 2 3 */
-                        0,  0,  4, -4, 4, 0, 4,  4,   /* right: T corner 4, then 5 6 7 */
-                        2,  0,  1, 0};                /* two more points on the edge 4-6: 8 (2, 0), 9 (1, 0) */
-    const uint32_t idx[] = {0, 1, 2, 0, 2, 3,         /* left quad */
-                            1, 5, 6, 1, 6, 4,         /* right lower: 1 5 6 4, cut at 4-6 by the fan below */
-                            4, 9, 2, 9, 8, 2, 8, 6, 7, 8, 7, 2}; /* right upper: a fan whose corners 9, 8 lie on 4-6 */
+    const float xz[] = {-4, -4, 0, -4, 0, 4, -4, 4, /* left quad: 0 1 2 3 */
+                        0,  0,  4, -4, 4, 0, 4,  4, /* right: T corner 4, then 5 6 7 */
+                        2,  0,  1, 0};              /* two more points on the edge 4-6: 8 (2, 0), 9 (1, 0) */
+    const uint32_t idx[] = {0, 1, 2, 0, 2, 3,       /* left quad */
+                            1, 5, 6, 1, 6, 4,       /* right lower: 1 5 6 4, cut at 4-6 by the fan below */
+                            4, 9, 2, 9, 8, 2,
+                            8, 6, 7, 8, 7, 2}; /* right upper: a fan whose corners 9, 8 lie on 4-6 */
     scene *s = fxt_new_scene();
     add_mesh(s, "t-junctions", xz, 10, idx, 8, true);
     light(s);
     scene_rt *rt = fxt_finish_scene(s, 16.0f, 1.0f);
-    print_message("T-junctions: %u triangles, %llu degenerate, %llu duplicate, %llu split\n", s->triangle_count,
-                  (unsigned long long)s->repairs.degenerate_skipped, (unsigned long long)s->repairs.duplicate_skipped,
+    print_message("T-junctions: %u triangles, %llu degenerate, %llu duplicate, %llu split\n",
+                  s->triangle_count, (unsigned long long)s->repairs.degenerate_skipped,
+                  (unsigned long long)s->repairs.duplicate_skipped,
                   (unsigned long long)s->repairs.nonmanifold_split);
     assert_int_equal(s->triangle_count, 8);
     const srv_camera cams[3] = {
@@ -337,7 +350,8 @@ static void test_single_sided_from_behind(void **state)
         s->sky_color[0] = 0.2f, s->sky_color[1] = 0.3f, s->sky_color[2] = 0.4f;
         s->sky_intensity = 1.0f;
         scene_rt *rt = fxt_finish_scene(s, 16.0f, 1.0f);
-        srv_camera cam = {.position = {0.4f, -2.2f, 0.6f}, .target = {0.0f, 0.3f, 0.0f}, .up = {0, 1, 0}, .fov_deg = 70};
+        srv_camera cam = {
+            .position = {0.4f, -2.2f, 0.6f}, .target = {0.0f, 0.3f, 0.0f}, .up = {0, 1, 0}, .fov_deg = 70};
         for (int no_cache = 0; no_cache < 2; no_cache++) {
             srv_viewer_id id;
             srv_loop *loop = views_loop(s, rt, no_cache, 64, 36, &id);
@@ -356,22 +370,27 @@ static void test_single_sided_from_behind(void **state)
                     if (!isfinite(t) || fmax(fabs(q[0]), fabs(q[2])) > 4.0 - 1e-3)
                         continue;
                     if (!(fabs(depth[px] - t) <= 1e-5 * t))
-                        fail_msg("from behind, pixel (%u, %u): depth %g, the plane's %g", x, y, (double)depth[px], t);
+                        fail_msg("from behind, pixel (%u, %u): depth %g, the plane's %g", x, y,
+                                 (double)depth[px], t);
                     plane++;
                     for (int k = 0; k < 3; k++) {
                         double sky = 0.5 * s->sky_color[k] * s->sky_intensity;
-                        double lit = sky + 0.5 * s->lights[0].intensity * s->lights[0].color[k] * fmax(cosine, 0.0);
+                        double lit =
+                            sky + 0.5 * s->lights[0].intensity * s->lights[0].color[k] * fmax(cosine, 0.0);
                         double v = rad[3 * px + k];
-                        if (!(v >= sky * (1 - STAB_FORMULA_TOLERANCE) && v <= lit * (1 + STAB_FORMULA_TOLERANCE)))
-                            fail_msg("from behind, pixel (%u, %u): radiance %g outside [%g, %g]", x, y, v, sky, lit);
+                        if (!(v >= sky * (1 - STAB_FORMULA_TOLERANCE) &&
+                              v <= lit * (1 + STAB_FORMULA_TOLERANCE)))
+                            fail_msg("from behind, pixel (%u, %u): radiance %g outside [%g, %g]", x, y, v,
+                                     sky, lit);
                         if (!(fabs(v - sky) <= STAB_FORMULA_TOLERANCE * sky)) /* the documented value */
                             fail_msg("from behind, sun %s, pixel (%u, %u): radiance %.9g, albedo x sky %.9g",
                                      below ? "below" : "above", x, y, v, sky);
                     }
                 }
-            print_message("seen from behind, sun %s%s: %u pixels, all albedo x sky%s\n", below ? "below" : "above",
-                          no_cache ? " (no cache)" : "", plane,
-                          below ? " (documented departure: the lit back face reads the front's shadow, 0)" : "");
+            print_message("seen from behind, sun %s%s: %u pixels, all albedo x sky%s\n",
+                          below ? "below" : "above", no_cache ? " (no cache)" : "", plane,
+                          below ? " (documented departure: the lit back face reads the front's shadow, 0)"
+                                : "");
             assert_true(plane > 64 * 36 / 2);
             srv_loop_free(loop);
         }
@@ -398,8 +417,8 @@ static void test_island_at_12bit_limit(void **state)
     const float density = 1000.0f;
     /* One millimetre too wide: refused. */
     scene *s = fxt_new_scene();
-    fxt_add_quad(s, "too wide", (const double[3]){-16.3835, (double)PLANE_Y, -16.3835}, (const double[3]){0, 0, 32.767},
-                 (const double[3]){32.767, 0, 0}, 1);
+    fxt_add_quad(s, "too wide", (const double[3]){-16.3835, (double)PLANE_Y, -16.3835},
+                 (const double[3]){0, 0, 32.767}, (const double[3]){32.767, 0, 0}, 1);
     scene_error err = {0};
     scene_load_desc desc = {.texel_density = density};
     assert_int_equal(scene__finalize(s, &desc, &err), SCENE_ERR_RANGE);
@@ -414,8 +433,8 @@ static void test_island_at_12bit_limit(void **state)
     double far[3] = {0, 0, 0};
     {
         scene *probe = fxt_new_scene();
-        fxt_add_quad(probe, "floor", (const double[3]){corner, (double)PLANE_Y, corner}, (const double[3]){0, 0, side},
-                     (const double[3]){side, 0, 0}, 1);
+        fxt_add_quad(probe, "floor", (const double[3]){corner, (double)PLANE_Y, corner},
+                     (const double[3]){0, 0, side}, (const double[3]){side, 0, 0}, 1);
         scene_rt *probe_rt = fxt_finish_scene(probe, density, 0.002f);
         print_message("32.766 m at %g texels/m: %u island(s), the first %u x %u texels\n", (double)density,
                       probe->island_count, probe->islands[0].width, probe->islands[0].height);
@@ -443,8 +462,8 @@ static void test_island_at_12bit_limit(void **state)
     const double lo[3] = {bc[0] - 0.005, (double)PLANE_Y + 0.002, bc[1] - 0.005},
                  hi[3] = {bc[0] + 0.005, (double)PLANE_Y + 0.010, bc[1] + 0.005};
     s = fxt_new_scene();
-    fxt_add_quad(s, "floor", (const double[3]){corner, (double)PLANE_Y, corner}, (const double[3]){0, 0, side},
-                 (const double[3]){side, 0, 0}, 1);
+    fxt_add_quad(s, "floor", (const double[3]){corner, (double)PLANE_Y, corner},
+                 (const double[3]){0, 0, side}, (const double[3]){side, 0, 0}, 1);
     fxt_add_box(s, "box", lo, hi, false, 1);
     const float out_sun[3] = {(float)-in_x, -1.0f, (float)-in_z};
     fxt_add_sun(s, out_sun[0], out_sun[1], out_sun[2]);
@@ -453,10 +472,11 @@ static void test_island_at_12bit_limit(void **state)
     s->sky_intensity = 1.0f;
     const float ao_radius = 0.002f;
     scene_rt *rt = fxt_finish_scene(s, density, ao_radius);
-    srv_camera cam = {.position = {(float)(far[0] + in_x * 0.010), PLANE_Y + 0.02f, (float)(far[2] + in_z * 0.010)},
-                      .target = {(float)(far[0] + in_x * 0.004), PLANE_Y, (float)(far[2] + in_z * 0.004)},
-                      .up = {0, 1, 0},
-                      .fov_deg = 40};
+    srv_camera cam = {
+        .position = {(float)(far[0] + in_x * 0.010), PLANE_Y + 0.02f, (float)(far[2] + in_z * 0.010)},
+        .target = {(float)(far[0] + in_x * 0.004), PLANE_Y, (float)(far[2] + in_z * 0.004)},
+        .up = {0, 1, 0},
+        .fov_deg = 40};
     for (int no_cache = 0; no_cache < 2; no_cache++) {
         srv_viewer_id id;
         srv_loop *loop = views_loop(s, rt, no_cache, 128, 96, &id);
@@ -467,7 +487,8 @@ static void test_island_at_12bit_limit(void **state)
         /* The largest level-0 block coordinate resident (the checker found every block inside its island). */
         uint32_t largest = 0;
         const srv_cache_kind *kind = loop->kinds[SCENE_CACHE_ON_SURFACE];
-        for (uint32_t b = 0; !no_cache && b < kind->pool_capacity(loop->caches[SCENE_CACHE_ON_SURFACE], SCENE_FX_SHADOW);
+        for (uint32_t b = 0;
+             !no_cache && b < kind->pool_capacity(loop->caches[SCENE_CACHE_ON_SURFACE], SCENE_FX_SHADOW);
              b++) {
             uint64_t key = kind->block_key(loop->caches[SCENE_CACHE_ON_SURFACE], SCENE_FX_SHADOW, b);
             if (key == UINT64_MAX || ((key >> 24) & 0xf) != 0)
@@ -476,10 +497,11 @@ static void test_island_at_12bit_limit(void **state)
             largest = bx > largest ? bx : largest;
             largest = by > largest ? by : largest;
         }
-        print_message("far corner%s: %u plane pixels, %u shadows exact (%u dark), AO 1 at %u; level-0 blocks up "
-                      "to %u (%llu blocks checked)\n",
-                      no_cache ? " (no cache)" : "", r.plane_pixels, r.lit_checked, r.dark, r.open, largest,
-                      (unsigned long long)c.blocks);
+        print_message(
+            "far corner%s: %u plane pixels, %u shadows exact (%u dark), AO 1 at %u; level-0 blocks up "
+            "to %u (%llu blocks checked)\n",
+            no_cache ? " (no cache)" : "", r.plane_pixels, r.lit_checked, r.dark, r.open, largest,
+            (unsigned long long)c.blocks);
         assert_true(r.lit_checked > 300 && r.dark > 20 && r.open > 100);
         assert_true(no_cache || largest == 4095);
         srv_loop_free(loop);
@@ -497,7 +519,8 @@ static void test_island_at_12bit_limit(void **state)
     for (uint32_t i = 0; i < s->island_count; i++) {
         widest = s->islands[i].width > widest ? s->islands[i].width : widest;
         widest = s->islands[i].height > widest ? s->islands[i].height : widest;
-        assert_true(s->islands[i].width <= SCENE_MAX_ISLAND_TEXELS && s->islands[i].height <= SCENE_MAX_ISLAND_TEXELS);
+        assert_true(s->islands[i].width <= SCENE_MAX_ISLAND_TEXELS &&
+                    s->islands[i].height <= SCENE_MAX_ISLAND_TEXELS);
     }
     print_message("40 m strip at %g texels/m: %u islands, the longest side %u texels\n", (double)density,
                   s->island_count, widest);
@@ -508,8 +531,8 @@ static void test_island_at_12bit_limit(void **state)
     for (double x = -19.99; x < 20 && isnan(seam); x += 0.01) {
         uint32_t tri;
         float u, v, t;
-        assert_true(scene_rt_intersect1(rt, (const float[3]){(float)x, 1.0f, 0.1f}, (const float[3]){0, -1, 0},
-                                        INFINITY, &tri, &u, &v, &t));
+        assert_true(scene_rt_intersect1(rt, (const float[3]){(float)x, 1.0f, 0.1f},
+                                        (const float[3]){0, -1, 0}, INFINITY, &tri, &u, &v, &t));
         if (last != UINT32_MAX && s->tri_island[tri] != last)
             seam = x;
         last = s->tri_island[tri];
@@ -527,12 +550,9 @@ static void test_island_at_12bit_limit(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_sliver_aspect_1e6),
-        cmocka_unit_test(test_zero_area_and_duplicates),
-        cmocka_unit_test(test_non_manifold_edge),
-        cmocka_unit_test(test_t_junction),
-        cmocka_unit_test(test_single_sided_from_behind),
-        cmocka_unit_test(test_island_at_12bit_limit),
+        cmocka_unit_test(test_sliver_aspect_1e6),        cmocka_unit_test(test_zero_area_and_duplicates),
+        cmocka_unit_test(test_non_manifold_edge),        cmocka_unit_test(test_t_junction),
+        cmocka_unit_test(test_single_sided_from_behind), cmocka_unit_test(test_island_at_12bit_limit),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -20,26 +20,33 @@
 static uint64_t check_plane(scene *s, scene_rt *rt, bool no_cache, bool lit, double *worst)
 {
     enum { PW = 64, PH = 36 };
-    srv_loop_desc d = {.s = s, .rt = rt, .seed = 3, .keep_views = true, .no_cache = no_cache,
-                       .samples_per_update = 64, .threads = 2};
+    srv_loop_desc d = {.s = s,
+                       .rt = rt,
+                       .seed = 3,
+                       .keep_views = true,
+                       .no_cache = no_cache,
+                       .samples_per_update = 64,
+                       .threads = 2};
     fxt_effects_on(&d, (const char *const[]){"shadow", "ao"}, 2);
     srv_viewer_id id;
     srv_loop *loop = fxt_loop(&d, 1, PW, PH, &id);
-    srv_camera cam = {.position = {1.0f, 4.3f, 5.0f}, .target = {0.5f, 0.3f, -2.0f}, .up = {0, 1, 0}, .fov_deg = 80};
+    srv_camera cam = {
+        .position = {1.0f, 4.3f, 5.0f}, .target = {0.5f, 0.3f, -2.0f}, .up = {0, 1, 0}, .fov_deg = 80};
     srv_frame_stats st;
     stab_frames(loop, &id, 1, &cam, true, no_cache ? 1 : 2, &st);
     double expected[3];
     stab_plane_closed_form(s, expected);
     const float *rad = srv_viewer_radiance(loop, id), *depth = srv_viewer_depth(loop, id);
-    const float *ao = srv_viewer_view(loop, id, SRV_VIEW_AO), *shadow = srv_viewer_view(loop, id, SRV_VIEW_SHADOW);
+    const float *ao = srv_viewer_view(loop, id, SRV_VIEW_AO),
+                *shadow = srv_viewer_view(loop, id, SRV_VIEW_SHADOW);
     uint64_t floor = 0;
     for (size_t p = 0; p < (size_t)PW * PH; p++) {
         if (!isfinite(depth[p]))
             continue; /* sky: the checker compared it with the sky */
         floor++;
         if (!(fabs(ao[p] - 1.0) <= 0x1p-22 && fabs(shadow[p] - (lit ? 1.0 : 0.0)) <= 0x1p-22))
-            fail_msg("pixel %zu: AO %.9g, lit fraction %.9g (expected 1 and %d)", p, (double)ao[p], (double)shadow[p],
-                     lit);
+            fail_msg("pixel %zu: AO %.9g, lit fraction %.9g (expected 1 and %d)", p, (double)ao[p],
+                     (double)shadow[p], lit);
         for (int k = 0; k < 3; k++) {
             double error = fabs(rad[3 * p + k] - expected[k]) / expected[k];
             *worst = fmax(*worst, error);
@@ -75,7 +82,8 @@ static void test_intensity_closed_form(void **state)
         fxt_effects_on(&d, (const char *const[]){"shadow", "ao"}, 2);
         srv_viewer_id id;
         srv_loop *loop = fxt_loop(&d, 1, 32, 18, &id);
-        srv_camera cam = {.position = {1.0f, 4.3f, 5.0f}, .target = {0.5f, 0.3f, -2.0f}, .up = {0, 1, 0}, .fov_deg = 80};
+        srv_camera cam = {
+            .position = {1.0f, 4.3f, 5.0f}, .target = {0.5f, 0.3f, -2.0f}, .up = {0, 1, 0}, .fov_deg = 80};
         srv_frame_stats st;
         stab_frames(loop, &id, 1, &cam, true, 1, &st);
         const uint8_t *srgb = srv_viewer_image(loop, id);
@@ -114,7 +122,8 @@ static void test_intensity_linear(void **state)
         scene_rt *rt = scene_rt_create(s, NULL, &err);
         assert_non_null(rt);
         for (int no_cache = 0; no_cache < 2; no_cache++) {
-            srv_loop_desc d = {.s = s, .rt = rt, .seed = 5, .no_cache = no_cache, .threads = 2, .probe_rays = 64};
+            srv_loop_desc d = {
+                .s = s, .rt = rt, .seed = 5, .no_cache = no_cache, .threads = 2, .probe_rays = 64};
             fxt_effects_on(&d, (const char *const[]){"shadow", "ao", "probes"}, 3);
             srv_viewer_id id;
             srv_loop *loop = fxt_loop(&d, 1, LW, LH, &id);
@@ -128,8 +137,8 @@ static void test_intensity_linear(void **state)
                 uint32_t differ = 0;
                 for (size_t c = 0; c < (size_t)LW * LH * 3; c++)
                     differ += rad[c] != reference[no_cache][c] * k;
-                print_message("lights x 2^%d%s: %u of %u values differ from 2^%d x the image at 1\n", exponents[i],
-                              no_cache ? " (no cache)" : "", differ, LW * LH * 3, exponents[i]);
+                print_message("lights x 2^%d%s: %u of %u values differ from 2^%d x the image at 1\n",
+                              exponents[i], no_cache ? " (no cache)" : "", differ, LW * LH * 3, exponents[i]);
                 assert_int_equal(differ, 0);
                 free(rad);
             }
@@ -163,11 +172,12 @@ static void test_grazing_1e_6_rad(void **state)
             pixels += check_plane(s, rt, no_cache, !below, &worst);
         double expected[3];
         stab_plane_closed_form(s, expected);
-        print_message("sun %g rad %s the horizon: %llu floor pixels, radiance %.6f (direct share %.3f), worst "
-                      "relative error %.2e\n",
-                      fabs(e), below ? "below" : "above", (unsigned long long)pixels, expected[0],
-                      below ? 0.0 : 0.5 * s->lights[0].intensity * -(double)s->lights[0].direction[1] / expected[0],
-                      worst);
+        print_message(
+            "sun %g rad %s the horizon: %llu floor pixels, radiance %.6f (direct share %.3f), worst "
+            "relative error %.2e\n",
+            fabs(e), below ? "below" : "above", (unsigned long long)pixels, expected[0],
+            below ? 0.0 : 0.5 * s->lights[0].intensity * -(double)s->lights[0].direction[1] / expected[0],
+            worst);
         scene_rt_free(rt);
         scene_free(s);
     }
@@ -180,12 +190,18 @@ enum { IW = 64, IH = 36 };
 /* Renders the scene of test_light_inside_geometry; returns the radiance and (may be NULL) the depth. */
 static float *render_inside(scene *s, scene_rt *rt, bool no_cache, bool probes, float **depth)
 {
-    srv_loop_desc d = {.s = s, .rt = rt, .seed = 9, .no_cache = no_cache, .threads = 2, .probe_rays = 64,
+    srv_loop_desc d = {.s = s,
+                       .rt = rt,
+                       .seed = 9,
+                       .no_cache = no_cache,
+                       .threads = 2,
+                       .probe_rays = 64,
                        .probe_hysteresis = 0.5f};
     fxt_effects_on(&d, (const char *const[]){"shadow", "ao", "probes"}, probes ? 3 : 2);
     srv_viewer_id id;
     srv_loop *loop = fxt_loop(&d, 1, IW, IH, &id);
-    srv_camera cam = {.position = {3.5f, 2.5f, 3.0f}, .target = {0.0f, 0.6f, 0.0f}, .up = {0, 1, 0}, .fov_deg = 70};
+    srv_camera cam = {
+        .position = {3.5f, 2.5f, 3.0f}, .target = {0.0f, 0.6f, 0.0f}, .up = {0, 1, 0}, .fov_deg = 70};
     srv_frame_stats st;
     stab_frames(loop, &id, 1, &cam, true, no_cache ? 1 : 4, &st);
     float *rad = stab_copy_radiance(loop, id);
@@ -205,7 +221,8 @@ static scene *inside_scene(int extra, scene_rt **rt)
     scene *s = fxt_new_scene();
     stab_add_floor(s, 0.0, 0.0, 0.0, 4.0, 4);
     fxt_add_box(s, "box", (const double[3]){-0.5, 0.3, -0.5}, (const double[3]){0.5, 1.3, 0.5}, false, 2);
-    fxt_add_box(s, "wall", (const double[3]){-2.0, 0.05, -1.51}, (const double[3]){2.0, 1.5, -1.49}, false, 2);
+    fxt_add_box(s, "wall", (const double[3]){-2.0, 0.05, -1.51}, (const double[3]){2.0, 1.5, -1.49}, false,
+                2);
     fxt_add_sun(s, 0.3f, -1.0f, -0.4f);
     if (extra == 1) {
         stab_add_point_light(s, 0.1f, 0.8f, -0.05f, 1e8f); /* inside the box */
@@ -237,18 +254,21 @@ static void test_light_inside_geometry(void **state)
         scene_rt *rt;
         scene *s = inside_scene(i == 1 ? 1 : (i == 3 ? 2 : 0), &rt);
         for (int no_cache = 0; no_cache < 2; no_cache++)
-            images[i][no_cache] = render_inside(s, rt, no_cache, i < 2, i == 0 && no_cache == 0 ? &depth : NULL);
+            images[i][no_cache] =
+                render_inside(s, rt, no_cache, i < 2, i == 0 && no_cache == 0 ? &depth : NULL);
         scene_rt_free(rt);
         scene_free(s);
     }
-    srv_camera cam = {.position = {3.5f, 2.5f, 3.0f}, .target = {0.0f, 0.6f, 0.0f}, .up = {0, 1, 0}, .fov_deg = 70};
+    srv_camera cam = {
+        .position = {3.5f, 2.5f, 3.0f}, .target = {0.0f, 0.6f, 0.0f}, .up = {0, 1, 0}, .fov_deg = 70};
     srv_camera_frame f;
     assert_true(srv_camera_setup(&cam, IW, IH, &f));
     for (int no_cache = 0; no_cache < 2; no_cache++) {
         uint32_t differ = 0, floor_differ = 0, floor_pixels = 0, lit_elsewhere = 0;
         for (uint32_t p = 0; p < IW * IH; p++) {
             double q[3];
-            bool on_floor = isfinite(depth[p]) && (stab_pixel_point(&f, p % IW, p / IW, depth[p], q), fabs(q[1]) < 1e-3);
+            bool on_floor =
+                isfinite(depth[p]) && (stab_pixel_point(&f, p % IW, p / IW, depth[p], q), fabs(q[1]) < 1e-3);
             floor_pixels += on_floor;
             for (int k = 0; k < 3; k++) {
                 size_t c = 3 * (size_t)p + (size_t)k;
@@ -257,9 +277,10 @@ static void test_light_inside_geometry(void **state)
                 lit_elsewhere += !on_floor && images[3][no_cache][c] > images[2][no_cache][c];
             }
         }
-        print_message("lights of 1e8 inside geometry%s: %u values differ from the image without them; a light on "
-                      "the floor's plane: %u of %u floor pixels' values differ, %u values elsewhere brighter\n",
-                      no_cache ? " (no cache)" : "", differ, floor_differ, 3 * floor_pixels, lit_elsewhere);
+        print_message(
+            "lights of 1e8 inside geometry%s: %u values differ from the image without them; a light on "
+            "the floor's plane: %u of %u floor pixels' values differ, %u values elsewhere brighter\n",
+            no_cache ? " (no cache)" : "", differ, floor_differ, 3 * floor_pixels, lit_elsewhere);
         assert_int_equal(differ, 0);
         assert_int_equal(floor_differ, 0);
         assert_true(floor_pixels > IW * IH / 4);
@@ -293,8 +314,8 @@ static void test_light_switched_on_and_off(void **state)
     double V, spread;
     stab_bounce_steady(s, rt, 10, &V, &spread);
     double bound = 0.04 * V + 4 * spread;
-    print_message("bounce scene: the wall's steady radiance %.5f, frame-to-frame spread %.5f, bound %.5f\n", V,
-                  spread, bound);
+    print_message("bounce scene: the wall's steady radiance %.5f, frame-to-frame spread %.5f, bound %.5f\n",
+                  V, spread, bound);
     assert_true(V > 0.01);
 
     srv_viewer_id id;
@@ -322,9 +343,10 @@ static void test_light_switched_on_and_off(void **state)
         if (settled_on < 0 && fabs(wall - V) <= 0.05 * V)
             settled_on = k;
     }
-    print_message("on: within 5 %% of the steady value after %d frames; worst deviation outside V (1 - h^k) for "
-                  "the probes' k %.5f (bound %.5f), peak %.5f (V + bound %.5f); probes at %u..%u updates\n",
-                  settled_on, worst, bound, peak, V + bound, least, most);
+    print_message(
+        "on: within 5 %% of the steady value after %d frames; worst deviation outside V (1 - h^k) for "
+        "the probes' k %.5f (bound %.5f), peak %.5f (V + bound %.5f); probes at %u..%u updates\n",
+        settled_on, worst, bound, peak, V + bound, least, most);
     assert_true(worst <= bound);
     assert_true(peak <= V + bound);
     assert_true(settled_on > 0 && settled_on <= 5);
@@ -350,9 +372,10 @@ static void test_light_switched_on_and_off(void **state)
         if (settled_off < 0 && wall <= 0.05 * V)
             settled_off = k;
     }
-    print_message("off: within 5 %% of V of 0 after %d frames (probes at %u..%u updates); worst deviation outside "
-                  "V h^k %.5f\n",
-                  settled_off, least, most, worst);
+    print_message(
+        "off: within 5 %% of V of 0 after %d frames (probes at %u..%u updates); worst deviation outside "
+        "V h^k %.5f\n",
+        settled_off, least, most, worst);
     assert_true(worst <= bound);
     assert_true(settled_off > 0 && settled_off <= 5);
     uint32_t late_least, late_most;
@@ -369,10 +392,8 @@ static void test_light_switched_on_and_off(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_intensity_closed_form),
-        cmocka_unit_test(test_intensity_linear),
-        cmocka_unit_test(test_grazing_1e_6_rad),
-        cmocka_unit_test(test_light_inside_geometry),
+        cmocka_unit_test(test_intensity_closed_form),     cmocka_unit_test(test_intensity_linear),
+        cmocka_unit_test(test_grazing_1e_6_rad),          cmocka_unit_test(test_light_inside_geometry),
         cmocka_unit_test(test_light_switched_on_and_off),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -80,8 +80,8 @@ static void against_reference(render_out *out, scene *s, scene_rt *rt, const srv
     if (srv_ref_create(&d, &ref, err, sizeof err) != FXC_OK)
         fail_msg("srv_ref_create: %s", err);
     size_t pixels = (size_t)out->w * out->h;
-    float *radiance = malloc(pixels * 3 * sizeof(float)), *terms[2] = {malloc(pixels * sizeof(float)),
-                                                                      malloc(pixels * sizeof(float))};
+    float *radiance = malloc(pixels * 3 * sizeof(float)),
+          *terms[2] = {malloc(pixels * sizeof(float)), malloc(pixels * sizeof(float))};
     assert_true(radiance && terms[0] && terms[1]);
     srv_ref_image im = {.radiance = radiance, .ao = terms[0], .shadow = terms[1]};
     srv_ref_stats st;
@@ -106,8 +106,14 @@ static render_out render(scene *s, bool probes, float probe_cell, uint32_t seed,
     scene_error err = {0};
     scene_rt *rt = scene_rt_create(s, NULL, &err);
     assert_non_null(rt);
-    srv_loop_desc d = {.s = s, .rt = rt, .seed = seed, .pool_bytes = 48u << 20, .probe_cell = probe_cell,
-                       .keep_views = !probes, .threads = 2, .probe_rays = PROBE_RAYS,
+    srv_loop_desc d = {.s = s,
+                       .rt = rt,
+                       .seed = seed,
+                       .pool_bytes = 48u << 20,
+                       .probe_cell = probe_cell,
+                       .keep_views = !probes,
+                       .threads = 2,
+                       .probe_rays = PROBE_RAYS,
                        .probe_hysteresis = PROBE_HYSTERESIS};
     if (probes)
         fxt_effects_on(&d, (const char *const[]){"probes"}, 1);
@@ -118,8 +124,12 @@ static render_out render(scene *s, bool probes, float probe_cell, uint32_t seed,
     srv_camera cam = srv_camera_default(s);
     srv_frame_stats st;
     stab_checked c = stab_frames(loop, &id, 1, &cam, true, FRAMES, &st);
-    assert_true(probes ? c.texels[SCENE_FX_PROBES] > 0 : c.texels[SCENE_FX_AO] > 0 && c.texels[SCENE_FX_SHADOW] > 0);
-    render_out out = {.w = w, .h = h, .radiance = stab_copy_radiance(loop, id), .visible = st.pixels_visible,
+    assert_true(probes ? c.texels[SCENE_FX_PROBES] > 0
+                       : c.texels[SCENE_FX_AO] > 0 && c.texels[SCENE_FX_SHADOW] > 0);
+    render_out out = {.w = w,
+                      .h = h,
+                      .radiance = stab_copy_radiance(loop, id),
+                      .visible = st.pixels_visible,
                       .probe_cell = srv_loop_probe_cell(loop)};
     for (int v = 0; !probes && v < 2; v++) {
         out.views[v] = malloc((size_t)w * h * sizeof(float));
@@ -156,8 +166,9 @@ static uint32_t beyond_one_texel(const float *a, const float *b, uint32_t w, uin
             double excess = fabs((double)b[p] - a[p]) - reach - 1.0 / 16.0;
             if (excess > 1e-6) {
                 if (beyond++ < 3)
-                    print_message("  %s pixel (%u, %u): %.4f against %.4f, its neighbourhood varies by %.4f\n", what,
-                                  x, y, (double)b[p], (double)a[p], reach);
+                    print_message(
+                        "  %s pixel (%u, %u): %.4f against %.4f, its neighbourhood varies by %.4f\n", what, x,
+                        y, (double)b[p], (double)a[p], reach);
             }
             worst = fmax(worst, fabs((double)b[p] - a[p]));
         }
@@ -208,28 +219,31 @@ static void check_variant(const reference *ref, scene *variant, double scale, co
     double noise = stab_relative_rmse(ref->probes.radiance, ref->other_seed.radiance, n_probes);
     double rmse = stab_relative_rmse(ref->probes.radiance, probes.radiance, n_probes);
     double rmse_plain = stab_relative_rmse(ref->plain.radiance, plain.radiance, n);
-    print_message("%s: origin (%.17g, %.17g, %.17g); relative RMSE without probes %.2e, with probes %.2e (another "
-                  "seed at scale 1: %.2e); visible %llu (scale 1: %llu)\n",
-                  what, variant->origin[0], variant->origin[1], variant->origin[2], rmse_plain, rmse, noise,
-                  (unsigned long long)plain.visible, (unsigned long long)ref->plain.visible);
-    print_message("  against the reference at its own scale: AO %.4f (scale 1: %.4f), lit fraction %.4f (scale 1: "
-                  "%.4f); the references' standard errors %.4f, %.4f\n",
-                  plain.ref_mae[0], ref->plain.ref_mae[0], plain.ref_mae[1], ref->plain.ref_mae[1],
-                  plain.ref_noise[0], plain.ref_noise[1]);
+    print_message(
+        "%s: origin (%.17g, %.17g, %.17g); relative RMSE without probes %.2e, with probes %.2e (another "
+        "seed at scale 1: %.2e); visible %llu (scale 1: %llu)\n",
+        what, variant->origin[0], variant->origin[1], variant->origin[2], rmse_plain, rmse, noise,
+        (unsigned long long)plain.visible, (unsigned long long)ref->plain.visible);
+    print_message(
+        "  against the reference at its own scale: AO %.4f (scale 1: %.4f), lit fraction %.4f (scale 1: "
+        "%.4f); the references' standard errors %.4f, %.4f\n",
+        plain.ref_mae[0], ref->plain.ref_mae[0], plain.ref_mae[1], ref->plain.ref_mae[1], plain.ref_noise[0],
+        plain.ref_noise[1]);
     if (scale == 1.0) {
         assert_memory_equal(ref->plain.radiance, plain.radiance, n * sizeof(float));
         assert_memory_equal(ref->probes.radiance, probes.radiance, n_probes * sizeof(float));
     } else {
         assert_int_equal(beyond_one_texel(ref->plain.views[0], plain.views[0], w, h, "AO"), 0);
         assert_int_equal(beyond_one_texel(ref->plain.views[1], plain.views[1], w, h, "lit fraction"), 0);
-        assert_true(llabs((long long)plain.visible - (long long)ref->plain.visible) * 200 <= (long long)ref->plain.visible);
+        assert_true(llabs((long long)plain.visible - (long long)ref->plain.visible) * 200 <=
+                    (long long)ref->plain.visible);
         assert_true(rmse <= noise);
     }
     for (int v = 0; v < 2; v++) {
         double allowed = 0.25 * ref->plain.ref_mae[v] + 2.0 * (plain.ref_noise[v] + ref->plain.ref_noise[v]);
         if (fabs(plain.ref_mae[v] - ref->plain.ref_mae[v]) > allowed)
-            fail_msg("%s: %s against the reference at its own scale %.4f, at scale 1 %.4f (allowed +-%.4f)", what,
-                     v == 0 ? "AO" : "lit fraction", plain.ref_mae[v], ref->plain.ref_mae[v], allowed);
+            fail_msg("%s: %s against the reference at its own scale %.4f, at scale 1 %.4f (allowed +-%.4f)",
+                     what, v == 0 ? "AO" : "lit fraction", plain.ref_mae[v], ref->plain.ref_mae[v], allowed);
     }
     render_free(&plain);
     render_free(&probes);
@@ -298,17 +312,20 @@ static void test_default_probe_cell_follows_scale(void **state)
         }
         double cell = srv_probe_cell_default(s), ratio = cell / (sqrt(d2) / 64.0);
         int exponent;
-        print_message("scale %g: default probe cell %g m, %.3f x a 64th of the diagonal\n", scales[i], cell, ratio);
+        print_message("scale %g: default probe cell %g m, %.3f x a 64th of the diagonal\n", scales[i], cell,
+                      ratio);
         assert_true(frexp(cell, &exponent) == 0.5);
         assert_true(ratio >= 1.0 / sqrt(2.0) - 1e-12 && ratio <= sqrt(2.0) + 1e-12);
         scene_free(s);
     }
     uint32_t w = ref->plain.w / 2, h = ref->plain.h / 2;
     size_t n = (size_t)w * h * 3;
-    scene *unit = fxt_transformed_default(1.0, 0.0, 1.0f), *small = fxt_transformed_default(0x1p-14, 0.0, 1.0f);
+    scene *unit = fxt_transformed_default(1.0, 0.0, 1.0f),
+          *small = fxt_transformed_default(0x1p-14, 0.0, 1.0f);
     render_out a = render(unit, true, 0, 7, w, h), b = render(unit, true, 0, 8, w, h);
     render_out c = render(small, true, 0, 7, w, h);
-    double noise = stab_relative_rmse(a.radiance, b.radiance, n), rmse = stab_relative_rmse(a.radiance, c.radiance, n);
+    double noise = stab_relative_rmse(a.radiance, b.radiance, n),
+           rmse = stab_relative_rmse(a.radiance, c.radiance, n);
     print_message("default cell %g m at scale 1, %g m at 2^-14; relative RMSE %.2e (another seed: %.2e)\n",
                   (double)a.probe_cell, (double)c.probe_cell, rmse, noise);
     assert_true(c.probe_cell == a.probe_cell * 0x1p-14f);
@@ -330,15 +347,17 @@ static scene *sponza_at(const char *path, double scale, double offset)
 {
     char text[4096];
     const double pos[3] = {-11.0, 3.0, 0.4}, target[3] = {9.0, 4.5, -0.6};
-    snprintf(text, sizeof text,
-             "{\"version\": 1, \"meshes\": [{\"file\": \"%s\", \"transform\": {\"scale\": %.17g, \"translate\": "
-             "[%.17g, %.17g, %.17g]}}],\n"
-             " \"lights\": [{\"type\": \"directional\", \"direction\": [-0.3, -1, -0.2], \"intensity\": 2}],\n"
-             " \"sky\": {\"color\": [0.5, 0.6, 1], \"intensity\": 0.6}, \"ao_radius\": %.17g,\n"
-             " \"camera\": {\"position\": [%.17g, %.17g, %.17g], \"target\": [%.17g, %.17g, %.17g], \"fov_deg\": 70}}",
-             path, scale, offset, offset, offset, 2.0 * scale, pos[0] * scale + offset, pos[1] * scale + offset,
-             pos[2] * scale + offset, target[0] * scale + offset, target[1] * scale + offset,
-             target[2] * scale + offset);
+    snprintf(
+        text, sizeof text,
+        "{\"version\": 1, \"meshes\": [{\"file\": \"%s\", \"transform\": {\"scale\": %.17g, \"translate\": "
+        "[%.17g, %.17g, %.17g]}}],\n"
+        " \"lights\": [{\"type\": \"directional\", \"direction\": [-0.3, -1, -0.2], \"intensity\": 2}],\n"
+        " \"sky\": {\"color\": [0.5, 0.6, 1], \"intensity\": 0.6}, \"ao_radius\": %.17g,\n"
+        " \"camera\": {\"position\": [%.17g, %.17g, %.17g], \"target\": [%.17g, %.17g, %.17g], \"fov_deg\": "
+        "70}}",
+        path, scale, offset, offset, offset, 2.0 * scale, pos[0] * scale + offset, pos[1] * scale + offset,
+        pos[2] * scale + offset, target[0] * scale + offset, target[1] * scale + offset,
+        target[2] * scale + offset);
     scene_error err = {0};
     scene *s = scene_load(fxt_write_file("sponza.json", text), NULL, &err);
     if (!s)
@@ -385,7 +404,8 @@ static void check_sponza(void **state, double scale, double offset)
         skip();
     scene *s = sponza_at(f->path, scale, offset);
     char what[128];
-    snprintf(what, sizeof what, "Sponza, scale %g, moved by %g (%u triangles)", scale, offset, s->triangle_count);
+    snprintf(what, sizeof what, "Sponza, scale %g, moved by %g (%u triangles)", scale, offset,
+             s->triangle_count);
     check_variant(&f->ref, s, scale, what);
     scene_free(s);
 }
@@ -418,7 +438,8 @@ int main(void)
         cmocka_unit_test(test_sponza_scaled_1e4),
         cmocka_unit_test(test_sponza_translated_1e6),
     };
-    int failed = cmocka_run_group_tests_name("scale: the embedded scene", default_tests, default_setup, default_teardown);
+    int failed = cmocka_run_group_tests_name("scale: the embedded scene", default_tests, default_setup,
+                                             default_teardown);
     failed += cmocka_run_group_tests_name("scale: Sponza", sponza_tests, sponza_setup, sponza_teardown);
     return failed;
 }

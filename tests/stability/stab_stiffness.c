@@ -67,9 +67,10 @@ static void test_probe_hysteresis_0(void **state)
     }
     double mean = sum / (FRAMES - 4), spread = sqrt(fmax(sum2 / (FRAMES - 4) - mean * mean, 0.0));
     double bound = 0.04 * V + 4 * spread;
-    print_message("hysteresis 1e-9: steady V %.5f (h 0.5, spread %.5f); after the switch %.5f, %.5f, %.5f ...; "
-                  "spread %.5f (%.2f x h 0.5's), bound %.5f\n",
-                  V, spread_half, r->wall[0], r->wall[1], r->wall[2], spread, spread / spread_half, bound);
+    print_message(
+        "hysteresis 1e-9: steady V %.5f (h 0.5, spread %.5f); after the switch %.5f, %.5f, %.5f ...; "
+        "spread %.5f (%.2f x h 0.5's), bound %.5f\n",
+        V, spread_half, r->wall[0], r->wall[1], r->wall[2], spread, spread / spread_half, bound);
     assert_true(r->wall[0] >= 0.9 * V - bound && r->wall[0] <= V + bound);
     for (int k = 1; k < FRAMES; k++) {
         if (fabs(r->wall[k] - V) > bound)
@@ -114,11 +115,12 @@ static void test_probe_hysteresis_0_999(void **state)
         double excess = fmax(low - r->wall[k], r->wall[k] - high) - allowed;
         worst = fmax(worst, fmax(low - r->wall[k], r->wall[k] - high) / allowed);
         if (excess > 1e-7)
-            fail_msg("hysteresis 0.999, frame %d: wall %.6g, expected %.6g .. %.6g (allowed %.3g)", k + 1, r->wall[k],
-                     low, high, allowed);
+            fail_msg("hysteresis 0.999, frame %d: wall %.6g, expected %.6g .. %.6g (allowed %.3g)", k + 1,
+                     r->wall[k], low, high, allowed);
     }
-    print_message("hysteresis 0.999: after %d frames %.6f (expected %.6f, V %.5f); worst deviation %.2f of its bound\n",
-                  FRAMES, r->wall[FRAMES - 1], V * (1 - pow(h, (double)r->most[FRAMES - 1])), V, worst);
+    print_message(
+        "hysteresis 0.999: after %d frames %.6f (expected %.6f, V %.5f); worst deviation %.2f of its bound\n",
+        FRAMES, r->wall[FRAMES - 1], V * (1 - pow(h, (double)r->most[FRAMES - 1])), V, worst);
     assert_true(r->wall[FRAMES - 1] > 0.5 * V * (1 - pow(h, FRAMES))); /* not stalled */
     free(r);
 
@@ -144,7 +146,8 @@ static void test_probe_hysteresis_0_999(void **state)
 static scene *ao_floor(bool boxed, scene_rt **rt)
 {
     scene *s = fxt_new_scene();
-    fxt_add_quad(s, "floor", (const double[3]){0, 0, 0}, (const double[3]){0, 0, 0.5}, (const double[3]){0.5, 0, 0}, 1);
+    fxt_add_quad(s, "floor", (const double[3]){0, 0, 0}, (const double[3]){0, 0, 0.5},
+                 (const double[3]){0.5, 0, 0}, 1);
     if (boxed) {
         const double lo[3] = {0, 0, 0}, hi[3] = {0.5, 0.02, 0.5};
         /* the box's five other faces, facing in, less its bottom */
@@ -209,8 +212,9 @@ static void test_ao_16bit_limits(void **state)
                 const uint8_t *texel = run.payload + (size_t)(64 * b + t) * 4;
                 uint32_t held = fx__get_u16(texel) | (uint32_t)fx__get_u16(texel + 2) << 16;
                 if (held != expected[64 * b + t] && wrong++ < 3)
-                    print_message("  texel %u/%u: holds %u of count %u, expected %u of %u\n", b, t, held & 0xffff,
-                                  held >> 16, expected[64 * b + t] & 0xffff, expected[64 * b + t] >> 16);
+                    print_message("  texel %u/%u: holds %u of count %u, expected %u of %u\n", b, t,
+                                  held & 0xffff, held >> 16, expected[64 * b + t] & 0xffff,
+                                  expected[64 * b + t] >> 16);
             }
         print_message("AO 16-bit limits, %s: %u (U, n) pairs and %u saturated texels, %u wrong\n",
                       boxed ? "every ray occluded" : "every ray free", pairs, pair - pairs, wrong);
@@ -233,10 +237,11 @@ static void test_ao_16bit_limits_through_the_engine(void **state)
     scene *s = ao_floor(false, &rt);
     const uint32_t steps[] = {64, 1, 7, 1000};
     float *reference = NULL;
-    srv_camera cam = {.position = {0.25f, 0.3f, 0.7f}, .target = {0.25f, 0.0f, 0.25f}, .up = {0, 1, 0}, .fov_deg = 60};
+    srv_camera cam = {
+        .position = {0.25f, 0.3f, 0.7f}, .target = {0.25f, 0.0f, 0.25f}, .up = {0, 1, 0}, .fov_deg = 60};
     for (size_t i = 0; i < sizeof steps / sizeof steps[0]; i++) {
-        srv_loop_desc d = {.s = s, .rt = rt, .seed = 8, .keep_views = true, .samples_per_update = steps[i],
-                           .threads = 2};
+        srv_loop_desc d = {
+            .s = s, .rt = rt, .seed = 8, .keep_views = true, .samples_per_update = steps[i], .threads = 2};
         fxt_effects_on(&d, (const char *const[]){"ao"}, 1);
         srv_viewer_id id;
         srv_loop *loop = fxt_loop(&d, 1, 32, 18, &id);
@@ -247,7 +252,8 @@ static void test_ao_16bit_limits_through_the_engine(void **state)
         const float *ao = srv_viewer_view(loop, id, SRV_VIEW_AO), *depth = srv_viewer_depth(loop, id);
         for (size_t p = 0; p < 32 * 18; p++)
             if (isfinite(depth[p]) && !(fabs(ao[p] - 1.0) <= 0x1p-22))
-                fail_msg("samples per update %u, pixel %zu: AO %.9g on the open floor", steps[i], p, (double)ao[p]);
+                fail_msg("samples per update %u, pixel %zu: AO %.9g on the open floor", steps[i], p,
+                         (double)ao[p]);
         if (!reference) {
             reference = malloc(32 * 18 * sizeof(float));
             assert_non_null(reference);
@@ -255,7 +261,8 @@ static void test_ao_16bit_limits_through_the_engine(void **state)
         } else {
             assert_memory_equal(reference, ao, 32 * 18 * sizeof(float));
         }
-        print_message("samples per update %u: converged after %u frames, the same AO view\n", steps[i], frames);
+        print_message("samples per update %u: converged after %u frames, the same AO view\n", steps[i],
+                      frames);
         srv_loop_free(loop);
     }
     free(reference);

@@ -78,22 +78,23 @@ static void check_osc_block(srv_loop *loop, uint32_t e, uint32_t block, uint64_t
     uint32_t width = (s->islands[island].width + (1u << level) - 1) >> level;
     uint32_t height = (s->islands[island].height + (1u << level) - 1) >> level;
     if (block_x * 8 >= width || block_y * 8 >= height)
-        fail_msg("effect %s: block (%u, %u) at level %u lies outside island %u (%u x %u texels)", fx->name, block_x,
-                 block_y, level, island, width, height);
+        fail_msg("effect %s: block (%u, %u) at level %u lies outside island %u (%u x %u texels)", fx->name,
+                 block_x, block_y, level, island, width, height);
     for (uint64_t m = valid; m; m &= m - 1) {
         uint32_t t = (uint32_t)__builtin_ctzll(m);
         const uint8_t *texel = payload + (size_t)t * bytes;
         uint32_t tx = block_x * 8 + (t & 7), ty = block_y * 8 + (t >> 3);
         if (tx >= width || ty >= height)
-            fail_msg("effect %s: texel (%u, %u) of island %u level %u holds data outside the island (%u x %u)",
-                     fx->name, tx, ty, island, level, width, height);
+            fail_msg(
+                "effect %s: texel (%u, %u) of island %u level %u holds data outside the island (%u x %u)",
+                fx->name, tx, ty, island, level, width, height);
         out->texels[e]++;
         if (strcmp(fx->name, "triangle_lookup") == 0) {
             uint32_t value = le_u32(texel), local = value & 0xff;
             double u = (double)((value >> 8) & 0xfff) / 4095.0, v = (double)(value >> 20) / 4095.0;
             if (local >= s->islands[island].triangle_count || u + v > 1.0 + 2.0 / 4095.0)
-                fail_msg("triangle lookup texel %u of island %u (%u triangles): triangle %u, u %g v %g", t, island,
-                         s->islands[island].triangle_count, local, u, v);
+                fail_msg("triangle lookup texel %u of island %u (%u triangles): triangle %u, u %g v %g", t,
+                         island, s->islands[island].triangle_count, local, u, v);
         } else if (strcmp(fx->name, "ao") == 0) {
             uint32_t count = le_u16(texel + 2);
             if (count < 1 || count > FX_AO_MAX_SAMPLES)
@@ -113,9 +114,11 @@ static void check_osc_block(srv_loop *loop, uint32_t e, uint32_t block, uint64_t
                 const scene_light *light = &s->lights[l];
                 if (light->type != SCENE_LIGHT_DIRECTIONAL)
                     continue;
-                double facing = -(n[0] * light->direction[0] + n[1] * light->direction[1] + n[2] * light->direction[2]);
+                double facing =
+                    -(n[0] * light->direction[0] + n[1] * light->direction[1] + n[2] * light->direction[2]);
                 if (facing < -1e-6 && le_u16(texel + 2 * l) != 0)
-                    fail_msg("shadow texel %u of key %016llx faces away from light %u (cos %g) but holds mask %04x",
+                    fail_msg("shadow texel %u of key %016llx faces away from light %u (cos %g) but holds "
+                             "mask %04x",
                              t, (unsigned long long)key, l, facing, le_u16(texel + 2 * l));
             }
         }
@@ -146,12 +149,14 @@ static void check_probe(srv_loop *loop, uint32_t e, uint32_t block, uint64_t key
     for (int k = 0; k < 3; k++)
         if (!(fabsf(position[k] - job.origin[k]) <= 0.45f * job.cell * 1.001f + 1e-6f * fabsf(job.origin[k])))
             fail_msg("probe %016llx: position %g is %g cells from its grid point (at most 0.45)",
-                     (unsigned long long)key, (double)position[k], (double)((position[k] - job.origin[k]) / job.cell));
+                     (unsigned long long)key, (double)position[k],
+                     (double)((position[k] - job.origin[k]) / job.cell));
     for (uint32_t t = 0; t < FX_PROBE_TEXELS; t++) {
         for (int k = 0; k < 3; k++) {
             double h = half_value(le_u16(p + 32 + 6 * t + 2 * k));
             if (!(h >= 0 && h <= 1.0)) /* stored divided by the scale, the map's largest value */
-                fail_msg("probe %016llx texel %u: irradiance / scale %g (0..1)", (unsigned long long)key, t, h);
+                fail_msg("probe %016llx texel %u: irradiance / scale %g (0..1)", (unsigned long long)key, t,
+                         h);
         }
         for (int k = 0; k < 2; k++) {
             double h = half_value(le_u16(p + 416 + 4 * t + 2 * k));
@@ -183,16 +188,16 @@ static void check_payloads(srv_loop *loop, const srv_frame_stats *st, stab_check
                 continue;
             if (k == SCENE_CACHE_ON_SURFACE) {
                 if ((uint32_t)(key >> 60) != e)
-                    fail_msg("block %u of effect %u holds key %016llx of effect %u", b, e, (unsigned long long)key,
-                             (unsigned)(key >> 60));
+                    fail_msg("block %u of effect %u holds key %016llx of effect %u", b, e,
+                             (unsigned long long)key, (unsigned)(key >> 60));
                 check_osc_block(loop, e, b, key, valid, out);
             } else if (strcmp(loop->effects[e]->name, "probes") == 0) {
                 check_probe(loop, e, b, key, out);
             }
         }
         if (resident != st->blocks_resident[e])
-            fail_msg("effect %s: %u blocks hold keys, the statistics say %llu resident", loop->effects[e]->name,
-                     resident, (unsigned long long)st->blocks_resident[e]);
+            fail_msg("effect %s: %u blocks hold keys, the statistics say %llu resident",
+                     loop->effects[e]->name, resident, (unsigned long long)st->blocks_resident[e]);
     }
 }
 
@@ -223,31 +228,34 @@ static void check_viewer(srv_loop *loop, srv_viewer_id id, const srv_viewer_stat
         for (int k = 0; k < 3; k++) {
             float c = rad[3 * p + k];
             if (!(isfinite(c) && c >= 0))
-                fail_msg("viewer %u pixel (%zu, %zu) channel %d: radiance %g", id.id, p % w, p / w, k, (double)c);
+                fail_msg("viewer %u pixel (%zu, %zu) channel %d: radiance %g", id.id, p % w, p / w, k,
+                         (double)c);
             if (is_sky && c != sky[k])
-                fail_msg("viewer %u pixel (%zu, %zu) sees the sky (depth inf) with radiance %g, the sky is %g",
-                         id.id, p % w, p / w, (double)c, (double)sky[k]);
+                fail_msg(
+                    "viewer %u pixel (%zu, %zu) sees the sky (depth inf) with radiance %g, the sky is %g",
+                    id.id, p % w, p / w, (double)c, (double)sky[k]);
             if (srgb[3 * p + k] != srv__tone_map_reference(c))
-                fail_msg("viewer %u pixel (%zu, %zu) channel %d: byte %u for radiance %g (tone map: %u)", id.id,
-                         p % w, p / w, k, srgb[3 * p + k], (double)c, srv__tone_map_reference(c));
+                fail_msg("viewer %u pixel (%zu, %zu) channel %d: byte %u for radiance %g (tone map: %u)",
+                         id.id, p % w, p / w, k, srgb[3 * p + k], (double)c, srv__tone_map_reference(c));
         }
         if (views[SRV_VIEW_AO]) {
-            float ao = views[SRV_VIEW_AO][p], lit = views[SRV_VIEW_SHADOW][p], share = views[SRV_VIEW_SHARING][p];
+            float ao = views[SRV_VIEW_AO][p], lit = views[SRV_VIEW_SHADOW][p],
+                  share = views[SRV_VIEW_SHARING][p];
             if (!(ao >= 0 && ao <= 1 && lit >= 0 && lit <= 1 && share >= 0 && share <= (float)viewers &&
                   share == floorf(share)))
-                fail_msg("viewer %u pixel (%zu, %zu): views AO %.9g, lit %.9g, sharing %.9g", id.id, p % w, p / w,
-                         (double)ao, (double)lit, (double)share);
+                fail_msg("viewer %u pixel (%zu, %zu): views AO %.9g, lit %.9g, sharing %.9g", id.id, p % w,
+                         p / w, (double)ao, (double)lit, (double)share);
             if (is_sky && !(ao == 1 && lit == 1 && share == 0))
-                fail_msg("viewer %u sky pixel (%zu, %zu): views AO %g, lit %g, sharing %g", id.id, p % w, p / w,
-                         (double)ao, (double)lit, (double)share);
+                fail_msg("viewer %u sky pixel (%zu, %zu): views AO %g, lit %g, sharing %g", id.id, p % w,
+                         p / w, (double)ao, (double)lit, (double)share);
             out->view_values += 3;
         }
     }
     out->pixels += (uint64_t)w * h;
     out->sky_pixels += (uint64_t)w * h - visible;
     if (vs->width != w || vs->height != h || vs->pixels_visible != visible || vs->pixels_missing > visible)
-        fail_msg("viewer %u: statistics %ux%u, %llu visible, %llu missing; the frame %ux%u, %llu visible", id.id,
-                 vs->width, vs->height, (unsigned long long)vs->pixels_visible,
+        fail_msg("viewer %u: statistics %ux%u, %llu visible, %llu missing; the frame %ux%u, %llu visible",
+                 id.id, vs->width, vs->height, (unsigned long long)vs->pixels_visible,
                  (unsigned long long)vs->pixels_missing, w, h, (unsigned long long)visible);
 }
 
@@ -261,38 +269,42 @@ static void check_stats(srv_loop *loop, const srv_frame_stats *st)
         missing += st->viewers[i].pixels_missing;
         pixels += (uint64_t)st->viewers[i].width * st->viewers[i].height;
     }
-    if (requested != st->requested_texels || cells != st->world.requested_cells || visible != st->pixels_visible ||
-        missing != st->pixels_missing || pixels != st->visibility_rays)
-        fail_msg("frame %u: the viewers' figures do not add up to the frame's (texels %llu/%llu, cells %llu/%llu, "
-                 "visible %llu/%llu, missing %llu/%llu, pixels %llu/%llu)",
-                 st->frame, (unsigned long long)requested, (unsigned long long)st->requested_texels,
-                 (unsigned long long)cells, (unsigned long long)st->world.requested_cells,
-                 (unsigned long long)visible, (unsigned long long)st->pixels_visible, (unsigned long long)missing,
-                 (unsigned long long)st->pixels_missing, (unsigned long long)pixels,
-                 (unsigned long long)st->visibility_rays);
+    if (requested != st->requested_texels || cells != st->world.requested_cells ||
+        visible != st->pixels_visible || missing != st->pixels_missing || pixels != st->visibility_rays)
+        fail_msg(
+            "frame %u: the viewers' figures do not add up to the frame's (texels %llu/%llu, cells %llu/%llu, "
+            "visible %llu/%llu, missing %llu/%llu, pixels %llu/%llu)",
+            st->frame, (unsigned long long)requested, (unsigned long long)st->requested_texels,
+            (unsigned long long)cells, (unsigned long long)st->world.requested_cells,
+            (unsigned long long)visible, (unsigned long long)st->pixels_visible, (unsigned long long)missing,
+            (unsigned long long)st->pixels_missing, (unsigned long long)pixels,
+            (unsigned long long)st->visibility_rays);
     if (st->unique_texels > st->requested_texels || st->world.unique_cells > st->world.requested_cells)
         fail_msg("frame %u: more unique texels (%llu) or cells (%llu) than requested (%llu, %llu)", st->frame,
                  (unsigned long long)st->unique_texels, (unsigned long long)st->world.unique_cells,
                  (unsigned long long)st->requested_texels, (unsigned long long)st->world.requested_cells);
     /* At most 75 % of the table's slots hold keys (osc.h's default maximum load). */
     if ((uint64_t)st->table_count * 100 > (uint64_t)st->table_capacity * 75 ||
-        st->world.entries * 100 > st->world.table_capacity * 75 || st->world.local_hits > st->world.local_lookups)
-        fail_msg("frame %u: table %u of %u slots, world table %llu of %llu, local hits %llu of %llu", st->frame,
-                 st->table_count, st->table_capacity, (unsigned long long)st->world.entries,
+        st->world.entries * 100 > st->world.table_capacity * 75 ||
+        st->world.local_hits > st->world.local_lookups)
+        fail_msg("frame %u: table %u of %u slots, world table %llu of %llu, local hits %llu of %llu",
+                 st->frame, st->table_count, st->table_capacity, (unsigned long long)st->world.entries,
                  (unsigned long long)st->world.table_capacity, (unsigned long long)st->world.local_hits,
                  (unsigned long long)st->world.local_lookups);
     double stages = 0;
     for (int k = 0; k < SRV_STAGE_COUNT; k++) {
         if (!(isfinite(st->time_ms[k]) && st->time_ms[k] >= 0))
-            fail_msg("frame %u: stage %s took %g ms", st->frame, srv_stage_name((srv_stage)k), st->time_ms[k]);
+            fail_msg("frame %u: stage %s took %g ms", st->frame, srv_stage_name((srv_stage)k),
+                     st->time_ms[k]);
         stages += st->time_ms[k];
     }
     if (!(isfinite(st->frame_ms) && st->frame_ms >= stages - 1e-3 * (1 + stages)))
         fail_msg("frame %u: frame time %g ms, its stages %g ms", st->frame, st->frame_ms, stages);
     for (uint32_t e = 0; e < loop->effect_count; e++)
         if (st->texels_resampled[e] > st->texels_updated[e])
-            fail_msg("frame %u: effect %s resampled %llu of %llu texels updated", st->frame, loop->effects[e]->name,
-                     (unsigned long long)st->texels_resampled[e], (unsigned long long)st->texels_updated[e]);
+            fail_msg("frame %u: effect %s resampled %llu of %llu texels updated", st->frame,
+                     loop->effects[e]->name, (unsigned long long)st->texels_resampled[e],
+                     (unsigned long long)st->texels_updated[e]);
 
     /* Memory: the parts add up to the total, and resident blocks are what the pools say is in use. */
     srv_memory m;
@@ -301,13 +313,15 @@ static void check_stats(srv_loop *loop, const srv_frame_stats *st)
     for (uint32_t e = 0; e < SRV_MAX_EFFECTS; e++) {
         sum += m.pools_reserved[e] + m.block_meta[e];
         if (m.pools_in_use[e] > m.pools_reserved[e])
-            fail_msg("effect %u: %llu pool bytes in use of %llu reserved", e, (unsigned long long)m.pools_in_use[e],
-                     (unsigned long long)m.pools_reserved[e]);
+            fail_msg("effect %u: %llu pool bytes in use of %llu reserved", e,
+                     (unsigned long long)m.pools_in_use[e], (unsigned long long)m.pools_reserved[e]);
         if (e < loop->effect_count && loop->effect_cached[e]) {
             const fx_effect *fx = loop->effects[e];
-            uint64_t side = loop->effect_kind[e] == SCENE_CACHE_WORLD_SPACE ? (fx->brick_size ? fx->brick_size : 1) : 8;
-            uint64_t block_bytes = (uint64_t)fx->texel_bytes(loop->s) *
-                                   (loop->effect_kind[e] == SCENE_CACHE_WORLD_SPACE ? side * side * side : 64);
+            uint64_t side =
+                loop->effect_kind[e] == SCENE_CACHE_WORLD_SPACE ? (fx->brick_size ? fx->brick_size : 1) : 8;
+            uint64_t block_bytes =
+                (uint64_t)fx->texel_bytes(loop->s) *
+                (loop->effect_kind[e] == SCENE_CACHE_WORLD_SPACE ? side * side * side : 64);
             if (m.pools_in_use[e] != st->blocks_resident[e] * block_bytes)
                 fail_msg("effect %s: %llu pool bytes in use for %llu resident blocks of %llu bytes", fx->name,
                          (unsigned long long)m.pools_in_use[e], (unsigned long long)st->blocks_resident[e],
@@ -339,7 +353,8 @@ stab_checked stab_check_loop(srv_loop *loop, const srv_frame_stats *st)
         rendered++;
     }
     if (rendered != st->viewer_count)
-        fail_msg("frame %u: %u viewers rendered, the statistics name %u", st->frame, rendered, st->viewer_count);
+        fail_msg("frame %u: %u viewers rendered, the statistics name %u", st->frame, rendered,
+                 st->viewer_count);
     check_stats(loop, st);
     check_payloads(loop, st, &out);
     return out;
@@ -425,13 +440,14 @@ double stab_relative_rmse(const float *a, const float *b, size_t n)
 void stab_add_floor(scene *s, double cx, double height, double cz, double half, uint32_t cells)
 {
     /* edge_a along +z, edge_b along +x: normal (z x x) = +y */
-    fxt_add_quad(s, "floor", (const double[3]){cx - half, height, cz - half}, (const double[3]){0, 0, 2 * half},
-                 (const double[3]){2 * half, 0, 0}, cells);
+    fxt_add_quad(s, "floor", (const double[3]){cx - half, height, cz - half},
+                 (const double[3]){0, 0, 2 * half}, (const double[3]){2 * half, 0, 0}, cells);
 }
 
 void stab_add_point_light(scene *s, float x, float y, float z, float intensity)
 {
-    scene_light light = {.type = SCENE_LIGHT_POINT, .position = {x, y, z}, .color = {1, 1, 1}, .intensity = intensity};
+    scene_light light = {
+        .type = SCENE_LIGHT_POINT, .position = {x, y, z}, .color = {1, 1, 1}, .intensity = intensity};
     scene_error err;
     assert_int_equal(scene__add_light(s, &light, "stability lamp", &err), SCENE_OK);
 }
@@ -457,8 +473,10 @@ scene *stab_bounce_scene(float intensity, scene_rt **rt)
 {
     scene *s = fxt_new_scene();
     /* Floor: edge_a along +z, edge_b along +x (normal +y); wall: edge_a along +y, edge_b along +z (+x). */
-    fxt_add_quad(s, "floor", (const double[3]){0.1, 0.1, -5}, (const double[3]){0, 0, 10}, (const double[3]){4, 0, 0}, 4);
-    fxt_add_quad(s, "wall", (const double[3]){0.1, 0.1, -5}, (const double[3]){0, 5, 0}, (const double[3]){0, 0, 10}, 4);
+    fxt_add_quad(s, "floor", (const double[3]){0.1, 0.1, -5}, (const double[3]){0, 0, 10},
+                 (const double[3]){4, 0, 0}, 4);
+    fxt_add_quad(s, "wall", (const double[3]){0.1, 0.1, -5}, (const double[3]){0, 5, 0},
+                 (const double[3]){0, 0, 10}, 4);
     fxt_add_sun(s, 0, -1, 0);
     s->lights[0].intensity = intensity;
     s->sky_intensity = 0;
@@ -469,7 +487,8 @@ scene *stab_bounce_scene(float intensity, scene_rt **rt)
 
 srv_camera stab_bounce_camera(void)
 {
-    return (srv_camera){.position = {3.9f, 1.2f, 0.05f}, .target = {0.1f, 0.9f, 0.0f}, .up = {0, 1, 0}, .fov_deg = 60};
+    return (srv_camera){
+        .position = {3.9f, 1.2f, 0.05f}, .target = {0.1f, 0.9f, 0.0f}, .up = {0, 1, 0}, .fov_deg = 60};
 }
 
 void stab_bounce_means(const srv_loop *loop, srv_viewer_id id, double *wall, double *floor)
@@ -504,8 +523,14 @@ void stab_bounce_means(const srv_loop *loop, srv_viewer_id id, double *wall, dou
 
 srv_loop *stab_bounce_loop(scene *s, scene_rt *rt, float h, srv_viewer_id *id)
 {
-    srv_loop_desc d = {.s = s, .rt = rt, .seed = 21, .threads = 2, .probe_rays = 64, .probe_hysteresis = h,
-                       .probe_cell = 0.5f, .keep_views = true};
+    srv_loop_desc d = {.s = s,
+                       .rt = rt,
+                       .seed = 21,
+                       .threads = 2,
+                       .probe_rays = 64,
+                       .probe_hysteresis = h,
+                       .probe_cell = 0.5f,
+                       .keep_views = true};
     fxt_effects_on(&d, (const char *const[]){"shadow", "probes"}, 2);
     return fxt_loop(&d, 1, 48, 32, id);
 }
@@ -559,7 +584,8 @@ void stab_probe_snapshot(srv_loop *loop, stab_probe_counts *out)
     }
 }
 
-uint32_t stab_probe_updates_since(srv_loop *loop, const stab_probe_counts *then, uint32_t *least, uint32_t *most)
+uint32_t stab_probe_updates_since(srv_loop *loop, const stab_probe_counts *then, uint32_t *least,
+                                  uint32_t *most)
 {
     stab_probe_counts *now = malloc(sizeof *now);
     assert_non_null(now);
@@ -617,7 +643,8 @@ stab_plane_result stab_check_open_plane(const srv_loop *loop, srv_viewer_id id, 
     stab_plane_closed_form(s, expected);
     bool lit = -(double)s->lights[0].direction[1] > 0;
     const float *rad = srv_viewer_radiance(loop, id), *depth = srv_viewer_depth(loop, id);
-    const float *ao = srv_viewer_view(loop, id, SRV_VIEW_AO), *shadow = srv_viewer_view(loop, id, SRV_VIEW_SHADOW);
+    const float *ao = srv_viewer_view(loop, id, SRV_VIEW_AO),
+                *shadow = srv_viewer_view(loop, id, SRV_VIEW_SHADOW);
     for (uint32_t y = 0; y < h; y++)
         for (uint32_t x = 0; x < w; x++) {
             size_t p = (size_t)y * w + x;
@@ -634,25 +661,26 @@ stab_plane_result stab_check_open_plane(const srv_loop *loop, srv_viewer_id id, 
                 double bound = 0x1p-20 * (1.0 + f.tan_half_x + f.tan_half_y) / fabs(dir[1]);
                 double error = fabs((double)depth[p] - t) / t;
                 if (!(error <= bound))
-                    fail_msg("pixel (%u, %u): depth %.9g, the plane's %.9g (relative error %.3g, bound %.3g)", x, y,
-                             (double)depth[p], t, error, bound);
+                    fail_msg("pixel (%u, %u): depth %.9g, the plane's %.9g (relative error %.3g, bound %.3g)",
+                             x, y, (double)depth[p], t, error, bound);
                 out.worst_depth = fmax(out.worst_depth, error / bound);
                 out.plane_pixels++;
                 for (int k = 0; k < 3; k++) {
                     double e = fabs(rad[3 * p + k] - expected[k]) / expected[k];
                     if (!(e <= STAB_FORMULA_TOLERANCE))
-                        fail_msg("pixel (%u, %u) channel %d: radiance %.9g, closed form %.9g (relative error %.3g)",
+                        fail_msg("pixel (%u, %u) channel %d: radiance %.9g, closed form %.9g (relative error "
+                                 "%.3g)",
                                  x, y, k, (double)rad[3 * p + k], expected[k], e);
                     out.worst_radiance = fmax(out.worst_radiance, e);
                 }
                 /* Every texel holds exactly 1 (or 0); a filter's weights sum to 1 within 4 roundings. */
                 if (ao && !(fabs(ao[p] - 1.0) <= 0x1p-22 && fabs(shadow[p] - (lit ? 1.0 : 0.0)) <= 0x1p-22))
-                    fail_msg("pixel (%u, %u): AO %.9g, lit fraction %.9g (expected 1 and %d)", x, y, (double)ao[p],
-                             (double)shadow[p], lit);
+                    fail_msg("pixel (%u, %u): AO %.9g, lit fraction %.9g (expected 1 and %d)", x, y,
+                             (double)ao[p], (double)shadow[p], lit);
             } else if (inside < -margin) {
                 if (depth[p] != INFINITY)
-                    fail_msg("pixel (%u, %u): depth %.9g, its ray misses the floor by %.3g m", x, y, (double)depth[p],
-                             -inside);
+                    fail_msg("pixel (%u, %u): depth %.9g, its ray misses the floor by %.3g m", x, y,
+                             (double)depth[p], -inside);
                 out.sky_pixels++;
             }
         }
@@ -678,15 +706,17 @@ bool stab_box_shadows(const double p[3], const float dir[3], const double lo[3],
     return t0 <= t1;
 }
 
-static bool box_dark(const double p[3], const float dir[3], const double lo[3], const double hi[3], bool under)
+static bool box_dark(const double p[3], const float dir[3], const double lo[3], const double hi[3],
+                     bool under)
 {
     return stab_box_shadows(p, dir, lo, hi) ||
            (under && p[0] >= lo[0] && p[0] <= hi[0] && p[2] >= lo[2] && p[2] <= hi[2]);
 }
 
 stab_box_result stab_check_box_on_plane(const srv_loop *loop, srv_viewer_id id, const srv_camera *cam,
-                                        double plane_y, const double lo[3], const double hi[3], bool under_is_dark,
-                                        float density, float ao_radius, double depth_tolerance)
+                                        double plane_y, const double lo[3], const double hi[3],
+                                        bool under_is_dark, float density, float ao_radius,
+                                        double depth_tolerance)
 {
     stab_box_result out;
     memset(&out, 0, sizeof out);
@@ -712,12 +742,13 @@ stab_box_result stab_check_box_on_plane(const srv_loop *loop, srv_viewer_id id, 
             out.worst_depth = fmax(out.worst_depth, fabs(depth[p] - t) / t);
             double footprint = t * 2.0 * f.tan_half_y / h / fabs(dir[1]);
             double band = 2.0 * fmax(1.42 * footprint, 1.0 / density) + footprint;
-            double dx = fmax(fmax(lo[0] - q[0], q[0] - hi[0]), 0.0), dz = fmax(fmax(lo[2] - q[2], q[2] - hi[2]), 0.0);
+            double dx = fmax(fmax(lo[0] - q[0], q[0] - hi[0]), 0.0),
+                   dz = fmax(fmax(lo[2] - q[2], q[2] - hi[2]), 0.0);
             if (sqrt(dx * dx + dz * dz) > ao_radius + 2 * band) {
                 out.open++;
                 if (!(fabs(ao[p] - 1.0) <= 0x1p-22))
-                    fail_msg("pixel (%u, %u) at (%.9g, %.9g): AO %.9g, nothing within its radius", x, y, q[0], q[2],
-                             (double)ao[p]);
+                    fail_msg("pixel (%u, %u) at (%.9g, %.9g): AO %.9g, nothing within its radius", x, y, q[0],
+                             q[2], (double)ao[p]);
             }
             bool shadowed = box_dark(q, sun, lo, hi, under_is_dark), near_edge = false;
             for (int a = -8; a <= 8 && !near_edge; a++)

@@ -20,11 +20,11 @@
 
 /* What a check looked at, so a case can assert it was not vacuous. */
 typedef struct stab_checked {
-    uint64_t pixels;         /* viewer pixels checked (all viewers) */
-    uint64_t sky_pixels;     /* of which saw the sky */
-    uint64_t view_values;    /* kept-view floats checked */
+    uint64_t pixels;                  /* viewer pixels checked (all viewers) */
+    uint64_t sky_pixels;              /* of which saw the sky */
+    uint64_t view_values;             /* kept-view floats checked */
     uint64_t texels[SRV_MAX_EFFECTS]; /* payload texels (cells) with data checked, per effect */
-    uint64_t blocks;         /* resident blocks walked */
+    uint64_t blocks;                  /* resident blocks walked */
 } stab_checked;
 
 /* Checks the loop's state after srv_loop_frame() returned st: every present viewer's frame, the frame's
@@ -106,7 +106,8 @@ void stab_probe_snapshot(srv_loop *loop, stab_probe_counts *out);
 
 /* The fewest and most updates since `then` of the probes on both then and now and not restarted since (a
  * probe switched off and on again starts its count afresh); returns how many such probes there are. */
-uint32_t stab_probe_updates_since(srv_loop *loop, const stab_probe_counts *then, uint32_t *least, uint32_t *most);
+uint32_t stab_probe_updates_since(srv_loop *loop, const stab_probe_counts *then, uint32_t *least,
+                                  uint32_t *most);
 
 /* ---- an open plane (stab_light.c, stab_cameras.c, stab_geometry.c) --------------------------------------- */
 
@@ -167,5 +168,6 @@ typedef struct stab_box_result {
  * texel), a filtered read reaches a texel to either side; AO is 1 within 2^-22 beyond the AO radius plus
  * twice that band (AO reads one level coarser) from the box's footprint. Fails at the first finding. */
 stab_box_result stab_check_box_on_plane(const srv_loop *loop, srv_viewer_id id, const srv_camera *cam,
-                                        double plane_y, const double lo[3], const double hi[3], bool under_is_dark,
-                                        float density, float ao_radius, double depth_tolerance);
+                                        double plane_y, const double lo[3], const double hi[3],
+                                        bool under_is_dark, float density, float ao_radius,
+                                        double depth_tolerance);

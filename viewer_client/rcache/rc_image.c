@@ -293,13 +293,11 @@ FXC_HOT_CLONES static void interleave(const uint8_t *restrict r, const uint8_t *
 
 /* One output row: the column sums of three rows of row sums (up, here, down: five planes each, `plane`
  * apart), the choice of colour, kind and priority (`own`: the row's shown points). */
-FXC_HOT_CLONES static uint64_t finish_row(const uint16_t *restrict up, const uint16_t *restrict here,
-                                          const uint16_t *restrict down, size_t plane,
-                                          const uint32_t *restrict own,
-                                          uint8_t *restrict out_r, uint8_t *restrict out_g,
-                                          uint8_t *restrict out_b, uint8_t *restrict kind,
-                                          uint8_t *restrict priority, uint32_t n, bool smooth_all,
-                                          const uint8_t clear[3], uint32_t kinds[VIEW_RC_PIXEL_KINDS])
+FXC_HOT_CLONES static uint64_t
+finish_row(const uint16_t *restrict up, const uint16_t *restrict here, const uint16_t *restrict down,
+           size_t plane, const uint32_t *restrict own, uint8_t *restrict out_r, uint8_t *restrict out_g,
+           uint8_t *restrict out_b, uint8_t *restrict kind, uint8_t *restrict priority, uint32_t n,
+           bool smooth_all, const uint8_t clear[3], uint32_t kinds[VIEW_RC_PIXEL_KINDS])
 {
     uint32_t weight = 0; /* at most 256 x VIEW_RC_MAX_SIDE a row: 32-bit lanes in the vector loop */
     uint32_t points = 0, interp = 0, empty = 0;
@@ -358,7 +356,8 @@ static void interp_row(const rc_band *band, int64_t y, uint16_t *sums, size_t pl
     r[0] = g[0] = b[0] = occupied[0] = 0;
     r[s - 1] = g[s - 1] = b[s - 1] = occupied[s - 1] = 0;
     uint32_t lo = xa > 0 ? xa - 1 : 0, hi = xb < w ? xb + 1 : w; /* the pixels the sums read */
-    unpack_span(band_pt(band, (uint32_t)y) + lo, r + 1 + lo, g + 1 + lo, b + 1 + lo, occupied + 1 + lo, hi - lo);
+    unpack_span(band_pt(band, (uint32_t)y) + lo, r + 1 + lo, g + 1 + lo, b + 1 + lo, occupied + 1 + lo,
+                hi - lo);
     row_sums(r + xa, g + xa, b + xa, occupied + xa, sums + xa, sums + plane + xa, sums + 2 * plane + xa,
              sums + 3 * plane + xa, sums + 4 * plane + xa, xb - xa);
 }
@@ -435,9 +434,8 @@ static void band_interpolate(view_rc *rc, rc_band *b, uint32_t band, uint32_t wo
                 size_t p = (size_t)y * w + xa;
                 uint32_t before = kinds[VIEW_RC_EMPTY];
                 weight += finish_row(sums[(y + 2) % 3] + xa, sums[y % 3] + xa, sums[(y + 1) % 3] + xa, plane,
-                                     rc->pt + p, out_r + xa, out_g + xa, out_b + xa,
-                                     rc->kind + p, rc->priority + p, n, rc->d.smooth_all, rc->d.clear_rgb,
-                                     kinds);
+                                     rc->pt + p, out_r + xa, out_g + xa, out_b + xa, rc->kind + p,
+                                     rc->priority + p, n, rc->d.smooth_all, rc->d.clear_rgb, kinds);
                 uint32_t need = kinds[VIEW_RC_EMPTY] - before;
                 rc->row_need[y] = xa == 0 ? need : rc->row_need[y] + need;
                 interleave(out_r + xa, out_g + xa, out_b + xa, rc->rgb + 3 * p, n);

@@ -156,8 +156,9 @@ typedef struct view_rc_sample {
     X(VIEW_RC_STAGE_UPDATE, "update points") /* inserts since the previous frame */                          \
     X(VIEW_RC_STAGE_PREDICT_PROJECT, "predicted projection")                                                 \
     X(VIEW_RC_STAGE_PREDICT_SAMPLE, "predicted sampling")                                                    \
-    X(VIEW_RC_STAGE_PROJECT_SORT, "project and tile sort") /* no_tiling: projection only; one thread: with   \
-                                                            * the z-buffer (not tiled_one_thread) */         \
+    X(VIEW_RC_STAGE_PROJECT_SORT,                                                                            \
+      "project and tile sort") /* no_tiling: projection only; one thread: with   \
+                                                            * the z-buffer (not tiled_one_thread) */                           \
     X(VIEW_RC_STAGE_ZBUFFER, "z-buffer tiles")                                                               \
     X(VIEW_RC_STAGE_PIXELS, "cull + interpolate + prefilter (fused)") /* the next three, by bands */         \
     X(VIEW_RC_STAGE_DEPTH_CULL, "depth cull")                                                                \

@@ -17,13 +17,13 @@
 #include <string.h>
 
 enum {
-    SRV_TILE = 16,                /* visibility and request tiles are 16 x 16 pixels */
-    SRV_MISS = 0xFFFFFFFFu,       /* no hit */
-    SRV_NONE = 0xFFFFFFFFu,       /* no block */
+    SRV_TILE = 16,          /* visibility and request tiles are 16 x 16 pixels */
+    SRV_MISS = 0xFFFFFFFFu, /* no hit */
+    SRV_NONE = 0xFFFFFFFFu, /* no block */
     SRV_MAX_SINKS = 8,
     SRV_NO_EFFECT = 0xFFFFFFFFu,
-    SRV_KEYS_PER_PIXEL = FX_MAX_TAPS,     /* blocks one filtered read of a pixel touches */
-    SRV_RUN = FX_RUN_PIXELS,               /* pixels per batched call in requests and compose */
+    SRV_KEYS_PER_PIXEL = FX_MAX_TAPS, /* blocks one filtered read of a pixel touches */
+    SRV_RUN = FX_RUN_PIXELS,          /* pixels per batched call in requests and compose */
 };
 
 /* Memory categories counted by the engine's allocator (srv_memory's viewers and queues). */
@@ -71,30 +71,30 @@ typedef struct srv_pixel_lanes {
 /* A viewer slot. A sparse viewer's per-pixel buffers are indexed by position in its list, not by y * width
  * + x; the stages visit list entries instead of tiles (visibility, requests, compose). */
 typedef struct srv_viewer {
-    uint32_t generation;       /* id = generation << 8 | slot; bumped at remove */
+    uint32_t generation; /* id = generation << 8 | slot; bumped at remove */
     bool present, has_camera, rendered;
-    bool sparse;               /* desc.max_pixels > 0 */
+    bool sparse; /* desc.max_pixels > 0 */
     srv_viewer_desc desc;
     srv_camera camera;
     srv_camera_frame frame;
-    size_t pixels;             /* entries of the per-pixel buffers (width*height, or max_pixels) */
-    uint32_t *list;            /* sparse: the distinct listed pixels, y << 16 | x, in srv__run_key order
+    size_t pixels;          /* entries of the per-pixel buffers (width*height, or max_pixels) */
+    uint32_t *list;         /* sparse: the distinct listed pixels, y << 16 | x, in srv__run_key order
                                   (max_pixels) */
-    uint32_t *list_scratch;    /* sparse: the radix sort's other buffer (max_pixels) */
-    uint32_t list_count;       /* sparse: entries of list */
-    uint32_t *tri;             /* hit triangle per pixel, SRV_MISS for none */
+    uint32_t *list_scratch; /* sparse: the radix sort's other buffer (max_pixels) */
+    uint32_t list_count;    /* sparse: entries of list */
+    uint32_t *tri;          /* hit triangle per pixel, SRV_MISS for none */
     float *bary_u, *bary_v;
-    float *footprint;          /* log2 of the pixel's footprint in level-0 texels (ray differentials) */
-    float *depth;              /* distance along the primary ray, INFINITY for none */
-    uint8_t *coarse;           /* whole frames with a coarse effect: per pixel, this frame's srv__coarse_mask
+    float *footprint;       /* log2 of the pixel's footprint in level-0 texels (ray differentials) */
+    float *depth;           /* distance along the primary ray, INFINITY for none */
+    uint8_t *coarse;        /* whole frames with a coarse effect: per pixel, this frame's srv__coarse_mask
                                   (written by requests, read by compose); NULL otherwise */
-    float *samples;            /* whole frames with a coarse effect: the frame's block samples' terms, evaluated
+    float *samples;         /* whole frames with a coarse effect: the frame's block samples' terms, evaluated
                                   once per frame before compose's tiles (SRV_SAMPLE_VALUES arrays of
                                   sample_capacity entries, sample (i, j) at j * ceil(width / B) + i); NULL
                                   otherwise */
-    size_t sample_capacity;    /* entries of each array: enough for the smallest block, 2 */
-    float *radiance;           /* linear RGB */
-    uint8_t *image;            /* sRGB 8-bit RGB */
+    size_t sample_capacity; /* entries of each array: enough for the smallest block, 2 */
+    float *radiance;        /* linear RGB */
+    uint8_t *image;         /* sRGB 8-bit RGB */
     float *views[SRV_VIEW_COUNT];
     srv_request_list requests; /* this frame's, merged across threads, before the cache */
     srv_viewer_stats stats;
@@ -114,15 +114,15 @@ typedef struct srv_effect_queue {
     size_t capacity;
     srv_job *jobs;
     size_t job_count, job_capacity;
-    fx_block_job *fx_jobs;           /* what the effect's update receives */
+    fx_block_job *fx_jobs; /* what the effect's update receives */
     size_t fx_job_capacity;
-    uint64_t *chunk_rays;            /* rays traced per chunk of jobs */
+    uint64_t *chunk_rays; /* rays traced per chunk of jobs */
     size_t chunk_capacity;
-    uint8_t *scratch;                /* job_count * the effect's scratch_bytes (world-space updates) */
-    size_t scratch_capacity;         /* bytes */
-    uint64_t *order;                 /* continuous refresh: (~age << 32 | frame block), oldest first */
+    uint8_t *scratch;        /* job_count * the effect's scratch_bytes (world-space updates) */
+    size_t scratch_capacity; /* bytes */
+    uint64_t *order;         /* continuous refresh: (~age << 32 | frame block), oldest first */
     size_t order_capacity, order_count;
-    uint64_t cells_taken;            /* continuous effects: cells taken this frame (the probe budget) */
+    uint64_t cells_taken; /* continuous effects: cells taken this frame (the probe budget) */
 } srv_effect_queue;
 
 typedef struct srv_loop srv_loop;
@@ -149,7 +149,7 @@ typedef struct srv_cache_kind {
      * Called from several threads at once. */
     uint32_t (*pixel_requests)(const void *cache, uint32_t slot, const srv_pixel *pixels, uint32_t count,
                                uint32_t effect, int32_t bias, uint64_t *keys, uint64_t *masks);
-    uint32_t (*key_effect)(uint64_t key);       /* keys_carry_effect only */
+    uint32_t (*key_effect)(uint64_t key);             /* keys_carry_effect only */
     uint64_t (*rekey)(uint64_t key, uint32_t effect); /* the same block's key for another effect */
     /* Sorts, merges and requests one viewer's keys (of `effect` when keys do not carry it). */
     fxc_result (*request_batch)(void *cache, uint32_t slot, uint32_t effect, uint64_t *keys, uint64_t *masks,
@@ -183,7 +183,8 @@ typedef struct srv_cache_kind {
      * pixels passed with lanes may then be unset). */
     uint32_t (*pixel_taps)(const void *cache, uint32_t slot, uint32_t thread, const srv_pixel *pixels,
                            const srv_pixel_lanes *lanes, uint32_t count, uint32_t effect_count,
-                           const uint32_t *effects, int32_t bias, fx_taps *const *taps, uint32_t *const *blocks);
+                           const uint32_t *effects, int32_t bias, fx_taps *const *taps,
+                           uint32_t *const *blocks);
     uint32_t (*pool_capacity)(const void *cache, uint32_t effect);
     /* Stage 9 and figures. */
     void (*housekeeping)(void *cache);
@@ -205,19 +206,19 @@ struct srv_loop {
     /* Effects. */
     uint32_t effect_count;
     const fx_effect *effects[SRV_MAX_EFFECTS];
-    uint32_t dependency[SRV_MAX_EFFECTS];   /* index of the effect it depends on, or SRV_NO_EFFECT */
-    bool effect_on[SRV_MAX_EFFECTS];        /* runs (in either mode) */
-    bool effect_cached[SRV_MAX_EFFECTS];    /* goes through a cache this run (on, cache mode) */
-    bool effect_shading[SRV_MAX_EFFECTS];   /* cached and shades (counted in requested texels) */
-    bool depended_on[SRV_MAX_EFFECTS];      /* an effect that runs depends on it: updated in the lookup stage */
+    uint32_t dependency[SRV_MAX_EFFECTS]; /* index of the effect it depends on, or SRV_NO_EFFECT */
+    bool effect_on[SRV_MAX_EFFECTS];      /* runs (in either mode) */
+    bool effect_cached[SRV_MAX_EFFECTS];  /* goes through a cache this run (on, cache mode) */
+    bool effect_shading[SRV_MAX_EFFECTS]; /* cached and shades (counted in requested texels) */
+    bool depended_on[SRV_MAX_EFFECTS];    /* an effect that runs depends on it: updated in the lookup stage */
     int32_t bias[SRV_MAX_EFFECTS];
-    uint32_t samples[SRV_MAX_EFFECTS];      /* samples per update handed to the effect */
-    uint32_t max_samples[SRV_MAX_EFFECTS];  /* progressive: the samples a texel converges at this run (the
+    uint32_t samples[SRV_MAX_EFFECTS];     /* samples per update handed to the effect */
+    uint32_t max_samples[SRV_MAX_EFFECTS]; /* progressive: the samples a texel converges at this run (the
                                                effect's run_samples, else its max_samples) */
     /* Caches, one per kind that an effect needs. */
     const srv_cache_kind *kinds[SCENE_CACHE_COUNT];
     void *caches[SCENE_CACHE_COUNT];
-    uint32_t effect_kind[SRV_MAX_EFFECTS];  /* scene_cache_kind of each effect */
+    uint32_t effect_kind[SRV_MAX_EFFECTS]; /* scene_cache_kind of each effect */
     /* Viewers and sinks. */
     uint32_t frame_number;
     /* The lights and sky as the last frame saw them (srv__light_signature), the frame they last changed on
@@ -229,15 +230,15 @@ struct srv_loop {
     srv_sink sinks[SRV_MAX_SINKS];
     uint32_t sink_count;
     /* Scratch kept across frames. */
-    srv_request_list *thread_requests;      /* one per pool thread */
+    srv_request_list *thread_requests; /* one per pool thread */
     srv_effect_queue queues[SRV_MAX_EFFECTS];
     uint64_t *viewer_bits[SRV_MAX_EFFECTS]; /* per block: which viewer slots requested it (keep_views) */
-    uint32_t coarse_effect;                 /* the low-frequency effect whole frames evaluate once per block of
+    uint32_t coarse_effect;       /* the low-frequency effect whole frames evaluate once per block of
                                                desc.indirect_block pixels (compose, requests), or SRV_NO_EFFECT */
-    float coarse_depth_scale;               /* the coarse match's depth tolerance per pixel apart and per metre
+    float coarse_depth_scale;     /* the coarse match's depth tolerance per pixel apart and per metre
                                                of footprint: 3 / texel_density (srv__coarse_match) */
-    void *compose_scratch;                  /* per thread: runs of pixels (compose.c) */
-    size_t compose_scratch_bytes;           /* per thread */
+    void *compose_scratch;        /* per thread: runs of pixels (compose.c) */
+    size_t compose_scratch_bytes; /* per thread */
     /* Memory counted by category through desc.allocator (request lists grow on pool threads). */
     _Atomic uint64_t mem[SRV_MEM_COUNT];
 };
@@ -276,7 +277,8 @@ static inline uint32_t srv__run_key(uint32_t xy, uint32_t tiles_x)
 static inline uint32_t srv__run_key_pixel(uint32_t key, uint32_t tiles_x)
 {
     uint32_t run = key >> 6, tile = run / (SRV_TILE / 4), band = run % (SRV_TILE / 4);
-    uint32_t x = (tile % tiles_x) * SRV_TILE + (key & 15u), y = (tile / tiles_x) * SRV_TILE + band * 4 + ((key >> 4) & 3u);
+    uint32_t x = (tile % tiles_x) * SRV_TILE + (key & 15u),
+             y = (tile / tiles_x) * SRV_TILE + band * 4 + ((key >> 4) & 3u);
     return y << 16 | x;
 }
 
@@ -298,8 +300,15 @@ static inline uint32_t srv__run_key_pixel(uint32_t key, uint32_t tiles_x)
 /* The frame-wide sample image (srv_viewer.samples): per sample its indirect term (3 arrays, sky visibility 1
  * in), the sky visibility shade left, the sharing count for the stats view, and 1 where it is visible and has
  * taps (else 0, and finite zeros everywhere: the blend multiplies them by 0). */
-enum { SRV_SAMPLE_R, SRV_SAMPLE_G, SRV_SAMPLE_B, SRV_SAMPLE_SKY, SRV_SAMPLE_SHARING, SRV_SAMPLE_OK,
-       SRV_SAMPLE_VALUES };
+enum {
+    SRV_SAMPLE_R,
+    SRV_SAMPLE_G,
+    SRV_SAMPLE_B,
+    SRV_SAMPLE_SKY,
+    SRV_SAMPLE_SHARING,
+    SRV_SAMPLE_OK,
+    SRV_SAMPLE_VALUES
+};
 
 /* Samples per row of a frame `width` pixels wide at block B (the pixels 0, B, 2 B, ...). */
 static inline uint32_t srv__sample_stride(uint32_t width, uint32_t block)
@@ -310,8 +319,8 @@ static inline uint32_t srv__sample_stride(uint32_t width, uint32_t block)
 typedef struct srv_coarse_grid {
     uint32_t block, shift; /* B = 1 << shift */
     uint32_t x0, y0;       /* the tile's first pixel (a multiple of B: tiles are 16-aligned) */
-    uint32_t nx, ny;       /* reps per row and column the tile uses (its own and the next, within the frame) */
-    float inv_block;       /* 1 / B */
+    uint32_t nx, ny; /* reps per row and column the tile uses (its own and the next, within the frame) */
+    float inv_block; /* 1 / B */
 } srv_coarse_grid;
 
 static inline void srv__coarse_grid(uint32_t block, uint32_t x0, uint32_t y0, uint32_t width, uint32_t height,
@@ -360,8 +369,8 @@ static inline float srv__pow2_floor(float x)
  * triangle, or a face normal within 0.05 per component (3 degrees) and a depth difference within
  * 3 x apart x the larger footprint (metres, rounded down to a power of two: 1.5 to 3 times what a plane
  * gives between pixels that far apart), both scaled by strictness. No sum of products: nothing to contract. */
-static inline bool srv__coarse_match(const scene *s, const srv_viewer *v, float depth_scale, size_t p, size_t r,
-                                     float apart, float strictness)
+static inline bool srv__coarse_match(const scene *s, const srv_viewer *v, float depth_scale, size_t p,
+                                     size_t r, float apart, float strictness)
 {
     uint32_t tr = v->tri[r], tp = v->tri[p];
     if (tr == tp)
@@ -452,8 +461,8 @@ void srv__visibility_tile(const scene *s, scene_rt *rt, const srv_camera_frame *
 /* The primary rays of up to 16 listed pixels (packed y << 16 | x of frame f), one packet: what
  * srv__visibility_tile computes for those pixels, written at their list positions first..first+count-1. */
 void srv__visibility_list(const scene *s, scene_rt *rt, const srv_camera_frame *f, const uint32_t *list,
-                          uint32_t first, uint32_t count, uint32_t *tri, float *bary_u, float *bary_v, float *depth,
-                          float *footprint);
+                          uint32_t first, uint32_t count, uint32_t *tri, float *bary_u, float *bary_v,
+                          float *depth, float *footprint);
 
 /* Differentials of the hit position at distance t along unit ray dir on the plane of normal n: the offsets
  * to where the rays through the next pixel right (dpdx) and down (dpdy) meet that plane (grazing: at most 64
@@ -464,7 +473,6 @@ void srv__pixel_differentials(const srv_camera_frame *f, const float dir[3], flo
 /* Stage 3: requests of one viewer into the caches; fills the viewer's requested texels and cells
  * (deduplicated within the viewer, shading effects only, per cache kind) and counts drops in st. */
 void srv__requests(srv_loop *loop, uint32_t slot, srv_frame_stats *st, uint64_t requested[SCENE_CACHE_COUNT]);
-
 
 /* Stage 4: queues of every cached effect within the ray budget, resampling first. */
 void srv__queues(srv_loop *loop, srv_frame_stats *st);
@@ -516,7 +524,8 @@ extern const srv_cache_kind srv__kind_osc, srv__kind_wsc;
 
 /* The world-space kind's read for effects (fx_context.world_taps; user: the kind's cache). */
 /* The same kind's whole-cell read (fx_context.world_cell). */
-bool srv__wsc_world_cell(const void *user, uint32_t effect, uint32_t level, const float centre[3], const void *texel[8]);
+bool srv__wsc_world_cell(const void *user, uint32_t effect, uint32_t level, const float centre[3],
+                         const void *texel[8]);
 uint32_t srv__wsc_world_taps(const void *user, uint32_t effect, const float position[3], uint32_t level,
                              fx_taps *taps);
 
