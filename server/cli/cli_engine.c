@@ -338,6 +338,31 @@ bool srv_cli_choose_effects(const char *cmd, const scene *s, const char *list,
     return true;
 }
 
+srv_loop_desc srv_cli_loop_desc(const srv_cli_engine *e, const scene *s, scene_rt *rt, bool keep_views)
+{
+    srv_loop_desc desc = {.s = s,
+                          .rt = rt,
+                          .pool_bytes = (uint64_t)(e->pool_mb * 1048576.0),
+                          .ray_budget = (uint64_t)e->ray_budget,
+                          .samples_per_update = e->ao_step,
+                          .no_cache = e->no_cache,
+                          .seed = e->seed,
+                          .threads = e->threads,
+                          .keep_views = keep_views,
+                          .probe_cell = (float)e->probe_cell,
+                          .probe_rays = e->probe_rays,
+                          .probe_hysteresis = (float)e->probe_hysteresis,
+                          .probe_budget = e->probe_budget,
+                          .indirect_block = e->indirect_block,
+                          .no_local_table = e->no_local_table,
+                          .ao_samples = e->ao_samples,
+                          .shadow_rays = e->shadow_rays,
+                          .no_cache_samples = (float)e->no_cache_samples};
+    memcpy(desc.bias, e->bias, sizeof desc.bias);
+    memcpy(desc.bias_set, e->bias_set, sizeof desc.bias_set);
+    return desc;
+}
+
 int srv_cli_run_open(const char *cmd, const srv_cli_engine *e, bool keep_views, srv_cli_run *run,
                      volatile sig_atomic_t *stop)
 {
@@ -357,28 +382,9 @@ int srv_cli_run_open(const char *cmd, const srv_cli_engine *e, bool keep_views, 
         fprintf(stderr, "fxcache %s: %s\n", cmd, serr.msg);
         return 1;
     }
-    srv_loop_desc desc = {.s = run->s,
-                          .rt = run->rt,
-                          .pool_bytes = (uint64_t)(e->pool_mb * 1048576.0),
-                          .ray_budget = (uint64_t)e->ray_budget,
-                          .samples_per_update = e->ao_step,
-                          .no_cache = e->no_cache,
-                          .seed = e->seed,
-                          .threads = e->threads,
-                          .keep_views = keep_views,
-                          .probe_cell = (float)e->probe_cell,
-                          .probe_rays = e->probe_rays,
-                          .probe_hysteresis = (float)e->probe_hysteresis,
-                          .probe_budget = e->probe_budget,
-                          .indirect_block = e->indirect_block,
-                          .no_local_table = e->no_local_table,
-                          .ao_samples = e->ao_samples,
-                          .shadow_rays = e->shadow_rays,
-                          .no_cache_samples = (float)e->no_cache_samples};
+    srv_loop_desc desc = srv_cli_loop_desc(e, run->s, run->rt, keep_views);
     if (!srv_cli_choose_effects(cmd, run->s, e->effects, desc.effect_on, run->reasons, run->left_out_extra))
         return 2;
-    memcpy(desc.bias, e->bias, sizeof desc.bias);
-    memcpy(desc.bias_set, e->bias_set, sizeof desc.bias_set);
     char err[512];
     if (srv_loop_create(&desc, &run->loop, err, sizeof err) != FXC_OK) {
         fprintf(stderr, "fxcache %s: %s\n", cmd, err);

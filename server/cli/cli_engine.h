@@ -100,6 +100,9 @@ typedef struct srv_cli_run {
  * one-line error. srv_cli_run_open calls it first. */
 bool srv_cli_engine_check(const char *cmd, const srv_cli_engine *e);
 
+/* The frame loop's description from the engine options (effects left off: the caller chooses them). */
+srv_loop_desc srv_cli_loop_desc(const srv_cli_engine *e, const scene *s, scene_rt *rt, bool keep_views);
+
 /* Opens a run. Returns -1 on success, else the exit code (an error line was printed; srv_cli_run_close
  * still frees what was made). A signal flagged in *stop during the scene load ends it (128 + signal). */
 int srv_cli_run_open(const char *cmd, const srv_cli_engine *e, bool keep_views, srv_cli_run *run,

@@ -238,27 +238,8 @@ static int run_config(report_config *c, const report_context *ctx, const srv_cli
     srv_rep_row *row = &c->row;
     srv_rep_row_free_images(row);
     double start = now_s();
-    srv_loop_desc desc = {.s = ctx->s,
-                          .rt = rt,
-                          .pool_bytes = (uint64_t)(e->pool_mb * 1048576.0),
-                          .ray_budget = (uint64_t)e->ray_budget,
-                          .samples_per_update = e->ao_step,
-                          .no_cache = e->no_cache,
-                          .seed = e->seed,
-                          .threads = e->threads,
-                          .keep_views = true,
-                          .probe_cell = (float)e->probe_cell,
-                          .probe_rays = e->probe_rays,
-                          .probe_hysteresis = (float)e->probe_hysteresis,
-                          .probe_budget = e->probe_budget,
-                          .indirect_block = e->indirect_block,
-                          .no_local_table = e->no_local_table,
-                          .ao_samples = e->ao_samples,
-                          .shadow_rays = e->shadow_rays,
-                          .no_cache_samples = (float)e->no_cache_samples};
+    srv_loop_desc desc = srv_cli_loop_desc(e, ctx->s, rt, true);
     memcpy(desc.effect_on, effect_on, sizeof desc.effect_on);
-    memcpy(desc.bias, e->bias, sizeof desc.bias);
-    memcpy(desc.bias_set, e->bias_set, sizeof desc.bias_set);
     char err[512];
     srv_loop *loop = NULL;
     if (srv_loop_create(&desc, &loop, err, sizeof err) != FXC_OK) {
