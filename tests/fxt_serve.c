@@ -77,6 +77,28 @@ int fxt_listening_port(const char *path)
     return port;
 }
 
+int fxt_node_peer_start(const char *script, const char *args, const char *out, pid_t *pid)
+{
+    char cmd[2048];
+    remove(out); /* a port from an earlier run must not be read */
+    snprintf(cmd, sizeof cmd, "NODE_PATH=/usr/share/nodejs exec node '%s/tests/%s' %s > '%s' 2>&1",
+             FXC_SOURCE_DIR, script, args, out);
+    const char *sh[] = {"/bin/sh", "-c", cmd, NULL};
+    assert_int_equal(posix_spawn(pid, "/bin/sh", NULL, NULL, (char *const *)sh, environ), 0);
+    int port = 0;
+    for (double t0 = fxt_now_s(); fxt_now_s() - t0 < 30 && !port;) {
+        port = fxt_listening_port(out);
+        if (!port && fxt_file_contains(out, "ws module is missing")) {
+            waitpid(*pid, NULL, 0);
+            return 0;
+        }
+        if (!port)
+            usleep(20000);
+    }
+    assert_true(port > 0);
+    return port;
+}
+
 bool fxt_file_contains(const char *path, const char *text)
 {
     bool found = false;

@@ -469,27 +469,14 @@ static void test_misbehaving_server(void **state)
         {"tiny_fps", 1, "no frame for 1 s"},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
-        char out[512], cmd[2048];
+        char out[512];
         snprintf(out, sizeof out, "%s", fxt_tmp_path("bad_server.out"));
-        remove(out); /* a port from an earlier run must not be read */
-        snprintf(cmd, sizeof cmd,
-                 "NODE_PATH=/usr/share/nodejs exec node '%s/tests/peer_bad_server.js' %s > '%s' 2>&1",
-                 FXC_SOURCE_DIR, cases[i].mode, out);
         pid_t fake;
-        const char *sh[] = {"/bin/sh", "-c", cmd, NULL};
-        assert_int_equal(posix_spawn(&fake, "/bin/sh", NULL, NULL, (char *const *)sh, environ), 0);
-        int port = 0;
-        for (double t0 = now_seconds(); now_seconds() - t0 < 30 && !port;) {
-            port = fxt_listening_port(out);
-            if (!port && fxt_file_contains(out, "ws module is missing")) {
-                waitpid(fake, NULL, 0);
-                print_message("Node's ws module is missing (Debian's node-ws): skipped\n");
-                skip();
-            }
-            if (!port)
-                usleep(20000);
+        int port = fxt_node_peer_start("peer_bad_server.js", cases[i].mode, out, &fake);
+        if (!port) {
+            print_message("Node's ws module is missing (Debian's node-ws): skipped\n");
+            skip();
         }
-        assert_true(port > 0);
         char url[64];
         snprintf(url, sizeof url, "ws://127.0.0.1:%d", port);
         const char *args[] = {"--connect", url, "--res",     "16x9", "--codec", "raw",

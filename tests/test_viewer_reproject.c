@@ -383,32 +383,21 @@ static void test_sample_requests(void **state)
         print_message("node is missing (./install-deps.sh installs it): skipped\n");
         skip();
     }
-    char report[512], out[512], display[512], stats[512], cmd[2048];
+    char report[512], out[512], display[512], stats[512];
     snprintf(report, sizeof report, "%s", fxt_tmp_path("fake_report.json"));
     snprintf(out, sizeof out, "%s", fxt_tmp_path("fake.out"));
     snprintf(display, sizeof display, "%s", fxt_tmp_path("fake_display"));
     snprintf(stats, sizeof stats, "%s", fxt_tmp_path("fake_stats.json"));
     remove_tree(display);
     remove(report);
-    remove(out); /* a port from an earlier run must not be read */
-    snprintf(cmd, sizeof cmd,
-             "NODE_PATH=/usr/share/nodejs exec node '%s/tests/peer_rc_server.js' '%s' > '%s' 2>&1",
-             FXC_SOURCE_DIR, report, out);
+    char quoted[600];
+    snprintf(quoted, sizeof quoted, "'%s'", report);
     pid_t fake;
-    const char *sh[] = {"/bin/sh", "-c", cmd, NULL};
-    assert_int_equal(posix_spawn(&fake, "/bin/sh", NULL, NULL, (char *const *)sh, environ), 0);
-    int port = 0;
-    for (double t0 = fxt_now_s(); fxt_now_s() - t0 < 30 && !port;) {
-        port = fxt_listening_port(out);
-        if (!port && fxt_file_contains(out, "ws module is missing")) {
-            waitpid(fake, NULL, 0);
-            print_message("Node's ws module is missing (Debian's node-ws): skipped\n");
-            skip();
-        }
-        if (!port)
-            usleep(20000);
+    int port = fxt_node_peer_start("peer_rc_server.js", quoted, out, &fake);
+    if (!port) {
+        print_message("Node's ws module is missing (Debian's node-ws): skipped\n");
+        skip();
     }
-    assert_true(port > 0);
     char url[64];
     snprintf(url, sizeof url, "ws://127.0.0.1:%d", port);
     const char *args[] = {
