@@ -102,8 +102,7 @@ static double run_stream(const bench_tables *tables, bench_impl impl, const uint
             checksum += found ? (uint32_t)(GPOINTER_TO_SIZE(found) - 1) : OSC_NONE;
         }
         break;
-    default:
-        break;
+    default: break;
     }
     double seconds = now_seconds() - start;
     bench_sink += checksum;

@@ -34,8 +34,7 @@ const char *osc_result_string(osc_result result)
 {
     switch (result) {
 #define OSC_RESULT_CASE(name, value, text)                                                                   \
-    case name:                                                                                               \
-        return text;
+    case name: return text;
         OSC_RESULT_LIST(OSC_RESULT_CASE)
 #undef OSC_RESULT_CASE
     }

@@ -51,8 +51,7 @@ static inline const char *fxc_strerror(int code)
 {
     switch (code) {
 #define FXC_RESULT_CASE(name, value, text)                                                                   \
-    case value:                                                                                              \
-        return text;
+    case value: return text;
         FXC_RESULT_LIST(FXC_RESULT_CASE)
 #undef FXC_RESULT_CASE
     }

@@ -113,8 +113,7 @@ const char *proto_type_name(uint32_t type)
 {
     switch (type) {
 #define PROTO_TYPE_CASE(name, value, text)                                                                   \
-    case value:                                                                                              \
-        return text;
+    case value: return text;
         PROTO_TYPES(PROTO_TYPE_CASE)
 #undef PROTO_TYPE_CASE
     }
@@ -352,9 +351,7 @@ static fxc_result payload_size(const proto_msg *m, uint64_t *size)
         *size = 4 + 4 + POSE_BYTES + 4 + 4 + 1 + 1 + 5 * 8 + 4 + 4 + 4 + (uint64_t)m->u.frame.color_bytes +
                 4 + (uint64_t)m->u.frame.depth_bytes;
         break;
-    case PROTO_STATS_REQUEST:
-        *size = 0;
-        break;
+    case PROTO_STATS_REQUEST: *size = 0; break;
     case PROTO_STATS:
         if (m->u.stats.json_bytes && !m->u.stats.json)
             return FXC_ERR_INVALID;
@@ -380,8 +377,7 @@ static fxc_result payload_size(const proto_msg *m, uint64_t *size)
             return r;
         *size = SAMPLES_FIXED + (uint64_t)m->u.samples.count * PROTO_SAMPLE_BYTES;
         break;
-    default:
-        return FXC_ERR_INVALID;
+    default: return FXC_ERR_INVALID;
     }
     return *size > PROTO_MAX_PAYLOAD ? FXC_ERR_TOO_LARGE : FXC_OK;
 }
@@ -523,8 +519,7 @@ static void put_payload(writer *w, const proto_msg *m)
         put_bytes(w, f->depth_data, f->depth_bytes);
         break;
     }
-    case PROTO_STATS_REQUEST:
-        break;
+    case PROTO_STATS_REQUEST: break;
     case PROTO_STATS:
         put_u32(w, m->u.stats.json_bytes);
         put_bytes(w, m->u.stats.json, m->u.stats.json_bytes);
@@ -533,9 +528,7 @@ static void put_payload(writer *w, const proto_msg *m)
         put_u32(w, (uint32_t)m->u.error.code);
         put_text16(w, m->u.error.reason);
         break;
-    case PROTO_BYE:
-        put_text16(w, m->u.bye.reason);
-        break;
+    case PROTO_BYE: put_text16(w, m->u.bye.reason); break;
     case PROTO_SAMPLE_REQUEST: {
         const proto_sample_request *q = &m->u.sample_request;
         put_u32(w, q->request);
@@ -813,18 +806,13 @@ static void get_payload(reader *r, proto_msg *m)
         f->depth_data = get_blob(r, &f->depth_bytes);
         break;
     }
-    case PROTO_STATS_REQUEST:
-        break;
-    case PROTO_STATS:
-        m->u.stats.json = (const char *)get_blob(r, &m->u.stats.json_bytes);
-        break;
+    case PROTO_STATS_REQUEST: break;
+    case PROTO_STATS: m->u.stats.json = (const char *)get_blob(r, &m->u.stats.json_bytes); break;
     case PROTO_ERROR:
         m->u.error.code = int32_from_bits(get_u32(r));
         get_text16(r, PROTO_REASON_MAX, m->u.error.reason);
         break;
-    case PROTO_BYE:
-        get_text16(r, PROTO_REASON_MAX, m->u.bye.reason);
-        break;
+    case PROTO_BYE: get_text16(r, PROTO_REASON_MAX, m->u.bye.reason); break;
     case PROTO_SAMPLE_REQUEST: {
         proto_sample_request *q = &m->u.sample_request;
         q->request = get_u32(r);

@@ -56,10 +56,8 @@ size_t proto_color_bound(uint32_t codec, uint32_t width, uint32_t height)
         return 0;
     size_t raw = (size_t)width * height * 3; /* at most 8192 * 8192 * 3: no overflow */
     switch (codec) {
-    case PROTO_CODEC_RAW:
-        return raw;
-    case PROTO_CODEC_ZSTD:
-        return ZSTD_compressBound(raw);
+    case PROTO_CODEC_RAW: return raw;
+    case PROTO_CODEC_ZSTD: return ZSTD_compressBound(raw);
     case PROTO_CODEC_JPEG: {
         unsigned long bound = tjBufSize((int)width, (int)height, TJSAMP_420);
         return bound == (unsigned long)-1 ? 0 : (size_t)bound;
@@ -126,8 +124,7 @@ fxc_result proto_color_decode(uint32_t codec, const uint8_t *payload, size_t pay
             return FXC_ERR_CODEC;
         memcpy(rgb, payload, raw);
         return FXC_OK;
-    case PROTO_CODEC_ZSTD:
-        return zstd_decode_exact(payload, payload_bytes, rgb, raw);
+    case PROTO_CODEC_ZSTD: return zstd_decode_exact(payload, payload_bytes, rgb, raw);
     default: {
         if (!payload || payload_bytes == 0)
             return FXC_ERR_CODEC;

@@ -8,8 +8,7 @@ const char *scene_strerror(scene_result code)
 {
     switch (code) {
 #define FXC_X(name, value, str)                                                                              \
-    case name:                                                                                               \
-        return str;
+    case name: return str;
         SCENE_RESULTS(FXC_X)
 #undef FXC_X
     }

@@ -110,16 +110,12 @@ proto_msg fxt_proto_sample(int i)
                                   .depth_data = frame_depth,
                                   .depth_bytes = sizeof frame_depth};
         break;
-    case FXT_S_STATS_REQUEST:
-        m.type = PROTO_STATS_REQUEST;
-        break;
+    case FXT_S_STATS_REQUEST: m.type = PROTO_STATS_REQUEST; break;
     case FXT_S_STATS:
         m.type = PROTO_STATS;
         m.u.stats = (proto_stats){FXT_STATS_JSON, (uint32_t)strlen(FXT_STATS_JSON)};
         break;
-    case FXT_S_STATS_EMPTY:
-        m.type = PROTO_STATS;
-        break;
+    case FXT_S_STATS_EMPTY: m.type = PROTO_STATS; break;
     case FXT_S_ERROR:
         m.type = PROTO_ERROR;
         m.u.error.code = FXC_ERR_UNAUTHORIZED;
@@ -129,9 +125,7 @@ proto_msg fxt_proto_sample(int i)
         m.type = PROTO_BYE;
         strcpy(m.u.bye.reason, "client closing");
         break;
-    case FXT_S_BYE_EMPTY:
-        m.type = PROTO_BYE;
-        break;
+    case FXT_S_BYE_EMPTY: m.type = PROTO_BYE; break;
     case FXT_S_SAMPLE_REQUEST:
         m.type = PROTO_SAMPLE_REQUEST;
         m.u.sample_request = (proto_sample_request){.request = 0x01020304u,
@@ -300,9 +294,7 @@ void fxt_assert_same_message(const proto_msg *a, const proto_msg *b)
         assert_int_equal(a->u.error.code, b->u.error.code);
         assert_string_equal(a->u.error.reason, b->u.error.reason);
         break;
-    case PROTO_BYE:
-        assert_string_equal(a->u.bye.reason, b->u.bye.reason);
-        break;
+    case PROTO_BYE: assert_string_equal(a->u.bye.reason, b->u.bye.reason); break;
     case PROTO_SAMPLE_REQUEST: {
         const proto_sample_request *x = &a->u.sample_request, *y = &b->u.sample_request;
         assert_int_equal(x->request, y->request);

@@ -485,18 +485,10 @@ static void apply_struct_edit(const struct_edit *e, proto_msg *m)
         memcpy(at, &v, sizeof v);
         break;
     }
-    case EDIT_F64:
-        memcpy(at, &e->number, sizeof e->number);
-        break;
-    case EDIT_TEXT:
-        memcpy(at, e->text, strlen(e->text) + 1);
-        break;
-    case EDIT_FILL:
-        memset(at, 'a', e->size);
-        break;
-    case EDIT_ZERO:
-        memset(at, 0, e->size);
-        break;
+    case EDIT_F64: memcpy(at, &e->number, sizeof e->number); break;
+    case EDIT_TEXT: memcpy(at, e->text, strlen(e->text) + 1); break;
+    case EDIT_FILL: memset(at, 'a', e->size); break;
+    case EDIT_ZERO: memset(at, 0, e->size); break;
     }
 }
 
@@ -572,15 +564,9 @@ static void test_mutations(void **state)
         for (int e = 0; e < edits; e++) {
             size_t at = fxt_random(&rng) % len;
             switch (fxt_random(&rng) % 4) {
-            case 0:
-                buf[at] = (uint8_t)fxt_random(&rng);
-                break;
-            case 1:
-                buf[at] ^= (uint8_t)(1u << (fxt_random(&rng) % 8));
-                break;
-            case 2:
-                buf[at] = (uint8_t)(buf[at] + 1);
-                break;
+            case 0: buf[at] = (uint8_t)fxt_random(&rng); break;
+            case 1: buf[at] ^= (uint8_t)(1u << (fxt_random(&rng) % 8)); break;
+            case 2: buf[at] = (uint8_t)(buf[at] + 1); break;
             default:
                 len = at > PROTO_HEADER_BYTES ? at : len; /* cut */
                 break;
@@ -608,10 +594,8 @@ static void test_mutations(void **state)
         case FXC_ERR_VERSION:
         case FXC_ERR_TOO_LARGE:
         case FXC_ERR_UNKNOWN_TYPE:
-        case FXC_ERR_RANGE:
-            break;
-        default:
-            fail_msg("unexpected %s", fxc_strerror(result));
+        case FXC_ERR_RANGE: break;
+        default: fail_msg("unexpected %s", fxc_strerror(result));
         }
         free(buf);
     }

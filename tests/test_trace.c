@@ -528,9 +528,7 @@ static void test_fuzz(void **state)
                 char c = (fxt_random(&rng) & 1) ? alphabet[fxt_random(&rng) % (sizeof alphabet - 1)]
                                                 : (char)fxt_random(&rng);
                 switch (fxt_random(&rng) % 3) {
-                case 0:
-                    buf[at] = c;
-                    break;
+                case 0: buf[at] = c; break;
                 case 1:
                     if (len < sizeof buf) {
                         memmove(buf + at + 1, buf + at, len - at);

@@ -93,14 +93,9 @@ int main(int argc, char **argv)
     view_options options;
     char err[1024];
     switch (view_options_parse(argc, argv, getenv("FXCACHE_TOKEN"), &options, err, sizeof err)) {
-    case VIEW_PARSE_HELP:
-        fputs(view_options_help(), stdout);
-        return 0;
-    case VIEW_PARSE_ERROR:
-        fprintf(stderr, "fxcache-viewer: %s\n", err);
-        return 2;
-    case VIEW_PARSE_RUN:
-        break;
+    case VIEW_PARSE_HELP: fputs(view_options_help(), stdout); return 0;
+    case VIEW_PARSE_ERROR: fprintf(stderr, "fxcache-viewer: %s\n", err); return 2;
+    case VIEW_PARSE_RUN: break;
     }
 
     /* Everything an option names is checked before any connection: traces, the output folder, the stats

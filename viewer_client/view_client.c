@@ -184,8 +184,7 @@ void view__stop(view_viewer *v, const char *reason)
         lws_callback_on_writable(v->wsi);
         break;
     case VIEWER_CLOSING:
-    case VIEWER_DONE:
-        break;
+    case VIEWER_DONE: break;
     }
 }
 
@@ -467,8 +466,7 @@ static int viewer_message(view_viewer *v, lws_usec_t now)
             break; /* never asked for */
         viewer_take_message(v, &msg, now);
         return 0;
-    case PROTO_STATS:
-        return 0; /* not asked for; harmless */
+    case PROTO_STATS: return 0; /* not asked for; harmless */
     case PROTO_ERROR:
         if (v->state == VIEWER_HELLO)
             view__fail(v, "server refused: %s (%s)", msg.u.error.reason, fxc_strerror(msg.u.error.code));
@@ -487,8 +485,7 @@ static int viewer_message(view_viewer *v, lws_usec_t now)
         v->goal_reached = true;
         v->state = VIEWER_CLOSING;
         return -1;
-    default:
-        break;
+    default: break;
     }
     view__fail(v, "the server sent a %s message, which a viewer does not expect %s",
                proto_type_name(msg.type), v->state == VIEWER_HELLO ? "before its welcome" : "now");
@@ -737,8 +734,7 @@ static int viewer_callback(struct lws *wsi, enum lws_callback_reasons reason, vo
             viewer_closed(v);
         }
         return 0;
-    default:
-        return 0;
+    default: return 0;
     }
 }
 
@@ -828,8 +824,7 @@ static void housekeeping(lws_sorted_usec_list_t *sul)
             if (now > v->closing_deadline_us)
                 viewer_kill(v);
             break;
-        case VIEWER_DONE:
-            break;
+        case VIEWER_DONE: break;
         }
     }
     show_progress(c, now);

@@ -357,20 +357,13 @@ srv_camera srv_camgen_camera(srv_camgen_kind kind, const scene *s, uint32_t view
     if (viewer_count == 0)
         viewer_count = 1;
     switch (kind) {
-    case SRV_CAMGEN_ORBIT:
-        return camgen_orbit(s, &box, viewer, viewer_count, frame, seed);
-    case SRV_CAMGEN_WALK:
-        return camgen_walk(s, &box, viewer, viewer_count, frame, seed, false);
-    case SRV_CAMGEN_GROUP:
-        return camgen_walk(s, &box, viewer, viewer_count, frame, seed, true);
-    case SRV_CAMGEN_TURN:
-        return camgen_turn(s, &box, viewer, viewer_count, frame, seed);
-    case SRV_CAMGEN_ROOM:
-        return camgen_room(s, &box, viewer, frame, seed);
-    case SRV_CAMGEN_STATIC:
-        return camgen_static(s, &box, viewer, seed, false);
+    case SRV_CAMGEN_ORBIT: return camgen_orbit(s, &box, viewer, viewer_count, frame, seed);
+    case SRV_CAMGEN_WALK: return camgen_walk(s, &box, viewer, viewer_count, frame, seed, false);
+    case SRV_CAMGEN_GROUP: return camgen_walk(s, &box, viewer, viewer_count, frame, seed, true);
+    case SRV_CAMGEN_TURN: return camgen_turn(s, &box, viewer, viewer_count, frame, seed);
+    case SRV_CAMGEN_ROOM: return camgen_room(s, &box, viewer, frame, seed);
+    case SRV_CAMGEN_STATIC: return camgen_static(s, &box, viewer, seed, false);
     case SRV_CAMGEN_IDENTICAL:
-    default:
-        return camgen_static(s, &box, viewer, seed, true);
+    default: return camgen_static(s, &box, viewer, seed, true);
     }
 }

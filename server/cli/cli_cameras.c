@@ -45,10 +45,8 @@ int srv_cli_view_option(const char *cmd, int code, const char *arg, srv_cli_view
         }
         v->traces[v->trace_count++] = arg;
         return 1;
-    case SRV_CLI_O_FPS:
-        return srv_cli_double(cmd, "--fps", arg, 0.001, 1000, &v->fps);
-    default:
-        return -1;
+    case SRV_CLI_O_FPS: return srv_cli_double(cmd, "--fps", arg, 0.001, 1000, &v->fps);
+    default: return -1;
     }
 }
 

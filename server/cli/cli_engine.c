@@ -232,55 +232,33 @@ bool srv_cli_engine_check(const char *cmd, const srv_cli_engine *e)
 int srv_cli_engine_option(const char *cmd, int code, const char *arg, srv_cli_engine *e)
 {
     switch (code) {
-    case SRV_CLI_O_SCENE:
-        e->scene_path = arg;
-        return 1;
-    case SRV_CLI_O_EFFECTS:
-        e->effects = arg;
-        return effects_list_valid(cmd, arg);
-    case SRV_CLI_O_BIAS:
-        return parse_bias(cmd, arg, e);
-    case SRV_CLI_O_POOL:
-        return srv_cli_double(cmd, "--pool-mb", arg, 1, 65536, &e->pool_mb);
-    case SRV_CLI_O_BUDGET:
-        return srv_cli_double(cmd, "--ray-budget", arg, 0, 1e12, &e->ray_budget);
-    case SRV_CLI_O_AOSTEP:
-        return srv_cli_u32(cmd, "--ao-step", arg, 1, 64, &e->ao_step);
+    case SRV_CLI_O_SCENE: e->scene_path = arg; return 1;
+    case SRV_CLI_O_EFFECTS: e->effects = arg; return effects_list_valid(cmd, arg);
+    case SRV_CLI_O_BIAS: return parse_bias(cmd, arg, e);
+    case SRV_CLI_O_POOL: return srv_cli_double(cmd, "--pool-mb", arg, 1, 65536, &e->pool_mb);
+    case SRV_CLI_O_BUDGET: return srv_cli_double(cmd, "--ray-budget", arg, 0, 1e12, &e->ray_budget);
+    case SRV_CLI_O_AOSTEP: return srv_cli_u32(cmd, "--ao-step", arg, 1, 64, &e->ao_step);
     /* down to about a 64th of the smallest scene fxcache loads (SCENE_MIN_EXTENT, 1e-6 m) */
-    case SRV_CLI_O_PCELL:
-        return srv_cli_double(cmd, "--probe-cell", arg, 1e-8, 1000, &e->probe_cell);
-    case SRV_CLI_O_PRAYS:
-        return srv_cli_u32(cmd, "--probe-rays", arg, 1, 4096, &e->probe_rays);
+    case SRV_CLI_O_PCELL: return srv_cli_double(cmd, "--probe-cell", arg, 1e-8, 1000, &e->probe_cell);
+    case SRV_CLI_O_PRAYS: return srv_cli_u32(cmd, "--probe-rays", arg, 1, 4096, &e->probe_rays);
     case SRV_CLI_O_PHYST:
         if (!srv_cli_double(cmd, "--probe-hysteresis", arg, 0, 0.999, &e->probe_hysteresis))
             return 0;
         if (e->probe_hysteresis == 0)
             e->probe_hysteresis = 1e-9; /* 0 means "default" in the loop's description */
         return 1;
-    case SRV_CLI_O_PBUDGET:
-        return srv_cli_u32(cmd, "--probe-budget", arg, 1, 1000000, &e->probe_budget);
-    case SRV_CLI_O_IBLOCK:
-        return parse_indirect_block(cmd, arg, e);
-    case SRV_CLI_O_NOLOCAL:
-        e->no_local_table = true;
-        return 1;
-    case SRV_CLI_O_NOCACHE:
-        e->no_cache = true;
-        return 1;
-    case SRV_CLI_O_SEED:
-        return srv_cli_u32(cmd, "--seed", arg, 0, UINT32_MAX, &e->seed);
-    case SRV_CLI_O_THREADS:
-        return srv_cli_u32(cmd, "--threads", arg, 0, 256, &e->threads);
-    case SRV_CLI_O_DENSITY:
-        return srv_cli_double(cmd, "--density", arg, 1e-6, 1e6, &e->density);
+    case SRV_CLI_O_PBUDGET: return srv_cli_u32(cmd, "--probe-budget", arg, 1, 1000000, &e->probe_budget);
+    case SRV_CLI_O_IBLOCK: return parse_indirect_block(cmd, arg, e);
+    case SRV_CLI_O_NOLOCAL: e->no_local_table = true; return 1;
+    case SRV_CLI_O_NOCACHE: e->no_cache = true; return 1;
+    case SRV_CLI_O_SEED: return srv_cli_u32(cmd, "--seed", arg, 0, UINT32_MAX, &e->seed);
+    case SRV_CLI_O_THREADS: return srv_cli_u32(cmd, "--threads", arg, 0, 256, &e->threads);
+    case SRV_CLI_O_DENSITY: return srv_cli_double(cmd, "--density", arg, 1e-6, 1e6, &e->density);
     case SRV_CLI_O_AOSAMPLES:
         return srv_cli_u32(cmd, "--ao-samples", arg, 1, FX_AO_SAMPLES_LIMIT, &e->ao_samples);
-    case SRV_CLI_O_SHADOWRAYS:
-        return parse_shadow_rays(cmd, arg, e);
-    case SRV_CLI_O_NCSAMPLES:
-        return parse_no_cache_samples(cmd, arg, e);
-    default:
-        return -1;
+    case SRV_CLI_O_SHADOWRAYS: return parse_shadow_rays(cmd, arg, e);
+    case SRV_CLI_O_NCSAMPLES: return parse_no_cache_samples(cmd, arg, e);
+    default: return -1;
     }
 }
 

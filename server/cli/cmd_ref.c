@@ -161,18 +161,10 @@ static int parse_options(int argc, char **argv, ref_options *o)
             continue;
         bool ok = true;
         switch (c) {
-        case O_OUT:
-            o->out_dir = srv_cli_dir_arg(optarg);
-            break;
-        case O_EVERY:
-            ok = srv_cli_u32("ref", "--every", optarg, 0, 1000000, &o->every);
-            break;
-        case O_VIEWS:
-            o->views = true;
-            break;
-        case O_QUIET:
-            o->quiet = true;
-            break;
+        case O_OUT: o->out_dir = srv_cli_dir_arg(optarg); break;
+        case O_EVERY: ok = srv_cli_u32("ref", "--every", optarg, 0, 1000000, &o->every); break;
+        case O_VIEWS: o->views = true; break;
+        case O_QUIET: o->quiet = true; break;
         case O_AO:
         case O_SHADOW:
         case O_PATHS: {
@@ -191,8 +183,7 @@ static int parse_options(int argc, char **argv, ref_options *o)
             printf(ref_usage, srv_camgen_list(), names);
             return 0;
         }
-        default:
-            return srv_cli_getopt_error("ref", c, argv);
+        default: return srv_cli_getopt_error("ref", c, argv);
         }
         if (!ok)
             return 2;

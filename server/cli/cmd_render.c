@@ -28,24 +28,12 @@ static void island_tint(uint32_t island, float out[3])
     float x = 1.0f - fabsf(fmodf(hue, 2.0f) - 1.0f);
     float r = 0, g = 0, b = 0;
     switch ((int)hue) {
-    case 0:
-        r = 1, g = x;
-        break;
-    case 1:
-        r = x, g = 1;
-        break;
-    case 2:
-        g = 1, b = x;
-        break;
-    case 3:
-        g = x, b = 1;
-        break;
-    case 4:
-        r = x, b = 1;
-        break;
-    default:
-        r = 1, b = x;
-        break;
+    case 0: r = 1, g = x; break;
+    case 1: r = x, g = 1; break;
+    case 2: g = 1, b = x; break;
+    case 3: g = x, b = 1; break;
+    case 4: r = x, b = 1; break;
+    default: r = 1, b = x; break;
     }
     out[0] = r, out[1] = g, out[2] = b;
 }
@@ -105,29 +93,14 @@ int srv_cmd_render(int argc, char **argv)
     for (int c; (c = getopt_long(argc, argv, ":ho:", options, NULL)) != -1;) {
         bool ok = true;
         switch (c) {
-        case 'o':
-            out_path = optarg;
-            break;
-        case 'r':
-            ok = srv_cli_resolution("render", "--res", optarg, 16384, &width, &height);
-            break;
-        case 'c':
-            ok = has_position = srv_cli_vec3("render", "--camera", optarg, position);
-            break;
-        case 't':
-            ok = has_target = srv_cli_vec3("render", "--target", optarg, target);
-            break;
-        case 'f':
-            ok = srv_cli_double("render", "--fov", optarg, 1, 179, &fov);
-            break;
-        case 'd':
-            ok = srv_cli_double("render", "--density", optarg, 1e-6, 1e6, &density);
-            break;
-        case 'h':
-            fputs(render_usage, stdout);
-            return 0;
-        default:
-            return srv_cli_getopt_error("render", c, argv);
+        case 'o': out_path = optarg; break;
+        case 'r': ok = srv_cli_resolution("render", "--res", optarg, 16384, &width, &height); break;
+        case 'c': ok = has_position = srv_cli_vec3("render", "--camera", optarg, position); break;
+        case 't': ok = has_target = srv_cli_vec3("render", "--target", optarg, target); break;
+        case 'f': ok = srv_cli_double("render", "--fov", optarg, 1, 179, &fov); break;
+        case 'd': ok = srv_cli_double("render", "--density", optarg, 1e-6, 1e6, &density); break;
+        case 'h': fputs(render_usage, stdout); return 0;
+        default: return srv_cli_getopt_error("render", c, argv);
         }
         if (!ok)
             return 2;

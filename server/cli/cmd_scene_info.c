@@ -268,18 +268,13 @@ int srv_cmd_scene_info(int argc, char **argv)
     opterr = 0;
     for (int c; (c = getopt_long(argc, argv, ":h", options, NULL)) != -1;) {
         switch (c) {
-        case 'j':
-            as_json = true;
-            break;
+        case 'j': as_json = true; break;
         case 'd':
             if (!srv_cli_double("scene-info", "--density", optarg, 1e-6, 1e6, &density))
                 return 2;
             break;
-        case 'h':
-            fputs(scene_info_usage, stdout);
-            return 0;
-        default:
-            return srv_cli_getopt_error("scene-info", c, argv);
+        case 'h': fputs(scene_info_usage, stdout); return 0;
+        default: return srv_cli_getopt_error("scene-info", c, argv);
         }
     }
     if (argc - optind > 1) {

@@ -112,22 +112,14 @@ static int parse_options(int argc, char **argv, serve_options *o)
         bool ok = true;
         uint32_t value = 0;
         switch (c) {
-        case O_BIND:
-            o->net.bind = optarg;
-            break;
+        case O_BIND: o->net.bind = optarg; break;
         case O_PORT:
             ok = srv_cli_u32("serve", "--port", optarg, 0, 65535, &value);
             o->net.port = (int)value;
             break;
-        case O_TOKEN:
-            o->net.token = optarg;
-            break;
-        case O_FPS:
-            ok = srv_cli_double("serve", "--fps", optarg, 0.001, 1000, &o->net.fps);
-            break;
-        case O_FRAMES:
-            ok = srv_cli_u32("serve", "--frames", optarg, 1, 100000000, &o->net.frames);
-            break;
+        case O_TOKEN: o->net.token = optarg; break;
+        case O_FPS: ok = srv_cli_double("serve", "--fps", optarg, 0.001, 1000, &o->net.fps); break;
+        case O_FRAMES: ok = srv_cli_u32("serve", "--frames", optarg, 1, 100000000, &o->net.frames); break;
         case O_MAXV:
             ok = srv_cli_u32("serve", "--max-viewers", optarg, 1, SRV_MAX_VIEWERS, &o->net.max_viewers);
             break;
@@ -144,18 +136,10 @@ static int parse_options(int argc, char **argv, serve_options *o)
         case O_MAXSAMPLES:
             ok = srv_cli_u32("serve", "--max-samples", optarg, 1, PROTO_MAX_SAMPLES, &o->net.max_samples);
             break;
-        case O_RECORD:
-            o->net.record_dir = srv_cli_dir_arg(optarg);
-            break;
-        case O_STATS:
-            o->stats_path = optarg;
-            break;
-        case O_SUMMARY:
-            o->summary_path = optarg;
-            break;
-        case O_QUIET:
-            o->quiet = true;
-            break;
+        case O_RECORD: o->net.record_dir = srv_cli_dir_arg(optarg); break;
+        case O_STATS: o->stats_path = optarg; break;
+        case O_SUMMARY: o->summary_path = optarg; break;
+        case O_QUIET: o->quiet = true; break;
         case 'h': {
             char names[256];
             srv_cli_effect_names(names, sizeof names);
@@ -164,8 +148,7 @@ static int parse_options(int argc, char **argv, serve_options *o)
             printf("  -h, --help           this text\n");
             return 0;
         }
-        default:
-            return srv_cli_getopt_error("serve", c, argv);
+        default: return srv_cli_getopt_error("serve", c, argv);
         }
         if (!ok)
             return 2;

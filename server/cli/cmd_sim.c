@@ -95,27 +95,13 @@ static int parse_options(int argc, char **argv, sim_options *o)
             continue;
         bool ok = true;
         switch (c) {
-        case O_OUT:
-            o->out_dir = srv_cli_dir_arg(optarg);
-            break;
-        case O_SAVE:
-            ok = srv_cli_u32("sim", "--save-every", optarg, 0, 1000000, &o->save_every);
-            break;
-        case O_VIEWS:
-            o->views = true;
-            break;
-        case O_STATS:
-            o->stats_path = optarg;
-            break;
-        case O_SUMMARY:
-            o->summary_path = optarg;
-            break;
-        case O_RECORD:
-            o->record_dir = srv_cli_dir_arg(optarg);
-            break;
-        case O_QUIET:
-            o->quiet = true;
-            break;
+        case O_OUT: o->out_dir = srv_cli_dir_arg(optarg); break;
+        case O_SAVE: ok = srv_cli_u32("sim", "--save-every", optarg, 0, 1000000, &o->save_every); break;
+        case O_VIEWS: o->views = true; break;
+        case O_STATS: o->stats_path = optarg; break;
+        case O_SUMMARY: o->summary_path = optarg; break;
+        case O_RECORD: o->record_dir = srv_cli_dir_arg(optarg); break;
+        case O_QUIET: o->quiet = true; break;
         case 'h': {
             char names[256];
             srv_cli_effect_names(names, sizeof names);
@@ -124,8 +110,7 @@ static int parse_options(int argc, char **argv, sim_options *o)
             printf("  -h, --help           this text\n");
             return 0;
         }
-        default:
-            return srv_cli_getopt_error("sim", c, argv);
+        default: return srv_cli_getopt_error("sim", c, argv);
         }
         if (!ok)
             return 2;

@@ -170,21 +170,11 @@ int srv_report_parse_options(int argc, char **argv, report_options *o)
             ok = srv_cli_u32("report", "--every", optarg, 1, 100000, &o->every);
             o->every_set = true;
             break;
-        case O_OUT:
-            o->out_dir = srv_cli_dir_arg(optarg);
-            break;
-        case O_QUICK:
-            o->quick = true;
-            break;
-        case O_QUIET:
-            o->quiet = true;
-            break;
-        case O_REFS:
-            ok = parse_power_of_two("--ref-samples", optarg, 0.125, 4, &o->ref_samples);
-            break;
-        case O_ONLY:
-            ok = parse_only(optarg, o);
-            break;
+        case O_OUT: o->out_dir = srv_cli_dir_arg(optarg); break;
+        case O_QUICK: o->quick = true; break;
+        case O_QUIET: o->quiet = true; break;
+        case O_REFS: ok = parse_power_of_two("--ref-samples", optarg, 0.125, 4, &o->ref_samples); break;
+        case O_ONLY: ok = parse_only(optarg, o); break;
         case O_HEATMAX:
             ok = srv_cli_double("report", "--heatmap-max", optarg, 1e-6, 1e6, &o->heatmap_max);
             break;
@@ -211,8 +201,7 @@ int srv_report_parse_options(int argc, char **argv, report_options *o)
                 "is added. Exit status: 0 done or interrupted, 1 a failure, 2 bad options.\n");
             return 0;
         }
-        default:
-            return srv_cli_getopt_error("report", c, argv);
+        default: return srv_cli_getopt_error("report", c, argv);
         }
         if (!ok)
             return 2;

@@ -543,15 +543,9 @@ static void on_message(srv_net *net, net_session *ss, const uint8_t *bytes, size
         return;
     }
     switch (m.type) {
-    case PROTO_HELLO:
-        on_hello(net, ss, &m.u.hello);
-        break;
-    case PROTO_CAMERA:
-        on_camera(net, ss, &m.u.camera);
-        break;
-    case PROTO_SAMPLE_REQUEST:
-        on_sample_request(net, ss, &m.u.sample_request);
-        break;
+    case PROTO_HELLO: on_hello(net, ss, &m.u.hello); break;
+    case PROTO_CAMERA: on_camera(net, ss, &m.u.camera); break;
+    case PROTO_SAMPLE_REQUEST: on_sample_request(net, ss, &m.u.sample_request); break;
     case PROTO_STATS_REQUEST:
         if (!ss->viewer) {
             session_fail(net, ss, FXC_ERR_PROTOCOL, "a stats request before hello");
@@ -706,25 +700,18 @@ static int net_callback(struct lws *wsi, enum lws_callback_reasons reason, void 
         }
         lws_set_timeout(wsi, PENDING_TIMEOUT_USER_OK, (int)net->d.hello_timeout_s);
         return 0;
-    case LWS_CALLBACK_RECEIVE:
-        on_receive(net, ss, in, len);
-        return 0;
+    case LWS_CALLBACK_RECEIVE: on_receive(net, ss, in, len); return 0;
     case LWS_CALLBACK_SERVER_WRITEABLE:
         if (ss->closing)
             return -1;
         return on_writeable(net, ss);
-    case LWS_CALLBACK_WS_PEER_INITIATED_CLOSE:
-        ss->closing = true;
-        return 0;
-    case LWS_CALLBACK_CLOSED:
-        session_close(net, ss);
-        return 0;
+    case LWS_CALLBACK_WS_PEER_INITIATED_CLOSE: ss->closing = true; return 0;
+    case LWS_CALLBACK_CLOSED: session_close(net, ss); return 0;
     case LWS_CALLBACK_EVENT_WAIT_CANCELLED:
         if (net)
             on_wake(net);
         return 0;
-    default:
-        return lws_callback_http_dummy(wsi, reason, user, in, len);
+    default: return lws_callback_http_dummy(wsi, reason, user, in, len);
     }
 }
 
