@@ -209,11 +209,6 @@ static bool frame_chosen(const ref_options *o, uint32_t frame)
 
 /* ---- output -------------------------------------------------------------------------------------------- */
 
-static bool make_dir(const char *path)
-{
-    return srv_cli_make_dir("ref", path);
-}
-
 /* Writes ref.json whole through a temporary file and a rename, so a reader never sees half of it. */
 static bool write_record(const ref_options *o, const json_t *root)
 {
@@ -373,7 +368,7 @@ int srv_cmd_ref(int argc, char **argv)
         goto done;
     }
     const srv_ref_desc *resolved = srv_ref_desc_of(ref);
-    if (!make_dir(o.out_dir))
+    if (!srv_cli_make_dir("ref", o.out_dir))
         goto done;
 
     /* ref.json: the options, then one record per image. */

@@ -48,15 +48,6 @@ static bool frame_compared(const report_options *o, uint32_t frame)
 
 /* ---- what a folder's results were made from ---------------------------------------------------------- */
 
-/* FNV-1a 64 over n bytes, continuing from h (the reference cache's keys use the same hash). */
-static uint64_t fnv_bytes(uint64_t h, const void *data, size_t n)
-{
-    const unsigned char *p = data;
-    for (size_t i = 0; i < n; i++)
-        h = (h ^ p[i]) * 0x100000001b3ull;
-    return h;
-}
-
 /* A fingerprint of what the results depend on beyond the options and the scene's path: the loaded scene's
  * content (geometry, UVs, materials, textures, lights, sky, density, AO radius, effect overrides, default
  * camera, origin) and the camera and size of every viewer in every frame (trace files and generators alike).
@@ -64,65 +55,60 @@ static uint64_t fnv_bytes(uint64_t h, const void *data, size_t n)
  * under the same name makes them again instead of being taken for the one the folder was made from. */
 static uint64_t content_fingerprint(const scene *s, const srv_cli_cameras *cams, uint32_t frames)
 {
-    uint64_t h = 0xcbf29ce484222325ull;
-    h = fnv_bytes(h, &s->vertex_count, sizeof s->vertex_count);
-    h = fnv_bytes(h, s->positions, (size_t)s->vertex_count * 3 * sizeof(float));
-    h = fnv_bytes(h, &s->triangle_count, sizeof s->triangle_count);
-    h = fnv_bytes(h, s->indices, (size_t)s->triangle_count * 3 * sizeof(uint32_t));
+    uint64_t h = SRV_FNV1A_START;
+    h = srv_fnv1a(h, &s->vertex_count, sizeof s->vertex_count);
+    h = srv_fnv1a(h, s->positions, (size_t)s->vertex_count * 3 * sizeof(float));
+    h = srv_fnv1a(h, &s->triangle_count, sizeof s->triangle_count);
+    h = srv_fnv1a(h, s->indices, (size_t)s->triangle_count * 3 * sizeof(uint32_t));
     if (s->corner_uv)
-        h = fnv_bytes(h, s->corner_uv, (size_t)s->triangle_count * 6 * sizeof(float));
-    h = fnv_bytes(h, s->tri_mesh, (size_t)s->triangle_count * sizeof(uint32_t));
+        h = srv_fnv1a(h, s->corner_uv, (size_t)s->triangle_count * 6 * sizeof(float));
+    h = srv_fnv1a(h, s->tri_mesh, (size_t)s->triangle_count * sizeof(uint32_t));
     for (uint32_t m = 0; m < s->mesh_count; m++)
-        h = fnv_bytes(h, &s->meshes[m].material, sizeof s->meshes[m].material);
+        h = srv_fnv1a(h, &s->meshes[m].material, sizeof s->meshes[m].material);
     for (uint32_t m = 0; m < s->material_count; m++) {
-        h = fnv_bytes(h, s->materials[m].diffuse, sizeof s->materials[m].diffuse);
-        h = fnv_bytes(h, &s->materials[m].texture, sizeof s->materials[m].texture);
+        h = srv_fnv1a(h, s->materials[m].diffuse, sizeof s->materials[m].diffuse);
+        h = srv_fnv1a(h, &s->materials[m].texture, sizeof s->materials[m].texture);
     }
     for (uint32_t t = 0; t < s->texture_count; t++) {
         const scene_texture *tex = &s->textures[t];
-        h = fnv_bytes(h, &tex->width, sizeof tex->width);
-        h = fnv_bytes(h, &tex->height, sizeof tex->height);
-        h = fnv_bytes(h, tex->rgb, (size_t)tex->width * tex->height * 3 * sizeof(float));
+        h = srv_fnv1a(h, &tex->width, sizeof tex->width);
+        h = srv_fnv1a(h, &tex->height, sizeof tex->height);
+        h = srv_fnv1a(h, tex->rgb, (size_t)tex->width * tex->height * 3 * sizeof(float));
     }
     for (uint32_t l = 0; l < s->light_count; l++) {
         const scene_light *light = &s->lights[l];
         int type = (int)light->type;
-        h = fnv_bytes(h, &type, sizeof type);
-        h = fnv_bytes(h, light->direction, sizeof light->direction);
-        h = fnv_bytes(h, light->position, sizeof light->position);
-        h = fnv_bytes(h, light->color, sizeof light->color);
-        h = fnv_bytes(h, &light->intensity, sizeof light->intensity);
+        h = srv_fnv1a(h, &type, sizeof type);
+        h = srv_fnv1a(h, light->direction, sizeof light->direction);
+        h = srv_fnv1a(h, light->position, sizeof light->position);
+        h = srv_fnv1a(h, light->color, sizeof light->color);
+        h = srv_fnv1a(h, &light->intensity, sizeof light->intensity);
     }
     int toggles[3] = {(int)s->fx_shadows, (int)s->fx_ao, (int)s->fx_indirect};
-    h = fnv_bytes(h, s->sky_color, sizeof s->sky_color);
-    h = fnv_bytes(h, &s->sky_intensity, sizeof s->sky_intensity);
-    h = fnv_bytes(h, &s->texel_density, sizeof s->texel_density);
-    h = fnv_bytes(h, &s->ao_radius, sizeof s->ao_radius);
-    h = fnv_bytes(h, toggles, sizeof toggles);
-    h = fnv_bytes(h, s->origin, sizeof s->origin);
+    h = srv_fnv1a(h, s->sky_color, sizeof s->sky_color);
+    h = srv_fnv1a(h, &s->sky_intensity, sizeof s->sky_intensity);
+    h = srv_fnv1a(h, &s->texel_density, sizeof s->texel_density);
+    h = srv_fnv1a(h, &s->ao_radius, sizeof s->ao_radius);
+    h = srv_fnv1a(h, toggles, sizeof toggles);
+    h = srv_fnv1a(h, s->origin, sizeof s->origin);
     for (uint32_t f = 0; f < frames; f++)
         for (uint32_t v = 0; v < cams->viewers; v++) {
             srv_camera c = {0};
             uint32_t size[2] = {0, 0};
             unsigned char present = srv_cli_cameras_get(cams, s, f, v, &c, &size[0], &size[1]);
-            h = fnv_bytes(h, &present, 1);
+            h = srv_fnv1a(h, &present, 1);
             if (present) {
-                h = fnv_bytes(h, c.position, sizeof c.position);
-                h = fnv_bytes(h, c.target, sizeof c.target);
-                h = fnv_bytes(h, c.up, sizeof c.up);
-                h = fnv_bytes(h, &c.fov_deg, sizeof c.fov_deg);
-                h = fnv_bytes(h, size, sizeof size);
+                h = srv_fnv1a(h, c.position, sizeof c.position);
+                h = srv_fnv1a(h, c.target, sizeof c.target);
+                h = srv_fnv1a(h, c.up, sizeof c.up);
+                h = srv_fnv1a(h, &c.fov_deg, sizeof c.fov_deg);
+                h = srv_fnv1a(h, size, sizeof size);
             }
         }
     return h;
 }
 
 /* ---- files --------------------------------------------------------------------------------------------- */
-
-static bool make_dir(const char *path)
-{
-    return srv_cli_make_dir("report", path);
-}
 
 /* Loads a configuration's marker if it exists and was made with the same key. */
 static bool load_marker(const char *dir, report_config *c)
@@ -621,13 +607,13 @@ int srv_cmd_report(int argc, char **argv)
         fprintf(stderr, "fxcache report: %s\n", err);
         goto done;
     }
-    if (!make_dir(o.out_dir))
+    if (!srv_cli_make_dir("report", o.out_dir))
         goto done;
     char sub[1400];
     const char *subdirs[] = {"done", "heatmaps", "frames", "plots"};
     for (size_t i = 0; i < sizeof subdirs / sizeof subdirs[0]; i++) {
         snprintf(sub, sizeof sub, "%s/%s", o.out_dir, subdirs[i]);
-        if (!make_dir(sub))
+        if (!srv_cli_make_dir("report", sub))
             goto done;
     }
     char ref_settings[1024];

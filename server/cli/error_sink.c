@@ -133,13 +133,11 @@ void srv_refcache_counts(const srv_refcache *cache, uint32_t *rendered, uint32_t
         *render_ms = cache->render_ms;
 }
 
-/* FNV-1a, 64 bits. */
-static uint64_t fnv1a(uint64_t h, const char *text)
+uint64_t srv_fnv1a(uint64_t h, const void *data, size_t n)
 {
-    for (const unsigned char *p = (const unsigned char *)text; *p; p++) {
-        h ^= *p;
-        h *= 0x100000001b3ull;
-    }
+    const unsigned char *p = data;
+    for (size_t i = 0; i < n; i++)
+        h = (h ^ p[i]) * 0x100000001b3ull;
     return h;
 }
 
@@ -151,7 +149,8 @@ uint64_t srv_refcache_key(const srv_refcache *cache, const srv_camera *c, uint32
              (double)c->position[1], (double)c->position[2], (double)c->target[0], (double)c->target[1],
              (double)c->target[2], (double)c->up[0], (double)c->up[1], (double)c->up[2], (double)c->fov_deg,
              width, height);
-    return fnv1a(fnv1a(0xcbf29ce484222325ull, text), cache->settings);
+    uint64_t h = srv_fnv1a(SRV_FNV1A_START, text, strlen(text));
+    return srv_fnv1a(h, cache->settings, strlen(cache->settings));
 }
 
 /* Reads one float image of the expected size into a malloc'd array of `channels` per pixel. */

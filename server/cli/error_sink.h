@@ -66,6 +66,11 @@ srv_refcache *srv_refcache_create(srv_ref *ref, const char *dir, const char *set
                                   size_t err_cap);
 void srv_refcache_free(srv_refcache *cache);
 
+/* FNV-1a, 64 bits, over n bytes, continuing from h (SRV_FNV1A_START to begin): the reference cache's keys and
+ * report's content fingerprint. */
+#define SRV_FNV1A_START 0xcbf29ce484222325ull
+uint64_t srv_fnv1a(uint64_t h, const void *data, size_t n);
+
 /* The key of a camera at a size under the cache's settings: FNV-1a 64 of their exact text. */
 uint64_t srv_refcache_key(const srv_refcache *cache, const srv_camera *camera, uint32_t width,
                           uint32_t height);
