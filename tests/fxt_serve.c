@@ -80,6 +80,10 @@ int fxt_listening_port(const char *path)
 int fxt_node_peer_start(const char *script, const char *args, const char *out, pid_t *pid)
 {
     char cmd[2048];
+    if (system("node --version >/dev/null 2>&1") != 0) {
+        print_message("node is missing (./install-deps.sh installs it): skipped\n");
+        return 0;
+    }
     remove(out); /* a port from an earlier run must not be read */
     snprintf(cmd, sizeof cmd, "NODE_PATH=/usr/share/nodejs exec node '%s/tests/%s' %s > '%s' 2>&1",
              FXC_SOURCE_DIR, script, args, out);
@@ -90,6 +94,7 @@ int fxt_node_peer_start(const char *script, const char *args, const char *out, p
         port = fxt_listening_port(out);
         if (!port && fxt_file_contains(out, "ws module is missing")) {
             waitpid(*pid, NULL, 0);
+            print_message("Node's ws module is missing (Debian's node-ws): skipped\n");
             return 0;
         }
         if (!port)

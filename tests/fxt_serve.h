@@ -31,7 +31,7 @@ bool fxt_file_contains(const char *path, const char *text);
 
 /* Starts a WebSocket peer written by someone else, `node tests/SCRIPT ARGS` (ARGS as the shell reads them) with
  * its output in the file at out, and waits up to 30 s for its "listening on ws://127.0.0.1:PORT" line. Returns
- * the port with *pid the peer's; 0 when Node's ws module is missing (the peer said so and has ended: the caller
+ * the port with *pid the peer's; 0 when node or its ws module is missing (said in a message: the caller
  * skips). Fails the test when no port comes. */
 int fxt_node_peer_start(const char *script, const char *args, const char *out, pid_t *pid);
 
