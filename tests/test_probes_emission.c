@@ -256,12 +256,92 @@ static void test_cornell_box(void **state)
     scene_free(s);
 }
 
+/* A quad in an OBJ file whose material (in its MTL) has the emissive colour ke ("0 0 0": none). */
+static const char *write_quad_obj(const char *name, const char *ke)
+{
+    char mtl_name[64], mtl[160], obj[400];
+    snprintf(mtl_name, sizeof mtl_name, "%s.mtl", name);
+    snprintf(mtl, sizeof mtl, "newmtl glow\nKd 0.5 0.5 0.5\nKe %s\n", ke);
+    fxt_write_file(mtl_name, mtl);
+    snprintf(obj, sizeof obj,
+             "mtllib %s\nv 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nusemtl glow\nf 1 4 3\nf 1 3 2\n", mtl_name);
+    char obj_name[64];
+    snprintf(obj_name, sizeof obj_name, "%s.obj", name);
+    return fxt_write_file(obj_name, obj);
+}
+
+/* Emission from files: an OBJ's Ke through Assimp (the file is then lit by it alone: no default sun and sky;
+ * without Ke it keeps them), a JSON material's "emission" (read and validated: >= 0, finite as a float, three
+ * numbers). */
+static void test_emission_from_files(void **state)
+{
+    (void)state;
+    scene_error err = {0};
+    scene *s = scene_load(write_quad_obj("glow", "2 3 4"), NULL, &err);
+    if (!s)
+        fail_msg("%s", err.msg);
+    const scene_material *m = &s->materials[s->meshes[0].material];
+    assert_true(m->emission[0] == 2.0f && m->emission[1] == 3.0f && m->emission[2] == 4.0f);
+    assert_true(s->emissive);
+    assert_int_equal(s->light_count, 0);
+    assert_true(s->sky_intensity == 0.0f);
+    scene_free(s);
+
+    s = scene_load(write_quad_obj("dark", "0 0 0"), NULL, &err);
+    if (!s)
+        fail_msg("%s", err.msg);
+    assert_false(s->emissive);
+    assert_int_equal(s->light_count, 1); /* the default sun */
+    assert_true(s->sky_intensity > 0.0f);
+    scene_free(s);
+
+    write_quad_obj("plain", "0 0 0");
+    s = scene_load(fxt_write_file("emit.json", "{\"version\": 1, \"meshes\": [{\"file\": \"plain.obj\", "
+                                               "\"material\": {\"diffuse\": [0.25, 0.25, 0.25], "
+                                               "\"emission\": [1, 2.5, 1e30]}}]}"),
+                   NULL, &err);
+    if (!s)
+        fail_msg("%s", err.msg);
+    m = &s->materials[s->meshes[0].material];
+    assert_true(m->emission[0] == 1.0f && m->emission[1] == 2.5f && m->emission[2] == 1e30f);
+    assert_true(s->emissive);
+    assert_int_equal(s->light_count, 0); /* a description says exactly which lights it has */
+    scene_needs_result needs;
+    scene_needs(s, &needs);
+    assert_true(needs.effect[SCENE_FX_PROBES]);
+    scene_free(s);
+
+    static const struct {
+        const char *emission;
+        scene_result code;
+        const char *text;
+    } bad[] = {
+        {"[-1, 0, 0]", SCENE_ERR_INVALID, "meshes[0].material.emission: components must be radiances >= 0"},
+        {"[0, 1e39, 0]", SCENE_ERR_INVALID, "meshes[0].material.emission[1]: must be a finite number"},
+        {"[1, 2]", SCENE_ERR_JSON, "meshes[0].material.emission"},
+        {"\"bright\"", SCENE_ERR_JSON, "meshes[0].material.emission"},
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        char json[256];
+        snprintf(
+            json, sizeof json,
+            "{\"version\": 1, \"meshes\": [{\"file\": \"plain.obj\", \"material\": {\"emission\": %s}}]}",
+            bad[i].emission);
+        memset(&err, 0, sizeof err);
+        s = scene_load(fxt_write_file("bad.json", json), NULL, &err);
+        assert_null(s);
+        if (err.code != bad[i].code || !strstr(err.msg, bad[i].text))
+            fail_msg("emission %s: code %d, '%s'", bad[i].emission, (int)err.code, err.msg);
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_sphere_emitter),
         cmocka_unit_test(test_pixel_shows_emission),
         cmocka_unit_test(test_cornell_box),
+        cmocka_unit_test(test_emission_from_files),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
