@@ -87,6 +87,13 @@ static void needs_shadow(const scene *s, const needs_content *content, scene_nee
         out->effect[SCENE_FX_SHADOW] = true;
         needs_reason(reason, cap, "%u of %u lights carry energy (intensity > 0, non-black colour)",
                      content->lights_with_energy, s->light_count);
+    } else if (s->light_count == 0 && content->emitting_meshes > 0) {
+        out->effect[SCENE_FX_SHADOW] = false;
+        needs_reason(
+            reason, cap,
+            "the scene has no lights: its %u emitting mesh%s light it through the probes (emitters cast "
+            "no hard shadows)",
+            content->emitting_meshes, content->emitting_meshes == 1 ? "" : "es");
     } else if (s->light_count == 0) {
         out->effect[SCENE_FX_SHADOW] = false;
         needs_reason(reason, cap, "the scene has no lights");

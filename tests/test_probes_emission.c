@@ -11,6 +11,7 @@
 #include "fxt_scene.h"
 #include "reference.h"
 
+#include <jansson.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -214,6 +215,20 @@ static void test_cornell_box(void **state)
     assert_false(needs.effect[SCENE_FX_SHADOW]);
     assert_false(needs.effect[SCENE_FX_AO]);
     assert_non_null(strstr(needs.effect_reason[SCENE_FX_PROBES], "1 emitting mesh"));
+
+    /* What sim says, in words and in its summary: the emitter lights the scene. */
+    char cmd[1400], out[8192];
+    snprintf(cmd, sizeof cmd, "sim --scene %s --viewers 1 --frames 2 --res 32x24 --threads 1 --summary %s",
+             path, fxt_tmp_path("cornell_summary.json"));
+    assert_int_equal(fxt_run_cli(cmd, out, sizeof out, NULL, 0), 0);
+    assert_non_null(strstr(out, "left out shadow: the scene has no lights: its 1 emitting mesh light it"));
+    json_error_t json_err;
+    json_t *summary = json_load_file(fxt_tmp_path("cornell_summary.json"), 0, &json_err);
+    assert_non_null(summary);
+    const char *probes = json_string_value(json_object_get(json_object_get(summary, "effects"), "probes"));
+    assert_non_null(probes);
+    assert_non_null(strstr(probes, "light from 1 emitting mesh bounces"));
+    json_decref(summary);
 
     scene_error rt_err = {0};
     scene_rt *rt = scene_rt_create(s, NULL, &rt_err);
