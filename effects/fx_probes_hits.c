@@ -3,9 +3,9 @@
  * probes around the hit through a per-thread memo of cells, in three passes over the chunk's hits), the
  * back faces and misses, each ray's distance; and the no-cache estimate's hits (fx_probe_eval_point), which
  * share the shadow-ray queue. A front face of an emitting material adds its emission to what leaves it (its
- * light reaches the surfaces around it through the probes; only when the scene has emitters). The rules (units, the bounce filter's departures, determinism) are in the
- * comment at the top of fx_probes.c; this file is apart so its hot inline code still inlines into its one
- * entry point's AVX2 copy. */
+ * light reaches the surfaces around it through the probes; only when the scene has emitters). The rules
+ * (units, the bounce filter's departures, determinism) are in the comment at the top of fx_probes.c; this
+ * file is apart so its hot inline code still inlines into its one entry point's AVX2 copy. */
 #include "fx_probes_internal.h"
 #include "fxc_hot.h"
 #include "scene_inline.h"

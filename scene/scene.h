@@ -225,7 +225,8 @@ typedef struct scene_load_desc {
 } scene_load_desc;
 
 /* Loads a scene: a JSON scene description (*.json), or any mesh file Assimp reads (optionally .gz), which
- * then becomes a scene with defaults (one sun, a sky). The path "default" (or NULL) is the embedded scene.
+ * then becomes a scene with defaults (one sun, a sky) unless some material of it emits (then its emitters
+ * alone light it). The path "default" (or NULL) is the embedded scene.
  * Returns NULL and fills err on failure; nothing partial is returned. */
 scene *scene_load(const char *path, const scene_load_desc *desc, scene_error *err);
 
