@@ -1019,10 +1019,13 @@ scene *scene_load(const char *path, const scene_load_desc *desc, scene_error *er
         snprintf(s->source, sizeof s->source, "%s", path);
         scene__set_source(s, path);
         rc = scene__import_file(s, path, NULL, NULL, err);
-        /* A file whose materials emit is lit by its emitters (a Cornell box's light): no sun and sky. */
+        /* A file whose lamps emit is lit by them (a Cornell box's light): no sun and sky. Emitters that
+         * cover most of the surface are a glow (an MS3D or FBX "emissive" colour): the defaults stay. */
         scene_emission_refresh(s);
-        if (rc == SCENE_OK && !s->emissive)
+        if (rc == SCENE_OK && (!s->emissive || scene_emission_area_fraction(s) > SCENE_LAMP_AREA_FRACTION)) {
             scene__add_default_lighting(s);
+            s->default_lighting = true;
+        }
     }
     s->timings.load_ms = scene__now_ms() - t0 - s->timings.weld_ms - s->timings.textures_ms;
     if (rc == SCENE_OK)

@@ -164,6 +164,9 @@ typedef struct scene {
      * after a material's emission changes. Compose and the probes add emission only when it is set, so a
      * scene without emitters pays one test per run of pixels or chunk of rays. */
     bool emissive;
+    /* A plain mesh file got the default sun and sky (scene__add_default_lighting): it has no emitters, or
+     * its emitters cover more than SCENE_LAMP_AREA_FRACTION of its surface (a glow, not a lamp). */
+    bool default_lighting;
 
     bool has_camera;                                       /* a default camera from the scene description */
     float camera_pos[3], camera_target[3], camera_fov_deg; /* local frame, like every position here */
@@ -225,8 +228,9 @@ typedef struct scene_load_desc {
 } scene_load_desc;
 
 /* Loads a scene: a JSON scene description (*.json), or any mesh file Assimp reads (optionally .gz), which
- * then becomes a scene with defaults (one sun, a sky) unless some material of it emits (then its emitters
- * alone light it). The path "default" (or NULL) is the embedded scene.
+ * then becomes a scene with defaults (one sun, a sky) unless some material of it emits and the emitting
+ * triangles cover at most SCENE_LAMP_AREA_FRACTION of its surface (lamps: then its emitters alone light
+ * it). The path "default" (or NULL) is the embedded scene.
  * Returns NULL and fills err on failure; nothing partial is returned. */
 scene *scene_load(const char *path, const scene_load_desc *desc, scene_error *err);
 
@@ -297,6 +301,14 @@ void scene_emission_refresh(scene *s);
 /* What the emitting materials give out, for messages: how many materials with a mesh emit, and the total
  * emitted power pi x Le x area summed over their triangles (one side), W in the scene's units, per channel. */
 void scene_emission_power(const scene *s, uint32_t *emitting_materials, double power_rgb[3]);
+
+/* The share of the scene's surface area whose material emits, 0..1 (0 without triangles). */
+double scene_emission_area_fraction(const scene *s);
+
+/* Emitters of a plain mesh file replace the default sun and sky only when they are lamps: their triangles
+ * cover at most this share of the surface. Formats whose materials carry an "emissive" colour for a whole
+ * object (MS3D, FBX's Phong, Blender's emit) glow everywhere; they keep the defaults, the emission adds. */
+#define SCENE_LAMP_AREA_FRACTION 0.1
 
 /* Adds the emission of triangle tri's material to radiance out_rgb when view_normal (the normal turned to the
  * side the viewer or ray comes from) is on its front: dot(view_normal, geometric normal) > 0. Emission is

@@ -436,6 +436,21 @@ void scene_albedo_mean(const scene *s, uint32_t tri, float out_rgb[3])
 
 /* ---- emission ----------------------------------------------------------------------------------------- */
 
+static double triangle_area(const scene *s, uint32_t t)
+{
+    const float *a = s->positions + 3 * (size_t)s->indices[3 * (size_t)t];
+    const float *b = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 1];
+    const float *c = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 2];
+    double e1[3], e2[3];
+    for (int k = 0; k < 3; k++) {
+        e1[k] = (double)b[k] - a[k];
+        e2[k] = (double)c[k] - a[k];
+    }
+    double cx = e1[1] * e2[2] - e1[2] * e2[1], cy = e1[2] * e2[0] - e1[0] * e2[2],
+           cz = e1[0] * e2[1] - e1[1] * e2[0];
+    return 0.5 * sqrt(cx * cx + cy * cy + cz * cz);
+}
+
 bool scene_material_emits(const scene_material *m)
 {
     return m->emission[0] > 0.0f || m->emission[1] > 0.0f || m->emission[2] > 0.0f;
@@ -464,19 +479,8 @@ void scene_emission_power(const scene *s, uint32_t *emitting_materials, double p
             if (mesh->material != m || mesh->triangle_count == 0)
                 continue;
             used = true;
-            for (uint32_t t = mesh->first_triangle; t < mesh->first_triangle + mesh->triangle_count; t++) {
-                const float *a = s->positions + 3 * (size_t)s->indices[3 * (size_t)t];
-                const float *b = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 1];
-                const float *c = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 2];
-                double e1[3], e2[3];
-                for (int k = 0; k < 3; k++) {
-                    e1[k] = (double)b[k] - a[k];
-                    e2[k] = (double)c[k] - a[k];
-                }
-                double cx = e1[1] * e2[2] - e1[2] * e2[1], cy = e1[2] * e2[0] - e1[0] * e2[2],
-                       cz = e1[0] * e2[1] - e1[1] * e2[0];
-                area += 0.5 * sqrt(cx * cx + cy * cy + cz * cz);
-            }
+            for (uint32_t t = mesh->first_triangle; t < mesh->first_triangle + mesh->triangle_count; t++)
+                area += triangle_area(s, t);
         }
         if (!used)
             continue;
@@ -485,6 +489,23 @@ void scene_emission_power(const scene *s, uint32_t *emitting_materials, double p
             power_rgb[k] += 3.14159265358979323846 * (double)material->emission[k] * area;
     }
     *emitting_materials = count;
+}
+
+double scene_emission_area_fraction(const scene *s)
+{
+    double all = 0.0, emitting = 0.0;
+    for (uint32_t i = 0; i < s->mesh_count; i++) {
+        const scene_mesh *mesh = &s->meshes[i];
+        bool emits =
+            mesh->material < s->material_count && scene_material_emits(&s->materials[mesh->material]);
+        for (uint32_t t = mesh->first_triangle; t < mesh->first_triangle + mesh->triangle_count; t++) {
+            double area = triangle_area(s, t);
+            all += area;
+            if (emits)
+                emitting += area;
+        }
+    }
+    return all > 0.0 ? emitting / all : 0.0;
 }
 
 void scene_emission_add(const scene *s, uint32_t tri, const float view_normal[3], float out_rgb[3])

@@ -271,15 +271,18 @@ static void test_cornell_box(void **state)
     scene_free(s);
 }
 
-/* A quad in an OBJ file whose material (in its MTL) has the emissive colour ke ("0 0 0": none). */
-static const char *write_quad_obj(const char *name, const char *ke)
+/* A 1 m quad in an OBJ file whose material (in its MTL) has the emissive colour ke ("0 0 0": none); with
+ * floor, also a 10 x 10 m floor 2 m below it of a material that does not emit (the quad is then a lamp over
+ * 1 % of the surface). */
+static const char *write_quad_obj(const char *name, const char *ke, bool floor)
 {
-    char mtl_name[64], mtl[160], obj[400];
+    char mtl_name[64], mtl[200], obj[600];
     snprintf(mtl_name, sizeof mtl_name, "%s.mtl", name);
-    snprintf(mtl, sizeof mtl, "newmtl glow\nKd 0.5 0.5 0.5\nKe %s\n", ke);
+    snprintf(mtl, sizeof mtl, "newmtl glow\nKd 0.5 0.5 0.5\nKe %s\nnewmtl floor\nKd 0.5 0.5 0.5\n", ke);
     fxt_write_file(mtl_name, mtl);
     snprintf(obj, sizeof obj,
-             "mtllib %s\nv 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nusemtl glow\nf 1 4 3\nf 1 3 2\n", mtl_name);
+             "mtllib %s\nv 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nusemtl glow\nf 1 4 3\nf 1 3 2\n%s", mtl_name,
+             floor ? "v -5 -2 -5\nv 5 -2 -5\nv 5 -2 5\nv -5 -2 5\nusemtl floor\nf 5 8 7\nf 5 7 6\n" : "");
     char obj_name[64];
     snprintf(obj_name, sizeof obj_name, "%s.obj", name);
     return fxt_write_file(obj_name, obj);
@@ -292,7 +295,7 @@ static void test_emission_from_files(void **state)
 {
     (void)state;
     scene_error err = {0};
-    scene *s = scene_load(write_quad_obj("glow", "2 3 4"), NULL, &err);
+    scene *s = scene_load(write_quad_obj("glow", "2 3 4", true), NULL, &err);
     if (!s)
         fail_msg("%s", err.msg);
     const scene_material *m = &s->materials[s->meshes[0].material];
@@ -300,9 +303,11 @@ static void test_emission_from_files(void **state)
     assert_true(s->emissive);
     assert_int_equal(s->light_count, 0);
     assert_true(s->sky_intensity == 0.0f);
+    assert_false(s->default_lighting);
+    assert_true(fabs(scene_emission_area_fraction(s) - 1.0 / 101.0) < 1e-9); /* 1 m^2 of 101 */
     scene_free(s);
 
-    s = scene_load(write_quad_obj("dark", "0 0 0"), NULL, &err);
+    s = scene_load(write_quad_obj("dark", "0 0 0", true), NULL, &err);
     if (!s)
         fail_msg("%s", err.msg);
     assert_false(s->emissive);
@@ -310,7 +315,19 @@ static void test_emission_from_files(void **state)
     assert_true(s->sky_intensity > 0.0f);
     scene_free(s);
 
-    write_quad_obj("plain", "0 0 0");
+    /* An emitter over the whole surface is a glow (an MS3D or FBX "emissive" colour), not a lamp: the
+     * default sun and sky stay and the emission adds (more than a tenth of the surface emits). */
+    s = scene_load(write_quad_obj("allglow", "2 3 4", false), NULL, &err);
+    if (!s)
+        fail_msg("%s", err.msg);
+    assert_true(s->emissive);
+    assert_true(fabs(scene_emission_area_fraction(s) - 1.0) < 1e-12);
+    assert_int_equal(s->light_count, 1);
+    assert_true(s->sky_intensity > 0.0f);
+    assert_true(s->default_lighting);
+    scene_free(s);
+
+    write_quad_obj("plain", "0 0 0", false);
     s = scene_load(fxt_write_file("emit.json", "{\"version\": 1, \"meshes\": [{\"file\": \"plain.obj\", "
                                                "\"material\": {\"diffuse\": [0.25, 0.25, 0.25], "
                                                "\"emission\": [1, 2.5, 1e30]}}]}"),

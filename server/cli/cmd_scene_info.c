@@ -89,7 +89,7 @@ static json_t *emission_json(const scene *s)
                                                   vec3_json(s->materials[m].emission)));
     return json_pack("{s:i,s:[fff],s:o,s:b}", "emitting_materials", (int)emitting, "power_w", power[0],
                      power[1], power[2], "materials", list, "default_lighting_replaced",
-                     emitting > 0 && plain_mesh_file(s));
+                     emitting > 0 && plain_mesh_file(s) && !s->default_lighting);
 }
 
 /* The whole report as one JSON object. */
@@ -210,7 +210,10 @@ static void print_text(const scene *s, const island_summary *is, const scene_nee
         printf(
             "emission:       %u emitting material%s, total power (%.4g, %.4g, %.4g) W (pi x Le x area)%s\n",
             emitting, emitting == 1 ? "" : "s", power[0], power[1], power[2],
-            plain_mesh_file(s) ? "; they light the scene: no default sun and sky" : "");
+            !plain_mesh_file(s)   ? ""
+            : s->default_lighting ? "; they cover more than a tenth of the surface (a glow, not lamps): the "
+                                    "default sun and sky stay"
+                                  : "; they light the scene: no default sun and sky");
     for (uint32_t m = 0; m < s->material_count; m++)
         if (scene_material_emits(&s->materials[m]))
             printf("  emits:        '%s' radiance (%.4g, %.4g, %.4g)\n", s->materials[m].name,
