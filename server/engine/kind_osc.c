@@ -456,19 +456,28 @@ typedef struct taps_grid {
 FXC_HOT_LANES static void grid_lanes_in(taps_grid *restrict G, const taps_lanes *restrict L,
                                         const srv_pixel_lanes *restrict P, uint32_t count, int32_t bounds[4])
 {
-    int32_t xmin = INT32_MAX, ymin = INT32_MAX, xmax = INT32_MIN, ymax = INT32_MIN;
     const uint32_t island = G->island;
     const int32_t level = G->level;
+    for (int i = 0; i < SRV_RUN; i++)
+        G->in[i] = L->fast[i] & (P->island[i] == island) & (L->level[i] == level) & ((uint32_t)i < count);
+    /* The bounds in loops of their own, the lanes left out by masks (GCC vectorised neither one loop of four
+     * reductions nor selects, which it kept as branches). */
+    int32_t xmin = INT32_MAX, ymin = INT32_MAX, xmax = INT32_MIN, ymax = INT32_MIN;
+    for (int i = 0; i < SRV_RUN; i++) { /* x0 >= 0 and below 2^24 - 1 where fast */
+        int32_t keep = -G->in[i], v = ((L->fast_x0[i] >> 3) & keep) | (INT32_MAX & ~keep);
+        xmin = v < xmin ? v : xmin;
+    }
     for (int i = 0; i < SRV_RUN; i++) {
-        int32_t in = L->fast[i] & (P->island[i] == island) & (L->level[i] == level) & ((uint32_t)i < count);
-        G->in[i] = in;
-        int32_t x0 = L->fast_x0[i], y0 = L->fast_y0[i]; /* >= 0 and below 2^24 - 1 where fast */
-        int32_t lo_x = in ? x0 >> 3 : INT32_MAX, lo_y = in ? y0 >> 3 : INT32_MAX;
-        int32_t hi_x = in ? (x0 + 1) >> 3 : INT32_MIN, hi_y = in ? (y0 + 1) >> 3 : INT32_MIN;
-        xmin = lo_x < xmin ? lo_x : xmin;
-        ymin = lo_y < ymin ? lo_y : ymin;
-        xmax = hi_x > xmax ? hi_x : xmax;
-        ymax = hi_y > ymax ? hi_y : ymax;
+        int32_t keep = -G->in[i], v = ((L->fast_y0[i] >> 3) & keep) | (INT32_MAX & ~keep);
+        ymin = v < ymin ? v : ymin;
+    }
+    for (int i = 0; i < SRV_RUN; i++) {
+        int32_t keep = -G->in[i], v = (((L->fast_x0[i] + 1) >> 3) & keep) | (INT32_MIN & ~keep);
+        xmax = v > xmax ? v : xmax;
+    }
+    for (int i = 0; i < SRV_RUN; i++) {
+        int32_t keep = -G->in[i], v = (((L->fast_y0[i] + 1) >> 3) & keep) | (INT32_MIN & ~keep);
+        ymax = v > ymax ? v : ymax;
     }
     bounds[0] = xmin, bounds[1] = ymin, bounds[2] = xmax, bounds[3] = ymax;
 }
@@ -817,6 +826,9 @@ FXC_HOT_INLINE uint32_t taps_of_effect(const kind_osc *k, const taps_lanes *L, c
                 grid_block[at] = st.memo.block[m];
             }
     }
+    /* A texel's offset in its block in 32 bits (at most 63 x 1024): in 64 bits GCC built the four products
+     * from vpmuludq pairs. */
+    const uint32_t grid_texel_bytes = (uint32_t)texel_bytes;
     for (uint32_t i = 0; i < count; i++) {
         fx_taps *out = &taps[i];
         if (G && G->in[i]) {
@@ -826,10 +838,10 @@ FXC_HOT_INLINE uint32_t taps_of_effect(const kind_osc *k, const taps_lanes *L, c
                            (grid_valid[e3] >> c3) & 1u;
             if (!all)
                 goto rest;
-            out->texel[0] = (const void *)(grid_base[e0] + (size_t)c0 * texel_bytes);
-            out->texel[1] = (const void *)(grid_base[e1] + (size_t)c1 * texel_bytes);
-            out->texel[2] = (const void *)(grid_base[e2] + (size_t)c2 * texel_bytes);
-            out->texel[3] = (const void *)(grid_base[e3] + (size_t)c3 * texel_bytes);
+            out->texel[0] = (const void *)(grid_base[e0] + (uint32_t)c0 * grid_texel_bytes);
+            out->texel[1] = (const void *)(grid_base[e1] + (uint32_t)c1 * grid_texel_bytes);
+            out->texel[2] = (const void *)(grid_base[e2] + (uint32_t)c2 * grid_texel_bytes);
+            out->texel[3] = (const void *)(grid_base[e3] + (uint32_t)c3 * grid_texel_bytes);
             taps_from_lanes(out, L, i);
             if (blocks)
                 blocks[i] = grid_block[e0];
