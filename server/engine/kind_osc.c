@@ -458,26 +458,20 @@ FXC_HOT_LANES static void grid_lanes_in(taps_grid *restrict G, const taps_lanes 
 {
     const uint32_t island = G->island;
     const int32_t level = G->level;
-    for (int i = 0; i < SRV_RUN; i++)
-        G->in[i] = L->fast[i] & (P->island[i] == island) & (L->level[i] == level) & ((uint32_t)i < count);
-    /* The bounds in loops of their own, the lanes left out by masks (GCC vectorised neither one loop of four
-     * reductions nor selects, which it kept as branches). */
+    /* The bounds with the lanes left out by masks (GCC kept selects as branches, and did not vectorise). */
     int32_t xmin = INT32_MAX, ymin = INT32_MAX, xmax = INT32_MIN, ymax = INT32_MIN;
-    for (int i = 0; i < SRV_RUN; i++) { /* x0 >= 0 and below 2^24 - 1 where fast */
-        int32_t keep = -G->in[i], v = ((L->fast_x0[i] >> 3) & keep) | (INT32_MAX & ~keep);
-        xmin = v < xmin ? v : xmin;
-    }
-    for (int i = 0; i < SRV_RUN; i++) {
-        int32_t keep = -G->in[i], v = ((L->fast_y0[i] >> 3) & keep) | (INT32_MAX & ~keep);
-        ymin = v < ymin ? v : ymin;
-    }
-    for (int i = 0; i < SRV_RUN; i++) {
-        int32_t keep = -G->in[i], v = (((L->fast_x0[i] + 1) >> 3) & keep) | (INT32_MIN & ~keep);
-        xmax = v > xmax ? v : xmax;
-    }
-    for (int i = 0; i < SRV_RUN; i++) {
-        int32_t keep = -G->in[i], v = (((L->fast_y0[i] + 1) >> 3) & keep) | (INT32_MIN & ~keep);
-        ymax = v > ymax ? v : ymax;
+    for (int i = 0; i < SRV_RUN; i++) { /* x0, y0 >= 0 and below 2^24 - 1 where fast */
+        int32_t in = L->fast[i] & (P->island[i] == island) & (L->level[i] == level) & ((uint32_t)i < count);
+        G->in[i] = in;
+        int32_t keep = -in, x0 = L->fast_x0[i], y0 = L->fast_y0[i];
+        int32_t lo_x = ((x0 >> 3) & keep) | (INT32_MAX & ~keep),
+                lo_y = ((y0 >> 3) & keep) | (INT32_MAX & ~keep);
+        int32_t hi_x = (((x0 + 1) >> 3) & keep) | (INT32_MIN & ~keep);
+        int32_t hi_y = (((y0 + 1) >> 3) & keep) | (INT32_MIN & ~keep);
+        xmin = lo_x < xmin ? lo_x : xmin;
+        ymin = lo_y < ymin ? lo_y : ymin;
+        xmax = hi_x > xmax ? hi_x : xmax;
+        ymax = hi_y > ymax ? hi_y : ymax;
     }
     bounds[0] = xmin, bounds[1] = ymin, bounds[2] = xmax, bounds[3] = ymax;
 }
