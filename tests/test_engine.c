@@ -344,11 +344,9 @@ static void test_late_viewer_same_pixels(void **state)
 
 /* The on-surface kind's taps of a run of pixels equal each pixel's taps found alone, bit for bit: a pixel
  * that reuses the previous pixel's four texels (same island, level and corner texel) gets what the full
- * lookup gives, and a run's block grid (taps_grid) what the per-pixel path gives (the single calls go
- * without it). Pixels from a converged frame of the fixture, every row in runs of up to 64 and in reverse
- * order too (other neighbours), and in compose's runs of 16 x 4, for each effect at its own level bias and
- * one finer, the two effects' taps in one call (each effect first once); every other run through lanes only
- * (the pixels garbage). */
+ * lookup gives. Pixels from a converged frame of the fixture, every row in runs of up to 64 and in reverse
+ * order too (other neighbours), for each effect at its own level bias and one finer, the two effects' taps
+ * in one call (each effect first once); every other row through lanes only (the pixels garbage). */
 static void test_osc_taps_run_equals_single(void **state)
 {
     fixture *f = *state;
@@ -384,20 +382,12 @@ static void test_osc_taps_run_equals_single(void **state)
         const srv_cache_kind *kind = loop->kinds[SCENE_CACHE_ON_SURFACE];
         void *cache = loop->caches[SCENE_CACHE_ON_SURFACE];
         for (int32_t bias = loop->bias[e] - 1; bias <= loop->bias[e]; bias++)
-            for (int reverse = 0; reverse < 3; reverse++)
+            for (int reverse = 0; reverse < 2; reverse++)
                 for (uint32_t y = 0; y < H; y++) {
-                    /* reverse 2: compose's runs, 16 columns x 4 rows of a tile (most within a few blocks:
-                     * the run's block grid), row y the run's first; else a row, forwards or backwards. */
-                    uint32_t n = 0, x_runs = W / 16;
-                    if (reverse == 2 && y >= x_runs * ((H + 3) / 4))
-                        break;
-                    for (uint32_t k = 0; k < (reverse == 2 ? 64u : W) && n < SRV_RUN; k++) {
-                        uint32_t x = reverse == 1 ? W - 1 - k : k, row = y;
-                        if (reverse == 2)
-                            x = (y % x_runs) * 16 + k % 16, row = (y / x_runs) * 4 + k / 16;
-                        if (row >= H)
-                            break;
-                        size_t p = (size_t)row * W + x;
+                    uint32_t n = 0;
+                    for (uint32_t k = 0; k < W && n < SRV_RUN; k++) {
+                        uint32_t x = reverse ? W - 1 - k : k;
+                        size_t p = (size_t)y * W + x;
                         uint32_t tri = view->tri[p];
                         if (tri == SRV_MISS)
                             continue;
@@ -435,12 +425,8 @@ static void test_osc_taps_run_equals_single(void **state)
                         uint32_t j = i / n, at = i % n;
                         fx_taps *one_taps = &one;
                         uint32_t *one_blocks = &one_block;
-                        /* The second method: one pixel through the per-pixel path alone (the run's call
-                         * above took the run's block grid where it applies). */
-                        srv__osc_kind_grid(cache, false);
                         kind->pixel_taps(cache, 0, 0, &pixels[at], NULL, 1, 1, &group[j], bias, &one_taps,
                                          &one_blocks);
-                        srv__osc_kind_grid(cache, true);
                         const fx_taps *a = &run_taps[j][at];
                         assert_int_equal(a->count, one.count);
                         empty_found += a->count == 0;

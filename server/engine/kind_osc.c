@@ -13,7 +13,6 @@
 typedef struct kind_osc {
     osc_cache *osc;
     const scene *s;
-    bool no_grid; /* tests: compose's taps without the run's block grid (srv__osc_kind_grid) */
 } kind_osc;
 
 static fxc_result osc_kind_create(srv_loop *loop, void **out, char *err, size_t err_cap)
@@ -436,85 +435,6 @@ FXC_HOT_LANES static void taps_lanes_fast(taps_lanes *restrict L, const srv_pixe
                     ((uint64_t)(uint32_t)(L->fast_x0[i] >> 3) << OSC_KEY_BLOCK_X_SHIFT);
 }
 
-/* A run's block grid: the blocks around the lanes of one island and level (those of the run's first usual-case
- * lane), at most GRID_MAX of them, looked up once per effect; every usual-case lane of that island and level
- * then finds its four texels (straddling a block edge or not) with the same arithmetic and no branch but the
- * one on whether all four hold data. The per-pixel loop with its previous-pixel reuse, memo compares and
- * straddle calls had most of compose's mispredicted branches (callgrind --branch-sim, docs/BENCHMARKS.md). */
-enum { GRID_MAX = 16 };
-typedef struct taps_grid {
-    uint32_t island;
-    int32_t level;
-    int32_t bx0, by0, width, height; /* the grid's first block column and row, its size in blocks */
-    int32_t in[SRV_RUN];             /* the lane reads the grid (usual case, the grid's island and level) */
-    int32_t entry[4][SRV_RUN];       /* tap t's block: entry by * width + bx of the grid (0 where not in) */
-    int32_t cell[4][SRV_RUN];        /* tap t's texel in its block (0..63) */
-} taps_grid;
-
-/* Which lanes read the grid (usual case, island and level as given, below count) and the blocks they span:
- * bounds receives the smallest and largest block column and row (INT32_MAX, INT32_MIN when none). */
-FXC_HOT_LANES static void grid_lanes_in(taps_grid *restrict G, const taps_lanes *restrict L,
-                                        const srv_pixel_lanes *restrict P, uint32_t count, int32_t bounds[4])
-{
-    const uint32_t island = G->island;
-    const int32_t level = G->level;
-    /* The bounds with the lanes left out by masks (GCC kept selects as branches, and did not vectorise). */
-    int32_t xmin = INT32_MAX, ymin = INT32_MAX, xmax = INT32_MIN, ymax = INT32_MIN;
-    for (int i = 0; i < SRV_RUN; i++) { /* x0, y0 >= 0 and below 2^24 - 1 where fast */
-        int32_t in = L->fast[i] & (P->island[i] == island) & (L->level[i] == level) & ((uint32_t)i < count);
-        G->in[i] = in;
-        int32_t keep = -in, x0 = L->fast_x0[i], y0 = L->fast_y0[i];
-        int32_t lo_x = ((x0 >> 3) & keep) | (INT32_MAX & ~keep),
-                lo_y = ((y0 >> 3) & keep) | (INT32_MAX & ~keep);
-        int32_t hi_x = (((x0 + 1) >> 3) & keep) | (INT32_MIN & ~keep);
-        int32_t hi_y = (((y0 + 1) >> 3) & keep) | (INT32_MIN & ~keep);
-        xmin = lo_x < xmin ? lo_x : xmin;
-        ymin = lo_y < ymin ? lo_y : ymin;
-        xmax = hi_x > xmax ? hi_x : xmax;
-        ymax = hi_y > ymax ? hi_y : ymax;
-    }
-    bounds[0] = xmin, bounds[1] = ymin, bounds[2] = xmax, bounds[3] = ymax;
-}
-
-/* Each grid lane's four taps as grid entries and texels, in the order (x0, y0), (x0 + 1, y0), (x0, y0 + 1),
- * (x0 + 1, y0 + 1). */
-FXC_HOT_LANES static void grid_lanes_taps(taps_grid *restrict G, const taps_lanes *restrict L)
-{
-    const int32_t bx0 = G->bx0, by0 = G->by0, width = G->width;
-    for (int i = 0; i < SRV_RUN; i++) {
-        int32_t x0 = G->in[i] ? L->fast_x0[i] : 8 * bx0, y0 = G->in[i] ? L->fast_y0[i] : 8 * by0;
-        int32_t x1 = x0 + 1, y1 = y0 + 1;
-        int32_t c0 = (x0 >> 3) - bx0, c1 = (x1 >> 3) - bx0;
-        int32_t r0 = ((y0 >> 3) - by0) * width, r1 = ((y1 >> 3) - by0) * width;
-        G->entry[0][i] = r0 + c0, G->entry[1][i] = r0 + c1, G->entry[2][i] = r1 + c0,
-        G->entry[3][i] = r1 + c1;
-        int32_t col0 = x0 & 7, col1 = x1 & 7, row0 = (y0 & 7) * 8, row1 = (y1 & 7) * 8;
-        G->cell[0][i] = row0 + col0, G->cell[1][i] = row0 + col1;
-        G->cell[2][i] = row1 + col0, G->cell[3][i] = row1 + col1;
-    }
-}
-
-/* The grid of a run (after taps_lanes_fast): false when no lane is the usual case or its blocks are more than
- * GRID_MAX (the lanes then take the per-pixel path alone). */
-static bool taps_grid_build(taps_grid *G, const taps_lanes *L, const srv_pixel_lanes *P, uint32_t count)
-{
-    uint32_t first = 0;
-    while (first < count && !L->fast[first])
-        first++;
-    if (first == count)
-        return false;
-    G->island = P->island[first];
-    G->level = L->level[first];
-    int32_t bounds[4];
-    grid_lanes_in(G, L, P, count, bounds);
-    int64_t width = (int64_t)bounds[2] - bounds[0] + 1, height = (int64_t)bounds[3] - bounds[1] + 1;
-    if (width * height > GRID_MAX)
-        return false;
-    G->bx0 = bounds[0], G->by0 = bounds[1], G->width = (int32_t)width, G->height = (int32_t)height;
-    grid_lanes_taps(G, L);
-    return true;
-}
-
 /* One effect's lookup state across the pixels of a call: its memo of blocks, the island and level of the
  * previous pixel (their size and key fields), and the four texels of the last pixel that took the common
  * path (its corner texel and block). */
@@ -774,8 +694,7 @@ static bool taps_straddle(taps_state *st, int32_t x0, int32_t y0, uint64_t key, 
  * through taps_pixel_rest, the general loop body with its state in a struct, not inlined: in one function
  * with the usual case, their state together outnumbered the registers and the usual case ran from the stack. */
 FXC_HOT_INLINE uint32_t taps_of_effect(const kind_osc *k, const taps_lanes *L, const srv_pixel_lanes *P,
-                                       const taps_grid *G, uint32_t count, uint32_t effect, fx_taps *taps,
-                                       uint32_t *blocks)
+                                       uint32_t count, uint32_t effect, fx_taps *taps, uint32_t *blocks)
 {
     uint32_t empty = 0; /* taps with count 0: only the general path gives them */
     taps_state st;
@@ -803,44 +722,8 @@ FXC_HOT_INLINE uint32_t taps_of_effect(const kind_osc *k, const taps_lanes *L, c
     int32_t reuse_cell = -1;
     const uint8_t *t0 = NULL, *t1 = NULL, *t2 = NULL, *t3 = NULL; /* its four texels */
     uint32_t reuse_block = 0, last_slot = 0;
-    /* The grid's blocks (G: taps_grid_build), through the memo: an absent block has no valid texel. */
-    uintptr_t grid_base[GRID_MAX];
-    uint64_t grid_valid[GRID_MAX];
-    uint32_t grid_block[GRID_MAX];
-    if (G) {
-        const uint64_t base = effect_field | ((uint64_t)G->island << OSC_KEY_ISLAND_SHIFT) |
-                              ((uint64_t)(uint32_t)G->level << OSC_KEY_LEVEL_SHIFT);
-        for (int32_t by = 0; by < G->height; by++)
-            for (int32_t bx = 0; bx < G->width; bx++) {
-                uint64_t key = base | ((uint64_t)(uint32_t)(G->by0 + by) << OSC_KEY_BLOCK_Y_SHIFT) |
-                               ((uint64_t)(uint32_t)(G->bx0 + bx) << OSC_KEY_BLOCK_X_SHIFT);
-                uint32_t m = memo_lookup(osc, &st.memo, effect, key), at = (uint32_t)(by * G->width + bx);
-                grid_base[at] = (uintptr_t)st.memo.payload[m];
-                grid_valid[at] = st.memo.payload[m] ? st.memo.valid[m] : 0;
-                grid_block[at] = st.memo.block[m];
-            }
-    }
-    /* A texel's offset in its block in 32 bits (at most 63 x 1024): in 64 bits GCC built the four products
-     * from vpmuludq pairs. */
-    const uint32_t grid_texel_bytes = (uint32_t)texel_bytes;
     for (uint32_t i = 0; i < count; i++) {
         fx_taps *out = &taps[i];
-        if (G && G->in[i]) {
-            int32_t e0 = G->entry[0][i], e1 = G->entry[1][i], e2 = G->entry[2][i], e3 = G->entry[3][i];
-            int32_t c0 = G->cell[0][i], c1 = G->cell[1][i], c2 = G->cell[2][i], c3 = G->cell[3][i];
-            uint64_t all = (grid_valid[e0] >> c0) & (grid_valid[e1] >> c1) & (grid_valid[e2] >> c2) &
-                           (grid_valid[e3] >> c3) & 1u;
-            if (!all)
-                goto rest;
-            out->texel[0] = (const void *)(grid_base[e0] + (uint32_t)c0 * grid_texel_bytes);
-            out->texel[1] = (const void *)(grid_base[e1] + (uint32_t)c1 * grid_texel_bytes);
-            out->texel[2] = (const void *)(grid_base[e2] + (uint32_t)c2 * grid_texel_bytes);
-            out->texel[3] = (const void *)(grid_base[e3] + (uint32_t)c3 * grid_texel_bytes);
-            taps_from_lanes(out, L, i);
-            if (blocks)
-                blocks[i] = grid_block[e0];
-            continue;
-        }
         if (L->fast[i]) {
             uint64_t key = L->key[i] | effect_field;
             int32_t cell = L->cell[i];
@@ -916,11 +799,9 @@ FXC_HOT_CLONES static uint32_t osc_kind_pixel_taps(const void *cache, uint32_t s
     }
     taps_lanes_fill(&L, lanes, bias);
     taps_lanes_fast(&L, lanes);
-    taps_grid G;
-    const taps_grid *grid = !k->no_grid && taps_grid_build(&G, &L, lanes, count) ? &G : NULL;
     uint32_t empty = 0;
     for (uint32_t j = 0; j < effect_count; j++)
-        empty += taps_of_effect(k, &L, lanes, grid, count, effects[j], taps[j], blocks ? blocks[j] : NULL);
+        empty += taps_of_effect(k, &L, lanes, count, effects[j], taps[j], blocks ? blocks[j] : NULL);
     return empty;
 }
 
@@ -958,11 +839,6 @@ static void osc_kind_memory(const void *cache, srv_memory *out)
         out->block_meta[e] += m.effects[e].block_meta_bytes + m.effects[e].list_bytes;
     }
     out->total += m.total_bytes + sizeof *k;
-}
-
-void srv__osc_kind_grid(void *cache, bool on)
-{
-    ((kind_osc *)cache)->no_grid = !on;
 }
 
 const srv_cache_kind srv__kind_osc = {

@@ -522,10 +522,6 @@ void srv__hit_point(const scene *s, uint32_t tri, float u, float v, float pos[3]
 /* The on-surface kind (kind_osc.c) and the world-space kind (kind_wsc.c). */
 extern const srv_cache_kind srv__kind_osc, srv__kind_wsc;
 
-/* Tests: whether the on-surface kind's taps use a run's block grid (on by default; off, every pixel takes the
- * per-pixel path: the same taps). cache: the kind's cache (srv_loop.caches[SCENE_CACHE_ON_SURFACE]). */
-void srv__osc_kind_grid(void *cache, bool on);
-
 /* The world-space kind's read for effects (fx_context.world_taps; user: the kind's cache). */
 /* The same kind's whole-cell read (fx_context.world_cell). */
 bool srv__wsc_world_cell(const void *user, uint32_t effect, uint32_t level, const float centre[3],
