@@ -106,8 +106,11 @@ typedef struct fx_context {
 
 /* One queued block. payload and lookup point into the cache; the effect writes payload texels of mask. */
 typedef struct fx_block_job {
-    uint64_t key; /* the block's cache key (seeds the random numbers) */
-    uint32_t island, level, block_x, block_y;
+    uint64_t key;                             /* the block's cache key (seeds the random numbers) */
+    uint32_t island, level, block_x, block_y; /* island: its index in scene.islands (no side bit) */
+    /* On-surface: the block is of the island's back (its key's island field has SCENE_ISLAND_BACK): the
+     * surface seen from behind its winding, so an effect's rays leave along the negated geometric normal. */
+    bool back;
     uint64_t mask;          /* texels to update */
     const uint32_t *lookup; /* the block's 64 triangle-lookup texels (valid for every texel of mask) */
     void *payload;          /* 64 * texel_bytes (on-surface); brick_size^3 * texel_bytes (world-space) */
