@@ -145,14 +145,13 @@ static uint32_t osc_kind_pixel_requests(const void *cache, uint32_t slot, const 
             const srv_pixel *px = &pixels[first + i];
             uint32_t level = (uint32_t)L.level[i];
             if (L.inside[i]) {
-                /* floor(x - 0.5) + 1, 16 bits each: level 4, island index 27 bits, its side bit on top
-                 * (islands of index 2^27 and beyond are not deduped) */
+                /* floor(x - 0.5) + 1, 16 bits each: level 4, island 28 bits (the id rotated left by one:
+                 * its index, then its side bit; islands of index 2^27 and beyond are not deduped) */
                 uint64_t cx = (uint64_t)L.cx[i], cy = (uint64_t)L.cy[i];
-                uint32_t index = px->island & SCENE_ISLAND_INDEX;
-                uint64_t signature = (uint64_t)(px->island >> 31) << 63 | (uint64_t)index << 36 |
-                                     (uint64_t)level << 32 | cy << 16 | cx;
+                uint32_t island = px->island << 1 | px->island >> 31;
+                uint64_t signature = (uint64_t)island << 36 | (uint64_t)level << 32 | cy << 16 | cx;
                 uint32_t seen_slot = (uint32_t)((signature * 0x9E3779B97F4A7C15ull) >> 58); /* 6 bits: SEEN */
-                if (index < (1u << 27)) {
+                if (island < (1u << 28)) {
                     if (seen[seen_slot] == signature)
                         continue;
                     seen[seen_slot] = signature;
