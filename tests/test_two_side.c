@@ -117,6 +117,41 @@ static void test_floor_both_sides(void **state)
     }
 }
 
+/* A sparse viewer (a client's sample request: visibility, requests and compose over a list) below the floor
+ * with the sun above reads the back too: every listed pixel wholly shadowed, as the whole frame's. */
+static void test_floor_sparse_back(void **state)
+{
+    (void)state;
+    enum { W = 48, H = 32, LISTED = 200 };
+    scene_rt *rt;
+    scene *s = floor_scene(false, &rt);
+    srv_loop_desc d = {.s = s, .rt = rt, .seed = 7, .keep_views = true, .threads = 2};
+    fxt_effects_on(&d, ao_shadow, 2);
+    srv_loop *loop = NULL;
+    char err[256];
+    assert_int_equal(srv_loop_create(&d, &loop, err, sizeof err), FXC_OK);
+    srv_viewer_id id;
+    assert_int_equal(srv_viewer_add(loop, &(srv_viewer_desc){.max_pixels = LISTED}, &id), FXC_OK);
+    const srv_camera cam = {
+        .position = {0.3f, -1.5f, 0.2f}, .target = {0, 0, 0}, .up = {0, 0, -1}, .fov_deg = 60};
+    uint32_t list[LISTED];
+    for (uint32_t i = 0; i < LISTED; i++)
+        list[i] = SRV_PIXEL_XY((i * 7) % W, (i * 5) % H);
+    uint32_t unique = 0;
+    assert_int_equal(srv_viewer_set_pixels(loop, id, &cam, W, H, list, LISTED, &unique), FXC_OK);
+    srv_frame_stats st;
+    assert_int_equal(srv_loop_frame(loop, &st), FXC_OK);
+    assert_int_equal(st.viewers[0].pixels_missing, 0);
+    const float *lit = srv_viewer_view(loop, id, SRV_VIEW_SHADOW), *depth = srv_viewer_depth(loop, id);
+    for (uint32_t i = 0; i < unique; i++) {
+        assert_true(isfinite(depth[i]));
+        assert_true(lit[i] == 0.0f);
+    }
+    srv_loop_free(loop);
+    scene_rt_free(rt);
+    scene_free(s);
+}
+
 /* ---- a camera inside a box ----------------------------------------------------------------------------- */
 
 static const double box_lo[3] = {0, 0, 0}, box_hi[3] = {8, 4, 8};
@@ -416,9 +451,9 @@ static void test_closed_mesh_no_twin(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_floor_both_sides),         cmocka_unit_test(test_box_inside_closed_forms),
-        cmocka_unit_test(test_box_inward_outward_agree), cmocka_unit_test(test_sides_against_reference),
-        cmocka_unit_test(test_closed_mesh_no_twin),
+        cmocka_unit_test(test_floor_both_sides),        cmocka_unit_test(test_floor_sparse_back),
+        cmocka_unit_test(test_box_inside_closed_forms), cmocka_unit_test(test_box_inward_outward_agree),
+        cmocka_unit_test(test_sides_against_reference), cmocka_unit_test(test_closed_mesh_no_twin),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
