@@ -108,7 +108,7 @@ typedef struct fx_context {
 typedef struct fx_block_job {
     uint64_t key;                             /* the block's cache key (seeds the random numbers) */
     uint32_t island, level, block_x, block_y; /* island: its index in scene.islands (no side bit) */
-    uint64_t mask;          /* texels to update */
+    uint64_t mask;                            /* texels to update */
     const uint32_t *lookup; /* the block's 64 triangle-lookup texels (valid for every texel of mask) */
     void *payload;          /* 64 * texel_bytes (on-surface); brick_size^3 * texel_bytes (world-space) */
     /* World-space effects: the brick's first cell's grid point (its lowest corner) in scene-local metres,
