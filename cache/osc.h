@@ -5,6 +5,9 @@
  * ceil(size0 / 2^l) texels wide and high. Texture space is cut into 8 x 8 texel blocks. A block is named by
  * a 64-bit key  effect:4 | island:32 | level:4 | block_y:12 | block_x:12  (high bits to low bits), and one
  * open-addressing hash table for all effects maps a key to the index of a block in that effect's pool.
+ * The engine names the back of an island (its triangles seen against their winding) by the island id with
+ * its top bit set (SCENE_ISLAND_BACK, scene.h): a twin island with its own blocks, created only when a
+ * viewer sees that side. The cache treats it as any other island id.
  * Per block the pool keeps (structure of arrays): the texels requested this frame (64-bit mask, bit
  * y*8+x), the texels that hold data (valid mask), the frame it was last requested, its key, an optional
  * 32-bit convergence word and the payload: 64 texels of `texel_bytes` bytes each, defined by the effect.

@@ -106,9 +106,9 @@ typedef struct fx_context {
 
 /* One queued block. payload and lookup point into the cache; the effect writes payload texels of mask. */
 typedef struct fx_block_job {
-    uint64_t key; /* the block's cache key (seeds the random numbers) */
-    uint32_t island, level, block_x, block_y;
-    uint64_t mask;          /* texels to update */
+    uint64_t key;                             /* the block's cache key (seeds the random numbers) */
+    uint32_t island, level, block_x, block_y; /* island: its index in scene.islands (no side bit) */
+    uint64_t mask;                            /* texels to update */
     const uint32_t *lookup; /* the block's 64 triangle-lookup texels (valid for every texel of mask) */
     void *payload;          /* 64 * texel_bytes (on-surface); brick_size^3 * texel_bytes (world-space) */
     /* World-space effects: the brick's first cell's grid point (its lowest corner) in scene-local metres,
@@ -120,6 +120,10 @@ typedef struct fx_block_job {
     float cell;
     void *scratch;
     uint32_t effect; /* the effect's index in the loop's list (what ctx->world_taps takes) */
+    /* On-surface: the block is of the island's back (its key's island field has SCENE_ISLAND_BACK): the
+     * surface seen from behind its winding, so an effect's rays leave along the negated geometric normal.
+     * (Last, in the struct's tail padding: a job is no larger for it.) */
+    bool back;
 } fx_block_job;
 
 /* Hard shadows: for each texel of mask and each light, ctx->shadow_rays (default FX_SHADOW_RAYS) rays from

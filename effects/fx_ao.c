@@ -14,11 +14,13 @@
  * the ray origin inside the texel's footprint (mapped to the surface through the triangle lookup, and kept
  * FX_TEXEL_MARGIN of a texel inside the lookup triangle's edges, so a texel at a crease never samples the
  * wall's plane), the other gives the cosine-weighted direction about the lookup triangle's geometric normal
- * (Duff et al. basis). The first 16, 32 and 64 samples are each stratified in both, which lowers the error
+ * (Duff et al. basis), negated for a block of the island's back (fx_block_job.back: rays leave on the side
+ * the viewer sees). The first 16, 32 and 64 samples are each stratified in both, which lowers the error
  * against pure random.
  *
  * The no-cache baseline traces from the visible point itself, after moving it inside the triangle it lies on
- * (fx__locate_point): a pixel exactly on a crease would otherwise start every ray on the wall's plane.
+ * (fx__locate_point), about the normal of the side the viewer sees: a pixel exactly on a crease would
+ * otherwise start every ray on the wall's plane.
  *
  * Rays: origins through scene_offset_ray_origin (along the normal: every AO ray leaves on that side),
  * batched 256 at a time into rtcOccluded1M; a texel's rays are never split across batches. The caller must
@@ -121,14 +123,15 @@ uint64_t fx_ao_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t 
             uint64_t direction_hash = fx__hash(ctx->seed, job->key, texel, 0, FX_STREAM_AO_DIRECTION);
             fx__surface_map map;
             fx__surface_map_init(ctx->s, job->island, job->lookup[texel], margin, &map);
-            float tangent[3], bitangent[3];
-            fx__onb(map.normal, tangent, bitangent);
+            float normal[3], tangent[3], bitangent[3]; /* of the block's side: a back block's is negated */
+            fx__side_normal(map.normal, job->back, normal);
+            fx__onb(normal, tangent, bitangent);
             for (uint32_t k = stored; k < stored + add; k++) {
                 float jitter[2], u, v, position[3], origin[3], dir[3];
                 fx__sobol_2d(k, origin_hash, jitter);
                 fx__texel_uv(job->level, job->block_x, job->block_y, texel, jitter[0], jitter[1], &u, &v);
                 fx__surface_map_eval(&map, u, v, position);
-                ao_ray(position, map.normal, tangent, bitangent, direction_hash, k, ctx->s->ray_offset_scale,
+                ao_ray(position, normal, tangent, bitangent, direction_hash, k, ctx->s->ray_offset_scale,
                        origin, dir);
                 fx__set_ray(&batch.rays[batch.ray_count], origin, dir, ctx->ao_radius, batch.ray_count);
                 batch.owner[batch.ray_count++] = (uint16_t)owner;
@@ -254,11 +257,12 @@ FXC_HOT_CLONES static void ao_shade(const fx_context *ctx, const fx_shade_run *r
     }
 }
 
+/* The baseline: the run's samples from the side the viewer sees, as the cache's texels of that side. */
 static uint64_t ao_eval(const fx_context *ctx, const fx_point *point, fx_shade_point *out)
 {
     uint64_t rays = 0;
-    *out->sky_visibility *=
-        fx_ao_eval_point(ctx, point->position, point->normal, ao_max_samples(ctx), point->pixel_id, &rays);
+    *out->sky_visibility *= fx_ao_eval_point(ctx, point->position, point->view_normal, ao_max_samples(ctx),
+                                             point->pixel_id, &rays);
     return rays;
 }
 

@@ -151,6 +151,10 @@ typedef struct locate_query {
     float normal[3];
     uint32_t best_tri; /* UINT32_MAX: none yet */
     double best_d2;    /* squared distance to it */
+    /* The same for triangles facing against the normal: a point seen from behind its triangle (the normal
+     * passed is the side the viewer sees), taken only when no triangle faces along it. */
+    uint32_t back_tri;
+    double back_d2;
 } locate_query;
 
 /* Squared distance from p to triangle (a, b, c), in double (Ericson, Real-Time Collision Detection 5.1.5). */
@@ -200,23 +204,30 @@ static double triangle_distance2(const double p[3], const float *a, const float 
     return d2sum;
 }
 
-/* Embree's point-query callback: keeps the nearest triangle facing along the query's normal (ties: the
- * lower index, so the answer does not depend on the traversal order). The radius is never shrunk. */
+/* Embree's point-query callback: keeps the nearest triangle facing along the query's normal, and apart the
+ * nearest facing against it (ties: the lower index, so the answer does not depend on the traversal order).
+ * The radius is never shrunk. */
 static bool locate_callback(struct RTCPointQueryFunctionArguments *args)
 {
     locate_query *q = args->userPtr;
     uint32_t tri = args->primID;
     const scene *s = q->s;
-    if (tri >= s->triangle_count || !(fx__dot(s->tri_normal + 3 * (size_t)tri, q->normal) > 0.906f))
+    if (tri >= s->triangle_count)
+        return false;
+    float facing = fx__dot(s->tri_normal + 3 * (size_t)tri, q->normal);
+    bool along = facing > 0.906f;
+    if (!along && !(facing < -0.906f))
         return false; /* more than 25 degrees off: another surface (the wall at a crease) */
     const uint32_t *corner = s->indices + 3 * (size_t)tri;
     double d2 =
         triangle_distance2(q->point, s->positions + 3 * (size_t)corner[0],
                            s->positions + 3 * (size_t)corner[1], s->positions + 3 * (size_t)corner[2]);
     double radius = args->query->radius;
-    if (d2 <= radius * radius && (d2 < q->best_d2 || (d2 == q->best_d2 && tri < q->best_tri))) {
-        q->best_d2 = d2;
-        q->best_tri = tri;
+    uint32_t *best_tri = along ? &q->best_tri : &q->back_tri;
+    double *best_d2 = along ? &q->best_d2 : &q->back_d2;
+    if (d2 <= radius * radius && (d2 < *best_d2 || (d2 == *best_d2 && tri < *best_tri))) {
+        *best_d2 = d2;
+        *best_tri = tri;
     }
     return false;
 }
@@ -226,7 +237,8 @@ bool fx__locate_point(const fx_context *ctx, const float pos[3], const float nor
 {
     const scene *s = ctx->s;
     float reach = fx__robust_distance(pos, s->ray_offset_scale);
-    locate_query q = {.s = s, .best_tri = UINT32_MAX, .best_d2 = INFINITY};
+    locate_query q = {
+        .s = s, .best_tri = UINT32_MAX, .best_d2 = INFINITY, .back_tri = UINT32_MAX, .back_d2 = INFINITY};
     for (int k = 0; k < 3; k++) {
         q.point[k] = pos[k];
         q.normal[k] = normal[k];
@@ -237,6 +249,8 @@ bool fx__locate_point(const fx_context *ctx, const float pos[3], const float nor
     _Alignas(16) struct RTCPointQueryContext context;
     rtcInitPointQueryContext(&context);
     rtcPointQuery((RTCScene)scene_rt_handle(ctx->rt), &query, &context, locate_callback, &q);
+    if (q.best_tri == UINT32_MAX)
+        q.best_tri = q.back_tri; /* seen from behind (or nothing facing either way: none) */
     if (q.best_tri == UINT32_MAX)
         return false;
     fx__triangle_map_init(s, q.best_tri, fmaxf(margin, reach), map);

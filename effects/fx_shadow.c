@@ -10,9 +10,11 @@
  * and clamped into the lookup triangle shrunk by FX_TEXEL_MARGIN of a texel (border texels sample just inside
  * the nearest triangle's edge, never on the plane of a wall that edge meets: fx_internal.h).
  * The same 16 points serve every light. Facing: a ray whose direction has dot(n, to_light) <= 0 (n the
- * geometric normal) is not traced and its bit stays 0; a texel facing away from a light stores 0 with no ray.
+ * geometric normal, negated for a block of the island's back: fx_block_job.back) is not traced and its bit
+ * stays 0; a texel facing away from a light stores 0 with no ray. Origins leave along n, on that side.
  *
- * The no-cache baseline (fx_shadow_eval_point) jitters over the pixel's footprint instead, which can reach
+ * The no-cache baseline (fx_shadow_eval_point, about the normal of the side the viewer sees, as the
+ * reference) jitters over the pixel's footprint instead, which can reach
  * past a crease onto or behind a wall: its points are checked as effects.h describes. Checking only the
  * points that leave the visible triangle keeps the baseline at 16 rays for pixels inside a triangle, which
  * is what it stands for (DESIGN.md "No-cache baseline"); clamping every point into the triangle instead would
@@ -134,7 +136,8 @@ uint64_t fx_shadow_update(const fx_context *ctx, const fx_block_job *jobs, uint3
             shadow_jitter(ctx->seed, job->key, texel, n, offsets);
             fx__surface_map map;
             fx__surface_map_init(s, job->island, job->lookup[texel], fx__texel_margin(s, job->level), &map);
-            const float *normal = map.normal;
+            float normal[3]; /* of the block's side: a back block's is negated */
+            fx__side_normal(map.normal, job->back, normal);
             for (uint32_t i = 0; i < n; i++) {
                 float u, v, position[3];
                 fx__texel_uv(job->level, job->block_x, job->block_y, texel, offsets[i][0], offsets[i][1], &u,
@@ -571,7 +574,7 @@ static uint64_t shadow_eval(const fx_context *ctx, const fx_point *point, fx_sha
         float lit = 0;
         for (uint32_t set = 0; set < sets; set++) {
             uint64_t r = 0;
-            lit += shadow_eval_rays(ctx, point->position, point->normal, point->dpdx, point->dpdy, l,
+            lit += shadow_eval_rays(ctx, point->position, point->view_normal, point->dpdx, point->dpdy, l,
                                     shadow_set_id(point->pixel_id, set), per_set, &r);
             rays += r;
         }

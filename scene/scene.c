@@ -503,6 +503,7 @@ static scene_result commit_mesh(scene *s, const staged_mesh *m, const double ori
         rc = SCENE_OK; /* nothing left of this mesh: counted above, not an error by itself */
         goto done;
     }
+    _Static_assert(UINT32_MAX / 8 < SCENE_ISLAND_BACK, "island ids keep their top bit for the side");
     if ((uint64_t)s->vertex_count + unique > UINT32_MAX / 4 ||
         (uint64_t)s->triangle_count + kept > UINT32_MAX / 8) {
         rc = scene__fail(err, SCENE_ERR_RANGE, "mesh '%s': the scene would exceed %u triangles", name,

@@ -99,6 +99,13 @@ typedef struct scene_island {
     uint32_t mesh;           /* the mesh it belongs to */
 } scene_island;
 
+/* The side bit of an island id where it names a side of a surface (on-surface cache keys, srv_pixel.island):
+ * set for the side the triangles' winding makes the back (DESIGN.md "On-surface cache": the back is a twin
+ * island). An island's own index never has it: a scene holds at most UINT32_MAX / 8 triangles
+ * (scene__add_mesh) and islands are fewer than triangles. */
+#define SCENE_ISLAND_BACK  0x80000000u
+#define SCENE_ISLAND_INDEX 0x7FFFFFFFu /* the island's own index in an id with a side bit */
+
 enum {
     SCENE_ISLAND_MAX_TRIANGLES = 256,
     SCENE_BLOCK_TEXELS = 8,             /* a block is 8 x 8 texels */

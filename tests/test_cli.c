@@ -662,11 +662,11 @@ static void test_err_memory_beyond_physical(void **state)
         const char *needle;
     } cases[] = {
         {"sim --pool-mb 65536 --quiet", 65536, "block pools (65536 MiB)"},
-        {"sim --viewers 64 --res 8192x8192 --quiet", 64ull * 8192 * 8192 * 35 / 1048576,
-         "64 viewers, 4294967296 pixels (143360 MiB)"},
-        {views_args, 64ull * 8192 * 8192 * 47 / 1048576, "64 viewers, 4294967296 pixels (192512 MiB)"},
+        {"sim --viewers 64 --res 8192x8192 --quiet", 64ull * 8192 * 8192 * 36 / 1048576,
+         "64 viewers, 4294967296 pixels (147456 MiB)"},
+        {views_args, 64ull * 8192 * 8192 * 48 / 1048576, "64 viewers, 4294967296 pixels (196608 MiB)"},
         {"sim --no-cache --pool-mb 65536 --viewers 64 --res 8192x8192 --quiet",
-         64ull * 8192 * 8192 * 35 / 1048576, "block pools (0 MiB)"},
+         64ull * 8192 * 8192 * 36 / 1048576, "block pools (0 MiB)"},
     };
     unsigned checked = 0;
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {

@@ -247,8 +247,10 @@ static void test_viewer_handles(void **state)
     assert_int_equal(srv_viewer_add(loop, &(srv_viewer_desc){.width = 40, .height = 20}, &b), FXC_OK);
     assert_true(a.id != 0 && b.id != 0 && a.id != b.id);
     srv_loop_memory(loop, &after);
-    assert_int_equal(after.viewers - before.viewers, (uint64_t)(32 * 16 + 40 * 20) * (5 * 4 + 12 + 3));
-    assert_int_equal(SRV_VIEWER_BYTES_PER_PIXEL, 5 * 4 + 12 + 3); /* what the command line checks against */
+    /* triangle, barycentrics, footprint, depth (4 each), side (1), radiance (12), sRGB (3) */
+    assert_int_equal(after.viewers - before.viewers, (uint64_t)(32 * 16 + 40 * 20) * (5 * 4 + 1 + 12 + 3));
+    assert_int_equal(SRV_VIEWER_BYTES_PER_PIXEL,
+                     5 * 4 + 1 + 12 + 3); /* what the command line checks against */
     srv_camera cam = srv_camgen_camera(SRV_CAMGEN_STATIC, f->s, 0, 1, 0, 1);
     srv_frame_stats st;
     fxt_frame(loop, (srv_viewer_id[]){a, b}, 2, (srv_camera[]){cam, cam}, &st);

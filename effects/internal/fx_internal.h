@@ -149,6 +149,13 @@ static inline bool fx__light_arriving(const scene_light *light, const float orig
     return *scale > 0;
 }
 
+/* The normal of one side of a surface: n, or -n for its back (a block of a twin island, fx_block_job.back). */
+static inline void fx__side_normal(const float n[3], bool back, float out[3])
+{
+    for (int k = 0; k < 3; k++)
+        out[k] = back ? -n[k] : n[k];
+}
+
 /* An orthonormal basis (t, b) around unit n, branchless and continuous except at n.z = 0 sign flips
  * (Duff et al. 2017, "Building an Orthonormal Basis, Revisited"). */
 static inline void fx__onb(const float n[3], float t[3], float b[3])
@@ -275,9 +282,11 @@ static inline void fx__surface_map_bary(const fx__surface_map *map, const float 
 
 /* For the no-cache baseline, which knows a visible point and its normal but not its triangle: finds the
  * triangle facing along normal (within 25 degrees) nearest to pos, within fx__robust_distance of it
- * (Embree's point query), and sets map up for it with points kept margin metres inside (raised as in
- * fx__triangle_map_init), then `settled` = pos clamped into that shrunk triangle. Returns false, with
- * settled = pos, when no such triangle is that near (a point off every surface). */
+ * (Embree's point query); when none does, the nearest facing against it (within 25 degrees: a point seen
+ * from behind its triangle, normal the side the viewer sees); and sets map up for it with points kept
+ * margin metres inside (raised as in fx__triangle_map_init), then `settled` = pos clamped into that shrunk
+ * triangle. Returns false, with settled = pos, when no such triangle is that near (a point off every
+ * surface). */
 bool fx__locate_point(const fx_context *ctx, const float pos[3], const float normal[3], float margin,
                       fx__surface_map *map, float settled[3]);
 

@@ -215,7 +215,7 @@ FXC_HOT_INLINE void gather_pixel(srv_loop *loop, srv_viewer *view, uint32_t x, u
             memcpy(px->position, pt->position, sizeof px->position);
     }
     px->triangle = tri;
-    px->island = memo->island;
+    px->island = memo->island | (uint32_t)view->back[p] << 31; /* the side seen: SCENE_ISLAND_BACK */
     px->footprint = view->footprint[p];
     px->island_u = w * memo->island_uv[0] + u * memo->island_uv[2] + v * memo->island_uv[4];
     px->island_v = w * memo->island_uv[1] + u * memo->island_uv[3] + v * memo->island_uv[5];
@@ -283,6 +283,7 @@ FXC_HOT_INLINE uint32_t gather_tile_run(srv_loop *loop, srv_viewer *view, uint32
     const size_t width = view->frame.width;
     const uint32_t *tris = view->tri;
     const float *bary_u = view->bary_u, *bary_v = view->bary_v, *footprint = view->footprint;
+    const uint8_t *back = view->back;
     float *views_ao = view->views[SRV_VIEW_AO], *views_shadow = view->views[SRV_VIEW_SHADOW],
           *views_sharing = view->views[SRV_VIEW_SHARING], *radiance = view->radiance;
     uint32_t count = 0, last = SRV_MISS, island = 0, width0 = 0, height0 = 0;
@@ -319,7 +320,7 @@ FXC_HOT_INLINE uint32_t gather_tile_run(srv_loop *loop, srv_viewer *view, uint32
             pl->footprint[i] = footprint[p];
             cs->lane_x[i] = (float)x;
             cs->lane_y[i] = (float)y;
-            pl->island[i] = island;
+            pl->island[i] = island | (uint32_t)back[p] << 31; /* the side seen: SCENE_ISLAND_BACK */
             pl->width0[i] = width0;
             pl->height0[i] = height0;
             cs->lane_normal[0][i] = n0;

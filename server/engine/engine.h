@@ -142,10 +142,11 @@ typedef struct srv_viewer_desc {
                                SRV_LIST_BYTES_PER_ENTRY), whatever the image size */
 } srv_viewer_desc;
 
-/* Bytes srv_viewer_add allocates per pixel: triangle, barycentric u and v, footprint, depth (4 each), linear
- * radiance (12), sRGB image (3); and the three kept views with keep_views (4 each). For memory checks before
- * anything is created; tests/test_engine.c checks them against the counted allocations. */
-#define SRV_VIEWER_BYTES_PER_PIXEL 35u
+/* Bytes srv_viewer_add allocates per pixel: triangle, barycentric u and v, footprint, depth (4 each), the
+ * side seen (1), linear radiance (12), sRGB image (3); and the three kept views with keep_views (4 each).
+ * For memory checks before anything is created; tests/test_engine.c checks them against the counted
+ * allocations. */
+#define SRV_VIEWER_BYTES_PER_PIXEL 36u
 #define SRV_VIEWS_BYTES_PER_PIXEL  12u
 /* A sparse viewer's list and its sorting scratch, per entry (4 each). */
 #define SRV_LIST_BYTES_PER_ENTRY 8u

@@ -145,12 +145,13 @@ static uint32_t osc_kind_pixel_requests(const void *cache, uint32_t slot, const 
             const srv_pixel *px = &pixels[first + i];
             uint32_t level = (uint32_t)L.level[i];
             if (L.inside[i]) {
-                /* floor(x - 0.5) + 1, 16 bits each: island 28 bits, level 4 (islands beyond 2^28 are not
-                 * deduped) */
+                /* floor(x - 0.5) + 1, 16 bits each: level 4, island 28 bits (the id rotated left by one:
+                 * its index, then its side bit; islands of index 2^27 and beyond are not deduped) */
                 uint64_t cx = (uint64_t)L.cx[i], cy = (uint64_t)L.cy[i];
-                uint64_t signature = (uint64_t)px->island << 36 | (uint64_t)level << 32 | cy << 16 | cx;
+                uint32_t island = px->island << 1 | px->island >> 31;
+                uint64_t signature = (uint64_t)island << 36 | (uint64_t)level << 32 | cy << 16 | cx;
                 uint32_t seen_slot = (uint32_t)((signature * 0x9E3779B97F4A7C15ull) >> 58); /* 6 bits: SEEN */
-                if (px->island < (1u << 28)) {
+                if (island < (1u << 28)) {
                     if (seen[seen_slot] == signature)
                         continue;
                     seen[seen_slot] = signature;
@@ -158,8 +159,8 @@ static uint32_t osc_kind_pixel_requests(const void *cache, uint32_t slot, const 
             }
             if (px->island != memo_island) {
                 memo_island = px->island;
-                width0 = islands[memo_island].width;
-                height0 = islands[memo_island].height;
+                width0 = islands[memo_island & SCENE_ISLAND_INDEX].width;
+                height0 = islands[memo_island & SCENE_ISLAND_INDEX].height;
             }
             n += osc_bilinear_keys(effect, px->island, width0, height0, level, L.x[i], L.y[i], keys + n,
                                    masks + n);
@@ -235,7 +236,8 @@ static void osc_kind_job_location(const void *cache, uint32_t effect, uint64_t k
     (void)cache, (void)effect;
     osc_key_fields f = osc_key_unpack(key);
     job->key = key;
-    job->island = f.island_id;
+    job->island = f.island_id & SCENE_ISLAND_INDEX;
+    job->back = (f.island_id & SCENE_ISLAND_BACK) != 0;
     job->level = f.level;
     job->block_x = f.block_x;
     job->block_y = f.block_y;
@@ -248,7 +250,7 @@ static uint64_t osc_kind_finer_texels(void *cache, uint32_t effect, uint32_t blo
     osc_key_fields key = osc_key_unpack(osc_block_key(k->osc, effect, block));
     if (key.level == 0 || need == 0)
         return 0;
-    const scene_island *island = &k->s->islands[key.island_id];
+    const scene_island *island = &k->s->islands[key.island_id & SCENE_ISLAND_INDEX]; /* either side */
     uint32_t fine_w = osc_level_size(island->width, key.level - 1);
     uint32_t fine_h = osc_level_size(island->height, key.level - 1);
     uint32_t texel_bytes = osc_pool_texel_bytes(k->osc, effect);
@@ -476,7 +478,7 @@ FXC_HOT_INLINE void taps_state_island(taps_state *st, uint32_t island, uint32_t 
 {
     st->memo_island = island;
     st->memo_level = level;
-    const scene_island *is = &st->islands[island];
+    const scene_island *is = &st->islands[island & SCENE_ISLAND_INDEX]; /* either side's */
     st->w = (long)((is->width + (1u << level) - 1u) >> level);
     st->h = (long)((is->height + (1u << level) - 1u) >> level);
     bool small = st->w > 0 && st->h > 0 && st->w < (1l << 24) && st->h < (1l << 24);
@@ -788,8 +790,8 @@ FXC_HOT_CLONES static uint32_t osc_kind_pixel_taps(const void *cache, uint32_t s
             copy.footprint[i] = pixels[i].footprint;
             uint32_t island = pixels[i].island;
             copy.island[i] = island;
-            copy.width0[i] = islands[island].width;
-            copy.height0[i] = islands[island].height;
+            copy.width0[i] = islands[island & SCENE_ISLAND_INDEX].width;
+            copy.height0[i] = islands[island & SCENE_ISLAND_INDEX].height;
         }
         for (; i < SRV_RUN; i++) {
             copy.island_u[i] = copy.island_v[i] = copy.footprint[i] = 0.0f;

@@ -390,6 +390,7 @@ static void viewer_free_buffers(srv_loop *loop, srv_viewer *view)
     srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->bary_v, n, 0, sizeof(float));
     srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->footprint, n, 0, sizeof(float));
     srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->depth, n, 0, sizeof(float));
+    srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->back, n, 0, 1);
     srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->coarse, view->coarse ? n : 0, 0, 1);
     srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->samples,
                 view->samples ? SRV_SAMPLE_VALUES * view->sample_capacity : 0, 0, sizeof(float));
@@ -500,6 +501,7 @@ fxc_result srv_viewer_add(srv_loop *loop, const srv_viewer_desc *desc, srv_viewe
     ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->bary_v, 0, n, sizeof(float));
     ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->footprint, 0, n, sizeof(float));
     ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->depth, 0, n, sizeof(float));
+    ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->back, 0, n, 1);
     if (!view->sparse && loop->coarse_effect != SRV_NO_EFFECT) { /* requests' sample choice for compose */
         ok = ok && srv__resize(loop, SRV_MEM_VIEWERS, (void **)&view->coarse, 0, n, 1);
         /* the frame-wide sample image, sized for the smallest block (2) */

@@ -333,7 +333,7 @@ static void ref_tile(void *user, uint32_t task_index, uint32_t thread_index)
     uint32_t tx1 = tx0 + SRV_TILE < f->width ? tx0 + SRV_TILE : f->width;
     uint32_t ty1 = ty0 + SRV_TILE < f->height ? ty0 + SRV_TILE : f->height;
     srv__visibility_tile(ref->desc.s, ref->desc.rt, f, tx0, ty0, ref->tri, ref->bary_u, ref->bary_v,
-                         ref->depth, ref->footprint);
+                         ref->depth, ref->footprint, NULL);
     uint64_t rays[SRV_MAX_EFFECTS] = {0};
     for (uint32_t y = ty0; y < ty1; y++)
         for (uint32_t x = tx0; x < tx1; x++) {

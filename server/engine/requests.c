@@ -93,7 +93,7 @@ FXC_HOT_INLINE void fill_pixel(const scene *s, const srv_viewer *view, size_t p,
         }
     }
     px->triangle = tri;
-    px->island = memo->island;
+    px->island = memo->island | (uint32_t)view->back[p] << 31; /* the side seen: SCENE_ISLAND_BACK */
     px->footprint = view->footprint[p];
     float u = view->bary_u[p], v = view->bary_v[p], w = 1.0f - u - v;
     if (!positions) { /* a kind reads island UVs or positions, never both (needs_position) */

@@ -1,9 +1,10 @@
 /* Stage 2, visibility: one primary ray per pixel through Embree's 16-wide packets (4 x 4 pixels), in
  * 16 x 16-pixel tiles spread over the thread pool (a sparse viewer: packets of 16 consecutive entries of its
- * sorted list, 256 entries per task). Per pixel it keeps the triangle, the barycentrics and
- * the footprint: the pixel's size on the surface from ray differentials (the neighbouring pixels' rays
+ * sorted list, 256 entries per task). Per pixel it keeps the triangle, the barycentrics, the
+ * footprint: the pixel's size on the surface from ray differentials (the neighbouring pixels' rays
  * intersected with the hit triangle's plane), in level-0 texels, as log2 - the level an unbiased effect
- * reads. */
+ * reads - and the side of the triangle the ray meets (back: the ray runs along its geometric normal), which
+ * decides which side's cached shadows and AO the pixel reads (requests and compose take it from here). */
 #include "engine_internal.h"
 
 #include <embree3/rtcore.h>
@@ -59,11 +60,12 @@ static float pixel_footprint(const srv_camera_frame *f, const float dir[3], floa
  * pixel traced in a tile or from a list gets the same ray. */
 static void trace_packet(const scene *s, RTCScene rtc, const srv_camera_frame *f, const uint32_t x[16],
                          const uint32_t y[16], const size_t index[16], const int valid_lane[16],
-                         uint32_t *tri, float *bary_u, float *bary_v, float *depth, float *footprint)
+                         uint32_t *tri, float *bary_u, float *bary_v, float *depth, float *footprint,
+                         uint8_t *back)
 {
     _Alignas(64) struct RTCRayHit16 packet;
     _Alignas(64) int valid[16];
-    float dirs[16][3];
+    float dirs[16][3], plane_dirs[16][3]; /* unit, and on the image plane (not normalised) */
     struct RTCIntersectContext ctx;
     /* The image plane per pixel: dir = forward + sx * right + sy * up, normalised (srv_camera_ray, inlined). */
     const float scale_x = 2.0f * f->tan_half_x / (float)f->width,
@@ -76,6 +78,7 @@ static void trace_packet(const scene *s, RTCScene rtc, const srv_camera_frame *f
         for (int k = 0; k < 3; k++) {
             d[k] = f->forward[k] + sx * f->right[k] + sy * f->up[k];
             len2 += d[k] * d[k];
+            plane_dirs[i][k] = d[k];
         }
         float inv = 1.0f / sqrtf(len2);
         for (int k = 0; k < 3; k++)
@@ -108,6 +111,11 @@ static void trace_packet(const scene *s, RTCScene rtc, const srv_camera_frame *f
         }
         uint32_t hit = packet.hit.primID[i];
         tri[p] = hit;
+        if (back) { /* the sign of compose's own facing test (gather_pixel): the same operations, in order */
+            const float *n = s->tri_normal + 3 * (size_t)hit, *d = plane_dirs[i];
+            float facing = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
+            back[p] = facing > 0;
+        }
         bary_u[p] = packet.hit.u[i];
         bary_v[p] = packet.hit.v[i];
         depth[p] = packet.ray.tfar[i];
@@ -118,7 +126,7 @@ static void trace_packet(const scene *s, RTCScene rtc, const srv_camera_frame *f
 
 void srv__visibility_tile(const scene *s, scene_rt *rt, const srv_camera_frame *f, uint32_t tile_x,
                           uint32_t tile_y, uint32_t *tri, float *bary_u, float *bary_v, float *depth,
-                          float *footprint)
+                          float *footprint, uint8_t *back)
 {
     RTCScene rtc = scene_rt_handle(rt);
     uint32_t xs[16], ys[16];
@@ -132,13 +140,13 @@ void srv__visibility_tile(const scene *s, scene_rt *rt, const srv_camera_frame *
                 valid[i] = xs[i] < f->width && ys[i] < f->height;
                 index[i] = valid[i] ? (size_t)ys[i] * f->width + xs[i] : 0;
             }
-            trace_packet(s, rtc, f, xs, ys, index, valid, tri, bary_u, bary_v, depth, footprint);
+            trace_packet(s, rtc, f, xs, ys, index, valid, tri, bary_u, bary_v, depth, footprint, back);
         }
 }
 
 void srv__visibility_list(const scene *s, scene_rt *rt, const srv_camera_frame *f, const uint32_t *list,
                           uint32_t first, uint32_t count, uint32_t *tri, float *bary_u, float *bary_v,
-                          float *depth, float *footprint)
+                          float *depth, float *footprint, uint8_t *back)
 {
     uint32_t xs[16] = {0}, ys[16] = {0};
     size_t index[16] = {0};
@@ -149,7 +157,8 @@ void srv__visibility_list(const scene *s, scene_rt *rt, const srv_camera_frame *
         index[i] = first + i;
         valid[i] = 1;
     }
-    trace_packet(s, scene_rt_handle(rt), f, xs, ys, index, valid, tri, bary_u, bary_v, depth, footprint);
+    trace_packet(s, scene_rt_handle(rt), f, xs, ys, index, valid, tri, bary_u, bary_v, depth, footprint,
+                 back);
 }
 
 typedef struct visibility_task {
@@ -166,7 +175,7 @@ static void visibility_tile(void *user, uint32_t task_index, uint32_t thread_ind
     srv_viewer *view = task->view;
     srv__visibility_tile(task->loop->s, task->loop->rt, &view->frame, (task_index % task->tiles_x) * SRV_TILE,
                          (task_index / task->tiles_x) * SRV_TILE, view->tri, view->bary_u, view->bary_v,
-                         view->depth, view->footprint);
+                         view->depth, view->footprint, view->back);
 }
 
 enum { LIST_TASK = 256 }; /* listed pixels per visibility task: 16 packets */
@@ -182,7 +191,7 @@ static void visibility_list_task(void *user, uint32_t task_index, uint32_t threa
         end = view->list_count;
     for (uint32_t at = first; at < end; at += 16)
         srv__visibility_list(task->loop->s, task->loop->rt, &view->frame, view->list, at, end - at, view->tri,
-                             view->bary_u, view->bary_v, view->depth, view->footprint);
+                             view->bary_u, view->bary_v, view->depth, view->footprint, view->back);
 }
 
 void srv__visibility(srv_loop *loop, srv_viewer *view)

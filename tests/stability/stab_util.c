@@ -69,7 +69,10 @@ static void check_osc_block(srv_loop *loop, uint32_t e, uint32_t block, uint64_t
     const srv_cache_kind *kind = loop->kinds[SCENE_CACHE_ON_SURFACE];
     const uint8_t *payload = kind->block_payload(loop->caches[SCENE_CACHE_ON_SURFACE], e, block);
     uint32_t bytes = fx->texel_bytes(s);
-    uint32_t island = (uint32_t)(key >> 28), level = (uint32_t)(key >> 24) & 0xf;
+    /* The island field names a side too (SCENE_ISLAND_BACK: the twin island of its back). */
+    uint32_t island_id = (uint32_t)(key >> 28), level = (uint32_t)(key >> 24) & 0xf;
+    uint32_t island = island_id & SCENE_ISLAND_INDEX;
+    bool back = (island_id & SCENE_ISLAND_BACK) != 0;
     uint32_t block_y = (uint32_t)(key >> 12) & 0xfff, block_x = (uint32_t)key & 0xfff;
     if (island >= s->island_count)
         fail_msg("effect %s: block %u holds key %016llx of island %u (the scene has %u)", fx->name, block,
@@ -101,7 +104,8 @@ static void check_osc_block(srv_loop *loop, uint32_t e, uint32_t block, uint64_t
                 fail_msg("AO texel %u of key %016llx: %u samples (1..%d)", t, (unsigned long long)key, count,
                          FX_AO_MAX_SAMPLES);
         } else if (strcmp(fx->name, "shadow") == 0) {
-            /* A texel facing away from a directional light holds 0 for it (no ray is traced). */
+            /* A texel facing away from a directional light holds 0 for it (no ray is traced): the side's normal,
+             * negated for a back block. */
             uint32_t lookup;
             if (!lookup_texel(loop, e, block, t, &lookup))
                 continue;
@@ -116,6 +120,7 @@ static void check_osc_block(srv_loop *loop, uint32_t e, uint32_t block, uint64_t
                     continue;
                 double facing =
                     -(n[0] * light->direction[0] + n[1] * light->direction[1] + n[2] * light->direction[2]);
+                facing = back ? -facing : facing;
                 if (facing < -1e-6 && le_u16(texel + 2 * l) != 0)
                     fail_msg("shadow texel %u of key %016llx faces away from light %u (cos %g) but holds "
                              "mask %04x",

@@ -49,7 +49,8 @@ typedef struct srv_request_list {
 
 /* A visible pixel as the cache kinds see it. */
 typedef struct srv_pixel {
-    uint32_t triangle, island;
+    uint32_t triangle;
+    uint32_t island;          /* the triangle's island and the side seen: | SCENE_ISLAND_BACK for its back */
     float island_u, island_v; /* level-0 island texels */
     float footprint;          /* log2 of the pixel's footprint in level-0 texels */
     /* Filled only when a cache kind asks for them (needs_position; its request pass then leaves island_u/v
@@ -65,7 +66,8 @@ typedef struct srv_pixel {
  * copy them out of srv_pixel again for each call. */
 typedef struct srv_pixel_lanes {
     float island_u[SRV_RUN], island_v[SRV_RUN], footprint[SRV_RUN];
-    uint32_t island[SRV_RUN], width0[SRV_RUN], height0[SRV_RUN];
+    uint32_t island[SRV_RUN]; /* with the side bit, as srv_pixel.island */
+    uint32_t width0[SRV_RUN], height0[SRV_RUN];
 } srv_pixel_lanes;
 
 /* A viewer slot. A sparse viewer's per-pixel buffers are indexed by position in its list, not by y * width
@@ -86,6 +88,8 @@ typedef struct srv_viewer {
     float *bary_u, *bary_v;
     float *footprint;       /* log2 of the pixel's footprint in level-0 texels (ray differentials) */
     float *depth;           /* distance along the primary ray, INFINITY for none */
+    uint8_t *back;          /* 1 where the ray meets its triangle's back (visibility; requests and compose
+                               read the island's back, SCENE_ISLAND_BACK), else 0; unset for a miss */
     uint8_t *coarse;        /* whole frames with a coarse effect: per pixel, this frame's srv__coarse_mask
                                   (written by requests, read by compose); NULL otherwise */
     float *samples;         /* whole frames with a coarse effect: the frame's block samples' terms, evaluated
@@ -452,17 +456,19 @@ void srv__visibility(srv_loop *loop, srv_viewer *view);
 
 /* The primary rays of one SRV_TILE x SRV_TILE tile of frame f whose top-left pixel is (tile_x, tile_y), in
  * 4 x 4 packets: per pixel of the tile (index y * width + x) the triangle (SRV_MISS for none), barycentrics,
- * depth (INFINITY for none) and footprint (log2 of level-0 texels). What srv__visibility writes into a
- * viewer's buffers; the reference renderer uses it so it sees the same surface at every pixel. */
+ * depth (INFINITY for none), footprint (log2 of level-0 texels) and, when back is not NULL, whether the ray
+ * meets the triangle's back (1; compose's facing test: the geometric normal's dot with the pixel's ray on the
+ * image plane > 0). What srv__visibility writes into a viewer's buffers; the reference renderer uses it so
+ * it sees the same surface at every pixel. */
 void srv__visibility_tile(const scene *s, scene_rt *rt, const srv_camera_frame *f, uint32_t tile_x,
                           uint32_t tile_y, uint32_t *tri, float *bary_u, float *bary_v, float *depth,
-                          float *footprint);
+                          float *footprint, uint8_t *back);
 
 /* The primary rays of up to 16 listed pixels (packed y << 16 | x of frame f), one packet: what
  * srv__visibility_tile computes for those pixels, written at their list positions first..first+count-1. */
 void srv__visibility_list(const scene *s, scene_rt *rt, const srv_camera_frame *f, const uint32_t *list,
                           uint32_t first, uint32_t count, uint32_t *tri, float *bary_u, float *bary_v,
-                          float *depth, float *footprint);
+                          float *depth, float *footprint, uint8_t *back);
 
 /* Differentials of the hit position at distance t along unit ray dir on the plane of normal n: the offsets
  * to where the rays through the next pixel right (dpdx) and down (dpdy) meet that plane (grazing: at most 64
