@@ -650,7 +650,7 @@ const char *view_options_help(void)
            "\n"
            "Exit status: 0 when every viewer ended well; 1 when one failed (refused by the server, could "
            "not\n"
-           "connect, timed out, the connection closed early, a message that does not decode; each gets one "
-           "line\n"
-           "on stderr and the others go on); 2 for a bad option or an unreadable --trace file.\n";
+           "connect, timed out, the connection closed early, a message or a frame's picture that does not\n"
+           "decode; each gets one line on stderr and the others go on); 2 for a bad option, or a --trace,\n"
+           "--out, --display-out or --stats that cannot be used.\n";
 }
