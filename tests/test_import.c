@@ -282,6 +282,77 @@ static void test_missing_texture_counted(void **state)
     scene_free(s);
 }
 
+/* A damaged PNG texture gives one warning line and nothing else on stderr (file descriptor 2, where libpng's
+ * own handler wrote "libpng error: IDA[AB]: invalid chunk type" as a second line, and where OpenImageIO's
+ * message for a truncated PNG spread over three lines); the material keeps its colour. */
+static void test_damaged_png_one_line(void **state)
+{
+    (void)state;
+    uint8_t pixels[4 * 4 * 3];
+    memset(pixels, 200, sizeof pixels);
+    char msg[256];
+    const char *good = fxt_tmp_path("good.png");
+    assert_int_equal(scene_image_write_u8(good, 4, 4, 3, pixels, msg, sizeof msg), 0);
+    uint8_t bytes[4096];
+    FILE *f = fopen(good, "rb");
+    assert_non_null(f);
+    size_t len = fread(bytes, 1, sizeof bytes, f);
+    fclose(f);
+    uint8_t *idat = NULL;
+    for (size_t i = 0; i + 4 <= len && !idat; i++)
+        if (memcmp(bytes + i, "IDAT", 4) == 0)
+            idat = bytes + i;
+    assert_non_null(idat);
+    static const char *const names[2] = {"bad_chunk.png", "cut.png"};
+    for (int k = 0; k < 2; k++) {
+        char mtl[128], obj[256], err_path[1024];
+        snprintf(mtl, sizeof mtl, "newmtl m\nKd 0.5 0.5 0.5\nmap_Kd %s\n", names[k]);
+        fxt_write_file(k ? "cut.mtl" : "bad_chunk.mtl", mtl);
+        snprintf(obj, sizeof obj,
+                 "mtllib %s\nusemtl m\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n",
+                 k ? "cut.mtl" : "bad_chunk.mtl");
+        char obj_path[1024]; /* fxt_tmp_path's buffer is reused below */
+        snprintf(obj_path, sizeof obj_path, "%s", fxt_write_file(k ? "cut.obj" : "bad_chunk.obj", obj));
+        f = fopen(fxt_tmp_path(names[k]), "wb");
+        assert_non_null(f);
+        if (k == 0) { /* the chunk type IDAT becomes IDAB */
+            idat[3] = 'B';
+            fwrite(bytes, 1, len, f);
+            idat[3] = 'T';
+        } else { /* cut inside the image data */
+            fwrite(bytes, 1, (size_t)(idat - bytes) + 10, f);
+        }
+        fclose(f);
+        /* stderr into a file while the scene loads */
+        snprintf(err_path, sizeof err_path, "%s", fxt_tmp_path("png_stderr.txt"));
+        fflush(stderr);
+        int saved = dup(2);
+        FILE *capture = fopen(err_path, "w+");
+        assert_non_null(capture);
+        assert_true(dup2(fileno(capture), 2) >= 0);
+        scene *s = load_ok(obj_path);
+        fflush(stderr);
+        dup2(saved, 2);
+        close(saved);
+        char text[2048] = {0};
+        rewind(capture);
+        size_t n = fread(text, 1, sizeof text - 1, capture);
+        fclose(capture);
+        text[n] = 0;
+        unsigned lines = 0;
+        for (size_t i = 0; i < n; i++)
+            lines += text[i] == '\n';
+        print_message("%s: %s", names[k], text);
+        if (lines != 1 || !strstr(text, names[k]) || !strstr(text, "(using its colour)"))
+            fail_msg("%s: expected one warning line naming it, got %u lines: %s", names[k], lines, text);
+        assert_int_equal(s->texture_count, 0);
+        float rgb[3];
+        scene_albedo(s, 0, 0.3f, 0.3f, rgb);
+        assert_true(fabsf(rgb[0] - 0.5f) < 1e-6f);
+        scene_free(s);
+    }
+}
+
 /* Welding, degenerate and duplicate triangles through the builder. */
 static void test_builder_cleaning(void **state)
 {
@@ -880,6 +951,7 @@ int main(void)
         cmocka_unit_test(test_texture_bilinear_wrap),
         cmocka_unit_test(test_albedo_run_equals_filtered),
         cmocka_unit_test(test_missing_texture_counted),
+        cmocka_unit_test(test_damaged_png_one_line),
         cmocka_unit_test(test_builder_cleaning),
         cmocka_unit_test(test_mirrored_transform_keeps_winding),
         cmocka_unit_test(test_damaged_ply_refused),
