@@ -138,6 +138,7 @@ typedef struct image_sink {
     const sim_options *o;
     uint32_t last_frame; /* the run's last frame (always saved) */
     bool force;          /* save whatever frame comes (after an interruption) */
+    bool failed;         /* a write failed and said so: the frame's other viewers write nothing more */
 } image_sink;
 
 static bool save_viewer_frame(const sim_options *o, const srv_viewer_frame *vf, uint32_t viewers)
@@ -185,9 +186,12 @@ static int image_sink_frame(void *user, const srv_viewer_frame *vf)
     const sim_options *o = sink->o;
     bool chosen =
         sink->force || vf->frame == sink->last_frame || (o->save_every && vf->frame % o->save_every == 0);
+    if (sink->failed)
+        return -1; /* one line for the run (the loop still hands over the frame's other viewers) */
     if (!chosen || stop_requested) /* an interrupted run saves its last frame afterwards */
         return 0;
-    return save_viewer_frame(o, vf, o->view.viewers) ? 0 : -1;
+    sink->failed = !save_viewer_frame(o, vf, o->view.viewers);
+    return sink->failed ? -1 : 0;
 }
 
 /* Recording: the camera each viewer was rendered for, at the frame's time. */
@@ -373,8 +377,10 @@ int srv_cmd_sim(int argc, char **argv)
                                    .srgb = srv_viewer_image(loop, present[i])};
             for (int k = 0; k < SRV_VIEW_COUNT; k++)
                 vf.views[k] = srv_viewer_view(loop, present[i], k);
-            if (vf.srgb)
-                save_viewer_frame(&o, &vf, o.view.viewers);
+            if (vf.srgb && !save_viewer_frame(&o, &vf, o.view.viewers)) {
+                images.failed = true; /* it said why; the summary is still written, the exit code is 1 */
+                break;
+            }
         }
     }
 
@@ -394,7 +400,7 @@ int srv_cmd_sim(int argc, char **argv)
         goto done;
     if (!o.quiet)
         srv_cli_print_summary(&run, o.engine.no_cache, stop_requested);
-    exit_code = 0;
+    exit_code = images.failed ? 1 : 0;
 done:
     for (uint32_t v = 0; v < SRV_MAX_VIEWERS; v++)
         if (recorder.writers[v] && srv_trace_writer_close(recorder.writers[v]) != 0 && exit_code == 0) {
