@@ -89,7 +89,8 @@ static const char ref_usage[] =
     "Output:\n"
     "  --out DIR            frame_FFFF_viewer_VV.exr (linear RGB float), frame_FFFF_viewer_VV.png (display:\n"
     "                       sim's tone map and sRGB), and ref.json (the options; per image its time, rays,\n"
-    "                       noise and mean radiance), rewritten after every image\n"
+    "                       noise and mean radiance), rewritten after every image; one run at a time\n"
+    "                       per folder (another run writing it is refused)\n"
     "  --views              also the AO term and the lit fraction of light 0 as _ao.exr and _shadow.exr\n"
     "                       (as 'sim --views')\n"
     "  --quiet              no line per image on stdout\n"
@@ -302,6 +303,7 @@ int srv_cmd_ref(int argc, char **argv)
     json_t *root = NULL, *left_out_extra = json_object();
     ref_buffers buffers = {0};
     int exit_code = 1;
+    int lock = -1; /* the output folder's lock (srv_cli_lock_dir) */
     char err[512];
 
     /* Traces: sim's clock starts at the earliest first time; frames until the last trace ends. */
@@ -368,7 +370,7 @@ int srv_cmd_ref(int argc, char **argv)
         goto done;
     }
     const srv_ref_desc *resolved = srv_ref_desc_of(ref);
-    if (!srv_cli_make_dir("ref", o.out_dir))
+    if (!srv_cli_make_dir("ref", o.out_dir) || (lock = srv_cli_lock_dir("ref", o.out_dir)) < 0)
         goto done;
 
     /* ref.json: the options, then one record per image. */
@@ -516,5 +518,6 @@ done:
     scene_rt_free(rt);
     scene_free(s);
     srv_cli_cameras_free(&cams);
+    srv_cli_unlock_dir(lock);
     return exit_code;
 }

@@ -549,6 +549,7 @@ int srv_cmd_report(int argc, char **argv)
     report_plan *plan = calloc(1, sizeof *plan);
     json_t *left_out_extra = json_object();
     int exit_code = 1;
+    int lock = -1; /* the output folder's lock (srv_cli_lock_dir) */
     char err[512];
     if (!plan) {
         fprintf(stderr, "fxcache report: out of memory\n");
@@ -607,7 +608,7 @@ int srv_cmd_report(int argc, char **argv)
         fprintf(stderr, "fxcache report: %s\n", err);
         goto done;
     }
-    if (!srv_cli_make_dir("report", o.out_dir))
+    if (!srv_cli_make_dir("report", o.out_dir) || (lock = srv_cli_lock_dir("report", o.out_dir)) < 0)
         goto done;
     char sub[1400];
     const char *subdirs[] = {"done", "heatmaps", "frames", "plots"};
@@ -748,5 +749,6 @@ done:
     scene_free(s);
     json_decref(left_out_extra);
     srv_cli_cameras_free(&cams);
+    srv_cli_unlock_dir(lock);
     return exit_code;
 }
