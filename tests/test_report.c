@@ -486,6 +486,21 @@ static void test_cli_trace_ends_before_compared_frames(void **state)
         if (strncmp(csv[0][k], "rmse", 4) == 0 || strcmp(csv[0][k], "psnr_db") == 0)
             if (csv[1][k][0])
                 fail_msg("configs.csv: %s is '%s' with no frame compared", csv[0][k], csv[1][k]);
+
+    /* A trace of one camera: gone before the warm-up ends, so no timed frame has a viewer; its line said
+     * "nan per viewer". */
+    snprintf(trace_path, sizeof trace_path, "%s",
+             fxt_write_file("report_one.trace", "fxcache-trace 1\n0 0 1.6 3 0 -0.2 -1 60\n"));
+    remove_tree(dir);
+    snprintf(
+        args, sizeof args,
+        "report --out %s --trace %s --res 16x9 --frames 3 --warmup 1 --every 2 --threads 1 --only default "
+        "--ref-samples 1/8 --effects shadow",
+        dir, trace_path);
+    err[0] = 0;
+    rc = fxt_run_cli(args, NULL, 0, err, sizeof err);
+    if (rc != 0 || strstr(err, "nan") || !strstr(err, "(no viewer present, CPU"))
+        fail_msg("one camera: exit %d: %s", rc, err);
 }
 
 /* Two runs writing one folder at once: while another process holds DIR/.fxcache.lock (here, a child of the

@@ -685,21 +685,23 @@ int srv_cmd_report(int argc, char **argv)
         char ao_text[48] = "";
         if (isfinite(row->rmse_ao))
             snprintf(ao_text, sizeof ao_text, ", AO %.3g", row->rmse_ao);
+        char per_viewer[48] = "no viewer present"; /* after the warm-up (a trace ended before it) */
+        if (isfinite(row->ms_per_viewer))
+            snprintf(per_viewer, sizeof per_viewer, "%.1f per viewer", row->ms_per_viewer);
         if (row->images ==
             0) /* every viewer had left (traces shorter than --frames) before a compared frame */
             fprintf(stderr,
-                    "report: [%zu/%zu] %s: %.1f ms/frame (%.1f per viewer, CPU %.1f), no error: no frame "
+                    "report: [%zu/%zu] %s: %.1f ms/frame (%s, CPU %.1f), no error: no frame "
                     "after the warm-up was compared with a viewer present (the traces end before it; lower "
                     "--frames or --warmup) (%.1f s)\n",
-                    i + 1, plan->count, row->id, row->ms_per_frame, row->ms_per_viewer, row->cpu_ms_per_frame,
+                    i + 1, plan->count, row->id, row->ms_per_frame, per_viewer, row->cpu_ms_per_frame,
                     row->run_s);
         else
-            fprintf(
-                stderr,
-                "report: [%zu/%zu] %s: %.1f ms/frame (%.1f per viewer, CPU %.1f), RMSE %.4g, PSNR %.2f dB, "
-                "shadow %.3g%s (%.1f s)\n",
-                i + 1, plan->count, row->id, row->ms_per_frame, row->ms_per_viewer, row->cpu_ms_per_frame,
-                row->rmse, row->psnr_db, row->rmse_shadow, ao_text, row->run_s);
+            fprintf(stderr,
+                    "report: [%zu/%zu] %s: %.1f ms/frame (%s, CPU %.1f), RMSE %.4g, PSNR %.2f dB, "
+                    "shadow %.3g%s (%.1f s)\n",
+                    i + 1, plan->count, row->id, row->ms_per_frame, per_viewer, row->cpu_ms_per_frame,
+                    row->rmse, row->psnr_db, row->rmse_shadow, ao_text, row->run_s);
         if (!write_outputs(plan, &o, NULL, NULL, NULL, false, NULL)) /* the CSVs after every configuration */
             goto done;
     }
