@@ -176,6 +176,50 @@ static void test_subcommand_help(void **state)
     assert_contains(out_buf, "--no-cache");
 }
 
+/* --help states each option's range as the option's refusal does: the value just outside is refused naming
+ * that range, and the help has the same range. --fps said (0, 1000] where 0.0005 is refused ([0.001, 1000]);
+ * --save-every, --threads, --ray-budget, ref's --every and report's --heatmap-max gave none. */
+static void test_help_ranges_match_refusals(void **state)
+{
+    (void)state;
+    static const struct {
+        const char *command, *option, *outside, *refusal, *help;
+    } cases[] = {
+        {"sim", "--fps", "0.0005", "in [0.001, 1000]", "[0.001, 1000]"},
+        {"serve", "--fps", "0.0005", "in [0.001, 1000]", "[0.001, 1000]"},
+        {"ref --out x", "--fps", "0.0005", "in [0.001, 1000]", "[0.001, 1000]"},
+        {"report --out x", "--fps", "0.0005", "in [0.001, 1000]", "[0.001, 1000]"},
+        {"sim", "--save-every", "1000001", "in [0, 1000000]", "0..1000000"},
+        {"ref --out x", "--every", "1000001", "in [0, 1000000]", "0..1000000"},
+        {"sim", "--threads", "257", "in [0, 256]", "0..256"},
+        {"serve", "--threads", "257", "in [0, 256]", "0..256"},
+        {"ref --out x", "--threads", "257", "in [0, 256]", "0..256"},
+        {"sim", "--ray-budget", "2e12", "in [0, 1e+12]", "0..1e12"},
+        {"report --out x", "--heatmap-max", "2e6", "in [1e-06, 1e+06]", "[1e-6, 1e6]"},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        int rc = run("%s %s %s", cases[i].command, cases[i].option, cases[i].outside);
+        if (rc != 2 || !strstr(err_buf, cases[i].refusal))
+            fail_msg("%s %s %s: exit %d, '%s'", cases[i].command, cases[i].option, cases[i].outside, rc,
+                     err_buf);
+        char command[64];
+        snprintf(command, sizeof command, "%s", cases[i].command);
+        command[strcspn(command, " ")] = 0;
+        assert_int_equal(run("%s --help", command), 0);
+        /* the option's entry: from its name to the next option's */
+        char key[64];
+        snprintf(key, sizeof key, "  %s ", cases[i].option);
+        const char *entry = strstr(out_buf, key);
+        assert_non_null(entry);
+        const char *next = strstr(entry + 3, "\n  --");
+        size_t len = next ? (size_t)(next - entry) : strlen(entry);
+        char text[1024];
+        snprintf(text, sizeof text, "%.*s", (int)(len < sizeof text ? len : sizeof text - 1), entry);
+        if (!strstr(text, cases[i].help))
+            fail_msg("%s --help: %s lacks '%s': %s", command, cases[i].option, cases[i].help, text);
+    }
+}
+
 /* --indirect-block: in both commands' --help; in sim, the block a frame uses is the largest of 1, 2, 4 up
  * to N within the rule (a quarter of the narrowest probe cell in pixels). At 320 x 180 and 60 degrees the
  * rule allows 2: the default (4) and 2 give the same bytes, 1 (every pixel) other bytes, and the summary
@@ -1214,6 +1258,7 @@ int main(void)
         cmocka_unit_test(test_help_lists_commands),
         cmocka_unit_test(test_unknown_command),
         cmocka_unit_test(test_subcommand_help),
+        cmocka_unit_test(test_help_ranges_match_refusals),
         cmocka_unit_test(test_indirect_block_option),
         cmocka_unit_test(test_scene_info_default),
         cmocka_unit_test(test_scene_info_bunny),

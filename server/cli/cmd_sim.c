@@ -60,11 +60,12 @@ static const char sim_usage[] =
     "                       %s\n"
     "  --trace FILE         a viewer trace (repeat once per viewer; see docs/TRACE_FORMAT.md): the viewer\n"
     "                       joins at its first time and leaves after its last\n"
-    "  --fps F              frames per second of trace time when replaying, (0, 1000] (default 30)\n"
+    "  --fps F              frames per second of trace time when replaying, [0.001, 1000] (default 30)\n"
     "  --record DIR         write the cameras each viewer was rendered for as DIR/viewer_NN.trace\n"
     "                       (version 2, with the resolution; replay with --trace)\n"
     "  --out DIR            write frames as DIR/frame_FFFF_viewer_VV.png\n"
-    "  --save-every K       frames to save: every K-th and the last (default 0: only the last)\n"
+    "  --save-every K       frames to save: every K-th and the last, 0..1000000 (default 0: only the\n"
+    "                       last)\n"
     "  --views              with --out: also AO and shadow as linear EXR, and a picture of how many\n"
     "                       viewers requested the blocks each pixel reads (_sharing.png)\n"
     "  --stats FILE         one JSON line of statistics per frame\n"
@@ -107,7 +108,14 @@ static int parse_options(int argc, char **argv, sim_options *o)
             srv_cli_effect_names(names, sizeof names);
             printf(sim_usage, srv_camgen_list());
             printf(srv_cli_engine_usage, names);
-            printf("  -h, --help           this text\n");
+            printf(
+                "  -h, --help           this text\n"
+                "\n"
+                "SIGINT or SIGTERM during the scene's load: one line, nothing written, exit 128 + signal;\n"
+                "during the frames: the current frame finishes, then the statistics, traces, the last\n"
+                "frame's images and the summary (interrupted: true) are written.\n"
+                "Exit status: 0 done or interrupted during the frames, 1 a failure (scene, trace, writing\n"
+                "files), 2 bad options or a run larger than the machine's memory.\n");
             return 0;
         }
         default: return srv_cli_getopt_error("sim", c, argv);
