@@ -125,7 +125,19 @@ static void test_sim_frames_unwritable(void **state)
             remove(link);
             assert_int_equal(symlink("/dev/full", link), 0);
         }
-    int rc = run("sim --frames 1 --viewers 2 --res 16x9 --threads 1 --quiet --out %s", out);
+    /* A summary that cannot be written: one line, exit 1, and no partial file left (an empty one was). */
+    char full_summary[1024];
+    tmp_path(full_summary, sizeof full_summary, "full_summary_link.json");
+    remove(full_summary);
+    assert_int_equal(symlink("/dev/full", full_summary), 0);
+    int rc = run("sim --frames 1 --viewers 1 --res 16x9 --threads 1 --quiet --summary %s", full_summary);
+    assert_int_equal(rc, 1);
+    assert_one_line_error();
+    assert_contains(err_buf, "full_summary_link.json: No space left on device");
+    struct stat st;
+    assert_int_equal(lstat(full_summary, &st), -1);
+
+    rc = run("sim --frames 1 --viewers 2 --res 16x9 --threads 1 --quiet --out %s", out);
     assert_int_equal(rc, 1);
     assert_one_line_error();
     assert_contains(err_buf, "frame_0000_viewer_00.png: cannot write: No space left on device");

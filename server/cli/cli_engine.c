@@ -481,13 +481,21 @@ json_t *srv_cli_summary_json(const srv_cli_run *run, const srv_cli_engine *e)
 
 bool srv_cli_write_json(const char *cmd, const char *path, const json_t *value)
 {
+    errno = 0;
     FILE *file = fopen(path, "w");
-    bool written = file && json_dumpf(value, file, JSON_INDENT(2) | JSON_PRESERVE_ORDER) == 0;
+    bool written =
+        file && json_dumpf(value, file, JSON_INDENT(2) | JSON_PRESERVE_ORDER) == 0 && fflush(file) == 0;
     int saved = errno;
-    if (file && fclose(file) != 0)
+    if (file && fclose(file) != 0 && written) {
         written = false;
-    if (!written)
+        saved = errno;
+    }
+    if (!written) {
+        /* a summary that is there is whole: a partial one (a full disk) is removed */
+        if (file)
+            remove(path);
         fprintf(stderr, "fxcache %s: cannot write %s: %s\n", cmd, path, strerror(saved ? saved : EIO));
+    }
     return written;
 }
 
