@@ -8,6 +8,7 @@
 #include <jansson.h>
 #include <signal.h>
 #include <stdarg.h>
+#include <stdbool.h>
 #include <stdio.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -198,11 +199,62 @@ static void test_sim_frames_unwritable(void **state)
     }
 }
 
+/* Whether process pid catches signal sig (its SigCgt mask in /proc). */
+static bool catches_signal(pid_t pid, int sig)
+{
+    char path[64], line[256];
+    snprintf(path, sizeof path, "/proc/%d/status", (int)pid);
+    FILE *f = fopen(path, "r");
+    if (!f)
+        return false;
+    unsigned long long mask = 0;
+    bool found = false;
+    while (!found && fgets(line, sizeof line, f))
+        found = sscanf(line, "SigCgt: %llx", &mask) == 1;
+    fclose(f);
+    return found && (mask >> (sig - 1)) & 1;
+}
+
+/* Ctrl-C twice during a long frame (2048 x 2048 on one thread: seconds): the first asks for the end after the
+ * frame, the second ends the run at once, by the signal. Before, sim caught every signal alike and a user
+ * could not stop a frame that takes minutes short of SIGKILL. */
+static void test_sim_second_signal_ends_at_once(void **state)
+{
+    (void)state;
+    pid_t pid = fork();
+    assert_true(pid >= 0);
+    if (pid == 0) {
+        signal(SIGINT, SIG_DFL); /* so SigCgt shows fxcache's own handler */
+        int devnull = open("/dev/null", O_WRONLY);
+        dup2(devnull, STDOUT_FILENO);
+        dup2(devnull, STDERR_FILENO);
+        execl(FXC_BIN, FXC_BIN, "sim", "--frames", "3", "--viewers", "1", "--res", "2048x2048", "--threads",
+              "1", "--quiet", (char *)NULL);
+        _exit(127);
+    }
+    struct timespec tenth = {0, 100 * 1000 * 1000};
+    for (int tries = 0; tries < 300 && !catches_signal(pid, SIGINT); tries++)
+        nanosleep(&tenth, NULL);
+    assert_true(catches_signal(pid, SIGINT));
+    for (int k = 0; k < 10; k++) /* a second into the load and the first frame */
+        nanosleep(&tenth, NULL);
+    assert_int_equal(kill(pid, SIGINT), 0);
+    for (int tries = 0; tries < 50 && catches_signal(pid, SIGINT); tries++)
+        nanosleep(&tenth, NULL); /* the handler has given SIGINT back to its default action */
+    assert_int_equal(kill(pid, SIGINT), 0);
+    int status = 0;
+    assert_int_equal(waitpid(pid, &status, 0), pid);
+    if (!WIFSIGNALED(status) || WTERMSIG(status) != SIGINT)
+        fail_msg("after two SIGINTs: %s %d", WIFSIGNALED(status) ? "signal" : "exit",
+                 WIFSIGNALED(status) ? WTERMSIG(status) : WEXITSTATUS(status));
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_help_ranges_match_refusals),
         cmocka_unit_test(test_sim_frames_unwritable),
+        cmocka_unit_test(test_sim_second_signal_ends_at_once),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

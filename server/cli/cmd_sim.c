@@ -27,9 +27,12 @@
 
 static volatile sig_atomic_t stop_requested = 0;
 
+/* The first signal asks for the end after the current frame; a second ends at once (the default action): a
+ * frame can take a minute (many large viewers on one thread), and Ctrl-C twice is how a user says "now". */
 static void on_signal(int sig)
 {
     stop_requested = sig;
+    signal(sig, SIG_DFL);
 }
 
 typedef struct sim_options {
@@ -113,7 +116,8 @@ static int parse_options(int argc, char **argv, sim_options *o)
                 "\n"
                 "SIGINT or SIGTERM during the scene's load: one line, nothing written, exit 128 + signal;\n"
                 "during the frames: the current frame finishes, then the statistics, traces, the last\n"
-                "frame's images and the summary (interrupted: true) are written.\n"
+                "frame's images and the summary (interrupted: true) are written; a second signal ends\n"
+                "the run at once.\n"
                 "Exit status: 0 done or interrupted during the frames, 1 a failure (scene, trace, writing\n"
                 "files), 2 bad options or a run larger than the machine's memory.\n");
             return 0;
