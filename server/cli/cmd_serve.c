@@ -19,12 +19,11 @@
 
 static volatile sig_atomic_t stop_requested = 0;
 
-/* The first signal asks for the end after the current frame; a second ends at once (the default action): a
- * frame can take a minute (many large viewers on one thread), and Ctrl-C twice is how a user says "now". */
+/* Every signal asks for the end after the current frame: the shutdown (bye to every viewer, the files)
+ * survives a supervisor's or a test's repeated SIGTERM. */
 static void on_signal(int sig)
 {
     stop_requested = sig;
-    signal(sig, SIG_DFL);
 }
 
 typedef struct serve_options {
@@ -153,8 +152,7 @@ static int parse_options(int argc, char **argv, serve_options *o)
                 "\n"
                 "Exit status: 0 stopped by SIGINT, SIGTERM or --frames (the statistics, traces and summary\n"
                 "written), 1 a failure (scene, port, writing files), 2 bad options or pools larger than the\n"
-                "machine's memory; 128 + signal for a signal during the scene's load (nothing written).\n"
-                "The first SIGINT or SIGTERM stops after the current frame; a second ends at once.\n");
+                "machine's memory; 128 + signal for a signal during the scene's load (nothing written).\n");
             return 0;
         }
         default: return srv_cli_getopt_error("serve", c, argv);
