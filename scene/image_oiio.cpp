@@ -2,13 +2,16 @@
 // touches images; every exception is caught here and turned into -1 and a one-line message.
 #include "image.h"
 
+#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -19,11 +22,83 @@ using OIIO::ImageOutput;
 using OIIO::ImageSpec;
 using OIIO::TypeDesc;
 
+// Text on one line: each run of line ends becomes "; " (OpenImageIO's errors may hold several lines: a
+// truncated PNG gave "Read error: hit end of file\nPNG read error: ...\nPNG library error"), trailing ones go.
+static std::string one_line(const std::string &text)
+{
+    std::string out;
+    bool line_end = false;
+    for (char c : text) {
+        if (c == '\n' || c == '\r') {
+            line_end = true;
+            continue;
+        }
+        if (line_end && !out.empty())
+            out += "; ";
+        line_end = false;
+        out += c;
+    }
+    return out;
+}
+
 static void set_msg(char *msg, size_t cap, const std::string &text)
 {
     if (msg && cap)
-        std::snprintf(msg, cap, "%s", text.c_str());
+        std::snprintf(msg, cap, "%s", one_line(text).c_str());
 }
+
+// What is written to file descriptor 2 while an image is read, held in a temporary file instead of printed.
+// libpng's default error handler (OpenImageIO 2.4's PNG reader installs none) writes "libpng error: ..." with
+// C's stderr, a second line beside fxcache's one-line message, which cerr_capture (std::cerr only) cannot
+// hold. Reads are serialised by a mutex, as the descriptor is the process's; another thread writing to
+// stderr meanwhile would be held too, and a crash inside the read loses its report to the file (the price
+// of one line; reads are short).
+class stderr_hold
+{
+  public:
+    stderr_hold()
+    {
+        std::fflush(stderr);
+        file_ = std::tmpfile();
+        if (!file_)
+            return;
+        saved_ = dup(2);
+        if (saved_ < 0 || dup2(fileno(file_), 2) < 0) {
+            if (saved_ >= 0)
+                close(saved_);
+            saved_ = -1;
+            std::fclose(file_);
+            file_ = nullptr;
+        }
+    }
+    // Puts descriptor 2 back; returns what was written (at most 1 KiB), on one line.
+    std::string release()
+    {
+        if (!file_)
+            return "";
+        std::fflush(stderr);
+        dup2(saved_, 2);
+        close(saved_);
+        char text[1024];
+        std::rewind(file_);
+        size_t n = std::fread(text, 1, sizeof text - 1, file_);
+        std::fclose(file_);
+        file_ = nullptr;
+        return one_line(std::string(text, n));
+    }
+    ~stderr_hold()
+    {
+        release();
+    }
+    stderr_hold(const stderr_hold &) = delete;
+    stderr_hold &operator=(const stderr_hold &) = delete;
+
+  private:
+    FILE *file_ = nullptr;
+    int saved_ = -1;
+};
+
+static std::mutex stderr_hold_mutex;
 
 // The sRGB transfer function, decoded to linear.
 static float srgb_to_linear(float c)
@@ -31,10 +106,9 @@ static float srgb_to_linear(float c)
     return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
 }
 
-extern "C" int scene_image_read_rgb(const char *path, uint32_t *width, uint32_t *height, float **rgb,
-                                    char *msg, size_t msg_cap)
+static int read_rgb(const char *path, uint32_t *width, uint32_t *height, float **rgb, char *msg,
+                    size_t msg_cap)
 {
-    *rgb = nullptr;
     try {
         auto in = ImageInput::open(path);
         if (!in) {
@@ -100,6 +174,53 @@ extern "C" int scene_image_read_rgb(const char *path, uint32_t *width, uint32_t 
     return -1;
 }
 
+extern "C" int scene_image_read_rgb(const char *path, uint32_t *width, uint32_t *height, float **rgb,
+                                    char *msg, size_t msg_cap)
+{
+    *rgb = nullptr;
+    std::string held;
+    int rc;
+    try {
+        std::lock_guard<std::mutex> lock(stderr_hold_mutex);
+        stderr_hold hold;
+        rc = read_rgb(path, width, height, rgb, msg, msg_cap);
+        held = hold.release();
+    } catch (...) {
+        set_msg(msg, msg_cap, std::string(path) + ": cannot read image: out of memory");
+        return -1;
+    }
+    // What the library printed joins a failure's message unless it says what the message says already
+    // ("libpng error: X" beside OpenImageIO's "PNG read error: X"); after a success it is dropped (libpng's
+    // warnings, such as an sRGB profile it calls incorrect).
+    const std::string prefix = "libpng error: ";
+    std::string said = held.compare(0, prefix.size(), prefix) == 0 ? held.substr(prefix.size()) : held;
+    if (rc != 0 && !said.empty() && msg && msg_cap && !std::strstr(msg, said.c_str()))
+        set_msg(msg, msg_cap, std::string(msg) + " (" + held + ")");
+    return rc;
+}
+
+// Writes bytes to path, checking every step (a full disk shows at fwrite, fflush or fclose); a file that
+// could not be written whole is removed rather than left truncated. Returns false with the reason in msg.
+static bool write_whole_file(const char *path, const std::vector<unsigned char> &bytes, char *msg, size_t cap)
+{
+    FILE *file = std::fopen(path, "wb");
+    if (!file) {
+        set_msg(msg, cap, std::string(path) + ": cannot write: " + std::strerror(errno));
+        return false;
+    }
+    bool ok = std::fwrite(bytes.data(), 1, bytes.size(), file) == bytes.size() && std::fflush(file) == 0;
+    int saved = errno;
+    if (std::fclose(file) != 0 && ok) {
+        ok = false;
+        saved = errno;
+    }
+    if (!ok) {
+        std::remove(path);
+        set_msg(msg, cap, std::string(path) + ": cannot write: " + std::strerror(saved));
+    }
+    return ok;
+}
+
 // Writes one image in the given pixel type; shared by the two public writers.
 static int write_image(const char *path, uint32_t width, uint32_t height, uint32_t channels, TypeDesc type,
                        const void *pixels, char *msg, size_t msg_cap)
@@ -115,11 +236,18 @@ static int write_image(const char *path, uint32_t width, uint32_t height, uint32
                     std::string(path) + ": no image writer for this file name: " + OIIO::geterror());
             return -1;
         }
+        // Encoded in memory where the writer can (PNG): OpenImageIO 2.4's PNG writer does not check its
+        // writes, so on a full disk it left empty or truncated files and reported success.
+        std::vector<unsigned char> bytes;
+        OIIO::Filesystem::IOVecOutput memory(bytes);
+        bool in_memory = out->supports("ioproxy") && out->set_ioproxy(&memory);
         ImageSpec spec((int)width, (int)height, (int)channels, type);
         if (!out->open(path, spec) || !out->write_image(type, pixels) || !out->close()) {
             set_msg(msg, msg_cap, std::string(path) + ": " + out->geterror());
             return -1;
         }
+        if (in_memory && !write_whole_file(path, bytes, msg, msg_cap))
+            return -1;
         return 0;
     } catch (const std::exception &e) {
         set_msg(msg, msg_cap, std::string(path) + ": " + e.what());

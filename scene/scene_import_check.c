@@ -39,7 +39,7 @@ static scene_result check_ply(const char *path, const char *buf, size_t len, sce
                                    path);
         } else if (m >= 10 && memcmp(start, "end_header", 10) == 0 &&
                    (m == 10 || start[10] == ' ' || start[10] == '\t')) {
-            return SCENE_OK;
+            return scene__check_ply_body(path, buf, len, newline ? pos + n + 1 : len, err);
         } else if (m >= 8 && memcmp(start, "element ", 8) == 0) {
             /* "element NAME COUNT", nothing after the count */
             const char *p = start + 8, *name = NULL, *digits = NULL;

@@ -10,7 +10,8 @@
 // of NaNs), stall (a welcome, one frame, then nothing), unasked (frames with binary16 depth as asked, and with
 // each a samples message for a request never made, for pixels never asked), slow_clock (a frame for the first
 // camera only, and an error at a second camera: the viewer runs at --fps 1e-300), tiny_fps (the same with a
-// welcome of 1e-30 fps, and an error at a second sample request too).
+// welcome of 1e-30 fps, and an error at a second sample request too), bad_payload (frames whose raw colour
+// payload is 3 bytes short: the messages decode, the pictures do not).
 'use strict';
 
 const { load_ws, TYPE, header, text8, pose } = require('./peer_wire.js');
@@ -50,8 +51,8 @@ function zstd_raw(b) {
 
 // A raw-colour frame, w x h grey, for camera sequence seq; with `depth`, binary16 depth of 4 m everywhere.
 let frame_number = 0;
-function frame(w, h, seq, position, direction, fov, depth) {
-    const color = Buffer.alloc(w * h * 3, 120);
+function frame(w, h, seq, position, direction, fov, depth, short_color) {
+    const color = Buffer.alloc(w * h * 3 - (short_color ? 3 : 0), 120);
     let depth_data = Buffer.alloc(0);
     if (depth) {
         const halves = Buffer.alloc(2 * w * h);
@@ -117,7 +118,7 @@ server.on('connection', ws => {
         if (mode === 'nan_camera')
             ws.send(frame(16, 9, seq, [NaN, NaN, NaN], [NaN, NaN, NaN], NaN));
         else
-            ws.send(frame(16, 9, seq, [0, 1.6, 3], [0, 0, -1], 60, mode === 'unasked'));
+            ws.send(frame(16, 9, seq, [0, 1.6, 3], [0, 0, -1], 60, mode === 'unasked', mode === 'bad_payload'));
         if (mode === 'unasked')
             ws.send(unasked_samples(16, 9, 40));
     });

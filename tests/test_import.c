@@ -282,6 +282,87 @@ static void test_missing_texture_counted(void **state)
     scene_free(s);
 }
 
+#ifdef __SANITIZE_ADDRESS__
+/* The sanitizer build unwinds every allocation's stack in full: the fast unwinder stops in libstdc++, so
+ * lsan.supp's entry for OpenImageIO's leak on a truncated PNG (test_damaged_png_one_line) could not match. */
+const char *__asan_default_options(void);
+const char *__asan_default_options(void)
+{
+    return "fast_unwind_on_malloc=0";
+}
+#endif
+
+/* A damaged PNG texture gives one warning line and nothing else on stderr (file descriptor 2, where libpng's
+ * own handler wrote "libpng error: IDA[AB]: invalid chunk type" as a second line, and where OpenImageIO's
+ * message for a truncated PNG spread over three lines); the material keeps its colour. */
+static void test_damaged_png_one_line(void **state)
+{
+    (void)state;
+    uint8_t pixels[4 * 4 * 3];
+    memset(pixels, 200, sizeof pixels);
+    char msg[256];
+    const char *good = fxt_tmp_path("good.png");
+    assert_int_equal(scene_image_write_u8(good, 4, 4, 3, pixels, msg, sizeof msg), 0);
+    uint8_t bytes[4096];
+    FILE *f = fopen(good, "rb");
+    assert_non_null(f);
+    size_t len = fread(bytes, 1, sizeof bytes, f);
+    fclose(f);
+    uint8_t *idat = NULL;
+    for (size_t i = 0; i + 4 <= len && !idat; i++)
+        if (memcmp(bytes + i, "IDAT", 4) == 0)
+            idat = bytes + i;
+    assert_non_null(idat);
+    static const char *const names[2] = {"bad_chunk.png", "cut.png"};
+    for (int k = 0; k < 2; k++) {
+        char mtl[128], obj[256], err_path[1024];
+        snprintf(mtl, sizeof mtl, "newmtl m\nKd 0.5 0.5 0.5\nmap_Kd %s\n", names[k]);
+        fxt_write_file(k ? "cut.mtl" : "bad_chunk.mtl", mtl);
+        snprintf(obj, sizeof obj,
+                 "mtllib %s\nusemtl m\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n",
+                 k ? "cut.mtl" : "bad_chunk.mtl");
+        char obj_path[1024]; /* fxt_tmp_path's buffer is reused below */
+        snprintf(obj_path, sizeof obj_path, "%s", fxt_write_file(k ? "cut.obj" : "bad_chunk.obj", obj));
+        f = fopen(fxt_tmp_path(names[k]), "wb");
+        assert_non_null(f);
+        if (k == 0) { /* the chunk type IDAT becomes IDAB */
+            idat[3] = 'B';
+            fwrite(bytes, 1, len, f);
+            idat[3] = 'T';
+        } else { /* cut inside the image data */
+            fwrite(bytes, 1, (size_t)(idat - bytes) + 10, f);
+        }
+        fclose(f);
+        /* stderr into a file while the scene loads */
+        snprintf(err_path, sizeof err_path, "%s", fxt_tmp_path("png_stderr.txt"));
+        fflush(stderr);
+        int saved = dup(2);
+        FILE *capture = fopen(err_path, "w+");
+        assert_non_null(capture);
+        assert_true(dup2(fileno(capture), 2) >= 0);
+        scene *s = load_ok(obj_path);
+        fflush(stderr);
+        dup2(saved, 2);
+        close(saved);
+        char text[2048] = {0};
+        rewind(capture);
+        size_t n = fread(text, 1, sizeof text - 1, capture);
+        fclose(capture);
+        text[n] = 0;
+        unsigned lines = 0;
+        for (size_t i = 0; i < n; i++)
+            lines += text[i] == '\n';
+        print_message("%s: %s", names[k], text);
+        if (lines != 1 || !strstr(text, names[k]) || !strstr(text, "(using its colour)"))
+            fail_msg("%s: expected one warning line naming it, got %u lines: %s", names[k], lines, text);
+        assert_int_equal(s->texture_count, 0);
+        float rgb[3];
+        scene_albedo(s, 0, 0.3f, 0.3f, rgb);
+        assert_true(fabsf(rgb[0] - 0.5f) < 1e-6f);
+        scene_free(s);
+    }
+}
+
 /* Welding, degenerate and duplicate triangles through the builder. */
 static void test_builder_cleaning(void **state)
 {
@@ -501,6 +582,50 @@ static void check_input_case(const input_case *c, const char *path)
                  (int)c->code, c->needle, (int)err.code, err.msg);
 }
 
+/* A binary PLY of a unit quad (4 float vertices, 2 faces as uchar-counted int lists, then an element 'extra'
+ * of one short and one double) in either byte order: the last `cut` bytes left off, and the second face's
+ * last index set to `last_index`. Returns its length. */
+static size_t binary_ply(char *buf, size_t cap, bool big, size_t cut, int32_t last_index)
+{
+    size_t at = (size_t)snprintf(buf, cap,
+                                 "ply\nformat %s 1.0\nelement vertex 4\nproperty float x\nproperty float "
+                                 "y\nproperty float z\nelement face 2\nproperty list uchar int "
+                                 "vertex_indices\nelement extra 1\nproperty short s\nproperty float64 "
+                                 "d\nend_header\n",
+                                 big ? "binary_big_endian" : "binary_little_endian");
+    const float corners[4][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+    const int32_t faces[2][3] = {{0, 1, 2}, {0, 2, last_index}};
+    uint8_t body[128];
+    size_t n = 0;
+    /* each value as bytes in the file's order */
+#define PUT(value, bytes)                                                                                    \
+    do {                                                                                                     \
+        uint64_t bits_ = (value);                                                                            \
+        for (int k_ = 0; k_ < (bytes); k_++)                                                                 \
+            body[n++] = (uint8_t)(bits_ >> (8 * (big ? (bytes)-1 - k_ : k_)));                               \
+    } while (0)
+    for (int v = 0; v < 4; v++)
+        for (int k = 0; k < 3; k++) {
+            uint32_t bits;
+            memcpy(&bits, &corners[v][k], 4);
+            PUT(bits, 4);
+        }
+    for (int f = 0; f < 2; f++) {
+        PUT(3, 1);
+        for (int k = 0; k < 3; k++)
+            PUT((uint32_t)faces[f][k], 4);
+    }
+    PUT(7, 2);
+    double d = 0.5;
+    uint64_t dbits;
+    memcpy(&dbits, &d, 8);
+    PUT(dbits, 8);
+#undef PUT
+    assert_true(at + n <= cap && cut <= n);
+    memcpy(buf + at, body, n - cut);
+    return at + n - cut;
+}
+
 /* A binary STL of count facets declared, with facets_written facets of data after the header. */
 static size_t binary_stl(char *buf, size_t cap, uint32_t declared, uint32_t facets_written)
 {
@@ -559,6 +684,26 @@ static void test_inputs_refused_or_read(void **state)
     at = (size_t)snprintf(off_long, sizeof off_long, "OFF\n3 1 0\n0 0 0");
     memset(off_long + at, ' ', 5000);
     snprintf(off_long + at + 5000, sizeof off_long - at - 5000, "\n1 0 0\n0 1 0\n3 0 1 2\n");
+    /* PLY bodies that disagree with their headers: Assimp 5.2.5 read a short vertex line as zeros, ignored
+     * extra values and lines, loaded a file missing a face (as a copy) and called a truncated binary body or
+     * an index out of range "Validation failed: mIndices[2] is out of range". The same quad in ASCII (CRLF,
+     * blank lines, an element after the faces) and in both binary byte orders loads as 2 triangles. */
+    static char ply_le[512], ply_be[512], ply_le_cut[512], ply_be_cut[512], ply_le_range[512],
+        ply_be_neg[512];
+    size_t ply_le_len = binary_ply(ply_le, sizeof ply_le, false, 0, 3);
+    size_t ply_be_len = binary_ply(ply_be, sizeof ply_be, true, 0, 3);
+    size_t ply_le_cut_len = binary_ply(ply_le_cut, sizeof ply_le_cut, false, 1, 3);
+    size_t ply_be_cut_len = binary_ply(ply_be_cut, sizeof ply_be_cut, true, 20, 3);
+    size_t ply_le_range_len = binary_ply(ply_le_range, sizeof ply_le_range, false, 0, 4);
+    size_t ply_be_neg_len = binary_ply(ply_be_neg, sizeof ply_be_neg, true, 0, -1);
+#define PLY_QUAD_HEAD                                                                                        \
+    "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"        \
+    "element face 2\nproperty list uchar int vertex_indices\nend_header\n"
+    const char *ply_crlf =
+        "ply\r\nformat ascii 1.0\r\nelement vertex 4\r\nproperty float x\r\nproperty float "
+        "y\r\nproperty float z\r\nelement face 2\r\nproperty list uchar int vertex_indices\r\n"
+        "element extra 1\r\nproperty list int float f\r\nend_header\r\n0 0 0\r\n1 0 0\r\n"
+        "1 1 0\r\n 0 1e0 -0\r\n3 0 1 2\r\n3   0 2 +3 \r\n2 0.5 -7\r\n\r\n\r\n";
     const char *ply_head = "ply\nformat ascii 1.0\n";
     const char *ply_body = "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
                            "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
@@ -696,6 +841,42 @@ static void test_inputs_refused_or_read(void **state)
         {"wrapped.stl", stl_wrapped, stl_wrapped_len, false, SCENE_ERR_FORMAT, "declares 2147483649 facets",
          0},
         {"one.stl", stl_one, stl_one_len, false, SCENE_OK, NULL, 1},
+        {"quad_crlf.ply", ply_crlf, 0, false, SCENE_OK, NULL, 2},
+        {"quad_le.ply", ply_le, ply_le_len, false, SCENE_OK, NULL, 2},
+        {"quad_be.ply", ply_be, ply_be_len, false, SCENE_OK, NULL, 2},
+        {"blank_line.ply", PLY_QUAD_HEAD "\n0 0 0\n1 0 0\n\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n", 0, false,
+         SCENE_OK, NULL, 2},
+        {"two_blank_lines.ply", PLY_QUAD_HEAD "0 0 0\n1 0 0\n\n\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n", 0, false,
+         SCENE_ERR_FORMAT, ":13: a blank line where item 2 of element 'vertex' should be", 0},
+        {"crlf_blank_line.ply",
+         PLY_QUAD_HEAD "0 0 0\r\n1 0 0\r\n\r\n1 1 0\r\n0 1 0\r\n3 0 1 2\r\n3 0 2 3\r\n", 0, false,
+         SCENE_ERR_FORMAT, ":12: a blank line where item 2 of element 'vertex' should be", 0},
+        {"short_vertex.ply", PLY_QUAD_HEAD "0 0 0\n1 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n", 0, false,
+         SCENE_ERR_FORMAT, ":11: element 'vertex' item 1 has 2 values, the header declares 3", 0},
+        {"long_vertex.ply", PLY_QUAD_HEAD "0 0 0 7\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n", 0, false,
+         SCENE_ERR_FORMAT, ":10: element 'vertex' item 0 has 4 values, the header declares 3", 0},
+        {"word.ply", PLY_QUAD_HEAD "0 0 0\n1 abc 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n", 0, false,
+         SCENE_ERR_FORMAT, ":11: 'abc' is not a number (element 'vertex' item 1, property 'y')", 0},
+        {"fraction_index.ply", PLY_QUAD_HEAD "0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 2.5\n", 0, false,
+         SCENE_ERR_FORMAT, ":15: '2.5' is not a whole number", 0},
+        {"index_range.ply", PLY_QUAD_HEAD "0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 4\n", 0, false,
+         SCENE_ERR_FORMAT, ":15: face 1 uses vertex 4, but the file declares 4 vertices", 0},
+        {"short_face.ply", PLY_QUAD_HEAD "0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2\n", 0, false,
+         SCENE_ERR_FORMAT, ":15: element 'face' item 1 has 3 values, the header declares 4", 0},
+        {"no_length.ply", PLY_QUAD_HEAD "0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n-3 0 2 3\n", 0, false,
+         SCENE_ERR_FORMAT, ":15: '-3' is not a list length", 0},
+        {"missing_face.ply", PLY_QUAD_HEAD "0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n", 0, false,
+         SCENE_ERR_FORMAT, "the body ends before item 1 of the 2 of element 'face'", 0},
+        {"extra_face.ply", PLY_QUAD_HEAD "0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n3 0 1 3\n", 0, false,
+         SCENE_ERR_FORMAT, ":16: data after the last item the header declares", 0},
+        {"cut_le.ply", ply_le_cut, ply_le_cut_len, false, SCENE_ERR_FORMAT,
+         "truncated: the binary body ends (after 83 bytes) inside item 0 of the 1 of element 'extra'", 0},
+        {"cut_be.ply", ply_be_cut, ply_be_cut_len, false, SCENE_ERR_FORMAT,
+         "truncated: the binary body ends (after 64 bytes) inside item 1 of the 2 of element 'face'", 0},
+        {"range_le.ply", ply_le_range, ply_le_range_len, false, SCENE_ERR_FORMAT,
+         "face 1 uses vertex 4, but the file declares 4 vertices", 0},
+        {"negative_be.ply", ply_be_neg, ply_be_neg_len, false, SCENE_ERR_FORMAT,
+         "face 1 uses vertex -1, but the file declares 4 vertices", 0},
         {"blender247.ply", ply_blender, 0, false, SCENE_OK, NULL, 1},
         {"comment_small.ply", ply_comment_small, 0, false, SCENE_OK, NULL, 1},
         {"comment_huge.ply", ply_comment_huge, 0, false, SCENE_ERR_FORMAT, ":3: Assimp reads this comment",
@@ -780,6 +961,7 @@ int main(void)
         cmocka_unit_test(test_texture_bilinear_wrap),
         cmocka_unit_test(test_albedo_run_equals_filtered),
         cmocka_unit_test(test_missing_texture_counted),
+        cmocka_unit_test(test_damaged_png_one_line),
         cmocka_unit_test(test_builder_cleaning),
         cmocka_unit_test(test_mirrored_transform_keeps_winding),
         cmocka_unit_test(test_damaged_ply_refused),

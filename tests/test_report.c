@@ -17,6 +17,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <time.h>
@@ -485,6 +486,75 @@ static void test_cli_trace_ends_before_compared_frames(void **state)
         if (strncmp(csv[0][k], "rmse", 4) == 0 || strcmp(csv[0][k], "psnr_db") == 0)
             if (csv[1][k][0])
                 fail_msg("configs.csv: %s is '%s' with no frame compared", csv[0][k], csv[1][k]);
+
+    /* A trace of one camera: gone before the warm-up ends, so no timed frame has a viewer; its line said
+     * "nan per viewer". */
+    snprintf(trace_path, sizeof trace_path, "%s",
+             fxt_write_file("report_one.trace", "fxcache-trace 1\n0 0 1.6 3 0 -0.2 -1 60\n"));
+    remove_tree(dir);
+    snprintf(
+        args, sizeof args,
+        "report --out %s --trace %s --res 16x9 --frames 3 --warmup 1 --every 2 --threads 1 --only default "
+        "--ref-samples 1/8 --effects shadow",
+        dir, trace_path);
+    err[0] = 0;
+    rc = fxt_run_cli(args, NULL, 0, err, sizeof err);
+    if (rc != 0 || strstr(err, "nan") || !strstr(err, "(no viewer present, CPU"))
+        fail_msg("one camera: exit %d: %s", rc, err);
+}
+
+/* Two runs writing one folder at once: while another process holds DIR/.fxcache.lock (here, a child of the
+ * test that took it with flock), report and ref refuse the folder with one line naming the holder, and write
+ * nothing into it; once it is given back, report runs. Before, the two wrote the same CSVs and markers. */
+static void test_cli_folder_in_use(void **state)
+{
+    (void)state;
+    char dir[1024], lock_path[1200], err[8192], args[3072];
+    snprintf(dir, sizeof dir, "%s", fxt_tmp_path("report_in_use"));
+    remove_tree(dir);
+    assert_int_equal(mkdir(dir, 0755), 0);
+    snprintf(lock_path, sizeof lock_path, "%s/.fxcache.lock", dir);
+    int ready[2];
+    assert_int_equal(pipe(ready), 0);
+    pid_t holder = fork();
+    assert_true(holder >= 0);
+    if (holder == 0) { /* takes the lock as another run would, says so, and waits to be ended */
+        int fd = open(lock_path, O_RDWR | O_CREAT, 0644);
+        if (fd < 0 || flock(fd, LOCK_EX) != 0 || dprintf(fd, "%ld\n", (long)getpid()) < 0)
+            _exit(1);
+        if (write(ready[1], "x", 1) != 1)
+            _exit(1);
+        pause();
+        _exit(0);
+    }
+    char byte;
+    assert_int_equal(read(ready[0], &byte, 1), 1);
+    char holder_text[64];
+    snprintf(holder_text, sizeof holder_text, "is in use by another fxcache run (process %ld)", (long)holder);
+    static const char *const commands[2] = {
+        "report --out %s --res 16x9 --frames 3 --warmup 1 --every 2 --threads 1 --only default --ref-samples "
+        "1/8 --effects shadow --viewers 1",
+        "ref --out %s --res 8x8 --frames 1 --ao-samples 2 --shadow-rays 32 --paths 2 --threads 1 --quiet"};
+    for (int k = 0; k < 2; k++) {
+        snprintf(args, sizeof args, commands[k], dir);
+        err[0] = 0;
+        int rc = fxt_run_cli(args, NULL, 0, err, sizeof err);
+        if (rc != 1 || !strstr(err, holder_text) || strchr(err, '\n') != err + strlen(err) - 1)
+            fail_msg("%s with the folder in use: exit %d, '%s'", k ? "ref" : "report", rc, err);
+    }
+    char path[1200];
+    snprintf(path, sizeof path, "%s/configs.csv", dir);
+    assert_int_equal(access(path, F_OK), -1);
+    snprintf(path, sizeof path, "%s/ref.json", dir);
+    assert_int_equal(access(path, F_OK), -1);
+    kill(holder, SIGTERM);
+    waitpid(holder, NULL, 0);
+    close(ready[0]);
+    close(ready[1]);
+    snprintf(args, sizeof args, commands[0], dir);
+    int rc = fxt_run_cli(args, NULL, 0, err, sizeof err);
+    if (rc != 0)
+        fail_msg("report after the lock was given back: exit %d, '%s'", rc, err);
 }
 
 #define SCENE_TEST(fn)                                                                                       \
@@ -501,6 +571,7 @@ int main(void)
         cmocka_unit_test(test_cli_resume),
         cmocka_unit_test(test_cli_folder_of_other_content),
         cmocka_unit_test(test_cli_trace_ends_before_compared_frames),
+        cmocka_unit_test(test_cli_folder_in_use),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

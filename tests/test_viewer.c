@@ -18,6 +18,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #define PI 3.14159265358979323846
 
@@ -448,6 +449,25 @@ static void test_png_same_as_server(void **state)
                      -1);
     assert_non_null(strstr(msg, "no/such/x.png"));
     assert_null(strchr(msg, '\n'));
+    /* A full disk (a file name linked to /dev/full, where every write fails with ENOSPC): both writers say so
+     * in one line, and leave no file. OpenImageIO's PNG writer does not check its writes: both returned 0. */
+    if (access("/dev/full", W_OK) == 0)
+        for (int k = 0; k < 2; k++) {
+            char full_path[1024];
+            snprintf(full_path, sizeof full_path, "%s",
+                     fxt_tmp_path(k ? "full_server.png" : "full_client.png"));
+            remove(full_path);
+            assert_int_equal(symlink("/dev/full", full_path), 0);
+            int rc = k ? scene_image_write_u8(full_path, width, height, 3, rgb, msg, sizeof msg)
+                       : view_image_write_png(full_path, width, height, rgb, msg, sizeof msg);
+            if (rc != -1 || !strstr(msg, "No space left on device") || !strstr(msg, full_path))
+                fail_msg("%s writer on a full disk: %d, '%s'", k ? "server" : "client", rc, msg);
+            assert_null(strchr(msg, '\n'));
+            assert_int_equal(access(full_path, F_OK), -1);
+            remove(full_path);
+        }
+    else
+        print_message("/dev/full is absent: the full-disk case is skipped\n");
     free(rgb);
 }
 

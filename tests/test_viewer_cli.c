@@ -463,6 +463,7 @@ static void test_misbehaving_server(void **state)
         {"unasked", 0, NULL},
         {"slow_clock", 1, "no frame for 1 s"}, /* was "server error: a flood" */
         {"tiny_fps", 1, "no frame for 1 s"},
+        {"bad_payload", 1, "3 of 3 frames did not decode"}, /* was exit 0 */
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         char out[512];

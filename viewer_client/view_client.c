@@ -931,6 +931,11 @@ int view_client_run(const view_options *o, const proto_trace *traces, view_viewe
         view_viewer *v = &c.viewers[i];
         if (v->state != VIEWER_DONE)
             viewer_closed(v);
+        /* Frames whose payload did not decode were counted and skipped; the run still did not end well, so
+         * a script can tell from the exit status. */
+        if (v->stats->decode_errors)
+            view__fail(v, "%llu of %llu frames did not decode", (unsigned long long)v->stats->decode_errors,
+                       (unsigned long long)v->stats->frames);
         free(v->pending);
         free(v->held);
         free(v->rx);

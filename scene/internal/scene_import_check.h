@@ -61,6 +61,11 @@ static inline scene_result check_count_at(const char *path, const char *buf, con
     return count <= len ? SCENE_OK : check_count(path, line_of(buf, at), what, count, len, err);
 }
 
+/* The check of a PLY body against its header (scene_import_ply.c): body is the offset of the byte after the
+ * end_header line. */
+scene_result scene__check_ply_body(const char *path, const char *buf, size_t len, size_t body,
+                                   scene_error *err);
+
 /* The MD5 mesh check (scene_import_md5.c). */
 scene_result scene__check_md5(const char *path, const char *buf, size_t len, scene_error *err);
 

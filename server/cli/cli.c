@@ -4,11 +4,13 @@
 #include "engine.h"
 
 #include <errno.h>
+#include <fcntl.h>
 #include <math.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -164,6 +166,47 @@ bool srv_cli_make_dir(const char *cmd, const char *path)
     fprintf(stderr, "fxcache %s: cannot create folder %s: %s\n", cmd, path,
             mkdir_errno == EEXIST ? "a file of that name is in the way" : strerror(mkdir_errno));
     return false;
+}
+
+int srv_cli_lock_dir(const char *cmd, const char *dir)
+{
+    char path[4096];
+    if ((size_t)snprintf(path, sizeof path, "%s/.fxcache.lock", dir) >= sizeof path) {
+        fprintf(stderr, "fxcache %s: %s: the path is too long\n", cmd, dir);
+        return -1;
+    }
+    int fd = open(path, O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    if (fd < 0) {
+        fprintf(stderr, "fxcache %s: cannot create %s: %s\n", cmd, path, strerror(errno));
+        return -1;
+    }
+    if (flock(fd, LOCK_EX | LOCK_NB) != 0) {
+        int why = errno;
+        char holder[32] = "";
+        ssize_t n = read(fd, holder, sizeof holder - 1);
+        holder[n > 0 ? n : 0] = 0;
+        holder[strcspn(holder, "\n")] = 0;
+        close(fd);
+        if (why == EWOULDBLOCK)
+            fprintf(stderr,
+                    "fxcache %s: %s is in use by another fxcache run (process %s); wait for it to end or use "
+                    "another --out\n",
+                    cmd, dir, holder[0] ? holder : "unknown");
+        else
+            fprintf(stderr, "fxcache %s: cannot lock %s: %s\n", cmd, path, strerror(why));
+        return -1;
+    }
+    char pid[32];
+    int len = snprintf(pid, sizeof pid, "%ld\n", (long)getpid());
+    bool noted = ftruncate(fd, 0) == 0 && pwrite(fd, pid, (size_t)len, 0) == len;
+    (void)noted; /* the process number is only the refusal's figure */
+    return fd;
+}
+
+void srv_cli_unlock_dir(int fd)
+{
+    if (fd >= 0)
+        close(fd);
 }
 
 bool srv_cli_output_file_ok(const char *cmd, const char *option, const char *path)

@@ -53,6 +53,15 @@ char *srv_cli_dir_arg(char *dir);
  * would fail to be written after the run); false with "fxcache CMD: cannot create folder PATH: why". */
 bool srv_cli_make_dir(const char *cmd, const char *path);
 
+/* Takes the output folder for this run: an exclusive lock (flock) on DIR/.fxcache.lock, held until the
+ * process ends or srv_cli_unlock_dir(), so two runs writing one folder at once (report, ref) cannot mix
+ * their files. Returns the lock's descriptor, or -1 after one line: "fxcache CMD: DIR is in use by another
+ * fxcache run (process N); wait for it to end or use another --out", or why the lock could not be taken. */
+int srv_cli_lock_dir(const char *cmd, const char *dir);
+
+/* Gives the lock back (fd -1: nothing to do). */
+void srv_cli_unlock_dir(int fd);
+
 /* Whether an output file named by option (--stats, --summary) can be written, checked before the scene
  * loads: not a directory, its folder exists and is writable. Prints "fxcache CMD: cannot write PATH (OPTION):
  * why" and returns false otherwise (the file itself is opened later, when the run needs it). */

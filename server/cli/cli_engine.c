@@ -18,7 +18,7 @@ const char srv_cli_engine_usage[] =
     "                       default: each effect's own)\n"
     "  --pool-mb MB         block-pool memory for all effects, 1..65536, within the machine's memory\n"
     "                       (default 64; a quarter of it for probes when they run)\n"
-    "  --ray-budget R       effect rays per frame, 0 = unlimited (default 0)\n"
+    "  --ray-budget R       effect rays per frame, 0..1e12, 0 = unlimited (default 0)\n"
     "  --ao-step S          samples added per texel and update of progressive effects (AO), 1..64\n"
     "                       (default 16)\n"
     "  --ao-samples N       AO samples a texel converges at, 1..4096 (default 64; the no-cache baseline's\n"
@@ -43,7 +43,7 @@ const char srv_cli_engine_usage[] =
     "                       the converged counts, S a power of two in [1/64, 16] ('0.25' or '1/4'; default\n"
     "                       1; shadow rays above 16 go in sets of 16, at most 256)\n"
     "  --seed S             random seed, 0..4294967295 (default 1)\n"
-    "  --threads T          worker threads, 0 = all cores (default 0)\n"
+    "  --threads T          worker threads, 0..256, 0 = all cores (default 0)\n"
     "  --density D          level-0 texels per metre, [1e-6, 1e6] (default: the scene's, else auto)\n";
 
 const struct option srv_cli_engine_options[] = {
@@ -481,13 +481,21 @@ json_t *srv_cli_summary_json(const srv_cli_run *run, const srv_cli_engine *e)
 
 bool srv_cli_write_json(const char *cmd, const char *path, const json_t *value)
 {
+    errno = 0;
     FILE *file = fopen(path, "w");
-    bool written = file && json_dumpf(value, file, JSON_INDENT(2) | JSON_PRESERVE_ORDER) == 0;
+    bool written =
+        file && json_dumpf(value, file, JSON_INDENT(2) | JSON_PRESERVE_ORDER) == 0 && fflush(file) == 0;
     int saved = errno;
-    if (file && fclose(file) != 0)
+    if (file && fclose(file) != 0 && written) {
         written = false;
-    if (!written)
+        saved = errno;
+    }
+    if (!written) {
+        /* a summary that is there is whole: a partial one (a full disk) is removed */
+        if (file)
+            remove(path);
         fprintf(stderr, "fxcache %s: cannot write %s: %s\n", cmd, path, strerror(saved ? saved : EIO));
+    }
     return written;
 }
 

@@ -121,7 +121,7 @@ bool srv_cli_stats_close(srv_cli_stats *stats); /* false (and an error line) whe
 
 /* The summary's common part: scene, options, effects and why, the report's totals. Caller owns it. */
 json_t *srv_cli_summary_json(const srv_cli_run *run, const srv_cli_engine *e);
-/* Writes JSON to path (indented); false with an error line on failure. */
+/* Writes JSON to path (indented); false with an error line on failure, and no partial file left. */
 bool srv_cli_write_json(const char *cmd, const char *path, const json_t *value);
 /* The summary in words on stdout. */
 void srv_cli_print_summary(const srv_cli_run *run, bool no_cache, bool interrupted);

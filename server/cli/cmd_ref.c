@@ -69,14 +69,14 @@ static const char ref_usage[] =
     "                       start + f / fps (start: the earliest first time of the traces); a viewer is in\n"
     "                       the frames from its first time to its last, with the last camera line not\n"
     "                       after the frame's time\n"
-    "  --fps F              frames per second of trace time, (0, 1000] (default 30)\n"
+    "  --fps F              frames per second of trace time, [0.001, 1000] (default 30)\n"
     "  --camera GEN         camera generator when no --trace is given (default room):\n"
     "                       %s\n"
     "  --viewers N          viewers of the generator, 1..64 (default 4)\n"
     "  --frames F           frames, 1..1000000 (default 30, or until the last trace ends: traces\n"
     "                       lasting more frames need --frames)\n"
     "  --every K            render frames 0, K, 2K, ... and the last: what 'sim --out DIR --save-every K'\n"
-    "                       saves (default 0: only the last frame)\n"
+    "                       saves, 0..1000000 (default 0: only the last frame)\n"
     "  --res WxH            resolution, sides 1..8192 (default 640x360; a version 2 trace's own resolution\n"
     "                       wins for its viewer unless --res is given, as in sim)\n"
     "Samples per pixel (each half takes half of them):\n"
@@ -90,7 +90,8 @@ static const char ref_usage[] =
     "Output:\n"
     "  --out DIR            frame_FFFF_viewer_VV.exr (linear RGB float), frame_FFFF_viewer_VV.png (display:\n"
     "                       sim's tone map and sRGB), and ref.json (the options; per image its time, rays,\n"
-    "                       noise and mean radiance), rewritten after every image\n"
+    "                       noise and mean radiance), rewritten after every image; one run at a time\n"
+    "                       per folder (another run writing it is refused)\n"
     "  --views              also the AO term and the lit fraction of light 0 as _ao.exr and _shadow.exr\n"
     "                       (as 'sim --views')\n"
     "  --quiet              no line per image on stdout\n"
@@ -100,7 +101,8 @@ static const char ref_usage[] =
     "                       terms in the image, as the cached frames have them\n"
     "  --seed S             random seed, 0..4294967295 (default 1): the generators' cameras (sim's) and\n"
     "                       the samples\n"
-    "  --threads T          worker threads, 0 = all cores (default 0); the images do not depend on it\n"
+    "  --threads T          worker threads, 0..256, 0 = all cores (default 0); the images do not depend\n"
+    "                       on it\n"
     "  -h, --help           this text\n"
     "\n"
     "Progress goes to stderr when it is a terminal. SIGINT or SIGTERM: the current image is finished and\n"
@@ -303,6 +305,7 @@ int srv_cmd_ref(int argc, char **argv)
     json_t *root = NULL, *left_out_extra = json_object();
     ref_buffers buffers = {0};
     int exit_code = 1;
+    int lock = -1; /* the output folder's lock (srv_cli_lock_dir) */
     char err[512];
 
     /* Traces: sim's clock starts at the earliest first time; frames until the last trace ends. */
@@ -369,7 +372,7 @@ int srv_cmd_ref(int argc, char **argv)
         goto done;
     }
     const srv_ref_desc *resolved = srv_ref_desc_of(ref);
-    if (!srv_cli_make_dir("ref", o.out_dir))
+    if (!srv_cli_make_dir("ref", o.out_dir) || (lock = srv_cli_lock_dir("ref", o.out_dir)) < 0)
         goto done;
 
     /* ref.json: the options, then one record per image. */
@@ -517,5 +520,6 @@ done:
     scene_rt_free(rt);
     scene_free(s);
     srv_cli_cameras_free(&cams);
+    srv_cli_unlock_dir(lock);
     return exit_code;
 }

@@ -549,6 +549,7 @@ int srv_cmd_report(int argc, char **argv)
     report_plan *plan = calloc(1, sizeof *plan);
     json_t *left_out_extra = json_object();
     int exit_code = 1;
+    int lock = -1; /* the output folder's lock (srv_cli_lock_dir) */
     char err[512];
     if (!plan) {
         fprintf(stderr, "fxcache report: out of memory\n");
@@ -607,7 +608,7 @@ int srv_cmd_report(int argc, char **argv)
         fprintf(stderr, "fxcache report: %s\n", err);
         goto done;
     }
-    if (!srv_cli_make_dir("report", o.out_dir))
+    if (!srv_cli_make_dir("report", o.out_dir) || (lock = srv_cli_lock_dir("report", o.out_dir)) < 0)
         goto done;
     char sub[1400];
     const char *subdirs[] = {"done", "heatmaps", "frames", "plots"};
@@ -684,21 +685,23 @@ int srv_cmd_report(int argc, char **argv)
         char ao_text[48] = "";
         if (isfinite(row->rmse_ao))
             snprintf(ao_text, sizeof ao_text, ", AO %.3g", row->rmse_ao);
+        char per_viewer[48] = "no viewer present"; /* after the warm-up (a trace ended before it) */
+        if (isfinite(row->ms_per_viewer))
+            snprintf(per_viewer, sizeof per_viewer, "%.1f per viewer", row->ms_per_viewer);
         if (row->images ==
             0) /* every viewer had left (traces shorter than --frames) before a compared frame */
             fprintf(stderr,
-                    "report: [%zu/%zu] %s: %.1f ms/frame (%.1f per viewer, CPU %.1f), no error: no frame "
+                    "report: [%zu/%zu] %s: %.1f ms/frame (%s, CPU %.1f), no error: no frame "
                     "after the warm-up was compared with a viewer present (the traces end before it; lower "
                     "--frames or --warmup) (%.1f s)\n",
-                    i + 1, plan->count, row->id, row->ms_per_frame, row->ms_per_viewer, row->cpu_ms_per_frame,
+                    i + 1, plan->count, row->id, row->ms_per_frame, per_viewer, row->cpu_ms_per_frame,
                     row->run_s);
         else
-            fprintf(
-                stderr,
-                "report: [%zu/%zu] %s: %.1f ms/frame (%.1f per viewer, CPU %.1f), RMSE %.4g, PSNR %.2f dB, "
-                "shadow %.3g%s (%.1f s)\n",
-                i + 1, plan->count, row->id, row->ms_per_frame, row->ms_per_viewer, row->cpu_ms_per_frame,
-                row->rmse, row->psnr_db, row->rmse_shadow, ao_text, row->run_s);
+            fprintf(stderr,
+                    "report: [%zu/%zu] %s: %.1f ms/frame (%s, CPU %.1f), RMSE %.4g, PSNR %.2f dB, "
+                    "shadow %.3g%s (%.1f s)\n",
+                    i + 1, plan->count, row->id, row->ms_per_frame, per_viewer, row->cpu_ms_per_frame,
+                    row->rmse, row->psnr_db, row->rmse_shadow, ao_text, row->run_s);
         if (!write_outputs(plan, &o, NULL, NULL, NULL, false, NULL)) /* the CSVs after every configuration */
             goto done;
     }
@@ -748,5 +751,6 @@ done:
     scene_free(s);
     json_decref(left_out_extra);
     srv_cli_cameras_free(&cams);
+    srv_cli_unlock_dir(lock);
     return exit_code;
 }

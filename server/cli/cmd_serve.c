@@ -19,6 +19,8 @@
 
 static volatile sig_atomic_t stop_requested = 0;
 
+/* Every signal asks for the end after the current frame: the shutdown (bye to every viewer, the files)
+ * survives a supervisor's or a test's repeated SIGTERM. */
 static void on_signal(int sig)
 {
     stop_requested = sig;
@@ -49,7 +51,7 @@ static const char serve_usage[] =
     "  --port P             TCP port, 0..65535; 0 = any free port (default 7681). The address is\n"
     "                       printed on stdout as 'fxcache serve: listening on ws://ADDR:PORT'\n"
     "  --token T            access token every hello must carry (default: $FXCACHE_TOKEN, else none)\n"
-    "  --fps F              frames per second, (0, 1000] (default 30)\n"
+    "  --fps F              frames per second, [0.001, 1000] (default 30)\n"
     "  --frames N           stop after N frames, 1..100000000 (default: until stopped); the clock\n"
     "                       starts with the first viewer's first camera\n"
     "  --max-viewers N      viewers at once, 1..64 (default 16)\n"
@@ -145,7 +147,12 @@ static int parse_options(int argc, char **argv, serve_options *o)
             srv_cli_effect_names(names, sizeof names);
             fputs(serve_usage, stdout);
             printf(srv_cli_engine_usage, names);
-            printf("  -h, --help           this text\n");
+            printf(
+                "  -h, --help           this text\n"
+                "\n"
+                "Exit status: 0 stopped by SIGINT, SIGTERM or --frames (the statistics, traces and summary\n"
+                "written), 1 a failure (scene, port, writing files), 2 bad options or pools larger than the\n"
+                "machine's memory; 128 + signal for a signal during the scene's load (nothing written).\n");
             return 0;
         }
         default: return srv_cli_getopt_error("serve", c, argv);

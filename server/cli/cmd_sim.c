@@ -27,9 +27,12 @@
 
 static volatile sig_atomic_t stop_requested = 0;
 
+/* The first signal asks for the end after the current frame; a second ends at once (the default action): a
+ * frame can take a minute (many large viewers on one thread), and Ctrl-C twice is how a user says "now". */
 static void on_signal(int sig)
 {
     stop_requested = sig;
+    signal(sig, SIG_DFL);
 }
 
 typedef struct sim_options {
@@ -60,11 +63,12 @@ static const char sim_usage[] =
     "                       %s\n"
     "  --trace FILE         a viewer trace (repeat once per viewer; see docs/TRACE_FORMAT.md): the viewer\n"
     "                       joins at its first time and leaves after its last\n"
-    "  --fps F              frames per second of trace time when replaying, (0, 1000] (default 30)\n"
+    "  --fps F              frames per second of trace time when replaying, [0.001, 1000] (default 30)\n"
     "  --record DIR         write the cameras each viewer was rendered for as DIR/viewer_NN.trace\n"
     "                       (version 2, with the resolution; replay with --trace)\n"
     "  --out DIR            write frames as DIR/frame_FFFF_viewer_VV.png\n"
-    "  --save-every K       frames to save: every K-th and the last (default 0: only the last)\n"
+    "  --save-every K       frames to save: every K-th and the last, 0..1000000 (default 0: only the\n"
+    "                       last)\n"
     "  --views              with --out: also AO and shadow as linear EXR, and a picture of how many\n"
     "                       viewers requested the blocks each pixel reads (_sharing.png)\n"
     "  --stats FILE         one JSON line of statistics per frame\n"
@@ -107,7 +111,15 @@ static int parse_options(int argc, char **argv, sim_options *o)
             srv_cli_effect_names(names, sizeof names);
             printf(sim_usage, srv_camgen_list());
             printf(srv_cli_engine_usage, names);
-            printf("  -h, --help           this text\n");
+            printf(
+                "  -h, --help           this text\n"
+                "\n"
+                "SIGINT or SIGTERM during the scene's load: one line, nothing written, exit 128 + signal;\n"
+                "during the frames: the current frame finishes, then the statistics, traces, the last\n"
+                "frame's images and the summary (interrupted: true) are written; a second signal ends\n"
+                "the run at once.\n"
+                "Exit status: 0 done or interrupted during the frames, 1 a failure (scene, trace, writing\n"
+                "files), 2 bad options or a run larger than the machine's memory.\n");
             return 0;
         }
         default: return srv_cli_getopt_error("sim", c, argv);
@@ -138,6 +150,7 @@ typedef struct image_sink {
     const sim_options *o;
     uint32_t last_frame; /* the run's last frame (always saved) */
     bool force;          /* save whatever frame comes (after an interruption) */
+    bool failed;         /* a write failed and said so: the frame's other viewers write nothing more */
 } image_sink;
 
 static bool save_viewer_frame(const sim_options *o, const srv_viewer_frame *vf, uint32_t viewers)
@@ -185,9 +198,12 @@ static int image_sink_frame(void *user, const srv_viewer_frame *vf)
     const sim_options *o = sink->o;
     bool chosen =
         sink->force || vf->frame == sink->last_frame || (o->save_every && vf->frame % o->save_every == 0);
+    if (sink->failed)
+        return -1; /* one line for the run (the loop still hands over the frame's other viewers) */
     if (!chosen || stop_requested) /* an interrupted run saves its last frame afterwards */
         return 0;
-    return save_viewer_frame(o, vf, o->view.viewers) ? 0 : -1;
+    sink->failed = !save_viewer_frame(o, vf, o->view.viewers);
+    return sink->failed ? -1 : 0;
 }
 
 /* Recording: the camera each viewer was rendered for, at the frame's time. */
@@ -373,8 +389,10 @@ int srv_cmd_sim(int argc, char **argv)
                                    .srgb = srv_viewer_image(loop, present[i])};
             for (int k = 0; k < SRV_VIEW_COUNT; k++)
                 vf.views[k] = srv_viewer_view(loop, present[i], k);
-            if (vf.srgb)
-                save_viewer_frame(&o, &vf, o.view.viewers);
+            if (vf.srgb && !save_viewer_frame(&o, &vf, o.view.viewers)) {
+                images.failed = true; /* it said why; the summary is still written, the exit code is 1 */
+                break;
+            }
         }
     }
 
@@ -394,7 +412,7 @@ int srv_cmd_sim(int argc, char **argv)
         goto done;
     if (!o.quiet)
         srv_cli_print_summary(&run, o.engine.no_cache, stop_requested);
-    exit_code = 0;
+    exit_code = images.failed ? 1 : 0;
 done:
     for (uint32_t v = 0; v < SRV_MAX_VIEWERS; v++)
         if (recorder.writers[v] && srv_trace_writer_close(recorder.writers[v]) != 0 && exit_code == 0) {
