@@ -1,6 +1,7 @@
 // OpenImageIO shim: reads textures and writes frames for the C code (see image.h). The only C++ that
 // touches images; every exception is caught here and turned into -1 and a one-line message.
 #include "image.h"
+#include "fxc_file.h"
 
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
@@ -199,28 +200,6 @@ extern "C" int scene_image_read_rgb(const char *path, uint32_t *width, uint32_t 
     return rc;
 }
 
-// Writes bytes to path, checking every step (a full disk shows at fwrite, fflush or fclose); a file that
-// could not be written whole is removed rather than left truncated. Returns false with the reason in msg.
-static bool write_whole_file(const char *path, const std::vector<unsigned char> &bytes, char *msg, size_t cap)
-{
-    FILE *file = std::fopen(path, "wb");
-    if (!file) {
-        set_msg(msg, cap, std::string(path) + ": cannot write: " + std::strerror(errno));
-        return false;
-    }
-    bool ok = std::fwrite(bytes.data(), 1, bytes.size(), file) == bytes.size() && std::fflush(file) == 0;
-    int saved = errno;
-    if (std::fclose(file) != 0 && ok) {
-        ok = false;
-        saved = errno;
-    }
-    if (!ok) {
-        std::remove(path);
-        set_msg(msg, cap, std::string(path) + ": cannot write: " + std::strerror(saved));
-    }
-    return ok;
-}
-
 // Writes one image in the given pixel type; shared by the two public writers.
 static int write_image(const char *path, uint32_t width, uint32_t height, uint32_t channels, TypeDesc type,
                        const void *pixels, char *msg, size_t msg_cap)
@@ -246,7 +225,7 @@ static int write_image(const char *path, uint32_t width, uint32_t height, uint32
             set_msg(msg, msg_cap, std::string(path) + ": " + out->geterror());
             return -1;
         }
-        if (in_memory && !write_whole_file(path, bytes, msg, msg_cap))
+        if (in_memory && !fxc_write_whole_file(path, bytes.data(), bytes.size(), msg, msg_cap))
             return -1;
         return 0;
     } catch (const std::exception &e) {
