@@ -275,9 +275,10 @@ static void shade_pixel(ref_task *task, uint32_t thread_index, uint32_t x, uint3
         fx_light_direction(light, pt.position, ldir, &dist);
         float cosine =
             pt.view_normal[0] * ldir[0] + pt.view_normal[1] * ldir[1] + pt.view_normal[2] * ldir[2];
-        float falloff = light->type == SCENE_LIGHT_POINT ? 1.0f / fmaxf(dist * dist, 1e-8f) : 1.0f;
+        float falloff = light->type == SCENE_LIGHT_POINT ? fx_point_falloff(dist) : 1.0f;
+        float scale = fminf(light->intensity * cosine * falloff, FLT_MAX); /* x a black channel: 0, not NaN */
         for (int k = 0; k < 3; k++)
-            unshadowed[l][k] = cosine > 0 ? light->intensity * cosine * falloff * light->color[k] : 0.0f;
+            unshadowed[l][k] = cosine > 0 ? fminf(scale * light->color[k], FLT_MAX) : 0.0f;
     }
 
     float half_rad[2][3], half_ao[2], half_shadow[2];
