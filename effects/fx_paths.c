@@ -7,7 +7,8 @@
  * the probe update's model of a hit, bounce after bounce:
  *   - a miss returns the sky's radiance;
  *   - a back face returns nothing (a probe counts it as the inside of a closed mesh);
- *   - a front face y returns albedo(y) x (direct(y) + E(y) / pi), direct(y) the sum over lights of intensity x
+ *   - a front face y returns Le(y) + albedo(y) x (direct(y) + E(y) / pi), Le(y) its material's emission,
+ *     direct(y) the sum over lights of intensity x
  *     colour x cos (/ d^2 for point lights) where a shadow ray reaches the light (compose's formula at a
  *     point), and E(y) the same integral at y: no ambient occlusion at a hit, as the probes' hits have none.
  * With cosine-weighted directions and a Lambertian surface the weight of a vertex is its albedo, so the
@@ -155,6 +156,12 @@ void fx_indirect_reference_point(const fx_context *ctx, const float pos[3], cons
                 if (!(fx__dot(p.dir, hit_normal) < 0))
                     continue; /* a back face: dark, the path ends */
                 float albedo[3], at[3];
+                if (s->emissive) { /* the emission the path meets, weighted by what it carries so far */
+                    float emitted[3] = {0, 0, 0};
+                    scene_emission_add(s, tri, hit_normal, emitted);
+                    for (int k = 0; k < 3; k++)
+                        sum[k] += (double)p.throughput[k] * emitted[k];
+                }
                 scene_albedo(s, tri, rh->hit.u, rh->hit.v, albedo);
                 for (int k = 0; k < 3; k++) {
                     p.throughput[k] *= albedo[k];

@@ -2,9 +2,10 @@
  * after rtcIntersect1M): the radiance leaving each front-face hit (shadow rays to the lights, the committed
  * probes around the hit through a per-thread memo of cells, in three passes over the chunk's hits), the
  * back faces and misses, each ray's distance; and the no-cache estimate's hits (fx_probe_eval_point), which
- * share the shadow-ray queue. The rules (units, the bounce filter's departures, determinism) are in the
- * comment at the top of fx_probes.c; this file is apart so its hot inline code still inlines into its one
- * entry point's AVX2 copy. */
+ * share the shadow-ray queue. A front face of an emitting material adds its emission to what leaves it (its
+ * light reaches the surfaces around it through the probes; only when the scene has emitters). The rules
+ * (units, the bounce filter's departures, determinism) are in the comment at the top of fx_probes.c; this
+ * file is apart so its hot inline code still inlines into its one entry point's AVX2 copy. */
 #include "fx_probes_internal.h"
 #include "fxc_hot.h"
 #include "scene_inline.h"
@@ -577,6 +578,8 @@ FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job,
         own_bounce(job, normal, bounce);
     for (int k = 0; k < 3; k++)
         out[k] = albedo[k] * (direct[k] + bounce[k] * (1.0f / FX_PROBE_PI));
+    if (ctx->s->emissive) /* a front face: its own emission (one material lookup) */
+        scene_emission_add(ctx->s, tri, normal, out);
 }
 
 /* Pass 1 of the batched bounce (the comment at hit_batch): chunk hit r at `position` joins the batch, its
@@ -689,15 +692,21 @@ FXC_HOT_INLINE void hits_radiance(const fx_context *ctx, const fx_block_job *job
                                   const struct RTCRayHit *hits, const hit_shading *hs, float (*values)[5])
 {
     batch_bounce(hb, hb->done, hb->count);
+    const scene *s = ctx->s;
     for (uint32_t i = 0; i < hb->count; i++) {
         uint32_t r = hb->ray[i];
         if (!hb->found[i])
             own_bounce(job, ctx->s->tri_normal + 3 * (size_t)hits[r].hit.primID, hb->bounce[i]);
         float albedo[3];
-        scene_albedo_mean(ctx->s, hits[r].hit.primID, albedo); /* the triangle's mean (file comment) */
+        scene_albedo_mean(s, hits[r].hit.primID, albedo); /* the triangle's mean (file comment) */
         for (int k = 0; k < 3; k++)
             values[r][k] = albedo[k] * (hs->direct[r][k] + hb->bounce[i][k] * (1.0f / FX_PROBE_PI));
     }
+    if (s->emissive) /* front faces: their own emission (one material lookup each) */
+        for (uint32_t i = 0; i < hb->count; i++) {
+            uint32_t tri = hits[hb->ray[i]].hit.primID;
+            scene_emission_add(s, tri, s->tri_normal + 3 * (size_t)tri, values[hb->ray[i]]);
+        }
     hb->count = 0;
 }
 
@@ -866,11 +875,14 @@ void fx_probe_eval_point(const fx_context *ctx, const float pos[3], const float 
         for (uint32_t r = 0; r < n; r++) {
             if (!front[r])
                 continue;
-            float albedo[3];
-            scene_albedo_filtered(s, hits[r].hit.primID, hits[r].hit.u, hits[r].hit.v,
+            float albedo[3], emitted[3] = {0, 0, 0};
+            uint32_t tri = hits[r].hit.primID;
+            scene_albedo_filtered(s, tri, hits[r].hit.u, hits[r].hit.v,
                                   log2f(fmaxf(hits[r].ray.tfar * 0.3f, 1e-30f)), albedo);
+            if (s->emissive) /* a front face's own emission */
+                scene_emission_add(s, tri, s->tri_normal + 3 * (size_t)tri, emitted);
             for (int k = 0; k < 3; k++)
-                sum[k] += (double)albedo[k] * hs->direct[r][k];
+                sum[k] += (double)albedo[k] * hs->direct[r][k] + (double)emitted[k];
         }
     }
     /* Cosine-weighted sampling: E = pi x the mean radiance. */

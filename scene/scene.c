@@ -960,6 +960,7 @@ scene_result scene__finalize(scene *s, const scene_load_desc *desc, scene_error 
     t0 = scene__now_ms();
     rc = scene__build_islands(s, err);
     s->timings.islands_ms = scene__now_ms() - t0;
+    scene_emission_refresh(s);
     return rc;
 }
 
@@ -1025,7 +1026,9 @@ scene *scene_load(const char *path, const scene_load_desc *desc, scene_error *er
         snprintf(s->source, sizeof s->source, "%s", path);
         scene__set_source(s, path);
         rc = scene__import_file(s, path, NULL, NULL, err);
-        if (rc == SCENE_OK)
+        /* A file whose materials emit is lit by its emitters (a Cornell box's light): no sun and sky. */
+        scene_emission_refresh(s);
+        if (rc == SCENE_OK && !s->emissive)
             scene__add_default_lighting(s);
     }
     s->timings.load_ms = scene__now_ms() - t0 - s->timings.weld_ms - s->timings.textures_ms;

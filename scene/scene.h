@@ -78,8 +78,10 @@ typedef struct scene_texture {
 } scene_texture;
 
 typedef struct scene_material {
-    float diffuse[3]; /* linear RGB albedo, 0..1 */
-    int32_t texture;  /* index into scene.textures, or -1 */
+    float diffuse[3];  /* linear RGB albedo, 0..1 */
+    int32_t texture;   /* index into scene.textures, or -1 */
+    float emission[3]; /* linear RGB radiance the front face emits, W/(m^2 sr) in the scene's units (the sky's
+                        * radiance and compose's radiance are in the same units); finite, >= 0; 0: none */
     char name[64];
 } scene_material;
 
@@ -158,6 +160,11 @@ typedef struct scene {
 
     scene_toggle fx_shadows, fx_ao, fx_indirect;
 
+    /* Some material with a mesh emits (emission > 0): set by scene_finalize(), and by scene_emission_refresh()
+     * after a material's emission changes. Compose and the probes add emission only when it is set, so a
+     * scene without emitters pays one test per run of pixels or chunk of rays. */
+    bool emissive;
+
     bool has_camera;                                       /* a default camera from the scene description */
     float camera_pos[3], camera_target[3], camera_fov_deg; /* local frame, like every position here */
 
@@ -218,7 +225,8 @@ typedef struct scene_load_desc {
 } scene_load_desc;
 
 /* Loads a scene: a JSON scene description (*.json), or any mesh file Assimp reads (optionally .gz), which
- * then becomes a scene with defaults (one sun, a sky). The path "default" (or NULL) is the embedded scene.
+ * then becomes a scene with defaults (one sun, a sky) unless some material of it emits (then its emitters
+ * alone light it). The path "default" (or NULL) is the embedded scene.
  * Returns NULL and fills err on failure; nothing partial is returned. */
 scene *scene_load(const char *path, const scene_load_desc *desc, scene_error *err);
 
@@ -277,6 +285,24 @@ void scene_albedo_run(const scene *s, const uint32_t *tri, const float *u, const
  * at the call (a material changed after finalisation counts); a scene without the table (never finalised)
  * gives the same value, computed at the call. */
 void scene_albedo_mean(const scene *s, uint32_t tri, float out_rgb[3]);
+
+/* ---- emission ------------------------------------------------------------------------------------------ */
+
+/* True when a material emits (some emission component > 0). */
+bool scene_material_emits(const scene_material *m);
+
+/* Recomputes s->emissive from the materials of its meshes (after a material's emission changed). */
+void scene_emission_refresh(scene *s);
+
+/* What the emitting materials give out, for messages: how many materials with a mesh emit, and the total
+ * emitted power pi x Le x area summed over their triangles (one side), W in the scene's units, per channel. */
+void scene_emission_power(const scene *s, uint32_t *emitting_materials, double power_rgb[3]);
+
+/* Adds the emission of triangle tri's material to radiance out_rgb when view_normal (the normal turned to the
+ * side the viewer or ray comes from) is on its front: dot(view_normal, geometric normal) > 0. Emission is
+ * one-sided, as the probes see it (a back face is the inside of a closed mesh). Saturates at FLT_MAX, never
+ * infinite. One material lookup: callers test s->emissive first. */
+void scene_emission_add(const scene *s, uint32_t tri, const float view_normal[3], float out_rgb[3]);
 
 /* ---- what the scene needs ---------------------------------------------------------------------------- */
 

@@ -2,8 +2,9 @@
  * A ".gz" file is decompressed with zlib first and handed to Assimp from memory with the inner extension
  * as the format hint. Meshes are triangulated by Assimp and pre-transformed to world space; points and
  * lines are dropped and counted; every mesh then goes through scene__add_mesh(), which checks, welds and
- * cleans it. Diffuse colours and diffuse textures (read with OpenImageIO, relative to the model file, with
- * a case-insensitive fallback since many old models name "KAMEN.JPG" for kamen.jpg) become materials. */
+ * cleans it. Diffuse colours, emissive colours (times the emissive intensity) and diffuse textures (read
+ * with OpenImageIO, relative to the model file, with a case-insensitive fallback since many old models name
+ * "KAMEN.JPG" for kamen.jpg) become materials. */
 #include "scene_internal.h"
 #include "cerr_capture.h"
 
@@ -237,8 +238,8 @@ static bool resolve_texture(const char *model_dir, const char *name, char *out, 
     return found;
 }
 
-/* Converts one Assimp material into a scene material (its diffuse colour and texture). A texture that
- * cannot be read is reported on stderr and counted; the material keeps its colour. */
+/* Converts one Assimp material into a scene material (its diffuse colour, emission and texture). A texture
+ * that cannot be read is reported on stderr and counted; the material keeps its colour. */
 static scene_result import_material(scene *s, const struct aiMaterial *am, const char *model_dir,
                                     uint32_t *out_index, scene_error *err)
 {
@@ -251,6 +252,21 @@ static scene_result import_material(scene *s, const struct aiMaterial *am, const
         float c[3] = {color.r, color.g, color.b};
         for (int k = 0; k < 3; k++)
             m.diffuse[k] = isfinite(c[k]) ? fminf(fmaxf(c[k], 0.0f), 1.0f) : 0.7f;
+    }
+    /* Emission: the emissive colour (OBJ's Ke, glTF's emissiveFactor, FBX's EmissiveColor) times the emissive
+     * intensity when Assimp gives one (FBX's EmissiveFactor; glTF's KHR_materials_emissive_strength in Assimp
+     * versions that read it, not 5.2.5). Radiance in the file's units; negative or non-finite counts as none. */
+    if (aiGetMaterialColor(am, AI_MATKEY_COLOR_EMISSIVE, &color) == aiReturn_SUCCESS) {
+        float strength = 1.0f;
+        ai_real intensity = 1;
+        if (aiGetMaterialFloat(am, AI_MATKEY_EMISSIVE_INTENSITY, &intensity) == aiReturn_SUCCESS &&
+            isfinite(intensity) && intensity >= 0)
+            strength = (float)intensity;
+        float c[3] = {color.r, color.g, color.b};
+        for (int k = 0; k < 3; k++) {
+            float e = c[k] * strength;
+            m.emission[k] = isfinite(e) && e > 0.0f ? e : 0.0f;
+        }
     }
     struct aiString tex;
     if (aiGetMaterialTextureCount(am, aiTextureType_DIFFUSE) > 0 &&

@@ -18,7 +18,8 @@
  *                                                     row-major affine 4x4, last row 0 0 0 1, not singular
  *         "material": { "diffuse": [r, g, b],         optional; replaces every material of the file;
  *                       "texture": "wood.png",        linear albedo in 0..1 (default 0.8 grey, or white
- *                       "name": "wood" } },           when a texture is given); texture relative to the JSON
+ *                       "emission": [r, g, b],        when a texture is given); texture relative to the JSON;
+ *                       "name": "wood" } },           emission: radiance of the front faces, >= 0 (default 0)
  *       { "builtin": "default",                       the embedded default scene's geometry and materials
  *         "transform": { ... } }                      (not its lights, sky or camera); optional transform
  *     ],
@@ -487,10 +488,10 @@ static scene_result json_read_mesh_entry(const json_ctx *ctx, const json_t *valu
 
     const json_t *material = json_object_get(value, "material");
     if (material) {
-        static const char *const allowed_material[] = {"diffuse", "texture", "name"};
+        static const char *const allowed_material[] = {"diffuse", "texture", "name", "emission"};
         char material_where[JSON_WHERE_CAP];
         json_field_path(material_where, sizeof material_where, where, "material");
-        if ((r = json_check_object(ctx, material, material_where, allowed_material, 3)) != SCENE_OK)
+        if ((r = json_check_object(ctx, material, material_where, allowed_material, 4)) != SCENE_OK)
             return r;
         scene_material *m = &entry->material;
         m->texture = -1;
@@ -508,6 +509,18 @@ static scene_result json_read_mesh_entry(const json_ctx *ctx, const json_t *valu
                 return json_fail(ctx, SCENE_ERR_INVALID, field,
                                  "components must be albedos in 0..1 (component %d is %g)", i,
                                  (double)m->diffuse[i]);
+            }
+        }
+        /* Emission: radiance (not an albedo), any size a float holds, >= 0; default none. */
+        if ((r = json_get_numbers(ctx, material, material_where, "emission", m->emission, 3, NULL)) !=
+            SCENE_OK)
+            return r;
+        for (int i = 0; i < 3; i++) {
+            if (!(m->emission[i] >= 0.0f) || !isfinite(m->emission[i])) {
+                json_field_path(field, sizeof field, material_where, "emission");
+                return json_fail(ctx, SCENE_ERR_INVALID, field,
+                                 "components must be radiances >= 0 that fit a float (component %d is %g)", i,
+                                 (double)m->emission[i]);
             }
         }
         if (entry->has_texture) {

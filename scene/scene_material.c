@@ -438,3 +438,68 @@ void scene_albedo_mean(const scene *s, uint32_t tri, float out_rgb[3])
     for (int k = 0; k < 3; k++)
         out_rgb[k] = texel[k] * m->diffuse[k];
 }
+
+/* ---- emission ----------------------------------------------------------------------------------------- */
+
+bool scene_material_emits(const scene_material *m)
+{
+    return m->emission[0] > 0.0f || m->emission[1] > 0.0f || m->emission[2] > 0.0f;
+}
+
+void scene_emission_refresh(scene *s)
+{
+    s->emissive = false;
+    for (uint32_t i = 0; i < s->mesh_count; i++)
+        if (s->meshes[i].triangle_count > 0 && s->meshes[i].material < s->material_count)
+            s->emissive |= scene_material_emits(&s->materials[s->meshes[i].material]);
+}
+
+void scene_emission_power(const scene *s, uint32_t *emitting_materials, double power_rgb[3])
+{
+    uint32_t count = 0;
+    power_rgb[0] = power_rgb[1] = power_rgb[2] = 0.0;
+    for (uint32_t m = 0; m < s->material_count; m++) {
+        const scene_material *material = &s->materials[m];
+        if (!scene_material_emits(material))
+            continue;
+        double area = 0.0;
+        bool used = false;
+        for (uint32_t i = 0; i < s->mesh_count; i++) {
+            const scene_mesh *mesh = &s->meshes[i];
+            if (mesh->material != m || mesh->triangle_count == 0)
+                continue;
+            used = true;
+            for (uint32_t t = mesh->first_triangle; t < mesh->first_triangle + mesh->triangle_count; t++) {
+                const float *a = s->positions + 3 * (size_t)s->indices[3 * (size_t)t];
+                const float *b = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 1];
+                const float *c = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 2];
+                double e1[3], e2[3];
+                for (int k = 0; k < 3; k++) {
+                    e1[k] = (double)b[k] - a[k];
+                    e2[k] = (double)c[k] - a[k];
+                }
+                double cx = e1[1] * e2[2] - e1[2] * e2[1], cy = e1[2] * e2[0] - e1[0] * e2[2],
+                       cz = e1[0] * e2[1] - e1[1] * e2[0];
+                area += 0.5 * sqrt(cx * cx + cy * cy + cz * cz);
+            }
+        }
+        if (!used)
+            continue;
+        count++;
+        for (int k = 0; k < 3; k++) /* a Lambertian emitter's exitance is pi x its radiance */
+            power_rgb[k] += 3.14159265358979323846 * (double)material->emission[k] * area;
+    }
+    *emitting_materials = count;
+}
+
+void scene_emission_add(const scene *s, uint32_t tri, const float view_normal[3], float out_rgb[3])
+{
+    const float *n = s->tri_normal + 3 * (size_t)tri;
+    if (!(view_normal[0] * n[0] + view_normal[1] * n[1] + view_normal[2] * n[2] > 0.0f))
+        return;
+    const scene_material *m = &s->materials[s->meshes[s->tri_mesh[tri]].material];
+    for (int k = 0; k < 3; k++) {
+        float sum = out_rgb[k] + m->emission[k];
+        out_rgb[k] = sum <= FLT_MAX ? sum : FLT_MAX;
+    }
+}

@@ -9,8 +9,9 @@
  * to work with; "auto" follows the content):
  *   shadow           at least one light with intensity > 0 and a non-black colour;
  *   ao               a sky (the ambient light) with intensity > 0 and a non-black colour;
- *   probes           indirect not switched off, some light or sky energy, and some mesh whose material has
- *                    a non-zero albedo (a texture counts as non-zero);
+ *   probes           indirect not switched off, some light, sky or emitting material (emission > 0) with
+ *                    energy, and some mesh whose material has a non-zero albedo (a texture counts as
+ *                    non-zero); the probes carry the emitters' light to the surfaces around them;
  *   triangle_lookup  iff an on-surface effect (shadow, ao) runs: it serves them;
  *   on_surface cache iff triangle_lookup runs; world_space cache iff probes run. */
 #include "scene_internal.h"
@@ -25,6 +26,7 @@ typedef struct needs_content {
     bool sky_exists;             /* any sky intensity or colour at all */
     bool sky_with_energy;        /* intensity > 0 and a non-black colour */
     uint32_t meshes_with_albedo; /* meshes whose material has a non-zero diffuse colour or a texture */
+    uint32_t emitting_meshes;    /* meshes whose material emits */
 } needs_content;
 
 /* Writes a reason (printf-style) into a fixed-size reason slot, cut short if it does not fit. */
@@ -59,6 +61,8 @@ static void needs_survey(const scene *s, needs_content *content)
         bool textured = material->texture >= 0 && (uint32_t)material->texture < s->texture_count;
         if (textured || needs_color_nonblack(material->diffuse))
             content->meshes_with_albedo++;
+        if (scene_material_emits(material))
+            content->emitting_meshes++;
     }
 }
 
@@ -83,6 +87,13 @@ static void needs_shadow(const scene *s, const needs_content *content, scene_nee
         out->effect[SCENE_FX_SHADOW] = true;
         needs_reason(reason, cap, "%u of %u lights carry energy (intensity > 0, non-black colour)",
                      content->lights_with_energy, s->light_count);
+    } else if (s->light_count == 0 && content->emitting_meshes > 0) {
+        out->effect[SCENE_FX_SHADOW] = false;
+        needs_reason(
+            reason, cap,
+            "the scene has no lights: its %u emitting mesh%s light it through the probes (emitters cast "
+            "no hard shadows)",
+            content->emitting_meshes, content->emitting_meshes == 1 ? "" : "es");
     } else if (s->light_count == 0) {
         out->effect[SCENE_FX_SHADOW] = false;
         needs_reason(reason, cap, "the scene has no lights");
@@ -127,7 +138,8 @@ static void needs_probes(const scene *s, const needs_content *content, scene_nee
 {
     char *reason = out->effect_reason[SCENE_FX_PROBES];
     size_t cap = sizeof out->effect_reason[SCENE_FX_PROBES];
-    bool has_energy = content->lights_with_energy > 0 || content->sky_with_energy;
+    bool has_energy =
+        content->lights_with_energy > 0 || content->sky_with_energy || content->emitting_meshes > 0;
     bool has_albedo = content->meshes_with_albedo > 0;
     if (s->fx_indirect == SCENE_OFF) {
         out->effect[SCENE_FX_PROBES] = false;
@@ -139,27 +151,30 @@ static void needs_probes(const scene *s, const needs_content *content, scene_nee
                          content->meshes_with_albedo);
         else
             needs_reason(reason, cap, "forced on in the scene description; warning: nothing to bounce (%s)",
-                         !has_energy ? "no light or sky with energy" : "every material is black");
+                         !has_energy ? "no light, sky or emitter with energy" : "every material is black");
     } else if (!has_energy) {
         out->effect[SCENE_FX_PROBES] = false;
         needs_reason(reason, cap,
-                     "nothing lights the scene (no light or sky with energy), so no light bounces");
+                     "nothing lights the scene (no light, sky or emitter with energy), so no light bounces");
     } else if (!has_albedo) {
         out->effect[SCENE_FX_PROBES] = false;
         needs_reason(reason, cap, "every material is black (zero albedo, no texture), so no light bounces");
     } else {
         out->effect[SCENE_FX_PROBES] = true;
-        char sources[64];
+        char sources[64] = "", emitters[48] = "";
         if (content->lights_with_energy > 0 && content->sky_with_energy)
             needs_reason(sources, sizeof sources, "%u light%s and the sky", content->lights_with_energy,
                          content->lights_with_energy == 1 ? "" : "s");
         else if (content->lights_with_energy > 0)
             needs_reason(sources, sizeof sources, "%u light%s", content->lights_with_energy,
                          content->lights_with_energy == 1 ? "" : "s");
-        else
+        else if (content->sky_with_energy)
             needs_reason(sources, sizeof sources, "the sky");
-        needs_reason(reason, cap, "light from %s bounces off %u of %u meshes with non-zero albedo", sources,
-                     content->meshes_with_albedo, s->mesh_count);
+        if (content->emitting_meshes > 0) /* the emitters' light reaches surfaces through the probes alone */
+            needs_reason(emitters, sizeof emitters, "%s%u emitting mesh%s", sources[0] ? " and " : "",
+                         content->emitting_meshes, content->emitting_meshes == 1 ? "" : "es");
+        needs_reason(reason, cap, "light from %s%s bounces off %u of %u meshes with non-zero albedo", sources,
+                     emitters, content->meshes_with_albedo, s->mesh_count);
     }
 }
 

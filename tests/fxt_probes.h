@@ -47,6 +47,8 @@ void fxt_grid_shade_at(const fxt_grid *g, const float pos[3], const float normal
 /* A white point light of the given intensity. */
 void fxt_add_point_light(scene *s, float x, float y, float z, float intensity);
 
+/* fxt_add_sphere (an icosphere, normals inward): fxt_scene.h, shared with test_world.c. */
+
 /* A uniform float in [0, 1) from a splitmix step of *state. */
 float fxt_random_unit(uint64_t *state);
 

@@ -17,6 +17,7 @@ typedef struct needs_fixture {
     float sky_intensity;   /* 0 = no sky */
     float albedo;          /* grey level of the one material */
     bool textured;         /* the material has a texture (with a black diffuse colour when albedo = 0) */
+    float emission;        /* grey level of the material's emission (0: none) */
     scene_toggle shadows, ao, indirect;
 } needs_fixture;
 
@@ -35,7 +36,9 @@ static scene *make_scene(const needs_fixture *f)
         s->textures[0].rgb[0] = 0.5f;
         s->texture_count = 1;
     }
-    scene_material material = {.diffuse = {f->albedo, f->albedo, f->albedo}, .texture = f->textured ? 0 : -1};
+    scene_material material = {.diffuse = {f->albedo, f->albedo, f->albedo},
+                               .texture = f->textured ? 0 : -1,
+                               .emission = {f->emission, f->emission, f->emission}};
     uint32_t material_index = scene__add_material(s, &material, &err);
     assert_int_not_equal(material_index, UINT32_MAX);
     static const float positions[] = {0, 0, 0, 1, 0, 0, 1, 0, 1, 0, 0, 1};
@@ -88,6 +91,38 @@ static void assert_mentions(const char *text, const char *fragment)
 {
     if (!strstr(text, fragment))
         fail_msg("reason '%s' does not mention '%s'", text, fragment);
+}
+
+/* Emission is energy for the probes: an emitter alone runs them (no shadow, no AO, each saying the emitter
+ * lights the scene), not when every albedo is black (nothing bounces; the emitter still shows), and beside a
+ * sky both are named. */
+static void test_needs_emission(void **state)
+{
+    (void)state;
+    needs_fixture f = {.albedo = 0.7f, .emission = 2.0f};
+    scene *s = make_scene(&f);
+    scene_needs_result r = needs_of(s);
+    assert_true(r.effect[SCENE_FX_PROBES]);
+    assert_mentions(r.effect_reason[SCENE_FX_PROBES], "light from 1 emitting mesh bounces");
+    assert_false(r.effect[SCENE_FX_SHADOW]);
+    assert_mentions(r.effect_reason[SCENE_FX_SHADOW], "1 emitting mesh light it through the probes");
+    assert_false(r.effect[SCENE_FX_AO]);
+    scene_free(s);
+
+    f = (needs_fixture){.albedo = 0.0f, .emission = 2.0f};
+    s = make_scene(&f);
+    r = needs_of(s);
+    assert_false(r.effect[SCENE_FX_PROBES]);
+    assert_mentions(r.effect_reason[SCENE_FX_PROBES], "every material is black");
+    scene_free(s);
+
+    f = (needs_fixture){.albedo = 0.7f, .emission = 2.0f, .sky_intensity = 1.0f};
+    s = make_scene(&f);
+    r = needs_of(s);
+    assert_true(r.effect[SCENE_FX_PROBES]);
+    assert_mentions(r.effect_reason[SCENE_FX_PROBES], "the sky and 1 emitting mesh");
+    assert_true(r.effect[SCENE_FX_AO]);
+    scene_free(s);
 }
 
 /* No lights and no sky: nothing runs, and each reason says what is missing. */
@@ -365,6 +400,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_needs_nothing),
+        cmocka_unit_test(test_needs_emission),
         cmocka_unit_test(test_needs_light_only),
         cmocka_unit_test(test_needs_sky_only),
         cmocka_unit_test(test_needs_everything),

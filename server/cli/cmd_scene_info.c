@@ -9,6 +9,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 
 enum { HIST_BUCKETS = 9 }; /* islands by triangle count: 1, 2-3, 4-7, ..., 128-255, 256 */
 
@@ -67,6 +68,30 @@ static json_t *exact_number_json(double v)
     return json_real(v);
 }
 
+/* Whether the scene came from a plain mesh file (not a JSON description, not the embedded scene): such a
+ * scene gets the default sun and sky unless its materials emit. */
+static bool plain_mesh_file(const scene *s)
+{
+    size_t n = strlen(s->source);
+    return s->source[0] != '(' && !(n >= 5 && strcasecmp(s->source + n - 5, ".json") == 0);
+}
+
+/* The emitting materials as one JSON object: count, total power, each one's name and radiance. */
+static json_t *emission_json(const scene *s)
+{
+    uint32_t emitting = 0;
+    double power[3];
+    scene_emission_power(s, &emitting, power);
+    json_t *list = json_array();
+    for (uint32_t m = 0; m < s->material_count; m++)
+        if (scene_material_emits(&s->materials[m]))
+            json_array_append_new(list, json_pack("{s:s,s:o}", "name", s->materials[m].name, "emission",
+                                                  vec3_json(s->materials[m].emission)));
+    return json_pack("{s:i,s:[fff],s:o,s:b}", "emitting_materials", (int)emitting, "power_w", power[0],
+                     power[1], power[2], "materials", list, "default_lighting_replaced",
+                     emitting > 0 && plain_mesh_file(s));
+}
+
 /* The whole report as one JSON object. */
 static json_t *scene_info_json(const scene *s, const island_summary *is, const scene_needs_result *needs,
                                double bvh_ms)
@@ -89,6 +114,7 @@ static json_t *scene_info_json(const scene *s, const island_summary *is, const s
                                                 vec3_json(l->color), "intensity", (double)l->intensity));
     }
     json_object_set_new(root, "light_list", lights);
+    json_object_set_new(root, "emission", emission_json(s));
     json_object_set_new(
         root, "sky",
         json_pack("{s:o,s:f}", "color", vec3_json(s->sky_color), "intensity", (double)s->sky_intensity));
@@ -175,6 +201,21 @@ static void print_text(const scene *s, const island_summary *is, const scene_nee
     for (uint32_t i = 0; i < s->light_count; i++)
         dirs += s->lights[i].type == SCENE_LIGHT_DIRECTIONAL;
     printf("lights:         %u (%u directional, %u point)\n", s->light_count, dirs, s->light_count - dirs);
+    uint32_t emitting = 0;
+    double power[3];
+    scene_emission_power(s, &emitting, power);
+    if (emitting == 0)
+        printf("emission:       none (no material emits)\n");
+    else
+        printf(
+            "emission:       %u emitting material%s, total power (%.4g, %.4g, %.4g) W (pi x Le x area)%s\n",
+            emitting, emitting == 1 ? "" : "s", power[0], power[1], power[2],
+            plain_mesh_file(s) ? "; they light the scene: no default sun and sky" : "");
+    for (uint32_t m = 0; m < s->material_count; m++)
+        if (scene_material_emits(&s->materials[m]))
+            printf("  emits:        '%s' radiance (%.4g, %.4g, %.4g)\n", s->materials[m].name,
+                   (double)s->materials[m].emission[0], (double)s->materials[m].emission[1],
+                   (double)s->materials[m].emission[2]);
     printf("sky:            colour (%.3g, %.3g, %.3g), intensity %.3g\n", (double)s->sky_color[0],
            (double)s->sky_color[1], (double)s->sky_color[2], (double)s->sky_intensity);
     printf("texel density:  %.4g texels per metre%s\n", (double)s->texel_density,
@@ -214,7 +255,8 @@ static const char scene_info_usage[] =
     "usage: fxcache scene-info [SCENE] [--json] [--density TEXELS_PER_METRE]\n"
     "\n"
     "Loads SCENE (a *.json scene description, a mesh file Assimp reads, optionally .gz, or 'default' for\n"
-    "the embedded scene; the default) and prints its triangles, meshes, lights, islands (count,\n"
+    "the embedded scene; the default) and prints its triangles, meshes, lights, emitting\n"
+    "materials (count, total emitted power pi x Le x area), islands (count,\n"
     "triangles-per-island histogram, texels and blocks at level 0), texel density, the origin of its local\n"
     "frame (world = local + origin) and the spacing of its float positions (with a warning when that "
     "exceeds\n"

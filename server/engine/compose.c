@@ -1,5 +1,6 @@
 /* Stage 7, compose: per pixel,
  *     radiance = albedo x (sum over lights of E x cos x light visibility + sky x sky visibility + indirect)
+ *                + the emission of a front face (scene_emission_add; only in scenes with emitters)
  * then a tone map and sRGB 8-bit. Compose knows the formula, not the effects: it starts every pixel
  * unshadowed, unoccluded and with no indirect light, and each effect's shade callback modulates its term for
  * a run of pixels from the taps its cache kind gathers (bilinear reads at the level the pixel requested,
@@ -916,6 +917,12 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
             cs->irradiance[i][k] = cs->indirect[3 * i + k] = cs->albedo[i][k] = 0.0f;
     }
     radiance_lanes(cs, cu->sky);
+    if (s->emissive) /* emitting materials: a front face adds its own radiance (scene_emission_add) */
+        for (uint32_t i = 0; i < count; i++)
+            scene_emission_add(
+                s, cs->triangle[i],
+                (const float[3]){cs->shade_normal[0][i], cs->shade_normal[1][i], cs->shade_normal[2][i]},
+                cs->radiance[i]);
     float *radiance = view->radiance; /* the stores below cannot change the viewer's pointers: loaded once */
     uint64_t missed = 0;
     for (uint32_t i = 0; i < count; i++) {

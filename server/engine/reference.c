@@ -301,6 +301,8 @@ static void shade_pixel(ref_task *task, uint32_t thread_index, uint32_t x, uint3
             float value = albedo[k] * irr[k];
             half_rad[h][k] = value <= FLT_MAX ? value : (value > 0 ? FLT_MAX : 0.0f);
         }
+        if (s->emissive) /* a front face's own emission, as compose adds it */
+            scene_emission_add(s, tri, pt.view_normal, half_rad[h]);
         half_ao[h] = sky_open >= 0 ? sky_open : sky_visibility;
         half_shadow[h] = s->light_count ? visibility[0] : 1.0f;
     }
