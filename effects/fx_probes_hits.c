@@ -162,6 +162,7 @@ typedef struct hit_batch {
     float tap[PROBE_CHUNK][8], weight[PROBE_CHUNK][8], distance[PROBE_CHUNK][8];
     int32_t texel[PROBE_CHUNK][8];
     float bounce[PROBE_CHUNK][3]; /* pass 3's E of the probes around the hit */
+    bool found[PROBE_CHUNK];      /* pass 3: some probe around the hit contributed (else own_bounce) */
     uint32_t done;                /* pass 3 ran for hits [0, done) */
 } hit_batch;
 
@@ -511,9 +512,27 @@ FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t 
     return cell_filter(e, tap, position, normal, out);
 }
 
+/* The bounce at a hit no probe around contributes to (its cell holds no probe: no viewer requested it; or
+ * every corner is off): the updating probe's own committed irradiance towards the hit's normal, 0 while it
+ * has none or is off. The ray reached the hit, so the two see the same side of every wall; in a closed
+ * uniform enclosure the irradiance is the same everywhere and this is exact. Before, such a hit reflected
+ * no indirect light: inside a closed sphere of albedo 0.5 seen by one viewer, the light that went round
+ * behind it was lost and the wall converged to 0.80 of its closed form E0 / (1 - rho), at albedo 0.99 to
+ * 0.024 (tests/test_world.c, test_closed_sphere_one_viewer). */
+FXC_HOT_INLINE void own_bounce(const fx_block_job *job, const float normal[3], float out[3])
+{
+    const uint8_t *p = job->payload;
+    uint32_t flags = get_u32(p + 16);
+    if (!(flags & FX_PROBE_HAS_DATA) || (flags & FX_PROBE_OFF)) {
+        out[0] = out[1] = out[2] = 0;
+        return;
+    }
+    fx_probe_irradiance(p, normal, out);
+}
+
 /* hit_bounce's filter from taps (ctx->world_taps, when world_cell is NULL): the taps as the corners of a
  * cell (up to 8; an update's taps are one level's 8 corners), then the same cell_filter. */
-static void taps_bounce(const fx_taps *taps, const float position[3], const float normal[3], float out[3])
+static bool taps_bounce(const fx_taps *taps, const float position[3], const float normal[3], float out[3])
 {
     hit_cell e;
     memset(&e, 0, sizeof e);
@@ -533,8 +552,7 @@ static void taps_bounce(const fx_taps *taps, const float position[3], const floa
         e.cell[c] = get_f32(p + 12);
         tap[c] = taps->weight[c];
     }
-    if (e.active)
-        cell_filter(&e, tap, position, normal, out);
+    return e.active && cell_filter(&e, tap, position, normal, out);
 }
 
 /* Radiance leaving a front-face hit, given its direct light (compose units) and the probes around it. */
@@ -547,15 +565,17 @@ FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job,
     (void)u, (void)v, (void)t;
     scene_albedo_mean(ctx->s, tri, albedo);
     uint32_t effect = job->effect, level = job->level;
+    bool found = false;
     if (ctx->world_cell) {
-        hit_bounce(ctx, effect, level, job->origin, job->cell, inverse, position, normal, bounce);
+        found = hit_bounce(ctx, effect, level, job->origin, job->cell, inverse, position, normal, bounce);
     } else if (ctx->world_taps) {
         fx_taps taps;
         memset(&taps, 0, sizeof taps);
         ctx->world_taps(ctx->world_user, effect, position, level, &taps);
-        if (taps.count > 0)
-            taps_bounce(&taps, position, normal, bounce);
+        found = taps.count > 0 && taps_bounce(&taps, position, normal, bounce);
     }
+    if (!found)
+        own_bounce(job, normal, bounce);
     for (int k = 0; k < 3; k++)
         out[k] = albedo[k] * (direct[k] + bounce[k] * (1.0f / FX_PROBE_PI));
     if (ctx->s->emissive) /* a front face: its own emission (one material lookup) */
@@ -600,11 +620,12 @@ FXC_HOT_INLINE void batch_bounce(hit_batch *restrict hb, uint32_t from, uint32_t
         float *bounce = hb->bounce[i];
         bounce[0] = bounce[1] = bounce[2] = 0;
         const hit_cell *e = hb->entry[i];
+        hb->found[i] = false;
         if (e) {
             float weight[8];
             hit_weights_finish(e, hb->tap[i], hb->texel[i], hb->weight[i], hb->distance[i], hb->front[i],
                                weight);
-            cell_sum(e, hb->slot[i], weight, bounce);
+            hb->found[i] = cell_sum(e, hb->slot[i], weight, bounce);
         }
     }
 }
@@ -667,13 +688,15 @@ FXC_HOT_INLINE void hits_bounce_prepare(const fx_context *ctx, const fx_block_jo
 }
 
 /* Pass 3 for the hits left, then every batch hit's radiance (direct light back) into values[r][0..2]. */
-FXC_HOT_INLINE void hits_radiance(const fx_context *ctx, hit_batch *restrict hb, const struct RTCRayHit *hits,
-                                  const hit_shading *hs, float (*values)[5])
+FXC_HOT_INLINE void hits_radiance(const fx_context *ctx, const fx_block_job *job, hit_batch *restrict hb,
+                                  const struct RTCRayHit *hits, const hit_shading *hs, float (*values)[5])
 {
     batch_bounce(hb, hb->done, hb->count);
     const scene *s = ctx->s;
     for (uint32_t i = 0; i < hb->count; i++) {
         uint32_t r = hb->ray[i];
+        if (!hb->found[i])
+            own_bounce(job, ctx->s->tri_normal + 3 * (size_t)hits[r].hit.primID, hb->bounce[i]);
         float albedo[3];
         scene_albedo_mean(s, hits[r].hit.primID, albedo); /* the triangle's mean (file comment) */
         for (int k = 0; k < 3; k++)
@@ -785,7 +808,7 @@ FXC_HOT_CLONES uint64_t fx__probe_shade_chunk(const fx_context *ctx, const fx_bl
         values[r][4] = d * d;
     }
     if (batch)
-        hits_radiance(ctx, &memo->batch, hits, hs, values);
+        hits_radiance(ctx, job, &memo->batch, hits, hs, values);
     return traced;
 }
 

@@ -232,6 +232,13 @@ scene_result scene__add_light_world(scene *s, const scene_light *l, const double
         return scene__fail(err, SCENE_ERR_INVALID, "%s: light colour and intensity must be finite", where);
     if (light.intensity < 0 || light.color[0] < 0 || light.color[1] < 0 || light.color[2] < 0)
         return scene__fail(err, SCENE_ERR_RANGE, "%s: light colour and intensity must be >= 0", where);
+    /* Every consumer multiplies colour by intensity first: an infinite product turns a shadowed point's
+     * 0 x inf into NaN (rendered black where the light is brightest). */
+    double brightest = fmax(fmax(light.color[0], light.color[1]), light.color[2]) * (double)light.intensity;
+    if (brightest > FLT_MAX)
+        return scene__fail(err, SCENE_ERR_INVALID,
+                           "%s: light colour x intensity must fit a float (it is %g, at most %g)", where,
+                           brightest, (double)FLT_MAX);
     double world[3] = {light.position[0], light.position[1], light.position[2]};
     if (light.type == SCENE_LIGHT_DIRECTIONAL) {
         if (!finite3(light.direction))

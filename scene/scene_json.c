@@ -634,6 +634,11 @@ static scene_result json_read_sky(const json_ctx *ctx, scene *s, const json_t *s
     if (intensity < 0.0f)
         return json_fail(ctx, SCENE_ERR_INVALID, "sky.intensity", "must be a finite number >= 0 (it is %g)",
                          (double)intensity);
+    double brightest = fmax(fmax(color[0], color[1]), color[2]) * (double)intensity;
+    if (brightest > FLT_MAX) /* as a light's (scene__add_light_world): 0 x inf would be NaN */
+        return json_fail(ctx, SCENE_ERR_INVALID, "sky",
+                         "color x intensity must fit a float (it is %g, at most %g)", brightest,
+                         (double)FLT_MAX);
     memcpy(s->sky_color, color, sizeof color);
     s->sky_intensity = intensity;
     return SCENE_OK;

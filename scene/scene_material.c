@@ -67,6 +67,11 @@ int32_t scene__add_texture(scene *s, const char *path, scene_error *err)
         scene__fail(err, SCENE_ERR_IO, "%s", msg);
         return -1;
     }
+    /* An albedo is a reflectance, 0..1 (as a material's colour is clamped on import): a float texture (EXR, HDR)
+     * may hold more, which would reflect more light than arrives (a closed room's indirect light then grows
+     * without bound, to FLT_MAX), or less than 0. */
+    for (size_t i = 0; i < (size_t)tex.width * tex.height * 3; i++)
+        tex.rgb[i] = fminf(fmaxf(tex.rgb[i], 0.0f), 1.0f);
     snprintf(tex.path, sizeof tex.path, "%s", path);
     bool mips_ok = build_mips(&tex);
     if (!mips_ok || !scene__grow((void **)&s->textures, (size_t)s->texture_count + 1, sizeof *s->textures)) {

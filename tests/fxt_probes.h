@@ -47,9 +47,7 @@ void fxt_grid_shade_at(const fxt_grid *g, const float pos[3], const float normal
 /* A white point light of the given intensity. */
 void fxt_add_point_light(scene *s, float x, float y, float z, float intensity);
 
-/* An icosphere of radius r about the origin, subdivided `levels` times (20 x 4^levels facets), normals inward:
- * one mesh of material 0. */
-void fxt_add_sphere(scene *s, float r, int levels);
+/* fxt_add_sphere (an icosphere, normals inward): fxt_scene.h, shared with test_world.c. */
 
 /* A uniform float in [0, 1) from a splitmix step of *state. */
 float fxt_random_unit(uint64_t *state);

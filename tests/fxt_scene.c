@@ -213,6 +213,68 @@ scene *fxt_transformed_default(double scale, double offset, float intensity_scal
     return s;
 }
 
+void fxt_add_sphere(scene *s, float r, int levels)
+{
+    const float t = 1.6180339887f;
+    float v0[12][3] = {{-1, t, 0},  {1, t, 0},  {-1, -t, 0}, {1, -t, 0}, {0, -1, t},  {0, 1, t},
+                       {0, -1, -t}, {0, 1, -t}, {t, 0, -1},  {t, 0, 1},  {-t, 0, -1}, {-t, 0, 1}};
+    uint32_t f0[20][3] = {{0, 11, 5},  {0, 5, 1},  {0, 1, 7},  {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
+                          {11, 10, 2}, {10, 7, 6}, {7, 1, 8},  {3, 9, 4},  {3, 4, 2},   {3, 2, 6}, {3, 6, 8},
+                          {3, 8, 9},   {4, 9, 5},  {2, 4, 11}, {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
+    uint32_t tri_count = 20;
+    float(*tris)[3][3] = malloc(sizeof *tris * 20);
+    for (uint32_t f = 0; f < 20; f++)
+        for (int c = 0; c < 3; c++)
+            memcpy(tris[f][c], v0[f0[f][c]], sizeof tris[f][c]);
+    for (int l = 0; l < levels; l++) {
+        float(*next)[3][3] = malloc(sizeof *next * tri_count * 4);
+        for (uint32_t f = 0; f < tri_count; f++) {
+            float m[3][3];
+            for (int e = 0; e < 3; e++)
+                for (int k = 0; k < 3; k++)
+                    m[e][k] = 0.5f * (tris[f][e][k] + tris[f][(e + 1) % 3][k]);
+            float(*o)[3][3] = next + 4 * f;
+            memcpy(o[0][0], tris[f][0], 12), memcpy(o[0][1], m[0], 12), memcpy(o[0][2], m[2], 12);
+            memcpy(o[1][0], tris[f][1], 12), memcpy(o[1][1], m[1], 12), memcpy(o[1][2], m[0], 12);
+            memcpy(o[2][0], tris[f][2], 12), memcpy(o[2][1], m[2], 12), memcpy(o[2][2], m[1], 12);
+            memcpy(o[3][0], m[0], 12), memcpy(o[3][1], m[1], 12), memcpy(o[3][2], m[2], 12);
+        }
+        free(tris);
+        tris = next;
+        tri_count *= 4;
+    }
+    float *positions = malloc(sizeof(float) * 9 * tri_count);
+    uint32_t *indices = malloc(sizeof(uint32_t) * 3 * tri_count);
+    for (uint32_t f = 0; f < tri_count; f++) {
+        float p[3][3];
+        for (int c = 0; c < 3; c++) {
+            float len = sqrtf(tris[f][c][0] * tris[f][c][0] + tris[f][c][1] * tris[f][c][1] +
+                              tris[f][c][2] * tris[f][c][2]);
+            for (int k = 0; k < 3; k++)
+                p[c][k] = tris[f][c][k] / len * r;
+        }
+        /* Inward: (p1 - p0) x (p2 - p0) must point towards the centre. */
+        float e1[3], e2[3], n[3];
+        for (int k = 0; k < 3; k++)
+            e1[k] = p[1][k] - p[0][k], e2[k] = p[2][k] - p[0][k];
+        n[0] = e1[1] * e2[2] - e1[2] * e2[1], n[1] = e1[2] * e2[0] - e1[0] * e2[2],
+        n[2] = e1[0] * e2[1] - e1[1] * e2[0];
+        bool outward = n[0] * p[0][0] + n[1] * p[0][1] + n[2] * p[0][2] > 0;
+        for (int c = 0; c < 3; c++) {
+            int src = outward && c > 0 ? 3 - c : c;
+            memcpy(positions + 9 * f + 3 * c, p[src], 12);
+            indices[3 * f + c] = 3 * f + (uint32_t)c;
+        }
+    }
+    scene_error err;
+    assert_int_equal(
+        scene__add_mesh(s, "sphere", positions, 3 * tri_count, indices, tri_count, NULL, 0, NULL, &err),
+        SCENE_OK);
+    free(positions);
+    free(indices);
+    free(tris);
+}
+
 /* ---- the closed form of AO in a corner (test_crease.c, the stability suite) ---------------------------- */
 
 /* Antiderivative of sqrt(1 - x^2) on [-1, 1]. */

@@ -38,6 +38,10 @@ void fxt_add_box(scene *s, const char *name, const double lo[3], const double hi
 /* Adds a directional light travelling along direction. */
 void fxt_add_sun(scene *s, float dx, float dy, float dz);
 
+/* Adds an icosphere of radius r about the origin, 20 x 4^levels facets, normals inward (test_probes.c,
+ * test_world.c: a closed sphere lit from its centre). */
+void fxt_add_sphere(scene *s, float r, int levels);
+
 /* Finalizes s at texel density (texels per metre) with the AO radius and builds its Embree scene. */
 scene_rt *fxt_finish_scene(scene *s, float density, float ao_radius);
 

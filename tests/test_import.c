@@ -153,6 +153,30 @@ static void test_texture_mip_levels(void **state)
     scene_free(s);
 }
 
+/* A float texture (EXR) with texels 2, -1, 0.25 and NaN: albedo is a reflectance, so they load as 1, 0, 0.25 and
+ * 0 (the reader's NaN rule), as a material colour is clamped; before, 2 was kept, and inside a closed room of
+ * it the probes' indirect light grew without bound. */
+static void test_float_texture_albedo_clamped(void **state)
+{
+    (void)state;
+    const float texels[4 * 3] = {2, 2, 2, -1, -1, -1, 0.25f, 0.25f, 0.25f, NAN, 0.5f, 0.5f};
+    char msg[256];
+    assert_int_equal(scene_image_write_f32(fxt_tmp_path("hdr2x2.exr"), 2, 2, 3, texels, msg, sizeof msg), 0);
+    fxt_write_file("hdr.mtl", "newmtl h\nKd 1 1 1\nmap_Kd hdr2x2.exr\n");
+    const char *obj =
+        fxt_write_file("hdr.obj", "mtllib hdr.mtl\nusemtl h\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+                                  "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n");
+    scene *s = load_ok(obj);
+    assert_int_equal(s->texture_count, 1);
+    const float expected[4 * 3] = {1, 1, 1, 0, 0, 0, 0.25f, 0.25f, 0.25f, 0, 0.5f, 0.5f};
+    for (int i = 0; i < 12; i++)
+        assert_true(s->textures[0].rgb[i] == expected[i]);
+    for (uint32_t l = 0; l < s->textures[0].levels; l++) /* every mip level within 0..1 */
+        for (uint32_t i = 0; i < s->textures[0].mip_width[l] * s->textures[0].mip_height[l] * 3; i++)
+            assert_true(s->textures[0].mip_rgb[l][i] >= 0 && s->textures[0].mip_rgb[l][i] <= 1);
+    scene_free(s);
+}
+
 /* The albedo of a run of hits (scene_albedo_run: stretches of one triangle in lanes) equals each hit's
  * scene_albedo_filtered bit for bit: a 64 x 64 texture of random texels (7 mip levels) on a quad and an
  * untextured triangle, hits in stretches of 1 to 150 on one triangle (longer than a lanes call), footprints
@@ -958,6 +982,7 @@ int main(void)
         cmocka_unit_test(test_bad_gz),
         cmocka_unit_test(test_obj_texture_and_non_triangles),
         cmocka_unit_test(test_texture_mip_levels),
+        cmocka_unit_test(test_float_texture_albedo_clamped),
         cmocka_unit_test(test_texture_bilinear_wrap),
         cmocka_unit_test(test_albedo_run_equals_filtered),
         cmocka_unit_test(test_missing_texture_counted),

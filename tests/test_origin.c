@@ -10,6 +10,7 @@
 
 #include "camera.h"
 #include "engine.h"
+#include "fxt_scene.h"
 #include "scene_internal.h"
 #include "trace.h"
 
@@ -464,6 +465,37 @@ static void test_extent_too_large_for_density_is_warned_about(void **state)
     }
 }
 
+/* The warning's boundary at 1000 texels per metre, where 1/16 texel is 6.25e-5 m: two 1 m quads (world x from
+ * -d - 0.5 to d + 0.5, the local origin between them) reach 1022.5 m from the origin, where floats are 2^-14 =
+ * 6.1e-5 m apart (0.061 texel): no warning; at 1030.5 m they are 2^-13 apart (0.122 texel): warned. The
+ * boundary is the float spacing's step at 1024 m, as the closed form puts it. */
+static void test_extent_warning_boundary(void **state)
+{
+    (void)state;
+    const double reach[2] = {1022, 1030};
+    for (int i = 0; i < 2; i++) {
+        scene *s = fxt_new_scene();
+        fxt_add_quad(s, "west", (double[3]){-reach[i] - 0.5, 0, -0.5}, (double[3]){0, 0, 1},
+                     (double[3]){1, 0, 0}, 1);
+        fxt_add_quad(s, "east", (double[3]){reach[i] - 0.5, 0, -0.5}, (double[3]){0, 0, 1},
+                     (double[3]){1, 0, 0}, 1);
+        scene_error err = {0};
+        scene_load_desc desc = {.texel_density = 1000};
+        assert_int_equal(scene__finalize(s, &desc, &err), SCENE_OK);
+        print_message("reach %g m: origin x %g, step %g m (%g texel), warning '%s'\n", reach[i] + 0.5,
+                      s->origin[0], s->position_step, s->position_step * 1000, s->precision_warning);
+        assert_true(s->origin[0] == 0);
+        if (i == 0) {
+            assert_true(s->position_step == 0x1p-14f);
+            assert_string_equal(s->precision_warning, "");
+        } else {
+            assert_true(s->position_step == 0x1p-13f);
+            assert_non_null(strstr(s->precision_warning, "reaches 1030 m"));
+        }
+        scene_free(s);
+    }
+}
+
 /* A trace recorded in world coordinates at 1e6 replays into the far scene's local frame as the same camera
  * the trace at the origin gives in the near scene; the writer records world coordinates that read back to
  * the same local camera. */
@@ -535,6 +567,7 @@ int main(void)
         cmocka_unit_test(test_rebuild_in_final_frame),
         cmocka_unit_test(test_far_mesh_file_is_warned_about),
         cmocka_unit_test(test_extent_too_large_for_density_is_warned_about),
+        cmocka_unit_test(test_extent_warning_boundary),
         cmocka_unit_test(test_trace_cameras_follow),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -269,6 +269,38 @@ static void test_direct_light_analytic(void **state)
     scene_free(s);
 }
 
+/* A sun and a sky at 3e38 (colour x intensity just under FLT_MAX): radiance saturates at FLT_MAX, and the
+ * noise, a sum of squared half differences, stays finite (saturated) instead of infinite; before, the
+ * image's record in ref.json could not be written (JSON has no infinity) and `fxcache report` stopped. */
+static void test_saturated_noise_finite(void **state)
+{
+    (void)state;
+    scene *s = fxt_new_scene();
+    add_ground(s, 40, 8);
+    fxt_add_quad(s, "roof", (double[3]){-1, 1, -1}, (double[3]){2, 0, 0}, (double[3]){0, 0, 2}, 1);
+    fxt_add_sun(s, 0.3f, -1.0f, 0.2f);
+    s->lights[0].intensity = 3e38f;
+    s->sky_intensity = 3e38f;
+    scene_rt *rt = fxt_finish_scene(s, 4, 1.0f);
+    srv_ref_desc d = {.s = s, .rt = rt, .seed = 5, .threads = 2};
+    effects_needed(&d);
+    set_samples(&d, "shadow", 32);
+    set_samples(&d, "ao", 16);
+    set_samples(&d, "probes", 4);
+    srv_camera cam = {.position = {0, 3, 2.5f}, .target = {0, 0, 0}, .fov_deg = 60};
+    ref_image im;
+    render(&d, &cam, 24, 14, 0, &im);
+    for (size_t i = 0; i < (size_t)im.width * im.height * 3; i++)
+        assert_true(isfinite(im.radiance[i]) && im.radiance[i] >= 0);
+    print_message("noise %g (visible %g), mean radiance %g\n", im.stats.noise_rmse,
+                  im.stats.noise_rmse_visible, im.stats.mean_radiance[0]);
+    assert_true(isfinite(im.stats.noise_rmse) && isfinite(im.stats.noise_rmse_visible));
+    assert_true(isfinite(im.stats.mean_radiance[0]) && im.stats.mean_radiance[0] > 1e37);
+    image_free(&im);
+    scene_rt_free(rt);
+    scene_free(s);
+}
+
 /* A square occluder above the ground under the sun: a pixel whose footprint (with a pixel's margin) lies
  * inside the occluder's projection along the sun is black (no sky, and paths from below meet the occluder's
  * back face, which is dark), one wholly outside it gets the analytic sun term, one across its edge is in
@@ -932,6 +964,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_open_plane_under_sky),
         cmocka_unit_test(test_direct_light_analytic),
+        cmocka_unit_test(test_saturated_noise_finite),
         cmocka_unit_test(test_shadow_analytic),
         cmocka_unit_test(test_closed_sphere_series),
         SCENE_TEST(test_one_bounce_matches_no_cache),

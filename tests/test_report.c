@@ -152,6 +152,46 @@ static void test_pareto_front(void **state)
     assert_int_equal(where, 1);
 }
 
+/* A scene whose every image is exact (a light of 1e-38: every radiance 0, every RMSE 0): the equal-time
+ * comparison has no no-cache point with an error above 0 and says "not compared"; before, the page and the
+ * summary in words printed "nan" for the no-cache error and the ratio. */
+static void test_equal_time_all_exact(void **state)
+{
+    (void)state;
+    srv_rep_row rows[2];
+    memset(rows, 0, sizeof rows);
+    const char *ids[2] = {"default_v1", "no_cache_x1_v1"};
+    for (int i = 0; i < 2; i++) {
+        snprintf(rows[i].id, sizeof rows[i].id, "%s", ids[i]);
+        snprintf(rows[i].family, sizeof rows[i].family, "%s", i ? "no_cache" : "default");
+        snprintf(rows[i].label, sizeof rows[i].label, "%s", ids[i]);
+        rows[i].viewers = 1;
+        rows[i].no_cache = i == 1;
+        rows[i].done = true;
+        rows[i].ms_per_frame = 5.0 * (i + 1);
+        rows[i].rmse = rows[i].rmse_denoised = 0;
+        rows[i].psnr_db = rows[i].rmse_shadow = rows[i].rmse_ao = rows[i].ref_noise = rows[i].flip_mean = NAN;
+    }
+    srv_rep_equal eq[4];
+    assert_int_equal(srv_rep_equal_times(rows, 2, eq, 4), 1);
+    assert_false(isfinite(eq[0].no_cache_rmse)); /* not measured: no point with an error above 0 */
+    char dir[1024], path[1100], err[256];
+    snprintf(dir, sizeof dir, "%s", fxt_tmp_path("report_exact"));
+    mkdir(dir, 0755);
+    srv_rep_page page = {
+        .title = "exact", .command = "fxcache report", .settings = "", .time_label = "elapsed"};
+    assert_true(srv_rep_write_html(dir, rows, 2, &page, err, sizeof err));
+    snprintf(path, sizeof path, "%s/index.html", dir);
+    FILE *f = fopen(path, "r");
+    assert_non_null(f);
+    static char html[65536];
+    size_t len = fread(html, 1, sizeof html - 1, f);
+    html[len] = 0;
+    fclose(f);
+    assert_null(strstr(html, "nan"));
+    assert_non_null(strstr(html, "not compared"));
+}
+
 /* ---- run-time sample counts ---------------------------------------------------------------------------- */
 
 /* The same frame with 4 and with 16 shadow rays per texel: the same texels updated, a quarter of the rays
@@ -565,6 +605,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_error_sink_closed_form),
         cmocka_unit_test(test_pareto_front),
+        cmocka_unit_test(test_equal_time_all_exact),
         SCENE_TEST(test_sample_counts),
         cmocka_unit_test(test_cli_option_errors),
         cmocka_unit_test(test_cli_end_to_end),

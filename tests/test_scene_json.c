@@ -649,6 +649,34 @@ static void test_error_float_overflow(void **state)
                  SCENE_ERR_INVALID, "lights[0].intensity", "finite");
 }
 
+/* Colour and intensity each a float but their product not (1e30 x 1e30): refused, for a light and for the sky;
+ * the product just below FLT_MAX loads. Before, compose multiplied them into infinity, and a shadowed
+ * pixel's 0 x inf made NaN, written out as black. */
+static void test_error_light_product_overflow(void **state)
+{
+    (void)state;
+    expect_error(
+        "light_product.json",
+        "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}], \"lights\": ["
+        "{\"type\": \"point\", \"position\": [0,1,0], \"color\": [1, 1e30, 0], \"intensity\": 1e30}]}",
+        SCENE_ERR_INVALID, "lights[0]: light colour x intensity must fit a float", "1e+60");
+    expect_error("sky_product.json",
+                 "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}], "
+                 "\"sky\": {\"color\": [1e20, 1, 1], \"intensity\": 1e20}}",
+                 SCENE_ERR_INVALID, "sky: color x intensity must fit a float", "1e+40");
+    scene_error err;
+    scene *s =
+        load_json_text("product_fits.json",
+                       "{\"version\": 1, \"meshes\": [{\"file\": \"quad.obj\"}], \"lights\": ["
+                       "{\"type\": \"directional\", \"direction\": [0,-1,0], \"color\": [1e19, 1, 1], "
+                       "\"intensity\": 3e19}], \"sky\": {\"color\": [3e19, 0, 1], \"intensity\": 1e19}}",
+                       &err);
+    assert_non_null(s);
+    assert_int_equal(s->light_count, 1);
+    assert_true(s->sky_intensity == 1e19f);
+    scene_free(s);
+}
+
 /* A zero light direction. */
 static void test_error_zero_direction(void **state)
 {
@@ -1050,6 +1078,7 @@ int main(void)
         cmocka_unit_test(test_error_version_not_integer),
         cmocka_unit_test(test_error_negative_intensity),
         cmocka_unit_test(test_error_float_overflow),
+        cmocka_unit_test(test_error_light_product_overflow),
         cmocka_unit_test(test_error_zero_direction),
         cmocka_unit_test(test_error_negative_sky_color),
         cmocka_unit_test(test_error_density_range),

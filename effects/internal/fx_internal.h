@@ -144,8 +144,8 @@ static inline bool fx__light_arriving(const scene_light *light, const float orig
     float cosine = fx__dot(normal, dir);
     if (!(cosine > 0))
         return false;
-    float falloff = light->type == SCENE_LIGHT_POINT ? 1.0f / fmaxf(*distance * *distance, 1e-8f) : 1.0f;
-    *scale = light->intensity * cosine * falloff;
+    float falloff = light->type == SCENE_LIGHT_POINT ? fx_point_falloff(*distance) : 1.0f;
+    *scale = fminf(light->intensity * cosine * falloff, FLT_MAX); /* x a black channel: 0, never NaN */
     return *scale > 0;
 }
 

@@ -491,6 +491,11 @@ int srv_cmd_ref(int argc, char **argv)
                 "noise_rmse_visible", st.noise_rmse_visible, "noise_ao", st.noise_ao, "noise_shadow",
                 st.noise_shadow, "mean_radiance", st.mean_radiance[0], st.mean_radiance[1],
                 st.mean_radiance[2], "pixels_visible", (json_int_t)st.pixels_visible);
+            if (!image) { /* json_pack refuses a non-finite real: never drop the record silently */
+                fprintf(stderr, "fxcache ref: frame %u, viewer %u: a statistic of the image is not finite\n",
+                        f, v);
+                goto done;
+            }
             json_array_append_new(images, image);
             done_images++;
             if (!write_record(&o, root))

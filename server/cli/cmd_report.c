@@ -511,14 +511,21 @@ static bool write_outputs(report_plan *plan, const report_options *o, const char
     json_decref(sum);
     if (ok && plots_made && !o->quiet && !interrupted) { /* the final write only */
         for (size_t k = 0; k < m; k++)
-            printf("equal time, %u viewer%s: cached RMSE %.4g at %.1f ms/frame, no cache %.4g: ratio %.2f, "
-                   "goal (<= "
-                   "0.5) %s%s\n",
-                   eq[k].viewers, eq[k].viewers == 1 ? "" : "s", eq[k].cached_rmse, eq[k].cached_ms,
-                   eq[k].no_cache_rmse, eq[k].ratio, eq[k].goal_met ? "met" : "NOT met",
-                   eq[k].where < 0   ? " (cache faster than every no-cache point: compared with the fastest)"
-                   : eq[k].where > 0 ? " (cache slower than every no-cache point: compared with the slowest)"
-                                     : "");
+            if (!isfinite(eq[k].no_cache_rmse))
+                printf(
+                    "equal time, %u viewer%s: cached RMSE %.4g at %.1f ms/frame, not compared: no no-cache "
+                    "point has an error above 0\n",
+                    eq[k].viewers, eq[k].viewers == 1 ? "" : "s", eq[k].cached_rmse, eq[k].cached_ms);
+            else
+                printf(
+                    "equal time, %u viewer%s: cached RMSE %.4g at %.1f ms/frame, no cache %.4g: ratio %.2f, "
+                    "goal (<= "
+                    "0.5) %s%s\n",
+                    eq[k].viewers, eq[k].viewers == 1 ? "" : "s", eq[k].cached_rmse, eq[k].cached_ms,
+                    eq[k].no_cache_rmse, eq[k].ratio, eq[k].goal_met ? "met" : "NOT met",
+                    eq[k].where < 0   ? " (cache faster than every no-cache point: compared with the fastest)"
+                    : eq[k].where > 0 ? " (cache slower than every no-cache point: compared with the slowest)"
+                                      : "");
         printf("report: %s/index.html\n", o->out_dir);
     }
     free(rows);

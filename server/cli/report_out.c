@@ -661,6 +661,15 @@ bool srv_rep_write_html(const char *dir, const srv_rep_row *rows, size_t n, cons
               "viewer count.</li>\n",
               f);
     for (size_t k = 0; k < m; k++) {
+        if (!isfinite(
+                eq[k].no_cache_rmse)) { /* every no-cache error 0 (or none finite): nothing to compare */
+            fprintf(f,
+                    "<li>%u viewer%s: cached RMSE %.4g at %.1f ms per frame; not compared: no no-cache point "
+                    "has an "
+                    "error above 0.</li>\n",
+                    eq[k].viewers, eq[k].viewers == 1 ? "" : "s", eq[k].cached_rmse, eq[k].cached_ms);
+            continue;
+        }
         fprintf(
             f,
             "<li class=\"%s\">%u viewer%s: cached RMSE %.4g at %.1f ms per frame; no cache at that time %.4g "

@@ -905,8 +905,9 @@ FXC_HOT_INLINE void shade_run(srv_loop *loop, srv_viewer *view, compose_scratch 
                            cs->shade_normal[2][i] * ldir[2];
             if (!(cosine > 0))
                 continue;
-            float falloff = light->type == SCENE_LIGHT_POINT ? 1.0f / fmaxf(dist * dist, 1e-8f) : 1.0f;
-            float scale = light->intensity * cosine * cs->light_visibility[(size_t)i * stride + l] * falloff;
+            float falloff = light->type == SCENE_LIGHT_POINT ? fx_point_falloff(dist) : 1.0f;
+            float scale = fminf(
+                light->intensity * cosine * cs->light_visibility[(size_t)i * stride + l] * falloff, FLT_MAX);
             for (int k = 0; k < 3; k++)
                 cs->irradiance[i][k] += scale * light->color[k];
         }

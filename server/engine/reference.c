@@ -275,9 +275,10 @@ static void shade_pixel(ref_task *task, uint32_t thread_index, uint32_t x, uint3
         fx_light_direction(light, pt.position, ldir, &dist);
         float cosine =
             pt.view_normal[0] * ldir[0] + pt.view_normal[1] * ldir[1] + pt.view_normal[2] * ldir[2];
-        float falloff = light->type == SCENE_LIGHT_POINT ? 1.0f / fmaxf(dist * dist, 1e-8f) : 1.0f;
+        float falloff = light->type == SCENE_LIGHT_POINT ? fx_point_falloff(dist) : 1.0f;
+        float scale = fminf(light->intensity * cosine * falloff, FLT_MAX); /* x a black channel: 0, not NaN */
         for (int k = 0; k < 3; k++)
-            unshadowed[l][k] = cosine > 0 ? light->intensity * cosine * falloff * light->color[k] : 0.0f;
+            unshadowed[l][k] = cosine > 0 ? fminf(scale * light->color[k], FLT_MAX) : 0.0f;
     }
 
     float half_rad[2][3], half_ao[2], half_shadow[2];
@@ -305,16 +306,17 @@ static void shade_pixel(ref_task *task, uint32_t thread_index, uint32_t x, uint3
         half_ao[h] = sky_open >= 0 ? sky_open : sky_visibility;
         half_shadow[h] = s->light_count ? visibility[0] : 1.0f;
     }
-    float d2 = 0;
+    double d2 =
+        0; /* in double: halves near FLT_MAX square far past a float (noise inf, then unwritable JSON) */
     for (int k = 0; k < 3; k++) {
         rad[k] = 0.5f * half_rad[0][k] + 0.5f * half_rad[1][k];
-        float d = half_rad[0][k] - half_rad[1][k];
+        double d = (double)half_rad[0][k] - half_rad[1][k];
         d2 += d * d;
         for (int h = 0; h < 2; h++)
             if (out->half[h])
                 out->half[h][3 * p + k] = half_rad[h][k];
     }
-    noise[0] = d2;
+    noise[0] = d2 <= FLT_MAX ? (float)d2 : FLT_MAX; /* saturated: a lower bound, never infinite */
     noise[1] = (half_ao[0] - half_ao[1]) * (half_ao[0] - half_ao[1]);
     noise[2] = (half_shadow[0] - half_shadow[1]) * (half_shadow[0] - half_shadow[1]);
     if (out->ao)
