@@ -676,23 +676,27 @@ double scene__longest_edge(const scene *s)
     return longest;
 }
 
+double scene_triangle_area(const scene *s, uint32_t t)
+{
+    const float *a = s->positions + 3 * (size_t)s->indices[3 * (size_t)t];
+    const float *b = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 1];
+    const float *c = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 2];
+    double e1[3], e2[3];
+    for (int k = 0; k < 3; k++) {
+        e1[k] = (double)b[k] - a[k];
+        e2[k] = (double)c[k] - a[k];
+    }
+    double cx = e1[1] * e2[2] - e1[2] * e2[1];
+    double cy = e1[2] * e2[0] - e1[0] * e2[2];
+    double cz = e1[0] * e2[1] - e1[1] * e2[0];
+    return 0.5 * sqrt(cx * cx + cy * cy + cz * cz);
+}
+
 double scene_surface_area(const scene *s)
 {
     double area = 0;
-    for (uint32_t t = 0; t < s->triangle_count; t++) {
-        const float *a = s->positions + 3 * (size_t)s->indices[3 * (size_t)t];
-        const float *b = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 1];
-        const float *c = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 2];
-        double e1[3], e2[3];
-        for (int k = 0; k < 3; k++) {
-            e1[k] = (double)b[k] - a[k];
-            e2[k] = (double)c[k] - a[k];
-        }
-        double cx = e1[1] * e2[2] - e1[2] * e2[1];
-        double cy = e1[2] * e2[0] - e1[0] * e2[2];
-        double cz = e1[0] * e2[1] - e1[1] * e2[0];
-        area += 0.5 * sqrt(cx * cx + cy * cy + cz * cz);
-    }
+    for (uint32_t t = 0; t < s->triangle_count; t++)
+        area += scene_triangle_area(s, t);
     return area;
 }
 

@@ -255,6 +255,9 @@ void scene_world_to_local(const scene *s, const double world[3], float local[3])
 /* The inverse: local + origin, added in double (for writing positions back out, e.g. recorded traces). */
 void scene_local_to_world(const scene *s, const float local[3], double world[3]);
 
+/* The area of triangle t, square metres (its corners' floats, in double). */
+double scene_triangle_area(const scene *s, uint32_t t);
+
 /* Total surface area of the scene's triangles, square metres. */
 double scene_surface_area(const scene *s);
 

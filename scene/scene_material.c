@@ -102,17 +102,7 @@ scene_result scene__compute_texture_lods(scene *s, scene_error *err)
                          fabs(((double)uv[2] - uv[0]) * ((double)uv[5] - uv[1]) -
                               ((double)uv[4] - uv[0]) * ((double)uv[3] - uv[1])) *
                          (double)tex->width * (double)tex->height;
-        const float *a = s->positions + 3 * (size_t)s->indices[3 * (size_t)t];
-        const float *b = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 1];
-        const float *c = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 2];
-        double e1[3], e2[3];
-        for (int k = 0; k < 3; k++) {
-            e1[k] = (double)b[k] - a[k];
-            e2[k] = (double)c[k] - a[k];
-        }
-        double cx = e1[1] * e2[2] - e1[2] * e2[1], cy = e1[2] * e2[0] - e1[0] * e2[2],
-               cz = e1[0] * e2[1] - e1[1] * e2[0];
-        double world_area = 0.5 * sqrt(cx * cx + cy * cy + cz * cz);
+        double world_area = scene_triangle_area(s, t);
         if (uv_area > 0 && world_area > 0 && isfinite(uv_area))
             s->tri_texture_lod[t] = (float)(0.5 * log2(uv_area / world_area));
     }
@@ -441,21 +431,6 @@ void scene_albedo_mean(const scene *s, uint32_t tri, float out_rgb[3])
 
 /* ---- emission ----------------------------------------------------------------------------------------- */
 
-static double triangle_area(const scene *s, uint32_t t)
-{
-    const float *a = s->positions + 3 * (size_t)s->indices[3 * (size_t)t];
-    const float *b = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 1];
-    const float *c = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 2];
-    double e1[3], e2[3];
-    for (int k = 0; k < 3; k++) {
-        e1[k] = (double)b[k] - a[k];
-        e2[k] = (double)c[k] - a[k];
-    }
-    double cx = e1[1] * e2[2] - e1[2] * e2[1], cy = e1[2] * e2[0] - e1[0] * e2[2],
-           cz = e1[0] * e2[1] - e1[1] * e2[0];
-    return 0.5 * sqrt(cx * cx + cy * cy + cz * cz);
-}
-
 bool scene_material_emits(const scene_material *m)
 {
     return m->emission[0] > 0.0f || m->emission[1] > 0.0f || m->emission[2] > 0.0f;
@@ -485,7 +460,7 @@ void scene_emission_power(const scene *s, uint32_t *emitting_materials, double p
                 continue;
             used = true;
             for (uint32_t t = mesh->first_triangle; t < mesh->first_triangle + mesh->triangle_count; t++)
-                area += triangle_area(s, t);
+                area += scene_triangle_area(s, t);
         }
         if (!used)
             continue;
@@ -504,7 +479,7 @@ double scene_emission_area_fraction(const scene *s)
         bool emits =
             mesh->material < s->material_count && scene_material_emits(&s->materials[mesh->material]);
         for (uint32_t t = mesh->first_triangle; t < mesh->first_triangle + mesh->triangle_count; t++) {
-            double area = triangle_area(s, t);
+            double area = scene_triangle_area(s, t);
             all += area;
             if (emits)
                 emitting += area;

@@ -189,3 +189,19 @@ void fxt_counting_free(void *pointer, size_t size, void *user)
     counter->live_allocations--;
     free(pointer);
 }
+
+/* Whether process pid catches signal sig (its SigCgt mask in /proc). */
+bool fxt_catches_signal(pid_t pid, int sig)
+{
+    char path[64], line[256];
+    snprintf(path, sizeof path, "/proc/%d/status", (int)pid);
+    FILE *f = fopen(path, "r");
+    if (!f)
+        return false;
+    unsigned long long mask = 0;
+    bool found = false;
+    while (!found && fgets(line, sizeof line, f))
+        found = sscanf(line, "SigCgt: %llx", &mask) == 1;
+    fclose(f);
+    return found && (mask >> (sig - 1)) & 1;
+}

@@ -1046,22 +1046,6 @@ static void test_sim_interrupted_keeps_results(void **state)
     json_decref(sum);
 }
 
-/* Whether process pid catches signal sig (its SigCgt mask in /proc). */
-static bool catches_signal(pid_t pid, int sig)
-{
-    char path[64], line[256];
-    snprintf(path, sizeof path, "/proc/%d/status", (int)pid);
-    FILE *f = fopen(path, "r");
-    if (!f)
-        return false;
-    unsigned long long mask = 0;
-    bool found = false;
-    while (!found && fgets(line, sizeof line, f))
-        found = sscanf(line, "SigCgt: %llx", &mask) == 1;
-    fclose(f);
-    return found && (mask >> (sig - 1)) & 1;
-}
-
 /* SIGTERM or SIGINT while sim loads a large scene (Sponza, about 1-2 s of loading): the load runs to its end,
  * then the run stops with one line saying so and the exit code a shell gives such a run (143, 130), and
  * nothing else is written. The signal is sent as soon as fxcache's handler is in place, which is just before
@@ -1100,7 +1084,7 @@ static void test_sim_signal_during_load(void **state)
         }
         bool ready = false;
         for (int tries = 0; tries < 60000 && !ready; tries++) { /* at most 60 s */
-            ready = catches_signal(pid, cases[i].sig);
+            ready = fxt_catches_signal(pid, cases[i].sig);
             if (!ready) {
                 struct timespec pause = {0, 1000 * 1000};
                 nanosleep(&pause, NULL);

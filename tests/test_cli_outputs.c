@@ -199,22 +199,6 @@ static void test_sim_frames_unwritable(void **state)
     }
 }
 
-/* Whether process pid catches signal sig (its SigCgt mask in /proc). */
-static bool catches_signal(pid_t pid, int sig)
-{
-    char path[64], line[256];
-    snprintf(path, sizeof path, "/proc/%d/status", (int)pid);
-    FILE *f = fopen(path, "r");
-    if (!f)
-        return false;
-    unsigned long long mask = 0;
-    bool found = false;
-    while (!found && fgets(line, sizeof line, f))
-        found = sscanf(line, "SigCgt: %llx", &mask) == 1;
-    fclose(f);
-    return found && (mask >> (sig - 1)) & 1;
-}
-
 /* Ctrl-C twice during a long frame (2048 x 2048 on one thread: seconds): the first asks for the end after the
  * frame, the second ends the run at once, by the signal. Before, sim caught every signal alike and a user
  * could not stop a frame that takes minutes short of SIGKILL. */
@@ -233,13 +217,13 @@ static void test_sim_second_signal_ends_at_once(void **state)
         _exit(127);
     }
     struct timespec tenth = {0, 100 * 1000 * 1000};
-    for (int tries = 0; tries < 300 && !catches_signal(pid, SIGINT); tries++)
+    for (int tries = 0; tries < 300 && !fxt_catches_signal(pid, SIGINT); tries++)
         nanosleep(&tenth, NULL);
-    assert_true(catches_signal(pid, SIGINT));
+    assert_true(fxt_catches_signal(pid, SIGINT));
     for (int k = 0; k < 10; k++) /* a second into the load and the first frame */
         nanosleep(&tenth, NULL);
     assert_int_equal(kill(pid, SIGINT), 0);
-    for (int tries = 0; tries < 50 && catches_signal(pid, SIGINT); tries++)
+    for (int tries = 0; tries < 50 && fxt_catches_signal(pid, SIGINT); tries++)
         nanosleep(&tenth, NULL); /* the handler has given SIGINT back to its default action */
     assert_int_equal(kill(pid, SIGINT), 0);
     int status = 0;

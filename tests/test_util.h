@@ -4,9 +4,11 @@
 #define FXC_TEST_UTIL_H
 
 #include <stdarg.h>
+#include <stdbool.h>
 #include <stddef.h>
 #include <setjmp.h>
 #include <stdint.h>
+#include <sys/types.h>
 #include <cmocka.h>
 
 /* Path of ../shared/scenes/<rel> relative to the repository root, or NULL (with a message printed) when
@@ -27,6 +29,9 @@ const char *fxt_tmp_path(const char *name);
 /* Runs `fxcache <args>` through the shell, captures stdout and stderr (each truncated to cap-1 bytes, may
  * be NULL) and returns the exit status (or -1 when it did not exit normally). */
 int fxt_run_cli(const char *args, char *out, size_t out_cap, char *err, size_t err_cap);
+
+/* Whether process pid catches signal sig (its SigCgt mask in /proc): a child's handler is in place. */
+bool fxt_catches_signal(pid_t pid, int sig);
 
 /* A small deterministic generator for test data (xorshift32): the next value of *state (never 0 if the seed
  * is not 0), stored back into *state. */
