@@ -1,6 +1,7 @@
 /* Shared test helpers (named fxt_util.c so the test_*.c glob does not take it for a test): see test_util.h. */
 #include "test_util.h"
 
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -204,4 +205,21 @@ bool fxt_catches_signal(pid_t pid, int sig)
         found = sscanf(line, "SigCgt: %llx", &mask) == 1;
     fclose(f);
     return found && (mask >> (sig - 1)) & 1;
+}
+
+int fxt_run_clif(char *out, size_t out_cap, char *err, size_t err_cap, const char *fmt, ...)
+{
+    char args[3072];
+    va_list ap;
+    va_start(ap, fmt);
+    int n = vsnprintf(args, sizeof args, fmt, ap);
+    va_end(ap);
+    assert_true(n > 0 && (size_t)n < sizeof args);
+    return fxt_run_cli(args, out, out_cap, err, err_cap);
+}
+
+void fxt_tmp_path_copy(char *dst, size_t cap, const char *name)
+{
+    int n = snprintf(dst, cap, "%s", fxt_tmp_path(name));
+    assert_true(n > 0 && (size_t)n < cap);
 }

@@ -20,23 +20,8 @@ static char out_buf[1 << 16], err_buf[1 << 14];
 
 /* Runs `fxcache <args...>` (printf-style) and returns the exit code; stdout and stderr land in out_buf and
  * err_buf. */
-static int run(const char *fmt, ...)
-{
-    char args[3072];
-    va_list ap;
-    va_start(ap, fmt);
-    int n = vsnprintf(args, sizeof args, fmt, ap);
-    va_end(ap);
-    assert_true(n > 0 && (size_t)n < sizeof args);
-    return fxt_run_cli(args, out_buf, sizeof out_buf, err_buf, sizeof err_buf);
-}
-
-/* A scratch path copied out of fxt_tmp_path's static buffer. */
-static void tmp_path(char *dst, size_t cap, const char *name)
-{
-    int n = snprintf(dst, cap, "%s", fxt_tmp_path(name));
-    assert_true(n > 0 && (size_t)n < cap);
-}
+#define run(...) fxt_run_clif(out_buf, sizeof out_buf, err_buf, sizeof err_buf, __VA_ARGS__)
+#define tmp_path fxt_tmp_path_copy
 
 /* err_buf holds exactly one non-empty line (ending in one newline). */
 static void assert_one_line_error(void)

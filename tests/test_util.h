@@ -30,6 +30,13 @@ const char *fxt_tmp_path(const char *name);
  * be NULL) and returns the exit status (or -1 when it did not exit normally). */
 int fxt_run_cli(const char *args, char *out, size_t out_cap, char *err, size_t err_cap);
 
+/* fxt_run_cli with the arguments printf-style (at most 3 KB). */
+int fxt_run_clif(char *out, size_t out_cap, char *err, size_t err_cap, const char *fmt, ...)
+    __attribute__((format(printf, 5, 6)));
+
+/* fxt_tmp_path(name) copied into dst (cap bytes; fails the test when it does not fit). */
+void fxt_tmp_path_copy(char *dst, size_t cap, const char *name);
+
 /* Whether process pid catches signal sig (its SigCgt mask in /proc): a child's handler is in place. */
 bool fxt_catches_signal(pid_t pid, int sig);
 
