@@ -7,6 +7,7 @@
 #include <string.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
+#include <time.h>
 #include <unistd.h>
 
 const char *fxt_shared_scene(const char *rel)
@@ -222,4 +223,22 @@ void fxt_tmp_path_copy(char *dst, size_t cap, const char *name)
 {
     int n = snprintf(dst, cap, "%s", fxt_tmp_path(name));
     assert_true(n > 0 && (size_t)n < cap);
+}
+
+bool fxt_wait_for_lines(const char *path, int lines, double timeout_s)
+{
+    for (double waited = 0; waited <= timeout_s; waited += 0.1) {
+        FILE *f = fopen(path, "r");
+        int count = 0;
+        if (f) {
+            for (int c; (c = fgetc(f)) != EOF;)
+                count += c == '\n';
+            fclose(f);
+        }
+        if (count >= lines)
+            return true;
+        struct timespec pause = {0, 100 * 1000 * 1000};
+        nanosleep(&pause, NULL);
+    }
+    return false;
 }

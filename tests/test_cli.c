@@ -992,20 +992,7 @@ static void test_sim_interrupted_keeps_results(void **state)
               stats, "--summary", summary, "--out", out, "--quiet", (char *)NULL);
         _exit(127);
     }
-    /* Wait (at most 60 s) until two frames are on record, then interrupt. */
-    for (int tries = 0; tries < 600; tries++) {
-        FILE *f = fopen(stats, "r");
-        int lines = 0;
-        if (f) {
-            for (int c; (c = fgetc(f)) != EOF;)
-                lines += c == '\n';
-            fclose(f);
-        }
-        if (lines >= 2)
-            break;
-        struct timespec pause = {0, 100 * 1000 * 1000};
-        nanosleep(&pause, NULL);
-    }
+    fxt_wait_for_lines(stats, 2, 60.0); /* two frames on record, then interrupt */
     assert_int_equal(kill(pid, SIGINT), 0);
     int status = 0;
     assert_int_equal(waitpid(pid, &status, 0), pid);

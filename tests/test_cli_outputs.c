@@ -150,19 +150,7 @@ static void test_sim_frames_unwritable(void **state)
               (char *)NULL);
         _exit(127);
     }
-    for (int tries = 0; tries < 600; tries++) { /* at most 60 s until two frames are on record */
-        FILE *f = fopen(stats, "r");
-        int lines = 0;
-        if (f) {
-            for (int c; (c = fgetc(f)) != EOF;)
-                lines += c == '\n';
-            fclose(f);
-        }
-        if (lines >= 2)
-            break;
-        struct timespec pause = {0, 100 * 1000 * 1000};
-        nanosleep(&pause, NULL);
-    }
+    fxt_wait_for_lines(stats, 2, 60.0); /* two frames on record */
     assert_int_equal(kill(pid, SIGINT), 0);
     int status = 0;
     assert_int_equal(waitpid(pid, &status, 0), pid);

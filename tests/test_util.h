@@ -37,6 +37,10 @@ int fxt_run_clif(char *out, size_t out_cap, char *err, size_t err_cap, const cha
 /* fxt_tmp_path(name) copied into dst (cap bytes; fails the test when it does not fit). */
 void fxt_tmp_path_copy(char *dst, size_t cap, const char *name);
 
+/* Waits until the file at path holds at least `lines` newline characters (a growing stats.jsonl), polling
+ * every 0.1 s for at most timeout_s seconds; false when it never did. */
+bool fxt_wait_for_lines(const char *path, int lines, double timeout_s);
+
 /* Whether process pid catches signal sig (its SigCgt mask in /proc): a child's handler is in place. */
 bool fxt_catches_signal(pid_t pid, int sig);
 
