@@ -2,8 +2,8 @@
  * the finalisation that turns the appended meshes into a read-only scene with islands.
  *
  * scene__add_mesh() is where untrusted geometry is checked: every coordinate finite (naming mesh and
- * vertex), every index in range, vertices with equal positions welded (so the half-edge mesh sees the real
- * topology), degenerate and duplicate triangles dropped and counted. */
+ * vertex), every index in range; it stages the mesh in double and has scene_weld.c weld and clean it
+ * (equal positions welded, degenerate and duplicate triangles dropped and counted). */
 #include "scene_internal.h"
 
 #include <errno.h>
@@ -40,23 +40,11 @@ scene *scene__alloc(void)
 
 typedef struct scene__builder scene__builder;
 
-/* One mesh as a loader handed it over, in double precision after its transform: kept until the scene's
- * origin is settled, so that the mesh can be welded and cleaned again in the final frame. */
-typedef struct staged_mesh {
-    char name[128];
-    double *world;     /* vertex_count * 3: positions after the mesh transform, world frame */
-    uint32_t *indices; /* triangle_count * 3 */
-    float *uv;         /* vertex_count * 2, or NULL */
-    uint32_t vertex_count, triangle_count, material;
-    bool mirrored; /* the transform mirrors: corners are swapped to keep the winding */
-    uint32_t mesh; /* its entry in scene.meshes, UINT32_MAX when nothing of it was left */
-} staged_mesh;
-
 /* What a scene holds while it is being loaded (scene.builder); scene__finalize() releases it. */
 struct scene__builder {
     bool frame_chosen;
     double frame_origin[3]; /* the provisional frame the meshes are welded in: the first mesh's */
-    staged_mesh *meshes;
+    scene__staged_mesh *meshes;
     uint32_t mesh_count;
     double *light_world; /* 3 per light slot: the world position of the light in that slot, in double */
     uint32_t light_slots;
@@ -77,7 +65,7 @@ static scene__builder *builder_of(scene *s)
     return s->builder;
 }
 
-static void staged_mesh_release(staged_mesh *m)
+static void staged_mesh_release(scene__staged_mesh *m)
 {
     free(m->world);
     free(m->indices);
@@ -106,14 +94,6 @@ void scene__set_source(scene *s, const char *label)
         snprintf(b->source, sizeof b->source, "%s", label ? label : "");
 }
 
-/* The spacing of floats at magnitude x (the unit in the last place), in double. */
-static double float_spacing(double x)
-{
-    if (!(x >= FLT_MIN))
-        return ldexp(1.0, -149); /* subnormal floats are this far apart */
-    return ldexp(1.0, ilogb(x) - 23);
-}
-
 static void bounds_reset(double lo[3], double hi[3])
 {
     for (int k = 0; k < 3; k++) {
@@ -123,7 +103,7 @@ static void bounds_reset(double lo[3], double hi[3])
 }
 
 /* Extends lo..hi by the vertices the mesh's triangles use (stray unused vertices do not move the frame). */
-static void staged_bounds(const staged_mesh *m, double lo[3], double hi[3])
+static void staged_bounds(const scene__staged_mesh *m, double lo[3], double hi[3])
 {
     for (size_t i = 0; i < 3 * (size_t)m->triangle_count; i++) {
         const double *p = m->world + 3 * (size_t)m->indices[i];
@@ -219,16 +199,11 @@ bool scene__grow(void **array, size_t count, size_t size)
     return true;
 }
 
-static bool finite3(const float v[3])
-{
-    return isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]);
-}
-
 scene_result scene__add_light_world(scene *s, const scene_light *l, const double world_position[3],
                                     const char *where, scene_error *err)
 {
     scene_light light = *l;
-    if (!finite3(light.color) || !isfinite(light.intensity))
+    if (!scene__finite3(light.color) || !isfinite(light.intensity))
         return scene__fail(err, SCENE_ERR_INVALID, "%s: light colour and intensity must be finite", where);
     if (light.intensity < 0 || light.color[0] < 0 || light.color[1] < 0 || light.color[2] < 0)
         return scene__fail(err, SCENE_ERR_RANGE, "%s: light colour and intensity must be >= 0", where);
@@ -241,7 +216,7 @@ scene_result scene__add_light_world(scene *s, const scene_light *l, const double
                            brightest, (double)FLT_MAX);
     double world[3] = {light.position[0], light.position[1], light.position[2]};
     if (light.type == SCENE_LIGHT_DIRECTIONAL) {
-        if (!finite3(light.direction))
+        if (!scene__finite3(light.direction))
             return scene__fail(err, SCENE_ERR_INVALID, "%s: light direction must be finite", where);
         double len = sqrt((double)light.direction[0] * light.direction[0] +
                           (double)light.direction[1] * light.direction[1] +
@@ -255,7 +230,8 @@ scene_result scene__add_light_world(scene *s, const scene_light *l, const double
             memcpy(world, world_position, sizeof world);
         for (int k = 0; k < 3; k++)
             light.position[k] = (float)world[k];
-        if (!isfinite(world[0]) || !isfinite(world[1]) || !isfinite(world[2]) || !finite3(light.position))
+        if (!isfinite(world[0]) || !isfinite(world[1]) || !isfinite(world[2]) ||
+            !scene__finite3(light.position))
             return scene__fail(err, SCENE_ERR_INVALID, "%s: light position must be finite", where);
     }
     /* The slot's world position in double; scene__finalize() moves the light into the local frame. */
@@ -310,266 +286,6 @@ void scene__add_default_lighting(scene *s)
 
 /* ---- welding and cleaning ----------------------------------------------------------------------------- */
 
-static _Thread_local const float *weld_positions;
-
-/* Orders vertex indices by position (x, then y, then z), so equal positions end up adjacent. */
-static int weld_compare(const void *a, const void *b)
-{
-    const float *pa = weld_positions + 3 * (size_t)(*(const uint32_t *)a);
-    const float *pb = weld_positions + 3 * (size_t)(*(const uint32_t *)b);
-    for (int k = 0; k < 3; k++) {
-        if (pa[k] < pb[k])
-            return -1;
-        if (pa[k] > pb[k])
-            return 1;
-    }
-    uint32_t ia = *(const uint32_t *)a, ib = *(const uint32_t *)b;
-    return (ia > ib) - (ia < ib);
-}
-
-typedef struct tri_key {
-    uint32_t v[3];  /* sorted welded vertex indices */
-    uint32_t index; /* triangle in the mesh */
-} tri_key;
-
-/* Orders triangles by their sorted vertex triple, then by input order (so the first copy survives). */
-static int tri_key_compare(const void *a, const void *b)
-{
-    const tri_key *ta = a, *tb = b;
-    for (int k = 0; k < 3; k++)
-        if (ta->v[k] != tb->v[k])
-            return ta->v[k] < tb->v[k] ? -1 : 1;
-    return (ta->index > tb->index) - (ta->index < tb->index);
-}
-
-static void sort3(uint32_t v[3])
-{
-    uint32_t t;
-    if (v[0] > v[1]) {
-        t = v[0];
-        v[0] = v[1];
-        v[1] = t;
-    }
-    if (v[1] > v[2]) {
-        t = v[1];
-        v[1] = v[2];
-        v[2] = t;
-    }
-    if (v[0] > v[1]) {
-        t = v[0];
-        v[0] = v[1];
-        v[1] = t;
-    }
-}
-
-void scene__precision_lost(const scene_repairs *r, uint64_t before, char *out, size_t cap)
-{
-    uint64_t n = r->precision_skipped - before;
-    if (n)
-        snprintf(out, cap,
-                 "; %llu of the degenerate ones have an area but collapse at float precision %.4g m "
-                 "from the local origin, where floats are %.3g m apart",
-                 (unsigned long long)n, r->precision_reach, float_spacing(r->precision_reach));
-    else if (cap)
-        out[0] = 0;
-}
-
-/* Whether triangle (a, b, c) is too thin to carry a normal, judged in double. */
-static bool triangle_degenerate_d(const double a[3], const double b[3], const double c[3])
-{
-    double e1[3], e2[3], e3[3];
-    for (int k = 0; k < 3; k++) {
-        e1[k] = b[k] - a[k];
-        e2[k] = c[k] - a[k];
-        e3[k] = c[k] - b[k];
-    }
-    double cx = e1[1] * e2[2] - e1[2] * e2[1];
-    double cy = e1[2] * e2[0] - e1[0] * e2[2];
-    double cz = e1[0] * e2[1] - e1[1] * e2[0];
-    double area2 = sqrt(cx * cx + cy * cy + cz * cz);
-    double l1 = e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2];
-    double l2 = e2[0] * e2[0] + e2[1] * e2[1] + e2[2] * e2[2];
-    double l3 = e3[0] * e3[0] + e3[1] * e3[1] + e3[2] * e3[2];
-    double longest2 = fmax(l1, fmax(l2, l3));
-    /* The sine of the smallest angle scaled: below 1e-9 the float normal is noise. */
-    return !(area2 > 1e-9 * longest2) || !(longest2 > 0);
-}
-
-/* The same for float corners. */
-static bool triangle_degenerate(const float *a, const float *b, const float *c)
-{
-    double p[3][3];
-    for (int k = 0; k < 3; k++) {
-        p[0][k] = a[k];
-        p[1][k] = b[k];
-        p[2][k] = c[k];
-    }
-    return triangle_degenerate_d(p[0], p[1], p[2]);
-}
-
-/* Whether the triangle with these corners (world positions, double) keeps its shape when moved by -origin in
- * double: a triangle degenerate only once rounded to float lies too far from the frame's origin for its size.
- * Its farthest corner from the origin goes into *reach. */
-static bool triangle_fine_in_double(const double *world, const uint32_t *tri, const double origin[3],
-                                    double *reach)
-{
-    double p[3][3];
-    for (int c = 0; c < 3; c++)
-        for (int k = 0; k < 3; k++) {
-            p[c][k] = world[3 * (size_t)tri[c] + k] - origin[k];
-            *reach = fmax(*reach, fabs(p[c][k]));
-        }
-    return !triangle_degenerate_d(p[0], p[1], p[2]);
-}
-
-/* Welds, cleans and appends one staged mesh, its positions moved into the frame with the given origin:
- * (float)(world - origin), subtracted in double. *mesh_index receives its index in s->meshes, or UINT32_MAX
- * when no triangle was left. */
-static scene_result commit_mesh(scene *s, const staged_mesh *m, const double origin[3], const char *name,
-                                uint32_t *mesh_index, scene_error *err)
-{
-    uint32_t vertex_count = m->vertex_count, triangle_count = m->triangle_count;
-    const uint32_t *indices = m->indices;
-    *mesh_index = UINT32_MAX;
-    double t0 = scene__now_ms();
-    scene_result rc = SCENE_ERR_NOMEM;
-    float *world = malloc(sizeof(float) * 3 * (size_t)vertex_count);
-    uint32_t *order = malloc(sizeof(uint32_t) * (size_t)vertex_count);
-    uint32_t *remap = malloc(sizeof(uint32_t) * (size_t)vertex_count);
-    tri_key *keys = malloc(sizeof(tri_key) * (size_t)triangle_count);
-    uint8_t *keep = calloc(triangle_count, 1);
-    if (!world || !order || !remap || !keys || !keep)
-        goto done;
-
-    /* Into the frame, in double, rounded once; adding 0.0f turns -0 into +0 so the two weld together. */
-    for (uint32_t v = 0; v < vertex_count; v++) {
-        const double *p = m->world + 3 * (size_t)v;
-        float *w = world + 3 * (size_t)v;
-        for (int k = 0; k < 3; k++)
-            w[k] = (float)(p[k] - origin[k]) + 0.0f;
-        if (!finite3(w)) {
-            rc = scene__fail(err, SCENE_ERR_INVALID,
-                             "mesh '%s': vertex %u is not finite after the mesh transform (%g, %g, %g)", name,
-                             v, p[0], p[1], p[2]);
-            goto done;
-        }
-        order[v] = v;
-    }
-
-    /* Weld equal positions: sort, then the first of each run of equal positions keeps its slot. */
-    weld_positions = world;
-    qsort(order, vertex_count, sizeof *order, weld_compare);
-    uint32_t unique = 0;
-    for (uint32_t i = 0; i < vertex_count; i++) {
-        const float *p = world + 3 * (size_t)order[i];
-        if (i > 0) {
-            const float *q = world + 3 * (size_t)order[i - 1];
-            if (p[0] == q[0] && p[1] == q[1] && p[2] == q[2]) {
-                remap[order[i]] = remap[order[i - 1]];
-                continue;
-            }
-        }
-        remap[order[i]] = unique++;
-    }
-    s->repairs.vertices_welded += vertex_count - unique;
-
-    /* Degenerate and duplicate triangles, judged on the float positions in this frame. */
-    uint32_t kept = 0;
-    for (uint32_t t = 0; t < triangle_count; t++) {
-        const uint32_t *tri = indices + 3 * (size_t)t;
-        keys[t].v[0] = remap[tri[0]];
-        keys[t].v[1] = remap[tri[1]];
-        keys[t].v[2] = remap[tri[2]];
-        keys[t].index = t;
-        sort3(keys[t].v);
-        bool degenerate = keys[t].v[0] == keys[t].v[1] || keys[t].v[1] == keys[t].v[2] ||
-                          triangle_degenerate(world + 3 * (size_t)tri[0], world + 3 * (size_t)tri[1],
-                                              world + 3 * (size_t)tri[2]);
-        if (degenerate) {
-            s->repairs.degenerate_skipped++;
-            double reach = 0;
-            if (triangle_fine_in_double(m->world, tri, origin, &reach)) {
-                s->repairs.precision_skipped++;
-                s->repairs.precision_reach = fmax(s->repairs.precision_reach, reach);
-            }
-            keys[t].v[0] = keys[t].v[1] = keys[t].v[2] = UINT32_MAX;
-        }
-    }
-    qsort(keys, triangle_count, sizeof *keys, tri_key_compare);
-    for (uint32_t i = 0; i < triangle_count; i++) {
-        if (keys[i].v[0] == UINT32_MAX)
-            continue;
-        if (i > 0 && memcmp(keys[i].v, keys[i - 1].v, sizeof keys[i].v) == 0) {
-            s->repairs.duplicate_skipped++;
-            continue;
-        }
-        keep[keys[i].index] = 1;
-        kept++;
-    }
-    if (kept == 0) {
-        rc = SCENE_OK; /* nothing left of this mesh: counted above, not an error by itself */
-        goto done;
-    }
-    _Static_assert(UINT32_MAX / 8 < SCENE_ISLAND_BACK, "island ids keep their top bit for the side");
-    if ((uint64_t)s->vertex_count + unique > UINT32_MAX / 4 ||
-        (uint64_t)s->triangle_count + kept > UINT32_MAX / 8) {
-        rc = scene__fail(err, SCENE_ERR_RANGE, "mesh '%s': the scene would exceed %u triangles", name,
-                         UINT32_MAX / 8);
-        goto done;
-    }
-
-    uint32_t base_vertex = s->vertex_count, base_tri = s->triangle_count;
-    size_t nv = (size_t)base_vertex + unique, nt = (size_t)base_tri + kept;
-    if (!scene__grow((void **)&s->positions, nv * 3, sizeof(float)) ||
-        !scene__grow((void **)&s->indices, nt * 3, sizeof(uint32_t)) ||
-        !scene__grow((void **)&s->corner_uv, nt * 6, sizeof(float)) ||
-        !scene__grow((void **)&s->tri_mesh, nt, sizeof(uint32_t)) ||
-        !scene__grow((void **)&s->meshes, (size_t)s->mesh_count + 1, sizeof(scene_mesh)))
-        goto done;
-    for (uint32_t v = 0; v < vertex_count; v++)
-        memcpy(s->positions + 3 * ((size_t)base_vertex + remap[v]), world + 3 * (size_t)v, 3 * sizeof(float));
-    uint32_t out = base_tri;
-    for (uint32_t t = 0; t < triangle_count; t++) {
-        if (!keep[t])
-            continue;
-        for (int corner = 0; corner < 3; corner++) {
-            /* A mirroring transform would turn every triangle inside out: swap two corners. */
-            int c = m->mirrored && corner > 0 ? 3 - corner : corner;
-            uint32_t src = indices[3 * (size_t)t + corner];
-            s->indices[3 * (size_t)out + c] = base_vertex + remap[src];
-            float u = 0, w = 0;
-            if (m->uv && isfinite(m->uv[2 * (size_t)src]) && isfinite(m->uv[2 * (size_t)src + 1])) {
-                u = m->uv[2 * (size_t)src];
-                w = m->uv[2 * (size_t)src + 1];
-            }
-            s->corner_uv[6 * (size_t)out + 2 * c] = u;
-            s->corner_uv[6 * (size_t)out + 2 * c + 1] = w;
-        }
-        s->tri_mesh[out] = s->mesh_count;
-        out++;
-    }
-    scene_mesh *mesh = &s->meshes[s->mesh_count];
-    memset(mesh, 0, sizeof *mesh);
-    snprintf(mesh->name, sizeof mesh->name, "%s", name);
-    mesh->first_triangle = base_tri;
-    mesh->triangle_count = kept;
-    mesh->material = m->material;
-    *mesh_index = s->mesh_count++;
-    s->vertex_count = (uint32_t)nv;
-    s->triangle_count = (uint32_t)nt;
-    rc = SCENE_OK;
-done:
-    if (rc == SCENE_ERR_NOMEM)
-        scene__fail(err, rc, "mesh '%s': out of memory", name);
-    s->timings.weld_ms += scene__now_ms() - t0;
-    free(world);
-    free(order);
-    free(remap);
-    free(keys);
-    free(keep);
-    return rc;
-}
-
 scene_result scene__add_mesh(scene *s, const char *name, const float *positions, uint32_t vertex_count,
                              const uint32_t *indices, uint32_t triangle_count, const float *uv,
                              uint32_t material, const double *xform, scene_error *err)
@@ -579,7 +295,7 @@ scene_result scene__add_mesh(scene *s, const char *name, const float *positions,
                            material, s->material_count);
     for (uint32_t v = 0; v < vertex_count; v++) {
         const float *p = positions + 3 * (size_t)v;
-        if (!finite3(p))
+        if (!scene__finite3(p))
             return scene__fail(err, SCENE_ERR_INVALID,
                                "mesh '%s': vertex %u has a non-finite coordinate (%g, %g, %g)", name, v,
                                (double)p[0], (double)p[1], (double)p[2]);
@@ -595,7 +311,7 @@ scene_result scene__add_mesh(scene *s, const char *name, const float *positions,
     scene__builder *b = builder_of(s);
     if (!b || !scene__grow((void **)&b->meshes, (size_t)b->mesh_count + 1, sizeof *b->meshes))
         return scene__fail(err, SCENE_ERR_NOMEM, "mesh '%s': out of memory", name);
-    staged_mesh *m = &b->meshes[b->mesh_count];
+    scene__staged_mesh *m = &b->meshes[b->mesh_count];
     memset(m, 0, sizeof *m);
     snprintf(m->name, sizeof m->name, "%s", name);
     m->vertex_count = vertex_count;
@@ -643,7 +359,7 @@ scene_result scene__add_mesh(scene *s, const char *name, const float *positions,
                      xform[2] * (xform[4] * xform[9] - xform[5] * xform[8]);
         m->mirrored = det < 0;
     }
-    double input_step = float_spacing(input_magnitude) * stretch;
+    double input_step = scene__float_spacing(input_magnitude) * stretch;
     if (input_step > b->input_step) {
         b->input_step = input_step;
         b->input_magnitude = input_magnitude;
@@ -658,7 +374,7 @@ scene_result scene__add_mesh(scene *s, const char *name, const float *positions,
         frame_origin_for(lo, hi, b->frame_origin);
         b->frame_chosen = true;
     }
-    return commit_mesh(s, m, b->frame_origin, name, &m->mesh, err);
+    return scene__commit_mesh(s, m, b->frame_origin, name, &m->mesh, err);
 }
 
 /* ---- finalisation ------------------------------------------------------------------------------------- */
@@ -771,12 +487,12 @@ static scene_result settle_frame(scene *s, scene_error *err)
         s->repairs.precision_reach = 0;
         scene_result rc = SCENE_OK;
         for (uint32_t i = 0; i < b->mesh_count && rc == SCENE_OK; i++) {
-            staged_mesh *m = &b->meshes[i];
+            scene__staged_mesh *m = &b->meshes[i];
             /* The name as the loader left it (a JSON scene renames meshes after import). */
             const char *name = m->mesh < old_mesh_count ? old_meshes[m->mesh].name : m->name;
             char kept_name[sizeof m->name];
             snprintf(kept_name, sizeof kept_name, "%s", name);
-            rc = commit_mesh(s, m, origin, kept_name, &m->mesh, err);
+            rc = scene__commit_mesh(s, m, origin, kept_name, &m->mesh, err);
         }
         free(old_meshes);
         if (rc != SCENE_OK)
@@ -823,7 +539,7 @@ static void assess_precision(scene *s)
     double reach = 0;
     for (int k = 0; k < 3; k++)
         reach = fmax(reach, fmax(fabs((double)s->bounds_min[k]), fabs((double)s->bounds_max[k])));
-    double local_step = float_spacing(reach);
+    double local_step = scene__float_spacing(reach);
     const scene__builder *b = s->builder;
     double input_step = b ? b->input_step : 0;
     s->position_step = fmax(local_step, input_step);
@@ -835,7 +551,7 @@ static void assess_precision(scene *s)
             "to %.4g m from the local origin, where floats are %.3g m apart; keep distant parts in a scene "
             "of their own, or scale the scene down",
             s->source, (unsigned long long)s->repairs.precision_skipped, s->repairs.precision_reach,
-            float_spacing(s->repairs.precision_reach));
+            scene__float_spacing(s->repairs.precision_reach));
         return;
     }
     double texel = 1.0 / (double)s->texel_density;

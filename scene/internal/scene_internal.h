@@ -5,7 +5,35 @@
 
 #include "scene.h"
 
+#include <math.h>
 #include <stdarg.h>
+#include <stdbool.h>
+#include <stdint.h>
+
+/* One mesh as a loader handed it over, in double precision after its transform: kept until the scene's
+ * origin is settled, so that the mesh can be welded and cleaned again in the final frame. */
+typedef struct scene__staged_mesh {
+    char name[128];
+    double *world;     /* vertex_count * 3: positions after the mesh transform, world frame */
+    uint32_t *indices; /* triangle_count * 3 */
+    float *uv;         /* vertex_count * 2, or NULL */
+    uint32_t vertex_count, triangle_count, material;
+    bool mirrored; /* the transform mirrors: corners are swapped to keep the winding */
+    uint32_t mesh; /* its entry in scene.meshes, UINT32_MAX when nothing of it was left */
+} scene__staged_mesh;
+
+/* Welds and cleans the staged mesh m into the scene in the local frame at origin (scene_weld.c): appends its
+ * vertices and triangles, sets *mesh to its entry in s->meshes (UINT32_MAX when nothing of it was left). */
+scene_result scene__commit_mesh(scene *s, const scene__staged_mesh *m, const double origin[3],
+                                const char *name, uint32_t *mesh_index, scene_error *err);
+
+/* The spacing of floats at magnitude x (the unit in the last place), in double. */
+double scene__float_spacing(double x);
+
+static inline bool scene__finite3(const float v[3])
+{
+    return isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]);
+}
 
 /* "; N of the degenerate ones have an area but collapse at float precision D m from the local origin, ..." for the
  * triangles of r->precision_skipped beyond `before`, or "" when there are none; for messages about dropped
