@@ -2,10 +2,9 @@
  * the options enforce, and frames that cannot be written end a run with one line (also the frame an
  * interrupted run saves at its end). Runs the fxcache program of this build through fxt_run_cli(), as
  * test_cli.c does (which had grown past 1,000 lines). */
-#include "test_util.h"
+#include "fxt_cli.h"
 
 #include <fcntl.h>
-#include <jansson.h>
 #include <signal.h>
 #include <stdarg.h>
 #include <stdbool.h>
@@ -15,36 +14,6 @@
 #include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
-
-static char out_buf[1 << 16], err_buf[1 << 14];
-
-/* Runs `fxcache <args...>` (printf-style) and returns the exit code; stdout and stderr land in out_buf and
- * err_buf. */
-#define run(...) fxt_run_clif(out_buf, sizeof out_buf, err_buf, sizeof err_buf, __VA_ARGS__)
-#define tmp_path fxt_tmp_path_copy
-
-/* err_buf holds exactly one non-empty line (ending in one newline). */
-static void assert_one_line_error(void)
-{
-    size_t len = strlen(err_buf);
-    if (len < 2 || err_buf[len - 1] != '\n' || memchr(err_buf, '\n', len - 1) != NULL)
-        fail_msg("stderr is not exactly one line: '%s'", err_buf);
-}
-
-static void assert_contains(const char *haystack, const char *needle)
-{
-    if (!strstr(haystack, needle))
-        fail_msg("'%s' lacks '%s'", haystack, needle);
-}
-
-static json_t *load_json_file(const char *path)
-{
-    json_error_t error;
-    json_t *root = json_load_file(path, 0, &error);
-    if (!root)
-        fail_msg("%s: invalid JSON (%d:%d: %s)", path, error.line, error.column, error.text);
-    return root;
-}
 
 /* --help states each option's range as the option's refusal does: the value just outside is refused naming
  * that range, and the help has the same range. --fps said (0, 1000] where 0.0005 is refused ([0.001, 1000]);
