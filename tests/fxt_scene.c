@@ -308,3 +308,37 @@ double fxt_disk_open(double d1, double d2, double h, double radius)
     }
     return open / pi;
 }
+
+/* A unit quad in the XZ plane facing up (+y), two triangles. */
+const char fxt_quad_obj[] = "o quad\n"
+                            "v 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\n"
+                            "f 1 3 2\nf 1 4 3\n";
+
+/* Writes quad.obj into the scratch folder, where the JSON files of these tests refer to it. */
+const char *fxt_write_quad(void)
+{
+    return fxt_write_file("quad.obj", fxt_quad_obj);
+}
+
+/* Writes text as a JSON file name next to quad.obj, loads it into a fresh scene and finalises it; returns
+ * the scene on success (caller frees) or NULL with err filled. */
+scene *fxt_load_json_text(const char *name, const char *text, scene_error *err)
+{
+    fxt_write_quad();
+    const char *path = fxt_write_file(name, text);
+    char path_copy[1024];
+    snprintf(path_copy, sizeof path_copy, "%s", path);
+    scene *s = scene__alloc();
+    assert_non_null(s);
+    snprintf(s->source, sizeof s->source, "%s", path_copy); /* as scene_load() names it */
+    memset(err, 0, sizeof *err);
+    scene_result r = scene__load_json(s, path_copy, err);
+    if (r == SCENE_OK) /* settles the local frame: positions, lights and camera relative to s->origin */
+        r = scene__finalize(s, NULL, err);
+    if (r != SCENE_OK) {
+        assert_int_equal(err->code, r);
+        scene_free(s);
+        return NULL;
+    }
+    return s;
+}

@@ -69,4 +69,15 @@ scene *fxt_transformed_default(double scale, double offset, float intensity_scal
  * distance d iff its component towards it exceeds d / radius (test_crease.c checks it by counting). */
 double fxt_disk_open(double d1, double d2, double h, double radius);
 
+/* A unit quad in the XZ plane facing up (+y), two triangles, as an OBJ file's text. */
+extern const char fxt_quad_obj[];
+
+/* Writes quad.obj (a unit quad in the XZ plane facing up, two triangles) into the scratch folder, where the
+ * JSON scene tests' files refer to it; returns its path. */
+const char *fxt_write_quad(void);
+
+/* Writes text as a JSON file `name` next to quad.obj, loads it into a fresh scene and finalises it; returns
+ * the scene on success (caller frees) or NULL with err filled. */
+scene *fxt_load_json_text(const char *name, const char *text, scene_error *err);
+
 #endif
