@@ -269,6 +269,14 @@ bool fx__probe_filter_memo(const fx_context *ctx, bool committed, const fx_taps 
  * occlusion: the fraction of the hemisphere open within its radius) scales E instead, the way engines
  * apply AO to indirect diffuse light. Without AO it is 1 and E goes in whole. Both modes do the same.
  *
+ * The back of a single-sided surface (a pixel whose view_normal is against its triangle's normal) reads only
+ * the probes on its own side of the surface's plane. The probes there see that surface's back, so they are off
+ * (or moved out through it), and DDGI's renormalisation gave the back the whole light of the probes on the
+ * other side, however small their weights: the outside of a room of inward faces showed the room's light (the
+ * Cornell box's floor seen from below, its ceiling from above; tests/test_probes_sides.c). With no probe on
+ * its side the pixel keeps the sky term (what the reference's paths from there see, less what they would meet
+ * in the scene). Front faces are as DDGI has them: a probe behind one is usually in a solid.
+ *
  * Cost. The filter of one pixel reads 8 probes, each twice (irradiance towards the normal, moments towards
  * the point) and weighs each with a Chebyshev bound: too much to do per pixel (bench_probes). Pixels of a
  * run that read the same 8 probes (the same cell) and face the same way (the same normal: one triangle or
@@ -276,13 +284,15 @@ bool fx__probe_filter_memo(const fx_context *ctx, bool committed, const fx_taps 
  * depends on nothing else) and each probe's wrap and Chebyshev weight is taken once, at the group's mean
  * position; per pixel only the trilinear weights change. A group spans at most 4 x 16 pixels, much less than
  * a cell (cells are about distance/16 wide, 16 pixels about distance/40 at 640 pixels and 60 degrees), so
- * the visibility weights barely move within it. A group of one pixel is exactly the filter of fx__probe_filter_memo. */
+ * the visibility weights barely move within it. A group of one pixel is exactly the filter of fx__probe_filter_memo
+ * (for a front face; the filter knows no sides). */
 enum { SHADE_GROUPS = 16 };
 
 typedef struct shade_group {
     const void *texel[FX_MAX_TAPS]; /* its taps' probes, in order: with the normal, what a group shares */
     uint32_t count;
     float normal[3];
+    bool back; /* its pixels see their triangles' backs (fx_point.normal against view_normal) */
     float position_sum[3];
     uint32_t pixels;
     /* Per tap: its wrap x Chebyshev weight w at the mean position times its irradiance towards the normal
@@ -290,12 +300,13 @@ typedef struct shade_group {
     _Alignas(16) float weighted[FX_MAX_TAPS][4];
 } shade_group;
 
-static bool same_group(const shade_group *g, const fx_taps *taps, const float normal[3])
+static bool same_group(const shade_group *g, const fx_taps *taps, const float normal[3], bool back)
 {
     /* Normals within 1e-3 per component (0.06 degrees) count as one: coplanar triangles of a wall have
      * normals that differ in their last bits, and the irradiance cannot tell them apart. */
-    if (g->count != taps->count || g->texel[0] != taps->texel[0] || fabsf(g->normal[0] - normal[0]) > 1e-3f ||
-        fabsf(g->normal[1] - normal[1]) > 1e-3f || fabsf(g->normal[2] - normal[2]) > 1e-3f)
+    if (g->count != taps->count || g->texel[0] != taps->texel[0] || g->back != back ||
+        fabsf(g->normal[0] - normal[0]) > 1e-3f || fabsf(g->normal[1] - normal[1]) > 1e-3f ||
+        fabsf(g->normal[2] - normal[2]) > 1e-3f)
         return false;
     return memcmp(g->texel + 1, taps->texel + 1, (taps->count - 1) * sizeof taps->texel[0]) == 0;
 }
@@ -310,7 +321,7 @@ static bool same_group(const shade_group *g, const fx_taps *taps, const float no
 enum { PROBE_LANES = 8 };
 
 FXC_HOT_CLONES static void group_weights_lanes(const void *const *probe, uint32_t n, const float position[3],
-                                               const float normal[3], const uint32_t texel_n[4],
+                                               const float normal[3], bool back, const uint32_t texel_n[4],
                                                const float bilinear_n[4], float out[4][PROBE_LANES])
 {
     const float px = position[0], py = position[1], pz = position[2];
@@ -337,9 +348,10 @@ FXC_HOT_CLONES static void group_weights_lanes(const void *const *probe, uint32_
         float by = qy[l] - (py + ny * FX_PROBE_NORMAL_BIAS * cell[l]);
         float bz = qz[l] - (pz + nz * FX_PROBE_NORMAL_BIAS * cell[l]);
         float len2 = tx * tx + ty * ty + tz * tz, biased_len2 = bx * bx + by * by + bz * bz;
-        float len = sqrtf(len2);
-        float wrap = len > 0 ? ((tx * nx + ty * ny + tz * nz) / (len > 0 ? len : 1.0f) + 1.0f) * 0.5f : 1.0f;
+        float len = sqrtf(len2), side = tx * nx + ty * ny + tz * nz;
+        float wrap = len > 0 ? (side / (len > 0 ? len : 1.0f) + 1.0f) * 0.5f : 1.0f;
         weight[l] = wrap * wrap + 0.2f;
+        live[l] = back && !(side > 0) ? 0 : live[l]; /* a back's probes: only those on its viewer's side */
         float d = sqrtf(biased_len2);
         distance[l] = d;
         /* oct_bilinear of the direction from the probe to the biased point */
@@ -428,10 +440,11 @@ FXC_HOT_CLONES void fx__probes_shade(const fx_context *ctx, const fx_shade_run *
             group_of[end] = 0xFF;
             if (taps->count == 0)
                 continue;
-            const float *n = run->points[end].view_normal;
+            const float *n = run->points[end].view_normal, *geometric = run->points[end].normal;
+            bool back = n[0] * geometric[0] + n[1] * geometric[1] + n[2] * geometric[2] < 0;
             uint32_t g = last;
-            if (!(g < group_count && same_group(&groups[g], taps, n)))
-                for (g = 0; g < group_count && !same_group(&groups[g], taps, n);)
+            if (!(g < group_count && same_group(&groups[g], taps, n, back)))
+                for (g = 0; g < group_count && !same_group(&groups[g], taps, n, back);)
                     g++;
             last = g;
             if (g == group_count) {
@@ -441,6 +454,7 @@ FXC_HOT_CLONES void fx__probes_shade(const fx_context *ctx, const fx_shade_run *
                 memcpy(ng->texel, taps->texel, taps->count * sizeof taps->texel[0]);
                 ng->count = taps->count;
                 memcpy(ng->normal, n, sizeof ng->normal);
+                ng->back = back;
                 ng->position_sum[0] = ng->position_sum[1] = ng->position_sum[2] = 0;
                 ng->pixels = 0;
             }
@@ -469,7 +483,7 @@ FXC_HOT_CLONES void fx__probes_shade(const fx_context *ctx, const fx_shade_run *
             for (uint32_t t = 0; t < taps->count; t += PROBE_LANES) {
                 uint32_t lanes = taps->count - t < PROBE_LANES ? taps->count - t : PROBE_LANES;
                 float out[4][PROBE_LANES];
-                group_weights_lanes(taps->texel + t, lanes, mean, sg->normal, texel, bilinear, out);
+                group_weights_lanes(taps->texel + t, lanes, mean, sg->normal, sg->back, texel, bilinear, out);
                 for (uint32_t l = 0; l < lanes; l++)
                     for (int k = 0; k < 4; k++)
                         sg->weighted[t + l][k] = out[k][l];
