@@ -249,8 +249,12 @@ bool fx__locate_point(const fx_context *ctx, const float pos[3], const float nor
     _Alignas(16) struct RTCPointQueryContext context;
     rtcInitPointQueryContext(&context);
     rtcPointQuery((RTCScene)scene_rt_handle(ctx->rt), &query, &context, locate_callback, &q);
-    if (q.best_tri == UINT32_MAX)
-        q.best_tri = q.back_tri; /* seen from behind (or nothing facing either way: none) */
+    /* A triangle facing against the normal wins when it is nearer: the point seen from behind its own triangle
+     * (normal the side the viewer sees) lies on it, and a neighbour facing along the normal (a mesh with one
+     * triangle wound the other way: the Stanford dragon's) can lie under it; moved into that neighbour, the
+     * point's rays all met the triangle it was on (black pixels in the reference). On a tie, along. */
+    if (q.best_tri == UINT32_MAX || q.back_d2 < q.best_d2)
+        q.best_tri = q.back_tri; /* (nothing facing either way: none) */
     if (q.best_tri == UINT32_MAX)
         return false;
     fx__triangle_map_init(s, q.best_tri, fmaxf(margin, reach), map);

@@ -10,7 +10,9 @@
  *   - single-sided floor and occluder lit by one sun from above and one from below, seen from above and from
  *     below: cached frames and the baseline against the reference, within stated bounds;
  *   - a closed mesh seen only from outside requests no back block (no twin key in the cache), and one seen
- *     only from inside nothing but back blocks. */
+ *     only from inside nothing but back blocks;
+ *   - a triangle wound the other way over its neighbour, seen from behind: the baseline's and the reference's
+ *     point stays on it (AO 1 and lit under an open sky). */
 #include "test_util.h"
 
 #include "engine_internal.h"
@@ -404,6 +406,47 @@ static void test_sides_against_reference(void **state)
     scene_free(s);
 }
 
+/* ---- a triangle wound the other way, over its neighbour ------------------------------------------------- */
+
+/* A floor facing up and, 2.5e-5 m above it (within fx__robust_distance, 3.4e-5 m here, beyond the ray origins'
+ * offset from the floor), a flap facing down: what a mesh with
+ * one triangle wound the other way and folded over its neighbour looks like (the Stanford dragon's, ../shared).
+ * Seen from above, a point on the flap is seen from behind; nothing lies above it, so its AO is 1 and the sun
+ * from above lights it (closed forms), in the no-cache baseline and the reference, which locate the point
+ * with fx__locate_point. Before, the floor, facing along the view normal, was preferred although farther:
+ * the point moved onto it, under the flap, and every ray met the flap (AO 0, unlit: black pixels in the
+ * reference's dragon). Every paths' estimate then sees the sky: its indirect light > 0. */
+static void test_flap_over_neighbour(void **state)
+{
+    (void)state;
+    scene *s = fxt_new_scene();
+    fxt_add_quad(s, "floor", (double[3]){-1, 0, -1}, (double[3]){0, 0, 2}, (double[3]){2, 0, 0}, 2);
+    fxt_add_quad(s, "flap", (double[3]){-0.2, 2.5e-5, -0.2}, (double[3]){0.4, 0, 0}, (double[3]){0, 0, 0.4},
+                 1);
+    fxt_add_sun(s, 0.2f, -1.0f, 0.1f);
+    add_sky(s);
+    scene_rt *rt = fxt_finish_scene(s, 16, 0.5f);
+    assert_true(s->tri_normal[3 * (s->triangle_count - 1) + 1] < -0.99f); /* the flap faces down */
+    scene_tracing_thread_init();
+    fx_context ctx = {.s = s, .rt = rt, .seed = 3, .ao_radius = 0.5f};
+    const float up[3] = {0, 1, 0}, dpdx[3] = {0.01f, 0, 0}, dpdy[3] = {0, 0, 0.01f};
+    for (int i = 0; i < 4; i++) {
+        float pos[3] = {0.05f - 0.03f * (float)i, 2.5e-5f, 0.03f + 0.02f * (float)i};
+        uint64_t rays = 0;
+        float ao = fx_ao_eval_point(&ctx, pos, up, 64, (uint64_t)i, &rays);
+        float lit = fx_shadow_eval_point(&ctx, pos, up, dpdx, dpdy, 0, (uint64_t)i, &rays);
+        float indirect[3];
+        fx_indirect_reference_point(&ctx, pos, up, 16, (uint64_t)i, indirect, &rays);
+        printf("flap point %d: AO %.3f, lit %.3f, indirect %.3f\n", i, (double)ao, (double)lit,
+               (double)indirect[0]);
+        assert_true(ao == 1.0f);
+        assert_true(lit == 1.0f);
+        assert_true(indirect[0] > 0.5f);
+    }
+    scene_rt_free(rt);
+    scene_free(s);
+}
+
 /* ---- no twin block for what nobody sees from behind ------------------------------------------------------ */
 
 /* How many of the viewer's requested keys after the frame (the effects' and their lookups') name a back. */
@@ -454,6 +497,7 @@ int main(void)
         cmocka_unit_test(test_floor_both_sides),        cmocka_unit_test(test_floor_sparse_back),
         cmocka_unit_test(test_box_inside_closed_forms), cmocka_unit_test(test_box_inward_outward_agree),
         cmocka_unit_test(test_sides_against_reference), cmocka_unit_test(test_closed_mesh_no_twin),
+        cmocka_unit_test(test_flap_over_neighbour),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

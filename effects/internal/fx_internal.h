@@ -282,8 +282,8 @@ static inline void fx__surface_map_bary(const fx__surface_map *map, const float 
 
 /* For the no-cache baseline, which knows a visible point and its normal but not its triangle: finds the
  * triangle facing along normal (within 25 degrees) nearest to pos, within fx__robust_distance of it
- * (Embree's point query); when none does, the nearest facing against it (within 25 degrees: a point seen
- * from behind its triangle, normal the side the viewer sees); and sets map up for it with points kept
+ * (Embree's point query); when none does, or one facing against it (within 25 degrees: a point seen from
+ * behind its triangle, normal the side the viewer sees) is strictly nearer, that one; and sets map up for it with points kept
  * margin metres inside (raised as in fx__triangle_map_init), then `settled` = pos clamped into that shrunk
  * triangle. Returns false, with settled = pos, when no such triangle is that near (a point off every
  * surface). */
