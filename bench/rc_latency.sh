@@ -70,11 +70,19 @@ for latency in $latencies; do
     run "predict_$latency" --latency "$latency" --reproject --strategy predictive "$@"
 done
 
-# The true view: the display cameras are the trace at k / 30 s in every run (only how long each ran
-# differs), so the longest display trace is rendered once.
-longest=$(wc -l "$out"/*/display_viewer_00.trace | grep -v total | sort -n | tail -n 1 | awk '{ print $2 }')
+# The true view: display frame k's camera is the trace at k / 30 s in every run, so the display cameras of all
+# runs are merged into one trace (by time, each once) and rendered once. A display clock that falls behind skips
+# frames and writes no line for them, so no single run's trace need hold every frame another run showed: sim
+# would render the line before for a missing one (display frame 92 of a 100 ms run was compared with frame 91's
+# camera, 4 degrees of turn away: RMSE 17.5 against 5 for its neighbours).
+truth_trace="$out/display_cameras.trace"
+first=$(ls "$out"/*/display_viewer_00.trace | head -n 1)
+{
+    grep -v '^[0-9.-]' "$first"
+    cat "$out"/*/display_viewer_00.trace | grep '^[0-9]' | sort -g -k1,1 | awk '!seen[$1]++'
+} > "$truth_trace"
 rm -rf "$out/truth"
-"$fxcache" sim --scene "$scene" --effects "$effects" --trace "$longest" --fps 30 --out "$out/truth" --save-every 1 --quiet
+"$fxcache" sim --scene "$scene" --effects "$effects" --trace "$truth_trace" --fps 30 --out "$out/truth" --save-every 1 --quiet
 
 echo "# display frames from ${warmup} s on; RMSE of 8-bit sRGB against the server's render of the same camera"
 for latency in $latencies; do
