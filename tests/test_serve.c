@@ -421,6 +421,45 @@ static void test_options(void **state)
     assert_non_null(strstr(out, "--record"));
 }
 
+/* SIGTERM during a long frame (one viewer at 3840x2160 on one thread: many seconds a frame here): the frame
+ * is abandoned within a tile, so the server ends with its summary written (interrupted, no frame counted)
+ * within a few seconds of the signal, most of it the second it gives the viewer to close. Before, it
+ * finished the frame first. */
+static void test_sigterm_mid_frame(void **state)
+{
+    (void)state;
+    char summary[1100];
+    fxt_tmp_path_copy(summary, sizeof summary, "sigterm_summary.json");
+    unlink(summary);
+    fxt_server sv;
+    const char *args[] = {"--threads", "1", "--fps", "1", "--summary", summary, NULL};
+    fxt_server_start(&sv, "sigterm", args);
+    int fd = fxt_ws_connect(sv.port);
+    assert_true(fd >= 0);
+    proto_msg hello = fxt_hello_msg(3840, 2160, PROTO_CODEC_RAW);
+    assert_true(fxt_ws_send_msg(fd, &hello));
+    proto_welcome w;
+    assert_true(fxt_read_welcome(fd, &w));
+    proto_msg cam = camera_msg(&w, 0);
+    assert_true(fxt_ws_send_msg(fd, &cam));
+    usleep(1500000); /* the first frame is under way (a tick at most 1 s after the camera) */
+    double t0 = fxt_now_s();
+    int status = fxt_server_stop(&sv);
+    double took = fxt_now_s() - t0;
+    close(fd);
+    print_message("stopped %.2f s after SIGTERM in a 3840x2160 frame\n", took);
+    assert_int_equal(status, 0);
+    assert_true(took < 5.0);
+    size_t size = 0;
+    char *text = fxt_read_file(summary, &size);
+    json_error_t error;
+    json_t *sum = json_loadb(text, size, 0, &error);
+    free(text);
+    assert_non_null(sum);
+    assert_true(json_is_true(json_object_get(sum, "interrupted")));
+    json_decref(sum);
+}
+
 /* --bind resolves to an IPv4 address of this machine or is refused with one line: "::1" made
  * libwebsockets listen on every IPv4 interface (0.0.0.0), with no token since it counted as loopback; a name
  * it could not find ("localhost", a misspelling) left the server without a listening socket while it said
@@ -598,6 +637,7 @@ int main(void)
     mkdir(FXC_TEST_TMP, 0755);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_options),
+        cmocka_unit_test(test_sigterm_mid_frame),
         cmocka_unit_test(test_bind_addresses),
         cmocka_unit_test(test_node_peer),
         cmocka_unit_test(test_limits_and_token),

@@ -1,8 +1,8 @@
 /* `fxcache serve`: the networked server. Viewers connect over WebSockets (the wire format is proto/, the
  * client viewer_client/), each with its own resolution and codec, and get frames for their latest camera at
  * --fps, composed by the same engine `fxcache sim` drives (the network is one more sink: server/net/).
- * SIGINT and SIGTERM stop it cleanly: bye on every connection, the statistics and the summary written, the
- * recorded traces flushed. */
+ * SIGINT and SIGTERM stop it cleanly, within a tile of the frame in progress (which is abandoned): bye on
+ * every connection, the statistics and the summary written, the recorded traces flushed. */
 #include "cli.h"
 #include "cli_engine.h"
 #include "net.h"
@@ -19,8 +19,8 @@
 
 static volatile sig_atomic_t stop_requested = 0;
 
-/* Every signal asks for the end after the current frame: the shutdown (bye to every viewer, the files)
- * survives a supervisor's or a test's repeated SIGTERM. */
+/* Every signal asks for the end (the frame in progress is abandoned within a tile: srv_loop_set_stop): the
+ * shutdown (bye to every viewer, the files) survives a supervisor's or a test's repeated SIGTERM. */
 static void on_signal(int sig)
 {
     stop_requested = sig;
@@ -247,6 +247,7 @@ int srv_cmd_serve(int argc, char **argv)
     o.net.report = run.report;
     o.net.s = run.s;
     o.net.stop = &stop_requested;
+    srv_loop_set_stop(run.loop, &stop_requested); /* a signal ends a long frame within a tile */
     o.net.progress = isatty(STDERR_FILENO);
     char err[512];
     if (srv_net_create(&o.net, &net, err, sizeof err) != FXC_OK) {
