@@ -10,6 +10,7 @@
  * The misbehaving peers speak WebSocket by hand (RFC 6455 framing, a few lines) because they must send what
  * no well-behaved library would. Under the sanitizer build the server runs instrumented and must exit 0 on
  * SIGTERM (a leak or an error makes it exit non-zero). */
+#include "cli.h"
 #include "proto.h"
 #include "fxt_serve.h"
 #include "test_util.h"
@@ -419,6 +420,24 @@ static void test_options(void **state)
     char out[8192];
     assert_int_equal(fxt_run_cli("serve --help", out, sizeof out, NULL, 0), 0);
     assert_non_null(strstr(out, "--record"));
+
+    /* Memory at the limits: 64 viewers at 8192x8192 (36 + 32 bytes a pixel: 4.3 GiB each, 292 GiB) were
+     * accepted at start-up and would have failed only as viewers joined; now refused with the figures. The
+     * defaults are lowered to the viewers that fit instead: the count that fits, by hand. */
+    if (srv_cli_physical_memory() < (200ull << 30)) {
+        err[0] = 0;
+        assert_int_equal(fxt_run_cli("serve --max-viewers 64 --max-res 8192x8192 --max-samples 1048576", NULL,
+                                     0, err, sizeof err),
+                         2);
+        assert_non_null(strstr(err, "physical memory"));
+        assert_non_null(strstr(err, "8192x8192"));
+        assert_true(strchr(err, '\n') == strrchr(err, '\n')); /* one line */
+    }
+    assert_int_equal(srv_cli_viewers_that_fit(1000, 100, 300, 16), 3);
+    assert_int_equal(srv_cli_viewers_that_fit(1000, 100, 300, 2), 2);
+    assert_int_equal(srv_cli_viewers_that_fit(1000, 800, 300, 16), 0);
+    assert_int_equal(srv_cli_viewers_that_fit(1000, 1000, 300, 16), 0);
+    assert_int_equal(srv_cli_viewers_that_fit(1000, 0, 0, 5), 5);
 }
 
 /* SIGTERM during a long frame (one viewer at 3840x2160 on one thread: many seconds a frame here): the frame

@@ -32,6 +32,7 @@ typedef struct serve_options {
     const char *stats_path, *summary_path;
     uint32_t max_width, max_height;
     bool quiet;
+    bool limits_set; /* --max-viewers or --max-res given */
 } serve_options;
 
 static const char serve_usage[] =
@@ -124,8 +125,10 @@ static int parse_options(int argc, char **argv, serve_options *o)
         case O_FRAMES: ok = srv_cli_u32("serve", "--frames", optarg, 1, 100000000, &o->net.frames); break;
         case O_MAXV:
             ok = srv_cli_u32("serve", "--max-viewers", optarg, 1, SRV_MAX_VIEWERS, &o->net.max_viewers);
+            o->limits_set = true;
             break;
         case O_MAXRES:
+            o->limits_set = true;
             ok = srv_cli_resolution("serve", "--max-res", optarg, PROTO_MAX_SIDE, &o->net.max_width,
                                     &o->net.max_height);
             break;
@@ -193,6 +196,48 @@ static int parse_options(int argc, char **argv, serve_options *o)
     return -1;
 }
 
+/* Memory at the limits, before anything is loaded: the pools, and every viewer at --max-res (the engine's
+ * per-pixel buffers and the network's) with its sample viewer at --max-samples, within physical memory.
+ * Limits given on the command line that cannot fit are refused with the figures (exit 2); the defaults
+ * (16 viewers at 3840x2160, about 9 GiB) are lowered to the viewers that fit, with a warning line, so a
+ * small machine still serves. False after the line of a refusal. */
+static bool serve_memory_fits(serve_options *o)
+{
+    uint64_t physical = srv_cli_physical_memory();
+    if (physical == 0)
+        return true;
+    srv_net_desc *d = &o->net;
+    uint32_t viewers = d->max_viewers ? d->max_viewers : 16;
+    uint64_t width = d->max_width ? d->max_width : 3840, height = d->max_height ? d->max_height : 2160;
+    uint64_t samples = d->max_samples ? d->max_samples : 65536;
+    uint64_t per_viewer = width * height * (SRV_VIEWER_BYTES_PER_PIXEL + SRV_NET_BYTES_PER_PIXEL) +
+                          samples * (SRV_VIEWER_BYTES_PER_PIXEL + SRV_NET_BYTES_PER_SAMPLE);
+    uint64_t pools = o->engine.no_cache ? 0 : (uint64_t)(o->engine.pool_mb * 1048576.0);
+    uint32_t fit = srv_cli_viewers_that_fit(physical, pools, per_viewer, viewers);
+    if (fit == viewers)
+        return true;
+    if (fit == 0 || o->limits_set) {
+        fprintf(
+            stderr,
+            "fxcache serve: %u viewers at --max-res %llux%llu (and --max-samples %llu) need %.0f MiB with "
+            "the block pools (%.0f MiB), more than this machine's %llu MiB of physical memory: lower "
+            "--max-viewers, --max-res, --max-samples or --pool-mb\n",
+            viewers, (unsigned long long)width, (unsigned long long)height, (unsigned long long)samples,
+            ((double)pools + (double)per_viewer * viewers) / 1048576.0, pools / 1048576.0,
+            (unsigned long long)(physical >> 20));
+        return false;
+    }
+    fprintf(
+        stderr,
+        "fxcache serve: warning: %u viewers at %llux%llu would need %.0f MiB, more than this machine's %llu "
+        "MiB of physical memory: at most %u viewers (--max-viewers %u)\n",
+        viewers, (unsigned long long)width, (unsigned long long)height,
+        ((double)pools + (double)per_viewer * viewers) / 1048576.0, (unsigned long long)(physical >> 20), fit,
+        fit);
+    d->max_viewers = fit;
+    return true;
+}
+
 /* The network's totals, for the summary. */
 static json_t *net_json(const serve_options *o, const srv_net *net, const srv_net_totals *t)
 {
@@ -223,7 +268,8 @@ int srv_cmd_serve(int argc, char **argv)
     int rc = parse_options(argc, argv, &o);
     if (rc >= 0)
         return rc;
-    if (!srv_cli_check_memory("serve", o.engine.no_cache ? 0 : o.engine.pool_mb, 0, 0, false))
+    if (!srv_cli_check_memory("serve", o.engine.no_cache ? 0 : o.engine.pool_mb, 0, 0, false) ||
+        !serve_memory_fits(&o))
         return 2;
     if (o.net.record_dir && !srv_cli_make_dir("serve", o.net.record_dir))
         return 1;
