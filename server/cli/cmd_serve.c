@@ -305,6 +305,7 @@ int srv_cmd_serve(int argc, char **argv)
     fxc_result r = srv_net_run(net, err, sizeof err);
     if (r != FXC_OK)
         fprintf(stderr, "fxcache serve: %s\n", err);
+    srv_cli_warn_exhausted(&run, &o.engine); /* degraded frames are never silent (sim says the same) */
     srv_net_totals totals;
     srv_net_get_totals(net, &totals);
     json_t *sum = srv_cli_summary_json(&run, &o.engine);

@@ -177,6 +177,8 @@ typedef struct srv_world_stats {
     uint64_t refusals;      /* this frame: points outside the grid's range, refused (never wrapped) */
     uint64_t local_lookups; /* this frame: compose's reads through the viewers' local lookup tables */
     uint64_t local_hits;    /* of which answered without the hash table */
+    uint64_t
+        exhausted; /* cumulative: brick requests its pools could not take (in the frame's exhausted too) */
 } srv_world_stats;
 
 /* One frame's figures. */
