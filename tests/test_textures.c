@@ -130,11 +130,41 @@ static void test_truncated_textures_cli(void **state)
     assert_non_null(strstr(err, png));
 }
 
+/* A model whose materials share one missing texture warns once for it (and once for another); every
+ * material still counts in the repairs. It warned once per material (Assimp's MDC spider: 19 lines, one
+ * texture 12 times). */
+static void test_shared_missing_texture_once(void **state)
+{
+    (void)state;
+    char obj[1100], mtl[1100], out[8192], err[4096];
+    fxt_tmp_path_copy(obj, sizeof obj, "shared.obj");
+    fxt_tmp_path_copy(mtl, sizeof mtl, "shared.mtl");
+    FILE *f = fopen(mtl, "w");
+    assert_non_null(f);
+    fputs("newmtl a\nKd 1 0 0\nmap_Kd gone.png\nnewmtl b\nKd 0 1 0\nmap_Kd gone.png\n"
+          "newmtl c\nKd 0 0 1\nmap_Kd other.png\n",
+          f);
+    fclose(f);
+    f = fopen(obj, "w");
+    assert_non_null(f);
+    fputs("mtllib shared.mtl\nv 0 0 0\nv 1 0 0\nv 0 0 1\nv 1 0 1\nv 2 0 0\nv 2 0 1\nvt 0 0\n"
+          "usemtl a\nf 1/1 3/1 2/1\nusemtl b\nf 2/1 3/1 4/1\nusemtl c\nf 2/1 4/1 5/1\n",
+          f);
+    fclose(f);
+    err[0] = 0;
+    assert_int_equal(fxt_run_clif(out, sizeof out, err, sizeof err, "scene-info '%s'", obj), 0);
+    assert_int_equal(count_lines(err), 2);
+    assert_non_null(strstr(err, "gone.png"));
+    assert_non_null(strstr(err, "other.png"));
+    assert_non_null(strstr(out, "3 textures missing"));
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_truncated_jpeg_shim),
         cmocka_unit_test(test_truncated_textures_cli),
+        cmocka_unit_test(test_shared_missing_texture_once),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
