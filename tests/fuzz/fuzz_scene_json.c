@@ -15,6 +15,16 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
 static char folder[64], path[96];
 
+/* The private folder goes at exit (libFuzzer exits through exit() at the end of a run). */
+static void remove_folder(void)
+{
+    char file[128];
+    snprintf(file, sizeof file, "%s/tri.obj", folder);
+    unlink(file);
+    unlink(path);
+    rmdir(folder);
+}
+
 static void make_folder(void)
 {
     snprintf(folder, sizeof folder, "/tmp/fxc_fuzz_json_XXXXXX");
@@ -28,6 +38,7 @@ static void make_folder(void)
     fputs("v 0 0 0\nv 1 0 0\nv 0 0 1\nvt 0 0\nvt 1 0\nvt 0 1\nf 1/1 3/3 2/2\n", f);
     fclose(f);
     snprintf(path, sizeof path, "%s/scene.json", folder);
+    atexit(remove_folder);
 }
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
