@@ -13,7 +13,9 @@ extern "C" {
 
 /* Reads any image OpenImageIO reads as linear RGB floats (8- and 16-bit files are taken as sRGB and
  * decoded; float files as linear; grey is replicated; alpha dropped). On success *rgb is malloc'd
- * (width*height*3, top row first) and owned by the caller. Returns 0, or -1 with msg filled. */
+ * (width*height*3, top row first) and owned by the caller. Returns 0, or -1 with msg filled. A file the
+ * reader returns despite an error (a truncated JPEG: libjpeg fills the missing part with grey) returns 0 with
+ * msg a one-line warning naming the file; msg is "" after a clean read. */
 int scene_image_read_rgb(const char *path, uint32_t *width, uint32_t *height, float **rgb, char *msg,
                          size_t msg_cap);
 

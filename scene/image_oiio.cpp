@@ -150,6 +150,14 @@ static int read_rgb(const char *path, uint32_t *width, uint32_t *height, float *
             set_msg(msg, msg_cap, std::string(path) + ": " + in->geterror());
             return -1;
         }
+        // A read that succeeds may still have met an error: OpenImageIO's JPEG reader returns a truncated
+        // file's image whole, libjpeg having filled what is missing with grey, and leaves only
+        // "Premature end of JPEG file" in geterror(). That becomes the caller's warning (rc 0, msg set).
+        std::string late = in->geterror();
+        if (!late.empty())
+            set_msg(msg, msg_cap,
+                    std::string(path) + ": damaged or truncated image (" + late +
+                        "); the reader's fill stands for what it could not read");
         bool encoded = spec.format.basetype == TypeDesc::UINT8 || spec.format.basetype == TypeDesc::UINT16;
         float *out = static_cast<float *>(std::malloc(w * h * 3 * sizeof(float)));
         if (!out) {
@@ -179,6 +187,8 @@ extern "C" int scene_image_read_rgb(const char *path, uint32_t *width, uint32_t 
                                     char *msg, size_t msg_cap)
 {
     *rgb = nullptr;
+    if (msg && msg_cap)
+        msg[0] = 0;
     std::string held;
     int rc;
     try {

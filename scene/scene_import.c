@@ -240,9 +240,26 @@ static bool resolve_texture(const char *model_dir, const char *name, char *out, 
 
 /* Converts one Assimp material into a scene material (its diffuse colour, emission and texture). A texture
  * that cannot be read is reported on stderr and counted; the material keeps its colour. */
-static scene_result import_material(scene *s, const struct aiMaterial *am, const char *model_dir,
+/* True when one of the file's materials before `index` names the same diffuse texture: its warning was
+ * printed already (a model of many materials sharing one missing texture printed it once per material:
+ * Assimp's MDC spider, 19 lines). */
+static bool texture_warned(const struct aiScene *ai, uint32_t index, const struct aiString *texture)
+{
+    for (uint32_t j = 0; j < index; j++) {
+        struct aiString other;
+        if (aiGetMaterialTextureCount(ai->mMaterials[j], aiTextureType_DIFFUSE) > 0 &&
+            aiGetMaterialTexture(ai->mMaterials[j], aiTextureType_DIFFUSE, 0, &other, NULL, NULL, NULL, NULL,
+                                 NULL, NULL) == aiReturn_SUCCESS &&
+            other.length == texture->length && memcmp(other.data, texture->data, other.length) == 0)
+            return true;
+    }
+    return false;
+}
+
+static scene_result import_material(scene *s, const struct aiScene *ai, uint32_t index, const char *model_dir,
                                     uint32_t *out_index, scene_error *err)
 {
+    const struct aiMaterial *am = ai->mMaterials[index];
     scene_material m = {.diffuse = {0.7f, 0.7f, 0.7f}, .texture = -1};
     struct aiString name;
     if (aiGetMaterialString(am, AI_MATKEY_NAME, &name) == aiReturn_SUCCESS)
@@ -279,8 +296,9 @@ static scene_result import_material(scene *s, const struct aiMaterial *am, const
             scene_error tex_err = {0};
             m.texture = scene__add_texture(s, path, &tex_err);
             if (m.texture < 0) {
-                fprintf(stderr, "fxcache: warning: material '%s': %s (using its colour)\n", m.name,
-                        tex_err.msg);
+                if (!texture_warned(ai, index, &tex))
+                    fprintf(stderr, "fxcache: warning: material '%s': %s (using its colour)\n", m.name,
+                            tex_err.msg);
                 s->repairs.textures_missing++;
             } else {
                 /* The texture carries the colour; Assimp's 3DS and OBJ readers give a tint we keep. */
@@ -289,10 +307,11 @@ static scene_result import_material(scene *s, const struct aiMaterial *am, const
                     m.diffuse[0] = m.diffuse[1] = m.diffuse[2] = 1.0f;
             }
         } else {
-            fprintf(stderr,
-                    "fxcache: warning: material '%s': texture '%s' not found beside the model "
-                    "(using its colour)\n",
-                    m.name, tex.data);
+            if (!texture_warned(ai, index, &tex))
+                fprintf(stderr,
+                        "fxcache: warning: material '%s': texture '%s' not found beside the model "
+                        "(using its colour)\n",
+                        m.name, tex.data);
             s->repairs.textures_missing++;
         }
         s->timings.textures_ms += scene__now_ms() - t0;
@@ -450,7 +469,7 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
         if (!material_map)
             rc = scene__fail(err, SCENE_ERR_NOMEM, "%s: out of memory", path);
         for (uint32_t m = 0; rc == SCENE_OK && m < ai->mNumMaterials; m++)
-            rc = import_material(s, ai->mMaterials[m], model_dir, &material_map[m], err);
+            rc = import_material(s, ai, m, model_dir, &material_map[m], err);
         if (rc == SCENE_OK && ai->mNumMaterials == 0) {
             scene_material grey = {.diffuse = {0.7f, 0.7f, 0.7f}, .texture = -1, .name = "default"};
             override_index = scene__add_material(s, &grey, err);

@@ -67,6 +67,8 @@ int32_t scene__add_texture(scene *s, const char *path, scene_error *err)
         scene__fail(err, SCENE_ERR_IO, "%s", msg);
         return -1;
     }
+    if (msg[0]) /* read, but damaged: it loads (docs/SCENE_FORMAT.md), never silently */
+        fprintf(stderr, "fxcache: warning: %s\n", msg);
     /* An albedo is a reflectance, 0..1 (as a material's colour is clamped on import): a float texture (EXR, HDR)
      * may hold more, which would reflect more light than arrives (a closed room's indirect light then grows
      * without bound, to FLT_MAX), or less than 0. */

@@ -152,6 +152,47 @@ static void test_pareto_front(void **state)
     assert_int_equal(where, 1);
 }
 
+/* The plots' data files written to a full disk (each in turn a link to /dev/full): srv_rep_plots fails with
+ * a line naming that file (-2, which fails the report as a CSV would); before, their write errors were
+ * ignored and the report said it was done. With every file writable the same rows plot (or only miss
+ * gnuplot: -1). */
+static void test_plot_files_write_errors(void **state)
+{
+    (void)state;
+    char dir[] = "/tmp/fxc_report_full_XXXXXX";
+    assert_non_null(mkdtemp(dir));
+    srv_rep_row row = {.id = "default",
+                       .family = "default",
+                       .label = "default",
+                       .viewers = 1,
+                       .done = true,
+                       .ms_per_frame = 2,
+                       .rmse = 0.1,
+                       .pareto = true};
+    srv_rep_image image = {.frame = 3, .viewer = "viewer_00", .steady = true, .rmse = 0.1};
+    row.images_list = &image;
+    row.image_count = 1;
+    char err[1400], plots[1100], path[1200];
+    snprintf(plots, sizeof plots, "%s/plots", dir);
+    int fine = srv_rep_plots(dir, &row, 1, "ms", err, sizeof err);
+    assert_true(fine > 0 || fine == -1);
+    static const char *const files[] = {"points_v1.dat", "pareto_v1.dat", "frames_v1.dat", "plots.gp"};
+    for (size_t k = 0; k < sizeof files / sizeof files[0]; k++) {
+        snprintf(path, sizeof path, "%s/%s", plots, files[k]);
+        assert_int_equal(unlink(path), 0);
+        assert_int_equal(symlink("/dev/full", path), 0);
+        err[0] = 0;
+        assert_int_equal(srv_rep_plots(dir, &row, 1, "ms", err, sizeof err), -2);
+        assert_non_null(strstr(err, files[k]));
+        assert_null(strchr(err, '\n'));
+        assert_int_equal(unlink(path), 0);
+        FILE *f = fopen(path, "w"); /* back to a plain file for the next one */
+        assert_non_null(f);
+        fclose(f);
+    }
+    remove_tree(dir);
+}
+
 /* A scene whose every image is exact (a light of 1e-38: every radiance 0, every RMSE 0): the equal-time
  * comparison has no no-cache point with an error above 0 and says "not compared"; before, the page and the
  * summary in words printed "nan" for the no-cache error and the ratio. */
@@ -605,6 +646,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_error_sink_closed_form),
         cmocka_unit_test(test_pareto_front),
+        cmocka_unit_test(test_plot_files_write_errors),
         cmocka_unit_test(test_equal_time_all_exact),
         SCENE_TEST(test_sample_counts),
         cmocka_unit_test(test_cli_option_errors),

@@ -10,6 +10,7 @@
  * The misbehaving peers speak WebSocket by hand (RFC 6455 framing, a few lines) because they must send what
  * no well-behaved library would. Under the sanitizer build the server runs instrumented and must exit 0 on
  * SIGTERM (a leak or an error makes it exit non-zero). */
+#include "cli.h"
 #include "proto.h"
 #include "fxt_serve.h"
 #include "test_util.h"
@@ -419,6 +420,63 @@ static void test_options(void **state)
     char out[8192];
     assert_int_equal(fxt_run_cli("serve --help", out, sizeof out, NULL, 0), 0);
     assert_non_null(strstr(out, "--record"));
+
+    /* Memory at the limits: 64 viewers at 8192x8192 (36 + 32 bytes a pixel: 4.3 GiB each, 292 GiB) were
+     * accepted at start-up and would have failed only as viewers joined; now refused with the figures. The
+     * defaults are lowered to the viewers that fit instead: the count that fits, by hand. */
+    if (srv_cli_physical_memory() < (200ull << 30)) {
+        err[0] = 0;
+        assert_int_equal(fxt_run_cli("serve --max-viewers 64 --max-res 8192x8192 --max-samples 1048576", NULL,
+                                     0, err, sizeof err),
+                         2);
+        assert_non_null(strstr(err, "physical memory"));
+        assert_non_null(strstr(err, "8192x8192"));
+        assert_true(strchr(err, '\n') == strrchr(err, '\n')); /* one line */
+    }
+    assert_int_equal(srv_cli_viewers_that_fit(1000, 100, 300, 16), 3);
+    assert_int_equal(srv_cli_viewers_that_fit(1000, 100, 300, 2), 2);
+    assert_int_equal(srv_cli_viewers_that_fit(1000, 800, 300, 16), 0);
+    assert_int_equal(srv_cli_viewers_that_fit(1000, 1000, 300, 16), 0);
+    assert_int_equal(srv_cli_viewers_that_fit(1000, 0, 0, 5), 5);
+}
+
+/* SIGTERM during a long frame (one viewer at 3840x2160 on one thread: many seconds a frame here): the frame
+ * is abandoned within a tile, so the server ends with its summary written (interrupted, no frame counted)
+ * within a few seconds of the signal, most of it the second it gives the viewer to close. Before, it
+ * finished the frame first. */
+static void test_sigterm_mid_frame(void **state)
+{
+    (void)state;
+    char summary[1100];
+    fxt_tmp_path_copy(summary, sizeof summary, "sigterm_summary.json");
+    unlink(summary);
+    fxt_server sv;
+    const char *args[] = {"--threads", "1", "--fps", "1", "--summary", summary, NULL};
+    fxt_server_start(&sv, "sigterm", args);
+    int fd = fxt_ws_connect(sv.port);
+    assert_true(fd >= 0);
+    proto_msg hello = fxt_hello_msg(3840, 2160, PROTO_CODEC_RAW);
+    assert_true(fxt_ws_send_msg(fd, &hello));
+    proto_welcome w;
+    assert_true(fxt_read_welcome(fd, &w));
+    proto_msg cam = camera_msg(&w, 0);
+    assert_true(fxt_ws_send_msg(fd, &cam));
+    usleep(1500000); /* the first frame is under way (a tick at most 1 s after the camera) */
+    double t0 = fxt_now_s();
+    int status = fxt_server_stop(&sv);
+    double took = fxt_now_s() - t0;
+    close(fd);
+    print_message("stopped %.2f s after SIGTERM in a 3840x2160 frame\n", took);
+    assert_int_equal(status, 0);
+    assert_true(took < 5.0);
+    size_t size = 0;
+    char *text = fxt_read_file(summary, &size);
+    json_error_t error;
+    json_t *sum = json_loadb(text, size, 0, &error);
+    free(text);
+    assert_non_null(sum);
+    assert_true(json_is_true(json_object_get(sum, "interrupted")));
+    json_decref(sum);
 }
 
 /* --bind resolves to an IPv4 address of this machine or is refused with one line: "::1" made
@@ -598,6 +656,7 @@ int main(void)
     mkdir(FXC_TEST_TMP, 0755);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_options),
+        cmocka_unit_test(test_sigterm_mid_frame),
         cmocka_unit_test(test_bind_addresses),
         cmocka_unit_test(test_node_peer),
         cmocka_unit_test(test_limits_and_token),

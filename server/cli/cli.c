@@ -110,6 +110,16 @@ bool srv_cli_check_memory(const char *cmd, double pool_mb, uint32_t viewers, uin
     return false;
 }
 
+uint32_t srv_cli_viewers_that_fit(uint64_t physical, uint64_t fixed, uint64_t per_viewer, uint32_t wanted)
+{
+    if (fixed >= physical)
+        return 0;
+    if (per_viewer == 0)
+        return wanted;
+    uint64_t fit = (physical - fixed) / per_viewer;
+    return fit < wanted ? (uint32_t)fit : wanted;
+}
+
 int srv_cli_interrupted(const char *cmd, int sig, const char *when)
 {
     const char *name = sig == SIGINT ? "SIGINT" : sig == SIGTERM ? "SIGTERM" : "a signal";

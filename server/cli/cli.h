@@ -39,6 +39,9 @@ bool srv_cli_no_operands(const char *cmd, int argc, char **argv);
  * machine's ("fxcache CMD: ... need N MiB ..., more than this machine's M MiB of physical memory") and
  * returns false. Always true when the physical memory is unknown. */
 bool srv_cli_check_memory(const char *cmd, double pool_mb, uint32_t viewers, uint64_t pixels, bool views);
+/* How many of `wanted` viewers of per_viewer bytes each fit in `physical` bytes beside `fixed` bytes (0 when
+ * not one does). */
+uint32_t srv_cli_viewers_that_fit(uint64_t physical, uint64_t fixed, uint64_t per_viewer, uint32_t wanted);
 
 /* Reports a run ended by signal sig (SIGINT, SIGTERM) before it did its work, with one line
  * "fxcache CMD: interrupted by SIGTERM WHEN", and returns the exit code a shell gives such a run: 128 + sig

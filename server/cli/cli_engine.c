@@ -499,6 +499,25 @@ bool srv_cli_write_json(const char *cmd, const char *path, const json_t *value)
     return written;
 }
 
+void srv_cli_warn_exhausted(const srv_cli_run *run, const srv_cli_engine *e)
+{
+    const srv_report_totals *t = srv_report_get_totals(run->report);
+    if (t->exhausted == 0)
+        return;
+    char world[320] = "";
+    double cell = (double)srv_loop_probe_cell(run->loop);
+    if (t->world_last.exhausted > 0 && cell > 0)
+        snprintf(world, sizeof world,
+                 ", %llu of them in the probes' world-space pool at a finest cell of %g m (this scene's "
+                 "default %g m; raise --probe-cell or --pool-mb)",
+                 (unsigned long long)t->world_last.exhausted, cell, srv_probe_cell_default(run->s));
+    fprintf(
+        stderr,
+        "fxcache %s: warning: the block pools (--pool-mb %g) were too small for the requests of one frame "
+        "%llu times%s; the run went on degraded (%llu visible pixels composed without cached data)\n",
+        run->cmd, e->pool_mb, (unsigned long long)t->exhausted, world, (unsigned long long)t->pixels_missing);
+}
+
 void srv_cli_print_summary(const srv_cli_run *run, bool no_cache, bool interrupted)
 {
     const srv_loop *loop = run->loop;

@@ -126,4 +126,10 @@ bool srv_cli_write_json(const char *cmd, const char *path, const json_t *value);
 /* The summary in words on stdout. */
 void srv_cli_print_summary(const srv_cli_run *run, bool no_cache, bool interrupted);
 
+/* After a run whose block pools were too small for a frame's requests (the report's exhausted count): one
+ * warning line on stderr with the count, the pixels composed without cached data, --pool-mb and, when the
+ * probes' world-space pool was among them, the finest probe cell against the scene's default (a tiny
+ * --probe-cell multiplies the cells near every viewer). Nothing when no request was refused. */
+void srv_cli_warn_exhausted(const srv_cli_run *run, const srv_cli_engine *e);
+
 #endif

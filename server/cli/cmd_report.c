@@ -455,8 +455,12 @@ static bool write_outputs(report_plan *plan, const report_options *o, const char
     }
     if (ok && plots_made) {
         int plots = srv_rep_plots(o->out_dir, rows, n, time_label, err, sizeof err);
-        if (plots < 0)
+        if (plots == -2) { /* a file that cannot be written fails the report, as the CSVs do */
+            fprintf(stderr, "fxcache report: %s\n", err);
+            ok = false;
+        } else if (plots < 0) {
             fprintf(stderr, "fxcache report: warning: no plots: %s\n", err);
+        }
         *plots_made = plots > 0;
     }
     srv_rep_page page = {.title = title,

@@ -1,8 +1,8 @@
 /* `fxcache serve`: the networked server. Viewers connect over WebSockets (the wire format is proto/, the
  * client viewer_client/), each with its own resolution and codec, and get frames for their latest camera at
  * --fps, composed by the same engine `fxcache sim` drives (the network is one more sink: server/net/).
- * SIGINT and SIGTERM stop it cleanly: bye on every connection, the statistics and the summary written, the
- * recorded traces flushed. */
+ * SIGINT and SIGTERM stop it cleanly, within a tile of the frame in progress (which is abandoned): bye on
+ * every connection, the statistics and the summary written, the recorded traces flushed. */
 #include "cli.h"
 #include "cli_engine.h"
 #include "net.h"
@@ -19,8 +19,8 @@
 
 static volatile sig_atomic_t stop_requested = 0;
 
-/* Every signal asks for the end after the current frame: the shutdown (bye to every viewer, the files)
- * survives a supervisor's or a test's repeated SIGTERM. */
+/* Every signal asks for the end (the frame in progress is abandoned within a tile: srv_loop_set_stop): the
+ * shutdown (bye to every viewer, the files) survives a supervisor's or a test's repeated SIGTERM. */
 static void on_signal(int sig)
 {
     stop_requested = sig;
@@ -32,6 +32,7 @@ typedef struct serve_options {
     const char *stats_path, *summary_path;
     uint32_t max_width, max_height;
     bool quiet;
+    bool limits_set; /* --max-viewers or --max-res given */
 } serve_options;
 
 static const char serve_usage[] =
@@ -124,8 +125,10 @@ static int parse_options(int argc, char **argv, serve_options *o)
         case O_FRAMES: ok = srv_cli_u32("serve", "--frames", optarg, 1, 100000000, &o->net.frames); break;
         case O_MAXV:
             ok = srv_cli_u32("serve", "--max-viewers", optarg, 1, SRV_MAX_VIEWERS, &o->net.max_viewers);
+            o->limits_set = true;
             break;
         case O_MAXRES:
+            o->limits_set = true;
             ok = srv_cli_resolution("serve", "--max-res", optarg, PROTO_MAX_SIDE, &o->net.max_width,
                                     &o->net.max_height);
             break;
@@ -193,6 +196,48 @@ static int parse_options(int argc, char **argv, serve_options *o)
     return -1;
 }
 
+/* Memory at the limits, before anything is loaded: the pools, and every viewer at --max-res (the engine's
+ * per-pixel buffers and the network's) with its sample viewer at --max-samples, within physical memory.
+ * Limits given on the command line that cannot fit are refused with the figures (exit 2); the defaults
+ * (16 viewers at 3840x2160, about 9 GiB) are lowered to the viewers that fit, with a warning line, so a
+ * small machine still serves. False after the line of a refusal. */
+static bool serve_memory_fits(serve_options *o)
+{
+    uint64_t physical = srv_cli_physical_memory();
+    if (physical == 0)
+        return true;
+    srv_net_desc *d = &o->net;
+    uint32_t viewers = d->max_viewers ? d->max_viewers : 16;
+    uint64_t width = d->max_width ? d->max_width : 3840, height = d->max_height ? d->max_height : 2160;
+    uint64_t samples = d->max_samples ? d->max_samples : 65536;
+    uint64_t per_viewer = width * height * (SRV_VIEWER_BYTES_PER_PIXEL + SRV_NET_BYTES_PER_PIXEL) +
+                          samples * (SRV_VIEWER_BYTES_PER_PIXEL + SRV_NET_BYTES_PER_SAMPLE);
+    uint64_t pools = o->engine.no_cache ? 0 : (uint64_t)(o->engine.pool_mb * 1048576.0);
+    uint32_t fit = srv_cli_viewers_that_fit(physical, pools, per_viewer, viewers);
+    if (fit == viewers)
+        return true;
+    if (fit == 0 || o->limits_set) {
+        fprintf(
+            stderr,
+            "fxcache serve: %u viewers at --max-res %llux%llu (and --max-samples %llu) need %.0f MiB with "
+            "the block pools (%.0f MiB), more than this machine's %llu MiB of physical memory: lower "
+            "--max-viewers, --max-res, --max-samples or --pool-mb\n",
+            viewers, (unsigned long long)width, (unsigned long long)height, (unsigned long long)samples,
+            ((double)pools + (double)per_viewer * viewers) / 1048576.0, pools / 1048576.0,
+            (unsigned long long)(physical >> 20));
+        return false;
+    }
+    fprintf(
+        stderr,
+        "fxcache serve: warning: %u viewers at %llux%llu would need %.0f MiB, more than this machine's %llu "
+        "MiB of physical memory: at most %u viewers (--max-viewers %u)\n",
+        viewers, (unsigned long long)width, (unsigned long long)height,
+        ((double)pools + (double)per_viewer * viewers) / 1048576.0, (unsigned long long)(physical >> 20), fit,
+        fit);
+    d->max_viewers = fit;
+    return true;
+}
+
 /* The network's totals, for the summary. */
 static json_t *net_json(const serve_options *o, const srv_net *net, const srv_net_totals *t)
 {
@@ -223,7 +268,8 @@ int srv_cmd_serve(int argc, char **argv)
     int rc = parse_options(argc, argv, &o);
     if (rc >= 0)
         return rc;
-    if (!srv_cli_check_memory("serve", o.engine.no_cache ? 0 : o.engine.pool_mb, 0, 0, false))
+    if (!srv_cli_check_memory("serve", o.engine.no_cache ? 0 : o.engine.pool_mb, 0, 0, false) ||
+        !serve_memory_fits(&o))
         return 2;
     if (o.net.record_dir && !srv_cli_make_dir("serve", o.net.record_dir))
         return 1;
@@ -247,6 +293,7 @@ int srv_cmd_serve(int argc, char **argv)
     o.net.report = run.report;
     o.net.s = run.s;
     o.net.stop = &stop_requested;
+    srv_loop_set_stop(run.loop, &stop_requested); /* a signal ends a long frame within a tile */
     o.net.progress = isatty(STDERR_FILENO);
     char err[512];
     if (srv_net_create(&o.net, &net, err, sizeof err) != FXC_OK) {
@@ -258,6 +305,7 @@ int srv_cmd_serve(int argc, char **argv)
     fxc_result r = srv_net_run(net, err, sizeof err);
     if (r != FXC_OK)
         fprintf(stderr, "fxcache serve: %s\n", err);
+    srv_cli_warn_exhausted(&run, &o.engine); /* degraded frames are never silent (sim says the same) */
     srv_net_totals totals;
     srv_net_get_totals(net, &totals);
     json_t *sum = srv_cli_summary_json(&run, &o.engine);

@@ -291,7 +291,6 @@ int srv_cmd_sim(int argc, char **argv)
     if (!srv_cli_cameras_check("sim", &cams, s))
         goto done;
     srv_loop *loop = run.loop;
-    srv_report *report = run.report;
     fxc_result r;
     image_sink images = {.o = &o, .last_frame = o.view.frames - 1};
     if (o.out_dir)
@@ -363,14 +362,7 @@ int srv_cmd_sim(int argc, char **argv)
     }
     if (progress)
         fputc('\n', stderr);
-    const srv_report_totals *tot = srv_report_get_totals(report);
-    if (tot->exhausted > 0)
-        fprintf(stderr,
-                "fxcache sim: warning: the block pools (--pool-mb %g) were too small for the requests of one "
-                "frame %llu times; the run went on degraded (%llu visible pixels composed without cached "
-                "data)\n",
-                o.engine.pool_mb, (unsigned long long)tot->exhausted,
-                (unsigned long long)tot->pixels_missing);
+    srv_cli_warn_exhausted(&run, &o.engine);
     if (stop_requested && o.out_dir && frame > 0) {
         /* Interrupted: the last finished frame of every viewer still present. */
         srv_viewer_id present[SRV_MAX_VIEWERS];

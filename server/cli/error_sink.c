@@ -161,7 +161,7 @@ static float *read_image(const char *path, uint32_t width, uint32_t height, uint
     char msg[512];
     if (scene_image_read_rgb(path, &w, &h, &rgb, msg, sizeof msg) != 0)
         return NULL;
-    if (w != width || h != height) {
+    if (msg[0] || w != width || h != height) { /* a damaged reference is a miss: rendered again */
         free(rgb);
         return NULL;
     }

@@ -395,15 +395,37 @@ static int compare_points(const void *a, const void *b)
     return p[0] < q[0] ? -1 : p[0] > q[0];
 }
 
-/* Writes the data files and the script for one viewer count; returns the number of plots it draws. */
+/* Opens a plot data file; NULL after a line in err naming it. */
+static FILE *open_data(const char *path, char *err, size_t err_cap)
+{
+    FILE *f = fopen(path, "w");
+    if (!f)
+        snprintf(err, err_cap, "cannot write %s: %s", path, strerror(errno));
+    return f;
+}
+
+/* Closes a plot data file; false after a line in err naming it when a write or the close failed (a full
+ * disk shows only here: fprintf buffers). */
+static bool close_data(FILE *f, const char *path, char *err, size_t err_cap)
+{
+    errno = 0;
+    bool ok = !ferror(f);
+    ok = fclose(f) == 0 && ok;
+    if (!ok)
+        snprintf(err, err_cap, "cannot write %s: %s", path, strerror(errno ? errno : EIO));
+    return ok;
+}
+
+/* Writes the data files and the script for one viewer count; returns the number of plots it draws, or -1
+ * after a line in err when a data file cannot be written. */
 static int plot_files(const char *plots, FILE *gp, const srv_rep_row *rows, size_t n, uint32_t viewers,
-                      const char *time_label)
+                      const char *time_label, char *err, size_t err_cap)
 {
     char path[1200];
     snprintf(path, sizeof path, "%s/points_v%u.dat", plots, viewers);
-    FILE *f = fopen(path, "w");
+    FILE *f = open_data(path, err, err_cap);
     if (!f)
-        return 0;
+        return -1;
     bool used[FAMILY_COUNT] = {false};
     int blocks = 0, block_of[FAMILY_COUNT];
     for (int k = 0; k < FAMILY_COUNT; k++) {
@@ -427,14 +449,15 @@ static int plot_files(const char *plots, FILE *gp, const srv_rep_row *rows, size
             block_of[k] = blocks++;
         }
     }
-    fclose(f);
+    if (!close_data(f, path, err, err_cap))
+        return -1;
     if (!blocks)
         return 0;
     /* The Pareto front, by time. */
     snprintf(path, sizeof path, "%s/pareto_v%u.dat", plots, viewers);
-    f = fopen(path, "w");
+    f = open_data(path, err, err_cap);
     if (!f)
-        return 0;
+        return -1;
     double(*front)[2] = malloc((n ? n : 1) * sizeof *front);
     size_t m = 0;
     for (size_t i = 0; front && i < n; i++)
@@ -448,7 +471,8 @@ static int plot_files(const char *plots, FILE *gp, const srv_rep_row *rows, size
     for (size_t i = 0; i < m; i++)
         fprintf(f, "%.6g %.6g\n", front[i][0], front[i][1]);
     free(front);
-    fclose(f);
+    if (!close_data(f, path, err, err_cap))
+        return -1;
 
     static const int point_type[FAMILY_COUNT] = {7, 5, 9, 11, 13, 15, 4, 6, 2};
     for (int term = 0; term < 2; term++) {
@@ -485,9 +509,9 @@ static int plot_files(const char *plots, FILE *gp, const srv_rep_row *rows, size
 
     /* Error over frames: the default, viewers and no-cache configurations, mean over viewers per frame. */
     snprintf(path, sizeof path, "%s/frames_v%u.dat", plots, viewers);
-    f = fopen(path, "w");
+    f = open_data(path, err, err_cap);
     if (!f)
-        return 1;
+        return -1;
     int series = 0;
     char titles[32][96];
     for (size_t i = 0; i < n && series < 32; i++) {
@@ -511,7 +535,8 @@ static int plot_files(const char *plots, FILE *gp, const srv_rep_row *rows, size
         snprintf(titles[series], sizeof titles[series], "%s", r->label);
         series++;
     }
-    fclose(f);
+    if (!close_data(f, path, err, err_cap))
+        return -1;
     if (!series)
         return 1;
     for (int term = 0; term < 2; term++) {
@@ -556,12 +581,16 @@ int srv_rep_plots(const char *dir, const srv_rep_row *rows, size_t n, const char
     uint32_t counts[SRV_REP_MAX_VIEWER_COUNTS];
     size_t m = viewer_counts(rows, n, counts, SRV_REP_MAX_VIEWER_COUNTS);
     int made = 0;
-    for (size_t k = 0; k < m; k++)
-        made += plot_files(plots, gp, rows, n, counts[k], time_label);
-    if (fclose(gp) != 0) {
-        snprintf(err, err_cap, "cannot write %s", path);
-        return -1;
+    for (size_t k = 0; k < m; k++) {
+        int drawn = plot_files(plots, gp, rows, n, counts[k], time_label, err, err_cap);
+        if (drawn < 0) {
+            fclose(gp);
+            return -2;
+        }
+        made += drawn;
     }
+    if (!close_data(gp, path, err, err_cap))
+        return -2;
     if (!srv_rep_on_path("gnuplot")) {
         snprintf(err, err_cap,
                  "gnuplot is not on PATH (install-deps.sh installs gnuplot-nox): the data and the "

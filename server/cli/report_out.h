@@ -99,8 +99,9 @@ size_t srv_rep_equal_times(const srv_rep_row *rows, size_t n, srv_rep_equal *out
 
 /* The plots with gnuplot, if it is on PATH: per viewer count error against time per frame (Pareto front
  * marked) and error over frames, PNG and SVG under dir/plots/; time_label says what the rows' ms_per_frame
- * is. Returns the number of plots made; -1 when gnuplot is missing or failed (a line in err); the data and the
- * script stay for a later run. */
+ * is. Returns the number of plots made; -1 when gnuplot is missing or failed (a line in err; the data and the
+ * script stay for a later run); -2 when a data file or the script cannot be written (a line in err naming
+ * the file: a full disk, a read-only folder). */
 int srv_rep_plots(const char *dir, const srv_rep_row *rows, size_t n, const char *time_label, char *err,
                   size_t err_cap);
 

@@ -25,6 +25,7 @@
 
 #include <stdbool.h>
 #include <stddef.h>
+#include <signal.h>
 #include <stdint.h>
 
 enum {
@@ -176,6 +177,8 @@ typedef struct srv_world_stats {
     uint64_t refusals;      /* this frame: points outside the grid's range, refused (never wrapped) */
     uint64_t local_lookups; /* this frame: compose's reads through the viewers' local lookup tables */
     uint64_t local_hits;    /* of which answered without the hash table */
+    uint64_t
+        exhausted; /* cumulative: brick requests its pools could not take (in the frame's exhausted too) */
 } srv_world_stats;
 
 /* One frame's figures. */
@@ -298,8 +301,18 @@ fxc_result srv_viewer_size(const srv_loop *loop, srv_viewer_id id, uint32_t *wid
 fxc_result srv_loop_add_sink(srv_loop *loop, const srv_sink *sink);
 
 /* Runs one frame for every present viewer that has a camera, fills *stats (returned, never stashed).
- * Returns FXC_OK; a sink's failure is returned as FXC_ERR_IO after the whole frame ran. */
+ * Returns FXC_OK; a sink's failure is returned as FXC_ERR_IO after the whole frame ran; FXC_ERR_SHUTDOWN for
+ * a frame abandoned at a stop (srv_loop_set_stop). */
 fxc_result srv_loop_frame(srv_loop *loop, srv_frame_stats *stats);
+
+/* A stop flag the frames watch (NULL: none; the flag must outlive the loop): once it is non-zero, a frame in
+ * progress ends within one task of the thread pool (a 16 x 16 tile, a chunk of blocks) instead of after its
+ * last stage (a frame of several 4K viewers takes seconds), and is abandoned: srv_loop_frame returns
+ * FXC_ERR_SHUTDOWN without calling the sinks, counting the frame or advancing the frame number. The caches
+ * may then hold blocks marked valid that were not computed, so the loop renders no more frames (every later
+ * srv_loop_frame returns FXC_ERR_SHUTDOWN at once); what it counted so far (the run report, memory) stays
+ * readable. For a server's SIGTERM: the summary is written a tile after the signal, not a frame after. */
+void srv_loop_set_stop(srv_loop *loop, const volatile sig_atomic_t *stop);
 
 /* The effect list, the effects that run, their effective level bias. */
 uint32_t srv_loop_effect_count(const srv_loop *loop);

@@ -746,6 +746,7 @@ static void wsc_kind_frame_figures(const void *cache, srv_frame_stats *st)
         st->world.bricks_resident += es->bricks_resident;
         st->evictions += es->evictions;
         st->exhausted += es->exhausted;
+        st->world.exhausted += es->exhausted;
     }
     wsc_memory_report m;
     wsc_memory(k->wsc, &m);

@@ -724,10 +724,26 @@ fxc_result srv_loop_add_sink(srv_loop *loop, const srv_sink *sink)
 
 /* ---- the frame ----------------------------------------------------------------------------------------- */
 
+void srv_loop_set_stop(srv_loop *loop, const volatile sig_atomic_t *stop)
+{
+    srv_pool_set_stop(loop->pool, stop);
+}
+
+/* True (and the loop marked) when the stop flag is set: the frame in progress is abandoned. Checked after
+ * every stage that runs on the pool, before anything reads what its skipped tasks did not write. */
+static bool abandon(srv_loop *loop)
+{
+    if (srv_pool_stopped(loop->pool))
+        loop->abandoned = true;
+    return loop->abandoned;
+}
+
 fxc_result srv_loop_frame(srv_loop *loop, srv_frame_stats *st)
 {
     memset(st, 0, sizeof *st);
     st->frame = loop->frame_number;
+    if (abandon(loop))
+        return FXC_ERR_SHUTDOWN;
     double frame_start = srv__now_ms();
     uint64_t lights = light_signature(loop->s);
     if (lights != loop->light_signature) {
@@ -748,6 +764,8 @@ fxc_result srv_loop_frame(srv_loop *loop, srv_frame_stats *st)
     for (uint32_t i = 0; i < active; i++)
         srv__visibility(loop, &loop->viewers[slots[i]]);
     st->time_ms[SRV_STAGE_VISIBILITY] = srv__now_ms() - t;
+    if (abandon(loop))
+        return FXC_ERR_SHUTDOWN;
     for (uint32_t i = 0; i < active; i++) {
         srv_viewer *view = &loop->viewers[slots[i]];
         memset(&view->stats, 0, sizeof view->stats);
@@ -798,6 +816,8 @@ fxc_result srv_loop_frame(srv_loop *loop, srv_frame_stats *st)
             st->unique_texels += unique;
     }
     st->time_ms[SRV_STAGE_REQUESTS] = srv__now_ms() - t;
+    if (abandon(loop))
+        return FXC_ERR_SHUTDOWN;
 
     /* Stages 4-6: queues for every effect, then the lookup, then every effect's updates. */
     t = srv__now_ms();
@@ -809,12 +829,16 @@ fxc_result srv_loop_frame(srv_loop *loop, srv_frame_stats *st)
     t = srv__now_ms();
     srv__updates(loop, false, st);
     st->time_ms[SRV_STAGE_EFFECTS] = srv__now_ms() - t;
+    if (abandon(loop))
+        return FXC_ERR_SHUTDOWN;
 
     /* Stage 7: compose. */
     t = srv__now_ms();
     for (uint32_t i = 0; i < active; i++)
         srv__compose(loop, slots[i], st);
     st->time_ms[SRV_STAGE_COMPOSE] = srv__now_ms() - t;
+    if (abandon(loop))
+        return FXC_ERR_SHUTDOWN;
     for (uint32_t i = 0; i < active; i++) {
         srv_viewer *view = &loop->viewers[slots[i]];
         view->rendered = true;

@@ -52,6 +52,13 @@
 proto_pose srv_net_strategy_pose(uint32_t strategy, const proto_camera *c, const proto_pose *previous,
                                  double previous_time, double latency_s);
 
+/* Bytes the network side holds per pixel of a viewer's resolution: two outboxes of colour and depth (3 + 4
+ * each), the encoding scratch and the send buffer (the codecs' bounds: at most about 3 + 4 each, rounded
+ * up); and per entry of a sample request: two request lists (4 each), two answer outboxes and the send
+ * buffer (12 each). With the engine's SRV_VIEWER_BYTES_PER_PIXEL, what a viewer at the limits can take. */
+#define SRV_NET_BYTES_PER_PIXEL  32u
+#define SRV_NET_BYTES_PER_SAMPLE 44u
+
 /* Configuration; zero fields take the defaults beside them. */
 typedef struct srv_net_desc {
     srv_loop *loop;       /* required: the engine (the frame thread drives it) */

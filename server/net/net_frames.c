@@ -248,7 +248,10 @@ void *srv__net_frame_thread(void *arg)
         take_viewers(net);
         if (net->clock_started) {
             srv_frame_stats st;
-            if (srv_loop_frame(net->d.loop, &st) != FXC_OK && !net->frame_error) {
+            fxc_result r = srv_loop_frame(net->d.loop, &st);
+            if (r == FXC_ERR_SHUTDOWN)
+                break; /* abandoned at the stop flag, within a tile of the signal: nothing to send */
+            if (r != FXC_OK && !net->frame_error) {
                 net->frame_error = FXC_ERR_IO; /* a sink could not write: it said why */
                 snprintf(net->frame_error_text, sizeof net->frame_error_text,
                          "a frame's output could not be written");

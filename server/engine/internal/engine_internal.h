@@ -206,6 +206,7 @@ struct srv_loop {
     const scene *s;
     scene_rt *rt;
     srv_pool *pool;
+    bool abandoned; /* a frame was abandoned at the stop flag (srv_loop_set_stop): no more frames */
     fx_context fx;
     /* Effects. */
     uint32_t effect_count;
