@@ -246,7 +246,8 @@ void fx_probe_irradiance(const void *payload, const float dir[3], float out_rgb[
  * and, through ctx->world_taps, its neighbours' committed ones). Returns the rays traced. */
 uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count);
 
-/* Blends every job's scratch into its payload with hysteresis ctx->probe_hysteresis. */
+/* Blends every job's scratch into its payload: the moments with hysteresis ctx->probe_hysteresis, the
+ * irradiance with the change-aware blend (fx_probes.c; plain hysteresis when ctx->probe_plain_blend). */
 void fx_probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint32_t count);
 
 /* The no-cache estimate at a visible point: probe_rays cosine-weighted rays, hits lit directly (shadow rays),
