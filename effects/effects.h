@@ -91,8 +91,10 @@ typedef struct fx_context {
     uint32_t probe_rays; /* rays per probe update (default 144, DDGI's) */
     uint32_t frame;      /* the frame being run, + 1 (0: unknown). Cache payloads change only between
                                frames, so what is derived from them can be kept within one frame. */
-    float
-        probe_hysteresis; /* weight of the old irradiance in a probe update's blend (default 0.97, RTXGI's) */
+    float probe_hysteresis; /* weight of the old irradiance in a probe update's blend (default 0.97, RTXGI's);
+                             the change-aware blend's steady state */
+    bool probe_plain_blend; /* true: plain hysteresis, probe_hysteresis at every update (false, the default:
+                               the change-aware blend, fx_probes.c) */
     uint32_t reference_bounces; /* the reference's path tracing (fx_indirect_reference_point): bounces at most
                                    (0: until Russian roulette ends the path) */
     /* Run-time sample counts (0: the default). In a cached run they are what a texel converges at; in the
@@ -192,11 +194,14 @@ static inline float fx_point_falloff(float distance)
 /* One probe's payload, FX_PROBE_BYTES, little-endian, written byte by byte:
  *   0  float32 x3  position, scene-local metres (the grid point plus its relocation offset)
  *  12  float32     cell size of its level, metres (shade has no other way to know it)
- *  16  uint32      flags: FX_PROBE_HAS_DATA (committed at least once), FX_PROBE_OFF (inside geometry),
- *                  FX_PROBE_MOVED_OUT (relocated out of geometry once: it no longer returns to its grid point),
- *                  FX_PROBE_SEEN_FRONT (some update saw a front face within reach from this position)
- *  20  uint32      blended updates since it was created or last switched on (0: the next takes its value
- *                  fully); texel_samples returns it
+ *  16  uint32      flags (low 16 bits): FX_PROBE_HAS_DATA (committed at least once), FX_PROBE_OFF (inside
+ *                  geometry), FX_PROBE_MOVED_OUT (relocated out of geometry once: it no longer returns to its
+ *                  grid point), FX_PROBE_SEEN_FRONT (some update saw a front face within reach from this
+ *                  position); high 16 bits: the change-aware blend's drift mean, a half (0 when fresh, off
+ *                  or under plain hysteresis)
+ *  20  uint32      low 16 bits: blended updates since it was created or last switched on, at most 65535
+ *                  (0: the next takes its value fully; texel_samples returns it); high 16 bits: the drift's
+ *                  variance, a half
  *  24  float32     irradiance scale: the largest irradiance component of the map (0: all zero)
  *  28  float32     fraction of back-face hits of the last update
  *  32  64 x 3 half irradiance / scale, RGB, texel t = y * 8 + x of the 8 x 8 octahedral map
@@ -228,8 +233,9 @@ void fx_probe_fibonacci(uint32_t i, uint32_t n, float dir[3]);
 /* A probe payload's header, decoded. */
 typedef struct fx_probe_info {
     float position[3], cell;
-    uint32_t flags, updates;
+    uint32_t flags, updates; /* flags: the low 16 bits of the word (FX_PROBE_*) */
     float backface_fraction;
+    float drift_mean, drift_variance; /* the change-aware blend's state (fx_probes.c, commit) */
 } fx_probe_info;
 void fx_probe_info_read(const void *payload, fx_probe_info *out);
 
@@ -240,7 +246,8 @@ void fx_probe_irradiance(const void *payload, const float dir[3], float out_rgb[
  * and, through ctx->world_taps, its neighbours' committed ones). Returns the rays traced. */
 uint64_t fx_probes_update(const fx_context *ctx, const fx_block_job *jobs, uint32_t count);
 
-/* Blends every job's scratch into its payload with hysteresis ctx->probe_hysteresis. */
+/* Blends every job's scratch into its payload: the moments with hysteresis ctx->probe_hysteresis, the
+ * irradiance with the change-aware blend (fx_probes.c; plain hysteresis when ctx->probe_plain_blend). */
 void fx_probes_commit(const fx_context *ctx, const fx_block_job *jobs, uint32_t count);
 
 /* The no-cache estimate at a visible point: probe_rays cosine-weighted rays, hits lit directly (shadow rays),

@@ -113,8 +113,12 @@ void fx_probe_info_read(const void *payload, fx_probe_info *out)
     for (int k = 0; k < 3; k++)
         out->position[k] = get_f32(p + 4 * k);
     out->cell = get_f32(p + 12);
-    out->flags = get_u32(p + 16);
-    out->updates = get_u32(p + 20);
+    uint32_t flags = get_u32(p + 16);
+    out->flags = flags & 0xffffu;
+    uint32_t updates_word = get_u32(p + 20);
+    out->updates = updates_word & 0xffffu;
+    out->drift_mean = half_to_float((uint16_t)(flags >> 16));
+    out->drift_variance = half_to_float((uint16_t)(updates_word >> 16));
     out->backface_fraction = get_f32(p + 28);
 }
 

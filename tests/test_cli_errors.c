@@ -150,6 +150,7 @@ static void test_err_res(void **state)
     expect_error(2, "sim --probe-cell nan", "--probe-cell", "'nan'", NULL);
     expect_error(2, "sim --probe-cell 1e-9", "--probe-cell", "'1e-9'", NULL);
     expect_error(2, "sim --probe-hysteresis 1", "--probe-hysteresis", "'1'", NULL);
+    expect_error(2, "sim --probe-blend fast", "--probe-blend", "'fast'", "adaptive or plain", NULL);
     expect_error(2, "sim --probe-budget 0", "--probe-budget", "'0'", NULL);
     expect_error(2, "sim --indirect-block 0", "--indirect-block", "'0'", NULL);
     expect_error(2, "sim --indirect-block 3", "--indirect-block", "'3'", "1, 2 or 4", NULL);

@@ -21,7 +21,15 @@
 #define FX_PROBE_MAX_DISTANCE     2.598076f /* 1.5 sqrt(3): distances are clamped to this many cells */
 #define FX_PROBE_MIN_FRONT        0.25f     /* cells: relocation keeps front faces at least this far */
 #define FX_PROBE_MAX_OFFSET       0.45f     /* cells, per axis: relocation range */
-#define FX_PROBE_NORMAL_BIAS      0.2f /* cells: the shading point moves this far along its normal for Chebyshev */
+/* The change-aware blend (fx_probes.c, commit): the memories per update of the drift's mean and of its
+ * variance, the z-scores of the mean up to which the irradiance keeps the steady-state hysteresis h and from
+ * which it keeps FX_PROBE_FAST_KEEP. */
+#define FX_PROBE_DRIFT_MEMORY 0.75f
+#define FX_PROBE_NOISE_MEMORY 0.9f
+#define FX_PROBE_DRIFT_Z_LOW  4.0f
+#define FX_PROBE_DRIFT_Z_HIGH 7.0f
+#define FX_PROBE_FAST_KEEP    0.0f
+#define FX_PROBE_NORMAL_BIAS  0.2f /* cells: the shading point moves this far along its normal for Chebyshev */
 
 enum {
     FX_STREAM_PROBE_ROTATION = 0x5052, /* "PR" */

@@ -29,7 +29,12 @@ const char srv_cli_engine_usage[] =
     "                       viewer is about d/16..d/8 wide, never finer (default: the power of two nearest\n"
     "                       a 64th of the scene's bounding-box diagonal)\n"
     "  --probe-rays N       rays per probe update, 1..4096 (default 144, DDGI's)\n"
-    "  --probe-hysteresis H weight of a probe's old irradiance per update, [0, 0.999] (default 0.97)\n"
+    "  --probe-hysteresis H weight of a probe's old irradiance per update, [0, 0.999] (default 0.97):\n"
+    "                       the steady state of the change-aware blend, every update's with plain\n"
+    "  --probe-blend B      adaptive or plain (default adaptive): adaptive keeps less of the old\n"
+    "                       irradiance (down to none) while a probe's total changes, over updates, by\n"
+    "                       well more than the update's own noise (a light switched on or off, bounces\n"
+    "                       building up), and H where the change is noise; plain: always H\n"
     "  --probe-budget N     probes updated per frame at most, 1..1000000 (default 1024)\n"
     "  --indirect-block N   probes evaluated once per NxN block of pixels, then a depth- and normal-aware\n"
     "                       upsample; 1 = every pixel, 2 or 4 at most (default 4); a viewer uses the\n"
@@ -56,6 +61,7 @@ const struct option srv_cli_engine_options[] = {
     {"probe-cell", required_argument, NULL, SRV_CLI_O_PCELL},
     {"probe-rays", required_argument, NULL, SRV_CLI_O_PRAYS},
     {"probe-hysteresis", required_argument, NULL, SRV_CLI_O_PHYST},
+    {"probe-blend", required_argument, NULL, SRV_CLI_O_PBLEND},
     {"probe-budget", required_argument, NULL, SRV_CLI_O_PBUDGET},
     {"indirect-block", required_argument, NULL, SRV_CLI_O_IBLOCK},
     {"no-local-table", no_argument, NULL, SRV_CLI_O_NOLOCAL},
@@ -247,6 +253,13 @@ int srv_cli_engine_option(const char *cmd, int code, const char *arg, srv_cli_en
         if (e->probe_hysteresis == 0)
             e->probe_hysteresis = 1e-9; /* 0 means "default" in the loop's description */
         return 1;
+    case SRV_CLI_O_PBLEND:
+        if (strcmp(arg, "adaptive") == 0 || strcmp(arg, "plain") == 0) {
+            e->probe_plain_blend = strcmp(arg, "plain") == 0;
+            return 1;
+        }
+        fprintf(stderr, "fxcache %s: --probe-blend '%s': expected adaptive or plain\n", cmd, arg);
+        return 0;
     case SRV_CLI_O_PBUDGET: return srv_cli_u32(cmd, "--probe-budget", arg, 1, 1000000, &e->probe_budget);
     case SRV_CLI_O_IBLOCK: return parse_indirect_block(cmd, arg, e);
     case SRV_CLI_O_NOLOCAL: e->no_local_table = true; return 1;
@@ -330,6 +343,7 @@ srv_loop_desc srv_cli_loop_desc(const srv_cli_engine *e, const scene *s, scene_r
                           .probe_cell = (float)e->probe_cell,
                           .probe_rays = e->probe_rays,
                           .probe_hysteresis = (float)e->probe_hysteresis,
+                          .probe_plain_blend = e->probe_plain_blend,
                           .probe_budget = e->probe_budget,
                           .indirect_block = e->indirect_block,
                           .no_local_table = e->no_local_table,
@@ -448,13 +462,14 @@ json_t *srv_cli_summary_json(const srv_cli_run *run, const srv_cli_engine *e)
         json_object_set_new(sum, "no_cache_samples", json_real(resolved->no_cache_samples));
     if (srv_loop_probe_cell(loop) > 0)
         json_object_set_new(sum, "probes",
-                            json_pack("{s:f,s:I,s:f,s:I,s:I,s:b}", "cell_m",
+                            json_pack("{s:f,s:I,s:f,s:s,s:I,s:I,s:b}", "cell_m",
                                       (double)srv_loop_probe_cell(loop), "rays",
                                       (json_int_t)srv_loop_desc_of(loop)->probe_rays, "hysteresis",
-                                      (double)srv_loop_desc_of(loop)->probe_hysteresis, "budget",
-                                      (json_int_t)srv_loop_desc_of(loop)->probe_budget, "indirect_block",
-                                      (json_int_t)srv_loop_desc_of(loop)->indirect_block, "local_tables",
-                                      !e->no_local_table));
+                                      (double)srv_loop_desc_of(loop)->probe_hysteresis, "blend",
+                                      srv_loop_desc_of(loop)->probe_plain_blend ? "plain" : "adaptive",
+                                      "budget", (json_int_t)srv_loop_desc_of(loop)->probe_budget,
+                                      "indirect_block", (json_int_t)srv_loop_desc_of(loop)->indirect_block,
+                                      "local_tables", !e->no_local_table));
     else
         json_object_set_new(
             sum, "world_space_cache",

@@ -25,6 +25,7 @@ typedef struct srv_cli_engine {
     uint32_t ao_samples, shadow_rays; /* converged sample counts (0: the loop's defaults, 64 and 16) */
     double no_cache_samples;          /* --no-cache: the baseline's counts as a multiple of those (0: 1) */
     bool no_cache, no_local_table;
+    bool probe_plain_blend; /* --probe-blend plain: srv_loop_desc.probe_plain_blend */
 } srv_cli_engine;
 
 /* getopt_long codes of the engine options (a command's own codes start at SRV_CLI_O_COMMAND). */
@@ -48,6 +49,7 @@ enum {
     SRV_CLI_O_SHADOWRAYS,
     SRV_CLI_O_NCSAMPLES,
     SRV_CLI_O_IBLOCK,
+    SRV_CLI_O_PBLEND,
     SRV_CLI_O_COMMAND = 320
 };
 

@@ -105,6 +105,9 @@ typedef struct srv_loop_desc {
     float probe_hysteresis;  /* old irradiance's weight in an update, (0, 0.999] (default 0.97,
                                               RTXGI's; a tiny weight such as 1e-9 spells "none", as the
                                               command line's 0 does) */
+    bool probe_plain_blend;  /* true: plain hysteresis, probe_hysteresis at every update; false
+                                              (the default): the change-aware blend, which keeps less
+                                              while an update's changes agree in sign (fx_probes.c) */
     uint32_t probe_budget;   /* cells (probes) updated per frame at most, new ones first, then
                                               the longest unrefreshed (default 1024; shares the ray budget) */
     uint32_t indirect_block; /* low-frequency effects (probes) in whole frames: evaluated once

@@ -299,6 +299,7 @@ fxc_result srv_loop_create(const srv_loop_desc *desc, srv_loop **out, char *err,
                             .ao_radius = desc->s->ao_radius,
                             .probe_rays = loop->desc.probe_rays,
                             .probe_hysteresis = loop->desc.probe_hysteresis,
+                            .probe_plain_blend = loop->desc.probe_plain_blend,
                             .ao_samples = loop->desc.ao_samples,
                             .shadow_rays = shadow_rays,
                             .epoch = atomic_fetch_add(&loop_epochs, 1) + 1};

@@ -140,8 +140,14 @@ static void check_probe(srv_loop *loop, uint32_t e, uint32_t block, uint64_t key
     memset(&job, 0, sizeof job);
     kind->job_location(cache, e, key, &job);
     float position[3] = {le_f32(p), le_f32(p + 4), le_f32(p + 8)}, cell = le_f32(p + 12);
-    uint32_t flags = le_u32(p + 16);
+    uint32_t flags = le_u32(p + 16) & 0xffffu; /* the high 16 bits: the blend's drift mean (effects.h) */
     float scale = le_f32(p + 24), backface = le_f32(p + 28);
+    fx_probe_info info;
+    fx_probe_info_read(p, &info);
+    if (!(fabsf(info.drift_mean) <= 1.0f) || !(info.drift_variance >= 0.0f && info.drift_variance <= 1.0f))
+        fail_msg("probe %016llx: drift mean %g, variance %g (the change-aware blend's state, in [-1, 1] and "
+                 "[0, 1])",
+                 (unsigned long long)key, (double)info.drift_mean, (double)info.drift_variance);
     if (!(isfinite(cell) && cell > 0 && fabsf(cell - job.cell) <= 1e-6f * job.cell))
         fail_msg("probe %016llx: cell %g (its level's cell %g)", (unsigned long long)key, (double)cell,
                  (double)job.cell);
@@ -534,6 +540,9 @@ srv_loop *stab_bounce_loop(scene *s, scene_rt *rt, float h, srv_viewer_id *id)
                        .threads = 2,
                        .probe_rays = 64,
                        .probe_hysteresis = h,
+                       /* plain hysteresis: the closed forms V (1 - h^k) and V h^k the callers check are its
+                          (the default change-aware blend's: tests/test_probes_converge.c) */
+                       .probe_plain_blend = true,
                        .probe_cell = 0.5f,
                        .keep_views = true};
     fxt_effects_on(&d, (const char *const[]){"shadow", "probes"}, 2);
@@ -584,7 +593,8 @@ void stab_probe_snapshot(srv_loop *loop, stab_probe_counts *out)
                 continue;
             assert_true(out->count < sizeof out->key / sizeof out->key[0]);
             out->key[out->count] = key;
-            out->updates[out->count++] = le_u32(p + 20);
+            out->updates[out->count++] =
+                le_u32(p + 20) & 0xffffu; /* the low 16 bits: the count (effects.h) */
         }
     }
 }

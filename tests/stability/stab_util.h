@@ -83,7 +83,7 @@ srv_camera stab_bounce_camera(void);
  * of the floor's (x 1.5..3.5, |z| < 1.4), from a viewer's depth and radiance. */
 void stab_bounce_means(const srv_loop *loop, srv_viewer_id id, double *wall, double *floor);
 
-/* A loop over the bounce scene: shadows and probes (64 rays, hysteresis h, finest cell 0.5 m), one viewer of
+/* A loop over the bounce scene: shadows and probes (64 rays, plain hysteresis h, finest cell 0.5 m), one viewer of
  * 48 x 32 (views kept). */
 srv_loop *stab_bounce_loop(scene *s, scene_rt *rt, float h, srv_viewer_id *id);
 
