@@ -1,12 +1,14 @@
 /* Mesh-file import through Assimp's C API: OBJ, 3DS, PLY, glTF 2 and whatever else Assimp reads.
  * A ".gz" file is decompressed with zlib first and handed to Assimp from memory with the inner extension
- * as the format hint. Meshes are triangulated by Assimp and pre-transformed to world space; points and
+ * as the format hint. Meshes are triangulated by Assimp and pre-transformed to world space (or, when some
+ * node places a mesh through a mirroring transform, placed node by node here: import_node()); points and
  * lines are dropped and counted; every mesh then goes through scene__add_mesh(), which checks, welds and
  * cleans it. Diffuse colours, emissive colours (times the emissive intensity) and diffuse textures (read
  * with OpenImageIO, relative to the model file, with a case-insensitive fallback since many old models name
  * "KAMEN.JPG" for kamen.jpg) become materials. */
 #include "scene_internal.h"
 #include "cerr_capture.h"
+#include "scene_import_nodes.h"
 
 #include <assimp/cimport.h>
 #include <assimp/material.h>
@@ -347,6 +349,46 @@ done:
     return rc;
 }
 
+/* Which scene material each Assimp mesh gets: the file's own through material_map, or one for all. */
+typedef struct import_materials {
+    const uint32_t *map; /* per Assimp material, or NULL */
+    uint32_t count;      /* entries of map */
+    uint32_t all;        /* UINT32_MAX, or the material every mesh gets */
+} import_materials;
+
+static uint32_t material_for(const import_materials *mats, const struct aiMesh *mesh)
+{
+    if (mats->all != UINT32_MAX)
+        return mats->all;
+    return mesh->mMaterialIndex < mats->count ? mats->map[mesh->mMaterialIndex] : mats->map[0]; /* first */
+}
+
+/* Imports every mesh the nodes below node place, each through its node's transform times parent (the
+ * ancestors' transforms times the caller's), so scene__add_mesh() sees a mirroring instance's transform and
+ * keeps its triangles facing outwards. A mesh placed by two nodes is imported twice. */
+static scene_result import_node(scene *s, const struct aiScene *ai, const struct aiNode *node,
+                                const double parent[16], const import_materials *mats, const char *path,
+                                unsigned depth, scene_error *err)
+{
+    if (!node || depth > 10000)
+        return SCENE_OK;
+    double local[16], world[16];
+    scene__node_matrix(node, local);
+    scene__matrix_multiply(parent, local, world);
+    scene_result rc = SCENE_OK;
+    for (uint32_t i = 0; rc == SCENE_OK && i < node->mNumMeshes; i++) {
+        const struct aiMesh *mesh = ai->mMeshes[node->mMeshes[i]];
+        if (!(mesh->mPrimitiveTypes & aiPrimitiveType_TRIANGLE)) {
+            s->repairs.non_triangles_dropped += mesh->mNumFaces;
+            continue;
+        }
+        rc = import_mesh(s, mesh, node->mMeshes[i], material_for(mats, mesh), world, path, err);
+    }
+    for (uint32_t i = 0; rc == SCENE_OK && i < node->mNumChildren; i++)
+        rc = import_node(s, ai, node->mChildren[i], world, mats, path, depth + 1, err);
+    return rc;
+}
+
 scene_result scene__import_file(scene *s, const char *path, const double *xform,
                                 const scene_material *override, scene_error *err)
 {
@@ -360,7 +402,7 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
      * import runs only Assimp's validation, check_faces() and check_scene_graph() check what that let
      * through and what the steps would fail on, and only then do the post-processing steps run. */
     const unsigned flags = aiProcess_ValidateDataStructure;
-    const unsigned post = aiProcess_Triangulate | aiProcess_PreTransformVertices | aiProcess_SortByPType;
+    unsigned post = aiProcess_Triangulate | aiProcess_SortByPType;
     const struct aiScene *ai = NULL;
     size_t n = strlen(path);
     bool gz = n > 3 && strcasecmp(path + n - 3, ".gz") == 0;
@@ -432,6 +474,12 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
         aiReleaseImport(ai);
         return checked;
     }
+    /* Assimp pre-transforms the meshes when no instance mirrors (every mesh in world space, merged by
+     * material, as fxcache always read files); otherwise the meshes stay in their nodes' frames and
+     * import_node() places each instance, so that a mirrored one keeps its triangles facing outwards. */
+    bool mirrored = scene__places_mirrored(ai->mRootNode, scene__identity_matrix, 0);
+    if (!mirrored)
+        post |= aiProcess_PreTransformVertices;
     ai = aiApplyPostProcessing(ai, post);
     if (!ai)
         return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s", path,
@@ -460,17 +508,16 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
     }
     uint32_t before = s->triangle_count;
     scene_repairs repairs_before = s->repairs;
-    for (uint32_t i = 0; rc == SCENE_OK && i < ai->mNumMeshes; i++) {
+    import_materials mats = {.map = material_map, .count = ai->mNumMaterials, .all = override_index};
+    if (mirrored && rc == SCENE_OK)
+        rc = import_node(s, ai, ai->mRootNode, xform ? xform : scene__identity_matrix, &mats, path, 0, err);
+    for (uint32_t i = 0; !mirrored && rc == SCENE_OK && i < ai->mNumMeshes; i++) {
         const struct aiMesh *mesh = ai->mMeshes[i];
         if (!(mesh->mPrimitiveTypes & aiPrimitiveType_TRIANGLE)) {
             s->repairs.non_triangles_dropped += mesh->mNumFaces;
             continue;
         }
-        uint32_t material = override_index;
-        if (material == UINT32_MAX)
-            material = mesh->mMaterialIndex < ai->mNumMaterials ? material_map[mesh->mMaterialIndex]
-                                                                : material_map[0]; /* this file's first */
-        rc = import_mesh(s, mesh, i, material, xform, path, err);
+        rc = import_mesh(s, mesh, i, material_for(&mats, mesh), xform, path, err);
     }
     if (rc == SCENE_OK && s->triangle_count == before) {
         char lost[160];

@@ -1,0 +1,24 @@
+/* Private to the scene module: a mesh file's node graph as Assimp gives it (scene_import_nodes.c): node
+ * transforms in double and whether some instance mirrors. */
+#ifndef FXC_SCENE_IMPORT_NODES_H
+#define FXC_SCENE_IMPORT_NODES_H
+
+#include "scene_internal.h"
+
+#include <assimp/scene.h>
+
+/* The identity as a row-major 4 x 4. */
+extern const double scene__identity_matrix[16];
+
+/* The transform of node relative to its parent as a row-major 4 x 4 in double (Assimp's aiMatrix4x4 is
+ * row-major and applies to column vectors, as scene__add_mesh's transforms do). */
+void scene__node_matrix(const struct aiNode *node, double m[16]);
+
+/* out = a * b (row-major 4 x 4); out may not alias a or b. */
+void scene__matrix_multiply(const double a[16], const double b[16], double out[16]);
+
+/* True when some node below node places a mesh through a mirroring transform (a negative determinant of its
+ * own transform times its ancestors'; parent is the ancestors'). */
+bool scene__places_mirrored(const struct aiNode *node, const double parent[16], unsigned depth);
+
+#endif
