@@ -474,6 +474,13 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
         aiReleaseImport(ai);
         return checked;
     }
+    /* Lengths in metres: Assimp's global-scale step applies the file's unit where its reader leaves it to
+     * that step (FBX's UnitScaleFactor, centimetres by default: an FBX cube of 21 cm was read as 21 m);
+     * Collada's <unit> and up axis its reader applies itself, glTF is in metres. */
+    ai = aiApplyPostProcessing(ai, aiProcess_GlobalScale);
+    if (!ai)
+        return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s", path,
+                           assimp_error(why, sizeof why));
     /* Assimp pre-transforms the meshes when no instance mirrors (every mesh in world space, merged by
      * material, as fxcache always read files); otherwise the meshes stay in their nodes' frames and
      * import_node() places each instance, so that a mirrored one keeps its triangles facing outwards. */

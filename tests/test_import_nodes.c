@@ -6,6 +6,10 @@
 
 #include "scene_internal.h"
 
+#include <assimp/cimport.h>
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -156,10 +160,89 @@ static void test_mirrored_instance_faces_outwards(void **state)
     scene_free(s);
 }
 
+/* The world bounds of a file's pre-transformed vertices as Assimp gives them without fxcache (its own units). */
+static void assimp_raw_bounds(const char *path, double lo[3], double hi[3])
+{
+    const struct aiScene *ai =
+        aiImportFile(path, aiProcess_Triangulate | aiProcess_PreTransformVertices | aiProcess_SortByPType);
+    assert_non_null(ai);
+    for (int k = 0; k < 3; k++) {
+        lo[k] = INFINITY;
+        hi[k] = -INFINITY;
+    }
+    for (uint32_t i = 0; i < ai->mNumMeshes; i++)
+        for (uint32_t v = 0; v < ai->mMeshes[i]->mNumVertices; v++) {
+            const double p[3] = {ai->mMeshes[i]->mVertices[v].x, ai->mMeshes[i]->mVertices[v].y,
+                                 ai->mMeshes[i]->mVertices[v].z};
+            for (int k = 0; k < 3; k++) {
+                lo[k] = fmin(lo[k], p[k]);
+                hi[k] = fmax(hi[k], p[k]);
+            }
+        }
+    aiReleaseImport(ai);
+}
+
+/* An FBX file in centimetres (UnitScaleFactor 1, Assimp's cubes_with_names.fbx) loads in metres: its bounds
+ * are the file's own coordinates times 0.01. Before, a 21 cm model was 21 m wide, so a glTF (metres) beside
+ * it in a scene description was a hundred times too small, and its lights' falloff was off. */
+static void test_fbx_centimetres_become_metres(void **state)
+{
+    (void)state;
+    const char *path = ASSIMP_MODELS "/FBX/cubes_with_names.fbx";
+    if (access(path, R_OK) != 0) {
+        print_message("skipped: %s is absent (Debian's assimp-testmodels)\n", path);
+        skip();
+    }
+    double lo[3], hi[3];
+    assimp_raw_bounds(path, lo, hi);
+    scene *s = load_ok(path);
+    for (int k = 0; k < 3; k++) {
+        double world_lo = s->bounds_min[k] + s->origin[k], world_hi = s->bounds_max[k] + s->origin[k];
+        assert_true(fabs(world_lo - 0.01 * lo[k]) < 1e-6 && fabs(world_hi - 0.01 * hi[k]) < 1e-6);
+    }
+    assert_true(hi[0] - lo[0] > 20); /* the file's 21 units (centimetres) */
+    scene_free(s);
+}
+
+/* A Collada file in centimetres with Z up: Assimp's Collada reader applies both itself (checked, already
+ * right): a 100 x 100 cm quad at z = 200 cm is a 1 m quad 2 m up in fxcache's y-up world. */
+static void test_collada_unit_and_up_axis(void **state)
+{
+    (void)state;
+    const char *path = fxt_write_file(
+        "zup_cm.dae",
+        "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n"
+        "<COLLADA xmlns=\"http://www.collada.org/2005/11/COLLADASchema\" version=\"1.4.1\">\n"
+        "<asset><unit name=\"centimeter\" meter=\"0.01\"/><up_axis>Z_UP</up_axis></asset>\n"
+        "<library_geometries><geometry id=\"quad\" name=\"quad\"><mesh>\n"
+        "<source id=\"p\"><float_array id=\"pa\" count=\"12\">-50 -50 0 50 -50 0 50 50 0 -50 50 "
+        "0</float_array>\n"
+        "<technique_common><accessor source=\"#pa\" count=\"4\" stride=\"3\"><param name=\"X\" "
+        "type=\"float\"/><param name=\"Y\" type=\"float\"/><param name=\"Z\" type=\"float\"/>"
+        "</accessor></technique_common></source>\n"
+        "<vertices id=\"v\"><input semantic=\"POSITION\" source=\"#p\"/></vertices>\n"
+        "<triangles count=\"2\"><input semantic=\"VERTEX\" source=\"#v\" offset=\"0\"/><p>0 1 2 0 2 3</p>"
+        "</triangles>\n</mesh></geometry></library_geometries>\n"
+        "<library_visual_scenes><visual_scene id=\"S\" name=\"S\"><node id=\"q\" name=\"q\">"
+        "<translate>0 0 200</translate><instance_geometry url=\"#quad\"/></node></visual_scene>"
+        "</library_visual_scenes>\n<scene><instance_visual_scene url=\"#S\"/></scene>\n</COLLADA>\n");
+    scene *s = load_ok(path);
+    const double lo[3] = {-0.5, 2, -0.5}, hi[3] = {0.5, 2, 0.5};
+    for (int k = 0; k < 3; k++) {
+        assert_true(fabs(s->bounds_min[k] + s->origin[k] - lo[k]) < 1e-6);
+        assert_true(fabs(s->bounds_max[k] + s->origin[k] - hi[k]) < 1e-6);
+    }
+    assert_true(fabs(scene_surface_area(s) - 1.0) < 1e-6);
+    assert_true(s->tri_normal[1] > 0.999f); /* counter-clockwise seen from +z in the file: up */
+    scene_free(s);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_mirrored_instance_faces_outwards),
+        cmocka_unit_test(test_fbx_centimetres_become_metres),
+        cmocka_unit_test(test_collada_unit_and_up_axis),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
