@@ -389,8 +389,10 @@ static scene_result import_node(scene *s, const struct aiScene *ai, const struct
     return rc;
 }
 
-scene_result scene__import_file(scene *s, const char *path, const double *xform,
-                                const scene_material *override, scene_error *err)
+/* scene__import_file, and with lights (non-NULL) also the file's lights and camera, which it then describes
+ * (scene__import_file_lit). */
+static scene_result import_file(scene *s, const char *path, const double *xform,
+                                const scene_material *override, scene_file_lights *lights, scene_error *err)
 {
     scene_result rc = scene__check_file(path, err);
     if (rc != SCENE_OK)
@@ -477,10 +479,26 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
     /* Lengths in metres: Assimp's global-scale step applies the file's unit where its reader leaves it to
      * that step (FBX's UnitScaleFactor, centimetres by default: an FBX cube of 21 cm was read as 21 m);
      * Collada's <unit> and up axis its reader applies itself, glTF is in metres. */
+    const struct aiVector3D *sample = NULL; /* a vertex before and after: the scale applied */
+    for (uint32_t i = 0; !sample && i < ai->mNumMeshes; i++)
+        for (uint32_t v = 0; !sample && v < ai->mMeshes[i]->mNumVertices; v++)
+            if (ai->mMeshes[i]->mVertices[v].x != 0)
+                sample = &ai->mMeshes[i]->mVertices[v];
+    double sample_before = sample ? sample->x : 0;
     ai = aiApplyPostProcessing(ai, aiProcess_GlobalScale);
     if (!ai)
         return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s", path,
                            assimp_error(why, sizeof why));
+    double unit_scale = sample ? sample->x / sample_before : 1.0;
+    /* The file's lights and camera, while the node graph that places them is whole (the global-scale step
+     * ran alone for this). */
+    if (lights) {
+        rc = scene__import_lights(s, ai, path, unit_scale, lights, err);
+        if (rc != SCENE_OK) {
+            aiReleaseImport(ai);
+            return rc;
+        }
+    }
     /* Assimp pre-transforms the meshes when no instance mirrors (every mesh in world space, merged by
      * material, as fxcache always read files); otherwise the meshes stay in their nodes' frames and
      * import_node() places each instance, so that a mirrored one keeps its triangles facing outwards. */
@@ -541,4 +559,15 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
     free(material_map);
     aiReleaseImport(ai);
     return rc;
+}
+
+scene_result scene__import_file(scene *s, const char *path, const double *xform,
+                                const scene_material *override, scene_error *err)
+{
+    return import_file(s, path, xform, override, NULL, err);
+}
+
+scene_result scene__import_file_lit(scene *s, const char *path, scene_file_lights *found, scene_error *err)
+{
+    return import_file(s, path, NULL, NULL, found, err);
 }

@@ -139,6 +139,19 @@ const scene_import_format *scene__import_format_of(const char *ext);
 scene_result scene__import_file(scene *s, const char *path, const double *xform,
                                 const scene_material *override, scene_error *err);
 
+/* What a mesh file's own lights and camera gave the scene (scene__import_file_lit). */
+typedef struct scene_file_lights {
+    uint32_t lights;  /* directional and point lights added */
+    uint32_t skipped; /* lights fxcache cannot represent (spot, area, other falloffs): a warning line each */
+    bool sky;         /* an ambient light became the sky */
+    bool camera;      /* the file's first camera became the scene's default camera */
+} scene_file_lights;
+
+/* A plain mesh file: scene__import_file without transform or material, plus the file's lights (directional,
+ * point with an inverse-square falloff, ambient as the sky) and its first camera (scene_import_nodes.c);
+ * *found says what they gave. */
+scene_result scene__import_file_lit(scene *s, const char *path, scene_file_lights *found, scene_error *err);
+
 /* Reads a JSON scene description into s (scene_json.c). */
 scene_result scene__load_json(scene *s, const char *path, scene_error *err);
 
