@@ -240,10 +240,72 @@ static bool resolve_texture(const char *model_dir, const char *name, char *out, 
     return found;
 }
 
-/* Converts one Assimp material into a scene material (its diffuse colour, emission and texture). A texture
- * that cannot be read is reported on stderr and counted; the material keeps its colour. */
-static scene_result import_material(scene *s, const struct aiMaterial *am, const char *model_dir,
-                                    uint32_t *out_index, scene_error *err)
+/* The texture a material names that the file itself holds (a GLB's images, an FBX's embedded media), or
+ * NULL: "*N" is the file's N-th texture (glTF), another name is looked up by its file name among the
+ * embedded textures' names (FBX, which also names a file). */
+static const struct aiTexture *embedded_texture(const struct aiScene *ai, const char *name)
+{
+    if (name[0] == '*') {
+        char *end = NULL;
+        unsigned long index = strtoul(name + 1, &end, 10);
+        return end != name + 1 && *end == 0 && index < ai->mNumTextures ? ai->mTextures[index] : NULL;
+    }
+    const char *base = name;
+    for (const char *p = name; *p; p++)
+        if (*p == '/' || *p == '\\')
+            base = p + 1;
+    for (uint32_t i = 0; i < ai->mNumTextures; i++) {
+        const char *file = ai->mTextures[i]->mFilename.data, *file_base = file;
+        for (const char *p = file; *p; p++)
+            if (*p == '/' || *p == '\\')
+                file_base = p + 1;
+        if (file_base[0] && strcasecmp(file_base, base) == 0)
+            return ai->mTextures[i];
+    }
+    return NULL;
+}
+
+/* The sRGB transfer function, decoded to linear (8-bit texels are sRGB, as image files' are). */
+static float srgb_to_linear(float c)
+{
+    return c <= 0.04045f ? c / 12.92f : powf((c + 0.055f) / 1.055f, 2.4f);
+}
+
+/* Adds a texture the file holds: encoded bytes (mHeight 0: PNG, JPEG, ..., named by Assimp's format hint)
+ * through OpenImageIO, or Assimp's raw BGRA texels. Returns its index or -1 with err filled. */
+static int32_t add_embedded_texture(scene *s, const char *path, const char *name, const struct aiTexture *tex,
+                                    scene_error *err)
+{
+    char label[512];
+    char hint[sizeof tex->achFormatHint + 1];
+    snprintf(hint, sizeof hint, "%.*s", (int)sizeof tex->achFormatHint, tex->achFormatHint);
+    snprintf(label, sizeof label, "%s[embedded %s].%s", path, name, hint[0] ? hint : "png");
+    if (tex->mHeight == 0)
+        return scene__add_texture_memory(s, label, tex->pcData, tex->mWidth, err);
+    if (tex->mWidth > 65536 || tex->mHeight > 65536) {
+        scene__fail(err, SCENE_ERR_RANGE, "%s: image size out of range (1..65536 per side)", label);
+        return -1;
+    }
+    size_t texels = (size_t)tex->mWidth * tex->mHeight;
+    float *rgb = malloc(sizeof(float) * 3 * texels);
+    if (!rgb) {
+        scene__fail(err, SCENE_ERR_NOMEM, "%s: out of memory", label);
+        return -1;
+    }
+    for (size_t i = 0; i < texels; i++) {
+        rgb[3 * i] = srgb_to_linear(tex->pcData[i].r / 255.0f);
+        rgb[3 * i + 1] = srgb_to_linear(tex->pcData[i].g / 255.0f);
+        rgb[3 * i + 2] = srgb_to_linear(tex->pcData[i].b / 255.0f);
+    }
+    return scene__add_texture_rgb(s, label, tex->mWidth, tex->mHeight, rgb, err);
+}
+
+/* Converts one Assimp material into a scene material (its diffuse colour, emission and texture: a file
+ * beside the model, or one the file holds). A texture that cannot be read is reported on stderr and counted;
+ * the material keeps its colour. */
+static scene_result import_material(scene *s, const struct aiScene *ai, const struct aiMaterial *am,
+                                    const char *path, const char *model_dir, uint32_t *out_index,
+                                    scene_error *err)
 {
     scene_material m = {.diffuse = {0.7f, 0.7f, 0.7f}, .texture = -1};
     struct aiString name;
@@ -274,12 +336,16 @@ static scene_result import_material(scene *s, const struct aiMaterial *am, const
     if (aiGetMaterialTextureCount(am, aiTextureType_DIFFUSE) > 0 &&
         aiGetMaterialTexture(am, aiTextureType_DIFFUSE, 0, &tex, NULL, NULL, NULL, NULL, NULL, NULL) ==
             aiReturn_SUCCESS &&
-        tex.length > 0 && tex.data[0] != '*') {
-        char path[768];
+        tex.length > 0) {
+        char found[768];
         double t0 = scene__now_ms();
-        if (resolve_texture(model_dir, tex.data, path, sizeof path)) {
+        const struct aiTexture *held = embedded_texture(ai, tex.data);
+        /* A file beside the model first (an FBX names both); what the file holds next (a GLB's "*0"). */
+        bool beside = tex.data[0] != '*' && resolve_texture(model_dir, tex.data, found, sizeof found);
+        if (beside || held) {
             scene_error tex_err = {0};
-            m.texture = scene__add_texture(s, path, &tex_err);
+            m.texture = beside ? scene__add_texture(s, found, &tex_err)
+                               : add_embedded_texture(s, path, tex.data, held, &tex_err);
             if (m.texture < 0) {
                 fprintf(stderr, "fxcache: warning: material '%s': %s (using its colour)\n", m.name,
                         tex_err.msg);
@@ -523,7 +589,7 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
         if (!material_map)
             rc = scene__fail(err, SCENE_ERR_NOMEM, "%s: out of memory", path);
         for (uint32_t m = 0; rc == SCENE_OK && m < ai->mNumMaterials; m++)
-            rc = import_material(s, ai->mMaterials[m], model_dir, &material_map[m], err);
+            rc = import_material(s, ai, ai->mMaterials[m], path, model_dir, &material_map[m], err);
         if (rc == SCENE_OK && ai->mNumMaterials == 0) {
             scene_material grey = {.diffuse = {0.7f, 0.7f, 0.7f}, .texture = -1, .name = "default"};
             override_index = scene__add_material(s, &grey, err);

@@ -336,6 +336,31 @@ static void test_collada_lights_kept_and_refused(void **state)
     scene_free(s);
 }
 
+/* A GLB holds its texture ("*0"): the texels must be those of the same texture read from its PNG file beside
+ * the .gltf twin of the model (Assimp's BoxTextured). Before, "*0" was skipped without a word: the box came
+ * out white. */
+static void test_glb_embedded_texture(void **state)
+{
+    (void)state;
+    const char *glb = ASSIMP_MODELS "/glTF2/BoxTextured-glTF-Binary/BoxTextured.glb";
+    const char *gltf = ASSIMP_MODELS "/glTF2/BoxTextured-glTF/BoxTextured.gltf";
+    if (access(glb, R_OK) != 0 || access(gltf, R_OK) != 0) {
+        print_message("skipped: %s or %s is absent (Debian's assimp-testmodels)\n", glb, gltf);
+        skip();
+    }
+    scene *a = load_ok(glb), *b = load_ok(gltf);
+    assert_int_equal(a->texture_count, 1);
+    assert_int_equal(b->texture_count, 1);
+    assert_int_equal(a->repairs.textures_missing, 0);
+    const scene_texture *ta = &a->textures[0], *tb = &b->textures[0];
+    assert_int_equal(ta->width, tb->width);
+    assert_int_equal(ta->height, tb->height);
+    assert_memory_equal(ta->rgb, tb->rgb, sizeof(float) * 3 * (size_t)ta->width * ta->height);
+    assert_int_equal(a->materials[a->meshes[0].material].texture, 0);
+    scene_free(a);
+    scene_free(b);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -344,6 +369,7 @@ int main(void)
         cmocka_unit_test(test_collada_unit_and_up_axis),
         cmocka_unit_test(test_gltf_lights_and_camera),
         cmocka_unit_test(test_collada_lights_kept_and_refused),
+        cmocka_unit_test(test_glb_embedded_texture),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
