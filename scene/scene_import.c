@@ -305,8 +305,9 @@ static int32_t add_embedded_texture(scene *s, const char *path, const char *name
  * the material keeps its colour. */
 static scene_result import_material(scene *s, const struct aiScene *ai, const struct aiMaterial *am,
                                     const char *path, const char *model_dir, uint32_t *out_index,
-                                    scene_error *err)
+                                    uint8_t *out_uv_set, scene_error *err)
 {
+    *out_uv_set = 0;
     scene_material m = {.diffuse = {0.7f, 0.7f, 0.7f}, .texture = -1};
     struct aiString name;
     if (aiGetMaterialString(am, AI_MATKEY_NAME, &name) == aiReturn_SUCCESS)
@@ -333,10 +334,12 @@ static scene_result import_material(scene *s, const struct aiScene *ai, const st
         }
     }
     struct aiString tex;
+    unsigned uv_set = 0; /* which of the mesh's texture coordinate sets the texture uses (glTF's texCoord) */
     if (aiGetMaterialTextureCount(am, aiTextureType_DIFFUSE) > 0 &&
-        aiGetMaterialTexture(am, aiTextureType_DIFFUSE, 0, &tex, NULL, NULL, NULL, NULL, NULL, NULL) ==
+        aiGetMaterialTexture(am, aiTextureType_DIFFUSE, 0, &tex, NULL, &uv_set, NULL, NULL, NULL, NULL) ==
             aiReturn_SUCCESS &&
         tex.length > 0) {
+        *out_uv_set = uv_set < AI_MAX_NUMBER_OF_TEXTURECOORDS ? (uint8_t)uv_set : 0;
         char found[768];
         double t0 = scene__now_ms();
         const struct aiTexture *held = embedded_texture(ai, tex.data);
@@ -369,10 +372,13 @@ static scene_result import_material(scene *s, const struct aiScene *ai, const st
     return *out_index == UINT32_MAX ? SCENE_ERR_NOMEM : SCENE_OK;
 }
 
-/* Appends one Assimp mesh (already triangulated and in world space) through scene__add_mesh(). */
+/* Appends one Assimp mesh (triangulated) through scene__add_mesh(), with its texture coordinates of set
+ * uv_set (its material's texture's; set 0 when the mesh has no such set). */
 static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t mesh_number, uint32_t material,
-                                const double *xform, const char *path, scene_error *err)
+                                unsigned uv_set, const double *xform, const char *path, scene_error *err)
 {
+    const struct aiVector3D *coords =
+        mesh->mTextureCoords[uv_set] ? mesh->mTextureCoords[uv_set] : mesh->mTextureCoords[0];
     char name[160];
     if (mesh->mName.length > 0)
         snprintf(name, sizeof name, "%s", mesh->mName.data);
@@ -380,10 +386,10 @@ static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t me
         snprintf(name, sizeof name, "%s#%u", path, mesh_number);
     uint32_t nv = mesh->mNumVertices, nf = mesh->mNumFaces;
     float *positions = malloc(sizeof(float) * 3 * (size_t)(nv ? nv : 1));
-    float *uv = mesh->mTextureCoords[0] ? malloc(sizeof(float) * 2 * (size_t)(nv ? nv : 1)) : NULL;
+    float *uv = coords ? malloc(sizeof(float) * 2 * (size_t)(nv ? nv : 1)) : NULL;
     uint32_t *indices = malloc(sizeof(uint32_t) * 3 * (size_t)(nf ? nf : 1));
     scene_result rc = SCENE_ERR_NOMEM;
-    if (!positions || !indices || (mesh->mTextureCoords[0] && !uv)) {
+    if (!positions || !indices || (coords && !uv)) {
         rc = scene__fail(err, SCENE_ERR_NOMEM, "mesh '%s': out of memory", name);
         goto done;
     }
@@ -392,8 +398,8 @@ static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t me
         positions[3 * (size_t)v + 1] = mesh->mVertices[v].y;
         positions[3 * (size_t)v + 2] = mesh->mVertices[v].z;
         if (uv) {
-            uv[2 * (size_t)v] = mesh->mTextureCoords[0][v].x;
-            uv[2 * (size_t)v + 1] = mesh->mTextureCoords[0][v].y;
+            uv[2 * (size_t)v] = coords[v].x;
+            uv[2 * (size_t)v + 1] = coords[v].y;
         }
     }
     uint32_t nt = 0;
@@ -417,9 +423,10 @@ done:
 
 /* Which scene material each Assimp mesh gets: the file's own through material_map, or one for all. */
 typedef struct import_materials {
-    const uint32_t *map; /* per Assimp material, or NULL */
-    uint32_t count;      /* entries of map */
-    uint32_t all;        /* UINT32_MAX, or the material every mesh gets */
+    const uint32_t *map;   /* per Assimp material, or NULL */
+    const uint8_t *uv_set; /* per Assimp material: its texture's coordinate set, or NULL */
+    uint32_t count;        /* entries of map */
+    uint32_t all;          /* UINT32_MAX, or the material every mesh gets */
 } import_materials;
 
 static uint32_t material_for(const import_materials *mats, const struct aiMesh *mesh)
@@ -427,6 +434,14 @@ static uint32_t material_for(const import_materials *mats, const struct aiMesh *
     if (mats->all != UINT32_MAX)
         return mats->all;
     return mesh->mMaterialIndex < mats->count ? mats->map[mesh->mMaterialIndex] : mats->map[0]; /* first */
+}
+
+/* The texture coordinate set a mesh's material reads (0 with a material for all meshes). */
+static unsigned uv_set_for(const import_materials *mats, const struct aiMesh *mesh)
+{
+    if (mats->all != UINT32_MAX || !mats->uv_set)
+        return 0;
+    return mesh->mMaterialIndex < mats->count ? mats->uv_set[mesh->mMaterialIndex] : mats->uv_set[0];
 }
 
 /* Imports every mesh the nodes below node place, each through its node's transform times parent (the
@@ -448,7 +463,8 @@ static scene_result import_node(scene *s, const struct aiScene *ai, const struct
             s->repairs.non_triangles_dropped += mesh->mNumFaces;
             continue;
         }
-        rc = import_mesh(s, mesh, node->mMeshes[i], material_for(mats, mesh), world, path, err);
+        rc = import_mesh(s, mesh, node->mMeshes[i], material_for(mats, mesh), uv_set_for(mats, mesh), world,
+                         path, err);
     }
     for (uint32_t i = 0; rc == SCENE_OK && i < node->mNumChildren; i++)
         rc = import_node(s, ai, node->mChildren[i], world, mats, path, depth + 1, err);
@@ -579,6 +595,7 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
     char model_dir[512];
     folder_of(path, model_dir, sizeof model_dir);
     uint32_t *material_map = NULL;
+    uint8_t *uv_sets = NULL;
     uint32_t override_index = UINT32_MAX;
     if (override) {
         override_index = scene__add_material(s, override, err);
@@ -586,10 +603,12 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
             rc = SCENE_ERR_NOMEM;
     } else {
         material_map = malloc(sizeof(uint32_t) * (ai->mNumMaterials ? ai->mNumMaterials : 1));
-        if (!material_map)
+        uv_sets = malloc(ai->mNumMaterials ? ai->mNumMaterials : 1);
+        if (!material_map || !uv_sets)
             rc = scene__fail(err, SCENE_ERR_NOMEM, "%s: out of memory", path);
         for (uint32_t m = 0; rc == SCENE_OK && m < ai->mNumMaterials; m++)
-            rc = import_material(s, ai, ai->mMaterials[m], path, model_dir, &material_map[m], err);
+            rc = import_material(s, ai, ai->mMaterials[m], path, model_dir, &material_map[m], &uv_sets[m],
+                                 err);
         if (rc == SCENE_OK && ai->mNumMaterials == 0) {
             scene_material grey = {.diffuse = {0.7f, 0.7f, 0.7f}, .texture = -1, .name = "default"};
             override_index = scene__add_material(s, &grey, err);
@@ -599,7 +618,8 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
     }
     uint32_t before = s->triangle_count;
     scene_repairs repairs_before = s->repairs;
-    import_materials mats = {.map = material_map, .count = ai->mNumMaterials, .all = override_index};
+    import_materials mats = {
+        .map = material_map, .uv_set = uv_sets, .count = ai->mNumMaterials, .all = override_index};
     if (mirrored && rc == SCENE_OK)
         rc = import_node(s, ai, ai->mRootNode, xform ? xform : scene__identity_matrix, &mats, path, 0, err);
     for (uint32_t i = 0; !mirrored && rc == SCENE_OK && i < ai->mNumMeshes; i++) {
@@ -608,7 +628,7 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
             s->repairs.non_triangles_dropped += mesh->mNumFaces;
             continue;
         }
-        rc = import_mesh(s, mesh, i, material_for(&mats, mesh), xform, path, err);
+        rc = import_mesh(s, mesh, i, material_for(&mats, mesh), uv_set_for(&mats, mesh), xform, path, err);
     }
     if (rc == SCENE_OK && s->triangle_count == before) {
         char lost[160];
@@ -623,6 +643,7 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
             (unsigned long long)(s->repairs.degenerate_skipped - repairs_before.degenerate_skipped), lost);
     }
     free(material_map);
+    free(uv_sets);
     aiReleaseImport(ai);
     return rc;
 }

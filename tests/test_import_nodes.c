@@ -4,6 +4,7 @@
  * with a message when assimp-testmodels is absent). */
 #include "test_util.h"
 
+#include "image.h"
 #include "scene_internal.h"
 
 #include <assimp/cimport.h>
@@ -361,6 +362,57 @@ static void test_glb_embedded_texture(void **state)
     scene_free(b);
 }
 
+/* glTF's texCoord: a base-colour texture that reads TEXCOORD_1. The texture is 2 x 1 texels, red then green;
+ * every corner of the quad has u = 0.25 in set 0 (the red texel's centre) and u = 0.75 in set 1 (the green
+ * one's), so the albedo is green when set 1 is read. Before, set 0 was always read: red. */
+static void test_gltf_texcoord_set_1(void **state)
+{
+    (void)state;
+    const uint8_t texels[6] = {255, 0, 0, 0, 255, 0};
+    char msg[256];
+    assert_int_equal(scene_image_write_u8(fxt_tmp_path("red_green.png"), 2, 1, 3, texels, msg, sizeof msg),
+                     0);
+    const float positions[4][3] = {{0, 0, 0}, {1, 0, 0}, {1, 0, -1}, {0, 0, -1}};
+    const float uv0[4][2] = {{0.25f, 0.5f}, {0.25f, 0.5f}, {0.25f, 0.5f}, {0.25f, 0.5f}};
+    const float uv1[4][2] = {{0.75f, 0.5f}, {0.75f, 0.5f}, {0.75f, 0.5f}, {0.75f, 0.5f}};
+    const uint16_t indices[6] = {0, 1, 2, 0, 2, 3};
+    FILE *bin = fopen(fxt_tmp_path("quad_uv.bin"), "wb");
+    assert_non_null(bin);
+    assert_int_equal(fwrite(positions, sizeof positions, 1, bin), 1);
+    assert_int_equal(fwrite(uv0, sizeof uv0, 1, bin), 1);
+    assert_int_equal(fwrite(uv1, sizeof uv1, 1, bin), 1);
+    assert_int_equal(fwrite(indices, sizeof indices, 1, bin), 1);
+    fclose(bin);
+    const char *path = fxt_write_file(
+        "quad_uv.gltf",
+        "{\"asset\":{\"version\":\"2.0\"},\"scene\":0,\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}],"
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0,\"TEXCOORD_0\":1,\"TEXCOORD_1\":2},"
+        "\"indices\":3,\"material\":0}]}],"
+        "\"materials\":[{\"pbrMetallicRoughness\":{\"baseColorTexture\":{\"index\":0,\"texCoord\":1},"
+        "\"metallicFactor\":0}}],"
+        "\"textures\":[{\"source\":0}],\"images\":[{\"uri\":\"red_green.png\"}],"
+        "\"buffers\":[{\"byteLength\":124,\"uri\":\"quad_uv.bin\"}],"
+        "\"bufferViews\":[{\"buffer\":0,\"byteOffset\":0,\"byteLength\":48},"
+        "{\"buffer\":0,\"byteOffset\":48,\"byteLength\":32},{\"buffer\":0,\"byteOffset\":80,\"byteLength\":"
+        "32},"
+        "{\"buffer\":0,\"byteOffset\":112,\"byteLength\":12}],"
+        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":4,\"type\":\"VEC3\","
+        "\"min\":[0,0,-1],\"max\":[1,0,0]},{\"bufferView\":1,\"componentType\":5126,\"count\":4,\"type\":"
+        "\"VEC2\"},"
+        "{\"bufferView\":2,\"componentType\":5126,\"count\":4,\"type\":\"VEC2\"},"
+        "{\"bufferView\":3,\"componentType\":5123,\"count\":6,\"type\":\"SCALAR\"}]}");
+    scene *s = load_ok(path);
+    assert_int_equal(s->texture_count, 1);
+    for (uint32_t t = 0; t < s->triangle_count; t++) {
+        float rgb[3];
+        scene_albedo(s, t, 0.3f, 0.3f, rgb);
+        if (!(rgb[0] < 0.01f && rgb[1] > 0.99f && rgb[2] < 0.01f))
+            fail_msg("triangle %u: albedo (%g, %g, %g), expected green (0, 1, 0) from TEXCOORD_1", t,
+                     (double)rgb[0], (double)rgb[1], (double)rgb[2]);
+    }
+    scene_free(s);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -370,6 +422,7 @@ int main(void)
         cmocka_unit_test(test_gltf_lights_and_camera),
         cmocka_unit_test(test_collada_lights_kept_and_refused),
         cmocka_unit_test(test_glb_embedded_texture),
+        cmocka_unit_test(test_gltf_texcoord_set_1),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
