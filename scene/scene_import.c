@@ -471,6 +471,49 @@ static scene_result import_node(scene *s, const struct aiScene *ai, const struct
     return rc;
 }
 
+/* What fxcache leaves out of a file's materials, one warning line each: vertex colours (fxcache renders the
+ * materials' colours and textures; glTF's COLOR_0 multiplies the base colour, a PLY scan's colours are its
+ * albedo), and a texture the file clamps or mirrors (glTF's CLAMP_TO_EDGE, MIRRORED_REPEAT) where a mesh's
+ * coordinates leave 0..1 (fxcache repeats every texture; inside 0..1 the modes agree). */
+static void warn_left_out(const struct aiScene *ai, const char *path)
+{
+    uint32_t coloured = 0;
+    for (uint32_t i = 0; i < ai->mNumMeshes; i++)
+        coloured += ai->mMeshes[i]->mColors[0] != NULL;
+    if (coloured)
+        fprintf(
+            stderr,
+            "fxcache: warning: %s: %u mesh(es) carry vertex colours, which fxcache does not use (it renders "
+            "the materials' colours and textures)\n",
+            path, coloured);
+    for (uint32_t m = 0; m < ai->mNumMaterials; m++) {
+        struct aiString tex;
+        unsigned uv_set = 0;
+        enum aiTextureMapMode modes[2] = {aiTextureMapMode_Wrap, aiTextureMapMode_Wrap};
+        if (aiGetMaterialTextureCount(ai->mMaterials[m], aiTextureType_DIFFUSE) == 0 ||
+            aiGetMaterialTexture(ai->mMaterials[m], aiTextureType_DIFFUSE, 0, &tex, NULL, &uv_set, NULL, NULL,
+                                 modes, NULL) != aiReturn_SUCCESS ||
+            uv_set >= AI_MAX_NUMBER_OF_TEXTURECOORDS ||
+            (modes[0] == aiTextureMapMode_Wrap && modes[1] == aiTextureMapMode_Wrap))
+            continue;
+        bool outside = false;
+        for (uint32_t i = 0; i < ai->mNumMeshes && !outside; i++) {
+            const struct aiMesh *mesh = ai->mMeshes[i];
+            const struct aiVector3D *uv = mesh->mTextureCoords[uv_set];
+            for (uint32_t v = 0; mesh->mMaterialIndex == m && uv && v < mesh->mNumVertices && !outside; v++)
+                outside =
+                    (modes[0] != aiTextureMapMode_Wrap && !(uv[v].x >= -1e-4f && uv[v].x <= 1 + 1e-4f)) ||
+                    (modes[1] != aiTextureMapMode_Wrap && !(uv[v].y >= -1e-4f && uv[v].y <= 1 + 1e-4f));
+        }
+        if (outside)
+            fprintf(
+                stderr,
+                "fxcache: warning: %s: texture '%s' is to be clamped or mirrored where its coordinates leave "
+                "0..1, and some do; fxcache repeats it\n",
+                path, tex.data);
+    }
+}
+
 /* scene__import_file, and with lights (non-NULL) also the file's lights and camera, which it then describes
  * (scene__import_file_lit). */
 static scene_result import_file(scene *s, const char *path, const double *xform,
@@ -592,6 +635,8 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
         return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s", path,
                            assimp_error(why, sizeof why));
 
+    if (!override)
+        warn_left_out(ai, path);
     char model_dir[512];
     folder_of(path, model_dir, sizeof model_dir);
     uint32_t *material_map = NULL;
