@@ -160,6 +160,17 @@ static const char *light_type_name(enum aiLightSourceType type)
     }
 }
 
+/* The name of the Assimp reader that read the file ("glTF2 Importer", ...), or "". */
+static const char *reader_of(const struct aiScene *ai)
+{
+    const struct aiMetadata *meta = ai->mMetaData;
+    for (uint32_t i = 0; meta && i < meta->mNumProperties; i++)
+        if (strcmp(meta->mKeys[i].data, "SourceAsset_Format") == 0 && meta->mValues[i].mType == AI_AISTRING &&
+            meta->mValues[i].mData)
+            return ((const struct aiString *)meta->mValues[i].mData)->data;
+    return "";
+}
+
 /* Converts one light. Returns SCENE_OK with *added or *skipped set; an error only from scene__add_light. */
 static scene_result import_light(scene *s, const struct aiScene *ai, const struct aiLight *light,
                                  const char *path, double unit_scale, scene_file_lights *out,
@@ -171,6 +182,11 @@ static scene_result import_light(scene *s, const struct aiScene *ai, const struc
     char detail[160] = "";
     scene_light l = {0};
     double position[3] = {0, 0, 0};
+    /* fxcache shades a surface of albedo a under a light of intensity I at angle t as a I cos t (I / d^2 for a
+     * point light), as classic light colours mean (Collada, FBX, 3DS: a white light of 1 shows a surface's
+     * albedo). glTF's lights are photometric: a sun of E lux gives radiance a E cos t / pi, a lamp of I cd
+     * a I cos t / (pi d^2), so their intensities are divided by pi. */
+    double photometric = strcmp(reader_of(ai), "glTF2 Importer") == 0 ? 1.0 / M_PI : 1.0;
     if (light->mType == aiLightSource_AMBIENT) {
         float color[3], intensity;
         if (!split_colour(&light->mColorAmbient, color, &intensity))
@@ -192,6 +208,7 @@ static scene_result import_light(scene *s, const struct aiScene *ai, const struc
     } else if (!split_colour(&light->mColorDiffuse, l.color, &l.intensity)) {
         why = "it has no intensity";
     } else if (light->mType == aiLightSource_DIRECTIONAL) {
+        l.intensity *= photometric;
         double d[3] = {light->mDirection.x, light->mDirection.y, light->mDirection.z}, dw[3];
         transform(world, d, 0, dw);
         if (!normalize(dw))
@@ -209,7 +226,7 @@ static scene_result import_light(scene *s, const struct aiScene *ai, const struc
             why = "fxcache's point lights fall off as 1/d^2 only";
             snprintf(detail, sizeof detail, " (its falloff is 1 / (%g + %g d + %g d^2))", c, lin, q);
         } else {
-            double intensity = l.intensity * unit_scale * unit_scale / q;
+            double intensity = l.intensity * photometric * unit_scale * unit_scale / q;
             if (!(intensity <= 3.0e38))
                 why = "its intensity is beyond a float";
             l.type = SCENE_LIGHT_POINT;
@@ -230,17 +247,6 @@ static scene_result import_light(scene *s, const struct aiScene *ai, const struc
     if (rc == SCENE_OK)
         out->lights++;
     return rc;
-}
-
-/* The name of the Assimp reader that read the file ("glTF2 Importer", ...), or "". */
-static const char *reader_of(const struct aiScene *ai)
-{
-    const struct aiMetadata *meta = ai->mMetaData;
-    for (uint32_t i = 0; meta && i < meta->mNumProperties; i++)
-        if (strcmp(meta->mKeys[i].data, "SourceAsset_Format") == 0 && meta->mValues[i].mType == AI_AISTRING &&
-            meta->mValues[i].mData)
-            return ((const struct aiString *)meta->mValues[i].mData)->data;
-    return "";
 }
 
 /* The first camera as the scene's default camera, looking at a target as far as the geometry's centre. */

@@ -5,6 +5,7 @@
 #include "test_util.h"
 
 #include "image.h"
+#include "reference.h"
 #include "scene_internal.h"
 
 #include <assimp/cimport.h>
@@ -252,8 +253,8 @@ static scene *load_lit(const char *path, scene_file_lights *found)
 
 /* glTF's KHR_lights_punctual and a camera, against the file worked by hand: a directional light of colour
  * [1, 0.5, 0.25] x 2 on a node turned -45 degrees about x travels along R_x(-45) (0, 0, -1) = (0, -0.7071,
- * -0.7071); a point light of 5 cd on a node at (1, 2, 3) is a point light of intensity 5 there (1/d^2 in metres,
- * lux at 1 m); the spot light is left out (counted); the camera on a node at (0, 2, 8) turned -10 degrees about
+ * -0.7071) with intensity 2 / pi (a surface under E lux shows a E cos t / pi); a point light of 5 cd on a node at
+ * (1, 2, 3) is a point light of intensity 5 / pi there; the spot light is left out (counted); the camera on a node at (0, 2, 8) turned -10 degrees about
  * x stands there (Assimp 5.2.5 also copies the translation into the camera, which its pre-transform step then
  * applied twice: (0, 5.36, 15.53)) and looks along (0, -sin 10, -cos 10) with glTF's yfov of 0.8 rad. */
 static void test_gltf_lights_and_camera(void **state)
@@ -286,7 +287,9 @@ static void test_gltf_lights_and_camera(void **state)
     assert_int_equal(s->light_count, 2);
     const scene_light *sun = &s->lights[0], *lamp = &s->lights[1];
     assert_int_equal(sun->type, SCENE_LIGHT_DIRECTIONAL);
-    const float sun_dir[3] = {0, -0.70710678f, -0.70710678f}, sun_rgb[3] = {2, 1, 0.5f};
+    /* glTF's lux and candela are photometric: fxcache's intensity is E / pi (radiance a E cos t / pi). */
+    const float pi = (float)M_PI;
+    const float sun_dir[3] = {0, -0.70710678f, -0.70710678f}, sun_rgb[3] = {2 / pi, 1 / pi, 0.5f / pi};
     for (int k = 0; k < 3; k++) {
         assert_true(fabsf(sun->direction[k] - sun_dir[k]) < 1e-5f);
         assert_true(fabsf(sun->color[k] * sun->intensity - sun_rgb[k]) < 1e-5f);
@@ -295,7 +298,7 @@ static void test_gltf_lights_and_camera(void **state)
     const double lamp_at[3] = {1, 2, 3};
     for (int k = 0; k < 3; k++) {
         assert_true(fabs(lamp->position[k] + s->origin[k] - lamp_at[k]) < 1e-5);
-        assert_true(fabsf(lamp->color[k] * lamp->intensity - 5.0f) < 1e-5f);
+        assert_true(fabsf(lamp->color[k] * lamp->intensity - 5.0f / pi) < 1e-5f);
     }
     const double cam_at[3] = {0, 2, 8}, cam_dir[3] = {0, -sin(10 * M_PI / 180), -cos(10 * M_PI / 180)};
     double len = 0, to[3];
@@ -308,6 +311,64 @@ static void test_gltf_lights_and_camera(void **state)
     for (int k = 0; k < 3; k++)
         assert_true(fabs(to[k] / len - cam_dir[k]) < 1e-5);
     assert_true(fabs(s->camera_fov_deg - 0.8 * 180 / M_PI) < 1e-3);
+    scene_free(s);
+}
+
+/* The closed form through the reference renderer: a glTF sun of E = 3 lux whose light travels along
+ * R_x(-60) (0, 0, -1) = (0, -0.866, -0.5), on the top of a slab of base colour a = 0.5 (no sky: glTF has
+ * none), shows radiance a E cos t / pi = 0.5 x 3 x 0.866 / pi = 0.4135 at every pixel (each shadow ray reaches
+ * the sun; nothing else is there to bounce light back). Before the light was read, the file got fxcache's
+ * default sun and sky. */
+static void test_gltf_sun_closed_form(void **state)
+{
+    (void)state;
+    const char *path = write_cube_gltf(
+        "sun.gltf",
+        "[{\"mesh\":0,\"name\":\"slab\",\"scale\":[40,1,40],\"translation\":[0,-0.5,0]},"
+        "{\"name\":\"sunnode\",\"rotation\":[-0.5,0,0,0.8660254],"
+        "\"extensions\":{\"KHR_lights_punctual\":{\"light\":0}}}]",
+        "[0,1]",
+        "\"extensionsUsed\":[\"KHR_lights_punctual\"],\"extensions\":{\"KHR_lights_punctual\":{\"lights\":["
+        "{\"type\":\"directional\",\"intensity\":3.0}]}}");
+    scene_file_lights found;
+    scene *s = load_lit(path, &found);
+    assert_int_equal(found.lights, 1);
+    assert_true(s->sky_intensity == 0);
+    scene_error err = {0};
+    scene_rt *rt = scene_rt_create(s, NULL, &err);
+    assert_non_null(rt);
+    srv_ref_desc d = {.s = s, .rt = rt, .seed = 5, .threads = 2};
+    uint32_t n = 0;
+    const fx_effect *const *registry = fx_registry(&n);
+    bool needed[SRV_MAX_EFFECTS] = {false};
+    char why[SRV_MAX_EFFECTS][200];
+    fx_needs(registry, n, s, needed, why);
+    for (uint32_t e = 0; e < n; e++)
+        d.effect_on[e] = needed[e] && registry[e]->shade;
+    srv_ref *ref = NULL;
+    char msg[256];
+    if (srv_ref_create(&d, &ref, msg, sizeof msg) != FXC_OK)
+        fail_msg("srv_ref_create: %s", msg);
+    enum { W = 16, H = 9 };
+    static float radiance[W * H * 3], half0[W * H * 3], half1[W * H * 3], ao[W * H], shadow[W * H];
+    static uint8_t srgb[W * H * 3];
+    srv_ref_image out = {
+        .radiance = radiance, .half = {half0, half1}, .ao = ao, .shadow = shadow, .srgb = srgb};
+    srv_ref_stats stats;
+    srv_camera cam = {.position = {0, 3, 2.5f}, .target = {0, 0, 0}, .fov_deg = 60};
+    for (int k = 0; k < 3; k++) { /* the camera in the local frame */
+        cam.position[k] -= (float)s->origin[k];
+        cam.target[k] -= (float)s->origin[k];
+    }
+    assert_int_equal(srv_ref_render(ref, &cam, W, H, 0, &out, &stats, NULL, NULL), FXC_OK);
+    double expected = 0.5 * 3.0 * cos(30 * M_PI / 180) / M_PI, worst = 0;
+    for (size_t i = 0; i < (size_t)W * H * 3; i++)
+        worst = fmax(worst, fabs(radiance[i] - expected) / expected);
+    if (worst > 1e-4)
+        fail_msg("worst relative error %.3g against a E cos t / pi = %.6f (pixel 0: %.6f)", worst, expected,
+                 (double)radiance[0]);
+    srv_ref_free(ref);
+    scene_rt_free(rt);
     scene_free(s);
 }
 
@@ -420,6 +481,7 @@ int main(void)
         cmocka_unit_test(test_fbx_centimetres_become_metres),
         cmocka_unit_test(test_collada_unit_and_up_axis),
         cmocka_unit_test(test_gltf_lights_and_camera),
+        cmocka_unit_test(test_gltf_sun_closed_form),
         cmocka_unit_test(test_collada_lights_kept_and_refused),
         cmocka_unit_test(test_glb_embedded_texture),
         cmocka_unit_test(test_gltf_texcoord_set_1),
