@@ -474,6 +474,27 @@ static void test_gltf_texcoord_set_1(void **state)
     scene_free(s);
 }
 
+/* What fxcache leaves out of a file's materials is said in one warning line each at load: vertex colours
+ * (Assimp's kwxport_test_vcolors.dae, three coloured meshes) and a texture mirrored where its coordinates
+ * leave 0..1 (BoxTextured.gltf: MIRRORED_REPEAT over u in 0..6), and neither where it does not apply. */
+static void test_left_out_warned(void **state)
+{
+    (void)state;
+    const char *colours = ASSIMP_MODELS "/Collada/kwxport_test_vcolors.dae";
+    const char *mirrored = ASSIMP_MODELS "/glTF2/BoxTextured-glTF/BoxTextured.gltf";
+    if (access(colours, R_OK) != 0 || access(mirrored, R_OK) != 0) {
+        print_message("skipped: %s or %s is absent (Debian's assimp-testmodels)\n", colours, mirrored);
+        skip();
+    }
+    static char out[8192], err[8192];
+    assert_int_equal(fxt_run_clif(out, sizeof out, err, sizeof err, "scene-info '%s'", colours), 0);
+    assert_non_null(strstr(err, "3 mesh(es) carry vertex colours, which fxcache does not use"));
+    assert_null(strstr(err, "clamped or mirrored"));
+    assert_int_equal(fxt_run_clif(out, sizeof out, err, sizeof err, "scene-info '%s'", mirrored), 0);
+    assert_non_null(strstr(err, "texture 'CesiumLogoFlat.png' is to be clamped or mirrored"));
+    assert_null(strstr(err, "vertex colours"));
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -485,6 +506,7 @@ int main(void)
         cmocka_unit_test(test_collada_lights_kept_and_refused),
         cmocka_unit_test(test_glb_embedded_texture),
         cmocka_unit_test(test_gltf_texcoord_set_1),
+        cmocka_unit_test(test_left_out_warned),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
