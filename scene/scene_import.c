@@ -300,14 +300,57 @@ static int32_t add_embedded_texture(scene *s, const char *path, const char *name
     return scene__add_texture_rgb(s, label, tex->mWidth, tex->mHeight, rgb, err);
 }
 
+/* How a mesh reads its material's texture: which texture coordinate set, and whether u or v is halved (the
+ * material's texture was mirrored into one twice as wide or high: mirrored_texture()). */
+typedef struct import_uv {
+    uint8_t set;
+    bool half_u, half_v;
+} import_uv;
+
+/* A mirrored repeat (glTF's MIRRORED_REPEAT) of texture index `texture` along u and/or v, as a plain repeat:
+ * the texture followed by its mirror image, twice as wide (or high), read at half the coordinate. Bilinear
+ * filtering and the mip chain see the same texels as mirrored addressing would (the seam's two texels are
+ * the edge texel twice, as in a mirror), and texels per metre stay as they were. Returns the new texture's
+ * index (it takes the plain one's place when nothing else uses that), or -1 with err filled. */
+static int32_t mirrored_texture(scene *s, int32_t texture, bool mirror_u, bool mirror_v, scene_error *err)
+{
+    const scene_texture *src = &s->textures[texture];
+    uint32_t w = src->width, h = src->height, mw = mirror_u ? 2 * w : w, mh = mirror_v ? 2 * h : h;
+    float *rgb = malloc(sizeof(float) * 3 * (size_t)mw * mh);
+    char name[300];
+    snprintf(name, sizeof name, "%.250s (mirrored%s%s)", src->path, mirror_u ? " u" : "",
+             mirror_v ? " v" : "");
+    if (!rgb) {
+        scene__fail(err, SCENE_ERR_NOMEM, "%s: out of memory", name);
+        return -1;
+    }
+    for (uint32_t y = 0; y < mh; y++)
+        for (uint32_t x = 0; x < mw; x++) {
+            uint32_t sx = x < w ? x : 2 * w - 1 - x, sy = y < h ? y : 2 * h - 1 - y;
+            memcpy(rgb + 3 * ((size_t)y * mw + x), src->rgb + 3 * ((size_t)sy * w + sx), sizeof(float) * 3);
+        }
+    int32_t added = scene__add_texture_rgb(s, name, mw, mh, rgb, err);
+    /* The plain texture goes when it was loaded just now for this material and no other material uses it. */
+    bool used = (uint32_t)texture + 2 != s->texture_count;
+    for (uint32_t i = 0; i < s->material_count && !used; i++)
+        used = s->materials[i].texture == texture;
+    if (added < 0 || used)
+        return added;
+    for (uint32_t l = 0; l < s->textures[texture].levels; l++)
+        free(s->textures[texture].mip_rgb[l]);
+    s->textures[texture] = s->textures[added];
+    s->texture_count--;
+    return texture;
+}
+
 /* Converts one Assimp material into a scene material (its diffuse colour, emission and texture: a file
  * beside the model, or one the file holds). A texture that cannot be read is reported on stderr and counted;
  * the material keeps its colour. */
 static scene_result import_material(scene *s, const struct aiScene *ai, const struct aiMaterial *am,
                                     const char *path, const char *model_dir, uint32_t *out_index,
-                                    uint8_t *out_uv_set, scene_error *err)
+                                    import_uv *out_uv, scene_error *err)
 {
-    *out_uv_set = 0;
+    *out_uv = (import_uv){0};
     scene_material m = {.diffuse = {0.7f, 0.7f, 0.7f}, .texture = -1};
     struct aiString name;
     if (aiGetMaterialString(am, AI_MATKEY_NAME, &name) == aiReturn_SUCCESS)
@@ -335,11 +378,12 @@ static scene_result import_material(scene *s, const struct aiScene *ai, const st
     }
     struct aiString tex;
     unsigned uv_set = 0; /* which of the mesh's texture coordinate sets the texture uses (glTF's texCoord) */
+    enum aiTextureMapMode modes[2] = {aiTextureMapMode_Wrap, aiTextureMapMode_Wrap};
     if (aiGetMaterialTextureCount(am, aiTextureType_DIFFUSE) > 0 &&
-        aiGetMaterialTexture(am, aiTextureType_DIFFUSE, 0, &tex, NULL, &uv_set, NULL, NULL, NULL, NULL) ==
+        aiGetMaterialTexture(am, aiTextureType_DIFFUSE, 0, &tex, NULL, &uv_set, NULL, NULL, modes, NULL) ==
             aiReturn_SUCCESS &&
         tex.length > 0) {
-        *out_uv_set = uv_set < AI_MAX_NUMBER_OF_TEXTURECOORDS ? (uint8_t)uv_set : 0;
+        out_uv->set = uv_set < AI_MAX_NUMBER_OF_TEXTURECOORDS ? (uint8_t)uv_set : 0;
         char found[768];
         double t0 = scene__now_ms();
         const struct aiTexture *held = embedded_texture(ai, tex.data);
@@ -353,7 +397,16 @@ static scene_result import_material(scene *s, const struct aiScene *ai, const st
                 fprintf(stderr, "fxcache: warning: material '%s': %s (using its colour)\n", m.name,
                         tex_err.msg);
                 s->repairs.textures_missing++;
-            } else {
+            } else if (modes[0] == aiTextureMapMode_Mirror || modes[1] == aiTextureMapMode_Mirror) {
+                int32_t mirrored = mirrored_texture(s, m.texture, modes[0] == aiTextureMapMode_Mirror,
+                                                    modes[1] == aiTextureMapMode_Mirror, err);
+                if (mirrored < 0)
+                    return err ? err->code : SCENE_ERR_NOMEM;
+                m.texture = mirrored;
+                out_uv->half_u = modes[0] == aiTextureMapMode_Mirror;
+                out_uv->half_v = modes[1] == aiTextureMapMode_Mirror;
+            }
+            if (m.texture >= 0) {
                 /* The texture carries the colour; Assimp's 3DS and OBJ readers give a tint we keep. */
                 bool black = m.diffuse[0] == 0 && m.diffuse[1] == 0 && m.diffuse[2] == 0;
                 if (black)
@@ -375,8 +428,10 @@ static scene_result import_material(scene *s, const struct aiScene *ai, const st
 /* Appends one Assimp mesh (triangulated) through scene__add_mesh(), with its texture coordinates of set
  * uv_set (its material's texture's; set 0 when the mesh has no such set). */
 static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t mesh_number, uint32_t material,
-                                unsigned uv_set, const double *xform, const char *path, scene_error *err)
+                                import_uv uv_mode, const double *xform, const char *path, scene_error *err)
 {
+    unsigned uv_set = uv_mode.set;
+    float scale_u = uv_mode.half_u ? 0.5f : 1.0f, scale_v = uv_mode.half_v ? 0.5f : 1.0f;
     const struct aiVector3D *coords =
         mesh->mTextureCoords[uv_set] ? mesh->mTextureCoords[uv_set] : mesh->mTextureCoords[0];
     char name[160];
@@ -398,8 +453,8 @@ static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t me
         positions[3 * (size_t)v + 1] = mesh->mVertices[v].y;
         positions[3 * (size_t)v + 2] = mesh->mVertices[v].z;
         if (uv) {
-            uv[2 * (size_t)v] = coords[v].x;
-            uv[2 * (size_t)v + 1] = coords[v].y;
+            uv[2 * (size_t)v] = coords[v].x * scale_u;
+            uv[2 * (size_t)v + 1] = coords[v].y * scale_v;
         }
     }
     uint32_t nt = 0;
@@ -423,10 +478,10 @@ done:
 
 /* Which scene material each Assimp mesh gets: the file's own through material_map, or one for all. */
 typedef struct import_materials {
-    const uint32_t *map;   /* per Assimp material, or NULL */
-    const uint8_t *uv_set; /* per Assimp material: its texture's coordinate set, or NULL */
-    uint32_t count;        /* entries of map */
-    uint32_t all;          /* UINT32_MAX, or the material every mesh gets */
+    const uint32_t *map; /* per Assimp material, or NULL */
+    const import_uv *uv; /* per Assimp material: how its texture is read, or NULL */
+    uint32_t count;      /* entries of map */
+    uint32_t all;        /* UINT32_MAX, or the material every mesh gets */
 } import_materials;
 
 static uint32_t material_for(const import_materials *mats, const struct aiMesh *mesh)
@@ -436,12 +491,12 @@ static uint32_t material_for(const import_materials *mats, const struct aiMesh *
     return mesh->mMaterialIndex < mats->count ? mats->map[mesh->mMaterialIndex] : mats->map[0]; /* first */
 }
 
-/* The texture coordinate set a mesh's material reads (0 with a material for all meshes). */
-static unsigned uv_set_for(const import_materials *mats, const struct aiMesh *mesh)
+/* How a mesh reads its material's texture (set 0, as it is, with a material for all meshes). */
+static import_uv uv_for(const import_materials *mats, const struct aiMesh *mesh)
 {
-    if (mats->all != UINT32_MAX || !mats->uv_set)
-        return 0;
-    return mesh->mMaterialIndex < mats->count ? mats->uv_set[mesh->mMaterialIndex] : mats->uv_set[0];
+    if (mats->all != UINT32_MAX || !mats->uv)
+        return (import_uv){0};
+    return mesh->mMaterialIndex < mats->count ? mats->uv[mesh->mMaterialIndex] : mats->uv[0];
 }
 
 /* Imports every mesh the nodes below node place, each through its node's transform times parent (the
@@ -463,8 +518,8 @@ static scene_result import_node(scene *s, const struct aiScene *ai, const struct
             s->repairs.non_triangles_dropped += mesh->mNumFaces;
             continue;
         }
-        rc = import_mesh(s, mesh, node->mMeshes[i], material_for(mats, mesh), uv_set_for(mats, mesh), world,
-                         path, err);
+        rc = import_mesh(s, mesh, node->mMeshes[i], material_for(mats, mesh), uv_for(mats, mesh), world, path,
+                         err);
     }
     for (uint32_t i = 0; rc == SCENE_OK && i < node->mNumChildren; i++)
         rc = import_node(s, ai, node->mChildren[i], world, mats, path, depth + 1, err);
@@ -473,8 +528,8 @@ static scene_result import_node(scene *s, const struct aiScene *ai, const struct
 
 /* What fxcache leaves out of a file's materials, one warning line each: vertex colours (fxcache renders the
  * materials' colours and textures; glTF's COLOR_0 multiplies the base colour, a PLY scan's colours are its
- * albedo), and a texture the file clamps or mirrors (glTF's CLAMP_TO_EDGE, MIRRORED_REPEAT) where a mesh's
- * coordinates leave 0..1 (fxcache repeats every texture; inside 0..1 the modes agree). */
+ * albedo), and a texture the file clamps (glTF's CLAMP_TO_EDGE) where a mesh's coordinates leave 0..1
+ * (fxcache repeats textures, or mirrors them: mirrored_texture(); inside 0..1 the modes agree). */
 static void warn_left_out(const struct aiScene *ai, const char *path)
 {
     uint32_t coloured = 0;
@@ -493,23 +548,27 @@ static void warn_left_out(const struct aiScene *ai, const char *path)
         if (aiGetMaterialTextureCount(ai->mMaterials[m], aiTextureType_DIFFUSE) == 0 ||
             aiGetMaterialTexture(ai->mMaterials[m], aiTextureType_DIFFUSE, 0, &tex, NULL, &uv_set, NULL, NULL,
                                  modes, NULL) != aiReturn_SUCCESS ||
-            uv_set >= AI_MAX_NUMBER_OF_TEXTURECOORDS ||
-            (modes[0] == aiTextureMapMode_Wrap && modes[1] == aiTextureMapMode_Wrap))
+            uv_set >= AI_MAX_NUMBER_OF_TEXTURECOORDS)
+            continue;
+        bool clamped
+            [2]; /* clamped to the edge, or a decal: not repeated (wrap) nor mirrored (import_material) */
+        for (int k = 0; k < 2; k++)
+            clamped[k] = modes[k] != aiTextureMapMode_Wrap && modes[k] != aiTextureMapMode_Mirror;
+        if (!clamped[0] && !clamped[1])
             continue;
         bool outside = false;
         for (uint32_t i = 0; i < ai->mNumMeshes && !outside; i++) {
             const struct aiMesh *mesh = ai->mMeshes[i];
             const struct aiVector3D *uv = mesh->mTextureCoords[uv_set];
             for (uint32_t v = 0; mesh->mMaterialIndex == m && uv && v < mesh->mNumVertices && !outside; v++)
-                outside =
-                    (modes[0] != aiTextureMapMode_Wrap && !(uv[v].x >= -1e-4f && uv[v].x <= 1 + 1e-4f)) ||
-                    (modes[1] != aiTextureMapMode_Wrap && !(uv[v].y >= -1e-4f && uv[v].y <= 1 + 1e-4f));
+                outside = (clamped[0] && !(uv[v].x >= -1e-4f && uv[v].x <= 1 + 1e-4f)) ||
+                          (clamped[1] && !(uv[v].y >= -1e-4f && uv[v].y <= 1 + 1e-4f));
         }
         if (outside)
             fprintf(
                 stderr,
-                "fxcache: warning: %s: texture '%s' is to be clamped or mirrored where its coordinates leave "
-                "0..1, and some do; fxcache repeats it\n",
+                "fxcache: warning: %s: texture '%s' is to be clamped where its coordinates leave 0..1, and "
+                "some do; fxcache repeats it\n",
                 path, tex.data);
     }
 }
@@ -640,7 +699,7 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
     char model_dir[512];
     folder_of(path, model_dir, sizeof model_dir);
     uint32_t *material_map = NULL;
-    uint8_t *uv_sets = NULL;
+    import_uv *uv_modes = NULL;
     uint32_t override_index = UINT32_MAX;
     if (override) {
         override_index = scene__add_material(s, override, err);
@@ -648,11 +707,11 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
             rc = SCENE_ERR_NOMEM;
     } else {
         material_map = malloc(sizeof(uint32_t) * (ai->mNumMaterials ? ai->mNumMaterials : 1));
-        uv_sets = malloc(ai->mNumMaterials ? ai->mNumMaterials : 1);
-        if (!material_map || !uv_sets)
+        uv_modes = malloc(sizeof *uv_modes * (ai->mNumMaterials ? ai->mNumMaterials : 1));
+        if (!material_map || !uv_modes)
             rc = scene__fail(err, SCENE_ERR_NOMEM, "%s: out of memory", path);
         for (uint32_t m = 0; rc == SCENE_OK && m < ai->mNumMaterials; m++)
-            rc = import_material(s, ai, ai->mMaterials[m], path, model_dir, &material_map[m], &uv_sets[m],
+            rc = import_material(s, ai, ai->mMaterials[m], path, model_dir, &material_map[m], &uv_modes[m],
                                  err);
         if (rc == SCENE_OK && ai->mNumMaterials == 0) {
             scene_material grey = {.diffuse = {0.7f, 0.7f, 0.7f}, .texture = -1, .name = "default"};
@@ -664,7 +723,7 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
     uint32_t before = s->triangle_count;
     scene_repairs repairs_before = s->repairs;
     import_materials mats = {
-        .map = material_map, .uv_set = uv_sets, .count = ai->mNumMaterials, .all = override_index};
+        .map = material_map, .uv = uv_modes, .count = ai->mNumMaterials, .all = override_index};
     if (mirrored && rc == SCENE_OK)
         rc = import_node(s, ai, ai->mRootNode, xform ? xform : scene__identity_matrix, &mats, path, 0, err);
     for (uint32_t i = 0; !mirrored && rc == SCENE_OK && i < ai->mNumMeshes; i++) {
@@ -673,7 +732,7 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
             s->repairs.non_triangles_dropped += mesh->mNumFaces;
             continue;
         }
-        rc = import_mesh(s, mesh, i, material_for(&mats, mesh), uv_set_for(&mats, mesh), xform, path, err);
+        rc = import_mesh(s, mesh, i, material_for(&mats, mesh), uv_for(&mats, mesh), xform, path, err);
     }
     if (rc == SCENE_OK && s->triangle_count == before) {
         char lost[160];
@@ -688,7 +747,7 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
             (unsigned long long)(s->repairs.degenerate_skipped - repairs_before.degenerate_skipped), lost);
     }
     free(material_map);
-    free(uv_sets);
+    free(uv_modes);
     aiReleaseImport(ai);
     return rc;
 }

@@ -414,28 +414,31 @@ static void test_glb_embedded_texture(void **state)
     assert_int_equal(a->texture_count, 1);
     assert_int_equal(b->texture_count, 1);
     assert_int_equal(a->repairs.textures_missing, 0);
+    /* The twin's sampler mirrors u (MIRRORED_REPEAT), so its texture is the PNG followed by its mirror
+     * image: its left half row by row is the PNG. */
     const scene_texture *ta = &a->textures[0], *tb = &b->textures[0];
-    assert_int_equal(ta->width, tb->width);
+    assert_int_equal(2 * ta->width, tb->width);
     assert_int_equal(ta->height, tb->height);
-    assert_memory_equal(ta->rgb, tb->rgb, sizeof(float) * 3 * (size_t)ta->width * ta->height);
+    for (uint32_t y = 0; y < ta->height; y++)
+        assert_memory_equal(ta->rgb + 3 * (size_t)y * ta->width, tb->rgb + 3 * (size_t)y * tb->width,
+                            sizeof(float) * 3 * ta->width);
     assert_int_equal(a->materials[a->meshes[0].material].texture, 0);
     scene_free(a);
     scene_free(b);
 }
 
-/* glTF's texCoord: a base-colour texture that reads TEXCOORD_1. The texture is 2 x 1 texels, red then green;
- * every corner of the quad has u = 0.25 in set 0 (the red texel's centre) and u = 0.75 in set 1 (the green
- * one's), so the albedo is green when set 1 is read. Before, set 0 was always read: red. */
-static void test_gltf_texcoord_set_1(void **state)
+/* A unit quad whose base-colour texture is 2 x 1 texels, red then green (red_green.png beside it), read from
+ * texture coordinate set `texcoord` with the sampler's wrapS `wrap_s` (10497 repeat, 33648 mirrored repeat,
+ * 33071 clamp); every corner has u = u0 in set 0 and u = u1 in set 1 (v = 0.5). Returns the .gltf path. */
+static const char *write_quad_gltf(const char *name, float u0, float u1, int texcoord, int wrap_s)
 {
-    (void)state;
     const uint8_t texels[6] = {255, 0, 0, 0, 255, 0};
     char msg[256];
     assert_int_equal(scene_image_write_u8(fxt_tmp_path("red_green.png"), 2, 1, 3, texels, msg, sizeof msg),
                      0);
     const float positions[4][3] = {{0, 0, 0}, {1, 0, 0}, {1, 0, -1}, {0, 0, -1}};
-    const float uv0[4][2] = {{0.25f, 0.5f}, {0.25f, 0.5f}, {0.25f, 0.5f}, {0.25f, 0.5f}};
-    const float uv1[4][2] = {{0.75f, 0.5f}, {0.75f, 0.5f}, {0.75f, 0.5f}, {0.75f, 0.5f}};
+    const float uv0[4][2] = {{u0, 0.5f}, {u0, 0.5f}, {u0, 0.5f}, {u0, 0.5f}};
+    const float uv1[4][2] = {{u1, 0.5f}, {u1, 0.5f}, {u1, 0.5f}, {u1, 0.5f}};
     const uint16_t indices[6] = {0, 1, 2, 0, 2, 3};
     FILE *bin = fopen(fxt_tmp_path("quad_uv.bin"), "wb");
     assert_non_null(bin);
@@ -444,55 +447,87 @@ static void test_gltf_texcoord_set_1(void **state)
     assert_int_equal(fwrite(uv1, sizeof uv1, 1, bin), 1);
     assert_int_equal(fwrite(indices, sizeof indices, 1, bin), 1);
     fclose(bin);
-    const char *path = fxt_write_file(
-        "quad_uv.gltf",
+    static char text[4096];
+    snprintf(
+        text, sizeof text,
         "{\"asset\":{\"version\":\"2.0\"},\"scene\":0,\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}],"
         "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0,\"TEXCOORD_0\":1,\"TEXCOORD_1\":2},"
         "\"indices\":3,\"material\":0}]}],"
-        "\"materials\":[{\"pbrMetallicRoughness\":{\"baseColorTexture\":{\"index\":0,\"texCoord\":1},"
+        "\"materials\":[{\"pbrMetallicRoughness\":{\"baseColorTexture\":{\"index\":0,\"texCoord\":%d},"
         "\"metallicFactor\":0}}],"
-        "\"textures\":[{\"source\":0}],\"images\":[{\"uri\":\"red_green.png\"}],"
+        "\"samplers\":[{\"wrapS\":%d,\"wrapT\":10497}],"
+        "\"textures\":[{\"source\":0,\"sampler\":0}],\"images\":[{\"uri\":\"red_green.png\"}],"
         "\"buffers\":[{\"byteLength\":124,\"uri\":\"quad_uv.bin\"}],"
         "\"bufferViews\":[{\"buffer\":0,\"byteOffset\":0,\"byteLength\":48},"
-        "{\"buffer\":0,\"byteOffset\":48,\"byteLength\":32},{\"buffer\":0,\"byteOffset\":80,\"byteLength\":"
-        "32},"
-        "{\"buffer\":0,\"byteOffset\":112,\"byteLength\":12}],"
+        "{\"buffer\":0,\"byteOffset\":48,\"byteLength\":32},{\"buffer\":0,\"byteOffset\":80,"
+        "\"byteLength\":32},{\"buffer\":0,\"byteOffset\":112,\"byteLength\":12}],"
         "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":4,\"type\":\"VEC3\","
-        "\"min\":[0,0,-1],\"max\":[1,0,0]},{\"bufferView\":1,\"componentType\":5126,\"count\":4,\"type\":"
-        "\"VEC2\"},"
-        "{\"bufferView\":2,\"componentType\":5126,\"count\":4,\"type\":\"VEC2\"},"
-        "{\"bufferView\":3,\"componentType\":5123,\"count\":6,\"type\":\"SCALAR\"}]}");
-    scene *s = load_ok(path);
+        "\"min\":[0,0,-1],\"max\":[1,0,0]},{\"bufferView\":1,\"componentType\":5126,\"count\":4,"
+        "\"type\":\"VEC2\"},{\"bufferView\":2,\"componentType\":5126,\"count\":4,\"type\":\"VEC2\"},"
+        "{\"bufferView\":3,\"componentType\":5123,\"count\":6,\"type\":\"SCALAR\"}]}",
+        texcoord, wrap_s);
+    return fxt_write_file(name, text);
+}
+
+/* Fails unless every triangle's albedo is the given texel colour (red: 1 0 0, green: 0 1 0). */
+static void assert_albedo_everywhere(const scene *s, const float expected[3], const char *why)
+{
+    for (uint32_t t = 0; t < s->triangle_count; t++)
+        for (int corner = 0; corner < 3; corner++) {
+            float rgb[3];
+            scene_albedo(s, t, corner == 1 ? 0.8f : 0.1f, corner == 2 ? 0.8f : 0.1f, rgb);
+            for (int k = 0; k < 3; k++)
+                if (!(fabsf(rgb[k] - expected[k]) < 0.01f))
+                    fail_msg("%s: triangle %u albedo (%g, %g, %g), expected (%g, %g, %g)", why, t,
+                             (double)rgb[0], (double)rgb[1], (double)rgb[2], (double)expected[0],
+                             (double)expected[1], (double)expected[2]);
+        }
+}
+
+/* glTF's texCoord and wrap modes against the texel each must read, in a red | green texture (texel centres
+ * at u = 0.25 and 0.75). texCoord 1 reads TEXCOORD_1: u0 = 0.25 (red) in set 0, u1 = 0.75 (green) in set 1
+ * gives green (before, set 0 was always read: red). MIRRORED_REPEAT at u = 1.25 reads 2 - 1.25 = 0.75: green
+ * (a repeat reads 0.25: red, which is what fxcache did before), and a plain repeat there still reads red. */
+static void test_gltf_texcoord_and_mirror(void **state)
+{
+    (void)state;
+    const float red[3] = {1, 0, 0}, green[3] = {0, 1, 0};
+    scene *s = load_ok(write_quad_gltf("set1.gltf", 0.25f, 0.75f, 1, 10497));
     assert_int_equal(s->texture_count, 1);
-    for (uint32_t t = 0; t < s->triangle_count; t++) {
-        float rgb[3];
-        scene_albedo(s, t, 0.3f, 0.3f, rgb);
-        if (!(rgb[0] < 0.01f && rgb[1] > 0.99f && rgb[2] < 0.01f))
-            fail_msg("triangle %u: albedo (%g, %g, %g), expected green (0, 1, 0) from TEXCOORD_1", t,
-                     (double)rgb[0], (double)rgb[1], (double)rgb[2]);
-    }
+    assert_albedo_everywhere(s, green, "texCoord 1");
+    scene_free(s);
+    s = load_ok(write_quad_gltf("mirror.gltf", 1.25f, 0, 0, 33648));
+    assert_int_equal(s->texture_count, 1); /* the mirrored texture replaced the plain one */
+    assert_int_equal(s->textures[0].width, 4);
+    assert_albedo_everywhere(s, green, "MIRRORED_REPEAT at u = 1.25");
+    scene_free(s);
+    s = load_ok(write_quad_gltf("repeat.gltf", 1.25f, 0, 0, 10497));
+    assert_albedo_everywhere(s, red, "REPEAT at u = 1.25");
     scene_free(s);
 }
 
 /* What fxcache leaves out of a file's materials is said in one warning line each at load: vertex colours
- * (Assimp's kwxport_test_vcolors.dae, three coloured meshes) and a texture mirrored where its coordinates
- * leave 0..1 (BoxTextured.gltf: MIRRORED_REPEAT over u in 0..6), and neither where it does not apply. */
+ * (Assimp's kwxport_test_vcolors.dae, three coloured meshes) and a texture clamped where its coordinates
+ * leave 0..1 (CLAMP_TO_EDGE at u = 1.25), and neither where it does not apply (a mirrored repeat there). */
 static void test_left_out_warned(void **state)
 {
     (void)state;
+    static char out[8192], err[8192];
+    const char *clamped = write_quad_gltf("clamp.gltf", 1.25f, 0, 0, 33071);
+    assert_int_equal(fxt_run_clif(out, sizeof out, err, sizeof err, "scene-info '%s'", clamped), 0);
+    assert_non_null(strstr(err, "texture 'red_green.png' is to be clamped where its coordinates leave 0..1"));
+    assert_null(strstr(err, "vertex colours"));
+    const char *mirrored = write_quad_gltf("mirror.gltf", 1.25f, 0, 0, 33648);
+    assert_int_equal(fxt_run_clif(out, sizeof out, err, sizeof err, "scene-info '%s'", mirrored), 0);
+    assert_null(strstr(err, "clamped"));
     const char *colours = ASSIMP_MODELS "/Collada/kwxport_test_vcolors.dae";
-    const char *mirrored = ASSIMP_MODELS "/glTF2/BoxTextured-glTF/BoxTextured.gltf";
-    if (access(colours, R_OK) != 0 || access(mirrored, R_OK) != 0) {
-        print_message("skipped: %s or %s is absent (Debian's assimp-testmodels)\n", colours, mirrored);
+    if (access(colours, R_OK) != 0) {
+        print_message("skipped: %s is absent (Debian's assimp-testmodels)\n", colours);
         skip();
     }
-    static char out[8192], err[8192];
     assert_int_equal(fxt_run_clif(out, sizeof out, err, sizeof err, "scene-info '%s'", colours), 0);
     assert_non_null(strstr(err, "3 mesh(es) carry vertex colours, which fxcache does not use"));
-    assert_null(strstr(err, "clamped or mirrored"));
-    assert_int_equal(fxt_run_clif(out, sizeof out, err, sizeof err, "scene-info '%s'", mirrored), 0);
-    assert_non_null(strstr(err, "texture 'CesiumLogoFlat.png' is to be clamped or mirrored"));
-    assert_null(strstr(err, "vertex colours"));
+    assert_null(strstr(err, "clamped"));
 }
 
 int main(void)
@@ -505,7 +540,7 @@ int main(void)
         cmocka_unit_test(test_gltf_sun_closed_form),
         cmocka_unit_test(test_collada_lights_kept_and_refused),
         cmocka_unit_test(test_glb_embedded_texture),
-        cmocka_unit_test(test_gltf_texcoord_set_1),
+        cmocka_unit_test(test_gltf_texcoord_and_mirror),
         cmocka_unit_test(test_left_out_warned),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
