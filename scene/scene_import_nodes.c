@@ -226,7 +226,13 @@ static scene_result import_light(scene *s, const struct aiScene *ai, const struc
             why = "fxcache's point lights fall off as 1/d^2 only";
             snprintf(detail, sizeof detail, " (its falloff is 1 / (%g + %g d + %g d^2))", c, lin, q);
         } else {
-            double intensity = l.intensity * photometric * unit_scale * unit_scale / q;
+            /* q is per squared length in the light's frame: a Collada file's unit is a scale in its root node
+             * (0.01 for centimetres), so d there is d / scale in metres. glTF's lights ignore their nodes'
+             * scale (KHR_lights_punctual: "all properties of the light ... are unaffected"). */
+            double scale =
+                strcmp(reader_of(ai), "glTF2 Importer") == 0 ? 1.0 : cbrt(fabs(determinant3(world)));
+            double length = scale * unit_scale;
+            double intensity = l.intensity * photometric * length * length / q;
             if (!(intensity <= 3.0e38))
                 why = "its intensity is beyond a float";
             l.type = SCENE_LIGHT_POINT;
@@ -294,19 +300,48 @@ static void import_camera(scene *s, const struct aiScene *ai, const char *path, 
         out->camera = true;
 }
 
+/* Which readers give lights and cameras as their files mean them, checked against Assimp 5.2.5's output:
+ * glTF 2 (KHR_lights_punctual; yfov) and Collada (its spec's colour and 1 / (c + l d + q d^2) falloff, passed
+ * as they are; whole horizontal angle) for both, FBX for cameras (whole horizontal angle: Blender's default
+ * 35 mm lens reads 49.1 degrees). Not the others: Assimp's 3DS reader reads a camera's lens (millimetres) as
+ * an angle in degrees and leaves every light aiLight's default falloff 1/d; its FBX reader turns a light's
+ * decay into 2 / DecayStart^2, which is not FBX's falloff. */
+static const struct {
+    const char *reader;
+    bool lights, cameras;
+} trusted_readers[] = {
+    {"glTF2 Importer", true, true},
+    {"Collada Importer", true, true},
+    {"Autodesk FBX Importer", false, true},
+};
+
 scene_result scene__import_lights(scene *s, const struct aiScene *ai, const char *path, double unit_scale,
                                   scene_file_lights *out, scene_error *err)
 {
     memset(out, 0, sizeof *out);
+    const char *reader = reader_of(ai);
+    bool lights = false, cameras = false;
+    for (size_t i = 0; i < sizeof trusted_readers / sizeof trusted_readers[0]; i++)
+        if (strcmp(reader, trusted_readers[i].reader) == 0) {
+            lights = trusted_readers[i].lights;
+            cameras = trusted_readers[i].cameras;
+        }
+    uint32_t unused_lights = lights ? 0 : ai->mNumLights, unused_cameras = cameras ? 0 : ai->mNumCameras;
+    if (unused_lights || unused_cameras)
+        fprintf(
+            stderr,
+            "fxcache: warning: %s: its %u light(s) and %u camera(s) are not used: fxcache reads them from "
+            "glTF and Collada files (FBX: cameras only), where Assimp gives them as the file means them\n",
+            path, unused_lights, unused_cameras);
     double bounds_lo[3] = {INFINITY, INFINITY, INFINITY}, bounds_hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-    if (ai->mNumCameras > 0)
+    if (cameras && ai->mNumCameras > 0)
         grow_bounds(ai, ai->mRootNode, scene__identity_matrix, 0, bounds_lo, bounds_hi);
-    for (uint32_t i = 0; i < ai->mNumLights; i++) {
+    for (uint32_t i = 0; lights && i < ai->mNumLights; i++) {
         scene_result rc = import_light(s, ai, ai->mLights[i], path, unit_scale, out, err);
         if (rc != SCENE_OK)
             return rc;
     }
-    if (ai->mNumCameras > 0)
+    if (cameras && ai->mNumCameras > 0)
         import_camera(s, ai, path, bounds_lo, bounds_hi, out);
     return SCENE_OK;
 }

@@ -398,6 +398,71 @@ static void test_collada_lights_kept_and_refused(void **state)
     scene_free(s);
 }
 
+/* A Collada point light in a centimetre file, falling off as 1 / (q d^2) with q = 1e-4 per square centimetre:
+ * in metres 1 / (1e-4 x 1e4 d^2) = 1 / d^2, a point light of intensity 1 (Collada's colour, no pi: classic light
+ * colours shade a I cos t / d^2), at z = 300 cm with Z up: 3 m above the origin. */
+static void test_collada_point_light_in_centimetres(void **state)
+{
+    (void)state;
+    const char *path = fxt_write_file(
+        "lamp_cm.dae",
+        "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n"
+        "<COLLADA xmlns=\"http://www.collada.org/2005/11/COLLADASchema\" version=\"1.4.1\">\n"
+        "<asset><unit name=\"centimeter\" meter=\"0.01\"/><up_axis>Z_UP</up_axis></asset>\n"
+        "<library_lights><light id=\"lamp\" name=\"lamp\"><technique_common><point><color>1 1 1</color>"
+        "<constant_attenuation>0</constant_attenuation><linear_attenuation>0</linear_attenuation>"
+        "<quadratic_attenuation>0.0001</quadratic_attenuation></point></technique_common></light>"
+        "</library_lights>\n"
+        "<library_geometries><geometry id=\"quad\" name=\"quad\"><mesh>\n"
+        "<source id=\"p\"><float_array id=\"pa\" count=\"12\">-500 -500 0 500 -500 0 500 500 0 -500 500 0"
+        "</float_array>\n<technique_common><accessor source=\"#pa\" count=\"4\" stride=\"3\"><param "
+        "name=\"X\" type=\"float\"/><param name=\"Y\" type=\"float\"/><param name=\"Z\" type=\"float\"/>"
+        "</accessor></technique_common></source>\n"
+        "<vertices id=\"v\"><input semantic=\"POSITION\" source=\"#p\"/></vertices>\n"
+        "<triangles count=\"2\"><input semantic=\"VERTEX\" source=\"#v\" offset=\"0\"/><p>0 1 2 0 2 3</p>"
+        "</triangles>\n</mesh></geometry></library_geometries>\n"
+        "<library_visual_scenes><visual_scene id=\"S\" name=\"S\">"
+        "<node id=\"q\" name=\"q\"><instance_geometry url=\"#quad\"/></node>"
+        "<node id=\"lampnode\" name=\"lamp\"><translate>0 0 300</translate><instance_light "
+        "url=\"#lamp\"/></node>"
+        "</visual_scene></library_visual_scenes>\n<scene><instance_visual_scene url=\"#S\"/></scene>\n"
+        "</COLLADA>\n");
+    scene_file_lights found;
+    scene *s = load_lit(path, &found);
+    assert_int_equal(found.lights, 1);
+    assert_int_equal(s->light_count, 1);
+    const scene_light *lamp = &s->lights[0];
+    assert_int_equal(lamp->type, SCENE_LIGHT_POINT);
+    const double at[3] = {0, 3, 0};
+    for (int k = 0; k < 3; k++) {
+        assert_true(fabs(lamp->position[k] + s->origin[k] - at[k]) < 1e-5);
+        assert_true(fabs(lamp->color[k] * lamp->intensity - 1.0) < 1e-4);
+    }
+    scene_free(s);
+}
+
+/* Assimp's FBX global_settings.fbx (Blender: two lamps, two cameras, UnitScaleFactor 500): its camera is used,
+ * its lights are not (Assimp turns FBX's decay into 2 / DecayStart^2), which a warning says; with no light
+ * left the loader keeps the default sun and sky (scene_load). */
+static void test_fbx_camera_used_lights_not(void **state)
+{
+    (void)state;
+    const char *path = ASSIMP_MODELS "/FBX/global_settings.fbx";
+    if (access(path, R_OK) != 0) {
+        print_message("skipped: %s is absent (Debian's assimp-testmodels)\n", path);
+        skip();
+    }
+    scene_file_lights found;
+    scene *s = load_lit(path, &found);
+    assert_int_equal(found.lights, 0);
+    assert_int_equal(s->light_count, 0);
+    assert_true(found.camera && s->has_camera);
+    /* Blender's 35 mm lens on a 32 mm sensor: 49.13 degrees across, 16:9: 2 atan(tan(24.57 deg) / 1.7778)
+     * = 28.84 degrees vertically. */
+    assert_true(fabs(s->camera_fov_deg - 28.84) < 0.05);
+    scene_free(s);
+}
+
 /* A GLB holds its texture ("*0"): the texels must be those of the same texture read from its PNG file beside
  * the .gltf twin of the model (Assimp's BoxTextured). Before, "*0" was skipped without a word: the box came
  * out white. */
@@ -539,6 +604,8 @@ int main(void)
         cmocka_unit_test(test_gltf_lights_and_camera),
         cmocka_unit_test(test_gltf_sun_closed_form),
         cmocka_unit_test(test_collada_lights_kept_and_refused),
+        cmocka_unit_test(test_collada_point_light_in_centimetres),
+        cmocka_unit_test(test_fbx_camera_used_lights_not),
         cmocka_unit_test(test_glb_embedded_texture),
         cmocka_unit_test(test_gltf_texcoord_and_mirror),
         cmocka_unit_test(test_left_out_warned),
