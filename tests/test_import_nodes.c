@@ -494,28 +494,28 @@ static void test_glb_embedded_texture(void **state)
 
 /* A unit quad whose base-colour texture is 2 x 1 texels, red then green (red_green.png beside it), read from
  * texture coordinate set `texcoord` with the sampler's wrapS `wrap_s` (10497 repeat, 33648 mirrored repeat,
- * 33071 clamp); every corner has u = u0 in set 0 and u = u1 in set 1 (v = 0.5). Returns the .gltf path. */
-static const char *write_quad_gltf(const char *name, float u0, float u1, int texcoord, int wrap_s)
+ * 33071 clamp); its corners' coordinates in sets 0 and 1 are uv0 and uv1; placed by the glTF `nodes` (JSON
+ * text) whose roots are `scene_nodes`. Returns the .gltf path. */
+static const char *write_quad_gltf_nodes(const char *name, const float uv0[4][2], const float uv1[4][2],
+                                         int texcoord, int wrap_s, const char *nodes, const char *scene_nodes)
 {
     const uint8_t texels[6] = {255, 0, 0, 0, 255, 0};
     char msg[256];
     assert_int_equal(scene_image_write_u8(fxt_tmp_path("red_green.png"), 2, 1, 3, texels, msg, sizeof msg),
                      0);
     const float positions[4][3] = {{0, 0, 0}, {1, 0, 0}, {1, 0, -1}, {0, 0, -1}};
-    const float uv0[4][2] = {{u0, 0.5f}, {u0, 0.5f}, {u0, 0.5f}, {u0, 0.5f}};
-    const float uv1[4][2] = {{u1, 0.5f}, {u1, 0.5f}, {u1, 0.5f}, {u1, 0.5f}};
     const uint16_t indices[6] = {0, 1, 2, 0, 2, 3};
     FILE *bin = fopen(fxt_tmp_path("quad_uv.bin"), "wb");
     assert_non_null(bin);
     assert_int_equal(fwrite(positions, sizeof positions, 1, bin), 1);
-    assert_int_equal(fwrite(uv0, sizeof uv0, 1, bin), 1);
-    assert_int_equal(fwrite(uv1, sizeof uv1, 1, bin), 1);
+    assert_int_equal(fwrite(uv0, sizeof(float) * 8, 1, bin), 1);
+    assert_int_equal(fwrite(uv1, sizeof(float) * 8, 1, bin), 1);
     assert_int_equal(fwrite(indices, sizeof indices, 1, bin), 1);
     fclose(bin);
     static char text[4096];
     snprintf(
         text, sizeof text,
-        "{\"asset\":{\"version\":\"2.0\"},\"scene\":0,\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}],"
+        "{\"asset\":{\"version\":\"2.0\"},\"scene\":0,\"scenes\":[{\"nodes\":%s}],\"nodes\":%s,"
         "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0,\"TEXCOORD_0\":1,\"TEXCOORD_1\":2},"
         "\"indices\":3,\"material\":0}]}],"
         "\"materials\":[{\"pbrMetallicRoughness\":{\"baseColorTexture\":{\"index\":0,\"texCoord\":%d},"
@@ -530,8 +530,16 @@ static const char *write_quad_gltf(const char *name, float u0, float u1, int tex
         "\"min\":[0,0,-1],\"max\":[1,0,0]},{\"bufferView\":1,\"componentType\":5126,\"count\":4,"
         "\"type\":\"VEC2\"},{\"bufferView\":2,\"componentType\":5126,\"count\":4,\"type\":\"VEC2\"},"
         "{\"bufferView\":3,\"componentType\":5123,\"count\":6,\"type\":\"SCALAR\"}]}",
-        texcoord, wrap_s);
+        scene_nodes, nodes, texcoord, wrap_s);
     return fxt_write_file(name, text);
+}
+
+/* The quad placed once as it is, every corner at u = u0 in set 0 and u = u1 in set 1 (v = 0.5). */
+static const char *write_quad_gltf(const char *name, float u0, float u1, int texcoord, int wrap_s)
+{
+    const float uv0[4][2] = {{u0, 0.5f}, {u0, 0.5f}, {u0, 0.5f}, {u0, 0.5f}};
+    const float uv1[4][2] = {{u1, 0.5f}, {u1, 0.5f}, {u1, 0.5f}, {u1, 0.5f}};
+    return write_quad_gltf_nodes(name, uv0, uv1, texcoord, wrap_s, "[{\"mesh\":0}]", "[0]");
 }
 
 /* Fails unless every triangle's albedo is the given texel colour (red: 1 0 0, green: 0 1 0). */
@@ -568,6 +576,43 @@ static void test_gltf_texcoord_and_mirror(void **state)
     scene_free(s);
     s = load_ok(write_quad_gltf("repeat.gltf", 1.25f, 0, 0, 10497));
     assert_albedo_everywhere(s, red, "REPEAT at u = 1.25");
+    scene_free(s);
+}
+
+/* One textured quad placed by two nodes, as it is and scaled by 2 (no mirror: Assimp's pre-transform path):
+ * both appear (1 + 4 square metres), with islands of their own, and the texture on the scaled copy has half
+ * the texels per metre: its log2 is exactly one lower (the same UVs over twice the length). */
+static void test_instanced_texture_density(void **state)
+{
+    (void)state;
+    const float uv[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+    const char *path = write_quad_gltf_nodes(
+        "twice.gltf", uv, uv, 0, 10497,
+        "[{\"mesh\":0},{\"mesh\":0,\"scale\":[2,2,2],\"translation\":[3,0,0]}]", "[0,1]");
+    scene *s = load_ok(path);
+    assert_int_equal(s->triangle_count, 4);
+    assert_true(fabs(scene_surface_area(s) - 5.0) < 1e-6);
+    float lod[2] = {NAN, NAN};
+    for (uint32_t t = 0; t < s->triangle_count; t++) {
+        double c[3];
+        centroid_world(s, t, c);
+        int copy = c[0] > 2 ? 1 : 0;
+        if (isnan(lod[copy]))
+            lod[copy] = s->tri_texture_lod[t];
+        assert_true(s->tri_texture_lod[t] == lod[copy]);
+    }
+    /* a 2 x 1 texture over 1 m^2: log2 sqrt(2 texels / 1 m^2) = 0.5; over 4 m^2: -0.5 */
+    assert_true(fabsf(lod[0] - 0.5f) < 1e-5f && fabsf(lod[1] + 0.5f) < 1e-5f);
+    for (uint32_t i = 0; i < s->island_count; i++) {
+        const scene_island *island = &s->islands[i];
+        double first[3];
+        centroid_world(s, s->island_triangles[island->first], first);
+        for (uint32_t k = 1; k < island->triangle_count; k++) {
+            double c[3];
+            centroid_world(s, s->island_triangles[island->first + k], c);
+            assert_true((c[0] > 2) == (first[0] > 2)); /* no island spans both copies */
+        }
+    }
     scene_free(s);
 }
 
@@ -608,6 +653,7 @@ int main(void)
         cmocka_unit_test(test_fbx_camera_used_lights_not),
         cmocka_unit_test(test_glb_embedded_texture),
         cmocka_unit_test(test_gltf_texcoord_and_mirror),
+        cmocka_unit_test(test_instanced_texture_density),
         cmocka_unit_test(test_left_out_warned),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
