@@ -4,6 +4,8 @@
  * with a message when assimp-testmodels is absent). */
 #include "test_util.h"
 
+#include "camera.h"
+#include "engine.h"
 #include "image.h"
 #include "reference.h"
 #include "scene_internal.h"
@@ -249,6 +251,39 @@ static scene *load_lit(const char *path, scene_file_lights *found)
         scene__finalize(s, NULL, &err) != SCENE_OK)
         fail_msg("%s: %s", path, err.msg);
     return s;
+}
+
+/* A model in millimetres or kilometres (the same cubes under a root node of scale 1e-3 or 1e3): the scene-scale
+ * defaults follow its size (checked, already right): the ambient-occlusion radius is a tenth of the bounds'
+ * diagonal, exactly a million times apart; the probes' finest cell, a power of two near a 64th of it, a
+ * million times apart within the power of two (2^20 = 1.05e6); the default camera stands 1.1 diagonals from
+ * the centre at both sizes. */
+static void test_scene_scale_defaults_follow_units(void **state)
+{
+    (void)state;
+    scene *s[2];
+    const char *roots[2] = {"[{\"name\":\"mm\",\"scale\":[0.001,0.001,0.001],\"children\":[1,2]},"
+                            "{\"mesh\":0},{\"mesh\":0,\"translation\":[3,0,0]}]",
+                            "[{\"name\":\"km\",\"scale\":[1000,1000,1000],\"children\":[1,2]},"
+                            "{\"mesh\":0},{\"mesh\":0,\"translation\":[3,0,0]}]"};
+    for (int i = 0; i < 2; i++)
+        s[i] = load_ok(write_cube_gltf(i ? "km.gltf" : "mm.gltf", roots[i], "[0]", NULL));
+    assert_true(fabs(s[1]->ao_radius / s[0]->ao_radius / 1e6 - 1) < 1e-5);
+    double cell_ratio = srv_probe_cell_default(s[1]) / srv_probe_cell_default(s[0]);
+    assert_true(cell_ratio == 1048576.0 || cell_ratio == 524288.0);
+    for (int i = 0; i < 2; i++) {
+        srv_camera cam = srv_camera_default(s[i]);
+        double diag = 0, dist = 0;
+        for (int k = 0; k < 3; k++) {
+            double e = (double)s[i]->bounds_max[k] - s[i]->bounds_min[k];
+            double d = (double)cam.position[k] - cam.target[k];
+            diag += e * e;
+            dist += d * d;
+        }
+        assert_true(fabs(sqrt(dist) / sqrt(diag) - 1.1) < 1e-4);
+    }
+    scene_free(s[0]);
+    scene_free(s[1]);
 }
 
 /* glTF's KHR_lights_punctual and a camera, against the file worked by hand: a directional light of colour
@@ -646,6 +681,7 @@ int main(void)
         cmocka_unit_test(test_mirrored_instance_faces_outwards),
         cmocka_unit_test(test_fbx_centimetres_become_metres),
         cmocka_unit_test(test_collada_unit_and_up_axis),
+        cmocka_unit_test(test_scene_scale_defaults_follow_units),
         cmocka_unit_test(test_gltf_lights_and_camera),
         cmocka_unit_test(test_gltf_sun_closed_form),
         cmocka_unit_test(test_collada_lights_kept_and_refused),
