@@ -24,6 +24,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include <unistd.h>
 #include <zlib.h>
 
 /* Largest decompressed .gz model accepted (bytes): Assimp takes the length as unsigned int. */
@@ -287,6 +288,14 @@ static int32_t add_embedded_texture(scene *s, const char *path, const char *name
         return -1;
     }
     size_t texels = (size_t)tex->mWidth * tex->mHeight;
+    double need = (double)texels * 3 * sizeof(float),
+           memory = (double)sysconf(_SC_PHYS_PAGES) * sysconf(_SC_PAGESIZE);
+    if (memory > 0 && need > memory) { /* as image files' headers are checked before anything is allocated */
+        scene__fail(err, SCENE_ERR_RANGE,
+                    "%s: %u x %u texels need %.3g GiB as floats, more than this machine has", label,
+                    tex->mWidth, tex->mHeight, need / (1u << 30));
+        return -1;
+    }
     float *rgb = malloc(sizeof(float) * 3 * texels);
     if (!rgb) {
         scene__fail(err, SCENE_ERR_NOMEM, "%s: out of memory", label);
@@ -316,6 +325,11 @@ static int32_t mirrored_texture(scene *s, int32_t texture, bool mirror_u, bool m
 {
     const scene_texture *src = &s->textures[texture];
     uint32_t w = src->width, h = src->height, mw = mirror_u ? 2 * w : w, mh = mirror_v ? 2 * h : h;
+    if (mw > 65536 || mh > 65536) { /* a side the mip chain (SCENE_TEXTURE_MAX_LEVELS) cannot reach 1 from */
+        scene__fail(err, SCENE_ERR_RANGE, "%s: mirrored, it would be %u x %u texels (at most 65536 a side)",
+                    src->path, mw, mh);
+        return -1;
+    }
     float *rgb = malloc(sizeof(float) * 3 * (size_t)mw * mh);
     char name[300];
     snprintf(name, sizeof name, "%.250s (mirrored%s%s)", src->path, mirror_u ? " u" : "",
@@ -399,12 +413,15 @@ static scene_result import_material(scene *s, const struct aiScene *ai, const st
                 s->repairs.textures_missing++;
             } else if (modes[0] == aiTextureMapMode_Mirror || modes[1] == aiTextureMapMode_Mirror) {
                 int32_t mirrored = mirrored_texture(s, m.texture, modes[0] == aiTextureMapMode_Mirror,
-                                                    modes[1] == aiTextureMapMode_Mirror, err);
-                if (mirrored < 0)
-                    return err ? err->code : SCENE_ERR_NOMEM;
-                m.texture = mirrored;
-                out_uv->half_u = modes[0] == aiTextureMapMode_Mirror;
-                out_uv->half_v = modes[1] == aiTextureMapMode_Mirror;
+                                                    modes[1] == aiTextureMapMode_Mirror, &tex_err);
+                if (mirrored < 0) {
+                    fprintf(stderr, "fxcache: warning: material '%s': %s (repeating it instead)\n", m.name,
+                            tex_err.msg);
+                } else {
+                    m.texture = mirrored;
+                    out_uv->half_u = modes[0] == aiTextureMapMode_Mirror;
+                    out_uv->half_v = modes[1] == aiTextureMapMode_Mirror;
+                }
             }
             if (m.texture >= 0) {
                 /* The texture carries the colour; Assimp's 3DS and OBJ readers give a tint we keep. */

@@ -296,6 +296,12 @@ static void import_camera(scene *s, const struct aiScene *ai, const char *path, 
     double target[3];
     for (int k = 0; k < 3; k++)
         target[k] = position[k] + distance * dir[k];
+    if (!(isfinite(position[0]) && isfinite(position[1]) && isfinite(position[2]) && isfinite(target[0]) &&
+          isfinite(target[1]) && isfinite(target[2]))) {
+        fprintf(stderr, "fxcache: warning: %s: camera '%s' ignored: its position is not finite\n", path,
+                cam->mName.data);
+        return;
+    }
     if (scene__set_camera_world(s, position, target, (float)fov_deg))
         out->camera = true;
 }
