@@ -347,6 +347,15 @@ static void test_gltf_lights_and_camera(void **state)
         assert_true(fabs(to[k] / len - cam_dir[k]) < 1e-5);
     assert_true(fabs(s->camera_fov_deg - 0.8 * 180 / M_PI) < 1e-3);
     scene_free(s);
+    /* scene_load, as every command loads a mesh file: the file's lights replace the default sun and sky (a
+     * glTF has no sky), and its camera is the default camera. Before: one default sun, a sky of 0.6, no
+     * camera. */
+    s = load_ok(path);
+    assert_int_equal(s->light_count, 2);
+    assert_false(s->default_lighting);
+    assert_true(s->sky_intensity == 0);
+    assert_true(s->has_camera);
+    scene_free(s);
 }
 
 /* The closed form through the reference renderer: a glTF sun of E = 3 lux whose light travels along
@@ -495,6 +504,9 @@ static void test_fbx_camera_used_lights_not(void **state)
     /* Blender's 35 mm lens on a 32 mm sensor: 49.13 degrees across, 16:9: 2 atan(tan(24.57 deg) / 1.7778)
      * = 28.84 degrees vertically. */
     assert_true(fabs(s->camera_fov_deg - 28.84) < 0.05);
+    scene_free(s);
+    s = load_ok(path); /* through scene_load: no light read, so the default sun and sky; the file's camera */
+    assert_true(s->default_lighting && s->light_count == 1 && s->sky_intensity > 0 && s->has_camera);
     scene_free(s);
 }
 
