@@ -124,6 +124,9 @@ typedef struct scene_repairs {
     uint64_t vertices_welded;    /* vertices merged into an earlier one with the same position */
     uint64_t non_triangles_dropped; /* points and lines in the input */
     uint64_t textures_missing;      /* texture files named by a material that could not be read */
+    uint64_t lights_unused;         /* a mesh file's lights fxcache does not use (spot, area, other falloffs,
+                                       formats whose lights Assimp does not give as meant: SCENE_FORMAT.md) */
+    uint64_t cameras_unused;        /* a mesh file's cameras not used (all but the first; other formats') */
 } scene_repairs;
 
 /* Wall-clock time of each build stage, milliseconds. */

@@ -244,6 +244,7 @@ static scene_result import_light(scene *s, const struct aiScene *ai, const struc
         fprintf(stderr, "fxcache: warning: %s: %s light '%s' ignored: %s%s\n", path,
                 light_type_name(light->mType), light->mName.data, why, detail);
         out->skipped++;
+        s->repairs.lights_unused++;
         return SCENE_OK;
     }
     char where[200];
@@ -332,13 +333,12 @@ scene_result scene__import_lights(scene *s, const struct aiScene *ai, const char
             lights = trusted_readers[i].lights;
             cameras = trusted_readers[i].cameras;
         }
-    uint32_t unused_lights = lights ? 0 : ai->mNumLights, unused_cameras = cameras ? 0 : ai->mNumCameras;
-    if (unused_lights || unused_cameras)
-        fprintf(
-            stderr,
-            "fxcache: warning: %s: its %u light(s) and %u camera(s) are not used: fxcache reads them from "
-            "glTF and Collada files (FBX: cameras only), where Assimp gives them as the file means them\n",
-            path, unused_lights, unused_cameras);
+    /* Counted, not printed: Sponza's 3DS file carries an omni light and a camera, and every command that
+     * loads it would repeat the line; scene-info reports the counts. */
+    s->repairs.lights_unused += lights ? 0 : ai->mNumLights;
+    s->repairs.cameras_unused += cameras ? 0 : ai->mNumCameras;
+    if (cameras && ai->mNumCameras > 1)
+        s->repairs.cameras_unused += ai->mNumCameras - 1;
     double bounds_lo[3] = {INFINITY, INFINITY, INFINITY}, bounds_hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     if (cameras && ai->mNumCameras > 0)
         grow_bounds(ai, ai->mRootNode, scene__identity_matrix, 0, bounds_lo, bounds_hi);

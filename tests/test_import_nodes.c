@@ -431,6 +431,7 @@ static void test_collada_lights_kept_and_refused(void **state)
     scene *s = load_lit(path, &found);
     assert_int_equal(found.lights, 1);
     assert_int_equal(found.skipped, 3);
+    assert_int_equal(s->repairs.lights_unused, 3);
     assert_true(
         found.sky); /* <ambient><color>1 1 1</color>: a sky of radiance 1 (a surface of albedo a under it
                              * shows a x 1, as under an ambient light of 1) */
@@ -486,8 +487,8 @@ static void test_collada_point_light_in_centimetres(void **state)
 }
 
 /* Assimp's FBX global_settings.fbx (Blender: two lamps, two cameras, UnitScaleFactor 500): its camera is used,
- * its lights are not (Assimp turns FBX's decay into 2 / DecayStart^2), which a warning says; with no light
- * left the loader keeps the default sun and sky (scene_load). */
+ * its lights are not (Assimp turns FBX's decay into 2 / DecayStart^2): counted in the repairs scene-info
+ * prints; with no light left the loader keeps the default sun and sky (scene_load). */
 static void test_fbx_camera_used_lights_not(void **state)
 {
     (void)state;
@@ -500,6 +501,8 @@ static void test_fbx_camera_used_lights_not(void **state)
     scene *s = load_lit(path, &found);
     assert_int_equal(found.lights, 0);
     assert_int_equal(s->light_count, 0);
+    assert_int_equal(s->repairs.lights_unused, 2);  /* counted for scene-info */
+    assert_int_equal(s->repairs.cameras_unused, 1); /* the second camera */
     assert_true(found.camera && s->has_camera);
     /* Blender's 35 mm lens on a 32 mm sensor: 49.13 degrees across, 16:9: 2 atan(tan(24.57 deg) / 1.7778)
      * = 28.84 degrees vertically. */
