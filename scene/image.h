@@ -19,6 +19,11 @@ extern "C" {
 int scene_image_read_rgb(const char *path, uint32_t *width, uint32_t *height, float **rgb, char *msg,
                          size_t msg_cap);
 
+/* The same from len encoded bytes in memory (an image embedded in a GLB or FBX file): name says where they
+ * came from in messages, and its extension (".png", ".jpg", ...) picks the reader. */
+int scene_image_read_rgb_memory(const char *name, const void *data, size_t len, uint32_t *width,
+                                uint32_t *height, float **rgb, char *msg, size_t msg_cap);
+
 /* Writes 8-bit pixels (channels 1..4, top row first) to path; the format follows the extension (PNG,
  * JPEG, ...). Returns 0, or -1 with msg filled. */
 int scene_image_write_u8(const char *path, uint32_t width, uint32_t height, uint32_t channels,

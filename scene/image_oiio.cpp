@@ -107,11 +107,14 @@ static float srgb_to_linear(float c)
     return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
 }
 
-static int read_rgb(const char *path, uint32_t *width, uint32_t *height, float **rgb, char *msg,
-                    size_t msg_cap)
+// Reads the image file at path or, when data is not null, the len encoded bytes at data (path then only
+// names it and its extension picks the reader).
+static int read_rgb(const char *path, const void *data, size_t len, uint32_t *width, uint32_t *height,
+                    float **rgb, char *msg, size_t msg_cap)
 {
     try {
-        auto in = ImageInput::open(path);
+        OIIO::Filesystem::IOMemReader bytes(data, len);
+        auto in = data ? ImageInput::open(path, nullptr, &bytes) : ImageInput::open(path);
         if (!in) {
             std::string e = OIIO::geterror();
             set_msg(msg, msg_cap, std::string(path) + ": cannot read image" + (e.empty() ? "" : ": " + e));
@@ -183,8 +186,9 @@ static int read_rgb(const char *path, uint32_t *width, uint32_t *height, float *
     return -1;
 }
 
-extern "C" int scene_image_read_rgb(const char *path, uint32_t *width, uint32_t *height, float **rgb,
-                                    char *msg, size_t msg_cap)
+// scene_image_read_rgb and scene_image_read_rgb_memory: the read with stderr held.
+static int read_rgb_held(const char *path, const void *data, size_t len, uint32_t *width, uint32_t *height,
+                         float **rgb, char *msg, size_t msg_cap)
 {
     *rgb = nullptr;
     if (msg && msg_cap)
@@ -194,7 +198,7 @@ extern "C" int scene_image_read_rgb(const char *path, uint32_t *width, uint32_t 
     try {
         std::lock_guard<std::mutex> lock(stderr_hold_mutex);
         stderr_hold hold;
-        rc = read_rgb(path, width, height, rgb, msg, msg_cap);
+        rc = read_rgb(path, data, len, width, height, rgb, msg, msg_cap);
         held = hold.release();
     } catch (...) {
         set_msg(msg, msg_cap, std::string(path) + ": cannot read image: out of memory");
@@ -208,6 +212,23 @@ extern "C" int scene_image_read_rgb(const char *path, uint32_t *width, uint32_t 
     if (rc != 0 && !said.empty() && msg && msg_cap && !std::strstr(msg, said.c_str()))
         set_msg(msg, msg_cap, std::string(msg) + " (" + held + ")");
     return rc;
+}
+
+extern "C" int scene_image_read_rgb(const char *path, uint32_t *width, uint32_t *height, float **rgb,
+                                    char *msg, size_t msg_cap)
+{
+    return read_rgb_held(path, nullptr, 0, width, height, rgb, msg, msg_cap);
+}
+
+extern "C" int scene_image_read_rgb_memory(const char *name, const void *data, size_t len, uint32_t *width,
+                                           uint32_t *height, float **rgb, char *msg, size_t msg_cap)
+{
+    if (!data || len == 0) {
+        set_msg(msg, msg_cap, std::string(name) + ": cannot read image: no bytes");
+        *rgb = nullptr;
+        return -1;
+    }
+    return read_rgb_held(name, data, len, width, height, rgb, msg, msg_cap);
 }
 
 // Writes one image in the given pixel type; shared by the two public writers.

@@ -746,11 +746,16 @@ scene *scene_load(const char *path, const scene_load_desc *desc, scene_error *er
     } else {
         snprintf(s->source, sizeof s->source, "%s", path);
         scene__set_source(s, path);
-        rc = scene__import_file(s, path, NULL, NULL, err);
-        /* A file whose lamps emit is lit by them (a Cornell box's light): no sun and sky. Emitters that
-         * cover most of the surface are a glow (an MS3D or FBX "emissive" colour): the defaults stay. */
+        scene_file_lights file = {0};
+        rc = scene__import_file_lit(s, path, &file, err);
+        /* The file's own lights (and its ambient light, as the sky) replace the default sun and sky, as a
+         * scene description's do. A file whose lamps emit is lit by them (a Cornell box's light): no sun and
+         * sky. Emitters that cover most of the surface are a glow (an MS3D or FBX "emissive" colour): the
+         * defaults stay. */
         scene_emission_refresh(s);
-        if (rc == SCENE_OK && (!s->emissive || scene_emission_area_fraction(s) > SCENE_LAMP_AREA_FRACTION)) {
+        bool lit_by_file = file.lights > 0 || file.sky;
+        if (rc == SCENE_OK && !lit_by_file &&
+            (!s->emissive || scene_emission_area_fraction(s) > SCENE_LAMP_AREA_FRACTION)) {
             scene__add_default_lighting(s);
             s->default_lighting = true;
         }

@@ -124,6 +124,9 @@ typedef struct scene_repairs {
     uint64_t vertices_welded;    /* vertices merged into an earlier one with the same position */
     uint64_t non_triangles_dropped; /* points and lines in the input */
     uint64_t textures_missing;      /* texture files named by a material that could not be read */
+    uint64_t lights_unused;         /* a mesh file's lights fxcache does not use (spot, area, other falloffs,
+                                       formats whose lights Assimp does not give as meant: SCENE_FORMAT.md) */
+    uint64_t cameras_unused;        /* a mesh file's cameras not used (all but the first; other formats') */
 } scene_repairs;
 
 /* Wall-clock time of each build stage, milliseconds. */
@@ -171,8 +174,9 @@ typedef struct scene {
      * after a material's emission changes. Compose and the probes add emission only when it is set, so a
      * scene without emitters pays one test per run of pixels or chunk of rays. */
     bool emissive;
-    /* A plain mesh file got the default sun and sky (scene__add_default_lighting): it has no emitters, or
-     * its emitters cover more than SCENE_LAMP_AREA_FRACTION of its surface (a glow, not a lamp). */
+    /* A plain mesh file got the default sun and sky (scene__add_default_lighting): it has no lights fxcache
+     * reads (glTF, Collada: docs/SCENE_FORMAT.md) and no emitters, or its emitters cover more than
+     * SCENE_LAMP_AREA_FRACTION of its surface (a glow, not a lamp). */
     bool default_lighting;
 
     bool has_camera;                                       /* a default camera from the scene description */
@@ -235,7 +239,8 @@ typedef struct scene_load_desc {
 } scene_load_desc;
 
 /* Loads a scene: a JSON scene description (*.json), or any mesh file Assimp reads (optionally .gz), which
- * then becomes a scene with defaults (one sun, a sky) unless some material of it emits and the emitting
+ * then becomes a scene lit by its own lights and seen from its own camera where it has them (glTF, Collada;
+ * FBX cameras), else with defaults (one sun, a sky) unless some material of it emits and the emitting
  * triangles cover at most SCENE_LAMP_AREA_FRACTION of its surface (lamps: then its emitters alone light
  * it). The path "default" (or NULL) is the embedded scene.
  * Returns NULL and fills err on failure; nothing partial is returned. */

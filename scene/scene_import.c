@@ -1,12 +1,14 @@
 /* Mesh-file import through Assimp's C API: OBJ, 3DS, PLY, glTF 2 and whatever else Assimp reads.
  * A ".gz" file is decompressed with zlib first and handed to Assimp from memory with the inner extension
- * as the format hint. Meshes are triangulated by Assimp and pre-transformed to world space; points and
+ * as the format hint. Meshes are triangulated by Assimp and pre-transformed to world space (or, when some
+ * node places a mesh through a mirroring transform, placed node by node here: import_node()); points and
  * lines are dropped and counted; every mesh then goes through scene__add_mesh(), which checks, welds and
  * cleans it. Diffuse colours, emissive colours (times the emissive intensity) and diffuse textures (read
  * with OpenImageIO, relative to the model file, with a case-insensitive fallback since many old models name
  * "KAMEN.JPG" for kamen.jpg) become materials. */
 #include "scene_internal.h"
 #include "cerr_capture.h"
+#include "scene_import_nodes.h"
 
 #include <assimp/cimport.h>
 #include <assimp/material.h>
@@ -22,6 +24,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include <unistd.h>
 #include <zlib.h>
 
 /* Largest decompressed .gz model accepted (bytes): Assimp takes the length as unsigned int. */
@@ -238,8 +241,6 @@ static bool resolve_texture(const char *model_dir, const char *name, char *out, 
     return found;
 }
 
-/* Converts one Assimp material into a scene material (its diffuse colour, emission and texture). A texture
- * that cannot be read is reported on stderr and counted; the material keeps its colour. */
 /* True when one of the file's materials before `index` names the same diffuse texture: its warning was
  * printed already (a model of many materials sharing one missing texture printed it once per material:
  * Assimp's MDC spider, 19 lines). */
@@ -256,10 +257,131 @@ static bool texture_warned(const struct aiScene *ai, uint32_t index, const struc
     return false;
 }
 
-static scene_result import_material(scene *s, const struct aiScene *ai, uint32_t index, const char *model_dir,
-                                    uint32_t *out_index, scene_error *err)
+/* The texture a material names that the file itself holds (a GLB's images, an FBX's embedded media), or
+ * NULL: "*N" is the file's N-th texture (glTF), another name is looked up by its file name among the
+ * embedded textures' names (FBX, which also names a file). */
+static const struct aiTexture *embedded_texture(const struct aiScene *ai, const char *name)
+{
+    if (name[0] == '*') {
+        char *end = NULL;
+        unsigned long index = strtoul(name + 1, &end, 10);
+        return end != name + 1 && *end == 0 && index < ai->mNumTextures ? ai->mTextures[index] : NULL;
+    }
+    const char *base = name;
+    for (const char *p = name; *p; p++)
+        if (*p == '/' || *p == '\\')
+            base = p + 1;
+    for (uint32_t i = 0; i < ai->mNumTextures; i++) {
+        const char *file = ai->mTextures[i]->mFilename.data, *file_base = file;
+        for (const char *p = file; *p; p++)
+            if (*p == '/' || *p == '\\')
+                file_base = p + 1;
+        if (file_base[0] && strcasecmp(file_base, base) == 0)
+            return ai->mTextures[i];
+    }
+    return NULL;
+}
+
+/* The sRGB transfer function, decoded to linear (8-bit texels are sRGB, as image files' are). */
+static float srgb_to_linear(float c)
+{
+    return c <= 0.04045f ? c / 12.92f : powf((c + 0.055f) / 1.055f, 2.4f);
+}
+
+/* Adds a texture the file holds: encoded bytes (mHeight 0: PNG, JPEG, ..., named by Assimp's format hint)
+ * through OpenImageIO, or Assimp's raw BGRA texels. Returns its index or -1 with err filled. */
+static int32_t add_embedded_texture(scene *s, const char *path, const char *name, const struct aiTexture *tex,
+                                    scene_error *err)
+{
+    char label[512];
+    char hint[sizeof tex->achFormatHint + 1];
+    snprintf(hint, sizeof hint, "%.*s", (int)sizeof tex->achFormatHint, tex->achFormatHint);
+    snprintf(label, sizeof label, "%s[embedded %s].%s", path, name, hint[0] ? hint : "png");
+    if (tex->mHeight == 0)
+        return scene__add_texture_memory(s, label, tex->pcData, tex->mWidth, err);
+    if (tex->mWidth > 65536 || tex->mHeight > 65536) {
+        scene__fail(err, SCENE_ERR_RANGE, "%s: image size out of range (1..65536 per side)", label);
+        return -1;
+    }
+    size_t texels = (size_t)tex->mWidth * tex->mHeight;
+    double need = (double)texels * 3 * sizeof(float),
+           memory = (double)sysconf(_SC_PHYS_PAGES) * sysconf(_SC_PAGESIZE);
+    if (memory > 0 && need > memory) { /* as image files' headers are checked before anything is allocated */
+        scene__fail(err, SCENE_ERR_RANGE,
+                    "%s: %u x %u texels need %.3g GiB as floats, more than this machine has", label,
+                    tex->mWidth, tex->mHeight, need / (1u << 30));
+        return -1;
+    }
+    float *rgb = malloc(sizeof(float) * 3 * texels);
+    if (!rgb) {
+        scene__fail(err, SCENE_ERR_NOMEM, "%s: out of memory", label);
+        return -1;
+    }
+    for (size_t i = 0; i < texels; i++) {
+        rgb[3 * i] = srgb_to_linear(tex->pcData[i].r / 255.0f);
+        rgb[3 * i + 1] = srgb_to_linear(tex->pcData[i].g / 255.0f);
+        rgb[3 * i + 2] = srgb_to_linear(tex->pcData[i].b / 255.0f);
+    }
+    return scene__add_texture_rgb(s, label, tex->mWidth, tex->mHeight, rgb, err);
+}
+
+/* How a mesh reads its material's texture: which texture coordinate set, and whether u or v is halved (the
+ * material's texture was mirrored into one twice as wide or high: mirrored_texture()). */
+typedef struct import_uv {
+    uint8_t set;
+    bool half_u, half_v;
+} import_uv;
+
+/* A mirrored repeat (glTF's MIRRORED_REPEAT) of texture index `texture` along u and/or v, as a plain repeat:
+ * the texture followed by its mirror image, twice as wide (or high), read at half the coordinate. Bilinear
+ * filtering and the mip chain see the same texels as mirrored addressing would (the seam's two texels are
+ * the edge texel twice, as in a mirror), and texels per metre stay as they were. Returns the new texture's
+ * index (it takes the plain one's place when nothing else uses that), or -1 with err filled. */
+static int32_t mirrored_texture(scene *s, int32_t texture, bool mirror_u, bool mirror_v, scene_error *err)
+{
+    const scene_texture *src = &s->textures[texture];
+    uint32_t w = src->width, h = src->height, mw = mirror_u ? 2 * w : w, mh = mirror_v ? 2 * h : h;
+    if (mw > 65536 || mh > 65536) { /* a side the mip chain (SCENE_TEXTURE_MAX_LEVELS) cannot reach 1 from */
+        scene__fail(err, SCENE_ERR_RANGE, "%s: mirrored, it would be %u x %u texels (at most 65536 a side)",
+                    src->path, mw, mh);
+        return -1;
+    }
+    float *rgb = malloc(sizeof(float) * 3 * (size_t)mw * mh);
+    char name[300];
+    snprintf(name, sizeof name, "%.250s (mirrored%s%s)", src->path, mirror_u ? " u" : "",
+             mirror_v ? " v" : "");
+    if (!rgb) {
+        scene__fail(err, SCENE_ERR_NOMEM, "%s: out of memory", name);
+        return -1;
+    }
+    for (uint32_t y = 0; y < mh; y++)
+        for (uint32_t x = 0; x < mw; x++) {
+            uint32_t sx = x < w ? x : 2 * w - 1 - x, sy = y < h ? y : 2 * h - 1 - y;
+            memcpy(rgb + 3 * ((size_t)y * mw + x), src->rgb + 3 * ((size_t)sy * w + sx), sizeof(float) * 3);
+        }
+    int32_t added = scene__add_texture_rgb(s, name, mw, mh, rgb, err);
+    /* The plain texture goes when it was loaded just now for this material and no other material uses it. */
+    bool used = (uint32_t)texture + 2 != s->texture_count;
+    for (uint32_t i = 0; i < s->material_count && !used; i++)
+        used = s->materials[i].texture == texture;
+    if (added < 0 || used)
+        return added;
+    for (uint32_t l = 0; l < s->textures[texture].levels; l++)
+        free(s->textures[texture].mip_rgb[l]);
+    s->textures[texture] = s->textures[added];
+    s->texture_count--;
+    return texture;
+}
+
+/* Converts one Assimp material into a scene material (its diffuse colour, emission and texture: a file
+ * beside the model, or one the file holds). A texture that cannot be read is reported on stderr and counted;
+ * the material keeps its colour. */
+static scene_result import_material(scene *s, const struct aiScene *ai, uint32_t index, const char *path,
+                                    const char *model_dir, uint32_t *out_index, import_uv *out_uv,
+                                    scene_error *err)
 {
     const struct aiMaterial *am = ai->mMaterials[index];
+    *out_uv = (import_uv){0};
     scene_material m = {.diffuse = {0.7f, 0.7f, 0.7f}, .texture = -1};
     struct aiString name;
     if (aiGetMaterialString(am, AI_MATKEY_NAME, &name) == aiReturn_SUCCESS)
@@ -286,21 +408,40 @@ static scene_result import_material(scene *s, const struct aiScene *ai, uint32_t
         }
     }
     struct aiString tex;
+    unsigned uv_set = 0; /* which of the mesh's texture coordinate sets the texture uses (glTF's texCoord) */
+    enum aiTextureMapMode modes[2] = {aiTextureMapMode_Wrap, aiTextureMapMode_Wrap};
     if (aiGetMaterialTextureCount(am, aiTextureType_DIFFUSE) > 0 &&
-        aiGetMaterialTexture(am, aiTextureType_DIFFUSE, 0, &tex, NULL, NULL, NULL, NULL, NULL, NULL) ==
+        aiGetMaterialTexture(am, aiTextureType_DIFFUSE, 0, &tex, NULL, &uv_set, NULL, NULL, modes, NULL) ==
             aiReturn_SUCCESS &&
-        tex.length > 0 && tex.data[0] != '*') {
-        char path[768];
+        tex.length > 0) {
+        out_uv->set = uv_set < AI_MAX_NUMBER_OF_TEXTURECOORDS ? (uint8_t)uv_set : 0;
+        char found[768];
         double t0 = scene__now_ms();
-        if (resolve_texture(model_dir, tex.data, path, sizeof path)) {
+        const struct aiTexture *held = embedded_texture(ai, tex.data);
+        /* A file beside the model first (an FBX names both); what the file holds next (a GLB's "*0"). */
+        bool beside = tex.data[0] != '*' && resolve_texture(model_dir, tex.data, found, sizeof found);
+        if (beside || held) {
             scene_error tex_err = {0};
-            m.texture = scene__add_texture(s, path, &tex_err);
+            m.texture = beside ? scene__add_texture(s, found, &tex_err)
+                               : add_embedded_texture(s, path, tex.data, held, &tex_err);
             if (m.texture < 0) {
                 if (!texture_warned(ai, index, &tex))
                     fprintf(stderr, "fxcache: warning: material '%s': %s (using its colour)\n", m.name,
                             tex_err.msg);
                 s->repairs.textures_missing++;
-            } else {
+            } else if (modes[0] == aiTextureMapMode_Mirror || modes[1] == aiTextureMapMode_Mirror) {
+                int32_t mirrored = mirrored_texture(s, m.texture, modes[0] == aiTextureMapMode_Mirror,
+                                                    modes[1] == aiTextureMapMode_Mirror, &tex_err);
+                if (mirrored < 0) {
+                    fprintf(stderr, "fxcache: warning: material '%s': %s (repeating it instead)\n", m.name,
+                            tex_err.msg);
+                } else {
+                    m.texture = mirrored;
+                    out_uv->half_u = modes[0] == aiTextureMapMode_Mirror;
+                    out_uv->half_v = modes[1] == aiTextureMapMode_Mirror;
+                }
+            }
+            if (m.texture >= 0) {
                 /* The texture carries the colour; Assimp's 3DS and OBJ readers give a tint we keep. */
                 bool black = m.diffuse[0] == 0 && m.diffuse[1] == 0 && m.diffuse[2] == 0;
                 if (black)
@@ -320,10 +461,15 @@ static scene_result import_material(scene *s, const struct aiScene *ai, uint32_t
     return *out_index == UINT32_MAX ? SCENE_ERR_NOMEM : SCENE_OK;
 }
 
-/* Appends one Assimp mesh (already triangulated and in world space) through scene__add_mesh(). */
+/* Appends one Assimp mesh (triangulated) through scene__add_mesh(), with its texture coordinates of set
+ * uv_set (its material's texture's; set 0 when the mesh has no such set). */
 static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t mesh_number, uint32_t material,
-                                const double *xform, const char *path, scene_error *err)
+                                import_uv uv_mode, const double *xform, const char *path, scene_error *err)
 {
+    unsigned uv_set = uv_mode.set;
+    float scale_u = uv_mode.half_u ? 0.5f : 1.0f, scale_v = uv_mode.half_v ? 0.5f : 1.0f;
+    const struct aiVector3D *coords =
+        mesh->mTextureCoords[uv_set] ? mesh->mTextureCoords[uv_set] : mesh->mTextureCoords[0];
     char name[160];
     if (mesh->mName.length > 0)
         snprintf(name, sizeof name, "%s", mesh->mName.data);
@@ -331,10 +477,10 @@ static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t me
         snprintf(name, sizeof name, "%s#%u", path, mesh_number);
     uint32_t nv = mesh->mNumVertices, nf = mesh->mNumFaces;
     float *positions = malloc(sizeof(float) * 3 * (size_t)(nv ? nv : 1));
-    float *uv = mesh->mTextureCoords[0] ? malloc(sizeof(float) * 2 * (size_t)(nv ? nv : 1)) : NULL;
+    float *uv = coords ? malloc(sizeof(float) * 2 * (size_t)(nv ? nv : 1)) : NULL;
     uint32_t *indices = malloc(sizeof(uint32_t) * 3 * (size_t)(nf ? nf : 1));
     scene_result rc = SCENE_ERR_NOMEM;
-    if (!positions || !indices || (mesh->mTextureCoords[0] && !uv)) {
+    if (!positions || !indices || (coords && !uv)) {
         rc = scene__fail(err, SCENE_ERR_NOMEM, "mesh '%s': out of memory", name);
         goto done;
     }
@@ -343,8 +489,8 @@ static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t me
         positions[3 * (size_t)v + 1] = mesh->mVertices[v].y;
         positions[3 * (size_t)v + 2] = mesh->mVertices[v].z;
         if (uv) {
-            uv[2 * (size_t)v] = mesh->mTextureCoords[0][v].x;
-            uv[2 * (size_t)v + 1] = mesh->mTextureCoords[0][v].y;
+            uv[2 * (size_t)v] = coords[v].x * scale_u;
+            uv[2 * (size_t)v + 1] = coords[v].y * scale_v;
         }
     }
     uint32_t nt = 0;
@@ -366,8 +512,107 @@ done:
     return rc;
 }
 
-scene_result scene__import_file(scene *s, const char *path, const double *xform,
-                                const scene_material *override, scene_error *err)
+/* Which scene material each Assimp mesh gets: the file's own through material_map, or one for all. */
+typedef struct import_materials {
+    const uint32_t *map; /* per Assimp material, or NULL */
+    const import_uv *uv; /* per Assimp material: how its texture is read, or NULL */
+    uint32_t count;      /* entries of map */
+    uint32_t all;        /* UINT32_MAX, or the material every mesh gets */
+} import_materials;
+
+static uint32_t material_for(const import_materials *mats, const struct aiMesh *mesh)
+{
+    if (mats->all != UINT32_MAX)
+        return mats->all;
+    return mesh->mMaterialIndex < mats->count ? mats->map[mesh->mMaterialIndex] : mats->map[0]; /* first */
+}
+
+/* How a mesh reads its material's texture (set 0, as it is, with a material for all meshes). */
+static import_uv uv_for(const import_materials *mats, const struct aiMesh *mesh)
+{
+    if (mats->all != UINT32_MAX || !mats->uv)
+        return (import_uv){0};
+    return mesh->mMaterialIndex < mats->count ? mats->uv[mesh->mMaterialIndex] : mats->uv[0];
+}
+
+/* Imports every mesh the nodes below node place, each through its node's transform times parent (the
+ * ancestors' transforms times the caller's), so scene__add_mesh() sees a mirroring instance's transform and
+ * keeps its triangles facing outwards. A mesh placed by two nodes is imported twice. */
+static scene_result import_node(scene *s, const struct aiScene *ai, const struct aiNode *node,
+                                const double parent[16], const import_materials *mats, const char *path,
+                                unsigned depth, scene_error *err)
+{
+    if (!node || depth > 10000)
+        return SCENE_OK;
+    double local[16], world[16];
+    scene__node_matrix(node, local);
+    scene__matrix_multiply(parent, local, world);
+    scene_result rc = SCENE_OK;
+    for (uint32_t i = 0; rc == SCENE_OK && i < node->mNumMeshes; i++) {
+        const struct aiMesh *mesh = ai->mMeshes[node->mMeshes[i]];
+        if (!(mesh->mPrimitiveTypes & aiPrimitiveType_TRIANGLE)) {
+            s->repairs.non_triangles_dropped += mesh->mNumFaces;
+            continue;
+        }
+        rc = import_mesh(s, mesh, node->mMeshes[i], material_for(mats, mesh), uv_for(mats, mesh), world, path,
+                         err);
+    }
+    for (uint32_t i = 0; rc == SCENE_OK && i < node->mNumChildren; i++)
+        rc = import_node(s, ai, node->mChildren[i], world, mats, path, depth + 1, err);
+    return rc;
+}
+
+/* What fxcache leaves out of a file's materials, one warning line each: vertex colours (fxcache renders the
+ * materials' colours and textures; glTF's COLOR_0 multiplies the base colour, a PLY scan's colours are its
+ * albedo), and a texture the file clamps (glTF's CLAMP_TO_EDGE) where a mesh's coordinates leave 0..1
+ * (fxcache repeats textures, or mirrors them: mirrored_texture(); inside 0..1 the modes agree). */
+static void warn_left_out(const struct aiScene *ai, const char *path)
+{
+    uint32_t coloured = 0;
+    for (uint32_t i = 0; i < ai->mNumMeshes; i++)
+        coloured += ai->mMeshes[i]->mColors[0] != NULL;
+    if (coloured)
+        fprintf(
+            stderr,
+            "fxcache: warning: %s: %u mesh(es) carry vertex colours, which fxcache does not use (it renders "
+            "the materials' colours and textures)\n",
+            path, coloured);
+    for (uint32_t m = 0; m < ai->mNumMaterials; m++) {
+        struct aiString tex;
+        unsigned uv_set = 0;
+        enum aiTextureMapMode modes[2] = {aiTextureMapMode_Wrap, aiTextureMapMode_Wrap};
+        if (aiGetMaterialTextureCount(ai->mMaterials[m], aiTextureType_DIFFUSE) == 0 ||
+            aiGetMaterialTexture(ai->mMaterials[m], aiTextureType_DIFFUSE, 0, &tex, NULL, &uv_set, NULL, NULL,
+                                 modes, NULL) != aiReturn_SUCCESS ||
+            uv_set >= AI_MAX_NUMBER_OF_TEXTURECOORDS)
+            continue;
+        bool clamped
+            [2]; /* clamped to the edge, or a decal: not repeated (wrap) nor mirrored (import_material) */
+        for (int k = 0; k < 2; k++)
+            clamped[k] = modes[k] != aiTextureMapMode_Wrap && modes[k] != aiTextureMapMode_Mirror;
+        if (!clamped[0] && !clamped[1])
+            continue;
+        bool outside = false;
+        for (uint32_t i = 0; i < ai->mNumMeshes && !outside; i++) {
+            const struct aiMesh *mesh = ai->mMeshes[i];
+            const struct aiVector3D *uv = mesh->mTextureCoords[uv_set];
+            for (uint32_t v = 0; mesh->mMaterialIndex == m && uv && v < mesh->mNumVertices && !outside; v++)
+                outside = (clamped[0] && !(uv[v].x >= -1e-4f && uv[v].x <= 1 + 1e-4f)) ||
+                          (clamped[1] && !(uv[v].y >= -1e-4f && uv[v].y <= 1 + 1e-4f));
+        }
+        if (outside)
+            fprintf(
+                stderr,
+                "fxcache: warning: %s: texture '%s' is to be clamped where its coordinates leave 0..1, and "
+                "some do; fxcache repeats it\n",
+                path, tex.data);
+    }
+}
+
+/* scene__import_file, and with lights (non-NULL) also the file's lights and camera, which it then describes
+ * (scene__import_file_lit). */
+static scene_result import_file(scene *s, const char *path, const double *xform,
+                                const scene_material *override, scene_file_lights *lights, scene_error *err)
 {
     scene_result rc = scene__check_file(path, err);
     if (rc != SCENE_OK)
@@ -379,7 +624,7 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
      * import runs only Assimp's validation, check_faces() and check_scene_graph() check what that let
      * through and what the steps would fail on, and only then do the post-processing steps run. */
     const unsigned flags = aiProcess_ValidateDataStructure;
-    const unsigned post = aiProcess_Triangulate | aiProcess_PreTransformVertices | aiProcess_SortByPType;
+    unsigned post = aiProcess_Triangulate | aiProcess_SortByPType;
     const struct aiScene *ai = NULL;
     size_t n = strlen(path);
     bool gz = n > 3 && strcasecmp(path + n - 3, ".gz") == 0;
@@ -451,14 +696,46 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
         aiReleaseImport(ai);
         return checked;
     }
+    /* Lengths in metres: Assimp's global-scale step applies the file's unit where its reader leaves it to
+     * that step (FBX's UnitScaleFactor, centimetres by default: an FBX cube of 21 cm was read as 21 m);
+     * Collada's <unit> and up axis its reader applies itself, glTF is in metres. */
+    const struct aiVector3D *sample = NULL; /* a vertex before and after: the scale applied */
+    for (uint32_t i = 0; !sample && i < ai->mNumMeshes; i++)
+        for (uint32_t v = 0; !sample && v < ai->mMeshes[i]->mNumVertices; v++)
+            if (ai->mMeshes[i]->mVertices[v].x != 0)
+                sample = &ai->mMeshes[i]->mVertices[v];
+    double sample_before = sample ? sample->x : 0;
+    ai = aiApplyPostProcessing(ai, aiProcess_GlobalScale);
+    if (!ai)
+        return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s", path,
+                           assimp_error(why, sizeof why));
+    double unit_scale = sample ? sample->x / sample_before : 1.0;
+    /* The file's lights and camera, while the node graph that places them is whole (the global-scale step
+     * ran alone for this). */
+    if (lights) {
+        rc = scene__import_lights(s, ai, path, unit_scale, lights, err);
+        if (rc != SCENE_OK) {
+            aiReleaseImport(ai);
+            return rc;
+        }
+    }
+    /* Assimp pre-transforms the meshes when no instance mirrors (every mesh in world space, merged by
+     * material, as fxcache always read files); otherwise the meshes stay in their nodes' frames and
+     * import_node() places each instance, so that a mirrored one keeps its triangles facing outwards. */
+    bool mirrored = scene__places_mirrored(ai->mRootNode, scene__identity_matrix, 0);
+    if (!mirrored)
+        post |= aiProcess_PreTransformVertices;
     ai = aiApplyPostProcessing(ai, post);
     if (!ai)
         return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s", path,
                            assimp_error(why, sizeof why));
 
+    if (!override)
+        warn_left_out(ai, path);
     char model_dir[512];
     folder_of(path, model_dir, sizeof model_dir);
     uint32_t *material_map = NULL;
+    import_uv *uv_modes = NULL;
     uint32_t override_index = UINT32_MAX;
     if (override) {
         override_index = scene__add_material(s, override, err);
@@ -466,10 +743,11 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
             rc = SCENE_ERR_NOMEM;
     } else {
         material_map = malloc(sizeof(uint32_t) * (ai->mNumMaterials ? ai->mNumMaterials : 1));
-        if (!material_map)
+        uv_modes = malloc(sizeof *uv_modes * (ai->mNumMaterials ? ai->mNumMaterials : 1));
+        if (!material_map || !uv_modes)
             rc = scene__fail(err, SCENE_ERR_NOMEM, "%s: out of memory", path);
         for (uint32_t m = 0; rc == SCENE_OK && m < ai->mNumMaterials; m++)
-            rc = import_material(s, ai, m, model_dir, &material_map[m], err);
+            rc = import_material(s, ai, m, path, model_dir, &material_map[m], &uv_modes[m], err);
         if (rc == SCENE_OK && ai->mNumMaterials == 0) {
             scene_material grey = {.diffuse = {0.7f, 0.7f, 0.7f}, .texture = -1, .name = "default"};
             override_index = scene__add_material(s, &grey, err);
@@ -479,17 +757,17 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
     }
     uint32_t before = s->triangle_count;
     scene_repairs repairs_before = s->repairs;
-    for (uint32_t i = 0; rc == SCENE_OK && i < ai->mNumMeshes; i++) {
+    import_materials mats = {
+        .map = material_map, .uv = uv_modes, .count = ai->mNumMaterials, .all = override_index};
+    if (mirrored && rc == SCENE_OK)
+        rc = import_node(s, ai, ai->mRootNode, xform ? xform : scene__identity_matrix, &mats, path, 0, err);
+    for (uint32_t i = 0; !mirrored && rc == SCENE_OK && i < ai->mNumMeshes; i++) {
         const struct aiMesh *mesh = ai->mMeshes[i];
         if (!(mesh->mPrimitiveTypes & aiPrimitiveType_TRIANGLE)) {
             s->repairs.non_triangles_dropped += mesh->mNumFaces;
             continue;
         }
-        uint32_t material = override_index;
-        if (material == UINT32_MAX)
-            material = mesh->mMaterialIndex < ai->mNumMaterials ? material_map[mesh->mMaterialIndex]
-                                                                : material_map[0]; /* this file's first */
-        rc = import_mesh(s, mesh, i, material, xform, path, err);
+        rc = import_mesh(s, mesh, i, material_for(&mats, mesh), uv_for(&mats, mesh), xform, path, err);
     }
     if (rc == SCENE_OK && s->triangle_count == before) {
         char lost[160];
@@ -504,6 +782,18 @@ scene_result scene__import_file(scene *s, const char *path, const double *xform,
             (unsigned long long)(s->repairs.degenerate_skipped - repairs_before.degenerate_skipped), lost);
     }
     free(material_map);
+    free(uv_modes);
     aiReleaseImport(ai);
     return rc;
+}
+
+scene_result scene__import_file(scene *s, const char *path, const double *xform,
+                                const scene_material *override, scene_error *err)
+{
+    return import_file(s, path, xform, override, NULL, err);
+}
+
+scene_result scene__import_file_lit(scene *s, const char *path, scene_file_lights *found, scene_error *err)
+{
+    return import_file(s, path, NULL, NULL, found, err);
 }

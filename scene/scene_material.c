@@ -56,19 +56,52 @@ static bool build_mips(scene_texture *tex)
     return true;
 }
 
-int32_t scene__add_texture(scene *s, const char *path, scene_error *err)
+/* The texture already loaded from path (or named so), or -1. */
+static int32_t texture_named(const scene *s, const char *path)
 {
     for (uint32_t i = 0; i < s->texture_count; i++)
         if (strcmp(s->textures[i].path, path) == 0)
             return (int32_t)i;
+    return -1;
+}
+
+int32_t scene__add_texture(scene *s, const char *path, scene_error *err)
+{
+    int32_t known = texture_named(s, path);
+    if (known >= 0)
+        return known;
     scene_texture tex = {0};
-    char msg[384];
+    char msg[384] = "";
     if (scene_image_read_rgb(path, &tex.width, &tex.height, &tex.rgb, msg, sizeof msg) != 0) {
         scene__fail(err, SCENE_ERR_IO, "%s", msg);
         return -1;
     }
     if (msg[0]) /* read, but damaged: it loads (docs/SCENE_FORMAT.md), never silently */
         fprintf(stderr, "fxcache: warning: %s\n", msg);
+    return scene__add_texture_rgb(s, path, tex.width, tex.height, tex.rgb, err);
+}
+
+int32_t scene__add_texture_memory(scene *s, const char *name, const void *data, size_t len, scene_error *err)
+{
+    int32_t known = texture_named(s, name);
+    if (known >= 0)
+        return known;
+    scene_texture tex = {0};
+    char msg[384] = "";
+    if (scene_image_read_rgb_memory(name, data, len, &tex.width, &tex.height, &tex.rgb, msg, sizeof msg) !=
+        0) {
+        scene__fail(err, SCENE_ERR_IO, "%s", msg);
+        return -1;
+    }
+    if (msg[0]) /* read, but damaged: it loads (docs/SCENE_FORMAT.md), never silently */
+        fprintf(stderr, "fxcache: warning: %s\n", msg);
+    return scene__add_texture_rgb(s, name, tex.width, tex.height, tex.rgb, err);
+}
+
+int32_t scene__add_texture_rgb(scene *s, const char *path, uint32_t width, uint32_t height, float *rgb,
+                               scene_error *err)
+{
+    scene_texture tex = {.width = width, .height = height, .rgb = rgb};
     /* An albedo is a reflectance, 0..1 (as a material's colour is clamped on import): a float texture (EXR, HDR)
      * may hold more, which would reflect more light than arrives (a closed room's indirect light then grows
      * without bound, to FLT_MAX), or less than 0. */

@@ -60,6 +60,15 @@ uint32_t scene__add_material(scene *s, const scene_material *m, scene_error *err
  * Returns -1 and fills err when it cannot be read. */
 int32_t scene__add_texture(scene *s, const char *path, scene_error *err);
 
+/* The same from len encoded bytes in memory (a texture embedded in a GLB or FBX file), named name (its
+ * extension picks the image reader; a second texture of the same name is the first). */
+int32_t scene__add_texture_memory(scene *s, const char *name, const void *data, size_t len, scene_error *err);
+
+/* Adds a texture of linear RGB texels (width * height * 3, malloc'd; the scene owns them from here on, also
+ * on failure), named path in messages: texels clamped to 0..1, mip chain built. */
+int32_t scene__add_texture_rgb(scene *s, const char *path, uint32_t width, uint32_t height, float *rgb,
+                               scene_error *err);
+
 /* Appends a light after checking it (finite values, non-negative intensity, non-zero direction). A point
  * light's position is in world coordinates until scene__finalize() moves it into the local frame. */
 scene_result scene__add_light(scene *s, const scene_light *l, const char *where, scene_error *err);
@@ -138,6 +147,19 @@ const scene_import_format *scene__import_format_of(const char *ext);
  * xform (row-major affine, double) may be NULL; override (may be NULL) replaces every material of the file. */
 scene_result scene__import_file(scene *s, const char *path, const double *xform,
                                 const scene_material *override, scene_error *err);
+
+/* What a mesh file's own lights and camera gave the scene (scene__import_file_lit). */
+typedef struct scene_file_lights {
+    uint32_t lights;  /* directional and point lights added */
+    uint32_t skipped; /* lights fxcache cannot represent (spot, area, other falloffs): a warning line each */
+    bool sky;         /* an ambient light became the sky */
+    bool camera;      /* the file's first camera became the scene's default camera */
+} scene_file_lights;
+
+/* A plain mesh file: scene__import_file without transform or material, plus the file's lights (directional,
+ * point with an inverse-square falloff, ambient as the sky) and its first camera (scene_import_nodes.c);
+ * *found says what they gave. */
+scene_result scene__import_file_lit(scene *s, const char *path, scene_file_lights *found, scene_error *err);
 
 /* Reads a JSON scene description into s (scene_json.c). */
 scene_result scene__load_json(scene *s, const char *path, scene_error *err);

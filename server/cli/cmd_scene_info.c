@@ -146,11 +146,13 @@ static json_t *scene_info_json(const scene *s, const island_summary *is, const s
     const scene_repairs *r = &s->repairs;
     json_object_set_new(
         root, "repairs",
-        json_pack("{s:I,s:I,s:I,s:I,s:I,s:I,s:I}", "degenerate_skipped", (json_int_t)r->degenerate_skipped,
-                  "precision_skipped", (json_int_t)r->precision_skipped, "duplicate_skipped",
-                  (json_int_t)r->duplicate_skipped, "nonmanifold_split", (json_int_t)r->nonmanifold_split,
-                  "vertices_welded", (json_int_t)r->vertices_welded, "non_triangles_dropped",
-                  (json_int_t)r->non_triangles_dropped, "textures_missing", (json_int_t)r->textures_missing));
+        json_pack("{s:I,s:I,s:I,s:I,s:I,s:I,s:I,s:I,s:I}", "degenerate_skipped",
+                  (json_int_t)r->degenerate_skipped, "precision_skipped", (json_int_t)r->precision_skipped,
+                  "duplicate_skipped", (json_int_t)r->duplicate_skipped, "nonmanifold_split",
+                  (json_int_t)r->nonmanifold_split, "vertices_welded", (json_int_t)r->vertices_welded,
+                  "non_triangles_dropped", (json_int_t)r->non_triangles_dropped, "textures_missing",
+                  (json_int_t)r->textures_missing, "lights_unused", (json_int_t)r->lights_unused,
+                  "cameras_unused", (json_int_t)r->cameras_unused));
     json_object_set_new(root, "time_ms",
                         json_pack("{s:f,s:f,s:f,s:f,s:f}", "load", s->timings.load_ms, "weld",
                                   s->timings.weld_ms, "textures", s->timings.textures_ms, "islands",
@@ -195,6 +197,11 @@ static void print_text(const scene *s, const island_summary *is, const scene_nee
            (unsigned long long)r->degenerate_skipped, lost, (unsigned long long)r->duplicate_skipped,
            (unsigned long long)r->nonmanifold_split, (unsigned long long)r->non_triangles_dropped,
            (unsigned long long)r->textures_missing);
+    if (r->lights_unused || r->cameras_unused)
+        printf("file lights:    %llu light(s) and %llu camera(s) of the file not used (docs/SCENE_FORMAT.md: "
+               "fxcache reads directional and 1/d^2 point lights from glTF and Collada, cameras also from "
+               "FBX)\n",
+               (unsigned long long)r->lights_unused, (unsigned long long)r->cameras_unused);
     printf("meshes:         %u (materials %u, textures %u)\n", s->mesh_count, s->material_count,
            s->texture_count);
     uint32_t dirs = 0;
