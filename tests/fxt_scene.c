@@ -342,3 +342,12 @@ scene *fxt_load_json_text(const char *name, const char *text, scene_error *err)
     }
     return s;
 }
+
+scene *fxt_load_ok(const char *path)
+{
+    scene_error err = {0};
+    scene *s = scene_load(path, NULL, &err);
+    if (!s)
+        fail_msg("%s: %s", path, err.msg);
+    return s;
+}

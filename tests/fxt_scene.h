@@ -80,4 +80,7 @@ const char *fxt_write_quad(void);
  * the scene on success (caller frees) or NULL with err filled. */
 scene *fxt_load_json_text(const char *name, const char *text, scene_error *err);
 
+/* scene_load(path) with default options; fails the test with the loader's message when it refuses. */
+scene *fxt_load_ok(const char *path);
+
 #endif

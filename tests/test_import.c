@@ -4,6 +4,8 @@
  * degenerate and duplicate triangles skipped, mirrored transforms keeping the winding. */
 #include "test_util.h"
 
+#include "fxt_scene.h"
+
 #include "image.h"
 #include "scene_internal.h"
 
@@ -26,15 +28,6 @@ static uint64_t splitmix(uint64_t *state)
     return z ^ (z >> 31);
 }
 
-static scene *load_ok(const char *path)
-{
-    scene_error err = {0};
-    scene *s = scene_load(path, NULL, &err);
-    if (!s)
-        fail_msg("%s: %s", path, err.msg);
-    return s;
-}
-
 /* A glTF 2 file with one triangle in a base64 data-URI buffer. */
 static void test_gltf(void **state)
 {
@@ -50,7 +43,7 @@ static void test_gltf(void **state)
         "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\","
         "\"min\":[0,0,0],\"max\":[1,1,0]},{\"bufferView\":1,\"componentType\":5123,\"count\":3,\"type\":"
         "\"SCALAR\"}]}");
-    scene *s = load_ok(path);
+    scene *s = fxt_load_ok(path);
     assert_int_equal(s->triangle_count, 1);
     assert_int_equal(s->island_count, 1);
     assert_true(fabsf(s->tri_normal[2] - 1.0f) < 1e-6f); /* counter-clockwise seen from +z */
@@ -66,14 +59,14 @@ static void test_ply_and_gz(void **state)
     const char *ply = "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
                       "property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n"
                       "0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n";
-    scene *plain = load_ok(fxt_write_file("quad.ply", ply));
+    scene *plain = fxt_load_ok(fxt_write_file("quad.ply", ply));
     char gz_path[1024];
     snprintf(gz_path, sizeof gz_path, "%s", fxt_tmp_path("quad.ply.gz"));
     gzFile gz = gzopen(gz_path, "wb");
     assert_non_null(gz);
     assert_int_equal(gzputs(gz, ply), (int)strlen(ply));
     gzclose(gz);
-    scene *packed = load_ok(gz_path);
+    scene *packed = fxt_load_ok(gz_path);
     assert_int_equal(plain->triangle_count, 2);
     assert_int_equal(packed->triangle_count, 2);
     assert_int_equal(plain->vertex_count, 4);
@@ -108,7 +101,7 @@ static void test_obj_texture_and_non_triangles(void **state)
                                                 "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
                                                 "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
                                                 "f 1/1 2/2 3/3\nf 1/1 3/3 4/4\nl 1 2\np 3\n");
-    scene *s = load_ok(obj);
+    scene *s = fxt_load_ok(obj);
     assert_int_equal(s->triangle_count, 2);
     assert_int_equal(s->texture_count, 1);
     assert_int_equal(s->repairs.textures_missing, 0);
@@ -136,7 +129,7 @@ static void test_texture_mip_levels(void **state)
     const char *obj =
         fxt_write_file("mip.obj", "mtllib mip.mtl\nusemtl c\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
                                   "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n");
-    scene *s = load_ok(obj);
+    scene *s = fxt_load_ok(obj);
     assert_int_equal(s->texture_count, 1);
     assert_int_equal(s->textures[0].levels, 7);               /* 64, 32, ..., 1 */
     assert_true(fabsf(s->tri_texture_lod[0] - 6.0f) < 1e-4f); /* 64 texels per metre */
@@ -166,7 +159,7 @@ static void test_float_texture_albedo_clamped(void **state)
     const char *obj =
         fxt_write_file("hdr.obj", "mtllib hdr.mtl\nusemtl h\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
                                   "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n");
-    scene *s = load_ok(obj);
+    scene *s = fxt_load_ok(obj);
     assert_int_equal(s->texture_count, 1);
     const float expected[4 * 3] = {1, 1, 1, 0, 0, 0, 0.25f, 0.25f, 0.25f, 0, 0.5f, 0.5f};
     for (int i = 0; i < 12; i++)
@@ -200,7 +193,7 @@ static void test_albedo_run_equals_filtered(void **state)
         fxt_write_file("run.obj", "mtllib run.mtl\nusemtl t\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
                                   "v 3 0 0\nv 4 0 0\nv 3 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
                                   "f 1/1 2/2 3/3\nf 1/1 3/3 4/4\nusemtl plain\nf 5 6 7\n");
-    scene *s = load_ok(obj);
+    scene *s = fxt_load_ok(obj);
     assert_int_equal(s->texture_count, 1);
     assert_int_equal(s->textures[0].levels, 7);
     static uint32_t tri[HITS];
@@ -297,7 +290,7 @@ static void test_missing_texture_counted(void **state)
     fxt_write_file("gone.mtl", "newmtl m\nKd 0.5 0.5 0.5\nmap_Kd nowhere.png\n");
     const char *obj =
         fxt_write_file("gone.obj", "mtllib gone.mtl\nusemtl m\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
-    scene *s = load_ok(obj);
+    scene *s = fxt_load_ok(obj);
     assert_int_equal(s->repairs.textures_missing, 1);
     assert_int_equal(s->texture_count, 0);
     float rgb[3];
@@ -364,7 +357,7 @@ static void test_damaged_png_one_line(void **state)
         FILE *capture = fopen(err_path, "w+");
         assert_non_null(capture);
         assert_true(dup2(fileno(capture), 2) >= 0);
-        scene *s = load_ok(obj_path);
+        scene *s = fxt_load_ok(obj_path);
         fflush(stderr);
         dup2(saved, 2);
         close(saved);
@@ -966,7 +959,7 @@ static void test_3ds_horse(void **state)
         skip();
     }
     fclose(f);
-    scene *s = load_ok(path);
+    scene *s = fxt_load_ok(path);
     assert_true(s->triangle_count > 1000);
     assert_true(s->island_count > 0);
     for (uint32_t i = 0; i < s->island_count; i++)

@@ -4,6 +4,8 @@
  * with a message when assimp-testmodels is absent). */
 #include "test_util.h"
 
+#include "fxt_scene.h"
+
 #include "camera.h"
 #include "engine.h"
 #include "image.h"
@@ -21,15 +23,6 @@
 
 /* Where Debian's assimp-testmodels puts Assimp's own test models. */
 #define ASSIMP_MODELS "/usr/share/assimp/models"
-
-static scene *load_ok(const char *path)
-{
-    scene_error err = {0};
-    scene *s = scene_load(path, NULL, &err);
-    if (!s)
-        fail_msg("%s: %s", path, err.msg);
-    return s;
-}
 
 /* A closed unit cube centred on its origin, faces counter-clockwise seen from outside, normals outward, as a
  * glTF 2 buffer "cube.bin" beside name; `nodes` and `extra` are JSON text for the "nodes" array (each node
@@ -108,7 +101,7 @@ static void test_mirrored_instance_faces_outwards(void **state)
         "{\"name\":\"parent\",\"scale\":[2,1,1],\"children\":[3]},"
         "{\"mesh\":0,\"name\":\"child\",\"rotation\":[0,0,0.38268343,0.92387953],\"translation\":[0,0,3]}]",
         "[0,1,2]", NULL);
-    scene *s = load_ok(path);
+    scene *s = fxt_load_ok(path);
     assert_int_equal(s->triangle_count, 36); /* three instances of 12 */
     const double centres[3][3] = {{0, 0, 0}, {3, 0, 0}, {0, 0, 3}};
     uint32_t per_instance[3] = {0, 0, 0};
@@ -199,7 +192,7 @@ static void test_fbx_centimetres_become_metres(void **state)
     }
     double lo[3], hi[3];
     assimp_raw_bounds(path, lo, hi);
-    scene *s = load_ok(path);
+    scene *s = fxt_load_ok(path);
     for (int k = 0; k < 3; k++) {
         double world_lo = s->bounds_min[k] + s->origin[k], world_hi = s->bounds_max[k] + s->origin[k];
         assert_true(fabs(world_lo - 0.01 * lo[k]) < 1e-6 && fabs(world_hi - 0.01 * hi[k]) < 1e-6);
@@ -230,7 +223,7 @@ static void test_collada_unit_and_up_axis(void **state)
         "<library_visual_scenes><visual_scene id=\"S\" name=\"S\"><node id=\"q\" name=\"q\">"
         "<translate>0 0 200</translate><instance_geometry url=\"#quad\"/></node></visual_scene>"
         "</library_visual_scenes>\n<scene><instance_visual_scene url=\"#S\"/></scene>\n</COLLADA>\n");
-    scene *s = load_ok(path);
+    scene *s = fxt_load_ok(path);
     const double lo[3] = {-0.5, 2, -0.5}, hi[3] = {0.5, 2, 0.5};
     for (int k = 0; k < 3; k++) {
         assert_true(fabs(s->bounds_min[k] + s->origin[k] - lo[k]) < 1e-6);
@@ -267,7 +260,7 @@ static void test_scene_scale_defaults_follow_units(void **state)
                             "[{\"name\":\"km\",\"scale\":[1000,1000,1000],\"children\":[1,2]},"
                             "{\"mesh\":0},{\"mesh\":0,\"translation\":[3,0,0]}]"};
     for (int i = 0; i < 2; i++)
-        s[i] = load_ok(write_cube_gltf(i ? "km.gltf" : "mm.gltf", roots[i], "[0]", NULL));
+        s[i] = fxt_load_ok(write_cube_gltf(i ? "km.gltf" : "mm.gltf", roots[i], "[0]", NULL));
     assert_true(fabs(s[1]->ao_radius / s[0]->ao_radius / 1e6 - 1) < 1e-5);
     double cell_ratio = srv_probe_cell_default(s[1]) / srv_probe_cell_default(s[0]);
     assert_true(cell_ratio == 1048576.0 || cell_ratio == 524288.0);
@@ -350,7 +343,7 @@ static void test_gltf_lights_and_camera(void **state)
     /* scene_load, as every command loads a mesh file: the file's lights replace the default sun and sky (a
      * glTF has no sky), and its camera is the default camera. Before: one default sun, a sky of 0.6, no
      * camera. */
-    s = load_ok(path);
+    s = fxt_load_ok(path);
     assert_int_equal(s->light_count, 2);
     assert_false(s->default_lighting);
     assert_true(s->sky_intensity == 0);
@@ -508,7 +501,8 @@ static void test_fbx_camera_used_lights_not(void **state)
      * = 28.84 degrees vertically. */
     assert_true(fabs(s->camera_fov_deg - 28.84) < 0.05);
     scene_free(s);
-    s = load_ok(path); /* through scene_load: no light read, so the default sun and sky; the file's camera */
+    s = fxt_load_ok(
+        path); /* through scene_load: no light read, so the default sun and sky; the file's camera */
     assert_true(s->default_lighting && s->light_count == 1 && s->sky_intensity > 0 && s->has_camera);
     scene_free(s);
 }
@@ -525,7 +519,7 @@ static void test_glb_embedded_texture(void **state)
         print_message("skipped: %s or %s is absent (Debian's assimp-testmodels)\n", glb, gltf);
         skip();
     }
-    scene *a = load_ok(glb), *b = load_ok(gltf);
+    scene *a = fxt_load_ok(glb), *b = fxt_load_ok(gltf);
     assert_int_equal(a->texture_count, 1);
     assert_int_equal(b->texture_count, 1);
     assert_int_equal(a->repairs.textures_missing, 0);
@@ -615,16 +609,16 @@ static void test_gltf_texcoord_and_mirror(void **state)
 {
     (void)state;
     const float red[3] = {1, 0, 0}, green[3] = {0, 1, 0};
-    scene *s = load_ok(write_quad_gltf("set1.gltf", 0.25f, 0.75f, 1, 10497));
+    scene *s = fxt_load_ok(write_quad_gltf("set1.gltf", 0.25f, 0.75f, 1, 10497));
     assert_int_equal(s->texture_count, 1);
     assert_albedo_everywhere(s, green, "texCoord 1");
     scene_free(s);
-    s = load_ok(write_quad_gltf("mirror.gltf", 1.25f, 0, 0, 33648));
+    s = fxt_load_ok(write_quad_gltf("mirror.gltf", 1.25f, 0, 0, 33648));
     assert_int_equal(s->texture_count, 1); /* the mirrored texture replaced the plain one */
     assert_int_equal(s->textures[0].width, 4);
     assert_albedo_everywhere(s, green, "MIRRORED_REPEAT at u = 1.25");
     scene_free(s);
-    s = load_ok(write_quad_gltf("repeat.gltf", 1.25f, 0, 0, 10497));
+    s = fxt_load_ok(write_quad_gltf("repeat.gltf", 1.25f, 0, 0, 10497));
     assert_albedo_everywhere(s, red, "REPEAT at u = 1.25");
     scene_free(s);
 }
@@ -639,7 +633,7 @@ static void test_instanced_texture_density(void **state)
     const char *path = write_quad_gltf_nodes(
         "twice.gltf", uv, uv, 0, 10497,
         "[{\"mesh\":0},{\"mesh\":0,\"scale\":[2,2,2],\"translation\":[3,0,0]}]", "[0,1]");
-    scene *s = load_ok(path);
+    scene *s = fxt_load_ok(path);
     assert_int_equal(s->triangle_count, 4);
     assert_true(fabs(scene_surface_area(s) - 5.0) < 1e-6);
     float lod[2] = {NAN, NAN};
