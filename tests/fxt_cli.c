@@ -73,26 +73,7 @@ json_t *load_json_file(const char *path)
     return root;
 }
 
-/* The integer at a dotted path ("rays.ao"); fails when absent or not an integer. */
-long long jint(const json_t *root, const char *path)
-{
-    char buf[256];
-    snprintf(buf, sizeof buf, "%s", path);
-    const json_t *node = root;
-    for (char *save = NULL, *key = strtok_r(buf, ".", &save); key; key = strtok_r(NULL, ".", &save)) {
-        node = json_object_get(node, key);
-        if (!node) {
-            print_error("missing field '%s'\n", path);
-            fail();
-        }
-    }
-    if (!json_is_integer(node)) {
-        print_error("field '%s' is not an integer\n", path);
-        fail();
-    }
-    return json_integer_value(node);
-}
-
+/* The node at a dotted path ("rays.ao"); fails when absent. */
 const json_t *jget(const json_t *root, const char *path)
 {
     char buf[256];
@@ -106,4 +87,15 @@ const json_t *jget(const json_t *root, const char *path)
         }
     }
     return node;
+}
+
+/* The integer at a dotted path; fails when absent or not an integer. */
+long long jint(const json_t *root, const char *path)
+{
+    const json_t *node = jget(root, path);
+    if (!json_is_integer(node)) {
+        print_error("field '%s' is not an integer\n", path);
+        fail();
+    }
+    return json_integer_value(node);
 }
