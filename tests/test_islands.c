@@ -118,22 +118,6 @@ static uint64_t rasterise_triangle(const float *uv, uint32_t width, uint32_t hei
     return claimed;
 }
 
-/* World area of triangle t, square metres. */
-static double world_area(const scene *s, uint32_t t)
-{
-    const float *a = s->positions + 3 * (size_t)s->indices[3 * (size_t)t];
-    const float *b = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 1];
-    const float *c = s->positions + 3 * (size_t)s->indices[3 * (size_t)t + 2];
-    double e1[3], e2[3];
-    for (int k = 0; k < 3; k++) {
-        e1[k] = (double)b[k] - a[k];
-        e2[k] = (double)c[k] - a[k];
-    }
-    double x = e1[1] * e2[2] - e1[2] * e2[1], y = e1[2] * e2[0] - e1[0] * e2[2],
-           z = e1[0] * e2[1] - e1[1] * e2[0];
-    return 0.5 * sqrt(x * x + y * y + z * z);
-}
-
 /* Checks every island invariant listed at the top of this file; returns what it measured. */
 static island_report check_island_invariants(const scene *s)
 {
@@ -224,7 +208,7 @@ static island_report check_island_invariants(const scene *s)
                 perimeter += sqrt(du * du + dv * dv);
             }
             uv_area += tri_uv_area;
-            area += world_area(s, t);
+            area += scene_triangle_area(s, t);
             slack += perimeter / 128.0;
             if (rasterise)
                 report.texels_covered += rasterise_triangle(uv, island->width, island->height, bitmap, i, t);
