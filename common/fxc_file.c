@@ -4,6 +4,7 @@
 #include <errno.h>
 #include <stdio.h>
 #include <string.h>
+#include <sys/stat.h>
 
 bool fxc_write_whole_file(const char *path, const void *bytes, size_t len, char *msg, size_t cap)
 {
@@ -20,9 +21,16 @@ bool fxc_write_whole_file(const char *path, const void *bytes, size_t len, char 
         saved = errno;
     }
     if (!ok) {
-        remove(path);
+        fxc_remove_partial(path);
         if (msg && cap)
             snprintf(msg, cap, "%s: cannot write: %s", path, strerror(saved ? saved : EIO));
     }
     return ok;
+}
+
+void fxc_remove_partial(const char *path)
+{
+    struct stat st;
+    if (lstat(path, &st) == 0 && (S_ISREG(st.st_mode) || S_ISLNK(st.st_mode)))
+        remove(path);
 }

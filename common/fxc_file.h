@@ -12,9 +12,14 @@ extern "C" {
 #endif
 
 /* Writes len bytes to path (created or truncated). A full disk shows at fwrite, fflush or fclose; a file that
- * could not be written whole is removed. Returns false with "PATH: cannot write: REASON" in msg (cap bytes,
+ * could not be written whole is removed (fxc_remove_partial). Returns false with "PATH: cannot write: REASON" in msg (cap bytes,
  * may be NULL). */
 bool fxc_write_whole_file(const char *path, const void *bytes, size_t len, char *msg, size_t cap);
+
+/* Removes what a failed write left at path: a regular file, or a link (whatever it points to stays). Anything
+ * else is left alone: a device, a pipe or a socket the user named (`--summary /dev/full` run as root removed
+ * the device node, and the next write made it a regular file). */
+void fxc_remove_partial(const char *path);
 
 #ifdef __cplusplus
 }

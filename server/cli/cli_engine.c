@@ -5,6 +5,8 @@
 #include "cli.h"
 #include "cli_engine.h"
 
+#include "fxc_file.h"
+
 #include <errno.h>
 #include <math.h>
 #include <stdio.h>
@@ -508,7 +510,7 @@ bool srv_cli_write_json(const char *cmd, const char *path, const json_t *value)
     if (!written) {
         /* a summary that is there is whole: a partial one (a full disk) is removed */
         if (file)
-            remove(path);
+            fxc_remove_partial(path);
         fprintf(stderr, "fxcache %s: cannot write %s: %s\n", cmd, path, strerror(saved ? saved : EIO));
     }
     return written;
