@@ -250,13 +250,13 @@ FXC_HOT_CLONES static uint32_t migrate_span(const uint16_t *restrict dest, uint1
  *
  * The image's depths, winners and colours (3 MiB at 512 x 512) do not stay in L2, and the points land at
  * random in them, so a test a point in one loop waited for its depth's miss, then for the stores' lines
- * (perf: 45 % of that loop's samples on the compare). So in blocks of RC_ZBLOCK points, three steps: the
- * depth held at every projected point's pixel read without a branch (vectorised: the loads, independent,
- * overlap their misses) and the points nearer than it listed as candidates; the candidates' winner and colour
- * lines fetched for writing; then the candidates tested in slot order against the z-buffer as it is now (the
- * lines in cache). The depths only fall, so a point that was not nearer then is not nearer now: the same
- * winners as one test a point in slot order. */
-#define RC_ZBLOCK 256u
+ * (perf: 45 % of that loop's samples on the compare). So in blocks of RC_ZBLOCK points (128: a block's three
+ * lines a point fit in L1), three steps: the depth held at every projected point's pixel read without a
+ * branch (vectorised: the loads, independent, overlap their misses) and the points nearer than it listed as
+ * candidates; the candidates' winner and colour lines fetched for writing; then the candidates tested in slot
+ * order against the z-buffer as it is now (the lines in cache). The depths only fall, so a point that was not
+ * nearer then is not nearer now: the same winners as one test a point in slot order. */
+#define RC_ZBLOCK 128u
 
 FXC_HOT_CLONES static uint32_t zbuffer_candidates(const uint32_t *restrict key, const float *restrict dep,
                                                   uint32_t n, const float *restrict zbuf,
