@@ -201,6 +201,70 @@ static void test_zbuffer_ties_first_slot(void **state)
     check_ties_first_slot(1024, 64, 20 * 1024 + 300, 40 * 1024 + 900);
 }
 
+/* The z-buffer's order within and across the one-thread path's blocks (rc_project.c, zbuffer_span: depths read
+ * for a block of points before any of them is tested), by closed form: at each of four pixels a run of points
+ * in consecutive slots, the pixel must show the first point of the least depth in slot order. At p 5, 3, 4, 3
+ * (the 4 and the second 3 were nearer than what the z-buffer held when the block began) and, in the last
+ * slots, after the other pixels' points (another block), 3 again and 6; at q 4, 3, 2, 1 (each wins in turn);
+ * at r 1, 2, 3, 4; at s 5, then 2 in the last slot. The direct path, the tile lists on one thread and 2
+ * threads must agree. */
+static void test_zbuffer_order_in_blocks(void **state)
+{
+    (void)state;
+    const uint32_t w = 64, h = 32;
+    const uint32_t px[4] = {10 * 64 + 20, 20 * 64 + 40, 5 * 64 + 50, 25 * 64 + 8};
+    view_rc_camera cam = fxt_rc_look(0, 0, 0, 0, 0, -1, 60);
+    view_rc_sample *s = malloc(sizeof *s * (w * h + 16));
+    uint32_t n = 0;
+#define RC_T_ADD(pix, d, c)                                                                                  \
+    do {                                                                                                     \
+        s[n] = (view_rc_sample){.x = (uint16_t)((pix) % w), .y = (uint16_t)((pix) / w), .depth = (d)};       \
+        s[n].rgb[0] = (uint8_t)(c);                                                                          \
+        s[n].rgb[1] = s[n].rgb[2] = 0;                                                                       \
+        n++;                                                                                                 \
+    } while (0)
+    RC_T_ADD(px[0], 5.0f, 10);
+    RC_T_ADD(px[0], 3.0f, 11); /* p's winner */
+    RC_T_ADD(px[0], 4.0f, 12);
+    RC_T_ADD(px[0], 3.0f, 13);
+    const float up[4] = {4.0f, 3.0f, 2.0f, 1.0f};
+    for (int k = 0; k < 4; k++)
+        RC_T_ADD(px[1], up[k], 20 + k); /* q's winner: the last, 23 */
+    for (int k = 0; k < 4; k++)
+        RC_T_ADD(px[2], up[3 - k], 30 + k); /* r's winner: the first, 30 */
+    RC_T_ADD(px[3], 5.0f, 40);
+    for (uint32_t k = 0; k < w * h; k++)
+        if (k != px[0] && k != px[1] && k != px[2] && k != px[3])
+            RC_T_ADD(k, 5.0f, 90);
+    RC_T_ADD(px[0], 3.0f, 14);
+    RC_T_ADD(px[0], 6.0f, 15);
+    RC_T_ADD(px[3], 2.0f, 41); /* s's winner */
+#undef RC_T_ADD
+    const uint8_t want[4] = {11, 23, 30, 41};
+    const struct {
+        uint32_t threads;
+        bool tiled;
+    } ways[] = {{1, false}, {1, true}, {2, false}};
+    for (size_t k = 0; k < sizeof ways / sizeof ways[0]; k++) {
+        view_rc *rc = fxt_rc_make(&(view_rc_desc){.width = w,
+                                                  .height = h,
+                                                  .threads = ways[k].threads,
+                                                  .tile_size = 16,
+                                                  .capacity = w * h + 16,
+                                                  .tiled_one_thread = ways[k].tiled});
+        assert_int_equal(view_rc_insert_samples(rc, &cam, w, h, s, n), FXC_OK);
+        view_rc_frame f;
+        fxt_rc_render(rc, &cam, NULL, &f);
+        assert_int_equal(f.stats.projected, n);
+        for (int j = 0; j < 4; j++) {
+            assert_int_equal(f.kind[px[j]], VIEW_RC_POINT);
+            assert_int_equal(f.rgb[3 * px[j]], want[j]);
+        }
+        view_rc_destroy(rc);
+    }
+    free(s);
+}
+
 /* ---- tiles --------------------------------------------------------------------------------------------- */
 
 /* Tiles organise the work; they must not change the picture: the same sparse points (a pattern dense here,
@@ -342,6 +406,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_threads_bit_identical),
         cmocka_unit_test(test_zbuffer_ties_first_slot),
+        cmocka_unit_test(test_zbuffer_order_in_blocks),
         cmocka_unit_test(test_tiles_do_not_change_the_image),
         cmocka_unit_test(test_links_only_libc_libm_pthreads),
     };
