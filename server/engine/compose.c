@@ -45,11 +45,9 @@ typedef struct compose_scratch {
     uint32_t triangle[SRV_RUN]; /* the albedo's arguments, one array each */
     float bary_u[SRV_RUN], bary_v[SRV_RUN], albedo_footprint[SRV_RUN];
     float shade_normal[3][SRV_RUN]; /* axis k of gathered pixel i at [k][i] */
-    /* A tile's run gathered in lanes (gather_tile_run): per gathered pixel its triangle's island UVs (input
-     * of gather_lanes); in pixel_lanes its footprint, its triangle's island and the island's size (inputs),
-     * its island texel position (output of gather_lanes). pixel_lanes is handed to the cache kinds'
+    /* A tile's run gathered in lanes (gather_tile_run): per gathered pixel its footprint, its triangle's
+     * island and the island's size, its island texel position. pixel_lanes is handed to the cache kinds'
      * pixel_taps when the run's pixels are those (have_lanes). */
-    float lane_island_uv[6][SRV_RUN];
     srv_pixel_lanes pixel_lanes;
     bool have_lanes;
     float irradiance[SRV_RUN][3]; /* from the lights, summed light by light */
@@ -233,28 +231,14 @@ FXC_HOT_INLINE uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0
     return count;
 }
 
-/* gather_pixel's arithmetic for the SRV_RUN lanes of a tile's run gathered by gather_tile_run (vectorised:
- * FXC_HOT_LANES): the albedo's footprint and the island texel position, from each lane's barycentrics,
- * footprint and its triangle's island UVs. The same operations in the same order as gather_pixel (ISO C, no
- * contraction), so the same floats; the lanes past the run compute on zeros and are not read. */
-FXC_HOT_LANES static void gather_lanes(compose_scratch *cs, float log2_density)
-{
-    for (int i = 0; i < SRV_RUN; i++) {
-        float u = cs->bary_u[i], v = cs->bary_v[i];
-        float w = 1.0f - u - v;
-        cs->albedo_footprint[i] = cs->pixel_lanes.footprint[i] - log2_density;
-        float(*uv)[SRV_RUN] = cs->lane_island_uv;
-        cs->pixel_lanes.island_u[i] = w * uv[0][i] + u * uv[2][i] + v * uv[4][i];
-        cs->pixel_lanes.island_v[i] = w * uv[1][i] + u * uv[3][i] + v * uv[5][i];
-    }
-}
-
 /* gather_run for a tile's run when no visible points are gathered (points false, so positions false too):
- * the same values in three passes instead of one per pixel: the visible pixels, their shading normals and
- * their triangles' data into lanes (a miss gets the sky, as in gather_pixel), their arithmetic in lanes
- * (gather_lanes), then the
+ * the same values (the same operations in the same order as gather_pixel, so the same floats) in two passes
+ * instead of one per pixel: the visible pixels into lanes (a miss gets the sky, as in gather_pixel), then the
  * cache pixels, only when some kind reads them (pixels; else cs->pixels stays unset: every pixel_taps call
- * gets the lanes). */
+ * gets the lanes). The lanes past the run get zeros (inputs of loops over every lane; not read). Per pixel
+ * only what differs from its neighbour's goes to the lanes: an earlier version also stored its column, row,
+ * triangle normal and six island UVs to work out the facing test and the island position in a vectorised
+ * pass, 11 more stores a pixel than the scalar arithmetic they saved. */
 FXC_HOT_INLINE uint32_t gather_tile_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32_t x1,
                                         uint32_t y0, uint32_t y1, compose_scratch *cs, const float sky[3],
                                         float log2_density, bool pixels)
@@ -295,9 +279,13 @@ FXC_HOT_INLINE uint32_t gather_tile_run(srv_loop *loop, srv_viewer *view, uint32
             uint32_t i = count++;
             cs->index[i] = p;
             cs->triangle[i] = tri;
-            cs->bary_u[i] = bary_u[p];
-            cs->bary_v[i] = bary_v[p];
-            pl->footprint[i] = footprint[p];
+            float u = bary_u[p], v = bary_v[p], w = 1.0f - u - v, fp = footprint[p];
+            cs->bary_u[i] = u;
+            cs->bary_v[i] = v;
+            pl->footprint[i] = fp;
+            cs->albedo_footprint[i] = fp - log2_density;
+            pl->island_u[i] = w * uv0 + u * uv2 + v * uv4;
+            pl->island_v[i] = w * uv1 + u * uv3 + v * uv5;
             uint32_t back_bit = back[p];
             pl->island[i] = island | back_bit << 31; /* the side seen: SCENE_ISLAND_BACK */
             pl->width0[i] = width0;
@@ -305,23 +293,15 @@ FXC_HOT_INLINE uint32_t gather_tile_run(srv_loop *loop, srv_viewer *view, uint32
             cs->shade_normal[0][i] = shade_axis(n0, back_bit);
             cs->shade_normal[1][i] = shade_axis(n1, back_bit);
             cs->shade_normal[2][i] = shade_axis(n2, back_bit);
-            cs->lane_island_uv[0][i] = uv0;
-            cs->lane_island_uv[1][i] = uv1;
-            cs->lane_island_uv[2][i] = uv2;
-            cs->lane_island_uv[3][i] = uv3;
-            cs->lane_island_uv[4][i] = uv4;
-            cs->lane_island_uv[5][i] = uv5;
         }
     }
     for (uint32_t i = count; i < SRV_RUN; i++) { /* defined inputs for the lanes past the run */
-        cs->bary_u[i] = cs->bary_v[i] = pl->footprint[i] = 0.0f;
+        cs->bary_u[i] = cs->bary_v[i] = pl->footprint[i] = pl->island_u[i] = pl->island_v[i] = 0.0f;
+        cs->albedo_footprint[i] = 0.0f - log2_density;
         pl->island[i] = pl->width0[i] = pl->height0[i] = 0;
         for (int k = 0; k < 3; k++)
             cs->shade_normal[k][i] = 0.0f;
-        for (int k = 0; k < 6; k++)
-            cs->lane_island_uv[k][i] = 0.0f;
     }
-    gather_lanes(cs, log2_density);
     for (uint32_t i = 0; pixels && i < count; i++) {
         srv_pixel *px = &cs->pixels[i];
         px->triangle = cs->triangle[i];
