@@ -477,11 +477,21 @@ static void test_closed_mesh_no_twin(void **state)
         assert_true(total > 0);
         assert_int_equal(back, inside ? total : 0);
         const srv_viewer *v = &loop->viewers[id.id & 0xFFu];
+        srv_camera_frame cf;
+        assert_true(srv_camera_setup(inside ? &box_camera : &outside, W, H, &cf));
         uint32_t visible = 0, backs = 0;
         for (size_t p = 0; p < (size_t)W * H; p++)
             if (v->tri[p] != SRV_MISS) {
                 visible++;
                 backs += v->back[p];
+                /* A second method for the byte compose takes the shading normal's side from: the unit ray
+                 * and the normal in double (away from grazing, where rounding could differ). */
+                float dir[3];
+                srv_camera_ray(&cf, (float)(p % W) + 0.5f, (float)(p / W) + 0.5f, dir);
+                const float *n = s->tri_normal + 3 * (size_t)v->tri[p];
+                double facing = (double)n[0] * dir[0] + (double)n[1] * dir[1] + (double)n[2] * dir[2];
+                if (fabs(facing) > 1e-4)
+                    assert_int_equal(v->back[p], facing > 0);
             }
         assert_true(visible > 0);
         assert_int_equal(backs, inside ? visible : 0);

@@ -45,12 +45,9 @@ typedef struct compose_scratch {
     uint32_t triangle[SRV_RUN]; /* the albedo's arguments, one array each */
     float bary_u[SRV_RUN], bary_v[SRV_RUN], albedo_footprint[SRV_RUN];
     float shade_normal[3][SRV_RUN]; /* axis k of gathered pixel i at [k][i] */
-    /* A tile's run gathered in lanes (gather_tile_run): per gathered pixel its column and row, its triangle's
-     * normal and island UVs (inputs of gather_lanes); in pixel_lanes its footprint, its triangle's island
-     * and the island's size (inputs), its island texel position (output of gather_lanes). pixel_lanes is
-     * handed to the cache kinds' pixel_taps when the run's pixels are those (have_lanes). */
-    float lane_x[SRV_RUN], lane_y[SRV_RUN];
-    float lane_normal[3][SRV_RUN], lane_island_uv[6][SRV_RUN];
+    /* A tile's run gathered in lanes (gather_tile_run): per gathered pixel its footprint, its triangle's
+     * island and the island's size, its island texel position. pixel_lanes is handed to the cache kinds'
+     * pixel_taps when the run's pixels are those (have_lanes). */
     srv_pixel_lanes pixel_lanes;
     bool have_lanes;
     float irradiance[SRV_RUN][3]; /* from the lights, summed light by light */
@@ -116,26 +113,30 @@ typedef struct compose_task {
     atomic_uint_fast64_t rays[SRV_MAX_EFFECTS];
 } compose_task;
 
-/* What neighbouring pixels share when they see the same triangle, looked up once; and the camera's frame,
- * copied once per run (read through the viewer, it was loaded again for every pixel: the scratch's stores
- * might alias it). */
+/* What neighbouring pixels share when they see the same triangle, looked up once. */
 typedef struct gather_memo {
     uint32_t tri, island; /* SRV_MISS: none yet */
     float corner[3][3], normal[3], island_uv[6];
-    float scale_x, scale_y, tan_half_x, tan_half_y, forward[3], right[3], up[3];
 } gather_memo;
 
-/* A memo with no triangle yet, for viewer view's frame. */
-FXC_HOT_INLINE gather_memo gather_memo_start(const srv_viewer *view)
+/* A memo with no triangle yet. */
+FXC_HOT_INLINE gather_memo gather_memo_start(void)
 {
-    const srv_camera_frame *f = &view->frame;
-    gather_memo memo = {.tri = SRV_MISS, .tan_half_x = f->tan_half_x, .tan_half_y = f->tan_half_y};
-    memo.scale_x = 2.0f * f->tan_half_x / (float)f->width;
-    memo.scale_y = 2.0f * f->tan_half_y / (float)f->height;
-    memcpy(memo.forward, f->forward, sizeof memo.forward);
-    memcpy(memo.right, f->right, sizeof memo.right);
-    memcpy(memo.up, f->up, sizeof memo.up);
-    return memo;
+    return (gather_memo){.tri = SRV_MISS};
+}
+
+/* The shading normal of a visible pixel: its triangle's normal, negated when the pixel sees the back of the
+ * triangle (back: the byte visibility stored, its facing test `normal . ray direction on the image plane > 0`,
+ * which compose computed again per pixel with the same operations in the same order until 2026-11-29, so the
+ * same sign; tests/test_two_side.c checks the byte against that test). The negation flips the sign bit only,
+ * exactly as `-n` does, NaN included. */
+FXC_HOT_INLINE float shade_axis(float normal, uint32_t back_bit)
+{
+    uint32_t bits;
+    memcpy(&bits, &normal, sizeof bits);
+    bits ^= back_bit << 31;
+    memcpy(&normal, &bits, sizeof normal);
+    return normal;
 }
 
 /* Pixel (x, y) of the viewer's frame, held at buffer entry p (y * width + x, or a sparse viewer's list
@@ -161,7 +162,7 @@ FXC_HOT_INLINE void gather_pixel(srv_loop *loop, srv_viewer *view, uint32_t x, u
     }
     uint32_t i = (*count)++;
     cs->index[i] = p;
-    float u = view->bary_u[p], v = view->bary_v[p], dir[3];
+    float u = view->bary_u[p], v = view->bary_v[p];
     if (tri != memo->tri) {
         memo->tri = tri;
         const uint32_t *idx = s->indices + 3 * (size_t)tri;
@@ -173,19 +174,8 @@ FXC_HOT_INLINE void gather_pixel(srv_loop *loop, srv_viewer *view, uint32_t x, u
     }
     const float *normal = memo->normal;
     float w = 1.0f - u - v;
-    /* The ray's direction, not normalised: only its side of the surface matters here. The loops over the
-     * three axes are written out (at -O2 they stayed loops). */
-    float sx = ((float)x + 0.5f) * memo->scale_x - memo->tan_half_x;
-    float sy = memo->tan_half_y - ((float)y + 0.5f) * memo->scale_y;
-    const float *forward = memo->forward, *right = memo->right, *up = memo->up;
-    dir[0] = forward[0] + sx * right[0] + sy * up[0];
-    dir[1] = forward[1] + sx * right[1] + sy * up[1];
-    dir[2] = forward[2] + sx * right[2] + sy * up[2];
-    float facing = normal[0] * dir[0] + normal[1] * dir[1] + normal[2] * dir[2];
-    float sn[3]; /* seen from behind: light the side the viewer sees */
-    sn[0] = facing > 0 ? -normal[0] : normal[0];
-    sn[1] = facing > 0 ? -normal[1] : normal[1];
-    sn[2] = facing > 0 ? -normal[2] : normal[2];
+    uint32_t back = view->back[p]; /* seen from behind: light the side the viewer sees */
+    float sn[3] = {shade_axis(normal[0], back), shade_axis(normal[1], back), shade_axis(normal[2], back)};
     cs->shade_normal[0][i] = sn[0];
     cs->shade_normal[1][i] = sn[1];
     cs->shade_normal[2][i] = sn[2];
@@ -208,6 +198,7 @@ FXC_HOT_INLINE void gather_pixel(srv_loop *loop, srv_viewer *view, uint32_t x, u
         pt->v = v;
         pt->pixel_id = (uint64_t)y * f->width + x; /* the image position, whatever buffer entry holds it */
         if (loop->desc.no_cache) {
+            float dir[3];
             srv_camera_ray(f, (float)x + 0.5f, (float)y + 0.5f, dir);
             srv__pixel_differentials(f, dir, view->depth[p], pt->normal, pt->dpdx, pt->dpdy);
         }
@@ -215,7 +206,7 @@ FXC_HOT_INLINE void gather_pixel(srv_loop *loop, srv_viewer *view, uint32_t x, u
             memcpy(px->position, pt->position, sizeof px->position);
     }
     px->triangle = tri;
-    px->island = memo->island | (uint32_t)view->back[p] << 31; /* the side seen: SCENE_ISLAND_BACK */
+    px->island = memo->island | back << 31; /* the side seen: SCENE_ISLAND_BACK */
     px->footprint = view->footprint[p];
     px->island_u = w * memo->island_uv[0] + u * memo->island_uv[2] + v * memo->island_uv[4];
     px->island_v = w * memo->island_uv[1] + u * memo->island_uv[3] + v * memo->island_uv[5];
@@ -229,7 +220,7 @@ FXC_HOT_INLINE uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0
                                    uint32_t y1, compose_scratch *cs, const float sky[3], float log2_density,
                                    bool positions, bool points)
 {
-    gather_memo memo = gather_memo_start(view);
+    gather_memo memo = gather_memo_start();
     uint32_t count = 0;
     cs->have_lanes = false;
     for (uint32_t y = y0; y < y1; y++)
@@ -240,41 +231,14 @@ FXC_HOT_INLINE uint32_t gather_run(srv_loop *loop, srv_viewer *view, uint32_t x0
     return count;
 }
 
-/* gather_pixel's arithmetic for the SRV_RUN lanes of a tile's run gathered by gather_tile_run (vectorised:
- * FXC_HOT_LANES): the ray's side of the surface and the shading normal, the albedo's footprint and the island
- * texel position, from each lane's column, row, barycentrics, footprint and its triangle's normal and island
- * UVs. The same operations in the same order as gather_pixel (ISO C, no contraction), so the same floats;
- * the lanes past the run compute on zeros and are not read. */
-FXC_HOT_LANES static void gather_lanes(compose_scratch *cs, const gather_memo *memo, float log2_density)
-{
-    const float scale_x = memo->scale_x, scale_y = memo->scale_y, tan_half_x = memo->tan_half_x,
-                tan_half_y = memo->tan_half_y;
-    const float f0 = memo->forward[0], f1 = memo->forward[1], f2 = memo->forward[2];
-    const float r0 = memo->right[0], r1 = memo->right[1], r2 = memo->right[2];
-    const float u0 = memo->up[0], u1 = memo->up[1], u2 = memo->up[2];
-    for (int i = 0; i < SRV_RUN; i++) {
-        float u = cs->bary_u[i], v = cs->bary_v[i];
-        float w = 1.0f - u - v;
-        float sx = (cs->lane_x[i] + 0.5f) * scale_x - tan_half_x;
-        float sy = tan_half_y - (cs->lane_y[i] + 0.5f) * scale_y;
-        float d0 = f0 + sx * r0 + sy * u0, d1 = f1 + sx * r1 + sy * u1, d2 = f2 + sx * r2 + sy * u2;
-        float n0 = cs->lane_normal[0][i], n1 = cs->lane_normal[1][i], n2 = cs->lane_normal[2][i];
-        float facing = n0 * d0 + n1 * d1 + n2 * d2;
-        cs->shade_normal[0][i] = facing > 0 ? -n0 : n0;
-        cs->shade_normal[1][i] = facing > 0 ? -n1 : n1;
-        cs->shade_normal[2][i] = facing > 0 ? -n2 : n2;
-        cs->albedo_footprint[i] = cs->pixel_lanes.footprint[i] - log2_density;
-        float(*uv)[SRV_RUN] = cs->lane_island_uv;
-        cs->pixel_lanes.island_u[i] = w * uv[0][i] + u * uv[2][i] + v * uv[4][i];
-        cs->pixel_lanes.island_v[i] = w * uv[1][i] + u * uv[3][i] + v * uv[5][i];
-    }
-}
-
 /* gather_run for a tile's run when no visible points are gathered (points false, so positions false too):
- * the same values in three passes instead of one per pixel: the visible pixels and their triangles' data
- * into lanes (a miss gets the sky, as in gather_pixel), their arithmetic in lanes (gather_lanes), then the
+ * the same values (the same operations in the same order as gather_pixel, so the same floats) in two passes
+ * instead of one per pixel: the visible pixels into lanes (a miss gets the sky, as in gather_pixel), then the
  * cache pixels, only when some kind reads them (pixels; else cs->pixels stays unset: every pixel_taps call
- * gets the lanes). */
+ * gets the lanes). The lanes past the run get zeros (inputs of loops over every lane; not read). Per pixel
+ * only what differs from its neighbour's goes to the lanes: an earlier version also stored its column, row,
+ * triangle normal and six island UVs to work out the facing test and the island position in a vectorised
+ * pass, 11 more stores a pixel than the scalar arithmetic they saved. */
 FXC_HOT_INLINE uint32_t gather_tile_run(srv_loop *loop, srv_viewer *view, uint32_t x0, uint32_t x1,
                                         uint32_t y0, uint32_t y1, compose_scratch *cs, const float sky[3],
                                         float log2_density, bool pixels)
@@ -315,35 +279,29 @@ FXC_HOT_INLINE uint32_t gather_tile_run(srv_loop *loop, srv_viewer *view, uint32
             uint32_t i = count++;
             cs->index[i] = p;
             cs->triangle[i] = tri;
-            cs->bary_u[i] = bary_u[p];
-            cs->bary_v[i] = bary_v[p];
-            pl->footprint[i] = footprint[p];
-            cs->lane_x[i] = (float)x;
-            cs->lane_y[i] = (float)y;
-            pl->island[i] = island | (uint32_t)back[p] << 31; /* the side seen: SCENE_ISLAND_BACK */
+            float u = bary_u[p], v = bary_v[p], w = 1.0f - u - v, fp = footprint[p];
+            cs->bary_u[i] = u;
+            cs->bary_v[i] = v;
+            pl->footprint[i] = fp;
+            cs->albedo_footprint[i] = fp - log2_density;
+            pl->island_u[i] = w * uv0 + u * uv2 + v * uv4;
+            pl->island_v[i] = w * uv1 + u * uv3 + v * uv5;
+            uint32_t back_bit = back[p];
+            pl->island[i] = island | back_bit << 31; /* the side seen: SCENE_ISLAND_BACK */
             pl->width0[i] = width0;
             pl->height0[i] = height0;
-            cs->lane_normal[0][i] = n0;
-            cs->lane_normal[1][i] = n1;
-            cs->lane_normal[2][i] = n2;
-            cs->lane_island_uv[0][i] = uv0;
-            cs->lane_island_uv[1][i] = uv1;
-            cs->lane_island_uv[2][i] = uv2;
-            cs->lane_island_uv[3][i] = uv3;
-            cs->lane_island_uv[4][i] = uv4;
-            cs->lane_island_uv[5][i] = uv5;
+            cs->shade_normal[0][i] = shade_axis(n0, back_bit);
+            cs->shade_normal[1][i] = shade_axis(n1, back_bit);
+            cs->shade_normal[2][i] = shade_axis(n2, back_bit);
         }
     }
     for (uint32_t i = count; i < SRV_RUN; i++) { /* defined inputs for the lanes past the run */
-        cs->bary_u[i] = cs->bary_v[i] = pl->footprint[i] = cs->lane_x[i] = cs->lane_y[i] = 0.0f;
+        cs->bary_u[i] = cs->bary_v[i] = pl->footprint[i] = pl->island_u[i] = pl->island_v[i] = 0.0f;
+        cs->albedo_footprint[i] = 0.0f - log2_density;
         pl->island[i] = pl->width0[i] = pl->height0[i] = 0;
         for (int k = 0; k < 3; k++)
-            cs->lane_normal[k][i] = 0.0f;
-        for (int k = 0; k < 6; k++)
-            cs->lane_island_uv[k][i] = 0.0f;
+            cs->shade_normal[k][i] = 0.0f;
     }
-    gather_memo memo = gather_memo_start(view);
-    gather_lanes(cs, &memo, log2_density);
     for (uint32_t i = 0; pixels && i < count; i++) {
         srv_pixel *px = &cs->pixels[i];
         px->triangle = cs->triangle[i];
@@ -361,7 +319,7 @@ FXC_HOT_INLINE uint32_t gather_tile_run(srv_loop *loop, srv_viewer *view, uint32
 static uint32_t gather_list(srv_loop *loop, srv_viewer *view, size_t first, size_t end, compose_scratch *cs,
                             const float sky[3], float log2_density, bool positions, bool points)
 {
-    gather_memo memo = gather_memo_start(view);
+    gather_memo memo = gather_memo_start();
     uint32_t count = 0;
     cs->have_lanes = false;
     for (size_t p = first; p < end; p++)
@@ -696,7 +654,7 @@ FXC_HOT_INLINE void coarse_shade(srv_loop *loop, srv_viewer *view, compose_scrat
     if (!owns) /* every pixel blended (the common case): nothing to gather or shade */
         return;
     uint32_t own = 0;
-    gather_memo memo = gather_memo_start(view);
+    gather_memo memo = gather_memo_start();
     for (uint32_t i = 0; i < count; i++) {
         if (!cs->blend_own[i])
             continue;
@@ -761,7 +719,7 @@ FXC_HOT_CLONES static void sample_patch(void *user, uint32_t task_index, uint32_
     float *values = view->samples;
     const size_t value_stride = view->sample_capacity;
     const uint64_t *bits = loop->viewer_bits[e];
-    gather_memo memo = gather_memo_start(view);
+    gather_memo memo = gather_memo_start();
     const uint32_t across = gx1 - gx0, n = across * (gy1 - gy0);
     for (uint32_t first = 0; first < n;) {
         uint32_t count = 0;
