@@ -461,10 +461,17 @@ static scene_result import_material(scene *s, const struct aiScene *ai, uint32_t
     return *out_index == UINT32_MAX ? SCENE_ERR_NOMEM : SCENE_OK;
 }
 
-/* Appends one Assimp mesh (triangulated) through scene__add_mesh(), with its texture coordinates of set
- * uv_set (its material's texture's; set 0 when the mesh has no such set). */
+/* How a file's vertex colours are read: not at all (a scene description's material replaces the file's),
+ * as linear RGB (glTF's COLOR_0, by its specification), or as sRGB-encoded (every other format: PLY scans' and
+ * DCC tools' byte colours are what a screen shows, as 8-bit images are). */
+typedef enum import_colors { IMPORT_COLORS_NONE = 0, IMPORT_COLORS_LINEAR, IMPORT_COLORS_SRGB } import_colors;
+
+/* Appends one Assimp mesh (triangulated) through scene__add_mesh_colored(), with its texture coordinates of
+ * set uv_set (its material's texture's; set 0 when the mesh has no such set) and its first vertex colour set
+ * (Assimp's mColors[0]; alpha is not used) read as `colors` says. */
 static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t mesh_number, uint32_t material,
-                                import_uv uv_mode, const double *xform, const char *path, scene_error *err)
+                                import_uv uv_mode, import_colors colors, const double *xform,
+                                const char *path, scene_error *err)
 {
     unsigned uv_set = uv_mode.set;
     float scale_u = uv_mode.half_u ? 0.5f : 1.0f, scale_v = uv_mode.half_v ? 0.5f : 1.0f;
@@ -479,8 +486,10 @@ static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t me
     float *positions = malloc(sizeof(float) * 3 * (size_t)(nv ? nv : 1));
     float *uv = coords ? malloc(sizeof(float) * 2 * (size_t)(nv ? nv : 1)) : NULL;
     uint32_t *indices = malloc(sizeof(uint32_t) * 3 * (size_t)(nf ? nf : 1));
+    const struct aiColor4D *vertex_colors = colors != IMPORT_COLORS_NONE ? mesh->mColors[0] : NULL;
+    float *color = vertex_colors ? malloc(sizeof(float) * 3 * (size_t)(nv ? nv : 1)) : NULL;
     scene_result rc = SCENE_ERR_NOMEM;
-    if (!positions || !indices || (coords && !uv)) {
+    if (!positions || !indices || (coords && !uv) || (vertex_colors && !color)) {
         rc = scene__fail(err, SCENE_ERR_NOMEM, "mesh '%s': out of memory", name);
         goto done;
     }
@@ -491,6 +500,12 @@ static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t me
         if (uv) {
             uv[2 * (size_t)v] = coords[v].x * scale_u;
             uv[2 * (size_t)v + 1] = coords[v].y * scale_v;
+        }
+        if (color) {
+            const float c[3] = {vertex_colors[v].r, vertex_colors[v].g, vertex_colors[v].b};
+            for (int k = 0; k < 3; k++) /* scene__add_mesh_colored clamps to 0..1 */
+                color[3 * (size_t)v + k] =
+                    colors == IMPORT_COLORS_SRGB ? srgb_to_linear(fminf(fmaxf(c[k], 0.0f), 1.0f)) : c[k];
         }
     }
     uint32_t nt = 0;
@@ -504,20 +519,22 @@ static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t me
             indices[3 * (size_t)nt + c] = face->mIndices[c];
         nt++;
     }
-    rc = scene__add_mesh(s, name, positions, nv, indices, nt, uv, material, xform, err);
+    rc = scene__add_mesh_colored(s, name, positions, nv, indices, nt, uv, color, material, xform, err);
 done:
     free(positions);
     free(uv);
+    free(color);
     free(indices);
     return rc;
 }
 
 /* Which scene material each Assimp mesh gets: the file's own through material_map, or one for all. */
 typedef struct import_materials {
-    const uint32_t *map; /* per Assimp material, or NULL */
-    const import_uv *uv; /* per Assimp material: how its texture is read, or NULL */
-    uint32_t count;      /* entries of map */
-    uint32_t all;        /* UINT32_MAX, or the material every mesh gets */
+    const uint32_t *map;  /* per Assimp material, or NULL */
+    const import_uv *uv;  /* per Assimp material: how its texture is read, or NULL */
+    uint32_t count;       /* entries of map */
+    uint32_t all;         /* UINT32_MAX, or the material every mesh gets */
+    import_colors colors; /* how meshes' vertex colours are read */
 } import_materials;
 
 static uint32_t material_for(const import_materials *mats, const struct aiMesh *mesh)
@@ -554,8 +571,8 @@ static scene_result import_node(scene *s, const struct aiScene *ai, const struct
             s->repairs.non_triangles_dropped += mesh->mNumFaces;
             continue;
         }
-        rc = import_mesh(s, mesh, node->mMeshes[i], material_for(mats, mesh), uv_for(mats, mesh), world, path,
-                         err);
+        rc = import_mesh(s, mesh, node->mMeshes[i], material_for(mats, mesh), uv_for(mats, mesh),
+                         mats->colors, world, path, err);
     }
     for (uint32_t i = 0; rc == SCENE_OK && i < node->mNumChildren; i++)
         rc = import_node(s, ai, node->mChildren[i], world, mats, path, depth + 1, err);
@@ -568,15 +585,6 @@ static scene_result import_node(scene *s, const struct aiScene *ai, const struct
  * (fxcache repeats textures, or mirrors them: mirrored_texture(); inside 0..1 the modes agree). */
 static void warn_left_out(const struct aiScene *ai, const char *path)
 {
-    uint32_t coloured = 0;
-    for (uint32_t i = 0; i < ai->mNumMeshes; i++)
-        coloured += ai->mMeshes[i]->mColors[0] != NULL;
-    if (coloured)
-        fprintf(
-            stderr,
-            "fxcache: warning: %s: %u mesh(es) carry vertex colours, which fxcache does not use (it renders "
-            "the materials' colours and textures)\n",
-            path, coloured);
     for (uint32_t m = 0; m < ai->mNumMaterials; m++) {
         struct aiString tex;
         unsigned uv_set = 0;
@@ -757,8 +765,15 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
     }
     uint32_t before = s->triangle_count;
     scene_repairs repairs_before = s->repairs;
-    import_materials mats = {
-        .map = material_map, .uv = uv_modes, .count = ai->mNumMaterials, .all = override_index};
+    import_materials mats = {.map = material_map,
+                             .uv = uv_modes,
+                             .count = ai->mNumMaterials,
+                             .all = override_index,
+                             .colors = override
+                                           ? IMPORT_COLORS_NONE
+                                           : (strcasecmp(hint, "gltf") == 0 || strcasecmp(hint, "glb") == 0
+                                                  ? IMPORT_COLORS_LINEAR
+                                                  : IMPORT_COLORS_SRGB)};
     if (mirrored && rc == SCENE_OK)
         rc = import_node(s, ai, ai->mRootNode, xform ? xform : scene__identity_matrix, &mats, path, 0, err);
     for (uint32_t i = 0; !mirrored && rc == SCENE_OK && i < ai->mNumMeshes; i++) {
@@ -767,7 +782,8 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
             s->repairs.non_triangles_dropped += mesh->mNumFaces;
             continue;
         }
-        rc = import_mesh(s, mesh, i, material_for(&mats, mesh), uv_for(&mats, mesh), xform, path, err);
+        rc = import_mesh(s, mesh, i, material_for(&mats, mesh), uv_for(&mats, mesh), mats.colors, xform, path,
+                         err);
     }
     if (rc == SCENE_OK && s->triangle_count == before) {
         char lost[160];
