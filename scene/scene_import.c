@@ -373,6 +373,56 @@ static int32_t mirrored_texture(scene *s, int32_t texture, bool mirror_u, bool m
     return texture;
 }
 
+/* An emitting material's emissive texture (glTF's emissiveTexture, times emissiveFactor): fxcache's emission
+ * is one radiance per material, so the texture's mean colour over its texels multiplies it, which keeps the
+ * material's emitted power (before, the texture was not read: a factor of 1 made every texel emit white). The
+ * texture is read only for its mean and not kept (unless the material's diffuse texture is the same file);
+ * one warning line says so. A texture that cannot be read leaves the emission as it is, with a warning. */
+static void emissive_texture_mean(scene *s, const struct aiScene *ai, const struct aiMaterial *am,
+                                  const char *path, const char *model_dir, scene_material *m)
+{
+    struct aiString tex;
+    if (!scene_material_emits(m) || aiGetMaterialTextureCount(am, aiTextureType_EMISSIVE) == 0 ||
+        aiGetMaterialTexture(am, aiTextureType_EMISSIVE, 0, &tex, NULL, NULL, NULL, NULL, NULL, NULL) !=
+            aiReturn_SUCCESS ||
+        tex.length == 0)
+        return;
+    char found[768];
+    const struct aiTexture *held = embedded_texture(ai, tex.data);
+    bool beside = tex.data[0] != '*' && resolve_texture(model_dir, tex.data, found, sizeof found);
+    uint32_t before = s->texture_count;
+    scene_error tex_err = {0};
+    int32_t index = beside ? scene__add_texture(s, found, &tex_err)
+                    : held ? add_embedded_texture(s, path, tex.data, held, &tex_err)
+                           : -1;
+    if (index < 0) {
+        fprintf(stderr,
+                "fxcache: warning: material '%s': emissive texture '%s' %s (its emission is uniform)\n",
+                m->name, tex.data, beside || held ? "could not be read" : "not found beside the model");
+        return;
+    }
+    scene_texture *t = &s->textures[index];
+    double sum[3] = {0, 0, 0};
+    size_t texels = (size_t)t->width * t->height;
+    for (size_t i = 0; i < texels; i++)
+        for (int k = 0; k < 3; k++)
+            sum[k] += t->rgb[3 * i + k];
+    for (int k = 0; k < 3; k++)
+        m->emission[k] = (float)(m->emission[k] * (texels ? sum[k] / (double)texels : 0.0));
+    fprintf(stderr,
+            "fxcache: warning: material '%s': emissive texture '%s' is used as its mean colour (%.3g, %.3g, "
+            "%.3g): fxcache's emission is uniform over a material\n",
+            m->name, tex.data, sum[0] / (double)(texels ? texels : 1), sum[1] / (double)(texels ? texels : 1),
+            sum[2] / (double)(texels ? texels : 1));
+    if ((uint32_t)index == before && s->texture_count == before + 1) { /* read for its mean alone */
+        free(t->rgb);
+        for (uint32_t l = 1; l < t->levels; l++)
+            free(t->mip_rgb[l]);
+        memset(t, 0, sizeof *t);
+        s->texture_count--;
+    }
+}
+
 /* Converts one Assimp material into a scene material (its diffuse colour, emission and texture: a file
  * beside the model, or one the file holds). A texture that cannot be read is reported on stderr and counted;
  * the material keeps its colour. */
@@ -406,6 +456,7 @@ static scene_result import_material(scene *s, const struct aiScene *ai, uint32_t
             float e = c[k] * strength;
             m.emission[k] = isfinite(e) && e > 0.0f ? e : 0.0f;
         }
+        emissive_texture_mean(s, ai, am, path, model_dir, &m);
     }
     struct aiString tex;
     unsigned uv_set = 0; /* which of the mesh's texture coordinate sets the texture uses (glTF's texCoord) */

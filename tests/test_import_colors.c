@@ -1,13 +1,15 @@
 /* Vertex colours as mesh files carry them (scene/scene_import.c, scene_material.c): glTF's COLOR_0 multiplies
  * the base colour (linear, by glTF's specification), a PLY scan's byte colours are sRGB-encoded albedos. Each
  * expectation is a closed form of the file written here: the colours are an affine function of position, so
- * the interpolation over either triangle of the quad is that function at the hit point. */
+ * the interpolation over either triangle of the quad is that function at the hit point. Emission as files
+ * give it (an emissive texture) and as a program changes it (the frame loop sees it as a change of light). */
 #include "test_util.h"
 
 #include "fxt_scene.h"
 
 #include "camera.h"
 #include "engine.h"
+#include "engine_internal.h" /* white-box: the loop's record of light changes */
 #include "image.h"
 
 #include <math.h>
@@ -27,8 +29,8 @@ static const double base_color[3] = {0.5, 0.8, 1.0};
 
 /* A unit quad in the xy plane (z = 0) facing +z, corners (0, 0), (1, 0), (1, 1), (0, 1), with COLOR_0 from
  * affine_color and baseColorFactor base_color; textured (the 2 x 1 red | green texture, u = x, v = y) when
- * `textured`. Returns the .gltf path. */
-static const char *write_colored_quad(const char *name, bool textured)
+ * `textured`; `emissive` (JSON text or NULL) is added to the material. Returns the .gltf path. */
+static const char *write_quad_emissive(const char *name, bool textured, const char *emissive)
 {
     const uint8_t texels[6] = {255, 0, 0, 0, 255, 0};
     char msg[256];
@@ -60,7 +62,7 @@ static const char *write_colored_quad(const char *name, bool textured)
         "{\"asset\":{\"version\":\"2.0\"},\"scene\":0,\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}],"
         "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0,\"COLOR_0\":1%s},"
         "\"indices\":3,\"material\":0}]}],"
-        "\"materials\":[{\"pbrMetallicRoughness\":{\"baseColorFactor\":[%g,%g,%g,1],%s"
+        "\"materials\":[{%s\"pbrMetallicRoughness\":{\"baseColorFactor\":[%g,%g,%g,1],%s"
         "\"metallicFactor\":0}}],"
         "%s"
         "\"buffers\":[{\"byteLength\":140,\"uri\":\"%s\"}],"
@@ -71,11 +73,17 @@ static const char *write_colored_quad(const char *name, bool textured)
         "\"min\":[0,0,0],\"max\":[1,1,0]},{\"bufferView\":1,\"componentType\":5126,\"count\":4,"
         "\"type\":\"VEC3\"},{\"bufferView\":2,\"componentType\":5126,\"count\":4,\"type\":\"VEC2\"},"
         "{\"bufferView\":3,\"componentType\":5123,\"count\":6,\"type\":\"SCALAR\"}]}",
-        textured ? ",\"TEXCOORD_0\":2" : "", base_color[0], base_color[1], base_color[2],
-        textured ? "\"baseColorTexture\":{\"index\":0}," : "",
-        textured ? "\"textures\":[{\"source\":0}],\"images\":[{\"uri\":\"vc_red_green.png\"}]," : "",
+        textured || emissive ? ",\"TEXCOORD_0\":2" : "", emissive ? emissive : "", base_color[0],
+        base_color[1], base_color[2], textured ? "\"baseColorTexture\":{\"index\":0}," : "",
+        textured || emissive ? "\"textures\":[{\"source\":0}],\"images\":[{\"uri\":\"vc_red_green.png\"}],"
+                             : "",
         bin_name);
     return fxt_write_file(name, text);
+}
+
+static const char *write_colored_quad(const char *name, bool textured)
+{
+    return write_quad_emissive(name, textured, NULL);
 }
 
 /* The hit point (local frame) of triangle t at barycentrics (u, v) of corners 1 and 2. */
@@ -259,6 +267,70 @@ static void test_ply_colors_srgb(void **state)
     scene_free(s);
 }
 
+/* glTF's emissive texture times emissiveFactor [2, 2, 2]: the red | green texture's mean (0.5, 0.5, 0) makes
+ * the material's uniform emission (1, 1, 0), the texture is not kept for it, and kept when it is also the
+ * base colour's; without the texture the factor alone (2, 2, 2). Before, the texture was not read: (2, 2, 2)
+ * in each case. */
+static void test_emissive_texture_mean(void **state)
+{
+    (void)state;
+    const char *emissive = "\"emissiveFactor\":[2,2,2],\"emissiveTexture\":{\"index\":0},";
+    const float want[3] = {1, 1, 0};
+    for (int textured = 0; textured < 2; textured++) {
+        scene *s = fxt_load_ok(write_quad_emissive("emissive.gltf", textured, emissive));
+        assert_int_equal(s->texture_count, (uint32_t)textured);
+        const scene_material *m = &s->materials[s->meshes[0].material];
+        for (int k = 0; k < 3; k++)
+            if (!(fabsf(m->emission[k] - want[k]) < 1e-6f))
+                fail_msg("textured %d: emission %g %g %g", textured, (double)m->emission[0],
+                         (double)m->emission[1], (double)m->emission[2]);
+        assert_true(s->emissive);
+        scene_free(s);
+    }
+    scene *s = fxt_load_ok(write_quad_emissive("emissive_plain.gltf", false, "\"emissiveFactor\":[2,2,2],"));
+    const scene_material *m = &s->materials[s->meshes[0].material];
+    assert_true(m->emission[0] == 2 && m->emission[1] == 2 && m->emission[2] == 2);
+    scene_free(s);
+}
+
+/* A change of a material's emission between frames is a change of light (srv_loop_frame's light signature):
+ * the loop marks it, so converged probes refresh at once, as for a light dimmed. Before, emission was not in
+ * the signature: the probes kept the lamp's old light until their slow refresh. */
+static void test_emission_change_is_light_change(void **state)
+{
+    (void)state;
+    scene *s = fxt_new_scene();
+    s->materials[0].emission[0] = s->materials[0].emission[1] = s->materials[0].emission[2] = 1.0f;
+    fxt_add_quad(s, "lamp", (double[3]){-1, -1, 0}, (double[3]){2, 0, 0}, (double[3]){0, 2, 0}, 4);
+    fxt_add_quad(s, "floor", (double[3]){-3, -2, 3}, (double[3]){6, 0, 0}, (double[3]){0, 0, -6}, 4);
+    scene_rt *rt = fxt_finish_scene(s, 8.0f, 1.0f);
+    assert_true(s->emissive);
+    srv_camera cam = {.position = {0, 0, 4}, .target = {0, 0, 0}, .fov_deg = 60};
+    srv_loop_desc d = {.s = s, .rt = rt, .seed = 3};
+    fxt_effects_on(&d, (const char *const[]){"probes"}, 1);
+    srv_viewer_id id;
+    srv_loop *loop = fxt_loop(&d, 1, 32, 16, &id);
+    srv_frame_stats st;
+    fxt_frame(loop, &id, 1, &cam, &st);
+    fxt_frame(loop, &id, 1, &cam, &st);
+    assert_false(loop->light_changed);   /* nothing changed since the loop was made */
+    s->materials[0].emission[1] = 0.25f; /* dimmed */
+    scene_emission_refresh(s);
+    uint32_t frame = loop->frame_number;
+    fxt_frame(loop, &id, 1, &cam, &st);
+    assert_true(loop->light_changed);
+    assert_int_equal(loop->light_change_frame, frame);
+    memset(s->materials[0].emission, 0, sizeof s->materials[0].emission); /* switched off */
+    scene_emission_refresh(s);
+    assert_false(s->emissive);
+    frame = loop->frame_number;
+    fxt_frame(loop, &id, 1, &cam, &st);
+    assert_int_equal(loop->light_change_frame, frame);
+    srv_loop_free(loop);
+    scene_rt_free(rt);
+    scene_free(s);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -266,6 +338,8 @@ int main(void)
         cmocka_unit_test(test_compose_pixels_interpolate),
         cmocka_unit_test(test_textured_run_matches_single),
         cmocka_unit_test(test_ply_colors_srgb),
+        cmocka_unit_test(test_emissive_texture_mean),
+        cmocka_unit_test(test_emission_change_is_light_change),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
