@@ -325,12 +325,19 @@ static int32_t add_embedded_texture(scene *s, const char *path, const char *name
     return scene__add_texture_rgb(s, label, tex->mWidth, tex->mHeight, rgb, err);
 }
 
-/* How a mesh reads its material's texture: which texture coordinate set, and whether u or v is halved (the
- * material's texture was mirrored into one twice as wide or high: mirrored_texture()). */
+/* How a mesh reads its material's texture: which texture coordinate set, and per axis (u, v) whether the
+ * coordinate is remapped to (c - offset) x scale: halved where the material's texture was mirrored into one
+ * twice as wide or high (mirrored_texture()), moved and shrunk where it was clamped (clamped_texture()). */
 typedef struct import_uv {
     uint8_t set;
-    bool half_u, half_v;
+    bool remap[2];
+    float offset[2], scale[2];
 } import_uv;
+
+/* The largest side, in texels, of a clamped texture's padded copy (clamped_texture()). */
+#define IMPORT_CLAMP_MAX_SIDE 16384
+
+static int32_t replace_plain(scene *s, int32_t texture, int32_t added);
 
 /* A mirrored repeat (glTF's MIRRORED_REPEAT) of texture index `texture` along u and/or v, as a plain repeat:
  * the texture followed by its mirror image, twice as wide (or high), read at half the coordinate. Bilinear
@@ -359,8 +366,14 @@ static int32_t mirrored_texture(scene *s, int32_t texture, bool mirror_u, bool m
             uint32_t sx = x < w ? x : 2 * w - 1 - x, sy = y < h ? y : 2 * h - 1 - y;
             memcpy(rgb + 3 * ((size_t)y * mw + x), src->rgb + 3 * ((size_t)sy * w + sx), sizeof(float) * 3);
         }
-    int32_t added = scene__add_texture_rgb(s, name, mw, mh, rgb, err);
-    /* The plain texture goes when it was loaded just now for this material and no other material uses it. */
+    return replace_plain(s, texture, scene__add_texture_rgb(s, name, mw, mh, rgb, err));
+}
+
+/* After a texture `added` was made from the plain one `texture` (mirrored_texture(), clamped_texture()): the
+ * plain texture goes when it was loaded just now for this material and no other material uses it, the new
+ * one taking its index. Returns the new texture's index, or -1 as added is. */
+static int32_t replace_plain(scene *s, int32_t texture, int32_t added)
+{
     bool used = (uint32_t)texture + 2 != s->texture_count;
     for (uint32_t i = 0; i < s->material_count && !used; i++)
         used = s->materials[i].texture == texture;
@@ -371,6 +384,85 @@ static int32_t mirrored_texture(scene *s, int32_t texture, bool mirror_u, bool m
     s->textures[texture] = s->textures[added];
     s->texture_count--;
     return texture;
+}
+
+/* A texture clamped to its edge (glTF's CLAMP_TO_EDGE, Assimp's clamp and decal modes) along the axes `axis`
+ * says, read by coordinates that leave 0..1: as a plain repeat of a padded copy that covers the coordinates'
+ * whole periods [lo, hi) (lo = floor of the least coordinate, hi = ceil of the greatest) plus one texel each
+ * side, each texel the clamped lookup of the original's (its edge texel outside it). Read at
+ * (c - lo + 1 / n) x n / (n (hi - lo) + 2) for a side of n texels, it gives the texels, the bilinear filter
+ * and the texel density of clamped addressing; the margin keeps the copy's own wrap-around away from every
+ * coordinate the meshes use. range[axis] holds the least and greatest coordinate. Returns the new texture's
+ * index and fills uv's remap for the axes, or -1 with err filled (a copy wider than IMPORT_CLAMP_MAX_SIDE). */
+static int32_t clamped_texture(scene *s, int32_t texture, const bool axis[2], const float range[2][2],
+                               import_uv *uv, scene_error *err)
+{
+    const scene_texture *src = &s->textures[texture];
+    uint32_t side[2] = {src->width, src->height}, out[2];
+    int64_t first[2] = {0, 0};
+    for (int k = 0; k < 2; k++) {
+        out[k] = side[k];
+        if (!axis[k])
+            continue;
+        double a = floor(range[k][0]), b = ceil(range[k][1]);
+        double size = (b - a) * side[k] + 2;
+        if (!(size <= IMPORT_CLAMP_MAX_SIDE)) {
+            scene__fail(
+                err, SCENE_ERR_RANGE,
+                "%s: clamped over coordinates %g..%g, its copy would be %.0f texels wide (at most %d)",
+                src->path, (double)range[k][0], (double)range[k][1], size, IMPORT_CLAMP_MAX_SIDE);
+            return -1;
+        }
+        out[k] = (uint32_t)size;
+        first[k] = (int64_t)a * side[k] - 1; /* the original texel (from the start) of the copy's first */
+        uv->remap[k] = true;
+        uv->offset[k] = (float)(a - 1.0 / side[k]);
+        uv->scale[k] = (float)((double)side[k] / size);
+    }
+    float *rgb = malloc(sizeof(float) * 3 * (size_t)out[0] * out[1]);
+    char name[300];
+    snprintf(name, sizeof name, "%.250s (clamped%s%s)", src->path, axis[0] ? " u" : "", axis[1] ? " v" : "");
+    if (!rgb) {
+        scene__fail(err, SCENE_ERR_NOMEM, "%s: out of memory", name);
+        return -1;
+    }
+    uint32_t w = side[0], h = side[1];
+    for (uint32_t y = 0; y < out[1]; y++) {
+        /* rows count from the top, coordinates v from the bottom: the copy's bottom row is row out[1] - 1 */
+        int64_t r =
+            axis[1] ? first[1] + (int64_t)(out[1] - 1 - y) : (int64_t)(h - 1 - y); /* from the bottom */
+        r = r < 0 ? 0 : (r >= (int64_t)h ? (int64_t)h - 1 : r);
+        size_t sy = (size_t)(h - 1 - (uint32_t)r);
+        for (uint32_t x = 0; x < out[0]; x++) {
+            int64_t c = axis[0] ? first[0] + (int64_t)x : (int64_t)x;
+            c = c < 0 ? 0 : (c >= (int64_t)w ? (int64_t)w - 1 : c);
+            memcpy(rgb + 3 * ((size_t)y * out[0] + x), src->rgb + 3 * (sy * w + (size_t)c),
+                   sizeof(float) * 3);
+        }
+    }
+    return replace_plain(s, texture, scene__add_texture_rgb(s, name, out[0], out[1], rgb, err));
+}
+
+/* The least and greatest finite coordinate (u, v) of set uv_set (set 0 where a mesh lacks it, as import_mesh
+ * reads) over the meshes of material `material`; false when they have none. */
+static bool material_uv_range(const struct aiScene *ai, uint32_t material, unsigned uv_set, float range[2][2])
+{
+    range[0][0] = range[1][0] = INFINITY;
+    range[0][1] = range[1][1] = -INFINITY;
+    for (uint32_t i = 0; i < ai->mNumMeshes; i++) {
+        const struct aiMesh *mesh = ai->mMeshes[i];
+        const struct aiVector3D *uv =
+            mesh->mTextureCoords[uv_set] ? mesh->mTextureCoords[uv_set] : mesh->mTextureCoords[0];
+        for (uint32_t v = 0; mesh->mMaterialIndex == material && uv && v < mesh->mNumVertices; v++) {
+            const float c[2] = {uv[v].x, uv[v].y};
+            for (int k = 0; k < 2; k++)
+                if (isfinite(c[k])) {
+                    range[k][0] = fminf(range[k][0], c[k]);
+                    range[k][1] = fmaxf(range[k][1], c[k]);
+                }
+        }
+    }
+    return range[0][0] <= range[0][1] || range[1][0] <= range[1][1];
 }
 
 /* An emitting material's emissive texture (glTF's emissiveTexture, times emissiveFactor): fxcache's emission
@@ -488,9 +580,31 @@ static scene_result import_material(scene *s, const struct aiScene *ai, uint32_t
                             tex_err.msg);
                 } else {
                     m.texture = mirrored;
-                    out_uv->half_u = modes[0] == aiTextureMapMode_Mirror;
-                    out_uv->half_v = modes[1] == aiTextureMapMode_Mirror;
+                    for (int k = 0; k < 2; k++)
+                        if (modes[k] == aiTextureMapMode_Mirror) {
+                            out_uv->remap[k] = true;
+                            out_uv->offset[k] = 0.0f;
+                            out_uv->scale[k] = 0.5f;
+                        }
                 }
+            }
+            /* Clamped (not repeated nor mirrored) where the meshes' coordinates leave 0..1: a padded copy.
+             * Inside 0..1 clamping and repeating read the same texels but at the edges' outer half texel. */
+            bool clamped[2] = {false, false}, outside = false;
+            float range[2][2];
+            if (m.texture >= 0 && material_uv_range(ai, index, out_uv->set, range))
+                for (int k = 0; k < 2; k++) {
+                    clamped[k] = modes[k] != aiTextureMapMode_Wrap && modes[k] != aiTextureMapMode_Mirror &&
+                                 (range[k][0] < -1e-4f || range[k][1] > 1 + 1e-4f);
+                    outside |= clamped[k];
+                }
+            if (outside) {
+                int32_t copy = clamped_texture(s, m.texture, clamped, range, out_uv, &tex_err);
+                if (copy < 0)
+                    fprintf(stderr, "fxcache: warning: material '%s': %s (repeating it instead)\n", m.name,
+                            tex_err.msg);
+                else
+                    m.texture = copy;
             }
             if (m.texture >= 0) {
                 /* The texture carries the colour; Assimp's 3DS and OBJ readers give a tint we keep. */
@@ -525,7 +639,6 @@ static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t me
                                 const char *path, scene_error *err)
 {
     unsigned uv_set = uv_mode.set;
-    float scale_u = uv_mode.half_u ? 0.5f : 1.0f, scale_v = uv_mode.half_v ? 0.5f : 1.0f;
     const struct aiVector3D *coords =
         mesh->mTextureCoords[uv_set] ? mesh->mTextureCoords[uv_set] : mesh->mTextureCoords[0];
     char name[160];
@@ -549,8 +662,10 @@ static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t me
         positions[3 * (size_t)v + 1] = mesh->mVertices[v].y;
         positions[3 * (size_t)v + 2] = mesh->mVertices[v].z;
         if (uv) {
-            uv[2 * (size_t)v] = coords[v].x * scale_u;
-            uv[2 * (size_t)v + 1] = coords[v].y * scale_v;
+            const float c[2] = {coords[v].x, coords[v].y};
+            for (int k = 0; k < 2; k++)
+                uv[2 * (size_t)v + k] =
+                    uv_mode.remap[k] ? (c[k] - uv_mode.offset[k]) * uv_mode.scale[k] : c[k];
         }
         if (color) {
             const float c[3] = {vertex_colors[v].r, vertex_colors[v].g, vertex_colors[v].b};
@@ -628,44 +743,6 @@ static scene_result import_node(scene *s, const struct aiScene *ai, const struct
     for (uint32_t i = 0; rc == SCENE_OK && i < node->mNumChildren; i++)
         rc = import_node(s, ai, node->mChildren[i], world, mats, path, depth + 1, err);
     return rc;
-}
-
-/* What fxcache leaves out of a file's materials, one warning line each: vertex colours (fxcache renders the
- * materials' colours and textures; glTF's COLOR_0 multiplies the base colour, a PLY scan's colours are its
- * albedo), and a texture the file clamps (glTF's CLAMP_TO_EDGE) where a mesh's coordinates leave 0..1
- * (fxcache repeats textures, or mirrors them: mirrored_texture(); inside 0..1 the modes agree). */
-static void warn_left_out(const struct aiScene *ai, const char *path)
-{
-    for (uint32_t m = 0; m < ai->mNumMaterials; m++) {
-        struct aiString tex;
-        unsigned uv_set = 0;
-        enum aiTextureMapMode modes[2] = {aiTextureMapMode_Wrap, aiTextureMapMode_Wrap};
-        if (aiGetMaterialTextureCount(ai->mMaterials[m], aiTextureType_DIFFUSE) == 0 ||
-            aiGetMaterialTexture(ai->mMaterials[m], aiTextureType_DIFFUSE, 0, &tex, NULL, &uv_set, NULL, NULL,
-                                 modes, NULL) != aiReturn_SUCCESS ||
-            uv_set >= AI_MAX_NUMBER_OF_TEXTURECOORDS)
-            continue;
-        bool clamped
-            [2]; /* clamped to the edge, or a decal: not repeated (wrap) nor mirrored (import_material) */
-        for (int k = 0; k < 2; k++)
-            clamped[k] = modes[k] != aiTextureMapMode_Wrap && modes[k] != aiTextureMapMode_Mirror;
-        if (!clamped[0] && !clamped[1])
-            continue;
-        bool outside = false;
-        for (uint32_t i = 0; i < ai->mNumMeshes && !outside; i++) {
-            const struct aiMesh *mesh = ai->mMeshes[i];
-            const struct aiVector3D *uv = mesh->mTextureCoords[uv_set];
-            for (uint32_t v = 0; mesh->mMaterialIndex == m && uv && v < mesh->mNumVertices && !outside; v++)
-                outside = (clamped[0] && !(uv[v].x >= -1e-4f && uv[v].x <= 1 + 1e-4f)) ||
-                          (clamped[1] && !(uv[v].y >= -1e-4f && uv[v].y <= 1 + 1e-4f));
-        }
-        if (outside)
-            fprintf(
-                stderr,
-                "fxcache: warning: %s: texture '%s' is to be clamped where its coordinates leave 0..1, and "
-                "some do; fxcache repeats it\n",
-                path, tex.data);
-    }
 }
 
 /* scene__import_file, and with lights (non-NULL) also the file's lights and camera, which it then describes
@@ -789,8 +866,6 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
         return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s", path,
                            assimp_error(why, sizeof why));
 
-    if (!override)
-        warn_left_out(ai, path);
     char model_dir[512];
     folder_of(path, model_dir, sizeof model_dir);
     uint32_t *material_map = NULL;

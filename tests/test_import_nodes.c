@@ -660,21 +660,45 @@ static void test_instanced_texture_density(void **state)
     scene_free(s);
 }
 
-/* What fxcache leaves out of a file's materials is said in one warning line each at load: a texture clamped
- * where its coordinates leave 0..1 (CLAMP_TO_EDGE at u = 1.25), and not where it does not apply (a mirrored
- * repeat there). Vertex colours are used (tests/test_import_colors.c): Assimp's kwxport_test_vcolors.dae,
- * three coloured meshes, loads them without a warning (before, one said they were not used). */
-static void test_left_out_warned(void **state)
+/* glTF's CLAMP_TO_EDGE where the coordinates leave 0..1: the quad's u runs from -1 (x = 0) to 2 (x = 1), so at
+ * x the red | green texture (texel centres u = 0.25, 0.75) clamped gives green g(u) = clamp((u - 0.25) / 0.5,
+ * 0, 1), red 1 - g: red up to u = 0.25, green from 0.75, a blend between; near both ends too (the copy's own
+ * wrap-around stays outside). Before, the texture repeated (with one warning line): at u = -0.5 it read the
+ * green texel. A mirrored repeat there is not clamped, and Assimp's vertex-coloured Collada model loads its
+ * colours without a warning (tests/test_import_colors.c). */
+static void test_gltf_clamp_to_edge(void **state)
 {
     (void)state;
     static char out[8192], err[8192];
-    const char *clamped = write_quad_gltf("clamp.gltf", 1.25f, 0, 0, 33071);
-    assert_int_equal(fxt_run_clif(out, sizeof out, err, sizeof err, "scene-info '%s'", clamped), 0);
-    assert_non_null(strstr(err, "texture 'red_green.png' is to be clamped where its coordinates leave 0..1"));
-    assert_null(strstr(err, "vertex colours"));
+    const float uv[4][2] = {{-1, 0.5f}, {2, 0.5f}, {2, 0.5f}, {-1, 0.5f}};
+    char path[1024]; /* fxt_run_clif reuses the scratch path's buffer */
+    snprintf(path, sizeof path, "%s",
+             write_quad_gltf_nodes("clamp.gltf", uv, uv, 0, 33071, "[{\"mesh\":0}]", "[0]"));
+    assert_int_equal(fxt_run_clif(out, sizeof out, err, sizeof err, "scene-info '%s'", path), 0);
+    assert_null(strstr(err, "clamp"));
+    scene *s = fxt_load_ok(path);
+    assert_int_equal(s->texture_count, 1); /* the padded copy took the plain texture's place */
+    const float bary[6][2] = {{0.001f, 0.001f}, {0.2f, 0.1f},     {0.4f, 0.3f},
+                              {0.1f, 0.6f},     {0.998f, 0.001f}, {0.5f, 0.25f}};
+    for (uint32_t t = 0; t < s->triangle_count; t++)
+        for (int i = 0; i < 6; i++) {
+            double x = 0;
+            for (int c = 0; c < 3; c++) {
+                double w = c == 0 ? 1.0 - bary[i][0] - bary[i][1] : bary[i][c - 1];
+                x +=
+                    w * s->positions[3 * (size_t)s->indices[3 * (size_t)t + c]] + (c == 0 ? s->origin[0] : 0);
+            }
+            double u = -1 + 3 * x, g = fmin(fmax((u - 0.25) / 0.5, 0), 1);
+            float rgb[3];
+            scene_albedo(s, t, bary[i][0], bary[i][1], rgb);
+            if (!(fabs(rgb[0] - (1 - g)) < 1e-4 && fabs(rgb[1] - g) < 1e-4 && fabs(rgb[2]) < 1e-6))
+                fail_msg("triangle %u at u = %.4f: (%g, %g, %g), expected (%g, %g, 0)", t, u, (double)rgb[0],
+                         (double)rgb[1], (double)rgb[2], 1 - g, g);
+        }
+    scene_free(s);
     const char *mirrored = write_quad_gltf("mirror.gltf", 1.25f, 0, 0, 33648);
     assert_int_equal(fxt_run_clif(out, sizeof out, err, sizeof err, "scene-info '%s'", mirrored), 0);
-    assert_null(strstr(err, "clamped"));
+    assert_null(strstr(err, "clamp"));
     const char *colours = ASSIMP_MODELS "/Collada/kwxport_test_vcolors.dae";
     if (access(colours, R_OK) != 0) {
         print_message("skipped: %s is absent (Debian's assimp-testmodels)\n", colours);
@@ -682,8 +706,7 @@ static void test_left_out_warned(void **state)
     }
     assert_int_equal(fxt_run_clif(out, sizeof out, err, sizeof err, "scene-info '%s'", colours), 0);
     assert_null(strstr(err, "vertex colours"));
-    assert_null(strstr(err, "clamped"));
-    scene *s = fxt_load_ok(colours);
+    s = fxt_load_ok(colours);
     assert_non_null(s->corner_color);
     scene_free(s);
 }
@@ -703,7 +726,7 @@ int main(void)
         cmocka_unit_test(test_glb_embedded_texture),
         cmocka_unit_test(test_gltf_texcoord_and_mirror),
         cmocka_unit_test(test_instanced_texture_density),
-        cmocka_unit_test(test_left_out_warned),
+        cmocka_unit_test(test_gltf_clamp_to_edge),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
