@@ -330,9 +330,47 @@ static int32_t add_embedded_texture(scene *s, const char *path, const char *name
  * twice as wide or high (mirrored_texture()), moved and shrunk where it was clamped (clamped_texture()). */
 typedef struct import_uv {
     uint8_t set;
+    bool
+        transform; /* glTF's KHR_texture_transform first: (u, v) -> (xf[0] u + xf[1] v + xf[2], xf[3] u + ...) */
+    double xf[6];
     bool remap[2];
     float offset[2], scale[2];
 } import_uv;
+
+/* A coordinate pair as the material reads it: through its texture transform (the remap comes after). */
+static void uv_transformed(const import_uv *m, float u, float v, float out[2])
+{
+    out[0] = u;
+    out[1] = v;
+    if (m->transform) {
+        out[0] = (float)(m->xf[0] * u + m->xf[1] * v + m->xf[2]);
+        out[1] = (float)(m->xf[3] * u + m->xf[4] * v + m->xf[5]);
+    }
+}
+
+/* glTF's KHR_texture_transform of a material's base-colour texture, as Assimp 5.2.5 hands it over: an
+ * aiUVTransform whose rotation is the glTF one negated and whose translation Assimp computed from the glTF
+ * offset, scale and rotation for its own conventions (its glTF reader's formula, inverted here to recover
+ * the offset). The glTF transform, uv' = offset + R(rotation) (scale x uv) with R = [cos -sin; sin cos] on
+ * glTF's coordinates (v down from the top), is written into m->xf on Assimp's (v = 1 - v_glTF). */
+static void gltf_texture_transform(const struct aiMaterial *am, import_uv *m)
+{
+    struct aiUVTransform t;
+    unsigned n = sizeof t / sizeof(ai_real);
+    if (aiGetMaterialFloatArray(am, AI_MATKEY_UVTRANSFORM(aiTextureType_DIFFUSE, 0), (ai_real *)&t, &n) !=
+            aiReturn_SUCCESS ||
+        n != sizeof t / sizeof(ai_real))
+        return;
+    double sx = t.mScaling.x, sy = t.mScaling.y, rot = -(double)t.mRotation, c = cos(rot), sn = sin(rot);
+    double o0 = t.mTranslation.x - 0.5 * sx * (-c + sn + 1);
+    double o1 = 0.5 * sy * (sn + c - 1) + 1 - sy - t.mTranslation.y;
+    const double xf[6] = {c * sx, sn * sy, o0 - sn * sy, -sn * sx, c * sy, 1 - o1 - c * sy};
+    for (int k = 0; k < 6; k++)
+        if (!isfinite(xf[k]))
+            return;
+    memcpy(m->xf, xf, sizeof xf);
+    m->transform = true;
+}
 
 /* The largest side, in texels, of a clamped texture's padded copy (clamped_texture()). */
 #define IMPORT_CLAMP_MAX_SIDE 16384
@@ -445,8 +483,10 @@ static int32_t clamped_texture(scene *s, int32_t texture, const bool axis[2], co
 
 /* The least and greatest finite coordinate (u, v) of set uv_set (set 0 where a mesh lacks it, as import_mesh
  * reads) over the meshes of material `material`; false when they have none. */
-static bool material_uv_range(const struct aiScene *ai, uint32_t material, unsigned uv_set, float range[2][2])
+static bool material_uv_range(const struct aiScene *ai, uint32_t material, const import_uv *m,
+                              float range[2][2])
 {
+    unsigned uv_set = m->set;
     range[0][0] = range[1][0] = INFINITY;
     range[0][1] = range[1][1] = -INFINITY;
     for (uint32_t i = 0; i < ai->mNumMeshes; i++) {
@@ -454,7 +494,8 @@ static bool material_uv_range(const struct aiScene *ai, uint32_t material, unsig
         const struct aiVector3D *uv =
             mesh->mTextureCoords[uv_set] ? mesh->mTextureCoords[uv_set] : mesh->mTextureCoords[0];
         for (uint32_t v = 0; mesh->mMaterialIndex == material && uv && v < mesh->mNumVertices; v++) {
-            const float c[2] = {uv[v].x, uv[v].y};
+            float c[2];
+            uv_transformed(m, uv[v].x, uv[v].y, c);
             for (int k = 0; k < 2; k++)
                 if (isfinite(c[k])) {
                     range[k][0] = fminf(range[k][0], c[k]);
@@ -519,7 +560,7 @@ static void emissive_texture_mean(scene *s, const struct aiScene *ai, const stru
  * beside the model, or one the file holds). A texture that cannot be read is reported on stderr and counted;
  * the material keeps its colour. */
 static scene_result import_material(scene *s, const struct aiScene *ai, uint32_t index, const char *path,
-                                    const char *model_dir, uint32_t *out_index, import_uv *out_uv,
+                                    const char *model_dir, bool gltf, uint32_t *out_index, import_uv *out_uv,
                                     scene_error *err)
 {
     const struct aiMaterial *am = ai->mMaterials[index];
@@ -558,6 +599,8 @@ static scene_result import_material(scene *s, const struct aiScene *ai, uint32_t
             aiReturn_SUCCESS &&
         tex.length > 0) {
         out_uv->set = uv_set < AI_MAX_NUMBER_OF_TEXTURECOORDS ? (uint8_t)uv_set : 0;
+        if (gltf)
+            gltf_texture_transform(am, out_uv);
         char found[768];
         double t0 = scene__now_ms();
         const struct aiTexture *held = embedded_texture(ai, tex.data);
@@ -592,7 +635,7 @@ static scene_result import_material(scene *s, const struct aiScene *ai, uint32_t
              * Inside 0..1 clamping and repeating read the same texels but at the edges' outer half texel. */
             bool clamped[2] = {false, false}, outside = false;
             float range[2][2];
-            if (m.texture >= 0 && material_uv_range(ai, index, out_uv->set, range))
+            if (m.texture >= 0 && material_uv_range(ai, index, out_uv, range))
                 for (int k = 0; k < 2; k++) {
                     clamped[k] = modes[k] != aiTextureMapMode_Wrap && modes[k] != aiTextureMapMode_Mirror &&
                                  (range[k][0] < -1e-4f || range[k][1] > 1 + 1e-4f);
@@ -662,7 +705,8 @@ static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t me
         positions[3 * (size_t)v + 1] = mesh->mVertices[v].y;
         positions[3 * (size_t)v + 2] = mesh->mVertices[v].z;
         if (uv) {
-            const float c[2] = {coords[v].x, coords[v].y};
+            float c[2];
+            uv_transformed(&uv_mode, coords[v].x, coords[v].y, c);
             for (int k = 0; k < 2; k++)
                 uv[2 * (size_t)v + k] =
                     uv_mode.remap[k] ? (c[k] - uv_mode.offset[k]) * uv_mode.scale[k] : c[k];
@@ -868,6 +912,7 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
 
     char model_dir[512];
     folder_of(path, model_dir, sizeof model_dir);
+    bool gltf = strcasecmp(hint, "gltf") == 0 || strcasecmp(hint, "glb") == 0;
     uint32_t *material_map = NULL;
     import_uv *uv_modes = NULL;
     uint32_t override_index = UINT32_MAX;
@@ -881,7 +926,7 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
         if (!material_map || !uv_modes)
             rc = scene__fail(err, SCENE_ERR_NOMEM, "%s: out of memory", path);
         for (uint32_t m = 0; rc == SCENE_OK && m < ai->mNumMaterials; m++)
-            rc = import_material(s, ai, m, path, model_dir, &material_map[m], &uv_modes[m], err);
+            rc = import_material(s, ai, m, path, model_dir, gltf, &material_map[m], &uv_modes[m], err);
         if (rc == SCENE_OK && ai->mNumMaterials == 0) {
             scene_material grey = {.diffuse = {0.7f, 0.7f, 0.7f}, .texture = -1, .name = "default"};
             override_index = scene__add_material(s, &grey, err);
@@ -895,11 +940,8 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
                              .uv = uv_modes,
                              .count = ai->mNumMaterials,
                              .all = override_index,
-                             .colors = override
-                                           ? IMPORT_COLORS_NONE
-                                           : (strcasecmp(hint, "gltf") == 0 || strcasecmp(hint, "glb") == 0
-                                                  ? IMPORT_COLORS_LINEAR
-                                                  : IMPORT_COLORS_SRGB)};
+                             .colors = override ? IMPORT_COLORS_NONE
+                                                : (gltf ? IMPORT_COLORS_LINEAR : IMPORT_COLORS_SRGB)};
     if (mirrored && rc == SCENE_OK)
         rc = import_node(s, ai, ai->mRootNode, xform ? xform : scene__identity_matrix, &mats, path, 0, err);
     for (uint32_t i = 0; !mirrored && rc == SCENE_OK && i < ai->mNumMeshes; i++) {

@@ -331,6 +331,73 @@ static void test_emission_change_is_light_change(void **state)
     scene_free(s);
 }
 
+/* The weight of the texel centred at 0.75 (against the one at 0.25) in a bilinear, repeated lookup of a
+ * 2-texel side at coordinate fraction f. */
+static double right_weight(double f)
+{
+    double d = fabs(f - 0.75);
+    return 1.0 - 2.0 * fmin(d, 1.0 - d);
+}
+
+/* glTF's KHR_texture_transform (offset [0.3, -0.2], rotation 0.4, scale [1.7, 0.6]) on a unit quad whose
+ * texture coordinates are its (x, y), reading a 2 x 2 texture (top row red, green; bottom row blue, black):
+ * at every point the texel weights of uv' = offset + R (scale x uv), R = [cos -sin; sin cos] (the
+ * extension's GLSL), glTF's v pointing down the image. Before, the transform was not applied. */
+static void test_gltf_texture_transform(void **state)
+{
+    (void)state;
+    const uint8_t texels[12] = {255, 0, 0, 0, 255, 0, 0, 0, 255, 0, 0, 0};
+    char msg[256];
+    assert_int_equal(scene_image_write_u8(fxt_tmp_path("kt_2x2.png"), 2, 2, 3, texels, msg, sizeof msg), 0);
+    const float positions[4][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+    const float uv[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+    const uint16_t indices[6] = {0, 1, 2, 0, 2, 3};
+    FILE *bin = fopen(fxt_tmp_path("kt.bin"), "wb");
+    assert_non_null(bin);
+    assert_int_equal(fwrite(positions, sizeof positions, 1, bin), 1);
+    assert_int_equal(fwrite(uv, sizeof uv, 1, bin), 1);
+    assert_int_equal(fwrite(indices, sizeof indices, 1, bin), 1);
+    fclose(bin);
+    const double offset[2] = {0.3, -0.2}, rotation = 0.4, scale[2] = {1.7, 0.6};
+    static char text[4096];
+    snprintf(text, sizeof text,
+             "{\"asset\":{\"version\":\"2.0\"},\"extensionsUsed\":[\"KHR_texture_transform\"],\"scene\":0,"
+             "\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}],\"meshes\":[{\"primitives\":[{"
+             "\"attributes\":{\"POSITION\":0,\"TEXCOORD_0\":1},\"indices\":2,\"material\":0}]}],"
+             "\"materials\":[{\"pbrMetallicRoughness\":{\"baseColorTexture\":{\"index\":0,\"extensions\":{"
+             "\"KHR_texture_transform\":{\"offset\":[%g,%g],\"rotation\":%g,\"scale\":[%g,%g]}}},"
+             "\"metallicFactor\":0}}],\"textures\":[{\"source\":0}],\"images\":[{\"uri\":\"kt_2x2.png\"}],"
+             "\"buffers\":[{\"byteLength\":92,\"uri\":\"kt.bin\"}],"
+             "\"bufferViews\":[{\"buffer\":0,\"byteOffset\":0,\"byteLength\":48},{\"buffer\":0,"
+             "\"byteOffset\":48,\"byteLength\":32},{\"buffer\":0,\"byteOffset\":80,\"byteLength\":12}],"
+             "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":4,\"type\":\"VEC3\","
+             "\"min\":[0,0,0],\"max\":[1,1,0]},{\"bufferView\":1,\"componentType\":5126,\"count\":4,"
+             "\"type\":\"VEC2\"},{\"bufferView\":2,\"componentType\":5123,\"count\":6,\"type\":\"SCALAR\"}]}",
+             offset[0], offset[1], rotation, scale[0], scale[1]);
+    scene *s = fxt_load_ok(fxt_write_file("kt.gltf", text));
+    assert_int_equal(s->texture_count, 1);
+    const float bary[5][2] = {{0.1f, 0.1f}, {0.6f, 0.3f}, {0.2f, 0.7f}, {0.33f, 0.33f}, {0.05f, 0.8f}};
+    double c = cos(rotation), sn = sin(rotation);
+    for (uint32_t t = 0; t < s->triangle_count; t++)
+        for (int i = 0; i < 5; i++) {
+            double p[3];
+            point_at(s, t, bary[i][0], bary[i][1], p);
+            double u = offset[0] + c * scale[0] * p[0] - sn * scale[1] * p[1];
+            double v_down = offset[1] + sn * scale[0] * p[0] + c * scale[1] * p[1];
+            double v = 1.0 - v_down; /* up the image, as fxcache reads */
+            double gu = right_weight(u - floor(u)), gv = right_weight(v - floor(v)); /* gv: the top row's */
+            const double want[3] = {gv * (1 - gu), gv * gu, (1 - gv) * (1 - gu)};
+            float rgb[3];
+            scene_albedo(s, t, bary[i][0], bary[i][1], rgb);
+            for (int k = 0; k < 3; k++)
+                if (!(fabs(rgb[k] - want[k]) < 1e-4))
+                    fail_msg("point (%.3f, %.3f) uv' (%.4f, %.4f): (%g, %g, %g), expected (%g, %g, %g)", p[0],
+                             p[1], u, v, (double)rgb[0], (double)rgb[1], (double)rgb[2], want[0], want[1],
+                             want[2]);
+        }
+    scene_free(s);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -339,6 +406,7 @@ int main(void)
         cmocka_unit_test(test_textured_run_matches_single),
         cmocka_unit_test(test_ply_colors_srgb),
         cmocka_unit_test(test_emissive_texture_mean),
+        cmocka_unit_test(test_gltf_texture_transform),
         cmocka_unit_test(test_emission_change_is_light_change),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
