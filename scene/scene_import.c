@@ -351,8 +351,10 @@ static void uv_transformed(const import_uv *m, float u, float v, float out[2])
 /* glTF's KHR_texture_transform of a material's base-colour texture, as Assimp 5.2.5 hands it over: an
  * aiUVTransform whose rotation is the glTF one negated and whose translation Assimp computed from the glTF
  * offset, scale and rotation for its own conventions (its glTF reader's formula, inverted here to recover
- * the offset). The glTF transform, uv' = offset + R(rotation) (scale x uv) with R = [cos -sin; sin cos] on
- * glTF's coordinates (v down from the top), is written into m->xf on Assimp's (v = 1 - v_glTF). */
+ * the offset). The glTF transform, uv' = offset + R(rotation) (scale x uv) with R = [cos sin; -sin cos] on
+ * glTF's coordinates (v down from the top: the extension's GLSL matrix read by rows, which is what Khronos's
+ * TextureTransformTest asset shows as right; by columns its arrow points at the "opposite direction" marker),
+ * is written into m->xf on Assimp's (v = 1 - v_glTF). */
 static void gltf_texture_transform(const struct aiMaterial *am, import_uv *m)
 {
     struct aiUVTransform t;
@@ -364,7 +366,7 @@ static void gltf_texture_transform(const struct aiMaterial *am, import_uv *m)
     double sx = t.mScaling.x, sy = t.mScaling.y, rot = -(double)t.mRotation, c = cos(rot), sn = sin(rot);
     double o0 = t.mTranslation.x - 0.5 * sx * (-c + sn + 1);
     double o1 = 0.5 * sy * (sn + c - 1) + 1 - sy - t.mTranslation.y;
-    const double xf[6] = {c * sx, sn * sy, o0 - sn * sy, -sn * sx, c * sy, 1 - o1 - c * sy};
+    const double xf[6] = {c * sx, -sn * sy, o0 + sn * sy, sn * sx, c * sy, 1 - o1 - c * sy};
     for (int k = 0; k < 6; k++)
         if (!isfinite(xf[k]))
             return;

@@ -341,8 +341,9 @@ static double right_weight(double f)
 
 /* glTF's KHR_texture_transform (offset [0.3, -0.2], rotation 0.4, scale [1.7, 0.6]) on a unit quad whose
  * texture coordinates are its (x, y), reading a 2 x 2 texture (top row red, green; bottom row blue, black):
- * at every point the texel weights of uv' = offset + R (scale x uv), R = [cos -sin; sin cos] (the
- * extension's GLSL), glTF's v pointing down the image. Before, the transform was not applied. */
+ * at every point the texel weights of uv' = offset + R (scale x uv), R = [cos sin; -sin cos] (the rotation
+ * Khronos's TextureTransformTest asset shows as right), glTF's v pointing down the image. Before, the
+ * transform was not applied. */
 static void test_gltf_texture_transform(void **state)
 {
     (void)state;
@@ -382,8 +383,8 @@ static void test_gltf_texture_transform(void **state)
         for (int i = 0; i < 5; i++) {
             double p[3];
             point_at(s, t, bary[i][0], bary[i][1], p);
-            double u = offset[0] + c * scale[0] * p[0] - sn * scale[1] * p[1];
-            double v_down = offset[1] + sn * scale[0] * p[0] + c * scale[1] * p[1];
+            double u = offset[0] + c * scale[0] * p[0] + sn * scale[1] * p[1];
+            double v_down = offset[1] - sn * scale[0] * p[0] + c * scale[1] * p[1];
             double v = 1.0 - v_down; /* up the image, as fxcache reads */
             double gu = right_weight(u - floor(u)), gv = right_weight(v - floor(v)); /* gv: the top row's */
             const double want[3] = {gv * (1 - gu), gv * gu, (1 - gv) * (1 - gu)};
