@@ -711,6 +711,63 @@ static void test_gltf_clamp_to_edge(void **state)
     scene_free(s);
 }
 
+/* Appends a 3DS chunk header (id, length including the six header bytes) at buf + *at. */
+static void chunk_3ds(uint8_t *buf, size_t *at, uint16_t id, uint32_t length)
+{
+    memcpy(buf + *at, &id, 2);
+    memcpy(buf + *at + 2, &length, 4);
+    *at += 6;
+}
+
+/* A hand-written 3DS file: one triangle and a camera with a 35 mm lens. Assimp 5.2.5 reads the lens as an
+ * angle (35 degrees across), while a 35 mm lens on 3D Studio's 36 mm film frame sees 2 atan(18 / 35) = 54.4
+ * degrees: the camera is left out (counted in cameras_unused) and the scene keeps fxcache's default camera,
+ * as Sponza's 3DS file does. The decision stands on what this checks of Assimp's reading. */
+static void test_3ds_camera_lens_misread(void **state)
+{
+    (void)state;
+    static uint8_t buf[512];
+    size_t at = 0;
+    const float corners[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    const uint16_t face[4] = {0, 1, 2, 0};
+    const float camera[8] = {0, 0.3f, 5, 0, 0.3f, 0, 0, 35}; /* position, target, bank, lens (mm) */
+    uint32_t mesh_len = 6 + 4 + 6 + (6 + 2 + 36) + (6 + 2 + 8),
+             cam_len = 6 + 4 + 6 + 32;                       /* names of 4 bytes */
+    chunk_3ds(buf, &at, 0x4D4D, 6 + 6 + mesh_len + cam_len); /* main */
+    chunk_3ds(buf, &at, 0x3D3D, 6 + mesh_len + cam_len);     /* editor */
+    chunk_3ds(buf, &at, 0x4000, mesh_len);                   /* object "tri" */
+    memcpy(buf + at, "tri", 4), at += 4;
+    chunk_3ds(buf, &at, 0x4100, 6 + (6 + 2 + 36) + (6 + 2 + 8)); /* triangle mesh */
+    chunk_3ds(buf, &at, 0x4110, 6 + 2 + 36);
+    uint16_t three = 3, one = 1;
+    memcpy(buf + at, &three, 2), at += 2;
+    memcpy(buf + at, corners, 36), at += 36;
+    chunk_3ds(buf, &at, 0x4120, 6 + 2 + 8);
+    memcpy(buf + at, &one, 2), at += 2;
+    memcpy(buf + at, face, 8), at += 8;
+    chunk_3ds(buf, &at, 0x4000, cam_len); /* object "cam" */
+    memcpy(buf + at, "cam", 4), at += 4;
+    chunk_3ds(buf, &at, 0x4700, 6 + 32);
+    memcpy(buf + at, camera, 32), at += 32;
+    FILE *f = fopen(fxt_tmp_path("lens.3ds"), "wb");
+    assert_non_null(f);
+    assert_int_equal(fwrite(buf, at, 1, f), 1);
+    fclose(f);
+    char path[1024];
+    snprintf(path, sizeof path, "%s", fxt_tmp_path("lens.3ds"));
+    const struct aiScene *ai = aiImportFile(path, 0);
+    if (!ai)
+        fail_msg("Assimp: %s", aiGetErrorString());
+    assert_int_equal(ai->mNumCameras, 1);
+    double across_deg = ai->mCameras[0]->mHorizontalFOV * 180 / M_PI;
+    aiReleaseImport(ai);
+    assert_true(fabs(across_deg - 35) < 1e-3); /* the lens's millimetres as degrees, not 54.4 */
+    scene *s = fxt_load_ok(path);
+    assert_false(s->has_camera);
+    assert_int_equal(s->repairs.cameras_unused, 1);
+    scene_free(s);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -727,6 +784,7 @@ int main(void)
         cmocka_unit_test(test_gltf_texcoord_and_mirror),
         cmocka_unit_test(test_instanced_texture_density),
         cmocka_unit_test(test_gltf_clamp_to_edge),
+        cmocka_unit_test(test_3ds_camera_lens_misread),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
