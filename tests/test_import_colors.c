@@ -237,6 +237,13 @@ static void test_ply_colors_srgb(void **state)
     scene *alone = fxt_load_ok(quad);
     assert_null(alone->corner_color);
     scene_free(alone);
+    static char out[8192], cli_err[8192], path[1024]; /* scene-info says which has them */
+    snprintf(path, sizeof path, "%s", quad);          /* fxt_run_clif reuses the scratch path's buffer */
+    assert_int_equal(fxt_run_clif(out, sizeof out, cli_err, sizeof cli_err, "scene-info '%s'", path), 0);
+    assert_null(strstr(out, "vertex colours"));
+    snprintf(path, sizeof path, "%s", fxt_tmp_path("vc.ply"));
+    assert_int_equal(fxt_run_clif(out, sizeof out, cli_err, sizeof cli_err, "scene-info '%s'", path), 0);
+    assert_non_null(strstr(out, "textures 0, vertex colours)"));
     scene_error err = {0};
     scene *s = fxt_load_json_text(
         "vc_ply.json", "{\"version\":1,\"meshes\":[{\"file\":\"vc.ply\"},{\"file\":\"quad.obj\"}]}", &err);
