@@ -208,7 +208,9 @@ static void folder_of(const char *path, char *dir, size_t cap)
 
 /* Resolves a texture name from a model file: backslashes become slashes, the path is taken relative to
  * the model's folder, and when that file is absent a case-insensitive match of the file name in that
- * folder is used. Returns false when nothing matches. */
+ * folder is used, then the name's last folder and file name beside the model's folder (a path from the
+ * author's machine, "D:\\work\\models\\OBJ\\wood.jpg" read from models/FBX/ finds models/OBJ/wood.jpg: Assimp's
+ * FBX spider). Returns false when nothing matches. */
 static bool resolve_texture(const char *model_dir, const char *name, char *out, size_t cap)
 {
     char clean[512];
@@ -238,7 +240,23 @@ static bool resolve_texture(const char *model_dir, const char *name, char *out, 
             break;
         }
     closedir(dir);
-    return found;
+    /* The last folder and file name, from the model's folder's parent. */
+    char parent[512];
+    snprintf(parent, sizeof parent, "%s", model_dir[0] ? model_dir : "./");
+    size_t n = strlen(parent);
+    while (n > 0 && parent[n - 1] == '/')
+        parent[--n] = 0;
+    const char *folder = base > clean + 1 ? base - 2 : NULL;
+    while (folder && folder > clean && folder[-1] != '/')
+        folder--;
+    if (found || !folder || folder == base - 1 || !strrchr(parent, '/'))
+        return found;
+    *(strrchr(parent, '/') + 1) = 0;
+    snprintf(out, cap, "%s%s", parent, folder);
+    f = fopen(out, "rb");
+    if (f)
+        fclose(f);
+    return f != NULL;
 }
 
 /* True when one of the file's materials before `index` names the same diffuse texture: its warning was

@@ -16,6 +16,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 /* The colour the quad's corners carry: affine in (x, y), so its interpolation is itself. */
 static void affine_color(double x, double y, double out[3])
@@ -406,6 +407,37 @@ static void test_gltf_texture_transform(void **state)
     scene_free(s);
 }
 
+/* A texture named by a path from the author's machine ("D:\\work\\proj\\tex\\red.png" in an OBJ's MTL) is found
+ * as its last folder and file name beside the model's folder (proj/model/quad.obj reads proj/tex/red.png),
+ * as Assimp's FBX spider names ..\\OBJ\\ textures; before, it was missing and the material kept its colour. */
+static void test_texture_from_another_machine(void **state)
+{
+    (void)state;
+    char dir[1024];
+    snprintf(dir, sizeof dir, "%s", fxt_tmp_path("proj"));
+    mkdir(dir, 0755);
+    snprintf(dir, sizeof dir, "%s", fxt_tmp_path("proj/model"));
+    mkdir(dir, 0755);
+    snprintf(dir, sizeof dir, "%s", fxt_tmp_path("proj/tex"));
+    mkdir(dir, 0755);
+    const uint8_t red[3] = {255, 0, 0};
+    char msg[256];
+    assert_int_equal(scene_image_write_u8(fxt_tmp_path("proj/tex/red.png"), 1, 1, 3, red, msg, sizeof msg),
+                     0);
+    fxt_write_file("proj/model/quad.mtl", "newmtl m\nKd 1 1 1\nmap_Kd D:\\work\\proj\\tex\\red.png\n");
+    const char *path =
+        fxt_write_file("proj/model/quad.obj", "mtllib quad.mtl\nv 0 0 0\nv 1 0 0\nv 1 0 -1\nv 0 0 -1\n"
+                                              "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl m\n"
+                                              "f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n");
+    scene *s = fxt_load_ok(path);
+    assert_int_equal(s->repairs.textures_missing, 0);
+    assert_int_equal(s->texture_count, 1);
+    float rgb[3];
+    scene_albedo(s, 0, 0.3f, 0.3f, rgb);
+    assert_true(rgb[0] == 1.0f && rgb[1] == 0.0f && rgb[2] == 0.0f);
+    scene_free(s);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -415,6 +447,7 @@ int main(void)
         cmocka_unit_test(test_ply_colors_srgb),
         cmocka_unit_test(test_emissive_texture_mean),
         cmocka_unit_test(test_gltf_texture_transform),
+        cmocka_unit_test(test_texture_from_another_machine),
         cmocka_unit_test(test_emission_change_is_light_change),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
