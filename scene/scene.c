@@ -70,6 +70,7 @@ static void staged_mesh_release(scene__staged_mesh *m)
     free(m->world);
     free(m->indices);
     free(m->uv);
+    free(m->color);
     memset(m, 0, sizeof *m);
 }
 
@@ -165,6 +166,7 @@ void scene_free(scene *s)
     free(s->positions);
     free(s->indices);
     free(s->corner_uv);
+    free(s->corner_color);
     free(s->tri_mesh);
     free(s->tri_normal);
     free(s->meshes);
@@ -290,6 +292,15 @@ scene_result scene__add_mesh(scene *s, const char *name, const float *positions,
                              const uint32_t *indices, uint32_t triangle_count, const float *uv,
                              uint32_t material, const double *xform, scene_error *err)
 {
+    return scene__add_mesh_colored(s, name, positions, vertex_count, indices, triangle_count, uv, NULL,
+                                   material, xform, err);
+}
+
+scene_result scene__add_mesh_colored(scene *s, const char *name, const float *positions,
+                                     uint32_t vertex_count, const uint32_t *indices, uint32_t triangle_count,
+                                     const float *uv, const float *color, uint32_t material,
+                                     const double *xform, scene_error *err)
+{
     if (material >= s->material_count)
         return scene__fail(err, SCENE_ERR_INVALID, "mesh '%s': material %u out of range (%u materials)", name,
                            material, s->material_count);
@@ -321,13 +332,16 @@ scene_result scene__add_mesh(scene *s, const char *name, const float *positions,
     m->world = malloc(sizeof(double) * 3 * (size_t)vertex_count);
     m->indices = malloc(sizeof(uint32_t) * 3 * (size_t)triangle_count);
     m->uv = uv ? malloc(sizeof(float) * 2 * (size_t)vertex_count) : NULL;
-    if (!m->world || !m->indices || (uv && !m->uv)) {
+    m->color = color ? malloc(sizeof(float) * 3 * (size_t)vertex_count) : NULL;
+    if (!m->world || !m->indices || (uv && !m->uv) || (color && !m->color)) {
         staged_mesh_release(m);
         return scene__fail(err, SCENE_ERR_NOMEM, "mesh '%s': out of memory", name);
     }
     memcpy(m->indices, indices, sizeof(uint32_t) * 3 * (size_t)triangle_count);
     if (uv)
         memcpy(m->uv, uv, sizeof(float) * 2 * (size_t)vertex_count);
+    for (size_t i = 0; color && i < 3 * (size_t)vertex_count; i++) /* an albedo factor: 0..1, NaN as 0 */
+        m->color[i] = color[i] > 0.0f ? fminf(color[i], 1.0f) : 0.0f;
 
     /* The transform, in double. The input's own float spacing, times the transform's largest stretch, is the
      * finest the mesh can be, wherever it ends up. */
@@ -475,10 +489,12 @@ static scene_result settle_frame(scene *s, scene_error *err)
         free(s->positions);
         free(s->indices);
         free(s->corner_uv);
+        free(s->corner_color);
         free(s->tri_mesh);
         s->positions = NULL;
         s->indices = NULL;
         s->corner_uv = NULL;
+        s->corner_color = NULL;
         s->tri_mesh = NULL;
         s->meshes = NULL;
         s->vertex_count = s->triangle_count = s->mesh_count = 0;

@@ -146,6 +146,10 @@ typedef struct scene {
     uint32_t triangle_count;
     uint32_t *indices;       /* triangle_count * 3, into positions */
     float *corner_uv;        /* triangle_count * 6: the mesh's own UVs per corner (for textures), 0 if none */
+    float *corner_color;     /* triangle_count * 9: per corner, the vertex colour (linear RGB, 0..1) that
+                              * multiplies the material's albedo, interpolated over the triangle (glTF's
+                              * COLOR_0, a PLY scan's colours); NULL when no mesh has vertex colours (then
+                              * 1, 1, 1 everywhere), so a scene without them holds nothing for them */
     uint32_t *tri_mesh;      /* triangle_count: mesh index */
     float *tri_normal;       /* triangle_count * 3: unit geometric normal */
     float *tri_texture_lod;  /* triangle_count: log2 of its texture's texels per metre on it (-1000: none) */
@@ -267,7 +271,8 @@ double scene_triangle_area(const scene *s, uint32_t t);
 double scene_surface_area(const scene *s);
 
 /* Samples a material's albedo (linear RGB) at triangle tri with barycentrics (u, v) of corners 1 and 2, from
- * the texture's finest level (bilinear). */
+ * the texture's finest level (bilinear), times the vertex colour interpolated there (corner_color, when the
+ * scene has vertex colours: (1 - u - v) c0 + u c1 + v c2). */
 void scene_albedo(const scene *s, uint32_t tri, float u, float v, float out_rgb[3]);
 
 /* The same, filtered for a pixel whose footprint on the surface is 2^footprint_log2 metres: the texture's
@@ -280,8 +285,9 @@ void scene_albedo_filtered(const scene *s, uint32_t tri, float u, float v, float
 typedef struct scene_albedo_triangle {
     const scene_texture *texture; /* NULL: untextured, the diffuse colour alone */
     float diffuse[3];
-    float uv[6]; /* mesh UVs of the three corners */
-    float lod;   /* log2 of texture texels per metre on the triangle */
+    float uv[6];        /* mesh UVs of the three corners */
+    float lod;          /* log2 of texture texels per metre on the triangle */
+    const float *color; /* its three corners' vertex colours (scene.corner_color), or NULL: none */
 } scene_albedo_triangle;
 
 /* Prepares albedo sampling of triangle tri; scene_albedo_sample() then gives what scene_albedo_filtered()

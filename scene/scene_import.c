@@ -208,7 +208,9 @@ static void folder_of(const char *path, char *dir, size_t cap)
 
 /* Resolves a texture name from a model file: backslashes become slashes, the path is taken relative to
  * the model's folder, and when that file is absent a case-insensitive match of the file name in that
- * folder is used. Returns false when nothing matches. */
+ * folder is used, then the name's last folder and file name beside the model's folder (a path from the
+ * author's machine, "D:\\work\\models\\OBJ\\wood.jpg" read from models/FBX/ finds models/OBJ/wood.jpg: Assimp's
+ * FBX spider). Returns false when nothing matches. */
 static bool resolve_texture(const char *model_dir, const char *name, char *out, size_t cap)
 {
     char clean[512];
@@ -238,7 +240,23 @@ static bool resolve_texture(const char *model_dir, const char *name, char *out, 
             break;
         }
     closedir(dir);
-    return found;
+    /* The last folder and file name, from the model's folder's parent. */
+    char parent[512];
+    snprintf(parent, sizeof parent, "%s", model_dir[0] ? model_dir : "./");
+    size_t n = strlen(parent);
+    while (n > 0 && parent[n - 1] == '/')
+        parent[--n] = 0;
+    const char *folder = base > clean + 1 ? base - 2 : NULL;
+    while (folder && folder > clean && folder[-1] != '/')
+        folder--;
+    if (found || !folder || folder == base - 1 || !strrchr(parent, '/'))
+        return found;
+    *(strrchr(parent, '/') + 1) = 0;
+    snprintf(out, cap, "%s%s", parent, folder);
+    f = fopen(out, "rb");
+    if (f)
+        fclose(f);
+    return f != NULL;
 }
 
 /* True when one of the file's materials before `index` names the same diffuse texture: its warning was
@@ -325,12 +343,59 @@ static int32_t add_embedded_texture(scene *s, const char *path, const char *name
     return scene__add_texture_rgb(s, label, tex->mWidth, tex->mHeight, rgb, err);
 }
 
-/* How a mesh reads its material's texture: which texture coordinate set, and whether u or v is halved (the
- * material's texture was mirrored into one twice as wide or high: mirrored_texture()). */
+/* How a mesh reads its material's texture: which texture coordinate set, and per axis (u, v) whether the
+ * coordinate is remapped to (c - offset) x scale: halved where the material's texture was mirrored into one
+ * twice as wide or high (mirrored_texture()), moved and shrunk where it was clamped (clamped_texture()). */
 typedef struct import_uv {
     uint8_t set;
-    bool half_u, half_v;
+    bool
+        transform; /* glTF's KHR_texture_transform first: (u, v) -> (xf[0] u + xf[1] v + xf[2], xf[3] u + ...) */
+    double xf[6];
+    bool remap[2];
+    float offset[2], scale[2];
 } import_uv;
+
+/* A coordinate pair as the material reads it: through its texture transform (the remap comes after). */
+static void uv_transformed(const import_uv *m, float u, float v, float out[2])
+{
+    out[0] = u;
+    out[1] = v;
+    if (m->transform) {
+        out[0] = (float)(m->xf[0] * u + m->xf[1] * v + m->xf[2]);
+        out[1] = (float)(m->xf[3] * u + m->xf[4] * v + m->xf[5]);
+    }
+}
+
+/* glTF's KHR_texture_transform of a material's base-colour texture, as Assimp 5.2.5 hands it over: an
+ * aiUVTransform whose rotation is the glTF one negated and whose translation Assimp computed from the glTF
+ * offset, scale and rotation for its own conventions (its glTF reader's formula, inverted here to recover
+ * the offset). The glTF transform, uv' = offset + R(rotation) (scale x uv) with R = [cos sin; -sin cos] on
+ * glTF's coordinates (v down from the top: the extension's GLSL matrix read by rows, which is what Khronos's
+ * TextureTransformTest asset shows as right; by columns its arrow points at the "opposite direction" marker),
+ * is written into m->xf on Assimp's (v = 1 - v_glTF). */
+static void gltf_texture_transform(const struct aiMaterial *am, import_uv *m)
+{
+    struct aiUVTransform t;
+    unsigned n = sizeof t / sizeof(ai_real);
+    if (aiGetMaterialFloatArray(am, AI_MATKEY_UVTRANSFORM(aiTextureType_DIFFUSE, 0), (ai_real *)&t, &n) !=
+            aiReturn_SUCCESS ||
+        n != sizeof t / sizeof(ai_real))
+        return;
+    double sx = t.mScaling.x, sy = t.mScaling.y, rot = -(double)t.mRotation, c = cos(rot), sn = sin(rot);
+    double o0 = t.mTranslation.x - 0.5 * sx * (-c + sn + 1);
+    double o1 = 0.5 * sy * (sn + c - 1) + 1 - sy - t.mTranslation.y;
+    const double xf[6] = {c * sx, -sn * sy, o0 + sn * sy, sn * sx, c * sy, 1 - o1 - c * sy};
+    for (int k = 0; k < 6; k++)
+        if (!isfinite(xf[k]))
+            return;
+    memcpy(m->xf, xf, sizeof xf);
+    m->transform = true;
+}
+
+/* The largest side, in texels, of a clamped texture's padded copy (clamped_texture()). */
+#define IMPORT_CLAMP_MAX_SIDE 16384
+
+static int32_t replace_plain(scene *s, int32_t texture, int32_t added);
 
 /* A mirrored repeat (glTF's MIRRORED_REPEAT) of texture index `texture` along u and/or v, as a plain repeat:
  * the texture followed by its mirror image, twice as wide (or high), read at half the coordinate. Bilinear
@@ -359,8 +424,14 @@ static int32_t mirrored_texture(scene *s, int32_t texture, bool mirror_u, bool m
             uint32_t sx = x < w ? x : 2 * w - 1 - x, sy = y < h ? y : 2 * h - 1 - y;
             memcpy(rgb + 3 * ((size_t)y * mw + x), src->rgb + 3 * ((size_t)sy * w + sx), sizeof(float) * 3);
         }
-    int32_t added = scene__add_texture_rgb(s, name, mw, mh, rgb, err);
-    /* The plain texture goes when it was loaded just now for this material and no other material uses it. */
+    return replace_plain(s, texture, scene__add_texture_rgb(s, name, mw, mh, rgb, err));
+}
+
+/* After a texture `added` was made from the plain one `texture` (mirrored_texture(), clamped_texture()): the
+ * plain texture goes when it was loaded just now for this material and no other material uses it, the new
+ * one taking its index. Returns the new texture's index, or -1 as added is. */
+static int32_t replace_plain(scene *s, int32_t texture, int32_t added)
+{
     bool used = (uint32_t)texture + 2 != s->texture_count;
     for (uint32_t i = 0; i < s->material_count && !used; i++)
         used = s->materials[i].texture == texture;
@@ -373,11 +444,143 @@ static int32_t mirrored_texture(scene *s, int32_t texture, bool mirror_u, bool m
     return texture;
 }
 
+/* A texture clamped to its edge (glTF's CLAMP_TO_EDGE, Assimp's clamp and decal modes) along the axes `axis`
+ * says, read by coordinates that leave 0..1: as a plain repeat of a padded copy that covers the coordinates'
+ * whole periods [lo, hi) (lo = floor of the least coordinate, hi = ceil of the greatest) plus one texel each
+ * side, each texel the clamped lookup of the original's (its edge texel outside it). Read at
+ * (c - lo + 1 / n) x n / (n (hi - lo) + 2) for a side of n texels, it gives the texels, the bilinear filter
+ * and the texel density of clamped addressing; the margin keeps the copy's own wrap-around away from every
+ * coordinate the meshes use. range[axis] holds the least and greatest coordinate. Returns the new texture's
+ * index and fills uv's remap for the axes, or -1 with err filled (a copy wider than IMPORT_CLAMP_MAX_SIDE). */
+static int32_t clamped_texture(scene *s, int32_t texture, const bool axis[2], const float range[2][2],
+                               import_uv *uv, scene_error *err)
+{
+    const scene_texture *src = &s->textures[texture];
+    uint32_t side[2] = {src->width, src->height}, out[2];
+    int64_t first[2] = {0, 0};
+    for (int k = 0; k < 2; k++) {
+        out[k] = side[k];
+        if (!axis[k])
+            continue;
+        double a = floor(range[k][0]), b = ceil(range[k][1]);
+        double size = (b - a) * side[k] + 2;
+        if (!(size <= IMPORT_CLAMP_MAX_SIDE)) {
+            scene__fail(
+                err, SCENE_ERR_RANGE,
+                "%s: clamped over coordinates %g..%g, its copy would be %.0f texels wide (at most %d)",
+                src->path, (double)range[k][0], (double)range[k][1], size, IMPORT_CLAMP_MAX_SIDE);
+            return -1;
+        }
+        out[k] = (uint32_t)size;
+        first[k] = (int64_t)a * side[k] - 1; /* the original texel (from the start) of the copy's first */
+        uv->remap[k] = true;
+        uv->offset[k] = (float)(a - 1.0 / side[k]);
+        uv->scale[k] = (float)((double)side[k] / size);
+    }
+    float *rgb = malloc(sizeof(float) * 3 * (size_t)out[0] * out[1]);
+    char name[300];
+    snprintf(name, sizeof name, "%.250s (clamped%s%s)", src->path, axis[0] ? " u" : "", axis[1] ? " v" : "");
+    if (!rgb) {
+        scene__fail(err, SCENE_ERR_NOMEM, "%s: out of memory", name);
+        return -1;
+    }
+    uint32_t w = side[0], h = side[1];
+    for (uint32_t y = 0; y < out[1]; y++) {
+        /* rows count from the top, coordinates v from the bottom: the copy's bottom row is row out[1] - 1 */
+        int64_t r =
+            axis[1] ? first[1] + (int64_t)(out[1] - 1 - y) : (int64_t)(h - 1 - y); /* from the bottom */
+        r = r < 0 ? 0 : (r >= (int64_t)h ? (int64_t)h - 1 : r);
+        size_t sy = (size_t)(h - 1 - (uint32_t)r);
+        for (uint32_t x = 0; x < out[0]; x++) {
+            int64_t c = axis[0] ? first[0] + (int64_t)x : (int64_t)x;
+            c = c < 0 ? 0 : (c >= (int64_t)w ? (int64_t)w - 1 : c);
+            memcpy(rgb + 3 * ((size_t)y * out[0] + x), src->rgb + 3 * (sy * w + (size_t)c),
+                   sizeof(float) * 3);
+        }
+    }
+    return replace_plain(s, texture, scene__add_texture_rgb(s, name, out[0], out[1], rgb, err));
+}
+
+/* The least and greatest finite coordinate (u, v) of set uv_set (set 0 where a mesh lacks it, as import_mesh
+ * reads) over the meshes of material `material`; false when they have none. */
+static bool material_uv_range(const struct aiScene *ai, uint32_t material, const import_uv *m,
+                              float range[2][2])
+{
+    unsigned uv_set = m->set;
+    range[0][0] = range[1][0] = INFINITY;
+    range[0][1] = range[1][1] = -INFINITY;
+    for (uint32_t i = 0; i < ai->mNumMeshes; i++) {
+        const struct aiMesh *mesh = ai->mMeshes[i];
+        const struct aiVector3D *uv =
+            mesh->mTextureCoords[uv_set] ? mesh->mTextureCoords[uv_set] : mesh->mTextureCoords[0];
+        for (uint32_t v = 0; mesh->mMaterialIndex == material && uv && v < mesh->mNumVertices; v++) {
+            float c[2];
+            uv_transformed(m, uv[v].x, uv[v].y, c);
+            for (int k = 0; k < 2; k++)
+                if (isfinite(c[k])) {
+                    range[k][0] = fminf(range[k][0], c[k]);
+                    range[k][1] = fmaxf(range[k][1], c[k]);
+                }
+        }
+    }
+    return range[0][0] <= range[0][1] || range[1][0] <= range[1][1];
+}
+
+/* An emitting material's emissive texture (glTF's emissiveTexture, times emissiveFactor): fxcache's emission
+ * is one radiance per material, so the texture's mean colour over its texels multiplies it, which keeps the
+ * material's emitted power (before, the texture was not read: a factor of 1 made every texel emit white). The
+ * texture is read only for its mean and not kept (unless the material's diffuse texture is the same file);
+ * one warning line says so. A texture that cannot be read leaves the emission as it is, with a warning. */
+static void emissive_texture_mean(scene *s, const struct aiScene *ai, const struct aiMaterial *am,
+                                  const char *path, const char *model_dir, scene_material *m)
+{
+    struct aiString tex;
+    if (!scene_material_emits(m) || aiGetMaterialTextureCount(am, aiTextureType_EMISSIVE) == 0 ||
+        aiGetMaterialTexture(am, aiTextureType_EMISSIVE, 0, &tex, NULL, NULL, NULL, NULL, NULL, NULL) !=
+            aiReturn_SUCCESS ||
+        tex.length == 0)
+        return;
+    char found[768];
+    const struct aiTexture *held = embedded_texture(ai, tex.data);
+    bool beside = tex.data[0] != '*' && resolve_texture(model_dir, tex.data, found, sizeof found);
+    uint32_t before = s->texture_count;
+    scene_error tex_err = {0};
+    int32_t index = beside ? scene__add_texture(s, found, &tex_err)
+                    : held ? add_embedded_texture(s, path, tex.data, held, &tex_err)
+                           : -1;
+    if (index < 0) {
+        fprintf(stderr,
+                "fxcache: warning: material '%s': emissive texture '%s' %s (its emission is uniform)\n",
+                m->name, tex.data, beside || held ? "could not be read" : "not found beside the model");
+        return;
+    }
+    scene_texture *t = &s->textures[index];
+    double sum[3] = {0, 0, 0};
+    size_t texels = (size_t)t->width * t->height;
+    for (size_t i = 0; i < texels; i++)
+        for (int k = 0; k < 3; k++)
+            sum[k] += t->rgb[3 * i + k];
+    for (int k = 0; k < 3; k++)
+        m->emission[k] = (float)(m->emission[k] * (texels ? sum[k] / (double)texels : 0.0));
+    fprintf(stderr,
+            "fxcache: warning: material '%s': emissive texture '%s' is used as its mean colour (%.3g, %.3g, "
+            "%.3g): fxcache's emission is uniform over a material\n",
+            m->name, tex.data, sum[0] / (double)(texels ? texels : 1), sum[1] / (double)(texels ? texels : 1),
+            sum[2] / (double)(texels ? texels : 1));
+    if ((uint32_t)index == before && s->texture_count == before + 1) { /* read for its mean alone */
+        free(t->rgb);
+        for (uint32_t l = 1; l < t->levels; l++)
+            free(t->mip_rgb[l]);
+        memset(t, 0, sizeof *t);
+        s->texture_count--;
+    }
+}
+
 /* Converts one Assimp material into a scene material (its diffuse colour, emission and texture: a file
  * beside the model, or one the file holds). A texture that cannot be read is reported on stderr and counted;
  * the material keeps its colour. */
 static scene_result import_material(scene *s, const struct aiScene *ai, uint32_t index, const char *path,
-                                    const char *model_dir, uint32_t *out_index, import_uv *out_uv,
+                                    const char *model_dir, bool gltf, uint32_t *out_index, import_uv *out_uv,
                                     scene_error *err)
 {
     const struct aiMaterial *am = ai->mMaterials[index];
@@ -406,6 +609,7 @@ static scene_result import_material(scene *s, const struct aiScene *ai, uint32_t
             float e = c[k] * strength;
             m.emission[k] = isfinite(e) && e > 0.0f ? e : 0.0f;
         }
+        emissive_texture_mean(s, ai, am, path, model_dir, &m);
     }
     struct aiString tex;
     unsigned uv_set = 0; /* which of the mesh's texture coordinate sets the texture uses (glTF's texCoord) */
@@ -415,6 +619,8 @@ static scene_result import_material(scene *s, const struct aiScene *ai, uint32_t
             aiReturn_SUCCESS &&
         tex.length > 0) {
         out_uv->set = uv_set < AI_MAX_NUMBER_OF_TEXTURECOORDS ? (uint8_t)uv_set : 0;
+        if (gltf)
+            gltf_texture_transform(am, out_uv);
         char found[768];
         double t0 = scene__now_ms();
         const struct aiTexture *held = embedded_texture(ai, tex.data);
@@ -437,9 +643,31 @@ static scene_result import_material(scene *s, const struct aiScene *ai, uint32_t
                             tex_err.msg);
                 } else {
                     m.texture = mirrored;
-                    out_uv->half_u = modes[0] == aiTextureMapMode_Mirror;
-                    out_uv->half_v = modes[1] == aiTextureMapMode_Mirror;
+                    for (int k = 0; k < 2; k++)
+                        if (modes[k] == aiTextureMapMode_Mirror) {
+                            out_uv->remap[k] = true;
+                            out_uv->offset[k] = 0.0f;
+                            out_uv->scale[k] = 0.5f;
+                        }
                 }
+            }
+            /* Clamped (not repeated nor mirrored) where the meshes' coordinates leave 0..1: a padded copy.
+             * Inside 0..1 clamping and repeating read the same texels but at the edges' outer half texel. */
+            bool clamped[2] = {false, false}, outside = false;
+            float range[2][2];
+            if (m.texture >= 0 && material_uv_range(ai, index, out_uv, range))
+                for (int k = 0; k < 2; k++) {
+                    clamped[k] = modes[k] != aiTextureMapMode_Wrap && modes[k] != aiTextureMapMode_Mirror &&
+                                 (range[k][0] < -1e-4f || range[k][1] > 1 + 1e-4f);
+                    outside |= clamped[k];
+                }
+            if (outside) {
+                int32_t copy = clamped_texture(s, m.texture, clamped, range, out_uv, &tex_err);
+                if (copy < 0)
+                    fprintf(stderr, "fxcache: warning: material '%s': %s (repeating it instead)\n", m.name,
+                            tex_err.msg);
+                else
+                    m.texture = copy;
             }
             if (m.texture >= 0) {
                 /* The texture carries the colour; Assimp's 3DS and OBJ readers give a tint we keep. */
@@ -461,13 +689,19 @@ static scene_result import_material(scene *s, const struct aiScene *ai, uint32_t
     return *out_index == UINT32_MAX ? SCENE_ERR_NOMEM : SCENE_OK;
 }
 
-/* Appends one Assimp mesh (triangulated) through scene__add_mesh(), with its texture coordinates of set
- * uv_set (its material's texture's; set 0 when the mesh has no such set). */
+/* How a file's vertex colours are read: not at all (a scene description's material replaces the file's),
+ * as linear RGB (glTF's COLOR_0, by its specification), or as sRGB-encoded (every other format: PLY scans' and
+ * DCC tools' byte colours are what a screen shows, as 8-bit images are). */
+typedef enum import_colors { IMPORT_COLORS_NONE = 0, IMPORT_COLORS_LINEAR, IMPORT_COLORS_SRGB } import_colors;
+
+/* Appends one Assimp mesh (triangulated) through scene__add_mesh_colored(), with its texture coordinates of
+ * set uv_set (its material's texture's; set 0 when the mesh has no such set) and its first vertex colour set
+ * (Assimp's mColors[0]; alpha is not used) read as `colors` says. */
 static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t mesh_number, uint32_t material,
-                                import_uv uv_mode, const double *xform, const char *path, scene_error *err)
+                                import_uv uv_mode, import_colors colors, const double *xform,
+                                const char *path, scene_error *err)
 {
     unsigned uv_set = uv_mode.set;
-    float scale_u = uv_mode.half_u ? 0.5f : 1.0f, scale_v = uv_mode.half_v ? 0.5f : 1.0f;
     const struct aiVector3D *coords =
         mesh->mTextureCoords[uv_set] ? mesh->mTextureCoords[uv_set] : mesh->mTextureCoords[0];
     char name[160];
@@ -479,8 +713,10 @@ static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t me
     float *positions = malloc(sizeof(float) * 3 * (size_t)(nv ? nv : 1));
     float *uv = coords ? malloc(sizeof(float) * 2 * (size_t)(nv ? nv : 1)) : NULL;
     uint32_t *indices = malloc(sizeof(uint32_t) * 3 * (size_t)(nf ? nf : 1));
+    const struct aiColor4D *vertex_colors = colors != IMPORT_COLORS_NONE ? mesh->mColors[0] : NULL;
+    float *color = vertex_colors ? malloc(sizeof(float) * 3 * (size_t)(nv ? nv : 1)) : NULL;
     scene_result rc = SCENE_ERR_NOMEM;
-    if (!positions || !indices || (coords && !uv)) {
+    if (!positions || !indices || (coords && !uv) || (vertex_colors && !color)) {
         rc = scene__fail(err, SCENE_ERR_NOMEM, "mesh '%s': out of memory", name);
         goto done;
     }
@@ -489,8 +725,17 @@ static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t me
         positions[3 * (size_t)v + 1] = mesh->mVertices[v].y;
         positions[3 * (size_t)v + 2] = mesh->mVertices[v].z;
         if (uv) {
-            uv[2 * (size_t)v] = coords[v].x * scale_u;
-            uv[2 * (size_t)v + 1] = coords[v].y * scale_v;
+            float c[2];
+            uv_transformed(&uv_mode, coords[v].x, coords[v].y, c);
+            for (int k = 0; k < 2; k++)
+                uv[2 * (size_t)v + k] =
+                    uv_mode.remap[k] ? (c[k] - uv_mode.offset[k]) * uv_mode.scale[k] : c[k];
+        }
+        if (color) {
+            const float c[3] = {vertex_colors[v].r, vertex_colors[v].g, vertex_colors[v].b};
+            for (int k = 0; k < 3; k++) /* scene__add_mesh_colored clamps to 0..1 */
+                color[3 * (size_t)v + k] =
+                    colors == IMPORT_COLORS_SRGB ? srgb_to_linear(fminf(fmaxf(c[k], 0.0f), 1.0f)) : c[k];
         }
     }
     uint32_t nt = 0;
@@ -504,20 +749,22 @@ static scene_result import_mesh(scene *s, const struct aiMesh *mesh, uint32_t me
             indices[3 * (size_t)nt + c] = face->mIndices[c];
         nt++;
     }
-    rc = scene__add_mesh(s, name, positions, nv, indices, nt, uv, material, xform, err);
+    rc = scene__add_mesh_colored(s, name, positions, nv, indices, nt, uv, color, material, xform, err);
 done:
     free(positions);
     free(uv);
+    free(color);
     free(indices);
     return rc;
 }
 
 /* Which scene material each Assimp mesh gets: the file's own through material_map, or one for all. */
 typedef struct import_materials {
-    const uint32_t *map; /* per Assimp material, or NULL */
-    const import_uv *uv; /* per Assimp material: how its texture is read, or NULL */
-    uint32_t count;      /* entries of map */
-    uint32_t all;        /* UINT32_MAX, or the material every mesh gets */
+    const uint32_t *map;  /* per Assimp material, or NULL */
+    const import_uv *uv;  /* per Assimp material: how its texture is read, or NULL */
+    uint32_t count;       /* entries of map */
+    uint32_t all;         /* UINT32_MAX, or the material every mesh gets */
+    import_colors colors; /* how meshes' vertex colours are read */
 } import_materials;
 
 static uint32_t material_for(const import_materials *mats, const struct aiMesh *mesh)
@@ -554,59 +801,12 @@ static scene_result import_node(scene *s, const struct aiScene *ai, const struct
             s->repairs.non_triangles_dropped += mesh->mNumFaces;
             continue;
         }
-        rc = import_mesh(s, mesh, node->mMeshes[i], material_for(mats, mesh), uv_for(mats, mesh), world, path,
-                         err);
+        rc = import_mesh(s, mesh, node->mMeshes[i], material_for(mats, mesh), uv_for(mats, mesh),
+                         mats->colors, world, path, err);
     }
     for (uint32_t i = 0; rc == SCENE_OK && i < node->mNumChildren; i++)
         rc = import_node(s, ai, node->mChildren[i], world, mats, path, depth + 1, err);
     return rc;
-}
-
-/* What fxcache leaves out of a file's materials, one warning line each: vertex colours (fxcache renders the
- * materials' colours and textures; glTF's COLOR_0 multiplies the base colour, a PLY scan's colours are its
- * albedo), and a texture the file clamps (glTF's CLAMP_TO_EDGE) where a mesh's coordinates leave 0..1
- * (fxcache repeats textures, or mirrors them: mirrored_texture(); inside 0..1 the modes agree). */
-static void warn_left_out(const struct aiScene *ai, const char *path)
-{
-    uint32_t coloured = 0;
-    for (uint32_t i = 0; i < ai->mNumMeshes; i++)
-        coloured += ai->mMeshes[i]->mColors[0] != NULL;
-    if (coloured)
-        fprintf(
-            stderr,
-            "fxcache: warning: %s: %u mesh(es) carry vertex colours, which fxcache does not use (it renders "
-            "the materials' colours and textures)\n",
-            path, coloured);
-    for (uint32_t m = 0; m < ai->mNumMaterials; m++) {
-        struct aiString tex;
-        unsigned uv_set = 0;
-        enum aiTextureMapMode modes[2] = {aiTextureMapMode_Wrap, aiTextureMapMode_Wrap};
-        if (aiGetMaterialTextureCount(ai->mMaterials[m], aiTextureType_DIFFUSE) == 0 ||
-            aiGetMaterialTexture(ai->mMaterials[m], aiTextureType_DIFFUSE, 0, &tex, NULL, &uv_set, NULL, NULL,
-                                 modes, NULL) != aiReturn_SUCCESS ||
-            uv_set >= AI_MAX_NUMBER_OF_TEXTURECOORDS)
-            continue;
-        bool clamped
-            [2]; /* clamped to the edge, or a decal: not repeated (wrap) nor mirrored (import_material) */
-        for (int k = 0; k < 2; k++)
-            clamped[k] = modes[k] != aiTextureMapMode_Wrap && modes[k] != aiTextureMapMode_Mirror;
-        if (!clamped[0] && !clamped[1])
-            continue;
-        bool outside = false;
-        for (uint32_t i = 0; i < ai->mNumMeshes && !outside; i++) {
-            const struct aiMesh *mesh = ai->mMeshes[i];
-            const struct aiVector3D *uv = mesh->mTextureCoords[uv_set];
-            for (uint32_t v = 0; mesh->mMaterialIndex == m && uv && v < mesh->mNumVertices && !outside; v++)
-                outside = (clamped[0] && !(uv[v].x >= -1e-4f && uv[v].x <= 1 + 1e-4f)) ||
-                          (clamped[1] && !(uv[v].y >= -1e-4f && uv[v].y <= 1 + 1e-4f));
-        }
-        if (outside)
-            fprintf(
-                stderr,
-                "fxcache: warning: %s: texture '%s' is to be clamped where its coordinates leave 0..1, and "
-                "some do; fxcache repeats it\n",
-                path, tex.data);
-    }
 }
 
 /* scene__import_file, and with lights (non-NULL) also the file's lights and camera, which it then describes
@@ -730,10 +930,9 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
         return scene__fail(err, SCENE_ERR_FORMAT, "%s: cannot import: %s", path,
                            assimp_error(why, sizeof why));
 
-    if (!override)
-        warn_left_out(ai, path);
     char model_dir[512];
     folder_of(path, model_dir, sizeof model_dir);
+    bool gltf = strcasecmp(hint, "gltf") == 0 || strcasecmp(hint, "glb") == 0;
     uint32_t *material_map = NULL;
     import_uv *uv_modes = NULL;
     uint32_t override_index = UINT32_MAX;
@@ -747,7 +946,7 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
         if (!material_map || !uv_modes)
             rc = scene__fail(err, SCENE_ERR_NOMEM, "%s: out of memory", path);
         for (uint32_t m = 0; rc == SCENE_OK && m < ai->mNumMaterials; m++)
-            rc = import_material(s, ai, m, path, model_dir, &material_map[m], &uv_modes[m], err);
+            rc = import_material(s, ai, m, path, model_dir, gltf, &material_map[m], &uv_modes[m], err);
         if (rc == SCENE_OK && ai->mNumMaterials == 0) {
             scene_material grey = {.diffuse = {0.7f, 0.7f, 0.7f}, .texture = -1, .name = "default"};
             override_index = scene__add_material(s, &grey, err);
@@ -757,8 +956,12 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
     }
     uint32_t before = s->triangle_count;
     scene_repairs repairs_before = s->repairs;
-    import_materials mats = {
-        .map = material_map, .uv = uv_modes, .count = ai->mNumMaterials, .all = override_index};
+    import_materials mats = {.map = material_map,
+                             .uv = uv_modes,
+                             .count = ai->mNumMaterials,
+                             .all = override_index,
+                             .colors = override ? IMPORT_COLORS_NONE
+                                                : (gltf ? IMPORT_COLORS_LINEAR : IMPORT_COLORS_SRGB)};
     if (mirrored && rc == SCENE_OK)
         rc = import_node(s, ai, ai->mRootNode, xform ? xform : scene__identity_matrix, &mats, path, 0, err);
     for (uint32_t i = 0; !mirrored && rc == SCENE_OK && i < ai->mNumMeshes; i++) {
@@ -767,7 +970,8 @@ static scene_result import_file(scene *s, const char *path, const double *xform,
             s->repairs.non_triangles_dropped += mesh->mNumFaces;
             continue;
         }
-        rc = import_mesh(s, mesh, i, material_for(&mats, mesh), uv_for(&mats, mesh), xform, path, err);
+        rc = import_mesh(s, mesh, i, material_for(&mats, mesh), uv_for(&mats, mesh), mats.colors, xform, path,
+                         err);
     }
     if (rc == SCENE_OK && s->triangle_count == before) {
         char lost[160];

@@ -232,6 +232,15 @@ FXC_HOT_INLINE void albedo_sample(const scene_albedo_triangle *t, float u, float
     out_rgb[2] = texel[2] * t->diffuse[2];
 }
 
+/* Multiplies out_rgb by the vertex colour at barycentrics (u, v) of corners 1 and 2 of a triangle whose corner
+ * colours are color[0..8]. */
+static inline void apply_vertex_color(const float color[9], float u, float v, float out_rgb[3])
+{
+    float w0 = 1 - u - v;
+    for (int k = 0; k < 3; k++)
+        out_rgb[k] *= w0 * color[k] + u * color[3 + k] + v * color[6 + k];
+}
+
 void scene_albedo(const scene *s, uint32_t tri, float u, float v, float out_rgb[3])
 {
     scene_albedo_filtered(s, tri, u, v, -1000.0f, out_rgb);
@@ -242,6 +251,7 @@ void scene_albedo_prepare(const scene *s, uint32_t tri, scene_albedo_triangle *o
     const scene_material *m = &s->materials[s->meshes[s->tri_mesh[tri]].material];
     memcpy(out->diffuse, m->diffuse, sizeof out->diffuse);
     out->texture = NULL;
+    out->color = s->corner_color ? s->corner_color + 9 * (size_t)tri : NULL;
     if (m->texture < 0 || (uint32_t)m->texture >= s->texture_count)
         return;
     out->texture = &s->textures[m->texture];
@@ -253,6 +263,8 @@ void scene_albedo_sample(const scene_albedo_triangle *t, float u, float v, float
                          float out_rgb[3])
 {
     albedo_sample(t, u, v, footprint_log2, out_rgb);
+    if (t->color)
+        apply_vertex_color(t->color, u, v, out_rgb);
 }
 
 /* The mip level albedo_sample reads for footprint_log2 on triangle t (textured). */
@@ -386,14 +398,15 @@ FXC_HOT_CLONES void scene_albedo_run(const scene *s, const uint32_t *tri, const 
         if (!t.texture) {
             for (uint32_t i = first; i < end; i++)
                 memcpy(out_rgb[i], t.diffuse, sizeof out_rgb[i]);
-            continue;
-        }
-        if (end - first < ALBEDO_MIN_STRETCH) { /* the lanes' set-up costs more than they save */
+        } else if (end - first < ALBEDO_MIN_STRETCH) { /* the lanes' set-up costs more than they save */
             for (uint32_t i = first; i < end; i++)
                 albedo_sample(&t, u[i], v[i], footprint_log2[i], out_rgb[i]);
-            continue;
+        } else {
+            albedo_stretch(&t, &L, u, v, footprint_log2, first, end, out_rgb);
         }
-        albedo_stretch(&t, &L, u, v, footprint_log2, first, end, out_rgb);
+        if (t.color) /* vertex colours (a scene without them: one test per stretch) */
+            for (uint32_t i = first; i < end; i++)
+                apply_vertex_color(t.color, u[i], v[i], out_rgb[i]);
     }
 }
 
@@ -431,12 +444,14 @@ scene_result scene__compute_texture_means(scene *s, scene_error *err)
         const scene_material *m = &s->materials[s->meshes[s->tri_mesh[t]].material];
         float *out = s->tri_texture_mean + 3 * (size_t)t;
         out[0] = out[1] = out[2] = 1.0f;
-        if (m->texture < 0 || (uint32_t)m->texture >= s->texture_count)
-            continue;
-        const scene_texture *tex = &s->textures[m->texture];
-        const float *uv = s->corner_uv + 6 * (size_t)t;
-        float cu = (uv[0] + uv[2] + uv[4]) * (1.0f / 3.0f), cv = (uv[1] + uv[3] + uv[5]) * (1.0f / 3.0f);
-        texture_sample(tex, mean_level(tex, uv), cu, cv, out);
+        if (m->texture >= 0 && (uint32_t)m->texture < s->texture_count) {
+            const scene_texture *tex = &s->textures[m->texture];
+            const float *uv = s->corner_uv + 6 * (size_t)t;
+            float cu = (uv[0] + uv[2] + uv[4]) * (1.0f / 3.0f), cv = (uv[1] + uv[3] + uv[5]) * (1.0f / 3.0f);
+            texture_sample(tex, mean_level(tex, uv), cu, cv, out);
+        }
+        if (s->corner_color)
+            apply_vertex_color(s->corner_color + 9 * (size_t)t, 1.0f / 3.0f, 1.0f / 3.0f, out);
     }
     return SCENE_OK;
 }
@@ -451,17 +466,17 @@ void scene_albedo_mean(const scene *s, uint32_t tri, float out_rgb[3])
         out_rgb[2] = m->diffuse[2] * mean[2];
         return;
     }
-    if (m->texture < 0 || (uint32_t)m->texture >= s->texture_count) {
-        memcpy(out_rgb, m->diffuse, 3 * sizeof(float));
-        return;
+    float mean[3] = {1.0f, 1.0f, 1.0f}; /* what scene__compute_texture_means stores */
+    if (m->texture >= 0 && (uint32_t)m->texture < s->texture_count) {
+        const scene_texture *tex = &s->textures[m->texture];
+        const float *uv = s->corner_uv + 6 * (size_t)tri;
+        texture_sample(tex, mean_level(tex, uv), (uv[0] + uv[2] + uv[4]) * (1.0f / 3.0f),
+                       (uv[1] + uv[3] + uv[5]) * (1.0f / 3.0f), mean);
     }
-    const scene_texture *tex = &s->textures[m->texture];
-    const float *uv = s->corner_uv + 6 * (size_t)tri;
-    float texel[3];
-    texture_sample(tex, mean_level(tex, uv), (uv[0] + uv[2] + uv[4]) * (1.0f / 3.0f),
-                   (uv[1] + uv[3] + uv[5]) * (1.0f / 3.0f), texel);
+    if (s->corner_color)
+        apply_vertex_color(s->corner_color + 9 * (size_t)tri, 1.0f / 3.0f, 1.0f / 3.0f, mean);
     for (int k = 0; k < 3; k++)
-        out_rgb[k] = texel[k] * m->diffuse[k];
+        out_rgb[k] = m->diffuse[k] * mean[k];
 }
 
 /* ---- emission ----------------------------------------------------------------------------------------- */

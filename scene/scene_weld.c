@@ -234,6 +234,12 @@ scene_result scene__commit_mesh(scene *s, const scene__staged_mesh *m, const dou
         !scene__grow((void **)&s->tri_mesh, nt, sizeof(uint32_t)) ||
         !scene__grow((void **)&s->meshes, (size_t)s->mesh_count + 1, sizeof(scene_mesh)))
         goto done;
+    /* Vertex colours: the scene's table from the first mesh that has them on (white before it). */
+    bool had_colors = s->corner_color != NULL;
+    if ((m->color || had_colors) && !scene__grow((void **)&s->corner_color, nt * 9, sizeof(float)))
+        goto done;
+    for (size_t i = 0; m->color && !had_colors && i < (size_t)base_tri * 9; i++)
+        s->corner_color[i] = 1.0f;
     for (uint32_t v = 0; v < vertex_count; v++)
         memcpy(s->positions + 3 * ((size_t)base_vertex + remap[v]), world + 3 * (size_t)v, 3 * sizeof(float));
     uint32_t out = base_tri;
@@ -252,6 +258,9 @@ scene_result scene__commit_mesh(scene *s, const scene__staged_mesh *m, const dou
             }
             s->corner_uv[6 * (size_t)out + 2 * c] = u;
             s->corner_uv[6 * (size_t)out + 2 * c + 1] = w;
+            for (int k = 0; s->corner_color && k < 3; k++)
+                s->corner_color[9 * (size_t)out + 3 * c + k] =
+                    m->color ? m->color[3 * (size_t)src + k] : 1.0f;
         }
         s->tri_mesh[out] = s->mesh_count;
         out++;

@@ -660,28 +660,112 @@ static void test_instanced_texture_density(void **state)
     scene_free(s);
 }
 
-/* What fxcache leaves out of a file's materials is said in one warning line each at load: vertex colours
- * (Assimp's kwxport_test_vcolors.dae, three coloured meshes) and a texture clamped where its coordinates
- * leave 0..1 (CLAMP_TO_EDGE at u = 1.25), and neither where it does not apply (a mirrored repeat there). */
-static void test_left_out_warned(void **state)
+/* glTF's CLAMP_TO_EDGE where the coordinates leave 0..1: the quad's u runs from -1 (x = 0) to 2 (x = 1), so at
+ * x the red | green texture (texel centres u = 0.25, 0.75) clamped gives green g(u) = clamp((u - 0.25) / 0.5,
+ * 0, 1), red 1 - g: red up to u = 0.25, green from 0.75, a blend between; near both ends too (the copy's own
+ * wrap-around stays outside). Before, the texture repeated (with one warning line): at u = -0.5 it read the
+ * green texel. A mirrored repeat there is not clamped, and Assimp's vertex-coloured Collada model loads its
+ * colours without a warning (tests/test_import_colors.c). */
+static void test_gltf_clamp_to_edge(void **state)
 {
     (void)state;
     static char out[8192], err[8192];
-    const char *clamped = write_quad_gltf("clamp.gltf", 1.25f, 0, 0, 33071);
-    assert_int_equal(fxt_run_clif(out, sizeof out, err, sizeof err, "scene-info '%s'", clamped), 0);
-    assert_non_null(strstr(err, "texture 'red_green.png' is to be clamped where its coordinates leave 0..1"));
-    assert_null(strstr(err, "vertex colours"));
+    const float uv[4][2] = {{-1, 0.5f}, {2, 0.5f}, {2, 0.5f}, {-1, 0.5f}};
+    char path[1024]; /* fxt_run_clif reuses the scratch path's buffer */
+    snprintf(path, sizeof path, "%s",
+             write_quad_gltf_nodes("clamp.gltf", uv, uv, 0, 33071, "[{\"mesh\":0}]", "[0]"));
+    assert_int_equal(fxt_run_clif(out, sizeof out, err, sizeof err, "scene-info '%s'", path), 0);
+    assert_null(strstr(err, "clamp"));
+    scene *s = fxt_load_ok(path);
+    assert_int_equal(s->texture_count, 1); /* the padded copy took the plain texture's place */
+    const float bary[6][2] = {{0.001f, 0.001f}, {0.2f, 0.1f},     {0.4f, 0.3f},
+                              {0.1f, 0.6f},     {0.998f, 0.001f}, {0.5f, 0.25f}};
+    for (uint32_t t = 0; t < s->triangle_count; t++)
+        for (int i = 0; i < 6; i++) {
+            double x = 0;
+            for (int c = 0; c < 3; c++) {
+                double w = c == 0 ? 1.0 - bary[i][0] - bary[i][1] : bary[i][c - 1];
+                x +=
+                    w * s->positions[3 * (size_t)s->indices[3 * (size_t)t + c]] + (c == 0 ? s->origin[0] : 0);
+            }
+            double u = -1 + 3 * x, g = fmin(fmax((u - 0.25) / 0.5, 0), 1);
+            float rgb[3];
+            scene_albedo(s, t, bary[i][0], bary[i][1], rgb);
+            if (!(fabs(rgb[0] - (1 - g)) < 1e-4 && fabs(rgb[1] - g) < 1e-4 && fabs(rgb[2]) < 1e-6))
+                fail_msg("triangle %u at u = %.4f: (%g, %g, %g), expected (%g, %g, 0)", t, u, (double)rgb[0],
+                         (double)rgb[1], (double)rgb[2], 1 - g, g);
+        }
+    scene_free(s);
     const char *mirrored = write_quad_gltf("mirror.gltf", 1.25f, 0, 0, 33648);
     assert_int_equal(fxt_run_clif(out, sizeof out, err, sizeof err, "scene-info '%s'", mirrored), 0);
-    assert_null(strstr(err, "clamped"));
+    assert_null(strstr(err, "clamp"));
     const char *colours = ASSIMP_MODELS "/Collada/kwxport_test_vcolors.dae";
     if (access(colours, R_OK) != 0) {
         print_message("skipped: %s is absent (Debian's assimp-testmodels)\n", colours);
         skip();
     }
     assert_int_equal(fxt_run_clif(out, sizeof out, err, sizeof err, "scene-info '%s'", colours), 0);
-    assert_non_null(strstr(err, "3 mesh(es) carry vertex colours, which fxcache does not use"));
-    assert_null(strstr(err, "clamped"));
+    assert_null(strstr(err, "vertex colours"));
+    s = fxt_load_ok(colours);
+    assert_non_null(s->corner_color);
+    scene_free(s);
+}
+
+/* Appends a 3DS chunk header (id, length including the six header bytes) at buf + *at. */
+static void chunk_3ds(uint8_t *buf, size_t *at, uint16_t id, uint32_t length)
+{
+    memcpy(buf + *at, &id, 2);
+    memcpy(buf + *at + 2, &length, 4);
+    *at += 6;
+}
+
+/* A hand-written 3DS file: one triangle and a camera with a 35 mm lens. Assimp 5.2.5 reads the lens as an
+ * angle (35 degrees across), while a 35 mm lens on 3D Studio's 36 mm film frame sees 2 atan(18 / 35) = 54.4
+ * degrees: the camera is left out (counted in cameras_unused) and the scene keeps fxcache's default camera,
+ * as Sponza's 3DS file does. The decision stands on what this checks of Assimp's reading. */
+static void test_3ds_camera_lens_misread(void **state)
+{
+    (void)state;
+    static uint8_t buf[512];
+    size_t at = 0;
+    const float corners[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    const uint16_t face[4] = {0, 1, 2, 0};
+    const float camera[8] = {0, 0.3f, 5, 0, 0.3f, 0, 0, 35}; /* position, target, bank, lens (mm) */
+    uint32_t mesh_len = 6 + 4 + 6 + (6 + 2 + 36) + (6 + 2 + 8),
+             cam_len = 6 + 4 + 6 + 32;                       /* names of 4 bytes */
+    chunk_3ds(buf, &at, 0x4D4D, 6 + 6 + mesh_len + cam_len); /* main */
+    chunk_3ds(buf, &at, 0x3D3D, 6 + mesh_len + cam_len);     /* editor */
+    chunk_3ds(buf, &at, 0x4000, mesh_len);                   /* object "tri" */
+    memcpy(buf + at, "tri", 4), at += 4;
+    chunk_3ds(buf, &at, 0x4100, 6 + (6 + 2 + 36) + (6 + 2 + 8)); /* triangle mesh */
+    chunk_3ds(buf, &at, 0x4110, 6 + 2 + 36);
+    uint16_t three = 3, one = 1;
+    memcpy(buf + at, &three, 2), at += 2;
+    memcpy(buf + at, corners, 36), at += 36;
+    chunk_3ds(buf, &at, 0x4120, 6 + 2 + 8);
+    memcpy(buf + at, &one, 2), at += 2;
+    memcpy(buf + at, face, 8), at += 8;
+    chunk_3ds(buf, &at, 0x4000, cam_len); /* object "cam" */
+    memcpy(buf + at, "cam", 4), at += 4;
+    chunk_3ds(buf, &at, 0x4700, 6 + 32);
+    memcpy(buf + at, camera, 32), at += 32;
+    FILE *f = fopen(fxt_tmp_path("lens.3ds"), "wb");
+    assert_non_null(f);
+    assert_int_equal(fwrite(buf, at, 1, f), 1);
+    fclose(f);
+    char path[1024];
+    snprintf(path, sizeof path, "%s", fxt_tmp_path("lens.3ds"));
+    const struct aiScene *ai = aiImportFile(path, 0);
+    if (!ai)
+        fail_msg("Assimp: %s", aiGetErrorString());
+    assert_int_equal(ai->mNumCameras, 1);
+    double across_deg = ai->mCameras[0]->mHorizontalFOV * 180 / M_PI;
+    aiReleaseImport(ai);
+    assert_true(fabs(across_deg - 35) < 1e-3); /* the lens's millimetres as degrees, not 54.4 */
+    scene *s = fxt_load_ok(path);
+    assert_false(s->has_camera);
+    assert_int_equal(s->repairs.cameras_unused, 1);
+    scene_free(s);
 }
 
 int main(void)
@@ -699,7 +783,8 @@ int main(void)
         cmocka_unit_test(test_glb_embedded_texture),
         cmocka_unit_test(test_gltf_texcoord_and_mirror),
         cmocka_unit_test(test_instanced_texture_density),
-        cmocka_unit_test(test_left_out_warned),
+        cmocka_unit_test(test_gltf_clamp_to_edge),
+        cmocka_unit_test(test_3ds_camera_lens_misread),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

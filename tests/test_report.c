@@ -6,6 +6,8 @@
  * frames keep it quick, also in the sanitizer build. */
 #include "test_util.h"
 
+#include "fxt_scene.h"
+
 #include "error_sink.h"
 #include "image.h"
 #include "report_out.h"
@@ -491,7 +493,8 @@ static void run_small_report(const char *dir, const char *scene_path, const char
  * and every reference read; with the scene file edited in place (another sun), the trace edited in place
  * (another camera) or another --indirect-block, neither the configuration nor (for the edits) the references
  * are taken from the folder. Before, the scene and traces counted by their paths and --indirect-block not at
- * all, so each of the three silently reported the old results. */
+ * all, so each of the three silently reported the old results. The same for a material's emission edited
+ * alone. */
 static void test_cli_folder_of_other_content(void **state)
 {
     (void)state;
@@ -531,6 +534,23 @@ static void test_cli_folder_of_other_content(void **state)
     run_small_report(dir, scene_path, trace_path, "--indirect-block 1", err, sizeof err);
     if (strstr(err, "default_v1: done earlier") || !strstr(err, "references: 0 rendered"))
         fail_msg("another --indirect-block: %s", err);
+
+    /* Only a material's emission edited (a lamp brightened): before, emission was not in the fingerprint. */
+    fxt_write_quad();
+    static const char lamp[] =
+        "{\"version\": 1, \"meshes\": [{\"builtin\": \"default\"}, {\"file\": \"quad.obj\", "
+        "\"transform\": {\"translate\": [0, 0.5, 0]}, \"material\": {\"emission\": [%d, %d, %d]}}], "
+        "\"lights\": [{\"type\": \"directional\", \"direction\": [-0.3, -1, -0.2], "
+        "\"intensity\": 1}]}";
+    char text[512];
+    snprintf(text, sizeof text, lamp, 1, 1, 1);
+    fxt_write_file("report_scene.json", text);
+    run_small_report(dir, scene_path, trace_path, "--indirect-block 1", err, sizeof err);
+    snprintf(text, sizeof text, lamp, 2, 2, 2);
+    fxt_write_file("report_scene.json", text);
+    run_small_report(dir, scene_path, trace_path, "--indirect-block 1", err, sizeof err);
+    if (strstr(err, "default_v1: done earlier") || !strstr(err, "references: 2 rendered"))
+        fail_msg("the emission edited in place: %s", err);
 }
 
 /* A trace that ends before the first compared frame after the warm-up: the configuration has no error to give.

@@ -17,6 +17,7 @@ typedef struct scene__staged_mesh {
     double *world;     /* vertex_count * 3: positions after the mesh transform, world frame */
     uint32_t *indices; /* triangle_count * 3 */
     float *uv;         /* vertex_count * 2, or NULL */
+    float *color;      /* vertex_count * 3: vertex colours, linear RGB in 0..1, or NULL */
     uint32_t vertex_count, triangle_count, material;
     bool mirrored; /* the transform mirrors: corners are swapped to keep the winding */
     uint32_t mesh; /* its entry in scene.meshes, UINT32_MAX when nothing of it was left */
@@ -101,6 +102,14 @@ void scene__set_source(scene *s, const char *label);
 scene_result scene__add_mesh(scene *s, const char *name, const float *positions, uint32_t vertex_count,
                              const uint32_t *indices, uint32_t triangle_count, const float *uv,
                              uint32_t material, const double *xform, scene_error *err);
+
+/* The same with vertex colours: color is vertex_count * 3 linear RGB (clamped to 0..1 here, a value that is
+ * not finite read as 0), or NULL (none). The scene gets corner_color once some mesh has colours; meshes
+ * without them are white (1, 1, 1) there. */
+scene_result scene__add_mesh_colored(scene *s, const char *name, const float *positions,
+                                     uint32_t vertex_count, const uint32_t *indices, uint32_t triangle_count,
+                                     const float *uv, const float *color, uint32_t material,
+                                     const double *xform, scene_error *err);
 
 /* Appends a sun (directional light) and a sky: the defaults of a plain mesh file or a scene without lights
  * and sky. */

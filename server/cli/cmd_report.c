@@ -49,7 +49,7 @@ static bool frame_compared(const report_options *o, uint32_t frame)
 /* ---- what a folder's results were made from ---------------------------------------------------------- */
 
 /* A fingerprint of what the results depend on beyond the options and the scene's path: the loaded scene's
- * content (geometry, UVs, materials, textures, lights, sky, density, AO radius, effect overrides, default
+ * content (geometry, UVs, vertex colours, materials with their emission, textures, lights, sky, density, AO radius, effect overrides, default
  * camera, origin) and the camera and size of every viewer in every frame (trace files and generators alike).
  * The references and the finished configurations in DIR are keyed by it, so a scene or trace edited in place
  * under the same name makes them again instead of being taken for the one the folder was made from. */
@@ -62,12 +62,16 @@ static uint64_t content_fingerprint(const scene *s, const srv_cli_cameras *cams,
     h = srv_fnv1a(h, s->indices, (size_t)s->triangle_count * 3 * sizeof(uint32_t));
     if (s->corner_uv)
         h = srv_fnv1a(h, s->corner_uv, (size_t)s->triangle_count * 6 * sizeof(float));
+    if (s->corner_color) /* vertex colours (a scene without them hashes as before) */
+        h = srv_fnv1a(h, s->corner_color, (size_t)s->triangle_count * 9 * sizeof(float));
     h = srv_fnv1a(h, s->tri_mesh, (size_t)s->triangle_count * sizeof(uint32_t));
     for (uint32_t m = 0; m < s->mesh_count; m++)
         h = srv_fnv1a(h, &s->meshes[m].material, sizeof s->meshes[m].material);
     for (uint32_t m = 0; m < s->material_count; m++) {
         h = srv_fnv1a(h, s->materials[m].diffuse, sizeof s->materials[m].diffuse);
         h = srv_fnv1a(h, &s->materials[m].texture, sizeof s->materials[m].texture);
+        if (scene_material_emits(&s->materials[m])) /* emission (none hashes as before) */
+            h = srv_fnv1a(h, s->materials[m].emission, sizeof s->materials[m].emission);
     }
     for (uint32_t t = 0; t < s->texture_count; t++) {
         const scene_texture *tex = &s->textures[t];

@@ -103,6 +103,7 @@ static json_t *scene_info_json(const scene *s, const island_summary *is, const s
     json_object_set_new(root, "meshes", json_integer(s->mesh_count));
     json_object_set_new(root, "materials", json_integer(s->material_count));
     json_object_set_new(root, "textures", json_integer(s->texture_count));
+    json_object_set_new(root, "vertex_colors", json_boolean(s->corner_color != NULL));
     json_object_set_new(root, "lights", json_integer(s->light_count));
     json_t *lights = json_array();
     for (uint32_t i = 0; i < s->light_count; i++) {
@@ -202,8 +203,8 @@ static void print_text(const scene *s, const island_summary *is, const scene_nee
                "fxcache reads directional and 1/d^2 point lights from glTF and Collada, cameras also from "
                "FBX)\n",
                (unsigned long long)r->lights_unused, (unsigned long long)r->cameras_unused);
-    printf("meshes:         %u (materials %u, textures %u)\n", s->mesh_count, s->material_count,
-           s->texture_count);
+    printf("meshes:         %u (materials %u, textures %u%s)\n", s->mesh_count, s->material_count,
+           s->texture_count, s->corner_color ? ", vertex colours" : "");
     uint32_t dirs = 0;
     for (uint32_t i = 0; i < s->light_count; i++)
         dirs += s->lights[i].type == SCENE_LIGHT_DIRECTIONAL;

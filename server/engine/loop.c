@@ -200,10 +200,12 @@ static fxc_result resolve_effects(srv_loop *loop, char *err, size_t err_cap)
  * one loop's frame from another's, even when a loop is freed and the next one reuses its addresses). */
 static _Atomic uint64_t loop_epochs;
 
-/* What probes have stored depends on the lights and the sky: a hash of every field that changes their light
- * (FNV-1a over the fields' bytes), compared at each frame's start so that a light switched or dimmed between
- * frames lets converged probes refresh at once (update.c). Positions and directions are in it too, though the
- * shadow texels do not follow a light that moves. */
+/* What probes have stored depends on the lights, the sky and the emitting materials: a hash of every field
+ * that changes their light (FNV-1a over the fields' bytes), compared at each frame's start so that a light
+ * switched or dimmed between frames lets converged probes refresh at once (update.c). Positions and
+ * directions are in it too, though the shadow texels do not follow a light that moves. Materials' emission
+ * (and the scene's emissive flag) are in it: a lamp switched on or off through its material is a change of
+ * light as well (before, the probes kept its old light until their slow refresh). */
 static uint64_t light_signature(const scene *s)
 {
     uint64_t h = 14695981039346656037u;
@@ -227,6 +229,10 @@ static uint64_t light_signature(const scene *s)
             for (size_t b = 0; b < sizes[k]; b++)
                 h = (h ^ ((const unsigned char *)parts[k])[b]) * 1099511628211u;
     }
+    h = (h ^ (unsigned char)s->emissive) * 1099511628211u;
+    for (uint32_t m = 0; s->emissive && m < s->material_count; m++)
+        for (size_t b = 0; b < sizeof s->materials[m].emission; b++)
+            h = (h ^ ((const unsigned char *)s->materials[m].emission)[b]) * 1099511628211u;
     return h;
 }
 
