@@ -512,6 +512,45 @@ FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t 
     return cell_filter(e, tap, position, normal, out);
 }
 
+/* The bounce at a hit no probe of the update's level contributes to: the committed probes of the coarser
+ * levels around it, level + 1 .. level + FX_PROBE_COARSER_LEVELS (the world cache's grid is anchored at the
+ * scene-local origin and its cell doubles per level, wsc.h: cells of level l + 1 are unions of 2 x 2 x 2
+ * cells of level l), with the same filter (trilinear x wrap x Chebyshev with each probe's own cell x plane
+ * test); the first level whose probes contribute. False (out 0) when none does. A viewer requests coarser
+ * levels for what it sees far away, so a hit off every viewer's screen near the probe (behind the viewers,
+ * a ceiling) often still finds them; before, such a hit took own_bounce (below) at once. */
+FXC_HOT_INLINE bool hit_bounce_coarser(const fx_context *ctx, uint32_t effect, uint32_t level, float cell,
+                                       const float position[3], const float normal[3], float out[3])
+{
+    static const float anchor[3] = {0, 0, 0};
+    for (uint32_t j = 1; j <= FX_PROBE_COARSER_LEVELS; j++) {
+        float coarse = ldexpf(cell, (int)j);
+        if (!(coarse < FLT_MAX))
+            break;
+        if (hit_bounce(ctx, effect, level + j, anchor, coarse, cell_inverse(coarse), position, normal, out))
+            return true;
+    }
+    out[0] = out[1] = out[2] = 0;
+    return false;
+}
+
+/* The same through ctx->world_taps (world_cell NULL): taps_bounce at level + 1 .. level +
+ * FX_PROBE_COARSER_LEVELS. */
+static bool taps_bounce(const fx_taps *taps, const float position[3], const float normal[3], float out[3]);
+static bool taps_bounce_coarser(const fx_context *ctx, uint32_t effect, uint32_t level,
+                                const float position[3], const float normal[3], float out[3])
+{
+    for (uint32_t j = 1; j <= FX_PROBE_COARSER_LEVELS; j++) {
+        fx_taps taps;
+        memset(&taps, 0, sizeof taps);
+        ctx->world_taps(ctx->world_user, effect, position, level + j, &taps);
+        if (taps.count > 0 && taps_bounce(&taps, position, normal, out))
+            return true;
+    }
+    out[0] = out[1] = out[2] = 0;
+    return false;
+}
+
 /* The bounce at a hit no probe around contributes to (its cell holds no probe: no viewer requested it; or
  * every corner is off): the updating probe's own committed irradiance towards the hit's normal, 0 while it
  * has none or is off. The ray reached the hit, so the two see the same side of every wall; in a closed
@@ -567,12 +606,14 @@ FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job,
     uint32_t effect = job->effect, level = job->level;
     bool found = false;
     if (ctx->world_cell) {
-        found = hit_bounce(ctx, effect, level, job->origin, job->cell, inverse, position, normal, bounce);
+        found = hit_bounce(ctx, effect, level, job->origin, job->cell, inverse, position, normal, bounce) ||
+                hit_bounce_coarser(ctx, effect, level, job->cell, position, normal, bounce);
     } else if (ctx->world_taps) {
         fx_taps taps;
         memset(&taps, 0, sizeof taps);
         ctx->world_taps(ctx->world_user, effect, position, level, &taps);
-        found = taps.count > 0 && taps_bounce(&taps, position, normal, bounce);
+        found = (taps.count > 0 && taps_bounce(&taps, position, normal, bounce)) ||
+                taps_bounce_coarser(ctx, effect, level, position, normal, bounce);
     }
     if (!found)
         own_bounce(job, normal, bounce);
@@ -689,14 +730,22 @@ FXC_HOT_INLINE void hits_bounce_prepare(const fx_context *ctx, const fx_block_jo
 
 /* Pass 3 for the hits left, then every batch hit's radiance (direct light back) into values[r][0..2]. */
 FXC_HOT_INLINE void hits_radiance(const fx_context *ctx, const fx_block_job *job, hit_batch *restrict hb,
-                                  const struct RTCRayHit *hits, const hit_shading *hs, float (*values)[5])
+                                  const struct RTCRayHit *hits, const float (*hit_pos)[3],
+                                  const hit_shading *hs, float (*values)[5])
 {
     batch_bounce(hb, hb->done, hb->count);
     const scene *s = ctx->s;
     for (uint32_t i = 0; i < hb->count; i++) {
         uint32_t r = hb->ray[i];
-        if (!hb->found[i])
-            own_bounce(job, ctx->s->tri_normal + 3 * (size_t)hits[r].hit.primID, hb->bounce[i]);
+        if (hb->found[i])
+            continue;
+        /* After pass 3 of every hit: the coarser levels' fills may replace entries the batch has read. */
+        const float *normal = s->tri_normal + 3 * (size_t)hits[r].hit.primID;
+        if (!hit_bounce_coarser(ctx, job->effect, job->level, job->cell, hit_pos[r], normal, hb->bounce[i]))
+            own_bounce(job, normal, hb->bounce[i]);
+    }
+    for (uint32_t i = 0; i < hb->count; i++) {
+        uint32_t r = hb->ray[i];
         float albedo[3];
         scene_albedo_mean(s, hits[r].hit.primID, albedo); /* the triangle's mean (file comment) */
         for (int k = 0; k < 3; k++)
@@ -808,7 +857,7 @@ FXC_HOT_CLONES uint64_t fx__probe_shade_chunk(const fx_context *ctx, const fx_bl
         values[r][4] = d * d;
     }
     if (batch)
-        hits_radiance(ctx, job, &memo->batch, hits, hs, values);
+        hits_radiance(ctx, job, &memo->batch, hits, (const float(*)[3])hit_pos, hs, values);
     return traced;
 }
 
