@@ -560,13 +560,25 @@ FXC_HOT_INLINE uint32_t hit_coarse_level(const fx_context *ctx, uint32_t effect,
             break;
         double inverse = cell_inverse(coarse);
         /* the coarse cells around 8 points just inside the cell's corners: every coarse cell the cell
-         * overlaps (one on the world cache's nested grid, its memo entry found 7 times more; up to 8 where
-         * the grids are not nested, as in some tests' grids) */
+         * overlaps (one on the world cache's nested grid: its lowest and highest points fall in the same;
+         * up to 8 where the grids are not nested, as in some tests' grids) */
+        float low[3], high[3], low_centre[3], high_centre[3];
+        double t[3];
+        for (int k = 0; k < 3; k++) {
+            low[k] = centre[k] - 0.49f * cell;
+            high[k] = centre[k] + 0.49f * cell;
+        }
+        if (!hit_locate(hit_anchor, coarse, inverse, low, low_centre, t) ||
+            !hit_locate(hit_anchor, coarse, inverse, high, high_centre, t))
+            break;
+        if (memcmp(low_centre, high_centre, sizeof low_centre) == 0) { /* one coarse cell (nested grids) */
+            first = hit_cell_find(ctx, effect, level + j, low_centre)->active ? j : 0;
+            continue;
+        }
         for (uint32_t c = 0; c < 8 && !first; c++) {
             float point[3], coarse_centre[3];
-            double t[3];
             for (int k = 0; k < 3; k++)
-                point[k] = centre[k] + (c >> k & 1 ? 0.49f : -0.49f) * cell;
+                point[k] = c >> k & 1 ? high[k] : low[k];
             if (hit_locate(hit_anchor, coarse, inverse, point, coarse_centre, t) &&
                 hit_cell_find(ctx, effect, level + j, coarse_centre)->active)
                 first = j;
