@@ -23,7 +23,9 @@
  *     lights it + E_probes / pi), E_probes the committed probes around the hit at the job's level with the
  *     update's filter (below, "The bounce at hits"), the hit's cell read through ctx->world_cell and kept
  *     per thread for the frame (hit_bounce; through ctx->world_taps per hit when world_cell is NULL, the same
- *     filter): light bounces once more every frame; the albedo is the triangle's mean (below); plus the
+ *     filter); where none contributes, the probes of the 4 coarser levels around the hit, then the updating
+ *     probe's own irradiance towards the hit's normal (fx_probes_hits.c, hit_bounce_coarser, own_bounce):
+ *     light bounces once more every frame; the albedo is the triangle's mean (below); plus the
  *     emission of an emitting material (scene_material.emission; scenes with emitters only), which is how an
  *     emitter's light reaches the surfaces around it;
  *   - back-face hit: radiance 0, counted, distance shortened to 0.2 t (RTXGI), so the visibility moments see

@@ -127,7 +127,10 @@ enum {
 typedef struct hit_cell {
     uint64_t generation; /* the thread's generation it was filled in (0: empty) */
     float centre[3];     /* the cell's centre as the update computed it (compared bit for bit) */
-    uint32_t level, effect;
+    uint16_t level, effect;
+    /* HIT_COARSE_KNOWN | j once hit_coarse_level has looked: the first level above `level` (j = 1 ..
+     * FX_PROBE_COARSER_LEVELS) with an active corner in a cell overlapping this one, 0 none; 0 before */
+    uint32_t coarse;
     uint32_t active; /* bit c: corner c holds a probe with data, not off */
     const uint8_t *texel[8];
     float position[8][3], cell[8];
@@ -163,6 +166,7 @@ typedef struct hit_batch {
     int32_t texel[PROBE_CHUNK][8];
     float bounce[PROBE_CHUNK][3]; /* pass 3's E of the probes around the hit */
     bool found[PROBE_CHUNK];      /* pass 3: some probe around the hit contributed (else own_bounce) */
+    bool located[PROBE_CHUNK];    /* pass 1: hit_locate gave the hit's cell (centre) */
     uint32_t done;                /* pass 3 ran for hits [0, done) */
 } hit_batch;
 
@@ -263,8 +267,9 @@ FXC_HOT_INLINE void hit_cell_fill(const fx_context *ctx, hit_cell *e, uint32_t e
         memset(texel, 0, sizeof texel);
     e->generation = thread_hit_generation;
     memcpy(e->centre, centre, sizeof e->centre);
-    e->level = level;
-    e->effect = effect;
+    e->level = (uint16_t)level;
+    e->effect = (uint16_t)effect;
+    e->coarse = 0;
     e->active = 0;
     e->normal_set = 0;
     e->normal_next = 0;
@@ -495,14 +500,15 @@ FXC_HOT_INLINE bool cell_filter(hit_cell *e, const float tap[8], const float pos
 
 /* The filter at a hit (one hit at a time: the path of the tests' comparison and of fx__probe_hits_batched
  * false): E of the probes around it, or false (and 0) when none contributes. */
-FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level,
-                               const float grid_point[3], float cell, double inverse, const float position[3],
-                               const float normal[3], float out[3])
+FXC_HOT_INLINE bool hit_bounce_at(const fx_context *ctx, uint32_t effect, uint32_t level,
+                                  const float grid_point[3], float cell, double inverse,
+                                  const float position[3], const float normal[3], float out[3],
+                                  float centre[3], bool *located)
 {
     out[0] = out[1] = out[2] = 0;
-    float centre[3];
     double t[3];
-    if (!hit_locate(grid_point, cell, inverse, position, centre, t))
+    *located = hit_locate(grid_point, cell, inverse, position, centre, t);
+    if (!*located)
         return false;
     hit_cell *e = hit_cell_find(ctx, effect, level, centre);
     if (!e->active)
@@ -510,6 +516,112 @@ FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t 
     float tap[8];
     hit_taps(t, tap);
     return cell_filter(e, tap, position, normal, out);
+}
+
+/* hit_bounce_at without its cell. */
+FXC_HOT_INLINE bool hit_bounce(const fx_context *ctx, uint32_t effect, uint32_t level,
+                               const float grid_point[3], float cell, double inverse, const float position[3],
+                               const float normal[3], float out[3])
+{
+    float centre[3];
+    bool located;
+    return hit_bounce_at(ctx, effect, level, grid_point, cell, inverse, position, normal, out, centre,
+                         &located);
+}
+
+/* The bounce at a hit no probe of the update's level contributes to: the committed probes of the coarser
+ * levels around it, level + 1 .. level + FX_PROBE_COARSER_LEVELS (the world cache's grid is anchored at the
+ * scene-local origin and its cell doubles per level, wsc.h: cells of level l + 1 are unions of 2 x 2 x 2
+ * cells of level l), with the same filter (trilinear x wrap x Chebyshev with each probe's own cell x plane
+ * test); the first level whose probes contribute. False (out 0) when none does. A viewer requests coarser
+ * levels for what it sees far away, so a hit off every viewer's screen near the probe (behind the viewers,
+ * a ceiling) often still finds them; before, such a hit took own_bounce (below) at once.
+ *
+ * Most such hits find no probe at any level (on Sponza's bench, searching the four levels per hit cost 8 %
+ * of the update's speed): the first level with an active corner is looked up once per cell of the update's
+ * level and kept in its memo entry (hit_cell.coarse, hit_coarse_level); the filter then runs from that
+ * level on, per hit. `centre`: the hit's cell at the update's level (hit_locate's). */
+enum { HIT_COARSE_KNOWN = 0x100u };
+static const float hit_anchor[3] = {0, 0, 0};
+
+/* The first coarser level (1 .. FX_PROBE_COARSER_LEVELS above `level`) with an active corner in a cell that
+ * overlaps the cell of `level` around `centre`, 0 when none; kept in that cell's memo entry. The levels below
+ * it hold no probe around any hit of the cell, so skipping them changes nothing. */
+FXC_HOT_INLINE uint32_t hit_coarse_level(const fx_context *ctx, uint32_t effect, uint32_t level, float cell,
+                                         const float centre[3])
+{
+    hit_cell *e = hit_cell_find(ctx, effect, level, centre);
+    if (e->coarse & HIT_COARSE_KNOWN)
+        return e->coarse & 0xffu;
+    uint32_t first = 0;
+    for (uint32_t j = 1; j <= FX_PROBE_COARSER_LEVELS && !first; j++) {
+        float coarse = ldexpf(cell, (int)j);
+        if (!(coarse < FLT_MAX))
+            break;
+        double inverse = cell_inverse(coarse);
+        /* the coarse cells around 8 points just inside the cell's corners: every coarse cell the cell
+         * overlaps (one on the world cache's nested grid: its lowest and highest points fall in the same;
+         * up to 8 where the grids are not nested, as in some tests' grids) */
+        float low[3], high[3], low_centre[3], high_centre[3];
+        double t[3];
+        for (int k = 0; k < 3; k++) {
+            low[k] = centre[k] - 0.49f * cell;
+            high[k] = centre[k] + 0.49f * cell;
+        }
+        if (!hit_locate(hit_anchor, coarse, inverse, low, low_centre, t) ||
+            !hit_locate(hit_anchor, coarse, inverse, high, high_centre, t))
+            break;
+        if (memcmp(low_centre, high_centre, sizeof low_centre) == 0) { /* one coarse cell (nested grids) */
+            first = hit_cell_find(ctx, effect, level + j, low_centre)->active ? j : 0;
+            continue;
+        }
+        for (uint32_t c = 0; c < 8 && !first; c++) {
+            float point[3], coarse_centre[3];
+            for (int k = 0; k < 3; k++)
+                point[k] = c >> k & 1 ? high[k] : low[k];
+            if (hit_locate(hit_anchor, coarse, inverse, point, coarse_centre, t) &&
+                hit_cell_find(ctx, effect, level + j, coarse_centre)->active)
+                first = j;
+        }
+    }
+    /* the coarse cells' fills may have replaced e */
+    if (hit_cell_holds(e, effect, level, centre))
+        e->coarse = HIT_COARSE_KNOWN | first;
+    return first;
+}
+
+FXC_HOT_INLINE bool hit_bounce_coarser(const fx_context *ctx, uint32_t effect, uint32_t level, float cell,
+                                       const float centre[3], const float position[3], const float normal[3],
+                                       float out[3])
+{
+    uint32_t first = hit_coarse_level(ctx, effect, level, cell, centre);
+    for (uint32_t j = first; j && j <= FX_PROBE_COARSER_LEVELS; j++) {
+        float coarse = ldexpf(cell, (int)j);
+        if (!(coarse < FLT_MAX))
+            break;
+        if (hit_bounce(ctx, effect, level + j, hit_anchor, coarse, cell_inverse(coarse), position, normal,
+                       out))
+            return true;
+    }
+    out[0] = out[1] = out[2] = 0;
+    return false;
+}
+
+/* The same through ctx->world_taps (world_cell NULL): taps_bounce at level + 1 .. level +
+ * FX_PROBE_COARSER_LEVELS. */
+static bool taps_bounce(const fx_taps *taps, const float position[3], const float normal[3], float out[3]);
+static bool taps_bounce_coarser(const fx_context *ctx, uint32_t effect, uint32_t level,
+                                const float position[3], const float normal[3], float out[3])
+{
+    for (uint32_t j = 1; j <= FX_PROBE_COARSER_LEVELS; j++) {
+        fx_taps taps;
+        memset(&taps, 0, sizeof taps);
+        ctx->world_taps(ctx->world_user, effect, position, level + j, &taps);
+        if (taps.count > 0 && taps_bounce(&taps, position, normal, out))
+            return true;
+    }
+    out[0] = out[1] = out[2] = 0;
+    return false;
 }
 
 /* The bounce at a hit no probe around contributes to (its cell holds no probe: no viewer requested it; or
@@ -567,12 +679,18 @@ FXC_HOT_INLINE void hit_radiance(const fx_context *ctx, const fx_block_job *job,
     uint32_t effect = job->effect, level = job->level;
     bool found = false;
     if (ctx->world_cell) {
-        found = hit_bounce(ctx, effect, level, job->origin, job->cell, inverse, position, normal, bounce);
+        float centre[3];
+        bool located;
+        found =
+            hit_bounce_at(ctx, effect, level, job->origin, job->cell, inverse, position, normal, bounce,
+                          centre, &located) ||
+            (located && hit_bounce_coarser(ctx, effect, level, job->cell, centre, position, normal, bounce));
     } else if (ctx->world_taps) {
         fx_taps taps;
         memset(&taps, 0, sizeof taps);
         ctx->world_taps(ctx->world_user, effect, position, level, &taps);
-        found = taps.count > 0 && taps_bounce(&taps, position, normal, bounce);
+        found = (taps.count > 0 && taps_bounce(&taps, position, normal, bounce)) ||
+                taps_bounce_coarser(ctx, effect, level, position, normal, bounce);
     }
     if (!found)
         own_bounce(job, normal, bounce);
@@ -590,7 +708,8 @@ FXC_HOT_INLINE void batch_locate(hit_batch *restrict hb, const fx_block_job *job
     uint32_t i = hb->count++;
     hb->ray[i] = (uint16_t)r;
     hb->entry[i] = NULL;
-    if (!hit_locate(job->origin, job->cell, inverse, position, hb->centre[i], hb->t[i]))
+    hb->located[i] = hit_locate(job->origin, job->cell, inverse, position, hb->centre[i], hb->t[i]);
+    if (!hb->located[i])
         return;
     hit_cell *e = hit_cell_entry(job->effect, job->level, hb->centre[i]);
     hb->entry[i] = e;
@@ -689,14 +808,23 @@ FXC_HOT_INLINE void hits_bounce_prepare(const fx_context *ctx, const fx_block_jo
 
 /* Pass 3 for the hits left, then every batch hit's radiance (direct light back) into values[r][0..2]. */
 FXC_HOT_INLINE void hits_radiance(const fx_context *ctx, const fx_block_job *job, hit_batch *restrict hb,
-                                  const struct RTCRayHit *hits, const hit_shading *hs, float (*values)[5])
+                                  const struct RTCRayHit *hits, const float (*hit_pos)[3],
+                                  const hit_shading *hs, float (*values)[5])
 {
     batch_bounce(hb, hb->done, hb->count);
     const scene *s = ctx->s;
     for (uint32_t i = 0; i < hb->count; i++) {
         uint32_t r = hb->ray[i];
-        if (!hb->found[i])
-            own_bounce(job, ctx->s->tri_normal + 3 * (size_t)hits[r].hit.primID, hb->bounce[i]);
+        if (hb->found[i])
+            continue;
+        /* After pass 3 of every hit: the coarser levels' fills may replace entries the batch has read. */
+        const float *normal = s->tri_normal + 3 * (size_t)hits[r].hit.primID;
+        if (!hb->located[i] || !hit_bounce_coarser(ctx, job->effect, job->level, job->cell, hb->centre[i],
+                                                   hit_pos[r], normal, hb->bounce[i]))
+            own_bounce(job, normal, hb->bounce[i]);
+    }
+    for (uint32_t i = 0; i < hb->count; i++) {
+        uint32_t r = hb->ray[i];
         float albedo[3];
         scene_albedo_mean(s, hits[r].hit.primID, albedo); /* the triangle's mean (file comment) */
         for (int k = 0; k < 3; k++)
@@ -808,7 +936,7 @@ FXC_HOT_CLONES uint64_t fx__probe_shade_chunk(const fx_context *ctx, const fx_bl
         values[r][4] = d * d;
     }
     if (batch)
-        hits_radiance(ctx, job, &memo->batch, hits, hs, values);
+        hits_radiance(ctx, job, &memo->batch, hits, (const float(*)[3])hit_pos, hs, values);
     return traced;
 }
 

@@ -15,12 +15,16 @@
 #define FXT_PI_F 3.14159265358979f
 
 /* A grid of nx x ny x nz probes at origin + cell * (x, y, z), one level: each probe's payload, scratch and
- * block job (keyed by its grid position). */
+ * block job (keyed by its grid position). `coarser` (NULL unless a test sets it): a grid of another level
+ * that world_cell and world_taps also answer for (its level in its `level`, its origin a multiple of its cell:
+ * the update reads coarser levels on the world cache's grid, anchored at the origin); other levels hold no
+ * probes. */
 typedef struct fxt_grid {
     float origin[3], cell;
     uint32_t n[3], count, level, scratch_bytes;
     uint8_t *payload, *scratch;
     fx_block_job *jobs;
+    const struct fxt_grid *coarser;
 } fxt_grid;
 
 void fxt_grid_init(fxt_grid *g, const scene *s, const float origin[3], float cell, uint32_t nx, uint32_t ny,

@@ -207,7 +207,8 @@ static void test_shade_lanes_match_filter(void **state)
  * the probes of both rooms, a wall between them, probes switched off inside the wall) the maps agree. The
  * trilinear weights differ in rounding only (the harness's taps are computed in float, world_cell's in
  * double) and stochastic rounding to half may then round a texel the other way: within 3 units in the last
- * place of a half (2^-11 relative each) of the probe's brightest texel, per texel. */
+ * place of a half (2^-11 relative each) of the probe's brightest texel, per texel. A grid of level 1 is
+ * resident, read at hits whose cell of level 0 holds no probe, through either path. */
 static void test_cell_reads_match_taps(void **state)
 {
     (void)state;
@@ -216,6 +217,15 @@ static void test_cell_reads_match_taps(void **state)
     fxt_grid a, b;
     fxt_grid_init(&a, s, (float[3]){-1.5f, 0.5f, -0.5f}, 1.0f, 4, 2, 2);
     fxt_grid_init(&b, s, (float[3]){-1.5f, 0.5f, -0.5f}, 1.0f, 4, 2, 2);
+    fxt_grid coarse; /* level 1, read by both at hits with no probe of level 0 (hit_bounce_coarser) */
+    fxt_grid_init(&coarse, s, (float[3]){-2, 2, -2}, 2.0f, 3, 1, 3);
+    coarse.level = 1;
+    for (uint32_t i = 0; i < coarse.count; i++)
+        coarse.jobs[i].level = 1;
+    fx_context coarse_ctx = fxt_grid_context(s, rt, &coarse, 0.9f);
+    for (int f = 0; f < 3; f++)
+        fxt_grid_frame(&coarse, &coarse_ctx);
+    a.coarser = b.coarser = &coarse;
     fx_context cells = fxt_grid_context(s, rt, &a, 0.9f), taps = fxt_grid_context(s, rt, &b, 0.9f);
     taps.world_cell = NULL;
     for (int f = 0; f < 6; f++) {
@@ -252,6 +262,7 @@ static void test_cell_reads_match_taps(void **state)
         assert_true(worst <= 3.0f / 2048.0f * brightest);
     }
     assert_true(lit >= 8); /* the comparison saw light: most of the 16 probes are on and lit */
+    fxt_grid_free(&coarse);
     fxt_grid_free(&a);
     fxt_grid_free(&b);
     scene_rt_free(rt);
@@ -371,7 +382,8 @@ static void test_memo_across_loops(void **state)
  * replaced while read); 144 rays and 200 (a chunk of 128 and one of 72). Two scenes: the thin-wall rooms (a
  * point light) and an open court under a sky with a sun and a point light (the directional light's direction
  * taken once per update against fx__light_arriving per hit); the rooms also with a cell of 0.7 (no exact
- * inverse: hit_locate divides). */
+ * inverse: hit_locate divides). A grid of level 1 is resident too, which the hits in cells with no probe of
+ * the update's level read. */
 typedef struct batch_run {
     fxt_grid *g;
     scene *s;
@@ -420,12 +432,29 @@ static void test_batched_hits_match_single(void **state)
         const float cell = setup == 2 ? 0.7f : 1.0f;
         scene *s;
         scene_rt *rt = court ? open_court_scene(&s) : fxt_thin_wall_scene(0.35, &s);
-        fxt_grid g;
+        fxt_grid g, coarse;
         fxt_grid_init(&g, s, (float[3]){-1.5f, 0.5f, -0.5f}, cell, 4, 2, 2);
+        /* Probes of level 1 (cell x 2, on the grid anchored at the origin), committed first and then kept:
+         * the hits in g's cells with no probe read them (hit_bounce_coarser; in the batched path after
+         * pass 3, through the same memo) */
+        const float coarse_cell = 2 * cell;
+        fxt_grid_init(&coarse, s, (float[3]){-coarse_cell, coarse_cell, -coarse_cell}, coarse_cell, 3, 1, 3);
+        coarse.level = 1;
+        for (uint32_t i = 0; i < coarse.count; i++)
+            coarse.jobs[i].level = 1;
+        fx_context coarse_ctx = fxt_grid_context(s, rt, &coarse, 0.9f);
+        for (int f = 0; f < 3; f++)
+            fxt_grid_frame(&coarse, &coarse_ctx);
         size_t bytes = (size_t)g.count * FX_PROBE_BYTES;
         static const uint32_t memo_log2[3] = {11, 3, 1}, rays[2] = {FX_PROBE_RAYS, 200};
         uint8_t *single = malloc(bytes), *batched = malloc(bytes);
         assert_true(single && batched);
+        batch_run alone = {.g = &g, .s = s, .rt = rt, .rays = FX_PROBE_RAYS, .payload = malloc(bytes)};
+        assert_non_null(alone.payload);
+        pthread_t alone_tid; /* without the coarse probes: the payloads differ (they are read) */
+        assert_int_equal(pthread_create(&alone_tid, NULL, batch_run_thread, &alone), 0);
+        pthread_join(alone_tid, NULL);
+        g.coarser = &coarse;
         for (int v = 0; v < 6; v++) {
             batch_run run = {.g = &g, .s = s, .rt = rt, .rays = rays[v % 2]};
             fx__probe_memo_log2 = memo_log2[v / 2];
@@ -452,7 +481,16 @@ static void test_batched_hits_match_single(void **state)
                    lit, g.count);
             assert_int_equal(differ, 0);
             assert_true(lit >= 8);
+            if (v == 0) {
+                uint32_t coarse_read = 0;
+                for (size_t i = 0; i < bytes; i++)
+                    coarse_read += alone.payload[i] != batched[i];
+                printf("  without the coarse probes: %u payload bytes differ\n", coarse_read);
+                assert_true(coarse_read > 0);
+            }
         }
+        free(alone.payload);
+        fxt_grid_free(&coarse);
         fx__probe_memo_log2 = 11;
         free(single);
         free(batched);

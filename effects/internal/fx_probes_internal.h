@@ -24,12 +24,13 @@
 /* The change-aware blend (fx_probes.c, commit): the memories per update of the drift's mean and of its
  * variance, the z-scores of the mean up to which the irradiance keeps the steady-state hysteresis h and from
  * which it keeps FX_PROBE_FAST_KEEP. */
-#define FX_PROBE_DRIFT_MEMORY 0.75f
-#define FX_PROBE_NOISE_MEMORY 0.9f
-#define FX_PROBE_DRIFT_Z_LOW  4.0f
-#define FX_PROBE_DRIFT_Z_HIGH 7.0f
-#define FX_PROBE_FAST_KEEP    0.0f
-#define FX_PROBE_NORMAL_BIAS  0.2f /* cells: the shading point moves this far along its normal for Chebyshev */
+#define FX_PROBE_DRIFT_MEMORY   0.75f
+#define FX_PROBE_NOISE_MEMORY   0.9f
+#define FX_PROBE_DRIFT_Z_LOW    4.0f
+#define FX_PROBE_DRIFT_Z_HIGH   7.0f
+#define FX_PROBE_FAST_KEEP      0.0f
+#define FX_PROBE_COARSER_LEVELS 4u /* levels above the update's searched at a hit with no probe (hits) */
+#define FX_PROBE_NORMAL_BIAS    0.2f /* cells: the shading point moves this far along its normal for Chebyshev */
 
 enum {
     FX_STREAM_PROBE_ROTATION = 0x5052, /* "PR" */
