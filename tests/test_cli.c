@@ -546,9 +546,10 @@ static double monotonic_s(void)
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
-/* SIGTERM in the middle of a frame of seconds (one 3840 x 2160 viewer on one thread): the frame is abandoned
- * within a tile, so the run ends well within a second (it finished the frame before: seconds), with the
- * summary of the one finished frame (interrupted) and that frame's stats line. */
+/* SIGTERM in the middle of a frame of seconds (one 1280 x 720 viewer with the default effects on one thread:
+ * frame 0 took 10 s here on the loaded machine, 40 s under ASan; frame 1 about half): the frame is abandoned
+ * within a tile, so the run ends within a fraction of the frame (it used to finish it), with the summary of
+ * the one finished frame (interrupted). */
 static void test_sim_sigterm_mid_frame(void **state)
 {
     (void)state;
@@ -563,7 +564,7 @@ static void test_sim_sigterm_mid_frame(void **state)
         int devnull = open("/dev/null", O_WRONLY);
         dup2(devnull, STDOUT_FILENO);
         dup2(devnull, STDERR_FILENO);
-        execl(FXC_BIN, FXC_BIN, "sim", "--frames", "3", "--res", "3840x2160", "--viewers", "1", "--threads",
+        execl(FXC_BIN, FXC_BIN, "sim", "--frames", "3", "--res", "1280x720", "--viewers", "1", "--threads",
               "1", "--stats", stats, "--summary", summary, "--quiet", (char *)NULL);
         _exit(127);
     }
@@ -588,7 +589,7 @@ static void test_sim_sigterm_mid_frame(void **state)
     assert_true(WIFEXITED(status));
     assert_int_equal(WEXITSTATUS(status), 0);
     assert_true(first_frame_ms > 1000.0); /* else the frame was too short to tell */
-    assert_true(exit_s < 0.5 * first_frame_ms / 1000.0 && exit_s < 2.0);
+    assert_true(exit_s < 0.25 * first_frame_ms / 1000.0 && exit_s < 2.0);
     json_t *sum = json_load_file(summary, 0, &jerr);
     assert_non_null(sum);
     assert_true(json_is_true(json_object_get(sum, "interrupted")));
