@@ -425,7 +425,7 @@ static void test_cli_exhausted_pool_counted(void **state)
         snprintf(
             args, sizeof args,
             "report --quick --out %s --res 48x27 --frames 3 --warmup 1 --every 1 --viewers 1 --threads 2 "
-            "--only default --ref-samples 1/64 --effects probes --probe-cell 0.02 --pool-mb %d --quiet",
+            "--only default --ref-samples 1/8 --effects probes --probe-cell 0.02 --pool-mb %d --quiet",
             dir, small ? 1 : 64);
         int rc = fxt_run_cli(args, NULL, 0, err, sizeof err);
         if (rc != 0)
