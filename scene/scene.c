@@ -637,19 +637,49 @@ static scene_result check_reach(const scene *s, scene_error *err)
     return SCENE_OK;
 }
 
+/* Why every triangle came out degenerate when the transforms, not the file, did it: the meshes placed
+ * (in double) so far from the world origin that doubles there are coarser than the smallest scene (a
+ * translate of 1e38 m), or stretched beyond SCENE_MAX_REACH (a scale of [1e20, 1e-20, 1]); "" otherwise. */
+static void empty_scene_cause(const scene *s, char *out, size_t cap)
+{
+    const scene__builder *b = s->builder;
+    out[0] = 0;
+    if (!b || !b->mesh_count || !s->repairs.degenerate_skipped)
+        return;
+    double lo[3], hi[3], far = 0, extent = 0;
+    bounds_reset(lo, hi);
+    for (uint32_t i = 0; i < b->mesh_count; i++)
+        staged_bounds(&b->meshes[i], lo, hi);
+    for (int k = 0; k < 3; k++) {
+        far = fmax(far, fmax(fabs(lo[k]), fabs(hi[k])));
+        extent = fmax(extent, hi[k] - lo[k]);
+    }
+    if (extent > 2 * SCENE_MAX_REACH)
+        snprintf(out, cap,
+                 ": the meshes span %.4g m, and fxcache handles at most %.0e m from the scene's centre (a "
+                 "transform's scale?)",
+                 extent, SCENE_MAX_REACH);
+    else if (far * DBL_EPSILON > SCENE_MIN_EXTENT)
+        snprintf(out, cap,
+                 ": the meshes lie %.4g m from the world origin, where even doubles are about %.3g m apart; "
+                 "place them nearer to it",
+                 far, far * DBL_EPSILON);
+}
+
 scene_result scene__finalize(scene *s, const scene_load_desc *desc, scene_error *err)
 {
     scene_result settled = settle_frame(s, err);
     if (settled != SCENE_OK)
         return settled;
     if (s->triangle_count == 0) {
-        char lost[160];
+        char lost[160], where[240] = "";
         scene__precision_lost(&s->repairs, 0, lost, sizeof lost);
+        empty_scene_cause(s, where, sizeof where);
         return scene__fail(err, SCENE_ERR_EMPTY,
                            "%s: the scene has no triangles (%llu duplicate and %llu "
-                           "degenerate skipped%s)",
+                           "degenerate skipped%s)%s",
                            s->source, (unsigned long long)s->repairs.duplicate_skipped,
-                           (unsigned long long)s->repairs.degenerate_skipped, lost);
+                           (unsigned long long)s->repairs.degenerate_skipped, lost, where);
     }
     double t0 = scene__now_ms();
     scene_result rc = compute_normals_and_bounds(s, err);

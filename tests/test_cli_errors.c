@@ -145,6 +145,9 @@ static void test_err_res(void **state)
     expect_error(2, "render --res 100000x10", "--res", "'100000x10'", NULL);
     expect_error(2, "sim --res 64x", "--res", "'64x'", NULL);
     expect_error(2, "sim --res 8193x8", "--res", "'8193x8'", NULL);
+    expect_error(2, "sim --res '64x 36'", "--res", "'64x 36'", NULL); /* sscanf's %llu skipped the space */
+    expect_error(2, "sim --res 64x+36", "--res", "'64x+36'", NULL);
+    expect_error(2, "render --res 64x36x", "--res", "'64x36x'", NULL);
     expect_error(2, "sim --probe-rays 0", "--probe-rays", "'0'", NULL);
     expect_error(2, "sim --probe-cell -1", "--probe-cell", "'-1'", NULL);
     expect_error(2, "sim --probe-cell nan", "--probe-cell", "'nan'", NULL);

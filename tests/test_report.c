@@ -414,6 +414,45 @@ static void test_cli_end_to_end(void **state)
     assert_non_null(strstr(html, "heatmaps/default_v1.png"));
 }
 
+/* A pool too small for the frames' requests (--pool-mb 1 with the probes' fine cells): the configuration's
+ * line says DEGRADED with the counts, configs.csv and summary.json carry them; its error is not passed off as
+ * the cache's. The same report with the default pool says nothing of the kind and counts 0. */
+static void test_cli_exhausted_pool_counted(void **state)
+{
+    (void)state;
+    for (int small = 1; small >= 0; small--) {
+        char dir[1024], args[2048], path[1200], err[8192] = "";
+        snprintf(dir, sizeof dir, "%s", fxt_tmp_path(small ? "report_pool1" : "report_pool64"));
+        remove_tree(dir);
+        snprintf(
+            args, sizeof args,
+            "report --quick --out %s --res 48x27 --frames 3 --warmup 1 --every 1 --viewers 1 --threads 2 "
+            "--only default --ref-samples 1/8 --effects probes --probe-cell 0.02 --pool-mb %d --quiet",
+            dir, small ? 1 : 64);
+        int rc = fxt_run_cli(args, NULL, 0, err, sizeof err);
+        if (rc != 0)
+            fail_msg("exit %d: %s", rc, err);
+        print_message("%s\n", err);
+        assert_true((strstr(err, "DEGRADED: the block pools (--pool-mb) were full ") != NULL) == small);
+        assert_int_equal(check_configs_csv(dir), 1);
+        int exhausted = -1;
+        for (int k = 0; k < 64 && csv[0][k][0]; k++)
+            if (strcmp(csv[0][k], "pool_exhausted") == 0)
+                exhausted = k;
+        assert_true(exhausted >= 0);
+        assert_true((strtod(csv[1][exhausted], NULL) > 0) == small);
+        json_t *summary =
+            json_load_file((snprintf(path, sizeof path, "%s/summary.json", dir), path), 0, NULL);
+        assert_non_null(summary);
+        json_t *degraded = json_object_get(summary, "degraded");
+        assert_int_equal(json_array_size(degraded), small ? 1 : 0);
+        if (small)
+            assert_true(json_integer_value(json_object_get(json_array_get(degraded, 0), "pool_exhausted")) >
+                        0);
+        json_decref(summary);
+    }
+}
+
 /* SIGTERM once the first configuration is done: exit 0 with everything finished written; the rerun skips the
  * finished configuration (its marker untouched), runs the rest, and the CSV has each once. */
 static void test_cli_resume(void **state)
@@ -671,6 +710,7 @@ int main(void)
         SCENE_TEST(test_sample_counts),
         cmocka_unit_test(test_cli_option_errors),
         cmocka_unit_test(test_cli_end_to_end),
+        cmocka_unit_test(test_cli_exhausted_pool_counted),
         cmocka_unit_test(test_cli_resume),
         cmocka_unit_test(test_cli_folder_of_other_content),
         cmocka_unit_test(test_cli_trace_ends_before_compared_frames),

@@ -361,6 +361,22 @@ static void test_error_scene_too_small(void **state)
     scene_free(s);
 }
 
+/* Transforms that collapse every triangle: a translate of 1e38 m (even doubles are 1.7e22 m apart there) and
+ * a scale of [1e20, 1e-20, 1] (slivers 1e21 m long). Both said only "no triangles (1246 degenerate
+ * skipped)", as if the file were empty; the message now names the cause. */
+static void test_error_transform_collapses_everything(void **state)
+{
+    (void)state;
+    expect_error("far_away.json",
+                 "{\"version\": 1, \"meshes\": [{\"builtin\": \"default\", \"transform\": {\"translate\": "
+                 "[1e38, 1e38, -1e38]}}]}",
+                 SCENE_ERR_EMPTY, "no triangles", "where even doubles are");
+    expect_error("stretched.json",
+                 "{\"version\": 1, \"meshes\": [{\"builtin\": \"default\", \"transform\": {\"scale\": "
+                 "[1e20, 1e-20, 1]}}]}",
+                 SCENE_ERR_EMPTY, "no triangles", "the meshes span");
+}
+
 /* A UTF-8 byte-order mark before the JSON is skipped (it was refused: "'[' or '{' expected"); one anywhere
  * else is still malformed JSON. */
 static void test_byte_order_mark(void **state)
@@ -675,6 +691,7 @@ int main(void)
         cmocka_unit_test(test_density_range_ends),
         cmocka_unit_test(test_byte_order_mark),
         cmocka_unit_test(test_error_scene_too_small),
+        cmocka_unit_test(test_error_transform_collapses_everything),
         cmocka_unit_test(test_error_density_word),
         cmocka_unit_test(test_error_bad_override),
         cmocka_unit_test(test_error_camera_fov),

@@ -54,8 +54,12 @@ bool srv_cli_resolution(const char *cmd, const char *option, const char *text, u
 {
     unsigned long long w = 0, h = 0;
     char tail = 0;
-    if (!text || sscanf(text, "%llux%llu%c", &w, &h, &tail) != 2 || w < 1 || h < 1 || w > max_side ||
-        h > max_side || text[0] < '0' || text[0] > '9') {
+    /* Digits, one 'x', digits: sscanf's %llu alone would also take "64x 36", "64x+36" (and "64x-1" wrapped). */
+    size_t digits = text ? strspn(text, "0123456789") : 0;
+    bool shape = digits > 0 && text[digits] == 'x' && strspn(text + digits + 1, "0123456789") > 0 &&
+                 text[digits + 1 + strspn(text + digits + 1, "0123456789")] == 0;
+    if (!shape || sscanf(text, "%llux%llu%c", &w, &h, &tail) != 2 || w < 1 || h < 1 || w > max_side ||
+        h > max_side) {
         fprintf(stderr, "fxcache %s: %s: '%s' is not WIDTHxHEIGHT with each side in [1, %u]\n", cmd, option,
                 text ? text : "", max_side);
         return false;

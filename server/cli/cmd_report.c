@@ -41,6 +41,23 @@ static void on_signal(int sig)
 
 /* ---- cameras ------------------------------------------------------------------------------------------- */
 
+/* What a configuration's frames lacked, for its line: "" when nothing (the budget's deferrals are the ray
+ * and probe budgets at work, said with the count; an exhausted pool is a degraded run, said with its cause). */
+static void degraded_text(const srv_rep_row *row, char *out, size_t cap)
+{
+    size_t used = 0;
+    out[0] = 0;
+    if (row->pool_exhausted)
+        used += (size_t)snprintf(out, cap,
+                                 "; DEGRADED: the block pools (--pool-mb) were full %llu times, %llu visible "
+                                 "pixels composed without cached data",
+                                 (unsigned long long)row->pool_exhausted,
+                                 (unsigned long long)row->pixels_missing);
+    if (row->texels_deferred && used < cap)
+        snprintf(out + used, cap - used, "; %llu texels and cells deferred by the budgets",
+                 (unsigned long long)row->texels_deferred);
+}
+
 static bool frame_compared(const report_options *o, uint32_t frame)
 {
     return frame == o->view.frames - 1 || frame % o->every == 0;
@@ -227,6 +244,7 @@ static int run_config(report_config *c, const report_context *ctx, const srv_cli
     const srv_cli_engine *e = &c->engine;
     srv_rep_row *row = &c->row;
     srv_rep_row_free_images(row);
+    row->pool_exhausted = row->pixels_missing = row->texels_deferred = 0;
     double start = now_s();
     srv_loop_desc desc = srv_cli_loop_desc(e, ctx->s, rt, true);
     memcpy(desc.effect_on, effect_on, sizeof desc.effect_on);
@@ -317,6 +335,10 @@ static int run_config(report_config *c, const report_context *ctx, const srv_cli
             result = -1;
             goto done;
         }
+        row->pool_exhausted = st.exhausted; /* cumulative (the probes' pool in it) */
+        row->pixels_missing += st.pixels_missing;
+        for (uint32_t k = 0; k < SRV_MAX_EFFECTS; k++)
+            row->texels_deferred += st.texels_deferred[k];
         if (progress)
             fprintf(stderr, "\r  [%zu/%zu] %s: frame %u/%u, %.1f ms   ", index + 1, total, row->id, frame + 1,
                     o->view.frames, st.frame_ms - st.time_ms[SRV_STAGE_SINKS]);
@@ -511,6 +533,15 @@ static bool write_outputs(report_plan *plan, const report_options *o, const char
     json_object_set_new(sum, "goal",
                         json_string("cached RMSE at most half the no-cache RMSE at equal time per frame"));
     json_object_set_new(sum, "equal_time", list);
+    /* The configurations whose pools ran out: their errors are of degraded frames (counted, not hidden). */
+    json_t *degraded = json_array();
+    for (size_t i = 0; i < n; i++)
+        if (rows[i].done && rows[i].pool_exhausted)
+            json_array_append_new(degraded, json_pack("{s:s,s:I,s:I}", "config", rows[i].id, "pool_exhausted",
+                                                      (json_int_t)rows[i].pool_exhausted, "pixels_missing",
+                                                      (json_int_t)rows[i].pixels_missing));
+    size_t degraded_count = json_array_size(degraded);
+    json_object_set_new(sum, "degraded", degraded);
     json_object_set_new(sum, "interrupted", json_boolean(interrupted));
     json_object_set_new(sum, "time", json_string(time_label));
     snprintf(path, sizeof path, "%s/summary.json", o->out_dir);
@@ -534,6 +565,10 @@ static bool write_outputs(report_plan *plan, const report_options *o, const char
                     eq[k].where < 0   ? " (cache faster than every no-cache point: compared with the fastest)"
                     : eq[k].where > 0 ? " (cache slower than every no-cache point: compared with the slowest)"
                                       : "");
+        if (degraded_count)
+            printf("degraded: %zu configuration%s ran out of block pool (--pool-mb): their errors are of "
+                   "frames with pixels composed without cached data (summary.json \"degraded\")\n",
+                   degraded_count, degraded_count == 1 ? "" : "s");
         printf("report: %s/index.html\n", o->out_dir);
     }
     free(rows);
@@ -703,20 +738,22 @@ int srv_cmd_report(int argc, char **argv)
         char per_viewer[48] = "no viewer present"; /* after the warm-up (a trace ended before it) */
         if (isfinite(row->ms_per_viewer))
             snprintf(per_viewer, sizeof per_viewer, "%.1f per viewer", row->ms_per_viewer);
+        char degraded[200] = "";
+        degraded_text(row, degraded, sizeof degraded);
         if (row->images ==
             0) /* every viewer had left (traces shorter than --frames) before a compared frame */
             fprintf(stderr,
                     "report: [%zu/%zu] %s: %.1f ms/frame (%s, CPU %.1f), no error: no frame "
                     "after the warm-up was compared with a viewer present (the traces end before it; lower "
-                    "--frames or --warmup) (%.1f s)\n",
+                    "--frames or --warmup)%s (%.1f s)\n",
                     i + 1, plan->count, row->id, row->ms_per_frame, per_viewer, row->cpu_ms_per_frame,
-                    row->run_s);
+                    degraded, row->run_s);
         else
             fprintf(stderr,
                     "report: [%zu/%zu] %s: %.1f ms/frame (%s, CPU %.1f), RMSE %.4g, PSNR %.2f dB, "
-                    "shadow %.3g%s (%.1f s)\n",
+                    "shadow %.3g%s%s (%.1f s)\n",
                     i + 1, plan->count, row->id, row->ms_per_frame, per_viewer, row->cpu_ms_per_frame,
-                    row->rmse, row->psnr_db, row->rmse_shadow, ao_text, row->run_s);
+                    row->rmse, row->psnr_db, row->rmse_shadow, ao_text, degraded, row->run_s);
         if (!write_outputs(plan, &o, NULL, NULL, NULL, false, NULL)) /* the CSVs after every configuration */
             goto done;
     }

@@ -3,8 +3,8 @@
  * generator or from viewer traces, whose viewers join at their trace's first time and leave after its last
  * (paced by --fps). The run's results go out through sinks: frames and effect views as images (--out), one
  * JSON line of statistics per frame (--stats), trace recording (--record) and the run report, whose totals
- * make the summary (--summary, and in words on stdout). SIGINT and SIGTERM end the run after the current
- * frame, with the summary and every file complete. */
+ * make the summary (--summary, and in words on stdout). SIGINT and SIGTERM end the run within a tile of the
+ * current frame (abandoned: srv_loop_set_stop), with the summary and every file of the finished frames. */
 #include "camgen.h"
 #include "cli_cameras.h"
 #include "cli.h"
@@ -27,8 +27,8 @@
 
 static volatile sig_atomic_t stop_requested = 0;
 
-/* The first signal asks for the end after the current frame; a second ends at once (the default action): a
- * frame can take a minute (many large viewers on one thread), and Ctrl-C twice is how a user says "now". */
+/* The first signal asks for the end: the frame in progress is abandoned within a tile (srv_loop_set_stop),
+ * the files of the finished frames are written; a second ends at once (the default action). */
 static void on_signal(int sig)
 {
     stop_requested = sig;
@@ -115,9 +115,10 @@ static int parse_options(int argc, char **argv, sim_options *o)
                 "  -h, --help           this text\n"
                 "\n"
                 "SIGINT or SIGTERM during the scene's load: one line, nothing written, exit 128 + signal;\n"
-                "during the frames: the current frame finishes, then the statistics, traces, the last\n"
-                "frame's images and the summary (interrupted: true) are written; a second signal ends\n"
-                "the run at once.\n"
+                "during the frames: the current frame is abandoned within a tile (about 0.1 s), then\n"
+                "the statistics and traces of the finished frames, the last finished frame's images\n"
+                "(unless the signal came during the next frame's compose: a note says so) and the\n"
+                "summary (interrupted: true) are written; a second signal ends the run at once.\n"
                 "Exit status: 0 done or interrupted during the frames, 1 a failure (scene, trace, writing\n"
                 "files), 2 bad options or a run larger than the machine's memory.\n");
             return 0;
@@ -291,6 +292,7 @@ int srv_cmd_sim(int argc, char **argv)
     if (!srv_cli_cameras_check("sim", &cams, s))
         goto done;
     srv_loop *loop = run.loop;
+    srv_loop_set_stop(loop, &stop_requested); /* a signal ends a long frame within a tile */
     fxc_result r;
     image_sink images = {.o = &o, .last_frame = o.view.frames - 1};
     if (o.out_dir)
@@ -353,7 +355,10 @@ int srv_cmd_sim(int argc, char **argv)
             }
         }
         srv_frame_stats st;
-        if (srv_loop_frame(loop, &st) != FXC_OK)
+        r = srv_loop_frame(loop, &st);
+        if (r == FXC_ERR_SHUTDOWN)
+            break; /* a signal: the frame was abandoned within a tile (not counted, no sink saw it) */
+        if (r != FXC_OK)
             goto done; /* a sink could not write: it said why */
         if (progress)
             fprintf(stderr, "\rframe %u/%u  %u viewers  %.1f ms  sharing %.2f   ", frame + 1, o.view.frames,
@@ -364,9 +369,10 @@ int srv_cmd_sim(int argc, char **argv)
         fputc('\n', stderr);
     srv_cli_warn_exhausted(&run, &o.engine);
     if (stop_requested && o.out_dir && frame > 0) {
-        /* Interrupted: the last finished frame of every viewer still present. */
+        /* Interrupted: the last finished frame of every viewer still present (gone when the signal came
+         * during the next frame's compose: then one line says so). */
         srv_viewer_id present[SRV_MAX_VIEWERS];
-        uint32_t n = srv_loop_viewers(loop, present, SRV_MAX_VIEWERS);
+        uint32_t n = srv_loop_viewers(loop, present, SRV_MAX_VIEWERS), lost = 0;
         for (uint32_t i = 0; i < n; i++) {
             uint32_t w = 0, h = 0;
             srv_viewer_size(loop, present[i], &w, &h);
@@ -381,11 +387,17 @@ int srv_cmd_sim(int argc, char **argv)
                                    .srgb = srv_viewer_image(loop, present[i])};
             for (int k = 0; k < SRV_VIEW_COUNT; k++)
                 vf.views[k] = srv_viewer_view(loop, present[i], k);
+            lost += !vf.srgb;
             if (vf.srgb && !save_viewer_frame(&o, &vf, o.view.viewers)) {
                 images.failed = true; /* it said why; the summary is still written, the exit code is 1 */
                 break;
             }
         }
+        if (lost)
+            fprintf(stderr,
+                    "fxcache sim: note: interrupted during frame %u's compose: frame %u's images of %u "
+                    "viewer%s were partly overwritten and are not saved\n",
+                    frame, frame - 1, lost, lost == 1 ? "" : "s");
     }
 
     /* The summary: the run's options, then the report's totals. */

@@ -75,6 +75,9 @@ json_t *srv_rep_row_json(const srv_rep_row *r)
     json_object_set_new(o, "ref_noise", number(r->ref_noise));
     json_object_set_new(o, "flip_mean", number(r->flip_mean));
     json_object_set_new(o, "run_s", number(r->run_s));
+    json_object_set_new(o, "pool_exhausted", json_integer((json_int_t)r->pool_exhausted));
+    json_object_set_new(o, "pixels_missing", json_integer((json_int_t)r->pixels_missing));
+    json_object_set_new(o, "texels_deferred", json_integer((json_int_t)r->texels_deferred));
     json_object_set_new(o, "heatmap", json_string(r->heatmap));
     json_object_set_new(o, "frame_png", json_string(r->frame_png));
     json_object_set_new(o, "ref_png", json_string(r->ref_png));
@@ -99,8 +102,12 @@ static void copy_string(char *out, size_t cap, const json_t *j)
 bool srv_rep_row_from_json(srv_rep_row *r, const json_t *o)
 {
     const json_t *images = json_object_get(o, "compared");
-    if (!json_is_object(o) || !json_is_array(images) || !json_is_number(json_object_get(o, "ms_per_frame")))
+    if (!json_is_object(o) || !json_is_array(images) || !json_is_number(json_object_get(o, "ms_per_frame")) ||
+        !json_is_integer(json_object_get(o, "pool_exhausted"))) /* a marker without the counts: redone */
         return false;
+    r->pool_exhausted = (uint64_t)json_integer_value(json_object_get(o, "pool_exhausted"));
+    r->pixels_missing = (uint64_t)json_integer_value(json_object_get(o, "pixels_missing"));
+    r->texels_deferred = (uint64_t)json_integer_value(json_object_get(o, "texels_deferred"));
     r->frames_timed = (uint32_t)json_integer_value(json_object_get(o, "frames_timed"));
     r->images = (uint32_t)json_integer_value(json_object_get(o, "images"));
     r->ms_per_frame = number_of(json_object_get(o, "ms_per_frame"));
@@ -282,7 +289,8 @@ bool srv_rep_write_csv(const char *path, const srv_rep_row *rows, size_t n, char
     }
     fputs("config,family,mode,viewers,bias_shadow,bias_ao,ao_samples,shadow_rays,probe_rays,probe_cell_m,"
           "ray_budget,no_cache_samples,frames_timed,images,ms_per_frame,ms_per_viewer,cpu_ms_per_frame,"
-          "effect_rays_per_frame,rmse,psnr_db,rmse_denoised,rmse_shadow,rmse_ao,ref_noise,pareto,flip_mean\n",
+          "effect_rays_per_frame,rmse,psnr_db,rmse_denoised,rmse_shadow,rmse_ao,ref_noise,pareto,flip_mean,"
+          "pool_exhausted,pixels_missing,texels_deferred\n",
           f);
     for (size_t i = 0; i < n; i++) {
         const srv_rep_row *r = &rows[i];
@@ -306,7 +314,8 @@ bool srv_rep_write_csv(const char *path, const srv_rep_row *rows, size_t n, char
         cell(f, r->ref_noise);
         fprintf(f, ",%d", r->pareto ? 1 : 0);
         cell(f, r->flip_mean);
-        fputc('\n', f);
+        fprintf(f, ",%llu,%llu,%llu\n", (unsigned long long)r->pool_exhausted,
+                (unsigned long long)r->pixels_missing, (unsigned long long)r->texels_deferred);
     }
     return finish_file(f, tmp, path, err, err_cap);
 }

@@ -42,11 +42,16 @@ typedef struct srv_rep_row {
     uint32_t frames_timed, images;
     double ms_per_frame, ms_per_viewer, cpu_ms_per_frame, rays_per_frame;
     double rmse, psnr_db, rmse_denoised, rmse_shadow, rmse_ao, ref_noise, flip_mean; /* NAN: not measured */
-    bool pareto;         /* on the front of its viewer count (computed, not stored) */
-    double run_s;        /* wall time the configuration took, references excluded */
-    char heatmap[160];   /* relative to the report folder ("" if none) */
-    char frame_png[160]; /* the compared frame of viewer 0 the heat map is of */
-    char ref_png[160];   /* its reference, display PNG */
+    bool pareto;  /* on the front of its viewer count (computed, not stored) */
+    double run_s; /* wall time the configuration took, references excluded */
+    /* Degraded frames, counted over all of the configuration's frames (warm-up included): its errors are of
+     * these frames, never silently lower for what the pools or the budget left out. */
+    uint64_t pool_exhausted;  /* block requests the pools could not take (--pool-mb), on-surface and probes */
+    uint64_t pixels_missing;  /* visible pixels composed without cached data */
+    uint64_t texels_deferred; /* texels and cells left for a later frame by the ray or probe budget */
+    char heatmap[160];        /* relative to the report folder ("" if none) */
+    char frame_png[160];      /* the compared frame of viewer 0 the heat map is of */
+    char ref_png[160];        /* its reference, display PNG */
     srv_rep_image *images_list;
     size_t image_count, image_capacity;
 } srv_rep_row;

@@ -314,7 +314,10 @@ fxc_result srv_loop_frame(srv_loop *loop, srv_frame_stats *stats);
  * FXC_ERR_SHUTDOWN without calling the sinks, counting the frame or advancing the frame number. The caches
  * may then hold blocks marked valid that were not computed, so the loop renders no more frames (every later
  * srv_loop_frame returns FXC_ERR_SHUTDOWN at once); what it counted so far (the run report, memory) stays
- * readable. For a server's SIGTERM: the summary is written a tile after the signal, not a frame after. */
+ * readable. The viewers' images, radiance and views stay the last finished frame's when the frame was
+ * abandoned before compose, and are gone (NULL) when compose had started; depth is gone either way. The
+ * queues stage (serial) watches the flag too, every few thousand blocks. For SIGTERM in `serve` and `sim`:
+ * the summary is written a tile after the signal, not a frame after. */
 void srv_loop_set_stop(srv_loop *loop, const volatile sig_atomic_t *stop);
 
 /* The effect list, the effects that run, their effective level bias. */

@@ -698,7 +698,8 @@ const float *srv_viewer_radiance(const srv_loop *loop, srv_viewer_id id)
 const float *srv_viewer_depth(const srv_loop *loop, srv_viewer_id id)
 {
     const srv_viewer *view = viewer_of(loop, id);
-    return view && view->rendered ? view->depth : NULL;
+    /* An abandoned frame's visibility may have rewritten part of it (the image is still the last frame's). */
+    return view && view->rendered && !loop->abandoned ? view->depth : NULL;
 }
 
 const float *srv_viewer_view(const srv_loop *loop, srv_viewer_id id, int which)
@@ -830,6 +831,8 @@ fxc_result srv_loop_frame(srv_loop *loop, srv_frame_stats *st)
     t = srv__now_ms();
     srv__queues(loop, st);
     st->time_ms[SRV_STAGE_QUEUES] = srv__now_ms() - t;
+    if (abandon(loop)) /* the queues may have stopped part-way: no update reads them */
+        return FXC_ERR_SHUTDOWN;
     t = srv__now_ms();
     srv__updates(loop, true, st);
     st->time_ms[SRV_STAGE_LOOKUP] = srv__now_ms() - t;
@@ -844,8 +847,13 @@ fxc_result srv_loop_frame(srv_loop *loop, srv_frame_stats *st)
     for (uint32_t i = 0; i < active; i++)
         srv__compose(loop, slots[i], st);
     st->time_ms[SRV_STAGE_COMPOSE] = srv__now_ms() - t;
-    if (abandon(loop))
+    if (abandon(loop)) {
+        /* Some images, radiance and views were written by this frame, some by the last, some in part: none
+         * is a frame any more. Before compose they are still the last frame's. */
+        for (uint32_t i = 0; i < active; i++)
+            loop->viewers[slots[i]].rendered = false;
         return FXC_ERR_SHUTDOWN;
+    }
     for (uint32_t i = 0; i < active; i++) {
         srv_viewer *view = &loop->viewers[slots[i]];
         view->rendered = true;

@@ -196,6 +196,10 @@ static void take_continuous(srv_loop *loop, uint32_t e, srv_effect_queue *q, uin
     }
 }
 
+/* The queues stage is serial (373 ms a frame for 4 x 3840x2160 viewers, BENCHMARKS.md robust-five): it looks
+ * at the stop flag (srv_loop_set_stop) every this many blocks of an effect (a power of two). */
+enum { QUEUE_STOP_BLOCKS = 4096 };
+
 void srv__queues(srv_loop *loop, srv_frame_stats *st)
 {
     uint32_t counts[SRV_MAX_EFFECTS] = {0};
@@ -220,6 +224,8 @@ void srv__queues(srv_loop *loop, srv_frame_stats *st)
         counts[e] = n;
         uint32_t dep = loop->dependency[e];
         for (uint32_t i = 0; i < n; i++) {
+            if ((i & (QUEUE_STOP_BLOCKS - 1)) == 0 && srv_pool_stopped(loop->pool))
+                goto stopped;
             uint32_t b = blocks[e][i];
             uint64_t requested = kind->block_requested(cache, e, b), valid = kind->block_valid(cache, e, b);
             uint64_t need = requested & ~valid;
@@ -249,6 +255,8 @@ void srv__queues(srv_loop *loop, srv_frame_stats *st)
     uint64_t budget_left = loop->desc.ray_budget;
     for (uint32_t round = 0; round < 3; round++)
         for (uint32_t e = 0; e < loop->effect_count; e++) {
+            if (srv_pool_stopped(loop->pool))
+                goto stopped;
             const fx_effect *fx = loop->effects[e];
             if (!counts[e] || (round == 1 && fx->policy != FX_UPDATE_PROGRESSIVE) ||
                 (round == 2 && fx->policy != FX_UPDATE_CONTINUOUS))
@@ -282,6 +290,10 @@ void srv__queues(srv_loop *loop, srv_frame_stats *st)
                 q->jobs[q->job_count++] = (srv_job){
                     .block = blocks[e][i], .dependency_block = q->dependency[i], .mask = q->take[i]};
     }
+    return;
+stopped: /* the frame is abandoned (srv_loop_frame checks the flag next): no effect has jobs */
+    for (uint32_t e = 0; e < loop->effect_count; e++)
+        loop->queues[e].job_count = 0;
 }
 
 typedef struct effect_task {

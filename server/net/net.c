@@ -2,6 +2,7 @@
  * loop on its own thread (net_frames.c), one mutex-protected table of viewer records between them
  * (net_internal.h). */
 #include "net_internal.h"
+#include "net_samples.h"
 
 #include "proto.h"
 #include "trace.h"
@@ -472,23 +473,12 @@ static void on_sample_request(srv_net *net, net_session *ss, const proto_sample_
         return;
     }
     ss->sample_tokens -= 1;
-    if (q->count > net->d.max_samples) {
-        session_fail(net, ss, FXC_ERR_LIMIT, "sample request %u: %u pixels, over the server's limit of %u",
-                     q->request, q->count, net->d.max_samples);
-        return;
-    }
-    if (q->width > net->d.max_width || q->height > net->d.max_height) {
-        session_fail(net, ss, FXC_ERR_LIMIT,
-                     "sample request %u: image %ux%u is above the server's limit %ux%u", q->request, q->width,
-                     q->height, net->d.max_width, net->d.max_height);
-        return;
-    }
-    double direction[3] = {q->camera.direction[0], q->camera.direction[1], q->camera.direction[2]};
-    srv_camera cam = srv_trace_camera_world(net->d.s, q->camera.position, direction, q->camera.fov_deg);
-    srv_camera_frame check;
-    if (!srv_camera_setup(&cam, q->width, q->height, &check)) {
-        session_fail(net, ss, FXC_ERR_CAMERA, "sample request %u: %s", q->request,
-                     fxc_strerror(FXC_ERR_CAMERA));
+    srv_sample_limits limits = {net->d.max_samples, net->d.max_width, net->d.max_height};
+    srv_camera cam;
+    char why[200];
+    fxc_result checked = srv_sample_request_check(net->d.s, &limits, q, &cam, why, sizeof why);
+    if (checked != FXC_OK) {
+        session_fail(net, ss, checked, "%s", why);
         return;
     }
     pthread_mutex_lock(&net->lock);
@@ -519,11 +509,7 @@ static void on_sample_request(srv_net *net, net_session *ss, const proto_sample_
         net->totals.sample_requests_dropped++;
     }
     int b = v->req_pending_index;
-    for (uint32_t i = 0; i < q->count; i++) {
-        uint16_t x, y;
-        proto_request_pixel_get(q->pixels, i, &x, &y);
-        v->req_pixels[b][i] = SRV_PIXEL_XY(x, y);
-    }
+    srv_sample_request_pixels(q, v->req_pixels[b]);
     v->req_id[b] = q->request;
     v->req_count[b] = q->count;
     v->req_width[b] = q->width;
