@@ -1,6 +1,8 @@
 /* Shared test helpers (named fxt_util.c so the test_*.c glob does not take it for a test): see test_util.h. */
 #include "test_util.h"
 
+#include <fcntl.h>
+#include <signal.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -193,6 +195,23 @@ void fxt_counting_free(void *pointer, size_t size, void *user)
 }
 
 /* Whether process pid catches signal sig (its SigCgt mask in /proc). */
+pid_t fxt_spawn_quiet(const char *const argv[], int reset, const char *err_path)
+{
+    pid_t pid = fork();
+    assert_true(pid >= 0);
+    if (pid == 0) {
+        if (reset)
+            signal(reset, SIG_DFL);
+        int devnull = open("/dev/null", O_WRONLY);
+        int errfd = err_path ? open(err_path, O_WRONLY | O_CREAT | O_TRUNC, 0644) : devnull;
+        dup2(devnull, STDOUT_FILENO);
+        dup2(errfd, STDERR_FILENO);
+        execv(argv[0], (char *const *)argv);
+        _exit(127);
+    }
+    return pid;
+}
+
 bool fxt_catches_signal(pid_t pid, int sig)
 {
     char path[64], line[256];

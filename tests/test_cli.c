@@ -558,16 +558,9 @@ static void test_sim_sigterm_mid_frame(void **state)
     snprintf(summary, sizeof summary, "%s", fxt_tmp_path("term_summary.json"));
     remove(stats);
     remove(summary);
-    pid_t pid = fork();
-    assert_true(pid >= 0);
-    if (pid == 0) {
-        int devnull = open("/dev/null", O_WRONLY);
-        dup2(devnull, STDOUT_FILENO);
-        dup2(devnull, STDERR_FILENO);
-        execl(FXC_BIN, FXC_BIN, "sim", "--frames", "3", "--res", "1280x720", "--viewers", "1", "--threads",
-              "1", "--stats", stats, "--summary", summary, "--quiet", (char *)NULL);
-        _exit(127);
-    }
+    const char *argv[] = {FXC_BIN,     "sim", "--frames", "3",   "--res",     "1280x720", "--viewers", "1",
+                          "--threads", "1",   "--stats",  stats, "--summary", summary,    "--quiet",   NULL};
+    pid_t pid = fxt_spawn_quiet(argv, 0, NULL);
     assert_true(fxt_wait_for_lines(stats, 1, 600.0)); /* frame 0 done: frame 1 is under way */
     double first_frame_ms = 0;
     FILE *f = fopen(stats, "r");
@@ -621,18 +614,9 @@ static void test_sim_signal_during_load(void **state)
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         remove(summary);
-        pid_t pid = fork();
-        assert_true(pid >= 0);
-        if (pid == 0) {
-            signal(cases[i].sig, SIG_DFL); /* so SigCgt shows fxcache's own handler, not one inherited */
-            int devnull = open("/dev/null", O_WRONLY);
-            int errfd = open(err_path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-            dup2(devnull, STDOUT_FILENO);
-            dup2(errfd, STDERR_FILENO);
-            execl(FXC_BIN, FXC_BIN, "sim", "--scene", scene_path, "--frames", "1", "--viewers", "1", "--res",
-                  "16x16", "--quiet", "--summary", summary, (char *)NULL);
-            _exit(127);
-        }
+        const char *argv[] = {FXC_BIN, "sim",   "--scene", scene_path, "--frames",  "1",     "--viewers",
+                              "1",     "--res", "16x16",   "--quiet",  "--summary", summary, NULL};
+        pid_t pid = fxt_spawn_quiet(argv, cases[i].sig, err_path);
         bool ready = false;
         for (int tries = 0; tries < 60000 && !ready; tries++) { /* at most 60 s */
             ready = fxt_catches_signal(pid, cases[i].sig);

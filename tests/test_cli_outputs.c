@@ -148,17 +148,9 @@ static void test_sim_frames_unwritable(void **state)
 static void test_sim_second_signal_ends_at_once(void **state)
 {
     (void)state;
-    pid_t pid = fork();
-    assert_true(pid >= 0);
-    if (pid == 0) {
-        signal(SIGINT, SIG_DFL); /* so SigCgt shows fxcache's own handler */
-        int devnull = open("/dev/null", O_WRONLY);
-        dup2(devnull, STDOUT_FILENO);
-        dup2(devnull, STDERR_FILENO);
-        execl(FXC_BIN, FXC_BIN, "sim", "--frames", "3", "--viewers", "1", "--res", "2048x2048", "--threads",
-              "1", "--quiet", (char *)NULL);
-        _exit(127);
-    }
+    const char *argv[] = {FXC_BIN, "sim",       "--frames",  "3", "--viewers", "1",
+                          "--res", "2048x2048", "--threads", "1", "--quiet",   NULL};
+    pid_t pid = fxt_spawn_quiet(argv, SIGINT, NULL);
     struct timespec tenth = {0, 100 * 1000 * 1000};
     for (int tries = 0; tries < 300 && !fxt_catches_signal(pid, SIGINT); tries++)
         nanosleep(&tenth, NULL);

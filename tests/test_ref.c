@@ -916,17 +916,11 @@ static void test_cli_interrupted(void **state)
     tmp_path(dir, sizeof dir, "int_ref");
     snprintf(record, sizeof record, "%s/ref.json", dir);
     clear_dir(dir);
-    pid_t pid = fork();
-    assert_true(pid >= 0);
-    if (pid == 0) {
-        int devnull = open("/dev/null", O_WRONLY);
-        dup2(devnull, STDOUT_FILENO);
-        dup2(devnull, STDERR_FILENO);
-        execl(FXC_BIN, FXC_BIN, "ref", "--camera", "orbit", "--viewers", "1", "--frames", "100000", "--every",
-              "1", "--res", "24x14", "--ao-samples", "8", "--shadow-rays", "32", "--paths", "4", "--threads",
-              "1", "--out", dir, (char *)NULL);
-        _exit(127);
-    }
+    const char *argv[] = {FXC_BIN,        "ref",    "--camera",      "orbit", "--viewers", "1",
+                          "--frames",     "100000", "--every",       "1",     "--res",     "24x14",
+                          "--ao-samples", "8",      "--shadow-rays", "32",    "--paths",   "4",
+                          "--threads",    "1",      "--out",         dir,     NULL};
+    pid_t pid = fxt_spawn_quiet(argv, 0, NULL);
     /* Wait (at most 60 s) until two images are on record, then ask it to stop. */
     size_t recorded = 0;
     for (int tries = 0; tries < 600 && recorded < 2; tries++) {

@@ -466,15 +466,7 @@ static void test_cli_resume(void **state)
                           "--frames",      "40",     "--warmup",  "2", "--every", "13",
                           "--viewers",     "2",      "--threads", "1", "--only",  "default,viewers",
                           "--ref-samples", "1/8",    "--quiet",   NULL};
-    pid_t pid = fork();
-    assert_true(pid >= 0);
-    if (pid == 0) {
-        int devnull = open("/dev/null", O_WRONLY);
-        dup2(devnull, STDOUT_FILENO);
-        dup2(devnull, STDERR_FILENO);
-        execv(FXC_BIN, (char *const *)argv);
-        _exit(127);
-    }
+    pid_t pid = fxt_spawn_quiet(argv, 0, NULL);
     bool seen = false;
     for (int tries = 0; tries < 1200 && !seen; tries++) { /* at most 120 s */
         seen = access(marker, R_OK) == 0;

@@ -41,6 +41,11 @@ void fxt_tmp_path_copy(char *dst, size_t cap, const char *name);
  * every 0.1 s for at most timeout_s seconds; false when it never did. */
 bool fxt_wait_for_lines(const char *path, int lines, double timeout_s);
 
+/* Starts argv[0] (a program path) with argv in a child process, its stdout to /dev/null and its stderr to
+ * err_path (created or truncated; NULL: /dev/null), signal `reset` (0: none) back to its default first, so
+ * that fxt_catches_signal sees the program's own handler and not one inherited. Returns the child's pid. */
+pid_t fxt_spawn_quiet(const char *const argv[], int reset, const char *err_path);
+
 /* Whether process pid catches signal sig (its SigCgt mask in /proc): a child's handler is in place. */
 bool fxt_catches_signal(pid_t pid, int sig);
 
