@@ -1,101 +1,20 @@
 /* The probe update's hits (effects/fx_probes.c's update calls fx__probe_shade_chunk once per chunk of rays
  * after rtcIntersect1M): the radiance leaving each front-face hit (shadow rays to the lights, the committed
  * probes around the hit through a per-thread memo of cells, in three passes over the chunk's hits), the
- * back faces and misses, each ray's distance; and the no-cache estimate's hits (fx_probe_eval_point), which
- * share the shadow-ray queue. A front face of an emitting material adds its emission to what leaves it (its
- * light reaches the surfaces around it through the probes; only when the scene has emitters). The rules
- * (units, the bounce filter's departures, determinism) are in the comment at the top of fx_probes.c; this
- * file is apart so its hot inline code still inlines into its one entry point's AVX2 copy. */
+ * back faces and misses, each ray's distance. The shadow-ray queue is fx_probes_shading.h's, shared with the
+ * no-cache estimate (fx_probes_eval.c). A front face of an emitting material adds its emission to what leaves
+ * it (its light reaches the surfaces around it through the probes; only when the scene has emitters). The
+ * rules (units, the bounce filter's departures, determinism) are in the comment at the top of fx_probes.c;
+ * this file is apart so its hot inline code still inlines into its one entry point's AVX2 copy. */
 #include "fx_probes_internal.h"
+#include "fx_probes_shading.h"
 #include "fxc_hot.h"
 #include "scene_inline.h"
 
 #include <pthread.h>
 #include <stdlib.h>
 
-/* The shading of a chunk of hits: per primary ray, its radiance once the shadow rays are back. */
-typedef struct hit_shading {
-    _Alignas(64) struct RTCRay shadow[FX_RAY_BATCH];
-    uint16_t owner[FX_RAY_BATCH];
-    float light[FX_RAY_BATCH][3];
-    uint32_t count;
-    float direct[PROBE_CHUNK][3]; /* compose units (irradiance / pi) */
-} hit_shading;
-
-static _Thread_local hit_shading thread_hit_shading; /* update's and eval's, within one call */
-
-FXC_HOT_INLINE void shadow_flush(const fx_context *ctx, hit_shading *hs)
-{
-    fx__occluded(ctx, hs->shadow, hs->count);
-    for (uint32_t r = 0; r < hs->count; r++)
-        if (hs->shadow[r].tfar != -INFINITY)
-            for (int k = 0; k < 3; k++)
-                hs->direct[hs->owner[r]][k] += hs->light[r][k];
-    hs->count = 0;
-}
-
-/* The directions of the first PROBE_FIXED_LIGHTS lights that are directional, once per update call: they do not
- * depend on the point (fx_light_direction's, the same floats), so the shadow-ray set-up skips the call and
- * its square root and division per hit and light. */
-enum { PROBE_FIXED_LIGHTS = 16 };
-typedef struct fixed_lights {
-    uint32_t directional; /* bit l: light l is directional, its direction in dir[l] */
-    float dir[PROBE_FIXED_LIGHTS][3];
-} fixed_lights;
-
-static void fixed_lights_init(const scene *s, fixed_lights *fl)
-{
-    fl->directional = 0;
-    static const float anywhere[3] = {0, 0, 0};
-    for (uint32_t l = 0; l < s->light_count && l < PROBE_FIXED_LIGHTS; l++) {
-        if (s->lights[l].type != SCENE_LIGHT_DIRECTIONAL)
-            continue;
-        float distance;
-        fx_light_direction(&s->lights[l], anywhere, fl->dir[l], &distance);
-        fl->directional |= 1u << l;
-    }
-}
-
-/* fx__light_arriving, for a directional light with its direction given (distance infinite, no falloff). */
-FXC_HOT_INLINE bool light_arriving_fixed(const scene_light *light, const float fixed_dir[3],
-                                         const float normal[3], float dir[3], float *distance, float *scale)
-{
-    memcpy(dir, fixed_dir, 3 * sizeof(float));
-    *distance = INFINITY;
-    float cosine = fx__dot(normal, dir);
-    if (!(cosine > 0))
-        return false;
-    *scale = light->intensity * cosine * 1.0f; /* fx__light_arriving's falloff 1 */
-    return *scale > 0;
-}
-
-/* Queues the shadow rays of a front-face hit (origin already offset, unit front normal) for chunk slot i;
- * returns the rays queued. Contributions are compose's: intensity x colour x cos (/ d^2 for point lights).
- * fl: the directional lights' directions (NULL: none given). */
-FXC_HOT_INLINE uint32_t queue_shadow_rays(const fx_context *ctx, const fixed_lights *fl, hit_shading *hs,
-                                          uint32_t i, const float origin[3], const float normal[3])
-{
-    const scene *s = ctx->s;
-    uint32_t queued = 0;
-    for (uint32_t l = 0; l < s->light_count; l++) {
-        const scene_light *light = &s->lights[l];
-        float dir[3], distance, scale;
-        bool fixed = fl && l < PROBE_FIXED_LIGHTS && (fl->directional >> l & 1);
-        if (fixed ? !light_arriving_fixed(light, fl->dir[l], normal, dir, &distance, &scale)
-                  : !fx__light_arriving(light, origin, normal, dir, &distance, &scale))
-            continue;
-        if (hs->count == FX_RAY_BATCH)
-            shadow_flush(ctx, hs);
-        fx__set_ray(&hs->shadow[hs->count], origin, dir,
-                    isinf(distance) ? INFINITY : distance * (1.0f - 1e-4f), hs->count);
-        hs->owner[hs->count] = (uint16_t)i;
-        for (int k = 0; k < 3; k++)
-            hs->light[hs->count][k] = min_of(scale * light->color[k], FLT_MAX);
-        hs->count++;
-        queued++;
-    }
-    return queued;
-}
+static _Thread_local hit_shading thread_hit_shading; /* the update's, within one call */
 
 /* ---- the bounce at hits: the committed probes around a hit, per cell ------------------------------------
  * The shading filter of fx__probe_filter_memo (trilinear x wrap x Chebyshev, renormalised) at a hit, with the
@@ -938,84 +857,4 @@ FXC_HOT_CLONES uint64_t fx__probe_shade_chunk(const fx_context *ctx, const fx_bl
     if (batch)
         hits_radiance(ctx, job, &memo->batch, hits, (const float(*)[3])hit_pos, hs, values);
     return traced;
-}
-
-/* ---- the no-cache baseline --------------------------------------------------------------------------- */
-
-void fx_probe_eval_point(const fx_context *ctx, const float pos[3], const float normal[3], uint64_t pixel_id,
-                         float out_rgb[3], uint64_t *rays)
-{
-    const scene *s = ctx->s;
-    const uint32_t n_rays = probe_ray_count(ctx);
-    float sky[3];
-    for (int k = 0; k < 3; k++)
-        sky[k] = s->sky_color[k] * s->sky_intensity;
-    fx__surface_map map;
-    float point[3], origin[3], tangent[3], bitangent[3];
-    fx__locate_point(ctx, pos, normal, 0.0f, &map, point); /* off a crease's wall */
-    scene_offset_ray_origin(point, normal, s->ray_offset_scale, origin);
-    fx__onb(normal, tangent, bitangent);
-    uint64_t direction_hash = fx__hash(ctx->seed, pixel_id, 0, 0, FX_STREAM_PROBE_EVAL);
-    struct RTCIntersectContext context;
-    rtcInitIntersectContext(&context);
-    RTCScene rtc = (RTCScene)scene_rt_handle(ctx->rt);
-    _Alignas(64) struct RTCRayHit hits[PROBE_CHUNK];
-    hit_shading *hs = &thread_hit_shading;
-    double sum[3] = {0, 0, 0};
-    uint64_t traced = 0;
-    for (uint32_t first = 0; first < n_rays; first += PROBE_CHUNK) {
-        uint32_t n = n_rays - first < PROBE_CHUNK ? n_rays - first : PROBE_CHUNK;
-        for (uint32_t r = 0; r < n; r++) {
-            float xi[2], dir[3];
-            fx__sobol_2d(first + r, direction_hash, xi);
-            fx__cosine_direction(normal, tangent, bitangent, xi, dir);
-            fx__set_ray(&hits[r].ray, origin, dir, INFINITY, r);
-            hits[r].hit.geomID = RTC_INVALID_GEOMETRY_ID;
-            hits[r].hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-        }
-        if (ctx->observe_hits)
-            ctx->observe_hits(ctx->observe_user, hits, n);
-        rtcIntersect1M(rtc, &context, hits, n, sizeof(struct RTCRayHit));
-        traced += n;
-        hs->count = 0;
-        float hit_pos[PROBE_CHUNK][3];
-        bool front[PROBE_CHUNK];
-        for (uint32_t r = 0; r < n; r++) {
-            hs->direct[r][0] = hs->direct[r][1] = hs->direct[r][2] = 0;
-            front[r] = false;
-            if (hits[r].hit.geomID == RTC_INVALID_GEOMETRY_ID || hits[r].hit.primID >= s->triangle_count) {
-                for (int k = 0; k < 3; k++)
-                    sum[k] += sky[k];
-                continue;
-            }
-            const float *n_hit = s->tri_normal + 3 * (size_t)hits[r].hit.primID;
-            float dir[3] = {hits[r].ray.dir_x, hits[r].ray.dir_y, hits[r].ray.dir_z};
-            if (!(fx__dot(dir, n_hit) < 0))
-                continue; /* back face: no light, as for the probes */
-            front[r] = true;
-            float p[3];
-            for (int k = 0; k < 3; k++)
-                p[k] = origin[k] + hits[r].ray.tfar * dir[k];
-            scene_offset_ray_origin(p, n_hit, s->ray_offset_scale, hit_pos[r]);
-            traced += queue_shadow_rays(ctx, NULL, hs, r, hit_pos[r], n_hit);
-        }
-        shadow_flush(ctx, hs);
-        for (uint32_t r = 0; r < n; r++) {
-            if (!front[r])
-                continue;
-            float albedo[3], emitted[3] = {0, 0, 0};
-            uint32_t tri = hits[r].hit.primID;
-            scene_albedo_filtered(s, tri, hits[r].hit.u, hits[r].hit.v,
-                                  log2f(fmaxf(hits[r].ray.tfar * 0.3f, 1e-30f)), albedo);
-            if (s->emissive) /* a front face's own emission */
-                scene_emission_add(s, tri, s->tri_normal + 3 * (size_t)tri, emitted);
-            for (int k = 0; k < 3; k++)
-                sum[k] += (double)albedo[k] * hs->direct[r][k] + (double)emitted[k];
-        }
-    }
-    /* Cosine-weighted sampling: E = pi x the mean radiance. */
-    for (int k = 0; k < 3; k++)
-        out_rgb[k] = (float)fmin(FX_PROBE_PI * sum[k] / (double)n_rays, FLT_MAX);
-    if (rays)
-        *rays = traced;
 }
