@@ -1,7 +1,7 @@
-/* fx_probes_internal.h: what the probe effect's three files share (effects/fx_probes.c: update, commit and
- * the table; effects/fx_probes_hits.c: the update's hits and the no-cache estimate; effects/fx_probes_map.c:
- * the octahedral maps, reading payloads, the shading filter and compose's shade). The payload layout and
- * units are described at the top of fx_probes.c. */
+/* fx_probes_internal.h: what the probe effect's four files share (effects/fx_probes.c: update, commit and
+ * the table; effects/fx_probes_hits.c: the update's hits; effects/fx_probes_eval.c: the no-cache estimate;
+ * effects/fx_probes_map.c: the octahedral maps, reading payloads, the shading filter and compose's shade).
+ * The payload layout and units are described at the top of fx_probes.c. */
 #ifndef FXC_FX_PROBES_INTERNAL_H
 #define FXC_FX_PROBES_INTERNAL_H
 
