@@ -26,6 +26,20 @@ typedef struct split_task {
 } split_task;
 
 /* Runs chunks thread, thread + threads, ... of the permuted job list (each chunk copied in `order`). */
+/* A level-1 grid (cell `cell`, 3 x 1 x 3 probes from (-cell, cell, -cell), anchored at the origin) whose probes
+ * are committed over 3 frames: what a level-0 grid's hits with no probe of their own read
+ * (hit_bounce_coarser). */
+static void coarse_grid_commit(fxt_grid *coarse, const scene *s, scene_rt *rt, float cell)
+{
+    fxt_grid_init(coarse, s, (float[3]){-cell, cell, -cell}, cell, 3, 1, 3);
+    coarse->level = 1;
+    for (uint32_t i = 0; i < coarse->count; i++)
+        coarse->jobs[i].level = 1;
+    fx_context ctx = fxt_grid_context(s, rt, coarse, 0.9f);
+    for (int f = 0; f < 3; f++)
+        fxt_grid_frame(coarse, &ctx);
+}
+
 static void *split_worker(void *arg)
 {
     split_task *t = arg;
@@ -218,13 +232,7 @@ static void test_cell_reads_match_taps(void **state)
     fxt_grid_init(&a, s, (float[3]){-1.5f, 0.5f, -0.5f}, 1.0f, 4, 2, 2);
     fxt_grid_init(&b, s, (float[3]){-1.5f, 0.5f, -0.5f}, 1.0f, 4, 2, 2);
     fxt_grid coarse; /* level 1, read by both at hits with no probe of level 0 (hit_bounce_coarser) */
-    fxt_grid_init(&coarse, s, (float[3]){-2, 2, -2}, 2.0f, 3, 1, 3);
-    coarse.level = 1;
-    for (uint32_t i = 0; i < coarse.count; i++)
-        coarse.jobs[i].level = 1;
-    fx_context coarse_ctx = fxt_grid_context(s, rt, &coarse, 0.9f);
-    for (int f = 0; f < 3; f++)
-        fxt_grid_frame(&coarse, &coarse_ctx);
+    coarse_grid_commit(&coarse, s, rt, 2.0f);
     a.coarser = b.coarser = &coarse;
     fx_context cells = fxt_grid_context(s, rt, &a, 0.9f), taps = fxt_grid_context(s, rt, &b, 0.9f);
     taps.world_cell = NULL;
@@ -437,14 +445,7 @@ static void test_batched_hits_match_single(void **state)
         /* Probes of level 1 (cell x 2, on the grid anchored at the origin), committed first and then kept:
          * the hits in g's cells with no probe read them (hit_bounce_coarser; in the batched path after
          * pass 3, through the same memo) */
-        const float coarse_cell = 2 * cell;
-        fxt_grid_init(&coarse, s, (float[3]){-coarse_cell, coarse_cell, -coarse_cell}, coarse_cell, 3, 1, 3);
-        coarse.level = 1;
-        for (uint32_t i = 0; i < coarse.count; i++)
-            coarse.jobs[i].level = 1;
-        fx_context coarse_ctx = fxt_grid_context(s, rt, &coarse, 0.9f);
-        for (int f = 0; f < 3; f++)
-            fxt_grid_frame(&coarse, &coarse_ctx);
+        coarse_grid_commit(&coarse, s, rt, 2 * cell);
         size_t bytes = (size_t)g.count * FX_PROBE_BYTES;
         static const uint32_t memo_log2[3] = {11, 3, 1}, rays[2] = {FX_PROBE_RAYS, 200};
         uint8_t *single = malloc(bytes), *batched = malloc(bytes);
